@@ -1,0 +1,60 @@
+"""Atomic file writes: write to a hidden temp file beside the target, then rename.
+
+A crash, SIGKILL or Ctrl-C never leaves a half-written file under the final
+name; at worst a hidden `.NAME.tmp-*` file that no reader accepts.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import tempfile
+from pathlib import Path
+
+from .errors import IblbakeError
+
+
+@contextlib.contextmanager
+def atomic_path(final: str | os.PathLike):
+    """Yield a temp path in the target's folder; rename it onto `final` on success."""
+    final = Path(final)
+    folder = final.parent if str(final.parent) else Path(".")
+    if not folder.is_dir():
+        raise IblbakeError(f"{final}: output folder {folder} does not exist; create it first")
+    # Keep the extension last: OpenImageIO picks the format from it.
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{final.stem}.tmp-", suffix=final.suffix, dir=folder)
+    except OSError as e:
+        raise IblbakeError(f"{final}: cannot write in {folder}: {e.strerror}") from None
+    os.close(fd)
+    try:
+        yield tmp
+        os.replace(tmp, final)
+    except OSError as e:
+        _unlink(tmp)
+        raise IblbakeError(f"{final}: write failed: {e.strerror or e}") from None
+    except BaseException:
+        _unlink(tmp)
+        raise
+
+
+def _unlink(path):
+    with contextlib.suppress(OSError):
+        os.unlink(path)
+
+
+def write_bytes(final, data: bytes) -> None:
+    with atomic_path(final) as tmp:
+        with open(tmp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+
+
+def write_text(final, text: str) -> None:
+    write_bytes(final, text.encode("utf-8"))
+
+
+def write_json(final, obj) -> None:
+    write_text(final, json.dumps(obj, indent=2, allow_nan=False) + "\n")

@@ -1,0 +1,262 @@
+"""OpenCL runtime: find a device that really works, build kernels/ with defines, cache programs.
+
+A device counts only after it has built and run a tiny probe kernel (a broken ICD such as
+PyPI's pocl-binary-distribution 3.0, "unknown target CPU 'generic'", lists devices that fail
+at the first build). GPUs are preferred over CPUs. pyopencl is imported here only, so commands
+that need no device never pay for it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import re
+import time
+from dataclasses import dataclass, field
+from importlib import resources
+
+import numpy as np
+
+from .errors import DeviceError
+
+FIX_HINT = (
+    "fix: on Debian/Ubuntu run `sudo apt-get install pocl-opencl-icd` (PoCL 3.1, a CPU device "
+    "that works on these CPUs), or install your GPU vendor's OpenCL driver; do not use PyPI's "
+    "pocl-binary-distribution 3.0, which fails on recent CPUs with \"unknown target CPU 'generic'\""
+)
+
+PROBE_SOURCE = """
+__kernel void probe(__global float *x) { int i = get_global_id(0); x[i] = x[i] * 2.0f + (float)i; }
+"""
+
+_INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"\s*$', re.M)
+
+
+def kernel_source(name: str, _seen=None) -> str:
+    """Source of kernels/NAME with its `#include "x.h"` lines inlined (once each), so that the
+    text we hash and build is exactly what the compiler sees."""
+    seen = set() if _seen is None else _seen
+    text = resources.files("iblbake.kernels").joinpath(name).read_text(encoding="utf-8")
+
+    def inline(m):
+        inc = m.group(1)
+        if inc in seen:
+            return ""
+        seen.add(inc)
+        return f"// ---- {inc}\n" + kernel_source(inc, seen) + f"\n// ---- end {inc}\n"
+
+    return _INCLUDE.sub(inline, text)
+
+
+def source_hash(name: str) -> str:
+    return hashlib.sha256(kernel_source(name).encode()).hexdigest()[:16]
+
+
+@dataclass
+class DeviceInfo:
+    index: str           # "platform:device"
+    platform: str
+    name: str
+    kind: str            # "GPU" | "CPU" | "other"
+    ok: bool = False
+    reason: str = ""
+    probe_s: float = 0.0
+    device: object = field(default=None, repr=False)
+
+    @property
+    def label(self) -> str:
+        return f"{self.name} ({self.platform}, {self.kind}, {self.index})"
+
+
+def _kind(cl, dev) -> str:
+    if dev.type & cl.device_type.GPU:
+        return "GPU"
+    if dev.type & cl.device_type.CPU:
+        return "CPU"
+    return "other"
+
+
+def _import_cl():
+    try:
+        import pyopencl as cl
+    except Exception as e:  # a missing or broken libOpenCL surfaces here
+        raise DeviceError(f"cannot import pyopencl ({e}); {FIX_HINT}") from None
+    return cl
+
+
+def enumerate_devices() -> tuple[list[DeviceInfo], list[str]]:
+    """Every (platform, device) pair, unprobed, and the platform-level errors met."""
+    cl = _import_cl()
+    errors = []
+    try:
+        platforms = cl.get_platforms()
+    except Exception as e:
+        return [], [f"no OpenCL platform ({_one_line(e)})"]
+    out = []
+    for pi, p in enumerate(platforms):
+        try:
+            devs = p.get_devices()
+        except Exception as e:
+            errors.append(f"platform {p.name!r}: cannot list devices ({_one_line(e)})")
+            continue
+        for di, d in enumerate(devs):
+            out.append(DeviceInfo(f"{pi}:{di}", p.name.strip(), d.name.strip(), _kind(cl, d), device=d))
+    return out, errors
+
+
+def probe(info: DeviceInfo) -> DeviceInfo:
+    """Build and run the probe kernel; fill info.ok / info.reason."""
+    cl = _import_cl()
+    t0 = time.perf_counter()
+    try:
+        ctx = cl.Context([info.device])
+        queue = cl.CommandQueue(ctx)
+        prg = cl.Program(ctx, PROBE_SOURCE).build()
+        x = np.arange(64, dtype=np.float32)
+        buf = cl.Buffer(ctx, cl.mem_flags.READ_WRITE | cl.mem_flags.COPY_HOST_PTR, hostbuf=x)
+        prg.probe(queue, (64,), None, buf)
+        y = np.empty_like(x)
+        cl.enqueue_copy(queue, y, buf)
+        queue.finish()
+        expect = x * 2 + np.arange(64, dtype=np.float32)
+        if not np.array_equal(y, expect):
+            raise RuntimeError("probe kernel returned wrong values")
+        info.ok, info.reason = True, "probe kernel built and ran"
+    except Exception as e:
+        info.ok, info.reason = False, _one_line(e)
+    info.probe_s = time.perf_counter() - t0
+    return info
+
+
+def _one_line(e: Exception) -> str:
+    text = " ".join(str(e).split())
+    m = re.search(r"unknown target CPU '[^']*'", text)
+    if m:
+        return f"kernel build fails: {m.group(0)} (a PoCL built for another CPU)"
+    return (text[:240] + "...") if len(text) > 240 else (text or type(e).__name__)
+
+
+def _matches(info: DeviceInfo, spec: str) -> bool:
+    s = spec.strip().lower()
+    if s in ("gpu", "cpu"):
+        return info.kind.lower() == s
+    if re.fullmatch(r"\d+:\d+", s):
+        return info.index == s
+    if re.fullmatch(r"\d+", s):
+        return info.index.split(":")[0] == s
+    return s in info.name.lower() or s in info.platform.lower()
+
+
+def _preference(info: DeviceInfo) -> int:
+    return {"GPU": 0, "CPU": 1}.get(info.kind, 2)
+
+
+def select_device(spec: str | None = None) -> DeviceInfo:
+    """The device to use: `spec` (--device), else $IBLBAKE_DEVICE, else the first working GPU,
+    else the first working CPU. Probes candidates in that order and stops at the first that works."""
+    spec = spec or os.environ.get("IBLBAKE_DEVICE") or None
+    devices, errors = enumerate_devices()
+    candidates = [d for d in devices if spec is None or _matches(d, spec)]
+    if spec and not candidates:
+        listed = ", ".join(d.label for d in devices) or "none"
+        raise DeviceError(f"no OpenCL device matches --device/IBLBAKE_DEVICE {spec!r}; devices: {listed}")
+    tried = []
+    for info in sorted(candidates, key=_preference):
+        probe(info)
+        if info.ok:
+            return info
+        tried.append(f"{info.label}: {info.reason}")
+    detail = "; ".join(errors + tried) or "no OpenCL device found"
+    raise DeviceError(f"no working OpenCL device (tried: {detail}); {FIX_HINT}")
+
+
+def probe_all() -> tuple[list[DeviceInfo], list[str], DeviceInfo | None]:
+    """Every device probed, platform errors, and the one select_device() would use."""
+    devices, errors = enumerate_devices()
+    for d in devices:
+        probe(d)
+    working = sorted((d for d in devices if d.ok), key=_preference)
+    chosen = None
+    spec = os.environ.get("IBLBAKE_DEVICE")
+    if spec:
+        working = [d for d in working if _matches(d, spec)]
+    if working:
+        chosen = working[0]
+    return devices, errors, chosen
+
+
+def _cache_dir() -> str:
+    path = os.environ.get("IBLBAKE_KERNEL_CACHE")
+    if not path:
+        import platformdirs
+        path = os.path.join(platformdirs.user_cache_dir("iblbake"), "kernels")
+    os.makedirs(path, exist_ok=True)
+    return path
+
+
+class Runtime:
+    """One device: its context, queue and built programs (cached per source, defines, device)."""
+
+    def __init__(self, device: str | None = None):
+        self.cl = _import_cl()
+        self.info = select_device(device)
+        self.ctx = self.cl.Context([self.info.device])
+        self.queue = self.cl.CommandQueue(self.ctx)
+        self._programs: dict = {}
+        self._kernels: dict = {}
+        self.builds: list[dict] = []  # what was built, with times, for reports
+
+    @property
+    def device_label(self) -> str:
+        return self.info.label
+
+    def program(self, name: str, defines: dict | None = None):
+        """Build kernels/NAME with -D defines. In-process cache, plus pyopencl's on-disk binary
+        cache keyed by (source, options, device), so a second run spends no time compiling."""
+        defines = dict(sorted((defines or {}).items()))
+        src = kernel_source(name)
+        key = (hashlib.sha256(src.encode()).hexdigest(), tuple(defines.items()))
+        if key in self._programs:
+            return self._programs[key]
+        options = ["-cl-std=CL1.2"] + [f"-D{k}={v}" for k, v in defines.items()]
+        t0 = time.perf_counter()
+        try:
+            prg = self.cl.Program(self.ctx, src).build(options=options, cache_dir=_cache_dir())
+        except Exception as e:
+            raise DeviceError(f"kernels/{name}: build failed on {self.device_label}: {_one_line(e)}") from None
+        self.builds.append({"kernel": name, "defines": defines, "seconds": time.perf_counter() - t0})
+        self._programs[key] = prg
+        return prg
+
+    def kernel(self, name: str, function: str, defines: dict | None = None):
+        """A kernel object of kernels/NAME, built once and reused (pyopencl warns that
+        `prg.function` creates a new kernel object every time)."""
+        key = (name, function, tuple(sorted((defines or {}).items())))
+        k = self._kernels.get(key)
+        if k is None:
+            k = self._kernels[key] = self.cl.Kernel(self.program(name, defines), function)
+        return k
+
+    # -- buffers ---------------------------------------------------------------------
+    def to_device(self, array, read_only: bool = True):
+        mf = self.cl.mem_flags
+        array = np.ascontiguousarray(array)
+        flags = (mf.READ_ONLY if read_only else mf.READ_WRITE) | mf.COPY_HOST_PTR
+        return self.cl.Buffer(self.ctx, flags, hostbuf=array)
+
+    def empty(self, nbytes: int):
+        return self.cl.Buffer(self.ctx, self.cl.mem_flags.READ_WRITE, size=max(4, int(nbytes)))
+
+    def read(self, buf, shape, dtype=np.float32):
+        out = np.empty(shape, dtype=dtype)
+        self.cl.enqueue_copy(self.queue, out, buf)
+        return out
+
+    def run(self, kernel, global_size, local_size, *args):
+        try:
+            return kernel(self.queue, global_size, local_size, *args)
+        except Exception as e:
+            raise DeviceError(f"kernel {kernel.function_name} failed on {self.device_label}: {_one_line(e)}") from None
+
+    def finish(self):
+        self.queue.finish()

@@ -1,0 +1,245 @@
+"""The `iblbake` command line: thin click commands that parse, call the library and print.
+
+Errors the user can act on are IblbakeError (a click.ClickException): one line, exit != 0.
+Anything else is an internal error: one line too, unless --debug asks for the traceback.
+Heavy modules (pyopencl, OpenImageIO, trimesh) are imported inside the commands that use them.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+import os
+import sys
+import time
+
+import click
+
+from . import __version__
+from .errors import IblbakeError, InputError
+
+_DEBUG = {"on": bool(os.environ.get("IBLBAKE_DEBUG"))}
+
+
+class IblbakeGroup(click.Group):
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except (click.ClickException, click.exceptions.Exit, click.exceptions.Abort):
+            raise
+        except KeyboardInterrupt:
+            raise click.exceptions.Abort() from None
+        except Exception as e:
+            if _DEBUG["on"]:
+                raise
+            text = " ".join(str(e).split())[:300]
+            raise IblbakeError(
+                f"internal error: {type(e).__name__}: {text} (rerun with --debug for the traceback)") from None
+
+
+def _set_debug(ctx, param, value):
+    if value:
+        _DEBUG["on"] = True
+    return value
+
+
+class Console:
+    """Where a command's human output goes: notes and warnings on stderr, silenced by --quiet;
+    machine-readable JSON on stdout with --json."""
+
+    def __init__(self, quiet: bool, as_json: bool):
+        self.quiet, self.as_json = quiet, as_json
+
+    def note(self, text: str):
+        if not self.quiet:
+            click.echo(text, err=True)
+
+    def warn(self, text: str):
+        if not self.quiet:
+            click.echo(f"iblbake: warning: {text}", err=True)
+
+    @property
+    def interactive(self) -> bool:
+        return not self.quiet and sys.stderr.isatty() and not os.environ.get("CI")
+
+    def result(self, summary: dict, human: str):
+        if self.as_json:
+            click.echo(json.dumps(summary, indent=2, allow_nan=False))
+        elif not self.quiet:
+            click.echo(human)
+
+
+def common_options(f):
+    """--json, --quiet, --debug, shared by every command."""
+    f = click.option("--debug", is_flag=True, expose_value=False, is_eager=True, callback=_set_debug,
+                     help="Show tracebacks for internal errors.")(f)
+    f = click.option("--quiet", "-q", is_flag=True, help="Print nothing but errors.")(f)
+    f = click.option("--json", "as_json", is_flag=True, help="Print a machine-readable JSON summary on stdout.")(f)
+    return f
+
+
+def device_option(f):
+    return click.option("--device", "-d", default=None, metavar="SPEC", show_default=False,
+                        help="OpenCL device: 'gpu', 'cpu', 'P:D' (platform:device index) or part of "
+                             "its name. Default: $IBLBAKE_DEVICE, else the first working GPU, else CPU.")(f)
+
+
+def input_options(f):
+    """Options for reading a panorama, shared by sh and mips."""
+    f = click.option("--max-pixels", type=click.IntRange(min=1), default=None,
+                     help="Refuse larger images before decoding them. Default: $IBLBAKE_MAX_PIXELS "
+                          "or 8192*8192.")(f)
+    f = click.option("--negative", type=click.Choice(["keep", "clamp", "error"]), default="keep",
+                     show_default=True,
+                     help="Negative texels: keep as stored (counted and reported), clamp to 0, or fail.")(f)
+    f = click.option("--nonfinite", type=click.Choice(["error", "zero", "clamp"]), default="error",
+                     show_default=True,
+                     help="NaN/Inf texels: fail (naming the count and first position), set to 0, or "
+                          "clamp (+Inf to the largest finite value, NaN and -Inf to 0).")(f)
+    return f
+
+
+def _finite(ctx, param, value):
+    if value is not None and not math.isfinite(value):
+        raise click.BadParameter(f"{value} is not a finite number")
+    return value
+
+
+def _non_negative(ctx, param, value):
+    value = _finite(ctx, param, value)
+    if value is not None and value < 0:
+        raise click.BadParameter(f"{value} is negative; give a value >= 0")
+    return value
+
+
+@click.group(cls=IblbakeGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="iblbake")
+@click.option("--debug", is_flag=True, expose_value=False, is_eager=True, callback=_set_debug,
+              help="Show tracebacks for internal errors.")
+def cli():
+    """Bake image-based lighting data and check what it looks like.
+
+    \b
+    iblbake sh ENV -o sh.json       spherical-harmonic irradiance coefficients
+    iblbake devices                 OpenCL devices and which one is used
+    """
+
+
+@cli.command()
+@common_options
+def devices(quiet, as_json):
+    """List OpenCL devices, whether each builds and runs a probe kernel, and which is used."""
+    from . import cl
+
+    con = Console(quiet, as_json)
+    devs, errors, chosen = cl.probe_all()
+    summary = {
+        "devices": [{"index": d.index, "platform": d.platform, "name": d.name, "type": d.kind,
+                     "works": d.ok, "probe": d.reason, "probe_s": round(d.probe_s, 4),
+                     "selected": chosen is d} for d in devs],
+        "platform_errors": errors,
+        "selected": chosen.label if chosen else None,
+    }
+    lines = []
+    for d in devs:
+        mark = "*" if chosen is d else " "
+        lines.append(f"{mark} {d.index}  {d.kind:5s} {d.name} [{d.platform}]: "
+                     f"{'works' if d.ok else 'FAILS'} ({d.reason})")
+    lines += [f"  platform error: {e}" for e in errors]
+    lines.append(f"selected: {chosen.label}" if chosen else "selected: none")
+    con.result(summary, "\n".join(lines))
+    if chosen is None:
+        raise IblbakeError(f"no working OpenCL device; {cl.FIX_HINT}")
+
+
+@cli.command("sh")
+@click.argument("env", metavar="ENV")
+@click.option("--output", "-o", type=click.Path(dir_okay=False), default=None,
+              help="Write the JSON document here (atomically). Without it, nothing is written.")
+@click.option("--bands", type=click.IntRange(1, 16), default=3, show_default=True,
+              help="Number of SH bands (l = 0..bands-1; 3 gives the classic 9 coefficients).")
+@click.option("--window", type=click.Choice(["none", "hann", "lanczos"]), default="none", show_default=True,
+              help="Ringing reduction applied per band: hann w_l=(1+cos(pi l/bands))/2, "
+                   "lanczos w_l=sinc(l/bands). Reduces negative lobes around bright suns.")
+@click.option("--backend", type=click.Choice(["opencl", "numpy"]), default="opencl", show_default=True,
+              help="opencl: the reduction kernel; numpy: the float64 per-texel reference.")
+@click.option("--rotate-y", type=float, default=0.0, show_default=True, callback=_finite, metavar="DEG",
+              help="Rotate the panorama about +y by DEG degrees (+x towards -z).")
+@click.option("--intensity", type=float, default=1.0, show_default=True, callback=_non_negative,
+              help="Scale the panorama's radiance.")
+@click.option("--glsl", is_flag=True, help="Print a GLSL function with the irradiance coefficients.")
+@input_options
+@device_option
+@common_options
+def sh_command(env, output, bands, window, backend, rotate_y, intensity, glsl, nonfinite, negative,
+               max_pixels, device, quiet, as_json):
+    """Project the panorama ENV onto spherical harmonics and bake irradiance coefficients.
+
+    The JSON holds the basis description, the radiance coefficients L_lm, the irradiance
+    coefficients E_lm = Ahat_l * L_lm (evaluate with max(0, sum E_lm Y_lm(n)); diffuse is
+    albedo/pi times that), the input's size and hash, the options and timings.
+    """
+    from . import images, shbake
+
+    con = Console(quiet, as_json)
+    t_start = time.perf_counter()
+    t0 = time.perf_counter()
+    image, info = images.read_panorama(env, max_pixels=max_pixels, nonfinite=nonfinite, negative=negative)
+    read_s = time.perf_counter() - t0
+    for w in info.warnings:
+        con.warn(w)
+    rt = None
+    device_label = "numpy (float64, host)"
+    if backend == "opencl":
+        from . import cl
+        rt = cl.Runtime(device)
+        device_label = rt.device_label
+    coeffs, project_s = shbake.project(image, bands, backend, rt, rotate_y)
+    coeffs = coeffs * intensity
+    options = {"bands": bands, "window": window, "backend": backend, "rotate_y_deg": rotate_y,
+               "intensity": intensity, "nonfinite": nonfinite, "negative": negative}
+    timings = {"read_s": round(read_s, 6), "project_s": round(project_s, 6)}
+    doc = shbake.document(coeffs, bands=bands, window=window, info=info, options=options,
+                          device=device_label, timings=timings)
+    doc["elapsed_s"] = round(time.perf_counter() - t_start, 6)
+    if output:
+        from .atomic import write_json
+        write_json(output, doc)
+    if glsl:
+        click.echo(shbake.glsl_snippet(doc), nl=False)
+    summary = {k: doc[k] for k in ("format", "format_version", "bands", "window", "irradiance", "device",
+                                   "timings", "elapsed_s")}
+    summary["input"] = {k: doc["input"][k] for k in ("path", "width", "height", "sha256")}
+    summary["output"] = output
+    dc = doc["radiance"][0]
+    human = (f"{'wrote ' + output + ': ' if output else ''}{bands * bands} SH coefficients of "
+             f"{info.path} ({info.width}x{info.height}) in {doc['elapsed_s']:.3f} s on {device_label}; "
+             f"mean radiance {[round(c / (2 * math.sqrt(math.pi)), 5) for c in dc]}")
+    if info.negative and negative == "keep":
+        human += f"; {info.negative} tiny negative values kept (min {info.negative_min:.3g})"
+    if glsl and not as_json:
+        if not quiet:
+            click.echo(human, err=True)
+    else:
+        con.result(summary, human)
+
+
+def main():
+    """Console-script entry point."""
+    try:
+        rv = cli.main(standalone_mode=False, prog_name="iblbake")
+    except click.ClickException as e:
+        e.show()
+        sys.exit(e.exit_code)
+    except click.exceptions.Abort:
+        click.echo("iblbake: interrupted", err=True)
+        sys.exit(130)
+    except KeyboardInterrupt:
+        click.echo("iblbake: interrupted", err=True)
+        sys.exit(130)
+    sys.exit(rv if isinstance(rv, int) else 0)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,236 @@
+"""Read and write panoramas and frames through OpenImageIO, with validation.
+
+Reading: EXR (half/float; RGB, RGBA, Y), Radiance .hdr, PFM, float TIFF, anything OIIO reads.
+The size is checked from the header before any pixel is decoded. Non-finite texels fail by
+default (count and first position in the message), or are repaired with --nonfinite zero|clamp;
+negative texels (every one of Blender's panoramas has tiny ones) are kept as stored by default,
+counted and reported, or clamped / refused with --negative.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .atomic import atomic_path
+from .errors import InputError, IblbakeError
+
+DEFAULT_MAX_PIXELS = 8192 * 8192
+NONFINITE_POLICIES = ("error", "zero", "clamp")
+NEGATIVE_POLICIES = ("keep", "clamp", "error")
+# Rec.709 / sRGB primaries and D65 white (x, y) pairs: R, G, B, W.
+REC709 = (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290)
+
+
+@dataclass
+class ImageInfo:
+    path: str
+    width: int
+    height: int
+    channels_in: tuple
+    format: str
+    sha256: str
+    chromaticities: tuple | None = None
+    nonfinite: int = 0
+    nonfinite_policy: str = "error"
+    negative: int = 0
+    negative_min: float = 0.0
+    negative_policy: str = "keep"
+    warnings: list = field(default_factory=list)
+
+    def to_json(self) -> dict:
+        return {
+            "path": self.path,
+            "width": self.width,
+            "height": self.height,
+            "channels": list(self.channels_in),
+            "format": self.format,
+            "sha256": self.sha256,
+            "chromaticities": list(self.chromaticities) if self.chromaticities else None,
+            "nonfinite_texels": self.nonfinite,
+            "nonfinite_policy": self.nonfinite_policy,
+            "negative_texels": self.negative,
+            "negative_min": self.negative_min,
+            "negative_policy": self.negative_policy,
+        }
+
+
+def max_pixels_default() -> int:
+    env = os.environ.get("IBLBAKE_MAX_PIXELS")
+    if env:
+        try:
+            return int(env)
+        except ValueError:
+            raise InputError(f"IBLBAKE_MAX_PIXELS={env!r} is not an integer") from None
+    return DEFAULT_MAX_PIXELS
+
+
+def file_sha256(path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _oiio():
+    import OpenImageIO as oiio  # 0.04 s; only commands that touch images pay it
+    return oiio
+
+
+def _first_position(mask) -> str:
+    j, i = np.argwhere(mask.any(axis=-1))[0]
+    return f"x={i}, y={j}"
+
+
+def read_panorama(path, *, max_pixels: int | None = None, nonfinite: str = "error",
+                  negative: str = "keep") -> tuple[np.ndarray, ImageInfo]:
+    """Read an HDR image as float32 RGB (H, W, 3) and validate it (see module doc)."""
+    oiio = _oiio()
+    path = str(path)
+    limit = max_pixels_default() if max_pixels is None else int(max_pixels)
+    if not os.path.exists(path):
+        raise InputError(f"{path}: no such file")
+    if os.path.isdir(path):
+        raise InputError(f"{path}: is a folder, not an image")
+    inp = oiio.ImageInput.open(path)
+    if inp is None:
+        msg = " ".join(oiio.geterror().split()) or "unknown format"
+        raise InputError(f"{path}: cannot read as an image ({msg[:200]}); expected EXR, HDR, PFM or float TIFF")
+    try:
+        spec = inp.spec()
+        w, h, nc = spec.width, spec.height, spec.nchannels
+        if w < 1 or h < 1 or nc < 1:
+            raise InputError(f"{path}: empty image ({w}x{h}, {nc} channels)")
+        if w * h > limit:
+            raise InputError(
+                f"{path}: {w}x{h} is {w * h} pixels, over the limit of {limit}; "
+                "raise it with --max-pixels or IBLBAKE_MAX_PIXELS if this is intended")
+        names = tuple(spec.channelnames)
+        chroma = spec.getattribute("chromaticities")
+        data = inp.read_image(0, 0, 0, nc, oiio.FLOAT)
+        if data is None or not isinstance(data, np.ndarray):
+            msg = " ".join(inp.geterror().split()) or "pixel data unreadable"
+            raise InputError(f"{path}: corrupt or truncated image ({msg[:200]})")
+        fmt = str(spec.format)
+    finally:
+        inp.close()
+    # OIIO may report partial-read errors without failing read_image.
+    err = oiio.geterror()
+    if err and ("corrupt" in err.lower() or "truncat" in err.lower() or "error" in err.lower()):
+        raise InputError(f"{path}: corrupt or truncated image ({' '.join(err.split())[:200]})")
+    data = np.asarray(data, dtype=np.float32).reshape(h, w, nc)
+    rgb = _to_rgb(data, names)
+
+    info = ImageInfo(path=path, width=w, height=h, channels_in=names, format=fmt,
+                     sha256=file_sha256(path), nonfinite_policy=nonfinite, negative_policy=negative)
+    if chroma is not None:
+        info.chromaticities = tuple(float(c) for c in chroma)
+        if not np.allclose(info.chromaticities, REC709, atol=2e-3):
+            info.warnings.append(
+                f"{path}: declares non-Rec.709 chromaticities {tuple(round(c, 4) for c in chroma)}; "
+                "pixels are used as stored (Rec.709 assumed)")
+    if w != 2 * h:
+        info.warnings.append(f"{path}: {w}x{h} is not 2:1; treated as a full latitude-longitude panorama")
+
+    bad = ~np.isfinite(rgb)
+    info.nonfinite = int(bad.sum())
+    if info.nonfinite:
+        if nonfinite == "error":
+            raise InputError(
+                f"{path}: {info.nonfinite} non-finite (NaN/Inf) values, first at {_first_position(bad)}; "
+                "repair with --nonfinite zero or --nonfinite clamp")
+        if nonfinite == "zero":
+            rgb[bad] = 0.0
+        else:  # clamp: +Inf to the largest finite value, NaN and -Inf to 0
+            finite = rgb[~bad]
+            top = float(finite.max()) if finite.size else 0.0
+            rgb[np.isposinf(rgb)] = max(top, 0.0)
+            rgb[~np.isfinite(rgb)] = 0.0
+        info.warnings.append(f"{path}: repaired {info.nonfinite} non-finite values (--nonfinite {nonfinite})")
+    neg = rgb < 0
+    info.negative = int(neg.sum())
+    if info.negative:
+        info.negative_min = float(rgb.min())
+        if negative == "error":
+            raise InputError(
+                f"{path}: {info.negative} negative values (min {info.negative_min:.3g}), first at "
+                f"{_first_position(neg)}; use --negative keep or --negative clamp")
+        if negative == "clamp":
+            np.maximum(rgb, 0.0, out=rgb)
+    return np.ascontiguousarray(rgb), info
+
+
+def _to_rgb(data: np.ndarray, names: tuple) -> np.ndarray:
+    nc = data.shape[-1]
+    upper = [n.upper().split(".")[-1] for n in names]
+    if all(c in upper for c in "RGB"):
+        idx = [upper.index(c) for c in "RGB"]
+        return data[..., idx].copy()
+    if nc >= 3:
+        return data[..., :3].copy()
+    # Y, YA, or a single/two-channel image: the first channel is luminance.
+    return np.repeat(data[..., :1], 3, axis=-1)
+
+
+def write_exr(path, image, *, half: bool = False, channels=("R", "G", "B"), attributes=None):
+    """Write a linear float (or half) EXR atomically."""
+    oiio = _oiio()
+    image = np.ascontiguousarray(image, dtype=np.float32)
+    if image.ndim == 2:
+        image = image[..., None]
+    h, w, nc = image.shape
+    spec = oiio.ImageSpec(w, h, nc, oiio.HALF if half else oiio.FLOAT)
+    spec.channelnames = tuple(channels[:nc])
+    spec.attribute("compression", "zip")
+    for k, v in (attributes or {}).items():
+        spec.attribute(k, v)
+    _write(oiio, path, spec, image)
+
+
+def write_png(path, image_u8):
+    """Write an 8-bit RGB(A) PNG atomically."""
+    oiio = _oiio()
+    image_u8 = np.ascontiguousarray(image_u8, dtype=np.uint8)
+    h, w, nc = image_u8.shape
+    spec = oiio.ImageSpec(w, h, nc, oiio.UINT8)
+    _write(oiio, path, spec, image_u8)
+
+
+def _write(oiio, path, spec, pixels):
+    with atomic_path(path) as tmp:
+        out = oiio.ImageOutput.create(tmp)
+        if out is None:
+            raise IblbakeError(f"{path}: no writer for this format ({oiio.geterror()})")
+        ok = out.open(tmp, spec) and out.write_image(pixels)
+        err = out.geterror()
+        out.close()
+        if not ok:
+            raise IblbakeError(f"{path}: write failed ({' '.join(err.split())[:200]})")
+
+
+def read_exr(path) -> np.ndarray:
+    """Read back an EXR written by iblbake (cache files), float32 (H, W, C)."""
+    oiio = _oiio()
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise InputError(f"{path}: cannot read ({' '.join(oiio.geterror().split())[:200]})")
+    try:
+        spec = inp.spec()
+        data = inp.read_image(0, 0, 0, spec.nchannels, oiio.FLOAT)
+    finally:
+        inp.close()
+    if not isinstance(data, np.ndarray):
+        raise InputError(f"{path}: corrupt or truncated EXR")
+    return np.asarray(data, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels)
+
+
+def display_path(path) -> str:
+    try:
+        return str(Path(path).relative_to(Path.cwd()))
+    except ValueError:
+        return str(path)

@@ -1,0 +1,86 @@
+/* Shared conventions of DESIGN.md in OpenCL C. Mirrors iblbake/conventions.py; tested against it
+ * (tests/test_conventions.py). +y up; equirect u = 0.5 - atan2(x, z)/(2 pi), v = acos(y)/pi,
+ * v = 0 the top row; cube faces +X -X +Y -Y +Z -Z; octahedral with +y at the centre. */
+#ifndef IBLBAKE_COMMON_H
+#define IBLBAKE_COMMON_H
+
+#define IBL_PI 3.14159265358979323846f
+
+inline float2 equirect_uv_from_dir(float3 d)
+{
+    float u = 0.5f - atan2(d.x, d.z) * (0.5f / IBL_PI);
+    u = u - floor(u);                     /* the seam (atan2 = -pi) wraps to 0 */
+    float v = acos(clamp(d.y, -1.0f, 1.0f)) * (1.0f / IBL_PI);
+    return (float2)(u, v);
+}
+
+inline float3 dir_from_equirect_uv(float2 uv)
+{
+    float theta = IBL_PI * uv.y, phi = 2.0f * IBL_PI * (0.5f - uv.x);
+    float st = sin(theta);
+    return (float3)(st * sin(phi), cos(theta), st * cos(phi));
+}
+
+/* Exact solid angle of a texel in row j of a W x H equirect image:
+ * (2 pi / W)(cos(pi j/H) - cos(pi (j+1)/H)) = (4 pi / W) sin(pi (j + 1/2)/H) sin(pi / (2H)),
+ * with the first sine taken from the nearer pole so float32 keeps its relative precision. */
+inline float equirect_row_solid_angle(int j, int width, int height)
+{
+    float c = fmin((float)j + 0.5f, (float)(height - j) - 0.5f);
+    return (4.0f * IBL_PI / (float)width) * sin(IBL_PI * c / (float)height) * sin(0.5f * IBL_PI / (float)height);
+}
+
+/* Bilinear lookup in an RGBA float image: wraps in u, clamps in v. */
+inline float3 bilinear_equirect(__global const float4 *img, int width, int height, float2 uv)
+{
+    float x = uv.x * (float)width - 0.5f;
+    float y = clamp(uv.y * (float)height - 0.5f, 0.0f, (float)(height - 1));
+    float fx0 = floor(x), fy0 = floor(y);
+    float fx = x - fx0, fy = y - fy0;
+    int x0 = (int)fx0 % width; if (x0 < 0) x0 += width;
+    int x1 = x0 + 1; if (x1 == width) x1 = 0;
+    int y0 = min((int)fy0, height - 1), y1 = min(y0 + 1, height - 1);
+    float4 a = mix(img[y0 * width + x0], img[y0 * width + x1], fx);
+    float4 b = mix(img[y1 * width + x0], img[y1 * width + x1], fx);
+    return mix(a, b, fy).xyz;
+}
+
+/* Face coordinates s, t in [0, 1] (t = 0 the top row) of face 0..5 -> unit direction. */
+inline float3 dir_from_cube(int face, float s, float t)
+{
+    float a = 2.0f * s - 1.0f, b = 2.0f * t - 1.0f;
+    float3 d;
+    switch (face) {
+    case 0: d = (float3)(1.0f, -b, -a); break;
+    case 1: d = (float3)(-1.0f, -b, a); break;
+    case 2: d = (float3)(a, 1.0f, b); break;
+    case 3: d = (float3)(a, -1.0f, -b); break;
+    case 4: d = (float3)(a, -b, 1.0f); break;
+    default: d = (float3)(-a, -b, -1.0f); break;
+    }
+    return normalize(d);
+}
+
+inline float3 dir_from_octahedral(float u, float v)
+{
+    float x = 2.0f * u - 1.0f, z = 2.0f * v - 1.0f;
+    float y = 1.0f - fabs(x) - fabs(z);
+    if (y < 0.0f) {
+        float sx = x >= 0.0f ? 1.0f : -1.0f, sz = z >= 0.0f ? 1.0f : -1.0f;
+        float nx = (1.0f - fabs(z)) * sx, nz = (1.0f - fabs(x)) * sz;
+        x = nx; z = nz;
+    }
+    return normalize((float3)(x, y, z));
+}
+
+/* Orthonormal t, b with cross(t, b) = n, finite for every unit n (Duff et al. 2017). */
+inline void tangent_frame(float3 n, float3 *t, float3 *b)
+{
+    float sign = copysign(1.0f, n.z);
+    float a = -1.0f / (sign + n.z);
+    float c = n.x * n.y * a;
+    *t = (float3)(1.0f + sign * n.x * n.x * a, sign * c, -sign * n.x);
+    *b = (float3)(c, sign + n.y * n.y * a, -n.y);
+}
+
+#endif

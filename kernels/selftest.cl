@@ -1,0 +1,59 @@
+/* Exposes the header functions one per work-item, so tests compare them with the numpy
+ * conventions (tests/test_conventions.py, tests/test_sh.py). Not used by any command. */
+#include "common.h"
+#include "sh.h"
+
+__kernel void t_equirect_uv(__global const float *d, __global float *uv)
+{
+    int i = get_global_id(0);
+    float2 r = equirect_uv_from_dir(vload3(i, d));
+    uv[2 * i] = r.x; uv[2 * i + 1] = r.y;
+}
+
+__kernel void t_dir_from_equirect(__global const float *uv, __global float *d)
+{
+    int i = get_global_id(0);
+    vstore3(dir_from_equirect_uv((float2)(uv[2 * i], uv[2 * i + 1])), i, d);
+}
+
+__kernel void t_row_solid_angle(const int width, const int height, __global float *out)
+{
+    int j = get_global_id(0);
+    out[j] = equirect_row_solid_angle(j, width, height);
+}
+
+__kernel void t_bilinear(__global const float4 *img, const int width, const int height,
+                         __global const float *uv, __global float *out)
+{
+    int i = get_global_id(0);
+    vstore3(bilinear_equirect(img, width, height, (float2)(uv[2 * i], uv[2 * i + 1])), i, out);
+}
+
+__kernel void t_cube(__global const float *st, __global float *d)
+{
+    int i = get_global_id(0);
+    vstore3(dir_from_cube((int)st[3 * i], st[3 * i + 1], st[3 * i + 2]), i, d);
+}
+
+__kernel void t_octahedral(__global const float *uv, __global float *d)
+{
+    int i = get_global_id(0);
+    vstore3(dir_from_octahedral(uv[2 * i], uv[2 * i + 1]), i, d);
+}
+
+__kernel void t_frame(__global const float *n, __global float *tb)
+{
+    int i = get_global_id(0);
+    float3 t, b;
+    tangent_frame(vload3(i, n), &t, &b);
+    vstore3(t, 2 * i, tb);
+    vstore3(b, 2 * i + 1, tb);
+}
+
+__kernel void t_sh(__global const float *d, __global float *y)
+{
+    int i = get_global_id(0);
+    float Y[SH_COEFFS];
+    sh_eval(vload3(i, d), Y);
+    for (int k = 0; k < SH_COEFFS; ++k) y[i * SH_COEFFS + k] = Y[k];
+}

@@ -1,0 +1,138 @@
+"""`iblbake sh` end to end: outputs, JSON document, and one-line errors on bad input."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from iblbake import sh
+
+from .conftest import run_cli, write_exr
+
+
+def assert_one_line_error(proc, *needles):
+    assert proc.returncode != 0, proc.stdout
+    err = proc.stderr.strip()
+    assert "Traceback" not in proc.stderr
+    lines = [l for l in err.splitlines() if not l.startswith("iblbake: warning")]
+    assert len(lines) == 1, err
+    for n in needles:
+        assert n in lines[0], lines[0]
+
+
+def test_sh_writes_document(tmp_path):
+    img = np.full((32, 64, 3), 0.5, np.float32)
+    img[..., 0] = 1.0
+    env = write_exr(tmp_path / "const.exr", img)
+    out = tmp_path / "sh.json"
+    p = run_cli("sh", env, "-o", out, "--bands", "4", "--intensity", "2", "--json")
+    assert p.returncode == 0, p.stderr
+    doc = json.loads(out.read_text())
+    assert doc["format"] == "iblbake.sh" and doc["format_version"] == 1 and doc["bands"] == 4
+    assert doc["basis"]["polar_axis"] == "+z" and doc["basis"]["condon_shortley_phase"] is False
+    assert len(doc["radiance"]) == 16 and len(doc["irradiance"]) == 16
+    # intensity 2, constant radiance (1, .5, .5): L00 = 2 c sqrt(4 pi), E00 = pi L00
+    assert np.allclose(doc["radiance"][0], np.array([2, 1, 1]) * math.sqrt(4 * math.pi), rtol=1e-6)
+    assert np.allclose(doc["irradiance"][0], np.array(doc["radiance"][0]) * math.pi, rtol=1e-12)
+    assert doc["input"]["width"] == 64 and len(doc["input"]["sha256"]) == 64
+    summary = json.loads(p.stdout)
+    assert summary["bands"] == 4 and summary["output"] == str(out)
+    # no temp files left beside the output
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["const.exr", "sh.json"]
+
+
+def test_sh_glsl_snippet_holds_the_coefficients(tmp_path):
+    env = write_exr(tmp_path / "c.exr", np.full((8, 16, 3), 1.0, np.float32))
+    p = run_cli("sh", env, "--glsl", "-q")
+    assert p.returncode == 0, p.stderr
+    assert "vec3 shIrradiance(vec3 d)" in p.stdout and "SH_IRRADIANCE[9]" in p.stdout
+    first = float(p.stdout.split("vec3(")[1].split(",")[0])
+    assert abs(first - math.pi * math.sqrt(4 * math.pi)) < 1e-5
+
+
+def test_sh_backends_agree_through_cli(tmp_path):
+    img = np.random.default_rng(0).random((64, 128, 3)).astype(np.float32) * 5
+    env = write_exr(tmp_path / "r.exr", img)
+    docs = []
+    for backend in ("opencl", "numpy"):
+        out = tmp_path / f"{backend}.json"
+        p = run_cli("sh", env, "-o", out, "--bands", "8", "--backend", backend, "--window", "hann")
+        assert p.returncode == 0, p.stderr
+        docs.append(np.array(json.loads(out.read_text())["irradiance"]))
+    assert np.abs(docs[0] - docs[1]).max() / np.abs(docs[1]).max() < 1e-5
+    expect = sh.project(img, 8) * (sh.window(8, "hann") * sh.ahat(8))[:, None]
+    assert np.abs(docs[1] - expect).max() / np.abs(expect).max() < 1e-6
+
+
+def bad_inputs(tmp_path):
+    good = np.ones((32, 64, 3), np.float32)
+    cases = {}
+    cases["missing"] = (str(tmp_path / "nope.exr"), ["nope.exr", "no such file"], [])
+    text = tmp_path / "text.exr"
+    text.write_text("this is not an image\n")
+    cases["text"] = (str(text), ["text.exr", "cannot read"], [])
+    full = write_exr(tmp_path / "full.exr", np.random.default_rng(0).random((128, 256, 3)))
+    data = open(full, "rb").read()
+    trunc = tmp_path / "trunc.exr"
+    trunc.write_bytes(data[: len(data) // 2])
+    cases["truncated"] = (str(trunc), ["trunc.exr"], [])
+    nan = good.copy()
+    nan[3, 5, 1] = np.nan
+    nan[7, 9, 0] = np.inf
+    cases["nan"] = (write_exr(tmp_path / "nan.exr", nan), ["nan.exr", "2 non-finite", "x=5, y=3", "--nonfinite"], [])
+    cases["big"] = (write_exr(tmp_path / "big.exr", good), ["big.exr", "over the limit"], ["--max-pixels", "1000"])
+    return cases
+
+
+@pytest.mark.parametrize("case", ["missing", "text", "truncated", "nan", "big"])
+def test_sh_bad_inputs_fail_with_one_line(tmp_path, case):
+    path, needles, extra = bad_inputs(tmp_path)[case]
+    out = tmp_path / "out.json"
+    p = run_cli("sh", path, "-o", out, *extra)
+    assert_one_line_error(p, *needles)
+    assert not out.exists()
+    assert not [x for x in tmp_path.iterdir() if x.name.startswith(".out")]
+
+
+def test_nonfinite_repair_policies(tmp_path):
+    img = np.ones((8, 16, 3), np.float32)
+    img[1, 1] = np.nan
+    img[2, 2] = np.inf
+    env = write_exr(tmp_path / "n.exr", img)
+    for policy in ("zero", "clamp"):
+        out = tmp_path / f"{policy}.json"
+        p = run_cli("sh", env, "-o", out, "--nonfinite", policy)
+        assert p.returncode == 0, p.stderr
+        assert "repaired 6 non-finite values" in p.stderr
+        doc = json.loads(out.read_text())
+        assert doc["input"]["nonfinite_texels"] == 6
+        assert all(math.isfinite(v) for row in doc["radiance"] for v in row)
+
+
+def test_tiny_and_odd_sizes_work(tmp_path):
+    for w, h in ((1, 1), (2, 1), (3, 1), (4, 2), (7, 3)):
+        env = write_exr(tmp_path / f"t{w}x{h}.exr", np.full((h, w, 3), 3.0, np.float32))
+        out = tmp_path / f"t{w}x{h}.json"
+        p = run_cli("sh", env, "-o", out)
+        assert p.returncode == 0, p.stderr
+        doc = json.loads(out.read_text())
+        assert np.allclose(doc["radiance"][0], 3 * math.sqrt(4 * math.pi), rtol=1e-6)
+        assert np.abs(np.array(doc["radiance"][1:])).max() < 1e-5
+        if w != 2 * h:
+            assert "not 2:1" in p.stderr
+
+
+def test_internal_errors_are_one_line_unless_debug(tmp_path):
+    # an output folder that does not exist is a user error: one line, no traceback
+    env = write_exr(tmp_path / "c.exr", np.ones((4, 8, 3), np.float32))
+    p = run_cli("sh", env, "-o", tmp_path / "no" / "such" / "dir.json")
+    assert_one_line_error(p, "does not exist")
+
+
+def test_usage_errors(tmp_path):
+    env = write_exr(tmp_path / "c.exr", np.ones((4, 8, 3), np.float32))
+    p = run_cli("sh", env, "--bands", "0")
+    assert p.returncode == 2 and "Traceback" not in p.stderr and "--bands" in p.stderr
+    p = run_cli("sh", env, "--intensity", "nan")
+    assert p.returncode == 2 and "not a finite number" in p.stderr
