@@ -13,6 +13,7 @@ functions come from the standard stable recurrences (seed 002 shows Filament's):
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -39,24 +40,21 @@ def sh_normalization(l: int, m: int) -> float:
     return math.sqrt((2 * l + 1) / (4.0 * math.pi) * ratio)
 
 
-def legendre_table(z, bands: int):
-    """K_l^m P_l^m(z) for 0 <= m <= l < bands, shape z.shape + (bands, bands) indexed [l, m]."""
+def legendre_table(z, bands: int) -> dict:
+    """{(l, m): K_l^m P_l^m(z)} for 0 <= m <= l < bands (one contiguous array per entry)."""
     z = np.asarray(z, dtype=np.float64)
     s = np.sqrt(np.maximum(0.0, 1.0 - z * z))
-    p = np.zeros(z.shape + (bands, bands))
+    p = {}
     pmm = np.ones_like(z)
     for m in range(bands):
         if m > 0:
-            pmm = pmm * (2 * m - 1) * s
-        p[..., m, m] = pmm
+            pmm = pmm * ((2 * m - 1) * s)
+        p[m, m] = pmm
         if m + 1 < bands:
-            p[..., m + 1, m] = (2 * m + 1) * z * pmm
+            p[m + 1, m] = (2 * m + 1) * z * pmm
         for l in range(m + 2, bands):
-            p[..., l, m] = ((2 * l - 1) * z * p[..., l - 1, m] - (l + m - 1) * p[..., l - 2, m]) / (l - m)
-    for l in range(bands):
-        for m in range(l + 1):
-            p[..., l, m] *= sh_normalization(l, m)
-    return p
+            p[l, m] = ((2 * l - 1) * z * p[l - 1, m] - (l + m - 1) * p[l - 2, m]) / (l - m)
+    return {lm: v * sh_normalization(*lm) for lm, v in p.items()}
 
 
 def azimuth_table(phi, bands: int):
@@ -72,13 +70,14 @@ def azimuth_table(phi, bands: int):
     return out
 
 
-def combine(legendre, azimuth, bands: int):
+def combine(legendre: dict, azimuth, bands: int):
     """Y_k from the two factors (broadcasting), shape (..., bands^2)."""
-    out = np.empty(np.broadcast_shapes(legendre.shape[:-2], azimuth.shape[:-1]) + (bands * bands,))
+    shape = np.broadcast_shapes(legendre[0, 0].shape, azimuth.shape[:-1])
+    out = np.empty(shape + (bands * bands,))
     c = bands - 1
     for l in range(bands):
         for m in range(-l, l + 1):
-            out[..., sh_index(l, m)] = legendre[..., l, abs(m)] * azimuth[..., c + m]
+            out[..., sh_index(l, m)] = legendre[l, abs(m)] * azimuth[..., c + m]
     return out
 
 
@@ -197,7 +196,8 @@ _GL_NODES = 8
 def _polar_nodes(height: int):
     """Gauss-Legendre nodes/weights in theta per row: shape (height, n)."""
     pieces = max(1, -(-64 // height))  # rows wider than pi/64 are split
-    x, w = np.polynomial.legendre.leggauss(_GL_NODES)
+    # narrow rows need few nodes: the error is ~ (dtheta * l)^(2n) / (2n)!
+    x, w = np.polynomial.legendre.leggauss(_GL_NODES if height < 256 else 4)
     edges = np.pi * np.arange(height * pieces + 1) / (height * pieces)
     a, b = edges[:-1, None], edges[1:, None]
     theta = 0.5 * (a + b) + 0.5 * (b - a) * x[None, :]
@@ -222,18 +222,26 @@ def azimuth_texel_means(width: int, bands: int):
     return np.sinc(m / width)
 
 
+@functools.lru_cache(maxsize=16)
 def row_factors(height: int, bands: int):
     """int over row j of G[k, t](theta) sin(theta) dtheta, shape (height, bands^2, 2*bands-1)."""
     theta, weight = _polar_nodes(height)
     return np.einsum("hn,hnkt->hkt", weight, _g_at(theta, bands))
 
 
+@functools.lru_cache(maxsize=16)
+def _contraction(height: int, width: int, bands: int):
+    """(bands^2, height * (2*bands-1)) matrix taking flattened row sums to coefficients."""
+    scale = (2.0 * np.pi / width) * azimuth_texel_means(width, bands)
+    g = row_factors(height, bands) * scale[None, None, :]          # (H, K, T)
+    return np.ascontiguousarray(g.transpose(1, 0, 2).reshape(bands * bands, -1))
+
+
 def project_row_sums(row_sums, bands: int, width: int):
     """Finish the projection from per-row Fourier sums S[j, t, c] (float64)."""
     row_sums = np.asarray(row_sums, dtype=np.float64)
-    h = row_sums.shape[0]
-    scale = (2.0 * np.pi / width) * azimuth_texel_means(width, bands)
-    return np.einsum("hkt,t,htc->kc", row_factors(h, bands), scale, row_sums)
+    h, nt, c = row_sums.shape
+    return _contraction(h, width, bands) @ row_sums.reshape(h * nt, c)
 
 
 def row_sums_reference(image, bands: int, rotate_y_deg: float = 0.0):
