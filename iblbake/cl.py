@@ -224,7 +224,10 @@ class Runtime:
         try:
             prg = self.cl.Program(self.ctx, src).build(options=options, cache_dir=_cache_dir())
         except Exception as e:
-            raise DeviceError(f"kernels/{name}: build failed on {self.device_label}: {_one_line(e)}") from None
+            log = str(e)
+            first = next((ln.strip() for ln in log.splitlines() if "error:" in ln), None)
+            raise DeviceError(f"kernels/{name}: build failed on {self.device_label}: "
+                              f"{first or _one_line(e)}") from None
         self.builds.append({"kernel": name, "defines": defines, "seconds": time.perf_counter() - t0})
         self._programs[key] = prg
         return prg

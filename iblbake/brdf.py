@@ -1,0 +1,42 @@
+"""The metallic-roughness BRDF terms of DESIGN.md, in numpy. Mirrors kernels/brdf.h.
+
+alpha = roughness^2 (perceptual roughness, Burley/Karis/glTF/Filament).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+ALPHA_MIN = 1e-7  # keeps D and V finite at roughness 0 (a mirror is handled as a delta elsewhere)
+
+
+def alpha_from_roughness(r):
+    return np.asarray(r, dtype=np.float64) ** 2
+
+
+def d_ggx(noh, alpha):
+    """GGX / Trowbridge-Reitz NDF: alpha^2 / (pi ((n.h)^2 (alpha^2 - 1) + 1)^2)."""
+    a2 = np.maximum(np.asarray(alpha, dtype=np.float64) ** 2, ALPHA_MIN**2)
+    noh = np.clip(noh, 0.0, 1.0)
+    d = noh * noh * (a2 - 1.0) + 1.0
+    return a2 / (np.pi * d * d)
+
+
+def v_smith_ggx_correlated(nov, nol, alpha):
+    """Height-correlated Smith visibility V = G / (4 NoV NoL) (Heitz 2014), as seed 002's GDFG."""
+    a2 = np.asarray(alpha, dtype=np.float64) ** 2
+    nov = np.clip(nov, 0.0, 1.0)
+    nol = np.clip(nol, 0.0, 1.0)
+    lv = nol * np.sqrt(nov * nov * (1.0 - a2) + a2)
+    ll = nov * np.sqrt(nol * nol * (1.0 - a2) + a2)
+    return 0.5 / np.maximum(lv + ll, 1e-30)
+
+
+def f_schlick(voh, f0, f90=1.0):
+    return f0 + (f90 - f0) * (1.0 - np.clip(voh, 0.0, 1.0)) ** 5
+
+
+def f_schlick_roughness(nov, f0, roughness):
+    """Roughness-aware Schlick of seed 004 (used only for the diffuse weight kD)."""
+    f0 = np.asarray(f0, dtype=np.float64)
+    return f0 + (np.maximum(1.0 - roughness, f0) - f0) * (1.0 - np.clip(nov, 0.0, 1.0)) ** 5

@@ -1,0 +1,40 @@
+/* Metallic-roughness BRDF terms of DESIGN.md. Mirrors iblbake/brdf.py (tests/test_brdf.py). */
+#ifndef IBLBAKE_BRDF_H
+#define IBLBAKE_BRDF_H
+
+#define ALPHA_MIN 1e-7f
+
+inline float d_ggx(float noh, float alpha)
+{
+    float a2 = fmax(alpha * alpha, ALPHA_MIN * ALPHA_MIN);
+    noh = clamp(noh, 0.0f, 1.0f);
+    float d = noh * noh * (a2 - 1.0f) + 1.0f;
+    return a2 / (3.14159265358979323846f * d * d);
+}
+
+/* Height-correlated Smith V = G / (4 NoV NoL) (Heitz 2014), as seed 002's GDFG. */
+inline float v_smith_ggx_correlated(float nov, float nol, float alpha)
+{
+    float a2 = alpha * alpha;
+    nov = clamp(nov, 0.0f, 1.0f);
+    nol = clamp(nol, 0.0f, 1.0f);
+    float lv = nol * sqrt(nov * nov * (1.0f - a2) + a2);
+    float ll = nov * sqrt(nol * nol * (1.0f - a2) + a2);
+    return 0.5f / fmax(lv + ll, 1e-30f);
+}
+
+inline float3 f_schlick(float voh, float3 f0)
+{
+    float x = 1.0f - clamp(voh, 0.0f, 1.0f);
+    float x2 = x * x;
+    return f0 + (1.0f - f0) * (x2 * x2 * x);
+}
+
+inline float3 f_schlick_roughness(float nov, float3 f0, float roughness)
+{
+    float x = 1.0f - clamp(nov, 0.0f, 1.0f);
+    float x2 = x * x;
+    return f0 + (fmax((float3)(1.0f - roughness), f0) - f0) * (x2 * x2 * x);
+}
+
+#endif

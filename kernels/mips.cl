@@ -1,0 +1,198 @@
+/* The specular bakes of `iblbake mips`. numpy twins in iblbake/mips.py; tests compare them.
+ *   downsample  one level of the radiance chain (solid-angle-weighted mean of covered texels)
+ *   prefilter   one level of the GGX-prefiltered chain (Karis 2013, N = V = R, NoL-weighted,
+ *               filtered importance sampling, Krivanek and Colbert 2008), for LAYOUT
+ *               0 = equirect, 1 = cubemap (faces +X -X +Y -Y +Z -Z stacked), 2 = octahedral
+ *   dfg         the split-sum DFG table (seed 002's DFG with the height-correlated Smith V) */
+#include "common.h"
+#include "brdf.h"
+#include "sampling.h"
+
+#ifndef LAYOUT
+#define LAYOUT 0
+#endif
+
+/* Parent texel (i, j) of a dw x dh level = the mean of the child texels it covers, each weighted
+ * by the solid angle of the overlap (azimuth overlap x (cos a - cos b)); exact for any sizes. */
+__kernel void downsample(__global const float4 *src, const int sw, const int sh,
+                         __global float4 *dst, const int dw, const int dh)
+{
+    const int i = get_global_id(0), j = get_global_id(1);
+    if (i >= dw || j >= dh) return;
+    const float ua = (float)i * sw / dw, ub = (float)(i + 1) * sw / dw;
+    const float va = (float)j * sh / dh, vb = (float)(j + 1) * sh / dh;
+    float4 acc = (float4)(0.0f);
+    float wsum = 0.0f;
+    for (int cj = (int)floor(va); cj < (int)ceil(vb) && cj < sh; ++cj) {
+        const float lo = fmax(va, (float)cj), hi = fmin(vb, (float)(cj + 1));
+        if (hi <= lo) continue;
+        /* cos(pi lo/sh) - cos(pi hi/sh) = 2 sin(pi (lo+hi)/(2 sh)) sin(pi (hi-lo)/(2 sh)), pole-symmetric */
+        const float mid = fmin(lo + hi, 2.0f * sh - lo - hi);
+        const float wt = sin(IBL_PI * 0.5f * mid / sh) * sin(IBL_PI * 0.5f * (hi - lo) / sh);
+        for (int ci = (int)floor(ua); ci < (int)ceil(ub) && ci < sw; ++ci) {
+            const float wu = fmin(ub, (float)(ci + 1)) - fmax(ua, (float)ci);
+            if (wu <= 0.0f) continue;
+            acc += (wt * wu) * src[cj * sw + ci];
+            wsum += wt * wu;
+        }
+    }
+    dst[j * dw + i] = acc / wsum;
+}
+
+inline float3 output_dir(int idx, int size)
+{
+#if LAYOUT == 0
+    const int w = 2 * size;
+    return dir_from_equirect_uv((float2)(((float)(idx % w) + 0.5f) / w, ((float)(idx / w) + 0.5f) / size));
+#elif LAYOUT == 1
+    const int face = idx / (size * size), r = idx % (size * size);
+    return dir_from_cube(face, ((float)(r % size) + 0.5f) / size, ((float)(r / size) + 0.5f) / size);
+#else
+    return dir_from_octahedral(((float)(idx % size) + 0.5f) / size, ((float)(idx / size) + 0.5f) / size);
+#endif
+}
+
+/* Trilinear lookup in the radiance chain: bilinear in two levels, blended. */
+inline float3 chain_lookup(__global const float4 *chain, __constant int *off, __constant int *lw,
+                           __constant int *lh, const int nlev, float3 d, float lod)
+{
+    const float2 uv = equirect_uv_from_dir(d);
+    lod = clamp(lod, 0.0f, (float)(nlev - 1));
+    const int l0 = (int)lod;
+    const int l1 = min(l0 + 1, nlev - 1);
+    const float f = lod - (float)l0;
+    float3 a = bilinear_equirect(chain + off[l0], lw[l0], lh[l0], uv);
+    if (f <= 0.0f) return a;
+    return mix(a, bilinear_equirect(chain + off[l1], lw[l1], lh[l1], uv), f);
+}
+
+/* samples[k] = (l_local.xyz, log2 of the sample's solid angle 1/(N pdf(l))), accepted (NoL > 0)
+ * samples only, computed once per level on the host (iblbake/mips.py: ggx_sample_set) from
+ * Hammersley points: pdf(l) = D(h) NoH / (4 VoH) = D(h) / 4 with N = V.
+ * Filtered importance sampling: a sample reads the chain at the level whose texel solid angle
+ * matches its own, lod = 0.5 log2(Omega_s / Omega_texel(l)) + bias, Omega_texel being a level-0
+ * texel's exact solid angle at the sample's latitude (equirect texels shrink towards the poles).
+ * The estimate is sum L(l) NoL / sum NoL (Karis 2013). */
+__kernel void prefilter(__global const float4 *chain, __constant int *off, __constant int *lw,
+                        __constant int *lh, const int nlev,
+                        __global const float4 *samples, const int nsamples, const float lod_bias,
+                        const int use_fis, const int size, const int ntexels, __global float4 *out)
+{
+    const int idx = get_global_id(0);
+    if (idx >= ntexels) return;
+    const float3 n = output_dir(idx, size);
+    float3 t, b;
+    tangent_frame(n, &t, &b);
+    const int w0 = lw[0], h0 = lh[0];
+    float3 acc = (float3)(0.0f);
+    float wsum = 0.0f;
+    for (int k = 0; k < nsamples; ++k) {
+        const float4 s = samples[k];
+        const float3 l = normalize(t * s.x + b * s.y + n * s.z);
+        float lod = 0.0f;
+        if (use_fis) {
+            const int row = min((int)(equirect_uv_from_dir(l).y * h0), h0 - 1);
+            lod = 0.5f * (s.w - log2(equirect_row_solid_angle(row, w0, h0))) + lod_bias;
+        }
+        acc += s.z * chain_lookup(chain, off, lw, lh, nlev, l, lod);
+        wsum += s.z;
+    }
+    out[idx] = (float4)(acc / fmax(wsum, 1e-30f), 0.0f);
+}
+
+/* Mirror level (roughness 0): the source resampled to the layout (bilinear in level 0). */
+__kernel void resample(__global const float4 *chain, __constant int *off, __constant int *lw,
+                       __constant int *lh, const int nlev, const int size, const int ntexels,
+                       __global float4 *out)
+{
+    const int idx = get_global_id(0);
+    if (idx >= ntexels) return;
+    out[idx] = (float4)(chain_lookup(chain, off, lw, lh, nlev, output_dir(idx, size), 0.0f), 0.0f);
+}
+
+/* DFG over NoV (x) and perceptual roughness (y), both on grids including 0 and 1:
+ * NoV = max(x/(n-1), 1e-4), r = y/(n-1), alpha = r^2. With N = (0,0,1), V = (sqrt(1-NoV^2), 0, NoV),
+ * h ~ D(h) NoH: the weight of a sample is G_vis = 4 V NoL VoH / NoH (seed 002's GDFG * VoH / NoH):
+ *   A = mean G_vis (1 - Fc), B = mean G_vis Fc, Fc = (1 - VoH)^5; specular = F0 A + F90 B.
+ * MULTISCATTER stores (B, A + B) instead (Filament's layout for energy compensation). */
+__kernel void dfg(const int n, const int nsamples, __global float2 *out)
+{
+    const int x = get_global_id(0), y = get_global_id(1);
+    if (x >= n || y >= n) return;
+    const float nov = fmax((float)x / (float)(n - 1), 1e-4f);
+    const float r = (float)y / (float)(n - 1);
+    const float alpha = r * r;
+    const float3 v = (float3)(sqrt(1.0f - nov * nov), 0.0f, nov);
+    float a = 0.0f, bsum = 0.0f;
+    for (int k = 0; k < nsamples; ++k) {
+        const float3 h = sample_ggx_half(hammersley((uint)k, (uint)nsamples), alpha);
+        const float voh = dot(v, h);
+        const float3 l = 2.0f * voh * h - v;
+        const float nol = clamp(l.z, 0.0f, 1.0f), noh = clamp(h.z, 0.0f, 1.0f);
+        if (nol > 0.0f && voh > 0.0f) {
+            const float gv = 4.0f * v_smith_ggx_correlated(nov, nol, alpha) * nol * voh / noh;
+            const float x1 = 1.0f - voh, x2 = x1 * x1;
+            const float fc = x2 * x2 * x1;
+            a += gv * (1.0f - fc);
+            bsum += gv * fc;
+        }
+    }
+    a /= (float)nsamples;
+    bsum /= (float)nsamples;
+#ifdef MULTISCATTER
+    out[y * n + x] = (float2)(bsum, a + bsum);
+#else
+    out[y * n + x] = (float2)(a, bsum);
+#endif
+}
+
+/* Deterministic prefilter: with N = V = R the lobe weight D(h) NoL depends only on c = n.w, so a
+ * level is the convolution sum_w L(w) D(h) c dOmega / sum_w D(h) c dOmega over the texels w of a
+ * radiance-chain level fine enough for the lobe (chosen on the host), restricted to the cone
+ * c > cos_cut outside which the weight is below a set fraction of its peak. Rows outside the
+ * cone are skipped, and in each row only the azimuth interval the cone crosses is visited.
+ * No sampling noise, no aliasing of small bright sources. */
+__kernel void convolve(__global const float4 *level, const int w, const int h,
+                       __global const float2 *col_sc, const int sub, const float alpha,
+                       const float cos_cut, const int size, const int ntexels, __global float4 *out)
+{
+    const int idx = get_global_id(0);
+    if (idx >= ntexels) return;
+    const float3 n = output_dir(idx, size);
+    const float gamma = acos(cos_cut);
+    const float theta_n = acos(clamp(n.y, -1.0f, 1.0f));
+    const float phi_n = atan2(n.x, n.z);
+    const int j0 = max(0, (int)floor((theta_n - gamma) / IBL_PI * h));
+    const int j1 = min(h - 1, (int)floor((theta_n + gamma) / IBL_PI * h));
+    const float sin_gamma = sin(gamma);
+    const int ws = w * sub, hs = h * sub;          /* the sub-texel grid: col_sc has ws entries */
+    float3 acc = (float3)(0.0f);
+    float wsum = 0.0f;
+    for (int js = j0 * sub; js < (j1 + 1) * sub; ++js) {
+        const float theta = IBL_PI * ((float)js + 0.5f) / hs;
+        const float st = sin(theta), ct = cos(theta);
+        const float d_omega = equirect_row_solid_angle(js, ws, hs);
+        /* azimuth half-width of the cone on this row (the whole row near the poles) */
+        int i0 = 0, i1 = ws - 1;
+        const float st_min = fmin(sin(IBL_PI * (float)js / hs), sin(IBL_PI * (float)(js + 1) / hs));
+        if (gamma < 0.5f * IBL_PI && sin_gamma < st_min) {
+            const float half_width = asin(sin_gamma / st_min) + 2.0f * IBL_PI / ws;
+            const float uc = 0.5f - phi_n * (0.5f / IBL_PI);
+            i0 = (int)floor((uc - half_width * (0.5f / IBL_PI)) * ws - 0.5f);
+            i1 = (int)ceil((uc + half_width * (0.5f / IBL_PI)) * ws - 0.5f);
+            if (i1 - i0 >= ws) { i0 = 0; i1 = ws - 1; }
+        }
+        __global const float4 *row = level + (js / sub) * w;
+        for (int ii = i0; ii <= i1; ++ii) {
+            int i = ii % ws; if (i < 0) i += ws;
+            const float2 sc = col_sc[i];
+            const float c = n.x * st * sc.x + n.y * ct + n.z * st * sc.y;
+            if (c > cos_cut) {
+                const float wgt = d_ggx(sqrt(0.5f * (1.0f + c)), alpha) * c * d_omega;
+                acc += wgt * row[i / sub].xyz;
+                wsum += wgt;
+            }
+        }
+    }
+    out[idx] = (float4)(acc / fmax(wsum, 1e-30f), 0.0f);
+}
