@@ -259,7 +259,7 @@ def mips_defaults_min_size():
               help="auto: weight evaluations per level allowed for convolve.")
 @click.option("--dfg-size", type=click.IntRange(2, 4096), default=128, show_default=True,
               help="DFG table size (NoV x roughness).")
-@click.option("--dfg-samples", type=click.IntRange(min=1), default=1024, show_default=True,
+@click.option("--dfg-samples", type=click.IntRange(min=1), default=4096, show_default=True,
               help="GGX samples per DFG texel.")
 @click.option("--dfg-multiscatter", is_flag=True,
               help="Store (B, A+B) for Filament's multiple-scattering energy compensation instead of (A, B).")

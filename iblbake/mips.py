@@ -152,10 +152,12 @@ def ggx_sample_set(alpha: float, n: int) -> SampleSet:
 
 
 def texel_solid_angle_at(chain0_w: int, chain0_h: int, dirs):
-    """Exact solid angle of the level-0 equirect texel row each direction falls in."""
-    _, v = conventions.equirect_uv_from_dir(dirs)
-    row = np.minimum((v * chain0_h).astype(np.int64), chain0_h - 1)
-    return conventions.equirect_row_solid_angles(chain0_w, chain0_h)[row]
+    """Solid angle density of level-0 equirect texels at each direction's latitude,
+    (2 pi / W)(pi / H) sin(theta), floored at the polar row centre (continuous in the direction,
+    so that the level choice does not jump at row boundaries)."""
+    st = np.sqrt(np.maximum(0.0, 1.0 - np.asarray(dirs)[..., 1] ** 2))
+    st = np.maximum(st, math.sin(0.5 * math.pi / chain0_h))
+    return (2.0 * math.pi / chain0_w) * (math.pi / chain0_h) * st
 
 
 def chain_lookup_reference(chain, dirs, lod):
@@ -257,6 +259,8 @@ def dfg_reference(size: int, n_samples: int, multiscatter: bool = False):
         del hy
     a /= n_samples
     b /= n_samples
+    e = np.maximum(a + b, 1.0)   # the exact A + B is <= 1; the QMC estimate can overshoot by ~1e-4
+    a, b = a / e, b / e
     out = np.stack([b, a + b] if multiscatter else [a, b], axis=-1)
     return out
 
@@ -305,9 +309,8 @@ class OpenCLBaker:
         k = rt.kernel("mips.cl", "downsample")
         for lvl in range(1, len(sizes)):
             (sw, sh), (dw, dh) = sizes[lvl - 1], sizes[lvl]
-            src = buf.get_sub_region(int(offsets[lvl - 1]) * 16, sw * sh * 16) if offsets[lvl - 1] else buf
-            dst = buf.get_sub_region(int(offsets[lvl]) * 16, dw * dh * 16)
-            rt.run(k, (dw, dh), None, src, np.int32(sw), np.int32(sh), dst, np.int32(dw), np.int32(dh))
+            rt.run(k, (dw, dh), None, buf, np.int32(offsets[lvl - 1]), np.int32(sw), np.int32(sh),
+                   np.int32(offsets[lvl]), np.int32(dw), np.int32(dh))
         flat = rt.read(buf, (int(offsets[-1]), 4))
         levels = [flat[offsets[i]:offsets[i + 1], :3].reshape(h, w, 3) for i, (w, h) in enumerate(sizes)]
         return levels, (buf, offsets, sizes)

@@ -14,9 +14,11 @@
 
 /* Parent texel (i, j) of a dw x dh level = the mean of the child texels it covers, each weighted
  * by the solid angle of the overlap (azimuth overlap x (cos a - cos b)); exact for any sizes. */
-__kernel void downsample(__global const float4 *src, const int sw, const int sh,
-                         __global float4 *dst, const int dw, const int dh)
+__kernel void downsample(__global float4 *chain, const int src_off, const int sw, const int sh,
+                         const int dst_off, const int dw, const int dh)
 {
+    __global const float4 *src = chain + src_off;
+    __global float4 *dst = chain + dst_off;
     const int i = get_global_id(0), j = get_global_id(1);
     if (i >= dw || j >= dh) return;
     const float ua = (float)i * sw / dw, ub = (float)(i + 1) * sw / dw;
@@ -71,7 +73,9 @@ inline float3 chain_lookup(__global const float4 *chain, __constant int *off, __
  * Hammersley points: pdf(l) = D(h) NoH / (4 VoH) = D(h) / 4 with N = V.
  * Filtered importance sampling: a sample reads the chain at the level whose texel solid angle
  * matches its own, lod = 0.5 log2(Omega_s / Omega_texel(l)) + bias, Omega_texel being a level-0
- * texel's exact solid angle at the sample's latitude (equirect texels shrink towards the poles).
+ * texel's solid angle at the sample's latitude, (2 pi / W)(pi / H) sin(theta), floored at the
+ * polar row's centre (equirect texels shrink towards the poles). A continuous density, not the
+ * row-exact value: a level choice that jumps at row boundaries made float32 and float64 disagree.
  * The estimate is sum L(l) NoL / sum NoL (Karis 2013). */
 __kernel void prefilter(__global const float4 *chain, __constant int *off, __constant int *lw,
                         __constant int *lh, const int nlev,
@@ -84,6 +88,7 @@ __kernel void prefilter(__global const float4 *chain, __constant int *off, __con
     float3 t, b;
     tangent_frame(n, &t, &b);
     const int w0 = lw[0], h0 = lh[0];
+    const float texel0 = (2.0f * IBL_PI / w0) * (IBL_PI / h0), sin_pole = sin(0.5f * IBL_PI / h0);
     float3 acc = (float3)(0.0f);
     float wsum = 0.0f;
     for (int k = 0; k < nsamples; ++k) {
@@ -91,8 +96,8 @@ __kernel void prefilter(__global const float4 *chain, __constant int *off, __con
         const float3 l = normalize(t * s.x + b * s.y + n * s.z);
         float lod = 0.0f;
         if (use_fis) {
-            const int row = min((int)(equirect_uv_from_dir(l).y * h0), h0 - 1);
-            lod = 0.5f * (s.w - log2(equirect_row_solid_angle(row, w0, h0))) + lod_bias;
+            const float st = fmax(sqrt(fmax(0.0f, 1.0f - l.y * l.y)), sin_pole);
+            lod = 0.5f * (s.w - log2(texel0 * st)) + lod_bias;
         }
         acc += s.z * chain_lookup(chain, off, lw, lh, nlev, l, lod);
         wsum += s.z;
@@ -139,6 +144,9 @@ __kernel void dfg(const int n, const int nsamples, __global float2 *out)
     }
     a /= (float)nsamples;
     bsum /= (float)nsamples;
+    /* the exact A + B is <= 1 (energy); the quasi-Monte Carlo estimate can overshoot by ~1e-4 */
+    const float e = a + bsum;
+    if (e > 1.0f) { a /= e; bsum /= e; }
 #ifdef MULTISCATTER
     out[y * n + x] = (float2)(bsum, a + bsum);
 #else
