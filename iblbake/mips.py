@@ -382,7 +382,7 @@ def lobe_cutoff(alpha: float, fraction: float = 1e-4) -> float:
     return max(0.0, math.cos(min(2.0 * theta_h, math.pi / 2)))
 
 
-TEXELS_PER_LOBE = 6.0
+TEXELS_PER_LOBE = 12.0  # measured at face 256 on city, r = 0.5: 6 -> 1.05%, 12 -> 0.20%, 24 -> 0.04%
 
 
 def convolve_level_choice(chain_sizes, alpha: float, texels_per_lobe: float = TEXELS_PER_LOBE,
