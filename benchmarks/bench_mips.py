@@ -81,9 +81,9 @@ def main(argv=None):
             errs = []
             for lvl, idx, ref in zip(levels, picks, refs):
                 errs.append(mips.relative_rmse(lvl.reshape(-1, 3)[idx], ref))
-            how = "" if kw["method"] != "auto" else " [" + " ".join(m[0] for m in methods) + "]"
+            how = "" if kw["method"] != "auto" else " [" + " ".join(m[0] + m.split("@")[-1] * ("@" in m) for m in methods) + "]"
             print(f"| {label}{how} | {t:.3f} | {' '.join(f'{e:.1%}' for e in errs)} | {max(errs):.1%} |")
-    print("\n(auto: per level r = resample, c = convolve, f = fis)")
+    print("\n(auto: per level r = resample, cT = convolve at T texels per lobe scale, f = fis)")
 
     if not args.no_dfg:
         gpu = baker.gpu

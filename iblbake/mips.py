@@ -20,6 +20,8 @@ from . import brdf, conventions, sampling
 
 LAYOUT_IDS = {"equirect": 0, "cubemap": 1, "octahedral": 2}
 MIN_LEVEL_SIZE = 8
+# `convolve` reads a chain level with texels this many times smaller than the lobe's angular scale
+TEXELS_PER_LOBE = 12.0  # measured at face 256 on city, r = 0.5: 6 -> 1.05%, 12 -> 0.20%, 24 -> 0.04%
 
 
 # --- sizes ----------------------------------------------------------------------------------
@@ -342,12 +344,13 @@ class OpenCLBaker:
                    np.float32(lod_bias), np.int32(1 if fis else 0), np.int32(s), np.int32(n), out)
         return rt.read(out, (n, 4))[:, :3].reshape(shape + (3,))
 
-    def convolve_level(self, chain_levels, layout: str, s: int, roughness: float):
+    def convolve_level(self, chain_levels, layout: str, s: int, roughness: float,
+                       texels_per_lobe: float = TEXELS_PER_LOBE):
         """One prefiltered level by the deterministic `convolve` kernel."""
         rt = self.rt
         alpha = roughness * roughness
         sizes = [(c.shape[1], c.shape[0]) for c in chain_levels]
-        lvl, sub = convolve_level_choice(sizes, alpha)
+        lvl, sub = convolve_level_choice(sizes, alpha, texels_per_lobe)
         src = chain_levels[lvl]
         shape = layout_shape(layout, s)
         n = shape[0] * shape[1]
@@ -382,7 +385,6 @@ def lobe_cutoff(alpha: float, fraction: float = 1e-4) -> float:
     return max(0.0, math.cos(min(2.0 * theta_h, math.pi / 2)))
 
 
-TEXELS_PER_LOBE = 12.0  # measured at face 256 on city, r = 0.5: 6 -> 1.05%, 12 -> 0.20%, 24 -> 0.04%
 
 
 def convolve_level_choice(chain_sizes, alpha: float, texels_per_lobe: float = TEXELS_PER_LOBE,
@@ -400,9 +402,9 @@ def convolve_level_choice(chain_sizes, alpha: float, texels_per_lobe: float = TE
     return best, sub
 
 
-def convolve_cost(chain_sizes, out_texels: int, alpha: float) -> float:
+def convolve_cost(chain_sizes, out_texels: int, alpha: float, texels_per_lobe: float = TEXELS_PER_LOBE) -> float:
     """Approximate weight evaluations of `convolve` for one level."""
-    k, sub = convolve_level_choice(chain_sizes, alpha)
+    k, sub = convolve_level_choice(chain_sizes, alpha, texels_per_lobe)
     w, h = chain_sizes[k]
     cells = w * h * sub * sub
     cone = 2.0 * math.pi * (1.0 - lobe_cutoff(alpha))
@@ -414,11 +416,11 @@ def _column_sin_cos(w: int):
     return np.stack([np.sin(phi), np.cos(phi)], axis=-1)
 
 
-def convolve_reference(chain, dirs, roughness: float):
+def convolve_reference(chain, dirs, roughness: float, texels_per_lobe: float = TEXELS_PER_LOBE):
     """numpy twin of kernels/mips.cl:convolve (all texels, the same level, split and cone cut)."""
     alpha = roughness * roughness
     sizes = [(c.shape[1], c.shape[0]) for c in chain]
-    k, sub = convolve_level_choice(sizes, alpha)
+    k, sub = convolve_level_choice(sizes, alpha, texels_per_lobe)
     lvl = np.asarray(chain[k], np.float64)
     h, w = lvl.shape[:2]
     src, om = _texel_subsamples(w, h, sub)

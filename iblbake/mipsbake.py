@@ -57,20 +57,26 @@ class BakeReport:
     entries: dict = field(default_factory=dict)  # kind -> {"path", "cached", "seconds", ...}
 
 
+CONVOLVE_RESOLUTIONS = (12.0, 6.0)   # texels per lobe scale, finest first (see mips.TEXELS_PER_LOBE)
+
+
 def plan_methods(chain_sizes, opts: dict) -> list[str]:
-    """Per level: 'resample' (mirror), 'convolve' or 'fis'."""
+    """Per level: 'resample' (mirror), 'convolve@T' (T texels per lobe scale) or 'fis'.
+    auto takes the finest convolution that fits the budget, else FIS."""
     out = []
     for s, r in zip(opts["sizes"], opts["roughness"]):
         if r == 0.0:
             out.append("resample")
         elif opts["method"] == "convolve":
-            out.append("convolve")
+            out.append(f"convolve@{CONVOLVE_RESOLUTIONS[0]:g}")
         elif opts["method"] == "fis":
             out.append("fis")
         else:
             shape = mips.layout_shape(opts["layout"], s)
-            cost = mips.convolve_cost(chain_sizes, shape[0] * shape[1], r * r)
-            out.append("convolve" if cost <= opts["convolve_budget"] else "fis")
+            n = shape[0] * shape[1]
+            fits = [t for t in CONVOLVE_RESOLUTIONS
+                    if mips.convolve_cost(chain_sizes, n, r * r, t) <= opts["convolve_budget"]]
+            out.append(f"convolve@{fits[0]:g}" if fits else "fis")
     return out
 
 
@@ -109,16 +115,16 @@ class Baker:
             if self.gpu:
                 if self._device_chain is None:
                     _, self._device_chain = self.gpu.radiance_chain(chain[0])
-                if how == "convolve":
-                    img = self.gpu.convolve_level(chain, layout, s, r)
+                if how.startswith("convolve"):
+                    img = self.gpu.convolve_level(chain, layout, s, r, float(how.split("@")[1]))
                 else:
                     img = self.gpu.prefilter_level(self._device_chain, layout, s, 0.0 if how == "resample" else r,
                                                    opts["samples"], opts["lod_bias"], opts["fis"])
             else:
                 dirs = mips.layout_dirs(layout, s)
                 chain64 = [c.astype(np.float64) for c in chain]
-                if how == "convolve":
-                    img = mips.convolve_reference(chain64, dirs, r)
+                if how.startswith("convolve"):
+                    img = mips.convolve_reference(chain64, dirs, r, float(how.split("@")[1]))
                 else:
                     img = mips.prefilter_reference(chain64, dirs, 0.0 if how == "resample" else r,
                                                    opts["samples"], opts["lod_bias"], opts["fis"])
