@@ -226,10 +226,6 @@ def sh_command(env, output, bands, window, backend, rotate_y, intensity, glsl, n
         con.result(summary, human)
 
 
-def mips_defaults_min_size():
-    return 8
-
-
 @cli.command("mips")
 @click.argument("env", metavar="ENV")
 @click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
@@ -244,9 +240,9 @@ def mips_defaults_min_size():
 @click.option("--levels", type=click.IntRange(1, 32), default=None,
               help="Levels K of the prefiltered chain, roughness r_k = k/(K-1). Default: one per halving "
                    "of --size down to --min-size.")
-@click.option("--min-size", type=click.IntRange(min=1), default=mips_defaults_min_size(), show_default=True,
+@click.option("--min-size", type=click.IntRange(min=1), default=8, show_default=True,  # mips.MIN_LEVEL_SIZE
               help="Smallest level size of the prefiltered chain.")
-@click.option("--method", type=click.Choice(["auto", "fis", "convolve"]), default="auto", show_default=True,
+@click.option("--method", type=click.Choice(["auto", "fis", "convolve"]), default="auto", show_default=True,  # mipsbake.METHODS
               help="fis: GGX importance sampling with filtered lookups; convolve: deterministic sum over "
                    "every texel of a fine enough chain level (exact, slower on sharp levels); auto: "
                    "convolve where it fits --convolve-budget, fis elsewhere.")

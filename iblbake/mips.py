@@ -249,7 +249,7 @@ def dfg_reference(size: int, n_samples: int, multiscatter: bool = False):
     vx, vz = np.sqrt(1.0 - nov * nov), nov
     for u0, u1 in u:
         hl = sampling.sample_ggx_half(np.array([u0, u1]), alpha)    # (size, 1, 3)
-        hx, hy, hz = hl[..., 0], hl[..., 1], hl[..., 2]
+        hx, hz = hl[..., 0], hl[..., 2]   # v has no y component
         voh = vx * hx + vz * hz
         lz = 2.0 * voh * hz - vz
         nol = np.clip(lz, 0.0, 1.0)
@@ -258,7 +258,6 @@ def dfg_reference(size: int, n_samples: int, multiscatter: bool = False):
         fc = (1.0 - np.clip(voh, 0, 1)) ** 5
         a += np.where(ok, gv * (1 - fc), 0.0)
         b += np.where(ok, gv * fc, 0.0)
-        del hy
     a /= n_samples
     b /= n_samples
     e = np.maximum(a + b, 1.0)   # the exact A + B is <= 1; the QMC estimate can overshoot by ~1e-4

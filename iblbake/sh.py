@@ -28,10 +28,6 @@ def sh_index(l: int, m: int) -> int:
     return l * (l + 1) + m
 
 
-def num_coeffs(bands: int) -> int:
-    return bands * bands
-
-
 def sh_normalization(l: int, m: int) -> float:
     """K_l^m = sqrt((2l+1)/(4 pi) * (l-m)!/(l+m)!), m >= 0."""
     ratio = 1.0
@@ -164,14 +160,6 @@ def irradiance(coeffs_e, n, bands: int):
     """Irradiance at normals n from irradiance coefficients, clamped at 0 (seed 000): a sharp
     source rings, and negative irradiance must not reach a frame."""
     return np.maximum(0.0, evaluate(coeffs_e, n, bands))
-
-
-def clamped_cosine_irradiance_of_direction(n, d, bands: int):
-    """Band-limited irradiance at normals n from a unit-solid-angle-weighted delta light at d:
-    sum_l Ahat_l sum_m Y_lm(d) Y_lm(n) (no clamp). The analytic answer for a single texel."""
-    yd = sh_basis(d, bands)
-    yn = sh_basis(n, bands)
-    return yn @ (ahat(bands) * yd)
 
 
 # --- exact texel integration, in separable form ----------------------------------------
