@@ -20,6 +20,9 @@ from .atomic import atomic_path
 from .errors import InputError, IblbakeError
 
 DEFAULT_MAX_PIXELS = 8192 * 8192
+# Values beyond this cannot be summed in float32 kernels (a row of 8192 of them overflows 3.4e38);
+# no real radiance comes near it (Blender's suns peak at 3.4e4), but a corrupted file does.
+MAX_ABS_VALUE = 1e30
 NONFINITE_POLICIES = ("error", "zero", "clamp")
 NEGATIVE_POLICIES = ("keep", "clamp", "error")
 # Rec.709 / sRGB primaries and D65 white (x, y) pairs: R, G, B, W.
@@ -137,20 +140,22 @@ def read_panorama(path, *, max_pixels: int | None = None, nonfinite: str = "erro
     if w != 2 * h:
         info.warnings.append(f"{path}: {w}x{h} is not 2:1; treated as a full latitude-longitude panorama")
 
-    bad = ~np.isfinite(rgb)
+    with np.errstate(invalid="ignore"):
+        bad = ~(np.abs(rgb) <= MAX_ABS_VALUE)   # NaN, +-Inf, and values no float32 sum survives
     info.nonfinite = int(bad.sum())
     if info.nonfinite:
         if nonfinite == "error":
             raise InputError(
-                f"{path}: {info.nonfinite} non-finite (NaN/Inf) values, first at {_first_position(bad)}; "
-                "repair with --nonfinite zero or --nonfinite clamp")
+                f"{path}: {info.nonfinite} non-finite (NaN/Inf or beyond +-1e30) values, first at "
+                f"{_first_position(bad)}; repair with --nonfinite zero or --nonfinite clamp")
         if nonfinite == "zero":
             rgb[bad] = 0.0
-        else:  # clamp: +Inf to the largest finite value, NaN and -Inf to 0
-            finite = rgb[~bad]
-            top = float(finite.max()) if finite.size else 0.0
-            rgb[np.isposinf(rgb)] = max(top, 0.0)
-            rgb[~np.isfinite(rgb)] = 0.0
+        else:  # clamp: too large positive values to the largest valid value, the rest to 0
+            good = rgb[~bad]
+            top = float(good.max()) if good.size else 0.0
+            with np.errstate(invalid="ignore"):
+                rgb[bad & (rgb > 0)] = max(top, 0.0)
+            rgb[bad & ~(rgb > 0)] = 0.0
         info.warnings.append(f"{path}: repaired {info.nonfinite} non-finite values (--nonfinite {nonfinite})")
     neg = rgb < 0
     info.negative = int(neg.sum())
