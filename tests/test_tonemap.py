@@ -1,0 +1,67 @@
+"""Tone mapping: OpenCL against the numpy reference, closed forms, monotonicity, hostile inputs."""
+
+import numpy as np
+import pytest
+
+from iblbake import tonemap
+
+OPS = {"aces": 0, "reinhard": 1, "hable": 2, "pbr_neutral": 3, "linear": 4}
+HOSTILE = np.array([0.0, 1e-30, 1e-8, 0.5, 1.0, 11.2, 1e4, 6.5e4, 1e30, np.inf, -np.inf, np.nan, -1.0, -1e30],
+                   dtype=np.float32)
+
+
+def run_cl(rt, hdr, op, ev=0.0, srgb=True, gamma=2.2):
+    hdr = np.asarray(hdr, np.float32).reshape(-1, 3)
+    n = len(hdr)
+    rgba = np.zeros((n, 4), np.float32)
+    rgba[:, :3] = hdr
+    k = rt.kernel("tonemap.cl", "tonemap_u8", {"TONEMAP": OPS[op], "OUTPUT_SRGB": int(srgb)})
+    out, disp = rt.empty(n * 4), rt.empty(n * 16)
+    rt.run(k, (n,), None, rt.to_device(rgba), np.float32(2.0 ** ev), np.float32(gamma), np.int32(n), out, disp)
+    return rt.read(disp, (n, 4))[:, :3], rt.read(out, (n, 4), np.uint8)[:, :3]
+
+
+def test_closed_forms():
+    assert np.isclose(tonemap.reinhard(1.0), 0.5)
+    assert np.isclose(tonemap.aces(np.array(1.0)), (2.51 + 0.03) / (2.43 + 0.59 + 0.14))
+    assert np.isclose(tonemap.hable(np.array(11.2)), 1.0)
+    assert np.isclose(tonemap.srgb_encode(np.array(0.5)), 0.7353569830524495)
+    # PBR Neutral is the identity below the compression start, minus the Fresnel offset
+    c = np.array([0.5, 0.3, 0.2])
+    assert np.allclose(tonemap.pbr_neutral(c), c - 0.04)
+    assert np.allclose(tonemap.tonemap(np.array([[0.25, 0.25, 0.25]]), "linear", transfer="gamma", gamma=2.0), 0.5)
+    assert np.allclose(tonemap.tonemap(np.array([[0.25] * 3]), "linear", exposure_ev=2, transfer="gamma"), 1.0)
+
+
+@pytest.mark.parametrize("op", list(OPS))
+@pytest.mark.parametrize("srgb", [True, False])
+def test_opencl_matches_numpy(rt, op, srgb):
+    rng = np.random.default_rng(0)
+    hdr = np.concatenate([rng.random((2000, 3)) * 4, np.exp(rng.normal(0, 3, (2000, 3)))]).astype(np.float32)
+    disp, u8 = run_cl(rt, hdr, op, ev=0.5, srgb=srgb)
+    ref = tonemap.tonemap(hdr, op, 0.5, "srgb" if srgb else "gamma", 2.2)
+    assert np.abs(disp - ref).max() < 1e-5
+    assert np.abs(u8.astype(int) - tonemap.to_u8(ref).astype(int)).max() <= 1
+
+
+@pytest.mark.parametrize("op", list(OPS))
+def test_hostile_inputs_stay_finite_in_range(rt, op):
+    hdr = np.stack(list(np.meshgrid(HOSTILE, HOSTILE, indexing="ij")) + [np.full((len(HOSTILE),) * 2, 0.3)], -1)
+    hdr = hdr.reshape(-1, 3).astype(np.float32)
+    ref = tonemap.tonemap(hdr, op)
+    disp, _ = run_cl(rt, hdr, op)
+    for a in (ref, disp):
+        assert np.all(np.isfinite(a)) and a.min() >= 0 and a.max() <= 1
+    assert np.abs(disp - ref).max() < 1e-5
+
+
+@pytest.mark.parametrize("op", list(OPS))
+def test_monotonic_in_luminance(op):
+    x = np.geomspace(1e-6, 1e6, 4000)
+    y = tonemap.tonemap(np.stack([x, x, x], -1), op)[:, 0]
+    assert np.all(np.diff(y) >= -1e-12)
+    # and for a coloured ramp, the luminance of the output never decreases
+    c = np.stack([x, 0.5 * x, 0.2 * x], -1)
+    out = tonemap.tonemap(c, op, transfer="gamma", gamma=1.0)
+    lum = out @ np.array([0.2126, 0.7152, 0.0722])
+    assert np.all(np.diff(lum) >= -1e-9)
