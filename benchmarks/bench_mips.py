@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from iblbake import cl, images, mips, mipsbake
+from iblbake import images, mips, mipsbake
 
 ROOT = Path(__file__).resolve().parents[1]
 

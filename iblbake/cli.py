@@ -7,7 +7,7 @@ Heavy modules (pyopencl, OpenImageIO, trimesh) are imported inside the commands 
 
 from __future__ import annotations
 
-import functools
+import contextlib
 import json
 import math
 import os
@@ -17,7 +17,7 @@ import time
 import click
 
 from . import __version__
-from .errors import IblbakeError, InputError
+from .errors import IblbakeError
 
 _DEBUG = {"on": bool(os.environ.get("IBLBAKE_DEBUG"))}
 
@@ -62,6 +62,24 @@ class Console:
     @property
     def interactive(self) -> bool:
         return not self.quiet and sys.stderr.isatty() and not os.environ.get("CI")
+
+    @contextlib.contextmanager
+    def stages(self, names, label: str):
+        """A progress bar over named stages on an interactive terminal; silent otherwise.
+        Yields a function that marks the current stage done."""
+        if not self.interactive:
+            yield lambda: None
+            return
+        names = list(names)
+        with click.progressbar(length=len(names), label=label, file=sys.stderr,
+                               item_show_func=lambda i: i) as bar:
+            done = [0]
+
+            def step():
+                done[0] += 1
+                bar.update(1, names[done[0]] if done[0] < len(names) else "done")
+            bar.update(0, names[0])
+            yield step
 
     def result(self, summary: dict, human: str):
         if self.as_json:
@@ -185,18 +203,21 @@ def sh_command(env, output, bands, window, backend, rotate_y, intensity, glsl, n
 
     con = Console(quiet, as_json)
     t_start = time.perf_counter()
-    t0 = time.perf_counter()
-    image, info = images.read_panorama(env, max_pixels=max_pixels, nonfinite=nonfinite, negative=negative)
-    read_s = time.perf_counter() - t0
+    with con.stages(["reading", "projecting"], label="sh") as stage:
+        t0 = time.perf_counter()
+        image, info = images.read_panorama(env, max_pixels=max_pixels, nonfinite=nonfinite, negative=negative)
+        read_s = time.perf_counter() - t0
+        stage()
+        rt = None
+        device_label = "numpy (float64, host)"
+        if backend == "opencl":
+            from . import cl
+            rt = cl.Runtime(device)
+            device_label = rt.device_label
+        coeffs, project_s = shbake.project(image, bands, backend, rt, rotate_y)
+        stage()
     for w in info.warnings:
         con.warn(w)
-    rt = None
-    device_label = "numpy (float64, host)"
-    if backend == "opencl":
-        from . import cl
-        rt = cl.Runtime(device)
-        device_label = rt.device_label
-    coeffs, project_s = shbake.project(image, bands, backend, rt, rotate_y)
     coeffs = coeffs * intensity
     options = {"bands": bands, "window": window, "backend": backend, "rotate_y_deg": rotate_y,
                "intensity": intensity, "nonfinite": nonfinite, "negative": negative}

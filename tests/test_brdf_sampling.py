@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from iblbake import brdf, conventions as cv, sampling
+from iblbake import brdf, sampling
 
 
 def test_hammersley_and_radical_inverse():

@@ -1,7 +1,6 @@
 """`iblbake mips` end to end: the cache reuses, detects corruption, survives concurrency and kills."""
 
 import json
-import os
 import signal
 import subprocess
 import sys

@@ -95,7 +95,6 @@ def test_opencl_equirect_matches_numpy(rt):
 
 
 def test_opencl_solid_angles_and_bilinear_match_numpy(rt):
-    import pyopencl as cl  # noqa: F401
     w, h = 1024, 512
     prg = rt.program("selftest.cl", {"SH_BANDS": 3})
     out = rt.empty(h * 4)
