@@ -136,3 +136,22 @@ def test_usage_errors(tmp_path):
     assert p.returncode == 2 and "Traceback" not in p.stderr and "--bands" in p.stderr
     p = run_cli("sh", env, "--intensity", "nan")
     assert p.returncode == 2 and "not a finite number" in p.stderr
+
+
+@pytest.mark.parametrize("icd", ["empty", "broken"])
+def test_no_working_device_names_the_fix(tmp_path, icd):
+    """With no usable OpenCL driver (an empty or broken ICD folder), commands that need a device
+    fail with one line naming what was tried and what to install; --backend numpy still works."""
+    vendors = tmp_path / "vendors"
+    vendors.mkdir()
+    if icd == "broken":
+        (vendors / "bad.icd").write_text("libdoesnotexist.so\n")
+    env = {"OCL_ICD_VENDORS": str(vendors)}
+    pano = write_exr(tmp_path / "c.exr", np.ones((4, 8, 3), np.float32))
+    p = run_cli("sh", pano, "-o", tmp_path / "x.json", env=env)
+    assert_one_line_error(p, "no working OpenCL device", "tried:", "pocl-opencl-icd")
+    assert p.returncode == 3 and not (tmp_path / "x.json").exists()
+    p = run_cli("devices", env=env)
+    assert p.returncode != 0 and "pocl-opencl-icd" in p.stderr and "Traceback" not in p.stderr
+    p = run_cli("sh", pano, "--backend", "numpy", "--json", env=env)
+    assert p.returncode == 0, p.stderr
