@@ -204,7 +204,6 @@ class Runtime:
         self.queue = self.cl.CommandQueue(self.ctx)
         self._programs: dict = {}
         self._kernels: dict = {}
-        self._host_arrays: dict = {}
         self.builds: list[dict] = []  # what was built, with times, for reports
 
     @property
@@ -244,13 +243,11 @@ class Runtime:
     # -- buffers ---------------------------------------------------------------------
     def to_device(self, array, read_only: bool = True):
         """A device buffer holding `array`. On CPU devices a read-only array is used in place
-        (USE_HOST_PTR: no copy); the caller keeps the array alive while the buffer is used."""
+        (USE_HOST_PTR: no copy; pyopencl keeps the array alive as the buffer's `hostbuf`)."""
         mf = self.cl.mem_flags
         array = np.ascontiguousarray(array)
         if read_only and self.info.kind == "CPU":
-            buf = self.cl.Buffer(self.ctx, mf.READ_ONLY | mf.USE_HOST_PTR, hostbuf=array)
-            self._host_arrays[id(buf)] = array
-            return buf
+            return self.cl.Buffer(self.ctx, mf.READ_ONLY | mf.USE_HOST_PTR, hostbuf=array)
         flags = (mf.READ_ONLY if read_only else mf.READ_WRITE) | mf.COPY_HOST_PTR
         return self.cl.Buffer(self.ctx, flags, hostbuf=array)
 
