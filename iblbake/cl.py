@@ -204,6 +204,7 @@ class Runtime:
         self.queue = self.cl.CommandQueue(self.ctx)
         self._programs: dict = {}
         self._kernels: dict = {}
+        self._host_arrays: list = []   # zero-copy host arrays of queued work (see to_device)
         self.builds: list[dict] = []  # what was built, with times, for reports
 
     @property
@@ -243,11 +244,17 @@ class Runtime:
     # -- buffers ---------------------------------------------------------------------
     def to_device(self, array, read_only: bool = True):
         """A device buffer holding `array`. On CPU devices a read-only array is used in place
-        (USE_HOST_PTR: no copy; pyopencl keeps the array alive as the buffer's `hostbuf`)."""
+        (USE_HOST_PTR: no copy). The runtime keeps the array alive: a buffer passed straight into
+        an asynchronous enqueue is dropped by Python at once, OpenCL keeps the memory object for
+        the queued kernel, but numpy would free the host memory under it (pyopencl's own
+        `hostbuf` reference dies with the Python buffer object). They are forgotten after the next
+        blocking read: on this in-order queue every kernel enqueued before it has then finished."""
         mf = self.cl.mem_flags
         array = np.ascontiguousarray(array)
         if read_only and self.info.kind == "CPU":
-            return self.cl.Buffer(self.ctx, mf.READ_ONLY | mf.USE_HOST_PTR, hostbuf=array)
+            buf = self.cl.Buffer(self.ctx, mf.READ_ONLY | mf.USE_HOST_PTR, hostbuf=array)
+            self._host_arrays.append(array)
+            return buf
         flags = (mf.READ_ONLY if read_only else mf.READ_WRITE) | mf.COPY_HOST_PTR
         return self.cl.Buffer(self.ctx, flags, hostbuf=array)
 
@@ -256,7 +263,8 @@ class Runtime:
 
     def read(self, buf, shape, dtype=np.float32):
         out = np.empty(shape, dtype=dtype)
-        self.cl.enqueue_copy(self.queue, out, buf)
+        self.cl.enqueue_copy(self.queue, out, buf)   # blocking: all earlier work is done
+        self._host_arrays.clear()
         return out
 
     def run(self, kernel, global_size, local_size, *args):
