@@ -8,6 +8,7 @@ that need no device never pay for it.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import re
@@ -48,6 +49,7 @@ def kernel_source(name: str, _seen=None) -> str:
     return _INCLUDE.sub(inline, text)
 
 
+@functools.lru_cache(maxsize=None)
 def source_hash(name: str) -> str:
     return hashlib.sha256(kernel_source(name).encode()).hexdigest()[:16]
 

@@ -68,14 +68,14 @@ class Console:
         """A progress bar over named stages on an interactive terminal; silent otherwise.
         Yields a function that marks the current stage done."""
         if not self.interactive:
-            yield lambda: None
+            yield lambda _=1: None
             return
         names = list(names)
         with click.progressbar(length=len(names), label=label, file=sys.stderr,
                                item_show_func=lambda i: i) as bar:
             done = [0]
 
-            def step():
+            def step(_=1):   # also fits callers that report progress(1)
                 done[0] += 1
                 bar.update(1, names[done[0]] if done[0] < len(names) else "done")
             bar.update(0, names[0])
@@ -263,7 +263,7 @@ def sh_command(env, output, bands, window, backend, rotate_y, intensity, glsl, n
                    "of --size down to --min-size.")
 @click.option("--min-size", type=click.IntRange(min=1), default=8, show_default=True,  # mips.MIN_LEVEL_SIZE
               help="Smallest level size of the prefiltered chain.")
-@click.option("--method", type=click.Choice(["auto", "fis", "convolve"]), default="auto", show_default=True,  # mipsbake.METHODS
+@click.option("--method", type=click.Choice(["auto", "fis", "convolve"]), default="auto", show_default=True,
               help="fis: GGX importance sampling with filtered lookups; convolve: deterministic sum over "
                    "every texel of a fine enough chain level (exact, slower on sharp levels); auto: "
                    "convolve where it fits --convolve-budget, fis elsewhere.")
@@ -323,17 +323,11 @@ def mips_command(env, cache_dir, layout, size, levels, min_size, method, samples
                     state["chain"] = mipsbake.load_chain(root, manifest)
                 return state["chain"]
 
-            bar = None
-            if con.interactive:
-                bar = click.progressbar(length=len(opts["sizes"]), label="prefiltering", file=sys.stderr)
-                bar.__enter__()
-            try:
+            levels_named = [f"level {k} (r = {r:.3g})" for k, r in enumerate(opts["roughness"])]
+            with con.stages(levels_named, label="prefiltering") as step:
                 t0 = time.perf_counter()
                 pm, pcached = mipsbake.bake_prefiltered(baker, chain_levels, info, root, policies, opts,
-                                                        warn=con.warn, progress=bar.update if bar else None)
-            finally:
-                if bar is not None:
-                    bar.__exit__(None, None, None)
+                                                        warn=con.warn, progress=step)
             report["prefiltered"] = {"path": str(root / pm["key"]), "cached": pcached,
                                      "seconds": round(time.perf_counter() - t0, 4), "layout": layout,
                                      "sizes": opts["sizes"], "roughness": opts["roughness"],

@@ -12,7 +12,7 @@ EXR, which must go down to 1x1 in one 2D layout); the manifest lists sizes and r
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +21,6 @@ from . import cache, cl, images, mips
 
 FORMAT = "iblbake.mips"
 FORMAT_VERSION = 1
-METHODS = ("auto", "fis", "convolve")
 DEFAULT_SAMPLES = 256
 DEFAULT_LOD_BIAS = 1.0
 # Weight evaluations of `convolve` allowed per level before `auto` switches to FIS: about half a
@@ -50,11 +49,6 @@ class PrefilterOptions:
                 "roughness": mips.level_roughness(len(sizes)), "method": self.method,
                 "samples": self.samples, "lod_bias": self.lod_bias, "fis": self.fis,
                 "convolve_budget": self.convolve_budget}
-
-
-@dataclass
-class BakeReport:
-    entries: dict = field(default_factory=dict)  # kind -> {"path", "cached", "seconds", ...}
 
 
 CONVOLVE_RESOLUTIONS = (12.0, 6.0)   # texels per lobe scale, finest first (see mips.TEXELS_PER_LOBE)
@@ -110,8 +104,9 @@ class Baker:
         sizes = [(c.shape[1], c.shape[0]) for c in chain]
         methods = plan_methods(sizes, {**opts, "convolve_budget": self.convolve_budget(opts)})
         out = []
+        layout = opts["layout"]
+        chain64 = None if self.gpu else [c.astype(np.float64) for c in chain]
         for s, r, how in zip(opts["sizes"], opts["roughness"], methods):
-            layout = opts["layout"]
             if self.gpu:
                 if self._device_chain is None:
                     _, self._device_chain = self.gpu.radiance_chain(chain[0])
@@ -122,7 +117,6 @@ class Baker:
                                                    opts["samples"], opts["lod_bias"], opts["fis"])
             else:
                 dirs = mips.layout_dirs(layout, s)
-                chain64 = [c.astype(np.float64) for c in chain]
                 if how.startswith("convolve"):
                     img = mips.convolve_reference(chain64, dirs, r, float(how.split("@")[1]))
                 else:
