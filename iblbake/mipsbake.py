@@ -77,9 +77,9 @@ def plan_methods(chain_sizes, opts: dict) -> list[str]:
 class Baker:
     """Bakes on the OpenCL device (backend 'opencl') or with the numpy twins (backend 'numpy')."""
 
-    def __init__(self, backend: str = "opencl", device: str | None = None):
+    def __init__(self, backend: str = "opencl", device: str | None = None, rt=None):
         self.backend = backend
-        self.rt = cl.Runtime(device) if backend == "opencl" else None
+        self.rt = rt or (cl.Runtime(device) if backend == "opencl" else None)
         self.gpu = mips.OpenCLBaker(self.rt) if self.rt else None
         self._device_chain = None
 

@@ -83,3 +83,26 @@ def tonemap(hdr, operator: str = "aces", exposure_ev: float = 0.0, transfer: str
 def to_u8(display):
     """Quantise display values in [0, 1] to 8 bits (round to nearest)."""
     return np.clip(np.floor(np.asarray(display) * 255.0 + 0.5), 0, 255).astype(np.uint8)
+
+
+def _pcg_hash(x):
+    x = np.asarray(x, np.uint64) & 0xFFFFFFFF
+    state = (x * 747796405 + 2891336453) & 0xFFFFFFFF
+    word = (((state >> ((state >> 28) + 4)) ^ state) * 277803737) & 0xFFFFFFFF
+    return ((word >> 22) ^ word) & 0xFFFFFFFF
+
+
+def dither_offsets(n: int):
+    """Triangular dither in LSB units (-1, 1) per pixel index; twin of kernels/tonemap.cl DITHER."""
+    h1 = _pcg_hash(np.arange(n, dtype=np.uint64))
+    h2 = _pcg_hash(h1)
+    u = ((h1 >> 8).astype(np.float64) + (h2 >> 8).astype(np.float64)) / 16777216.0
+    return u - 1.0
+
+
+def to_u8_dithered(display):
+    """8-bit quantisation with the renderer's deterministic triangular dither."""
+    d = np.asarray(display, np.float64)
+    flat = d.reshape(-1, d.shape[-1])
+    off = dither_offsets(len(flat))[:, None]
+    return np.clip(np.floor(flat * 255.0 + 0.5 + off), 0, 255).astype(np.uint8).reshape(d.shape)

@@ -7,6 +7,7 @@
 #include "common.h"
 #include "brdf.h"
 #include "sampling.h"
+#include "envmap.h"
 
 #ifndef LAYOUT
 #define LAYOUT 0
@@ -52,20 +53,6 @@ inline float3 output_dir(int idx, int size)
 #else
     return dir_from_octahedral(((float)(idx % size) + 0.5f) / size, ((float)(idx / size) + 0.5f) / size);
 #endif
-}
-
-/* Trilinear lookup in the radiance chain: bilinear in two levels, blended. */
-inline float3 chain_lookup(__global const float4 *chain, __constant int *off, __constant int *lw,
-                           __constant int *lh, const int nlev, float3 d, float lod)
-{
-    const float2 uv = equirect_uv_from_dir(d);
-    lod = clamp(lod, 0.0f, (float)(nlev - 1));
-    const int l0 = (int)lod;
-    const int l1 = min(l0 + 1, nlev - 1);
-    const float f = lod - (float)l0;
-    float3 a = bilinear_equirect(chain + off[l0], lw[l0], lh[l0], uv);
-    if (f <= 0.0f) return a;
-    return mix(a, bilinear_equirect(chain + off[l1], lw[l1], lh[l1], uv), f);
 }
 
 /* samples[k] = (l_local.xyz, log2 of the sample's solid angle 1/(N pdf(l))), accepted (NoL > 0)

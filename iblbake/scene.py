@@ -1,0 +1,572 @@
+"""Scene files for `iblbake render`: YAML in, a validated, defaults-filled dict out.
+
+The schema below is the single description of every key: the validator walks it, `render
+--help-schema` prints it, and README's scene section is generated from the same table. Errors are
+one line naming the file, the line and the dotted key, with the closest valid key for a typo.
+Values come from the YAML file, then `--set key.path=value` overrides (parsed as YAML scalars).
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from .errors import InputError
+
+# ---------------------------------------------------------------------------------------------
+# Field types. Each checks one value and returns it normalised, or raises _Bad with the reason.
+
+
+class _Bad(Exception):
+    pass
+
+
+@dataclass
+class Num:
+    default: Any = None
+    lo: float | None = None
+    hi: float | None = None
+    lo_open: bool = False      # lo excluded (fov 0 is an error, radius must be > 0)
+    integer: bool = False
+    doc: str = ""
+
+    def check(self, v):
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise _Bad(f"{v!r} is not a number")
+        if self.integer and (not float(v).is_integer()):
+            raise _Bad(f"{v!r} is not a whole number")
+        if not math.isfinite(v):
+            raise _Bad(f"{v!r} is not finite")
+        if self.lo is not None and (v < self.lo or (self.lo_open and v == self.lo)):
+            raise _Bad(f"{v!r} is out of range; give a value {'>' if self.lo_open else '>='} {self.lo:g}"
+                       + (f" and <= {self.hi:g}" if self.hi is not None else ""))
+        if self.hi is not None and v > self.hi:
+            raise _Bad(f"{v!r} is out of range; give a value <= {self.hi:g}"
+                       + (f" and {'>' if self.lo_open else '>='} {self.lo:g}" if self.lo is not None else ""))
+        return int(v) if self.integer else float(v)
+
+    def describe(self):
+        rng = ""
+        if self.lo is not None or self.hi is not None:
+            lo = "" if self.lo is None else f"{self.lo:g}{' <' if self.lo_open else ' <='} "
+            hi = "" if self.hi is None else f" <= {self.hi:g}"
+            rng = f" ({lo}x{hi})"
+        return ("integer" if self.integer else "number") + rng
+
+
+@dataclass
+class Vec:
+    n: int = 3
+    default: Any = None
+    lo: float | None = None
+    hi: float | None = None
+    nonzero: bool = False
+    integer: bool = False
+    positive: bool = False
+    doc: str = ""
+
+    def check(self, v):
+        if not isinstance(v, (list, tuple)) or len(v) != self.n:
+            raise _Bad(f"{v!r} is not a list of {self.n} numbers")
+        out = []
+        for x in v:
+            if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+                raise _Bad(f"{v!r} holds {x!r}, not a finite number")
+            if self.integer and not float(x).is_integer():
+                raise _Bad(f"{v!r} holds {x!r}, not a whole number")
+            if self.lo is not None and x < self.lo:
+                raise _Bad(f"{v!r} holds {x!r}; each value must be >= {self.lo:g}")
+            if self.hi is not None and x > self.hi:
+                raise _Bad(f"{v!r} holds {x!r}; each value must be <= {self.hi:g}")
+            if self.positive and x <= 0:
+                raise _Bad(f"{v!r} holds {x!r}; each value must be > 0")
+            out.append(int(x) if self.integer else float(x))
+        if self.nonzero and all(x == 0 for x in out):
+            raise _Bad(f"{v!r} is the zero vector; give a direction")
+        return out
+
+    def describe(self):
+        return f"[{', '.join(['x'] * self.n)}]" + (" (each >= %g)" % self.lo if self.lo is not None else "")
+
+
+@dataclass
+class Enum:
+    choices: tuple
+    default: Any = None
+    doc: str = ""
+
+    def check(self, v):
+        if isinstance(v, bool) and "on" in self.choices:   # YAML reads `off` as False
+            v = "on" if v else "off"
+        if isinstance(v, bool) and "off" in self.choices and v is False:
+            v = "off"
+        if v not in self.choices:
+            near = difflib.get_close_matches(str(v), [str(c) for c in self.choices], 1, 0.6)
+            hint = f" (did you mean {near[0]!r}?)" if near else ""
+            raise _Bad(f"{v!r} is not one of {' | '.join(map(str, self.choices))}{hint}")
+        return v
+
+    def describe(self):
+        return " | ".join(map(str, self.choices))
+
+
+@dataclass
+class Bool:
+    default: Any = False
+    doc: str = ""
+
+    def check(self, v):
+        if not isinstance(v, bool):
+            raise _Bad(f"{v!r} is not true or false")
+        return v
+
+    def describe(self):
+        return "true | false"
+
+
+@dataclass
+class Str:
+    default: Any = None
+    doc: str = ""
+
+    def check(self, v):
+        if not isinstance(v, str) or not v:
+            raise _Bad(f"{v!r} is not a non-empty string")
+        return v
+
+    def describe(self):
+        return "string"
+
+
+@dataclass
+class OneOf:
+    """The first alternative that accepts the value (e.g. a size: number or [w, h])."""
+    alternatives: tuple
+    default: Any = None
+    doc: str = ""
+
+    def check(self, v):
+        reasons = []
+        for alt in self.alternatives:
+            try:
+                return alt.check(v)
+            except _Bad as e:
+                reasons.append(str(e))
+        raise _Bad(" and ".join(dict.fromkeys(reasons)))
+
+    def describe(self):
+        return " or ".join(a.describe() for a in self.alternatives)
+
+
+@dataclass
+class Section:
+    fields: dict
+    required: tuple = ()
+    exclusive: tuple = ()        # exactly one of these keys (camera projection, object kind)
+    doc: str = ""
+
+
+@dataclass
+class MapOf:
+    """A mapping from user names to sections (materials)."""
+    section: Section
+    doc: str = ""
+
+
+@dataclass
+class ListOf:
+    section: Section
+    doc: str = ""
+
+
+@dataclass
+class StrList:
+    default: Any = None
+    doc: str = ""
+
+    def check(self, v):
+        if isinstance(v, str) and v:
+            return [v]
+        if isinstance(v, list) and v and all(isinstance(x, str) and x for x in v):
+            return list(v)
+        raise _Bad(f"{v!r} is not a path or a list of paths")
+
+    def describe(self):
+        return "path or [paths]"
+
+
+VEC3 = dict(n=3)
+
+CAMERA_COMMON = {
+    "position": Vec(**VEC3, doc="camera position (world space, +y up)"),
+    "look_at": Vec(**VEC3, default=[0.0, 0.0, 0.0], doc="point the camera looks at"),
+    "up": Vec(**VEC3, default=[0.0, 1.0, 0.0], nonzero=True, doc="up direction"),
+}
+
+SCHEMA = Section(doc="a scene", required=("environment",), fields={
+    "camera": Section(doc="the camera", exclusive=("perspective", "orthographic"), fields={
+        "perspective": Section(required=("position",), doc="pinhole camera", fields={
+            **CAMERA_COMMON,
+            "fov_y": Num(40.0, 0.0, 179.0, lo_open=True, doc="vertical field of view, degrees"),
+        }),
+        "orthographic": Section(required=("position", "width"), doc="parallel projection", fields={
+            **CAMERA_COMMON,
+            "width": Num(None, 0.0, lo_open=True, doc="width of the view in world units"),
+        }),
+        "resolution": Vec(n=2, default=[640, 360], integer=True, positive=True, hi=16384,
+                          doc="[width, height] in pixels"),
+        "spp": Num(1, 1, 1024, integer=True, doc="primary samples per pixel (anti-aliasing)"),
+    }),
+    "environment": Section(required=("path",), doc="the HDR panorama lighting the scene", fields={
+        "path": Str(doc="equirectangular panorama (EXR, HDR, any format iblbake reads); relative to the scene file"),
+        "intensity": Num(1.0, 0.0, doc="radiance scale"),
+        "rotation_y": Num(0.0, doc="rotate the panorama about +y, degrees (+x towards -z)"),
+        "background": OneOf((Enum(("show", "hide")), Vec(n=3, lo=0.0)), default="show",
+                            doc="show the panorama, hide it (black), or a constant [r, g, b]"),
+        "blur": Num(0.0, 0.0, 1.0, doc="show the background through the prefiltered level of this roughness (0: sharp)"),
+        "nonfinite": Enum(("error", "zero", "clamp"), "error", doc="NaN/Inf texels: fail, zero or clamp"),
+        "negative": Enum(("keep", "clamp", "error"), "keep", doc="negative texels: keep, clamp to 0, or fail"),
+    }),
+    "materials": MapOf(doc="named materials", section=Section(doc="a metallic-roughness material", fields={
+        "base_color": Vec(**VEC3, default=[0.8, 0.8, 0.8], lo=0.0, hi=1.0, doc="linear RGB albedo / F0 of metals"),
+        "metallic": Num(0.0, 0.0, 1.0, doc="0 dielectric (F0 = 0.04), 1 metal (F0 = base_color)"),
+        "roughness": Num(0.5, 0.0, 1.0, doc="perceptual roughness r; alpha = r^2"),
+        "emissive": Vec(**VEC3, default=[0.0, 0.0, 0.0], lo=0.0, doc="emitted radiance, linear RGB"),
+    })),
+    "objects": ListOf(doc="what is in the scene", section=Section(
+        required=("material",), exclusive=("sphere", "plane", "mesh"), doc="one object", fields={
+            "sphere": Section(required=("radius",), doc="analytic sphere", fields={
+                "center": Vec(**VEC3, default=[0.0, 0.0, 0.0], doc="centre"),
+                "radius": Num(None, 0.0, lo_open=True, doc="radius (> 0)"),
+            }),
+            "plane": Section(doc="analytic plane, two-sided", fields={
+                "point": Vec(**VEC3, default=[0.0, 0.0, 0.0], doc="a point on the plane (the centre of a finite one)"),
+                "normal": Vec(**VEC3, default=[0.0, 1.0, 0.0], nonzero=True, doc="plane normal"),
+                "size": OneOf((Num(None, 0.0, lo_open=True), Vec(n=2, positive=True)), default=None,
+                              doc="side length, or [width, depth]; omitted: infinite"),
+            }),
+            "mesh": Section(required=("path",), doc="triangle mesh loaded with trimesh", fields={
+                "path": Str(doc="OBJ, PLY, STL, GLB or glTF; relative to the scene file"),
+                "translate": Vec(**VEC3, default=[0.0, 0.0, 0.0], doc="translation"),
+                "rotate": Vec(**VEC3, default=[0.0, 0.0, 0.0], doc="rotation about x, then y, then z, degrees"),
+                "scale": OneOf((Num(None, 0.0, lo_open=True), Vec(n=3, positive=True)), default=1.0,
+                               doc="uniform scale or [sx, sy, sz] (> 0)"),
+                "smooth": Enum(("auto", "on", "off"), "auto",
+                               doc="shading normals: auto = the file's vertex normals if it has them, else faceted"),
+            }),
+            "material": Str(doc="name of a material in `materials`"),
+        })),
+    "effects": Section(doc="what the renderer simulates; nothing else is baked, compiled or run", fields={
+        "diffuse": Enum(("sh", "reference", "off"), "sh", doc="diffuse IBL: SH irradiance, Monte Carlo reference, or none"),
+        "sh_bands": Num(3, 1, 8, integer=True, doc="SH bands for diffuse: sh (3 = 9 coefficients)"),
+        "sh_window": Enum(("none", "hann", "lanczos"), "none", doc="SH ringing window"),
+        "specular": Enum(("importance", "prefiltered", "reference", "off"), "prefiltered",
+                         doc="specular IBL: runtime GGX importance sampling (seed 000), split sum, Monte Carlo reference, none"),
+        "samples": Num(40, 1, 65536, integer=True, doc="importance: GGX samples per pixel"),
+        "mip_bias": Num(1.0, -16.0, 16.0, doc="importance: added to each sample's mip level"),
+        "force_mip0": Bool(False, doc="importance: read level 0 for every sample (counting-reflections check)"),
+        "normalize": Enum(("total", "accepted"), "total",
+                          doc="importance: divide by all N samples (unbiased) or by the accepted ones (seed 000)"),
+        "prefilter": Section(doc="prefiltered: how the chain is baked (as `iblbake mips`)", fields={
+            "method": Enum(("auto", "fis", "convolve"), "auto", doc="see iblbake mips --method"),
+            "samples": Num(256, 1, 1 << 20, integer=True, doc="fis samples per texel"),
+            "size": Num(None, 1, 8192, integer=True, doc="base height of the equirect chain (default: source height)"),
+            "levels": Num(None, 2, 32, integer=True, doc="levels K, roughness k/(K-1)"),
+            "lod_bias": Num(1.0, -16.0, 16.0, doc="fis level bias"),
+            "dfg_size": Num(128, 2, 4096, integer=True, doc="DFG table size"),
+            "dfg_samples": Num(4096, 1, 1 << 20, integer=True, doc="GGX samples per DFG texel"),
+        }),
+        "reference": Section(doc="reference modes: progressive Monte Carlo with MIS", fields={
+            "max_samples": Num(1024, 1, 1 << 20, integer=True, doc="sample budget per pixel"),
+            "target_noise": Num(0.002, 0.0, 1.0, doc="stop when the frame's relative standard error is below this"),
+            "batch": Num(32, 1, 4096, integer=True, doc="samples per pixel per progressive pass"),
+            "seed": Num(1, 0, 2**31 - 1, integer=True, doc="random seed (renders are reproducible)"),
+        }),
+        "tonemap": Enum(("aces", "reinhard", "hable", "pbr_neutral", "linear"), "aces", doc="tone-mapping operator"),
+        "exposure": Num(0.0, -32.0, 32.0, doc="exposure in EV (radiance x 2^EV before the operator)"),
+        "output_transfer": Enum(("srgb", "gamma"), "srgb", doc="display encoding"),
+        "gamma": Num(2.2, 0.0, 10.0, lo_open=True, doc="for output_transfer: gamma"),
+    }),
+    "output": Section(doc="what is written (relative to the scene file; render overwrites its outputs)", fields={
+        "frame": StrList(doc="frame path(s): .png (tone-mapped 8-bit), .exr (linear RGBA)"),
+        "normal": Str(doc="AOV: world-space shading normal, EXR"),
+        "albedo": Str(doc="AOV: base colour, EXR"),
+        "depth": Str(doc="AOV: distance along the camera ray (0 where nothing is hit), EXR"),
+        "dither": Bool(False, doc="add +-0.5 LSB triangular dither before 8-bit quantisation"),
+    }),
+})
+
+
+FRAME_SUFFIXES = (".png", ".exr")
+AOVS = ("normal", "albedo", "depth")
+
+# ---------------------------------------------------------------------------------------------
+# YAML with line numbers: compose the node tree, keep each value's line per dotted path.
+
+
+def _load_with_lines(text: str, source: str):
+    try:
+        node = yaml.compose(text, Loader=yaml.SafeLoader)
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        where = f"{source}:{mark.line + 1}" if mark else source
+        problem = getattr(e, "problem", None) or str(e).splitlines()[0]
+        raise InputError(f"{where}: not valid YAML: {problem}") from None
+    lines: dict[str, int] = {}
+    constructor = yaml.SafeLoader(text)
+
+    def walk(n, path):
+        lines[path] = n.start_mark.line + 1
+        if isinstance(n, yaml.MappingNode):
+            out = {}
+            for k, v in n.value:
+                key = constructor.construct_object(k, deep=True)
+                sub = f"{path}.{key}" if path else str(key)
+                lines[sub] = k.start_mark.line + 1
+                if key in out:
+                    raise InputError(f"{source}:{k.start_mark.line + 1}: {sub}: key given twice")
+                out[key] = walk(v, sub)
+            return out
+        if isinstance(n, yaml.SequenceNode):
+            return [walk(v, f"{path}.{i}" if path else str(i)) for i, v in enumerate(n.value)]
+        return constructor.construct_object(n, deep=True)
+
+    data = walk(node, "") if node is not None else None
+    return data, lines
+
+
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass
+class Scene:
+    data: dict                     # validated, defaults filled, paths absolute
+    source: str                    # the scene file
+    folder: Path
+    lines: dict = field(default_factory=dict)
+
+    def __getitem__(self, k):
+        return self.data[k]
+
+
+class _Validator:
+    def __init__(self, source: str, lines: dict, overridden: set):
+        self.source, self.lines, self.overridden = source, lines, overridden
+
+    def where(self, path: str) -> str:
+        if path in self.overridden:
+            return f"{self.source}: --set {path}"
+        p = path
+        while p and p not in self.lines:
+            p = p.rpartition(".")[0]
+        line = self.lines.get(p)
+        return f"{self.source}:{line}" if line else self.source
+
+    def fail(self, path: str, msg: str):
+        raise InputError(f"{self.where(path)}: {path or 'scene'}: {msg}")
+
+    def section(self, spec: Section, value, path: str) -> dict:
+        if value is None:
+            value = {}
+        if not isinstance(value, dict):
+            self.fail(path, f"expected a mapping of keys ({', '.join(spec.fields)}), got {value!r}")
+        out = {}
+        for k in value:
+            if k not in spec.fields:
+                sub = f"{path}.{k}" if path else str(k)
+                near = difflib.get_close_matches(str(k), list(spec.fields), 1, 0.6)
+                hint = f"did you mean {near[0]!r}?" if near else f"valid keys: {', '.join(spec.fields)}"
+                self.fail(sub, f"unknown key ({hint})")
+        for k in spec.required:
+            if k not in value or value[k] is None:
+                self.fail(path, f"missing required key {k!r}")
+        if spec.exclusive:
+            given = [k for k in spec.exclusive if k in value]
+            if len(given) != 1 and not (not given and path == "camera"):
+                what = "one of " + " | ".join(spec.exclusive)
+                self.fail(path, f"give exactly {what} (got {', '.join(given) or 'none'})")
+        for k, f in spec.fields.items():
+            sub = f"{path}.{k}" if path else k
+            if isinstance(f, Section):
+                if spec.exclusive and k in spec.exclusive and k not in value:
+                    continue
+                out[k] = self.section(f, value.get(k), sub)
+            elif isinstance(f, MapOf):
+                m = value.get(k) or {}
+                if not isinstance(m, dict):
+                    self.fail(sub, f"expected a mapping of names to {f.section.doc}s")
+                out[k] = {name: self.section(f.section, v, f"{sub}.{name}") for name, v in m.items()}
+            elif isinstance(f, ListOf):
+                seq = value.get(k) or []
+                if not isinstance(seq, list):
+                    self.fail(sub, "expected a list")
+                out[k] = [self.section(f.section, v, f"{sub}.{i}") for i, v in enumerate(seq)]
+            else:
+                v = value.get(k)
+                if v is None:
+                    out[k] = f.default
+                else:
+                    try:
+                        out[k] = f.check(v)
+                    except _Bad as e:
+                        self.fail(sub, str(e))
+        return out
+
+
+def _apply_override(data: dict, assignment: str) -> str:
+    key, sep, raw = assignment.partition("=")
+    key = key.strip()
+    if not sep or not key:
+        raise InputError(f"--set {assignment!r}: expected KEY.PATH=VALUE, e.g. effects.samples=40")
+    try:
+        value = yaml.safe_load(raw) if raw.strip() else None
+    except yaml.YAMLError:
+        raise InputError(f"--set {key}: cannot parse {raw!r} as a value") from None
+    parts = key.split(".")
+    node = data
+    for i, p in enumerate(parts[:-1]):
+        if isinstance(node, list):
+            if not p.isdigit() or int(p) >= len(node):
+                raise InputError(f"--set {key}: {'.'.join(parts[:i + 1])}: no item {p} in a list of {len(node)}")
+            node = node[int(p)]
+        elif isinstance(node, dict):
+            node = node.setdefault(p, {})
+            if node is None:
+                node = {}
+        else:
+            raise InputError(f"--set {key}: {'.'.join(parts[:i])} is a value, not a section")
+    last = parts[-1]
+    if isinstance(node, list):
+        if not last.isdigit() or int(last) >= len(node):
+            raise InputError(f"--set {key}: no item {last} in a list of {len(node)}")
+        node[int(last)] = value
+    elif isinstance(node, dict):
+        node[last] = value
+    else:
+        raise InputError(f"--set {key}: {'.'.join(parts[:-1])} is a value, not a section")
+    return key
+
+
+def _resolve_inside(folder: Path, rel: str, what: str, where: str) -> Path:
+    """Scene output paths stay inside the scene's folder: `../../x` is refused."""
+    p = Path(rel)
+    full = (folder / p).resolve() if not p.is_absolute() else p.resolve()
+    if not p.is_absolute() and folder.resolve() not in (full, *full.parents):
+        raise InputError(f"{where}: {what}: {rel!r} leaves the scene's folder; write outputs "
+                         f"inside it or pass -o on the command line")
+    return full
+
+
+def load(path, overrides=(), outputs=None) -> Scene:
+    """Read, override, validate. `outputs` (from -o) replace output.frame."""
+    path = Path(path)
+    source = str(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError(f"{source}: scene file not found") from None
+    except IsADirectoryError:
+        raise InputError(f"{source}: is a folder, not a scene file") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{source}: not a UTF-8 text file; scene files are YAML") from None
+    except OSError as e:
+        raise InputError(f"{source}: cannot read: {e.strerror}") from None
+    data, lines = _load_with_lines(text, source)
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise InputError(f"{source}:1: a scene is a mapping of sections (camera, environment, "
+                         f"materials, objects, effects, output), not {type(data).__name__}")
+    overridden = set()
+    for a in overrides:
+        overridden.add(_apply_override(data, a))
+    v = _Validator(source, lines, overridden)
+    out = v.section(SCHEMA, data, "")
+    folder = path.resolve().parent
+    # camera: perspective by default
+    cam = out["camera"]
+    if "perspective" not in cam and "orthographic" not in cam:
+        cam["perspective"] = v.section(SCHEMA.fields["camera"].fields["perspective"],
+                                       {"position": [0.0, 0.0, 5.0]}, "camera.perspective")
+    proj = "perspective" if "perspective" in cam else "orthographic"
+    c = cam[proj]
+    fwd = [a - b for a, b in zip(c["look_at"], c["position"])]
+    if all(abs(x) < 1e-12 for x in fwd):
+        v.fail(f"camera.{proj}.look_at", "equals the camera position; the view direction is undefined")
+    cross = [fwd[1] * c["up"][2] - fwd[2] * c["up"][1], fwd[2] * c["up"][0] - fwd[0] * c["up"][2],
+             fwd[0] * c["up"][1] - fwd[1] * c["up"][0]]
+    if math.sqrt(sum(x * x for x in cross)) <= 1e-9 * math.sqrt(sum(x * x for x in fwd)) * math.sqrt(sum(x * x for x in c["up"])):
+        v.fail(f"camera.{proj}.up", "is parallel to the view direction; give another up vector")
+    cam["projection"] = proj
+    # references between sections
+    for i, o in enumerate(out["objects"]):
+        if o["material"] not in out["materials"]:
+            near = difflib.get_close_matches(o["material"], list(out["materials"]), 1, 0.6)
+            hint = f"did you mean {near[0]!r}?" if near else \
+                f"defined: {', '.join(out['materials']) or 'none'}"
+            v.fail(f"objects.{i}.material", f"no material named {o['material']!r} ({hint})")
+        if "mesh" in o:
+            o["mesh"]["path"] = str((folder / o["mesh"]["path"]).resolve())
+    env = out["environment"]
+    env["path"] = str((folder / env["path"]).resolve()) if not Path(env["path"]).is_absolute() else env["path"]
+    if not Path(env["path"]).is_file():
+        v.fail("environment.path", f"{env['path']} not found; give the path of an HDR panorama "
+                                   f"(relative to {folder})")
+    # outputs: -o replaces output.frame; scene paths stay inside the scene folder
+    o = out["output"]
+    if outputs:
+        o["frame"] = [str(Path(p).resolve()) for p in outputs]
+        o["frame_from_cli"] = True
+    else:
+        o["frame"] = [str(_resolve_inside(folder, p, "output.frame", v.where("output.frame")))
+                      for p in (o["frame"] or [])]
+    for p in o["frame"]:
+        if Path(p).suffix.lower() not in FRAME_SUFFIXES:
+            v.fail("output.frame", f"{p}: unsupported frame type; use .png (tone-mapped) or .exr (linear)")
+    for a in AOVS:
+        if o[a]:
+            o[a] = str(_resolve_inside(folder, o[a], f"output.{a}", v.where(f"output.{a}")))
+            if Path(o[a]).suffix.lower() != ".exr":
+                v.fail(f"output.{a}", f"{o[a]}: AOVs are written as .exr")
+    return Scene(out, source, folder, lines)
+
+
+# ---------------------------------------------------------------------------------------------
+
+
+def schema_text() -> str:
+    """The schema as an indented reference (render --help-schema, README)."""
+    rows = []
+
+    def field_line(indent, k, f):
+        d = getattr(f, "default", None)
+        dflt = "" if d is None else f" (default {d})"
+        return f"{'  ' * indent}{k}: {f.describe()}{dflt} -- {f.doc}"
+
+    def walk(spec, indent):
+        if spec.required:
+            rows.append(f"{'  ' * indent}# required: {', '.join(spec.required)}")
+        if spec.exclusive:
+            rows.append(f"{'  ' * indent}# exactly one of: {', '.join(spec.exclusive)}")
+        for k, f in spec.fields.items():
+            if isinstance(f, Section):
+                rows.append(f"{'  ' * indent}{k}:  # {f.doc}")
+                walk(f, indent + 1)
+            elif isinstance(f, MapOf):
+                rows.append(f"{'  ' * indent}{k}:  # {f.doc}")
+                rows.append(f"{'  ' * (indent + 1)}NAME:  # {f.section.doc}")
+                walk(f.section, indent + 2)
+            elif isinstance(f, ListOf):
+                rows.append(f"{'  ' * indent}{k}:  # {f.doc}; a list of:")
+                rows.append(f"{'  ' * (indent + 1)}- # {f.section.doc}")
+                walk(f.section, indent + 2)
+            else:
+                rows.append(field_line(indent, k, f))
+
+    walk(SCHEMA, 0)
+    return "\n".join(rows) + "\n"

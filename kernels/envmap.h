@@ -1,0 +1,21 @@
+/* Lookups in a chain of equirect levels stored back to back in one buffer (the radiance chain,
+ * the prefiltered chain). Mirrors iblbake/mips.py: chain_lookup_reference. */
+#ifndef IBLBAKE_ENVMAP_H
+#define IBLBAKE_ENVMAP_H
+#include "common.h"
+
+/* Trilinear lookup in the radiance chain: bilinear in two levels, blended. */
+inline float3 chain_lookup(__global const float4 *chain, __constant int *off, __constant int *lw,
+                           __constant int *lh, const int nlev, float3 d, float lod)
+{
+    const float2 uv = equirect_uv_from_dir(d);
+    lod = clamp(lod, 0.0f, (float)(nlev - 1));
+    const int l0 = (int)lod;
+    const int l1 = min(l0 + 1, nlev - 1);
+    const float f = lod - (float)l0;
+    float3 a = bilinear_equirect(chain + off[l0], lw[l0], lh[l0], uv);
+    if (f <= 0.0f) return a;
+    return mix(a, bilinear_equirect(chain + off[l1], lw[l1], lh[l1], uv), f);
+}
+
+#endif
