@@ -18,7 +18,7 @@ def d_ggx(noh, alpha):
     """GGX / Trowbridge-Reitz NDF: alpha^2 / (pi ((n.h)^2 (alpha^2 - 1) + 1)^2)."""
     a2 = np.maximum(np.asarray(alpha, dtype=np.float64) ** 2, ALPHA_MIN**2)
     noh = np.clip(noh, 0.0, 1.0)
-    d = noh * noh * (a2 - 1.0) + 1.0
+    d = (1.0 - noh) * (1.0 + noh) + noh * noh * a2     # = noh^2 (a2 - 1) + 1, no cancellation
     return a2 / (np.pi * d * d)
 
 

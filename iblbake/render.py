@@ -239,6 +239,20 @@ def sh_irradiance_coeffs(image, bands: int, window: str, backend: str, rt):
     return coeffs * sh.window(bands, window)[:, None] * sh.ahat(bands)[:, None]
 
 
+def reference_noise(lum_sum, odd_sum, taken: int) -> float:
+    """Relative standard error of the reference frame, from its two independent replicates
+    (even and odd sample numbers): the RMS over pixels of half their difference, divided by the
+    mean pixel luminance."""
+    n_odd = taken // 2
+    n_even = taken - n_odd
+    even = (lum_sum - odd_sum) / n_even
+    odd = odd_sum / max(n_odd, 1)
+    mean = (lum_sum / taken).mean()
+    if mean <= 0:
+        return 0.0
+    return math.sqrt(np.mean((even - odd) ** 2) / 4.0) / mean
+
+
 # ---------------------------------------------------------------------------------------------
 
 
@@ -452,29 +466,27 @@ def render(scene: Scene, *, device: str | None = None, cache_root: Path | None =
         hit = rt.read(gb_pos, (n, 4))[:, 3] != -1.0
         out_buf = rt.empty(n * 16)
         acc = np.zeros((n, 3))
-        acc_sq = np.zeros(n)
+        acc_odd = np.zeros(n)
         taken = 0
         noise = math.inf
         t0 = time.perf_counter()
         lumw = np.array([0.2126, 0.7152, 0.0722])
+        batch = ref["batch"] + (ref["batch"] & 1)      # even: both replicates advance together
         while taken < ref["max_samples"]:
-            b = min(ref["batch"], ref["max_samples"] - taken)
+            b = min(batch, ref["max_samples"] - taken)
             rt.run(k, (n,), None, *args_pre, np.uint32(ref["seed"]), np.int32(taken), np.int32(b), out_buf)
             r = rt.read(out_buf, (n, 4)).astype(np.float64)
             acc += r[:, :3]
-            acc_sq += r[:, 3]
+            acc_odd += r[:, 3]
             taken += b
             if progress:
                 progress(taken / ref["max_samples"])
-            if hit.any() and taken >= 2 * ref["batch"]:
-                m = acc[hit] @ lumw / taken
-                var = np.maximum(acc_sq[hit] / taken - m * m, 0.0) / taken
-                mean = m.mean()
-                noise = math.sqrt(var.mean()) / mean if mean > 0 else 0.0
+            if not hit.any():
+                break
+            if taken >= 2 * batch:
+                noise = reference_noise(acc[hit] @ lumw, acc_odd[hit], taken)
                 if noise <= ref["target_noise"]:
                     break
-            elif not hit.any():
-                break
         ref_mean = (acc / max(taken, 1)).astype(np.float32)
         rep.run("reference", time.perf_counter() - t0, samples_per_pixel=taken,
                 relative_noise=None if not math.isfinite(noise) else round(noise, 6),

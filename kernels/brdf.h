@@ -8,7 +8,18 @@ inline float d_ggx(float noh, float alpha)
 {
     float a2 = fmax(alpha * alpha, ALPHA_MIN * ALPHA_MIN);
     noh = clamp(noh, 0.0f, 1.0f);
-    float d = noh * noh * (a2 - 1.0f) + 1.0f;
+    /* noh^2 (a2 - 1) + 1 written as (1 - noh)(1 + noh) + noh^2 a2: no cancellation to 0 when
+     * noh rounds to 1 and a2 is tiny (roughness -> 0), so D stays finite (1 / (pi a2)) */
+    float d = (1.0f - noh) * (1.0f + noh) + noh * noh * a2;
+    return a2 / (3.14159265358979323846f * d * d);
+}
+
+/* D from sin^2 and cos^2 of the half-vector angle: sin^2 taken as |n x h|^2 keeps its relative
+ * precision for near-mirror lobes, where 1 - noh^2 in float32 is only a multiple of 1.2e-7. */
+inline float d_ggx_sc(float sin2, float cos2, float alpha)
+{
+    float a2 = fmax(alpha * alpha, ALPHA_MIN * ALPHA_MIN);
+    float d = sin2 + cos2 * a2;
     return a2 / (3.14159265358979323846f * d * d);
 }
 

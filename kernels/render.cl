@@ -390,10 +390,41 @@ inline uint pcg_hash(uint x)
     return (word >> 22u) ^ word;
 }
 
-inline float rng_uniform(uint *state)
+inline float hash_uniform(uint x)
 {
-    *state = pcg_hash(*state);
-    return (float)(*state >> 8) * (1.0f / 16777216.0f);
+    return (float)(pcg_hash(x) >> 8) * (1.0f / 16777216.0f);
+}
+
+/* Radical inverse of j in base b: Halton points, a quasi-random sequence that stays uniform at
+ * every prefix, so the frame converges faster than with independent random numbers. */
+inline float radical_inverse(uint j, uint b)
+{
+    const float inv_b = 1.0f / (float)b;
+    float f = inv_b, r = 0.0f;
+    while (j > 0u) {
+        r += f * (float)(j % b);
+        j /= b;
+        f *= inv_b;
+    }
+    return fmin(r, 0x1.fffffep-1f);
+}
+
+/* Dimension d of sample j of replicate `rep` for G-buffer sample gid: Halton in base
+ * HALTON_BASES[d], shifted by a random rotation per (seed, gid, replicate, dimension)
+ * (Cranley-Patterson). Two replicates (even and odd sample numbers) with independent rotations
+ * give an honest error estimate (their difference); a variance of QMC samples would not. */
+__constant uint HALTON_BASES[8] = {2u, 3u, 5u, 7u, 11u, 13u, 17u, 19u};
+#define DIM_ENV 0
+#define DIM_BRDF 2
+#define DIM_COSINE 4
+#define DIM_JITTER 6
+
+inline float qmc(uint seed, uint gid, uint k, int d)
+{
+    const uint rep = k & 1u, j = k >> 1;
+    const float shift = hash_uniform(seed ^ pcg_hash(gid * 16u + rep * 8u + (uint)d));
+    const float x = radical_inverse(j, HALTON_BASES[d]) + shift;
+    return x >= 1.0f ? x - 1.0f : x;
 }
 
 /* Environment sampling, piecewise constant over texels (the full-resolution panorama):
@@ -417,6 +448,8 @@ inline float3 env_texel(__global const float4 *img, int w, int h, float3 e, __gl
     return img[j * w + i].xyz;
 }
 
+#define DELTA_ALPHA 1e-4f
+
 inline float g1_smith(float nov, float alpha)
 {
     const float a2 = alpha * alpha;
@@ -439,15 +472,18 @@ inline float3 sample_vndf(float3 vl, float alpha, float u1, float u2)
     return normalize((float3)(alpha * nh.x, alpha * nh.y, fmax(1e-7f, nh.z)));
 }
 
+/* Power heuristic a^2 / (a^2 + b^2), written so that an infinite or huge pdf (a near-mirror
+ * lobe) gives 1 or 0 instead of inf / inf. */
 inline float power_weight(float a, float b)
 {
-    const float a2 = a * a, b2 = b * b;
-    return a2 / fmax(a2 + b2, 1e-30f);
+    if (!(a > 0.0f)) return 0.0f;
+    const float r = b / a;
+    return 1.0f / (1.0f + r * r);
 }
 
-/* One batch of `batch` samples per G-buffer sample: out = (sum of estimates, sum of squared
- * luminance). Samples are numbered globally (first + k) and seeded per (seed, gid, sample),
- * so the frame is the same whatever the batching and wherever the run stops. */
+/* One batch of `batch` samples per G-buffer sample: out = (sum of estimates, sum of the odd-numbered
+ * samples' luminance). Samples are numbered globally (first + k), so the frame is the same
+ * whatever the batching and wherever the run stops. */
 __kernel void reference(__global const float4 *gb_pos, __global const float4 *gb_nrm,
                         __global const float4 *gb_dir, const int n,
                         __global const float4 *materials, const float2 env_rot, const float env_scale,
@@ -468,21 +504,24 @@ __kernel void reference(__global const float4 *gb_pos, __global const float4 *gb
     float3 t, b;
     tangent_frame(nrm, &t, &b);
     const float3 vl = (float3)(dot(v, t), dot(v, b), nov);
+#if SPECULAR_MODE == 3
+    const int delta = mt.alpha < DELTA_ALPHA;
+#endif
 #if DIFFUSE_MODE == 2
     const float3 kd = diffuse_weight(mt, nov);
 #endif
     float3 sum = (float3)(0.0f);
-    float sumsq = 0.0f;
+    float odd = 0.0f;
     for (int k = 0; k < batch; ++k) {
-        uint st = pcg_hash(seed ^ pcg_hash((uint)gid * 9781u + pcg_hash((uint)(first + k))));
+        const uint sk = (uint)(first + k);
         float3 est = (float3)(0.0f);
         /* strategy 1: the environment */
         {
-            const int j = cdf_search(marginal, h, rng_uniform(&st));
-            const int i = cdf_search(conditional + j * (w + 1), w, rng_uniform(&st));
-            const float u = ((float)i + rng_uniform(&st)) / (float)w;
+            const int j = cdf_search(marginal, h, qmc(seed, gid, sk, DIM_ENV));
+            const int i = cdf_search(conditional + j * (w + 1), w, qmc(seed, gid, sk, DIM_ENV + 1));
+            const float u = ((float)i + qmc(seed, gid, sk, DIM_JITTER)) / (float)w;
             const float c0 = cospi((float)j / h), c1 = cospi((float)(j + 1) / h);
-            const float ct = mix(c0, c1, rng_uniform(&st));
+            const float ct = mix(c0, c1, qmc(seed, gid, sk, DIM_JITTER + 1));
             const float stt = sqrt(fmax(0.0f, 1.0f - ct * ct)), phi = 2.0f * IBL_PI * (0.5f - u);
             const float3 e = (float3)(stt * sin(phi), ct, stt * cos(phi));
             const float pe = pdf_table[j * w + i];
@@ -494,19 +533,22 @@ __kernel void reference(__global const float4 *gb_pos, __global const float4 *gb
                 est += li * kd * (nol / pe) * power_weight(pe, nol / IBL_PI);
 #endif
 #if SPECULAR_MODE == 3
-                const float3 hv = normalize(v + l);
-                const float noh = fmax(dot(nrm, hv), 0.0f), voh = fmax(dot(v, hv), 0.0f);
-                const float dd = d_ggx(noh, mt.alpha);
-                const float pb = g1_smith(nov, mt.alpha) * dd / (4.0f * nov);
-                est += li * f_schlick(voh, mt.f0) * (dd * v_smith_ggx_correlated(nov, nol, mt.alpha) * nol / pe)
-                       * power_weight(pe, pb);
+                if (!delta) {
+                    const float3 hv = normalize(v + l);
+                    const float3 cx = cross(nrm, hv);
+                    const float noh = fmax(dot(nrm, hv), 0.0f), voh = fmax(dot(v, hv), 0.0f);
+                    const float dd = d_ggx_sc(dot(cx, cx), noh * noh, mt.alpha);
+                    const float pb = g1_smith(nov, mt.alpha) * dd / (4.0f * nov);
+                    est += li * f_schlick(voh, mt.f0) * (dd * v_smith_ggx_correlated(nov, nol, mt.alpha) * nol / pe)
+                           * power_weight(pe, pb);
+                }
 #endif
             }
         }
 #if DIFFUSE_MODE == 2
         /* strategy 2a: cosine-weighted hemisphere */
         {
-            const float r = sqrt(rng_uniform(&st)), phi = 2.0f * IBL_PI * rng_uniform(&st);
+            const float r = sqrt(qmc(seed, gid, sk, DIM_COSINE)), phi = 2.0f * IBL_PI * qmc(seed, gid, sk, DIM_COSINE + 1);
             const float z = sqrt(fmax(0.0f, 1.0f - r * r));
             const float3 l = t * (r * cos(phi)) + b * (r * sin(phi)) + nrm * z;
             float pe;
@@ -516,19 +558,28 @@ __kernel void reference(__global const float4 *gb_pos, __global const float4 *gb
         }
 #endif
 #if SPECULAR_MODE == 3
-        /* strategy 2b: GGX visible normals; f NoL / pdf = F G2 / G1(V) */
-        {
-            const float u1 = rng_uniform(&st), u2 = rng_uniform(&st);
+        /* strategy 2b: GGX visible normals; f NoL / pdf = F G2 / G1(V). A lobe narrower than
+         * float32 can resolve (alpha < DELTA_ALPHA) is a mirror: this strategy alone, weight F. */
+        if (delta) {
+            const float3 l = 2.0f * nov * nrm - v;
+            float pe;
+            est += env_texel(img, w, h, to_env(l, env_rot), pdf_table, &pe) * f_schlick(nov, mt.f0);
+        } else {
+            const float u1 = qmc(seed, gid, sk, DIM_BRDF), u2 = qmc(seed, gid, sk, DIM_BRDF + 1);
             const float3 hl = sample_vndf(vl, mt.alpha, u1, u2);
-            const float3 hv = t * hl.x + b * hl.y + nrm * hl.z;
-            const float voh = dot(v, hv);
-            const float3 l = 2.0f * voh * hv - v;
+            const float3 hs = t * hl.x + b * hl.y + nrm * hl.z;
+            const float3 l = 2.0f * dot(v, hs) * hs - v;
             const float nol = dot(nrm, l);
-            if (nol > 0.0f && voh > 0.0f) {
+            if (nol > 0.0f && dot(v, hs) > 0.0f) {
+                /* the pdf from h = normalize(v + l), computed exactly as strategy 1 does, so the
+                 * two MIS weights of any direction sum to 1 */
+                const float3 hv = normalize(v + l);
+                const float3 cx = cross(nrm, hv);
+                const float noh = fmax(dot(nrm, hv), 0.0f), voh = fmax(dot(v, hv), 0.0f);
                 float pe;
                 const float3 li = env_texel(img, w, h, to_env(l, env_rot), pdf_table, &pe);
                 const float g1 = g1_smith(nov, mt.alpha);
-                const float pb = g1 * d_ggx(hl.z, mt.alpha) / (4.0f * nov);
+                const float pb = g1 * d_ggx_sc(dot(cx, cx), noh * noh, mt.alpha) / (4.0f * nov);
                 const float g2 = v_smith_ggx_correlated(nov, nol, mt.alpha) * 4.0f * nov * nol;
                 est += li * f_schlick(voh, mt.f0) * (g2 / g1) * power_weight(pb, pe);
             }
@@ -536,10 +587,9 @@ __kernel void reference(__global const float4 *gb_pos, __global const float4 *gb
 #endif
         est *= env_scale;
         sum += est;
-        const float lum = dot(est, (float3)(0.2126f, 0.7152f, 0.0722f));
-        sumsq += lum * lum;
+        if (sk & 1u) odd += dot(est, (float3)(0.2126f, 0.7152f, 0.0722f));
     }
-    out[gid] = (float4)(sum, sumsq);
+    out[gid] = (float4)(sum, odd);
 }
 #endif
 

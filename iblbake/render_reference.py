@@ -1,0 +1,222 @@
+"""numpy twin of kernels/render.cl, float64, for tests on small frames.
+
+primary()      G-buffer by brute force (every ray against every sphere, plane and triangle)
+shade()        SH diffuse, importance-sampled and prefiltered specular, emission
+exact()        the integral the `reference` pass estimates, by quadrature: every texel of the
+               panorama (piecewise constant), split into s x s parts with exact solid angles
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import brdf, conventions, mips, sampling, sh
+from .render import camera_vectors, pixel_jitter
+
+LUM = np.array([0.2126, 0.7152, 0.0722])
+
+
+def primary(cam: dict, arrays):
+    """Hit records per sample (pixel-major, spp-minor, like the kernel)."""
+    w, h = cam["resolution"]
+    spp = cam["spp"]
+    pos, fwd, right, up, ortho = camera_vectors(cam)
+    jit = pixel_jitter(spp)
+    px = np.arange(w * h * spp)
+    s, pix = px % spp, px // spp
+    sx = 2.0 * ((pix % w) + jit[s, 0]) / w - 1.0
+    sy = 1.0 - 2.0 * ((pix // w) + jit[s, 1]) / h
+    if ortho:
+        o = pos + sx[:, None] * right + sy[:, None] * up
+        d = np.broadcast_to(fwd, o.shape).copy()
+    else:
+        d = fwd + sx[:, None] * right + sy[:, None] * up
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        o = np.broadcast_to(pos, d.shape).copy()
+    n = len(d)
+    t_best = np.full(n, np.inf)
+    ng = np.zeros((n, 3))
+    ns = np.zeros((n, 3))
+    mat = np.full(n, -1)
+    ints = lambda a: np.asarray(a, np.float32).view(np.int32)
+    for sp in arrays.spheres.astype(np.float64):
+        c, r = sp[0, :3], sp[0, 3]
+        f = o - c
+        b = -(f * d).sum(1)
+        perp = f + b[:, None] * d
+        disc = r * r - (perp ** 2).sum(1)
+        ok = disc >= 0
+        sq = np.sqrt(np.maximum(disc, 0))
+        q = b + np.copysign(sq, b)
+        cc = (f ** 2).sum(1) - r * r
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t0 = np.where(q != 0, cc / q, 0.0)
+        t1 = q
+        lo, hi = np.minimum(t0, t1), np.maximum(t0, t1)
+        t = np.where(lo > 0, lo, np.where(hi > 0, hi, np.inf))
+        t = np.where(ok, t, np.inf)
+        better = t < t_best
+        t_best[better] = t[better]
+        nn = (o[better] + t[better, None] * d[better] - c) / r
+        ng[better] = ns[better] = nn / np.linalg.norm(nn, axis=1, keepdims=True)
+        mat[better] = ints(sp[1, 0])
+    for pl in arrays.planes.astype(np.float64):
+        p0, nrm, tt, bb = pl[0, :3], pl[1, :3], pl[2, :3], pl[3, :3]
+        den = d @ nrm
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = ((p0 - o) @ nrm) / den
+        q = o + t[:, None] * d - p0
+        inside = (np.abs(q @ tt) <= pl[2, 3]) & (np.abs(q @ bb) <= pl[3, 3])
+        t = np.where((np.abs(den) >= 1e-20) & (t > 0) & inside, t, np.inf)
+        better = t < t_best
+        t_best[better] = t[better]
+        ng[better] = ns[better] = nrm
+        mat[better] = ints(pl[0, 3])
+    tris = arrays.tris.astype(np.float64)
+    for k in range(len(tris)):
+        v0, e1, e2 = tris[k, 0, :3], tris[k, 1, :3], tris[k, 2, :3]
+        p = np.cross(d, e2)
+        det = p @ e1
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / det
+            sv = o - v0
+            u = (sv * p).sum(1) * inv
+            qv = np.cross(sv, e1)
+            v = (d * qv).sum(1) * inv
+            t = (qv @ e2) * inv
+        ok = (det != 0) & (u >= 0) & (u <= 1) & (v >= 0) & (u + v <= 1) & (t > 0)
+        t = np.where(ok, t, np.inf)
+        better = t < t_best
+        if not better.any():
+            continue
+        t_best[better] = t[better]
+        fn = np.cross(e1, e2)
+        fn /= np.linalg.norm(fn)
+        b0 = 1 - u[better] - v[better]
+        sn = b0[:, None] * tris[k, 3, :3] + u[better, None] * tris[k, 4, :3] + v[better, None] * tris[k, 5, :3]
+        ln = np.linalg.norm(sn, axis=1, keepdims=True)
+        sn = np.where(ln > 1e-12, sn / np.maximum(ln, 1e-300), fn)
+        sn = np.where((sn @ fn)[:, None] < 0, -sn, sn)
+        ng[better] = fn
+        ns[better] = sn
+        mat[better] = ints(tris[k, 0, 3])
+    hit = np.isfinite(t_best)
+    flip = ((ng * d).sum(1) > 0)[:, None]
+    ng = np.where(flip, -ng, ng)
+    ns = np.where(flip, -ns, ns)
+    return {"hit": hit, "t": t_best, "pos": o + np.where(hit, t_best, 0)[:, None] * d, "normal": ns,
+            "material": mat, "dir": d}
+
+
+def _materials(arrays, idx):
+    m = arrays.materials.astype(np.float64)[idx]
+    base, metallic, emissive, rough = m[:, 0, :3], m[:, 0, 3], m[:, 1, :3], m[:, 1, 3]
+    f0 = 0.04 * (1 - metallic[:, None]) + base * metallic[:, None]
+    return base, metallic, emissive, rough, f0
+
+
+def facing_normal(n, v):
+    nov = (n * v).sum(1, keepdims=True)
+    bent = n + (1e-4 - nov) * v
+    bent /= np.linalg.norm(bent, axis=1, keepdims=True)
+    return np.where(nov >= 1e-4, n, bent)
+
+
+def to_env(d, rotation_y_deg):
+    return conventions.rotate_y(d, -rotation_y_deg)
+
+
+def diffuse_weight(base, metallic, rough, f0, nov):
+    kd = (1 - brdf.f_schlick_roughness(nov[:, None], f0, rough[:, None])) * (1 - metallic[:, None])
+    return kd * base / math.pi
+
+
+def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, prefiltered=None, dfg=None):
+    """Per-sample radiance of the `shade` pass (hits only; misses are 0)."""
+    hit = gb["hit"]
+    out = np.zeros((len(hit), 3))
+    v = -gb["dir"][hit]
+    n = facing_normal(gb["normal"][hit], v)
+    nov = np.maximum((n * v).sum(1), 1e-4)
+    base, metallic, emissive, rough, f0 = _materials(arrays, gb["material"][hit])
+    alpha = rough ** 2
+    rot, scale = env["rotation_y"], env["intensity"]
+    color = emissive.copy()
+    if effects["diffuse"] == "sh":
+        e = np.maximum(sh.evaluate(sh_coeffs, to_env(n, rot), effects["sh_bands"]), 0.0)
+        color += diffuse_weight(base, metallic, rough, f0, nov) * scale * e
+    if effects["specular"] == "importance":
+        nsamp = effects["samples"]
+        pts = sampling.hammersley(nsamp).astype(np.float32).astype(np.float64)
+        t, b = conventions.tangent_frame(n)
+        h0, w0 = chain[0].shape[:2]
+        acc = np.zeros((len(n), 3))
+        accepted = np.zeros(len(n))
+        for u in pts:
+            hl = sampling.sample_ggx_half(np.broadcast_to(u, (len(n), 2)), alpha)
+            h = t * hl[:, 0:1] + b * hl[:, 1:2] + n * hl[:, 2:3]
+            voh = (v * h).sum(1)
+            l = 2 * voh[:, None] * h - v
+            nol = (n * l).sum(1)
+            ok = (nol > 0) & (voh > 0)
+            noh = np.maximum(hl[:, 2], 1e-7)
+            le = to_env(l, rot)
+            if effects["force_mip0"]:
+                lod = np.zeros(len(n))
+            else:
+                pdf = brdf.d_ggx(noh, alpha) * noh / (4 * np.maximum(voh, 1e-30))
+                with np.errstate(divide="ignore"):
+                    lod = 0.5 * (np.log2(1.0 / (nsamp * pdf)) - np.log2(mips.texel_solid_angle_at(w0, h0, le))) \
+                        + effects["mip_bias"]
+            li = mips.chain_lookup_reference(chain, le, lod)
+            wgt = brdf.v_smith_ggx_correlated(nov, nol, alpha) * 4 * nol * voh / noh
+            contrib = li * brdf.f_schlick(voh[:, None], f0) * wgt[:, None]
+            acc += np.where(ok[:, None], contrib, 0.0)
+            accepted += ok
+        div = np.maximum(accepted, 1)[:, None] if effects["normalize"] == "accepted" else nsamp
+        color += scale * acc / div
+    elif effects["specular"] == "prefiltered":
+        r = 2 * (n * v).sum(1, keepdims=True) * n - v
+        pre = mips.chain_lookup_reference(prefiltered, to_env(r, rot), rough * (len(prefiltered) - 1))
+        ab = mips.dfg_lookup(dfg, nov, rough)
+        color += scale * pre * (f0 * ab[:, 0:1] + ab[:, 1:2])
+    out[hit] = color
+    return out
+
+
+def exact(gb, arrays, effects: dict, env: dict, image, sub: int = 2, chunk: int = 256):
+    """What the `reference` pass converges to, by quadrature over the panorama's texels."""
+    hit = gb["hit"]
+    out = np.zeros((len(hit), 3))
+    v = -gb["dir"][hit]
+    n = facing_normal(gb["normal"][hit], v)
+    nov = np.maximum((n * v).sum(1), 1e-4)
+    base, metallic, emissive, rough, f0 = _materials(arrays, gb["material"][hit])
+    alpha = rough ** 2
+    hgt, wid = image.shape[:2]
+    dirs, omega = mips._texel_subsamples(wid, hgt, sub)
+    dirs = conventions.rotate_y(dirs.reshape(-1, 3), env["rotation_y"])     # panorama -> world
+    omega = omega.reshape(-1)
+    radiance = np.repeat(image.reshape(-1, 3).astype(np.float64), sub * sub, axis=0) * env["intensity"]
+    res = np.zeros((len(n), 3))
+    kd = diffuse_weight(base, metallic, rough, f0, nov)
+    for i0 in range(0, len(n), chunk):
+        sl = slice(i0, i0 + chunk)
+        nol = n[sl] @ dirs.T                                            # (c, dirs)
+        w = np.where(nol > 0, nol, 0.0) * omega
+        if effects["diffuse"] == "reference":
+            res[sl] += kd[sl] * (w @ radiance)
+        if effects["specular"] == "reference":
+            hv = v[sl, None, :] + dirs[None]
+            hv /= np.linalg.norm(hv, axis=2, keepdims=True)
+            noh = (hv * n[sl, None, :]).sum(2)
+            voh = (hv * v[sl, None, :]).sum(2)
+            dv = brdf.d_ggx(noh, alpha[sl, None]) * brdf.v_smith_ggx_correlated(nov[sl, None], nol, alpha[sl, None])
+            fw = (1 - np.clip(voh, 0, 1)) ** 5                          # Schlick: F0 + (1 - F0) fw
+            a = (dv * w) @ radiance
+            bsum = (dv * w * fw) @ radiance
+            res[sl] += f0[sl] * a + (1 - f0[sl]) * bsum
+    out[hit] = res
+    return out

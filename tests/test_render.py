@@ -1,0 +1,398 @@
+"""`iblbake render`: closed forms (white furnace, counting reflections), kernels against the numpy
+twin, modes against the converged reference, the effect set, scene validation, outputs."""
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from iblbake import conventions, images, mips, render, render_reference as rr, scene
+
+from .conftest import run_cli
+
+LUM = np.array([0.2126, 0.7152, 0.0722])
+
+
+def make_scene(folder, env_path, materials, *, objects=None, res=64, effects=None, camera=None,
+               background="hide", output=None, rotation_y=0.0):
+    doc = {"camera": camera or {"perspective": {"position": [0, 0, 3], "fov_y": 45}, "resolution": [res, res]},
+           "environment": {"path": str(env_path), "background": background, "rotation_y": rotation_y},
+           "materials": materials if "base_color" not in materials else {"m": materials},
+           "objects": objects or [{"sphere": {"radius": 1}, "material": "m"}],
+           "effects": effects or {}}
+    if output:
+        doc["output"] = output
+    p = Path(folder) / "scene.yaml"
+    p.write_text(yaml.safe_dump(doc))
+    return p
+
+
+def render_scene(path, cache, overrides=()):
+    sc = scene.load(path, overrides)
+    return sc, render.render(sc, cache_root=cache)
+
+
+def sphere_pixels(sc):
+    gb = rr.primary(sc["camera"], render.scene_arrays(sc))
+    return gb
+
+
+@pytest.fixture(scope="module")
+def constant_env(tmp_path_factory):
+    d = tmp_path_factory.mktemp("env")
+    p = d / "one.exr"
+    images.write_exr(p, np.ones((32, 64, 3), np.float32))
+    return p
+
+
+@pytest.fixture(scope="module")
+def small_panoramas(tmp_path_factory, load_panorama):
+    """city and studio at 256x128 (solid-angle-weighted downsampling): the same light, faster."""
+    d = tmp_path_factory.mktemp("small")
+    out = {}
+    for name in ("city", "studio"):
+        img = mips.downsample_reference(load_panorama(name), 256, 128)
+        out[name] = d / f"{name}.exr"
+        images.write_exr(out[name], img.astype(np.float32))
+    return out
+
+
+@pytest.fixture(scope="module")
+def dfg_fine():
+    return mips.dfg_reference(64, 4096)
+
+
+# --- white furnace ------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("metallic", [0.0, 1.0])
+@pytest.mark.parametrize("specular", ["importance", "prefiltered", "reference"])
+def test_white_furnace(tmp_path, constant_env, dfg_fine, metallic, specular):
+    """Constant radiance 1, base_color 1: the sphere's mean radiance is kD + F0 A + B (DFG) at
+    every roughness, in every specular mode (2%)."""
+    for r in (0.0, 0.25, 0.5, 1.0):
+        p = make_scene(tmp_path, constant_env, {"base_color": [1, 1, 1], "metallic": metallic, "roughness": r},
+                       effects={"specular": specular, "diffuse": "reference" if specular == "reference" else "sh",
+                                "samples": 256, "reference": {"max_samples": 256, "target_noise": 0}})
+        sc, frame = render_scene(p, tmp_path / "cache")
+        gb = sphere_pixels(sc)
+        hit = gb["hit"]
+        v = -gb["dir"][hit]
+        n = rr.facing_normal(gb["normal"][hit], v)
+        nov = np.maximum((n * v).sum(1), 1e-4)
+        f0 = 0.04 * (1 - metallic) + metallic
+        ab = mips.dfg_lookup(dfg_fine, nov, np.full(len(nov), r))
+        kd = (1 - (f0 + (max(1 - r, f0) - f0) * (1 - nov) ** 5)) * (1 - metallic)
+        predicted = (kd + f0 * ab[:, 0] + ab[:, 1]).mean()
+        got = frame.hdr[..., :3].reshape(-1, 3)[hit].mean()
+        assert abs(got / predicted - 1) < 0.02, (r, got, predicted)
+        assert np.isfinite(frame.hdr).all()
+
+
+# --- counting reflections (seed 000) --------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def spot_env(tmp_path_factory):
+    img = np.zeros((128, 256, 3), np.float32)
+    u, v = conventions.equirect_uv_from_dir(np.array([0, np.sin(0.35), np.cos(0.35)]))
+    i, j = int(u * 256), int(v * 128)
+    img[j - 1:j + 2, i - 1:i + 2] = 1000.0
+    p = tmp_path_factory.mktemp("spot") / "spot.exr"
+    images.write_exr(p, img)
+    return p
+
+
+@pytest.mark.parametrize("roughness,samples,blobs", [(0.5, 1, 1), (0.5, 2, 2), (0.5, 3, 3), (0.5, 5, 5), (0.0, 5, 1)])
+def test_counting_reflections(tmp_path, spot_env, roughness, samples, blobs):
+    """force_mip0, metallic 1: each of the N samples reflects the one bright spot once."""
+    from scipy import ndimage
+
+    p = make_scene(tmp_path, spot_env, {"base_color": [1, 1, 1], "metallic": 1, "roughness": roughness}, res=160,
+                   effects={"specular": "importance", "diffuse": "off", "samples": samples, "force_mip0": True})
+    _, frame = render_scene(p, tmp_path / "cache")
+    lum = frame.hdr[..., :3] @ LUM
+    _, count = ndimage.label(lum > 1.0)
+    assert count == blobs
+
+
+# --- kernels against the numpy twin -----------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def mesh_file(tmp_path_factory):
+    import trimesh
+    m = trimesh.creation.icosphere(subdivisions=2, radius=0.5)
+    p = tmp_path_factory.mktemp("mesh") / "ico.ply"
+    m.export(p)
+    return p
+
+
+def busy_scene(folder, env, mesh, camera=None, effects=None):
+    mats = {"gold": {"base_color": [1.0, 0.78, 0.34], "metallic": 1, "roughness": 0.4},
+            "red": {"base_color": [0.8, 0.1, 0.1], "roughness": 0.7},
+            "floor": {"base_color": [0.5, 0.5, 0.5], "roughness": 0.9, "metallic": 0.2}}
+    objs = [{"sphere": {"center": [-0.6, 0, 0], "radius": 0.5}, "material": "gold"},
+            {"mesh": {"path": str(mesh), "translate": [0.6, 0, 0], "rotate": [10, 20, 0]}, "material": "red"},
+            {"plane": {"point": [0, -0.5, 0], "size": [3, 2]}, "material": "floor"}]
+    return make_scene(folder, env, mats, objects=objs, res=48, effects=effects, rotation_y=30,
+                      camera=camera or {"perspective": {"position": [0, 1, 3], "fov_y": 50}, "resolution": [64, 48],
+                                        "spp": 2})
+
+
+@pytest.mark.parametrize("projection", ["perspective", "orthographic"])
+def test_gbuffer_matches_numpy(tmp_path, small_panoramas, mesh_file, rt, projection):
+    cam = {projection: {"position": [0, 1, 3], **({"fov_y": 50} if projection == "perspective" else {"width": 3})},
+           "resolution": [64, 48], "spp": 2}
+    p = busy_scene(tmp_path, small_panoramas["city"], mesh_file, camera=cam,
+                   effects={"diffuse": "off", "specular": "off"})
+    sc = scene.load(p, (), )
+    sc.data["output"]["normal"] = str(tmp_path / "n.exr")   # ask for AOVs
+    frame = render.render(sc, cache_root=tmp_path / "cache")
+    gb = rr.primary(sc["camera"], render.scene_arrays(sc))
+    cover = gb["hit"].reshape(-1, 2).mean(1).reshape(48, 64)
+    # coverage agrees except where a float32 and a float64 ray disagree on an edge
+    assert np.mean(np.abs(frame.hdr[..., 3] - cover) > 0) < 0.01
+    both = (frame.hdr[..., 3] == 1) & (cover == 1)
+    nref = gb["normal"].reshape(48, 64, 2, 3).mean(2)
+    err = np.abs(frame.aovs["normal"][..., :3] - nref)[both]
+    assert np.quantile(err, 0.99) < 1e-4
+    assert both.sum() > 500
+
+
+@pytest.mark.parametrize("effects", [
+    {"diffuse": "sh", "specular": "off"},
+    {"diffuse": "off", "specular": "importance", "samples": 16},
+    {"diffuse": "off", "specular": "prefiltered", "prefilter": {"method": "fis", "samples": 64}},
+])
+def test_shade_matches_numpy(tmp_path, small_panoramas, mesh_file, effects):
+    from iblbake import sh
+
+    p = busy_scene(tmp_path, small_panoramas["city"], mesh_file, effects=effects)
+    sc = scene.load(p)
+    frame = render.render(sc, cache_root=tmp_path / "cache")
+    arrays = render.scene_arrays(sc)
+    gb = rr.primary(sc["camera"], arrays)
+    image = images.read_panorama(sc["environment"]["path"])[0]
+    fx = sc["effects"]
+    kw = {}
+    if fx["diffuse"] == "sh":
+        kw["sh_coeffs"] = sh.project(image, 3) * sh.ahat(3)[:, None]
+    if fx["specular"] == "importance":
+        kw["chain"] = mips.radiance_chain_reference(image)
+    if fx["specular"] == "prefiltered":
+        rep = {b["name"]: b for b in frame.report["bakes"]}
+        entry = Path(rep["prefiltered"]["entry"])
+        man = json.loads((entry / "manifest.json").read_text())
+        kw["prefiltered"] = [images.read_exr(entry / f["name"])[..., :3].astype(np.float64) for f in man["files"]]
+        kw["dfg"] = images.read_exr(Path(rep["dfg"]["entry"]) / "dfg.exr")[..., :2].astype(np.float64)
+    ref = rr.shade(gb, arrays, fx, sc["environment"], **kw).reshape(48, 64, 2, 3)
+    same = (gb["hit"].reshape(48, 64, 2).all(2)) & (frame.hdr[..., 3] == 1)
+    got = frame.hdr[..., :3][same]
+    want = ref.mean(2)[same]
+    rel = np.abs(got - want) / np.maximum(np.abs(want), 1e-3)
+    assert np.median(rel) < 1e-4 and np.quantile(rel, 0.98) < 2e-3, (np.median(rel), np.quantile(rel, 0.98))
+
+
+def test_reference_converges_to_exact_integral(tmp_path, small_panoramas, load_panorama):
+    """The Monte Carlo reference against quadrature over every texel (64x32 city, so the
+    quadrature is cheap): relative RMSE < 1% on the sphere for a rough metal and a dielectric."""
+    small = mips.downsample_reference(load_panorama("city"), 64, 32).astype(np.float32)
+    env = tmp_path / "city64.exr"
+    images.write_exr(env, small)
+    for mat in ({"base_color": [0.9, 0.6, 0.3], "metallic": 1, "roughness": 0.6},
+                {"base_color": [0.5, 0.7, 0.9], "metallic": 0, "roughness": 0.5}):
+        p = make_scene(tmp_path, env, mat, res=24, rotation_y=40,
+                       effects={"diffuse": "reference", "specular": "reference",
+                                "reference": {"max_samples": 8192, "target_noise": 0.001, "batch": 256}})
+        sc, frame = render_scene(p, tmp_path / "cache")
+        gb = sphere_pixels(sc)
+        want = rr.exact(gb, render.scene_arrays(sc), sc["effects"], sc["environment"], small, sub=4)
+        hit = gb["hit"].reshape(24, 24)
+        got = frame.hdr[..., :3][hit]
+        assert mips.relative_rmse(got, want.reshape(24, 24, 3)[hit]) < 0.01
+
+
+@pytest.mark.parametrize("env", ["city", "studio"])
+def test_modes_agree_with_reference(tmp_path, small_panoramas, env):
+    """importance (N = 1024) and prefiltered specular, and SH diffuse, against the converged
+    reference: relative RMSE < 3% on the sphere pixels for roughness >= 0.25."""
+    path = small_panoramas[env]
+    for r in (0.25, 0.5, 1.0):
+        mat = {"base_color": [0.95, 0.95, 0.95], "metallic": 1, "roughness": r}
+        common = dict(res=48, rotation_y=70)
+        p = make_scene(tmp_path, path, mat, effects={"diffuse": "off", "specular": "reference",
+                                                     "reference": {"max_samples": 4096, "target_noise": 0.003,
+                                                                   "batch": 256}}, **common)
+        sc, ref = render_scene(p, tmp_path / "cache")
+        hit = ref.hdr[..., 3] == 1
+        for mode, extra in (("importance", {"samples": 1024}), ("prefiltered", {})):
+            p = make_scene(tmp_path, path, mat, effects={"diffuse": "off", "specular": mode, **extra}, **common)
+            _, got = render_scene(p, tmp_path / "cache")
+            err = mips.relative_rmse(got.hdr[..., :3][hit], ref.hdr[..., :3][hit])
+            assert err < 0.03, (env, r, mode, err)
+    mat = {"base_color": [0.8, 0.8, 0.8], "metallic": 0, "roughness": 0.5}
+    p = make_scene(tmp_path, path, mat, res=48, effects={"diffuse": "reference", "specular": "off",
+                                                         "reference": {"max_samples": 4096, "target_noise": 0.003,
+                                                                       "batch": 256}})
+    _, ref = render_scene(p, tmp_path / "cache")
+    p = make_scene(tmp_path, path, mat, res=48, effects={"diffuse": "sh", "specular": "off"})
+    _, got = render_scene(p, tmp_path / "cache")
+    hit = ref.hdr[..., 3] == 1
+    assert mips.relative_rmse(got.hdr[..., :3][hit], ref.hdr[..., :3][hit]) < 0.03
+
+
+# --- effect set -------------------------------------------------------------------------------------
+
+def bakes_of(frame):
+    return {b["name"] for b in frame.report["bakes"]}
+
+
+def render_defines(frame):
+    return [b["defines"] for b in frame.report["kernel_builds"] if b["kernel"] == "render.cl"]
+
+
+def test_effect_set_bakes_only_what_is_read(tmp_path, small_panoramas):
+    env = small_panoramas["studio"]
+    mat = {"base_color": [0.8, 0.8, 0.8], "metallic": 0, "roughness": 0.5}
+    cache = tmp_path / "cache"
+
+    def run(**fx):
+        p = make_scene(tmp_path, env, mat, res=16, effects=fx)
+        return render_scene(p, cache)[1]
+
+    f = run(diffuse="sh", specular="off")
+    assert bakes_of(f) & {"radiance", "prefiltered", "dfg"} == set() and "sh" in bakes_of(f)
+    assert all(d["SPECULAR_MODE"] == 0 for d in render_defines(f))
+    assert "shade" in [p["name"] for p in f.report["passes"]]
+    assert "background" not in [p["name"] for p in f.report["passes"]]       # background: hide
+    f = run(diffuse="off", specular="importance")
+    assert "radiance" in bakes_of(f) and not bakes_of(f) & {"sh", "prefiltered", "dfg"}
+    f = run(diffuse="off", specular="prefiltered")
+    assert {"prefiltered", "dfg"} <= bakes_of(f) and not bakes_of(f) & {"sh"}
+    kinds = {json.loads((e / "manifest.json").read_text()).get("kind") for e in cache.iterdir()
+             if (e / "manifest.json").exists()}
+    # importance wrote a radiance entry; prefiltered did not need one of its own
+    assert kinds == {"sh", "radiance", "prefiltered", "dfg"}
+    f = run(diffuse="off", specular="off")
+    assert [p["name"] for p in f.report["passes"]] == ["gbuffer", "resolve"]
+    assert not bakes_of(f) - {"geometry"}
+    assert "read_environment" not in bakes_of(f)
+    # an all-metal scene needs no SH, whatever diffuse says
+    p = make_scene(tmp_path, env, {"base_color": [1, 1, 1], "metallic": 1, "roughness": 0.3}, res=16,
+                   effects={"diffuse": "sh", "specular": "off"})
+    f = render_scene(p, cache)[1]
+    assert "sh" not in bakes_of(f) and f.report["effects"]["diffuse"] == "off"
+
+
+def test_report_cli_and_kernel_cache(tmp_path, small_panoramas):
+    """--report --json lists passes and bakes; the second run hits every cache and builds
+    nothing new on disk (pyopencl's binary cache)."""
+    kcache = tmp_path / "kernels"
+    envv = {"IBLBAKE_KERNEL_CACHE": str(kcache)}
+    p = make_scene(tmp_path, small_panoramas["studio"], {"base_color": [0.8, 0.8, 0.8], "roughness": 0.5}, res=32,
+                   effects={"diffuse": "sh", "specular": "prefiltered"})
+    out = tmp_path / "a.png"
+    r1 = run_cli("render", p, "-o", out, "--cache", tmp_path / "c", "--json", "--report", env=envv)
+    assert r1.returncode == 0, r1.stderr
+    files = sorted(str(x) for x in kcache.rglob("*"))
+    r2 = run_cli("render", p, "-o", out, "--cache", tmp_path / "c", "--json", env=envv)
+    assert r2.returncode == 0, r2.stderr
+    rep = json.loads(r2.stdout)
+    assert all(b["cached"] for b in rep["bakes"] if b["name"] in ("sh", "prefiltered", "dfg"))
+    assert sorted(str(x) for x in kcache.rglob("*")) == files
+    assert rep["outputs"] == [str(out)]
+
+
+def test_determinism_and_outputs(tmp_path, small_panoramas, mesh_file):
+    p = busy_scene(tmp_path, small_panoramas["city"], mesh_file,
+                   effects={"diffuse": "reference", "specular": "importance", "samples": 8,
+                            "reference": {"max_samples": 64}})
+    outs = []
+    for k in range(2):
+        o = tmp_path / f"f{k}.png"
+        r = run_cli("render", p, "-o", o, "-o", tmp_path / f"f{k}.exr", "--cache", tmp_path / "c",
+                    "--set", "output.depth=depth.exr", "--set", "output.albedo=albedo.exr", "-q")
+        assert r.returncode == 0, r.stderr
+        outs.append(o.read_bytes())
+    assert outs[0] == outs[1]
+    exr = images.read_exr(tmp_path / "f0.exr")
+    assert exr.shape == (48, 64, 4) and np.isfinite(exr).all()
+    depth = images.read_exr(tmp_path / "depth.exr")
+    assert np.isfinite(depth).all() and depth.max() > 2.0
+    assert not [x for x in os.listdir(tmp_path) if ".tmp-" in x]
+
+
+# --- scene validation --------------------------------------------------------------------------------
+
+GOOD = """camera:
+  perspective: {position: [0, 0, 3], fov_y: 40}
+  resolution: [16, 16]
+environment:
+  path: ENV
+materials:
+  gold: {base_color: [1, 0.8, 0.3], metallic: 1, roughness: 0.3}
+objects:
+  - sphere: {center: [0, 0, 0], radius: 1}
+    material: gold
+effects:
+  specular: prefiltered
+output:
+  frame: out.png
+"""
+
+
+@pytest.mark.parametrize("edit,expected", [
+    (("specular: prefiltered", "specullar: prefiltered"), ":13: effects.specullar: unknown key (did you mean 'specular'?)"),
+    (("roughness: 0.3", "roughness: 1.5"), ":7: materials.gold.roughness: 1.5 is out of range"),
+    (("radius: 1", "radius: -1"), ":9: objects.0.sphere.radius: -1 is out of range; give a value > 0"),
+    (("fov_y: 40", "fov_y: 0"), ":2: camera.perspective.fov_y: 0 is out of range"),
+    (("material: gold", "material: gld"), ":10: objects.0.material: no material named 'gld' (did you mean 'gold'?)"),
+    (("specular: prefiltered", "specular: importnce"), ":13: effects.specular: 'importnce' is not one of"),
+    (("path: ENV", "path: nowhere.exr"), ":5: environment.path:"),
+    (("frame: out.png", "frame: ../../x.png"), ":15: output.frame: '../../x.png' leaves the scene's folder"),
+    (("resolution: [16, 16]", "resolution: [16, 16"), "not valid YAML"),
+    (("frame: out.png", "frame: out.jpg"), "output.frame:"),
+])
+def test_bad_scene_one_line_error(tmp_path, constant_env, edit, expected):
+    text = GOOD.replace("ENV", str(constant_env)).replace(*edit)
+    p = tmp_path / "scene.yaml"
+    p.write_text(text)
+    r = run_cli("render", p, "--cache", tmp_path / "c")
+    assert r.returncode != 0
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
+    assert str(p) in lines[0] and expected in lines[0], lines[0]
+    assert not (tmp_path / "out.png").exists()
+
+
+def test_set_overrides(tmp_path, constant_env):
+    p = tmp_path / "scene.yaml"
+    p.write_text(GOOD.replace("ENV", str(constant_env)))
+    sc = scene.load(p, ["materials.gold.roughness=0.7", "effects.samples=12", "objects.0.sphere.radius=2"])
+    assert sc["materials"]["gold"]["roughness"] == 0.7 and sc["effects"]["samples"] == 12
+    assert sc["objects"][0]["sphere"]["radius"] == 2.0
+    r = run_cli("render", p, "--set", "materials.gold.roughness=2", "--cache", tmp_path / "c")
+    assert r.returncode != 0 and "--set materials.gold.roughness: 2 is out of range" in r.stderr
+    r = run_cli("render", p, "--set", "objects.5.sphere.radius=2")
+    assert r.returncode != 0 and "no item 5" in r.stderr
+
+
+def test_mesh_errors(tmp_path, constant_env):
+    bad_index = tmp_path / "bad.obj"
+    bad_index.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n")
+    nan = tmp_path / "nan.obj"
+    nan.write_text("v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n")
+    degenerate = tmp_path / "deg.obj"
+    degenerate.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nf 1 2 3\nf 1 2 4\nf 1 1 3\n")
+    for mesh, expected in ((bad_index, "bad.obj"), (nan, "not finite"), (tmp_path / "missing.ply", "not found")):
+        p = make_scene(tmp_path, constant_env, {"base_color": [1, 1, 1]},
+                       objects=[{"mesh": {"path": str(mesh)}, "material": "m"}])
+        r = run_cli("render", p, "--cache", tmp_path / "c")
+        assert r.returncode != 0 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+        assert expected in r.stderr and "objects.0.mesh" in r.stderr, r.stderr
+    p = make_scene(tmp_path, constant_env, {"base_color": [1, 1, 1]},
+                   objects=[{"mesh": {"path": str(degenerate)}, "material": "m"}])
+    sc = scene.load(p)
+    geo = render.scene_arrays(sc).geometry_report
+    assert geo["triangles"] == 1 and geo["meshes"][0]["dropped_degenerate"] == 2
