@@ -96,6 +96,8 @@ def plan(scene: Scene) -> Plan:
             defines["FORCE_MIP0"] = 1
         if fx["normalize"] == "accepted":
             defines["IMPORTANCE_ACCEPTED"] = 1
+    if specular == "prefiltered" and fx["prefilter"]["dominant_direction"]:
+        defines["DOMINANT_DIRECTION"] = 1
     if emissive:
         defines["HAS_EMISSIVE"] = 1
     kinds = {k for o in d["objects"] for k in ("sphere", "plane", "mesh") if k in o}

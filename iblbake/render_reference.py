@@ -179,6 +179,10 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
         color += scale * acc / div
     elif effects["specular"] == "prefiltered":
         r = 2 * (n * v).sum(1, keepdims=True) * n - v
+        if effects["prefilter"]["dominant_direction"]:
+            s = np.clip(1 - alpha, 0, 1)[:, None]
+            r = n + (r - n) * (s * (np.sqrt(s) + alpha[:, None]))
+            r /= np.linalg.norm(r, axis=1, keepdims=True)
         pre = mips.chain_lookup_reference(prefiltered, to_env(r, rot), rough * (len(prefiltered) - 1))
         ab = mips.dfg_lookup(dfg, nov, rough)
         color += scale * pre * (f0 * ab[:, 0:1] + ab[:, 1:2])

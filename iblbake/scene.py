@@ -268,7 +268,8 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "specular": Enum(("importance", "prefiltered", "reference", "off"), "prefiltered",
                          doc="specular IBL: runtime GGX importance sampling (seed 000), split sum, Monte Carlo reference, none"),
         "samples": Num(40, 1, 65536, integer=True, doc="importance: GGX samples per pixel"),
-        "mip_bias": Num(1.0, -16.0, 16.0, doc="importance: added to each sample's mip level"),
+        "mip_bias": Num(1.0, -16.0, 16.0, doc="importance: added to each sample's mip level (Krivanek and "
+                                              "Colbert: 1, closer to the reference; seed 000: 0)"),
         "force_mip0": Bool(False, doc="importance: read level 0 for every sample (counting-reflections check)"),
         "normalize": Enum(("total", "accepted"), "total",
                           doc="importance: divide by all N samples (unbiased) or by the accepted ones (seed 000)"),
@@ -278,6 +279,8 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
             "size": Num(None, 1, 8192, integer=True, doc="base height of the equirect chain (default: source height)"),
             "levels": Num(None, 2, 32, integer=True, doc="levels K, roughness k/(K-1)"),
             "lod_bias": Num(1.0, -16.0, 16.0, doc="fis level bias"),
+            "dominant_direction": Bool(True, doc="read the chain between N and R (Lagarde 2014), not at R: "
+                                                 "closer to the reference on rough metals"),
             "dfg_size": Num(128, 2, 4096, integer=True, doc="DFG table size"),
             "dfg_samples": Num(4096, 1, 1 << 20, integer=True, doc="GGX samples per DFG texel"),
         }),
@@ -360,7 +363,7 @@ class _Validator:
 
     def where(self, path: str) -> str:
         if path in self.overridden:
-            return f"{self.source}: --set {path}"
+            return f"{self.source}: --set"
         p = path
         while p and p not in self.lines:
             p = p.rpartition(".")[0]

@@ -294,6 +294,14 @@ inline float3 sh_irradiance(__constant float4 *coeffs, float3 n)
 }
 #endif
 
+/* Where a rough lobe really points: between N and R (Lagarde and de Rousiers 2014, Frostbite,
+ * getSpecularDominantDir with their alpha). The split sum reads its prefiltered chain there. */
+inline float3 dominant_direction(float3 n, float3 r, float a)
+{
+    const float s = clamp(1.0f - a, 0.0f, 1.0f);
+    return normalize(mix(n, r, s * (sqrt(s) + a)));
+}
+
 /* Level-0 texel solid angle of the chain at direction l, continuous in latitude (as mips.cl). */
 inline float texel_solid_angle(float3 l, int w0, int h0)
 {
@@ -365,7 +373,11 @@ __kernel void shade(__global const float4 *gb_pos, __global const float4 *gb_nrm
 #elif SPECULAR_MODE == 2
     {
         /* split sum: prefiltered chain at R (level = roughness (K-1)) x (F0 A + B) */
+#ifdef DOMINANT_DIRECTION
+        const float3 r = dominant_direction(nrm, 2.0f * dot(nrm, v) * nrm - v, mt.alpha);
+#else
         const float3 r = 2.0f * dot(nrm, v) * nrm - v;
+#endif
         const float3 pre = chain_lookup(chain, off, lw, lh, nlev, to_env(r, env_rot),
                                         mt.roughness * (float)(nlev - 1));
         const float x = clamp(nov, 0.0f, 1.0f) * (dfg_size - 1), y = mt.roughness * (dfg_size - 1);
