@@ -445,7 +445,10 @@ def render(scene: Scene, *, device: str | None = None, cache_root: Path | None =
         else:
             c_args = [dummy, zeros_i, zeros_i, zeros_i, np.int32(1)]
         nsamp = fx["samples"] if pl.specular == "importance" else 1
-        ham = sampling.hammersley(nsamp).astype(np.float32) if pl.specular == "importance" else np.zeros((1, 2), np.float32)
+        ham = np.zeros((max(nsamp, 1), 4), np.float32)
+        if pl.specular == "importance":       # (cos phi, sin phi, u1): sample_ggx_half_cs
+            pts = sampling.hammersley(nsamp)
+            ham[:, 0], ham[:, 1], ham[:, 2] = np.cos(2 * np.pi * pts[:, 0]), np.sin(2 * np.pi * pts[:, 0]), pts[:, 1]
         dfg_arr = dfg_table.astype(np.float32) if dfg_table is not None else np.zeros((2, 2, 2), np.float32)
         t0 = time.perf_counter()
         rt.run(k, (n,), None, gb_pos, gb_nrm, gb_dir, np.int32(n), mats_buf, env_rot, env_scale, sh_buf,
@@ -562,6 +565,8 @@ def write_outputs(frame: Frame, scene: Scene) -> list:
 
     out = scene.data["output"]
     written = []
+    for p in [*out["frame"], *(out[a] for a in ("normal", "albedo", "depth") if out[a])]:
+        Path(p).parent.mkdir(parents=True, exist_ok=True)
     for p in out["frame"]:
         if p.lower().endswith(".png"):
             images.write_png(p, frame.png)

@@ -164,6 +164,20 @@ class OneOf:
 
 
 @dataclass
+class ColorKey:
+    """{color: [r, g, b]}: the same as the bare list, spelled as the docs say it."""
+    doc: str = ""
+
+    def check(self, v):
+        if not isinstance(v, dict) or list(v) != ["color"]:
+            raise _Bad(f"{v!r} is not {{color: [r, g, b]}}")
+        return Vec(n=3, lo=0.0).check(v["color"])
+
+    def describe(self):
+        return "{color: [r, g, b]}"
+
+
+@dataclass
 class Section:
     fields: dict
     required: tuple = ()
@@ -226,7 +240,7 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "path": Str(doc="equirectangular panorama (EXR, HDR, any format iblbake reads); relative to the scene file"),
         "intensity": Num(1.0, 0.0, doc="radiance scale"),
         "rotation_y": Num(0.0, doc="rotate the panorama about +y, degrees (+x towards -z)"),
-        "background": OneOf((Enum(("show", "hide")), Vec(n=3, lo=0.0)), default="show",
+        "background": OneOf((Enum(("show", "hide")), Vec(n=3, lo=0.0), ColorKey()), default="show",
                             doc="show the panorama, hide it (black), or a constant [r, g, b]"),
         "blur": Num(0.0, 0.0, 1.0, doc="show the background through the prefiltered level of this roughness (0: sharp)"),
         "nonfinite": Enum(("error", "zero", "clamp"), "error", doc="NaN/Inf texels: fail, zero or clamp"),

@@ -314,7 +314,7 @@ __kernel void shade(__global const float4 *gb_pos, __global const float4 *gb_nrm
                     __constant float4 *sh_coeffs,
                     __global const float4 *chain, __constant int *off, __constant int *lw, __constant int *lh,
                     const int nlev,
-                    __global const float2 *hammersley_pts, const int nsamples, const float mip_bias,
+                    __global const float4 *hammersley_pts, const int nsamples, const float mip_bias,
                     __global const float2 *dfg, const int dfg_size,
                     __global float4 *out)
 {
@@ -343,7 +343,7 @@ __kernel void shade(__global const float4 *gb_pos, __global const float4 *gb_nrm
         float3 acc = (float3)(0.0f);
         int accepted = 0;
         for (int i = 0; i < nsamples; ++i) {
-            const float3 hl = sample_ggx_half(hammersley_pts[i], mt.alpha);
+            const float3 hl = sample_ggx_half_cs(hammersley_pts[i], mt.alpha);
             const float3 h = t * hl.x + b * hl.y + nrm * hl.z;
             const float voh = dot(v, h);
             const float3 l = 2.0f * voh * h - v;
@@ -356,7 +356,7 @@ __kernel void shade(__global const float4 *gb_pos, __global const float4 *gb_nrm
             /* solid angle of this sample, 1 / (N pdf(l)), pdf(l) = D(h) NoH / (4 VoH) */
             const float pdf = d_ggx(noh, mt.alpha) * noh / (4.0f * voh);
             const float3 le = to_env(l, env_rot);
-            lod = 0.5f * (log2(1.0f / ((float)nsamples * pdf)) - log2(texel_solid_angle(le, w0, h0))) + mip_bias;
+            lod = -0.5f * log2((float)nsamples * pdf * texel_solid_angle(le, w0, h0)) + mip_bias;
             const float3 li = chain_lookup(chain, off, lw, lh, nlev, le, lod);
 #else
             const float3 li = chain_lookup(chain, off, lw, lh, nlev, to_env(l, env_rot), 0.0f);

@@ -27,4 +27,15 @@ inline float3 sample_ggx_half(float2 u, float alpha)
     return (float3)(st * cos(phi), st * sin(phi), cos(theta));
 }
 
+/* The same warp without trigonometry, for per-pixel loops: the host uploads (cos phi, sin phi, u1)
+ * per Hammersley point; cos theta = sqrt((1 - u1) / (1 - u1 + alpha^2 u1)) is the atan2 form's cosine. */
+inline float3 sample_ggx_half_cs(float4 pt, float alpha)
+{
+    const float a2u = alpha * alpha * pt.z;
+    const float den = (1.0f - pt.z) + a2u;
+    const float ct = den > 0.0f ? sqrt((1.0f - pt.z) / den) : 1.0f;
+    const float st = den > 0.0f ? sqrt(a2u / den) : 0.0f;
+    return (float3)(st * pt.x, st * pt.y, ct);
+}
+
 #endif
