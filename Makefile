@@ -17,8 +17,9 @@ $(STAMP): pyproject.toml
 opencl: $(STAMP)
 	sh scripts/ensure_opencl.sh $(BIN)/iblbake
 
-assets:
+assets: $(STAMP)
 	sh examples/fetch_panoramas.sh $(PANOS)
+	test -f examples/meshes/knot.ply || $(BIN)/python examples/make_mesh.py examples/meshes/knot.ply
 
 demo: opencl assets
 	mkdir -p $(OUT)/sh
@@ -30,7 +31,11 @@ demo: opencl assets
 	done
 	$(BIN)/iblbake sh $(PANOS)/studio.exr --glsl -q > $(OUT)/sh/studio.glsl
 	$(BIN)/iblbake mips $(PANOS)/city.exr --cache $(OUT)/cache
-	@echo "demo: done (the last line shows a second run reusing the cache)"
+	$(BIN)/iblbake render examples/scenes/sphere_grid.yaml -o $(OUT)/sphere_grid.png --cache $(OUT)/cache --report
+	$(BIN)/iblbake render examples/scenes/sphere_grid.yaml -o $(OUT)/sphere_grid_importance.png --cache $(OUT)/cache \
+	    --set effects.specular=importance --set effects.samples=40 -q
+	$(BIN)/iblbake render examples/scenes/mesh.yaml -o $(OUT)/mesh.png --cache $(OUT)/cache -q
+	@echo "demo: done: frames in $(OUT)/ (sphere_grid.png, sphere_grid_importance.png, mesh.png)"
 
 test: opencl assets
 	$(BIN)/python -m pytest -q tests
@@ -38,6 +43,7 @@ test: opencl assets
 bench: opencl assets
 	$(BIN)/python benchmarks/bench_sh.py
 	$(BIN)/python benchmarks/bench_mips.py
+	$(BIN)/python benchmarks/bench_render.py
 
 clean:
 	rm -rf $(OUT) .pytest_cache
