@@ -39,7 +39,7 @@ def main():
     ap.add_argument("--cache", default=None)
     args = ap.parse_args()
     cache = Path(args.cache or tempfile.mkdtemp(prefix="iblbake-bench-"))
-    print(f"| configuration | end to end s | gbuffer s | lighting s | Mpixel-samples/s | primary Mrays/s | BVH build s |")
+    print("| configuration | end to end s | gbuffer s | lighting s | Mpixel-samples/s | primary Mrays/s | BVH build s |")
     print("|---|---|---|---|---|---|---|")
     device = None
     for name, file, sets in CONFIGS:

@@ -379,7 +379,6 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, devic
         raise click.UsageError("missing SCENE (a scene YAML file; see --help-schema)")
     con = Console(quiet, as_json)
     sc = scene.load(scene_path, overrides, outputs)
-    stages = ["rendering"]
     with con.stages(["reference samples"] * 100, label="render") if (
             "reference" in render.plan(sc).passes and con.interactive) else contextlib.nullcontext(None) as step:
         last = [0]
@@ -393,7 +392,6 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, devic
                 last[0] += 1
 
         frame = render.render(sc, device=device, cache_root=cache_dir, warn=con.warn, progress=progress)
-    del stages
     written = render.write_outputs(frame, sc)
     rep = frame.report
     for note in rep["effects"]["notes"]:

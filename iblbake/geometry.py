@@ -236,10 +236,10 @@ def plane_frame(normal):
     for a floor (normal +-y) width runs along x and depth along z."""
     n = np.asarray(normal, np.float64)
     n = n / np.linalg.norm(n)
-    ref = np.array([0.0, 0.0, 1.0]) if abs(n[1]) > 0.999 else np.array([0.0, 1.0, 0.0])
-    t = np.cross(n, ref)
-    t /= np.linalg.norm(t)
     if abs(n[1]) > 0.999:
         t = np.array([1.0, 0.0, 0.0])
+    else:
+        t = np.cross(n, [0.0, 1.0, 0.0])
+        t /= np.linalg.norm(t)
     b = np.cross(t, n)
     return n, t, b

@@ -293,9 +293,7 @@ def _chain_buffers(rt, levels):
         parts.append(mips.to_rgba(lvl).reshape(-1, 4))
         o += w * h
     data = np.concatenate(parts).astype(np.float32)
-    mf = rt.cl.mem_flags
-    consts = [rt.cl.Buffer(rt.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.asarray(x, np.int32))
-              for x in (offs, lws, lhs)]
+    consts = [rt.to_device(np.asarray(x, np.int32)) for x in (offs, lws, lhs)]
     return rt.to_device(data), consts, len(levels)
 
 
@@ -398,8 +396,7 @@ def render(scene: Scene, *, device: str | None = None, cache_root: Path | None =
     env_scale = np.float32(env["intensity"])
     mats_buf = rt.to_device(arrays.materials.reshape(-1, 4))
     dummy = rt.to_device(np.zeros(4, np.float32))
-    zeros_i = rt.cl.Buffer(rt.ctx, rt.cl.mem_flags.READ_ONLY | rt.cl.mem_flags.COPY_HOST_PTR,
-                           hostbuf=np.zeros(4, np.int32))
+    zeros_i = rt.to_device(np.zeros(4, np.int32))
 
     def kern(name):
         return rt.kernel("render.cl", name, prog_defines)
@@ -413,7 +410,7 @@ def render(scene: Scene, *, device: str | None = None, cache_root: Path | None =
     cam4 = np.zeros((4, 4), np.float32)
     cam4[0, :3], cam4[0, 3] = pos, 1.0 if ortho else 0.0
     cam4[1, :3], cam4[2, :3], cam4[3, :3] = fwd, right, up
-    cam_buf = rt.cl.Buffer(rt.ctx, rt.cl.mem_flags.READ_ONLY | rt.cl.mem_flags.COPY_HOST_PTR, hostbuf=cam4)
+    cam_buf = rt.to_device(cam4)
 
     def padded(a, shape):
         return a if len(a) else np.zeros(shape, np.float32)
@@ -435,8 +432,7 @@ def render(scene: Scene, *, device: str | None = None, cache_root: Path | None =
 
     if "shade" in pl.passes:
         k = kern("shade")
-        sh_buf = rt.cl.Buffer(rt.ctx, rt.cl.mem_flags.READ_ONLY | rt.cl.mem_flags.COPY_HOST_PTR,
-                              hostbuf=np.pad(sh_coeffs, ((0, 0), (0, 1))).astype(np.float32)
+        sh_buf = rt.to_device(np.pad(sh_coeffs, ((0, 0), (0, 1))).astype(np.float32)
                               if sh_coeffs is not None else np.zeros((1, 4), np.float32))
         if pl.specular == "importance":
             c_args = chain_args(chain)

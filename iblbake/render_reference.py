@@ -128,6 +128,15 @@ def to_env(d, rotation_y_deg):
     return conventions.rotate_y(d, -rotation_y_deg)
 
 
+def surface(gb, arrays):
+    """Twin of surface_at for every hit sample: view vectors, bent shading normals, NoV and the
+    material columns (base, metallic, emissive, roughness, F0)."""
+    hit = gb["hit"]
+    v = -gb["dir"][hit]
+    n = facing_normal(gb["normal"][hit], v)
+    return v, n, np.maximum((n * v).sum(1), 1e-4), _materials(arrays, gb["material"][hit])
+
+
 def diffuse_weight(base, metallic, rough, f0, nov):
     kd = (1 - brdf.f_schlick_roughness(nov[:, None], f0, rough[:, None])) * (1 - metallic[:, None])
     return kd * base / math.pi
@@ -137,10 +146,7 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
     """Per-sample radiance of the `shade` pass (hits only; misses are 0)."""
     hit = gb["hit"]
     out = np.zeros((len(hit), 3))
-    v = -gb["dir"][hit]
-    n = facing_normal(gb["normal"][hit], v)
-    nov = np.maximum((n * v).sum(1), 1e-4)
-    base, metallic, emissive, rough, f0 = _materials(arrays, gb["material"][hit])
+    v, n, nov, (base, metallic, emissive, rough, f0) = surface(gb, arrays)
     alpha = rough ** 2
     rot, scale = env["rotation_y"], env["intensity"]
     color = emissive.copy()
@@ -194,10 +200,7 @@ def exact(gb, arrays, effects: dict, env: dict, image, sub: int = 2, chunk: int 
     """What the `reference` pass converges to, by quadrature over the panorama's texels."""
     hit = gb["hit"]
     out = np.zeros((len(hit), 3))
-    v = -gb["dir"][hit]
-    n = facing_normal(gb["normal"][hit], v)
-    nov = np.maximum((n * v).sum(1), 1e-4)
-    base, metallic, emissive, rough, f0 = _materials(arrays, gb["material"][hit])
+    v, n, nov, (base, metallic, emissive, rough, f0) = surface(gb, arrays)
     alpha = rough ** 2
     hgt, wid = image.shape[:2]
     dirs, omega = mips._texel_subsamples(wid, hgt, sub)

@@ -265,6 +265,18 @@ inline float3 facing_normal(float3 n, float3 v)
     return normalize(n + (1e-4f - nov) * v);
 }
 
+/* What the lighting passes read of a G-buffer sample: its material, the view vector, the
+ * shading normal bent towards the viewer, and NoV (floored at 1e-4). */
+inline float surface_at(__global const float4 *gb_nrm, __global const float4 *gb_dir,
+                        __global const float4 *materials, int gid, Material *mt, float3 *v, float3 *nrm)
+{
+    const float4 nm = gb_nrm[gid];
+    *mt = material_at(materials, as_int(nm.w));
+    *v = -gb_dir[gid].xyz;
+    *nrm = facing_normal(nm.xyz, *v);
+    return fmax(dot(*nrm, *v), 1e-4f);
+}
+
 /* World direction -> the panorama's frame: the panorama is rotated by rotation_y about +y. */
 inline float3 to_env(float3 d, float2 rot)   /* rot = (cos, sin) of rotation_y */
 {
@@ -320,13 +332,10 @@ __kernel void shade(__global const float4 *gb_pos, __global const float4 *gb_nrm
 {
     const int gid = get_global_id(0);
     if (gid >= n) return;
-    const float4 p = gb_pos[gid];
-    if (p.w == MISS_T) { out[gid] = (float4)(0.0f); return; }
-    const float4 nm = gb_nrm[gid];
-    const Material mt = material_at(materials, as_int(nm.w));
-    const float3 v = -gb_dir[gid].xyz;
-    const float3 nrm = facing_normal(nm.xyz, v);
-    const float nov = fmax(dot(nrm, v), 1e-4f);
+    if (gb_pos[gid].w == MISS_T) { out[gid] = (float4)(0.0f); return; }
+    Material mt;
+    float3 v, nrm;
+    const float nov = surface_at(gb_nrm, gb_dir, materials, gid, &mt, &v, &nrm);
     float3 color = (float3)(0.0f);
 #ifdef HAS_EMISSIVE
     color += mt.emissive;
@@ -506,13 +515,10 @@ __kernel void reference(__global const float4 *gb_pos, __global const float4 *gb
 {
     const int gid = get_global_id(0);
     if (gid >= n) return;
-    const float4 p = gb_pos[gid];
-    if (p.w == MISS_T) { out[gid] = (float4)(0.0f); return; }
-    const float4 nm = gb_nrm[gid];
-    const Material mt = material_at(materials, as_int(nm.w));
-    const float3 v = -gb_dir[gid].xyz;
-    const float3 nrm = facing_normal(nm.xyz, v);
-    const float nov = fmax(dot(nrm, v), 1e-4f);
+    if (gb_pos[gid].w == MISS_T) { out[gid] = (float4)(0.0f); return; }
+    Material mt;
+    float3 v, nrm;
+    const float nov = surface_at(gb_nrm, gb_dir, materials, gid, &mt, &v, &nrm);
     float3 t, b;
     tangent_frame(nrm, &t, &b);
     const float3 vl = (float3)(dot(v, t), dot(v, b), nov);
