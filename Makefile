@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.iblbake-installed
 PANOS  := examples/panoramas
 OUT    := examples/out
 
-.PHONY: demo test install opencl assets bench clean
+.PHONY: demo test stress install opencl assets testmodels bench clean
 
 install: $(STAMP)
 $(STAMP): pyproject.toml
@@ -37,8 +37,17 @@ demo: opencl assets
 	$(BIN)/iblbake render examples/scenes/mesh.yaml -o $(OUT)/mesh.png --cache $(OUT)/cache -q
 	@echo "demo: done: frames in $(OUT)/ (sphere_grid.png, sphere_grid_importance.png, mesh.png)"
 
-test: opencl assets
+testmodels:
+	sh examples/fetch_testmodels.sh tests/data/assimp
+
+test: opencl assets testmodels
 	$(BIN)/python -m pytest -q tests
+
+# the stress and fuzz suite at full size (10x the fuzz inputs, 24 kill runs per command); prints
+# and saves the table of case, bound, measured, result
+stress: opencl assets testmodels
+	IBLBAKE_STRESS=1 IBLBAKE_STRESS_REPORT=docs/stress-table.md $(BIN)/python -m pytest -q -rs \
+	    tests/test_stress.py tests/test_stress_render.py tests/test_fuzz.py tests/test_nothing_lost.py
 
 bench: opencl assets
 	$(BIN)/python benchmarks/bench_sh.py

@@ -8,8 +8,10 @@ level is one segmented sort of all primitives), and traversed in kernels/render.
 
 from __future__ import annotations
 
+import logging
 import math
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -53,8 +55,16 @@ def load_mesh(spec: dict, where: str):
     path = Path(spec["path"])
     if not path.is_file():
         raise InputError(f"{where}: mesh {path} not found")
+    _refuse_draco(path, where)
+    # trimesh logs format warnings itself; ours are one line per problem, so keep it quiet
+    logging.getLogger("trimesh").setLevel(logging.CRITICAL)
     try:
-        loaded = trimesh.load(str(path), process=False, force="mesh")
+        with warnings.catch_warnings(), np.errstate(all="ignore"):   # NaN vertices are reported below
+            warnings.simplefilter("ignore")
+            loaded = trimesh.load(str(path), process=False, force="mesh")
+    except MemoryError:
+        raise InputError(f"{where}: mesh {path} claims more data than fits in memory; the file is "
+                         f"corrupt or far too large") from None
     except Exception as e:   # trimesh raises many kinds on malformed files
         text = " ".join(str(e).split())[:160] or type(e).__name__
         raise InputError(f"{where}: mesh {path} cannot be read ({text}); check the file "
@@ -84,6 +94,17 @@ def load_mesh(spec: dict, where: str):
         except Exception:
             normals = None
     return v, f.astype(np.int64), normals
+
+
+def _refuse_draco(path: Path, where: str):
+    """Draco-compressed glTF decodes to zeros without the optional DracoPy: say so instead."""
+    if path.suffix.lower() not in (".gltf", ".glb"):
+        return
+    with open(path, "rb") as f:
+        head = f.read(1 << 20)
+    if b"KHR_draco_mesh_compression" in head:
+        raise InputError(f"{where}: mesh {path} uses Draco compression (KHR_draco_mesh_compression), "
+                         f"which iblbake does not decode; export it uncompressed")
 
 
 def transform_matrix(spec: dict):

@@ -58,3 +58,62 @@ def run_cli(*args, cwd=None, env=None):
 def rel_err(a, b):
     a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
     return float(np.abs(a - b).max() / max(np.abs(b).max(), 1e-300))
+
+
+# --- the stress report (issue 7): every stress case records its bound and what it measured ---------
+
+STRESS = os.environ.get("IBLBAKE_STRESS") == "1"     # `make stress`: more fuzz inputs and kill runs
+
+
+def stress_scale(fast: int, full: int) -> int:
+    """How many inputs or runs a stress loop takes: `fast` in `make test`, `full` in `make stress`."""
+    return full if STRESS else fast
+
+
+class StressLog:
+    """Rows of (case, bound, measured, pass) and counters, printed as the `make stress` table."""
+
+    COUNTERS = ("inputs fuzzed", "crashes", "kill-runs", "partial files found")
+
+    def __init__(self):
+        self.rows = []
+        self.counts = {k: 0 for k in self.COUNTERS}
+
+    def check(self, case: str, measured: float, bound: float, what: str = "error"):
+        """Record and assert measured <= bound (a NaN measurement fails)."""
+        measured = float(measured)
+        ok = measured <= bound
+        self.rows.append((case, what, bound, measured, ok))
+        assert ok, f"{case}: {what} {measured:.3g} exceeds the bound {bound:.3g}"
+
+    def count(self, name: str, n: int = 1):
+        self.counts[name] = self.counts.get(name, 0) + n
+
+    def table(self) -> str:
+        out = ["| case | measured | bound | result |", "|---|---|---|---|"]
+        for case, what, bound, measured, ok in self.rows:
+            out.append(f"| {case} | {what} {measured:.3g} | <= {bound:.3g} | {'pass' if ok else 'FAIL'} |")
+        out += ["", "| count | value |", "|---|---|"]
+        out += [f"| {k} | {v} |" for k, v in self.counts.items()]
+        return "\n".join(out) + "\n"
+
+
+_STRESS_LOG = StressLog()
+
+
+@pytest.fixture(scope="session")
+def stress():
+    return _STRESS_LOG
+
+
+def pytest_terminal_summary(terminalreporter):
+    if not _STRESS_LOG.rows:
+        return
+    text = _STRESS_LOG.table()
+    terminalreporter.write_sep("-", f"stress table ({len(_STRESS_LOG.rows)} cases)")
+    terminalreporter.write(text)
+    dest = os.environ.get("IBLBAKE_STRESS_REPORT")
+    if dest:
+        from iblbake.atomic import write_text
+        write_text(dest, text)
+        terminalreporter.write_line(f"stress table written to {dest}")
