@@ -58,3 +58,18 @@ def write_text(final, text: str) -> None:
 
 def write_json(final, obj) -> None:
     write_text(final, json.dumps(obj, indent=2, allow_nan=False) + "\n")
+
+
+def check_writable(final: str | os.PathLike, what: str = "output", shown=None) -> None:
+    """Fail before any work if `final` could not be written: its nearest existing folder must be
+    a writable folder (read-only mounts and permissions are caught here, not after a long bake)."""
+    final = Path(final)
+    folder = final.parent
+    final = shown or final
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    if not folder.is_dir():
+        raise IblbakeError(f"{final}: cannot write the {what}: {folder} is not a folder")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise IblbakeError(f"{final}: cannot write the {what}: {folder} is not writable "
+                           f"(read-only or no permission)")

@@ -77,23 +77,27 @@ def get_or_build(root: Path, key: str, build: Callable[[Path], dict], *,
     manifest = verify(entry)
     if manifest is not None:
         return manifest, True
-    with filelock.FileLock(str(root / f".{key}.lock")):
-        manifest = verify(entry, warn)   # another process may have finished it meanwhile
-        if manifest is not None:
-            return manifest, True
-        for stale in root.glob(f".tmp-{key}-*"):   # left by a killed builder (we hold the lock)
-            shutil.rmtree(stale, ignore_errors=True)
-        tmp = root / f".tmp-{key}-{os.getpid()}"
-        tmp.mkdir()
-        try:
-            body = build(tmp)
-            for f in body["files"]:
-                f["sha256"] = file_sha256(tmp / f["name"])
-            body["key"] = key
-            write_json(tmp / MANIFEST, body)
-            _remove(entry)
-            os.replace(tmp, entry)
-        except BaseException:
-            shutil.rmtree(tmp, ignore_errors=True)
-            raise
+    try:
+        with filelock.FileLock(str(root / f".{key}.lock")):
+            manifest = verify(entry, warn)   # another process may have finished it meanwhile
+            if manifest is not None:
+                return manifest, True
+            for stale in root.glob(f".tmp-{key}-*"):   # left by a killed builder (we hold the lock)
+                shutil.rmtree(stale, ignore_errors=True)
+            tmp = root / f".tmp-{key}-{os.getpid()}"
+            tmp.mkdir()
+            try:
+                body = build(tmp)
+                for f in body["files"]:
+                    f["sha256"] = file_sha256(tmp / f["name"])
+                body["key"] = key
+                write_json(tmp / MANIFEST, body)
+                _remove(entry)
+                os.replace(tmp, entry)
+            except BaseException:
+                shutil.rmtree(tmp, ignore_errors=True)
+                raise
+    except OSError as e:   # read-only folder, disk full, no permission: nothing was left behind
+        raise IblbakeError(f"{root}: cannot write the cache entry {key} ({e.strerror or e}); "
+                           f"free space or pass a writable --cache folder") from None
     return body, False

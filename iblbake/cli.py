@@ -173,10 +173,32 @@ def devices(quiet, as_json):
         raise IblbakeError(f"no working OpenCL device; {cl.FIX_HINT}")
 
 
+def _check_overwrite(output: str, force: bool, source: str):
+    """sh replaces its own earlier documents (Makefile reruns) but nothing else unless --force,
+    and never its input."""
+    from . import shbake
+
+    out = os.path.realpath(output)
+    if os.path.exists(source) and out == os.path.realpath(source):
+        raise IblbakeError(f"-o {output}: is the input panorama; choose another output path")
+    if force or not os.path.exists(out):
+        return
+    try:
+        with open(out, "rb") as f:
+            ours = json.loads(f.read(1 << 22)).get("format") == shbake.FORMAT
+    except (OSError, ValueError, AttributeError):
+        ours = False
+    if not ours:
+        raise IblbakeError(f"{output}: exists and is not an iblbake SH document; pass --force to "
+                           f"overwrite it")
+
+
 @cli.command("sh")
 @click.argument("env", metavar="ENV")
 @click.option("--output", "-o", type=click.Path(dir_okay=False), default=None,
-              help="Write the JSON document here (atomically). Without it, nothing is written.")
+              help="Write the JSON document here (atomically). Without it, nothing is written. An "
+                   "existing iblbake SH document is replaced; any other existing file needs --force.")
+@click.option("--force", "-f", is_flag=True, help="Overwrite --output even if it is not an iblbake SH document.")
 @click.option("--bands", type=click.IntRange(1, 16), default=3, show_default=True,
               help="Number of SH bands (l = 0..bands-1; 3 gives the classic 9 coefficients).")
 @click.option("--window", type=click.Choice(["none", "hann", "lanczos"]), default="none", show_default=True,
@@ -192,7 +214,7 @@ def devices(quiet, as_json):
 @input_options
 @device_option
 @common_options
-def sh_command(env, output, bands, window, backend, rotate_y, intensity, glsl, nonfinite, negative,
+def sh_command(env, output, force, bands, window, backend, rotate_y, intensity, glsl, nonfinite, negative,
                max_pixels, device, quiet, as_json):
     """Project the panorama ENV onto spherical harmonics and bake irradiance coefficients.
 
@@ -203,6 +225,10 @@ def sh_command(env, output, bands, window, backend, rotate_y, intensity, glsl, n
     from . import images, shbake
 
     con = Console(quiet, as_json)
+    if output:
+        from .atomic import check_writable
+        check_writable(output)
+        _check_overwrite(output, force, env)
     t_start = time.perf_counter()
     with con.stages(["reading", "projecting"], label="sh") as stage:
         t0 = time.perf_counter()
@@ -302,6 +328,8 @@ def mips_command(env, cache_dir, layout, size, levels, min_size, method, samples
     parts = {"radiance", "prefiltered", "dfg"} if "all" in only else set(only)
     t_start = time.perf_counter()
     root = Path(cache_dir) if cache_dir else cache.default_root()
+    from .atomic import check_writable
+    check_writable(root / "manifest.json", "cache", shown=root)
     baker = mipsbake.Baker(backend, device)
     report = {}
     summary = {"cache": str(root), "device": baker.device_label, "entries": report}
@@ -379,6 +407,9 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, devic
         raise click.UsageError("missing SCENE (a scene YAML file; see --help-schema)")
     con = Console(quiet, as_json)
     sc = scene.load(scene_path, overrides, outputs)
+    from .atomic import check_writable
+    for p in render.output_paths(sc):
+        check_writable(p)
     with con.stages(["reference samples"] * 100, label="render") if (
             "reference" in render.plan(sc).passes and con.interactive) else contextlib.nullcontext(None) as step:
         last = [0]

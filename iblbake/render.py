@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from . import cache, cl, sampling
+from .errors import IblbakeError
 from .scene import Scene
 
 DIFFUSE_MODES = {"off": 0, "sh": 1, "reference": 2}
@@ -555,14 +556,22 @@ def render(scene: Scene, *, device: str | None = None, cache_root: Path | None =
     return Frame(hdr, png, aovs, report)
 
 
+def output_paths(scene: Scene) -> list:
+    out = scene.data["output"]
+    return [*out["frame"], *(out[a] for a in ("normal", "albedo", "depth") if out[a])]
+
+
 def write_outputs(frame: Frame, scene: Scene) -> list:
     """Write every requested output atomically; returns the paths written."""
     from . import images
 
     out = scene.data["output"]
     written = []
-    for p in [*out["frame"], *(out[a] for a in ("normal", "albedo", "depth") if out[a])]:
-        Path(p).parent.mkdir(parents=True, exist_ok=True)
+    for p in output_paths(scene):
+        try:
+            Path(p).parent.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise IblbakeError(f"{p}: cannot create its folder ({e.strerror})") from None
     for p in out["frame"]:
         if p.lower().endswith(".png"):
             images.write_png(p, frame.png)

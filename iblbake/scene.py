@@ -586,6 +586,18 @@ def load(path, overrides=(), outputs=None) -> Scene:
             o[a] = str(_resolve_inside(folder, o[a], f"output.{a}", v.where(f"output.{a}")))
             if Path(o[a]).suffix.lower() != ".exr":
                 v.fail(f"output.{a}", f"{o[a]}: AOVs are written as .exr")
+    # render overwrites its outputs (documented), but never one of its own inputs
+    inputs = {str(path.resolve()): "the scene file", str(Path(out["environment"]["path"]).resolve()): "the panorama"}
+    for i, obj in enumerate(out["objects"]):
+        if "mesh" in obj:
+            inputs[str(Path(obj["mesh"]["path"]).resolve())] = f"the mesh of objects.{i}"
+    for key, paths in [("output.frame", o["frame"]), *((f"output.{a}", [o[a]]) for a in AOVS if o[a])]:
+        for p in paths:
+            if str(Path(p).resolve()) in inputs:
+                what = inputs[str(Path(p).resolve())]
+                if o.get("frame_from_cli") and key == "output.frame":
+                    raise InputError(f"-o {p}: is {what}; render would overwrite its own input")
+                v.fail(key, f"{p} is {what}; render would overwrite its own input")
     return Scene(out, source, folder, lines)
 
 

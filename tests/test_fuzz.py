@@ -8,7 +8,6 @@ native decoder is caught and counted instead of taking pytest down.
 """
 
 import json
-import os
 import random
 import re
 import resource

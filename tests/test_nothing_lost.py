@@ -1,0 +1,313 @@
+"""Nothing is lost (issue 7): SIGKILL/SIGINT at random points never leaves a partial output under
+its final name nor a cache entry a later run would accept; outputs never overwrite what they should
+not; a full disk or a read-only folder gives a one-line error and leaves nothing half-written."""
+
+import contextlib
+import json
+import os
+import random
+import resource
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from iblbake import cache, images
+
+from .conftest import run_cli, stress_scale, write_exr
+
+
+def cli(*args):
+    return [sys.executable, "-m", "iblbake.cli", *map(str, args)]
+
+
+def cache_entries_ok(root: Path):
+    """(complete entries, partial entries): every visible entry folder must verify."""
+    good, bad = 0, []
+    if not root.exists():
+        return 0, []
+    for d in root.iterdir():
+        if d.is_dir() and not d.name.startswith("."):
+            if cache.verify(d) is None:
+                bad.append(d.name)
+            else:
+                good += 1
+    return good, bad
+
+
+def readable_image(path: Path, shape):
+    try:
+        img = images.read_exr(path) if path.suffix == ".exr" else _read_png(path)
+    except Exception:
+        return False
+    return img.shape[:2] == shape and np.isfinite(img).all()
+
+
+def _read_png(path):
+    import OpenImageIO as oiio
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise ValueError(oiio.geterror())
+    data = inp.read_image(0, 0, 0, inp.spec().nchannels, oiio.UINT8)
+    inp.close()
+    if not isinstance(data, np.ndarray):
+        raise ValueError("truncated")
+    return data
+
+
+def kill_loop(stress, name, cmd, runs, check, window, seed):
+    """Start `cmd`, send SIGKILL or SIGINT after a random delay within `window`, check what is left
+    on disk after every run; then a run left alone must succeed."""
+    rng = random.Random(seed)
+    partial = 0
+    for k in range(runs):
+        p = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        time.sleep(rng.uniform(*window))
+        sig = signal.SIGKILL if k % 2 else signal.SIGINT
+        p.send_signal(sig)
+        try:
+            _, err = p.communicate(timeout=120)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            raise
+        if sig == signal.SIGINT and p.returncode not in (0, 130, -signal.SIGINT):
+            pytest.fail(f"{name}: SIGINT gave exit {p.returncode}: {err.decode()[-300:]}")
+        if sig == signal.SIGINT:
+            assert b"Traceback" not in err, err.decode()[-500:]
+        partial += check()
+    stress.count("kill-runs", runs)
+    stress.count("partial files found", partial)
+    stress.check(f"kill {name} x{runs} (SIGKILL/SIGINT): partial outputs or cache entries", partial, 0, "count")
+    p = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr
+    assert check() == 0
+
+
+@pytest.fixture(scope="module")
+def random_env(tmp_path_factory):
+    d = tmp_path_factory.mktemp("env")
+    return Path(write_exr(d / "e.exr", (np.random.default_rng(0).random((128, 256, 3)) * 3).astype(np.float32)))
+
+
+def test_kill_loop_mips(tmp_path, stress, random_env):
+    root = tmp_path / "cache"
+    cmd = cli("mips", random_env, "--cache", root, "--samples", "512", "--dfg-size", "64", "-q")
+
+    def check():
+        _, bad = cache_entries_ok(root)
+        return len(bad)
+
+    kill_loop(stress, "mips", cmd, stress_scale(12, 24), check, (0.2, 4.0), seed=3)
+    good, bad = cache_entries_ok(root)
+    assert good == 3 and not bad      # radiance, prefiltered, dfg
+
+
+def _scene(folder: Path, env: Path, **effects):
+    doc = {"camera": {"perspective": {"position": [0, 0, 4]}, "resolution": [160, 120]},
+           "environment": {"path": str(env), "background": "show"},
+           "materials": {"m": {"base_color": [0.9, 0.6, 0.3], "metallic": 0.5, "roughness": 0.4}},
+           "objects": [{"sphere": {"radius": 1}, "material": "m"}],
+           "effects": {"specular": "importance", "samples": 64, **effects},
+           "output": {"frame": ["out/frame.png", "out/frame.exr"], "normal": "out/normal.exr",
+                      "depth": "out/depth.exr"}}
+    p = folder / "scene.yaml"
+    p.write_text(yaml.safe_dump(doc))
+    return p
+
+
+def test_kill_loop_render(tmp_path, stress, random_env):
+    scene = _scene(tmp_path, random_env)
+    root = tmp_path / "cache"
+    outs = [tmp_path / "out" / n for n in ("frame.png", "frame.exr", "normal.exr", "depth.exr")]
+    cmd = cli("render", scene, "--cache", root, "-q")
+
+    def check():
+        bad = sum(1 for o in outs if o.exists() and not readable_image(o, (120, 160)))
+        bad += len(cache_entries_ok(root)[1])
+        for o in outs:             # the next run must not be able to pass on an old frame
+            with contextlib.suppress(FileNotFoundError):
+                o.unlink()
+        return bad
+
+    kill_loop(stress, "render", cmd, stress_scale(12, 24), check, (0.2, 3.5), seed=4)
+
+
+def test_kill_loop_sh(tmp_path, stress):
+    env = write_exr(tmp_path / "e.exr", np.random.default_rng(0).random((256, 512, 3)).astype(np.float32))
+    out = tmp_path / "out.json"
+    cmd = cli("sh", env, "-o", out, "--backend", "numpy", "--bands", "8")
+
+    def check():
+        bad = 0
+        if out.exists():      # finished before the signal: then it is complete JSON
+            try:
+                json.loads(out.read_text())
+            except ValueError:
+                bad = 1
+            out.unlink()
+        # SIGKILL can leave a hidden temp file (never under the final name); it is harmless
+        leftovers = [x.name for x in tmp_path.iterdir() if x.name not in ("e.exr", "out.json")]
+        return bad + sum(not x.startswith(".out.tmp-") for x in leftovers)
+
+    kill_loop(stress, "sh", cmd, stress_scale(20, 24), check, (0.05, 0.8), seed=2)
+
+
+# --- overwriting and escaping ---------------------------------------------------------------------
+
+def test_sh_overwrites_only_its_own_documents(tmp_path, stress):
+    env = write_exr(tmp_path / "e.exr", np.full((8, 16, 3), 0.5, np.float32))
+    precious = tmp_path / "notes.json"
+    precious.write_text('{"mine": true}\n')
+    p = run_cli("sh", env, "-o", precious, "--backend", "numpy")
+    assert p.returncode == 1 and "--force" in p.stderr and len(p.stderr.strip().splitlines()) == 1
+    assert precious.read_text() == '{"mine": true}\n'
+    # its own earlier output is replaced (Makefile reruns), and --force replaces anything
+    own = tmp_path / "sh.json"
+    for _ in range(2):
+        assert run_cli("sh", env, "-o", own, "--backend", "numpy").returncode == 0
+    assert run_cli("sh", env, "-o", precious, "--backend", "numpy", "--force").returncode == 0
+    assert json.loads(precious.read_text())["format"] == "iblbake.sh"
+    # never its input, even with --force
+    before = Path(env).read_bytes()
+    p = run_cli("sh", env, "-o", env, "--force", "--backend", "numpy")
+    assert p.returncode == 1 and "input" in p.stderr and Path(env).read_bytes() == before
+    stress.count("partial files found", 0)
+
+
+def test_render_never_overwrites_its_inputs_or_leaves_its_folder(tmp_path, random_env):
+    import shutil
+    env = tmp_path / "env.exr"
+    shutil.copy(random_env, env)
+    scene = _scene(tmp_path, env)
+    before = env.read_bytes()
+    p = run_cli("render", scene, "-o", env)
+    assert p.returncode == 1 and "own input" in p.stderr and env.read_bytes() == before, p.stderr
+    p = run_cli("render", scene, "-o", scene.with_suffix(".png"), "--set", f"output.depth={env.name}")
+    assert p.returncode == 1 and "output.depth" in p.stderr and env.read_bytes() == before, p.stderr
+    for bad in ("../../escaped.png", "/tmp/abs/escaped.png"):
+        p = run_cli("render", scene, "--set", f"output.frame=[{bad}]")
+        if bad.startswith("/"):   # an absolute path in a scene is the user's explicit choice
+            continue
+        assert p.returncode == 1 and "leaves the scene's folder" in p.stderr, p.stderr
+    assert not (tmp_path.parent.parent / "escaped.png").exists()
+
+
+# --- disk full, read-only ----------------------------------------------------------------------
+
+def _leftovers(folder: Path, keep):
+    return sorted(x.name for x in folder.rglob("*") if x.name not in keep and not x.is_dir())
+
+
+def _limited(fsize):
+    def pre():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, fsize))
+    return pre
+
+
+def _one_line_failure(p, *needles):
+    assert p.returncode == 1, (p.returncode, p.stderr[-400:])
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in p.stderr, p.stderr
+    for n in needles:
+        assert n in p.stderr, (n, p.stderr)
+
+
+@pytest.fixture(scope="module")
+def warm(random_env, tmp_path_factory):
+    """Build the kernels once without limits, so the limited runs only write their outputs."""
+    d = tmp_path_factory.mktemp("warm")
+    assert subprocess.run(cli("mips", random_env, "--cache", d / "c", "--size", "32", "-q")).returncode == 0
+    scene = _scene(d, random_env)
+    assert subprocess.run(cli("render", scene, "--cache", d / "c", "-q", "-o", d / "warm.exr")).returncode == 0
+    assert subprocess.run(cli("render", scene, "--cache", d / "c", "-q", "-o", d / "warm.png")).returncode == 0
+    return d
+
+
+def test_file_size_limit_fails_cleanly(tmp_path, stress, random_env, warm):
+    """A write that hits the file-size limit (RLIMIT_FSIZE: what a full disk looks like to a
+    writer) gives a one-line error naming the file; no final or temp file is left."""
+    out = tmp_path / "sh.json"
+    p = subprocess.run(cli("sh", random_env, "-o", out, "--backend", "numpy", "--bands", "16"),
+                       capture_output=True, text=True, preexec_fn=_limited(4096))
+    _one_line_failure(p, "sh.json")
+    # PoCL writes up to ~1 MB of preprocessed source into its own cache on every run (and its
+    # LLVM aborts if that fails), so the OpenCL commands get 4 MB and outputs larger than that
+    frame = tmp_path / "f.exr"
+    p = subprocess.run(cli("render", _scene(tmp_path, random_env), "-o", frame, "--cache", warm / "c",
+                           "--set", "camera.resolution=[1280,960]"),
+                       capture_output=True, text=True, preexec_fn=_limited(4 << 20))
+    _one_line_failure(p, "f.exr")
+    big = write_exr(tmp_path / "big.exr", np.random.default_rng(1).random((1024, 2048, 3)).astype(np.float32))
+    root = tmp_path / "cache"
+    p = subprocess.run(cli("mips", big, "--cache", root, "--only", "radiance"),
+                       capture_output=True, text=True, preexec_fn=_limited(4 << 20))
+    _one_line_failure(p, str(root))
+    left = _leftovers(tmp_path, {"scene.yaml", "big.exr"})
+    assert cache_entries_ok(root) == (0, [])
+    assert all(x.endswith(".lock") for x in left), left
+    stress.count("partial files found", len([x for x in left if not x.endswith(".lock")]))
+
+
+@contextlib.contextmanager
+def mounted_tmpfs(path: Path, options: str):
+    path.mkdir(parents=True, exist_ok=True)
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(path)], capture_output=True)
+    if r.returncode:
+        pytest.skip(f"cannot mount a tmpfs here ({r.stderr.decode().strip()}); RLIMIT_FSIZE test covers it")
+    try:
+        yield path
+    finally:
+        subprocess.run(["umount", "-l", str(path)])
+
+
+def test_full_disk_fails_cleanly(tmp_path, stress, random_env, warm):
+    """A 256 KiB tmpfs: sh, render and mips fail in one line and leave nothing (no temp files
+    either, since the writer removes its own)."""
+    with mounted_tmpfs(tmp_path / "small", "size=256k") as disk:
+        filler = disk / "filler"
+        with open(filler, "wb") as f:          # leave about 8 KiB free
+            with contextlib.suppress(OSError):
+                f.write(b"\0" * (248 << 10))
+        p = run_cli("sh", random_env, "-o", disk / "sh.json", "--backend", "numpy", "--bands", "16")
+        _one_line_failure(p, "sh.json")
+        p = run_cli("render", _scene(tmp_path, random_env), "-o", disk / "f.exr", "--cache", warm / "c")
+        _one_line_failure(p, "f.exr")
+        p = run_cli("mips", random_env, "--cache", disk / "cache", "--size", "32")
+        _one_line_failure(p, "cache")
+        left = _leftovers(disk, {"filler"})
+        assert all(x.endswith(".lock") for x in left), left
+        assert cache_entries_ok(disk / "cache") == (0, [])
+
+
+@contextlib.contextmanager
+def read_only_folder(path: Path):
+    path.mkdir(parents=True, exist_ok=True)
+    if os.geteuid() != 0:
+        path.chmod(0o555)
+        try:
+            yield path
+        finally:
+            path.chmod(0o755)
+        return
+    with mounted_tmpfs(path, "ro,size=64k") as p:   # root ignores mode bits: use a read-only mount
+        yield p
+
+
+def test_read_only_folder_fails_cleanly(tmp_path, stress, random_env, warm):
+    with read_only_folder(tmp_path / "ro") as ro:
+        p = run_cli("sh", random_env, "-o", ro / "sh.json", "--backend", "numpy")
+        _one_line_failure(p, "sh.json")
+        p = run_cli("render", _scene(tmp_path, random_env), "-o", ro / "sub" / "f.png", "--cache", warm / "c")
+        _one_line_failure(p, "f.png")
+        p = run_cli("render", _scene(tmp_path, random_env), "-o", ro / "f.png", "--cache", warm / "c")
+        _one_line_failure(p, "f.png")
+        p = run_cli("mips", random_env, "--cache", ro / "cache", "--size", "32")
+        _one_line_failure(p, "cache")
+        p = run_cli("mips", random_env, "--cache", ro, "--size", "32")
+        _one_line_failure(p, str(ro))
+        assert not any(ro.iterdir())
