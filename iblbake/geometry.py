@@ -61,7 +61,8 @@ def load_mesh(spec: dict, where: str):
     try:
         with warnings.catch_warnings(), np.errstate(all="ignore"):   # NaN vertices are reported below
             warnings.simplefilter("ignore")
-            loaded = trimesh.load(str(path), process=False, force="mesh")
+            # not force="mesh": that concatenation drops the normals stored in the file
+            loaded = trimesh.load(str(path), process=False)
     except MemoryError:
         raise InputError(f"{where}: mesh {path} claims more data than fits in memory; the file is "
                          f"corrupt or far too large") from None
@@ -69,31 +70,70 @@ def load_mesh(spec: dict, where: str):
         text = " ".join(str(e).split())[:160] or type(e).__name__
         raise InputError(f"{where}: mesh {path} cannot be read ({text}); check the file "
                          f"(OBJ, PLY, STL, GLB/glTF)") from None
-    if not hasattr(loaded, "faces") or loaded.faces is None or len(loaded.faces) == 0:
+    parts = [p for p in _mesh_parts(loaded) if len(p[0].faces)]
+    if not parts:
         raise InputError(f"{where}: mesh {path} has no triangles")
-    v = np.asarray(loaded.vertices, dtype=np.float64)
-    f = np.asarray(loaded.faces)
-    if f.ndim != 2 or f.shape[1] != 3:
-        raise InputError(f"{where}: mesh {path}: faces are not triangles (shape {f.shape})")
-    if len(v) == 0:
-        raise InputError(f"{where}: mesh {path} has no vertices")
-    bad_idx = (f < 0) | (f >= len(v))
-    if bad_idx.any():
-        k = int(np.argmax(bad_idx.any(axis=1)))
-        raise InputError(f"{where}: mesh {path}: face {k} indexes vertex {int(f[k][bad_idx[k]][0])} "
-                         f"but the mesh has {len(v)} vertices; the file is corrupt")
-    bad = ~np.isfinite(v).all(axis=1)
-    if bad.any():
-        k = int(np.argmax(bad))
-        raise InputError(f"{where}: mesh {path}: vertex {k} is {v[k].tolist()} (not finite; "
-                         f"{int(bad.sum())} such vertices); fix or re-export the mesh")
-    normals = None
-    if spec.get("smooth", "auto") != "off":
-        try:
-            normals = np.asarray(loaded.vertex_normals, dtype=np.float64)
-        except Exception:
-            normals = None
-    return v, f.astype(np.int64), normals
+    vs, fs, ns = [], [], []
+    base = 0
+    for g, transform in parts:
+        v = np.asarray(g.vertices, dtype=np.float64)
+        f = np.asarray(g.faces)
+        if f.ndim != 2 or f.shape[1] != 3:
+            raise InputError(f"{where}: mesh {path}: faces are not triangles (shape {f.shape})")
+        bad_idx = (f < 0) | (f >= len(v))
+        if bad_idx.any():
+            k = int(np.argmax(bad_idx.any(axis=1)))
+            raise InputError(f"{where}: mesh {path}: face {k} indexes vertex {int(f[k][bad_idx[k]][0])} "
+                             f"but the mesh has {len(v)} vertices; the file is corrupt")
+        m = transform[:3, :3]
+        with np.errstate(all="ignore"):
+            v = v @ m.T + transform[:3, 3]
+        bad = ~np.isfinite(v).all(axis=1)
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise InputError(f"{where}: mesh {path}: vertex {k} is {v[k].tolist()} (not finite; "
+                             f"{int(bad.sum())} such vertices); fix or re-export the mesh")
+        n = None
+        if spec.get("smooth", "auto") != "off":
+            n = _vertex_normals(g)
+            if n is not None and abs(np.linalg.det(m)) > 1e-300:
+                n = n @ np.linalg.inv(m)          # normals transform with the inverse transpose
+        vs.append(v)
+        fs.append(f.astype(np.int64) + base)
+        ns.append(n)
+        base += len(v)
+    normals = np.concatenate(ns) if all(n is not None for n in ns) else None
+    return np.concatenate(vs), np.concatenate(fs), normals
+
+
+def _mesh_parts(loaded):
+    """(triangle mesh, 4x4 world transform) for every mesh in what trimesh.load returned."""
+    import trimesh
+
+    if isinstance(loaded, trimesh.Trimesh):
+        return [(loaded, np.eye(4))]
+    if isinstance(loaded, trimesh.Scene):
+        out = []
+        for node in loaded.graph.nodes_geometry:
+            transform, name = loaded.graph[node]
+            g = loaded.geometry.get(name)
+            if isinstance(g, trimesh.Trimesh):
+                out.append((g, np.asarray(transform, dtype=np.float64)))
+        return out
+    return []                                      # point clouds, paths: nothing to render
+
+
+def _vertex_normals(g):
+    """The normals stored in the file (trimesh keeps them in its cache), else trimesh's
+    area-weighted ones."""
+    stored = getattr(getattr(g, "_cache", None), "cache", {}).get("vertex_normals")
+    if stored is not None and np.shape(stored) == np.shape(g.vertices):
+        return np.asarray(stored, dtype=np.float64)
+    try:
+        with np.errstate(all="ignore"):
+            return np.asarray(g.vertex_normals, dtype=np.float64)
+    except Exception:   # a mesh trimesh cannot compute normals for: face normals are used
+        return None
 
 
 def _refuse_draco(path: Path, where: str):

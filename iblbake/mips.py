@@ -165,7 +165,9 @@ def texel_solid_angle_at(chain0_w: int, chain0_h: int, dirs):
 def chain_lookup_reference(chain, dirs, lod):
     """numpy twin of chain_lookup: trilinear in the radiance chain."""
     u, v = conventions.equirect_uv_from_dir(dirs)
-    lod = np.clip(lod, 0.0, len(chain) - 1)
+    # +-inf clamp to the ends; NaN (the 0/0 pdf of a delta lobe) reads level 0
+    lod = np.clip(np.nan_to_num(np.asarray(lod, np.float64), nan=0.0, posinf=np.inf, neginf=-np.inf),
+                  0.0, len(chain) - 1)
     l0 = np.floor(lod).astype(np.int64)
     f = (lod - l0)[..., None]
     out = np.zeros(dirs.shape[:-1] + (chain[0].shape[-1],))

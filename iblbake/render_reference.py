@@ -196,6 +196,9 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
     return out
 
 
+DELTA_ALPHA = 1e-4   # kernels/render.cl: narrower GGX lobes are mirrors in the reference
+
+
 def exact(gb, arrays, effects: dict, env: dict, image, sub: int = 2, chunk: int = 256):
     """What the `reference` pass converges to, by quadrature over the panorama's texels."""
     hit = gb["hit"]
@@ -209,13 +212,14 @@ def exact(gb, arrays, effects: dict, env: dict, image, sub: int = 2, chunk: int 
     radiance = np.repeat(image.reshape(-1, 3).astype(np.float64), sub * sub, axis=0) * env["intensity"]
     res = np.zeros((len(n), 3))
     kd = diffuse_weight(base, metallic, rough, f0, nov)
+    delta = alpha < DELTA_ALPHA
     for i0 in range(0, len(n), chunk):
         sl = slice(i0, i0 + chunk)
         nol = n[sl] @ dirs.T                                            # (c, dirs)
         w = np.where(nol > 0, nol, 0.0) * omega
         if effects["diffuse"] == "reference":
             res[sl] += kd[sl] * (w @ radiance)
-        if effects["specular"] == "reference":
+        if effects["specular"] == "reference" and not delta[sl].all():
             hv = v[sl, None, :] + dirs[None]
             hv /= np.linalg.norm(hv, axis=2, keepdims=True)
             noh = (hv * n[sl, None, :]).sum(2)
@@ -224,6 +228,15 @@ def exact(gb, arrays, effects: dict, env: dict, image, sub: int = 2, chunk: int 
             fw = (1 - np.clip(voh, 0, 1)) ** 5                          # Schlick: F0 + (1 - F0) fw
             a = (dv * w) @ radiance
             bsum = (dv * w * fw) @ radiance
-            res[sl] += f0[sl] * a + (1 - f0[sl]) * bsum
+            res[sl] += np.where(delta[sl, None], 0.0, f0[sl] * a + (1 - f0[sl]) * bsum)
+    if effects["specular"] == "reference" and delta.any():
+        # a lobe narrower than float32 resolves (the kernel's DELTA_ALPHA) is a mirror: F(NoV) L(R),
+        # L read as the kernel reads it (nearest texel)
+        r = 2 * nov[delta, None] * n[delta] - v[delta]
+        u, w = conventions.equirect_uv_from_dir(to_env(r, env["rotation_y"]))
+        i = np.minimum((u * wid).astype(np.int64), wid - 1)
+        j = np.minimum((w * hgt).astype(np.int64), hgt - 1)
+        res[delta] += (image[j, i].astype(np.float64) * env["intensity"]
+                       * brdf.f_schlick(nov[delta, None], f0[delta]))
     out[hit] = res
     return out

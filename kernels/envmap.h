@@ -9,7 +9,8 @@ inline float3 chain_lookup(__global const float4 *chain, __constant int *off, __
                            __constant int *lh, const int nlev, float3 d, float lod)
 {
     const float2 uv = equirect_uv_from_dir(d);
-    lod = clamp(lod, 0.0f, (float)(nlev - 1));
+    /* +-inf clamp to the ends; NaN (the 0/0 pdf of a delta lobe) reads level 0 */
+    lod = isnan(lod) ? 0.0f : clamp(lod, 0.0f, (float)(nlev - 1));
     const int l0 = (int)lod;
     const int l1 = min(l0 + 1, nlev - 1);
     const float f = lod - (float)l0;

@@ -2,6 +2,7 @@
  * conventions (tests/test_conventions.py, tests/test_sh.py). Not used by any command. */
 #include "common.h"
 #include "sh.h"
+#include "envmap.h"
 
 __kernel void t_equirect_uv(__global const float *d, __global float *uv)
 {
@@ -56,4 +57,12 @@ __kernel void t_sh(__global const float *d, __global float *y)
     float Y[SH_COEFFS];
     sh_eval(vload3(i, d), Y);
     for (int k = 0; k < SH_COEFFS; ++k) y[i * SH_COEFFS + k] = Y[k];
+}
+
+__kernel void t_chain_lookup(__global const float4 *chain, __constant int *off, __constant int *lw,
+                             __constant int *lh, const int nlev, __global const float *d,
+                             __global const float *lod, __global float *out)
+{
+    int i = get_global_id(0);
+    vstore3(chain_lookup(chain, off, lw, lh, nlev, vload3(i, d), lod[i]), i, out);
 }

@@ -114,6 +114,15 @@ def pytest_terminal_summary(terminalreporter):
     terminalreporter.write(text)
     dest = os.environ.get("IBLBAKE_STRESS_REPORT")
     if dest:
+        import datetime
+        import platform
         from iblbake.atomic import write_text
-        write_text(dest, text)
+        stats = terminalreporter.stats
+        head = (f"# Stress table\n\nWritten by `make stress` ({'IBLBAKE_STRESS=1, ' if STRESS else ''}"
+                f"{len(stats.get('passed', []))} passed, {len(stats.get('failed', []))} failed, "
+                f"{len(stats.get('skipped', []))} skipped) on {platform.machine()} with {os.cpu_count()} cores, "
+                f"{datetime.date.today().isoformat()}. Each row's bound is asserted by a test; the measured "
+                f"value is this run's.\n\n")
+        Path(dest).parent.mkdir(parents=True, exist_ok=True)
+        write_text(dest, head + text)
         terminalreporter.write_line(f"stress table written to {dest}")
