@@ -7,6 +7,10 @@ Heavy modules (pyopencl, OpenImageIO, trimesh) are imported inside the commands 
 
 from __future__ import annotations
 
+if __name__ == "__main__":   # python -m iblbake.cli: a Ctrl-C during the imports below exits quietly
+    from iblbake.entry import quiet_startup
+    quiet_startup()
+
 import contextlib
 import json
 import math
@@ -451,7 +455,9 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, devic
 
 
 def main():
-    """Console-script entry point."""
+    """Run the CLI (iblbake.entry.main is the console script)."""
+    from .entry import loaded
+    loaded()
     try:
         rv = cli.main(standalone_mode=False, prog_name="iblbake")
     except click.ClickException as e:
