@@ -27,9 +27,9 @@ CREASE_COS = math.cos(math.radians(45.0))
 
 @dataclass
 class Triangles:
-    v0: np.ndarray                # (n, 3) float64
-    e1: np.ndarray
-    e2: np.ndarray
+    v0: np.ndarray                # (n, 3) float64 corners, world space (shared corners stay
+    v1: np.ndarray                # bit-identical, which the watertight ray test relies on)
+    v2: np.ndarray
     normals: np.ndarray           # (n, 3, 3) shading normal per corner, unit
     material: np.ndarray          # (n,) int32
     object_id: np.ndarray         # (n,) int32
@@ -37,6 +37,14 @@ class Triangles:
 
     def __len__(self):
         return len(self.v0)
+
+    @property
+    def e1(self):
+        return self.v1 - self.v0
+
+    @property
+    def e2(self):
+        return self.v2 - self.v0
 
 
 def _rotation_xyz(deg):
@@ -192,7 +200,7 @@ def build_triangles(objects: list, material_index: dict, source: str) -> Triangl
         if n_keep == 0:
             raise InputError(f"{where}: mesh {spec['path']}: all {len(f)} triangles are degenerate "
                              f"(zero area); nothing to render")
-        parts.append((tri[keep, 0], e1[keep], e2[keep], corner[keep],
+        parts.append((tri[keep, 0], tri[keep, 1], tri[keep, 2], corner[keep],
                       np.full(n_keep, material_index[obj["material"]], np.int32), np.full(n_keep, oid, np.int32)))
         stats.append({"object": oid, "path": spec["path"], "triangles": n_keep,
                       "dropped_degenerate": int(len(f) - n_keep), "smooth_normals": smooth})
@@ -284,7 +292,7 @@ def build_bvh(lo: np.ndarray, hi: np.ndarray, leaf_size: int = LEAF_SIZE) -> BVH
 
 
 def triangle_bounds(tris: Triangles):
-    p0, p1, p2 = tris.v0, tris.v0 + tris.e1, tris.v0 + tris.e2
+    p0, p1, p2 = tris.v0, tris.v1, tris.v2
     lo = np.minimum(np.minimum(p0, p1), p2)
     hi = np.maximum(np.maximum(p0, p1), p2)
     # float32 rounding on the device: widen each box by a relative ulp margin

@@ -148,7 +148,7 @@ class SceneArrays:
     material_names: list
     spheres: np.ndarray       # (s, 2, 4) float32
     planes: np.ndarray        # (p, 4, 4) float32
-    tris: np.ndarray          # (t, 6, 4) float32, BVH order
+    tris: np.ndarray          # (t, 6, 4) float32, BVH order: v0|material, v1|object, v2, 3 normals
     bvh: np.ndarray           # (nodes, 8) float32
     geometry_report: dict
 
@@ -197,8 +197,8 @@ def scene_arrays(scene: Scene) -> SceneArrays:
         o = bvh.order
         arr = np.zeros((len(tris), 6, 4), np.float32)
         arr[:, 0, :3], arr[:, 0, 3] = tris.v0[o], _int_bits(tris.material[o])
-        arr[:, 1, :3], arr[:, 1, 3] = tris.e1[o], _int_bits(tris.object_id[o])
-        arr[:, 2, :3] = tris.e2[o]
+        arr[:, 1, :3], arr[:, 1, 3] = tris.v1[o], _int_bits(tris.object_id[o])
+        arr[:, 2, :3] = tris.v2[o]
         arr[:, 3:6, :3] = tris.normals[o]
         nodes = bvh.nodes
         report.update({"bvh_build_s": round(bvh.build_s, 4), "bvh_nodes": bvh.node_count, "bvh_depth": bvh.depth})

@@ -76,7 +76,8 @@ def primary(cam: dict, arrays):
         mat[better] = ints(pl[0, 3])
     tris = arrays.tris.astype(np.float64)
     for k in range(len(tris)):
-        v0, e1, e2 = tris[k, 0, :3], tris[k, 1, :3], tris[k, 2, :3]
+        v0 = tris[k, 0, :3]
+        e1, e2 = tris[k, 1, :3] - v0, tris[k, 2, :3] - v0
         p = np.cross(d, e2)
         det = p @ e1
         with np.errstate(divide="ignore", invalid="ignore"):

@@ -83,23 +83,48 @@ inline float hit_plane(float3 o, float3 d, __global const float4 *pl, float tmin
     return t;
 }
 
-/* Moller-Trumbore on (v0, e1, e2); returns t and barycentrics (b1, b2). */
-inline float hit_triangle(float3 o, float3 d, float3 v0, float3 e1, float3 e2, float tmin, float tmax,
+inline float component(float3 v, int k) { return k == 0 ? v.x : (k == 1 ? v.y : v.z); }
+
+/* Per-ray setup of the watertight ray-triangle test (Woop, Benthin and Wald 2013): the axis
+ * where the direction is largest becomes z, and a shear maps the ray onto +z. */
+typedef struct { int kx, ky, kz; float sx, sy, sz; } RayShear;
+
+inline RayShear ray_shear(float3 d)
+{
+    const float3 a = fabs(d);
+    RayShear r;
+    r.kz = a.x > a.y ? (a.x > a.z ? 0 : 2) : (a.y > a.z ? 1 : 2);
+    r.kx = r.kz == 2 ? 0 : r.kz + 1;
+    r.ky = r.kx == 2 ? 0 : r.kx + 1;
+    const float dz = component(d, r.kz);
+    if (dz < 0.0f) { const int t = r.kx; r.kx = r.ky; r.ky = t; }   /* keep the winding */
+    r.sx = component(d, r.kx) / dz;
+    r.sy = component(d, r.ky) / dz;
+    r.sz = 1.0f / dz;
+    return r;
+}
+
+/* Watertight test on the corners themselves: each edge function depends only on its two
+ * corners (bit-identical in the triangles that share them) and flips sign exactly between the
+ * two, so a ray through a shared edge hits at least one of the triangles (Moller-Trumbore on
+ * per-triangle edge vectors let a few rays through). FP_CONTRACT OFF keeps a*b - c*d unfused,
+ * which that exact antisymmetry needs. Returns t and the barycentrics of v1 and v2. */
+#pragma OPENCL FP_CONTRACT OFF
+inline float hit_triangle(float3 o, RayShear rs, float3 v0, float3 v1, float3 v2, float tmin, float tmax,
                           float *b1, float *b2)
 {
-    const float3 p = cross(d, e2);
-    const float det = dot(e1, p);
+    const float3 A = v0 - o, B = v1 - o, C = v2 - o;
+    const float az = component(A, rs.kz), bz = component(B, rs.kz), cz = component(C, rs.kz);
+    const float ax = component(A, rs.kx) - rs.sx * az, ay = component(A, rs.ky) - rs.sy * az;
+    const float bx = component(B, rs.kx) - rs.sx * bz, by = component(B, rs.ky) - rs.sy * bz;
+    const float cx = component(C, rs.kx) - rs.sx * cz, cy = component(C, rs.ky) - rs.sy * cz;
+    const float u = cx * by - cy * bx, v = ax * cy - ay * cx, w = bx * ay - by * ax;
+    if ((u < 0.0f || v < 0.0f || w < 0.0f) && (u > 0.0f || v > 0.0f || w > 0.0f)) return tmax;
+    const float det = u + v + w;
     if (det == 0.0f) return tmax;
-    const float inv = 1.0f / det;
-    const float3 s = o - v0;
-    const float u = dot(s, p) * inv;
-    if (u < 0.0f || u > 1.0f) return tmax;
-    const float3 q = cross(s, e1);
-    const float v = dot(d, q) * inv;
-    if (v < 0.0f || u + v > 1.0f) return tmax;
-    const float t = dot(e2, q) * inv;
+    const float t = rs.sz * (u * az + v * bz + w * cz) / det;
     if (!(t > tmin && t < tmax)) return tmax;
-    *b1 = u; *b2 = v;
+    *b1 = v / det; *b2 = w / det;
     return t;
 }
 
@@ -108,7 +133,8 @@ inline int box_hit(float3 o, float3 inv_d, float3 bmin, float3 bmax, float tmax,
     const float3 t0 = (bmin - o) * inv_d, t1 = (bmax - o) * inv_d;
     const float3 lo = fmin(t0, t1), hi = fmax(t0, t1);
     const float a = fmax(fmax(lo.x, lo.y), fmax(lo.z, 0.0f));
-    const float b = fmin(fmin(hi.x, hi.y), fmin(hi.z, tmax));
+    /* far bound widened by 2 gamma(3) (Ize 2013): rounding never drops a box a ray grazes */
+    const float b = fmin(fmin(hi.x, hi.y), fmin(hi.z, tmax)) * 1.0000004f;
     *tnear = a;
     return a <= b;
 }
@@ -145,6 +171,7 @@ inline Hit trace(float3 o, float3 d,
         /* +-inf components of 1/d are fine for the slab test; exact zeros become huge */
         const float3 inv_d = (float3)(1.0f / (d.x != 0.0f ? d.x : 1e-30f), 1.0f / (d.y != 0.0f ? d.y : 1e-30f),
                                       1.0f / (d.z != 0.0f ? d.z : 1e-30f));
+        const RayShear rs = ray_shear(d);
         int stack[64];
         int sp = 0;
         stack[sp++] = 0;
@@ -157,7 +184,7 @@ inline Hit trace(float3 o, float3 d,
             if (count > 0) {
                 for (int k = first; k < first + count; ++k) {
                     float b1, b2;
-                    const float t = hit_triangle(o, d, tris[6 * k].xyz, tris[6 * k + 1].xyz, tris[6 * k + 2].xyz,
+                    const float t = hit_triangle(o, rs, tris[6 * k].xyz, tris[6 * k + 1].xyz, tris[6 * k + 2].xyz,
                                                  tmin, h.t, &b1, &b2);
                     if (t < h.t) { h.t = t; h.kind = 3; h.index = k; h.b1 = b1; h.b2 = b2; }
                 }
@@ -184,7 +211,7 @@ inline Hit trace(float3 o, float3 d,
 
 /* spheres: (centre, radius), (material, object, -, -) as ints
  * planes: 4 float4 (see hit_plane), material/object in the w of point/normal
- * tris: v0 (w: material), e1 (w: object), e2, n0, n1, n2 */
+ * tris: v0 (w: material), v1 (w: object), v2, n0, n1, n2 */
 __kernel void gbuffer(__constant float4 *cam, const int width, const int height, const int spp,
                       __global const float2 *jitter,
                       __global const float4 *spheres, const int nspheres,
@@ -222,7 +249,8 @@ __kernel void gbuffer(__constant float4 *cam, const int width, const int height,
         obj = as_int(planes[4 * h.index + 1].w);
     } else {
         const int k = h.index;
-        ng = normalize(cross(tris[6 * k + 1].xyz, tris[6 * k + 2].xyz));
+        const float3 v0 = tris[6 * k].xyz;
+        ng = normalize(cross(tris[6 * k + 1].xyz - v0, tris[6 * k + 2].xyz - v0));
         const float b0 = 1.0f - h.b1 - h.b2;
         ns = b0 * tris[6 * k + 3].xyz + h.b1 * tris[6 * k + 4].xyz + h.b2 * tris[6 * k + 5].xyz;
         const float ln = length(ns);
