@@ -13,6 +13,7 @@ import hashlib
 import os
 import re
 import time
+import warnings
 from dataclasses import dataclass, field
 from importlib import resources
 
@@ -224,7 +225,11 @@ class Runtime:
         options = ["-cl-std=CL1.2"] + [f"-D{k}={v}" for k, v in defines.items()]
         t0 = time.perf_counter()
         try:
-            prg = self.cl.Program(self.ctx, src).build(options=options, cache_dir=_cache_dir())
+            # successful builds can log (NVIDIA notes every inlined kernel); pyopencl turns that
+            # into a multi-line warning on stderr: failures are reported below, the rest is noise
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", self.cl.CompilerWarning)
+                prg = self.cl.Program(self.ctx, src).build(options=options, cache_dir=_cache_dir())
         except Exception as e:
             log = str(e)
             first = next((ln.strip() for ln in log.splitlines() if "error:" in ln), None)
