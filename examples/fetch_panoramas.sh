@@ -7,18 +7,13 @@ NAMES="city courtyard forest interior night studio sunrise sunset"
 missing=0
 for n in $NAMES; do [ -s "$DEST/$n.exr" ] || missing=1; done
 [ "$missing" = 0 ] && exit 0
-command -v apt-get >/dev/null 2>&1 || { echo "fetch_panoramas: needs Debian's apt-get (or copy the EXRs of blender-data's studiolights/world into $DEST)" >&2; exit 1; }
 mkdir -p "$DEST"
 DEST=$(cd "$DEST" && pwd)
+HERE=$(cd "$(dirname "$0")" && pwd)
 TMP=$(mktemp -d)
 trap 'rm -rf "$TMP"' EXIT
+sh "$HERE/deb_extract.sh" blender-data "$TMP" || { echo "fetch_panoramas: or copy the EXRs of blender-data's studiolights/world into $DEST" >&2; exit 1; }
 cd "$TMP"
-if ! apt-get download blender-data >/dev/null 2>&1; then
-    SUDO=""; [ "$(id -u)" = 0 ] || SUDO="sudo"
-    $SUDO apt-get update -qq
-    apt-get download blender-data >/dev/null
-fi
-dpkg -x blender-data_*.deb x
 for n in $NAMES; do
     cp "x/usr/share/blender/datafiles/studiolights/world/$n.exr" "$DEST/.$n.exr.tmp"
     mv "$DEST/.$n.exr.tmp" "$DEST/$n.exr"

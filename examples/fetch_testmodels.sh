@@ -5,18 +5,13 @@
 set -eu
 DEST="${1:-tests/data/assimp}"
 [ -s "$DEST/.complete" ] && exit 0
-command -v apt-get >/dev/null 2>&1 || { echo "fetch_testmodels: needs Debian's apt-get (or extract assimp-testmodels' models/ into $DEST)" >&2; exit 1; }
 mkdir -p "$DEST"
 DEST=$(cd "$DEST" && pwd)
+HERE=$(cd "$(dirname "$0")" && pwd)
 TMP=$(mktemp -d)
 trap 'rm -rf "$TMP"' EXIT
+sh "$HERE/deb_extract.sh" assimp-testmodels "$TMP" || { echo "fetch_testmodels: or extract assimp-testmodels' models/ into $DEST" >&2; exit 1; }
 cd "$TMP"
-if ! apt-get download assimp-testmodels >/dev/null 2>&1; then
-    SUDO=""; [ "$(id -u)" = 0 ] || SUDO="sudo"
-    $SUDO apt-get update -qq
-    apt-get download assimp-testmodels >/dev/null
-fi
-dpkg -x assimp-testmodels_*.deb x
 M=x/usr/share/assimp/models
 for d in OBJ PLY STL OFF invalid glTF2/IndexOutOfRange glTF2/BoxWithInfinites-glTF-Binary \
          glTF2/SchemaFailures glTF2/wrongTypes glTF2/MissingBin glTF2/IncorrectVertexArrays \
@@ -24,5 +19,5 @@ for d in OBJ PLY STL OFF invalid glTF2/IndexOutOfRange glTF2/BoxWithInfinites-gl
     mkdir -p "$DEST/$d"
     cp -R "$M/$d/." "$DEST/$d/"
 done
-echo "assimp-testmodels $(ls x/usr/share/doc/assimp-testmodels >/dev/null 2>&1 && dpkg-deb -f assimp-testmodels_*.deb Version)" > "$DEST/.complete"
+echo "assimp-testmodels $(dpkg-deb -f assimp-testmodels_*.deb Version)" > "$DEST/.complete"
 echo "fetch_testmodels: meshes in $DEST" >&2

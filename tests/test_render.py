@@ -173,6 +173,15 @@ def test_gbuffer_matches_numpy(tmp_path, small_panoramas, mesh_file, rt, project
     assert both.sum() > 500
 
 
+def prefiltered_bakes(frame):
+    """The prefiltered chain and DFG table a render baked (float64), as rr.shade takes them."""
+    rep = {b["name"]: b for b in frame.report["bakes"]}
+    entry = Path(rep["prefiltered"]["entry"])
+    man = json.loads((entry / "manifest.json").read_text())
+    return {"prefiltered": [images.read_exr(entry / f["name"])[..., :3].astype(np.float64) for f in man["files"]],
+            "dfg": images.read_exr(Path(rep["dfg"]["entry"]) / "dfg.exr")[..., :2].astype(np.float64)}
+
+
 @pytest.mark.parametrize("effects", [
     {"diffuse": "sh", "specular": "off"},
     {"diffuse": "off", "specular": "importance", "samples": 16},
@@ -194,11 +203,7 @@ def test_shade_matches_numpy(tmp_path, small_panoramas, mesh_file, effects):
     if fx["specular"] == "importance":
         kw["chain"] = mips.radiance_chain_reference(image)
     if fx["specular"] == "prefiltered":
-        rep = {b["name"]: b for b in frame.report["bakes"]}
-        entry = Path(rep["prefiltered"]["entry"])
-        man = json.loads((entry / "manifest.json").read_text())
-        kw["prefiltered"] = [images.read_exr(entry / f["name"])[..., :3].astype(np.float64) for f in man["files"]]
-        kw["dfg"] = images.read_exr(Path(rep["dfg"]["entry"]) / "dfg.exr")[..., :2].astype(np.float64)
+        kw.update(prefiltered_bakes(frame))
     ref = rr.shade(gb, arrays, fx, sc["environment"], **kw).reshape(48, 64, 2, 3)
     same = (gb["hit"].reshape(48, 64, 2).all(2)) & (frame.hdr[..., 3] == 1)
     got = frame.hdr[..., :3][same]

@@ -180,20 +180,3 @@ def test_band0_is_solid_angle_weighted_mean():
     wgt = cv.equirect_solid_angles(27, 13)
     mean = (img * wgt[..., None]).sum((0, 1)) / wgt.sum()
     assert np.allclose(coeffs[0], mean * 2 * math.sqrt(math.pi), rtol=1e-12)
-
-
-def test_windows_reduce_ringing_of_a_sun():
-    """A single bright texel rings into negative irradiance; windowing reduces the negative lobe."""
-    w, h, bands = 64, 32, 8
-    img = np.zeros((h, w, 3))
-    img[8, 20] = 1e4
-    coeffs = sh.project(img, bands)
-    normals = cv.equirect_texel_dirs(128, 64).reshape(-1, 3)
-    neg = {}
-    for kind in sh.WINDOWS:
-        e = sh.evaluate(coeffs * (sh.window(bands, kind) * sh.ahat(bands))[:, None], normals, bands)[:, 0]
-        neg[kind] = -e.min() / e.max()
-        assert np.all(sh.irradiance(coeffs * sh.ahat(bands)[:, None], normals, bands) >= 0)
-    assert neg["none"] > 0.01
-    # measured: none 1.50%, hann 0.84%, lanczos 0.74% of the peak
-    assert neg["hann"] < 0.6 * neg["none"] and neg["lanczos"] < 0.6 * neg["none"]

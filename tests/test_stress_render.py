@@ -17,6 +17,8 @@ import yaml
 
 from iblbake import brdf, conventions as cv, images, mips, render, render_reference as rr, sampling, scene
 
+from .test_render import prefiltered_bakes
+
 EXTREMES = [(r, m, b) for r in (0.0, 1e-4, 0.5, 1.0) for m in (0.0, 1.0) for b in (0.0, 1.0)]
 
 
@@ -63,11 +65,7 @@ def twin_shade(sc, frame, gb, arrays, env_image):
     if fx["specular"] == "importance":
         kw["chain"] = mips.radiance_chain_reference(env_image)
     if fx["specular"] == "prefiltered":
-        rep = {b["name"]: b for b in frame.report["bakes"]}
-        entry = Path(rep["prefiltered"]["entry"])
-        man = json.loads((entry / "manifest.json").read_text())
-        kw["prefiltered"] = [images.read_exr(entry / f["name"])[..., :3].astype(np.float64) for f in man["files"]]
-        kw["dfg"] = images.read_exr(Path(rep["dfg"]["entry"]) / "dfg.exr")[..., :2].astype(np.float64)
+        kw.update(prefiltered_bakes(frame))
     fx2 = dict(fx)
     if fx["specular"] == "reference":
         fx2["specular"] = "off"
