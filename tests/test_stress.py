@@ -157,7 +157,7 @@ def test_sh_bands_up_to_8_orthonormal_in_both_languages(rt, stress):
         worst_np = max(worst_np, float(np.abs((y * w[:, None]).T @ y - np.eye(bands * bands)).max()))
         prg = rt.program("selftest.cl", {"SH_BANDS": bands})
         out = rt.empty(len(d) * bands * bands * 4)
-        rt.run(prg.t_sh, (len(d),), None, rt.to_device(d.astype(np.float32)), out)
+        rt.run(rt.cl.Kernel(prg, "t_sh"), (len(d),), None, rt.to_device(d.astype(np.float32)), out)
         yc = rt.read(out, (len(d), bands * bands)).astype(np.float64)
         worst_cl = max(worst_cl, float(np.abs((yc * w[:, None]).T @ yc - np.eye(bands * bands)).max()))
     stress.check("SH bands 1..8 orthonormal, numpy float64", worst_np, 1e-10, "max Gram error")
