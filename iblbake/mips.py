@@ -166,8 +166,8 @@ def chain_lookup_reference(chain, dirs, lod):
     """numpy twin of chain_lookup: trilinear in the radiance chain."""
     u, v = conventions.equirect_uv_from_dir(dirs)
     # +-inf clamp to the ends; NaN (the 0/0 pdf of a delta lobe) reads level 0
-    lod = np.clip(np.nan_to_num(np.asarray(lod, np.float64), nan=0.0, posinf=np.inf, neginf=-np.inf),
-                  0.0, len(chain) - 1)
+    lod = np.asarray(lod, np.float64)
+    lod = np.clip(np.where(np.isnan(lod), 0.0, lod), 0.0, len(chain) - 1)
     l0 = np.floor(lod).astype(np.int64)
     f = (lod - l0)[..., None]
     out = np.zeros(dirs.shape[:-1] + (chain[0].shape[-1],))

@@ -163,7 +163,7 @@ def test_normals_facing_away_back_faces_and_inside_a_sphere(tmp_path, stress, on
 
 # --- huge and tiny coordinates, degenerate meshes -------------------------------------------------
 
-def _knot_like(folder: Path):
+def _stretched_icosphere(folder: Path):
     import trimesh
     m = trimesh.creation.icosphere(subdivisions=3)
     m.vertices[:, 0] *= 1.4
@@ -178,7 +178,7 @@ def test_huge_and_tiny_coordinates_render_like_unit_scale(tmp_path, stress, load
     image as at scale 1 (float32 has the relative precision; no absolute epsilon may break it)."""
     env = tmp_path / "env.exr"
     images.write_exr(env, load_panorama("studio")[::8, ::8].astype(np.float32))
-    blob = _knot_like(tmp_path)
+    blob = _stretched_icosphere(tmp_path)
 
     def frame_at(s):
         d = tmp_path / f"s{s:g}"
