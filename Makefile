@@ -53,6 +53,7 @@ bench: opencl assets
 	$(BIN)/python benchmarks/bench_sh.py
 	$(BIN)/python benchmarks/bench_mips.py
 	$(BIN)/python benchmarks/bench_render.py
+	$(BIN)/python benchmarks/bench_accuracy.py
 
 clean:
 	rm -rf $(OUT) .pytest_cache

@@ -45,8 +45,10 @@ def render_sphere(folder: Path, cache: Path, env: str, r: float, effects: dict):
 
 
 def renderer_table(envs, roughness, cache: Path):
-    ref_fx = lambda seed: {"specular": "reference", "reference": {  # noqa: E731
-        "max_samples": 4096, "target_noise": 0.003, "batch": 256, "seed": seed}}
+    def ref_fx(seed):
+        return {"specular": "reference",
+                "reference": {"max_samples": 4096, "target_noise": 0.003, "batch": 256, "seed": seed}}
+
     modes = [("importance N=1024", {"specular": "importance", "samples": 1024}),
              ("importance N=4096", {"specular": "importance", "samples": 4096}),
              ("force_mip0 N=65536", {"specular": "importance", "samples": 65536, "force_mip0": True}),
