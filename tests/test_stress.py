@@ -12,7 +12,7 @@ import os
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from iblbake import brdf, conventions as cv, mips, sh, shbake
@@ -47,6 +47,7 @@ def test_equirect_round_trip_property(v):
 
 @settings(max_examples=300, deadline=None)
 @given(unit, unit, unit, st.floats(0, 1), st.floats(0, 1))
+@example((0.0, 0.0, 1.0), (0.0625, 0.0, 1e-10), (-1.0, 0.0, 0.0), 0.0, 0.0)   # l nearly opposite v, a mirror
 def test_brdf_finite_non_negative_reciprocal(nv, lv, vv, roughness, metallic):
     n, l, v = normalize(nv), normalize(lv), normalize(vv)
     alpha = roughness ** 2
@@ -63,7 +64,11 @@ def test_brdf_finite_non_negative_reciprocal(nv, lv, vv, roughness, metallic):
 
     a, b = f(l, v), f(v, l)
     assert math.isfinite(a) and a >= 0
-    assert abs(a - b) <= 1e-9 * max(1.0, abs(a))
+    # h = normalize(l + v) carries the rounding of l and v (~1e-16) divided by |l + v|, and
+    # Schlick's F moves with VoH vs LoH by up to 5 / F0 = 125 times that: for l nearly opposite
+    # v (|l + v| = 1.6e-9 found by hypothesis) reciprocity holds to that conditioning, not 1e-9
+    rtol = 1e-9 + 2e-14 / max(np.linalg.norm(l + v), 1e-300)
+    assert abs(a - b) <= rtol * max(1.0, abs(a))
 
 
 @settings(max_examples=40, deadline=None)
