@@ -5,6 +5,15 @@
 #include "common.h"
 
 /* Trilinear lookup in the radiance chain: bilinear in two levels, blended. */
+/* Solid angle of a level-0 texel (w0 x h0) of the chain at direction l: (2 pi / w0)(pi / h0)
+ * sin(theta), floored at the polar row's centre; continuous in latitude so that the level a
+ * filtered lookup picks does not jump at row boundaries. Mirrors mips.py: texel_solid_angle_at. */
+inline float texel_solid_angle(float3 l, int w0, int h0)
+{
+    const float st = fmax(sqrt(fmax(0.0f, 1.0f - l.y * l.y)), sin(0.5f * IBL_PI / h0));
+    return (2.0f * IBL_PI / w0) * (IBL_PI / h0) * st;
+}
+
 inline float3 chain_lookup(__global const float4 *chain, __constant int *off, __constant int *lw,
                            __constant int *lh, const int nlev, float3 d, float lod)
 {

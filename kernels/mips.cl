@@ -75,17 +75,14 @@ __kernel void prefilter(__global const float4 *chain, __constant int *off, __con
     float3 t, b;
     tangent_frame(n, &t, &b);
     const int w0 = lw[0], h0 = lh[0];
-    const float texel0 = (2.0f * IBL_PI / w0) * (IBL_PI / h0), sin_pole = sin(0.5f * IBL_PI / h0);
     float3 acc = (float3)(0.0f);
     float wsum = 0.0f;
     for (int k = 0; k < nsamples; ++k) {
         const float4 s = samples[k];
         const float3 l = normalize(t * s.x + b * s.y + n * s.z);
         float lod = 0.0f;
-        if (use_fis) {
-            const float st = fmax(sqrt(fmax(0.0f, 1.0f - l.y * l.y)), sin_pole);
-            lod = 0.5f * (s.w - log2(texel0 * st)) + lod_bias;
-        }
+        if (use_fis)
+            lod = 0.5f * (s.w - log2(texel_solid_angle(l, w0, h0))) + lod_bias;
         acc += s.z * chain_lookup(chain, off, lw, lh, nlev, l, lod);
         wsum += s.z;
     }

@@ -342,13 +342,6 @@ inline float3 dominant_direction(float3 n, float3 r, float a)
     return normalize(mix(n, r, s * (sqrt(s) + a)));
 }
 
-/* Level-0 texel solid angle of the chain at direction l, continuous in latitude (as mips.cl). */
-inline float texel_solid_angle(float3 l, int w0, int h0)
-{
-    const float st = fmax(sqrt(fmax(0.0f, 1.0f - l.y * l.y)), sin(0.5f * IBL_PI / h0));
-    return (2.0f * IBL_PI / w0) * (IBL_PI / h0) * st;
-}
-
 __kernel void shade(__global const float4 *gb_pos, __global const float4 *gb_nrm, __global const float4 *gb_dir,
                     const int n, __global const float4 *materials, const float2 env_rot, const float env_scale,
                     __constant float4 *sh_coeffs,
