@@ -69,6 +69,7 @@ def main(argv=None):
         print(f"\ncubemap face {face}, {args.levels} levels (r = k/{args.levels - 1}); brute-force reference at "
               f"{args.texels} texels per level took {t_ref:.0f} s")
         configs = [("auto (default)", dict(method="auto", samples=mipsbake.DEFAULT_SAMPLES))]
+        configs += [("spectral", dict(method="spectral"))]
         configs += [(f"fis N={n}", dict(method="fis", samples=n)) for n in args.samples]
         configs += [(f"no-fis N={n}", dict(method="fis", samples=n, fis=False)) for n in args.samples[-2:]]
         if face <= 128 or baker.rt.info.kind == "GPU":
@@ -82,8 +83,8 @@ def main(argv=None):
             for lvl, idx, ref in zip(levels, picks, refs):
                 errs.append(mips.relative_rmse(lvl.reshape(-1, 3)[idx], ref))
             how = "" if kw["method"] != "auto" else " [" + " ".join(m[0] + m.split("@")[-1] * ("@" in m) for m in methods) + "]"
-            print(f"| {label}{how} | {t:.3f} | {' '.join(f'{e:.1%}' for e in errs)} | {max(errs):.1%} |")
-    print("\n(auto: per level r = resample, cT = convolve at T texels per lobe scale, f = fis)")
+            print(f"| {label}{how} | {t:.3f} | {' '.join(f'{e:.2%}' for e in errs)} | {max(errs):.2%} |")
+    print("\n(auto: per level r = resample, s = spectral, cT = convolve at T texels per lobe scale, f = fis)")
 
     if not args.no_dfg:
         gpu = baker.gpu

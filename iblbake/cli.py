@@ -294,10 +294,13 @@ def sh_command(env, output, force, bands, window, backend, rotate_y, intensity, 
                    "of --size down to --min-size.")
 @click.option("--min-size", type=click.IntRange(min=1), default=8, show_default=True,  # mips.MIN_LEVEL_SIZE
               help="Smallest level size of the prefiltered chain.")
-@click.option("--method", type=click.Choice(["auto", "fis", "convolve"]), default="auto", show_default=True,
-              help="fis: GGX importance sampling with filtered lookups; convolve: deterministic sum over "
-                   "every texel of a fine enough chain level (exact, slower on sharp levels); auto: "
-                   "convolve where it fits --convolve-budget, fis elsewhere.")
+@click.option("--method", type=click.Choice(["auto", "spectral", "convolve", "fis"]), default="auto",
+              show_default=True,
+              help="spectral: the exact GGX convolution done in the spherical-harmonic domain (host, "
+                   "ducc0; any lobe with r >= 0.06 or so); convolve: deterministic sum over every texel "
+                   "of a fine enough chain level (exact, slow on sharp levels); fis: GGX importance "
+                   "sampling with filtered lookups; auto: spectral where it applies, else convolve "
+                   "where it fits --convolve-budget, else fis.")
 @click.option("--samples", type=click.IntRange(min=1), default=256, show_default=True,
               help="GGX samples per texel for fis levels.")
 @click.option("--lod-bias", type=float, default=1.0, show_default=True, callback=_finite,

@@ -211,13 +211,15 @@ def _texel_subsamples(w: int, h: int, s: int):
             om.transpose(0, 2, 1, 3).reshape(h * w, s * s))
 
 
-def prefilter_bruteforce(source, dirs, roughness: float, chunk: int = 64, max_sub: int = 12):
+def prefilter_bruteforce(source, dirs, roughness: float, chunk: int | None = None, max_sub: int | None = None,
+                         max_parts: float = 4e6):
     """The ground truth of a prefiltered texel: the integral over the sphere of the source (piecewise
     constant over its texels) against the lobe, sum L(w) D(h) NoL dOmega / sum D(h) NoL dOmega with
     h = normalize(n + w), NoL = n.w > 0 (the limit of Karis' NoL-weighted estimator, N = V = R).
-    Every source texel takes part; each is split into s x s parts with exact solid angles, s chosen
-    so that parts are several times smaller than the lobe (the lobe can be narrower than a texel).
-    float64. Roughness 0 is the mirror: the source read bilinearly at n."""
+    Every source texel takes part; each is split into s x s parts with exact solid angles, parts no
+    wider than a quarter of the lobe's scale alpha nor than 0.05 rad (the midpoint rule on a wide
+    lobe), s capped at max_sub (default: at most max_parts parts in all). float64.
+    Roughness 0 is the mirror: the source read bilinearly at n."""
     source = np.asarray(source, dtype=np.float64)
     dirs = np.asarray(dirs, dtype=np.float64)
     flat = dirs.reshape(-1, 3)
@@ -226,9 +228,12 @@ def prefilter_bruteforce(source, dirs, roughness: float, chunk: int = 64, max_su
         return conventions.bilinear_equirect(source, u, v).reshape(dirs.shape[:-1] + (-1,))
     h, w = source.shape[:2]
     alpha = roughness * roughness
-    sub = int(min(max_sub, max(1, math.ceil(4.0 * (math.pi / h) / alpha))))
+    if max_sub is None:
+        max_sub = max(1, int(math.sqrt(max_parts / (h * w))))
+    sub = int(min(max_sub, max(1, math.ceil((math.pi / h) / min(0.25 * alpha, 0.05)))))
     src_dirs, d_omega = _texel_subsamples(w, h, sub)
     values = source.reshape(-1, source.shape[-1])
+    chunk = chunk or max(1, min(64, int(2e7 // (h * w * sub * sub))))
     out = np.empty((len(flat), values.shape[-1]))
     for i0 in range(0, len(flat), chunk):
         n = flat[i0:i0 + chunk]

@@ -17,7 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from . import cache, cl, images, mips
+from . import cache, cl, images, mips, spectral
+from .errors import InputError
 
 FORMAT = "iblbake.mips"
 FORMAT_VERSION = 1
@@ -55,12 +56,19 @@ CONVOLVE_RESOLUTIONS = (12.0, 6.0)   # texels per lobe scale, finest first (see 
 
 
 def plan_methods(chain_sizes, opts: dict) -> list[str]:
-    """Per level: 'resample' (mirror), 'convolve@T' (T texels per lobe scale) or 'fis'.
-    auto takes the finest convolution that fits the budget, else FIS."""
+    """Per level: 'resample' (mirror), 'spectral', 'convolve@T' (T texels per lobe scale) or
+    'fis'. auto takes spectral (exact, fastest) where the lobe is wide enough for it, else the
+    finest convolution that fits the budget, else FIS."""
     out = []
-    for s, r in zip(opts["sizes"], opts["roughness"]):
+    for k, (s, r) in enumerate(zip(opts["sizes"], opts["roughness"])):
         if r == 0.0:
             out.append("resample")
+        elif opts["method"] in ("auto", "spectral") and spectral.applicable(r * r):
+            out.append("spectral")
+        elif opts["method"] == "spectral":
+            raise InputError(f"--method spectral: level {k} (roughness {r:g}) is too sharp for the SH "
+                             f"convolution (it needs bands beyond {spectral.MAX_LMAX}); use --method auto, "
+                             f"which bakes such levels with convolve or fis")
         elif opts["method"] == "convolve":
             out.append(f"convolve@{CONVOLVE_RESOLUTIONS[0]:g}")
         elif opts["method"] == "fis":
@@ -103,11 +111,17 @@ class Baker:
         """Levels of the prefiltered chain (float32 images) and the method used for each."""
         sizes = [(c.shape[1], c.shape[0]) for c in chain]
         methods = plan_methods(sizes, {**opts, "convolve_budget": self.convolve_budget(opts)})
-        out = []
         layout = opts["layout"]
+        # every spectral level from one projection of the source (host, float64, either backend)
+        todo = [(s, r) for s, r, how in zip(opts["sizes"], opts["roughness"], methods) if how == "spectral"]
+        done = iter(spectral.prefilter_levels(chain[0], [mips.layout_dirs(layout, s) for s, _ in todo],
+                                              [r for _, r in todo]) if todo else [])
+        out = []
         chain64 = None if self.gpu else [c.astype(np.float64) for c in chain]
         for s, r, how in zip(opts["sizes"], opts["roughness"], methods):
-            if self.gpu:
+            if how == "spectral":
+                img = next(done)
+            elif self.gpu:
                 if self._device_chain is None:
                     _, self._device_chain = self.gpu.radiance_chain(chain[0])
                 if how.startswith("convolve"):
@@ -175,7 +189,7 @@ def bake_prefiltered(baker: Baker, chain, info, root: Path, policies: dict, opts
     opts = {**opts, "convolve_budget": baker.convolve_budget(opts)}
     key = cache.content_key({"format": FORMAT, "v": FORMAT_VERSION, "kind": "prefiltered",
                              "input": info.sha256, "policies": policies, "options": opts,
-                             "kernel": cl.source_hash("mips.cl")})
+                             "kernel": cl.source_hash("mips.cl"), "spectral": spectral.source_hash()})
 
     def build(tmp: Path):
         t0 = time.perf_counter()

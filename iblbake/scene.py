@@ -288,7 +288,7 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "normalize": Enum(("total", "accepted"), "total",
                           doc="importance: divide by all N samples (unbiased) or by the accepted ones (seed 000)"),
         "prefilter": Section(doc="prefiltered: how the chain is baked (as `iblbake mips`)", fields={
-            "method": Enum(("auto", "fis", "convolve"), "auto", doc="see iblbake mips --method"),
+            "method": Enum(("auto", "spectral", "convolve", "fis"), "auto", doc="see iblbake mips --method"),
             "samples": Num(256, 1, 1 << 20, integer=True, doc="fis samples per texel"),
             "size": Num(None, 1, 8192, integer=True, doc="base height of the equirect chain (default: source height)"),
             "levels": Num(None, 2, 32, integer=True, doc="levels K, roughness k/(K-1)"),
