@@ -21,6 +21,10 @@ import numpy as np
 from iblbake import images, mips, mipsbake
 
 ROOT = Path(__file__).resolve().parents[1]
+# cmft (../shared/PEERS.md): radiance chain, cube face -> seconds on this machine's 2 threads; the
+# issue's targets are a tenth of the face-256 time with every level under 1%, face 512 under 2 s
+CMFT_SECONDS = {256: 4.2, 512: 61.0}
+TARGET_SECONDS = {256: 0.42, 512: 2.0}
 
 
 def median_time(fn, repeat=3):
@@ -84,6 +88,14 @@ def main(argv=None):
                 errs.append(mips.relative_rmse(lvl.reshape(-1, 3)[idx], ref))
             how = "" if kw["method"] != "auto" else " [" + " ".join(m[0] + m.split("@")[-1] * ("@" in m) for m in methods) + "]"
             print(f"| {label}{how} | {t:.3f} | {' '.join(f'{e:.2%}' for e in errs)} | {max(errs):.2%} |")
+            if kw["method"] == "auto":
+                auto = (t, max(errs))
+        if face in CMFT_SECONDS:
+            t, worst = auto
+            ok = t <= TARGET_SECONDS[face] and worst < 0.01
+            print(f"\ndefault chain at face {face}: {t:.3f} s = 1/{CMFT_SECONDS[face] / t:.0f} of cmft's "
+                  f"{CMFT_SECONDS[face]:g} s (target <= {TARGET_SECONDS[face]:g} s), worst level {worst:.2%} "
+                  f"(target < 1%): {'met' if ok else 'NOT met'}")
     print("\n(auto: per level r = resample, s = spectral, cT = convolve at T texels per lobe scale, f = fis)")
 
     if not args.no_dfg:
