@@ -53,11 +53,11 @@ def _threads() -> int:
         return os.cpu_count() or 1
 
 
-def _kernel_nodes(alpha_min: float):
+def _kernel_nodes(alpha: float):
     """Gauss-Legendre nodes in theta on [0, pi/2]: panels growing geometrically from a fraction of
-    the narrowest lobe, none wider than 0.01 rad (P_2048 oscillates with period ~0.003)."""
+    the lobe, none wider than 0.01 rad (P_2048 oscillates with period ~0.003)."""
     edges = [0.0]
-    t = alpha_min / 16.0
+    t = alpha / 16.0
     while t < 0.5 * math.pi:
         edges.append(t)
         t = min(1.4 * t, t + 0.01)
@@ -67,36 +67,33 @@ def _kernel_nodes(alpha_min: float):
     return (0.5 * (b - a) * g + 0.5 * (a + b)).ravel(), (0.5 * (b - a) * w).ravel()
 
 
-@functools.lru_cache(maxsize=32)
-def zonal_coefficients(alphas: tuple, tol: float = TOLERANCE, max_lmax: int = MAX_LMAX):
-    """For each alpha, the kernel's Legendre coefficients k_0..k_L (k_0 = 1), L the last band with
+@functools.lru_cache(maxsize=64)
+def zonal_coefficients(alpha: float, tol: float = TOLERANCE, max_lmax: int = MAX_LMAX):
+    """The kernel's Legendre coefficients k_0..k_L (k_0 = 1) for alpha > 0, L the last band with
     |k_l| > tol; None where that band lies beyond max_lmax (the level is too sharp for this
-    method). P_l by the three-term recurrence, integrals by quadrature in theta."""
-    theta, wq = _kernel_nodes(min(alphas))
+    method). P_l by the three-term recurrence, integrals by quadrature in theta. Cached: the
+    plan (applicable) and the bake ask for the same alphas."""
+    theta, wq = _kernel_nodes(alpha)
     x = np.cos(theta)
-    noh = np.sqrt(0.5 * (1.0 + x))
-    # kernel times the measure sin(theta) dtheta, one row per alpha
-    kw = np.stack([brdf.d_ggx(noh, a) * x * np.sin(theta) * wq for a in alphas])
-    coeffs = [kw.sum(1)]
+    # the kernel times the measure sin(theta) dtheta
+    kw = brdf.d_ggx(np.sqrt(0.5 * (1.0 + x)), alpha) * x * np.sin(theta) * wq
+    k = [kw.sum()]
     p_prev, p = np.ones_like(x), x
     quiet = 0
     for l in range(1, max_lmax + 33):
-        coeffs.append(kw @ p)
-        quiet = quiet + 1 if np.all(np.abs(coeffs[-1]) <= tol * np.abs(coeffs[0])) else 0
+        k.append(kw @ p)
+        quiet = quiet + 1 if abs(k[-1]) <= tol * abs(k[0]) else 0
         if quiet == 32:   # the k_l envelope decays monotonically: 32 quiet bands in a row end it
             break
         p_prev, p = p, ((2 * l + 1) * x * p - l * p_prev) / (l + 1)
-    k = np.stack(coeffs, axis=1) / coeffs[0][:, None]
-    out = []
-    for row in k:
-        loud = np.nonzero(np.abs(row) > tol)[0]
-        lmax = int(loud[-1]) if len(loud) else 0
-        out.append(row[:lmax + 1].copy() if lmax <= max_lmax else None)
-    return out
+    k = np.array(k) / k[0]
+    loud = np.nonzero(np.abs(k) > tol)[0]
+    lmax = int(loud[-1]) if len(loud) else 0
+    return k[:lmax + 1] if lmax <= max_lmax else None
 
 
 def applicable(alpha: float) -> bool:
-    return alpha > 0.0 and zonal_coefficients((float(alpha),))[0] is not None
+    return alpha > 0.0 and zonal_coefficients(float(alpha)) is not None
 
 
 def _alm_index(lmax_from: int, lmax_to: int):
@@ -144,10 +141,10 @@ def synthesize(alm, lmax: int, dirs, nthreads: int | None = None):
 def prefilter_levels(source, dirs_per_level, roughness, nthreads: int | None = None):
     """Prefiltered values (float64, shaped like each dirs[..., 3] with the source's channels) of
     every level, all roughness > 0 and applicable(); one projection serves every level."""
-    alphas = tuple(float(r) ** 2 for r in roughness)
-    ks = zonal_coefficients(alphas) if min(alphas) > 0.0 else [None]
-    if any(k is None for k in ks):
+    alphas = [float(r) * float(r) for r in roughness]   # as the plan asks: the same cache entries
+    if not all(applicable(a) for a in alphas):
         raise ValueError("spectral: a level is too sharp for MAX_LMAX (use convolve or fis)")
+    ks = [zonal_coefficients(a) for a in alphas]
     lmax = max(len(k) - 1 for k in ks)
     alm = project_texels(source, lmax, nthreads)
     # the exact level is a mean of source texels with non-negative weights, so it lies within the

@@ -165,7 +165,7 @@ def test_spectral_closed_form_at_roughness_one():
     the box texels differ from the smooth f by a part the lobe does not average away exactly,
     measured 5.6e-4, 1.4e-4, 3.5e-5, 8.8e-6 at 64, 128, 256, 512 rows (1/h^2, as it must)."""
     from iblbake import spectral
-    k = spectral.zonal_coefficients((1.0,))[0]
+    k = spectral.zonal_coefficients(1.0)
     assert abs(k[1] - 2 / 3) < 1e-9 and abs(k[2] - 0.25) < 1e-9 and abs(k[3]) < 1e-9
     img = _texel_average_legendre(256, 512)
     for layout in ("equirect", "cubemap", "octahedral"):
@@ -183,7 +183,7 @@ def test_spectral_kernel_coefficients_match_direct_quadrature():
     from iblbake import brdf, spectral
     for r in (0.125, 0.5):
         alpha = r * r
-        k = spectral.zonal_coefficients((alpha,))[0]
+        k = spectral.zonal_coefficients(alpha)
         def kern(t, l):
             return brdf.d_ggx(np.sqrt(0.5 * (1 + np.cos(t))), alpha) * np.cos(t) * np.sin(t) * special.eval_legendre(l, np.cos(t))
         pts = [alpha * f for f in (0.5, 1, 2, 4, 8, 16) if alpha * f < np.pi / 2]
