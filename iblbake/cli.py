@@ -329,7 +329,7 @@ def mips_command(env, cache_dir, layout, size, levels, min_size, method, samples
     content-addressed EXR cache. A second run with the same inputs does no work ("cached")."""
     from pathlib import Path
 
-    from . import cache, images, mipsbake
+    from . import cache, images, mips, mipsbake
 
     con = Console(quiet, as_json)
     parts = {"radiance", "prefiltered", "dfg"} if "all" in only else set(only)
@@ -345,13 +345,17 @@ def mips_command(env, cache_dir, layout, size, levels, min_size, method, samples
         for w in info.warnings:
             con.warn(w)
         policies = {"nonfinite": nonfinite, "negative": negative}
+        if "prefiltered" in parts:
+            opts = mipsbake.PrefilterOptions(layout, size, levels, min_size, method, samples, lod_bias,
+                                             not no_fis, convolve_budget).resolved(info.height)
+            # an impossible plan (--method spectral on a too sharp level) fails before any bake
+            mipsbake.plan_methods(mips.radiance_chain_sizes(info.width, info.height),
+                                  {**opts, "convolve_budget": baker.convolve_budget(opts)})
         t0 = time.perf_counter()
         manifest, cached, chain = mipsbake.bake_radiance(baker, image, info, root, policies, warn=con.warn)
         report["radiance"] = {"path": str(root / manifest["key"]), "cached": cached,
                               "seconds": round(time.perf_counter() - t0, 4), "levels": len(manifest["files"])}
         if "prefiltered" in parts:
-            opts = mipsbake.PrefilterOptions(layout, size, levels, min_size, method, samples, lod_bias,
-                                             not no_fis, convolve_budget).resolved(info.height)
             state = {"chain": chain}
 
             def chain_levels():

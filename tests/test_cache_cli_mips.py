@@ -109,3 +109,15 @@ def test_bad_input_fails_cleanly(tmp_path):
     p = run_cli("mips", tmp_path / "missing.exr", "--cache", root)
     assert p.returncode != 0 and "missing.exr" in p.stderr and "Traceback" not in p.stderr
     assert not root.exists() or not entries(root)
+
+
+def test_spectral_on_a_too_sharp_level_fails_before_any_bake(tmp_path):
+    """--method spectral with 32 levels (r_1 = 1/31, bands beyond 2048): one line naming the level
+    and the fix, exit 1, and not even the radiance chain baked."""
+    root = tmp_path / "c"
+    p = run_cli("mips", panorama(tmp_path), "--cache", root, "--levels", "32", "--min-size", "1",
+                "--method", "spectral")
+    assert p.returncode == 1 and "Traceback" not in p.stderr
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and "level 1" in lines[0] and "--method auto" in lines[0], p.stderr
+    assert not root.exists() or not entries(root)
