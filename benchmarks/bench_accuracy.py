@@ -27,7 +27,12 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from iblbake import brdf, conventions, images, mips, render, scene  # noqa: E402
+from iblbake.core import brdf
+from iblbake.core import conventions
+from iblbake.io import images
+from iblbake.bake import chain as mips
+from iblbake.render import frame as render
+from iblbake.scene import load as scene  # noqa: E402
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 

@@ -18,7 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from iblbake import images, mips, mipsbake
+from iblbake.io import images
+from iblbake.bake import chain as mips
+from iblbake.bake import mips as mipsbake
 
 ROOT = Path(__file__).resolve().parents[1]
 # cmft (../shared/PEERS.md): radiance chain, cube face -> seconds on this machine's 2 threads; the

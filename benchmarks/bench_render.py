@@ -16,7 +16,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from iblbake import render, scene  # noqa: E402
+from iblbake.render import frame as render
+from iblbake.scene import load as scene  # noqa: E402
 
 CONFIGS = [
     ("prefiltered", "sphere_grid.yaml", ["effects.specular=prefiltered"]),

@@ -14,7 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
-from iblbake import cl, images, sh, shbake
+from iblbake.device import runtime as cl
+from iblbake.io import images
+from iblbake.core import sh
+from iblbake.bake import sh as shbake
 
 
 def median_time(fn, repeat=9):

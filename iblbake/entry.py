@@ -22,5 +22,5 @@ def loaded():
 
 def main():
     quiet_startup()
-    from .cli import main as cli_main
+    from iblbake.cli.main import main as cli_main
     cli_main()

@@ -21,7 +21,7 @@ PANORAMA_NAMES = ("city", "courtyard", "forest", "interior", "night", "studio", 
 @pytest.fixture(scope="session")
 def rt():
     """The OpenCL runtime on the device iblbake would pick (tests need a working one: make opencl)."""
-    from iblbake import cl
+    from iblbake.device import runtime as cl
     return cl.Runtime()
 
 
@@ -36,7 +36,7 @@ def panoramas():
 
 @pytest.fixture(scope="session")
 def load_panorama(panoramas):
-    from iblbake import images
+    from iblbake.io import images
     cache = {}
 
     def load(name):
@@ -47,7 +47,7 @@ def load_panorama(panoramas):
 
 
 def write_exr(path, image, half=False):
-    from iblbake import images
+    from iblbake.io import images
     images.write_exr(path, np.asarray(image, dtype=np.float32), half=half)
     return str(path)
 
@@ -123,7 +123,7 @@ def pytest_terminal_summary(terminalreporter):
     if dest:
         import datetime
         import platform
-        from iblbake.atomic import write_text
+        from iblbake.io.atomic import write_text
         stats = terminalreporter.stats
         head = (f"# Stress table\n\nWritten by `make stress` ({'IBLBAKE_STRESS=1, ' if STRESS else ''}"
                 f"{len(stats.get('passed', []))} passed, {len(stats.get('failed', []))} failed, "

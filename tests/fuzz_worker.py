@@ -36,7 +36,7 @@ def _alarm(signum, frame):
 
 
 def load_mesh(path, cache):
-    from iblbake import geometry
+    from iblbake.scene import geometry
     tris = geometry.build_triangles([{"mesh": {"path": path}, "material": "m"}], {"m": 0}, "fuzz.yaml")
     if len(tris):
         lo, hi = geometry.triangle_bounds(tris)
@@ -45,13 +45,14 @@ def load_mesh(path, cache):
 
 
 def load_image(path, cache):
-    from iblbake import images
+    from iblbake.io import images
     img, _ = images.read_panorama(path, max_pixels=1 << 22)
     return bool(np.isfinite(img).all())
 
 
 def load_scene(path, cache):
-    from iblbake import render, scene
+    from iblbake.render import frame as render
+    from iblbake.scene import load as scene
     sc = scene.load(path)
     # keep every accepted mutation cheap to render: tiny frame, few reference samples
     sc.data["camera"]["resolution"] = [24, 16]

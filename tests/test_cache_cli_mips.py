@@ -8,7 +8,7 @@ import time
 
 import numpy as np
 
-from iblbake import cache
+from iblbake.bake import cache
 
 from .conftest import run_cli, write_exr
 

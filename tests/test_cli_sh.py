@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from iblbake import sh
+from iblbake.core import sh
 
 from .conftest import run_cli, write_exr
 

@@ -4,7 +4,7 @@ and kernels/common.h against numpy."""
 import numpy as np
 import pytest
 
-from iblbake import conventions as cv
+from iblbake.core import conventions as cv
 
 
 def random_dirs(n, seed=0):

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 import yaml
 
-from iblbake import images
+from iblbake.io import images
 
 from .conftest import ROOT, run_cli, stress_scale
 

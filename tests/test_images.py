@@ -6,7 +6,7 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 
-from iblbake import images
+from iblbake.io import images
 
 
 def write_with_oiio(path, pixels, fmt, channels):

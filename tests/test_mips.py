@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from iblbake import mips, mipsbake
+from iblbake.bake import chain as mips
+from iblbake.bake import mips as mipsbake
 
 from .conftest import rel_err
 
@@ -62,7 +63,7 @@ def test_mirror_level_is_the_source_resampled(baker, layout):
     _, dev = baker.radiance_chain(img)
     got = baker.prefilter_level(dev, layout, 16, 0.0, 1)
     dirs = mips.layout_dirs(layout, 16)
-    from iblbake import conventions as cv
+    from iblbake.core import conventions as cv
     u, v = cv.equirect_uv_from_dir(dirs)
     assert np.abs(got - cv.bilinear_equirect(img.astype(np.float64), u, v)).max() < 1e-3
     if layout == "equirect":
@@ -164,7 +165,7 @@ def test_spectral_closed_form_at_roughness_one():
     1 + (2/3) y + (1/4) P2(y) at every texel of every layout, to 5e-5 absolute at 256 rows:
     the box texels differ from the smooth f by a part the lobe does not average away exactly,
     measured 5.6e-4, 1.4e-4, 3.5e-5, 8.8e-6 at 64, 128, 256, 512 rows (1/h^2, as it must)."""
-    from iblbake import spectral
+    from iblbake.bake import spectral
     k = spectral.zonal_coefficients(1.0)
     assert abs(k[1] - 2 / 3) < 1e-9 and abs(k[2] - 0.25) < 1e-9 and abs(k[3]) < 1e-9
     img = _texel_average_legendre(256, 512)
@@ -180,7 +181,8 @@ def test_spectral_kernel_coefficients_match_direct_quadrature():
     """k_l against scipy's adaptive quadrature of int K P_l sin / int K sin in float64, for a
     sharp and a medium lobe (1e-10 absolute; measured <= 1e-14)."""
     from scipy import integrate, special
-    from iblbake import brdf, spectral
+    from iblbake.core import brdf
+    from iblbake.bake import spectral
     for r in (0.125, 0.5):
         alpha = r * r
         k = spectral.zonal_coefficients(alpha)
@@ -200,7 +202,7 @@ def test_spectral_against_bruteforce(baker, load_panorama):
     """A 32x16 reduction of city (its sun kept: the hardest case) at a sharp, a medium and a rough
     level, one per layout: within 0.3% relative RMSE of the float64 brute force (every texel,
     exact solid angles; measured <= 0.1%, the brute force's own midpoint error)."""
-    from iblbake import spectral
+    from iblbake.bake import spectral
     levels, _ = baker.radiance_chain(load_panorama("city"))
     small = levels[5].astype(np.float64)
     for r, layout in ((0.125, "cubemap"), (0.5, "equirect"), (1.0, "octahedral")):
@@ -213,7 +215,7 @@ def test_spectral_against_bruteforce(baker, load_panorama):
 def test_auto_plan_spectral_then_fallback_and_explicit_error():
     """auto takes spectral for every rough-enough level and falls back where a lobe needs bands
     beyond MAX_LMAX; --method spectral then says which level and what to do."""
-    from iblbake import spectral
+    from iblbake.bake import spectral
     from iblbake.errors import InputError
     chain = mips.radiance_chain_sizes(64, 32)
     opts = mipsbake.PrefilterOptions("equirect", 32, 9).resolved(32)
@@ -233,7 +235,8 @@ def test_spectral_lone_sun_over_black_stays_in_range_and_keeps_energy():
     solid-angle mean of the sampled level stays the source's (1%; k_0 = 1 keeps it exactly, the
     64x32 level's point samples of a lobe 3 texels wide measure 0.6% at r = 0.125, <= 0.03% from
     r = 0.25) and the brightest texel of each equirect level is the one facing the sun."""
-    from iblbake import conventions as cv, spectral
+    from iblbake.core import conventions as cv
+    from iblbake.bake import spectral
     img = np.zeros((64, 128, 3))
     img[20, 40] = 1e6
     m0 = mips.solid_angle_mean(img)[0]

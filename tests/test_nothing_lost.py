@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 import yaml
 
-from iblbake import cache, images
+from iblbake.bake import cache
+from iblbake.io import images
 
 from .conftest import run_cli, stress_scale, write_exr
 

@@ -5,7 +5,7 @@ import sys
 import zipfile
 from pathlib import Path
 
-from iblbake import cl
+from iblbake.device import runtime as cl
 
 ROOT = Path(__file__).resolve().parents[1]
 KERNELS = sorted(p.name for p in (ROOT / "kernels").iterdir() if p.suffix in (".cl", ".h"))
@@ -26,4 +26,4 @@ def test_wheel_contains_the_kernels(tmp_path):
     names = set(zipfile.ZipFile(wheel).namelist())
     for k in KERNELS:
         assert f"iblbake/kernels/{k}" in names, k
-    assert "iblbake/cli.py" in names
+    assert "iblbake/cli/main.py" in names and "iblbake/render/frame.py" in names

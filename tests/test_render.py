@@ -9,7 +9,12 @@ import numpy as np
 import pytest
 import yaml
 
-from iblbake import conventions, images, mips, render, render_reference as rr, scene
+from iblbake.core import conventions
+from iblbake.io import images
+from iblbake.bake import chain as mips
+from iblbake.render import frame as render
+from iblbake.render import twin as rr
+from iblbake.scene import load as scene
 
 from .conftest import run_cli
 
@@ -188,7 +193,7 @@ def prefiltered_bakes(frame):
     {"diffuse": "off", "specular": "prefiltered", "prefilter": {"method": "fis", "samples": 64}},
 ])
 def test_shade_matches_numpy(tmp_path, small_panoramas, mesh_file, effects):
-    from iblbake import sh
+    from iblbake.core import sh
 
     p = busy_scene(tmp_path, small_panoramas["city"], mesh_file, effects=effects)
     sc = scene.load(p)

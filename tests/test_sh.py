@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 from numpy.polynomial import legendre as npleg
 
-from iblbake import conventions as cv
-from iblbake import sh, shbake
+from iblbake.core import conventions as cv
+from iblbake.core import sh
+from iblbake.bake import sh as shbake
 
 from .conftest import rel_err
 

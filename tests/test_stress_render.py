@@ -15,7 +15,14 @@ import numpy as np
 import pytest
 import yaml
 
-from iblbake import brdf, conventions as cv, images, mips, render, render_reference as rr, sampling, scene
+from iblbake.core import brdf
+from iblbake.core import conventions as cv
+from iblbake.io import images
+from iblbake.bake import chain as mips
+from iblbake.render import frame as render
+from iblbake.render import twin as rr
+from iblbake.core import sampling
+from iblbake.scene import load as scene
 
 from .test_render import prefiltered_bakes
 
@@ -60,7 +67,7 @@ def twin_shade(sc, frame, gb, arrays, env_image):
         out += rr.exact(gb, arrays, fx, sc["environment"], env_image)
     kw = {}
     if fx["diffuse"] == "sh":
-        from iblbake import sh
+        from iblbake.core import sh
         kw["sh_coeffs"] = sh.project(env_image, fx["sh_bands"]) * sh.ahat(fx["sh_bands"])[:, None]
     if fx["specular"] == "importance":
         kw["chain"] = mips.radiance_chain_reference(env_image)

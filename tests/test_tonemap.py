@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from iblbake import tonemap
+from iblbake.core import tonemap
 
 OPS = {"aces": 0, "reinhard": 1, "hable": 2, "pbr_neutral": 3, "linear": 4}
 HOSTILE = np.array([0.0, 1e-30, 1e-8, 0.5, 1.0, 11.2, 1e4, 6.5e4, 1e30, np.inf, -np.inf, np.nan, -1.0, -1e30],

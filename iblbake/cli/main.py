@@ -20,8 +20,8 @@ import time
 
 import click
 
-from . import __version__
-from .errors import IblbakeError
+from iblbake import __version__
+from iblbake.errors import IblbakeError
 
 _DEBUG = {"on": bool(os.environ.get("IBLBAKE_DEBUG"))}
 
@@ -154,7 +154,7 @@ def cli():
 @common_options
 def devices(quiet, as_json):
     """List OpenCL devices, whether each builds and runs a probe kernel, and which is used."""
-    from . import cl
+    from iblbake.device import runtime as cl
 
     con = Console(quiet, as_json)
     devs, errors, chosen = cl.probe_all()
@@ -180,7 +180,7 @@ def devices(quiet, as_json):
 def _check_overwrite(output: str, force: bool, source: str):
     """sh replaces its own earlier documents (Makefile reruns) but nothing else unless --force,
     and never its input."""
-    from . import shbake
+    from iblbake.bake import sh as shbake
 
     out = os.path.realpath(output)
     if os.path.exists(source) and out == os.path.realpath(source):
@@ -226,11 +226,12 @@ def sh_command(env, output, force, bands, window, backend, rotate_y, intensity, 
     coefficients E_lm = Ahat_l * L_lm (evaluate with max(0, sum E_lm Y_lm(n)); diffuse is
     albedo/pi times that), the input's size and hash, the options and timings.
     """
-    from . import images, shbake
+    from iblbake.io import images
+    from iblbake.bake import sh as shbake
 
     con = Console(quiet, as_json)
     if output:
-        from .atomic import check_writable
+        from iblbake.io.atomic import check_writable
         check_writable(output)
         _check_overwrite(output, force, env)
     t_start = time.perf_counter()
@@ -242,7 +243,7 @@ def sh_command(env, output, force, bands, window, backend, rotate_y, intensity, 
         rt = None
         device_label = "numpy (float64, host)"
         if backend == "opencl":
-            from . import cl
+            from iblbake.device import runtime as cl
             rt = cl.Runtime(device)
             device_label = rt.device_label
         coeffs, project_s = shbake.project(image, bands, backend, rt, rotate_y)
@@ -257,7 +258,7 @@ def sh_command(env, output, force, bands, window, backend, rotate_y, intensity, 
                           device=device_label, timings=timings)
     doc["elapsed_s"] = round(time.perf_counter() - t_start, 6)
     if output:
-        from .atomic import write_json
+        from iblbake.io.atomic import write_json
         write_json(output, doc)
     if glsl:
         click.echo(shbake.glsl_snippet(doc), nl=False)
@@ -329,13 +330,16 @@ def mips_command(env, cache_dir, layout, size, levels, min_size, method, samples
     content-addressed EXR cache. A second run with the same inputs does no work ("cached")."""
     from pathlib import Path
 
-    from . import cache, images, mips, mipsbake
+    from iblbake.bake import cache
+    from iblbake.io import images
+    from iblbake.bake import chain as mips
+    from iblbake.bake import mips as mipsbake
 
     con = Console(quiet, as_json)
     parts = {"radiance", "prefiltered", "dfg"} if "all" in only else set(only)
     t_start = time.perf_counter()
     root = Path(cache_dir) if cache_dir else cache.default_root()
-    from .atomic import check_writable
+    from iblbake.io.atomic import check_writable
     check_writable(root / "manifest.json", "cache", shown=root)
     baker = mipsbake.Baker(backend, device)
     report = {}
@@ -386,7 +390,7 @@ def mips_command(env, cache_dir, layout, size, levels, min_size, method, samples
 
 def _help_schema(ctx, param, value):
     if value and not ctx.resilient_parsing:
-        from .scene import schema_text
+        from iblbake.scene.load import schema_text
         click.echo(schema_text(), nl=False)
         ctx.exit(0)
 
@@ -412,13 +416,14 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, devic
 
     Only the effects the scene calls for are baked, compiled and run; --report shows which.
     """
-    from . import render, scene
+    from iblbake.render import frame as render
+    from iblbake.scene import load as scene
 
     if scene_path is None:
         raise click.UsageError("missing SCENE (a scene YAML file; see --help-schema)")
     con = Console(quiet, as_json)
     sc = scene.load(scene_path, overrides, outputs)
-    from .atomic import check_writable
+    from iblbake.io.atomic import check_writable
     for p in render.output_paths(sc):
         check_writable(p)
     with con.stages(["reference samples"] * 100, label="render") if (
@@ -463,7 +468,7 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, devic
 
 def main():
     """Run the CLI (iblbake.entry.main is the console script)."""
-    from .entry import loaded
+    from iblbake.entry import loaded
     loaded()
     try:
         rv = cli.main(standalone_mode=False, prog_name="iblbake")

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import brdf, conventions
+from iblbake.core import brdf
+from iblbake.core import conventions
 
 
 def radical_inverse_vdc(i):

@@ -27,7 +27,8 @@ import os
 
 import numpy as np
 
-from . import brdf, conventions
+from iblbake.core import brdf
+from iblbake.core import conventions
 
 # k_l below this (relative to k_0 = 1) are dropped; measured against the float64 brute-force
 # reference on city/studio/sunset at face 256: every level within 0.02% (1e-5 gave 0.01% too)

@@ -12,7 +12,7 @@ import os
 import tempfile
 from pathlib import Path
 
-from .errors import IblbakeError
+from iblbake.errors import IblbakeError
 
 
 @contextlib.contextmanager

@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from . import conventions
+from iblbake.core import conventions
 
 MAX_BANDS = 16
 WINDOWS = ("none", "hann", "lanczos")

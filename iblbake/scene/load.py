@@ -16,7 +16,7 @@ from typing import Any
 
 import yaml
 
-from .errors import InputError
+from iblbake.errors import InputError
 
 # ---------------------------------------------------------------------------------------------
 # Field types. Each checks one value and returns it normalised, or raises _Bad with the reason.

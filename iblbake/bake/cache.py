@@ -19,9 +19,9 @@ import time
 from pathlib import Path
 from typing import Callable
 
-from .atomic import write_json
-from .errors import IblbakeError
-from .images import file_sha256
+from iblbake.io.atomic import write_json
+from iblbake.errors import IblbakeError
+from iblbake.io.images import file_sha256
 
 MANIFEST = "manifest.json"
 

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
+from iblbake.errors import InputError
 
 LEAF_SIZE = 4
 # corners whose vertex normal turns more than this from the face normal use the face normal

@@ -17,8 +17,12 @@ from pathlib import Path
 
 import numpy as np
 
-from . import cache, cl, images, mips, spectral
-from .errors import InputError
+from iblbake.bake import cache
+from iblbake.device import runtime as cl
+from iblbake.io import images
+from iblbake.bake import chain as mips
+from iblbake.bake import spectral
+from iblbake.errors import InputError
 
 FORMAT = "iblbake.mips"
 FORMAT_VERSION = 1

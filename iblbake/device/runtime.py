@@ -19,7 +19,7 @@ from importlib import resources
 
 import numpy as np
 
-from .errors import DeviceError
+from iblbake.errors import DeviceError
 
 FIX_HINT = (
     "fix: on Debian/Ubuntu run `sudo apt-get install pocl-opencl-icd` (PoCL 3.1, a CPU device "

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import atomic_path
-from .errors import InputError, IblbakeError
+from iblbake.io.atomic import atomic_path
+from iblbake.errors import InputError, IblbakeError
 
 DEFAULT_MAX_PIXELS = 8192 * 8192
 # Values beyond this cannot be summed in float32 kernels (a row of 8192 of them overflows 3.4e38);

@@ -16,7 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import brdf, conventions, sampling
+from iblbake.core import brdf
+from iblbake.core import conventions
+from iblbake.core import sampling
 
 LAYOUT_IDS = {"equirect": 0, "cubemap": 1, "octahedral": 2}
 MIN_LEVEL_SIZE = 8

@@ -14,9 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
-from . import cache, cl, sampling
-from .errors import IblbakeError
-from .scene import Scene
+from iblbake.bake import cache
+from iblbake.device import runtime as cl
+from iblbake.core import sampling
+from iblbake.errors import IblbakeError
+from iblbake.scene.load import Scene
 
 DIFFUSE_MODES = {"off": 0, "sh": 1, "reference": 2}
 SPECULAR_MODES = {"off": 0, "importance": 1, "prefiltered": 2, "reference": 3}
@@ -158,7 +160,7 @@ def _int_bits(x):
 
 
 def scene_arrays(scene: Scene) -> SceneArrays:
-    from . import geometry
+    from iblbake.scene import geometry
 
     d = scene.data
     names = list(d["materials"])
@@ -213,7 +215,7 @@ def env_sampling_tables(image):
     """Piecewise-constant environment sampling over texels: p(texel) proportional to
     luminance x exact solid angle. Returns (marginal cdf (H+1), conditional cdfs (H, W+1),
     pdf over solid angle per texel (H, W)), float32, built in float64."""
-    from . import conventions
+    from iblbake.core import conventions
 
     h, w = image.shape[:2]
     lum = np.maximum(image[..., :3].astype(np.float64) @ np.array([0.2126, 0.7152, 0.0722]), 0.0)
@@ -236,7 +238,8 @@ def env_sampling_tables(image):
 
 
 def sh_irradiance_coeffs(image, bands: int, window: str, backend: str, rt):
-    from . import sh, shbake
+    from iblbake.core import sh
+    from iblbake.bake import sh as shbake
 
     coeffs, _ = shbake.project(image, bands, backend, rt)
     return coeffs * sh.window(bands, window)[:, None] * sh.ahat(bands)[:, None]
@@ -282,7 +285,7 @@ class Frame:
 
 def _chain_buffers(rt, levels):
     """One buffer of levels back to back (RGBA) and the offset/size tables chain_lookup reads."""
-    from . import mips
+    from iblbake.bake import chain as mips
 
     offs, lws, lhs, parts = [], [], [], []
     o = 0
@@ -300,7 +303,9 @@ def _chain_buffers(rt, levels):
 
 def render(scene: Scene, *, device: str | None = None, cache_root: Path | None = None,
            warn=None, progress=None) -> Frame:
-    from . import images, mips, mipsbake
+    from iblbake.io import images
+    from iblbake.bake import chain as mips
+    from iblbake.bake import mips as mipsbake
 
     t_start = time.perf_counter()
     pl = plan(scene)
@@ -338,7 +343,7 @@ def render(scene: Scene, *, device: str | None = None, cache_root: Path | None =
                                          "kernel": cl.source_hash("sh_project.cl")})
 
         def build_sh(tmp: Path):
-            from .atomic import write_json
+            from iblbake.io.atomic import write_json
             e = sh_irradiance_coeffs(image, bands, window, "opencl", rt)
             write_json(tmp / "irradiance.json", {"bands": bands, "window": window,
                                                  "irradiance": e.tolist()})
@@ -563,7 +568,7 @@ def output_paths(scene: Scene) -> list:
 
 def write_outputs(frame: Frame, scene: Scene) -> list:
     """Write every requested output atomically; returns the paths written."""
-    from . import images
+    from iblbake.io import images
 
     out = scene.data["output"]
     written = []

@@ -12,8 +12,12 @@ import math
 
 import numpy as np
 
-from . import brdf, conventions, mips, sampling, sh
-from .render import camera_vectors, pixel_jitter
+from iblbake.core import brdf
+from iblbake.core import conventions
+from iblbake.bake import chain as mips
+from iblbake.core import sampling
+from iblbake.core import sh
+from iblbake.render.frame import camera_vectors, pixel_jitter
 
 LUM = np.array([0.2126, 0.7152, 0.0722])
 

@@ -15,7 +15,8 @@ import time
 
 import numpy as np
 
-from . import conventions, sh
+from iblbake.core import conventions
+from iblbake.core import sh
 
 FORMAT = "iblbake.sh"
 FORMAT_VERSION = 1

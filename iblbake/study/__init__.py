@@ -1,0 +1,1 @@
+"""Studies over many frames: sweeps, contact sheets, the accuracy study (next issues)."""
