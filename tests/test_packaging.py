@@ -27,3 +27,17 @@ def test_wheel_contains_the_kernels(tmp_path):
     for k in KERNELS:
         assert f"iblbake/kernels/{k}" in names, k
     assert "iblbake/cli/main.py" in names and "iblbake/render/frame.py" in names
+
+
+def test_source_checkout_without_install_finds_the_kernels(tmp_path):
+    """PYTHONPATH=<checkout> python -m iblbake.cli with no install: the kernels come from kernels/.
+    -S skips site's .pth files (where the editable install's finder lives); the dependencies'
+    folder is put back on the path by hand."""
+    import sysconfig
+    site = sysconfig.get_paths()["purelib"]
+    code = (f"import sys; sys.path.insert(0, {str(ROOT)!r}); sys.path.append({site!r}); "
+            "import importlib.util as u; assert u.find_spec('iblbake.kernels') is None, 'installed'; "
+            "from iblbake.device import runtime; print(len(runtime.kernel_source('render.cl')))")
+    p = subprocess.run([sys.executable, "-S", "-c", code], capture_output=True, text=True, cwd=tmp_path)
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert int(p.stdout) > 1000

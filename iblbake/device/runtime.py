@@ -16,6 +16,7 @@ import time
 import warnings
 from dataclasses import dataclass, field
 from importlib import resources
+from pathlib import Path
 
 import numpy as np
 
@@ -34,11 +35,21 @@ __kernel void probe(__global float *x) { int i = get_global_id(0); x[i] = x[i] *
 _INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"\s*$', re.M)
 
 
+@functools.lru_cache(maxsize=None)
+def kernel_folder():
+    """Where kernels/ is: inside the installed package (iblbake.kernels, wheel or editable), else
+    the source checkout's top-level kernels/ (running with PYTHONPATH=. and no install)."""
+    try:
+        return resources.files("iblbake.kernels")
+    except ModuleNotFoundError:
+        return Path(__file__).resolve().parents[2] / "kernels"
+
+
 def kernel_source(name: str, _seen=None) -> str:
     """Source of kernels/NAME with its `#include "x.h"` lines inlined (once each), so that the
     text we hash and build is exactly what the compiler sees."""
     seen = set() if _seen is None else _seen
-    text = resources.files("iblbake.kernels").joinpath(name).read_text(encoding="utf-8")
+    text = kernel_folder().joinpath(name).read_text(encoding="utf-8")
 
     def inline(m):
         inc = m.group(1)
