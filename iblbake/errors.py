@@ -1,10 +1,10 @@
-"""Errors the CLI turns into one-line messages (no traceback unless --debug)."""
+"""The library's errors: plain exceptions whose message is one line that names the file, key or
+value and what to do. The command line (iblbake.cli) prints them and exits with `exit_code`; the
+library never imports click."""
 
-import click
 
-
-class IblbakeError(click.ClickException):
-    """A failure the user can act on: the message names the file/key/value and the fix."""
+class IblbakeError(Exception):
+    """A failure the user can act on."""
 
     exit_code = 1
 

@@ -99,5 +99,5 @@ def get_or_build(root: Path, key: str, build: Callable[[Path], dict], *,
                 raise
     except OSError as e:   # read-only folder, disk full, no permission: nothing was left behind
         raise IblbakeError(f"{root}: cannot write the cache entry {key} ({e.strerror or e}); "
-                           f"free space or pass a writable --cache folder") from None
+                           f"free space or use a writable cache folder") from None
     return body, False

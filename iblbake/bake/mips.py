@@ -59,7 +59,7 @@ class PrefilterOptions:
 CONVOLVE_RESOLUTIONS = (12.0, 6.0)   # texels per lobe scale, finest first (see mips.TEXELS_PER_LOBE)
 
 
-def plan_methods(chain_sizes, opts: dict) -> list[str]:
+def plan_methods(chain_sizes, opts: dict, method_name: str = "method") -> list[str]:
     """Per level: 'resample' (mirror), 'spectral', 'convolve@T' (T texels per lobe scale) or
     'fis'. auto takes spectral (exact, fastest) where the lobe is wide enough for it, else the
     finest convolution that fits the budget, else FIS."""
@@ -70,8 +70,8 @@ def plan_methods(chain_sizes, opts: dict) -> list[str]:
         elif opts["method"] in ("auto", "spectral") and spectral.applicable(r * r):
             out.append("spectral")
         elif opts["method"] == "spectral":
-            raise InputError(f"--method spectral: level {k} (roughness {r:g}) is too sharp for the SH "
-                             f"convolution (it needs bands beyond {spectral.MAX_LMAX}); use --method auto, "
+            raise InputError(f"{method_name} spectral: level {k} (roughness {r:g}) is too sharp for the SH "
+                             f"convolution (it needs bands beyond {spectral.MAX_LMAX}); use {method_name} auto, "
                              f"which bakes such levels with convolve or fis")
         elif opts["method"] == "convolve":
             out.append(f"convolve@{CONVOLVE_RESOLUTIONS[0]:g}")
@@ -114,7 +114,8 @@ class Baker:
     def prefilter(self, chain, opts: dict, progress=None):
         """Levels of the prefiltered chain (float32 images) and the method used for each."""
         sizes = [(c.shape[1], c.shape[0]) for c in chain]
-        methods = plan_methods(sizes, {**opts, "convolve_budget": self.convolve_budget(opts)})
+        methods = plan_methods(sizes, {**opts, "convolve_budget": self.convolve_budget(opts)},
+                               opts.get("method_name", "method"))
         layout = opts["layout"]
         # every spectral level from one projection of the source (host, float64, either backend)
         todo = [(s, r) for s, r, how in zip(opts["sizes"], opts["roughness"], methods) if how == "spectral"]

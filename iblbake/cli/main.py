@@ -1,6 +1,7 @@
 """The `iblbake` command line: thin click commands that parse, call the library and print.
 
-Errors the user can act on are IblbakeError (a click.ClickException): one line, exit != 0.
+Errors the user can act on are the library's IblbakeError (iblbake.errors, plain exceptions): printed
+here as one line, exit != 0.
 Anything else is an internal error: one line too, unless --debug asks for the traceback.
 Heavy modules (pyopencl, OpenImageIO, trimesh) are imported inside the commands that use them.
 """
@@ -30,7 +31,7 @@ class IblbakeGroup(click.Group):
     def invoke(self, ctx):
         try:
             return super().invoke(ctx)
-        except (click.ClickException, click.exceptions.Exit, click.exceptions.Abort):
+        except (IblbakeError, click.ClickException, click.exceptions.Exit, click.exceptions.Abort):
             raise
         except KeyboardInterrupt:
             raise click.exceptions.Abort() from None
@@ -120,6 +121,10 @@ def input_options(f):
                      help="NaN/Inf texels: fail (naming the count and first position), set to 0, or "
                           "clamp (+Inf to the largest finite value, NaN and -Inf to 0).")(f)
     return f
+
+
+# the read policies as this command line names them (the library's messages quote these)
+POLICY_FLAGS = {"max_pixels": "--max-pixels", "nonfinite": "--nonfinite", "negative": "--negative"}
 
 
 def _finite(ctx, param, value):
@@ -237,7 +242,8 @@ def sh_command(env, output, force, bands, window, backend, rotate_y, intensity, 
     t_start = time.perf_counter()
     with con.stages(["reading", "projecting"], label="sh") as stage:
         t0 = time.perf_counter()
-        image, info = images.read_panorama(env, max_pixels=max_pixels, nonfinite=nonfinite, negative=negative)
+        image, info = images.read_panorama(env, max_pixels=max_pixels, nonfinite=nonfinite, negative=negative,
+                                           names=POLICY_FLAGS)
         read_s = time.perf_counter() - t0
         stage()
         rt = None
@@ -345,7 +351,8 @@ def mips_command(env, cache_dir, layout, size, levels, min_size, method, samples
     report = {}
     summary = {"cache": str(root), "device": baker.device_label, "entries": report}
     if parts & {"radiance", "prefiltered"}:
-        image, info = images.read_panorama(env, max_pixels=max_pixels, nonfinite=nonfinite, negative=negative)
+        image, info = images.read_panorama(env, max_pixels=max_pixels, nonfinite=nonfinite, negative=negative,
+                                           names=POLICY_FLAGS)
         for w in info.warnings:
             con.warn(w)
         policies = {"nonfinite": nonfinite, "negative": negative}
@@ -354,7 +361,7 @@ def mips_command(env, cache_dir, layout, size, levels, min_size, method, samples
                                              not no_fis, convolve_budget).resolved(info.height)
             # an impossible plan (--method spectral on a too sharp level) fails before any bake
             mipsbake.plan_methods(mips.radiance_chain_sizes(info.width, info.height),
-                                  {**opts, "convolve_budget": baker.convolve_budget(opts)})
+                                  {**opts, "convolve_budget": baker.convolve_budget(opts)}, "--method")
         t0 = time.perf_counter()
         manifest, cached, chain = mipsbake.bake_radiance(baker, image, info, root, policies, warn=con.warn)
         report["radiance"] = {"path": str(root / manifest["key"]), "cached": cached,
@@ -472,6 +479,9 @@ def main():
     loaded()
     try:
         rv = cli.main(standalone_mode=False, prog_name="iblbake")
+    except IblbakeError as e:
+        click.echo(f"Error: {e}", err=True)
+        sys.exit(e.exit_code)
     except click.ClickException as e:
         e.show()
         sys.exit(e.exit_code)

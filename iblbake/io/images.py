@@ -2,9 +2,9 @@
 
 Reading: EXR (half/float; RGB, RGBA, Y), Radiance .hdr, PFM, float TIFF, anything OIIO reads.
 The size is checked from the header before any pixel is decoded. Non-finite texels fail by
-default (count and first position in the message), or are repaired with --nonfinite zero|clamp;
+default (count and first position in the message), or are repaired with the nonfinite policy zero|clamp;
 negative texels (every one of Blender's panoramas has tiny ones) are kept as stored by default,
-counted and reported, or clamped / refused with --negative.
+counted and reported, or clamped / refused with the negative policy.
 """
 
 from __future__ import annotations
@@ -90,9 +90,16 @@ def _first_position(mask) -> str:
     return f"x={i}, y={j}"
 
 
+# How the read policies are named in messages: the caller says where each came from (a command-line
+# flag, a scene key); the library itself knows neither.
+POLICY_NAMES = {"max_pixels": "max_pixels", "nonfinite": "nonfinite", "negative": "negative"}
+
+
 def read_panorama(path, *, max_pixels: int | None = None, nonfinite: str = "error",
-                  negative: str = "keep") -> tuple[np.ndarray, ImageInfo]:
-    """Read an HDR image as float32 RGB (H, W, 3) and validate it (see module doc)."""
+                  negative: str = "keep", names: dict | None = None) -> tuple[np.ndarray, ImageInfo]:
+    """Read an HDR image as float32 RGB (H, W, 3) and validate it (see module doc). `names` maps
+    max_pixels / nonfinite / negative to what messages call them (a flag or a scene key)."""
+    name = {**POLICY_NAMES, **(names or {})}
     oiio = _oiio()
     path = str(path)
     limit = max_pixels_default() if max_pixels is None else int(max_pixels)
@@ -112,7 +119,7 @@ def read_panorama(path, *, max_pixels: int | None = None, nonfinite: str = "erro
         if w * h > limit:
             raise InputError(
                 f"{path}: {w}x{h} is {w * h} pixels, over the limit of {limit}; "
-                "raise it with --max-pixels or IBLBAKE_MAX_PIXELS if this is intended")
+                f"raise it with {name['max_pixels']} or IBLBAKE_MAX_PIXELS if this is intended")
         names = tuple(spec.channelnames)
         chroma = spec.getattribute("chromaticities")
         data = inp.read_image(0, 0, 0, nc, oiio.FLOAT)
@@ -147,7 +154,7 @@ def read_panorama(path, *, max_pixels: int | None = None, nonfinite: str = "erro
         if nonfinite == "error":
             raise InputError(
                 f"{path}: {info.nonfinite} non-finite (NaN/Inf or beyond +-1e30) values, first at "
-                f"{_first_position(bad)}; repair with --nonfinite zero or --nonfinite clamp")
+                f"{_first_position(bad)}; repair with {name['nonfinite']} zero or {name['nonfinite']} clamp")
         if nonfinite == "zero":
             rgb[bad] = 0.0
         else:  # clamp: too large positive values to the largest valid value, the rest to 0
@@ -156,7 +163,7 @@ def read_panorama(path, *, max_pixels: int | None = None, nonfinite: str = "erro
             with np.errstate(invalid="ignore"):
                 rgb[bad & (rgb > 0)] = max(top, 0.0)
             rgb[bad & ~(rgb > 0)] = 0.0
-        info.warnings.append(f"{path}: repaired {info.nonfinite} non-finite values (--nonfinite {nonfinite})")
+        info.warnings.append(f"{path}: repaired {info.nonfinite} non-finite values ({name['nonfinite']} {nonfinite})")
     neg = rgb < 0
     info.negative = int(neg.sum())
     if info.negative:
@@ -164,7 +171,7 @@ def read_panorama(path, *, max_pixels: int | None = None, nonfinite: str = "erro
         if negative == "error":
             raise InputError(
                 f"{path}: {info.negative} negative values (min {info.negative_min:.3g}), first at "
-                f"{_first_position(neg)}; use --negative keep or --negative clamp")
+                f"{_first_position(neg)}; use {name['negative']} keep or {name['negative']} clamp")
         if negative == "clamp":
             np.maximum(rgb, 0.0, out=rgb)
     return np.ascontiguousarray(rgb), info

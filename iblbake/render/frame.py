@@ -326,7 +326,9 @@ def render(scene: Scene, *, device: str | None = None, cache_root: Path | None =
     image = info = None
     if needs_env:
         t0 = time.perf_counter()
-        image, info = images.read_panorama(env["path"], nonfinite=env["nonfinite"], negative=env["negative"])
+        image, info = images.read_panorama(env["path"], nonfinite=env["nonfinite"], negative=env["negative"],
+                                          names={"nonfinite": "environment.nonfinite:",
+                                                 "negative": "environment.negative:"})
         for w in info.warnings:
             warn(w)
         rep.bake("read_environment", time.perf_counter() - t0, False, path=info.path,
