@@ -86,3 +86,22 @@ def test_chromaticities_warning_for_city(panoramas):
     _, info = images.read_panorama(panoramas["studio"])
     assert not any("non-Rec.709" in w for w in info.warnings)
     assert math.isclose(info.negative_min, -3.0398369e-06, rel_tol=1e-3) and info.negative == 3
+
+
+def test_atomic_writes_get_normal_permissions(tmp_path):
+    """Frames, EXRs and JSON written atomically are readable like any open()-created file
+    (0666 minus the umask), not the temporary file's 0600."""
+    import os
+    from iblbake.io import atomic
+    old = os.umask(0o022)
+    try:
+        atomic.write_json(tmp_path / "a.json", {"x": 1})
+        images.write_png(tmp_path / "a.png", np.zeros((2, 3, 3), np.uint8))
+        images.write_exr(tmp_path / "a.exr", np.zeros((2, 3, 3), np.float32))
+        os.umask(0o077)
+        atomic.write_text(tmp_path / "b.txt", "x")
+    finally:
+        os.umask(old)
+    for name in ("a.json", "a.png", "a.exr"):
+        assert (tmp_path / name).stat().st_mode & 0o777 == 0o644, name
+    assert (tmp_path / "b.txt").stat().st_mode & 0o777 == 0o600

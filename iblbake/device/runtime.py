@@ -8,6 +8,7 @@ that need no device never pay for it.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import os
@@ -118,6 +119,15 @@ def enumerate_devices() -> tuple[list[DeviceInfo], list[str]]:
     return out, errors
 
 
+@contextlib.contextmanager
+def _quiet_build_log(cl):
+    """Successful builds can log (NVIDIA notes every inlined kernel) and pyopencl turns that log
+    into a multi-line CompilerWarning on stderr; failures raise and are reported, the rest is noise."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", cl.CompilerWarning)
+        yield
+
+
 def probe(info: DeviceInfo) -> DeviceInfo:
     """Build and run the probe kernel; fill info.ok / info.reason."""
     cl = _import_cl()
@@ -125,7 +135,8 @@ def probe(info: DeviceInfo) -> DeviceInfo:
     try:
         ctx = cl.Context([info.device])
         queue = cl.CommandQueue(ctx)
-        prg = cl.Program(ctx, PROBE_SOURCE).build()
+        with _quiet_build_log(cl):
+            prg = cl.Program(ctx, PROBE_SOURCE).build()
         x = np.arange(64, dtype=np.float32)
         buf = cl.Buffer(ctx, cl.mem_flags.READ_WRITE | cl.mem_flags.COPY_HOST_PTR, hostbuf=x)
         prg.probe(queue, (64,), None, buf)
@@ -236,10 +247,7 @@ class Runtime:
         options = ["-cl-std=CL1.2"] + [f"-D{k}={v}" for k, v in defines.items()]
         t0 = time.perf_counter()
         try:
-            # successful builds can log (NVIDIA notes every inlined kernel); pyopencl turns that
-            # into a multi-line warning on stderr: failures are reported below, the rest is noise
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", self.cl.CompilerWarning)
+            with _quiet_build_log(self.cl):
                 prg = self.cl.Program(self.ctx, src).build(options=options, cache_dir=_cache_dir())
         except Exception as e:
             log = str(e)

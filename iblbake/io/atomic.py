@@ -30,6 +30,8 @@ def atomic_path(final: str | os.PathLike):
     os.close(fd)
     try:
         yield tmp
+        # mkstemp creates 0600; the final file gets what a plain open() would give it
+        os.chmod(tmp, 0o666 & ~_umask())
         os.replace(tmp, final)
     except OSError as e:
         _unlink(tmp)
@@ -37,6 +39,12 @@ def atomic_path(final: str | os.PathLike):
     except BaseException:
         _unlink(tmp)
         raise
+
+
+def _umask() -> int:
+    mask = os.umask(0)      # the only way to read it is to set it; put it straight back
+    os.umask(mask)
+    return mask
 
 
 def _unlink(path):
