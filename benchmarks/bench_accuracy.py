@@ -83,7 +83,7 @@ def split_sum_table(envs, roughness, f0=0.95, normals=24):
     ns /= np.linalg.norm(ns, axis=1, keepdims=True)
     for env in envs:
         img, _ = images.read_panorama(ROOT / "examples" / "panoramas" / f"{env}.exr")
-        img = mips.downsample_reference(img[..., :3], 512, 256)
+        img = mips.downsample_twin(img[..., :3], 512, 256)
         h, w = img.shape[:2]
         dirs = conventions.equirect_texel_dirs(w, h).reshape(-1, 3)
         om = conventions.equirect_solid_angles(w, h).reshape(-1)

@@ -5,7 +5,7 @@
  *   reference   progressive Monte Carlo of the exact integral (MIS: environment x BRDF sampling)
  *   background  samples that hit nothing
  *   resolve     mean over a pixel's samples (+ coverage alpha, + AOVs)
- * The numpy twin is iblbake/render_reference.py; tests compare them.
+ * The numpy twin is iblbake/render/twin.py; tests compare them.
  *
  * Compile-time effect set (defines; a term not asked for is not compiled):
  *   DIFFUSE_MODE  0 off, 1 sh, 2 reference          SH_BANDS

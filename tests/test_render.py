@@ -80,7 +80,7 @@ def shared_cache(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def dfg_fine():
-    return mips.dfg_reference(64, 4096)
+    return mips.dfg_twin(64, 4096)
 
 
 # --- white furnace ------------------------------------------------------------------------------
@@ -206,7 +206,7 @@ def test_shade_matches_numpy(tmp_path, small_panoramas, mesh_file, effects):
     if fx["diffuse"] == "sh":
         kw["sh_coeffs"] = sh.project(image, 3) * sh.ahat(3)[:, None]
     if fx["specular"] == "importance":
-        kw["chain"] = mips.radiance_chain_reference(image)
+        kw["chain"] = mips.radiance_chain_twin(image)
     if fx["specular"] == "prefiltered":
         kw.update(prefiltered_bakes(frame))
     ref = rr.shade(gb, arrays, fx, sc["environment"], **kw).reshape(48, 64, 2, 3)

@@ -197,7 +197,7 @@ def test_dfg_edges(rt, stress):
     """NoV = 0 (floored at 1e-4) and r = 0 rows: finite, in [0, 1], and the r = 0 row equals
     Schlick's split A = 1 - (1-NoV)^5, B = (1-NoV)^5 on OpenCL and numpy."""
     t = mips.OpenCLBaker(rt).dfg(64, 1024)
-    ref = mips.dfg_reference(64, 1024)
+    ref = mips.dfg_twin(64, 1024)
     nov = np.maximum(np.arange(64) / 63, 1e-4)
     for name, table in (("OpenCL", t), ("numpy", ref)):
         assert np.isfinite(table).all() and table.min() >= 0 and table.max() <= 1

@@ -38,7 +38,7 @@ def one_env(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def dfg_fine():
-    return mips.dfg_reference(64, 4096)
+    return mips.dfg_twin(64, 4096)
 
 
 def write_scene(folder: Path, env, materials: dict, objects: list, camera: dict, effects: dict, output=None):
@@ -70,7 +70,7 @@ def twin_shade(sc, frame, gb, arrays, env_image):
         from iblbake.core import sh
         kw["sh_coeffs"] = sh.project(env_image, fx["sh_bands"]) * sh.ahat(fx["sh_bands"])[:, None]
     if fx["specular"] == "importance":
-        kw["chain"] = mips.radiance_chain_reference(env_image)
+        kw["chain"] = mips.radiance_chain_twin(env_image)
     if fx["specular"] == "prefiltered":
         kw.update(prefiltered_bakes(frame))
     fx2 = dict(fx)
@@ -246,12 +246,12 @@ def test_chain_lookup_at_poles_seam_and_extreme_levels(rt, stress):
     fractions, past the last level, 1e30, +inf and NaN (the delta lobe's 0/0 pdf): finite, equal,
     and NaN reads level 0, +inf the coarsest level."""
     rng = np.random.default_rng(8)
-    levels = mips.radiance_chain_reference(rng.random((16, 32, 3)) + 0.1)
+    levels = mips.radiance_chain_twin(rng.random((16, 32, 3)) + 0.1)
     dirs = _edge_directions()
     lods = np.array([-np.inf, -1e30, -1.0, 0.0, 0.4, 2.5, len(levels) - 1, len(levels) + 5, 1e30, np.inf, np.nan])
     d = np.repeat(dirs, len(lods), axis=0)
     lod = np.tile(lods, len(dirs))
-    want = mips.chain_lookup_reference(levels, d, lod)
+    want = mips.chain_lookup_twin(levels, d, lod)
     prg = rt.program("selftest.cl", {"SH_BANDS": 3})
     chain, (off, lw, lh), nlev = render._chain_buffers(rt, [l.astype(np.float32) for l in levels])
     out = rt.empty(len(d) * 12)
@@ -263,7 +263,7 @@ def test_chain_lookup_at_poles_seam_and_extreme_levels(rt, stress):
     stress.check("chain lookup at poles/seam, lod +-inf/NaN/out of range: OpenCL vs numpy", err, 1e-5, "rel")
     nan_rows, zero_rows = lod != lod, lod == 0
     assert np.allclose(want[nan_rows], want[zero_rows])
-    top = mips.chain_lookup_reference(levels, dirs, np.full(len(dirs), len(levels) - 1.0))
+    top = mips.chain_lookup_twin(levels, dirs, np.full(len(dirs), len(levels) - 1.0))
     assert np.allclose(want[lod == np.inf], top)
 
 
@@ -321,7 +321,7 @@ def test_importance_mip_selection_pdf_extremes(tmp_path, stress, one_env, dfg_fi
         arrays = render.scene_arrays(sc)
         gb = rr.primary(sc["camera"], arrays)
         twin = rr.shade(gb, arrays, sc["effects"], sc["environment"],
-                        chain=mips.radiance_chain_reference(np.ones((16, 32, 3))))
+                        chain=mips.radiance_chain_twin(np.ones((16, 32, 3))))
         assert np.isfinite(twin).all()
         if n == 100:
             check_furnace(stress, "importance N=100 (not a power of two), r = 0 and 1", sc, frame,

@@ -1,4 +1,4 @@
-"""Tone mapping: OpenCL against the numpy reference, closed forms, monotonicity, hostile inputs."""
+"""Tone mapping: OpenCL against the numpy twin, closed forms, monotonicity, hostile inputs."""
 
 import numpy as np
 import pytest

@@ -104,7 +104,7 @@ def _overlap_matrix(n_dst: int, n_src: int, polar: bool):
     return np.where(hi > lo, w, 0.0)
 
 
-def downsample_reference(src, dw: int, dh: int):
+def downsample_twin(src, dw: int, dh: int):
     """numpy twin of kernels/mips.cl:downsample (float64)."""
     src = np.asarray(src, dtype=np.float64)
     sh, sw = src.shape[:2]
@@ -117,10 +117,10 @@ def downsample_reference(src, dw: int, dh: int):
     return num / den[..., None]
 
 
-def radiance_chain_reference(image):
+def radiance_chain_twin(image):
     chain = [np.asarray(image, dtype=np.float64)]
     for w, h in radiance_chain_sizes(image.shape[1], image.shape[0])[1:]:
-        chain.append(downsample_reference(chain[-1], w, h))
+        chain.append(downsample_twin(chain[-1], w, h))
     return chain
 
 
@@ -166,7 +166,7 @@ def texel_solid_angle_at(chain0_w: int, chain0_h: int, dirs):
     return (2.0 * math.pi / chain0_w) * (math.pi / chain0_h) * st
 
 
-def chain_lookup_reference(chain, dirs, lod):
+def chain_lookup_twin(chain, dirs, lod):
     """numpy twin of chain_lookup: trilinear in the radiance chain."""
     u, v = conventions.equirect_uv_from_dir(dirs)
     # +-inf clamp to the ends; NaN (the 0/0 pdf of a delta lobe) reads level 0
@@ -183,13 +183,13 @@ def chain_lookup_reference(chain, dirs, lod):
     return out
 
 
-def prefilter_reference(chain, dirs, roughness: float, n_samples: int, lod_bias: float = 0.0,
+def prefilter_twin(chain, dirs, roughness: float, n_samples: int, lod_bias: float = 0.0,
                         fis: bool = True):
     """numpy twin of kernels/mips.cl:prefilter at output directions dirs (..., 3), float64."""
     dirs = np.asarray(dirs, dtype=np.float64)
     flat = dirs.reshape(-1, 3)
     if roughness == 0.0:
-        return chain_lookup_reference(chain, flat, np.zeros(len(flat))).reshape(dirs.shape[:-1] + (-1,))
+        return chain_lookup_twin(chain, flat, np.zeros(len(flat))).reshape(dirs.shape[:-1] + (-1,))
     s = ggx_sample_set(roughness * roughness, n_samples).rows.astype(np.float64)
     t, b = conventions.tangent_frame(flat)
     h0, w0 = chain[0].shape[:2]
@@ -199,7 +199,7 @@ def prefilter_reference(chain, dirs, roughness: float, n_samples: int, lod_bias:
         l = t * lx + b * ly + flat * lz
         l /= np.linalg.norm(l, axis=-1, keepdims=True)
         lod = (0.5 * (log2_om - np.log2(texel_solid_angle_at(w0, h0, l))) + lod_bias) if fis else np.zeros(len(l))
-        acc += lz * chain_lookup_reference(chain, l, lod)
+        acc += lz * chain_lookup_twin(chain, l, lod)
         wsum += lz
     return (acc / wsum[:, None]).reshape(dirs.shape[:-1] + (-1,))
 
@@ -248,7 +248,7 @@ def prefilter_bruteforce(source, dirs, roughness: float, chunk: int | None = Non
 
 # --- DFG ----------------------------------------------------------------------------------------
 
-def dfg_reference(size: int, n_samples: int, multiscatter: bool = False):
+def dfg_twin(size: int, n_samples: int, multiscatter: bool = False):
     """numpy twin of kernels/mips.cl:dfg, shape (size, size, 2) indexed [roughness, NoV]."""
     grid = np.arange(size) / (size - 1)
     nov = np.maximum(grid, 1e-4)[None, :]
@@ -426,7 +426,7 @@ def _column_sin_cos(w: int):
     return np.stack([np.sin(phi), np.cos(phi)], axis=-1)
 
 
-def convolve_reference(chain, dirs, roughness: float, texels_per_lobe: float = TEXELS_PER_LOBE):
+def convolve_twin(chain, dirs, roughness: float, texels_per_lobe: float = TEXELS_PER_LOBE):
     """numpy twin of kernels/mips.cl:convolve (all texels, the same level, split and cone cut)."""
     alpha = roughness * roughness
     sizes = [(c.shape[1], c.shape[0]) for c in chain]

@@ -103,7 +103,7 @@ class Baker:
         if self.gpu:
             levels, self._device_chain = self.gpu.radiance_chain(image)
             return levels
-        return [c.astype(np.float32) for c in mips.radiance_chain_reference(image)]
+        return [c.astype(np.float32) for c in mips.radiance_chain_twin(image)]
 
     def convolve_budget(self, opts: dict) -> float:
         if opts.get("convolve_budget") is not None:
@@ -137,9 +137,9 @@ class Baker:
             else:
                 dirs = mips.layout_dirs(layout, s)
                 if how.startswith("convolve"):
-                    img = mips.convolve_reference(chain64, dirs, r, float(how.split("@")[1]))
+                    img = mips.convolve_twin(chain64, dirs, r, float(how.split("@")[1]))
                 else:
-                    img = mips.prefilter_reference(chain64, dirs, 0.0 if how == "resample" else r,
+                    img = mips.prefilter_twin(chain64, dirs, 0.0 if how == "resample" else r,
                                                    opts["samples"], opts["lod_bias"], opts["fis"])
             out.append(np.asarray(img, np.float32))
             if progress:
@@ -149,7 +149,7 @@ class Baker:
     def dfg(self, size: int, samples: int, multiscatter: bool):
         if self.gpu:
             return self.gpu.dfg(size, samples, multiscatter)
-        return mips.dfg_reference(size, samples, multiscatter).astype(np.float32)
+        return mips.dfg_twin(size, samples, multiscatter).astype(np.float32)
 
 
 def _check_finite(name, img):

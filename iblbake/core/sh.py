@@ -232,7 +232,7 @@ def project_row_sums(row_sums, bands: int, width: int):
     return _contraction(h, width, bands) @ row_sums.reshape(h * nt, c)
 
 
-def row_sums_reference(image, bands: int, rotate_y_deg: float = 0.0):
+def row_sums_twin(image, bands: int, rotate_y_deg: float = 0.0):
     """numpy version of kernels/sh_project.cl: S[j, t, c] = sum_i L(i, j) T_t(phi_i)."""
     image = np.asarray(image, dtype=np.float64)
     t = azimuth_table(conventions.equirect_phi(image.shape[1], rotate_y_deg), bands)  # (W, nt)
@@ -241,4 +241,4 @@ def row_sums_reference(image, bands: int, rotate_y_deg: float = 0.0):
 
 def project(image, bands: int, rotate_y_deg: float = 0.0):
     """Radiance coefficients (bands^2, C) in float64: the numpy backend of `iblbake sh`."""
-    return project_row_sums(row_sums_reference(image, bands, rotate_y_deg), bands, np.shape(image)[1])
+    return project_row_sums(row_sums_twin(image, bands, rotate_y_deg), bands, np.shape(image)[1])

@@ -113,7 +113,7 @@ def plan(scene: Scene) -> Plan:
 
 
 # ---------------------------------------------------------------------------------------------
-# Host-side scene arrays (shared with the numpy reference renderer)
+# Host-side scene arrays (shared with the numpy twin renderer)
 
 
 def camera_vectors(cam: dict):

@@ -181,7 +181,7 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
                 with np.errstate(divide="ignore"):
                     lod = 0.5 * (np.log2(1.0 / (nsamp * pdf)) - np.log2(mips.texel_solid_angle_at(w0, h0, le))) \
                         + effects["mip_bias"]
-            li = mips.chain_lookup_reference(chain, le, lod)
+            li = mips.chain_lookup_twin(chain, le, lod)
             wgt = brdf.v_smith_ggx_correlated(nov, nol, alpha) * 4 * nol * voh / noh
             contrib = li * brdf.f_schlick(voh[:, None], f0) * wgt[:, None]
             acc += np.where(ok[:, None], contrib, 0.0)
@@ -194,7 +194,7 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
             s = np.clip(1 - alpha, 0, 1)[:, None]
             r = n + (r - n) * (s * (np.sqrt(s) + alpha[:, None]))
             r /= np.linalg.norm(r, axis=1, keepdims=True)
-        pre = mips.chain_lookup_reference(prefiltered, to_env(r, rot), rough * (len(prefiltered) - 1))
+        pre = mips.chain_lookup_twin(prefiltered, to_env(r, rot), rough * (len(prefiltered) - 1))
         ab = mips.dfg_lookup(dfg, nov, rough)
         color += scale * pre * (f0 * ab[:, 0:1] + ab[:, 1:2])
     out[hit] = color
