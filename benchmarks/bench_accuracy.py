@@ -30,7 +30,8 @@ sys.path.insert(0, str(ROOT))
 from iblbake.core import brdf
 from iblbake.core import conventions
 from iblbake.io import images
-from iblbake.bake import chain as mips
+from iblbake.core import metrics
+from iblbake.bake import radiance
 from iblbake.render import frame as render
 from iblbake.scene import load as scene  # noqa: E402
 
@@ -67,11 +68,11 @@ def renderer_table(envs, roughness, cache: Path):
                 ref = render_sphere(tmp, cache, env, r, ref_fx(1))
                 hit = ref[..., 3] == 1
                 want = ref[..., :3][hit]
-                cells = [f"{mips.relative_rmse(render_sphere(tmp, cache, env, r, ref_fx(2))[..., :3][hit], want):.1%}"]
+                cells = [f"{metrics.relative_rmse(render_sphere(tmp, cache, env, r, ref_fx(2))[..., :3][hit], want):.1%}"]
                 for _, fx in modes:
                     got = render_sphere(tmp, cache, env, r, fx)[..., :3][hit]
                     ratio = (got @ LUMA).mean() / (want @ LUMA).mean()
-                    cells.append(f"{mips.relative_rmse(got, want):.1%} (mean x{ratio:.3f})")
+                    cells.append(f"{metrics.relative_rmse(got, want):.1%} (mean x{ratio:.3f})")
                 print(f"| {env} | {r:g} | " + " | ".join(cells) + " |", flush=True)
 
 
@@ -83,7 +84,7 @@ def split_sum_table(envs, roughness, f0=0.95, normals=24):
     ns /= np.linalg.norm(ns, axis=1, keepdims=True)
     for env in envs:
         img, _ = images.read_panorama(ROOT / "examples" / "panoramas" / f"{env}.exr")
-        img = mips.downsample_twin(img[..., :3], 512, 256)
+        img = radiance.downsample_twin(img[..., :3], 512, 256)
         h, w = img.shape[:2]
         dirs = conventions.equirect_texel_dirs(w, h).reshape(-1, 3)
         om = conventions.equirect_solid_angles(w, h).reshape(-1)
@@ -108,7 +109,7 @@ def split_sum_table(envs, roughness, f0=0.95, normals=24):
                     d = np.where(cr > 0, brdf.d_ggx(np.sqrt(np.maximum(0.5 * (1 + cr), 0)), a), 0.0) * om
                     for name, wgt in (("nol", d * np.maximum(cr, 0)), ("none", d)):
                         split[name].append((wgt @ lum) / wgt.sum() * energy)
-                cells = [f"{mips.relative_rmse(split[k], exacts):.1%} (x{np.mean(split[k]) / np.mean(exacts):.3f})"
+                cells = [f"{metrics.relative_rmse(split[k], exacts):.1%} (x{np.mean(split[k]) / np.mean(exacts):.3f})"
                          for k in ("nol", "none")]
                 print(f"| {env} | {r:g} | {nov:g} | " + " | ".join(cells) + " |", flush=True)
 

@@ -79,7 +79,7 @@ def main():
         try:
             outcome, message = ("ok" if load(f, cache) else "nonfinite"), ""
         except IblbakeError as e:
-            outcome, message = "error", e.format_message()
+            outcome, message = "error", str(e)
         except Hang as e:
             outcome, message = "hang", str(e)
         except BaseException:   # noqa: BLE001 -- exactly what the fuzzer hunts for

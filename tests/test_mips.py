@@ -3,7 +3,12 @@
 import numpy as np
 import pytest
 
-from iblbake.bake import chain as mips
+from iblbake.bake import dfg
+from iblbake.bake import layouts
+from iblbake.core import metrics
+from iblbake.bake import mips
+from iblbake.bake import prefilter
+from iblbake.bake import radiance
 from iblbake.bake import mips as mipsbake
 
 from .conftest import rel_err
@@ -18,28 +23,28 @@ def baker(rt):
 def test_radiance_chain_constant_and_mean_preserving(baker, w, h):
     img = np.full((h, w, 3), 2.0, np.float32)
     levels, _ = baker.radiance_chain(img)
-    ref = mips.radiance_chain_twin(img)
+    ref = radiance.radiance_chain_twin(img)
     assert [l.shape for l in levels] == [r.shape for r in ref]
     assert levels[-1].shape[0] == 1
     for l in levels:
         assert np.abs(l / 2.0 - 1).max() < 1e-4
     rnd = np.random.default_rng(0).random((h, w, 3)).astype(np.float32) * 5
     levels, _ = baker.radiance_chain(rnd)
-    ref = mips.radiance_chain_twin(rnd)
-    m0 = mips.solid_angle_mean(ref[0])
+    ref = radiance.radiance_chain_twin(rnd)
+    m0 = radiance.solid_angle_mean(ref[0])
     for a, b in zip(levels, ref):
         assert rel_err(a, b) < 1e-5
-        assert np.abs(mips.solid_angle_mean(b) / m0 - 1).max() < 1e-12
-        assert np.abs(mips.solid_angle_mean(a) / m0 - 1).max() < 1e-5
+        assert np.abs(radiance.solid_angle_mean(b) / m0 - 1).max() < 1e-12
+        assert np.abs(radiance.solid_angle_mean(a) / m0 - 1).max() < 1e-5
 
 
 @pytest.mark.assets
 def test_radiance_chain_mean_on_real_panoramas(baker, load_panorama):
     for name in ("city", "studio", "sunset", "night"):
         levels, _ = baker.radiance_chain(load_panorama(name))
-        m0 = mips.solid_angle_mean(levels[0])
+        m0 = radiance.solid_angle_mean(levels[0])
         for l in levels[1:]:
-            assert np.abs(mips.solid_angle_mean(l) / m0 - 1).max() < 1e-5, name
+            assert np.abs(radiance.solid_angle_mean(l) / m0 - 1).max() < 1e-5, name
 
 
 @pytest.mark.parametrize("layout", ["equirect", "cubemap", "octahedral"])
@@ -53,7 +58,7 @@ def test_prefiltered_constant_environment_every_layout(rt, layout, method):
     levels, methods = b.prefilter(chain, opts)
     assert methods[0] == "resample" and all(m.startswith(method) for m in methods[1:])
     for lvl in levels:
-        assert lvl.shape[:2] == mips.layout_shape(layout, lvl.shape[1] if layout != "equirect" else lvl.shape[0])
+        assert lvl.shape[:2] == layouts.layout_shape(layout, lvl.shape[1] if layout != "equirect" else lvl.shape[0])
         assert np.abs(lvl / 1.5 - 1).max() < 1e-4
 
 
@@ -62,7 +67,7 @@ def test_mirror_level_is_the_source_resampled(baker, layout):
     img = np.random.default_rng(1).random((32, 64, 3)).astype(np.float32)
     _, dev = baker.radiance_chain(img)
     got = baker.prefilter_level(dev, layout, 16, 0.0, 1)
-    dirs = mips.layout_dirs(layout, 16)
+    dirs = layouts.layout_dirs(layout, 16)
     from iblbake.core import conventions as cv
     u, v = cv.equirect_uv_from_dir(dirs)
     assert np.abs(got - cv.bilinear_equirect(img.astype(np.float64), u, v)).max() < 1e-3
@@ -78,12 +83,12 @@ def test_opencl_prefilter_matches_numpy(baker, roughness):
     levels, dev = baker.radiance_chain(img)
     chain64 = [l.astype(np.float64) for l in levels]
     for layout in ("equirect", "cubemap"):
-        dirs = mips.layout_dirs(layout, 8)
+        dirs = layouts.layout_dirs(layout, 8)
         got = baker.prefilter_level(dev, layout, 8, roughness, 64, 1.0, True)
-        ref = mips.prefilter_twin(chain64, dirs, roughness, 64, 1.0, True)
+        ref = prefilter.prefilter_twin(chain64, dirs, roughness, 64, 1.0, True)
         assert rel_err(got, ref) < 1e-4
         got = baker.convolve_level(levels, layout, 8, roughness)
-        ref = mips.convolve_twin(chain64, dirs, roughness)
+        ref = prefilter.convolve_twin(chain64, dirs, roughness)
         # float32 sums of ~1e4 weighted terms around a 500x spike: measured <= 1.8e-4
         assert rel_err(got, ref) < 5e-4
 
@@ -101,8 +106,8 @@ def test_default_chain_against_bruteforce_at_64x32(baker, load_panorama, name):
     chain = b.radiance_chain(small)
     out, methods = b.prefilter(chain, opts)
     for lvl, s, r in zip(out, opts["sizes"], opts["roughness"]):
-        ref = mips.prefilter_bruteforce(small.astype(np.float64), mips.layout_dirs("equirect", s), r)
-        assert mips.relative_rmse(lvl, ref) < 0.02, (name, r, mips.relative_rmse(lvl, ref))
+        ref = prefilter.prefilter_bruteforce(small.astype(np.float64), layouts.layout_dirs("equirect", s), r)
+        assert metrics.relative_rmse(lvl, ref) < 0.02, (name, r, metrics.relative_rmse(lvl, ref))
 
 
 def test_prefiltered_mean_close_to_source_mean(baker, load_panorama):
@@ -114,14 +119,14 @@ def test_prefiltered_mean_close_to_source_mean(baker, load_panorama):
         chain = b.radiance_chain(small)
         opts = mipsbake.PrefilterOptions("equirect").resolved(64)
         out, _ = b.prefilter(chain, opts)
-        m0 = mips.solid_angle_mean(small)
+        m0 = radiance.solid_angle_mean(small)
         for lvl in out:
-            assert np.abs(mips.solid_angle_mean(lvl) / m0 - 1).max() < 0.01, name
+            assert np.abs(radiance.solid_angle_mean(lvl) / m0 - 1).max() < 0.01, name
 
 
 def test_dfg_table(baker):
     t = baker.dfg(64, 512)
-    ref = mips.dfg_twin(64, 512)
+    ref = dfg.dfg_twin(64, 512)
     assert np.all(np.isfinite(t)) and np.all(t >= 0) and np.all(t <= 1)
     assert np.all(t.sum(-1) <= 1 + 1e-6)
     assert np.abs(t[0, -1] - [1, 0]).max() < 1e-3          # NoV = 1, r = 0
@@ -170,7 +175,7 @@ def test_spectral_closed_form_at_roughness_one():
     assert abs(k[1] - 2 / 3) < 1e-9 and abs(k[2] - 0.25) < 1e-9 and abs(k[3]) < 1e-9
     img = _texel_average_legendre(256, 512)
     for layout in ("equirect", "cubemap", "octahedral"):
-        dirs = mips.layout_dirs(layout, 16)
+        dirs = layouts.layout_dirs(layout, 16)
         got = spectral.prefilter_levels(img, [dirs], [1.0])[0]
         y = dirs[..., 1]
         want = 1.0 + (2.0 / 3.0) * y + 0.25 * (3 * y * y - 1) / 2
@@ -206,10 +211,10 @@ def test_spectral_against_bruteforce(baker, load_panorama):
     levels, _ = baker.radiance_chain(load_panorama("city"))
     small = levels[5].astype(np.float64)
     for r, layout in ((0.125, "cubemap"), (0.5, "equirect"), (1.0, "octahedral")):
-        dirs = mips.layout_dirs(layout, 8)
+        dirs = layouts.layout_dirs(layout, 8)
         got = spectral.prefilter_levels(small, [dirs], [r])[0]
-        ref = mips.prefilter_bruteforce(small, dirs, r)
-        assert mips.relative_rmse(got, ref) < 3e-3, (r, layout, mips.relative_rmse(got, ref))
+        ref = prefilter.prefilter_bruteforce(small, dirs, r)
+        assert metrics.relative_rmse(got, ref) < 3e-3, (r, layout, metrics.relative_rmse(got, ref))
 
 
 def test_auto_plan_spectral_then_fallback_and_explicit_error():
@@ -217,7 +222,7 @@ def test_auto_plan_spectral_then_fallback_and_explicit_error():
     beyond MAX_LMAX; --method spectral then says which level and what to do."""
     from iblbake.bake import spectral
     from iblbake.errors import InputError
-    chain = mips.radiance_chain_sizes(64, 32)
+    chain = layouts.radiance_chain_sizes(64, 32)
     opts = mipsbake.PrefilterOptions("equirect", 32, 9).resolved(32)
     methods = mipsbake.plan_methods(chain, {**opts, "convolve_budget": 1e9})
     assert methods == ["resample"] + ["spectral"] * 8
@@ -239,14 +244,14 @@ def test_spectral_lone_sun_over_black_stays_in_range_and_keeps_energy():
     from iblbake.bake import spectral
     img = np.zeros((64, 128, 3))
     img[20, 40] = 1e6
-    m0 = mips.solid_angle_mean(img)[0]
+    m0 = radiance.solid_angle_mean(img)[0]
     rough = [0.125, 0.25, 0.5, 1.0]
     for layout in ("equirect", "cubemap", "octahedral"):
-        out = spectral.prefilter_levels(img, [mips.layout_dirs(layout, 32)] * 4, rough)
+        out = spectral.prefilter_levels(img, [layouts.layout_dirs(layout, 32)] * 4, rough)
         for r, lvl in zip(rough, out):
             assert lvl.min() >= 0.0 and lvl.max() <= 1e6, (layout, r)
             if layout == "equirect":
-                assert abs(mips.solid_angle_mean(lvl)[0] / m0 - 1) < 0.01, r
+                assert abs(radiance.solid_angle_mean(lvl)[0] / m0 - 1) < 0.01, r
                 sun = cv.equirect_texel_dirs(128, 64)[20, 40]
                 at = np.unravel_index(np.argmax(lvl[..., 0]), lvl.shape[:2])
-                assert mips.layout_dirs("equirect", 32)[at] @ sun > np.cos(np.pi / 32), r
+                assert layouts.layout_dirs("equirect", 32)[at] @ sun > np.cos(np.pi / 32), r

@@ -11,7 +11,9 @@ import yaml
 
 from iblbake.core import conventions
 from iblbake.io import images
-from iblbake.bake import chain as mips
+from iblbake.bake import dfg
+from iblbake.core import metrics
+from iblbake.bake import radiance
 from iblbake.render import frame as render
 from iblbake.render import twin as rr
 from iblbake.scene import load as scene
@@ -80,7 +82,7 @@ def shared_cache(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def dfg_fine():
-    return mips.dfg_twin(64, 4096)
+    return dfg.dfg_twin(64, 4096)
 
 
 # --- white furnace ------------------------------------------------------------------------------
@@ -101,7 +103,7 @@ def test_white_furnace(tmp_path, constant_env, dfg_fine, metallic, specular):
         n = rr.facing_normal(gb["normal"][hit], v)
         nov = np.maximum((n * v).sum(1), 1e-4)
         f0 = 0.04 * (1 - metallic) + metallic
-        ab = mips.dfg_lookup(dfg_fine, nov, np.full(len(nov), r))
+        ab = dfg.dfg_lookup(dfg_fine, nov, np.full(len(nov), r))
         kd = (1 - (f0 + (max(1 - r, f0) - f0) * (1 - nov) ** 5)) * (1 - metallic)
         predicted = (kd + f0 * ab[:, 0] + ab[:, 1]).mean()
         got = frame.hdr[..., :3].reshape(-1, 3)[hit].mean()
@@ -206,7 +208,7 @@ def test_shade_matches_numpy(tmp_path, small_panoramas, mesh_file, effects):
     if fx["diffuse"] == "sh":
         kw["sh_coeffs"] = sh.project(image, 3) * sh.ahat(3)[:, None]
     if fx["specular"] == "importance":
-        kw["chain"] = mips.radiance_chain_twin(image)
+        kw["chain"] = radiance.radiance_chain_twin(image)
     if fx["specular"] == "prefiltered":
         kw.update(prefiltered_bakes(frame))
     ref = rr.shade(gb, arrays, fx, sc["environment"], **kw).reshape(48, 64, 2, 3)
@@ -233,7 +235,7 @@ def test_reference_converges_to_exact_integral(tmp_path, small_panoramas, load_p
         want = rr.exact(gb, render.scene_arrays(sc), sc["effects"], sc["environment"], small, sub=4)
         hit = gb["hit"].reshape(24, 24)
         got = frame.hdr[..., :3][hit]
-        assert mips.relative_rmse(got, want.reshape(24, 24, 3)[hit]) < 0.01
+        assert metrics.relative_rmse(got, want.reshape(24, 24, 3)[hit]) < 0.01
 
 
 @pytest.mark.parametrize("env", ["city", "studio"])
@@ -256,7 +258,7 @@ def test_modes_agree_with_reference(tmp_path, panoramas, shared_cache, env):
         for mode, extra, bound in (("importance", {"samples": 1024}, 0.05), ("prefiltered", {}, 0.30)):
             p = make_scene(tmp_path, path, mat, effects={"diffuse": "off", "specular": mode, **extra}, **common)
             _, got = render_scene(p, shared_cache)
-            err = mips.relative_rmse(got.hdr[..., :3][hit], ref.hdr[..., :3][hit])
+            err = metrics.relative_rmse(got.hdr[..., :3][hit], ref.hdr[..., :3][hit])
             print(f"{env} r={r} {mode}: relative RMSE {err:.4f}")
             assert err < bound, (env, r, mode, err)
     mat = {"base_color": [0.8, 0.8, 0.8], "metallic": 0, "roughness": 0.5}
@@ -269,7 +271,7 @@ def test_modes_agree_with_reference(tmp_path, panoramas, shared_cache, env):
     for bands in (3, 5):
         p = make_scene(tmp_path, path, mat, res=48, effects={"diffuse": "sh", "specular": "off", "sh_bands": bands})
         _, got = render_scene(p, shared_cache)
-        errs[bands] = mips.relative_rmse(got.hdr[..., :3][hit], ref.hdr[..., :3][hit])
+        errs[bands] = metrics.relative_rmse(got.hdr[..., :3][hit], ref.hdr[..., :3][hit])
         print(f"{env} SH diffuse, {bands} bands: relative RMSE {errs[bands]:.4f}")
     # 3 bands: the band-limit error of the classic 9 coefficients (studio's saturated lights: 7%);
     # 5 bands (l <= 4; Ahat_3 = 0) brings it under 3%

@@ -17,7 +17,9 @@ from hypothesis import strategies as st
 
 from iblbake.core import brdf
 from iblbake.core import conventions as cv
-from iblbake.bake import chain as mips
+from iblbake.bake import dfg
+from iblbake.bake import mips
+from iblbake.bake import radiance
 from iblbake.core import sh
 from iblbake.bake import sh as shbake
 
@@ -102,9 +104,9 @@ def test_single_sun_texel_sh_and_mips(rt, stress, value, w, h):
     # radiance chain: energy (solid-angle-weighted mean) conserved on every level
     baker = mips.OpenCLBaker(rt)
     levels, _ = baker.radiance_chain(img)
-    m0 = mips.solid_angle_mean(img)[0]
+    m0 = radiance.solid_angle_mean(img)[0]
     assert all(np.all(np.isfinite(lvl)) for lvl in levels)
-    worst = max(abs(mips.solid_angle_mean(lvl)[0] / m0 - 1) for lvl in levels)
+    worst = max(abs(radiance.solid_angle_mean(lvl)[0] / m0 - 1) for lvl in levels)
     stress.check(f"sun {value:g} in {w}x{h}: radiance chain energy, worst level", worst, 1e-4, "rel")
     if w == 64:
         chain = [l for l in levels]
@@ -197,7 +199,7 @@ def test_dfg_edges(rt, stress):
     """NoV = 0 (floored at 1e-4) and r = 0 rows: finite, in [0, 1], and the r = 0 row equals
     Schlick's split A = 1 - (1-NoV)^5, B = (1-NoV)^5 on OpenCL and numpy."""
     t = mips.OpenCLBaker(rt).dfg(64, 1024)
-    ref = mips.dfg_twin(64, 1024)
+    ref = dfg.dfg_twin(64, 1024)
     nov = np.maximum(np.arange(64) / 63, 1e-4)
     for name, table in (("OpenCL", t), ("numpy", ref)):
         assert np.isfinite(table).all() and table.min() >= 0 and table.max() <= 1

@@ -18,7 +18,8 @@ import yaml
 from iblbake.core import brdf
 from iblbake.core import conventions as cv
 from iblbake.io import images
-from iblbake.bake import chain as mips
+from iblbake.bake import dfg
+from iblbake.bake import radiance
 from iblbake.render import frame as render
 from iblbake.render import twin as rr
 from iblbake.core import sampling
@@ -38,7 +39,7 @@ def one_env(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def dfg_fine():
-    return mips.dfg_twin(64, 4096)
+    return dfg.dfg_twin(64, 4096)
 
 
 def write_scene(folder: Path, env, materials: dict, objects: list, camera: dict, effects: dict, output=None):
@@ -51,10 +52,10 @@ def write_scene(folder: Path, env, materials: dict, objects: list, camera: dict,
     return scene.load(p)
 
 
-def furnace_prediction(gb, arrays, dfg):
+def furnace_prediction(gb, arrays, table):
     """kD base + F0 A + B per hit sample (the white furnace closed form)."""
     v, n, nov, (base, metallic, emissive, rough, f0) = rr.surface(gb, arrays)
-    ab = mips.dfg_lookup(dfg, nov, rough)
+    ab = dfg.dfg_lookup(table, nov, rough)
     kd = (1 - brdf.f_schlick_roughness(nov[:, None], f0, rough[:, None])) * (1 - metallic[:, None])
     return kd * base + f0 * ab[:, 0:1] + ab[:, 1:2]
 
@@ -70,7 +71,7 @@ def twin_shade(sc, frame, gb, arrays, env_image):
         from iblbake.core import sh
         kw["sh_coeffs"] = sh.project(env_image, fx["sh_bands"]) * sh.ahat(fx["sh_bands"])[:, None]
     if fx["specular"] == "importance":
-        kw["chain"] = mips.radiance_chain_twin(env_image)
+        kw["chain"] = radiance.radiance_chain_twin(env_image)
     if fx["specular"] == "prefiltered":
         kw.update(prefiltered_bakes(frame))
     fx2 = dict(fx)
@@ -81,7 +82,7 @@ def twin_shade(sc, frame, gb, arrays, env_image):
     return out + rr.shade(gb, arrays, fx2, sc["environment"], **kw)
 
 
-def check_furnace(stress, case, sc, frame, env_image, dfg, bound=0.02):
+def check_furnace(stress, case, sc, frame, env_image, table, bound=0.02):
     """Kernel and twin against the closed form, per material."""
     arrays = render.scene_arrays(sc)
     gb = rr.primary(sc["camera"], arrays)
@@ -89,7 +90,7 @@ def check_furnace(stress, case, sc, frame, env_image, dfg, bound=0.02):
     assert np.isfinite(frame.hdr).all()
     for a in frame.aovs.values():
         assert np.isfinite(a).all()
-    pred = furnace_prediction(gb, arrays, dfg)
+    pred = furnace_prediction(gb, arrays, table)
     got = frame.hdr[..., :3].reshape(-1, 3)[hit]
     twin = twin_shade(sc, frame, gb, arrays, env_image)[hit]
     assert np.isfinite(twin).all()
@@ -246,12 +247,12 @@ def test_chain_lookup_at_poles_seam_and_extreme_levels(rt, stress):
     fractions, past the last level, 1e30, +inf and NaN (the delta lobe's 0/0 pdf): finite, equal,
     and NaN reads level 0, +inf the coarsest level."""
     rng = np.random.default_rng(8)
-    levels = mips.radiance_chain_twin(rng.random((16, 32, 3)) + 0.1)
+    levels = radiance.radiance_chain_twin(rng.random((16, 32, 3)) + 0.1)
     dirs = _edge_directions()
     lods = np.array([-np.inf, -1e30, -1.0, 0.0, 0.4, 2.5, len(levels) - 1, len(levels) + 5, 1e30, np.inf, np.nan])
     d = np.repeat(dirs, len(lods), axis=0)
     lod = np.tile(lods, len(dirs))
-    want = mips.chain_lookup_twin(levels, d, lod)
+    want = radiance.chain_lookup_twin(levels, d, lod)
     prg = rt.program("selftest.cl", {"SH_BANDS": 3})
     chain, (off, lw, lh), nlev = render._chain_buffers(rt, [l.astype(np.float32) for l in levels])
     out = rt.empty(len(d) * 12)
@@ -263,7 +264,7 @@ def test_chain_lookup_at_poles_seam_and_extreme_levels(rt, stress):
     stress.check("chain lookup at poles/seam, lod +-inf/NaN/out of range: OpenCL vs numpy", err, 1e-5, "rel")
     nan_rows, zero_rows = lod != lod, lod == 0
     assert np.allclose(want[nan_rows], want[zero_rows])
-    top = mips.chain_lookup_twin(levels, dirs, np.full(len(dirs), len(levels) - 1.0))
+    top = radiance.chain_lookup_twin(levels, dirs, np.full(len(dirs), len(levels) - 1.0))
     assert np.allclose(want[lod == np.inf], top)
 
 
@@ -321,7 +322,7 @@ def test_importance_mip_selection_pdf_extremes(tmp_path, stress, one_env, dfg_fi
         arrays = render.scene_arrays(sc)
         gb = rr.primary(sc["camera"], arrays)
         twin = rr.shade(gb, arrays, sc["effects"], sc["environment"],
-                        chain=mips.radiance_chain_twin(np.ones((16, 32, 3))))
+                        chain=radiance.radiance_chain_twin(np.ones((16, 32, 3))))
         assert np.isfinite(twin).all()
         if n == 100:
             check_furnace(stress, "importance N=100 (not a power of two), r = 0 and 1", sc, frame,
@@ -352,8 +353,8 @@ def test_sun_panorama_through_every_mode(tmp_path, stress, value):
             rep = {b["name"]: b for b in frame.report["bakes"]}
             entry = Path(rep["prefiltered"]["entry"])
             man = json.loads((entry / "manifest.json").read_text())
-            m0 = mips.solid_angle_mean(img)[0]
-            worst = max(abs(mips.solid_angle_mean(images.read_exr(entry / f["name"])[..., :3])[0] / m0 - 1)
+            m0 = radiance.solid_angle_mean(img)[0]
+            worst = max(abs(radiance.solid_angle_mean(images.read_exr(entry / f["name"])[..., :3])[0] / m0 - 1)
                         for f in man["files"])
             stress.check(f"sun {value:g}: prefiltered chain energy vs panorama", worst, 0.01, "rel")
 

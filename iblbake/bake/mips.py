@@ -20,7 +20,11 @@ import numpy as np
 from iblbake.bake import cache
 from iblbake.device import runtime as cl
 from iblbake.io import images
-from iblbake.bake import chain as mips
+from iblbake.bake import dfg
+from iblbake.bake import layouts
+from iblbake.bake import mips
+from iblbake.bake import prefilter
+from iblbake.bake import radiance
 from iblbake.bake import spectral
 from iblbake.errors import InputError
 
@@ -40,7 +44,7 @@ class PrefilterOptions:
     layout: str = "equirect"
     size: int | None = None
     levels: int | None = None
-    min_size: int = mips.MIN_LEVEL_SIZE
+    min_size: int = layouts.MIN_LEVEL_SIZE
     method: str = "auto"
     samples: int = DEFAULT_SAMPLES
     lod_bias: float = DEFAULT_LOD_BIAS
@@ -48,15 +52,15 @@ class PrefilterOptions:
     convolve_budget: float | None = None   # None: CONVOLVE_BUDGET of the device kind
 
     def resolved(self, src_height: int) -> dict:
-        base = self.size or mips.default_base_size(self.layout, src_height)
-        sizes = mips.prefiltered_sizes(base, self.levels, self.min_size)
+        base = self.size or layouts.default_base_size(self.layout, src_height)
+        sizes = layouts.prefiltered_sizes(base, self.levels, self.min_size)
         return {"layout": self.layout, "base_size": base, "sizes": sizes,
-                "roughness": mips.level_roughness(len(sizes)), "method": self.method,
+                "roughness": layouts.level_roughness(len(sizes)), "method": self.method,
                 "samples": self.samples, "lod_bias": self.lod_bias, "fis": self.fis,
                 "convolve_budget": self.convolve_budget}
 
 
-CONVOLVE_RESOLUTIONS = (12.0, 6.0)   # texels per lobe scale, finest first (see mips.TEXELS_PER_LOBE)
+CONVOLVE_RESOLUTIONS = (12.0, 6.0)   # texels per lobe scale, finest first (see prefilter.TEXELS_PER_LOBE)
 
 
 def plan_methods(chain_sizes, opts: dict, method_name: str = "method") -> list[str]:
@@ -78,12 +82,88 @@ def plan_methods(chain_sizes, opts: dict, method_name: str = "method") -> list[s
         elif opts["method"] == "fis":
             out.append("fis")
         else:
-            shape = mips.layout_shape(opts["layout"], s)
+            shape = layouts.layout_shape(opts["layout"], s)
             n = shape[0] * shape[1]
             fits = [t for t in CONVOLVE_RESOLUTIONS
-                    if mips.convolve_cost(chain_sizes, n, r * r, t) <= opts["convolve_budget"]]
+                    if prefilter.convolve_cost(chain_sizes, n, r * r, t) <= opts["convolve_budget"]]
             out.append(f"convolve@{fits[0]:g}" if fits else "fis")
     return out
+
+
+class OpenCLBaker:
+    """Runs kernels/mips.cl on one device (iblbake.cl.Runtime)."""
+
+    def __init__(self, rt):
+        self.rt = rt
+
+    def radiance_chain(self, image):
+        """Every level as float32 (h, w, 3), and the device buffer of the concatenated chain."""
+        rt = self.rt
+        sizes = layouts.radiance_chain_sizes(image.shape[1], image.shape[0])
+        offsets = np.cumsum([0] + [w * h for w, h in sizes])
+        buf = rt.empty(int(offsets[-1]) * 16)
+        rt.cl.enqueue_copy(rt.queue, buf, radiance.to_rgba(image))
+        k = rt.kernel("mips.cl", "downsample")
+        for lvl in range(1, len(sizes)):
+            (sw, sh), (dw, dh) = sizes[lvl - 1], sizes[lvl]
+            rt.run(k, (dw, dh), None, buf, np.int32(offsets[lvl - 1]), np.int32(sw), np.int32(sh),
+                   np.int32(offsets[lvl]), np.int32(dw), np.int32(dh))
+        flat = rt.read(buf, (int(offsets[-1]), 4))
+        levels = [flat[offsets[i]:offsets[i + 1], :3].reshape(h, w, 3) for i, (w, h) in enumerate(sizes)]
+        return levels, (buf, offsets, sizes)
+
+    def _chain_args(self, device_chain):
+        buf, offsets, sizes = device_chain
+        rt = self.rt
+        off = rt.to_device(np.asarray(offsets[:-1], np.int32))
+        lw = rt.to_device(np.asarray([w for w, _ in sizes], np.int32))
+        lh = rt.to_device(np.asarray([h for _, h in sizes], np.int32))
+        return (buf, off, lw, lh, np.int32(len(sizes)))
+
+    def prefilter_level(self, device_chain, layout: str, s: int, roughness: float, n_samples: int,
+                        lod_bias: float = 0.0, fis: bool = True):
+        rt = self.rt
+        shape = layouts.layout_shape(layout, s)
+        n = shape[0] * shape[1]
+        out = rt.empty(n * 16)
+        defines = {"LAYOUT": layouts.LAYOUT_IDS[layout]}
+        chain_args = self._chain_args(device_chain)
+        global_size = (-(-n // 64) * 64,)
+        if roughness == 0.0:
+            k = rt.kernel("mips.cl", "resample", defines)
+            rt.run(k, global_size, None, *chain_args, np.int32(s), np.int32(n), out)
+        else:
+            ss = prefilter.ggx_sample_set(roughness * roughness, n_samples)
+            k = rt.kernel("mips.cl", "prefilter", defines)
+            rt.run(k, global_size, None, *chain_args, rt.to_device(ss.rows), np.int32(len(ss.rows)),
+                   np.float32(lod_bias), np.int32(1 if fis else 0), np.int32(s), np.int32(n), out)
+        return rt.read(out, (n, 4))[:, :3].reshape(shape + (3,))
+
+    def convolve_level(self, chain_levels, layout: str, s: int, roughness: float,
+                       texels_per_lobe: float = prefilter.TEXELS_PER_LOBE):
+        """One prefiltered level by the deterministic `convolve` kernel."""
+        rt = self.rt
+        alpha = roughness * roughness
+        sizes = [(c.shape[1], c.shape[0]) for c in chain_levels]
+        lvl, sub = prefilter.convolve_level_choice(sizes, alpha, texels_per_lobe)
+        src = chain_levels[lvl]
+        shape = layouts.layout_shape(layout, s)
+        n = shape[0] * shape[1]
+        out = rt.empty(n * 16)
+        k = rt.kernel("mips.cl", "convolve", {"LAYOUT": layouts.LAYOUT_IDS[layout]})
+        col = prefilter.column_sin_cos(src.shape[1] * sub).astype(np.float32)
+        rt.run(k, (-(-n // 64) * 64,), None, rt.to_device(radiance.to_rgba(src)), np.int32(src.shape[1]),
+               np.int32(src.shape[0]), rt.to_device(col), np.int32(sub), np.float32(alpha),
+               np.float32(prefilter.lobe_cutoff(alpha)), np.int32(s), np.int32(n), out)
+        return rt.read(out, (n, 4))[:, :3].reshape(shape + (3,))
+
+    def dfg(self, size: int, n_samples: int, multiscatter: bool = False):
+        rt = self.rt
+        out = rt.empty(size * size * 8)
+        defines = {"MULTISCATTER": 1} if multiscatter else {}
+        k = rt.kernel("mips.cl", "dfg", defines)
+        rt.run(k, (size, size), None, np.int32(size), np.int32(n_samples), out)
+        return rt.read(out, (size, size, 2))
 
 
 class Baker:
@@ -103,7 +183,7 @@ class Baker:
         if self.gpu:
             levels, self._device_chain = self.gpu.radiance_chain(image)
             return levels
-        return [c.astype(np.float32) for c in mips.radiance_chain_twin(image)]
+        return [c.astype(np.float32) for c in radiance.radiance_chain_twin(image)]
 
     def convolve_budget(self, opts: dict) -> float:
         if opts.get("convolve_budget") is not None:
@@ -119,7 +199,7 @@ class Baker:
         layout = opts["layout"]
         # every spectral level from one projection of the source (host, float64, either backend)
         todo = [(s, r) for s, r, how in zip(opts["sizes"], opts["roughness"], methods) if how == "spectral"]
-        done = iter(spectral.prefilter_levels(chain[0], [mips.layout_dirs(layout, s) for s, _ in todo],
+        done = iter(spectral.prefilter_levels(chain[0], [layouts.layout_dirs(layout, s) for s, _ in todo],
                                               [r for _, r in todo]) if todo else [])
         out = []
         chain64 = None if self.gpu else [c.astype(np.float64) for c in chain]
@@ -135,11 +215,11 @@ class Baker:
                     img = self.gpu.prefilter_level(self._device_chain, layout, s, 0.0 if how == "resample" else r,
                                                    opts["samples"], opts["lod_bias"], opts["fis"])
             else:
-                dirs = mips.layout_dirs(layout, s)
+                dirs = layouts.layout_dirs(layout, s)
                 if how.startswith("convolve"):
-                    img = mips.convolve_twin(chain64, dirs, r, float(how.split("@")[1]))
+                    img = prefilter.convolve_twin(chain64, dirs, r, float(how.split("@")[1]))
                 else:
-                    img = mips.prefilter_twin(chain64, dirs, 0.0 if how == "resample" else r,
+                    img = prefilter.prefilter_twin(chain64, dirs, 0.0 if how == "resample" else r,
                                                    opts["samples"], opts["lod_bias"], opts["fis"])
             out.append(np.asarray(img, np.float32))
             if progress:
@@ -149,7 +229,7 @@ class Baker:
     def dfg(self, size: int, samples: int, multiscatter: bool):
         if self.gpu:
             return self.gpu.dfg(size, samples, multiscatter)
-        return mips.dfg_twin(size, samples, multiscatter).astype(np.float32)
+        return dfg.dfg_twin(size, samples, multiscatter).astype(np.float32)
 
 
 def _check_finite(name, img):

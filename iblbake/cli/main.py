@@ -299,7 +299,7 @@ def sh_command(env, output, force, bands, window, backend, rotate_y, intensity, 
 @click.option("--levels", type=click.IntRange(1, 32), default=None,
               help="Levels K of the prefiltered chain, roughness r_k = k/(K-1). Default: one per halving "
                    "of --size down to --min-size.")
-@click.option("--min-size", type=click.IntRange(min=1), default=8, show_default=True,  # mips.MIN_LEVEL_SIZE
+@click.option("--min-size", type=click.IntRange(min=1), default=8, show_default=True,  # layouts.MIN_LEVEL_SIZE
               help="Smallest level size of the prefiltered chain.")
 @click.option("--method", type=click.Choice(["auto", "spectral", "convolve", "fis"]), default="auto",
               show_default=True,
@@ -338,7 +338,7 @@ def mips_command(env, cache_dir, layout, size, levels, min_size, method, samples
 
     from iblbake.bake import cache
     from iblbake.io import images
-    from iblbake.bake import chain as mips
+    from iblbake.bake import layouts
     from iblbake.bake import mips as mipsbake
 
     con = Console(quiet, as_json)
@@ -360,7 +360,7 @@ def mips_command(env, cache_dir, layout, size, levels, min_size, method, samples
             opts = mipsbake.PrefilterOptions(layout, size, levels, min_size, method, samples, lod_bias,
                                              not no_fis, convolve_budget).resolved(info.height)
             # an impossible plan (--method spectral on a too sharp level) fails before any bake
-            mipsbake.plan_methods(mips.radiance_chain_sizes(info.width, info.height),
+            mipsbake.plan_methods(layouts.radiance_chain_sizes(info.width, info.height),
                                   {**opts, "convolve_budget": baker.convolve_budget(opts)}, "--method")
         t0 = time.perf_counter()
         manifest, cached, chain = mipsbake.bake_radiance(baker, image, info, root, policies, warn=con.warn)

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from iblbake.bake import cache
+from iblbake.bake.radiance import to_rgba
 from iblbake.device import runtime as cl
 from iblbake.core import sampling
 from iblbake.errors import IblbakeError
@@ -285,7 +286,7 @@ class Frame:
 
 def _chain_buffers(rt, levels):
     """One buffer of levels back to back (RGBA) and the offset/size tables chain_lookup reads."""
-    from iblbake.bake import chain as mips
+    from iblbake.bake import radiance
 
     offs, lws, lhs, parts = [], [], [], []
     o = 0
@@ -294,7 +295,7 @@ def _chain_buffers(rt, levels):
         offs.append(o)
         lws.append(w)
         lhs.append(h)
-        parts.append(mips.to_rgba(lvl).reshape(-1, 4))
+        parts.append(radiance.to_rgba(lvl).reshape(-1, 4))
         o += w * h
     data = np.concatenate(parts).astype(np.float32)
     consts = [rt.to_device(np.asarray(x, np.int32)) for x in (offs, lws, lhs)]
@@ -304,7 +305,7 @@ def _chain_buffers(rt, levels):
 def render(scene: Scene, *, device: str | None = None, cache_root: Path | None = None,
            warn=None, progress=None) -> Frame:
     from iblbake.io import images
-    from iblbake.bake import chain as mips
+    from iblbake.bake import layouts
     from iblbake.bake import mips as mipsbake
 
     t_start = time.perf_counter()
@@ -367,7 +368,7 @@ def render(scene: Scene, *, device: str | None = None, cache_root: Path | None =
     if "prefiltered" in pl.bakes:
         t0 = time.perf_counter()
         p = fx["prefilter"]
-        opts = mipsbake.PrefilterOptions("equirect", p["size"], p["levels"], mips.MIN_LEVEL_SIZE, p["method"],
+        opts = mipsbake.PrefilterOptions("equirect", p["size"], p["levels"], layouts.MIN_LEVEL_SIZE, p["method"],
                                          p["samples"], p["lod_bias"], True).resolved(info.height)
         state = {"chain": chain}
 
@@ -468,7 +469,7 @@ def render(scene: Scene, *, device: str | None = None, cache_root: Path | None =
         ref = fx["reference"]
         k = kern("reference")
         marginal, cond, pdf = cdf
-        img_buf = rt.to_device(mips.to_rgba(image).astype(np.float32))
+        img_buf = rt.to_device(to_rgba(image).astype(np.float32))
         args_pre = [gb_pos, gb_nrm, gb_dir, np.int32(n), mats_buf, env_rot, env_scale, img_buf,
                     np.int32(image.shape[1]), np.int32(image.shape[0]), rt.to_device(marginal),
                     rt.to_device(cond), rt.to_device(pdf)]

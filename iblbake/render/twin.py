@@ -14,7 +14,9 @@ import numpy as np
 
 from iblbake.core import brdf
 from iblbake.core import conventions
-from iblbake.bake import chain as mips
+from iblbake.bake.dfg import dfg_lookup
+from iblbake.bake import prefilter
+from iblbake.bake import radiance
 from iblbake.core import sampling
 from iblbake.core import sh
 from iblbake.render.frame import camera_vectors, pixel_jitter
@@ -179,9 +181,9 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
             else:
                 pdf = brdf.d_ggx(noh, alpha) * noh / (4 * np.maximum(voh, 1e-30))
                 with np.errstate(divide="ignore"):
-                    lod = 0.5 * (np.log2(1.0 / (nsamp * pdf)) - np.log2(mips.texel_solid_angle_at(w0, h0, le))) \
+                    lod = 0.5 * (np.log2(1.0 / (nsamp * pdf)) - np.log2(radiance.texel_solid_angle_at(w0, h0, le))) \
                         + effects["mip_bias"]
-            li = mips.chain_lookup_twin(chain, le, lod)
+            li = radiance.chain_lookup_twin(chain, le, lod)
             wgt = brdf.v_smith_ggx_correlated(nov, nol, alpha) * 4 * nol * voh / noh
             contrib = li * brdf.f_schlick(voh[:, None], f0) * wgt[:, None]
             acc += np.where(ok[:, None], contrib, 0.0)
@@ -194,8 +196,8 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
             s = np.clip(1 - alpha, 0, 1)[:, None]
             r = n + (r - n) * (s * (np.sqrt(s) + alpha[:, None]))
             r /= np.linalg.norm(r, axis=1, keepdims=True)
-        pre = mips.chain_lookup_twin(prefiltered, to_env(r, rot), rough * (len(prefiltered) - 1))
-        ab = mips.dfg_lookup(dfg, nov, rough)
+        pre = radiance.chain_lookup_twin(prefiltered, to_env(r, rot), rough * (len(prefiltered) - 1))
+        ab = dfg_lookup(dfg, nov, rough)
         color += scale * pre * (f0 * ab[:, 0:1] + ab[:, 1:2])
     out[hit] = color
     return out
@@ -211,7 +213,7 @@ def exact(gb, arrays, effects: dict, env: dict, image, sub: int = 2, chunk: int 
     v, n, nov, (base, metallic, emissive, rough, f0) = surface(gb, arrays)
     alpha = rough ** 2
     hgt, wid = image.shape[:2]
-    dirs, omega = mips._texel_subsamples(wid, hgt, sub)
+    dirs, omega = prefilter.texel_subsamples(wid, hgt, sub)
     dirs = conventions.rotate_y(dirs.reshape(-1, 3), env["rotation_y"])     # panorama -> world
     omega = omega.reshape(-1)
     radiance = np.repeat(image.reshape(-1, 3).astype(np.float64), sub * sub, axis=0) * env["intensity"]
