@@ -32,7 +32,7 @@ from iblbake.core import conventions
 from iblbake.io import images
 from iblbake.core import metrics
 from iblbake.bake import radiance
-from iblbake.render import frame as render
+from iblbake import render
 from iblbake.scene import load as scene  # noqa: E402
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])

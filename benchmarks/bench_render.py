@@ -16,7 +16,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from iblbake.render import frame as render
+from iblbake import render
 from iblbake.scene import load as scene  # noqa: E402
 
 CONFIGS = [

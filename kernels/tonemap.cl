@@ -1,24 +1,18 @@
 /* The tone-mapping pass: linear HDR frame -> 8-bit display frame (see tonemap.h).
  * DITHER: add triangular noise of +-1 LSB (a fixed hash of the pixel index, so frames stay
- * bit-identical run to run) before rounding; twin: iblbake/tonemap.py dither_offsets. */
+ * bit-identical run to run, and the same in a tiled frame: pixel0 + i) before rounding; twin: iblbake/tonemap.py dither_offsets. */
 #include "tonemap.h"
-
-inline uint tonemap_hash(uint x)
-{
-    uint state = x * 747796405u + 2891336453u;
-    uint word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
-    return (word >> 22u) ^ word;
-}
+#include "sampling.h"
 
 __kernel void tonemap_u8(__global const float4 *hdr, const float exposure_scale, const float gamma,
-                         const int n, __global uchar4 *out, __global float4 *display)
+                         const int n, const int pixel0, __global uchar4 *out, __global float4 *display)
 {
     const int i = get_global_id(0);
     if (i >= n) return;
     const float3 y = tonemap_display(hdr[i].xyz, exposure_scale, gamma);
     display[i] = (float4)(y, 1.0f);
 #ifdef DITHER
-    const uint h1 = tonemap_hash((uint)i), h2 = tonemap_hash(h1);
+    const uint h1 = pcg_hash((uint)(pixel0 + i)), h2 = pcg_hash(h1);
     const float tri = (float)(h1 >> 8) * (1.0f / 16777216.0f) + (float)(h2 >> 8) * (1.0f / 16777216.0f) - 1.0f;
     const float3 q = clamp(floor(y * 255.0f + 0.5f + tri), 0.0f, 255.0f);
 #else

@@ -51,7 +51,7 @@ def load_image(path, cache):
 
 
 def load_scene(path, cache):
-    from iblbake.render import frame as render
+    from iblbake import render
     from iblbake.scene import load as scene
     sc = scene.load(path)
     # keep every accepted mutation cheap to render: tiny frame, few reference samples

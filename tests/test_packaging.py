@@ -37,7 +37,7 @@ def test_source_checkout_without_install_finds_the_kernels(tmp_path):
     site = sysconfig.get_paths()["purelib"]
     code = (f"import sys; sys.path.insert(0, {str(ROOT)!r}); sys.path.append({site!r}); "
             "import importlib.util as u; assert u.find_spec('iblbake.kernels') is None, 'installed'; "
-            "from iblbake.device import runtime; print(len(runtime.kernel_source('render.cl')))")
+            "from iblbake.device import runtime; print(len(runtime.kernel_source('reference.cl')))")
     p = subprocess.run([sys.executable, "-S", "-c", code], capture_output=True, text=True, cwd=tmp_path)
     assert p.returncode == 0, p.stderr[-2000:]
     assert int(p.stdout) > 1000

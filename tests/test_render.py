@@ -14,7 +14,8 @@ from iblbake.io import images
 from iblbake.bake import dfg
 from iblbake.core import metrics
 from iblbake.bake import radiance
-from iblbake.render import frame as render
+from iblbake import render
+from iblbake.scene import pack
 from iblbake.render import twin as rr
 from iblbake.scene import load as scene
 
@@ -43,7 +44,7 @@ def render_scene(path, cache, overrides=()):
 
 
 def sphere_pixels(sc):
-    gb = rr.primary(sc["camera"], render.scene_arrays(sc))
+    gb = rr.primary(sc["camera"], pack.scene_arrays(sc))
     return gb
 
 
@@ -169,7 +170,7 @@ def test_gbuffer_matches_numpy(tmp_path, small_panoramas, mesh_file, rt, project
     sc = scene.load(p, (), )
     sc.data["output"]["normal"] = str(tmp_path / "n.exr")   # ask for AOVs
     frame = render.render(sc, cache_root=tmp_path / "cache")
-    gb = rr.primary(sc["camera"], render.scene_arrays(sc))
+    gb = rr.primary(sc["camera"], pack.scene_arrays(sc))
     cover = gb["hit"].reshape(-1, 2).mean(1).reshape(48, 64)
     # coverage agrees except where a float32 and a float64 ray disagree on an edge
     assert np.mean(np.abs(frame.hdr[..., 3] - cover) > 0) < 0.01
@@ -200,7 +201,7 @@ def test_shade_matches_numpy(tmp_path, small_panoramas, mesh_file, effects):
     p = busy_scene(tmp_path, small_panoramas["city"], mesh_file, effects=effects)
     sc = scene.load(p)
     frame = render.render(sc, cache_root=tmp_path / "cache")
-    arrays = render.scene_arrays(sc)
+    arrays = pack.scene_arrays(sc)
     gb = rr.primary(sc["camera"], arrays)
     image = images.read_panorama(sc["environment"]["path"])[0]
     fx = sc["effects"]
@@ -232,7 +233,7 @@ def test_reference_converges_to_exact_integral(tmp_path, small_panoramas, load_p
                                 "reference": {"max_samples": 8192, "target_noise": 0.001, "batch": 256}})
         sc, frame = render_scene(p, tmp_path / "cache")
         gb = sphere_pixels(sc)
-        want = rr.exact(gb, render.scene_arrays(sc), sc["effects"], sc["environment"], small, sub=4)
+        want = rr.exact(gb, pack.scene_arrays(sc), sc["effects"], sc["environment"], small, sub=4)
         hit = gb["hit"].reshape(24, 24)
         got = frame.hdr[..., :3][hit]
         assert metrics.relative_rmse(got, want.reshape(24, 24, 3)[hit]) < 0.01
@@ -285,7 +286,7 @@ def bakes_of(frame):
 
 
 def render_defines(frame):
-    return [b["defines"] for b in frame.report["kernel_builds"] if b["kernel"] == "render.cl"]
+    return [b["defines"] for b in frame.report["kernel_builds"] if b["kernel"] == "shade.cl"]
 
 
 def test_effect_set_bakes_only_what_is_read(tmp_path, small_panoramas):
@@ -430,5 +431,5 @@ def test_mesh_errors(tmp_path, constant_env):
     p = make_scene(tmp_path, constant_env, {"base_color": [1, 1, 1]},
                    objects=[{"mesh": {"path": str(degenerate)}, "material": "m"}])
     sc = scene.load(p)
-    geo = render.scene_arrays(sc).geometry_report
+    geo = pack.scene_arrays(sc).geometry_report
     assert geo["triangles"] == 1 and geo["meshes"][0]["dropped_degenerate"] == 2

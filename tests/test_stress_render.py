@@ -20,7 +20,9 @@ from iblbake.core import conventions as cv
 from iblbake.io import images
 from iblbake.bake import dfg
 from iblbake.bake import radiance
-from iblbake.render import frame as render
+from iblbake import render
+from iblbake.render.bakes import chain_table
+from iblbake.scene import pack
 from iblbake.render import twin as rr
 from iblbake.core import sampling
 from iblbake.scene import load as scene
@@ -84,7 +86,7 @@ def twin_shade(sc, frame, gb, arrays, env_image):
 
 def check_furnace(stress, case, sc, frame, env_image, table, bound=0.02):
     """Kernel and twin against the closed form, per material."""
-    arrays = render.scene_arrays(sc)
+    arrays = pack.scene_arrays(sc)
     gb = rr.primary(sc["camera"], arrays)
     hit = gb["hit"]
     assert np.isfinite(frame.hdr).all()
@@ -115,8 +117,9 @@ def test_material_extremes_white_furnace(tmp_path, stress, one_env, dfg_fine, sp
     objs = [{"sphere": {"center": [(i % 4) - 1.5, 1.5 - (i // 4), 0], "radius": 0.45}, "material": f"m{i}"}
             for i in range(len(EXTREMES))]
     cam = {"orthographic": {"position": [0, 0, 5], "width": 4.2}, "resolution": [128, 128]}
+    # the furnace closed form is each sphere alone: the neighbours' shadows are not in it
     fx = {"specular": specular, "diffuse": "reference" if specular == "reference" else "sh", "samples": 128,
-          "reference": {"max_samples": 256, "target_noise": 0}}
+          "reference": {"max_samples": 256, "target_noise": 0, "visibility": False}}
     sc = write_scene(tmp_path, one_env, mats, objs, cam, fx,
                      output={"frame": ["f.exr"], "normal": "n.exr", "albedo": "a.exr", "depth": "d.exr"})
     frame = render.render(sc, cache_root=tmp_path / "cache")
@@ -142,14 +145,15 @@ def test_normals_facing_away_back_faces_and_inside_a_sphere(tmp_path, stress, on
     quad = _tilted_quad(tmp_path)
     mats = {"rough": {"base_color": [1, 1, 1], "metallic": 0.0, "roughness": 0.6},
             "mirror": {"base_color": [1, 1, 1], "metallic": 1.0, "roughness": 0.0}}
+    # the furnace closed form is each sphere alone: the neighbours' shadows are not in it
     fx = {"specular": specular, "diffuse": "reference" if specular == "reference" else "sh", "samples": 128,
-          "reference": {"max_samples": 256, "target_noise": 0}}
+          "reference": {"max_samples": 256, "target_noise": 0, "visibility": False}}
     # grazing view of the tilted quad, and a single-sided triangle seen from behind
     objs = [{"mesh": {"path": str(quad)}, "material": "rough"},
             {"mesh": {"path": str(quad), "translate": [0, 0.6, -3], "rotate": [-90, 0, 0]}, "material": "mirror"}]
     cam = {"perspective": {"position": [0, 0.1, 1.9], "look_at": [0, 0, 0], "fov_y": 60}, "resolution": [96, 64]}
     sc = write_scene(tmp_path, one_env, mats, objs, cam, fx)
-    arrays = render.scene_arrays(sc)
+    arrays = pack.scene_arrays(sc)
     gb = rr.primary(sc["camera"], arrays)
     hit = gb["hit"]
     nov = (gb["normal"][hit] * -gb["dir"][hit]).sum(1)
@@ -254,9 +258,9 @@ def test_chain_lookup_at_poles_seam_and_extreme_levels(rt, stress):
     lod = np.tile(lods, len(dirs))
     want = radiance.chain_lookup_twin(levels, d, lod)
     prg = rt.program("selftest.cl", {"SH_BANDS": 3})
-    chain, (off, lw, lh), nlev = render._chain_buffers(rt, [l.astype(np.float32) for l in levels])
+    c = chain_table(rt, [l.astype(np.float32) for l in levels])
     out = rt.empty(len(d) * 12)
-    rt.run(prg.t_chain_lookup, (len(d),), None, chain, off, lw, lh, np.int32(nlev),
+    rt.run(prg.t_chain_lookup, (len(d),), None, c["chain"], c["off"], c["lw"], c["lh"], np.int32(c["nlev"]),
            rt.to_device(d.astype(np.float32)), rt.to_device(lod.astype(np.float32)), out)
     got = rt.read(out, (len(d), 3))
     assert np.isfinite(got).all() and np.isfinite(want).all()
@@ -319,7 +323,7 @@ def test_importance_mip_selection_pdf_extremes(tmp_path, stress, one_env, dfg_fi
                                                               "diffuse": "off"})
         frame = render.render(sc, cache_root=tmp_path / "cache")
         assert np.isfinite(frame.hdr).all()
-        arrays = render.scene_arrays(sc)
+        arrays = pack.scene_arrays(sc)
         gb = rr.primary(sc["camera"], arrays)
         twin = rr.shade(gb, arrays, sc["effects"], sc["environment"],
                         chain=radiance.radiance_chain_twin(np.ones((16, 32, 3))))

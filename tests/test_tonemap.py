@@ -5,7 +5,7 @@ import pytest
 
 from iblbake.core import tonemap
 
-OPS = {"aces": 0, "reinhard": 1, "hable": 2, "pbr_neutral": 3, "linear": 4}
+from iblbake.scene.layout import TONEMAP_IDS as OPS  # noqa: E402
 HOSTILE = np.array([0.0, 1e-30, 1e-8, 0.5, 1.0, 11.2, 1e4, 6.5e4, 1e30, np.inf, -np.inf, np.nan, -1.0, -1e30],
                    dtype=np.float32)
 
@@ -15,9 +15,9 @@ def run_cl(rt, hdr, op, ev=0.0, srgb=True, gamma=2.2):
     n = len(hdr)
     rgba = np.zeros((n, 4), np.float32)
     rgba[:, :3] = hdr
-    k = rt.kernel("tonemap.cl", "tonemap_u8", {"TONEMAP": OPS[op], "OUTPUT_SRGB": int(srgb)})
     out, disp = rt.empty(n * 4), rt.empty(n * 16)
-    rt.run(k, (n,), None, rt.to_device(rgba), np.float32(2.0 ** ev), np.float32(gamma), np.int32(n), out, disp)
+    rt.launch("tonemap.cl", "tonemap_u8", {"TONEMAP": OPS[op], "OUTPUT_SRGB": int(srgb)}, (n,), {},
+              hdr=rt.to_device(rgba), exposure_scale=2.0 ** ev, gamma=gamma, n=n, pixel0=0, out=out, display=disp)
     return rt.read(disp, (n, 4))[:, :3], rt.read(out, (n, 4), np.uint8)[:, :3]
 
 

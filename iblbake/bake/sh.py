@@ -177,3 +177,39 @@ vec3 shIrradiance(vec3 d) {{
     return max(e, vec3(0.0));
 }}
 """
+
+
+IRRADIANCE_VERSION = 1
+
+
+def irradiance_coeffs(image, bands: int, window: str, backend: str, rt):
+    """E_lm = Ahat_l w_l L_lm: what the renderer's SH diffuse term evaluates."""
+    coeffs, _ = project(image, bands, backend, rt)
+    return coeffs * sh.window(bands, window)[:, None] * sh.ahat(bands)[:, None]
+
+
+def bake_irradiance(rt, image, info, root, policies: dict, bands: int, window: str, warn=None):
+    """The renderer's SH entry (irradiance.json), keyed by the input's content, bands, window,
+    read policies and the projection kernel's source. Returns (coefficients, manifest, cached)."""
+    import json
+    from pathlib import Path
+
+    from iblbake.bake import cache
+    from iblbake.device.runtime import source_hash
+    from iblbake.io.atomic import write_json
+
+    root = Path(root)
+    key = "sh-" + cache.content_key({"kind": "sh", "v": IRRADIANCE_VERSION, "input": info.sha256,
+                                     "bands": bands, "window": window, "policies": policies,
+                                     "kernel": source_hash("sh_project.cl")})
+
+    def build(tmp: Path):
+        e = irradiance_coeffs(image, bands, window, "opencl", rt)
+        write_json(tmp / "irradiance.json", {"bands": bands, "window": window, "irradiance": e.tolist()})
+        return {"kind": "sh", "files": [{"name": "irradiance.json"}], "parameters":
+                {"bands": bands, "window": window, **policies}, "input": info.to_json(),
+                "device": rt.device_label}
+
+    manifest, cached = cache.get_or_build(root, key, build, warn=warn)
+    coeffs = np.asarray(json.loads((root / manifest["key"] / "irradiance.json").read_text())["irradiance"])
+    return coeffs, manifest, cached

@@ -423,7 +423,7 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, devic
 
     Only the effects the scene calls for are baked, compiled and run; --report shows which.
     """
-    from iblbake.render import frame as render
+    from iblbake import render
     from iblbake.scene import load as scene
 
     if scene_path is None:
@@ -434,7 +434,7 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, devic
     for p in render.output_paths(sc):
         check_writable(p)
     with con.stages(["reference samples"] * 100, label="render") if (
-            "reference" in render.plan(sc).passes and con.interactive) else contextlib.nullcontext(None) as step:
+            "reference" in render.plan(sc).pass_names and con.interactive) else contextlib.nullcontext(None) as step:
         last = [0]
 
         def progress(frac):
@@ -457,7 +457,8 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, devic
         lines.append(f"device: {rep['device']}")
         lines.append(f"effects: diffuse={e['diffuse']} specular={e['specular']} background={e['background']}"
                      f"{' emissive' if e['emissive'] else ''}")
-        lines.append("defines: " + " ".join(f"{k}={v}" for k, v in e["defines"].items()))
+        for name, defs in e["defines"].items():
+            lines.append(f"defines {name}: " + (" ".join(f"{k}={v}" for k, v in defs.items()) or "-"))
         for b in rep["bakes"]:
             extra = " ".join(f"{k}={v}" for k, v in b.items() if k not in ("name", "seconds", "cached", "entry",
                                                                              "meshes"))

@@ -1,4 +1,6 @@
-"""Sample sets and warps, in pairs sample_x / pdf_x (pbrt-v4's habit). Mirrors kernels/sampling.h."""
+"""Sample sets and warps, each warp a pair sample_x / pdf_x (pbrt-v4's habit), float64. Mirrors
+kernels/sampling.h; tests/test_sampling.py checks every warp on both sides with a chi-square test
+against its own pdf (as Mitsuba 3's ChiSquareTest)."""
 
 from __future__ import annotations
 
@@ -51,3 +53,148 @@ def to_world(local, n):
     """Local (x, y, z = n) vectors to world, with the Duff et al. frame of DESIGN.md."""
     t, b = conventions.tangent_frame(n)
     return local[..., 0:1] * t + local[..., 1:2] * b + local[..., 2:3] * np.asarray(n)
+
+
+# --- random and quasi-random numbers -----------------------------------------------------------
+
+def pcg_hash(x):
+    """PCG hash of 32-bit integers (Jarzynski and Olano 2020): one PCG state step and its output
+    permutation; kernels/sampling.h pcg_hash."""
+    s = (np.asarray(x, np.uint64) * 747796405 + 2891336453) & 0xFFFFFFFF
+    word = (((s >> ((s >> 28) + 4)) ^ s) * 277803737) & 0xFFFFFFFF
+    return ((word >> 22) ^ word).astype(np.uint32)
+
+
+def radical_inverse(j, base: int):
+    """Radical inverse of integers j in `base` (Halton's dimension of that prime)."""
+    j = np.asarray(j, np.int64).copy()
+    r = np.zeros(j.shape)
+    f = 1.0 / base
+    while (j > 0).any():
+        r += f * (j % base)
+        j //= base
+        f /= base
+    return r
+
+
+def halton_rotated(n: int, base: int, shift: float):
+    """The first n Halton points of `base`, rotated by `shift` modulo 1 (Cranley-Patterson)."""
+    return np.mod(radical_inverse(np.arange(n), base) + shift, 1.0)
+
+
+# --- warps: local frame z = normal ------------------------------------------------------------------
+
+def sample_cosine_hemisphere(u):
+    """Malley's method: a uniform disk point lifted to the hemisphere; pdf = cos(theta) / pi."""
+    u = np.asarray(u, np.float64)
+    r, phi = np.sqrt(u[..., 0]), 2 * np.pi * u[..., 1]
+    return np.stack([r * np.cos(phi), r * np.sin(phi), np.sqrt(np.maximum(0.0, 1 - u[..., 0]))], -1)
+
+
+def pdf_cosine_hemisphere(cos_theta):
+    return np.maximum(cos_theta, 0.0) / np.pi
+
+
+def sample_uniform_cone(u, cos_max):
+    """Uniform in the cone cos(theta) >= cos_max: cos(theta) = 1 - u0 (1 - cos_max)."""
+    u = np.asarray(u, np.float64)
+    ct = 1 - u[..., 0] * (1 - cos_max)
+    st, phi = np.sqrt(np.maximum(0.0, 1 - ct * ct)), 2 * np.pi * u[..., 1]
+    return np.stack([st * np.cos(phi), st * np.sin(phi), ct], -1)
+
+
+def pdf_uniform_cone(cos_max):
+    return 1.0 / (2 * np.pi * (1 - cos_max))
+
+
+def g1_smith(nov, alpha):
+    a2 = np.asarray(alpha) ** 2
+    return 2 * nov / (nov + np.sqrt(a2 + (1 - a2) * nov * nov))
+
+
+def sample_ggx_vndf(vl, alpha, u):
+    """GGX visible normals (Heitz 2018): stretch the view vector, sample the projected hemisphere,
+    unstretch. pdf over half-vectors G1(v) max(0, v.h) D(h) / NoV."""
+    vl, u = np.asarray(vl, np.float64), np.asarray(u, np.float64)
+    vh = np.stack([alpha * vl[..., 0], alpha * vl[..., 1], vl[..., 2]], -1)
+    vh /= np.linalg.norm(vh, axis=-1, keepdims=True)
+    lensq = vh[..., 0] ** 2 + vh[..., 1] ** 2
+    inv = np.where(lensq > 0, 1 / np.sqrt(np.maximum(lensq, 1e-300)), 0.0)
+    t1 = np.where((lensq > 0)[..., None], np.stack([-vh[..., 1] * inv, vh[..., 0] * inv, 0 * inv], -1),
+                  np.array([1.0, 0.0, 0.0]))
+    t2 = np.cross(vh, t1)
+    r, phi = np.sqrt(u[..., 0]), 2 * np.pi * u[..., 1]
+    p1, p2 = r * np.cos(phi), r * np.sin(phi)
+    s = 0.5 * (1 + vh[..., 2])
+    p2 = (1 - s) * np.sqrt(np.maximum(0.0, 1 - p1 * p1)) + s * p2
+    nh = p1[..., None] * t1 + p2[..., None] * t2 + np.sqrt(np.maximum(0.0, 1 - p1 * p1 - p2 * p2))[..., None] * vh
+    h = np.stack([alpha * nh[..., 0], alpha * nh[..., 1], np.maximum(1e-7, nh[..., 2])], -1)
+    return h / np.linalg.norm(h, axis=-1, keepdims=True)
+
+
+def pdf_ggx_vndf(nov, noh, voh, alpha):
+    """pdf of sample_ggx_vndf over half-vectors."""
+    return g1_smith(nov, alpha) * np.maximum(voh, 0.0) * brdf.d_ggx(noh, alpha) / nov
+
+
+# --- the environment -----------------------------------------------------------------------------
+
+class EnvironmentDistribution:
+    """Piecewise constant over a panorama's texels, p(texel) proportional to luminance x exact
+    solid angle; inside a texel uniform in (phi, cos theta). Its tables (marginal CDF over rows,
+    one CDF per row, pdf over solid angle per texel) are what kernels/sampling.h sample_env reads."""
+
+    def __init__(self, image):
+        self.marginal, self.conditional, self.pdf = env_sampling_tables(image)
+        self.height, self.width = self.pdf.shape
+
+    def sample(self, u):
+        """Directions in the panorama's frame from u in [0,1)^4 (rows of 4), and their texels."""
+        u = np.asarray(u, np.float64)
+        h, w = self.height, self.width
+        j = np.clip(np.searchsorted(self.marginal, u[:, 0], side="right") - 1, 0, h - 1)
+        i = np.clip(np.array([np.searchsorted(self.conditional[jj], uu, side="right") - 1
+                              for jj, uu in zip(j, u[:, 1])]), 0, w - 1)
+        uu = (i + u[:, 2]) / w
+        ct = np.cos(np.pi * j / h) + u[:, 3] * (np.cos(np.pi * (j + 1) / h) - np.cos(np.pi * j / h))
+        st, phi = np.sqrt(np.maximum(0.0, 1 - ct * ct)), 2 * np.pi * (0.5 - uu)
+        return np.stack([st * np.sin(phi), ct, st * np.cos(phi)], -1), j * w + i
+
+    def pdf_of(self, d):
+        """pdf over solid angle of directions d (panorama frame): its texel's table entry."""
+        u, v = conventions.equirect_uv_from_dir(d)
+        i = np.minimum((u * self.width).astype(np.int64), self.width - 1)
+        j = np.minimum((v * self.height).astype(np.int64), self.height - 1)
+        return self.pdf[j, i].astype(np.float64)
+
+
+def env_sampling_tables(image):
+    """Piecewise-constant environment sampling over texels: p(texel) proportional to
+    luminance x exact solid angle. Returns (marginal cdf (H+1), conditional cdfs (H, W+1),
+    pdf over solid angle per texel (H, W)), float32, built in float64."""
+    h, w = image.shape[:2]
+    lum = np.maximum(image[..., :3].astype(np.float64) @ np.array([0.2126, 0.7152, 0.0722]), 0.0)
+    omega = conventions.equirect_row_solid_angles(w, h)
+    weight = lum * omega[:, None]
+    total = weight.sum()
+    if not total > 0:                     # a black panorama: sample by solid angle
+        weight = np.broadcast_to(omega[:, None], (h, w)).copy()
+        total = weight.sum()
+    row = weight.sum(axis=1)
+    marginal = np.concatenate([[0.0], np.cumsum(row)]) / total
+    marginal[-1] = 1.0
+    cond = np.zeros((h, w + 1))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        c = np.cumsum(weight, axis=1) / row[:, None]
+    cond[:, 1:] = np.where(row[:, None] > 0, c, (np.arange(1, w + 1) / w)[None, :])
+    cond[:, -1] = 1.0
+    pdf = weight / total / omega[:, None]
+    return marginal.astype(np.float32), cond.astype(np.float32), pdf.astype(np.float32)
+
+
+def power_heuristic(a, b):
+    """MIS weight a^2 / (a^2 + b^2) (Veach 1997); 0 where a is 0, finite for infinite pdfs."""
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.where(a > 0, b / a, 0.0)
+    return np.where(a > 0, 1 / (1 + r * r), 0.0)

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from iblbake.core import sampling
+
 OPERATORS = ("aces", "reinhard", "hable", "pbr_neutral", "linear")
 TRANSFERS = ("srgb", "gamma")
 INPUT_CAP = 1e18
@@ -85,17 +87,10 @@ def to_u8(display):
     return np.clip(np.floor(np.asarray(display) * 255.0 + 0.5), 0, 255).astype(np.uint8)
 
 
-def _pcg_hash(x):
-    x = np.asarray(x, np.uint64) & 0xFFFFFFFF
-    state = (x * 747796405 + 2891336453) & 0xFFFFFFFF
-    word = (((state >> ((state >> 28) + 4)) ^ state) * 277803737) & 0xFFFFFFFF
-    return ((word >> 22) ^ word) & 0xFFFFFFFF
-
-
 def dither_offsets(n: int):
     """Triangular dither in LSB units (-1, 1) per pixel index; twin of kernels/tonemap.cl DITHER."""
-    h1 = _pcg_hash(np.arange(n, dtype=np.uint64))
-    h2 = _pcg_hash(h1)
+    h1 = sampling.pcg_hash(np.arange(n, dtype=np.uint64))
+    h2 = sampling.pcg_hash(h1)
     u = ((h1 >> 8).astype(np.float64) + (h2 >> 8).astype(np.float64)) / 16777216.0
     return u - 1.0
 

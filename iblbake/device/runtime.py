@@ -62,6 +62,37 @@ def kernel_source(name: str, _seen=None) -> str:
     return _INCLUDE.sub(inline, text)
 
 
+_DEFINE = re.compile(r"^\s*#\s*define\s+(\w+)[ \t]+((?:[^\n\\]|\\\n)*)$", re.M)
+_SCALARS = {"int": np.int32, "uint": np.uint32, "float": np.float32}
+
+
+@functools.lru_cache(maxsize=None)
+def kernel_params(name: str, function: str) -> tuple:
+    """((parameter name, converter), ...) of `function` in kernels/NAME, read from its signature
+    (object-like macros such as SCENE_PARAMS expanded), so the host binds arguments by name:
+    a buffer as it is, a scalar cast to its OpenCL type, a float2/float4 to a float32 vector."""
+    src = kernel_source(name)
+    macros = {m.group(1): m.group(2).replace("\\\n", " ") for m in _DEFINE.finditer(src)}
+    m = re.search(rf"__kernel\s+void\s+{function}\s*\(([^)]*)\)", src)
+    if m is None:
+        raise KeyError(f"kernels/{name}: no kernel {function}")
+    sig = m.group(1)
+    for _ in range(4):                       # macros inside macros
+        sig = re.sub(r"\b([A-Z_][A-Z0-9_]*)\b", lambda x: macros.get(x.group(1), x.group(1)), sig)
+    params = []
+    for decl in sig.split(","):
+        words = decl.replace("*", " * ").split()
+        pname, kind = words[-1], [w for w in words[:-1] if w not in ("const", "__global", "__constant", "__local")]
+        if "*" in kind:
+            conv = None
+        elif kind[0] in _SCALARS:
+            conv = _SCALARS[kind[0]]
+        else:                                # float2, float4: a float32 vector
+            conv = functools.partial(np.asarray, dtype=np.float32)
+        params.append((pname, conv))
+    return tuple(params)
+
+
 @functools.lru_cache(maxsize=None)
 def source_hash(name: str) -> str:
     return hashlib.sha256(kernel_source(name).encode()).hexdigest()[:16]
@@ -292,6 +323,22 @@ class Runtime:
         self.cl.enqueue_copy(self.queue, out, buf)   # blocking: all earlier work is done
         self._host_arrays.clear()
         return out
+
+    def launch(self, name: str, function: str, defines: dict | None, global_size, table: dict, **args):
+        """Run `function` of kernels/NAME with every parameter bound by name: from `args`, else
+        from `table` (the caller's named buffers and values). A name in neither is an error
+        that names it, not a silently shifted argument list."""
+        values = []
+        for pname, conv in kernel_params(name, function):
+            if pname in args:
+                v = args[pname]
+            elif pname in table:
+                v = table[pname]
+            else:
+                raise KeyError(f"kernels/{name} {function}: no value bound to parameter {pname!r}")
+            values.append(v if conv is None else conv(v))
+        k = self.kernel(name, function, defines)
+        return self.run(k, tuple(global_size), None, *values)
 
     def run(self, kernel, global_size, local_size, *args):
         try:

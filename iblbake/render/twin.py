@@ -1,9 +1,11 @@
-"""numpy twin of kernels/render.cl, float64, for tests on small frames.
+"""numpy twin of the render kernels (kernels/gbuffer.cl, shade.cl, reference.cl), float64, for
+tests on small frames.
 
 primary()      G-buffer by brute force (every ray against every sphere, plane and triangle)
 shade()        SH diffuse, importance-sampled and prefiltered specular, emission
 exact()        the integral the `reference` pass estimates, by quadrature: every texel of the
-               panorama (piecewise constant), split into s x s parts with exact solid angles
+               panorama (piecewise constant), split into s x s parts with exact solid angles,
+               each direction traced for occlusion (occluded) unless visibility is off
 """
 
 from __future__ import annotations
@@ -19,9 +21,70 @@ from iblbake.bake import prefilter
 from iblbake.bake import radiance
 from iblbake.core import sampling
 from iblbake.core import sh
-from iblbake.render.frame import camera_vectors, pixel_jitter
+from iblbake.scene.pack import camera_vectors, pixel_jitter
 
 LUM = np.array([0.2126, 0.7152, 0.0722])
+
+
+def _sphere_t(o, d, sp):
+    """Nearest t > 0 of rays o + t d with sphere record sp (inf where none): the stable quadratic."""
+    c, r = sp[0, :3], sp[0, 3]
+    f = o - c
+    b = -(f * d).sum(-1)
+    perp = f + b[..., None] * d
+    disc = r * r - (perp ** 2).sum(-1)
+    q = b + np.copysign(np.sqrt(np.maximum(disc, 0)), b)
+    cc = (f ** 2).sum(-1) - r * r
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t0 = np.where(q != 0, cc / q, 0.0)
+    lo, hi = np.minimum(t0, q), np.maximum(t0, q)
+    t = np.where(lo > 0, lo, np.where(hi > 0, hi, np.inf))
+    return np.where(disc >= 0, t, np.inf)
+
+
+def _plane_t(o, d, pl):
+    p0, nrm, tt, bb = pl[0, :3], pl[1, :3], pl[2, :3], pl[3, :3]
+    den = d @ nrm
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((p0 - o) @ nrm) / den
+        q = o + t[..., None] * d - p0
+    inside = (np.abs(q @ tt) <= pl[2, 3]) & (np.abs(q @ bb) <= pl[3, 3])
+    return np.where((np.abs(den) >= 1e-20) & (t > 0) & inside, t, np.inf)
+
+
+def _triangle_t(o, d, tri):
+    """(t, u, v) of rays with one triangle record (Moller-Trumbore, float64)."""
+    v0 = tri[0, :3]
+    e1, e2 = tri[1, :3] - v0, tri[2, :3] - v0
+    p = np.cross(d, e2)
+    det = p @ e1
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / det
+        sv = o - v0
+        u = (sv * p).sum(-1) * inv
+        qv = np.cross(sv, e1)
+        v = (d * qv).sum(-1) * inv
+        t = (qv @ e2) * inv
+    ok = (det != 0) & (u >= 0) & (u <= 1) & (v >= 0) & (u + v <= 1) & (t > 0)
+    return np.where(ok, t, np.inf), u, v
+
+
+def occluded(o, d, arrays):
+    """Any hit along o + t d, t > 0 (twin of kernels/scene.h occluded): a boolean per ray."""
+    hit = np.zeros(np.broadcast_shapes(o.shape, d.shape)[:-1], bool)
+    for sp in arrays.spheres.astype(np.float64):
+        hit |= np.isfinite(_sphere_t(o, d, sp))
+    for pl in arrays.planes.astype(np.float64):
+        hit |= np.isfinite(_plane_t(o, d, pl))
+    for tri in arrays.tris.astype(np.float64):
+        hit |= np.isfinite(_triangle_t(o, d, tri)[0])
+    return hit
+
+
+def ray_offset(p, n, d, t):
+    """Twin of kernels/scene.h ray_offset: off the surface, towards the viewer, relative to |p| + t."""
+    eps = 1e-5 * (np.abs(p).max(-1) + t)
+    return p + eps[..., None] * (n - d)
 
 
 def primary(cam: dict, arrays):
@@ -48,58 +111,28 @@ def primary(cam: dict, arrays):
     mat = np.full(n, -1)
     ints = lambda a: np.asarray(a, np.float32).view(np.int32)
     for sp in arrays.spheres.astype(np.float64):
-        c, r = sp[0, :3], sp[0, 3]
-        f = o - c
-        b = -(f * d).sum(1)
-        perp = f + b[:, None] * d
-        disc = r * r - (perp ** 2).sum(1)
-        ok = disc >= 0
-        sq = np.sqrt(np.maximum(disc, 0))
-        q = b + np.copysign(sq, b)
-        cc = (f ** 2).sum(1) - r * r
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t0 = np.where(q != 0, cc / q, 0.0)
-        t1 = q
-        lo, hi = np.minimum(t0, t1), np.maximum(t0, t1)
-        t = np.where(lo > 0, lo, np.where(hi > 0, hi, np.inf))
-        t = np.where(ok, t, np.inf)
+        t = _sphere_t(o, d, sp)
         better = t < t_best
         t_best[better] = t[better]
+        c, r = sp[0, :3], sp[0, 3]
         nn = (o[better] + t[better, None] * d[better] - c) / r
         ng[better] = ns[better] = nn / np.linalg.norm(nn, axis=1, keepdims=True)
         mat[better] = ints(sp[1, 0])
     for pl in arrays.planes.astype(np.float64):
-        p0, nrm, tt, bb = pl[0, :3], pl[1, :3], pl[2, :3], pl[3, :3]
-        den = d @ nrm
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = ((p0 - o) @ nrm) / den
-        q = o + t[:, None] * d - p0
-        inside = (np.abs(q @ tt) <= pl[2, 3]) & (np.abs(q @ bb) <= pl[3, 3])
-        t = np.where((np.abs(den) >= 1e-20) & (t > 0) & inside, t, np.inf)
+        t = _plane_t(o, d, pl)
         better = t < t_best
         t_best[better] = t[better]
-        ng[better] = ns[better] = nrm
+        ng[better] = ns[better] = pl[1, :3]
         mat[better] = ints(pl[0, 3])
     tris = arrays.tris.astype(np.float64)
     for k in range(len(tris)):
-        v0 = tris[k, 0, :3]
-        e1, e2 = tris[k, 1, :3] - v0, tris[k, 2, :3] - v0
-        p = np.cross(d, e2)
-        det = p @ e1
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = 1.0 / det
-            sv = o - v0
-            u = (sv * p).sum(1) * inv
-            qv = np.cross(sv, e1)
-            v = (d * qv).sum(1) * inv
-            t = (qv @ e2) * inv
-        ok = (det != 0) & (u >= 0) & (u <= 1) & (v >= 0) & (u + v <= 1) & (t > 0)
-        t = np.where(ok, t, np.inf)
+        t, u, v = _triangle_t(o, d, tris[k])
         better = t < t_best
         if not better.any():
             continue
         t_best[better] = t[better]
-        fn = np.cross(e1, e2)
+        v0 = tris[k, 0, :3]
+        fn = np.cross(tris[k, 1, :3] - v0, tris[k, 2, :3] - v0)
         fn /= np.linalg.norm(fn)
         b0 = 1 - u[better] - v[better]
         sn = b0[:, None] * tris[k, 3, :3] + u[better, None] * tris[k, 4, :3] + v[better, None] * tris[k, 5, :3]
@@ -203,7 +236,7 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
     return out
 
 
-DELTA_ALPHA = 1e-4   # kernels/render.cl: narrower GGX lobes are mirrors in the reference
+DELTA_ALPHA = 1e-4   # kernels/reference.cl: narrower GGX lobes are mirrors in the reference
 
 
 def exact(gb, arrays, effects: dict, env: dict, image, sub: int = 2, chunk: int = 256):
@@ -220,10 +253,15 @@ def exact(gb, arrays, effects: dict, env: dict, image, sub: int = 2, chunk: int 
     res = np.zeros((len(n), 3))
     kd = diffuse_weight(base, metallic, rough, f0, nov)
     delta = alpha < DELTA_ALPHA
+    visibility = effects["reference"]["visibility"]
+    if visibility:
+        origin = ray_offset(gb["pos"][hit], n, gb["dir"][hit], gb["t"][hit])
     for i0 in range(0, len(n), chunk):
         sl = slice(i0, i0 + chunk)
         nol = n[sl] @ dirs.T                                            # (c, dirs)
         w = np.where(nol > 0, nol, 0.0) * omega
+        if visibility:
+            w = np.where(occluded(origin[sl, None, :], dirs[None], arrays), 0.0, w)
         if effects["diffuse"] == "reference":
             res[sl] += kd[sl] * (w @ radiance)
         if effects["specular"] == "reference" and not delta[sl].all():
@@ -240,10 +278,11 @@ def exact(gb, arrays, effects: dict, env: dict, image, sub: int = 2, chunk: int 
         # a lobe narrower than float32 resolves (the kernel's DELTA_ALPHA) is a mirror: F(NoV) L(R),
         # L read as the kernel reads it (nearest texel)
         r = 2 * nov[delta, None] * n[delta] - v[delta]
+        seen = ~occluded(origin[delta], r, arrays) if visibility else np.ones(len(r), bool)
         u, w = conventions.equirect_uv_from_dir(to_env(r, env["rotation_y"]))
         i = np.minimum((u * wid).astype(np.int64), wid - 1)
         j = np.minimum((w * hgt).astype(np.int64), hgt - 1)
         res[delta] += (image[j, i].astype(np.float64) * env["intensity"]
-                       * brdf.f_schlick(nov[delta, None], f0[delta]))
+                       * brdf.f_schlick(nov[delta, None], f0[delta])) * seen[:, None]
     out[hit] = res
     return out

@@ -303,6 +303,8 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
             "target_noise": Num(0.002, 0.0, 1.0, doc="stop when the frame's relative standard error is below this"),
             "batch": Num(32, 1, 4096, integer=True, doc="samples per pixel per progressive pass"),
             "seed": Num(1, 0, 2**31 - 1, integer=True, doc="random seed (renders are reproducible)"),
+            "visibility": Bool(True, doc="trace a shadow ray for every sample: the occluded integral (false: "
+                                         "every object lit as if alone)"),
         }),
         "tonemap": Enum(("aces", "reinhard", "hable", "pbr_neutral", "linear"), "aces", doc="tone-mapping operator"),
         "exposure": Num(0.0, -32.0, 32.0, doc="exposure in EV (radiance x 2^EV before the operator)"),

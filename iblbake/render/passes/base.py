@@ -1,0 +1,46 @@
+"""The pass contract. A pass declares when it runs (a predicate on the scene and its effect
+modes), the bakes it reads, the kernel defines it adds, and the named buffers it reads and writes;
+run() carries it out against the render context. Lighting passes only add into `radiance`."""
+
+from __future__ import annotations
+
+from iblbake.render.plan import Effects
+from iblbake.scene.load import Scene
+
+
+class Pass:
+    name = ""
+    kernel = None            # kernels/<file> (None: host-only)
+    function = None          # the kernel function, by default the pass's name
+    reads: tuple = ()        # named buffers read and written (the context's table)
+    writes: tuple = ()
+
+    def runs(self, scene: Scene, fx: Effects) -> bool:
+        return True
+
+    def reads_bakes(self, scene: Scene, fx: Effects) -> list:
+        return []
+
+    def defines(self, scene: Scene, fx: Effects) -> dict:
+        return {}
+
+    def setup(self, ctx) -> dict:
+        """Once per frame, before the tiles: named kernel arguments of this pass (tables, bakes)."""
+        return {}
+
+    def run(self, ctx) -> dict:
+        """Do the work of one tile; returns report fields beyond the name and seconds."""
+        raise NotImplementedError
+
+
+def geometry_defines(scene: Scene) -> dict:
+    """HAS_SPHERES / HAS_PLANES / HAS_TRIANGLES for the primitives the scene has: tracing
+    kernels compile only those intersection loops."""
+    kinds = {k for o in scene.data["objects"] for k in ("sphere", "plane", "mesh") if k in o}
+    return {name: 1 for k, name in (("sphere", "HAS_SPHERES"), ("plane", "HAS_PLANES"),
+                                    ("mesh", "HAS_TRIANGLES")) if k in kinds}
+
+
+def mode_defines(fx: Effects) -> dict:
+    from iblbake.scene.layout import DIFFUSE_MODES, SPECULAR_MODES
+    return {"DIFFUSE_MODE": DIFFUSE_MODES[fx.diffuse], "SPECULAR_MODE": SPECULAR_MODES[fx.specular]}

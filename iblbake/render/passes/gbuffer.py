@@ -1,0 +1,25 @@
+"""G-buffer: the primary hit of every camera sample of the tile (kernels/gbuffer.cl)."""
+
+from __future__ import annotations
+
+import time
+
+from iblbake.render.passes.base import Pass, geometry_defines
+
+
+class GBuffer(Pass):
+    name = "gbuffer"
+    kernel = "gbuffer.cl"
+    reads = ("cam", "jitter", "spheres", "planes", "bvh", "tris")
+    writes = ("gb_pos", "gb_nrm", "gb_dir")
+
+    def defines(self, scene, fx):
+        return geometry_defines(scene)
+
+    def run(self, ctx):
+        n = ctx.table["n"]
+        t0 = time.perf_counter()
+        ctx.launch(self, (n,))
+        ctx.rt.finish()
+        s = time.perf_counter() - t0
+        return {"primary_rays": n, "rays_per_s": round(n / max(s, 1e-9))}

@@ -1,0 +1,95 @@
+"""Reference: progressive Monte Carlo of the exact direct environment lighting, with visibility
+(kernels/reference.cl; twin: iblbake/render/twin.py exact). Batches of samples per G-buffer
+sample until the frame's relative standard error, measured from two independent replicates, is
+below effects.reference.target_noise or max_samples are taken; the mean is added into `radiance`."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from iblbake.bake.radiance import to_rgba
+from iblbake.render.passes.base import Pass, geometry_defines, mode_defines
+
+LUM = np.array([0.2126, 0.7152, 0.0722])
+
+
+def reference_noise(lum_sum, odd_sum, taken: int) -> float:
+    """Relative standard error of the reference frame, from its two independent replicates
+    (even and odd sample numbers): the RMS over pixels of half their difference, divided by the
+    mean pixel luminance."""
+    n_odd = taken // 2
+    n_even = taken - n_odd
+    even = (lum_sum - odd_sum) / n_even
+    odd = odd_sum / max(n_odd, 1)
+    mean = (lum_sum / taken).mean()
+    if mean <= 0:
+        return 0.0
+    return math.sqrt(np.mean((even - odd) ** 2) / 4.0) / mean
+
+
+class Reference(Pass):
+    name = "reference"
+    kernel = "reference.cl"
+    reads = ("gb_pos", "gb_nrm", "gb_dir", "materials", "spheres", "planes", "bvh", "tris")
+    writes = ("radiance",)
+
+    def runs(self, scene, fx):
+        return "reference" in (fx.diffuse, fx.specular)
+
+    def reads_bakes(self, scene, fx):
+        return ["env_cdf"]
+
+    def defines(self, scene, fx):
+        d = mode_defines(fx)
+        if fx.diffuse != "reference":
+            d["DIFFUSE_MODE"] = 0
+        if fx.specular != "reference":
+            d["SPECULAR_MODE"] = 0
+        if scene.data["effects"]["reference"]["visibility"]:
+            d.update(VISIBILITY=1, **geometry_defines(scene))
+        return d
+
+    def setup(self, ctx) -> dict:
+        dist = ctx.loaded["env_cdf"]
+        rt = ctx.rt
+        return {"img": rt.to_device(to_rgba(ctx.image)), "w": dist.width, "h": dist.height,
+                     "marginal": rt.to_device(dist.marginal), "conditional": rt.to_device(dist.conditional),
+                     "pdf_table": rt.to_device(dist.pdf)}
+
+    def run(self, ctx):
+        ref = ctx.scene.data["effects"]["reference"]
+        rt, t = ctx.rt, ctx.table
+        n = t["n"]
+        hit = rt.read(t["gb_pos"], (n, 4))[:, 3] != -1.0
+        out = rt.empty(n * 16)
+        acc = np.zeros((n, 3))
+        acc_odd = np.zeros(n)
+        taken = 0
+        noise = math.inf
+        batch = ref["batch"] + (ref["batch"] & 1)      # even: both replicates advance together
+        while taken < ref["max_samples"]:
+            b = min(batch, ref["max_samples"] - taken)
+            ctx.launch(self, (n,), **ctx.args[self.name], seed=ref["seed"], first=taken, batch=b, out=out)
+            r = rt.read(out, (n, 4)).astype(np.float64)
+            acc += r[:, :3]
+            acc_odd += r[:, 3]
+            taken += b
+            if ctx.progress:
+                ctx.progress((ctx.tile_index + taken / ref["max_samples"]) / ctx.tile_count)
+            if not hit.any():
+                break
+            if taken >= 2 * batch:
+                noise = reference_noise(acc[hit] @ LUM, acc_odd[hit], taken)
+                if noise <= ref["target_noise"]:
+                    break
+        # the mean joins what the other lighting passes added
+        mean = np.zeros((n, 4), np.float32)
+        mean[:, :3] = (acc / max(taken, 1)).astype(np.float32)
+        radiance = rt.read(t["radiance"], (n, 4))
+        rt.cl.enqueue_copy(rt.queue, t["radiance"], radiance + mean)
+        return {"samples_per_pixel": taken,
+                "relative_noise": None if not math.isfinite(noise) else round(noise, 6),
+                "stopped": "target_noise" if noise <= ref["target_noise"] else "max_samples",
+                "visibility": bool(ref["visibility"])}

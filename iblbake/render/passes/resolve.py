@@ -1,0 +1,30 @@
+"""Resolve: each pixel the mean of its samples' radiance, alpha its coverage, and the AOVs
+(kernels/resolve.cl); read back into the frame's rows of this tile."""
+
+from __future__ import annotations
+
+from iblbake.render.passes.base import Pass
+
+AOVS = ("normal", "albedo", "depth")
+
+
+class Resolve(Pass):
+    name = "resolve"
+    kernel = "resolve.cl"
+    reads = ("radiance", "gb_pos", "gb_nrm", "materials")
+    writes = ("hdr", "aov_normal", "aov_albedo", "aov_depth")
+
+    def defines(self, scene, fx):
+        return {"WRITE_AOVS": 1} if any(scene.data["output"][a] for a in AOVS) else {}
+
+    def run(self, ctx):
+        t = ctx.table
+        ctx.launch(self, (t["npix"],))
+        rows, w = ctx.tile_rows, ctx.width
+        sl = slice(ctx.row0, ctx.row0 + rows)
+        ctx.frame_hdr[sl] = ctx.rt.read(t["hdr"], (rows, w, 4))
+        if "WRITE_AOVS" in ctx.plan.defines[self.name]:
+            for a in ("normal", "albedo"):
+                ctx.frame_aovs[a][sl] = ctx.rt.read(t[f"aov_{a}"], (rows, w, 4))
+            ctx.frame_aovs["depth"][sl] = ctx.rt.read(t["aov_depth"], (rows, w))
+        return {}

@@ -1,0 +1,71 @@
+"""Shade: the approximate lighting terms (SH diffuse, importance or prefiltered specular,
+emission), added into `radiance` (kernels/shade.cl; twin: iblbake/render/twin.py shade)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from iblbake.core import sampling
+from iblbake.render.passes.base import Pass, mode_defines
+
+
+class Shade(Pass):
+    name = "shade"
+    kernel = "shade.cl"
+    reads = ("gb_pos", "gb_nrm", "gb_dir", "materials")
+    writes = ("radiance",)
+
+    def runs(self, scene, fx):
+        return fx.diffuse == "sh" or fx.specular in ("importance", "prefiltered") or fx.emissive
+
+    def reads_bakes(self, scene, fx):
+        return (["sh"] if fx.diffuse == "sh" else []) + \
+            {"importance": ["radiance"], "prefiltered": ["prefiltered", "dfg"]}.get(fx.specular, [])
+
+    def defines(self, scene, fx):
+        e = scene.data["effects"]
+        d = mode_defines(fx)
+        # the reference terms are another pass's: here they count as off
+        if fx.diffuse != "sh":
+            d["DIFFUSE_MODE"] = 0
+        if fx.specular not in ("importance", "prefiltered"):
+            d["SPECULAR_MODE"] = 0
+        if fx.diffuse == "sh":
+            d["SH_BANDS"] = e["sh_bands"]
+        if fx.specular == "importance":
+            if e["force_mip0"]:
+                d["FORCE_MIP0"] = 1
+            if e["normalize"] == "accepted":
+                d["IMPORTANCE_ACCEPTED"] = 1
+        if fx.specular == "prefiltered" and e["prefilter"]["dominant_direction"]:
+            d["DOMINANT_DIRECTION"] = 1
+        if fx.emissive:
+            d["HAS_EMISSIVE"] = 1
+        return d
+
+    def setup(self, ctx) -> dict:
+        """Per frame (not per tile): the term's tables as named arguments."""
+        e, fx, b = ctx.scene.data["effects"], ctx.plan.effects, ctx.loaded
+        args = {"sh_coeffs": ctx.rt.to_device(np.pad(b["sh"], ((0, 0), (0, 1))).astype(np.float32)
+                                              if "sh" in b else np.zeros((1, 4), np.float32))}
+        chain = {"importance": b.get("radiance"), "prefiltered": b.get("prefiltered")}.get(fx.specular)
+        args.update(ctx.chain(chain) if chain is not None else ctx.no_chain())
+        nsamp = e["samples"] if fx.specular == "importance" else 1
+        ham = np.zeros((nsamp, 4), np.float32)
+        if fx.specular == "importance":       # (cos phi, sin phi, u1): sample_ggx_half_cs
+            pts = sampling.hammersley(nsamp)
+            ham[:, 0], ham[:, 1], ham[:, 2] = np.cos(2 * np.pi * pts[:, 0]), np.sin(2 * np.pi * pts[:, 0]), pts[:, 1]
+        dfg = b["dfg"].astype(np.float32) if "dfg" in b else np.zeros((2, 2, 2), np.float32)
+        args.update(hammersley_pts=ctx.rt.to_device(ham), nsamples=nsamp, mip_bias=e["mip_bias"],
+                    dfg=ctx.rt.to_device(dfg.reshape(-1, 2)), dfg_size=dfg.shape[0])
+        return args
+
+    def run(self, ctx):
+        import time
+        n = ctx.table["n"]
+        t0 = time.perf_counter()
+        ctx.launch(self, (n,), **ctx.args[self.name])
+        ctx.rt.finish()
+        s = time.perf_counter() - t0
+        extra = {"samples": ctx.args[self.name]["nsamples"]} if ctx.plan.effects.specular == "importance" else {}
+        return {"mpixel_samples_per_s": round(n * ctx.args[self.name]["nsamples"] / max(s, 1e-9) / 1e6, 2), **extra}

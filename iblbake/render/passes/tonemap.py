@@ -1,0 +1,33 @@
+"""Tone map: exposure, operator and display encoding into 8 bits (kernels/tonemap.cl), only when
+a PNG frame is written."""
+
+from __future__ import annotations
+
+from iblbake.render.passes.base import Pass
+from iblbake.scene.layout import TONEMAP_IDS
+
+
+class Tonemap(Pass):
+    name = "tonemap"
+    kernel = "tonemap.cl"
+    function = "tonemap_u8"
+    reads = ("hdr",)
+    writes = ("png",)
+
+    def runs(self, scene, fx):
+        return any(p.lower().endswith(".png") for p in scene.data["output"]["frame"])
+
+    def defines(self, scene, fx):
+        e = scene.data["effects"]
+        d = {"TONEMAP": TONEMAP_IDS[e["tonemap"]], "OUTPUT_SRGB": int(e["output_transfer"] == "srgb")}
+        if scene.data["output"]["dither"]:
+            d["DITHER"] = 1
+        return d
+
+    def run(self, ctx):
+        t, e = ctx.table, ctx.scene.data["effects"]
+        ctx.launch(self, (t["npix"],), exposure_scale=2.0 ** e["exposure"], gamma=e["gamma"], n=t["npix"],
+                   out=t["png_u8"], display=t["display"])
+        rows = ctx.tile_rows
+        ctx.frame_png[ctx.row0:ctx.row0 + rows] = ctx.rt.read(t["png_u8"], (rows, ctx.width, 4), "uint8")[..., :3]
+        return {"operator": e["tonemap"]}

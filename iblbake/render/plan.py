@@ -1,0 +1,82 @@
+"""The effect set of a scene: which lighting modes it resolves to, and which passes run.
+
+effect_modes() reads what the scene asks for and what can have an effect (no objects: no
+lighting; every material metallic or black: no diffuse). plan() then asks every pass whether it
+runs and collects what the running passes read (bakes) and compile (defines): nothing else
+decides what is baked, compiled or run.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from iblbake.scene.load import Scene
+
+
+@dataclass
+class Effects:
+    diffuse: str          # off | sh | reference
+    specular: str         # off | importance | prefiltered | reference
+    background: str       # hide | show | color | blur
+    emissive: bool
+    notes: list = field(default_factory=list)
+
+
+def effect_modes(scene: Scene) -> Effects:
+    d = scene.data
+    fx, env = d["effects"], d["environment"]
+    notes = []
+    mats = [d["materials"][m] for m in {o["material"] for o in d["objects"]}]
+    diffuse, specular = fx["diffuse"], fx["specular"]
+    if not d["objects"]:
+        if diffuse != "off" or specular != "off":
+            notes.append("no objects: no lighting is computed")
+        diffuse = specular = "off"
+    elif diffuse != "off" and all(m["metallic"] >= 1.0 or max(m["base_color"]) == 0.0 for m in mats):
+        notes.append(f"diffuse {diffuse} skipped: every material is metallic or black (kD = 0)")
+        diffuse = "off"
+    bg = env["background"]
+    if isinstance(bg, list):
+        background = "color"
+    elif bg == "show":
+        background = "blur" if env["blur"] > 0 else "show"
+    else:
+        background = "hide"
+    emissive = any(max(m["emissive"]) > 0 for m in mats)
+    return Effects(diffuse, specular, background, emissive, notes)
+
+
+@dataclass
+class Plan:
+    effects: Effects
+    passes: list              # the pass objects that run, in order
+    bakes: list               # what they read, in order (sh, radiance, prefiltered, dfg, env_cdf)
+    defines: dict             # pass name -> its kernel defines
+    notes: list
+
+    @property
+    def pass_names(self) -> list:
+        return [p.name for p in self.passes]
+
+    def to_json(self) -> dict:
+        e = self.effects
+        return {"diffuse": e.diffuse, "specular": e.specular, "background": e.background,
+                "emissive": e.emissive, "bakes": self.bakes, "passes": self.pass_names,
+                "defines": self.defines, "notes": self.notes}
+
+
+BAKE_ORDER = ("sh", "radiance", "prefiltered", "dfg", "env_cdf")
+
+
+def plan(scene: Scene) -> Plan:
+    from iblbake.render.passes import PASSES
+
+    fx = effect_modes(scene)
+    running = [p for p in PASSES if p.runs(scene, fx)]
+    wanted = {b for p in running for b in p.reads_bakes(scene, fx)}
+    notes = list(fx.notes)
+    out = scene.data["output"]
+    if not out["frame"] and not any(out[a] for a in ("normal", "albedo", "depth")):
+        notes.append("no output requested (output.frame or -o): rendering without writing")
+    return Plan(fx, running, [b for b in BAKE_ORDER if b in wanted],
+                {p.name: p.defines(scene, fx) for p in running if p.kernel}, notes)

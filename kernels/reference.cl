@@ -1,0 +1,145 @@
+/* Reference pass: progressive Monte Carlo of the exact integral of direct environment lighting,
+ * the ground truth the approximations are measured against. Per G-buffer sample and sample k:
+ * two strategies combined by MIS with the power heuristic (Veach 1997):
+ *   1. the environment, piecewise constant over the full-resolution panorama (sample_env);
+ *   2. the BRDF: cosine hemisphere for diffuse, GGX visible normals for specular.
+ * With VISIBILITY, every sample's light direction is traced for any hit (occluded(), from an
+ * offset origin), so the integral is the occluded one: a sphere above a plane darkens the plane.
+ *   DIFFUSE_MODE == DIFFUSE_REFERENCE, SPECULAR_MODE == SPECULAR_REFERENCE select the terms.
+ * numpy twin (the same integral by quadrature over every texel): iblbake/render/twin.py exact(). */
+#include "common.h"
+#include "brdf.h"
+#include "sampling.h"
+#include "envmap.h"
+#include "scene.h"
+#include "surface.h"
+
+#ifndef DIFFUSE_MODE
+#define DIFFUSE_MODE DIFFUSE_OFF
+#endif
+#ifndef SPECULAR_MODE
+#define SPECULAR_MODE SPECULAR_OFF
+#endif
+
+#define DIM_ENV 0
+#define DIM_BRDF 2
+#define DIM_COSINE 4
+#define DIM_JITTER 6
+
+/* GGX lobes narrower than float32 resolves are mirrors here (the twin uses the same bound) */
+#define DELTA_ALPHA 1e-4f
+
+#ifdef VISIBILITY
+#define VISIBLE(l) (!occluded(origin, (l), SCENE_ARGS))
+#else
+#define VISIBLE(l) 1
+#endif
+
+/* One batch of `batch` samples per G-buffer sample: out = (sum of estimates, sum of the odd-numbered
+ * samples' luminance). Samples are numbered globally (first + k), so the frame is the same
+ * whatever the batching and wherever the run stops. */
+__kernel void reference(__global const float4 *gb_pos, __global const float4 *gb_nrm,
+                        __global const float4 *gb_dir, const int n,
+                        __global const float4 *materials, const float2 env_rot, const float env_scale,
+                        __global const float4 *img, const int w, const int h,
+                        __global const float *marginal, __global const float *conditional,
+                        __global const float *pdf_table, SCENE_PARAMS, const int pixel0, const int spp,
+                        const uint seed, const int first, const int batch, __global float4 *out)
+{
+    const int gid = get_global_id(0);
+    if (gid >= n) return;
+    /* the sample's number in the whole frame (a tile starts at pixel0): its random streams */
+    const uint sid = (uint)(pixel0 * spp + gid);
+    const float4 hitp = gb_pos[gid];
+    if (hitp.w == MISS_T) { out[gid] = (float4)(0.0f); return; }
+    Material mt;
+    float3 v, nrm;
+    const float nov = surface_at(gb_nrm, gb_dir, materials, gid, &mt, &v, &nrm);
+#ifdef VISIBILITY
+    const float3 origin = ray_offset(hitp.xyz, nrm, gb_dir[gid].xyz, hitp.w);
+#endif
+    float3 t, b;
+    tangent_frame(nrm, &t, &b);
+    const float3 vl = (float3)(dot(v, t), dot(v, b), nov);
+#if SPECULAR_MODE == SPECULAR_REFERENCE
+    const int delta = mt.alpha < DELTA_ALPHA;
+#endif
+#if DIFFUSE_MODE == DIFFUSE_REFERENCE
+    const float3 kd = diffuse_weight(mt, nov);
+#endif
+    float3 sum = (float3)(0.0f);
+    float odd = 0.0f;
+    for (int k = 0; k < batch; ++k) {
+        const uint sk = (uint)(first + k);
+        float3 est = (float3)(0.0f);
+        /* strategy 1: the environment */
+        {
+            int texel;
+            const float4 u = (float4)(qmc(seed, sid, sk, DIM_ENV), qmc(seed, sid, sk, DIM_ENV + 1),
+                                      qmc(seed, sid, sk, DIM_JITTER), qmc(seed, sid, sk, DIM_JITTER + 1));
+            const float3 l = from_env(sample_env(marginal, conditional, w, h, u, &texel), env_rot);
+            const float pe = pdf_env(pdf_table, texel);
+            const float nol = dot(nrm, l);
+            if (nol > 0.0f && pe > 0.0f && VISIBLE(l)) {
+                const float3 li = img[texel].xyz;
+#if DIFFUSE_MODE == DIFFUSE_REFERENCE
+                est += li * kd * (nol / pe) * power_heuristic(pe, pdf_cosine_hemisphere(nol));
+#endif
+#if SPECULAR_MODE == SPECULAR_REFERENCE
+                if (!delta) {
+                    const float3 hv = normalize(v + l);
+                    const float3 cx = cross(nrm, hv);
+                    const float noh = fmax(dot(nrm, hv), 0.0f), voh = fmax(dot(v, hv), 0.0f);
+                    const float dd = d_ggx_sc(dot(cx, cx), noh * noh, mt.alpha);
+                    const float pb = g1_smith(nov, mt.alpha) * dd / (4.0f * nov);
+                    est += li * f_schlick(voh, mt.f0) * (dd * v_smith_ggx_correlated(nov, nol, mt.alpha) * nol / pe)
+                           * power_heuristic(pe, pb);
+                }
+#endif
+            }
+        }
+#if DIFFUSE_MODE == DIFFUSE_REFERENCE
+        /* strategy 2a: cosine-weighted hemisphere */
+        {
+            const float3 ll = sample_cosine_hemisphere((float2)(qmc(seed, sid, sk, DIM_COSINE),
+                                                                qmc(seed, sid, sk, DIM_COSINE + 1)));
+            const float3 l = t * ll.x + b * ll.y + nrm * ll.z;
+            const int texel = env_texel_index(to_env(l, env_rot), w, h);
+            const float pc = pdf_cosine_hemisphere(ll.z);
+            if (pc > 0.0f && VISIBLE(l))
+                est += img[texel].xyz * kd * IBL_PI * power_heuristic(pc, pdf_env(pdf_table, texel));
+        }
+#endif
+#if SPECULAR_MODE == SPECULAR_REFERENCE
+        /* strategy 2b: GGX visible normals; f NoL / pdf = F G2 / G1(V). A lobe narrower than
+         * float32 can resolve (alpha < DELTA_ALPHA) is a mirror: this strategy alone, weight F. */
+        if (delta) {
+            const float3 l = 2.0f * nov * nrm - v;
+            if (VISIBLE(l))
+                est += img[env_texel_index(to_env(l, env_rot), w, h)].xyz * f_schlick(nov, mt.f0);
+        } else {
+            const float2 u = (float2)(qmc(seed, sid, sk, DIM_BRDF), qmc(seed, sid, sk, DIM_BRDF + 1));
+            const float3 hl = sample_ggx_vndf(vl, mt.alpha, u);
+            const float3 hs = t * hl.x + b * hl.y + nrm * hl.z;
+            const float3 l = 2.0f * dot(v, hs) * hs - v;
+            const float nol = dot(nrm, l);
+            if (nol > 0.0f && dot(v, hs) > 0.0f && VISIBLE(l)) {
+                /* the pdf from h = normalize(v + l), computed exactly as strategy 1 does, so the
+                 * two MIS weights of any direction sum to 1 */
+                const float3 hv = normalize(v + l);
+                const float3 cx = cross(nrm, hv);
+                const float noh = fmax(dot(nrm, hv), 0.0f), voh = fmax(dot(v, hv), 0.0f);
+                const int texel = env_texel_index(to_env(l, env_rot), w, h);
+                const float g1 = g1_smith(nov, mt.alpha);
+                const float pb = g1 * d_ggx_sc(dot(cx, cx), noh * noh, mt.alpha) / (4.0f * nov);
+                const float g2 = v_smith_ggx_correlated(nov, nol, mt.alpha) * 4.0f * nov * nol;
+                est += img[texel].xyz * f_schlick(voh, mt.f0) * (g2 / g1) * power_heuristic(pb, pdf_env(pdf_table, texel));
+            }
+        }
+#endif
+        est *= env_scale;
+        sum += est;
+        if (sk & 1u) odd += dot(est, (float3)(0.2126f, 0.7152f, 0.0722f));
+    }
+    out[gid] = (float4)(sum, odd);
+}

@@ -1,0 +1,213 @@
+/* The scene's geometry on the device: camera rays, ray-primitive tests, a BVH over triangles, the
+ * closest hit (trace) and any hit (occluded) along a ray. Buffer layouts: kernels/layout.h.
+ * numpy twin: iblbake/render/twin.py (primary, occluded). */
+#ifndef IBLBAKE_SCENE_H
+#define IBLBAKE_SCENE_H
+#include "layout.h"
+
+/* The geometry buffers every tracing kernel takes, by name (the host binds them from its table) */
+#define SCENE_PARAMS __global const float4 *spheres, const int nspheres, \
+                     __global const float4 *planes, const int nplanes, \
+                     __global const float4 *bvh, __global const float4 *tris, const int ntris
+#define SCENE_ARGS spheres, nspheres, planes, nplanes, bvh, tris, ntris
+
+/* ---------------------------------------------------------------------------- camera, rays */
+
+/* cam[0] origin (w: 1 orthographic, 0 perspective), cam[1] forward, cam[2] right and cam[3] up,
+ * scaled to half the view's width and height (at distance 1 for perspective). */
+inline void camera_ray(__constant float4 *cam, int width, int height, int px, int py, float2 jitter,
+                       float3 *o, float3 *d)
+{
+    const float sx = 2.0f * ((float)px + jitter.x) / (float)width - 1.0f;
+    const float sy = 1.0f - 2.0f * ((float)py + jitter.y) / (float)height;
+    if (cam[0].w > 0.5f) {
+        *o = cam[0].xyz + sx * cam[2].xyz + sy * cam[3].xyz;
+        *d = cam[1].xyz;
+    } else {
+        *o = cam[0].xyz;
+        *d = normalize(cam[1].xyz + sx * cam[2].xyz + sy * cam[3].xyz);
+    }
+}
+
+/* ---------------------------------------------------------------------------- intersection */
+
+/* Nearest t > tmin of a ray with a sphere; the numerically stable quadratic (Haines et al.,
+ * Ray Tracing Gems ch. 7): the discriminant from the perpendicular distance, no cancellation. */
+inline float hit_sphere(float3 o, float3 d, float4 s, float tmin, float tmax)
+{
+    const float3 f = o - s.xyz;
+    const float b = -dot(f, d);
+    const float3 perp = f + b * d;
+    const float disc = s.w * s.w - dot(perp, perp);
+    if (disc < 0.0f) return tmax;
+    const float q = b + copysign(sqrt(disc), b);
+    const float c = dot(f, f) - s.w * s.w;
+    float t0 = q != 0.0f ? c / q : 0.0f, t1 = q;
+    if (t0 > t1) { float x = t0; t0 = t1; t1 = x; }
+    if (t0 > tmin && t0 < tmax) return t0;
+    if (t1 > tmin && t1 < tmax) return t1;
+    return tmax;
+}
+
+/* plane: point.xyz, normal.xyz, tangent.xyz (w: half width), bitangent.xyz (w: half depth) */
+inline float hit_plane(float3 o, float3 d, __global const float4 *pl, float tmin, float tmax)
+{
+    const float3 n = pl[1].xyz;
+    const float den = dot(d, n);
+    if (fabs(den) < 1e-20f) return tmax;
+    const float t = dot(pl[0].xyz - o, n) / den;
+    if (!(t > tmin && t < tmax)) return tmax;
+    const float3 q = o + t * d - pl[0].xyz;
+    if (fabs(dot(q, pl[2].xyz)) > pl[2].w || fabs(dot(q, pl[3].xyz)) > pl[3].w) return tmax;
+    return t;
+}
+
+inline float component(float3 v, int k) { return k == 0 ? v.x : (k == 1 ? v.y : v.z); }
+
+/* Per-ray setup of the watertight ray-triangle test (Woop, Benthin and Wald 2013): the axis
+ * where the direction is largest becomes z, and a shear maps the ray onto +z. */
+typedef struct { int kx, ky, kz; float sx, sy, sz; } RayShear;
+
+inline RayShear ray_shear(float3 d)
+{
+    const float3 a = fabs(d);
+    RayShear r;
+    r.kz = a.x > a.y ? (a.x > a.z ? 0 : 2) : (a.y > a.z ? 1 : 2);
+    r.kx = r.kz == 2 ? 0 : r.kz + 1;
+    r.ky = r.kx == 2 ? 0 : r.kx + 1;
+    const float dz = component(d, r.kz);
+    if (dz < 0.0f) { const int t = r.kx; r.kx = r.ky; r.ky = t; }   /* keep the winding */
+    r.sx = component(d, r.kx) / dz;
+    r.sy = component(d, r.ky) / dz;
+    r.sz = 1.0f / dz;
+    return r;
+}
+
+/* Watertight test on the corners themselves: each edge function depends only on its two
+ * corners (bit-identical in the triangles that share them) and flips sign exactly between the
+ * two, so a ray through a shared edge hits at least one of the triangles (Moller-Trumbore on
+ * per-triangle edge vectors let a few rays through). FP_CONTRACT OFF keeps a*b - c*d unfused,
+ * which that exact antisymmetry needs. Returns t and the barycentrics of v1 and v2. */
+#pragma OPENCL FP_CONTRACT OFF
+inline float hit_triangle(float3 o, RayShear rs, float3 v0, float3 v1, float3 v2, float tmin, float tmax,
+                          float *b1, float *b2)
+{
+    const float3 A = v0 - o, B = v1 - o, C = v2 - o;
+    const float az = component(A, rs.kz), bz = component(B, rs.kz), cz = component(C, rs.kz);
+    const float ax = component(A, rs.kx) - rs.sx * az, ay = component(A, rs.ky) - rs.sy * az;
+    const float bx = component(B, rs.kx) - rs.sx * bz, by = component(B, rs.ky) - rs.sy * bz;
+    const float cx = component(C, rs.kx) - rs.sx * cz, cy = component(C, rs.ky) - rs.sy * cz;
+    const float u = cx * by - cy * bx, v = ax * cy - ay * cx, w = bx * ay - by * ax;
+    if ((u < 0.0f || v < 0.0f || w < 0.0f) && (u > 0.0f || v > 0.0f || w > 0.0f)) return tmax;
+    const float det = u + v + w;
+    if (det == 0.0f) return tmax;
+    const float t = rs.sz * (u * az + v * bz + w * cz) / det;
+    if (!(t > tmin && t < tmax)) return tmax;
+    *b1 = v / det; *b2 = w / det;
+    return t;
+}
+
+inline int box_hit(float3 o, float3 inv_d, float3 bmin, float3 bmax, float tmax, float *tnear)
+{
+    const float3 t0 = (bmin - o) * inv_d, t1 = (bmax - o) * inv_d;
+    const float3 lo = fmin(t0, t1), hi = fmax(t0, t1);
+    const float a = fmax(fmax(lo.x, lo.y), fmax(lo.z, 0.0f));
+    /* far bound widened by 2 gamma(3) (Ize 2013): rounding never drops a box a ray grazes */
+    const float b = fmin(fmin(hi.x, hi.y), fmin(hi.z, tmax)) * 1.0000004f;
+    *tnear = a;
+    return a <= b;
+}
+
+typedef struct {
+    float t;
+    int kind;      /* 0 none, 1 sphere, 2 plane, 3 triangle */
+    int index;
+    float b1, b2;
+} Hit;
+
+/* The nearest hit in (tmin, tmax), or with any_hit the first one found (a shadow ray needs no
+ * more): h.kind = 0 where there is none. */
+inline Hit trace_range(float3 o, float3 d, float tmin, float tmax, int any_hit, SCENE_PARAMS)
+{
+    Hit h;
+    h.t = tmax; h.kind = 0; h.index = -1; h.b1 = 0.0f; h.b2 = 0.0f;
+#ifdef HAS_SPHERES
+    for (int i = 0; i < nspheres; ++i) {
+        const float t = hit_sphere(o, d, spheres[2 * i], tmin, h.t);
+        if (t < h.t) { h.t = t; h.kind = 1; h.index = i; if (any_hit) return h; }
+    }
+#endif
+#ifdef HAS_PLANES
+    for (int i = 0; i < nplanes; ++i) {
+        const float t = hit_plane(o, d, planes + 4 * i, tmin, h.t);
+        if (t < h.t) { h.t = t; h.kind = 2; h.index = i; if (any_hit) return h; }
+    }
+#endif
+#ifdef HAS_TRIANGLES
+    if (ntris > 0) {
+        /* +-inf components of 1/d are fine for the slab test; exact zeros become huge */
+        const float3 inv_d = (float3)(1.0f / (d.x != 0.0f ? d.x : 1e-30f), 1.0f / (d.y != 0.0f ? d.y : 1e-30f),
+                                      1.0f / (d.z != 0.0f ? d.z : 1e-30f));
+        const RayShear rs = ray_shear(d);
+        int stack[64];
+        int sp = 0;
+        stack[sp++] = 0;
+        while (sp > 0) {
+            const int ni = stack[--sp];
+            const float4 a = bvh[2 * ni], b = bvh[2 * ni + 1];
+            float tn;
+            if (!box_hit(o, inv_d, a.xyz, b.xyz, h.t, &tn)) continue;
+            const int count = as_int(b.w), first = as_int(a.w);
+            if (count > 0) {
+                for (int k = first; k < first + count; ++k) {
+                    float b1, b2;
+                    const float t = hit_triangle(o, rs, tris[6 * k].xyz, tris[6 * k + 1].xyz, tris[6 * k + 2].xyz,
+                                                 tmin, h.t, &b1, &b2);
+                    if (t < h.t) {
+                        h.t = t; h.kind = 3; h.index = k; h.b1 = b1; h.b2 = b2;
+                        if (any_hit) return h;
+                    }
+                }
+            } else if (sp < 62) {
+                /* nearer child last so it is popped first */
+                const float4 la = bvh[2 * first], lb = bvh[2 * first + 1];
+                const float4 ra = bvh[2 * first + 2], rb = bvh[2 * first + 3];
+                float tl, tr;
+                const int hl = box_hit(o, inv_d, la.xyz, lb.xyz, h.t, &tl);
+                const int hr = box_hit(o, inv_d, ra.xyz, rb.xyz, h.t, &tr);
+                if (hl && hr) {
+                    if (tl <= tr) { stack[sp++] = first + 1; stack[sp++] = first; }
+                    else { stack[sp++] = first; stack[sp++] = first + 1; }
+                } else if (hl) stack[sp++] = first;
+                else if (hr) stack[sp++] = first + 1;
+            }
+        }
+    }
+#endif
+    return h;
+}
+
+inline Hit trace(float3 o, float3 d, SCENE_PARAMS)
+{
+    return trace_range(o, d, 0.0f, INFINITY, 0, SCENE_ARGS);
+}
+
+/* Any hit along o + t d, t > 0: the shadow ray of a lighting sample. The origin is the shaded
+ * point moved off the surface by ray_offset, so the surface does not shadow itself. */
+inline int occluded(float3 o, float3 d, SCENE_PARAMS)
+{
+    return trace_range(o, d, 0.0f, INFINITY, 1, SCENE_ARGS).kind != 0;
+}
+
+/* Where a secondary ray starts: the hit p of a primary ray of direction d that travelled t, moved
+ * towards the viewer's side of the surface, along the shading normal n (bent to face the viewer)
+ * and back along d, by a distance relative to the float32 error of p (which grows with |p| and t),
+ * so the offset is the same fraction of the scene whatever its units. */
+inline float3 ray_offset(float3 p, float3 n, float3 d, float t)
+{
+    const float3 a = fabs(p);
+    const float eps = 1e-5f * (fmax(a.x, fmax(a.y, a.z)) + t);
+    return p + eps * (n - d);
+}
+
+#endif

@@ -1,0 +1,118 @@
+/* Shade pass: the approximate lighting terms the scene asks for, added into the radiance buffer.
+ *   DIFFUSE_MODE  DIFFUSE_SH (SH_BANDS bands) or off
+ *   SPECULAR_MODE SPECULAR_IMPORTANCE (IMPORTANCE_ACCEPTED, FORCE_MIP0) or SPECULAR_PREFILTERED
+ *                 (DOMINANT_DIRECTION) or off
+ *   HAS_EMISSIVE  emission
+ * numpy twin: iblbake/render/twin.py shade(). */
+#include "common.h"
+#include "brdf.h"
+#include "sampling.h"
+#include "envmap.h"
+#include "sh.h"
+#include "scene.h"
+#include "surface.h"
+
+#ifndef DIFFUSE_MODE
+#define DIFFUSE_MODE DIFFUSE_OFF
+#endif
+#ifndef SPECULAR_MODE
+#define SPECULAR_MODE SPECULAR_OFF
+#endif
+
+#if DIFFUSE_MODE == DIFFUSE_SH
+inline float3 sh_irradiance(__constant float4 *coeffs, float3 n)
+{
+    float Y[SH_COEFFS];
+    sh_eval(n, Y);
+    float3 e = (float3)(0.0f);
+    for (int k = 0; k < SH_COEFFS; ++k) e += coeffs[k].xyz * Y[k];
+    return fmax(e, (float3)(0.0f));
+}
+#endif
+
+/* Where a rough lobe really points: between N and R (Lagarde and de Rousiers 2014, Frostbite,
+ * getSpecularDominantDir with their alpha). The split sum reads its prefiltered chain there. */
+inline float3 dominant_direction(float3 n, float3 r, float a)
+{
+    const float s = clamp(1.0f - a, 0.0f, 1.0f);
+    return normalize(mix(n, r, s * (sqrt(s) + a)));
+}
+
+__kernel void shade(__global const float4 *gb_pos, __global const float4 *gb_nrm, __global const float4 *gb_dir,
+                    const int n, __global const float4 *materials, const float2 env_rot, const float env_scale,
+                    __constant float4 *sh_coeffs,
+                    __global const float4 *chain, __constant int *off, __constant int *lw, __constant int *lh,
+                    const int nlev,
+                    __global const float4 *hammersley_pts, const int nsamples, const float mip_bias,
+                    __global const float2 *dfg, const int dfg_size,
+                    __global float4 *radiance)
+{
+    const int gid = get_global_id(0);
+    if (gid >= n) return;
+    if (gb_pos[gid].w == MISS_T) return;
+    Material mt;
+    float3 v, nrm;
+    const float nov = surface_at(gb_nrm, gb_dir, materials, gid, &mt, &v, &nrm);
+    float3 color = (float3)(0.0f);
+#ifdef HAS_EMISSIVE
+    color += mt.emissive;
+#endif
+#if DIFFUSE_MODE == DIFFUSE_SH
+    color += diffuse_weight(mt, nov) * env_scale * sh_irradiance(sh_coeffs, to_env(nrm, env_rot));
+#endif
+#if SPECULAR_MODE == SPECULAR_IMPORTANCE
+    {
+        /* seed 000: N Hammersley points, GGX half-vector warp, mip level from the pdf */
+        float3 t, b;
+        tangent_frame(nrm, &t, &b);
+        const int w0 = lw[0], h0 = lh[0];
+        float3 acc = (float3)(0.0f);
+        int accepted = 0;
+        for (int i = 0; i < nsamples; ++i) {
+            const float3 hl = sample_ggx_half_cs(hammersley_pts[i], mt.alpha);
+            const float3 h = t * hl.x + b * hl.y + nrm * hl.z;
+            const float voh = dot(v, h);
+            const float3 l = 2.0f * voh * h - v;
+            const float nol = dot(nrm, l);
+            if (nol <= 0.0f || voh <= 0.0f) continue;
+            ++accepted;
+            const float noh = fmax(hl.z, 1e-7f);
+            float lod = 0.0f;
+#ifndef FORCE_MIP0
+            /* solid angle of this sample, 1 / (N pdf(l)), pdf(l) = D(h) NoH / (4 VoH) */
+            const float pdf = d_ggx(noh, mt.alpha) * noh / (4.0f * voh);
+            const float3 le = to_env(l, env_rot);
+            lod = -0.5f * log2((float)nsamples * pdf * texel_solid_angle(le, w0, h0)) + mip_bias;
+            const float3 li = chain_lookup(chain, off, lw, lh, nlev, le, lod);
+#else
+            const float3 li = chain_lookup(chain, off, lw, lh, nlev, to_env(l, env_rot), 0.0f);
+#endif
+            /* f NoL / pdf = F V 4 NoL VoH / NoH  (D cancels) */
+            acc += li * f_schlick(voh, mt.f0) * (v_smith_ggx_correlated(nov, nol, mt.alpha) * 4.0f * nol * voh / noh);
+        }
+#ifdef IMPORTANCE_ACCEPTED
+        color += env_scale * acc / (float)max(accepted, 1);
+#else
+        color += env_scale * acc / (float)nsamples;
+#endif
+    }
+#elif SPECULAR_MODE == SPECULAR_PREFILTERED
+    {
+        /* split sum: prefiltered chain at R (level = roughness (K-1)) x (F0 A + B) */
+#ifdef DOMINANT_DIRECTION
+        const float3 r = dominant_direction(nrm, 2.0f * dot(nrm, v) * nrm - v, mt.alpha);
+#else
+        const float3 r = 2.0f * dot(nrm, v) * nrm - v;
+#endif
+        const float3 pre = chain_lookup(chain, off, lw, lh, nlev, to_env(r, env_rot),
+                                        mt.roughness * (float)(nlev - 1));
+        const float x = clamp(nov, 0.0f, 1.0f) * (dfg_size - 1), y = mt.roughness * (dfg_size - 1);
+        const int x0 = min((int)x, dfg_size - 2), y0 = min((int)y, dfg_size - 2);
+        const float fx = x - x0, fy = y - y0;
+        const float2 ab = mix(mix(dfg[y0 * dfg_size + x0], dfg[y0 * dfg_size + x0 + 1], fx),
+                              mix(dfg[(y0 + 1) * dfg_size + x0], dfg[(y0 + 1) * dfg_size + x0 + 1], fx), fy);
+        color += env_scale * pre * (mt.f0 * ab.x + ab.y);
+    }
+#endif
+    radiance[gid] += (float4)(color, 0.0f);   /* lighting passes add */
+}

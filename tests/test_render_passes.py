@@ -1,0 +1,194 @@
+"""The pass contract and the frame around it: the reference pass with visibility against the
+closed form of a sphere over a plane, tiled frames against untiled ones, the layout table the
+kernels share, frames too large for the machine, and the package's import layers."""
+
+import ast
+import os
+import resource
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from iblbake import render
+from iblbake.io import images
+from iblbake.render import twin as rr
+from iblbake.scene import layout, pack
+from iblbake.scene import load as scene
+
+from .test_render import small_panoramas  # noqa: F401  (fixture: city and studio at 256x128)
+
+ROOT = Path(__file__).resolve().parents[1]
+R = 1.0
+BASE = 0.8
+
+
+@pytest.fixture(scope="module")
+def white(tmp_path_factory):
+    p = tmp_path_factory.mktemp("white") / "white.exr"
+    images.write_exr(p, np.ones((32, 64, 3), np.float32))
+    return p
+
+
+def sphere_over_plane(folder, env, h, visibility=True, samples=4096, res=40):
+    doc = {"camera": {"perspective": {"position": [0, 3 * h, 2.5 * h], "look_at": [0, 0, 0], "fov_y": 60},
+                      "resolution": [res, res]},
+           "environment": {"path": str(env), "background": "hide"},
+           "materials": {"ball": {"base_color": [0.5, 0.5, 0.5]}, "floor": {"base_color": [BASE] * 3, "roughness": 1}},
+           "objects": [{"sphere": {"center": [0, h, 0], "radius": R}, "material": "ball"},
+                       {"plane": {"point": [0, 0, 0], "normal": [0, 1, 0]}, "material": "floor"}],
+           "effects": {"diffuse": "reference", "specular": "off",
+                       "reference": {"max_samples": samples, "target_noise": 0, "batch": 256,
+                                     "visibility": visibility}}}
+    p = Path(folder) / f"sphere_over_plane_{h}.yaml"
+    p.write_text(yaml.safe_dump(doc))
+    return scene.load(p)
+
+
+def plane_closed_form(sc, visibility=True):
+    """Per sample on the plane: kD c (1 - R^2 h / d^3) under L = 1 (the sphere's form factor from
+    a point of the plane at distance d from its centre; R^2/h^2 right under it)."""
+    arrays = pack.scene_arrays(sc)
+    gb = rr.primary(sc["camera"], arrays)
+    hit = gb["hit"]
+    v, n, nov, (base, metallic, _, rough, f0) = rr.surface(gb, arrays)
+    on_plane = gb["material"][hit] == sc.data["materials"].__len__() - 1    # floor: the last material
+    h = sc.data["objects"][0]["sphere"]["center"][1]
+    p = gb["pos"][hit]
+    d = np.linalg.norm(p - np.array([0.0, h, 0.0]), axis=1)
+    blocked = R * R * h / d ** 3 if visibility else 0.0
+    want = rr.diffuse_weight(base, metallic, rough, f0, nov)[:, 0] * np.pi * (1 - blocked)
+    return gb, arrays, hit, on_plane, want
+
+
+@pytest.mark.parametrize("h", [2 * R, 4 * R])
+def test_reference_visibility_sphere_over_plane_closed_form(tmp_path, white, h):
+    sc = sphere_over_plane(tmp_path, white, h)
+    gb, arrays, hit, on_plane, want = plane_closed_form(sc)
+    frame = render.render(sc, cache_root=tmp_path / "cache")
+    got = frame.hdr[..., 0].reshape(-1)[hit][on_plane]
+    err = np.abs(got / want[on_plane] - 1)
+    print(f"h = {h}: OpenCL vs closed form, worst {err.max():.4f}, mean {err.mean():.5f} over {on_plane.sum()} px")
+    assert err.max() < 0.01
+    # the darkening is real: right under the sphere the plane loses (R/h)^2 of its light
+    assert want[on_plane].min() < want[on_plane].max() * (1 - 0.8 * (R / h) ** 2)
+    twin = rr.exact(gb, arrays, sc["effects"], sc["environment"], np.ones((32, 64, 3)), sub=2)[hit][on_plane, 0]
+    terr = np.abs(twin / want[on_plane] - 1)
+    print(f"h = {h}: numpy twin vs closed form, worst {terr.max():.4f}")
+    assert terr.max() < 0.01
+
+
+def test_reference_without_visibility_is_the_unoccluded_integral(tmp_path, white):
+    sc = sphere_over_plane(tmp_path, white, 2 * R, visibility=False)
+    _, _, hit, on_plane, want = plane_closed_form(sc, visibility=False)
+    frame = render.render(sc, cache_root=tmp_path / "cache")
+    got = frame.hdr[..., 0].reshape(-1)[hit][on_plane]
+    assert np.abs(got / want[on_plane] - 1).max() < 2e-3
+    assert "VISIBILITY" not in frame.report["effects"]["defines"]["reference"]
+
+
+def busy_scene(folder, env, fx):
+    doc = {"camera": {"perspective": {"position": [0.3, 1.2, 4], "fov_y": 40}, "resolution": [37, 23], "spp": 3},
+           "environment": {"path": str(env), "background": "show", "rotation_y": 30},
+           "materials": {"a": {"base_color": [0.9, 0.5, 0.2], "metallic": 1, "roughness": 0.3},
+                         "b": {"base_color": [0.2, 0.6, 0.9], "roughness": 0.6, "emissive": [0.1, 0, 0]}},
+           "objects": [{"sphere": {"center": [-0.6, 0, 0], "radius": 0.6}, "material": "a"},
+                       {"sphere": {"center": [0.7, 0, 0], "radius": 0.5}, "material": "b"},
+                       {"plane": {"point": [0, -0.6, 0], "size": 5}, "material": "b"}],
+           "effects": fx, "output": {"frame": ["f.png"], "normal": "n.exr", "albedo": "a.exr", "depth": "d.exr",
+                                     "dither": True}}
+    p = Path(folder) / "busy.yaml"
+    p.write_text(yaml.safe_dump(doc))
+    return scene.load(p)
+
+
+@pytest.mark.parametrize("fx", [{"diffuse": "sh", "specular": "prefiltered"},
+                                {"diffuse": "off", "specular": "importance", "samples": 8},
+                                {"diffuse": "reference", "specular": "reference",
+                                 "reference": {"max_samples": 16, "target_noise": 0}}],
+                         ids=["prefiltered", "importance", "reference"])
+def test_tiled_frame_equals_the_untiled_one(tmp_path, small_panoramas, fx):
+    """A device budget of a few rows renders in tiles; every pixel, AOV and 8-bit value is the same."""
+    sc = busy_scene(tmp_path, small_panoramas["city"], fx)
+    whole = render.render(sc, cache_root=tmp_path / "cache")
+    budget = 37 * (3 * (render.frame.SAMPLE_BYTES + render.frame.REFERENCE_SAMPLE_BYTES) + render.frame.PIXEL_BYTES) * 5
+    tiled = render.render(sc, cache_root=tmp_path / "cache", device_budget=budget)
+    assert whole.report["tiles"] == 1 and tiled.report["tiles"] >= 4      # 23 rows, 5 or 6 per tile
+    assert np.array_equal(whole.hdr, tiled.hdr)
+    assert np.array_equal(whole.png, tiled.png)
+    for a in ("normal", "albedo", "depth"):
+        assert np.array_equal(whole.aovs[a], tiled.aovs[a]), a
+
+
+def test_frame_that_cannot_fit_fails_in_one_line(tmp_path):
+    """16384 x 16384 under a 6 GiB address-space limit: a one-line error naming camera.resolution,
+    exit 1, no abort inside the OpenCL driver, nothing written."""
+    out = tmp_path / "big.png"
+    limit = 6 << 30
+
+    def cap():
+        resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+
+    p = subprocess.run([sys.executable, "-m", "iblbake.cli", "render", str(ROOT / "examples/scenes/quick.yaml"),
+                        "-o", str(out), "--cache", str(tmp_path / "c"), "--set", "camera.resolution=[16384,16384]"],
+                       capture_output=True, text=True, preexec_fn=cap, timeout=300)
+    assert p.returncode == 1, p.stderr[-2000:]
+    lines = p.stderr.strip().splitlines()
+    assert "camera.resolution" in lines[-1] and "Traceback" not in p.stderr
+    assert not out.exists()
+
+
+def test_layout_header_is_the_table():
+    """kernels/layout.h is exactly what iblbake/scene/layout.py emits (regenerate with
+    `python -m iblbake.scene.layout > kernels/layout.h`)."""
+    assert (ROOT / "kernels" / "layout.h").read_text() == layout.header_text()
+
+
+def test_every_kernel_parameter_is_bound_by_name():
+    """Each pass's kernel parameters are names the frame's table or the pass's own arguments
+    provide (a missing one would be a KeyError at launch, not a shifted argument)."""
+    from iblbake.device import runtime
+    from iblbake.render.passes import PASSES
+    table = {"cam", "width", "height", "spp", "jitter", "spheres", "nspheres", "planes", "nplanes", "bvh",
+             "tris", "ntris", "materials", "env_rot", "env_scale", "gb_pos", "gb_nrm", "gb_dir", "radiance",
+             "hdr", "png_u8", "display", "aov_normal", "aov_albedo", "aov_depth", "n", "npix", "pixel0"}
+    own = {"shade": {"sh_coeffs", "chain", "off", "lw", "lh", "nlev", "hammersley_pts", "nsamples", "mip_bias",
+                     "dfg", "dfg_size"},
+           "background": {"color", "lod", "chain", "off", "lw", "lh", "nlev"},
+           "reference": {"img", "w", "h", "marginal", "conditional", "pdf_table", "seed", "first", "batch", "out"},
+           "tonemap": {"exposure_scale", "gamma", "out", "display"}}
+    for p in PASSES:
+        names = {n for n, _ in runtime.kernel_params(p.kernel, p.function or p.name)}
+        assert names <= table | own.get(p.name, set()), (p.name, names - table - own.get(p.name, set()))
+        assert set(p.reads) | set(p.writes) <= table | {"png"}, p.name
+
+
+LAYERS = {"core": 0, "io": 0, "device": 0, "bake": 1, "scene": 1, "render": 2, "study": 3, "cli": 4}
+
+
+def test_imports_run_downward():
+    """cli -> study -> render -> {scene, bake} -> {device, core, io}; nothing imports cli; core
+    never imports device (every import, function-level ones too)."""
+    bad = []
+    for f in (ROOT / "iblbake").rglob("*.py"):
+        rel = f.relative_to(ROOT / "iblbake").parts
+        own = rel[0] if len(rel) > 1 else None
+        for node in ast.walk(ast.parse(f.read_text())):
+            mods = []
+            if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("iblbake"):
+                mods = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
+            elif isinstance(node, ast.Import):
+                mods = [a.name for a in node.names if a.name.startswith("iblbake")]
+            for m in mods:
+                parts = m.split(".")
+                target = parts[1] if len(parts) > 1 else None
+                if target not in LAYERS or target == own:
+                    continue
+                if target == "cli" and own != "cli" and f.name not in ("entry.py",):
+                    bad.append(f"{'/'.join(rel)} imports {m}")
+                elif own in LAYERS and LAYERS[target] >= LAYERS[own]:
+                    bad.append(f"{'/'.join(rel)} imports {m}")
+    assert not bad, bad
