@@ -66,3 +66,31 @@ __kernel void t_chain_lookup(__global const float4 *chain, __constant int *off, 
     int i = get_global_id(0);
     vstore3(chain_lookup(chain, off, lw, lh, nlev, vload3(i, d), lod[i]), i, out);
 }
+
+/* Warps of sampling.h on given uniforms (tests/test_sampling.py: chi-square against their pdfs).
+ * kind 0 cosine hemisphere, 1 uniform cone (param: cos_max), 2 GGX half-vector (param: alpha),
+ * 3 GGX visible normals reflected about h (param: alpha, view vl). */
+#include "sampling.h"
+
+__kernel void t_warp(const int kind, const float param, const float4 vl, __global const float2 *u,
+                     __global float4 *out)
+{
+    const int i = get_global_id(0);
+    float3 d;
+    if (kind == 0) d = sample_cosine_hemisphere(u[i]);
+    else if (kind == 1) d = sample_uniform_cone(u[i], param);
+    else if (kind == 2) d = sample_ggx_half(u[i], param);
+    else {
+        const float3 h = sample_ggx_vndf(vl.xyz, param, u[i]);
+        d = 2.0f * dot(vl.xyz, h) * h - vl.xyz;
+    }
+    out[i] = (float4)(d, 0.0f);
+}
+
+__kernel void t_env(__global const float *marginal, __global const float *conditional, const int w, const int h,
+                    __global const float4 *u, __global float4 *out)
+{
+    const int i = get_global_id(0);
+    int texel;
+    out[i] = (float4)(sample_env(marginal, conditional, w, h, u[i], &texel), (float)texel);
+}

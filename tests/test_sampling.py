@@ -1,0 +1,170 @@
+"""Every warp against its own pdf with a chi-square goodness-of-fit test over the sphere, on the
+numpy side and the OpenCL side (as Mitsuba 3's ChiSquareTest): cells of equal solid angle in
+(cos theta, phi), expected counts from the pdf integrated over each cell, cells with fewer than 5
+expected samples pooled, and a failure on negative or excess mass. The environment sampler runs
+on city. The p-value threshold is 0.01 over the whole family (Sidak-corrected per test)."""
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from iblbake.core import conventions, sampling
+
+N = 200_000
+CELLS_T, CELLS_P = 24, 48          # cos theta x phi cells over the sphere
+SUB = 10                           # pdf quadrature points per cell and axis
+TESTS = 12
+ALPHA = 1 - (1 - 0.01) ** (1 / TESTS)
+
+
+def cell_edges():
+    return np.linspace(-1, 1, CELLS_T + 1), np.linspace(-np.pi, np.pi, CELLS_P + 1)
+
+
+def histogram(d):
+    ct, ph = cell_edges()
+    d = np.asarray(d, np.float64)
+    h, _, _ = np.histogram2d(np.clip(d[:, 2], -1, 1), np.arctan2(d[:, 1], d[:, 0]), bins=[ct, ph])
+    return h
+
+
+def expected(pdf):
+    """N x the pdf integrated over every cell (midpoint rule on SUB x SUB parts of equal area)."""
+    ct, ph = cell_edges()
+    dz, dp = (ct[1] - ct[0]) / SUB, (ph[1] - ph[0]) / SUB
+    z = (ct[:-1, None] + (np.arange(SUB) + 0.5) * dz).reshape(-1)
+    p = (ph[:-1, None] + (np.arange(SUB) + 0.5) * dp).reshape(-1)
+    zz, pp = np.meshgrid(z, p, indexing="ij")
+    s = np.sqrt(np.maximum(0, 1 - zz ** 2))
+    d = np.stack([s * np.cos(pp), s * np.sin(pp), zz], -1)
+    vals = pdf(d.reshape(-1, 3)).reshape(zz.shape) * dz * dp
+    return vals.reshape(CELLS_T, SUB, CELLS_P, SUB).sum((1, 3)) * N
+
+
+def chi2_test(observed, exp, name):
+    mass = exp.sum() / N
+    assert (exp >= 0).all(), f"{name}: negative pdf"
+    assert mass < 1.0 + 2e-3, f"{name}: pdf mass {mass} > 1"   # beyond the cell quadrature's own error
+    o, e = observed.reshape(-1), exp.reshape(-1)
+    order = np.argsort(e)
+    o, e = o[order], e[order]
+    small = e < 5                    # pooled into one cell
+    obs = np.append(o[~small], o[small].sum())
+    ex = np.append(e[~small], e[small].sum())
+    keep = ex > 0
+    obs, ex = obs[keep], ex[keep] * obs.sum() / ex[keep].sum()
+    chi2 = ((obs - ex) ** 2 / ex).sum()
+    p = stats.chi2.sf(chi2, len(ex) - 1)
+    print(f"{name}: chi2 {chi2:.1f} on {len(ex) - 1} dof, p = {p:.3g}, mass {mass:.5f}")
+    assert p > ALPHA, f"{name}: samples do not follow the pdf (p = {p:.3g})"
+    assert abs(mass - 1) < 5e-3, f"{name}: pdf integrates to {mass}"
+
+
+def uniforms(n=N, dims=2, seed=5):
+    return np.random.default_rng(seed).random((n, dims))
+
+
+COS_MAX = 1 - 4 / CELLS_T           # on a cell edge: the quadrature sees no partial cell
+VIEW = np.array([np.sin(1.1), 0.0, np.cos(1.1)])
+
+
+def warps(alpha=0.5):
+    nov = VIEW[2]
+
+    def vndf_pdf(d):
+        h = d + VIEW
+        h /= np.linalg.norm(h, axis=-1, keepdims=True)
+        voh, noh = h @ VIEW, h[:, 2]
+        pdf = sampling.pdf_ggx_vndf(nov, noh, voh, alpha) / (4 * np.maximum(voh, 1e-12))
+        return np.where((voh > 0) & (noh > 0), pdf, 0.0)   # reflections below the horizon are samples too
+
+    return {
+        "cosine hemisphere": (lambda u: sampling.sample_cosine_hemisphere(u),
+                              lambda d: sampling.pdf_cosine_hemisphere(d[:, 2]), 0, 0.0),
+        "uniform cone": (lambda u: sampling.sample_uniform_cone(u, COS_MAX),
+                         lambda d: np.where(d[:, 2] >= COS_MAX, sampling.pdf_uniform_cone(COS_MAX), 0.0), 1, COS_MAX),
+        "GGX half-vector": (lambda u: sampling.sample_ggx_half(u, alpha),
+                            lambda d: sampling.pdf_ggx_half(d[:, 2], alpha) * (d[:, 2] > 0), 2, alpha),
+        "GGX visible normals": (lambda u: _reflect(sampling.sample_ggx_vndf(np.broadcast_to(VIEW, (len(u), 3)), alpha, u)),
+                                vndf_pdf, 3, alpha),
+    }
+
+
+def _reflect(h):
+    return 2 * (h @ VIEW)[:, None] * h - VIEW
+
+
+@pytest.mark.parametrize("name", list(warps()))
+def test_warp_numpy_chi2(name):
+    sample, pdf, _, _ = warps()[name]
+    chi2_test(histogram(sample(uniforms())), expected(pdf), f"numpy {name}")
+
+
+@pytest.mark.parametrize("name", list(warps()))
+def test_warp_opencl_chi2(rt, name):
+    sample, pdf, kind, param = warps()[name]
+    u = uniforms().astype(np.float32)
+    out = rt.empty(N * 16)
+    rt.launch("selftest.cl", "t_warp", {"SH_BANDS": 3}, (N,), {}, kind=kind, param=param,
+              vl=np.append(VIEW, 0.0), u=rt.to_device(u), out=out)
+    d = rt.read(out, (N, 4))[:, :3]
+    chi2_test(histogram(d), expected(pdf), f"OpenCL {name}")
+
+
+def test_warp_pairs_agree_between_numpy_and_opencl(rt):
+    u = uniforms(4096).astype(np.float32)
+    for name, (sample, _, kind, param) in warps().items():
+        out = rt.empty(len(u) * 16)
+        rt.launch("selftest.cl", "t_warp", {"SH_BANDS": 3}, (len(u),), {}, kind=kind, param=param,
+                  vl=np.append(VIEW, 0.0), u=rt.to_device(u), out=out)
+        got = rt.read(out, (len(u), 4))[:, :3]
+        assert np.abs(got - sample(u.astype(np.float64))).max() < 2e-5, name
+
+
+def env_pdf_world(dist):
+    """The environment pdf over directions in the test's frame (z up): the panorama's y is z."""
+    def pdf(d):
+        return dist.pdf_of(np.stack([d[:, 0], d[:, 2], d[:, 1]], -1))
+    return pdf
+
+
+@pytest.fixture(scope="module")
+def city_small(load_panorama):
+    img = load_panorama("city")
+    return img[::4, ::4].copy()              # 256 x 128 texels: the sun still dominates
+
+
+def test_environment_sampler_numpy_chi2(city_small):
+    dist = sampling.EnvironmentDistribution(city_small)
+    d, _ = dist.sample(uniforms(dims=4))
+    chi2_test(histogram(np.stack([d[:, 0], d[:, 2], d[:, 1]], -1)), expected(env_pdf_world(dist)), "numpy environment (city)")
+
+
+def test_environment_sampler_opencl_chi2(rt, city_small):
+    dist = sampling.EnvironmentDistribution(city_small)
+    u = uniforms(dims=4).astype(np.float32)
+    out = rt.empty(N * 16)
+    rt.launch("selftest.cl", "t_env", {"SH_BANDS": 3}, (N,), {}, marginal=rt.to_device(dist.marginal),
+              conditional=rt.to_device(dist.conditional), w=dist.width, h=dist.height, u=rt.to_device(u), out=out)
+    r = rt.read(out, (N, 4))
+    d = r[:, :3].astype(np.float64)
+    chi2_test(histogram(np.stack([d[:, 0], d[:, 2], d[:, 1]], -1)), expected(env_pdf_world(dist)), "OpenCL environment (city)")
+    _, texels = dist.sample(u.astype(np.float64))
+    assert (r[:, 3].astype(np.int64) == texels).mean() > 0.999     # the same texel choice (float32 CDF ties aside)
+
+
+def test_environment_pdf_integrates_to_one(city_small):
+    dist = sampling.EnvironmentDistribution(city_small)
+    omega = conventions.equirect_solid_angles(dist.width, dist.height)
+    assert abs((dist.pdf.astype(np.float64) * omega).sum() - 1) < 1e-5
+
+
+def test_power_heuristic_weights_sum_to_one():
+    a, b = np.random.default_rng(2).random((2, 1000)) * 10
+    assert np.allclose(sampling.power_heuristic(a, b) + sampling.power_heuristic(b, a), 1.0)
+    assert sampling.power_heuristic(np.inf, 1.0) == 1.0 and sampling.power_heuristic(0.0, 1.0) == 0.0
+
+
+def test_halton_rotation_stays_uniform():
+    x = sampling.halton_rotated(4096, 3, 0.37)
+    assert stats.kstest(x, "uniform").pvalue > 0.01
