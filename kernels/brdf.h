@@ -1,4 +1,5 @@
-/* Metallic-roughness BRDF terms of DESIGN.md. Mirrors iblbake/brdf.py (tests/test_brdf.py). */
+/* Metallic-roughness BRDF terms (docs/conventions.md). Mirrors iblbake/core/brdf.py
+ * (tests/test_brdf_sampling.py). */
 #ifndef IBLBAKE_BRDF_H
 #define IBLBAKE_BRDF_H
 
@@ -23,7 +24,7 @@ inline float d_ggx_sc(float sin2, float cos2, float alpha)
     return a2 / (3.14159265358979323846f * d * d);
 }
 
-/* Height-correlated Smith V = G / (4 NoV NoL) (Heitz 2014), as seed 002's GDFG. */
+/* Height-correlated Smith V = G / (4 NoV NoL) (Heitz 2014), as Filament's DFG code. */
 inline float v_smith_ggx_correlated(float nov, float nol, float alpha)
 {
     float a2 = alpha * alpha;

@@ -1,4 +1,4 @@
-/* Shared conventions of DESIGN.md in OpenCL C. Mirrors iblbake/conventions.py; tested against it
+/* Shared conventions (docs/conventions.md) in OpenCL C. Mirrors iblbake/core/conventions.py; tested against it
  * (tests/test_conventions.py). +y up; equirect u = 0.5 - atan2(x, z)/(2 pi), v = acos(y)/pi,
  * v = 0 the top row; cube faces +X -X +Y -Y +Z -Z; octahedral with +y at the centre. */
 #ifndef IBLBAKE_COMMON_H

@@ -1,5 +1,5 @@
 /* Lookups in a chain of equirect levels stored back to back in one buffer (the radiance chain,
- * the prefiltered chain). Mirrors iblbake/mips.py: chain_lookup_reference. */
+ * the prefiltered chain). Mirrors iblbake/bake/radiance.py: chain_lookup_twin. */
 #ifndef IBLBAKE_ENVMAP_H
 #define IBLBAKE_ENVMAP_H
 #include "common.h"
@@ -7,7 +7,7 @@
 /* Trilinear lookup in the radiance chain: bilinear in two levels, blended. */
 /* Solid angle of a level-0 texel (w0 x h0) of the chain at direction l: (2 pi / w0)(pi / h0)
  * sin(theta), floored at the polar row's centre; continuous in latitude so that the level a
- * filtered lookup picks does not jump at row boundaries. Mirrors mips.py: texel_solid_angle_at. */
+ * filtered lookup picks does not jump at row boundaries. Mirrors iblbake/bake/radiance.py: texel_solid_angle_at. */
 inline float texel_solid_angle(float3 l, int w0, int h0)
 {
     const float st = fmax(sqrt(fmax(0.0f, 1.0f - l.y * l.y)), sin(0.5f * IBL_PI / h0));

@@ -1,9 +1,9 @@
-/* The specular bakes of `iblbake mips`. numpy twins in iblbake/mips.py; tests compare them.
+/* The specular bakes of `iblbake mips`. numpy twins in iblbake/bake/ (radiance, prefilter, dfg); tests compare them.
  *   downsample  one level of the radiance chain (solid-angle-weighted mean of covered texels)
  *   prefilter   one level of the GGX-prefiltered chain (Karis 2013, N = V = R, NoL-weighted,
  *               filtered importance sampling, Krivanek and Colbert 2008), for LAYOUT
  *               0 = equirect, 1 = cubemap (faces +X -X +Y -Y +Z -Z stacked), 2 = octahedral
- *   dfg         the split-sum DFG table (seed 002's DFG with the height-correlated Smith V) */
+ *   dfg         the split-sum DFG table (Karis 2013's DFG with the height-correlated Smith V) */
 #include "common.h"
 #include "brdf.h"
 #include "sampling.h"
@@ -56,7 +56,7 @@ inline float3 output_dir(int idx, int size)
 }
 
 /* samples[k] = (l_local.xyz, log2 of the sample's solid angle 1/(N pdf(l))), accepted (NoL > 0)
- * samples only, computed once per level on the host (iblbake/mips.py: ggx_sample_set) from
+ * samples only, computed once per level on the host (iblbake/bake/prefilter.py: ggx_sample_set) from
  * Hammersley points: pdf(l) = D(h) NoH / (4 VoH) = D(h) / 4 with N = V.
  * Filtered importance sampling: a sample reads the chain at the level whose texel solid angle
  * matches its own, lod = 0.5 log2(Omega_s / Omega_texel(l)) + bias, Omega_texel being a level-0
@@ -101,7 +101,7 @@ __kernel void resample(__global const float4 *chain, __constant int *off, __cons
 
 /* DFG over NoV (x) and perceptual roughness (y), both on grids including 0 and 1:
  * NoV = max(x/(n-1), 1e-4), r = y/(n-1), alpha = r^2. With N = (0,0,1), V = (sqrt(1-NoV^2), 0, NoV),
- * h ~ D(h) NoH: the weight of a sample is G_vis = 4 V NoL VoH / NoH (seed 002's GDFG * VoH / NoH):
+ * h ~ D(h) NoH: the weight of a sample is G_vis = 4 V NoL VoH / NoH (Filament's GDFG * VoH / NoH):
  *   A = mean G_vis (1 - Fc), B = mean G_vis Fc, Fc = (1 - VoH)^5; specular = F0 A + F90 B.
  * MULTISCATTER stores (B, A + B) instead (Filament's layout for energy compensation). */
 __kernel void dfg(const int n, const int nsamples, __global float2 *out)

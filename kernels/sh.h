@@ -1,7 +1,7 @@
-/* Real orthonormal spherical harmonics of DESIGN.md: z polar axis, no Condon-Shortley phase,
- * k = l*(l+1) + m. Mirrors iblbake/sh.py (sh_basis); tests/test_sh.py checks the two agree.
+/* Real orthonormal spherical harmonics (docs/conventions.md): z polar axis, no Condon-Shortley phase,
+ * k = l*(l+1) + m. Mirrors iblbake/core/sh.py (sh_basis); tests/test_sh.py checks the two agree.
  * Legendre recurrences on P~ = P_l^m / sin^m(theta), times Re/Im((x + i y)^m) = sin^m cos/sin(m phi)
- * (Filament's computeShBasis, seed 002), so no trigonometric call is needed. */
+ * (as Filament's computeShBasis), so no trigonometric call is needed. */
 #ifndef IBLBAKE_SH_H
 #define IBLBAKE_SH_H
 

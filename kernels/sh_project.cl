@@ -1,4 +1,4 @@
-/* SH projection, the bandwidth-bound half (see iblbake/sh.py, "exact texel integration"):
+/* SH projection, the bandwidth-bound half (see iblbake/core/sh.py, "exact texel integration"):
  *   S[j][x][t*3 + c] = sum over the columns i of chunk x of L_c(i, j) * T_t(phi_i)
  * T is the equirect azimuth basis (1, sqrt2 cos m phi, sqrt2 sin m phi), trig[t][i], NT terms
  * (2*bands - 1 padded with zero rows to a multiple of TG, the terms per pass). The host sums the chunks and

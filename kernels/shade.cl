@@ -62,7 +62,8 @@ __kernel void shade(__global const float4 *gb_pos, __global const float4 *gb_nrm
 #endif
 #if SPECULAR_MODE == SPECULAR_IMPORTANCE
     {
-        /* seed 000: N Hammersley points, GGX half-vector warp, mip level from the pdf */
+        /* N Hammersley points, GGX half-vector warp, mip level from the pdf (filtered importance
+         * sampling: Colbert and Krivanek, GPU Gems 3 ch. 20, 2007) */
         float3 t, b;
         tangent_frame(nrm, &t, &b);
         const int w0 = lw[0], h0 = lh[0];

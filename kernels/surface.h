@@ -57,7 +57,7 @@ inline float3 from_env(float3 e, float2 rot)
 
 inline float3 diffuse_weight(const Material mt, float nov)
 {
-    /* kD = (1 - F_r(NoV)) (1 - metallic), DESIGN.md, times albedo / pi */
+    /* kD = (1 - F_r(NoV)) (1 - metallic) (docs/conventions.md), times albedo / pi */
     return (1.0f - f_schlick_roughness(nov, mt.f0, mt.roughness)) * (1.0f - mt.metallic) * mt.base
            * (1.0f / IBL_PI);
 }

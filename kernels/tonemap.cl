@@ -1,6 +1,6 @@
 /* The tone-mapping pass: linear HDR frame -> 8-bit display frame (see tonemap.h).
  * DITHER: add triangular noise of +-1 LSB (a fixed hash of the pixel index, so frames stay
- * bit-identical run to run, and the same in a tiled frame: pixel0 + i) before rounding; twin: iblbake/tonemap.py dither_offsets. */
+ * bit-identical run to run, and the same in a tiled frame: pixel0 + i) before rounding; twin: iblbake/core/tonemap.py dither_offsets. */
 #include "tonemap.h"
 #include "sampling.h"
 

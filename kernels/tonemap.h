@@ -1,4 +1,4 @@
-/* Tone mapping of DESIGN.md. Mirrors iblbake/tonemap.py (tests/test_tonemap.py).
+/* Tone mapping (docs/conventions.md). Mirrors iblbake/core/tonemap.py (tests/test_tonemap.py).
  * TONEMAP: 0 aces, 1 reinhard, 2 hable, 3 pbr_neutral, 4 linear (only the chosen operator is
  * compiled). OUTPUT_SRGB: 1 exact sRGB encoding, 0 pure gamma (1/gamma). */
 #ifndef IBLBAKE_TONEMAP_H

@@ -112,7 +112,7 @@ def test_white_furnace(tmp_path, constant_env, dfg_fine, metallic, specular):
         assert np.isfinite(frame.hdr).all()
 
 
-# --- counting reflections (seed 000) --------------------------------------------------------------
+# --- counting reflections -----------------------------------------------------------------------
 
 @pytest.fixture(scope="module")
 def spot_env(tmp_path_factory):

@@ -107,7 +107,7 @@ def test_single_sun_texel_sh_and_mips(rt, stress, value, w, h):
     m0 = radiance.solid_angle_mean(img)[0]
     assert all(np.all(np.isfinite(lvl)) for lvl in levels)
     worst = max(abs(radiance.solid_angle_mean(lvl)[0] / m0 - 1) for lvl in levels)
-    stress.check(f"sun {value:g} in {w}x{h}: radiance chain energy, worst level", worst, 1e-4, "rel")
+    stress.check(f"sun {value:g} in {w}x{h}: radiance chain energy, worst level", worst, 5e-7, "rel")  # measured <= 1.4e-7
     if w == 64:
         chain = [l for l in levels]
         for r in (0.25, 1.0):
@@ -142,7 +142,7 @@ def test_odd_sizes_through_mips(tmp_path, stress, w, h):
                 a = images.read_exr(os.path.join(folder, f))
                 assert np.all(np.isfinite(a)), (kind, f)
                 worst = max(worst, float(np.abs(a / 0.7 - 1).max()))
-    stress.check(f"constant panorama {w}x{h} through mips: every level", worst, 1e-4, "rel")
+    stress.check(f"constant panorama {w}x{h} through mips: every level", worst, 1e-6, "rel")  # measured <= 1.2e-7
 
 
 @pytest.mark.slow
@@ -172,7 +172,7 @@ def test_sh_bands_up_to_8_orthonormal_in_both_languages(rt, stress):
         yc = rt.read(out, (len(d), bands * bands)).astype(np.float64)
         worst_cl = max(worst_cl, float(np.abs((yc * w[:, None]).T @ yc - np.eye(bands * bands)).max()))
     stress.check("SH bands 1..8 orthonormal, numpy float64", worst_np, 1e-10, "max Gram error")
-    stress.check("SH bands 1..8 orthonormal, OpenCL float32", worst_cl, 1e-4, "max Gram error")
+    stress.check("SH bands 1..8 orthonormal, OpenCL float32", worst_cl, 1.5e-6, "max Gram error")  # 3.4e-7
 
 
 def test_sh_ringing_clamped_and_reduced_by_windows(stress):
@@ -204,7 +204,7 @@ def test_dfg_edges(rt, stress):
     for name, table in (("OpenCL", t), ("numpy", ref)):
         assert np.isfinite(table).all() and table.min() >= 0 and table.max() <= 1
         err = max(np.abs(table[0, :, 1] - (1 - nov) ** 5).max(), np.abs(table[0, :, 0] - (1 - (1 - nov) ** 5)).max())
-        stress.check(f"DFG r = 0 row vs Schlick, {name}", err, 1e-4, "abs")
+        stress.check(f"DFG r = 0 row vs Schlick, {name}", err, 5e-5, "abs")   # OpenCL 1.3e-5, numpy 2e-14
         stress.check(f"DFG NoV = 0 column: scale + bias - 1, {name}", float(table[:, 0].sum(-1).max() - 1), 1e-6, "abs")
 
 

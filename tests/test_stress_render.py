@@ -4,7 +4,7 @@ recorded in the stress table.
 
 Closed form used throughout: in a constant panorama of radiance 1 (the white furnace) a pixel's
 radiance is kD base + F0 A + B, with (A, B) the DFG integrals at the pixel's NoV and roughness
-and kD the DESIGN.md diffuse weight; it holds for every material, view angle and specular mode.
+and kD the diffuse weight of docs/conventions.md; it holds for every material, view angle and specular mode.
 """
 
 import json
@@ -84,8 +84,15 @@ def twin_shade(sc, frame, gb, arrays, env_image):
     return out + rr.shade(gb, arrays, fx2, sc["environment"], **kw)
 
 
-def check_furnace(stress, case, sc, frame, env_image, table, bound=0.02):
+# a few times the worst error measured per mode (docs/stress-table.md): importance 0.0031 (its N
+# samples), reference 0.0017 (Monte Carlo at 256 samples), prefiltered 4.9e-5 (the DFG table)
+FURNACE_BOUND = {"importance": 0.01, "reference": 0.006, "prefiltered": 2e-4}
+
+
+def check_furnace(stress, case, sc, frame, env_image, table, bound=None):
     """Kernel and twin against the closed form, per material."""
+    if bound is None:
+        bound = FURNACE_BOUND[sc["effects"]["specular"]]
     arrays = pack.scene_arrays(sc)
     gb = rr.primary(sc["camera"], arrays)
     hit = gb["hit"]
@@ -145,7 +152,7 @@ def test_normals_facing_away_back_faces_and_inside_a_sphere(tmp_path, stress, on
     quad = _tilted_quad(tmp_path)
     mats = {"rough": {"base_color": [1, 1, 1], "metallic": 0.0, "roughness": 0.6},
             "mirror": {"base_color": [1, 1, 1], "metallic": 1.0, "roughness": 0.0}}
-    # the furnace closed form is each sphere alone: the neighbours' shadows are not in it
+    # the furnace closed form has no occlusion (inside a sphere every shadow ray hits the wall)
     fx = {"specular": specular, "diffuse": "reference" if specular == "reference" else "sh", "samples": 128,
           "reference": {"max_samples": 256, "target_noise": 0, "visibility": False}}
     # grazing view of the tilted quad, and a single-sided triangle seen from behind
@@ -360,7 +367,7 @@ def test_sun_panorama_through_every_mode(tmp_path, stress, value):
             m0 = radiance.solid_angle_mean(img)[0]
             worst = max(abs(radiance.solid_angle_mean(images.read_exr(entry / f["name"])[..., :3])[0] / m0 - 1)
                         for f in man["files"])
-            stress.check(f"sun {value:g}: prefiltered chain energy vs panorama", worst, 0.01, "rel")
+            stress.check(f"sun {value:g}: prefiltered chain energy vs panorama", worst, 0.005, "rel")  # 0.0015
 
 
 # --- watertight meshes ------------------------------------------------------------------------------

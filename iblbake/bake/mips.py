@@ -289,7 +289,7 @@ def bake_prefiltered(baker: Baker, chain, info, root: Path, policies: dict, opts
         return {"format": FORMAT, "format_version": FORMAT_VERSION, "kind": "prefiltered",
                 "layout": opts["layout"],
                 "layout_description": {
-                    "equirect": "2s x s latitude-longitude, DESIGN.md mapping",
+                    "equirect": "2s x s latitude-longitude, u = 0.5 - atan2(x, z)/(2 pi), v = acos(y)/pi",
                     "cubemap": "faces +X -X +Y -Y +Z -Z of s x s stacked top to bottom (s x 6s image)",
                     "octahedral": "s x s octahedral map, +y at the centre"}[opts["layout"]],
                 "roughness_mapping": "level k of K has perceptual roughness r_k = k / (K - 1), alpha = r^2",

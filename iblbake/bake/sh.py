@@ -116,7 +116,7 @@ def document(coeffs_radiance, *, bands: int, window: str, info, options: dict, d
         "ahat": [sh.truncated_cos_sh(l) for l in range(bands)],
         "evaluation": {
             "radiance": "L(d) ~ sum_k radiance[k] * Y_k(d)",
-            "irradiance": "E(n) = max(0, sum_k irradiance[k] * Y_k(n))  (Ahat folded in, seed 000)",
+            "irradiance": "E(n) = max(0, sum_k irradiance[k] * Y_k(n))  (Ahat folded in, as Ramamoorthi and Hanrahan 2001)",
             "diffuse": "albedo / pi * E(n)",
         },
         "input": info.to_json(),

@@ -107,7 +107,7 @@ def _alm_index(lmax_from: int, lmax_to: int):
 
 def project_texels(image, lmax: int, nthreads: int | None = None):
     """SH coefficients (channels, (lmax+1)(lmax+2)/2), ducc0 layout) of the equirect image read
-    as piecewise constant over its texels, frame theta = pi v, phi = 2 pi u (DESIGN.md's u, v)."""
+    as piecewise constant over its texels, frame theta = pi v, phi = 2 pi u (docs/conventions.md's u, v)."""
     import ducc0.sht.experimental as sht
     h, w, c = np.shape(image)
     dth, dph = math.pi / h, 2.0 * math.pi / w

@@ -1,4 +1,4 @@
-"""The metallic-roughness BRDF terms of DESIGN.md, in numpy. Mirrors kernels/brdf.h.
+"""The metallic-roughness BRDF terms of docs/conventions.md, in numpy. Mirrors kernels/brdf.h.
 
 alpha = roughness^2 (perceptual roughness, Burley/Karis/glTF/Filament).
 """
@@ -23,7 +23,7 @@ def d_ggx(noh, alpha):
 
 
 def v_smith_ggx_correlated(nov, nol, alpha):
-    """Height-correlated Smith visibility V = G / (4 NoV NoL) (Heitz 2014), as seed 002's GDFG."""
+    """Height-correlated Smith visibility V = G / (4 NoV NoL) (Heitz 2014), as Filament's DFG code."""
     a2 = np.asarray(alpha, dtype=np.float64) ** 2
     nov = np.clip(nov, 0.0, 1.0)
     nol = np.clip(nol, 0.0, 1.0)
@@ -37,6 +37,6 @@ def f_schlick(voh, f0, f90=1.0):
 
 
 def f_schlick_roughness(nov, f0, roughness):
-    """Roughness-aware Schlick of seed 004 (used only for the diffuse weight kD)."""
+    """Roughness-aware Schlick (LearnOpenGL's fresnelSchlickRoughness, after Lagarde 2011) (used only for the diffuse weight kD)."""
     f0 = np.asarray(f0, dtype=np.float64)
     return f0 + (np.maximum(1.0 - roughness, f0) - f0) * (1.0 - np.clip(nov, 0.0, 1.0)) ** 5

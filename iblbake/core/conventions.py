@@ -1,9 +1,9 @@
-"""The shared conventions of DESIGN.md, in numpy (float64).
+"""The shared conventions of docs/conventions.md, in numpy (float64).
 
 Mirrors kernels/common.h; tests/test_conventions.py checks the two against each other.
 
 - World space: right-handed, +y up; directions point away from the shaded point.
-- Equirect (seed 000's uvOfW): u = 0.5 - atan2(x, z)/(2 pi), v = acos(y)/pi, v = 0 is the top row.
+- Equirect (the usual latitude-longitude mapping): u = 0.5 - atan2(x, z)/(2 pi), v = acos(y)/pi, v = 0 is the top row.
 - Cube faces in the order +X -X +Y -Y +Z -Z, row 0 at the top of each face.
 - Octahedral map with +y at the centre of the square.
 """

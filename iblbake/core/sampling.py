@@ -50,7 +50,7 @@ def pdf_ggx_reflected(noh, voh, alpha):
 
 
 def to_world(local, n):
-    """Local (x, y, z = n) vectors to world, with the Duff et al. frame of DESIGN.md."""
+    """Local (x, y, z = n) vectors to world, with the Duff et al. 2017 frame (docs/conventions.md)."""
     t, b = conventions.tangent_frame(n)
     return local[..., 0:1] * t + local[..., 1:2] * b + local[..., 2:3] * np.asarray(n)
 

@@ -1,10 +1,10 @@
-"""Real spherical harmonics (DESIGN.md): orthonormal, z polar axis, no Condon-Shortley
+"""Real spherical harmonics (docs/conventions.md): orthonormal, z polar axis, no Condon-Shortley
 phase, index k = l*(l+1) + m. Mirrors kernels/sh.h.
 
     Y_l^m = K_l^|m| P_l^|m|(z) * (sqrt2 cos(m phi) | 1 | sqrt2 sin(|m| phi)),  phi = atan2(y, x)
 
-For l <= 2 this is exactly seed 000's evalSHIrradiance basis. The associated Legendre
-functions come from the standard stable recurrences (seed 002 shows Filament's):
+For l <= 2 this is exactly the 9-coefficient basis of Ramamoorthi and Hanrahan 2001. The associated Legendre
+functions come from the standard stable recurrences (as Filament's CubemapSH):
 
     P_m^m     = (2m-1)!! (1 - z^2)^(m/2)
     P_{m+1}^m = (2m+1) z P_m^m
@@ -86,7 +86,7 @@ def sh_basis(d, bands: int):
 
 def truncated_cos_sh(l: int) -> float:
     """Ahat_l: the clamped-cosine kernel's SH coefficient scaled by sqrt(4 pi / (2l+1)), so that
-    E_lm = Ahat_l L_lm (Ramamoorthi and Hanrahan 2001; seed 002's computeTruncatedCosSh)."""
+    E_lm = Ahat_l L_lm (Ramamoorthi and Hanrahan 2001; Filament's computeTruncatedCosSh)."""
     if l == 0:
         return math.pi
     if l == 1:
@@ -125,7 +125,7 @@ def window(bands: int, kind: str = "none"):
 def project_direct(image, bands: int, rotate_y_deg: float = 0.0, nodes: int = 6):
     """The slow, obviously-correct oracle of `project`: for every texel, int_texel Y_k dOmega by a
     tensor Gauss-Legendre rule in (theta, phi) over the texel's exact extent, every direction
-    the exact inverse of the equirect mapping (seed 000's trap). For small images (tests)."""
+    the exact inverse of the equirect mapping (a common trap). For small images (tests)."""
     image = np.asarray(image, dtype=np.float64)
     h, w, c = image.shape
     # Large texels (tiny images) are split so the rule stays accurate: pieces of <= pi/64.
@@ -157,7 +157,7 @@ def evaluate(coeffs, d, bands: int):
 
 
 def irradiance(coeffs_e, n, bands: int):
-    """Irradiance at normals n from irradiance coefficients, clamped at 0 (seed 000): a sharp
+    """Irradiance at normals n from irradiance coefficients, clamped at 0: a sharp
     source rings, and negative irradiance must not reach a frame."""
     return np.maximum(0.0, evaluate(coeffs_e, n, bands))
 
@@ -166,7 +166,7 @@ def irradiance(coeffs_e, n, bands: int):
 #
 # The panorama is piecewise constant over texels, so L_k = sum_texels L_texel * int_texel Y_k dOmega
 # (exact for any W x H, 1x1 included; it differs from the midpoint sum L(d) Y(d) dOmega of
-# DESIGN.md by O(texel^2 l^2): 8e-6 relative at 1024x512 and 3 bands).
+# docs/conventions.md by O(texel^2 l^2): 8e-6 relative at 1024x512 and 3 bands).
 #
 # On one equirect row (theta from +y), every Y_k is a trigonometric polynomial of degree <= l in
 # the azimuth phi_e = atan2(x, z): Y_k = sum_t G[k, t](theta) T_t(phi_e), T = azimuth_table.

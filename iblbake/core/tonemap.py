@@ -1,4 +1,4 @@
-"""Tone mapping (DESIGN.md), numpy twin of kernels/tonemap.h.
+"""Tone mapping (docs/conventions.md), numpy twin of kernels/tonemap.h.
 
 Exposure first (linear x 2^EV), then the operator, then the output transfer. Inputs are made
 safe before anything else: NaN and negatives become 0, and values are capped at 1e18 (every

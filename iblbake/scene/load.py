@@ -280,13 +280,13 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "sh_bands": Num(3, 1, 8, integer=True, doc="SH bands for diffuse: sh (3 = 9 coefficients)"),
         "sh_window": Enum(("none", "hann", "lanczos"), "none", doc="SH ringing window"),
         "specular": Enum(("importance", "prefiltered", "reference", "off"), "prefiltered",
-                         doc="specular IBL: runtime GGX importance sampling (seed 000), split sum, Monte Carlo reference, none"),
+                         doc="specular IBL: runtime GGX importance sampling (Colbert and Krivanek 2007), split sum, Monte Carlo reference, none"),
         "samples": Num(40, 1, 65536, integer=True, doc="importance: GGX samples per pixel"),
         "mip_bias": Num(1.0, -16.0, 16.0, doc="importance: added to each sample's mip level (Krivanek and "
-                                              "Colbert: 1, closer to the reference; seed 000: 0)"),
+                                              "Colbert: 1, closer to the reference; 0: none)"),
         "force_mip0": Bool(False, doc="importance: read level 0 for every sample (counting-reflections check)"),
         "normalize": Enum(("total", "accepted"), "total",
-                          doc="importance: divide by all N samples (unbiased) or by the accepted ones (seed 000)"),
+                          doc="importance: divide by all N samples (unbiased) or by the accepted ones (as many real-time shaders do)"),
         "prefilter": Section(doc="prefiltered: how the chain is baked (as `iblbake mips`)", fields={
             "method": Enum(("auto", "spectral", "convolve", "fis"), "auto", doc="see iblbake mips --method"),
             "samples": Num(256, 1, 1 << 20, integer=True, doc="fis samples per texel"),
