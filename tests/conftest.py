@@ -1,5 +1,7 @@
 import os
+import shutil
 import subprocess
+import tempfile
 import sys
 from pathlib import Path
 
@@ -14,6 +16,42 @@ settings.register_profile("search", derandomize=False)
 settings.load_profile("search" if os.environ.get("IBLBAKE_STRESS") else "reproducible")
 
 ROOT = Path(__file__).resolve().parents[1]
+
+# Tests bake into a temporary folder, never into the working tree: a render or bake that names no
+# cache folder of its own lands here (subprocesses inherit it).
+_SESSION_CACHE = tempfile.mkdtemp(prefix="iblbake-test-cache-")
+os.environ["IBLBAKE_CACHE"] = _SESSION_CACHE
+
+
+def _tree_state():
+    """Every file git would list in the working tree (tracked changes, untracked, ignored), or
+    None outside a git checkout."""
+    try:
+        out = subprocess.run(["git", "status", "--porcelain", "--ignored", "--untracked-files=all"], cwd=ROOT,
+                             capture_output=True, text=True, timeout=60)
+    except (OSError, subprocess.TimeoutExpired):
+        return None
+    return set(out.stdout.splitlines()) if out.returncode == 0 else None
+
+
+_TREE_BEFORE = _tree_state()
+
+
+def pytest_sessionfinish(session, exitstatus):
+    """`make test` leaves the working tree as it found it: nothing generated, nothing changed
+    (Python's own __pycache__ aside). A new file fails the run and is named."""
+    shutil.rmtree(_SESSION_CACHE, ignore_errors=True)
+    after = _tree_state()
+    if _TREE_BEFORE is None or after is None:
+        return
+    new = sorted(x for x in after - _TREE_BEFORE if "__pycache__" not in x and ".pytest_cache" not in x)
+    if new:
+        tr = session.config.pluginmanager.get_plugin("terminalreporter")
+        tr.ensure_newline()
+        tr.write_line(f"the test run left files in the working tree: {new[:10]}", red=True)
+        session.exitstatus = 1
+
+
 PANORAMAS = ROOT / "examples" / "panoramas"
 PANORAMA_NAMES = ("city", "courtyard", "forest", "interior", "night", "studio", "sunrise", "sunset")
 

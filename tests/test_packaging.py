@@ -19,8 +19,13 @@ def test_installed_package_finds_every_kernel():
 
 
 def test_wheel_contains_the_kernels(tmp_path):
+    import shutil
+    src = tmp_path / "src"           # a copy: the build leaves build/ and egg-info beside its source
+    src.mkdir()
+    for name in ("pyproject.toml", "README.md", "iblbake", "kernels"):
+        (shutil.copytree if (ROOT / name).is_dir() else shutil.copy)(ROOT / name, src / name)
     p = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q",
-                        "-w", str(tmp_path), str(ROOT)], capture_output=True, text=True, timeout=300)
+                        "-w", str(tmp_path), str(src)], capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stderr[-2000:]
     wheel = next(tmp_path.glob("iblbake-*.whl"))
     names = set(zipfile.ZipFile(wheel).namelist())
