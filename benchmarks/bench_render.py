@@ -4,20 +4,32 @@ of the end-to-end render and of each pass, Mpixel-samples/s of the lighting pass
 and BVH build time. Targets (2-core CPU): prefiltered < 1 s end to end, importance N=40 < 3 s.
 
     python benchmarks/bench_render.py [--runs 3] [--device SPEC] [--only NAME]
+    python benchmarks/bench_render.py --baseline DIR    # against another source checkout, side by side
+
+--baseline runs every configuration in this checkout and in DIR (an older iblbake source tree,
+e.g. `git worktree add DIR REV`, with DIR/iblbake/kernels linking to DIR/kernels), alternately,
+each in its own process, and prints the ratio of the medians (this / baseline).
 """
 
 import argparse
+import json
+import os
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(os.environ.get("IBLBAKE_BENCH_SOURCE") or Path(__file__).resolve().parents[1])
 sys.path.insert(0, str(ROOT))
+SCENES = Path(__file__).resolve().parents[1] / "examples" / "scenes"    # the same scenes for both sides
 
-from iblbake import render
-from iblbake.scene import load as scene  # noqa: E402
+from iblbake import render  # noqa: E402
+try:
+    import iblbake.scene.load as scene  # noqa: E402
+except ImportError:                           # a baseline from before the layered package
+    from iblbake import scene  # noqa: E402
 
 CONFIGS = [
     ("prefiltered", "sphere_grid.yaml", ["effects.specular=prefiltered"]),
@@ -28,8 +40,13 @@ CONFIGS = [
     ("reference 64 spp", "sphere_grid.yaml", ["effects.specular=reference", "effects.diffuse=reference",
                                                "effects.reference.max_samples=64", "effects.reference.target_noise=0",
                                                "effects.reference.batch=32"]),
+    ("reference 64 spp, unoccluded", "sphere_grid.yaml",
+     ["effects.specular=reference", "effects.diffuse=reference", "effects.reference.max_samples=64",
+      "effects.reference.target_noise=0", "effects.reference.batch=32", "effects.reference.visibility=false"]),
     ("mesh 102k tris", "mesh.yaml", []),
 ]
+# keys a baseline from before them does not know; without them it renders what they switch off
+NEWER_KEYS = ("effects.reference.visibility",)
 
 
 def main():
@@ -38,15 +55,22 @@ def main():
     ap.add_argument("--device", default=None)
     ap.add_argument("--only", default=None)
     ap.add_argument("--cache", default=None)
+    ap.add_argument("--json", action="store_true", help="one JSON line per configuration")
+    ap.add_argument("--baseline", default=None, metavar="DIR")
     args = ap.parse_args()
+    if args.baseline:
+        return compare(args)
     cache = Path(args.cache or tempfile.mkdtemp(prefix="iblbake-bench-"))
-    print("| configuration | end to end s | gbuffer s | lighting s | Mpixel-samples/s | primary Mrays/s | BVH build s |")
-    print("|---|---|---|---|---|---|---|")
+    if not args.json:
+        print("| configuration | end to end s | gbuffer s | lighting s | Mpixel-samples/s | primary Mrays/s | BVH build s |")
+        print("|---|---|---|---|---|---|---|")
     device = None
     for name, file, sets in CONFIGS:
-        if args.only and args.only not in name:
+        if args.only and args.only != name and (args.json or args.only not in name):
             continue
-        sc = scene.load(ROOT / "examples" / "scenes" / file, sets)
+        if ROOT != SCENES.parents[1]:
+            sets = [s for s in sets if not s.startswith(NEWER_KEYS)]
+        sc = scene.load(SCENES / file, sets)
         render.render(sc, device=args.device, cache_root=cache)           # bake + build
         ends, passes = [], {}
         for _ in range(args.runs):
@@ -63,10 +87,38 @@ def main():
         samples = {"shade": sc["effects"]["samples"] if sc["effects"]["specular"] == "importance" else 1,
                    "reference": passes.get("reference", [{}])[0].get("samples_per_pixel", 1)}[light]
         mps = n * samples / max(med(light), 1e-9) / 1e6
+        if args.json:
+            print(json.dumps({"name": name, "end_s": statistics.median(ends), "light_s": med(light),
+                              "gbuffer_s": med("gbuffer")}), flush=True)
+            continue
         print(f"| {name} | {statistics.median(ends):.3f} | {med('gbuffer'):.3f} | {med(light):.3f} | {mps:.1f} | "
               f"{n / max(med('gbuffer'), 1e-9) / 1e6:.2f} | {geo.get('bvh_build_s', 0):.3f} |", flush=True)
+    if args.json:
+        return
     print(f"\ndevice: {device}; median of {args.runs} warm runs; end to end = render() incl. reading the "
           f"panorama, loading cached bakes and the mesh, all passes and read-back")
+
+
+def _run_one(source, name, args, cache):
+    env = dict(os.environ, IBLBAKE_BENCH_SOURCE=str(source), PYTHONPATH=str(source))
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--json", "--only", name, "--runs", str(args.runs),
+           "--cache", str(cache)] + (["--device", args.device] if args.device else [])
+    out = subprocess.run(cmd, capture_output=True, text=True, env=env, check=True).stdout
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def compare(args):
+    here = Path(__file__).resolve().parents[1]
+    cache = Path(args.cache or tempfile.mkdtemp(prefix="iblbake-bench-"))
+    print("| configuration | end to end s (this / baseline) | ratio | lighting s (this / baseline) | ratio |")
+    print("|---|---|---|---|---|")
+    for name, _, _ in CONFIGS:
+        if args.only and args.only not in name:
+            continue
+        a, b = _run_one(here, name, args, cache / "this"), _run_one(args.baseline, name, args, cache / "base")
+        print(f"| {name} | {a['end_s']:.3f} / {b['end_s']:.3f} | {a['end_s'] / b['end_s']:.2f} | "
+              f"{a['light_s']:.3f} / {b['light_s']:.3f} | {a['light_s'] / max(b['light_s'], 1e-9):.2f} |", flush=True)
+    print(f"\nmedians of {args.runs} warm runs, each side in its own process; baseline: {args.baseline}")
 
 
 if __name__ == "__main__":

@@ -46,10 +46,13 @@ def kernel_folder():
         return Path(__file__).resolve().parents[2] / "kernels"
 
 
-def kernel_source(name: str, _seen=None) -> str:
+def kernel_source(name, _seen=None) -> str:
     """Source of kernels/NAME with its `#include "x.h"` lines inlined (once each), so that the
-    text we hash and build is exactly what the compiler sees."""
+    text we hash and build is exactly what the compiler sees. NAME may be a tuple of files: one
+    program of them all (each header still once), which loads as one binary instead of several."""
     seen = set() if _seen is None else _seen
+    if isinstance(name, tuple):
+        return "\n".join(f"// ==== {n}\n" + kernel_source(n, seen) for n in name)
     text = kernel_folder().joinpath(name).read_text(encoding="utf-8")
 
     def inline(m):
@@ -67,7 +70,7 @@ _SCALARS = {"int": np.int32, "uint": np.uint32, "float": np.float32}
 
 
 @functools.lru_cache(maxsize=None)
-def kernel_params(name: str, function: str) -> tuple:
+def kernel_params(name, function: str) -> tuple:
     """((parameter name, converter), ...) of `function` in kernels/NAME, read from its signature
     (object-like macros such as SCENE_PARAMS expanded), so the host binds arguments by name:
     a buffer as it is, a scalar cast to its OpenCL type, a float2/float4 to a float32 vector."""
@@ -94,7 +97,7 @@ def kernel_params(name: str, function: str) -> tuple:
 
 
 @functools.lru_cache(maxsize=None)
-def source_hash(name: str) -> str:
+def source_hash(name) -> str:
     return hashlib.sha256(kernel_source(name).encode()).hexdigest()[:16]
 
 
@@ -267,7 +270,7 @@ class Runtime:
     def device_label(self) -> str:
         return self.info.label
 
-    def program(self, name: str, defines: dict | None = None):
+    def program(self, name, defines: dict | None = None):
         """Build kernels/NAME with -D defines. In-process cache, plus pyopencl's on-disk binary
         cache keyed by (source, options, device), so a second run spends no time compiling."""
         defines = dict(sorted((defines or {}).items()))
@@ -283,13 +286,15 @@ class Runtime:
         except Exception as e:
             log = str(e)
             first = next((ln.strip() for ln in log.splitlines() if "error:" in ln), None)
-            raise DeviceError(f"kernels/{name}: build failed on {self.device_label}: "
+            shown = "+".join(name) if isinstance(name, tuple) else name
+            raise DeviceError(f"kernels/{shown}: build failed on {self.device_label}: "
                               f"{first or _one_line(e)}") from None
-        self.builds.append({"kernel": name, "defines": defines, "seconds": time.perf_counter() - t0})
+        self.builds.append({"kernel": "+".join(name) if isinstance(name, tuple) else name, "defines": defines,
+                            "seconds": time.perf_counter() - t0})
         self._programs[key] = prg
         return prg
 
-    def kernel(self, name: str, function: str, defines: dict | None = None):
+    def kernel(self, name, function: str, defines: dict | None = None):
         """A kernel object of kernels/NAME, built once and reused (pyopencl warns that
         `prg.function` creates a new kernel object every time)."""
         key = (name, function, tuple(sorted((defines or {}).items())))
@@ -324,7 +329,7 @@ class Runtime:
         self._host_arrays.clear()
         return out
 
-    def launch(self, name: str, function: str, defines: dict | None, global_size, table: dict, **args):
+    def launch(self, name, function: str, defines: dict | None, global_size, table: dict, **args):
         """Run `function` of kernels/NAME with every parameter bound by name: from `args`, else
         from `table` (the caller's named buffers and values). A name in neither is an error
         that names it, not a silently shifted argument list."""
@@ -339,6 +344,12 @@ class Runtime:
             values.append(v if conv is None else conv(v))
         k = self.kernel(name, function, defines)
         return self.run(k, tuple(global_size), None, *values)
+
+    def read_into(self, buf, out):
+        """Blocking copy of `buf` into the contiguous array `out` (rows of a frame, say)."""
+        self.cl.enqueue_copy(self.queue, out, buf)
+        self._host_arrays.clear()
+        return out
 
     def run(self, kernel, global_size, local_size, *args):
         try:

@@ -67,8 +67,8 @@ class Context:
         self._chains: dict = {}
 
     def launch(self, p, global_size, **args):
-        return self.rt.launch(p.kernel, p.function or p.name, self.plan.defines.get(p.name), global_size,
-                              self.table, **args)
+        files, defines = self.plan.program(p)
+        return self.rt.launch(files, p.function or p.name, defines, global_size, self.table, **args)
 
     def chain(self, levels) -> dict:
         key = id(levels)
@@ -165,12 +165,12 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, device: st
     spp = cam["spp"]
     rows = tile_rows(rt, scene, pl, device_budget)
     ctx.width = width
-    ctx.frame_hdr = np.zeros((height, width, 4), np.float32)
-    ctx.frame_png = np.zeros((height, width, 3), np.uint8) if "tonemap" in pl.pass_names else None
+    ctx.frame_hdr = np.empty((height, width, 4), np.float32)
+    ctx.frame_png = np.empty((height, width, 4), np.uint8) if "tonemap" in pl.pass_names else None
     aov = "WRITE_AOVS" in pl.defines.get("resolve", {})
-    ctx.frame_aovs = {"normal": np.zeros((height, width, 4), np.float32),
-                      "albedo": np.zeros((height, width, 4), np.float32),
-                      "depth": np.zeros((height, width), np.float32)} if aov else {}
+    ctx.frame_aovs = {"normal": np.empty((height, width, 4), np.float32),
+                      "albedo": np.empty((height, width, 4), np.float32),
+                      "depth": np.empty((height, width), np.float32)} if aov else {}
     env = d["environment"]
     rot = np.radians(env["rotation_y"])
     pos, fwd, right, up, ortho = pack.camera_vectors(cam)
@@ -192,7 +192,8 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, device: st
     })
     for p in pl.passes:
         if p.kernel:                  # built (or loaded from the program cache) before any timing
-            rt.kernel(p.kernel, p.function or p.name, pl.defines[p.name])
+            files, defines = pl.program(p)
+            rt.kernel(files, p.function or p.name, defines)
         ctx.args[p.name] = p.setup(ctx)
 
     row0s = list(range(0, height, rows))
@@ -227,7 +228,8 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, device: st
         "tiles": len(row0s),
         "elapsed_s": round(time.perf_counter() - t_start, 4),
     }
-    return Frame(ctx.frame_hdr, ctx.frame_png, ctx.frame_aovs, report)
+    png = ctx.frame_png[..., :3] if ctx.frame_png is not None else None     # RGBA as read back; RGB shown
+    return Frame(ctx.frame_hdr, png, ctx.frame_aovs, report)
 
 
 def output_paths(scene: Scene) -> list:

@@ -54,6 +54,17 @@ class Plan:
     defines: dict             # pass name -> its kernel defines
     notes: list
 
+    def program(self, p) -> tuple:
+        """(kernel files, defines) of the program pass p is built in: every running pass of the
+        same program, their defines united."""
+        group = [q for q in self.passes if q.kernel and q.program == p.program]
+        defines = {}
+        for q in group:
+            for k, v in self.defines[q.name].items():
+                if defines.setdefault(k, v) != v:
+                    raise ValueError(f"passes of program {p.program} disagree on {k}")
+        return tuple(dict.fromkeys(q.kernel for q in group)), defines
+
     @property
     def pass_names(self) -> list:
         return [p.name for p in self.passes]

@@ -12,6 +12,9 @@ class Pass:
     name = ""
     kernel = None            # kernels/<file> (None: host-only)
     function = None          # the kernel function, by default the pass's name
+    # Passes of one program are built and loaded together (one binary: each program costs a load
+    # even from the cache); their defines must agree, and each reads only its own.
+    program = "frame"
     reads: tuple = ()        # named buffers read and written (the context's table)
     writes: tuple = ()
 

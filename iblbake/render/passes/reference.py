@@ -42,11 +42,7 @@ class Reference(Pass):
         return ["env_cdf"]
 
     def defines(self, scene, fx):
-        d = mode_defines(fx)
-        if fx.diffuse != "reference":
-            d["DIFFUSE_MODE"] = 0
-        if fx.specular != "reference":
-            d["SPECULAR_MODE"] = 0
+        d = mode_defines(fx)          # reference.cl computes only the reference terms
         if scene.data["effects"]["reference"]["visibility"]:
             d.update(VISIBILITY=1, **geometry_defines(scene))
         return d

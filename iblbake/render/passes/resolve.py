@@ -20,11 +20,10 @@ class Resolve(Pass):
     def run(self, ctx):
         t = ctx.table
         ctx.launch(self, (t["npix"],))
-        rows, w = ctx.tile_rows, ctx.width
+        rows = ctx.tile_rows
         sl = slice(ctx.row0, ctx.row0 + rows)
-        ctx.frame_hdr[sl] = ctx.rt.read(t["hdr"], (rows, w, 4))
+        ctx.rt.read_into(t["hdr"], ctx.frame_hdr[sl])        # whole rows: contiguous
         if "WRITE_AOVS" in ctx.plan.defines[self.name]:
-            for a in ("normal", "albedo"):
-                ctx.frame_aovs[a][sl] = ctx.rt.read(t[f"aov_{a}"], (rows, w, 4))
-            ctx.frame_aovs["depth"][sl] = ctx.rt.read(t["aov_depth"], (rows, w))
+            for a in ("normal", "albedo", "depth"):
+                ctx.rt.read_into(t[f"aov_{a}"], ctx.frame_aovs[a][sl])
         return {}

@@ -24,12 +24,7 @@ class Shade(Pass):
 
     def defines(self, scene, fx):
         e = scene.data["effects"]
-        d = mode_defines(fx)
-        # the reference terms are another pass's: here they count as off
-        if fx.diffuse != "sh":
-            d["DIFFUSE_MODE"] = 0
-        if fx.specular not in ("importance", "prefiltered"):
-            d["SPECULAR_MODE"] = 0
+        d = mode_defines(fx)          # shade.cl computes only the sh, importance, prefiltered terms
         if fx.diffuse == "sh":
             d["SH_BANDS"] = e["sh_bands"]
         if fx.specular == "importance":

@@ -11,6 +11,7 @@ class Tonemap(Pass):
     name = "tonemap"
     kernel = "tonemap.cl"
     function = "tonemap_u8"
+    program = "tonemap"      # its own: exposure and operator sweeps reuse the frame program
     reads = ("hdr",)
     writes = ("png",)
 
@@ -28,6 +29,5 @@ class Tonemap(Pass):
         t, e = ctx.table, ctx.scene.data["effects"]
         ctx.launch(self, (t["npix"],), exposure_scale=2.0 ** e["exposure"], gamma=e["gamma"], n=t["npix"],
                    out=t["png_u8"], display=t["display"])
-        rows = ctx.tile_rows
-        ctx.frame_png[ctx.row0:ctx.row0 + rows] = ctx.rt.read(t["png_u8"], (rows, ctx.width, 4), "uint8")[..., :3]
+        ctx.rt.read_into(t["png_u8"], ctx.frame_png[ctx.row0:ctx.row0 + ctx.tile_rows])   # RGBA rows
         return {"operator": e["tonemap"]}
