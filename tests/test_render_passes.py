@@ -125,7 +125,8 @@ def test_tiled_frame_equals_the_untiled_one(tmp_path, small_panoramas, fx):
 
 def test_frame_that_cannot_fit_fails_in_one_line(tmp_path):
     """16384 x 16384 under a 6 GiB address-space limit: a one-line error naming camera.resolution,
-    exit 1, no abort inside the OpenCL driver, nothing written."""
+    exit 1, no abort inside the OpenCL driver, nothing written. On the CPU device, whose buffers
+    are this process's memory (a GPU driver does not even start under such a limit)."""
     out = tmp_path / "big.png"
     limit = 6 << 30
 
@@ -133,7 +134,8 @@ def test_frame_that_cannot_fit_fails_in_one_line(tmp_path):
         resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
 
     p = subprocess.run([sys.executable, "-m", "iblbake.cli", "render", str(ROOT / "examples/scenes/quick.yaml"),
-                        "-o", str(out), "--cache", str(tmp_path / "c"), "--set", "camera.resolution=[16384,16384]"],
+                        "-o", str(out), "--cache", str(tmp_path / "c"), "--set", "camera.resolution=[16384,16384]",
+                        "--device", "cpu"],
                        capture_output=True, text=True, preexec_fn=cap, timeout=300)
     assert p.returncode == 1, p.stderr[-2000:]
     lines = p.stderr.strip().splitlines()

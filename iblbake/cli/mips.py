@@ -1,0 +1,120 @@
+"""`iblbake mips`: the radiance chain, the GGX-prefiltered chain and the DFG table, cached."""
+
+from __future__ import annotations
+
+import time
+
+import click
+
+from iblbake.cli.options import (POLICY_FLAGS, Console, common_options, device_option, finite, input_options,
+                                  non_negative)
+
+
+@click.command("mips")
+@click.argument("env", metavar="ENV")
+@click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
+              help="Cache folder; entries go to CACHE/<key>/ with a manifest.json. "
+                   "Default: $IBLBAKE_CACHE, else ./iblbake-cache.")
+@click.option("--layout", type=click.Choice(["equirect", "cubemap", "octahedral"]), default="equirect",
+              show_default=True, help="Layout of the prefiltered chain (cubemap: faces +X -X +Y -Y +Z -Z "
+                                      "stacked vertically).")
+@click.option("--size", type=click.IntRange(min=1), default=None,
+              help="Base size of the prefiltered chain: equirect height, cube face or octahedral side. "
+                   "Default: source height (cubemap: half of it).")
+@click.option("--levels", type=click.IntRange(1, 32), default=None,
+              help="Levels K of the prefiltered chain, roughness r_k = k/(K-1). Default: one per halving "
+                   "of --size down to --min-size.")
+@click.option("--min-size", type=click.IntRange(min=1), default=8, show_default=True,  # layouts.MIN_LEVEL_SIZE
+              help="Smallest level size of the prefiltered chain.")
+@click.option("--method", type=click.Choice(["auto", "spectral", "convolve", "fis"]), default="auto",
+              show_default=True,
+              help="spectral: the exact GGX convolution done in the spherical-harmonic domain (host, "
+                   "ducc0; any lobe with r >= 0.06 or so); convolve: deterministic sum over every texel "
+                   "of a fine enough chain level (exact, slow on sharp levels); fis: GGX importance "
+                   "sampling with filtered lookups; auto: spectral where it applies, else convolve "
+                   "where it fits --convolve-budget, else fis.")
+@click.option("--samples", type=click.IntRange(min=1), default=256, show_default=True,
+              help="GGX samples per texel for fis levels.")
+@click.option("--lod-bias", type=float, default=1.0, show_default=True, callback=finite,
+              help="Added to the filtered-importance-sampling level (Krivanek and Colbert use 1).")
+@click.option("--no-fis", is_flag=True, help="Plain importance sampling: every sample reads level 0.")
+@click.option("--convolve-budget", type=float, default=None, callback=non_negative,
+              help="auto: weight evaluations per level allowed for convolve. Default: 1.5e8 on a CPU "
+                   "device, 2e10 on a GPU (about half a second per level on each).")
+@click.option("--dfg-size", type=click.IntRange(2, 4096), default=128, show_default=True,
+              help="DFG table size (NoV x roughness).")
+@click.option("--dfg-samples", type=click.IntRange(min=1), default=4096, show_default=True,
+              help="GGX samples per DFG texel.")
+@click.option("--dfg-multiscatter", is_flag=True,
+              help="Store (B, A+B) for Filament's multiple-scattering energy compensation instead of (A, B).")
+@click.option("--only", type=click.Choice(["all", "radiance", "prefiltered", "dfg"]), multiple=True,
+              default=("all",), show_default=True, help="Bake only these parts (repeatable).")
+@click.option("--backend", type=click.Choice(["opencl", "numpy"]), default="opencl", show_default=True,
+              help="opencl: the kernels; numpy: their float64 twins (slow; small sizes).")
+@input_options
+@device_option
+@common_options
+def mips_command(env, cache_dir, layout, size, levels, min_size, method, samples, lod_bias, no_fis,
+                 convolve_budget, dfg_size, dfg_samples, dfg_multiscatter, only, backend, nonfinite, negative,
+                 max_pixels, device, quiet, as_json):
+    """Bake the radiance mip chain, the GGX-prefiltered chain and the DFG table of ENV into a
+    content-addressed EXR cache. A second run with the same inputs does no work ("cached")."""
+    from pathlib import Path
+
+    from iblbake.bake import cache
+    from iblbake.io import images
+    from iblbake.bake import layouts
+    from iblbake.bake import mips as mipsbake
+
+    con = Console(quiet, as_json)
+    parts = {"radiance", "prefiltered", "dfg"} if "all" in only else set(only)
+    t_start = time.perf_counter()
+    root = Path(cache_dir) if cache_dir else cache.default_root()
+    from iblbake.io.atomic import check_writable
+    check_writable(root / "manifest.json", "cache", shown=root)
+    baker = mipsbake.Baker(backend, device)
+    report = {}
+    summary = {"cache": str(root), "device": baker.device_label, "entries": report}
+    if parts & {"radiance", "prefiltered"}:
+        image, info = images.read_panorama(env, max_pixels=max_pixels, nonfinite=nonfinite, negative=negative,
+                                           names=POLICY_FLAGS)
+        for w in info.warnings:
+            con.warn(w)
+        policies = {"nonfinite": nonfinite, "negative": negative}
+        if "prefiltered" in parts:
+            opts = mipsbake.PrefilterOptions(layout, size, levels, min_size, method, samples, lod_bias,
+                                             not no_fis, convolve_budget).resolved(info.height)
+            # an impossible plan (--method spectral on a too sharp level) fails before any bake
+            mipsbake.plan_methods(layouts.radiance_chain_sizes(info.width, info.height),
+                                  {**opts, "convolve_budget": baker.convolve_budget(opts)}, "--method")
+        t0 = time.perf_counter()
+        manifest, cached, chain = mipsbake.bake_radiance(baker, image, info, root, policies, warn=con.warn)
+        report["radiance"] = {"path": str(root / manifest["key"]), "cached": cached,
+                              "seconds": round(time.perf_counter() - t0, 4), "levels": len(manifest["files"])}
+        if "prefiltered" in parts:
+            state = {"chain": chain}
+
+            def chain_levels():
+                if state["chain"] is None:
+                    state["chain"] = mipsbake.load_chain(root, manifest)
+                return state["chain"]
+
+            levels_named = [f"level {k} (r = {r:.3g})" for k, r in enumerate(opts["roughness"])]
+            with con.stages(levels_named, label="prefiltering") as step:
+                t0 = time.perf_counter()
+                pm, pcached = mipsbake.bake_prefiltered(baker, chain_levels, info, root, policies, opts,
+                                                        warn=con.warn, progress=step)
+            report["prefiltered"] = {"path": str(root / pm["key"]), "cached": pcached,
+                                     "seconds": round(time.perf_counter() - t0, 4), "layout": layout,
+                                     "sizes": opts["sizes"], "roughness": opts["roughness"],
+                                     "methods": [f["method"] for f in pm["files"]]}
+    if "dfg" in parts:
+        t0 = time.perf_counter()
+        dm, dcached = mipsbake.bake_dfg(baker, root, dfg_size, dfg_samples, dfg_multiscatter, warn=con.warn)
+        report["dfg"] = {"path": str(root / dm["key"]), "cached": dcached,
+                         "seconds": round(time.perf_counter() - t0, 4)}
+    summary["elapsed_s"] = round(time.perf_counter() - t_start, 4)
+    lines = [f"{kind}: {'cached' if e['cached'] else 'baked'} {e['path']} ({e['seconds']:.3f} s)"
+             for kind, e in report.items()]
+    lines.append(f"done in {summary['elapsed_s']:.3f} s on {baker.device_label}")
+    con.result(summary, "\n".join(lines))

@@ -1,0 +1,88 @@
+"""`iblbake render`: a scene YAML through the renderer's passes into frames."""
+
+from __future__ import annotations
+
+import contextlib
+
+import click
+
+from iblbake.cli.options import Console, common_options, device_option
+
+
+def _help_schema(ctx, param, value):
+    if value and not ctx.resilient_parsing:
+        from iblbake.scene.load import schema_text
+        click.echo(schema_text(), nl=False)
+        ctx.exit(0)
+
+
+@click.command("render")
+@click.argument("scene_path", metavar="SCENE", required=False)
+@click.option("--output", "-o", "outputs", multiple=True, type=click.Path(dir_okay=False),
+              help="Frame path (.png tone-mapped, .exr linear); repeatable. Replaces output.frame of the "
+                   "scene. Existing files are overwritten (atomically).")
+@click.option("--set", "overrides", multiple=True, metavar="KEY.PATH=VALUE",
+              help="Override a scene value, e.g. --set effects.samples=40 --set materials.gold.roughness=0.3 "
+                   "--set objects.0.sphere.radius=2 (repeatable; values parse as YAML).")
+@click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
+              help="Bake cache folder (shared with `iblbake mips`). Default: $IBLBAKE_CACHE, else ./iblbake-cache.")
+@click.option("--report", "show_report", is_flag=True,
+              help="Print the effect set, every bake and pass with its time and cache hit/miss, and the device.")
+@click.option("--help-schema", is_flag=True, expose_value=False, is_eager=True, callback=_help_schema,
+              help="Print every scene key with its type, range and default, and exit.")
+@device_option
+@common_options
+def render_command(scene_path, outputs, overrides, cache_dir, show_report, device, quiet, as_json):
+    """Render the scene file SCENE (YAML; see --help-schema and examples/scenes/) with OpenCL.
+
+    Only the effects the scene calls for are baked, compiled and run; --report shows which.
+    """
+    from iblbake import render
+    from iblbake.scene import load as scene
+
+    if scene_path is None:
+        raise click.UsageError("missing SCENE (a scene YAML file; see --help-schema)")
+    con = Console(quiet, as_json)
+    sc = scene.load(scene_path, overrides, outputs)
+    from iblbake.io.atomic import check_writable
+    for p in render.output_paths(sc):
+        check_writable(p)
+    with con.stages(["reference samples"] * 100, label="render") if (
+            "reference" in render.plan(sc).pass_names and con.interactive) else contextlib.nullcontext(None) as step:
+        last = [0]
+
+        def progress(frac):
+            if step is None:
+                return
+            k = int(frac * 100)
+            while last[0] < k:
+                step()
+                last[0] += 1
+
+        frame = render.render(sc, device=device, cache_root=cache_dir, warn=con.warn, progress=progress)
+    written = render.write_outputs(frame, sc)
+    rep = frame.report
+    for note in rep["effects"]["notes"]:
+        con.note(f"iblbake: {note}")
+    summary = {**rep, "scene": sc.source, "outputs": written}
+    lines = []
+    if show_report:
+        e = rep["effects"]
+        lines.append(f"device: {rep['device']}")
+        lines.append(f"effects: diffuse={e['diffuse']} specular={e['specular']} background={e['background']}"
+                     f"{' emissive' if e['emissive'] else ''}")
+        for name, defs in e["defines"].items():
+            lines.append(f"defines {name}: " + (" ".join(f"{k}={v}" for k, v in defs.items()) or "-"))
+        for b in rep["bakes"]:
+            extra = " ".join(f"{k}={v}" for k, v in b.items() if k not in ("name", "seconds", "cached", "entry",
+                                                                             "meshes"))
+            lines.append(f"bake  {b['name']:<16} {b['seconds']:8.3f} s  {'hit ' if b['cached'] else 'miss'}  {extra}")
+        for p in rep["passes"]:
+            extra = " ".join(f"{k}={v}" for k, v in p.items() if k not in ("name", "seconds"))
+            lines.append(f"pass  {p['name']:<16} {p['seconds']:8.3f} s        {extra}")
+        for b in rep["kernel_builds"]:
+            lines.append(f"build {b['kernel']:<16} {b['seconds']:8.3f} s")
+    w, h = rep["resolution"]
+    lines.append(f"{'wrote ' + ', '.join(written) if written else 'rendered'} ({w}x{h}, {rep['spp']} spp) "
+                 f"in {rep['elapsed_s']:.3f} s on {rep['device']}")
+    con.result(summary, "\n".join(lines))
