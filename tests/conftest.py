@@ -9,15 +9,15 @@ import numpy as np
 import pytest
 import platformdirs
 from hypothesis import settings
-from hypothesis.database import DirectoryBasedExampleDatabase
+from hypothesis.configuration import set_hypothesis_home_dir
 
 # `make test` (and CI) replays the same generated examples every run, so a result is reproducible;
 # `make stress` (IBLBAKE_STRESS=1) draws new ones each time to keep searching.
-# Neither writes its example database into the working tree: `make test` keeps none (derandomized
-# examples need none), `make stress` keeps its finds in the per-user cache folder.
+# Hypothesis keeps its files (example database, constants cache) in the per-user cache folder, not
+# in the working tree; `make test` needs no database (derandomized), `make stress` keeps its finds.
+set_hypothesis_home_dir(os.path.join(platformdirs.user_cache_dir("iblbake"), "hypothesis"))
 settings.register_profile("reproducible", derandomize=True, database=None)
-settings.register_profile("search", derandomize=False, database=DirectoryBasedExampleDatabase(
-    os.path.join(platformdirs.user_cache_dir("iblbake"), "hypothesis")))
+settings.register_profile("search", derandomize=False)
 settings.load_profile("search" if os.environ.get("IBLBAKE_STRESS") else "reproducible")
 
 ROOT = Path(__file__).resolve().parents[1]
