@@ -15,7 +15,7 @@ import sys
 import click
 
 from iblbake import __version__
-from iblbake.cli import devices, mips, render, sh
+from iblbake.cli import devices, mips, render, sh, sheet
 from iblbake.cli.options import _DEBUG, _set_debug
 from iblbake.errors import IblbakeError
 
@@ -47,11 +47,12 @@ def cli():
     iblbake sh ENV -o sh.json       spherical-harmonic irradiance coefficients
     iblbake mips ENV --cache DIR    radiance chain, GGX-prefiltered chain, DFG table
     iblbake render SCENE -o out.png render a scene YAML (see render --help-schema)
+    iblbake sheet SCENE -o s.png    a contact sheet of the scene's sweep (or --rows/--columns)
     iblbake devices                 OpenCL devices and which one is used
     """
 
 
-for command in (devices.devices, sh.sh_command, mips.mips_command, render.render_command):
+for command in (devices.devices, sh.sh_command, mips.mips_command, render.render_command, sheet.sheet_command):
     cli.add_command(command)
 
 

@@ -26,13 +26,16 @@ class Console:
 
     def __init__(self, quiet: bool, as_json: bool):
         self.quiet, self.as_json = quiet, as_json
+        self._warned: set = set()
 
     def note(self, text: str):
         if not self.quiet:
             click.echo(text, err=True)
 
     def warn(self, text: str):
-        if not self.quiet:
+        """Once per message (a sheet's cells read the same panorama)."""
+        if not self.quiet and text not in self._warned:
+            self._warned.add(text)
             click.echo(f"iblbake: warning: {text}", err=True)
 
     @property

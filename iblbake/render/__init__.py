@@ -2,7 +2,7 @@
 context, tiles and outputs), bakes (what passes read), twin (the numpy renderer)."""
 
 from iblbake.render.bakes import Bakes
-from iblbake.render.frame import Frame, output_paths, render, write_outputs
+from iblbake.render.frame import Frame, Reuse, output_paths, render, write_outputs
 from iblbake.render.plan import plan
 
-__all__ = ["Bakes", "Frame", "output_paths", "plan", "render", "write_outputs"]
+__all__ = ["Bakes", "Frame", "Reuse", "output_paths", "plan", "render", "write_outputs"]

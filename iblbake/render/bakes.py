@@ -38,6 +38,10 @@ class Bakes:
         return self._get(key, lambda: images.read_panorama(env["path"], nonfinite=env["nonfinite"],
                                                            negative=env["negative"], names=POLICY_KEYS))
 
+    def chain(self, rt, levels) -> dict:
+        """The device tables of a chain of levels (chain_table), uploaded once per runtime."""
+        return self._get(("chain", id(rt), tuple(id(lv) for lv in levels)), lambda: chain_table(rt, levels))
+
     def load(self, name: str, ctx) -> tuple:
         """(value, cached, report fields) of bake `name` for the context's scene."""
         return getattr(self, f"_{name}")(ctx)

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from iblbake.errors import IblbakeError, InputError
-from iblbake.render.bakes import Bakes, chain_table, load_all
+from iblbake.render.bakes import Bakes, load_all
 from iblbake.render.plan import Plan, plan
 from iblbake.scene import pack
 from iblbake.scene.load import Scene
@@ -53,6 +53,42 @@ class Frame:
     report: dict
 
 
+class Reuse:
+    """What the last frame of a series left on the device, for the next one: its buffers, host
+    frames and the input key of every pass. A pass whose inputs (the scene values it reads, its
+    program's defines, the passes upstream of it) are unchanged is not run again; its outputs are
+    the last frame's. Single-tile frames on one runtime only."""
+
+    def __init__(self):
+        self.state = None
+
+
+def pass_keys(pl: Plan, scene: Scene) -> dict:
+    from iblbake.bake.cache import content_key
+
+    keys = {}
+    for i, p in enumerate(pl.passes):
+        upstream = [keys[q.name] for q in pl.passes[:i] if set(q.writes) & set(p.reads)]
+        keys[p.name] = content_key({"scene": p.scene_inputs(scene), "defines": pl.defines.get(p.name),
+                                    "upstream": upstream})
+    return keys
+
+
+def passes_to_run(pl: Plan, keys: dict, previous: dict | None) -> set:
+    """The passes whose key changed, and every other writer of a buffer one of them rebuilds
+    (lighting passes add into one radiance buffer: it is cleared and all of them run)."""
+    run = {p.name for p in pl.passes if previous is None or previous.get(p.name) != keys[p.name]}
+    grew = True
+    while grew:
+        grew = False
+        for buf in {b for p in pl.passes for b in p.writes}:
+            writers = {p.name for p in pl.passes if buf in p.writes}
+            if writers & run and not writers <= run:
+                run |= writers
+                grew = True
+    return run
+
+
 class Context:
     """One frame's work: the runtime, scene, plan, loaded bakes, and the table of named buffers
     and values that kernel parameters are bound from (Runtime.launch)."""
@@ -64,17 +100,13 @@ class Context:
         self.args: dict = {}
         self.loaded: dict = {}
         self.image = None
-        self._chains: dict = {}
 
     def launch(self, p, global_size, **args):
         files, defines = self.plan.program(p)
         return self.rt.launch(files, p.function or p.name, defines, global_size, self.table, **args)
 
     def chain(self, levels) -> dict:
-        key = id(levels)
-        if key not in self._chains:
-            self._chains[key] = chain_table(self.rt, levels)
-        return self._chains[key]
+        return self.bakes.chain(self.rt, levels)
 
     def no_chain(self) -> dict:
         z = self.rt.to_device(np.zeros(4, np.int32))
@@ -131,11 +163,14 @@ def tile_rows(rt, scene: Scene, pl: Plan, device_budget: int | None = None) -> i
     return int(rows)
 
 
-def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, device: str | None = None,
-           cache_root: Path | None = None, warn=None, progress=None, device_budget: int | None = None) -> Frame:
+def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reuse | None = None,
+           device: str | None = None, cache_root: Path | None = None, warn=None, progress=None,
+           device_budget: int | None = None) -> Frame:
     """Render `scene`. `runtime` (a device.runtime.Runtime) and `cache` (a Bakes) are reused when
-    given; otherwise made for this frame (`device`, `cache_root`). `device_budget` overrides the
-    device bytes a frame's buffers may take (tests force tiling with it)."""
+    given; otherwise made for this frame (`device`, `cache_root`). With `reuse` (a Reuse kept
+    across a series of frames), passes whose inputs did not change since the last frame are not
+    run again. `device_budget` overrides the device bytes a frame's buffers may take (tests
+    force tiling with it)."""
     from iblbake.device.runtime import Runtime
 
     t_start = time.perf_counter()
@@ -190,7 +225,21 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, device: st
         "ntris": len(arrays.tris), "materials": rt.to_device(arrays.materials.reshape(-1, 4)),
         "env_rot": np.array([np.cos(rot), np.sin(rot)], np.float32), "env_scale": env["intensity"],
     })
+    keys = pass_keys(pl, scene)
+    prev = reuse.state if reuse is not None else None
+    if prev is not None and not (prev["runtime"] is rt and prev["shape"] == (width, height, spp) and rows == height):
+        prev = None
+    run = passes_to_run(pl, keys, prev["keys"] if prev else None)
+    if prev is not None:              # the last frame's buffers hold what the skipped passes wrote
+        ctx.table.update(prev["buffers"])
+        if "resolve" not in run:
+            ctx.frame_hdr = prev["hdr"].copy()
+            ctx.frame_aovs = {a: v.copy() for a, v in prev["aovs"].items()}
+        if "tonemap" not in run and prev["png"] is not None:
+            ctx.frame_png = prev["png"].copy()
     for p in pl.passes:
+        if p.name not in run:
+            continue
         if p.kernel:                  # built (or loaded from the program cache) before any timing
             files, defines = pl.program(p)
             rt.kernel(files, p.function or p.name, defines)
@@ -210,11 +259,22 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, device: st
                               "aov_albedo": rt.empty(npix * 16 if aov else 16),
                               "aov_depth": rt.empty(npix * 4 if aov else 16)})
         ctx.table.update({"n": n, "npix": npix, "pixel0": ctx.row0 * width})
-        rt.cl.enqueue_fill_buffer(rt.queue, ctx.table["radiance"], np.float32(0), 0, n * 16)
+        if any(p.name in run for p in pl.passes if "radiance" in p.writes):
+            rt.cl.enqueue_fill_buffer(rt.queue, ctx.table["radiance"], np.float32(0), 0, n * 16)
         for p in pl.passes:
+            if p.name not in run:
+                rep.run(p.name, 0.0, reused=True)
+                continue
             t0 = time.perf_counter()
             extra = p.run(ctx)
             rep.run(p.name, time.perf_counter() - t0, **extra)
+    if reuse is not None:
+        buffers = ("gb_pos", "gb_nrm", "gb_dir", "radiance", "hdr", "png_u8", "display", "aov_normal",
+                   "aov_albedo", "aov_depth", "npix")
+        reuse.state = None if len(row0s) > 1 else {
+            "runtime": rt, "shape": (width, height, spp), "keys": keys,
+            "buffers": {b: ctx.table[b] for b in buffers}, "hdr": ctx.frame_hdr, "aovs": ctx.frame_aovs,
+            "png": ctx.frame_png}
 
     report = {
         "device": rt.device_label,
@@ -226,6 +286,7 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, device: st
         "resolution": [width, height],
         "spp": spp,
         "tiles": len(row0s),
+        "reused": [p.name for p in pl.passes if p.name not in run],
         "elapsed_s": round(time.perf_counter() - t_start, 4),
     }
     png = ctx.frame_png[..., :3] if ctx.frame_png is not None else None     # RGBA as read back; RGB shown

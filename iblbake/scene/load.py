@@ -199,6 +199,22 @@ class ListOf:
 
 
 @dataclass
+class Raw:
+    """A mapping or list kept as written (the sweep axes, validated by iblbake.study.sweep)."""
+    default: Any = None
+    doc: str = ""
+    kinds: tuple = (dict, list)
+
+    def check(self, v):
+        if not isinstance(v, self.kinds):
+            raise _Bad(f"{v!r} is not a mapping or a list")
+        return v
+
+    def describe(self):
+        return "mapping"
+
+
+@dataclass
 class StrList:
     default: Any = None
     doc: str = ""
@@ -311,6 +327,12 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "output_transfer": Enum(("srgb", "gamma"), "srgb", doc="display encoding"),
         "gamma": Num(2.2, 0.0, 10.0, lo_open=True, doc="for output_transfer: gamma"),
     }),
+    "sweep": Section(doc="what `iblbake sheet` varies: one or two axes of key paths (render ignores it)", fields={
+        "title": Str(doc="the sheet's title (default: the scene file's name)"),
+        "rows": Raw(doc="an axis: {key: KEY.PATH, values: [...]}, {key: KEY.PATH, range: {start, stop, count, "
+                        "geometric}}, or {steps: [{KEY.PATH: value, ..., label: text}, ...]}"),
+        "columns": Raw(doc="an axis, as rows"),
+    }),
     "output": Section(doc="what is written (relative to the scene file; render overwrites its outputs)", fields={
         "frame": StrList(doc="frame path(s): .png (tone-mapped 8-bit), .exr (linear RGBA)"),
         "normal": Str(doc="AOV: world-space shading normal, EXR"),
@@ -413,12 +435,12 @@ class Scene:
 
 
 class _Validator:
-    def __init__(self, source: str, lines: dict, overridden: set):
+    def __init__(self, source: str, lines: dict, overridden: dict):
         self.source, self.lines, self.overridden = source, lines, overridden
 
     def where(self, path: str) -> str:
         if path in self.overridden:
-            return f"{self.source}: --set"
+            return f"{self.source}: {self.overridden[path]}"
         p = path
         while p and p not in self.lines:
             p = p.rpartition(".")[0]
@@ -482,29 +504,35 @@ def _apply_override(data: dict, assignment: str) -> str:
     if not sep or not key:
         raise InputError(f"--set {assignment!r}: expected KEY.PATH=VALUE, e.g. effects.samples=40")
     value = _load_with_lines(raw, f"--set {key}")[0] if raw.strip() else None
+    set_path(data, key, value, f"--set {key}")
+    return key
+
+
+def set_path(data: dict, key: str, value, origin: str) -> None:
+    """data[key.path] = value, creating sections on the way; `origin` names where the assignment
+    came from in errors (a --set flag, a sweep axis)."""
     parts = key.split(".")
     node = data
     for i, p in enumerate(parts[:-1]):
         if isinstance(node, list):
             if not p.isdigit() or int(p) >= len(node):
-                raise InputError(f"--set {key}: {'.'.join(parts[:i + 1])}: no item {p} in a list of {len(node)}")
+                raise InputError(f"{origin}: {'.'.join(parts[:i + 1])}: no item {p} in a list of {len(node)}")
             node = node[int(p)]
         elif isinstance(node, dict):
             if node.get(p) is None:
                 node[p] = {}
             node = node[p]
         else:
-            raise InputError(f"--set {key}: {'.'.join(parts[:i])} is a value, not a section")
+            raise InputError(f"{origin}: {'.'.join(parts[:i])} is a value, not a section")
     last = parts[-1]
     if isinstance(node, list):
         if not last.isdigit() or int(last) >= len(node):
-            raise InputError(f"--set {key}: no item {last} in a list of {len(node)}")
+            raise InputError(f"{origin}: no item {last} in a list of {len(node)}")
         node[int(last)] = value
     elif isinstance(node, dict):
         node[last] = value
     else:
-        raise InputError(f"--set {key}: {'.'.join(parts[:-1])} is a value, not a section")
-    return key
+        raise InputError(f"{origin}: {'.'.join(parts[:-1])} is a value, not a section")
 
 
 def _resolve_inside(folder: Path, rel: str, what: str, where: str) -> Path:
@@ -517,8 +545,10 @@ def _resolve_inside(folder: Path, rel: str, what: str, where: str) -> Path:
     return full
 
 
-def load(path, overrides=(), outputs=None) -> Scene:
-    """Read, override, validate. `outputs` (from -o) replace output.frame."""
+def load(path, overrides=(), outputs=None, values=(), origin: str = "--set") -> Scene:
+    """Read, override, validate. `overrides` are KEY.PATH=VALUE strings (--set), `values` typed
+    (key path, value) pairs applied after them (a sweep cell's), `origin` what errors call the
+    place the latter came from. `outputs` (from -o) replace output.frame."""
     path = Path(path)
     source = str(path)
     try:
@@ -537,9 +567,12 @@ def load(path, overrides=(), outputs=None) -> Scene:
     if not isinstance(data, dict):
         raise InputError(f"{source}:1: a scene is a mapping of sections (camera, environment, "
                          f"materials, objects, effects, output), not {type(data).__name__}")
-    overridden = set()
+    overridden = {}
     for a in overrides:
-        overridden.add(_apply_override(data, a))
+        overridden[_apply_override(data, a)] = "--set"
+    for key, value in values:
+        set_path(data, key, value, origin)
+        overridden[key] = origin
     v = _Validator(source, lines, overridden)
     out = v.section(SCHEMA, data, "")
     folder = path.resolve().parent

@@ -27,6 +27,12 @@ class Pass:
     def defines(self, scene: Scene, fx: Effects) -> dict:
         return {}
 
+    def scene_inputs(self, scene: Scene):
+        """What this pass reads of the scene, for its reuse key (a frame in a series whose pass
+        inputs are unchanged reuses that pass's outputs). By default all that lighting reads:
+        the scene without its outputs, its sweep and the display settings."""
+        return lighting_inputs(scene)
+
     def setup(self, ctx) -> dict:
         """Once per frame, before the tiles: named kernel arguments of this pass (tables, bakes)."""
         return {}
@@ -47,3 +53,12 @@ def geometry_defines(scene: Scene) -> dict:
 def mode_defines(fx: Effects) -> dict:
     from iblbake.scene.layout import DIFFUSE_MODES, SPECULAR_MODES
     return {"DIFFUSE_MODE": DIFFUSE_MODES[fx.diffuse], "SPECULAR_MODE": SPECULAR_MODES[fx.specular]}
+
+
+DISPLAY_KEYS = ("tonemap", "exposure", "output_transfer", "gamma")
+
+
+def lighting_inputs(scene: Scene) -> dict:
+    d = scene.data
+    return {"camera": d["camera"], "environment": d["environment"], "materials": d["materials"],
+            "objects": d["objects"], "effects": {k: v for k, v in d["effects"].items() if k not in DISPLAY_KEYS}}

@@ -16,6 +16,11 @@ class GBuffer(Pass):
     def defines(self, scene, fx):
         return geometry_defines(scene)
 
+    def scene_inputs(self, scene):
+        # the materials' names only: hits store material indices, values are resolved later
+        d = scene.data
+        return {"camera": d["camera"], "objects": d["objects"], "materials": list(d["materials"])}
+
     def run(self, ctx):
         n = ctx.table["n"]
         t0 = time.perf_counter()

@@ -17,6 +17,9 @@ class Resolve(Pass):
     def defines(self, scene, fx):
         return {"WRITE_AOVS": 1} if any(scene.data["output"][a] for a in AOVS) else {}
 
+    def scene_inputs(self, scene):
+        return {**super().scene_inputs(scene), "aovs": [a for a in AOVS if scene.data["output"][a]]}
+
     def run(self, ctx):
         t = ctx.table
         ctx.launch(self, (t["npix"],))

@@ -3,7 +3,7 @@ a PNG frame is written."""
 
 from __future__ import annotations
 
-from iblbake.render.passes.base import Pass
+from iblbake.render.passes.base import DISPLAY_KEYS, Pass
 from iblbake.scene.layout import TONEMAP_IDS
 
 
@@ -24,6 +24,10 @@ class Tonemap(Pass):
         if scene.data["output"]["dither"]:
             d["DITHER"] = 1
         return d
+
+    def scene_inputs(self, scene):
+        e = scene.data["effects"]
+        return {**{k: e[k] for k in DISPLAY_KEYS}, "dither": scene.data["output"]["dither"]}
 
     def run(self, ctx):
         t, e = ctx.table, ctx.scene.data["effects"]

@@ -1,0 +1,102 @@
+"""`iblbake sheet`: a sweep's cells rendered in one process and assembled into a contact sheet."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import click
+
+from iblbake.cli.options import Console, common_options, device_option
+from iblbake.errors import IblbakeError
+
+
+def _cell_size(ctx, param, value):
+    if value is None:
+        return None
+    try:
+        w, h = (int(x) for x in value.lower().split("x"))
+    except ValueError:
+        raise click.BadParameter(f"{value!r}: give WIDTHxHEIGHT, e.g. 256x256") from None
+    if not (1 <= w <= 16384 and 1 <= h <= 16384):
+        raise click.BadParameter(f"{value!r}: each side from 1 to 16384")
+    return w, h
+
+
+@click.command("sheet")
+@click.argument("scene_path", metavar="SCENE")
+@click.option("--output", "-o", "outputs", multiple=True, type=click.Path(dir_okay=False), required=True,
+              help="The sheet: .png (tone-mapped cells with title, axis labels and captions) or .exr (the "
+                   "linear cells, a mosaic without text); repeatable.")
+@click.option("--rows", "rows", default=None, metavar="KEY.PATH=SPEC",
+              help="The row axis, replacing the scene's sweep.rows: KEY.PATH=start:stop:count (a range; "
+                   "start:stop:count:log geometric) or KEY.PATH=v1,v2,... (values, as YAML).")
+@click.option("--columns", "columns", default=None, metavar="KEY.PATH=SPEC", help="The column axis, as --rows.")
+@click.option("--set", "overrides", multiple=True, metavar="KEY.PATH=VALUE",
+              help="Override a scene value for every cell (as render --set).")
+@click.option("--cell-size", default=None, callback=_cell_size, metavar="WxH",
+              help="Each cell's resolution (replaces camera.resolution).")
+@click.option("--label-format", default=None, metavar="FMT",
+              help="Caption of a step of a key/values or range axis, a Python format with {value} and {key}, "
+                   "e.g. 'r = {value}'. Default: the value.")
+@click.option("--caption", type=click.Choice(["values", "time", "none"]), default="values", show_default=True,
+              help="Under each cell: its values, its values and render time, or nothing.")
+@click.option("--title", default=None, help="The sheet's title. Default: sweep.title, else the scene file's name.")
+@click.option("--frames", "frames_dir", type=click.Path(file_okay=False), default=None,
+              help="Also write each cell's own frame here (rRR_cCC.png; with --frames-exr the linear .exr too).")
+@click.option("--frames-exr", is_flag=True, help="With --frames: each cell's linear EXR as well.")
+@click.option("--keep-going", is_flag=True,
+              help="Render the other cells when one fails, and mark it in the sheet (exit status still 1).")
+@click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
+              help="Bake cache folder. Default: $IBLBAKE_CACHE, else ./iblbake-cache.")
+@device_option
+@common_options
+def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, label_format, caption, title,
+                  frames_dir, frames_exr, keep_going, cache_dir, device, quiet, as_json):
+    """Render every cell of the sweep of SCENE (its sweep: section, or --rows / --columns) in one
+    process and assemble a contact sheet. Cells share the runtime, every bake, and the passes whose
+    inputs they share (a material sweep traces primary rays once, a tone-mapping sweep lights once);
+    each cell's pixels are what `iblbake render` writes for the same settings."""
+    from iblbake import render
+    from iblbake.device.runtime import Runtime
+    from iblbake.io import images
+    from iblbake.io.atomic import check_writable
+    from iblbake.scene import load as scene_load
+    from iblbake.study import sheet, sweep
+
+    con = Console(quiet, as_json)
+    for o in outputs:
+        if Path(o).suffix.lower() not in (".png", ".exr"):
+            raise click.BadParameter(f"{o}: the sheet is written as .png or .exr", param_hint="-o")
+        check_writable(o)
+    t_start = time.perf_counter()
+    base = scene_load.load(scene_path, overrides, ["cell.png"])
+    rows_axis, cols_axis, cells = sweep.plan_sheet(
+        base, sweep.parse_cli_axis(rows) if rows else None, sweep.parse_cli_axis(columns) if columns else None,
+        label_format)
+    scenes = sheet.cell_scenes(scene_path, overrides, cells, cell_size, keep_going)
+    rt = Runtime(device)
+    bakes = render.Bakes(cache_dir)
+    with con.stages([c.label or "cell" for c in cells], label="sheet") as step:
+        results = sheet.render_cells(scenes, cells, runtime=rt, bakes=bakes, warn=con.warn, progress=step,
+                                     keep_going=keep_going)
+    title = title or (base.data.get("sweep") or {}).get("title") or Path(scene_path).name
+    for o in outputs:
+        if o.lower().endswith(".png"):
+            images.write_png(o, sheet.assemble(results, rows_axis, cols_axis, title, caption))
+        else:
+            images.write_exr(o, sheet.mosaic(results, rows_axis, cols_axis), channels=("R", "G", "B", "A"))
+    if frames_dir:
+        sheet.write_frames(results, Path(frames_dir), frames_exr)
+    failed = [r for r in results if r.error]
+    summary = {"scene": str(scene_path), "outputs": list(outputs), "device": rt.device_label,
+               "rows": {"key": rows_axis.title, "labels": [s.label for s in rows_axis.steps]},
+               "columns": {"key": cols_axis.title, "labels": [s.label for s in cols_axis.steps]},
+               "cells": [r.to_json() for r in results], "failed": len(failed),
+               "elapsed_s": round(time.perf_counter() - t_start, 4)}
+    con.result(summary, f"wrote {', '.join(outputs)}: {len(rows_axis.steps)} x {len(cols_axis.steps)} cells "
+                        f"in {summary['elapsed_s']:.3f} s on {rt.device_label}"
+                        + (f"; {len(failed)} failed" if failed else ""))
+    if failed:
+        raise IblbakeError(f"{len(failed)} of {len(results)} cells failed; first: row {failed[0].cell.row}, "
+                           f"column {failed[0].cell.column}: {failed[0].error}")

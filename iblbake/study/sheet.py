@@ -1,0 +1,200 @@
+"""Contact sheets: every cell of a sweep rendered in one process (one runtime, one bake store, and
+passes reused from cell to cell where their inputs did not change), assembled into one image
+with a title, axis labels and a caption under each cell (text drawn by OpenImageIO's
+render_text), or into a linear EXR mosaic."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from iblbake.errors import IblbakeError
+from iblbake.scene import load as scene_load
+from iblbake.study import sweep
+
+BACKGROUND = (0.13, 0.13, 0.14)
+TEXT = (0.92, 0.92, 0.92)
+FAILED = (0.55, 0.12, 0.12)
+MARGIN, GAP = 14, 8
+TITLE_PT, AXIS_PT, CAPTION_PT = 22, 16, 13
+
+
+@dataclass
+class CellResult:
+    cell: sweep.Cell
+    frame: object = None              # render.Frame, None where the cell failed
+    seconds: float = 0.0
+    error: str | None = None
+    outputs: list = field(default_factory=list)
+
+    def to_json(self) -> dict:
+        rep = self.frame.report if self.frame is not None else {}
+        return {"row": self.cell.row, "column": self.cell.column, "label": self.cell.label,
+                "values": {k: v for k, v in self.cell.values}, "seconds": round(self.seconds, 4),
+                "reused": rep.get("reused", []),
+                "bakes_cached": [b["name"] for b in rep.get("bakes", []) if b.get("cached")],
+                "passes": {p["name"]: p["seconds"] for p in rep.get("passes", [])},
+                "outputs": self.outputs, "error": self.error}
+
+
+def cell_scenes(scene_path, overrides, cells, cell_size=None, keep_going=False):
+    """Every cell's validated scene (a frame output so the tone-mapping pass runs, no AOVs), or
+    its error; without keep_going the first error stops everything before any rendering."""
+    size = [("camera.resolution", list(cell_size))] if cell_size else []
+    out = []
+    for c in cells:
+        values = c.values + size + [(f"output.{a}", None) for a in ("normal", "albedo", "depth")]
+        try:
+            out.append(scene_load.load(scene_path, overrides, ["cell.png"], values=values, origin="sweep"))
+        except IblbakeError as e:
+            if not keep_going:
+                raise type(e)(f"cell (row {c.row}, column {c.column}: {c.label or 'base'}): {e}") from None
+            out.append(e)
+    return out
+
+
+def render_cells(scenes, cells, *, runtime, bakes, warn=None, progress=None, keep_going=False):
+    from iblbake import render
+    from iblbake.errors import DeviceError
+
+    reuse = render.Reuse()
+    results = []
+    for sc, c in zip(scenes, cells):
+        r = CellResult(c)
+        if isinstance(sc, Exception):
+            r.error = str(sc)
+        else:
+            t0 = time.perf_counter()
+            try:
+                r.frame = render.render(sc, runtime=runtime, cache=bakes, reuse=reuse, warn=warn)
+            except (IblbakeError, DeviceError) as e:
+                if not keep_going:
+                    raise type(e)(f"cell (row {c.row}, column {c.column}: {c.label or 'base'}): {e}") from None
+                r.error = str(e)
+                reuse.state = None
+            r.seconds = time.perf_counter() - t0
+        results.append(r)
+        if progress:
+            progress()
+    return results
+
+
+def _text_width(text: str, pt: int) -> int:
+    import OpenImageIO as oiio
+    return oiio.ImageBufAlgo.text_size(text, pt, "").width if text else 0
+
+
+def _fit(text: str, pt: int, width: int) -> str:
+    """The text, cut with an ellipsis to fit `width` pixels."""
+    if _text_width(text, pt) <= width:
+        return text
+    while text and _text_width(text + "...", pt) > width:
+        text = text[:-1]
+    return text + "..."
+
+
+def caption_lines(r: CellResult, caption: str) -> list:
+    if r.error:
+        return ["failed", r.error]
+    lines = [r.cell.label] if caption in ("values", "time") and r.cell.label else []
+    if caption == "time":
+        lines.append(f"{r.seconds * 1000:.0f} ms" + (" (reused " + ", ".join(r.frame.report["reused"]) + ")"
+                                                      if r.frame.report["reused"] else ""))
+    return lines
+
+
+@dataclass
+class Layout:
+    width: int
+    height: int
+    left: int                         # x of the first column of cells
+    top: int                          # y of the first row of cells
+    cell: tuple                       # (w, h) of a cell's frame
+    caption_h: int
+
+    def origin(self, row: int, column: int) -> tuple:
+        """(x, y) of the top-left pixel of a cell's frame in the sheet."""
+        w, h = self.cell
+        return self.left + column * (w + GAP), self.top + row * (h + self.caption_h + GAP)
+
+
+def layout(results, rows: sweep.Axis, columns: sweep.Axis, title: str, caption: str) -> Layout:
+    ok = [r for r in results if r.frame is not None]
+    if not ok:
+        raise IblbakeError("sheet: every cell failed; nothing to assemble")
+    h, w = ok[0].frame.png.shape[:2]
+    nr, nc = len(rows.steps), len(columns.steps)
+    has_rows, has_cols = bool(rows.title), bool(columns.title)
+    n_lines = max(len(caption_lines(r, caption)) for r in results)
+    cap_h = n_lines * (CAPTION_PT + 5) + (4 if n_lines else 0)
+    left = MARGIN + (max(_text_width(x, AXIS_PT) for x in [s.label for s in rows.steps] + [rows.title]) + MARGIN
+                     if has_rows else 0)
+    top = MARGIN + TITLE_PT + 8 + (AXIS_PT + 6) * (2 if has_cols else 1 if has_rows else 0)
+    width = max(left + nc * w + (nc - 1) * GAP + MARGIN, _text_width(title, TITLE_PT) + 2 * MARGIN)
+    height = top + nr * (h + cap_h) + (nr - 1) * GAP + MARGIN
+    return Layout(width, height, left, top, (w, h), cap_h)
+
+
+def assemble(results, rows: sweep.Axis, columns: sweep.Axis, title: str, caption: str = "values"):
+    """The contact sheet as an 8-bit RGB image: title, column and row labels, cells, captions."""
+    import OpenImageIO as oiio
+
+    lay = layout(results, rows, columns, title, caption)
+    w, h = lay.cell
+    buf = oiio.ImageBuf(oiio.ImageSpec(lay.width, lay.height, 3, oiio.FLOAT))
+    oiio.ImageBufAlgo.fill(buf, BACKGROUND)
+
+    def draw(x, y, text, pt):
+        oiio.ImageBufAlgo.render_text(buf, int(x), int(y), text, pt, "", TEXT)
+
+    draw(MARGIN, MARGIN + TITLE_PT, title, TITLE_PT)
+    header = MARGIN + TITLE_PT + 8
+    if columns.title:
+        draw(lay.left, header + AXIS_PT, columns.title, AXIS_PT)
+        for j, s in enumerate(columns.steps):
+            draw(lay.origin(0, j)[0], header + 2 * AXIS_PT + 6, _fit(s.label, AXIS_PT, w), AXIS_PT)
+    if rows.title:                   # above the row labels, in the header's last line
+        draw(MARGIN, lay.top - 6, _fit(rows.title, AXIS_PT, lay.left - MARGIN), AXIS_PT)
+        for i, s in enumerate(rows.steps):
+            draw(MARGIN, lay.origin(i, 0)[1] + h // 2 + AXIS_PT // 2, s.label, AXIS_PT)
+    for r in results:
+        x, y = lay.origin(r.cell.row, r.cell.column)
+        for k, text in enumerate(caption_lines(r, caption)):
+            draw(x, y + h + (k + 1) * (CAPTION_PT + 5), _fit(text, CAPTION_PT, w), CAPTION_PT)
+    # the cells last, as 8-bit values: exactly the frames `iblbake render` writes
+    out = np.ascontiguousarray(buf.get_pixels(oiio.UINT8).reshape(lay.height, lay.width, 3))
+    for r in results:
+        x, y = lay.origin(r.cell.row, r.cell.column)
+        out[y:y + h, x:x + w] = r.frame.png if r.frame is not None else np.uint8(np.array(FAILED) * 255)
+    return out
+
+
+def mosaic(results, rows: sweep.Axis, columns: sweep.Axis):
+    """The linear HDR cells side by side (RGBA, alpha = coverage), GAP pixels apart, no text."""
+    ok = [r for r in results if r.frame is not None]
+    if not ok:
+        raise IblbakeError("sheet: every cell failed; nothing to assemble")
+    h, w = ok[0].frame.hdr.shape[:2]
+    nr, nc = len(rows.steps), len(columns.steps)
+    out = np.zeros((nr * h + (nr - 1) * GAP, nc * w + (nc - 1) * GAP, 4), np.float32)
+    for r in ok:
+        x, y = r.cell.column * (w + GAP), r.cell.row * (h + GAP)
+        out[y:y + h, x:x + w] = r.frame.hdr
+    return out
+
+
+def write_frames(results, folder: Path, exr: bool = False) -> None:
+    from iblbake.io import images
+    folder.mkdir(parents=True, exist_ok=True)
+    for r in results:
+        if r.frame is None:
+            continue
+        stem = folder / f"r{r.cell.row:02d}_c{r.cell.column:02d}"
+        images.write_png(f"{stem}.png", r.frame.png)
+        r.outputs.append(f"{stem}.png")
+        if exr:
+            images.write_exr(f"{stem}.exr", r.frame.hdr, channels=("R", "G", "B", "A"))
+            r.outputs.append(f"{stem}.exr")

@@ -1,0 +1,146 @@
+"""`iblbake sheet`: cells equal to individually rendered frames, captions drawn, the JSON cells,
+reuse across cells (a tone-mapping sweep lights once, a roughness sweep traces primary rays
+once), the CLI shorthand, and bad sweep specs as one-line errors with nothing written."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from iblbake.io import images
+from iblbake.study import sheet, sweep
+
+from .conftest import run_cli
+from .test_render import small_panoramas  # noqa: F401  (fixture: city and studio at 256x128)
+
+
+def sheet_scene(folder, env, sweep_spec=None, res=(48, 32)):
+    doc = {"camera": {"perspective": {"position": [0, 0.4, 4], "fov_y": 40}, "resolution": list(res)},
+           "environment": {"path": str(env), "background": "show"},
+           "materials": {"gold": {"base_color": [1.0, 0.78, 0.34], "metallic": 1, "roughness": 0.3},
+                         "paint": {"base_color": [0.8, 0.1, 0.1], "roughness": 0.5}},
+           "objects": [{"sphere": {"center": [-0.6, 0, 0], "radius": 0.5}, "material": "gold"},
+                       {"sphere": {"center": [0.6, 0, 0], "radius": 0.5}, "material": "paint"}],
+           "effects": {"specular": "prefiltered", "samples": 8}}
+    if sweep_spec:
+        doc["sweep"] = sweep_spec
+    p = Path(folder) / "sheet.yaml"
+    p.write_text(yaml.safe_dump(doc))
+    return p
+
+
+SWEEP = {"title": "gold", "rows": {"key": "materials.gold.metallic", "values": [0, 1]},
+         "columns": {"key": "materials.gold.roughness", "range": {"start": 0, "stop": 1, "count": 3}}}
+
+
+def read_png(path):
+    import OpenImageIO as oiio
+    return oiio.ImageBuf(str(path)).get_pixels(oiio.UINT8)
+
+
+def test_two_by_three_sheet_cells_equal_rendered_frames(tmp_path, small_panoramas):
+    scene = sheet_scene(tmp_path, small_panoramas["city"], SWEEP)
+    out, mosaic = tmp_path / "sheet.png", tmp_path / "sheet.exr"
+    p = run_cli("sheet", scene, "-o", out, "-o", mosaic, "--json", "--cache", tmp_path / "c",
+                "--frames", tmp_path / "frames")
+    assert p.returncode == 0, p.stderr
+    doc = json.loads(p.stdout)
+    cells = doc["cells"]
+    assert len(cells) == 6
+    assert [(c["row"], c["column"]) for c in cells] == [(r, c) for r in range(2) for c in range(3)]
+    assert [c["values"] for c in cells] == [{"materials.gold.metallic": m, "materials.gold.roughness": r}
+                                            for m in (0, 1) for r in (0.0, 0.5, 1.0)]
+    png = read_png(out)
+    hdr = images.read_exr(mosaic)
+    assert hdr.shape[:2] == (2 * 32 + sheet.GAP, 3 * 48 + 2 * sheet.GAP)
+    # the layout the sheet used, recomputed from the same inputs, places every cell
+    rows_axis, cols_axis, plan_cells = sweep.plan_sheet(_load(scene))
+    fake = [sheet.CellResult(c, frame=_Stub(np.zeros((32, 48, 3), np.uint8))) for c in plan_cells]
+    lay = sheet.layout(fake, rows_axis, cols_axis, "gold", "values")
+    assert png.shape[:2] == (lay.height, lay.width)
+    for c in cells:
+        single = tmp_path / f"single_{c['row']}_{c['column']}.png"
+        sets = [a for k, v in c["values"].items() for a in ("--set", f"{k}={v}")]
+        r = run_cli("render", scene, "-o", single, "--cache", tmp_path / "c", "-q", *sets)
+        assert r.returncode == 0, r.stderr
+        want = read_png(single)
+        x, y = lay.origin(c["row"], c["column"])
+        assert np.array_equal(png[y:y + 32, x:x + 48], want), c
+        assert np.array_equal(read_png(c["outputs"][0]), want)
+        # the caption under the cell is drawn (text pixels, not the flat background)
+        band = png[y + 32:y + lay.caption_h + 32, x:x + 48].astype(int)
+        assert (np.abs(band - band[0, 0]).max(axis=-1) > 60).sum() > 20, c
+
+
+def _load(path):
+    from iblbake.scene import load
+    return load.load(path)
+
+
+class _Stub:
+    def __init__(self, png):
+        self.png = png
+        self.report = {"reused": []}
+
+
+def test_tonemap_sweep_lights_once_and_roughness_sweep_traces_once(tmp_path, small_panoramas):
+    scene = sheet_scene(tmp_path, small_panoramas["studio"])
+    p = run_cli("sheet", scene, "-o", tmp_path / "t.png", "--columns", "effects.tonemap=aces,reinhard,hable",
+                "--json", "--cache", tmp_path / "c")
+    assert p.returncode == 0, p.stderr
+    cells = json.loads(p.stdout)["cells"]
+    assert cells[0]["reused"] == []
+    for c in cells[1:]:
+        assert set(c["reused"]) == {"gbuffer", "shade", "background", "resolve"}, c
+    p = run_cli("sheet", scene, "-o", tmp_path / "r.png", "--rows", "materials.gold.roughness=0:1:4",
+                "--json", "--cache", tmp_path / "c")
+    assert p.returncode == 0, p.stderr
+    cells = json.loads(p.stdout)["cells"]
+    assert [c["values"]["materials.gold.roughness"] for c in cells] == pytest.approx([0, 1 / 3, 2 / 3, 1])
+    assert all(c["reused"] == ["gbuffer"] for c in cells[1:]), cells
+
+
+def test_cli_axis_shorthand():
+    assert sweep.parse_cli_axis("effects.samples=1:256:9:log") == {
+        "key": "effects.samples", "range": {"start": 1, "stop": 256, "count": 9, "geometric": True}}
+    assert sweep.parse_cli_axis("effects.specular=importance,prefiltered") == {
+        "key": "effects.specular", "values": ["importance", "prefiltered"]}
+    assert sweep._range({"start": 1, "stop": 256, "count": 9, "geometric": True}, "x") == \
+        [1, 2, 4, 8, 16, 32, 64, 128, 256]
+
+
+@pytest.mark.parametrize("spec, words", [
+    ({"rows": {"key": "materials.gold.roughnes", "values": [0, 1]}}, ["sweep.rows", "roughnes", "roughness"]),
+    ({"rows": {"key": "materials.silver.roughness", "values": [0]}}, ["sweep.rows", "silver"]),
+    ({"rows": {"key": "materials.gold.roughness", "values": []}}, ["sweep.rows.values", "non-empty"]),
+    ({"rows": {"key": "materials.gold.roughness", "range": {"start": 0, "stop": 1, "count": 0}}},
+     ["sweep.rows.range.count"]),
+    ({"columns": {"key": "materials.gold.roughness", "values": [0.2, "shiny"]}},
+     ["materials.gold.roughness", "shiny", "not a number"]),
+    ({"columns": {"key": "materials.gold.roughness", "values": [0.2, 7]}}, ["materials.gold.roughness", "range"]),
+    ({"layers": {"key": "effects.exposure", "values": [0]}}, ["sweep.layers", "unknown key"]),
+    ({"rows": {"key": "materials.gold", "values": [0]}}, ["materials.gold", "section"]),
+])
+def test_bad_sweep_specs_fail_in_one_line_and_write_nothing(tmp_path, small_panoramas, spec, words):
+    scene = sheet_scene(tmp_path, small_panoramas["studio"], spec)
+    out = tmp_path / "bad.png"
+    p = run_cli("sheet", scene, "-o", out, "--cache", tmp_path / "c")
+    assert p.returncode == 1, p.stderr
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in p.stderr, p.stderr
+    for w in words:
+        assert w in lines[0], (w, lines[0])
+    assert not out.exists()
+
+
+def test_keep_going_marks_the_failed_cell(tmp_path, small_panoramas):
+    scene = sheet_scene(tmp_path, small_panoramas["studio"])
+    out = tmp_path / "k.png"
+    p = run_cli("sheet", scene, "-o", out, "--columns", "materials.gold.roughness=0.2,3,0.6", "--keep-going",
+                "--json", "--cache", tmp_path / "c")
+    assert p.returncode == 1 and "1 of 3 cells failed" in p.stderr, p.stderr
+    cells = json.loads(p.stdout)["cells"]
+    assert [c["error"] is None for c in cells] == [True, False, True]
+    assert out.exists()
