@@ -144,3 +144,63 @@ def test_keep_going_marks_the_failed_cell(tmp_path, small_panoramas):
     cells = json.loads(p.stdout)["cells"]
     assert [c["error"] is None for c in cells] == [True, False, True]
     assert out.exists()
+
+
+def test_makefile_rebuilds_only_what_reads_a_touched_input(tmp_path, small_panoramas):
+    """Two scenes on two panoramas, a Makefile with `-include *.d` from --depfile: a second make
+    does nothing; touching one panorama rebuilds only the frame and the sheet that read it; the
+    depfile lists every file the scene reads (scene, panorama, mesh)."""
+    import os
+    import shutil
+    import subprocess
+    import sys
+    import time
+    import trimesh
+    for name in ("city", "studio"):
+        shutil.copy(small_panoramas[name], tmp_path / f"{name}.exr")
+    trimesh.creation.icosphere(subdivisions=1, radius=0.4).export(tmp_path / "ico.ply")
+    for name in ("city", "studio"):
+        doc = yaml.safe_load(sheet_scene(tmp_path, tmp_path / f"{name}.exr").read_text())
+        doc["environment"]["path"] = f"{name}.exr"
+        doc["objects"].append({"mesh": {"path": "ico.ply", "translate": [0, 0.9, 0]}, "material": "paint"})
+        (tmp_path / f"{name}.yaml").write_text(yaml.safe_dump(doc))
+    exe = str(Path(sys.executable).with_name("iblbake"))
+    (tmp_path / "Makefile").write_text(
+        "all: city.png studio.png city_sheet.png\n"
+        "%.png: %.yaml\n\t" + exe + " render $< -o $@ --depfile $@.d -q --cache c\n"
+        "city_sheet.png: city.yaml\n\t" + exe + " sheet $< -o $@ --depfile $@.d -q --cache c "
+        "--columns materials.gold.roughness=0.1,0.9\n"
+        "-include *.d\n")
+    make = lambda *a: subprocess.run(["make", "-C", str(tmp_path), *a], capture_output=True, text=True, timeout=300)
+    r = make()
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert make("-q").returncode == 0                       # up to date: a second make is a no-op
+    deps = (tmp_path / "city.png.d").read_text()
+    for f in ("city.yaml", "city.exr", "ico.ply"):
+        assert f in deps.split(":")[1], deps
+    before = {f: os.stat(tmp_path / f).st_mtime_ns for f in ("city.png", "studio.png", "city_sheet.png")}
+    time.sleep(0.01)
+    os.utime(tmp_path / "city.exr")
+    r = make()
+    assert r.returncode == 0, r.stdout + r.stderr
+    after = {f: os.stat(tmp_path / f).st_mtime_ns for f in before}
+    assert after["city.png"] > before["city.png"] and after["city_sheet.png"] > before["city_sheet.png"]
+    assert after["studio.png"] == before["studio.png"]
+
+
+def test_sh_and_mips_take_several_panoramas(tmp_path, small_panoramas):
+    out = tmp_path / "sh"
+    p = run_cli("sh", small_panoramas["city"], small_panoramas["studio"], "-o", f"{out}/", "--json",
+                "--depfile", tmp_path / "sh.d")
+    assert p.returncode == 0, p.stderr
+    assert sorted(x.name for x in out.iterdir()) == ["city.json", "studio.json"]
+    assert len(json.loads(p.stdout)["panoramas"]) == 2
+    assert "studio.exr" in (tmp_path / "sh.d").read_text()
+    p = run_cli("sh", small_panoramas["city"], small_panoramas["studio"], "-o", tmp_path / "one.json")
+    assert p.returncode == 1 and "is a folder" in p.stderr
+    p = run_cli("mips", small_panoramas["city"], small_panoramas["studio"], "--cache", tmp_path / "c", "--json",
+                "--size", "32", "--levels", "3")
+    assert p.returncode == 0, p.stderr
+    doc = json.loads(p.stdout)["panoramas"]
+    assert len(doc) == 2 and doc[0]["entries"]["dfg"] == doc[1]["entries"]["dfg"]
+    assert doc[0]["entries"]["prefiltered"]["path"] != doc[1]["entries"]["prefiltered"]["path"]

@@ -48,11 +48,13 @@ def cli():
     iblbake mips ENV --cache DIR    radiance chain, GGX-prefiltered chain, DFG table
     iblbake render SCENE -o out.png render a scene YAML (see render --help-schema)
     iblbake sheet SCENE -o s.png    a contact sheet of the scene's sweep (or --rows/--columns)
+    iblbake deps SCENE              the Make rule of what rendering SCENE reads
     iblbake devices                 OpenCL devices and which one is used
     """
 
 
-for command in (devices.devices, sh.sh_command, mips.mips_command, render.render_command, sheet.sheet_command):
+for command in (devices.devices, sh.sh_command, mips.mips_command, render.render_command, render.deps_command,
+                sheet.sheet_command):
     cli.add_command(command)
 
 

@@ -2,16 +2,17 @@
 
 from __future__ import annotations
 
+import os
 import time
 
 import click
 
-from iblbake.cli.options import (POLICY_FLAGS, Console, common_options, device_option, finite, input_options,
-                                  non_negative)
+from iblbake.cli.options import (POLICY_FLAGS, Console, common_options, depfile_option, device_option, finite,
+                                  input_options, non_negative)
 
 
 @click.command("mips")
-@click.argument("env", metavar="ENV")
+@click.argument("envs", metavar="ENV...", nargs=-1, required=True)
 @click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
               help="Cache folder; entries go to CACHE/<key>/ with a manifest.json. "
                    "Default: $IBLBAKE_CACHE, else ./iblbake-cache.")
@@ -51,14 +52,17 @@ from iblbake.cli.options import (POLICY_FLAGS, Console, common_options, device_o
               default=("all",), show_default=True, help="Bake only these parts (repeatable).")
 @click.option("--backend", type=click.Choice(["opencl", "numpy"]), default="opencl", show_default=True,
               help="opencl: the kernels; numpy: their float64 twins (slow; small sizes).")
+@depfile_option
 @input_options
 @device_option
 @common_options
-def mips_command(env, cache_dir, layout, size, levels, min_size, method, samples, lod_bias, no_fis,
+def mips_command(envs, cache_dir, layout, size, levels, min_size, method, samples, lod_bias, no_fis,
                  convolve_budget, dfg_size, dfg_samples, dfg_multiscatter, only, backend, nonfinite, negative,
-                 max_pixels, device, quiet, as_json):
-    """Bake the radiance mip chain, the GGX-prefiltered chain and the DFG table of ENV into a
-    content-addressed EXR cache. A second run with the same inputs does no work ("cached")."""
+                 max_pixels, depfile, device, quiet, as_json):
+    """Bake the radiance mip chain, the GGX-prefiltered chain and the DFG table of each ENV into a
+    content-addressed EXR cache (one process and one device for a whole folder). A second run
+    with the same inputs does no work ("cached"). With --depfile the entries' manifests depend on
+    their panorama."""
     from pathlib import Path
 
     from iblbake.bake import cache
@@ -73,48 +77,63 @@ def mips_command(env, cache_dir, layout, size, levels, min_size, method, samples
     from iblbake.io.atomic import check_writable
     check_writable(root / "manifest.json", "cache", shown=root)
     baker = mipsbake.Baker(backend, device)
-    report = {}
-    summary = {"cache": str(root), "device": baker.device_label, "entries": report}
-    if parts & {"radiance", "prefiltered"}:
-        image, info = images.read_panorama(env, max_pixels=max_pixels, nonfinite=nonfinite, negative=negative,
-                                           names=POLICY_FLAGS)
-        for w in info.warnings:
-            con.warn(w)
-        policies = {"nonfinite": nonfinite, "negative": negative}
-        if "prefiltered" in parts:
-            opts = mipsbake.PrefilterOptions(layout, size, levels, min_size, method, samples, lod_bias,
-                                             not no_fis, convolve_budget).resolved(info.height)
-            # an impossible plan (--method spectral on a too sharp level) fails before any bake
-            mipsbake.plan_methods(layouts.radiance_chain_sizes(info.width, info.height),
-                                  {**opts, "convolve_budget": baker.convolve_budget(opts)}, "--method")
-        t0 = time.perf_counter()
-        manifest, cached, chain = mipsbake.bake_radiance(baker, image, info, root, policies, warn=con.warn)
-        report["radiance"] = {"path": str(root / manifest["key"]), "cached": cached,
-                              "seconds": round(time.perf_counter() - t0, 4), "levels": len(manifest["files"])}
-        if "prefiltered" in parts:
-            state = {"chain": chain}
+    summaries, rules = [], []
+    for env in envs:
+        report = {}
+        summaries.append({"input": env, "cache": str(root), "device": baker.device_label, "entries": report})
+        if parts & {"radiance", "prefiltered"}:
+            image, info = images.read_panorama(env, max_pixels=max_pixels, nonfinite=nonfinite, negative=negative,
+                                               names=POLICY_FLAGS)
+            for w in info.warnings:
+                con.warn(w)
+            policies = {"nonfinite": nonfinite, "negative": negative}
+            if "prefiltered" in parts:
+                opts = mipsbake.PrefilterOptions(layout, size, levels, min_size, method, samples, lod_bias,
+                                                 not no_fis, convolve_budget).resolved(info.height)
+                # an impossible plan (--method spectral on a too sharp level) fails before any bake
+                mipsbake.plan_methods(layouts.radiance_chain_sizes(info.width, info.height),
+                                      {**opts, "convolve_budget": baker.convolve_budget(opts)}, "--method")
+            t0 = time.perf_counter()
+            manifest, cached, chain = mipsbake.bake_radiance(baker, image, info, root, policies, warn=con.warn)
+            report["radiance"] = {"path": str(root / manifest["key"]), "cached": cached,
+                                  "seconds": round(time.perf_counter() - t0, 4), "levels": len(manifest["files"])}
+            if "prefiltered" in parts:
+                state = {"chain": chain}
 
-            def chain_levels():
-                if state["chain"] is None:
-                    state["chain"] = mipsbake.load_chain(root, manifest)
-                return state["chain"]
+                def chain_levels():
+                    if state["chain"] is None:
+                        state["chain"] = mipsbake.load_chain(root, manifest)
+                    return state["chain"]
 
-            levels_named = [f"level {k} (r = {r:.3g})" for k, r in enumerate(opts["roughness"])]
-            with con.stages(levels_named, label="prefiltering") as step:
-                t0 = time.perf_counter()
-                pm, pcached = mipsbake.bake_prefiltered(baker, chain_levels, info, root, policies, opts,
-                                                        warn=con.warn, progress=step)
-            report["prefiltered"] = {"path": str(root / pm["key"]), "cached": pcached,
-                                     "seconds": round(time.perf_counter() - t0, 4), "layout": layout,
-                                     "sizes": opts["sizes"], "roughness": opts["roughness"],
-                                     "methods": [f["method"] for f in pm["files"]]}
-    if "dfg" in parts:
+                levels_named = [f"level {k} (r = {r:.3g})" for k, r in enumerate(opts["roughness"])]
+                with con.stages(levels_named, label="prefiltering") as step:
+                    t0 = time.perf_counter()
+                    pm, pcached = mipsbake.bake_prefiltered(baker, chain_levels, info, root, policies, opts,
+                                                            warn=con.warn, progress=step)
+                report["prefiltered"] = {"path": str(root / pm["key"]), "cached": pcached,
+                                         "seconds": round(time.perf_counter() - t0, 4), "layout": layout,
+                                         "sizes": opts["sizes"], "roughness": opts["roughness"],
+                                         "methods": [f["method"] for f in pm["files"]]}
+        entries = [Path(e["path"]) / "manifest.json" for e in report.values()]
+        if entries:
+            rules.append(([str(x) for x in entries], [os.path.abspath(env)]))
+    if "dfg" in parts:                # shared by every panorama: baked once
         t0 = time.perf_counter()
         dm, dcached = mipsbake.bake_dfg(baker, root, dfg_size, dfg_samples, dfg_multiscatter, warn=con.warn)
-        report["dfg"] = {"path": str(root / dm["key"]), "cached": dcached,
-                         "seconds": round(time.perf_counter() - t0, 4)}
-    summary["elapsed_s"] = round(time.perf_counter() - t_start, 4)
-    lines = [f"{kind}: {'cached' if e['cached'] else 'baked'} {e['path']} ({e['seconds']:.3f} s)"
-             for kind, e in report.items()]
-    lines.append(f"done in {summary['elapsed_s']:.3f} s on {baker.device_label}")
-    con.result(summary, "\n".join(lines))
+        dfg_entry = {"path": str(root / dm["key"]), "cached": dcached, "seconds": round(time.perf_counter() - t0, 4)}
+        for s in summaries:
+            s["entries"]["dfg"] = dfg_entry
+    if depfile:
+        from iblbake.io import depfile as dep
+        dep.write(depfile, rules)
+    elapsed = round(time.perf_counter() - t_start, 4)
+    lines = []
+    for s in summaries:
+        s["elapsed_s"] = elapsed
+        lines += [f"{kind}: {'cached' if e['cached'] else 'baked'} {e['path']} ({e['seconds']:.3f} s)"
+                  for kind, e in s["entries"].items() if kind != "dfg"]
+    if "dfg" in parts:
+        lines.append(f"dfg: {'cached' if dfg_entry['cached'] else 'baked'} {dfg_entry['path']} "
+                     f"({dfg_entry['seconds']:.3f} s)")
+    lines.append(f"done in {elapsed:.3f} s on {baker.device_label}")
+    con.result(summaries[0] if len(summaries) == 1 else {"panoramas": summaries}, "\n".join(lines))

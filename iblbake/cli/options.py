@@ -112,3 +112,9 @@ def non_negative(ctx, param, value):
     if value is not None and value < 0:
         raise click.BadParameter(f"{value} is negative; give a value >= 0")
     return value
+
+
+def depfile_option(f):
+    return click.option("--depfile", type=click.Path(dir_okay=False), default=None, metavar="FILE",
+                        help="Also write a Make dependency file (as gcc -MD -MF): the outputs depend on "
+                             "every file read. Use with `-include *.d` in a Makefile.")(f)

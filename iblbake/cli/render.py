@@ -6,7 +6,7 @@ import contextlib
 
 import click
 
-from iblbake.cli.options import Console, common_options, device_option
+from iblbake.cli.options import Console, common_options, depfile_option, device_option
 
 
 def _help_schema(ctx, param, value):
@@ -30,9 +30,10 @@ def _help_schema(ctx, param, value):
               help="Print the effect set, every bake and pass with its time and cache hit/miss, and the device.")
 @click.option("--help-schema", is_flag=True, expose_value=False, is_eager=True, callback=_help_schema,
               help="Print every scene key with its type, range and default, and exit.")
+@depfile_option
 @device_option
 @common_options
-def render_command(scene_path, outputs, overrides, cache_dir, show_report, device, quiet, as_json):
+def render_command(scene_path, outputs, overrides, cache_dir, show_report, depfile, device, quiet, as_json):
     """Render the scene file SCENE (YAML; see --help-schema and examples/scenes/) with OpenCL.
 
     Only the effects the scene calls for are baked, compiled and run; --report shows which.
@@ -61,6 +62,9 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, devic
 
         frame = render.render(sc, device=device, cache_root=cache_dir, warn=con.warn, progress=progress)
     written = render.write_outputs(frame, sc)
+    if depfile:
+        from iblbake.io import depfile as dep
+        dep.write(depfile, [(written, scene.input_files(sc))])
     rep = frame.report
     for note in rep["effects"]["notes"]:
         con.note(f"iblbake: {note}")
@@ -86,3 +90,21 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, devic
     lines.append(f"{'wrote ' + ', '.join(written) if written else 'rendered'} ({w}x{h}, {rep['spp']} spp) "
                  f"in {rep['elapsed_s']:.3f} s on {rep['device']}")
     con.result(summary, "\n".join(lines))
+
+
+
+@click.command("deps")
+@click.argument("scene_path", metavar="SCENE")
+@click.option("--set", "overrides", multiple=True, metavar="KEY.PATH=VALUE", help="As render --set.")
+@click.option("--output", "-o", "outputs", multiple=True, type=click.Path(dir_okay=False),
+              help="The targets (as render -o). Default: the scene's output.frame and AOVs.")
+def deps_command(scene_path, overrides, outputs):
+    """Print the Make rule that `render --depfile` writes: SCENE's outputs depend on the scene file,
+    its panorama and its meshes."""
+    from iblbake import render
+    from iblbake.io.depfile import rule
+    from iblbake.scene import load as scene
+
+    sc = scene.load(scene_path, overrides, outputs or None)
+    targets = render.output_paths(sc) or [str(scene_path)]
+    click.echo(rule(targets, scene.input_files(sc)), nl=False)

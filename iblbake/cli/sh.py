@@ -9,8 +9,8 @@ import time
 
 import click
 
-from iblbake.cli.options import (POLICY_FLAGS, Console, common_options, device_option, finite, input_options,
-                                  non_negative)
+from iblbake.cli.options import (POLICY_FLAGS, Console, common_options, depfile_option, device_option, finite,
+                                  input_options, non_negative)
 from iblbake.errors import IblbakeError
 
 
@@ -35,10 +35,11 @@ def _check_overwrite(output: str, force: bool, source: str):
 
 
 @click.command("sh")
-@click.argument("env", metavar="ENV")
-@click.option("--output", "-o", type=click.Path(dir_okay=False), default=None,
-              help="Write the JSON document here (atomically). Without it, nothing is written. An "
-                   "existing iblbake SH document is replaced; any other existing file needs --force.")
+@click.argument("envs", metavar="ENV...", nargs=-1, required=True)
+@click.option("--output", "-o", type=click.Path(), default=None,
+              help="Write the JSON document here (atomically); with several ENV, a folder (DIR/NAME.json "
+                   "each). Without it, nothing is written. An existing iblbake SH document is replaced; any "
+                   "other existing file needs --force.")
 @click.option("--force", "-f", is_flag=True, help="Overwrite --output even if it is not an iblbake SH document.")
 @click.option("--bands", type=click.IntRange(1, 16), default=3, show_default=True,
               help="Number of SH bands (l = 0..bands-1; 3 gives the classic 9 coefficients).")
@@ -52,25 +53,59 @@ def _check_overwrite(output: str, force: bool, source: str):
 @click.option("--intensity", type=float, default=1.0, show_default=True, callback=non_negative,
               help="Scale the panorama's radiance.")
 @click.option("--glsl", is_flag=True, help="Print a GLSL function with the irradiance coefficients.")
+@depfile_option
 @input_options
 @device_option
 @common_options
-def sh_command(env, output, force, bands, window, backend, rotate_y, intensity, glsl, nonfinite, negative,
-               max_pixels, device, quiet, as_json):
-    """Project the panorama ENV onto spherical harmonics and bake irradiance coefficients.
+def sh_command(envs, output, force, bands, window, backend, rotate_y, intensity, glsl, nonfinite, negative,
+               max_pixels, depfile, device, quiet, as_json):
+    """Project each panorama ENV onto spherical harmonics and bake irradiance coefficients (one
+    process for a whole folder: `iblbake sh *.exr -o DIR/`).
 
     The JSON holds the basis description, the radiance coefficients L_lm, the irradiance
     coefficients E_lm = Ahat_l * L_lm (evaluate with max(0, sum E_lm Y_lm(n)); diffuse is
     albedo/pi times that), the input's size and hash, the options and timings.
     """
-    from iblbake.io import images
-    from iblbake.bake import sh as shbake
+    from iblbake.io.atomic import check_writable
 
     con = Console(quiet, as_json)
-    if output:
-        from iblbake.io.atomic import check_writable
-        check_writable(output)
-        _check_overwrite(output, force, env)
+    if len(envs) > 1:
+        if glsl:
+            raise IblbakeError("--glsl prints one panorama's function; give one ENV")
+        if output and not (output.endswith("/") or os.path.isdir(output)):
+            raise IblbakeError(f"-o {output}: with {len(envs)} panoramas, -o is a folder (end it with /)")
+        outputs = [os.path.join(output, os.path.splitext(os.path.basename(e))[0] + ".json") if output else None
+                   for e in envs]
+        if output:
+            os.makedirs(output, exist_ok=True)
+    else:
+        outputs = [output]
+    for env, out in zip(envs, outputs):
+        if out:
+            check_writable(out)
+            _check_overwrite(out, force, env)
+    state = {"rt": None}
+    results = [_project_one(env, out, state, bands, window, backend, rotate_y, intensity, glsl, nonfinite,
+                            negative, max_pixels, device, con) for env, out in zip(envs, outputs)]
+    if depfile:
+        from iblbake.io import depfile as dep
+        dep.write(depfile, [([out], [os.path.abspath(env)]) for env, out in zip(envs, outputs) if out])
+    if len(results) == 1:
+        summary, human = results[0]
+        if glsl and not as_json:
+            if not quiet:
+                click.echo(human, err=True)
+        else:
+            con.result(summary, human)
+    else:
+        con.result({"panoramas": [s for s, _ in results]}, "\n".join(h for _, h in results))
+
+
+def _project_one(env, output, state, bands, window, backend, rotate_y, intensity, glsl, nonfinite, negative,
+                 max_pixels, device, con):
+    from iblbake.bake import sh as shbake
+    from iblbake.io import images
+
     t_start = time.perf_counter()
     with con.stages(["reading", "projecting"], label="sh") as stage:
         t0 = time.perf_counter()
@@ -82,7 +117,7 @@ def sh_command(env, output, force, bands, window, backend, rotate_y, intensity, 
         device_label = "numpy (float64, host)"
         if backend == "opencl":
             from iblbake.device import runtime as cl
-            rt = cl.Runtime(device)
+            rt = state["rt"] = state["rt"] or cl.Runtime(device)      # one runtime for every panorama
             device_label = rt.device_label
         coeffs, project_s = shbake.project(image, bands, backend, rt, rotate_y)
         stage()
@@ -110,8 +145,4 @@ def sh_command(env, output, force, bands, window, backend, rotate_y, intensity, 
              f"mean radiance {[round(c / (2 * math.sqrt(math.pi)), 5) for c in dc]}")
     if info.negative and negative == "keep":
         human += f"; {info.negative} tiny negative values kept (min {info.negative_min:.3g})"
-    if glsl and not as_json:
-        if not quiet:
-            click.echo(human, err=True)
-    else:
-        con.result(summary, human)
+    return summary, human

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from iblbake.cli.options import Console, common_options, device_option
+from iblbake.cli.options import Console, common_options, depfile_option, device_option
 from iblbake.errors import IblbakeError
 
 
@@ -49,10 +49,11 @@ def _cell_size(ctx, param, value):
               help="Render the other cells when one fails, and mark it in the sheet (exit status still 1).")
 @click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
               help="Bake cache folder. Default: $IBLBAKE_CACHE, else ./iblbake-cache.")
+@depfile_option
 @device_option
 @common_options
 def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, label_format, caption, title,
-                  frames_dir, frames_exr, keep_going, cache_dir, device, quiet, as_json):
+                  frames_dir, frames_exr, keep_going, cache_dir, depfile, device, quiet, as_json):
     """Render every cell of the sweep of SCENE (its sweep: section, or --rows / --columns) in one
     process and assemble a contact sheet. Cells share the runtime, every bake, and the passes whose
     inputs they share (a material sweep traces primary rays once, a tone-mapping sweep lights once);
@@ -88,6 +89,10 @@ def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, labe
             images.write_exr(o, sheet.mosaic(results, rows_axis, cols_axis), channels=("R", "G", "B", "A"))
     if frames_dir:
         sheet.write_frames(results, Path(frames_dir), frames_exr)
+    if depfile:                      # every file any cell read (a cell may sweep the panorama or a mesh)
+        from iblbake.io import depfile as dep
+        read = [f for s in scenes if not isinstance(s, Exception) for f in scene_load.input_files(s)]
+        dep.write(depfile, [(list(outputs), read)])
     failed = [r for r in results if r.error]
     summary = {"scene": str(scene_path), "outputs": list(outputs), "device": rt.device_label,
                "rows": {"key": rows_axis.title, "labels": [s.label for s in rows_axis.steps]},

@@ -636,6 +636,13 @@ def load(path, overrides=(), outputs=None, values=(), origin: str = "--set") -> 
     return Scene(out, source, folder, lines)
 
 
+def input_files(sc: Scene) -> list:
+    """Every file rendering the scene reads: the scene itself, its panorama, its meshes."""
+    d = sc.data
+    return [str(Path(sc.source).resolve()), d["environment"]["path"],
+            *(o["mesh"]["path"] for o in d["objects"] if "mesh" in o)]
+
+
 # ---------------------------------------------------------------------------------------------
 
 

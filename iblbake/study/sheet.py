@@ -100,9 +100,8 @@ def caption_lines(r: CellResult, caption: str) -> list:
     if r.error:
         return ["failed", r.error]
     lines = [r.cell.label] if caption in ("values", "time") and r.cell.label else []
-    if caption == "time":
-        lines.append(f"{r.seconds * 1000:.0f} ms" + (" (reused " + ", ".join(r.frame.report["reused"]) + ")"
-                                                      if r.frame.report["reused"] else ""))
+    if caption == "time":            # what it reused is in the --json report
+        lines.append(f"{r.seconds * 1000:.0f} ms")
     return lines
 
 
