@@ -31,8 +31,27 @@ def content_key(parts: dict) -> str:
     return hashlib.sha256(blob.encode()).hexdigest()[:24]
 
 
+# A prune never removes an entry used this recently: a process that has just verified an entry
+# may still be reading its files.
+PRUNE_GRACE_S = 120.0
+
+
 def default_root() -> Path:
-    return Path(os.environ.get("IBLBAKE_CACHE") or "iblbake-cache")
+    """$IBLBAKE_CACHE, else the per-user cache folder (shared by runs from any folder; no cache
+    appears in a project tree)."""
+    env = os.environ.get("IBLBAKE_CACHE")
+    if env:
+        return Path(env)
+    import platformdirs
+    return Path(platformdirs.user_cache_dir("iblbake")) / "bakes"
+
+
+def _touch(entry: Path) -> None:
+    """Mark an entry used now (its manifest's mtime): what prune's least-recently-used order reads."""
+    try:
+        os.utime(entry / MANIFEST)
+    except OSError:
+        pass
 
 
 def verify(entry: Path, warn: Callable[[str], None] | None = None) -> dict | None:
@@ -76,11 +95,13 @@ def get_or_build(root: Path, key: str, build: Callable[[Path], dict], *,
     entry = root / key
     manifest = verify(entry)
     if manifest is not None:
+        _touch(entry)
         return manifest, True
     try:
         with filelock.FileLock(str(root / f".{key}.lock")):
             manifest = verify(entry, warn)   # another process may have finished it meanwhile
             if manifest is not None:
+                _touch(entry)
                 return manifest, True
             for stale in root.glob(f".tmp-{key}-*"):   # left by a killed builder (we hold the lock)
                 shutil.rmtree(stale, ignore_errors=True)
@@ -101,3 +122,54 @@ def get_or_build(root: Path, key: str, build: Callable[[Path], dict], *,
         raise IblbakeError(f"{root}: cannot write the cache entry {key} ({e.strerror or e}); "
                            f"free space or use a writable cache folder") from None
     return body, False
+
+
+def entries(root: Path) -> list:
+    """Every complete entry: {key, kind, bytes, used (manifest mtime), path}, most recently used first."""
+    root = Path(root)
+    out = []
+    if not root.is_dir():
+        return out
+    for e in root.iterdir():
+        m = e / MANIFEST
+        if e.name.startswith(".") or not m.is_file():
+            continue
+        try:
+            kind = json.loads(m.read_text()).get("kind", "?")
+            size = sum(f.stat().st_size for f in e.iterdir() if f.is_file())
+            used = m.stat().st_mtime
+        except (OSError, ValueError):
+            continue
+        out.append({"key": e.name, "kind": kind, "bytes": size, "used": used, "path": str(e)})
+    return sorted(out, key=lambda x: -x["used"])
+
+
+def prune(root: Path, max_bytes: int, grace_s: float = PRUNE_GRACE_S) -> tuple[list, list]:
+    """Remove least-recently-used entries until the cache holds at most max_bytes. Safe beside
+    other processes: an entry being built (its lock held) or used within grace_s is kept.
+    Returns (removed, kept-although-over) entries."""
+    import filelock
+
+    root = Path(root)
+    live = entries(root)
+    total = sum(e["bytes"] for e in live)
+    removed, busy = [], []
+    now = time.time()
+    for e in reversed(live):                      # least recently used first
+        if total <= max_bytes:
+            break
+        if now - e["used"] < grace_s:
+            busy.append(e)
+            continue
+        try:
+            with filelock.FileLock(str(root / f".{e['key']}.lock"), timeout=0):
+                if now - (Path(e["path"]) / MANIFEST).stat().st_mtime < grace_s:   # used meanwhile
+                    busy.append(e)
+                    continue
+                _remove(Path(e["path"]))
+        except (filelock.Timeout, FileNotFoundError):
+            busy.append(e)
+            continue
+        total -= e["bytes"]
+        removed.append(e)
+    return removed, busy

@@ -15,7 +15,7 @@ from iblbake.cli.options import (POLICY_FLAGS, Console, common_options, depfile_
 @click.argument("envs", metavar="ENV...", nargs=-1, required=True)
 @click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
               help="Cache folder; entries go to CACHE/<key>/ with a manifest.json. "
-                   "Default: $IBLBAKE_CACHE, else ./iblbake-cache.")
+                   "Default: $IBLBAKE_CACHE, else the per-user cache folder.")
 @click.option("--layout", type=click.Choice(["equirect", "cubemap", "octahedral"]), default="equirect",
               show_default=True, help="Layout of the prefiltered chain (cubemap: faces +X -X +Y -Y +Z -Z "
                                       "stacked vertically).")

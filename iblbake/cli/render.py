@@ -25,7 +25,7 @@ def _help_schema(ctx, param, value):
               help="Override a scene value, e.g. --set effects.samples=40 --set materials.gold.roughness=0.3 "
                    "--set objects.0.sphere.radius=2 (repeatable; values parse as YAML).")
 @click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
-              help="Bake cache folder (shared with `iblbake mips`). Default: $IBLBAKE_CACHE, else ./iblbake-cache.")
+              help="Bake cache folder (shared with `iblbake mips`). Default: $IBLBAKE_CACHE, else the per-user cache folder.")
 @click.option("--report", "show_report", is_flag=True,
               help="Print the effect set, every bake and pass with its time and cache hit/miss, and the device.")
 @click.option("--help-schema", is_flag=True, expose_value=False, is_eager=True, callback=_help_schema,

@@ -48,7 +48,7 @@ def _cell_size(ctx, param, value):
 @click.option("--keep-going", is_flag=True,
               help="Render the other cells when one fails, and mark it in the sheet (exit status still 1).")
 @click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
-              help="Bake cache folder. Default: $IBLBAKE_CACHE, else ./iblbake-cache.")
+              help="Bake cache folder. Default: $IBLBAKE_CACHE, else the per-user cache folder.")
 @depfile_option
 @device_option
 @common_options

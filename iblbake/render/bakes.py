@@ -14,6 +14,7 @@ from iblbake.bake import cache, layouts
 from iblbake.bake import mips as mipsbake
 from iblbake.bake import sh as bake_sh
 from iblbake.core import sampling
+from iblbake.errors import IblbakeError
 from iblbake.io import images
 
 POLICY_KEYS = {"nonfinite": "environment.nonfinite:", "negative": "environment.negative:"}
@@ -27,8 +28,16 @@ class Bakes:
         self._memo: dict = {}
 
     def _get(self, key, make):
-        if key not in self._memo:
-            self._memo[key] = make()
+        for attempt in range(3):
+            if key in self._memo:
+                break
+            try:
+                self._memo[key] = make()
+            except (IblbakeError, OSError) as e:
+                # a prune in another process took the entry between its check and this read: the
+                # next check finds it gone and bakes it again (an error naming no cache file is real)
+                if attempt == 2 or str(self.root) not in str(e):
+                    raise
         return self._memo[key]
 
     def environment(self, env: dict):
