@@ -15,7 +15,7 @@ import sys
 import click
 
 from iblbake import __version__
-from iblbake.cli import cache, devices, mips, render, sh, sheet
+from iblbake.cli import cache, compare, devices, mips, render, sh, sheet
 from iblbake.cli.options import _DEBUG, _set_debug
 from iblbake.errors import IblbakeError
 
@@ -49,13 +49,14 @@ def cli():
     iblbake render SCENE -o out.png render a scene YAML (see render --help-schema)
     iblbake sheet SCENE -o s.png    a contact sheet of the scene's sweep (or --rows/--columns)
     iblbake deps SCENE              the Make rule of what rendering SCENE reads
+    iblbake compare A B             FLIP or RMSE between frames or sheets (per cell), for CI
     iblbake cache [prune]           the bake cache's entries; trim it to a size
     iblbake devices                 OpenCL devices and which one is used
     """
 
 
 for command in (devices.devices, sh.sh_command, mips.mips_command, render.render_command, render.deps_command,
-                sheet.sheet_command, cache.cache_group):
+                sheet.sheet_command, compare.compare_command, cache.cache_group):
     cli.add_command(command)
 
 

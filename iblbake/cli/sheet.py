@@ -45,6 +45,9 @@ def _cell_size(ctx, param, value):
 @click.option("--frames", "frames_dir", type=click.Path(file_okay=False), default=None,
               help="Also write each cell's own frame here (rRR_cCC.png; with --frames-exr the linear .exr too).")
 @click.option("--frames-exr", is_flag=True, help="With --frames: each cell's linear EXR as well.")
+@click.option("--layout", "layout_path", type=click.Path(dir_okay=False), default=None, metavar="FILE",
+              help="Also write the --json summary here, with each cell's box in the sheet (what "
+                   "`iblbake compare --layout` reads to compare sheets cell by cell).")
 @click.option("--keep-going", is_flag=True,
               help="Render the other cells when one fails, and mark it in the sheet (exit status still 1).")
 @click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
@@ -53,7 +56,7 @@ def _cell_size(ctx, param, value):
 @device_option
 @common_options
 def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, label_format, caption, title,
-                  frames_dir, frames_exr, keep_going, cache_dir, depfile, device, quiet, as_json):
+                  frames_dir, frames_exr, layout_path, keep_going, cache_dir, depfile, device, quiet, as_json):
     """Render every cell of the sweep of SCENE (its sweep: section, or --rows / --columns) in one
     process and assemble a contact sheet. Cells share the runtime, every bake, and the passes whose
     inputs they share (a material sweep traces primary rays once, a tone-mapping sweep lights once);
@@ -94,11 +97,22 @@ def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, labe
         read = [f for s in scenes if not isinstance(s, Exception) for f in scene_load.input_files(s)]
         dep.write(depfile, [(list(outputs), read)])
     failed = [r for r in results if r.error]
+    lay = sheet.layout(results, rows_axis, cols_axis, title, caption)
+    cells_json = []
+    for r in results:
+        c = r.to_json()
+        x, y = lay.origin(r.cell.row, r.cell.column)
+        w, h = lay.cell
+        c["png_box"] = [x, y, w, h]
+        c["exr_box"] = [r.cell.column * (w + sheet.GAP), r.cell.row * (h + sheet.GAP), w, h]
+        cells_json.append(c)
     summary = {"scene": str(scene_path), "outputs": list(outputs), "device": rt.device_label,
                "rows": {"key": rows_axis.title, "labels": [s.label for s in rows_axis.steps]},
                "columns": {"key": cols_axis.title, "labels": [s.label for s in cols_axis.steps]},
-               "cells": [r.to_json() for r in results], "failed": len(failed),
-               "elapsed_s": round(time.perf_counter() - t_start, 4)}
+               "cells": cells_json, "failed": len(failed), "elapsed_s": round(time.perf_counter() - t_start, 4)}
+    if layout_path:
+        from iblbake.io.atomic import write_json
+        write_json(layout_path, summary)
     con.result(summary, f"wrote {', '.join(outputs)}: {len(rows_axis.steps)} x {len(cols_axis.steps)} cells "
                         f"in {summary['elapsed_s']:.3f} s on {rt.device_label}"
                         + (f"; {len(failed)} failed" if failed else ""))
