@@ -138,6 +138,45 @@ def test_kill_loop_render(tmp_path, stress, random_env):
     kill_loop(stress, "render", cmd, stress_scale(12, 24), check, (0.2, 3.5), seed=4)
 
 
+def test_kill_loop_sheet(tmp_path, stress, random_env):
+    """A 3 x 3 sheet with its frames and layout: a kill at any point leaves no partial sheet, frame
+    or layout under its final name and no partial cache entry."""
+    scene = _scene(tmp_path, random_env)
+    root = tmp_path / "cache"
+    outs = [tmp_path / "sheet.png", tmp_path / "sheet.exr"]
+    frames = tmp_path / "frames"
+    layout = tmp_path / "sheet.json"
+    cmd = cli("sheet", scene, "-o", outs[0], "-o", outs[1], "--cache", root, "-q", "--frames", frames,
+              "--layout", layout, "--rows", "materials.m.roughness=0.1:0.9:3", "--columns", "effects.samples=8,32,64")
+
+    def check():
+        bad = sum(1 for o in outs if o.exists() and not readable_image(o, _shape(o)))
+        bad += sum(1 for f in frames.glob("*.png") if not readable_image(f, (120, 160)))
+        if layout.exists():
+            try:
+                json.loads(layout.read_text())
+            except ValueError:
+                bad += 1
+        bad += len(cache_entries_ok(root)[1])
+        for o in [*outs, layout, *frames.glob("*")]:
+            with contextlib.suppress(FileNotFoundError):
+                o.unlink()
+        return bad
+
+    kill_loop(stress, "sheet", cmd, stress_scale(8, 24), check, (0.2, 3.0), seed=5)
+
+
+def _shape(path: Path):
+    """A finished sheet's size: whatever it is, it must read whole (the check is readability)."""
+    import OpenImageIO as oiio
+    spec = oiio.ImageInput.open(str(path))
+    if spec is None:
+        return (-1, -1)
+    s = spec.spec()
+    spec.close()
+    return (s.height, s.width)
+
+
 def test_kill_loop_sh(tmp_path, stress):
     env = write_exr(tmp_path / "e.exr", np.random.default_rng(0).random((256, 512, 3)).astype(np.float32))
     out = tmp_path / "out.json"
