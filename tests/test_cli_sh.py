@@ -148,13 +148,15 @@ def test_no_working_device_names_the_fix(tmp_path, icd):
         (vendors / "bad.icd").write_text("libdoesnotexist.so\n")
     env = {"OCL_ICD_VENDORS": str(vendors)}
     pano = write_exr(tmp_path / "c.exr", np.ones((4, 8, 3), np.float32))
-    p = run_cli("sh", pano, "-o", tmp_path / "x.json", env=env)
+    p = run_cli("sh", pano, "-o", tmp_path / "x.json", "--backend", "opencl", env=env)
     assert_one_line_error(p, "no working OpenCL device", "tried:", "pocl-opencl-icd")
     assert p.returncode == 3 and not (tmp_path / "x.json").exists()
     p = run_cli("devices", env=env)
     assert p.returncode != 0 and "pocl-opencl-icd" in p.stderr and "Traceback" not in p.stderr
     p = run_cli("sh", pano, "--backend", "numpy", "--json", env=env)
     assert p.returncode == 0, p.stderr
+    p = run_cli("sh", pano, "--json", env=env)      # auto: a small panorama needs no device at all
+    assert p.returncode == 0 and json.loads(p.stdout)["device"].startswith("numpy"), p.stderr
 
 
 def test_device_probe_prints_no_compiler_warning(monkeypatch):

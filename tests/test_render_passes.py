@@ -168,11 +168,11 @@ def test_every_kernel_parameter_is_bound_by_name():
         assert set(p.reads) | set(p.writes) <= table | {"png"}, p.name
 
 
-LAYERS = {"core": 0, "io": 0, "device": 0, "bake": 1, "scene": 1, "render": 2, "study": 3, "cli": 4}
+LAYERS = {"core": 0, "io": 0, "device": 1, "bake": 2, "scene": 2, "render": 3, "study": 4, "cli": 5}
 
 
 def test_imports_run_downward():
-    """cli -> study -> render -> {scene, bake} -> {device, core, io}; nothing imports cli; core
+    """cli -> study -> render -> {scene, bake} -> device -> {core, io}; nothing imports cli; core
     never imports device (every import, function-level ones too)."""
     bad = []
     for f in (ROOT / "iblbake").rglob("*.py"):
@@ -194,3 +194,31 @@ def test_imports_run_downward():
                 elif own in LAYERS and LAYERS[target] >= LAYERS[own]:
                     bad.append(f"{'/'.join(rel)} imports {m}")
     assert not bad, bad
+
+
+def test_mesh_triangles_and_bvh_are_cached_by_content(tmp_path, white):
+    """A second render reads the mesh's triangles and BVH from the cache (the same pixels); a
+    changed mesh file, or another transform, builds them again."""
+    import trimesh
+    mesh = tmp_path / "m.ply"
+    trimesh.creation.icosphere(subdivisions=3, radius=0.8).export(mesh)
+    doc = {"camera": {"perspective": {"position": [0, 0, 3]}, "resolution": [32, 24]},
+           "environment": {"path": str(white), "background": "hide"},
+           "materials": {"m": {"base_color": [0.7, 0.7, 0.7], "roughness": 0.5}},
+           "objects": [{"mesh": {"path": str(mesh)}, "material": "m"}]}
+    p = tmp_path / "mesh.yaml"
+    p.write_text(yaml.safe_dump(doc))
+
+    def geometry(sets=()):
+        f = render.render(scene.load(p, sets), cache_root=tmp_path / "c")
+        return f, next(b for b in f.report["bakes"] if b["name"] == "geometry")
+
+    a, ga = geometry()
+    b, gb = geometry()
+    assert not ga["cached"] and gb["cached"] and gb["triangles"] == 1280
+    assert np.array_equal(a.hdr, b.hdr)
+    _, gc = geometry(["objects.0.mesh.translate=[0.1,0,0]"])
+    assert not gc["cached"]
+    trimesh.creation.icosphere(subdivisions=2, radius=0.8).export(mesh)
+    _, gd = geometry()
+    assert not gd["cached"] and gd["triangles"] == 320

@@ -251,7 +251,7 @@ def bake_radiance(baker: Baker, image, info, root: Path, policies: dict, warn=No
         for k, lvl in enumerate(chain):
             _check_finite(f"radiance level {k}", lvl)
             name = f"radiance_{k:02d}.exr"
-            images.write_exr(tmp / name, lvl)
+            images.write_exr(tmp / name, lvl, compression=images.CACHE_COMPRESSION)
             files.append({"name": name, "level": k, "width": lvl.shape[1], "height": lvl.shape[0]})
         return {"format": FORMAT, "format_version": FORMAT_VERSION, "kind": "radiance",
                 "layout": "equirect", "files": files, "input": info.to_json(), "parameters": policies,
@@ -283,7 +283,7 @@ def bake_prefiltered(baker: Baker, chain, info, root: Path, policies: dict, opts
         for k, (lvl, r, s, how) in enumerate(zip(levels, opts["roughness"], opts["sizes"], methods)):
             _check_finite(f"prefiltered level {k}", lvl)
             name = f"prefiltered_{k:02d}.exr"
-            images.write_exr(tmp / name, lvl)
+            images.write_exr(tmp / name, lvl, compression=images.CACHE_COMPRESSION)
             files.append({"name": name, "level": k, "roughness": r, "alpha": r * r, "size": s,
                           "width": lvl.shape[1], "height": lvl.shape[0], "method": how})
         return {"format": FORMAT, "format_version": FORMAT_VERSION, "kind": "prefiltered",
@@ -310,7 +310,7 @@ def bake_dfg(baker: Baker, root: Path, size: int, samples: int, multiscatter: bo
         table = baker.dfg(size, samples, multiscatter)
         _check_finite("dfg", table)
         channels = ("B", "A+B") if multiscatter else ("A", "B")
-        images.write_exr(tmp / "dfg.exr", table, channels=("R", "G"),
+        images.write_exr(tmp / "dfg.exr", table, channels=("R", "G"), compression=images.CACHE_COMPRESSION,
                          attributes={"iblbake:channels": ",".join(channels)})
         return {"format": FORMAT, "format_version": FORMAT_VERSION, "kind": "dfg",
                 "files": [{"name": "dfg.exr", "width": size, "height": size, "channels": list(channels)}],

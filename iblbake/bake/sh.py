@@ -21,6 +21,18 @@ from iblbake.core import sh
 FORMAT = "iblbake.sh"
 FORMAT_VERSION = 1
 BACKENDS = ("opencl", "numpy")
+# `auto` projects on the host where that is quicker than starting OpenCL: measured on 2 cores, the
+# float64 host projection of a 1024x512 panorama takes 0.008 s at 3 bands, 0.010 s at 5, 0.09 s
+# at 8 and 0.91 s at 16, and importing pyopencl, probing the device, loading the program and
+# projecting about 0.12 s whatever the bands. Texels x bands^2 up to this is the host's side.
+HOST_TEXEL_BANDS2 = 4e7
+
+
+def choose_backend(backend: str, width: int, height: int, bands: int) -> str:
+    """opencl or numpy; auto picks numpy below HOST_TEXEL_BANDS2 texels x bands^2."""
+    if backend != "auto":
+        return backend
+    return "numpy" if width * height * bands * bands <= HOST_TEXEL_BANDS2 else "opencl"
 
 
 MAX_TERM_GROUP = 5  # measured: 5 beats 8 (register pressure) and 3-4 (more passes)

@@ -46,8 +46,10 @@ def _check_overwrite(output: str, force: bool, source: str):
 @click.option("--window", type=click.Choice(["none", "hann", "lanczos"]), default="none", show_default=True,
               help="Ringing reduction applied per band: hann w_l=(1+cos(pi l/bands))/2, "
                    "lanczos w_l=sinc(l/bands). Reduces negative lobes around bright suns.")
-@click.option("--backend", type=click.Choice(["opencl", "numpy"]), default="opencl", show_default=True,
-              help="opencl: the reduction kernel; numpy: the float64 per-texel reference.")
+@click.option("--backend", type=click.Choice(["auto", "opencl", "numpy"]), default="auto", show_default=True,
+              help="opencl: the reduction kernel; numpy: the float64 host path (same math); auto: numpy "
+                   "where it is quicker than starting OpenCL (texels x bands^2 up to 4e7: a 1024x512 "
+                   "panorama up to 8 bands), else opencl.")
 @click.option("--rotate-y", type=float, default=0.0, show_default=True, callback=finite, metavar="DEG",
               help="Rotate the panorama about +y by DEG degrees (+x towards -z).")
 @click.option("--intensity", type=float, default=1.0, show_default=True, callback=non_negative,
@@ -115,6 +117,7 @@ def _project_one(env, output, state, bands, window, backend, rotate_y, intensity
         stage()
         rt = None
         device_label = "numpy (float64, host)"
+        backend = shbake.choose_backend(backend, info.width, info.height, bands)
         if backend == "opencl":
             from iblbake.device import runtime as cl
             rt = state["rt"] = state["rt"] or cl.Runtime(device)      # one runtime for every panorama

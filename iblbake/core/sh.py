@@ -201,7 +201,7 @@ def _g_at(theta, bands: int):
     d = np.stack(np.broadcast_arrays(st * np.sin(phis), np.cos(theta)[..., None], st * np.cos(phis)), axis=-1)
     y = sh_basis(d, bands)                              # (..., nt, K)
     t_inv = np.linalg.inv(azimuth_table(phis, bands))   # (nt, nt)
-    return np.einsum("ts,...sk->...kt", t_inv, y)
+    return np.einsum("ts,...sk->...kt", t_inv, y, optimize=True)
 
 
 def azimuth_texel_means(width: int, bands: int):
@@ -214,7 +214,7 @@ def azimuth_texel_means(width: int, bands: int):
 def row_factors(height: int, bands: int):
     """int over row j of G[k, t](theta) sin(theta) dtheta, shape (height, bands^2, 2*bands-1)."""
     theta, weight = _polar_nodes(height)
-    return np.einsum("hn,hnkt->hkt", weight, _g_at(theta, bands))
+    return np.einsum("hn,hnkt->hkt", weight, _g_at(theta, bands), optimize=True)
 
 
 @functools.lru_cache(maxsize=16)
@@ -236,7 +236,7 @@ def row_sums_twin(image, bands: int, rotate_y_deg: float = 0.0):
     """numpy version of kernels/sh_project.cl: S[j, t, c] = sum_i L(i, j) T_t(phi_i)."""
     image = np.asarray(image, dtype=np.float64)
     t = azimuth_table(conventions.equirect_phi(image.shape[1], rotate_y_deg), bands)  # (W, nt)
-    return np.einsum("hwc,wt->htc", image, t)
+    return np.matmul(image.transpose(0, 2, 1), t).transpose(0, 2, 1)   # (H, nt, C); BLAS, not einsum
 
 
 def project(image, bands: int, rotate_y_deg: float = 0.0):

@@ -210,9 +210,40 @@ def _preference(info: DeviceInfo) -> int:
     return {"GPU": 0, "CPU": 1}.get(info.kind, 2)
 
 
+def _verdict_path() -> str:
+    return os.path.join(os.path.dirname(_cache_dir()), "probe-verdicts.json")
+
+
+def _verdict_key(info: DeviceInfo) -> str:
+    """What a verdict holds for: the platform, the device and its driver (a new driver probes again)."""
+    d = info.device
+    return "|".join(str(x).strip() for x in (d.platform.name, d.platform.version, d.name, d.version,
+                                             d.driver_version))
+
+
+def _load_verdicts() -> dict:
+    import json
+    try:
+        with open(_verdict_path()) as f:
+            v = json.load(f)
+        return v if isinstance(v, dict) else {}
+    except (OSError, ValueError):
+        return {}
+
+
+def _save_verdicts(verdicts: dict) -> None:
+    from iblbake.io.atomic import write_json
+    try:
+        write_json(_verdict_path(), verdicts)
+    except Exception:          # a read-only home costs a probe per run, nothing else
+        pass
+
+
 def select_device(spec: str | None = None) -> DeviceInfo:
     """The device to use: `spec` (--device), else $IBLBAKE_DEVICE, else the first working GPU,
-    else the first working CPU. Probes candidates in that order and stops at the first that works."""
+    else the first working CPU. Probes candidates in that order and stops at the first that works;
+    a device whose driver passed the probe before (verdicts kept per platform, device and driver
+    version beside the kernel cache) is not probed again. `iblbake devices` always probes."""
     spec = spec or os.environ.get("IBLBAKE_DEVICE") or None
     devices, errors = enumerate_devices()
     candidates = [d for d in devices if spec is None or _matches(d, spec)]
@@ -220,8 +251,16 @@ def select_device(spec: str | None = None) -> DeviceInfo:
         listed = ", ".join(d.label for d in devices) or "none"
         raise DeviceError(f"no OpenCL device matches --device/IBLBAKE_DEVICE {spec!r}; devices: {listed}")
     tried = []
+    verdicts = _load_verdicts()
     for info in sorted(candidates, key=_preference):
+        key = _verdict_key(info)
+        known = verdicts.get(key)
+        if known and known.get("ok"):     # this device and driver built and ran the probe before
+            info.ok, info.reason = True, "probe verdict of an earlier run (same device and driver)"
+            return info
         probe(info)
+        verdicts[key] = {"ok": info.ok, "reason": info.reason}
+        _save_verdicts(verdicts)
         if info.ok:
             return info
         tried.append(f"{info.label}: {info.reason}")
@@ -232,8 +271,11 @@ def select_device(spec: str | None = None) -> DeviceInfo:
 def probe_all() -> tuple[list[DeviceInfo], list[str], DeviceInfo | None]:
     """Every device probed, platform errors, and the one select_device() would use."""
     devices, errors = enumerate_devices()
+    verdicts = _load_verdicts()
     for d in devices:
         probe(d)
+        verdicts[_verdict_key(d)] = {"ok": d.ok, "reason": d.reason}
+    _save_verdicts(verdicts)
     working = sorted((d for d in devices if d.ok), key=_preference)
     chosen = None
     spec = os.environ.get("IBLBAKE_DEVICE")

@@ -17,6 +17,15 @@ from iblbake.core import sampling
 from iblbake.errors import IblbakeError
 from iblbake.io import images
 
+def _geometry_code_hash() -> str:
+    """The mesh loader's and BVH builder's source: a cached BVH is rebuilt when they change."""
+    import hashlib
+    import inspect
+
+    from iblbake.scene import geometry, pack
+    return hashlib.sha256((inspect.getsource(geometry) + inspect.getsource(pack)).encode()).hexdigest()[:16]
+
+
 POLICY_KEYS = {"nonfinite": "environment.nonfinite:", "negative": "environment.negative:"}
 
 
@@ -46,6 +55,44 @@ class Bakes:
         key = ("env", env["path"], st.st_size, st.st_mtime_ns, env["nonfinite"], env["negative"])
         return self._get(key, lambda: images.read_panorama(env["path"], nonfinite=env["nonfinite"],
                                                            negative=env["negative"], names=POLICY_KEYS))
+
+    def geometry(self, sc, warn=None):
+        """The scene's device records; its meshes' triangles and BVH from the cache, keyed by each
+        mesh file's content, transform, normals mode, material and object index (a 1.3M-triangle
+        PLY: seconds to load and build, a fraction of a second to read back)."""
+        from iblbake.scene import pack
+
+        objs = sc.data["objects"]
+        names = list(sc.data["materials"])
+        meshes = [(oid, o) for oid, o in enumerate(objs) if "mesh" in o]
+        if not meshes:
+            return pack.scene_arrays(sc, (np.zeros((0, 6, 4), np.float32), np.zeros((0, 8), np.float32),
+                                          {"meshes": [], "triangles": 0, "load_s": 0.0}))
+        try:
+            parts = [{"object": oid, "sha256": images.file_sha256(o["mesh"]["path"]),
+                      "material": names.index(o["material"]), **{k: v for k, v in o["mesh"].items() if k != "path"}}
+                     for oid, o in meshes]
+        except OSError:              # a missing or unreadable mesh: the loader says so, in one line
+            return pack.scene_arrays(sc)
+        key = "geometry-" + cache.content_key({"kind": "geometry", "v": 1, "meshes": parts,
+                                               "code": _geometry_code_hash()})
+
+        def make():
+            def build(tmp: Path):
+                arr, nodes, report = pack.mesh_arrays(sc)
+                np.save(tmp / "triangles.npy", arr)
+                np.save(tmp / "bvh.npy", nodes)
+                return {"kind": "geometry", "files": [{"name": "triangles.npy"}, {"name": "bvh.npy"}],
+                        "report": report}
+
+            manifest, cached = cache.get_or_build(self.root, key, build, warn=warn)
+            entry = self.root / manifest["key"]
+            arrays = (np.load(entry / "triangles.npy"), np.load(entry / "bvh.npy"),
+                      {**manifest["report"], "cached": cached})
+            return arrays
+
+        meshes_arrays = self._get(("geometry", key), make)
+        return pack.scene_arrays(sc, meshes_arrays)
 
     def chain(self, rt, levels) -> dict:
         """The device tables of a chain of levels (chain_table), uploaded once per runtime."""
@@ -144,18 +191,13 @@ def load_all(ctx, names) -> dict:
 
 def chain_table(rt, levels) -> dict:
     """One buffer of levels back to back (RGBA) and the offset/size tables chain_lookup reads,
-    as the named kernel arguments chain, off, lw, lh, nlev."""
-    from iblbake.bake.radiance import to_rgba
-
-    offs, lws, lhs, parts = [], [], [], []
-    o = 0
-    for lvl in levels:
-        h, w = lvl.shape[:2]
-        offs.append(o)
-        lws.append(w)
-        lhs.append(h)
-        parts.append(to_rgba(lvl).reshape(-1, 4))
-        o += w * h
-    data = np.concatenate(parts).astype(np.float32)
-    off, lw, lh = (rt.to_device(np.asarray(x, np.int32)) for x in (offs, lws, lhs))
+    as the named kernel arguments chain, off, lw, lh, nlev. Filled in one pass (no per-level
+    RGBA copies: at 1024x512 the copies cost more than the frame's shading)."""
+    sizes = [lvl.shape[:2] for lvl in levels]
+    offs = np.concatenate([[0], np.cumsum([h * w for h, w in sizes])]).astype(np.int64)
+    data = np.zeros((int(offs[-1]), 4), np.float32)
+    for lvl, o0, o1 in zip(levels, offs[:-1], offs[1:]):
+        data[o0:o1, :3] = lvl[..., :3].reshape(-1, 3)
+    off, lw, lh = (rt.to_device(np.asarray(x, np.int32)) for x in (offs[:-1], [w for _, w in sizes],
+                                                                  [h for h, _ in sizes]))
     return {"chain": rt.to_device(data), "off": off, "lw": lw, "lh": lh, "nlev": len(levels)}

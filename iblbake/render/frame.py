@@ -184,8 +184,9 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
     ctx = Context(rt, scene, pl, bakes, rep, warn or (lambda _m: None), progress)
 
     t0 = time.perf_counter()
-    arrays = pack.scene_arrays(scene)
-    rep.bake("geometry", time.perf_counter() - t0, False, **arrays.geometry_report)
+    arrays = bakes.geometry(scene, ctx.warn)
+    geo = dict(arrays.geometry_report)
+    rep.bake("geometry", time.perf_counter() - t0, geo.pop("cached", False), **geo)
     needs_env = bool(pl.bakes) or pl.effects.background in ("show", "blur")
     if needs_env:                     # read only when some bake or pass reads it
         t0 = time.perf_counter()

@@ -59,7 +59,10 @@ def _int_bits(x):
     return np.asarray(x, np.int32).view(np.float32)
 
 
-def scene_arrays(scene: Scene) -> SceneArrays:
+def scene_arrays(scene: Scene, meshes=None) -> SceneArrays:
+    """Every record the device reads. `meshes`, the (triangles, BVH nodes, report) of
+    mesh_arrays(), may come from a cache (they are the costly part: a 1.3M-triangle PLY takes
+    seconds to load and split)."""
     d = scene.data
     names = list(d["materials"])
     index = {n: i for i, n in enumerate(names)}
@@ -87,6 +90,16 @@ def scene_arrays(scene: Scene) -> SceneArrays:
             a[2, :3], a[2, 3] = t, hw
             a[3, :3], a[3, 3] = b, hd
             planes.append(a)
+    arr, nodes, report = meshes if meshes is not None else mesh_arrays(scene)
+    return SceneArrays(mats, names, np.array(spheres, np.float32).reshape(-1, 2, 4),
+                       np.array(planes, np.float32).reshape(-1, 4, 4), arr, nodes, report)
+
+
+def mesh_arrays(scene: Scene):
+    """(triangles (t, 6, 4) float32 in BVH order, BVH nodes (n, 8) float32, report) of every mesh
+    object of the scene, in world space."""
+    index = {n: i for i, n in enumerate(scene.data["materials"])}
+    d = scene.data
     t0 = time.perf_counter()
     tris = geometry.build_triangles(d["objects"], index, scene.source)
     load_s = time.perf_counter() - t0
@@ -105,5 +118,4 @@ def scene_arrays(scene: Scene) -> SceneArrays:
     else:
         arr = np.zeros((0, 6, 4), np.float32)
         nodes = np.zeros((0, 8), np.float32)
-    return SceneArrays(mats, names, np.array(spheres, np.float32).reshape(-1, 2, 4),
-                       np.array(planes, np.float32).reshape(-1, 4, 4), arr, nodes, report)
+    return arr, nodes, report
