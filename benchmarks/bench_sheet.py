@@ -23,9 +23,13 @@ MODES = {"prefiltered": ["effects.specular=prefiltered"],
          "importance N=64": ["effects.specular=importance", "effects.samples=64"]}
 
 
+# the console script beside this Python, else the module (an install with --target has no script)
+_EXE = Path(sys.executable).with_name("iblbake")
+IBLBAKE = [str(_EXE)] if _EXE.exists() else [sys.executable, "-m", "iblbake.cli"]
+
+
 def cli(*args):
-    exe = Path(sys.executable).with_name("iblbake")
-    return subprocess.run([str(exe), *map(str, args)], capture_output=True, text=True, check=True)
+    return subprocess.run([*IBLBAKE, *map(str, args)], capture_output=True, text=True, check=True)
 
 
 def main():

@@ -164,7 +164,7 @@ def test_makefile_rebuilds_only_what_reads_a_touched_input(tmp_path, small_panor
         doc["environment"]["path"] = f"{name}.exr"
         doc["objects"].append({"mesh": {"path": "ico.ply", "translate": [0, 0.9, 0]}, "material": "paint"})
         (tmp_path / f"{name}.yaml").write_text(yaml.safe_dump(doc))
-    exe = str(Path(sys.executable).with_name("iblbake"))
+    exe = f"{sys.executable} -m iblbake.cli"
     (tmp_path / "Makefile").write_text(
         "all: city.png studio.png city_sheet.png\n"
         "%.png: %.yaml\n\t" + exe + " render $< -o $@ --depfile $@.d -q --cache c\n"
