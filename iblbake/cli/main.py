@@ -1,6 +1,7 @@
 """The `iblbake` command line: thin click commands that parse, call the library and print; one
-module per command (devices, sh, mips, render), shared options in options.py. The only place
-that knows click.
+module per command, loaded only when that command runs (a Makefile calls `iblbake sh` once
+per file: it should not pay for the others), shared options in options.py. The only place that
+knows click.
 
 Errors the user can act on are the library's IblbakeError (iblbake.errors, plain exceptions): printed
 here as one line, exit != 0. Anything else is an internal error: one line too, unless --debug
@@ -15,12 +16,30 @@ import sys
 import click
 
 from iblbake import __version__
-from iblbake.cli import cache, compare, devices, mips, render, sh, sheet
+import importlib
+
 from iblbake.cli.options import _DEBUG, _set_debug
 from iblbake.errors import IblbakeError
 
 
+# command name -> (module, attribute): imported on first use
+COMMANDS = {
+    "cache": ("cache", "cache_group"), "compare": ("compare", "compare_command"),
+    "deps": ("render", "deps_command"), "devices": ("devices", "devices"), "mips": ("mips", "mips_command"),
+    "render": ("render", "render_command"), "sh": ("sh", "sh_command"), "sheet": ("sheet", "sheet_command"),
+}
+
+
 class IblbakeGroup(click.Group):
+    def list_commands(self, ctx):
+        return sorted(COMMANDS)
+
+    def get_command(self, ctx, name):
+        if name not in COMMANDS:
+            return None
+        module, attr = COMMANDS[name]
+        return getattr(importlib.import_module(f"iblbake.cli.{module}"), attr)
+
     def invoke(self, ctx):
         try:
             return super().invoke(ctx)
@@ -53,11 +72,6 @@ def cli():
     iblbake cache [prune]           the bake cache's entries; trim it to a size
     iblbake devices                 OpenCL devices and which one is used
     """
-
-
-for command in (devices.devices, sh.sh_command, mips.mips_command, render.render_command, render.deps_command,
-                sheet.sheet_command, compare.compare_command, cache.cache_group):
-    cli.add_command(command)
 
 
 def main():
