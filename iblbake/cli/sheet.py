@@ -40,7 +40,8 @@ def _cell_size(ctx, param, value):
               help="Caption of a step of a key/values or range axis, a Python format with {value} and {key}, "
                    "e.g. 'r = {value}'. Default: the value.")
 @click.option("--caption", type=click.Choice(["values", "time", "none"]), default="values", show_default=True,
-              help="Under each cell: its values, its values and render time, or nothing.")
+              help="Under each cell: its values, its values and the time of its passes (kernel builds "
+                   "and bakes are one-off costs, in --json), or nothing.")
 @click.option("--title", default=None, help="The sheet's title. Default: sweep.title, else the scene file's name.")
 @click.option("--frames", "frames_dir", type=click.Path(file_okay=False), default=None,
               help="Also write each cell's own frame here (rRR_cCC.png; with --frames-exr the linear .exr too).")

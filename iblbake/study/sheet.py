@@ -30,10 +30,16 @@ class CellResult:
     error: str | None = None
     outputs: list = field(default_factory=list)
 
+    @property
+    def pass_seconds(self) -> float:
+        """What the frame's passes took (kernel builds and bakes are one-off costs, not in it)."""
+        return sum(p["seconds"] for p in self.frame.report["passes"]) if self.frame is not None else 0.0
+
     def to_json(self) -> dict:
         rep = self.frame.report if self.frame is not None else {}
         return {"row": self.cell.row, "column": self.cell.column, "label": self.cell.label,
                 "values": {k: v for k, v in self.cell.values}, "seconds": round(self.seconds, 4),
+                "pass_seconds": round(self.pass_seconds, 4),
                 "reused": rep.get("reused", []),
                 "bakes_cached": [b["name"] for b in rep.get("bakes", []) if b.get("cached")],
                 "passes": {p["name"]: p["seconds"] for p in rep.get("passes", [])},
@@ -100,8 +106,8 @@ def caption_lines(r: CellResult, caption: str) -> list:
     if r.error:
         return ["failed", r.error]
     lines = [r.cell.label] if caption in ("values", "time") and r.cell.label else []
-    if caption == "time":            # what it reused is in the --json report
-        lines.append(f"{r.seconds * 1000:.0f} ms")
+    if caption == "time":            # its passes: builds and bakes are one-off costs (in --json)
+        lines.append(f"{r.pass_seconds * 1000:.1f} ms")
     return lines
 
 
