@@ -14,13 +14,6 @@
 #include "scene.h"
 #include "surface.h"
 
-#ifndef DIFFUSE_MODE
-#define DIFFUSE_MODE DIFFUSE_OFF
-#endif
-#ifndef SPECULAR_MODE
-#define SPECULAR_MODE SPECULAR_OFF
-#endif
-
 #define DIM_ENV 0
 #define DIM_BRDF 2
 #define DIM_COSINE 4

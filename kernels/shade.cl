@@ -12,13 +12,6 @@
 #include "scene.h"
 #include "surface.h"
 
-#ifndef DIFFUSE_MODE
-#define DIFFUSE_MODE DIFFUSE_OFF
-#endif
-#ifndef SPECULAR_MODE
-#define SPECULAR_MODE SPECULAR_OFF
-#endif
-
 #if DIFFUSE_MODE == DIFFUSE_SH
 inline float3 sh_irradiance(__constant float4 *coeffs, float3 n)
 {

@@ -7,6 +7,14 @@
 #include "layout.h"
 #include "brdf.h"
 
+/* The lighting modes (kernels/layout.h ids): each lighting pass computes only its own terms */
+#ifndef DIFFUSE_MODE
+#define DIFFUSE_MODE DIFFUSE_OFF
+#endif
+#ifndef SPECULAR_MODE
+#define SPECULAR_MODE SPECULAR_OFF
+#endif
+
 typedef struct {
     float3 base, emissive, f0;
     float metallic, roughness, alpha;
