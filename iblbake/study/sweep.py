@@ -74,8 +74,8 @@ def resolve_key(key: str, data: dict, where: str) -> None:
         else:
             raise InputError(f"{where}: {key}: {'.'.join(parts[:i])} is a value, not a section")
     if isinstance(spec, (scene_load.Section, scene_load.MapOf, scene_load.ListOf)):
-        raise InputError(f"{where}: {key}: is a section; sweep one of its values "
-                         f"(e.g. {key}.{next(iter(getattr(spec, 'fields', {'x': 0})))})")
+        inside = ", ".join(spec.fields) if isinstance(spec, scene_load.Section) else "its entries"
+        raise InputError(f"{where}: {key}: is a section; sweep one of its values ({inside})")
     if key.split(".")[0] == "sweep":
         raise InputError(f"{where}: {key}: a sweep cannot sweep itself")
 
