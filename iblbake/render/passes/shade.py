@@ -3,6 +3,8 @@ emission), added into `radiance` (kernels/shade.cl; twin: iblbake/render/twin.py
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from iblbake.core import sampling
@@ -56,11 +58,10 @@ class Shade(Pass):
         return args
 
     def run(self, ctx):
-        import time
-        n = ctx.table["n"]
+        n, args = ctx.table["n"], ctx.args[self.name]
         t0 = time.perf_counter()
-        ctx.launch(self, (n,), **ctx.args[self.name])
+        ctx.launch(self, (n,), **args)
         ctx.rt.finish()
         s = time.perf_counter() - t0
-        extra = {"samples": ctx.args[self.name]["nsamples"]} if ctx.plan.effects.specular == "importance" else {}
-        return {"mpixel_samples_per_s": round(n * ctx.args[self.name]["nsamples"] / max(s, 1e-9) / 1e6, 2), **extra}
+        extra = {"samples": args["nsamples"]} if ctx.plan.effects.specular == "importance" else {}
+        return {"mpixel_samples_per_s": round(n * args["nsamples"] / max(s, 1e-9) / 1e6, 2), **extra}
