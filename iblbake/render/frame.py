@@ -56,8 +56,8 @@ class Frame:
 class Reuse:
     """What the last frame of a series left on the device, for the next one: its buffers, host
     frames and the input key of every pass. A pass whose inputs (the scene values it reads, its
-    program's defines, the passes upstream of it) are unchanged is not run again; its outputs are
-    the last frame's. Single-tile frames on one runtime only."""
+    defines, the passes upstream of it) are unchanged is not run again; its outputs are the last
+    frame's. Single-tile frames on one runtime only."""
 
     def __init__(self):
         self.state = None
