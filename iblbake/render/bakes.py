@@ -49,6 +49,11 @@ class Bakes:
                     raise
         return self._memo[key]
 
+    def _recall(self, key, make):
+        """(value, whether this store already held it): a bake counts as cached when it was."""
+        held = key in self._memo
+        return self._get(key, make), held
+
     def environment(self, env: dict):
         """(image, info), read once per file content (path, size, mtime) and policies."""
         st = os.stat(env["path"])
@@ -110,8 +115,7 @@ class Bakes:
         image, info = self.environment(env)
         bands, window = fx["sh_bands"], fx["sh_window"]
         key = ("sh", info.sha256, bands, window, env["nonfinite"], env["negative"])
-        hit = key in self._memo
-        coeffs, manifest, cached = self._get(key, lambda: bake_sh.bake_irradiance(
+        (coeffs, manifest, cached), hit = self._recall(key, lambda: bake_sh.bake_irradiance(
             ctx.rt, image, info, self.root, self._policies(env), bands, window, warn=ctx.warn))
         return coeffs, cached or hit, {"bands": bands, "entry": str(self.root / manifest["key"])}
 
@@ -122,14 +126,13 @@ class Bakes:
         env = ctx.scene.data["environment"]
         image, info = self.environment(env)
         key = ("radiance", info.sha256, env["nonfinite"], env["negative"])
-        hit = key in self._memo
 
         def make():
             manifest, cached, levels = mipsbake.bake_radiance(self._baker(ctx), image, info, self.root,
                                                               self._policies(env), warn=ctx.warn)
             return (levels if levels is not None else mipsbake.load_chain(self.root, manifest)), manifest, cached
 
-        chain, manifest, cached = self._get(key, make)
+        (chain, manifest, cached), hit = self._recall(key, make)
         return chain, cached or hit, {"levels": len(chain), "entry": str(self.root / manifest["key"])}
 
     def _prefiltered(self, ctx):
@@ -140,7 +143,6 @@ class Bakes:
         opts["method_name"] = "effects.prefilter.method:"
         key = ("prefiltered", info.sha256, env["nonfinite"], env["negative"],
                tuple(sorted((k, str(v)) for k, v in opts.items())))
-        hit = key in self._memo
         baker = self._baker(ctx)
 
         def chain_levels():       # the radiance chain in memory only: no radiance entry of its own
@@ -153,29 +155,28 @@ class Bakes:
             levels = [images.read_exr(self.root / pm["key"] / f["name"])[..., :3] for f in pm["files"]]
             return levels, pm, cached
 
-        levels, pm, cached = self._get(key, make)
+        (levels, pm, cached), hit = self._recall(key, make)
         return levels, cached or hit, {"levels": len(levels), "methods": [f["method"] for f in pm["files"]],
                                        "entry": str(self.root / pm["key"])}
 
     def _dfg(self, ctx):
         p = ctx.scene.data["effects"]["prefilter"]
         key = ("dfg", p["dfg_size"], p["dfg_samples"])
-        hit = key in self._memo
 
         def make():
             dm, cached = mipsbake.bake_dfg(self._baker(ctx), self.root, p["dfg_size"], p["dfg_samples"], False,
                                            warn=ctx.warn)
             return images.read_exr(self.root / dm["key"] / "dfg.exr")[..., :2], dm, cached
 
-        table, dm, cached = self._get(key, make)
+        (table, dm, cached), hit = self._recall(key, make)
         return table, cached or hit, {"size": p["dfg_size"], "entry": str(self.root / dm["key"])}
 
     def _env_cdf(self, ctx):
         env = ctx.scene.data["environment"]
         image, info = self.environment(env)
         key = ("env_cdf", info.sha256, env["nonfinite"], env["negative"])
-        hit = key in self._memo
-        return self._get(key, lambda: sampling.EnvironmentDistribution(image)), hit, {}
+        dist, hit = self._recall(key, lambda: sampling.EnvironmentDistribution(image))
+        return dist, hit, {}
 
 
 def load_all(ctx, names) -> dict:
