@@ -86,9 +86,10 @@ def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, labe
         results = sheet.render_cells(scenes, cells, runtime=rt, bakes=bakes, warn=con.warn, progress=step,
                                      keep_going=keep_going)
     title = title or (base.data.get("sweep") or {}).get("title") or Path(scene_path).name
+    lay = sheet.layout(results, rows_axis, cols_axis, title, caption)
     for o in outputs:
         if o.lower().endswith(".png"):
-            images.write_png(o, sheet.assemble(results, rows_axis, cols_axis, title, caption))
+            images.write_png(o, sheet.assemble(results, rows_axis, cols_axis, title, caption, lay))
         else:
             images.write_exr(o, sheet.mosaic(results, rows_axis, cols_axis), channels=("R", "G", "B", "A"))
     if frames_dir:
@@ -98,7 +99,6 @@ def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, labe
         read = [f for s in scenes if not isinstance(s, Exception) for f in scene_load.input_files(s)]
         dep.write(depfile, [(list(outputs), read)])
     failed = [r for r in results if r.error]
-    lay = sheet.layout(results, rows_axis, cols_axis, title, caption)
     cells_json = []
     for r in results:
         c = r.to_json()

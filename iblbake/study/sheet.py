@@ -143,11 +143,10 @@ def layout(results, rows: sweep.Axis, columns: sweep.Axis, title: str, caption: 
     return Layout(width, height, left, top, (w, h), cap_h)
 
 
-def assemble(results, rows: sweep.Axis, columns: sweep.Axis, title: str, caption: str = "values"):
-    """The contact sheet as an 8-bit RGB image: title, column and row labels, cells, captions."""
+def assemble(results, rows: sweep.Axis, columns: sweep.Axis, title: str, caption: str, lay: Layout):
+    """The contact sheet as an 8-bit RGB image in the layout `lay` (layout(): the same one the
+    sheet's JSON gives the cells' boxes from): title, column and row labels, cells, captions."""
     import OpenImageIO as oiio
-
-    lay = layout(results, rows, columns, title, caption)
     w, h = lay.cell
     buf = oiio.ImageBuf(oiio.ImageSpec(lay.width, lay.height, 3, oiio.FLOAT))
     oiio.ImageBufAlgo.fill(buf, BACKGROUND)
