@@ -1,7 +1,7 @@
 /* Shade pass: the approximate lighting terms the scene asks for, added into the radiance buffer.
  *   DIFFUSE_MODE  DIFFUSE_SH (SH_BANDS bands) or off
  *   SPECULAR_MODE SPECULAR_IMPORTANCE (IMPORTANCE_ACCEPTED, FORCE_MIP0) or SPECULAR_PREFILTERED
- *                 (DOMINANT_DIRECTION) or off
+ *                 (DOMINANT_DIRECTION) or SPECULAR_LOBE or off
  *   HAS_EMISSIVE  emission
  * numpy twin: iblbake/render/twin.py shade(). */
 #include "common.h"
@@ -23,6 +23,18 @@ inline float3 sh_irradiance(__constant float4 *coeffs, float3 n)
 }
 #endif
 
+#if SPECULAR_MODE == SPECULAR_PREFILTERED || SPECULAR_MODE == SPECULAR_LOBE
+/* The DFG table (x: NoV, y: roughness, texel centres at the ends): bilinear. */
+inline float2 dfg_lookup(__global const float2 *dfg, const int dfg_size, float nov, float roughness)
+{
+    const float x = clamp(nov, 0.0f, 1.0f) * (dfg_size - 1), y = roughness * (dfg_size - 1);
+    const int x0 = min((int)x, dfg_size - 2), y0 = min((int)y, dfg_size - 2);
+    const float fx = x - x0, fy = y - y0;
+    return mix(mix(dfg[y0 * dfg_size + x0], dfg[y0 * dfg_size + x0 + 1], fx),
+               mix(dfg[(y0 + 1) * dfg_size + x0], dfg[(y0 + 1) * dfg_size + x0 + 1], fx), fy);
+}
+#endif
+
 /* Where a rough lobe really points: between N and R (Lagarde and de Rousiers 2014, Frostbite,
  * getSpecularDominantDir with their alpha). The split sum reads its prefiltered chain there. */
 inline float3 dominant_direction(float3 n, float3 r, float a)
@@ -36,7 +48,7 @@ __kernel void shade(__global const float4 *gb_pos, __global const float4 *gb_nrm
                     __constant float4 *sh_coeffs,
                     __global const float4 *chain, __constant int *off, __constant int *lw, __constant int *lh,
                     const int nlev,
-                    __global const float4 *hammersley_pts, const int nsamples, const float mip_bias,
+                    __global const float4 *hammersley_pts, const int nsamples, const float mip_bias, const float lobe_spread,
                     __global const float2 *dfg, const int dfg_size,
                     __global float4 *radiance)
 {
@@ -100,12 +112,41 @@ __kernel void shade(__global const float4 *gb_pos, __global const float4 *gb_nrm
 #endif
         const float3 pre = chain_lookup(chain, off, lw, lh, nlev, to_env(r, env_rot),
                                         mt.roughness * (float)(nlev - 1));
-        const float x = clamp(nov, 0.0f, 1.0f) * (dfg_size - 1), y = mt.roughness * (dfg_size - 1);
-        const int x0 = min((int)x, dfg_size - 2), y0 = min((int)y, dfg_size - 2);
-        const float fx = x - x0, fy = y - y0;
-        const float2 ab = mix(mix(dfg[y0 * dfg_size + x0], dfg[y0 * dfg_size + x0 + 1], fx),
-                              mix(dfg[(y0 + 1) * dfg_size + x0], dfg[(y0 + 1) * dfg_size + x0 + 1], fx), fy);
+        const float2 ab = dfg_lookup(dfg, dfg_size, nov, mt.roughness);
         color += env_scale * pre * (mt.f0 * ab.x + ab.y);
+    }
+#elif SPECULAR_MODE == SPECULAR_LOBE
+    {
+        /* The split sum's chain and DFG table, read along the real lobe: K visible-normal samples
+         * l_i of the view-dependent GGX lobe (Heitz 2018), each reading the prefiltered chain at
+         * the roughness whose lobe covers the sample's share 1 / (K pdf(l_i)) of the solid angle
+         * (a level-k lobe at N = V = R has peak pdf 1 / (4 pi alpha_k^2): FIS's rule applied to
+         * the prefiltered chain), capped at the material's own. Weights are the exact estimator's,
+         * f NoL / pdf = 4 F V NoV NoL / G1(NoV); their ratio times the DFG table's albedo
+         * F0 A + B keeps the white furnace exact. K = 1: the split sum, read at one sample's
+         * direction and level. No sample above the horizon: the split sum at R. */
+        float3 t, b;
+        tangent_frame(nrm, &t, &b);
+        const float3 vl = (float3)(dot(v, t), dot(v, b), nov);
+        const float g1 = g1_smith(nov, mt.alpha);
+        float3 num = (float3)(0.0f), den = (float3)(0.0f);
+        for (int i = 0; i < nsamples; ++i) {
+            const float3 hl = sample_ggx_vndf(vl, mt.alpha, hammersley_pts[i].xy);
+            const float3 h = t * hl.x + b * hl.y + nrm * hl.z;
+            const float voh = dot(v, h);
+            const float3 l = 2.0f * voh * h - v;
+            const float nol = dot(nrm, l);
+            if (nol <= 0.0f || voh <= 0.0f) continue;
+            const float pdf = g1 * d_ggx(hl.z, mt.alpha) / (4.0f * nov);
+            const float a = fmin(sqrt(lobe_spread / (4.0f * IBL_PI * (float)nsamples * pdf)), mt.alpha);
+            const float3 w = f_schlick(voh, mt.f0) * (v_smith_ggx_correlated(nov, nol, mt.alpha) * 4.0f * nov * nol / g1);
+            num += w * chain_lookup(chain, off, lw, lh, nlev, to_env(l, env_rot), sqrt(a) * (float)(nlev - 1));
+            den += w;
+        }
+        const float2 ab = dfg_lookup(dfg, dfg_size, nov, mt.roughness);
+        const float3 li = den.x > 0.0f ? num / den
+            : chain_lookup(chain, off, lw, lh, nlev, to_env(2.0f * nov * nrm - v, env_rot), mt.roughness * (float)(nlev - 1));
+        color += env_scale * li * (mt.f0 * ab.x + ab.y);
     }
 #endif
     radiance[gid] += (float4)(color, 0.0f);   /* lighting passes add */

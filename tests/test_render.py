@@ -89,7 +89,7 @@ def dfg_fine():
 # --- white furnace ------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("metallic", [0.0, 1.0])
-@pytest.mark.parametrize("specular", ["importance", "prefiltered", "reference"])
+@pytest.mark.parametrize("specular", ["importance", "prefiltered", "lobe", "reference"])
 def test_white_furnace(tmp_path, constant_env, dfg_fine, metallic, specular):
     """Constant radiance 1, base_color 1: the sphere's mean radiance is kD + F0 A + B (DFG) at
     every roughness, in every specular mode (2%)."""
@@ -194,6 +194,7 @@ def prefiltered_bakes(frame):
     {"diffuse": "sh", "specular": "off"},
     {"diffuse": "off", "specular": "importance", "samples": 16},
     {"diffuse": "off", "specular": "prefiltered", "prefilter": {"method": "fis", "samples": 64}},
+    {"diffuse": "off", "specular": "lobe", "lobe": {"samples": 4}, "prefilter": {"method": "fis", "samples": 64}},
 ])
 def test_shade_matches_numpy(tmp_path, small_panoramas, mesh_file, effects):
     from iblbake.core import sh
@@ -210,7 +211,7 @@ def test_shade_matches_numpy(tmp_path, small_panoramas, mesh_file, effects):
         kw["sh_coeffs"] = sh.project(image, 3) * sh.ahat(3)[:, None]
     if fx["specular"] == "importance":
         kw["chain"] = radiance.radiance_chain_twin(image)
-    if fx["specular"] == "prefiltered":
+    if fx["specular"] in ("prefiltered", "lobe"):
         kw.update(prefiltered_bakes(frame))
     ref = rr.shade(gb, arrays, fx, sc["environment"], **kw).reshape(48, 64, 2, 3)
     same = (gb["hit"].reshape(48, 64, 2).all(2)) & (frame.hdr[..., 3] == 1)

@@ -181,3 +181,55 @@ def test_band0_is_solid_angle_weighted_mean():
     wgt = cv.equirect_solid_angles(27, 13)
     mean = (img * wgt[..., None]).sum((0, 1)) / wgt.sum()
     assert np.allclose(coeffs[0], mean * 2 * math.sqrt(math.pi), rtol=1e-12)
+
+
+# --- the error block of `iblbake sh` ----------------------------------------------------------------
+
+def brute_force_irradiance(img, normals, rotate_y):
+    """Independent: every texel against every normal, no arcs, no prefix sums."""
+    h, w = img.shape[:2]
+    d = cv.equirect_texel_dirs(w, h, rotate_y).reshape(-1, 3)
+    om = cv.equirect_solid_angles(w, h).reshape(-1)
+    return np.maximum(normals @ d.T, 0.0) @ (img.reshape(-1, img.shape[2]).astype(np.float64) * om[:, None])
+
+
+@pytest.mark.parametrize("w,h,rot", [(64, 32, 0.0), (96, 48, 37.0), (33, 17, -120.0), (8, 4, 200.0)])
+def test_exact_irradiance_against_brute_force(w, h, rot):
+    rng = np.random.default_rng(w)
+    img = rng.gamma(0.5, 1.0, (h, w, 3))
+    img[h // 3, w // 2] = 500.0                                  # a sun: arcs end inside its row
+    n = shbake.fibonacci_normals()
+    assert rel_err(shbake.exact_irradiance(img, n, rot), brute_force_irradiance(img, n, rot)) < 1e-12
+
+
+def test_error_block_against_float64_evaluation():
+    """Every figure of the error block against its independent float64 evaluation (1e-6), on a
+    panorama with a sun (the SH rings below zero), rotated and scaled."""
+    rng = np.random.default_rng(3)
+    img = 0.01 + 0.01 * rng.random((48, 96, 3))
+    img[10:12, 30:32] = 2000.0
+    rot, k, bands = 25.0, 1.7, 3
+    coeffs = sh.project(img, bands, rot) * k * sh.ahat(bands)[:, None]
+    got = shbake.irradiance_error(img, coeffs, bands, rot, k)
+    n = shbake.fibonacci_normals()
+    lum = np.array([0.2126, 0.7152, 0.0722])
+    exact = brute_force_irradiance(img, n, rot) @ lum * k
+    raw = np.stack([sum(coeffs[i, c] * sh.sh_basis(n, bands)[:, i] for i in range(bands * bands))
+                    for c in range(3)], -1)
+    approx = np.maximum(raw, 0) @ lum
+    assert raw.min() < 0                                        # the test exercises the ringing figure
+    want_rmse = math.sqrt(np.mean((approx - exact) ** 2) / np.mean(exact ** 2))
+    want_max = np.max(np.abs(approx - exact) / (exact + 1e-3 * exact.mean()))
+    assert got["relative_rmse"] == pytest.approx(want_rmse, rel=1e-6)
+    assert got["max_relative_error"] == pytest.approx(want_max, rel=1e-6)
+    assert got["most_negative"] == pytest.approx(raw.min(), rel=1e-6)
+    assert got["most_negative_relative"] == pytest.approx(raw.min() / exact.mean(), rel=1e-6)
+
+
+def test_error_falls_with_bands_on_a_smooth_panorama():
+    d = cv.equirect_texel_dirs(128, 64)
+    img = (np.exp(3.0 * (d @ np.array([0.6, 0.64, 0.48]) - 1)) + 0.2)[..., None] * np.ones(3)
+    errs = [shbake.irradiance_error(img, sh.project(img, b) * sh.ahat(b)[:, None], b)["relative_rmse"]
+            for b in (1, 2, 3, 5, 7)]
+    assert all(b < a for a, b in zip(errs, errs[1:])), errs
+    assert errs[-1] < 1e-3, errs

@@ -24,7 +24,7 @@ from iblbake.errors import IblbakeError
 
 # command name -> (module, attribute): imported on first use
 COMMANDS = {
-    "cache": ("cache", "cache_group"), "compare": ("compare", "compare_command"),
+    "accuracy": ("accuracy", "accuracy_command"), "cache": ("cache", "cache_group"), "compare": ("compare", "compare_command"),
     "deps": ("render", "deps_command"), "devices": ("devices", "devices"), "mips": ("mips", "mips_command"),
     "render": ("render", "render_command"), "sh": ("sh", "sh_command"), "sheet": ("sheet", "sheet_command"),
 }

@@ -132,6 +132,14 @@ def sample_ggx_vndf(vl, alpha, u):
     return h / np.linalg.norm(h, axis=-1, keepdims=True)
 
 
+def lobe_points(k: int):
+    """The lobe mode's K points in [0, 1)^2: strata centres in u1, the radical inverse turned
+    half a turn in u2, so that K = 1 takes the lobe's median ring (not its edge, as
+    Hammersley's first point would) and small K spread around it."""
+    i = np.arange(k)
+    return np.stack([(i + 0.5) / k, (radical_inverse_vdc(i) + 0.5) % 1.0], -1)
+
+
 def pdf_ggx_vndf(nov, noh, voh, alpha):
     """pdf of sample_ggx_vndf over half-vectors."""
     return g1_smith(nov, alpha) * np.maximum(voh, 0.0) * brdf.d_ggx(noh, alpha) / nov

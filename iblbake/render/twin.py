@@ -2,7 +2,7 @@
 tests on small frames.
 
 primary()      G-buffer by brute force (every ray against every sphere, plane and triangle)
-shade()        SH diffuse, importance-sampled and prefiltered specular, emission
+shade()        SH diffuse, importance-sampled, prefiltered and lobe specular, emission
 exact()        the integral the `reference` pass estimates, by quadrature: every texel of the
                panorama (piecewise constant), split into s x s parts with exact solid angles,
                each direction traced for occlusion (occluded) unless visibility is off
@@ -232,8 +232,42 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
         pre = radiance.chain_lookup_twin(prefiltered, to_env(r, rot), rough * (len(prefiltered) - 1))
         ab = dfg_lookup(dfg, nov, rough)
         color += scale * pre * (f0 * ab[:, 0:1] + ab[:, 1:2])
+    elif effects["specular"] == "lobe":
+        color += scale * lobe(v, n, nov, alpha, rough, f0, rot, effects["lobe"]["samples"],
+                              effects["lobe"]["spread"], prefiltered, dfg)
     out[hit] = color
     return out
+
+
+def lobe(v, n, nov, alpha, rough, f0, rot, k, spread, prefiltered, dfg):
+    """Twin of shade.cl's SPECULAR_LOBE block (see the comment there): K visible-normal samples,
+    each reading the prefiltered chain at its share of the lobe, their weighted mean times the
+    DFG table's albedo."""
+    pts = sampling.lobe_points(k).astype(np.float32).astype(np.float64)
+    t, b = conventions.tangent_frame(n)
+    vl = np.stack([(v * t).sum(1), (v * b).sum(1), nov], -1)
+    g1 = sampling.g1_smith(nov, alpha)
+    nlev = len(prefiltered)
+    num = np.zeros((len(n), 3))
+    den = np.zeros((len(n), 3))
+    for u in pts:
+        hl = sampling.sample_ggx_vndf(vl, alpha, np.broadcast_to(u, (len(n), 2)))
+        h = t * hl[:, 0:1] + b * hl[:, 1:2] + n * hl[:, 2:3]
+        voh = (v * h).sum(1)
+        l = 2 * voh[:, None] * h - v
+        nol = (n * l).sum(1)
+        ok = (nol > 0) & (voh > 0)
+        pdf = g1 * brdf.d_ggx(hl[:, 2], alpha) / (4 * nov)
+        a = np.minimum(np.sqrt(spread / (4 * np.pi * k * pdf)), alpha)
+        w = brdf.f_schlick(voh[:, None], f0) * (brdf.v_smith_ggx_correlated(nov, nol, alpha) * 4 * nov * nol / g1)[:, None]
+        w = np.where(ok[:, None], w, 0.0)
+        num += w * radiance.chain_lookup_twin(prefiltered, to_env(l, rot), np.sqrt(a) * (nlev - 1))
+        den += w
+    r = 2 * nov[:, None] * n - v
+    fallback = radiance.chain_lookup_twin(prefiltered, to_env(r, rot), rough * (nlev - 1))
+    li = np.where(den[:, :1] > 0, num / np.where(den > 0, den, 1.0), fallback)
+    ab = dfg_lookup(dfg, nov, rough)
+    return li * (f0 * ab[:, 0:1] + ab[:, 1:2])
 
 
 DELTA_ALPHA = 1e-4   # kernels/reference.cl: narrower GGX lobes are mirrors in the reference

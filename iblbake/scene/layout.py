@@ -7,7 +7,7 @@ tests/test_render_passes.py checks that the committed header is what this table 
 from __future__ import annotations
 
 DIFFUSE_MODES = {"off": 0, "sh": 1, "reference": 2}
-SPECULAR_MODES = {"off": 0, "importance": 1, "prefiltered": 2, "reference": 3}
+SPECULAR_MODES = {"off": 0, "importance": 1, "prefiltered": 2, "reference": 3, "lobe": 4}
 BACKGROUND_MODES = {"hide": 0, "show": 1, "color": 2, "blur": 3}
 TONEMAP_IDS = {"aces": 0, "reinhard": 1, "hable": 2, "pbr_neutral": 3, "linear": 4}
 

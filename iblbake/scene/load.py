@@ -295,8 +295,9 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "diffuse": Enum(("sh", "reference", "off"), "sh", doc="diffuse IBL: SH irradiance, Monte Carlo reference, or none"),
         "sh_bands": Num(3, 1, 8, integer=True, doc="SH bands for diffuse: sh (3 = 9 coefficients)"),
         "sh_window": Enum(("none", "hann", "lanczos"), "none", doc="SH ringing window"),
-        "specular": Enum(("importance", "prefiltered", "reference", "off"), "prefiltered",
-                         doc="specular IBL: runtime GGX importance sampling (Colbert and Krivanek 2007), split sum, Monte Carlo reference, none"),
+        "specular": Enum(("importance", "prefiltered", "lobe", "reference", "off"), "prefiltered",
+                         doc="specular IBL: runtime GGX importance sampling (Colbert and Krivanek 2007), split sum, "
+                             "lobe (K visible-normal samples reading the prefiltered chain), Monte Carlo reference, none"),
         "samples": Num(40, 1, 65536, integer=True, doc="importance: GGX samples per pixel"),
         "mip_bias": Num(1.0, -16.0, 16.0, doc="importance: added to each sample's mip level (Krivanek and "
                                               "Colbert: 1, closer to the reference; 0: none)"),
@@ -313,6 +314,12 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                                                  "closer to the reference on rough metals"),
             "dfg_size": Num(128, 2, 4096, integer=True, doc="DFG table size"),
             "dfg_samples": Num(4096, 1, 1 << 20, integer=True, doc="GGX samples per DFG texel"),
+        }),
+        "lobe": Section(doc="lobe: the split sum's chain and DFG table, read along the real lobe", fields={
+            "samples": Num(4, 1, 256, integer=True,
+                           doc="K visible-normal samples per pixel, each reading the chain at its share of the lobe"),
+            "spread": Num(2.0, 0.0625, 1024.0, doc="solid angle each sample reads, in units of its share "
+                                                    "1 / (K pdf) of the lobe (> 1: neighbouring samples overlap)"),
         }),
         "reference": Section(doc="reference modes: progressive Monte Carlo with MIS", fields={
             "max_samples": Num(1024, 1, 1 << 20, integer=True, doc="sample budget per pixel"),

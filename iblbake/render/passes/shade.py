@@ -1,4 +1,4 @@
-"""Shade: the approximate lighting terms (SH diffuse, importance or prefiltered specular,
+"""Shade: the approximate lighting terms (SH diffuse, importance, prefiltered or lobe specular,
 emission), added into `radiance` (kernels/shade.cl; twin: iblbake/render/twin.py shade)."""
 
 from __future__ import annotations
@@ -18,11 +18,12 @@ class Shade(Pass):
     writes = ("radiance",)
 
     def runs(self, scene, fx):
-        return fx.diffuse == "sh" or fx.specular in ("importance", "prefiltered") or fx.emissive
+        return fx.diffuse == "sh" or fx.specular in ("importance", "prefiltered", "lobe") or fx.emissive
 
     def reads_bakes(self, scene, fx):
         return (["sh"] if fx.diffuse == "sh" else []) + \
-            {"importance": ["radiance"], "prefiltered": ["prefiltered", "dfg"]}.get(fx.specular, [])
+            {"importance": ["radiance"], "prefiltered": ["prefiltered", "dfg"],
+             "lobe": ["prefiltered", "dfg"]}.get(fx.specular, [])
 
     def defines(self, scene, fx):
         e = scene.data["effects"]
@@ -45,15 +46,18 @@ class Shade(Pass):
         e, fx, b = ctx.scene.data["effects"], ctx.plan.effects, ctx.loaded
         args = {"sh_coeffs": ctx.rt.to_device(np.pad(b["sh"], ((0, 0), (0, 1))).astype(np.float32)
                                               if "sh" in b else np.zeros((1, 4), np.float32))}
-        chain = {"importance": b.get("radiance"), "prefiltered": b.get("prefiltered")}.get(fx.specular)
+        chain = {"importance": b.get("radiance"), "prefiltered": b.get("prefiltered"),
+                 "lobe": b.get("prefiltered")}.get(fx.specular)
         args.update(ctx.chain(chain) if chain is not None else ctx.no_chain())
-        nsamp = e["samples"] if fx.specular == "importance" else 1
+        nsamp = {"importance": e["samples"], "lobe": e["lobe"]["samples"]}.get(fx.specular, 1)
         ham = np.zeros((nsamp, 4), np.float32)
         if fx.specular == "importance":       # (cos phi, sin phi, u1): sample_ggx_half_cs
             pts = sampling.hammersley(nsamp)
             ham[:, 0], ham[:, 1], ham[:, 2] = np.cos(2 * np.pi * pts[:, 0]), np.sin(2 * np.pi * pts[:, 0]), pts[:, 1]
+        elif fx.specular == "lobe":           # (u1, u2): sample_ggx_vndf
+            ham[:, :2] = sampling.lobe_points(nsamp)
         dfg = b["dfg"].astype(np.float32) if "dfg" in b else np.zeros((2, 2, 2), np.float32)
-        args.update(hammersley_pts=ctx.rt.to_device(ham), nsamples=nsamp, mip_bias=e["mip_bias"],
+        args.update(hammersley_pts=ctx.rt.to_device(ham), nsamples=nsamp, mip_bias=e["mip_bias"], lobe_spread=e["lobe"]["spread"],
                     dfg=ctx.rt.to_device(dfg.reshape(-1, 2)), dfg_size=dfg.shape[0])
         return args
 
@@ -63,5 +67,5 @@ class Shade(Pass):
         ctx.launch(self, (n,), **args)
         ctx.rt.finish()
         s = time.perf_counter() - t0
-        extra = {"samples": args["nsamples"]} if ctx.plan.effects.specular == "importance" else {}
+        extra = {"samples": args["nsamples"]} if ctx.plan.effects.specular in ("importance", "lobe") else {}
         return {"mpixel_samples_per_s": round(n * args["nsamples"] / max(s, 1e-9) / 1e6, 2), **extra}

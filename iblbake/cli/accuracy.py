@@ -1,0 +1,119 @@
+"""`iblbake accuracy`: what each approximation of a scene's lighting costs in time and how far it
+is from the converged reference (iblbake/study/accuracy.py)."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import click
+
+from iblbake.cli.options import Console, common_options, device_option, non_negative
+from iblbake.errors import IblbakeError
+
+FILES = {"table.md": "Markdown table", "table.csv": "CSV", "accuracy.json": "JSON", "plot.png": "error-time plot",
+         "errors.png": "best and worst rungs with error maps"}
+
+
+@click.command("accuracy")
+@click.argument("scene_path", metavar="SCENE")
+@click.option("--output", "-o", "out_dir", type=click.Path(file_okay=False), default=None, metavar="DIR",
+              help="Write table.md, table.csv, accuracy.json, plot.png (error against time, the Pareto "
+                   "frontier marked) and errors.png (best and worst rungs beside their error maps) here.")
+@click.option("--ladder", "ladder_path", type=click.Path(dir_okay=False), default=None, metavar="FILE",
+              help="The rungs to run instead of the default ladder: {rungs: [AXIS, ...]}, each axis in the "
+                   "sweep syntax ({key, values}, {key, range}, {steps}) with optional term: and with:.")
+@click.option("--set", "overrides", multiple=True, metavar="KEY.PATH=VALUE",
+              help="Override a scene value for the reference and every rung (as render --set).")
+@click.option("--max-side", type=click.IntRange(8, 8192), default=320, show_default=True,
+              help="The study's resolution: the scene's, scaled so its longer side is at most this.")
+@click.option("--repeats", type=click.IntRange(1, 100), default=3, show_default=True,
+              help="Timed renders per rung; its time is their median.")
+@click.option("--target-noise", type=float, default=0.003, show_default=True, callback=non_negative,
+              help="The reference's stopping rule: each seed stops when its relative standard error is below this...")
+@click.option("--max-samples", type=click.IntRange(1, 1 << 20), default=4096, show_default=True,
+              help="...or at this many samples per pixel.")
+@click.option("--visibility/--no-visibility", default=True, show_default=True,
+              help="The reference traces occlusion (what the approximations leave out: the frame's true "
+                   "error); --no-visibility measures each approximation's own error, every object lit as alone.")
+@click.option("--flip/--no-flip", default=True, show_default=True, help="Also measure mean HDR-FLIP.")
+@click.option("--max-error", type=float, default=None, callback=non_negative, metavar="X",
+              help="Exit non-zero if the scene as configured (both terms) is further than X (relative RMSE) "
+                   "from the reference: a CI guard.")
+@click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
+              help="Bake cache folder (the reference is cached there too). Default: $IBLBAKE_CACHE, else "
+                   "the per-user cache folder.")
+@device_option
+@common_options
+def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repeats, target_noise, max_samples,
+                     visibility, flip, max_error, cache_dir, device, quiet, as_json):
+    """Render SCENE's converged reference (diffuse and specular with visibility, two seeds, its
+    noise measured), then a ladder of approximations of each term the scene calls for (SH bands
+    and windows; importance N, mip selection and bias; prefiltered chain size, levels, method and
+    dominant direction; lobe K; fewer reference samples), each timed (median lighting-pass time;
+    bakes and kernel builds reported apart as one-off costs) and measured over the object pixels:
+    relative RMSE, mean and max relative error, HDR-FLIP. Prints the table with each term's
+    Pareto frontier of error against time: for an error budget, the cheapest setting."""
+    from iblbake import render
+    from iblbake.device.runtime import Runtime
+    from iblbake.io import atomic, images
+    from iblbake.study import accuracy as acc
+
+    con = Console(quiet, as_json)
+    t_start = time.perf_counter()
+    out = Path(out_dir) if out_dir else None
+    if out is not None:
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise IblbakeError(f"{out}: cannot create the output folder ({e.strerror})") from None
+        for name in FILES:
+            atomic.check_writable(out / name)
+    settings = acc.Settings(max_side=max_side, repeats=repeats, target_noise=target_noise, max_samples=max_samples,
+                            flip=flip, visibility=visibility)
+    rt = Runtime(device)
+    study = acc.Study(scene_path, overrides, settings, runtime=rt, bakes=render.Bakes(cache_dir), warn=con.warn)
+    rungs = acc.ladder_from_file(ladder_path, study.scene, study.fx) if ladder_path else \
+        acc.default_ladder(study.scene, study.fx)
+    rungs = [acc._configured(study.scene, t) for t in study.terms] + rungs
+    for r in rungs:                  # every rung's scene validates before anything renders
+        study.load(acc.TERM_ALONE[r.term] + r.values, origin=f"ladder rung {r.label!r}")
+    names = [f"reference {t} seed {s}" for t in study.terms for s in settings.seeds] + [r.label for r in rungs]
+    with con.stages(names, label="accuracy") as step:
+        study.progress = step
+        refs = {t: study.render_reference(t) for t in study.terms}
+        rows = [study.run_rung(r) for r in rungs]
+    configured = study.configured_frame()
+    front = acc.frontiers(rows)
+    title = f"{Path(scene_path).name}: error against time ({rt.device_label})"
+    summary = {
+        "scene": str(scene_path), "device": rt.device_label,
+        "resolution": acc.study_resolution(study.scene, max_side), "repeats": repeats,
+        "reference": {t: {k: v for k, v in refs[t].items() if k not in ("hdr", "mask")} | {
+            "stopping_rule": f"each seed: relative standard error <= {target_noise} or {max_samples} samples",
+            "object_pixels": int(refs[t]["mask"].sum()),
+            "measured_pixels": int(study.metric_mask(t, refs[t]["hdr"]).sum())} for t in study.terms},
+        "rungs": [{**r, "pareto": r["label"] in front.get(r["term"], [])} for r in rows],
+        "frontier": front, "configured": configured,
+        "time_split_s": {k: round(v, 3) for k, v in study.times.items()},
+    }
+    if out is not None:
+        atomic.write_text(out / "table.md", acc.markdown(rows, front))
+        atomic.write_text(out / "table.csv", acc.csv_text(rows, front))
+        acc.plot(rows, front, out / "plot.png", title)
+        images.write_png(out / "errors.png", acc.error_sheet(study, rungs, f"{Path(scene_path).name}: best and worst"))
+        summary["outputs"] = [str(out / n) for n in FILES]
+    summary["elapsed_s"] = round(time.perf_counter() - t_start, 3)
+    if out is not None:
+        atomic.write_text(out / "accuracy.json", json.dumps(summary, indent=2, allow_nan=False) + "\n")
+    split = ", ".join(f"{k[:-2]} {v:.1f} s" for k, v in summary["time_split_s"].items())
+    noise = ", ".join(f"{t} {100 * refs[t]['noise']:.2f}%" for t in study.terms)
+    con.result(summary, acc.text_table(rows, front)
+               + f"\nreference noise (two seeds): {noise}; configured frame: relative RMSE "
+                 f"{100 * configured['relative_rmse']:.2f}%\n"
+               + f"{len(rows)} rungs in {summary['elapsed_s']:.1f} s ({split}) on {rt.device_label}"
+               + (f"; wrote {out}/" if out else ""))
+    if max_error is not None and configured["relative_rmse"] > max_error:
+        raise IblbakeError(f"{scene_path}: as configured, relative RMSE {configured['relative_rmse']:.4f} against "
+                           f"the reference is above --max-error {max_error}")

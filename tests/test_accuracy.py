@@ -1,0 +1,141 @@
+"""`iblbake accuracy`: the Pareto frontier against brute force, the study on a small scene (its
+reference's noise, errors falling with N and with SH bands, every report file), the CI guard."""
+
+import csv
+import json
+
+import numpy as np
+import pytest
+import yaml
+
+from iblbake.io import images
+from iblbake.study import accuracy
+
+from .conftest import run_cli
+
+
+def brute_force_front(points):
+    return sorted((i for i, (t, e) in enumerate(points)
+                   if not any((t2 <= t and e2 <= e) and (t2 < t or e2 < e) for t2, e2 in points)),
+                  key=lambda i: points[i])
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_pareto_matches_brute_force(seed):
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 40))
+    # a coarse grid makes ties in time and in error likely
+    pts = [(float(t), float(e)) for t, e in zip(rng.integers(0, 8, n), rng.integers(0, 8, n))]
+    pts = list(dict.fromkeys(pts))            # equal points: both or neither; keep one
+    assert accuracy.pareto(pts) == brute_force_front(pts)
+
+
+def test_pareto_frontier_of_a_table():
+    rows = [{"term": "specular", "label": x, "time_s": t, "relative_rmse": e}
+            for x, t, e in (("a", 1, 0.5), ("b", 2, 0.2), ("c", 3, 0.3), ("d", 4, 0.1), ("e", 0.5, 0.9))]
+    assert accuracy.frontiers(rows) == {"specular": ["e", "a", "b", "d"]}
+
+
+@pytest.fixture(scope="module")
+def smooth_env(tmp_path_factory):
+    """A smooth sky (a broad warm lobe over a cool gradient): SH converges on it, no sun."""
+    h, w = 64, 128
+    from iblbake.core import conventions
+    d = conventions.equirect_texel_dirs(w, h)
+    sun = np.array([0.4, 0.6, 0.7]) / np.linalg.norm([0.4, 0.6, 0.7])
+    lobe = np.exp(4.0 * ((d @ sun) - 1))[..., None] * np.array([3.0, 2.2, 1.2])
+    sky = (0.3 + 0.2 * d[..., 1:2]) * np.array([0.5, 0.7, 1.0])
+    p = tmp_path_factory.mktemp("smooth") / "sky.exr"
+    images.write_exr(p, (lobe + sky).astype(np.float32))
+    return p
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory, smooth_env):
+    d = tmp_path_factory.mktemp("study")
+    scene = {"camera": {"perspective": {"position": [0, 0, 3], "fov_y": 45}, "resolution": [96, 96]},
+             "environment": {"path": str(smooth_env), "rotation_y": 30},
+             "materials": {"m": {"base_color": [0.8, 0.7, 0.6], "metallic": 0.5, "roughness": 0.5}},
+             "objects": [{"sphere": {"radius": 1}, "material": "m"}],
+             "effects": {"diffuse": "sh", "specular": "prefiltered"}}
+    (d / "scene.yaml").write_text(yaml.safe_dump(scene))
+    ladder = {"rungs": [{"key": "effects.samples", "values": [2, 8, 32, 128], "with": {"effects.specular": "importance"}},
+                        {"key": "effects.sh_bands", "values": [1, 2, 3, 5]},
+                        {"steps": [{"effects.specular": "lobe", "effects.lobe.samples": 4, "label": "lobe K=4"}]}]}
+    (d / "ladder.yaml").write_text(yaml.safe_dump(ladder))
+    cache = d / "cache"
+    args = ("accuracy", d / "scene.yaml", "--ladder", d / "ladder.yaml", "--max-side", 40, "--repeats", 1,
+            "--cache", cache, "--max-samples", 8192)
+    r = run_cli(*args, "-o", d / "out", "--json")
+    assert r.returncode == 0, r.stderr
+    return {"dir": d, "args": args, "summary": json.loads(r.stdout)}
+
+
+def rungs(summary, term):
+    return [r for r in summary["rungs"] if r["term"] == term and not r["configured"]]
+
+
+def test_reference_noise_below_half_a_percent(study):
+    for term in ("diffuse", "specular"):
+        ref = study["summary"]["reference"][term]
+        assert ref["noise"] < 0.005, ref
+        assert ref["object_pixels"] > 500
+
+
+def test_error_falls_with_samples_and_bands(study):
+    """Monotonic within twice the reference's noise."""
+    s = study["summary"]
+    for term, key in (("specular", "effects.samples"), ("diffuse", "effects.sh_bands")):
+        sel = sorted((r for r in rungs(s, term) if key in r["values"]), key=lambda r: r["values"][key])
+        errs = [r["relative_rmse"] for r in sel]
+        slack = 2 * s["reference"][term]["noise"]
+        assert len(errs) == 4 and all(b <= a + slack for a, b in zip(errs, errs[1:])), (term, errs)
+        assert errs[-1] < errs[0] / 2, (term, errs)
+
+
+def test_report_files(study):
+    s, out = study["summary"], study["dir"] / "out"
+    assert len(s["rungs"]) == 2 + 4 + 4 + 1                  # the configured setting of each term first
+    with open(out / "table.csv") as f:
+        table = list(csv.DictReader(f))
+    assert [r["label"] for r in table] == [r["label"] for r in s["rungs"]]
+    for r, row in zip(s["rungs"], table):
+        for k in ("time_s", "bake_s", "relative_rmse", "mean_relative_error", "max_relative_error", "flip"):
+            assert r[k] is not None and np.isfinite(r[k]), (r["label"], k)
+        assert float(row["relative_rmse"]) == pytest.approx(r["relative_rmse"])
+        assert float(row["time_ms"]) == pytest.approx(1000 * r["time_s"])
+    assert json.loads((out / "accuracy.json").read_text())["rungs"] == s["rungs"]
+    md = (out / "table.md").read_text().splitlines()
+    assert len(md) == 2 + len(s["rungs"])
+    import OpenImageIO as oiio
+    spec = oiio.ImageInput.open(str(out / "plot.png")).spec()
+    assert (spec.width, spec.height) == accuracy.PLOT_SIZE
+    assert oiio.ImageInput.open(str(out / "errors.png")).spec().width > 5 * 40
+    front = s["frontier"]
+    assert set(front) == {"diffuse", "specular"} and all(front.values())
+
+
+def test_reference_is_cached_and_max_error_guards(study):
+    """A second study reuses the reference; --max-error above the configured frame's error
+    passes, below it fails in one line."""
+    s = study["summary"]
+    err = s["configured"]["relative_rmse"]
+    assert 0 < err < 1
+    r = run_cli(*study["args"], "--json", "--max-error", err * 1.01)
+    assert r.returncode == 0, r.stderr
+    again = json.loads(r.stdout)
+    assert all(all(again["reference"][t]["cached"]) for t in ("diffuse", "specular"))
+    assert again["reference"]["specular"]["noise"] == s["reference"]["specular"]["noise"]
+    r = run_cli(*study["args"], "-q", "--max-error", err * 0.99)
+    assert r.returncode == 1
+    assert "--max-error" in r.stderr and len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+
+
+def test_bad_ladder_is_one_line(tmp_path, study):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(yaml.safe_dump({"rungs": [{"key": "effects.sampels", "values": [1]}]}))
+    args = list(study["args"])
+    args[args.index("--ladder") + 1] = bad
+    r = run_cli(*args, "-q")
+    assert r.returncode != 0 and "effects.sampels" in r.stderr and "Traceback" not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
