@@ -20,8 +20,6 @@ import numpy as np
 
 from iblbake.io import images
 from iblbake.bake import layouts
-from iblbake.core import metrics
-from iblbake.bake import prefilter
 from iblbake.bake import mips as mipsbake
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -58,21 +56,14 @@ def main(argv=None):
     print(f"panorama {args.env}.exr {img.shape[1]}x{img.shape[0]}; radiance chain ({len(chain)} levels): "
           f"{t_chain * 1e3:.1f} ms")
     src = img.astype(np.float64)
-    rng = np.random.default_rng(0)
 
     for face in args.sizes:
         opts_base = dict(layout="cubemap", size=face, levels=args.levels, min_size=1)
         sizes = layouts.prefiltered_sizes(face, args.levels, 1)
         rough = layouts.level_roughness(args.levels)
-        # reference at a random subset of texels of each level
-        picks, refs = [], []
+        # reference at a random subset of texels of each level (what `iblbake mips --verify` measures)
         t0 = time.perf_counter()
-        for s, r in zip(sizes, rough):
-            n = 6 * s * s
-            idx = rng.choice(n, size=min(n, args.texels), replace=False)
-            dirs = layouts.layout_dirs("cubemap", s).reshape(-1, 3)[idx]
-            picks.append(idx)
-            refs.append(prefilter.prefilter_bruteforce(src, dirs, r, max_sub=4))
+        picks = mipsbake.verification_texels(src, "cubemap", sizes, rough, args.texels)
         t_ref = time.perf_counter() - t0
         print(f"\ncubemap face {face}, {args.levels} levels (r = k/{args.levels - 1}); brute-force reference at "
               f"{args.texels} texels per level took {t_ref:.0f} s")
@@ -87,9 +78,7 @@ def main(argv=None):
         for label, kw in configs:
             opts = mipsbake.PrefilterOptions(**{**opts_base, **kw}).resolved(img.shape[0])
             t, (levels, methods) = median_time(lambda: baker.prefilter(chain, opts))
-            errs = []
-            for lvl, idx, ref in zip(levels, picks, refs):
-                errs.append(metrics.relative_rmse(lvl.reshape(-1, 3)[idx], ref))
+            errs = mipsbake.level_errors(levels, picks)
             how = "" if kw["method"] != "auto" else " [" + " ".join(m[0] + m.split("@")[-1] * ("@" in m) for m in methods) + "]"
             print(f"| {label}{how} | {t:.3f} | {' '.join(f'{e:.2%}' for e in errs)} | {max(errs):.2%} |")
             if kw["method"] == "auto":

@@ -272,8 +272,10 @@ def bake_prefiltered(baker: Baker, chain, info, root: Path, policies: dict, opts
                      progress=None):
     # the budget decides each level's method, so the resolved value is part of the key
     opts = {**opts, "convolve_budget": baker.convolve_budget(opts)}
+    # what a plan error calls the method option (render: the scene key) is not part of the bake
+    keyed = {k: v for k, v in opts.items() if k != "method_name"}
     key = cache.content_key({"format": FORMAT, "v": FORMAT_VERSION, "kind": "prefiltered",
-                             "input": info.sha256, "policies": policies, "options": opts,
+                             "input": info.sha256, "policies": policies, "options": keyed,
                              "kernel": cl.source_hash("mips.cl"), "spectral": spectral.source_hash()})
 
     def build(tmp: Path):
@@ -293,7 +295,7 @@ def bake_prefiltered(baker: Baker, chain, info, root: Path, policies: dict, opts
                     "cubemap": "faces +X -X +Y -Y +Z -Z of s x s stacked top to bottom (s x 6s image)",
                     "octahedral": "s x s octahedral map, +y at the centre"}[opts["layout"]],
                 "roughness_mapping": "level k of K has perceptual roughness r_k = k / (K - 1), alpha = r^2",
-                "files": files, "input": info.to_json(), "parameters": {**policies, **opts},
+                "files": files, "input": info.to_json(), "parameters": {**policies, **keyed},
                 "kernel_source_sha256": cl.source_hash("mips.cl"), "device": baker.device_label,
                 "timings": {"bake_s": time.perf_counter() - t0}}
 
@@ -324,3 +326,45 @@ def bake_dfg(baker: Baker, root: Path, size: int, samples: int, multiscatter: bo
                 "timings": {"bake_s": time.perf_counter() - t0}}
 
     return cache.get_or_build(root, key, build, warn=warn)
+
+
+def verification_texels(source, layout: str, sizes, roughness, texels: int, seed: int = 0) -> list:
+    """(texel indices, float64 brute-force values) per level: `texels` texels of each level drawn
+    with one seeded generator, their ground truth by prefilter.prefilter_bruteforce (every source
+    texel, split finer than the lobe, exact solid angles). What `mips --verify` and
+    benchmarks/bench_mips.py compare the bakes with."""
+    from iblbake.bake import prefilter
+
+    rng = np.random.default_rng(seed)
+    src = np.asarray(source, np.float64)
+    out = []
+    for s, r in zip(sizes, roughness):
+        dirs = layouts.layout_dirs(layout, s).reshape(-1, 3)
+        idx = rng.choice(len(dirs), size=min(len(dirs), texels), replace=False)
+        out.append((idx, prefilter.prefilter_bruteforce(src, dirs[idx], r, max_sub=4)))
+    return out
+
+
+def level_errors(levels, picks) -> list:
+    """Relative RMSE of each level at its verification texels."""
+    from iblbake.core.metrics import relative_rmse
+    return [relative_rmse(np.asarray(lvl)[..., :3].reshape(-1, 3)[idx], ref) for lvl, (idx, ref) in zip(levels, picks)]
+
+
+def verify_prefiltered(root: Path, manifest: dict, source, texels: int, seed: int = 0) -> dict:
+    """Measure a prefiltered entry's levels against the brute force and store the figures in its
+    manifest (atomically; the files and their hashes are untouched)."""
+    from iblbake.io.atomic import write_json
+
+    files = manifest["files"]
+    entry = Path(root) / manifest["key"]
+    levels = [images.read_exr(entry / f["name"]) for f in files]
+    t0 = time.perf_counter()
+    picks = verification_texels(source, manifest["layout"], [f["size"] for f in files],
+                                [f["roughness"] for f in files], texels, seed)
+    errs = level_errors(levels, picks)
+    block = {"texels_per_level": texels, "seed": seed, "relative_rmse": [float(e) for e in errs],
+             "against": "float64 brute force: every source texel, split finer than the lobe, exact solid angles",
+             "seconds": round(time.perf_counter() - t0, 3)}
+    write_json(entry / cache.MANIFEST, {**manifest, "verify": block})
+    return block

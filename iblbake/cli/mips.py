@@ -50,6 +50,9 @@ from iblbake.cli.options import (POLICY_FLAGS, Console, common_options, depfile_
               help="Store (B, A+B) for Filament's multiple-scattering energy compensation instead of (A, B).")
 @click.option("--only", type=click.Choice(["all", "radiance", "prefiltered", "dfg"]), multiple=True,
               default=("all",), show_default=True, help="Bake only these parts (repeatable).")
+@click.option("--verify", type=click.IntRange(1, 1 << 20), default=None, metavar="N",
+              help="Measure each prefiltered level's relative RMSE against the float64 brute force at N "
+                   "random texels, print it and store it in the entry's manifest (render --report shows it).")
 @click.option("--backend", type=click.Choice(["opencl", "numpy"]), default="opencl", show_default=True,
               help="opencl: the kernels; numpy: their float64 twins (slow; small sizes).")
 @depfile_option
@@ -57,7 +60,7 @@ from iblbake.cli.options import (POLICY_FLAGS, Console, common_options, depfile_
 @device_option
 @common_options
 def mips_command(envs, cache_dir, layout, size, levels, min_size, method, samples, lod_bias, no_fis,
-                 convolve_budget, dfg_size, dfg_samples, dfg_multiscatter, only, backend, nonfinite, negative,
+                 convolve_budget, dfg_size, dfg_samples, dfg_multiscatter, only, verify, backend, nonfinite, negative,
                  max_pixels, depfile, device, quiet, as_json):
     """Bake the radiance mip chain, the GGX-prefiltered chain and the DFG table of each ENV into a
     content-addressed EXR cache (one process and one device for a whole folder). A second run
@@ -114,6 +117,8 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
                                          "seconds": round(time.perf_counter() - t0, 4), "layout": layout,
                                          "sizes": opts["sizes"], "roughness": opts["roughness"],
                                          "methods": [f["method"] for f in pm["files"]]}
+                if verify:
+                    report["prefiltered"]["verify"] = mipsbake.verify_prefiltered(root, pm, image, verify)
         entries = [Path(e["path"]) / "manifest.json" for e in report.values()]
         if entries:
             rules.append(([str(x) for x in entries], [os.path.abspath(env)]))
@@ -132,6 +137,10 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
         s["elapsed_s"] = elapsed
         lines += [f"{kind}: {'cached' if e['cached'] else 'baked'} {e['path']} ({e['seconds']:.3f} s)"
                   for kind, e in s["entries"].items() if kind != "dfg"]
+        v = s["entries"].get("prefiltered", {}).get("verify")
+        if v:
+            lines.append(f"verify: relative RMSE per level against the brute force at {v['texels_per_level']} texels: "
+                         + " ".join(f"{100 * e:.2f}%" for e in v["relative_rmse"]))
     if "dfg" in parts:
         lines.append(f"dfg: {'cached' if dfg_entry['cached'] else 'baked'} {dfg_entry['path']} "
                      f"({dfg_entry['seconds']:.3f} s)")

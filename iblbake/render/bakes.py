@@ -156,8 +156,11 @@ class Bakes:
             return levels, pm, cached
 
         (levels, pm, cached), hit = self._recall(key, make)
-        return levels, cached or hit, {"levels": len(levels), "methods": [f["method"] for f in pm["files"]],
-                                       "entry": str(self.root / pm["key"])}
+        extra = {"levels": len(levels), "methods": [f["method"] for f in pm["files"]],
+                 "entry": str(self.root / pm["key"])}
+        if "verify" in pm:            # what `mips --verify` measured and stored in the entry's manifest
+            extra["verified_relative_rmse"] = pm["verify"]["relative_rmse"]
+        return levels, cached or hit, extra
 
     def _dfg(self, ctx):
         p = ctx.scene.data["effects"]["prefilter"]
