@@ -157,7 +157,7 @@ def test_every_kernel_parameter_is_bound_by_name():
     table = {"cam", "width", "height", "spp", "jitter", "spheres", "nspheres", "planes", "nplanes", "bvh",
              "tris", "ntris", "materials", "env_rot", "env_scale", "gb_pos", "gb_nrm", "gb_dir", "radiance",
              "hdr", "png_u8", "display", "aov_normal", "aov_albedo", "aov_depth", "n", "npix", "pixel0"}
-    own = {"shade": {"sh_coeffs", "chain", "off", "lw", "lh", "nlev", "hammersley_pts", "nsamples", "mip_bias",
+    own = {"shade": {"sh_coeffs", "chain", "off", "lw", "lh", "nlev", "hammersley_pts", "nsamples", "mip_bias", "lobe_spread",
                      "dfg", "dfg_size"},
            "background": {"color", "lod", "chain", "off", "lw", "lh", "nlev"},
            "reference": {"img", "w", "h", "marginal", "conditional", "pdf_table", "seed", "first", "batch", "out"},

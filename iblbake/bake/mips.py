@@ -50,10 +50,13 @@ class PrefilterOptions:
     lod_bias: float = DEFAULT_LOD_BIAS
     fis: bool = True
     convolve_budget: float | None = None   # None: CONVOLVE_BUDGET of the device kind
+    level_sizes: str = "halving"           # halving: base >> k (a mip chain); lobe: layouts.lobe_sizes
 
     def resolved(self, src_height: int) -> dict:
         base = self.size or layouts.default_base_size(self.layout, src_height)
         sizes = layouts.prefiltered_sizes(base, self.levels, self.min_size)
+        if self.level_sizes == "lobe":
+            sizes = layouts.lobe_sizes(base, len(sizes), self.min_size)
         return {"layout": self.layout, "base_size": base, "sizes": sizes,
                 "roughness": layouts.level_roughness(len(sizes)), "method": self.method,
                 "samples": self.samples, "lod_bias": self.lod_bias, "fis": self.fis,

@@ -50,6 +50,10 @@ from iblbake.cli.options import (POLICY_FLAGS, Console, common_options, depfile_
               help="Store (B, A+B) for Filament's multiple-scattering energy compensation instead of (A, B).")
 @click.option("--only", type=click.Choice(["all", "radiance", "prefiltered", "dfg"]), multiple=True,
               default=("all",), show_default=True, help="Bake only these parts (repeatable).")
+@click.option("--level-sizes", type=click.Choice(["halving", "lobe"]), default="halving", show_default=True,
+              help="halving: level k is --size >> k (a mip chain, what engines load); lobe: each level as fine "
+                   "as its lobe needs (texels no wider than alpha/16, up to --size), what render bakes for its "
+                   "equirect chain.")
 @click.option("--verify", type=click.IntRange(1, 1 << 20), default=None, metavar="N",
               help="Measure each prefiltered level's relative RMSE against the float64 brute force at N "
                    "random texels, print it and store it in the entry's manifest (render --report shows it).")
@@ -60,7 +64,7 @@ from iblbake.cli.options import (POLICY_FLAGS, Console, common_options, depfile_
 @device_option
 @common_options
 def mips_command(envs, cache_dir, layout, size, levels, min_size, method, samples, lod_bias, no_fis,
-                 convolve_budget, dfg_size, dfg_samples, dfg_multiscatter, only, verify, backend, nonfinite, negative,
+                 convolve_budget, dfg_size, dfg_samples, dfg_multiscatter, only, level_sizes, verify, backend, nonfinite, negative,
                  max_pixels, depfile, device, quiet, as_json):
     """Bake the radiance mip chain, the GGX-prefiltered chain and the DFG table of each ENV into a
     content-addressed EXR cache (one process and one device for a whole folder). A second run
@@ -92,7 +96,7 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
             policies = {"nonfinite": nonfinite, "negative": negative}
             if "prefiltered" in parts:
                 opts = mipsbake.PrefilterOptions(layout, size, levels, min_size, method, samples, lod_bias,
-                                                 not no_fis, convolve_budget).resolved(info.height)
+                                                 not no_fis, convolve_budget, level_sizes).resolved(info.height)
                 # an impossible plan (--method spectral on a too sharp level) fails before any bake
                 mipsbake.plan_methods(layouts.radiance_chain_sizes(info.width, info.height),
                                       {**opts, "convolve_budget": baker.convolve_budget(opts)}, "--method")

@@ -138,8 +138,10 @@ class Bakes:
     def _prefiltered(self, ctx):
         p, env = ctx.scene.data["effects"]["prefilter"], ctx.scene.data["environment"]
         image, info = self.environment(env)
-        opts = mipsbake.PrefilterOptions("equirect", p["size"], p["levels"], layouts.MIN_LEVEL_SIZE, p["method"],
-                                         p["samples"], p["lod_bias"], True).resolved(info.height)
+        base = p["size"] or layouts.default_base_size("equirect", info.height)
+        levels = p["levels"] or len(layouts.prefiltered_sizes(base))     # roughness steps: one per halving to 8
+        opts = mipsbake.PrefilterOptions("equirect", base, levels, p["min_size"], p["method"], p["samples"],
+                                         p["lod_bias"], True, level_sizes=p["level_sizes"]).resolved(info.height)
         opts["method_name"] = "effects.prefilter.method:"
         key = ("prefiltered", info.sha256, env["nonfinite"], env["negative"],
                tuple(sorted((k, str(v)) for k, v in opts.items())))

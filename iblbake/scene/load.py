@@ -308,7 +308,13 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
             "method": Enum(("auto", "spectral", "convolve", "fis"), "auto", doc="see iblbake mips --method"),
             "samples": Num(256, 1, 1 << 20, integer=True, doc="fis samples per texel"),
             "size": Num(None, 1, 8192, integer=True, doc="base height of the equirect chain (default: source height)"),
-            "levels": Num(None, 2, 32, integer=True, doc="levels K, roughness k/(K-1)"),
+            "levels": Num(None, 2, 32, integer=True, doc="levels K, roughness k/(K-1) (default: one per "
+                                                            "halving of size down to 8)"),
+            "level_sizes": Enum(("lobe", "halving"), "lobe",
+                                doc="level heights: lobe (texels no wider than alpha/16, up to size: the exact split "
+                                    "sum within 1%) or halving (size >> k, a mip chain: 2-4% off at r = 0.25 and 1)"),
+            "min_size": Num(32, 1, 8192, integer=True, doc="smallest level height (bilinear lookups in an 8-row "
+                                                          "level of a wide lobe are 2% off the exact split sum)"),
             "lod_bias": Num(1.0, -16.0, 16.0, doc="fis level bias"),
             "dominant_direction": Bool(True, doc="read the chain between N and R (Lagarde 2014), not at R: "
                                                  "closer to the reference on rough metals"),

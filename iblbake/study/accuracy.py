@@ -118,6 +118,8 @@ def default_ladder(sc, fx) -> list:
             rungs.append(Rung("specular", f"prefiltered size {size}", pre + [("effects.prefilter.size", size)]))
         for levels in (5, 6, 7, 8, 9):
             rungs.append(Rung("specular", f"prefiltered {levels} levels", pre + [("effects.prefilter.levels", levels)]))
+        rungs.append(Rung("specular", "prefiltered halving levels", pre + [("effects.prefilter.level_sizes", "halving"),
+                                                                          ("effects.prefilter.min_size", 8)]))
         rungs.append(Rung("specular", "prefiltered spectral", pre + [("effects.prefilter.method", "spectral")]))
         for n in (64, 256, 1024):
             rungs.append(Rung("specular", f"prefiltered fis {n}", pre + [("effects.prefilter.method", "fis"),
