@@ -37,6 +37,9 @@ CONFIGS = [
     ("importance N=8", "sphere_grid.yaml", ["effects.specular=importance", "effects.samples=8"]),
     ("importance N=40", "sphere_grid.yaml", ["effects.specular=importance", "effects.samples=40"]),
     ("importance N=128", "sphere_grid.yaml", ["effects.specular=importance", "effects.samples=128"]),
+    ("lobe K=1", "sphere_grid.yaml", ["effects.specular=lobe", "effects.lobe.samples=1"]),
+    ("lobe K=4", "sphere_grid.yaml", ["effects.specular=lobe", "effects.lobe.samples=4"]),
+    ("lobe K=16", "sphere_grid.yaml", ["effects.specular=lobe", "effects.lobe.samples=16"]),
     ("reference 64 spp", "sphere_grid.yaml", ["effects.specular=reference", "effects.diffuse=reference",
                                                "effects.reference.max_samples=64", "effects.reference.target_noise=0",
                                                "effects.reference.batch=32"]),
@@ -46,7 +49,7 @@ CONFIGS = [
     ("mesh 102k tris", "mesh.yaml", []),
 ]
 # keys a baseline from before them does not know; without them it renders what they switch off
-NEWER_KEYS = ("effects.reference.visibility",)
+NEWER_KEYS = ("effects.reference.visibility", "effects.lobe.samples")
 
 
 def main():

@@ -149,7 +149,7 @@ def test_verify_measures_stores_and_reports(tmp_path):
                      f"environment: {{path: {env}}}\nmaterials: {{m: {{metallic: 1, roughness: 0.5}}}}\n"
                      f"objects: [{{sphere: {{radius: 1}}, material: m}}]\n"
                      f"effects: {{diffuse: off, specular: prefiltered, prefilter: {{size: 16, samples: 32, "
-                     f"level_sizes: halving, min_size: 8}}}}\n")
+                     f"level_sizes: halving, min_size: 8, levels: {len(man['files'])}}}}}\n")
     p = run_cli("render", scene, "--cache", root, "--json")
     assert p.returncode == 0, p.stderr
     pre = next(b for b in json.loads(p.stdout)["bakes"] if b["name"] == "prefiltered")

@@ -78,7 +78,7 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
         acc.default_ladder(study.scene, study.fx)
     rungs = [acc._configured(study.scene, t) for t in study.terms] + rungs
     for r in rungs:                  # every rung's scene validates before anything renders
-        study.load(acc.TERM_ALONE[r.term] + r.values, origin=f"ladder rung {r.label!r}")
+        study.load(study.rung_values(r), origin=f"ladder rung {r.label!r}")
     names = [f"reference {t} seed {s}" for t in study.terms for s in settings.seeds] + [r.label for r in rungs]
     with con.stages(names, label="accuracy") as step:
         study.progress = step

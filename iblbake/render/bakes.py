@@ -139,8 +139,7 @@ class Bakes:
         p, env = ctx.scene.data["effects"]["prefilter"], ctx.scene.data["environment"]
         image, info = self.environment(env)
         base = p["size"] or layouts.default_base_size("equirect", info.height)
-        levels = p["levels"] or len(layouts.prefiltered_sizes(base))     # roughness steps: one per halving to 8
-        opts = mipsbake.PrefilterOptions("equirect", base, levels, p["min_size"], p["method"], p["samples"],
+        opts = mipsbake.PrefilterOptions("equirect", base, p["levels"], p["min_size"], p["method"], p["samples"],
                                          p["lod_bias"], True, level_sizes=p["level_sizes"]).resolved(info.height)
         opts["method_name"] = "effects.prefilter.method:"
         key = ("prefiltered", info.sha256, env["nonfinite"], env["negative"],

@@ -41,7 +41,7 @@ class Report:
 
     def run(self, name, seconds, **extra):
         p = self.passes.setdefault(name, {"name": name, "seconds": 0.0})
-        p["seconds"] = round(p["seconds"] + seconds, 4)   # summed over tiles
+        p["seconds"] = round(p["seconds"] + seconds, 6)   # summed over tiles (microseconds: a GPU pass takes 0.1 ms)
         p.update(extra)
 
 

@@ -308,8 +308,9 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
             "method": Enum(("auto", "spectral", "convolve", "fis"), "auto", doc="see iblbake mips --method"),
             "samples": Num(256, 1, 1 << 20, integer=True, doc="fis samples per texel"),
             "size": Num(None, 1, 8192, integer=True, doc="base height of the equirect chain (default: source height)"),
-            "levels": Num(None, 2, 32, integer=True, doc="levels K, roughness k/(K-1) (default: one per "
-                                                            "halving of size down to 8)"),
+            "levels": Num(13, 2, 32, integer=True, doc="levels K, roughness k/(K-1); between levels the chain "
+                                                          "mixes two blurs (city, r = 0.3: 26% off the reference at "
+                                                          "7 levels, 12.1% at 13, the split sum's own floor 12.0%)"),
             "level_sizes": Enum(("lobe", "halving"), "lobe",
                                 doc="level heights: lobe (texels no wider than alpha/16, up to size: the exact split "
                                     "sum within 1%) or halving (size >> k, a mip chain: 2-4% off at r = 0.25 and 1)"),

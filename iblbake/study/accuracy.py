@@ -116,7 +116,7 @@ def default_ladder(sc, fx) -> list:
         rungs.append(Rung("specular", "prefiltered no dominant", pre + [("effects.prefilter.dominant_direction", False)]))
         for size in (64, 128, 256, 512):
             rungs.append(Rung("specular", f"prefiltered size {size}", pre + [("effects.prefilter.size", size)]))
-        for levels in (5, 6, 7, 8, 9):
+        for levels in (5, 7, 9, 17):
             rungs.append(Rung("specular", f"prefiltered {levels} levels", pre + [("effects.prefilter.levels", levels)]))
         rungs.append(Rung("specular", "prefiltered halving levels", pre + [("effects.prefilter.level_sizes", "halving"),
                                                                           ("effects.prefilter.min_size", 8)]))
@@ -355,13 +355,20 @@ class Study:
                 mask = mask & ~self._mirrors
         return mask
 
+    def rung_values(self, rung: Rung) -> list:
+        """The rung's term alone, with its values; a reference rung sees what the study's
+        reference sees (visibility), unless it sets it."""
+        vis = [] if any(k == "effects.reference.visibility" for k, _ in rung.values) else \
+            [("effects.reference.visibility", self.settings.visibility)]
+        return TERM_ALONE[rung.term] + vis + rung.values
+
     def run_rung(self, rung: Rung) -> dict:
         """Render the rung `repeats` times (kernel builds and bakes happen in the first and are
         reported apart); time = median over the renders of its lighting pass (shade or
         reference); frame = median of the whole render."""
         from iblbake import render
 
-        sc = self.load(TERM_ALONE[rung.term] + rung.values)
+        sc = self.load(self.rung_values(rung))
         t0 = time.perf_counter()
         lighting, whole, frame = [], [], None
         builds_before = len(self.rt.builds)
@@ -392,7 +399,7 @@ class Study:
             "kernel_build_s": round(builds, 4),
             **error_metrics(frame.hdr, ref["hdr"], mask, self.settings.flip)}
         rung.frame = frame
-        self.times["rungs_s"] += time.perf_counter() - t0 - builds
+        self.times["rungs_s"] += time.perf_counter() - t0 - builds - rung.result["bake_s"]
         self.times["bakes_s"] += rung.result["bake_s"] + builds
         self.progress()
         return rung.result
@@ -449,7 +456,7 @@ def _fmt(key, v) -> str:
     if key == "flip":
         return f"{v:.4f}"
     if key == "time_ms":
-        return f"{v:.2f}"
+        return f"{v:.3g}"
     if key == "bake_s":
         return f"{v:.3f}"
     return str(v)
