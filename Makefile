@@ -54,6 +54,7 @@ bench: opencl assets
 	$(BIN)/python benchmarks/bench_mips.py
 	$(BIN)/python benchmarks/bench_render.py
 	$(BIN)/python benchmarks/bench_accuracy.py
+	$(BIN)/python benchmarks/bench_study.py
 
 clean:
 	rm -rf $(OUT) .pytest_cache

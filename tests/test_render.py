@@ -206,6 +206,8 @@ def prefiltered_bakes(frame):
     {"diffuse": "off", "specular": "importance", "samples": 16},
     {"diffuse": "off", "specular": "prefiltered", "prefilter": {"method": "fis", "samples": 64}},
     {"diffuse": "off", "specular": "lobe", "lobe": {"samples": 4}, "prefilter": {"method": "fis", "samples": 64}},
+    {"diffuse": "off", "specular": "lobe", "lobe": {"samples": 1}, "prefilter": {"method": "fis", "samples": 64}},
+    {"diffuse": "off", "specular": "lobe", "lobe": {"samples": 16, "spread": 8}},
 ])
 def test_shade_matches_numpy(tmp_path, small_panoramas, mesh_file, effects):
     from iblbake.core import sh
@@ -291,6 +293,27 @@ def test_modes_agree_with_reference(tmp_path, panoramas, shared_cache, env):
     # 3 bands: the band-limit error of the classic 9 coefficients (studio's saturated lights: 7%);
     # 5 bands (l <= 4; Ahat_3 = 0) brings it under 3%
     assert errs[3] < 0.08 and errs[5] < 0.03 and errs[5] < errs[3]
+
+
+@pytest.mark.parametrize("k", [1, 4])
+def test_lobe_on_a_mirror_is_the_split_sum(tmp_path, small_panoramas, k):
+    """Roughness 0: every visible-normal sample is the normal, so `lobe` reads level 0 at R
+    times F0 A + B, which is the split sum without the dominant direction: every pixel within
+    1e-5 of the frame's peak but the sun's, whose steep bilinear gradient turns the two codes'
+    float32 rounding of R into 1e-4 (bound 5e-4 relative)."""
+    mat = {"base_color": [1.0, 0.8, 0.4], "metallic": 1, "roughness": 0.0}
+    frames = []
+    for fx in ({"specular": "lobe", "lobe": {"samples": k}},
+               {"specular": "prefiltered", "prefilter": {"dominant_direction": False}}):
+        p = make_scene(tmp_path, small_panoramas["city"], mat, res=32, rotation_y=20,
+                       effects={"diffuse": "off", **fx})
+        frames.append(render_scene(p, tmp_path / "cache")[1].hdr)
+    hit = frames[1][..., 3] == 1
+    assert hit.sum() > 300
+    diff = np.abs(frames[0] - frames[1])[hit][:, :3]
+    peak = np.abs(frames[1][hit]).max()
+    assert np.mean(diff <= 1e-5 * peak) > 0.995
+    assert (diff / np.maximum(np.abs(frames[1][hit][:, :3]), 1e-3)).max() < 5e-4
 
 
 def exact_dfg(nov, alpha, n_samples=16384):

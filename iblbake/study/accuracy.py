@@ -92,7 +92,12 @@ def _configured(sc, term: str) -> Rung:
     return Rung(term, f"configured: {label}", vals, configured=True)
 
 
-def default_ladder(sc, fx) -> list:
+# FIS chain bakes per sample count: N = 1024 over render's 13 lobe-sized levels is a 2-minute bake
+# on a 2-core CPU (no more accurate than spectral): GPUs only by default, --ladder elsewhere
+FIS_SAMPLES = {"GPU": (64, 256, 1024), "CPU": (64, 256)}
+
+
+def default_ladder(sc, fx, device_kind: str = "GPU") -> list:
     """The rungs of the terms the scene calls for (fx: plan.effect_modes of the scene): a
     diffuse-only scene runs only diffuse rungs. One factor at a time around the defaults."""
     rungs = []
@@ -121,7 +126,7 @@ def default_ladder(sc, fx) -> list:
         rungs.append(Rung("specular", "prefiltered halving levels", pre + [("effects.prefilter.level_sizes", "halving"),
                                                                           ("effects.prefilter.min_size", 8)]))
         rungs.append(Rung("specular", "prefiltered spectral", pre + [("effects.prefilter.method", "spectral")]))
-        for n in (64, 256, 1024):
+        for n in FIS_SAMPLES.get(device_kind, FIS_SAMPLES["CPU"]):
             rungs.append(Rung("specular", f"prefiltered fis {n}", pre + [("effects.prefilter.method", "fis"),
                                                                         ("effects.prefilter.samples", n)]))
         for k in (1, 2, 4, 8, 16):
