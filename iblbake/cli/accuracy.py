@@ -76,7 +76,7 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
     study = acc.Study(scene_path, overrides, settings, runtime=rt, bakes=render.Bakes(cache_dir), warn=con.warn)
     rungs = acc.ladder_from_file(ladder_path, study.scene, study.fx) if ladder_path else \
         acc.default_ladder(study.scene, study.fx, rt.info.kind)
-    rungs = [acc._configured(study.scene, t) for t in study.terms] + rungs
+    rungs = [acc.configured_rung(study.scene, t) for t in study.terms] + rungs
     for r in rungs:                  # every rung's scene validates before anything renders
         study.load(study.rung_values(r), origin=f"ladder rung {r.label!r}")
     names = [f"reference {t} seed {s}" for t in study.terms for s in settings.seeds] + [r.label for r in rungs]

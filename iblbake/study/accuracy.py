@@ -78,7 +78,7 @@ def base_values(sc, settings: Settings) -> list:
     return vals
 
 
-def _configured(sc, term: str) -> Rung:
+def configured_rung(sc, term: str) -> Rung:
     fx = sc.data["effects"]
     if term == "diffuse":
         mode = fx["diffuse"]
@@ -215,8 +215,8 @@ def hdr_flip(got, ref, mask) -> float:
     b = np.ascontiguousarray(np.clip(got[..., :3], 0, None), np.float32)
     if min(a.shape[:2]) < 2:
         return float(np.abs(a - b)[mask].mean())
-    err = flip_evaluator.evaluate(a, b, "HDR", applyMagma=False)[0]
-    return float(np.asarray(err)[..., 0 if np.ndim(err) == 3 else Ellipsis][mask].mean())
+    err = flip_evaluator.evaluate(a, b, "HDR", applyMagma=False)[0]     # the per-pixel error map
+    return float(np.asarray(err).reshape(mask.shape)[mask].mean())
 
 
 def error_image(got, ref, mask, top: float = 0.5) -> np.ndarray:
@@ -325,6 +325,10 @@ class Study:
             cached.append(hit)
             self.progress()
         mask = object_mask(frames[0]) & object_mask(frames[1])
+        if not mask.any():
+            w, h = study_resolution(self.scene, self.settings.max_side)
+            raise InputError(f"{self.path}: at {w}x{h} no pixel is fully covered by an object; raise --max-side "
+                             f"or move the camera closer")
         from iblbake.core.metrics import relative_rmse
         between = relative_rmse(frames[0][..., :3][mask], frames[1][..., :3][mask]) if mask.any() else 0.0
         mean = frames[0].copy()
