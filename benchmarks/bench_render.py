@@ -31,6 +31,7 @@ try:
 except ImportError:                           # a baseline from before the layered package
     from iblbake import scene  # noqa: E402
 
+SUN = "lights=[{directional: {direction: [0.5, -1, -0.4], illuminance: 3, angular_diameter: 2}, "
 CONFIGS = [
     ("prefiltered", "sphere_grid.yaml", ["effects.specular=prefiltered"]),
     ("importance N=1", "sphere_grid.yaml", ["effects.specular=importance", "effects.samples=1"]),
@@ -47,9 +48,12 @@ CONFIGS = [
      ["effects.specular=reference", "effects.diffuse=reference", "effects.reference.max_samples=64",
       "effects.reference.target_noise=0", "effects.reference.batch=32", "effects.reference.visibility=false"]),
     ("mesh 102k tris", "mesh.yaml", []),
+    ("mesh, sun hard shadows", "mesh.yaml", [SUN + "shadows: hard}]"]),
+    ("mesh, sun soft shadows 4", "mesh.yaml", [SUN + "shadows: soft, shadow_samples: 4}]"]),
+    ("mesh, sun soft shadows 16", "mesh.yaml", [SUN + "shadows: soft, shadow_samples: 16}]"]),
 ]
 # keys a baseline from before them does not know; without them it renders what they switch off
-NEWER_KEYS = ("effects.reference.visibility", "effects.lobe.samples")
+NEWER_KEYS = ("effects.reference.visibility", "effects.lobe.samples", "lights=")
 
 
 def main():

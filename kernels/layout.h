@@ -20,12 +20,19 @@
 #define TONEMAP_HABLE 2
 #define TONEMAP_PBR_NEUTRAL 3
 #define TONEMAP_LINEAR 4
+#define LIGHT_DIRECTIONAL 0
+#define LIGHT_POINT 1
+#define LIGHT_SPOT 2
+#define SHADOWS_NONE 0
+#define SHADOWS_HARD 1
+#define SHADOWS_SOFT 2
 
 #define MATERIAL_FLOAT4S 2
 #define SPHERE_FLOAT4S 2
 #define PLANE_FLOAT4S 4
 #define TRIANGLE_FLOAT4S 6
 #define BVH_NODE_FLOAT4S 2
+#define LIGHT_FLOAT4S 4
 
 /* gb_pos: hit position, w: distance along the ray (MISS_T where nothing is hit) */
 /* gb_nrm: shading normal facing the viewer, w: material index */

@@ -199,6 +199,12 @@ inline int occluded(float3 o, float3 d, SCENE_PARAMS)
     return trace_range(o, d, 0.0f, INFINITY, 1, SCENE_ARGS).kind != 0;
 }
 
+/* Any hit along o + t d, 0 < t < tmax: a shadow ray towards a light at distance tmax. */
+inline int occluded_to(float3 o, float3 d, float tmax, SCENE_PARAMS)
+{
+    return trace_range(o, d, 0.0f, tmax, 1, SCENE_ARGS).kind != 0;
+}
+
 /* Where a secondary ray starts: the hit p of a primary ray of direction d that travelled t, moved
  * towards the viewer's side of the surface, along the shading normal n (bent to face the viewer)
  * and back along d, by a distance relative to the float32 error of p (which grows with |p| and t),

@@ -161,6 +161,7 @@ def test_every_kernel_parameter_is_bound_by_name():
                      "dfg", "dfg_size"},
            "background": {"color", "lod", "chain", "off", "lw", "lh", "nlev"},
            "reference": {"img", "w", "h", "marginal", "conditional", "pdf_table", "seed", "first", "batch", "out"},
+           "lights": {"lights", "nlights", "light_seed", "exact_samples"},
            "tonemap": {"exposure_scale", "gamma", "out", "display"}}
     for p in PASSES:
         names = {n for n, _ in runtime.kernel_params(p.kernel, p.function or p.name)}

@@ -77,6 +77,23 @@ def radical_inverse(j, base: int):
     return r
 
 
+HALTON_BASES = (2, 3, 5, 7, 11, 13, 17, 19)
+
+
+def hash_uniform(x):
+    """kernels/sampling.h hash_uniform: the top 24 bits of pcg_hash, in [0, 1)."""
+    return (pcg_hash(x) >> 8).astype(np.float64) * (1.0 / 16777216.0)
+
+
+def qmc(seed, gid, k, d: int):
+    """kernels/sampling.h qmc: sample k of dimension d of sample stream gid: Halton point k // 2
+    of base HALTON_BASES[d], Cranley-Patterson rotated per replicate (k & 1) and stream."""
+    gid, k = np.asarray(gid, np.int64), np.asarray(k, np.int64)
+    rep, j = k & 1, k >> 1
+    shift = hash_uniform(np.uint32(seed) ^ pcg_hash((gid * 16 + rep * 8 + d) & 0xFFFFFFFF))
+    return np.mod(radical_inverse(j, HALTON_BASES[d]) + shift, 1.0)
+
+
 def halton_rotated(n: int, base: int, shift: float):
     """The first n Halton points of `base`, rotated by `shift` modulo 1 (Cranley-Patterson)."""
     return np.mod(radical_inverse(np.arange(n), base) + shift, 1.0)

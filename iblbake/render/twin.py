@@ -3,6 +3,7 @@ tests on small frames.
 
 primary()      G-buffer by brute force (every ray against every sphere, plane and triangle)
 shade()        SH diffuse, importance-sampled, prefiltered and lobe specular, emission
+lights()       analytic lights with hard and soft shadows, and their exact integral
 exact()        the integral the `reference` pass estimates, by quadrature: every texel of the
                panorama (piecewise constant), split into s x s parts with exact solid angles,
                each direction traced for occlusion (occluded) unless visibility is off
@@ -69,15 +70,16 @@ def _triangle_t(o, d, tri):
     return np.where(ok, t, np.inf), u, v
 
 
-def occluded(o, d, arrays):
-    """Any hit along o + t d, t > 0 (twin of kernels/scene.h occluded): a boolean per ray."""
+def occluded(o, d, arrays, tmax=np.inf):
+    """Any hit along o + t d, 0 < t < tmax (twin of kernels/scene.h occluded, occluded_to): a
+    boolean per ray."""
     hit = np.zeros(np.broadcast_shapes(o.shape, d.shape)[:-1], bool)
     for sp in arrays.spheres.astype(np.float64):
-        hit |= np.isfinite(_sphere_t(o, d, sp))
+        hit |= _sphere_t(o, d, sp) < tmax
     for pl in arrays.planes.astype(np.float64):
-        hit |= np.isfinite(_plane_t(o, d, pl))
+        hit |= _plane_t(o, d, pl) < tmax
     for tri in arrays.tris.astype(np.float64):
-        hit |= np.isfinite(_triangle_t(o, d, tri)[0])
+        hit |= _triangle_t(o, d, tri)[0] < tmax
     return hit
 
 
@@ -268,6 +270,93 @@ def lobe(v, n, nov, alpha, rough, f0, rot, k, spread, prefiltered, dfg):
     li = np.where(den[:, :1] > 0, num / np.where(den > 0, den, 1.0), fallback)
     ab = dfg_lookup(dfg, nov, rough)
     return li * (f0 * ab[:, 0:1] + ab[:, 1:2])
+
+
+def light_brdf_cos(base, metallic, rough, f0, n, v, nov, l, diffuse: bool, specular: bool):
+    """Twin of kernels/lights.cl light_brdf_cos: f(v, l) NoL, per hit and colour channel."""
+    nol = (n * l).sum(-1)
+    out = np.zeros(l.shape[:-1] + (3,))
+    if diffuse:
+        out += diffuse_weight(base, metallic, rough, f0, nov)
+    if specular:
+        h = v + l
+        h /= np.linalg.norm(h, axis=-1, keepdims=True)
+        alpha = rough ** 2
+        out += (brdf.d_ggx((n * h).sum(-1), alpha) * brdf.v_smith_ggx_correlated(nov, np.maximum(nol, 0), alpha))[:, None] \
+            * brdf.f_schlick((v * h).sum(-1)[:, None], f0)
+    return np.where((nol > 0)[:, None], out * np.maximum(nol, 0)[:, None], 0.0)
+
+
+def _cone_direction(a, omc, u):
+    x = u[..., 0] * omc
+    ct, st, phi = 1 - x, np.sqrt(np.maximum(0, x * (2 - x))), 2 * np.pi * u[..., 1]
+    t, b = conventions.tangent_frame(a)
+    d = t * (st * np.cos(phi))[:, None] + b * (st * np.sin(phi))[:, None] + a * ct[:, None]
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def lights(gb, arrays, records, effects: dict, *, diffuse=True, specular=True, exact=False, visibility=True):
+    """Per-sample radiance of the `lights` pass (hits only; misses are 0): records from
+    scene.pack.light_records, effects the scene's (reference seed and max_samples)."""
+    hit = gb["hit"]
+    out = np.zeros((len(hit), 3))
+    v, n, nov, (base, metallic, _, rough, f0) = surface(gb, arrays)
+    p = gb["pos"][hit]
+    origin = ray_offset(p, n, gb["dir"][hit], gb["t"][hit])
+    sid = np.flatnonzero(hit)              # each G-buffer sample's random stream (one tile)
+    seed = effects["reference"]["seed"]
+    color = np.zeros((len(p), 3))
+    shade = lambda l: light_brdf_cos(base, metallic, rough, f0, n, v, nov, l, diffuse, specular)   # noqa: E731
+    for j, r in enumerate(records.astype(np.float64)):
+        kind, e = int(r[0, 3]), np.broadcast_to(r[1, :3], (len(p), 3)).copy()
+        if kind == 0:
+            wc = np.broadcast_to(r[0, :3], p.shape).copy()
+            dist = np.full(len(p), np.inf)
+            sin_max = np.full(len(p), math.sin(r[2, 3]))
+        else:
+            dv = r[0, :3] - p
+            d = np.linalg.norm(dv, axis=-1)
+            wc = dv / d[:, None]
+            win = 1 / (d * d)
+            if r[3, 2] > 0:
+                win *= np.clip(1 - (d / r[3, 2]) ** 4, 0, 1) ** 2
+            a = np.clip((wc @ -r[2, :3]) * r[3, 0] + r[3, 1], 0, 1)
+            e *= (win * a * a)[:, None]
+            sin_max = np.minimum(r[2, 3] / d, 1.0)
+            dist = np.maximum(d - r[2, 3], 0)
+        omc = sin_max ** 2 / (1 + np.sqrt(np.maximum(0, 1 - sin_max ** 2)))
+        ls = int(np.uint32(seed) ^ sampling.pcg_hash(j + 1))
+        ns = effects["reference"]["max_samples"] if exact else int(r[3, 3])
+        mode = int(r[1, 3])
+
+        def visible_fraction(count):
+            lit = np.zeros(len(p))
+            for k in range(count):
+                u = np.stack([sampling.qmc(ls, sid, k, 0), sampling.qmc(ls, sid, k, 1)], -1)
+                lit += ~occluded(origin, _cone_direction(wc, omc, u), arrays, dist)
+            return lit / count
+
+        if exact and (sin_max > 0).any():
+            le = e / (np.pi * sin_max ** 2)[:, None]
+            acc = np.zeros((len(p), 3))
+            for k in range(ns):
+                u = np.stack([sampling.qmc(ls, sid, k, 0), sampling.qmc(ls, sid, k, 1)], -1)
+                l = _cone_direction(wc, omc, u)
+                ok = ~occluded(origin, l, arrays, dist) if visibility else np.ones(len(p), bool)
+                acc += np.where(ok[:, None], shade(l), 0.0)
+            color += le * (2 * np.pi * omc)[:, None] * acc / ns
+            continue
+        if exact:
+            vis = (~occluded(origin, wc, arrays, dist)).astype(float) if visibility else np.ones(len(p))
+        elif mode == 1 or (mode == 2 and (sin_max <= 0).all()):
+            vis = (~occluded(origin, wc, arrays, dist)).astype(float)
+        elif mode == 2:
+            vis = visible_fraction(ns)
+        else:
+            vis = np.ones(len(p))
+        color += vis[:, None] * e * shade(wc)
+    out[hit] = color
+    return out
 
 
 DELTA_ALPHA = 1e-4   # kernels/reference.cl: narrower GGX lobes are mirrors in the reference

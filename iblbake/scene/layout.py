@@ -10,6 +10,8 @@ DIFFUSE_MODES = {"off": 0, "sh": 1, "reference": 2}
 SPECULAR_MODES = {"off": 0, "importance": 1, "prefiltered": 2, "reference": 3, "lobe": 4}
 BACKGROUND_MODES = {"hide": 0, "show": 1, "color": 2, "blur": 3}
 TONEMAP_IDS = {"aces": 0, "reinhard": 1, "hable": 2, "pbr_neutral": 3, "linear": 4}
+LIGHT_KINDS = {"directional": 0, "point": 1, "spot": 2}
+SHADOW_MODES = {"none": 0, "hard": 1, "soft": 2}
 
 # Records are float4 rows (ints stored bit-cast in float lanes); the host packs them in
 # iblbake/scene/pack.py, the kernels index them with these strides.
@@ -19,6 +21,10 @@ FLOAT4S = {
     "PLANE": 4,      # (point, material), (normal, object), (tangent, half width), (bitangent, half depth)
     "TRIANGLE": 6,   # v0|material, v1|object, v2, n0, n1, n2
     "BVH_NODE": 2,   # (min, first), (max, count)
+    # (position, or the unit direction towards a directional light | kind), (colour x intensity or
+    # illuminance | shadow mode), (spot axis, the way light travels | radius, or a directional
+    # light's angular radius in radians), (spot scale, spot offset, range (0: none), shadow samples)
+    "LIGHT": 4,
 }
 # Per-sample G-buffer records, one float4 each: what every pass reads by these names.
 GBUFFER = {
@@ -38,7 +44,8 @@ def header_text() -> str:
             " * Mode ids and buffer record layouts shared by the host and every render kernel. */",
             "#ifndef IBLBAKE_LAYOUT_H", "#define IBLBAKE_LAYOUT_H", ""]
     rows += _modes("DIFFUSE", DIFFUSE_MODES) + _modes("SPECULAR", SPECULAR_MODES)
-    rows += _modes("BACKGROUND", BACKGROUND_MODES) + _modes("TONEMAP", TONEMAP_IDS) + [""]
+    rows += _modes("BACKGROUND", BACKGROUND_MODES) + _modes("TONEMAP", TONEMAP_IDS)
+    rows += _modes("LIGHT", LIGHT_KINDS) + _modes("SHADOWS", SHADOW_MODES) + [""]
     rows += [f"#define {k}_FLOAT4S {v}" for k, v in FLOAT4S.items()] + [""]
     rows += [f"/* {k}: {v} */" for k, v in GBUFFER.items()]
     rows += [f"#define MISS_T ({MISS_T}f)", "", "#endif", ""]

@@ -291,6 +291,41 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
             }),
             "material": Str(doc="name of a material in `materials`"),
         })),
+    "lights": ListOf(doc="analytic lights in the units of glTF's KHR_lights_punctual, added to the IBL and "
+                         "shaded with its BRDF", section=Section(
+        exclusive=("directional", "point", "spot"), doc="one light", fields={
+            "directional": Section(doc="a distant light (the sun)", fields={
+                "direction": Vec(**VEC3, default=[0.0, -1.0, 0.0], nonzero=True,
+                                 doc="the way the light travels, towards the scene (a glTF light node's -Z)"),
+                "color": Vec(**VEC3, default=[1.0, 1.0, 1.0], lo=0.0, doc="linear RGB"),
+                "illuminance": Num(1.0, 0.0, doc="lux (lm/m^2) on a surface facing it"),
+                "angular_diameter": Num(0.0, 0.0, 90.0, doc="degrees (the sun: 0.53); a disk this wide "
+                                                           "gives soft shadows their penumbra"),
+            }),
+            "point": Section(required=("position",), doc="a light at a point, or a sphere of `radius`", fields={
+                "position": Vec(**VEC3, doc="centre"),
+                "color": Vec(**VEC3, default=[1.0, 1.0, 1.0], lo=0.0, doc="linear RGB"),
+                "intensity": Num(1.0, 0.0, doc="candela (lm/sr)"),
+                "radius": Num(0.0, 0.0, doc="sphere light radius (0: a point); soft shadows sample it"),
+                "range": Num(None, 0.0, lo_open=True, doc="falloff windowed to 0 at this distance, as "
+                                                          "KHR_lights_punctual recommends; omitted: infinite"),
+            }),
+            "spot": Section(required=("position",), doc="a point light in a cone", fields={
+                "position": Vec(**VEC3, doc="apex"),
+                "direction": Vec(**VEC3, default=[0.0, -1.0, 0.0], nonzero=True, doc="the cone's axis, the way "
+                                                                                    "the light travels"),
+                "color": Vec(**VEC3, default=[1.0, 1.0, 1.0], lo=0.0, doc="linear RGB"),
+                "intensity": Num(1.0, 0.0, doc="candela (lm/sr) on the axis"),
+                "inner_cone_angle": Num(0.0, 0.0, 90.0, doc="degrees from the axis: full intensity inside"),
+                "outer_cone_angle": Num(45.0, 0.0, 90.0, lo_open=True, doc="degrees from the axis: dark outside"),
+                "radius": Num(0.0, 0.0, doc="sphere light radius (0: a point)"),
+                "range": Num(None, 0.0, lo_open=True, doc="as for point"),
+            }),
+            "shadows": Enum(("hard", "soft", "none"), "hard",
+                            doc="hard: one shadow ray to the light's centre; soft: shadow_samples rays over its "
+                                "disk or sphere; none"),
+            "shadow_samples": Num(16, 1, 4096, integer=True, doc="soft: rays per pixel sample (stratified, seeded)"),
+        })),
     "effects": Section(doc="what the renderer simulates; nothing else is baked, compiled or run", fields={
         "diffuse": Enum(("sh", "reference", "off"), "sh", doc="diffuse IBL: SH irradiance, Monte Carlo reference, or none"),
         "sh_bands": Num(3, 1, 8, integer=True, doc="SH bands for diffuse: sh (3 = 9 coefficients)"),
@@ -614,6 +649,10 @@ def load(path, overrides=(), outputs=None, values=(), origin: str = "--set") -> 
             v.fail(f"objects.{i}.material", f"no material named {o['material']!r} ({hint})")
         if "mesh" in o:
             o["mesh"]["path"] = str((folder / o["mesh"]["path"]).resolve())
+    for i, lt in enumerate(out["lights"]):
+        if "spot" in lt and lt["spot"]["inner_cone_angle"] > lt["spot"]["outer_cone_angle"]:
+            v.fail(f"lights.{i}.spot.inner_cone_angle", f"{lt['spot']['inner_cone_angle']:g} is wider than "
+                                                        f"outer_cone_angle {lt['spot']['outer_cone_angle']:g}")
     env = out["environment"]
     env["path"] = str((folder / env["path"]).resolve()) if not Path(env["path"]).is_absolute() else env["path"]
     if not Path(env["path"]).is_file():

@@ -119,3 +119,37 @@ def mesh_arrays(scene: Scene):
         arr = np.zeros((0, 6, 4), np.float32)
         nodes = np.zeros((0, 8), np.float32)
     return arr, nodes, report
+
+
+def light_records(scene: Scene) -> np.ndarray:
+    """(lights, LIGHT float4s, 4) float32 (layout.FLOAT4S["LIGHT"]): what kernels/lights.cl reads.
+    KHR_lights_punctual's spot falloff: a = clamp(cos(angle to the axis) scale + offset, 0, 1)^2,
+    scale = 1 / max(1e-3, cos(inner) - cos(outer)), offset = -cos(outer) scale."""
+    from iblbake.scene.layout import LIGHT_KINDS, SHADOW_MODES
+
+    out = np.zeros((len(scene.data["lights"]), FLOAT4S["LIGHT"], 4), np.float32)
+    for i, lt in enumerate(scene.data["lights"]):
+        kind = next(k for k in LIGHT_KINDS if k in lt)
+        p = lt[kind]
+        r = out[i]
+        r[0, 3], r[1, 3], r[3, 3] = LIGHT_KINDS[kind], SHADOW_MODES[lt["shadows"]], lt["shadow_samples"]
+        if kind == "directional":
+            d = np.asarray(p["direction"], np.float64)
+            r[0, :3] = -d / np.linalg.norm(d)
+            r[1, :3] = np.asarray(p["color"]) * p["illuminance"]
+            r[2, 3] = math.radians(p["angular_diameter"]) / 2
+            r[3, :2] = 0.0, 1.0
+            continue
+        r[0, :3] = p["position"]
+        r[1, :3] = np.asarray(p["color"]) * p["intensity"]
+        r[2, 3] = p["radius"]
+        r[3, 2] = p["range"] or 0.0
+        if kind == "spot":
+            d = np.asarray(p["direction"], np.float64)
+            r[2, :3] = d / np.linalg.norm(d)
+            ci, co = math.cos(math.radians(p["inner_cone_angle"])), math.cos(math.radians(p["outer_cone_angle"]))
+            scale = 1.0 / max(1e-3, ci - co)
+            r[3, :2] = scale, -co * scale
+        else:
+            r[3, :2] = 0.0, 1.0
+    return out

@@ -131,6 +131,13 @@ def default_ladder(sc, fx, device_kind: str = "GPU") -> list:
                                                                         ("effects.prefilter.samples", n)]))
         for k in (1, 2, 4, 8, 16):
             rungs.append(Rung("specular", f"lobe K={k}", [("effects.specular", "lobe"), ("effects.lobe.samples", k)]))
+    lights = sc.data["lights"]
+    for term in TERMS:                   # every light's shadows at once: none, hard, soft at 4 and 16
+        if getattr(fx, term) != "off" and lights:
+            for label, mode, n in (("none", "none", 16), ("hard", "hard", 16), ("soft 4", "soft", 4),
+                                   ("soft 16", "soft", 16)):
+                rungs.append(Rung(term, f"shadows {label}", [v for i in range(len(lights)) for v in (
+                    (f"lights.{i}.shadows", mode), (f"lights.{i}.shadow_samples", n))]))
     for term in TERMS:                   # fewer reference samples: Monte Carlo's own trade
         if getattr(fx, term) != "off":
             for n in (16, 64, 256):

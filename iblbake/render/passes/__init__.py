@@ -3,9 +3,10 @@ asks every one whether the scene calls for it (iblbake/render/passes/base.py: th
 
 from iblbake.render.passes.background import Background
 from iblbake.render.passes.gbuffer import GBuffer
+from iblbake.render.passes.lights import Lights
 from iblbake.render.passes.reference import Reference
 from iblbake.render.passes.resolve import Resolve
 from iblbake.render.passes.shade import Shade
 from iblbake.render.passes.tonemap import Tonemap
 
-PASSES = (GBuffer(), Shade(), Reference(), Background(), Resolve(), Tonemap())
+PASSES = (GBuffer(), Shade(), Reference(), Lights(), Background(), Resolve(), Tonemap())

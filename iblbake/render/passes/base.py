@@ -61,4 +61,5 @@ DISPLAY_KEYS = ("tonemap", "exposure", "output_transfer", "gamma")
 def lighting_inputs(scene: Scene) -> dict:
     d = scene.data
     return {"camera": d["camera"], "environment": d["environment"], "materials": d["materials"],
-            "objects": d["objects"], "effects": {k: v for k, v in d["effects"].items() if k not in DISPLAY_KEYS}}
+            "objects": d["objects"], "lights": d["lights"],
+            "effects": {k: v for k, v in d["effects"].items() if k not in DISPLAY_KEYS}}

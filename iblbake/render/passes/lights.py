@@ -1,0 +1,73 @@
+"""Lights: analytic lights (directional, point, spot; KHR_lights_punctual units) shaded with the
+IBL's BRDF and shadowed as each light asks, added into `radiance` (kernels/lights.cl; twin:
+iblbake/render/twin.py lights). In a reference frame (every term the scene renders is
+`reference`) a light with a size is integrated over its disk or sphere, traced with the
+reference's visibility."""
+
+from __future__ import annotations
+
+import time
+
+from iblbake.render.passes.base import Pass, geometry_defines
+from iblbake.scene import pack
+
+
+def exact(fx) -> bool:
+    return all(m == "reference" for m in (fx.diffuse, fx.specular) if m != "off")
+
+
+def shadow_rays_per_sample(scene, fx) -> int:
+    """Shadow rays one G-buffer sample traces (the planned count: a miss traces none)."""
+    if exact(fx):
+        if not scene.data["effects"]["reference"]["visibility"]:
+            return 0
+        return sum(scene.data["effects"]["reference"]["max_samples"] if _size(lt) > 0 else 1
+                   for lt in scene.data["lights"])
+    return sum({"none": 0, "hard": 1}.get(lt["shadows"], lt["shadow_samples"] if _size(lt) > 0 else 1)
+               for lt in scene.data["lights"])
+
+
+def _size(lt) -> float:
+    return lt["directional"]["angular_diameter"] if "directional" in lt else next(
+        lt[k]["radius"] for k in ("point", "spot") if k in lt)
+
+
+class Lights(Pass):
+    name = "lights"
+    kernel = "lights.cl"
+    reads = ("gb_pos", "gb_nrm", "gb_dir", "materials", "spheres", "planes", "bvh", "tris")
+    writes = ("radiance",)
+
+    def runs(self, scene, fx):
+        return bool(scene.data["lights"]) and (fx.diffuse != "off" or fx.specular != "off")
+
+    def defines(self, scene, fx):
+        d = {}
+        if fx.diffuse != "off":
+            d["LIGHT_DIFFUSE"] = 1
+        if fx.specular != "off":
+            d["LIGHT_SPECULAR"] = 1
+        if exact(fx):
+            d["LIGHTS_EXACT"] = 1
+            if scene.data["effects"]["reference"]["visibility"]:
+                d.update(VISIBILITY=1, **geometry_defines(scene))
+        elif any(lt["shadows"] != "none" for lt in scene.data["lights"]):
+            d.update(HAS_SHADOWS=1, **geometry_defines(scene))
+        return d
+
+    def setup(self, ctx) -> dict:
+        sc = ctx.scene
+        recs = pack.light_records(sc)
+        ref = sc.data["effects"]["reference"]
+        return {"lights": ctx.rt.to_device(recs.reshape(-1, 4)), "nlights": len(recs),
+                "light_seed": ref["seed"], "exact_samples": ref["max_samples"]}
+
+    def run(self, ctx):
+        n = ctx.table["n"]
+        t0 = time.perf_counter()
+        ctx.launch(self, (n,), **ctx.args[self.name])
+        ctx.rt.finish()
+        s = time.perf_counter() - t0
+        rays = shadow_rays_per_sample(ctx.scene, ctx.plan.effects)
+        return {"lights": ctx.args[self.name]["nlights"], "exact": exact(ctx.plan.effects),
+                "shadow_rays_per_sample": rays, "shadow_rays_per_s": round(n * rays / max(s, 1e-9))}

@@ -1,0 +1,132 @@
+/* Lights pass: analytic lights in the units of glTF's KHR_lights_punctual (lux for a directional
+ * light, candela for point and spot lights, the spec's range window and spot falloff), shaded
+ * with the IBL's BRDF (docs/conventions.md) and shadowed as each light asks, added into the
+ * radiance buffer. Records: kernels/layout.h LIGHT_FLOAT4S, packed by iblbake/scene/pack.py.
+ *   LIGHT_DIFFUSE, LIGHT_SPECULAR  the BRDF terms the scene renders
+ *   HAS_SHADOWS                    some light traces shadow rays (else none is traced)
+ *   LIGHTS_EXACT                   the reference: a light of size > 0 is integrated over its
+ *                                  disk (directional) or sphere by exact_samples seeded samples,
+ *                                  each shaded and, with VISIBILITY, traced
+ * Real time: the light's centre direction is shaded; hard shadows trace one ray to the centre,
+ * soft ones shadow_samples rays over the disk or sphere (the fraction that arrives).
+ * numpy twin: iblbake/render/twin.py lights(). */
+#include "common.h"
+#include "brdf.h"
+#include "sampling.h"
+#include "scene.h"
+#include "surface.h"
+
+/* f(v, l) NoL for a light direction l */
+inline float3 light_brdf_cos(const Material mt, float3 n, float3 v, float nov, float3 l)
+{
+    const float nol = dot(n, l);
+    if (nol <= 0.0f) return (float3)(0.0f);
+    float3 f = (float3)(0.0f);
+#ifdef LIGHT_DIFFUSE
+    f += diffuse_weight(mt, nov);
+#endif
+#ifdef LIGHT_SPECULAR
+    const float3 h = normalize(v + l);
+    f += d_ggx(dot(n, h), mt.alpha) * v_smith_ggx_correlated(nov, nol, mt.alpha) * f_schlick(dot(v, h), mt.f0);
+#endif
+    return f * nol;
+}
+
+/* Uniform in the cone around axis a whose 1 - cos(half angle) is omc (kept apart: the sun's is
+ * 1e-5, which 1 - cos in float32 would round); pdf 1 / (2 pi omc). */
+inline float3 cone_direction(float3 a, float omc, float2 u)
+{
+    const float x = u.x * omc;
+    const float ct = 1.0f - x, st = sqrt(fmax(0.0f, x * (2.0f - x))), phi = 2.0f * IBL_PI * u.y;
+    float3 t, b;
+    tangent_frame(a, &t, &b);
+    return normalize(t * (st * cos(phi)) + b * (st * sin(phi)) + a * ct);
+}
+
+__kernel void lights(__global const float4 *gb_pos, __global const float4 *gb_nrm, __global const float4 *gb_dir,
+                     const int n, __global const float4 *materials, __global const float4 *lights, const int nlights,
+                     SCENE_PARAMS, const int pixel0, const int spp, const uint light_seed, const int exact_samples,
+                     __global float4 *radiance)
+{
+    const int gid = get_global_id(0);
+    if (gid >= n) return;
+    const float4 hitp = gb_pos[gid];
+    if (hitp.w == MISS_T) return;
+    const uint sid = (uint)(pixel0 * spp + gid);
+    Material mt;
+    float3 v, nrm;
+    const float nov = surface_at(gb_nrm, gb_dir, materials, gid, &mt, &v, &nrm);
+    const float3 p = hitp.xyz;
+#if defined(HAS_SHADOWS) || (defined(LIGHTS_EXACT) && defined(VISIBILITY))
+    const float3 origin = ray_offset(p, nrm, gb_dir[gid].xyz, hitp.w);
+#endif
+    float3 color = (float3)(0.0f);
+    for (int j = 0; j < nlights; ++j) {
+        const float4 r0 = lights[LIGHT_FLOAT4S * j], r1 = lights[LIGHT_FLOAT4S * j + 1];
+        const float4 r2 = lights[LIGHT_FLOAT4S * j + 2], r3 = lights[LIGHT_FLOAT4S * j + 3];
+        const int kind = (int)r0.w;
+        float3 wc, e = r1.xyz;          /* towards the centre; irradiance facing it */
+        float dist = INFINITY, sin_max;
+        if (kind == LIGHT_DIRECTIONAL) {
+            wc = r0.xyz;
+            sin_max = sin(r2.w);
+        } else {
+            const float3 dv = r0.xyz - p;
+            const float d = length(dv);
+            wc = dv / d;
+            float win = 1.0f / (d * d);
+            if (r3.z > 0.0f) {           /* KHR: clamp(1 - (d / range)^4, 0, 1)^2 / d^2 */
+                float q = d / r3.z;
+                q = q * q;
+                const float c = clamp(1.0f - q * q, 0.0f, 1.0f);
+                win *= c * c;
+            }
+            const float a = clamp(dot(r2.xyz, -wc) * r3.x + r3.y, 0.0f, 1.0f);   /* spot (1 for a point) */
+            e *= win * a * a;
+            sin_max = fmin(r2.w / d, 1.0f);
+            dist = fmax(d - r2.w, 0.0f);
+        }
+        if (e.x + e.y + e.z <= 0.0f) continue;
+        const uint ls = light_seed ^ pcg_hash((uint)j + 1u);
+        /* 1 - cos of the cone the light fills, from its sine without cancellation */
+        const float omc = sin_max * sin_max / (1.0f + sqrt(fmax(0.0f, 1.0f - sin_max * sin_max)));
+#ifdef LIGHTS_EXACT
+        if (sin_max > 0.0f) {
+            /* radiance of the disk or sphere: E = Le pi sin^2 on a surface facing it */
+            const float3 le = e / (IBL_PI * sin_max * sin_max);
+            float3 acc = (float3)(0.0f);
+            for (int k = 0; k < exact_samples; ++k) {
+                const float3 l = cone_direction(wc, omc, (float2)(qmc(ls, sid, k, 0), qmc(ls, sid, k, 1)));
+#ifdef VISIBILITY
+                if (occluded_to(origin, l, dist, SCENE_ARGS)) continue;
+#endif
+                acc += light_brdf_cos(mt, nrm, v, nov, l);
+            }
+            color += le * (2.0f * IBL_PI * omc) * acc / (float)exact_samples;
+            continue;
+        }
+#ifdef VISIBILITY
+        if (occluded_to(origin, wc, dist, SCENE_ARGS)) continue;
+#endif
+        color += e * light_brdf_cos(mt, nrm, v, nov, wc);
+#else
+        float vis = 1.0f;
+#ifdef HAS_SHADOWS
+        const int shadows = (int)r1.w;
+        if (shadows == SHADOWS_HARD || (shadows == SHADOWS_SOFT && sin_max <= 0.0f)) {
+            vis = occluded_to(origin, wc, dist, SCENE_ARGS) ? 0.0f : 1.0f;
+        } else if (shadows == SHADOWS_SOFT) {
+            const int ns = (int)r3.w;
+            int lit = 0;
+            for (int k = 0; k < ns; ++k) {
+                const float3 l = cone_direction(wc, omc, (float2)(qmc(ls, sid, k, 0), qmc(ls, sid, k, 1)));
+                lit += !occluded_to(origin, l, dist, SCENE_ARGS);
+            }
+            vis = (float)lit / (float)ns;
+        }
+#endif
+        color += vis * e * light_brdf_cos(mt, nrm, v, nov, wc);
+#endif
+    }
+    radiance[gid] += (float4)(color, 0.0f);   /* lighting passes add */
+}
