@@ -69,9 +69,9 @@ def main():
         return compare(args)
     cache = Path(args.cache or tempfile.mkdtemp(prefix="iblbake-bench-"))
     if not args.json:
-        print("| configuration | end to end s | one runtime s | gbuffer s | lighting s | Mpixel-samples/s | "
+        print("| configuration | end to end s | one runtime s | gbuffer s | lighting s | lights s | Mpixel-samples/s | "
               "primary Mrays/s | BVH build s |")
-        print("|---|---|---|---|---|---|---|---|")
+        print("|---|---|---|---|---|---|---|---|---|")
     device = None
     for name, file, sets in CONFIGS:
         if args.only and args.only != name and (args.json or args.only not in name):
@@ -106,10 +106,11 @@ def main():
         mps = n * samples / max(med(light), 1e-9) / 1e6
         if args.json:
             print(json.dumps({"name": name, "end_s": statistics.median(ends), "light_s": med(light),
-                              "gbuffer_s": med("gbuffer")}), flush=True)
+                              "lights_s": med("lights"), "gbuffer_s": med("gbuffer")}), flush=True)
             continue
         one = f"{statistics.median(reused):.3f}" if reused else "-"
-        print(f"| {name} | {statistics.median(ends):.3f} | {one} | {med('gbuffer'):.3f} | {med(light):.3f} | {mps:.1f} | "
+        print(f"| {name} | {statistics.median(ends):.3f} | {one} | {med('gbuffer'):.3f} | {med(light):.3f} | "
+              f"{med('lights'):.4f} | {mps:.1f} | "
               f"{n / max(med('gbuffer'), 1e-9) / 1e6:.2f} | {geo.get('bvh_build_s', 0):.3f} |", flush=True)
     if args.json:
         return

@@ -97,19 +97,26 @@ __kernel void lights(__global const float4 *gb_pos, __global const float4 *gb_nr
             float3 acc = (float3)(0.0f);
             for (int k = 0; k < exact_samples; ++k) {
                 const float3 l = cone_direction(wc, omc, (float2)(qmc(ls, sid, k, 0), qmc(ls, sid, k, 1)));
+                const float3 f = light_brdf_cos(mt, nrm, v, nov, l);
+                if (f.x + f.y + f.z <= 0.0f) continue;      /* below the horizon: no ray */
 #ifdef VISIBILITY
                 if (occluded_to(origin, l, dist, SCENE_ARGS)) continue;
 #endif
-                acc += light_brdf_cos(mt, nrm, v, nov, l);
+                acc += f;
             }
             color += le * (2.0f * IBL_PI * omc) * acc / (float)exact_samples;
             continue;
         }
+        const float3 f = light_brdf_cos(mt, nrm, v, nov, wc);
+        if (f.x + f.y + f.z <= 0.0f) continue;
 #ifdef VISIBILITY
         if (occluded_to(origin, wc, dist, SCENE_ARGS)) continue;
 #endif
-        color += e * light_brdf_cos(mt, nrm, v, nov, wc);
+        color += e * f;
 #else
+        /* a surface facing away from the light traces no shadow ray */
+        const float3 f = light_brdf_cos(mt, nrm, v, nov, wc);
+        if (f.x + f.y + f.z <= 0.0f) continue;
         float vis = 1.0f;
 #ifdef HAS_SHADOWS
         const int shadows = (int)r1.w;
@@ -125,7 +132,7 @@ __kernel void lights(__global const float4 *gb_pos, __global const float4 *gb_nr
             vis = (float)lit / (float)ns;
         }
 #endif
-        color += vis * e * light_brdf_cos(mt, nrm, v, nov, wc);
+        color += vis * e * f;
 #endif
     }
     radiance[gid] += (float4)(color, 0.0f);   /* lighting passes add */

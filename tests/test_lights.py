@@ -205,7 +205,7 @@ def test_lights_match_numpy(busy, effects):
     gb = rr.primary(sc["camera"], arrays)
     from iblbake.render.passes.lights import exact
     from iblbake.render.plan import effect_modes
-    want = rr.lights(gb, arrays, pack.light_records(sc), sc["effects"], exact=exact(effect_modes(sc)))
+    want = rr.lights(gb, arrays, pack.light_records(sc["lights"]), sc["effects"], exact=exact(effect_modes(sc)))
     same = gb["hit"] & (frame.hdr[..., 3].reshape(-1) == 1)
     got = frame.hdr[..., :3].reshape(-1, 3)[same]
     w = want[same]
@@ -242,3 +242,63 @@ def test_bad_spot_cone_is_one_line(tmp_path, black_env):
     from iblbake.errors import InputError
     with pytest.raises(InputError, match=r"lights\.0\.spot\.inner_cone_angle"):
         scene.load(p)
+
+
+# --- the panorama's sun ------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("name", ["city", "interior", "sunrise"])
+def test_sun_extraction_keeps_the_energy(load_panorama, name):
+    """Sun light + residual panorama on a plane facing the sun = the original's irradiance (0.1%:
+    only the cosine spread over the disk differs); the direction within one texel of the
+    brightest texel's centre."""
+    from iblbake.bake import sh as shbake
+    from iblbake.bake import sun as sunbake
+    from iblbake.core import conventions
+
+    img = load_panorama(name)
+    residual, s = sunbake.extract(img)
+    assert s is not None and s.angular_diameter <= sunbake.MAX_DIAMETER
+    n = np.array([s.direction])
+    orig = shbake.exact_irradiance(img.astype(np.float64), n)[0]
+    rest = shbake.exact_irradiance(residual.astype(np.float64), n)[0]
+    sun_e = s.illuminance * np.array(s.color)
+    assert np.abs((rest + sun_e) / orig - 1).max() < 1e-3, (rest + sun_e, orig)
+    h, w = img.shape[:2]
+    lum = img[..., :3] @ sunbake.LUM
+    r, c = np.unravel_index(np.argmax(lum), lum.shape)
+    brightest = conventions.equirect_texel_dirs(w, h)[r, c]
+    assert math.acos(min(1.0, float(brightest @ n[0]))) < math.pi / h
+    assert 0 < s.energy_fraction < 1 and (residual <= img[..., :3] + 1e-6).all()
+
+
+@pytest.mark.parametrize("name", ["courtyard", "forest", "studio", "sunset"])
+def test_sunless_panoramas_extract_nothing(load_panorama, name):
+    from iblbake.bake import sun as sunbake
+    img = load_panorama(name)
+    residual, s = sunbake.extract(img)
+    assert s is None and np.array_equal(residual, img[..., :3].astype(np.float32))
+
+
+def test_extracted_sun_casts_a_shadow(tmp_path, panoramas):
+    """city with sun: extract: the lights pass reports the sun, and where the sphere's shadow
+    falls the plane loses exactly the sun's direct light, E cos(theta) kD albedo / pi (1%; SH
+    diffuse has no occlusion, so nothing else changes)."""
+    results = {}
+    for with_ball in (True, False):
+        sc = top_view_scene(tmp_path, panoramas["city"], [], effects={"diffuse": "sh", "specular": "off"}, res=64,
+                            objects=[{"sphere": {"center": [0, 0.8, 0], "radius": 0.4}, "material": "floor"}]
+                            if with_ball else None)
+        sc.data["environment"]["sun"] = "extract"
+        fr = render.render(sc, cache_root=tmp_path / "cache")
+        results[with_ball] = fr
+    lp = next(p for p in results[True].report["passes"] if p["name"] == "lights")
+    d = np.array(lp["sun"]["light_direction_world"])           # the way the sunlight travels
+    assert lp["sun"]["angular_diameter_deg"] < 6 and d[1] < 0
+    # where the sphere centre's shadow lands on y = 0, in pixels of the top view
+    hit = np.array([0, 0.8, 0]) + d * (0.8 / -d[1])
+    col = int((hit[0] + WIDTH / 2) / WIDTH * 64)
+    row = int((hit[2] + WIDTH / 2) / WIDTH * 64)
+    assert 0 <= row < 64 and 0 <= col < 64
+    lost = results[False].hdr[row, col, :3] - results[True].hdr[row, col, :3]
+    sun_e = lp["sun"]["illuminance"] * np.array(lp["sun"]["color"]) * -d[1]
+    assert np.abs(lost / lambert(sun_e) - 1).max() < 0.01, (lost, lambert(sun_e))

@@ -55,11 +55,33 @@ class Bakes:
         return self._get(key, make), held
 
     def environment(self, env: dict):
-        """(image, info), read once per file content (path, size, mtime) and policies."""
+        """(image, info), read once per file content (path, size, mtime) and policies. With
+        `sun: extract`, the panorama without its sun, its info's hash that of what is left (every
+        bake keys on it)."""
         st = os.stat(env["path"])
         key = ("env", env["path"], st.st_size, st.st_mtime_ns, env["nonfinite"], env["negative"])
-        return self._get(key, lambda: images.read_panorama(env["path"], nonfinite=env["nonfinite"],
-                                                           negative=env["negative"], names=POLICY_KEYS))
+        image, info = self._get(key, lambda: images.read_panorama(env["path"], nonfinite=env["nonfinite"],
+                                                                  negative=env["negative"], names=POLICY_KEYS))
+        if env.get("sun") != "extract":
+            return image, info
+        return self._get(key + ("sun",), lambda: self._extract(image, info))[:2]
+
+    def _extract(self, image, info):
+        import dataclasses
+        import hashlib
+
+        from iblbake.bake import sun as sunbake
+        residual, found = sunbake.extract(image)
+        tag = hashlib.sha256(f"{info.sha256}:sun-extract:{sunbake.PEAK}:{sunbake.THRESHOLD}:{sunbake.RING}".encode())
+        return residual, dataclasses.replace(info, sha256=tag.hexdigest()), found
+
+    def sun(self, env: dict):
+        """The extracted sun of the scene's panorama (bake/sun.py), or None."""
+        if env.get("sun") != "extract":
+            return None
+        self.environment(env)
+        st = os.stat(env["path"])
+        return self._memo[("env", env["path"], st.st_size, st.st_mtime_ns, env["nonfinite"], env["negative"], "sun")][2]
 
     def geometry(self, sc, warn=None):
         """The scene's device records; its meshes' triangles and BVH from the cache, keyed by each

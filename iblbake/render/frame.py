@@ -100,6 +100,7 @@ class Context:
         self.args: dict = {}
         self.loaded: dict = {}
         self.image = None
+        self.background_image = None
 
     def launch(self, p, global_size, **args):
         files, defines = self.plan.program(p)
@@ -187,10 +188,14 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
     arrays = bakes.geometry(scene, ctx.warn)
     geo = dict(arrays.geometry_report)
     rep.bake("geometry", time.perf_counter() - t0, geo.pop("cached", False), **geo)
-    needs_env = bool(pl.bakes) or pl.effects.background in ("show", "blur")
+    extract = d["environment"]["sun"] == "extract" and "lights" in pl.pass_names
+    needs_env = bool(pl.bakes) or pl.effects.background in ("show", "blur") or extract
     if needs_env:                     # read only when some bake or pass reads it
         t0 = time.perf_counter()
         ctx.image, info = bakes.environment(d["environment"])
+        # the background shows the sky as it is (an extracted sun stays visible in it)
+        ctx.background_image = bakes.environment({**d["environment"], "sun": "none"})[0] \
+            if d["environment"]["sun"] == "extract" else ctx.image
         for w in info.warnings:
             ctx.warn(w)
         rep.bake("read_environment", time.perf_counter() - t0, False, path=info.path,

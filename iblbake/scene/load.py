@@ -261,6 +261,10 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "blur": Num(0.0, 0.0, 1.0, doc="show the background through the prefiltered level of this roughness (0: sharp)"),
         "nonfinite": Enum(("error", "zero", "clamp"), "error", doc="NaN/Inf texels: fail, zero or clamp"),
         "negative": Enum(("keep", "clamp", "error"), "keep", doc="negative texels: keep, clamp to 0, or fail"),
+        "sun": Enum(("none", "extract"), "none",
+                    doc="extract: the panorama's sun (a compact region 1e4 x brighter than the median) leaves the "
+                        "panorama and comes back as a directional light of exactly its energy, so it casts shadows"),
+        "sun_shadows": Enum(("hard", "soft", "none"), "hard", doc="the extracted sun's shadows"),
     }),
     "materials": MapOf(doc="named materials", section=Section(doc="a metallic-roughness material", fields={
         "base_color": Vec(**VEC3, default=[0.8, 0.8, 0.8], lo=0.0, hi=1.0, doc="linear RGB albedo / F0 of metals"),

@@ -121,14 +121,15 @@ def mesh_arrays(scene: Scene):
     return arr, nodes, report
 
 
-def light_records(scene: Scene) -> np.ndarray:
-    """(lights, LIGHT float4s, 4) float32 (layout.FLOAT4S["LIGHT"]): what kernels/lights.cl reads.
+def light_records(lights: list) -> np.ndarray:
+    """(lights, LIGHT float4s, 4) float32 (layout.FLOAT4S["LIGHT"]) of validated `lights:` entries
+    (render adds the extracted sun): what kernels/lights.cl reads.
     KHR_lights_punctual's spot falloff: a = clamp(cos(angle to the axis) scale + offset, 0, 1)^2,
     scale = 1 / max(1e-3, cos(inner) - cos(outer)), offset = -cos(outer) scale."""
     from iblbake.scene.layout import LIGHT_KINDS, SHADOW_MODES
 
-    out = np.zeros((len(scene.data["lights"]), FLOAT4S["LIGHT"], 4), np.float32)
-    for i, lt in enumerate(scene.data["lights"]):
+    out = np.zeros((len(lights), FLOAT4S["LIGHT"], 4), np.float32)
+    for i, lt in enumerate(lights):
         kind = next(k for k in LIGHT_KINDS if k in lt)
         p = lt[kind]
         r = out[i]

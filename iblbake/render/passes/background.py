@@ -35,7 +35,7 @@ class Background(Pass):
             levels = ctx.loaded["prefiltered"]
             chain, lod = ctx.chain(levels), env["blur"] * (len(levels) - 1)
         else:
-            chain = ctx.chain([ctx.image])
+            chain = ctx.chain([ctx.background_image])
         return {"color": color, "lod": lod, **chain}
 
     def run(self, ctx):

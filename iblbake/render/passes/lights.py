@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import time
 
+import numpy as np
+
 from iblbake.render.passes.base import Pass, geometry_defines
 from iblbake.scene import pack
 
@@ -16,15 +18,29 @@ def exact(fx) -> bool:
     return all(m == "reference" for m in (fx.diffuse, fx.specular) if m != "off")
 
 
-def shadow_rays_per_sample(scene, fx) -> int:
+def frame_lights(scene, sun) -> list:
+    """The scene's lights, and the panorama's extracted sun (bake/sun.py) as a directional light
+    in world space, scaled like the panorama."""
+    out = list(scene.data["lights"])
+    if sun is not None:
+        from iblbake.core import conventions
+        env = scene.data["environment"]
+        d = conventions.rotate_y(sun.direction, env["rotation_y"])
+        out.append({"directional": {"direction": [-x for x in d], "color": sun.color,
+                                    "illuminance": sun.illuminance * env["intensity"],
+                                    "angular_diameter": sun.angular_diameter},
+                    "shadows": env["sun_shadows"], "shadow_samples": 16})
+    return out
+
+
+def shadow_rays_per_sample(scene, fx, lights) -> int:
     """Shadow rays one G-buffer sample traces (the planned count: a miss traces none)."""
     if exact(fx):
         if not scene.data["effects"]["reference"]["visibility"]:
             return 0
-        return sum(scene.data["effects"]["reference"]["max_samples"] if _size(lt) > 0 else 1
-                   for lt in scene.data["lights"])
+        return sum(scene.data["effects"]["reference"]["max_samples"] if _size(lt) > 0 else 1 for lt in lights)
     return sum({"none": 0, "hard": 1}.get(lt["shadows"], lt["shadow_samples"] if _size(lt) > 0 else 1)
-               for lt in scene.data["lights"])
+               for lt in lights)
 
 
 def _size(lt) -> float:
@@ -39,7 +55,8 @@ class Lights(Pass):
     writes = ("radiance",)
 
     def runs(self, scene, fx):
-        return bool(scene.data["lights"]) and (fx.diffuse != "off" or fx.specular != "off")
+        has = bool(scene.data["lights"]) or scene.data["environment"]["sun"] == "extract"
+        return has and (fx.diffuse != "off" or fx.specular != "off")
 
     def defines(self, scene, fx):
         d = {}
@@ -51,16 +68,19 @@ class Lights(Pass):
             d["LIGHTS_EXACT"] = 1
             if scene.data["effects"]["reference"]["visibility"]:
                 d.update(VISIBILITY=1, **geometry_defines(scene))
-        elif any(lt["shadows"] != "none" for lt in scene.data["lights"]):
+        elif any(lt["shadows"] != "none" for lt in scene.data["lights"]) or (
+                scene.data["environment"]["sun"] == "extract" and scene.data["environment"]["sun_shadows"] != "none"):
             d.update(HAS_SHADOWS=1, **geometry_defines(scene))
         return d
 
     def setup(self, ctx) -> dict:
         sc = ctx.scene
-        recs = pack.light_records(sc)
+        ctx.sun = ctx.bakes.sun(sc.data["environment"])
+        ctx.frame_lights = frame_lights(sc, ctx.sun)
+        recs = pack.light_records(ctx.frame_lights)
         ref = sc.data["effects"]["reference"]
-        return {"lights": ctx.rt.to_device(recs.reshape(-1, 4)), "nlights": len(recs),
-                "light_seed": ref["seed"], "exact_samples": ref["max_samples"]}
+        return {"lights": ctx.rt.to_device(recs.reshape(-1, 4) if len(recs) else np.zeros((4, 4), np.float32)),
+                "nlights": len(recs), "light_seed": ref["seed"], "exact_samples": ref["max_samples"]}
 
     def run(self, ctx):
         n = ctx.table["n"]
@@ -68,6 +88,10 @@ class Lights(Pass):
         ctx.launch(self, (n,), **ctx.args[self.name])
         ctx.rt.finish()
         s = time.perf_counter() - t0
-        rays = shadow_rays_per_sample(ctx.scene, ctx.plan.effects)
+        rays = shadow_rays_per_sample(ctx.scene, ctx.plan.effects, ctx.frame_lights)
+        extra = {}
+        if getattr(ctx, "sun", None) is not None:     # what was extracted; the light's direction in world space
+            extra["sun"] = {**ctx.sun.to_json(), "light_direction_world": [
+                round(x, 6) for x in ctx.frame_lights[-1]["directional"]["direction"]]}
         return {"lights": ctx.args[self.name]["nlights"], "exact": exact(ctx.plan.effects),
-                "shadow_rays_per_sample": rays, "shadow_rays_per_s": round(n * rays / max(s, 1e-9))}
+                "shadow_rays_per_sample": rays, "shadow_rays_per_s": round(n * rays / max(s, 1e-9)), **extra}

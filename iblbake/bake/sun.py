@@ -1,0 +1,114 @@
+"""The panorama's sun as a light (`environment.sun: extract`).
+
+A panorama has a sun when its brightest texel is PEAK times its median luminance or more; the
+sun is then the connected region (8-neighbours, wrapping in azimuth) of texels brighter than
+THRESHOLD times the median that holds that texel, if it is compact (a disk of at most
+MAX_DIAMETER degrees: a softbox or a bright sky patch is not a sun). Its texels are
+replaced by the level of its surroundings (the mean of the ring of texels around it, RING
+texels wide), and exactly the removed energy comes back as a directional light: illuminance per
+channel E_c = sum over the region of (L_c - fill_c) dOmega (what a surface facing the sun
+receives from it, to the cosine spread over the disk: 1 - cos of half a degree is 4e-5), the
+direction the removed energy's centroid, the angular diameter that of a disk of the region's
+solid angle. A panorama with no texel above the threshold has no sun: nothing is extracted.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from iblbake.core import conventions
+
+# Blender's panoramas, peak / median luminance: city 6e4, interior 1e5, sunrise 3e5, night 3e5
+# (a lamp: extracted, 4.1 degrees); forest 9e3, sunset 7e3, courtyard 1e3: no sun; studio 2e4 but
+# its softbox spans 14 degrees: not a sun
+PEAK = 1e4
+THRESHOLD = 100.0
+MAX_DIAMETER = 6.0       # degrees (the sun's 0.53 spreads over 1.5-4.4 in a 1024x512 panorama)
+RING = 2
+MAX_TEXELS = 1 << 16     # the region search stops here (a bright sky, not a disk)
+LUM = np.array([0.2126, 0.7152, 0.0722])
+
+
+@dataclass
+class Sun:
+    direction: list          # unit, from the scene towards the sun (the panorama's frame)
+    color: list              # linear RGB, luminance 1: illuminance x color = E per channel
+    illuminance: float       # luminance-weighted E (lux for a panorama in nits)
+    angular_diameter: float  # degrees
+    texels: int
+    energy_fraction: float   # of the panorama's luminance x solid angle
+
+    def to_json(self) -> dict:
+        return {"direction": [round(x, 6) for x in self.direction], "color": [round(x, 6) for x in self.color],
+                "illuminance": self.illuminance, "angular_diameter_deg": round(self.angular_diameter, 4),
+                "texels": self.texels, "energy_fraction": round(self.energy_fraction, 6)}
+
+
+def _region(mask: np.ndarray, seed: tuple) -> np.ndarray:
+    """The 8-connected component of mask holding seed, wrapping in azimuth (columns)."""
+    h, w = mask.shape
+    out = np.zeros_like(mask)
+    stack = [seed]
+    out[seed] = True
+    while stack:
+        r, c = stack.pop()
+        for dr in (-1, 0, 1):
+            rr = r + dr
+            if rr < 0 or rr >= h:
+                continue
+            for dc in (-1, 0, 1):
+                cc = (c + dc) % w
+                if mask[rr, cc] and not out[rr, cc]:
+                    out[rr, cc] = True
+                    stack.append((rr, cc))
+        if len(stack) > MAX_TEXELS:
+            break
+    return out
+
+
+def _dilate(region: np.ndarray, k: int) -> np.ndarray:
+    out = region.copy()
+    for _ in range(k):
+        grown = out.copy()
+        grown[1:] |= out[:-1]
+        grown[:-1] |= out[1:]
+        grown |= np.roll(out, 1, axis=1) | np.roll(out, -1, axis=1)
+        out = grown
+    return out
+
+
+def extract(image) -> tuple[np.ndarray, Sun | None]:
+    """(residual panorama, Sun or None). The image is (H, W, 3) linear RGB."""
+    img = np.asarray(image, np.float64)[..., :3]
+    h, w = img.shape[:2]
+    lum = img @ LUM
+    median = float(np.median(lum))
+    peak = np.unravel_index(int(np.argmax(lum)), lum.shape)
+    none = (np.asarray(image, np.float32), None)
+    if lum[peak] <= 0 or lum[peak] < PEAK * max(median, 0.0):
+        return none
+    region = _region(lum > THRESHOLD * median, peak)
+    n = int(region.sum())
+    om = conventions.equirect_solid_angles(w, h)
+    solid = float(om[region].sum())
+    half = math.acos(max(-1.0, 1.0 - solid / (2 * math.pi)))
+    if n > MAX_TEXELS or math.degrees(2 * half) > MAX_DIAMETER:
+        return none
+    ring = _dilate(region, RING) & ~region
+    fill = img[ring].mean(axis=0)
+    removed = np.maximum(img[region] - fill, 0.0)           # per texel and channel
+    e = (removed * om[region][:, None]).sum(axis=0)           # E per channel, facing the sun
+    dirs = conventions.equirect_texel_dirs(w, h)[region]
+    centroid = ((removed @ LUM)[:, None] * om[region][:, None] * dirs).sum(axis=0)
+    direction = centroid / np.linalg.norm(centroid)
+    residual = img.copy()
+    residual[region] = np.minimum(img[region], fill)          # never brighter than it was
+    total = float(((img @ LUM) * om).sum())
+    illum = float(e @ LUM)
+    sun = Sun(direction=direction.tolist(), color=(e / illum).tolist() if illum > 0 else [1.0, 1.0, 1.0],
+              illuminance=illum, angular_diameter=math.degrees(2 * half), texels=n,
+              energy_fraction=float((removed @ LUM * om[region]).sum()) / total if total > 0 else 0.0)
+    return residual.astype(np.float32), sun
