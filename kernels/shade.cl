@@ -3,6 +3,8 @@
  *   SPECULAR_MODE SPECULAR_IMPORTANCE (IMPORTANCE_ACCEPTED, FORCE_MIP0) or SPECULAR_PREFILTERED
  *                 (DOMINANT_DIRECTION) or SPECULAR_LOBE or off
  *   HAS_EMISSIVE  emission
+ *   HAS_AO        ambient occlusion (the ao pass's ao_buf) on the diffuse term, Lagarde's specular
+ *                 occlusion on the specular term
  * numpy twin: iblbake/render/twin.py shade(). */
 #include "common.h"
 #include "brdf.h"
@@ -35,6 +37,13 @@ inline float2 dfg_lookup(__global const float2 *dfg, const int dfg_size, float n
 }
 #endif
 
+/* Specular occlusion from ambient occlusion (Lagarde and de Rousiers 2014, "Moving Frostbite to
+ * PBR", computeSpecOcclusion): saturate((NoV + ao)^(2^(-16 r - 1)) - 1 + ao). */
+inline float specular_occlusion(float nov, float ao, float roughness)
+{
+    return clamp(pow(nov + ao, exp2(-16.0f * roughness - 1.0f)) - 1.0f + ao, 0.0f, 1.0f);
+}
+
 /* Where a rough lobe really points: between N and R (Lagarde and de Rousiers 2014, Frostbite,
  * getSpecularDominantDir with their alpha). The split sum reads its prefiltered chain there. */
 inline float3 dominant_direction(float3 n, float3 r, float a)
@@ -49,7 +58,7 @@ __kernel void shade(__global const float4 *gb_pos, __global const float4 *gb_nrm
                     __global const float4 *chain, __constant int *off, __constant int *lw, __constant int *lh,
                     const int nlev,
                     __global const float4 *hammersley_pts, const int nsamples, const float mip_bias, const float lobe_spread,
-                    __global const float2 *dfg, const int dfg_size,
+                    __global const float2 *dfg, const int dfg_size, __global const float *ao_buf,
                     __global float4 *radiance)
 {
     const int gid = get_global_id(0);
@@ -59,11 +68,16 @@ __kernel void shade(__global const float4 *gb_pos, __global const float4 *gb_nrm
     float3 v, nrm;
     const float nov = surface_at(gb_nrm, gb_dir, materials, gid, &mt, &v, &nrm);
     float3 color = (float3)(0.0f);
+#ifdef HAS_AO
+    const float diff_occ = ao_buf[gid], spec_occ = specular_occlusion(nov, diff_occ, mt.roughness);
+#else
+    const float diff_occ = 1.0f, spec_occ = 1.0f;
+#endif
 #ifdef HAS_EMISSIVE
     color += mt.emissive;
 #endif
 #if DIFFUSE_MODE == DIFFUSE_SH
-    color += diffuse_weight(mt, nov) * env_scale * sh_irradiance(sh_coeffs, to_env(nrm, env_rot));
+    color += diff_occ * diffuse_weight(mt, nov) * env_scale * sh_irradiance(sh_coeffs, to_env(nrm, env_rot));
 #endif
 #if SPECULAR_MODE == SPECULAR_IMPORTANCE
     {
@@ -97,9 +111,9 @@ __kernel void shade(__global const float4 *gb_pos, __global const float4 *gb_nrm
             acc += li * f_schlick(voh, mt.f0) * (v_smith_ggx_correlated(nov, nol, mt.alpha) * 4.0f * nol * voh / noh);
         }
 #ifdef IMPORTANCE_ACCEPTED
-        color += env_scale * acc / (float)max(accepted, 1);
+        color += spec_occ * env_scale * acc / (float)max(accepted, 1);
 #else
-        color += env_scale * acc / (float)nsamples;
+        color += spec_occ * env_scale * acc / (float)nsamples;
 #endif
     }
 #elif SPECULAR_MODE == SPECULAR_PREFILTERED
@@ -113,7 +127,7 @@ __kernel void shade(__global const float4 *gb_pos, __global const float4 *gb_nrm
         const float3 pre = chain_lookup(chain, off, lw, lh, nlev, to_env(r, env_rot),
                                         mt.roughness * (float)(nlev - 1));
         const float2 ab = dfg_lookup(dfg, dfg_size, nov, mt.roughness);
-        color += env_scale * pre * (mt.f0 * ab.x + ab.y);
+        color += spec_occ * env_scale * pre * (mt.f0 * ab.x + ab.y);
     }
 #elif SPECULAR_MODE == SPECULAR_LOBE
     {
@@ -146,7 +160,7 @@ __kernel void shade(__global const float4 *gb_pos, __global const float4 *gb_nrm
         const float2 ab = dfg_lookup(dfg, dfg_size, nov, mt.roughness);
         const float3 li = den.x > 0.0f ? num / den
             : chain_lookup(chain, off, lw, lh, nlev, to_env(2.0f * nov * nrm - v, env_rot), mt.roughness * (float)(nlev - 1));
-        color += env_scale * li * (mt.f0 * ab.x + ab.y);
+        color += spec_occ * env_scale * li * (mt.f0 * ab.x + ab.y);
     }
 #endif
     radiance[gid] += (float4)(color, 0.0f);   /* lighting passes add */

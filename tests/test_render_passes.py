@@ -156,12 +156,13 @@ def test_every_kernel_parameter_is_bound_by_name():
     from iblbake.render.passes import PASSES
     table = {"cam", "width", "height", "spp", "jitter", "spheres", "nspheres", "planes", "nplanes", "bvh",
              "tris", "ntris", "materials", "env_rot", "env_scale", "gb_pos", "gb_nrm", "gb_dir", "radiance",
-             "hdr", "png_u8", "display", "aov_normal", "aov_albedo", "aov_depth", "n", "npix", "pixel0"}
+             "hdr", "png_u8", "display", "aov_normal", "aov_albedo", "aov_depth", "n", "npix", "pixel0", "ao_buf"}
     own = {"shade": {"sh_coeffs", "chain", "off", "lw", "lh", "nlev", "hammersley_pts", "nsamples", "mip_bias", "lobe_spread",
                      "dfg", "dfg_size"},
            "background": {"color", "lod", "chain", "off", "lw", "lh", "nlev"},
            "reference": {"img", "w", "h", "marginal", "conditional", "pdf_table", "seed", "first", "batch", "out"},
            "lights": {"lights", "nlights", "light_seed", "exact_samples"},
+           "ao": {"ao_seed", "ao_samples", "ao_radius"},
            "tonemap": {"exposure_scale", "gamma", "out", "display"}}
     for p in PASSES:
         names = {n for n, _ in runtime.kernel_params(p.kernel, p.function or p.name)}

@@ -143,7 +143,8 @@ def tile_rows(rt, scene: Scene, pl: Plan, device_budget: int | None = None) -> i
     the frame on the host, does not fit."""
     w, h = scene.data["camera"]["resolution"]
     spp = scene.data["camera"]["spp"]
-    per_sample = SAMPLE_BYTES + (REFERENCE_SAMPLE_BYTES if "reference" in pl.pass_names else 0)
+    per_sample = SAMPLE_BYTES + (REFERENCE_SAMPLE_BYTES if "reference" in pl.pass_names else 0) + \
+        (4 if "ao" in pl.pass_names else 0)
     row = w * (spp * per_sample + PIXEL_BYTES)
     largest_row_buffer = w * spp * 16               # one per-sample buffer of one row
     dev = rt.info.device
@@ -259,6 +260,7 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
         n = npix * spp
         if ctx.table.get("npix") != npix:         # (re)allocate for this tile size
             ctx.table.update({name: rt.empty(n * 16) for name in ("gb_pos", "gb_nrm", "gb_dir", "radiance")})
+            ctx.table["ao_buf"] = rt.empty(n * 4 if "ao" in pl.pass_names else 16)
             ctx.table.update({"hdr": rt.empty(npix * 16), "png_u8": rt.empty(npix * 4),
                               "display": rt.empty(npix * 16)})
             ctx.table.update({"aov_normal": rt.empty(npix * 16 if aov else 16),
@@ -275,7 +277,7 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
             extra = p.run(ctx)
             rep.run(p.name, time.perf_counter() - t0, **extra)
     if reuse is not None:
-        buffers = ("gb_pos", "gb_nrm", "gb_dir", "radiance", "hdr", "png_u8", "display", "aov_normal",
+        buffers = ("gb_pos", "gb_nrm", "gb_dir", "radiance", "ao_buf", "hdr", "png_u8", "display", "aov_normal",
                    "aov_albedo", "aov_depth", "npix")
         reuse.state = None if len(row0s) > 1 else {
             "runtime": rt, "shape": (width, height, spp), "keys": keys,

@@ -184,17 +184,21 @@ def diffuse_weight(base, metallic, rough, f0, nov):
     return kd * base / math.pi
 
 
-def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, prefiltered=None, dfg=None):
-    """Per-sample radiance of the `shade` pass (hits only; misses are 0)."""
+def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, prefiltered=None, dfg=None,
+          ao=None):
+    """Per-sample radiance of the `shade` pass (hits only; misses are 0); `ao` the ambient
+    occlusion of every sample (ambient_occlusion) where effects.ao is on."""
     hit = gb["hit"]
     out = np.zeros((len(hit), 3))
     v, n, nov, (base, metallic, emissive, rough, f0) = surface(gb, arrays)
     alpha = rough ** 2
     rot, scale = env["rotation_y"], env["intensity"]
     color = emissive.copy()
+    occ = ao[hit] if ao is not None else np.ones(len(n))
+    spec_occ = specular_occlusion(nov, occ, rough)[:, None]
     if effects["diffuse"] == "sh":
         e = np.maximum(sh.evaluate(sh_coeffs, to_env(n, rot), effects["sh_bands"]), 0.0)
-        color += diffuse_weight(base, metallic, rough, f0, nov) * scale * e
+        color += occ[:, None] * diffuse_weight(base, metallic, rough, f0, nov) * scale * e
     if effects["specular"] == "importance":
         nsamp = effects["samples"]
         pts = sampling.hammersley(nsamp).astype(np.float32).astype(np.float64)
@@ -224,7 +228,7 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
             acc += np.where(ok[:, None], contrib, 0.0)
             accepted += ok
         div = np.maximum(accepted, 1)[:, None] if effects["normalize"] == "accepted" else nsamp
-        color += scale * acc / div
+        color += spec_occ * scale * acc / div
     elif effects["specular"] == "prefiltered":
         r = 2 * (n * v).sum(1, keepdims=True) * n - v
         if effects["prefilter"]["dominant_direction"]:
@@ -233,11 +237,38 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
             r /= np.linalg.norm(r, axis=1, keepdims=True)
         pre = radiance.chain_lookup_twin(prefiltered, to_env(r, rot), rough * (len(prefiltered) - 1))
         ab = dfg_lookup(dfg, nov, rough)
-        color += scale * pre * (f0 * ab[:, 0:1] + ab[:, 1:2])
+        color += spec_occ * scale * pre * (f0 * ab[:, 0:1] + ab[:, 1:2])
     elif effects["specular"] == "lobe":
-        color += scale * lobe(v, n, nov, alpha, rough, f0, rot, effects["lobe"]["samples"],
+        color += spec_occ * scale * lobe(v, n, nov, alpha, rough, f0, rot, effects["lobe"]["samples"],
                               effects["lobe"]["spread"], prefiltered, dfg)
     out[hit] = color
+    return out
+
+
+def specular_occlusion(nov, ao, roughness):
+    """Twin of shade.cl specular_occlusion (Lagarde and de Rousiers 2014)."""
+    return np.clip((nov + ao) ** np.exp2(-16 * roughness - 1) - 1 + ao, 0, 1)
+
+
+def ambient_occlusion(gb, arrays, effects: dict):
+    """Twin of kernels/ao.cl: per G-buffer sample (misses 1) the fraction of ao_samples
+    cosine-weighted rays with no hit closer than ao_radius."""
+    hit = gb["hit"]
+    out = np.ones(len(hit))
+    v = -gb["dir"][hit]
+    n = facing_normal(gb["normal"][hit], v)
+    origin = ray_offset(gb["pos"][hit], n, gb["dir"][hit], gb["t"][hit])
+    t, b = conventions.tangent_frame(n)
+    sid = np.flatnonzero(hit)
+    seed = effects["reference"]["seed"] ^ 0x5A0
+    k_n = effects["ao_samples"]
+    open_ = np.zeros(len(sid))
+    for k in range(k_n):
+        u = np.stack([sampling.qmc(seed, sid, k, 0), sampling.qmc(seed, sid, k, 1)], -1)
+        l = sampling.sample_cosine_hemisphere(u)
+        d = t * l[:, 0:1] + b * l[:, 1:2] + n * l[:, 2:3]
+        open_ += ~occluded(origin, d, arrays, effects["ao_radius"])
+    out[hit] = open_ / k_n
     return out
 
 

@@ -375,6 +375,11 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
             "visibility": Bool(True, doc="trace a shadow ray for every sample: the occluded integral (false: "
                                          "every object lit as if alone)"),
         }),
+        "ao": Enum(("off", "raytraced"), "off",
+                   doc="ambient occlusion of the IBL: raytraced (cosine-weighted rays within ao_radius through the "
+                       "BVH) multiplies the diffuse IBL, and Lagarde's specular occlusion the specular IBL"),
+        "ao_radius": Num(1.0, 0.0, lo_open=True, doc="ao: how far an occluder counts (scene units)"),
+        "ao_samples": Num(16, 1, 4096, integer=True, doc="ao: rays per G-buffer sample (stratified, seeded)"),
         "tonemap": Enum(("aces", "reinhard", "hable", "pbr_neutral", "linear"), "aces", doc="tone-mapping operator"),
         "exposure": Num(0.0, -32.0, 32.0, doc="exposure in EV (radiance x 2^EV before the operator)"),
         "output_transfer": Enum(("srgb", "gamma"), "srgb", doc="display encoding"),

@@ -14,7 +14,7 @@ from iblbake.render.passes.base import Pass, mode_defines
 class Shade(Pass):
     name = "shade"
     kernel = "shade.cl"
-    reads = ("gb_pos", "gb_nrm", "gb_dir", "materials")
+    reads = ("gb_pos", "gb_nrm", "gb_dir", "materials", "ao_buf")
     writes = ("radiance",)
 
     def runs(self, scene, fx):
@@ -39,6 +39,8 @@ class Shade(Pass):
             d["DOMINANT_DIRECTION"] = 1
         if fx.emissive:
             d["HAS_EMISSIVE"] = 1
+        if e["ao"] == "raytraced":
+            d["HAS_AO"] = 1
         return d
 
     def setup(self, ctx) -> dict:
