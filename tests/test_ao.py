@@ -105,3 +105,18 @@ def test_ao_gating(tmp_path, white):
                                              "reference": {"max_samples": 4, "target_noise": 0}})
     fr = render.render(sc, cache_root=tmp_path / "cache")
     assert "ao" not in fr.report["effects"]["passes"]          # the reference traces true visibility
+
+
+def test_a_series_switching_ao_on_reuses_safely(tmp_path, white):
+    """Frames of one series (a sheet's cells: one runtime, Reuse) switching AO and AOVs on grow
+    those buffers instead of writing past them: the second frame equals its own fresh render."""
+    from iblbake.device.runtime import Runtime
+    rt, bakes, reuse = Runtime(), render.Bakes(tmp_path / "cache"), render.Reuse()
+    sc_off = side_view(tmp_path, white, effects={"ao": "off"}, res=48)
+    render.render(sc_off, runtime=rt, cache=bakes, reuse=reuse)
+    sc_on = side_view(tmp_path, white, sphere={"center": [0, 1.0, 0], "radius": 0.5},
+                      effects={"ao_samples": 32}, res=48)
+    sc_on.data["output"]["albedo"] = str(tmp_path / "a.exr")
+    series = render.render(sc_on, runtime=rt, cache=bakes, reuse=reuse)
+    fresh = render.render(sc_on, cache_root=tmp_path / "cache")
+    assert np.array_equal(series.hdr, fresh.hdr) and np.array_equal(series.aovs["albedo"], fresh.aovs["albedo"])

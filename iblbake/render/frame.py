@@ -258,14 +258,17 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
         ctx.tile_rows = min(rows, height - ctx.row0)
         npix = ctx.tile_rows * width
         n = npix * spp
-        if ctx.table.get("npix") != npix:         # (re)allocate for this tile size
-            ctx.table.update({name: rt.empty(n * 16) for name in ("gb_pos", "gb_nrm", "gb_dir", "radiance")})
-            ctx.table["ao_buf"] = rt.empty(n * 4 if "ao" in pl.pass_names else 16)
-            ctx.table.update({"hdr": rt.empty(npix * 16), "png_u8": rt.empty(npix * 4),
-                              "display": rt.empty(npix * 16)})
-            ctx.table.update({"aov_normal": rt.empty(npix * 16 if aov else 16),
-                              "aov_albedo": rt.empty(npix * 16 if aov else 16),
-                              "aov_depth": rt.empty(npix * 4 if aov else 16)})
+        # (re)allocate each buffer whose size this tile and plan need differs from what the table
+        # holds (a series of frames reusing buffers may switch AO or AOVs on: their buffers grow,
+        # and the passes writing them run, being new or redefined)
+        sizes = {"gb_pos": n * 16, "gb_nrm": n * 16, "gb_dir": n * 16, "radiance": n * 16,
+                 "ao_buf": n * 4 if "ao" in pl.pass_names else 16,
+                 "hdr": npix * 16, "png_u8": npix * 4, "display": npix * 16,
+                 "aov_normal": npix * 16 if aov else 16, "aov_albedo": npix * 16 if aov else 16,
+                 "aov_depth": npix * 4 if aov else 16}
+        for name, nbytes in sizes.items():
+            if name not in ctx.table or ctx.table[name].size != nbytes:
+                ctx.table[name] = rt.empty(nbytes)
         ctx.table.update({"n": n, "npix": npix, "pixel0": ctx.row0 * width})
         if any(p.name in run for p in pl.passes if "radiance" in p.writes):
             rt.cl.enqueue_fill_buffer(rt.queue, ctx.table["radiance"], np.float32(0), 0, n * 16)
