@@ -58,13 +58,18 @@ class Bakes:
         """(image, info), read once per file content (path, size, mtime) and policies. With
         `sun: extract`, the panorama without its sun, its info's hash that of what is left (every
         bake keys on it)."""
-        st = os.stat(env["path"])
-        key = ("env", env["path"], st.st_size, st.st_mtime_ns, env["nonfinite"], env["negative"])
+        key = self._env_key(env)
         image, info = self._get(key, lambda: images.read_panorama(env["path"], nonfinite=env["nonfinite"],
                                                                   negative=env["negative"], names=POLICY_KEYS))
         if env.get("sun") != "extract":
             return image, info
         return self._get(key + ("sun",), lambda: self._extract(image, info))[:2]
+
+    @staticmethod
+    def _env_key(env: dict) -> tuple:
+        """A panorama file's content as far as a read can tell (path, size, mtime), and its policies."""
+        st = os.stat(env["path"])
+        return ("env", env["path"], st.st_size, st.st_mtime_ns, env["nonfinite"], env["negative"])
 
     def _extract(self, image, info):
         import dataclasses
@@ -80,8 +85,7 @@ class Bakes:
         if env.get("sun") != "extract":
             return None
         self.environment(env)
-        st = os.stat(env["path"])
-        return self._memo[("env", env["path"], st.st_size, st.st_mtime_ns, env["nonfinite"], env["negative"], "sun")][2]
+        return self._memo[self._env_key(env) + ("sun",)][2]
 
     def geometry(self, sc, warn=None):
         """The scene's device records; its meshes' triangles and BVH from the cache, keyed by each

@@ -264,8 +264,7 @@ def ambient_occlusion(gb, arrays, effects: dict):
     k_n = effects["ao_samples"]
     open_ = np.zeros(len(sid))
     for k in range(k_n):
-        u = np.stack([sampling.qmc(seed, sid, k, 0), sampling.qmc(seed, sid, k, 1)], -1)
-        l = sampling.sample_cosine_hemisphere(u)
+        l = sampling.sample_cosine_hemisphere(_qmc2(seed, sid, k))
         d = t * l[:, 0:1] + b * l[:, 1:2] + n * l[:, 2:3]
         open_ += ~occluded(origin, d, arrays, effects["ao_radius"])
     out[hit] = open_ / k_n
@@ -318,6 +317,11 @@ def light_brdf_cos(base, metallic, rough, f0, n, v, nov, l, diffuse: bool, specu
     return np.where((nol > 0)[:, None], out * np.maximum(nol, 0)[:, None], 0.0)
 
 
+def _qmc2(seed, sid, k):
+    """Sample k of the 2D stream of each sample sid (kernels/sampling.h qmc, dimensions 0 and 1)."""
+    return np.stack([sampling.qmc(seed, sid, k, 0), sampling.qmc(seed, sid, k, 1)], -1)
+
+
 def _cone_direction(a, omc, u):
     x = u[..., 0] * omc
     ct, st, phi = 1 - x, np.sqrt(np.maximum(0, x * (2 - x))), 2 * np.pi * u[..., 1]
@@ -360,19 +364,11 @@ def lights(gb, arrays, records, effects: dict, *, diffuse=True, specular=True, e
         ns = effects["reference"]["max_samples"] if exact else int(r[3, 3])
         mode = int(r[1, 3])
 
-        def visible_fraction(count):
-            lit = np.zeros(len(p))
-            for k in range(count):
-                u = np.stack([sampling.qmc(ls, sid, k, 0), sampling.qmc(ls, sid, k, 1)], -1)
-                lit += ~occluded(origin, _cone_direction(wc, omc, u), arrays, dist)
-            return lit / count
-
         if exact and (sin_max > 0).any():
             le = e / (np.pi * sin_max ** 2)[:, None]
             acc = np.zeros((len(p), 3))
             for k in range(ns):
-                u = np.stack([sampling.qmc(ls, sid, k, 0), sampling.qmc(ls, sid, k, 1)], -1)
-                l = _cone_direction(wc, omc, u)
+                l = _cone_direction(wc, omc, _qmc2(ls, sid, k))
                 ok = ~occluded(origin, l, arrays, dist) if visibility else np.ones(len(p), bool)
                 acc += np.where(ok[:, None], shade(l), 0.0)
             color += le * (2 * np.pi * omc)[:, None] * acc / ns
@@ -381,8 +377,9 @@ def lights(gb, arrays, records, effects: dict, *, diffuse=True, specular=True, e
             vis = (~occluded(origin, wc, arrays, dist)).astype(float) if visibility else np.ones(len(p))
         elif mode == 1 or (mode == 2 and (sin_max <= 0).all()):
             vis = (~occluded(origin, wc, arrays, dist)).astype(float)
-        elif mode == 2:
-            vis = visible_fraction(ns)
+        elif mode == 2:             # soft: the share of ns rays over the disk or sphere that arrive
+            vis = sum(~occluded(origin, _cone_direction(wc, omc, _qmc2(ls, sid, k)), arrays, dist)
+                      for k in range(ns)) / ns
         else:
             vis = np.ones(len(p))
         color += vis[:, None] * e * shade(wc)

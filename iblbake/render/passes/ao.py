@@ -4,8 +4,6 @@ iblbake/render/twin.py ambient_occlusion)."""
 
 from __future__ import annotations
 
-import time
-
 from iblbake.render.passes.base import Pass, geometry_defines
 
 
@@ -35,9 +33,6 @@ class AmbientOcclusion(Pass):
 
     def run(self, ctx):
         n = ctx.table["n"]
-        t0 = time.perf_counter()
-        ctx.launch(self, (n,), **ctx.args[self.name])
-        ctx.rt.finish()
-        s = time.perf_counter() - t0
+        s = self.launch_samples(ctx)
         k = ctx.args[self.name]["ao_samples"]
         return {"rays_per_sample": k, "rays_per_s": round(n * k / max(s, 1e-9))}

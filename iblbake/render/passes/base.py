@@ -4,6 +4,8 @@ run() carries it out against the render context. Lighting passes only add into `
 
 from __future__ import annotations
 
+import time
+
 from iblbake.render.plan import Effects
 from iblbake.scene.load import Scene
 
@@ -40,6 +42,14 @@ class Pass:
     def run(self, ctx) -> dict:
         """Do the work of one tile; returns report fields beyond the name and seconds."""
         raise NotImplementedError
+
+    def launch_samples(self, ctx) -> float:
+        """Run this pass's kernel over every G-buffer sample of the tile with its setup()
+        arguments, to completion; the seconds it took (for its rates in the report)."""
+        t0 = time.perf_counter()
+        ctx.launch(self, (ctx.table["n"],), **ctx.args[self.name])
+        ctx.rt.finish()
+        return time.perf_counter() - t0
 
 
 def geometry_defines(scene: Scene) -> dict:

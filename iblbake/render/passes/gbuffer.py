@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import time
-
 from iblbake.render.passes.base import Pass, geometry_defines
 
 
@@ -23,8 +21,5 @@ class GBuffer(Pass):
 
     def run(self, ctx):
         n = ctx.table["n"]
-        t0 = time.perf_counter()
-        ctx.launch(self, (n,))
-        ctx.rt.finish()
-        s = time.perf_counter() - t0
+        s = self.launch_samples(ctx)
         return {"primary_rays": n, "rays_per_s": round(n / max(s, 1e-9))}

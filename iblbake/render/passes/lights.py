@@ -6,8 +6,6 @@ reference's visibility."""
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
 from iblbake.render.passes.base import Pass, geometry_defines
@@ -84,10 +82,7 @@ class Lights(Pass):
 
     def run(self, ctx):
         n = ctx.table["n"]
-        t0 = time.perf_counter()
-        ctx.launch(self, (n,), **ctx.args[self.name])
-        ctx.rt.finish()
-        s = time.perf_counter() - t0
+        s = self.launch_samples(ctx)
         rays = shadow_rays_per_sample(ctx.scene, ctx.plan.effects, ctx.frame_lights)
         extra = {}
         if getattr(ctx, "sun", None) is not None:     # what was extracted; the light's direction in world space

@@ -3,8 +3,6 @@ emission), added into `radiance` (kernels/shade.cl; twin: iblbake/render/twin.py
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
 from iblbake.core import sampling
@@ -65,9 +63,6 @@ class Shade(Pass):
 
     def run(self, ctx):
         n, args = ctx.table["n"], ctx.args[self.name]
-        t0 = time.perf_counter()
-        ctx.launch(self, (n,), **args)
-        ctx.rt.finish()
-        s = time.perf_counter() - t0
+        s = self.launch_samples(ctx)
         extra = {"samples": args["nsamples"]} if ctx.plan.effects.specular in ("importance", "lobe") else {}
         return {"mpixel_samples_per_s": round(n * args["nsamples"] / max(s, 1e-9) / 1e6, 2), **extra}
