@@ -51,6 +51,7 @@ CONFIGS = [
     ("mesh, sun hard shadows", "mesh.yaml", [SUN + "shadows: hard}]"]),
     ("mesh, sun soft shadows 4", "mesh.yaml", [SUN + "shadows: soft, shadow_samples: 4}]"]),
     ("mesh, sun soft shadows 16", "mesh.yaml", [SUN + "shadows: soft, shadow_samples: 16}]"]),
+    ("mesh, gtao", "mesh.yaml", ["effects.ao=gtao", "effects.ao_radius=1"]),
     ("mesh, raytraced AO 16", "mesh.yaml", ["effects.ao=raytraced", "effects.ao_samples=16", "effects.ao_radius=1"]),
     ("mesh, raytraced AO 64", "mesh.yaml", ["effects.ao=raytraced", "effects.ao_samples=64", "effects.ao_radius=1"]),
 ]
@@ -112,7 +113,7 @@ def main():
             continue
         one = f"{statistics.median(reused):.3f}" if reused else "-"
         print(f"| {name} | {statistics.median(ends):.3f} | {one} | {med('gbuffer'):.3f} | {med(light):.3f} | "
-              f"{med('lights') + med('ao'):.4f} | {mps:.1f} | "
+              f"{med('lights') + med('ao') + med('gtao'):.4f} | {mps:.1f} | "
               f"{n / max(med('gbuffer'), 1e-9) / 1e6:.2f} | {geo.get('bvh_build_s', 0):.3f} |", flush=True)
     if args.json:
         return

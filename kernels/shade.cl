@@ -3,8 +3,8 @@
  *   SPECULAR_MODE SPECULAR_IMPORTANCE (IMPORTANCE_ACCEPTED, FORCE_MIP0) or SPECULAR_PREFILTERED
  *                 (DOMINANT_DIRECTION) or SPECULAR_LOBE or off
  *   HAS_EMISSIVE  emission
- *   HAS_AO        ambient occlusion (the ao pass's ao_buf) on the diffuse term, Lagarde's specular
- *                 occlusion on the specular term
+ *   HAS_AO        ambient occlusion (the ao or gtao pass's ao_buf) on the diffuse term (AO_MULTIBOUNCE:
+ *                 through the multi-bounce fit), Lagarde's specular occlusion on the specular term
  * numpy twin: iblbake/render/twin.py shade(). */
 #include "common.h"
 #include "brdf.h"
@@ -41,7 +41,16 @@ inline float2 dfg_lookup(__global const float2 *dfg, const int dfg_size, float n
  * PBR", computeSpecOcclusion): saturate((NoV + ao)^(2^(-16 r - 1)) - 1 + ao). */
 inline float specular_occlusion(float nov, float ao, float roughness)
 {
-    return clamp(pow(nov + ao, exp2(-16.0f * roughness - 1.0f)) - 1.0f + ao, 0.0f, 1.0f);
+    /* exp2(e log2 x) for pow(x, e), x >= 1e-4: PoCL's pow costs more than the rest of the pass */
+    return clamp(exp2(exp2(-16.0f * roughness - 1.0f) * log2(nov + ao)) - 1.0f + ao, 0.0f, 1.0f);
+}
+
+/* Multi-bounce AO (Jimenez et al. 2016, "Practical Real-Time Strategies for Accurate Indirect
+ * Occlusion", eq. 10): a cubic in the visibility fitted per albedo to ray-traced interreflection. */
+inline float3 ao_multibounce(float ao, float3 albedo)
+{
+    const float3 a = 2.0404f * albedo - 0.3324f, b = -4.7951f * albedo + 0.6417f, c = 2.7552f * albedo + 0.6903f;
+    return fmax((float3)(ao), ((ao * a + b) * ao + c) * ao);
 }
 
 /* Where a rough lobe really points: between N and R (Lagarde and de Rousiers 2014, Frostbite,
@@ -69,7 +78,12 @@ __kernel void shade(__global const float4 *gb_pos, __global const float4 *gb_nrm
     const float nov = surface_at(gb_nrm, gb_dir, materials, gid, &mt, &v, &nrm);
     float3 color = (float3)(0.0f);
 #ifdef HAS_AO
-    const float diff_occ = ao_buf[gid], spec_occ = specular_occlusion(nov, diff_occ, mt.roughness);
+    const float spec_occ = specular_occlusion(nov, ao_buf[gid], mt.roughness);
+#ifdef AO_MULTIBOUNCE
+    const float3 diff_occ = ao_multibounce(ao_buf[gid], mt.base * (1.0f - mt.metallic));
+#else
+    const float diff_occ = ao_buf[gid];
+#endif
 #else
     const float diff_occ = 1.0f, spec_occ = 1.0f;
 #endif

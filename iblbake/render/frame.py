@@ -102,9 +102,10 @@ class Context:
         self.image = None
         self.background_image = None
 
-    def launch(self, p, global_size, **args):
+    def launch(self, p, global_size, function=None, **args):
+        """Run pass p's kernel (or another `function` of its program) over global_size."""
         files, defines = self.plan.program(p)
-        return self.rt.launch(files, p.function or p.name, defines, global_size, self.table, **args)
+        return self.rt.launch(files, function or p.function or p.name, defines, global_size, self.table, **args)
 
     def chain(self, levels) -> dict:
         return self.bakes.chain(self.rt, levels)
@@ -137,6 +138,10 @@ def _host_bytes_available() -> int | None:
     return min(limits) if limits else None
 
 
+def has_ao(pl: Plan) -> bool:
+    return bool({"ao", "gtao"} & set(pl.pass_names))
+
+
 def tile_rows(rt, scene: Scene, pl: Plan, device_budget: int | None = None) -> int:
     """Rows of pixels per tile: the whole frame where its buffers fit the device, else the most
     that do. Fails in one line (naming camera.resolution and camera.spp) where even one row, or
@@ -144,8 +149,8 @@ def tile_rows(rt, scene: Scene, pl: Plan, device_budget: int | None = None) -> i
     w, h = scene.data["camera"]["resolution"]
     spp = scene.data["camera"]["spp"]
     per_sample = SAMPLE_BYTES + (REFERENCE_SAMPLE_BYTES if "reference" in pl.pass_names else 0) + \
-        (4 if "ao" in pl.pass_names else 0)
-    row = w * (spp * per_sample + PIXEL_BYTES)
+        (4 if has_ao(pl) else 0)
+    row = w * (spp * per_sample + PIXEL_BYTES + (4 + 48 if "gtao" in pl.pass_names else 0))
     largest_row_buffer = w * spp * 16               # one per-sample buffer of one row
     dev = rt.info.device
     budget = device_budget if device_budget is not None else int(dev.global_mem_size * DEVICE_SHARE)
@@ -262,7 +267,7 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
         # holds (a series of frames reusing buffers may switch AO or AOVs on: their buffers grow,
         # and the passes writing them run, being new or redefined)
         sizes = {"gb_pos": n * 16, "gb_nrm": n * 16, "gb_dir": n * 16, "radiance": n * 16,
-                 "ao_buf": n * 4 if "ao" in pl.pass_names else 16,
+                 "ao_buf": n * 4 if has_ao(pl) else 16,
                  "hdr": npix * 16, "png_u8": npix * 4, "display": npix * 16,
                  "aov_normal": npix * 16 if aov else 16, "aov_albedo": npix * 16 if aov else 16,
                  "aov_depth": npix * 4 if aov else 16}

@@ -238,6 +238,11 @@ CAMERA_COMMON = {
     "up": Vec(**VEC3, default=[0.0, 1.0, 0.0], nonzero=True, doc="up direction"),
 }
 
+# gtao's search, as benchmarks/tune_gtao.py chose it: the lowest AO error against 1024-ray
+# raytraced AO over the two example scenes of that script (README: GTAO)
+GTAO_DEFAULTS = {"slices": 2, "steps": 6, "radius_scale": 2.0, "falloff": 0.6, "power": 1.3, "denoise": 2,
+                 "resolution": "half"}
+
 SCHEMA = Section(doc="a scene", required=("environment",), fields={
     "camera": Section(doc="the camera", exclusive=("perspective", "orthographic"), fields={
         "perspective": Section(required=("position",), doc="pinhole camera", fields={
@@ -375,11 +380,28 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
             "visibility": Bool(True, doc="trace a shadow ray for every sample: the occluded integral (false: "
                                          "every object lit as if alone)"),
         }),
-        "ao": Enum(("off", "raytraced"), "off",
-                   doc="ambient occlusion of the IBL: raytraced (cosine-weighted rays within ao_radius through the "
-                       "BVH) multiplies the diffuse IBL, and Lagarde's specular occlusion the specular IBL"),
+        "ao": Enum(("off", "gtao", "raytraced"), "off",
+                   doc="ambient occlusion of the IBL: gtao (screen-space horizons, Jimenez et al. 2016) or raytraced "
+                       "(cosine-weighted rays within ao_radius through the BVH) multiplies the diffuse IBL, and "
+                       "Lagarde's specular occlusion the specular IBL"),
         "ao_radius": Num(1.0, 0.0, lo_open=True, doc="ao: how far an occluder counts (scene units)"),
-        "ao_samples": Num(16, 1, 4096, integer=True, doc="ao: rays per G-buffer sample (stratified, seeded)"),
+        "ao_samples": Num(16, 1, 4096, integer=True, doc="ao raytraced: rays per G-buffer sample (stratified, seeded)"),
+        "ao_multibounce": Bool(False, doc="ao: Jimenez et al.'s multi-bounce fit in the albedo (brighter occlusion "
+                                          "on light surfaces; the reference has no interreflection, so off is closer)"),
+        "gtao": Section(doc="ao gtao: the screen-space search (defaults tuned against raytraced AO: "
+                            "benchmarks/tune_gtao.py)", fields={
+            "slices": Num(GTAO_DEFAULTS["slices"], 1, 64, integer=True, doc="half-planes through the view vector per pixel"),
+            "steps": Num(GTAO_DEFAULTS["steps"], 1, 64, integer=True, doc="depth samples per side of each slice"),
+            "radius_scale": Num(GTAO_DEFAULTS["radius_scale"], 0.0, 16.0, lo_open=True,
+                                doc="search radius over ao_radius (the screen sees only the front surfaces)"),
+            "falloff": Num(GTAO_DEFAULTS["falloff"], 0.0, 1.0, lo_open=True,
+                           doc="share of the radius over which an occluder's weight fades to 0"),
+            "power": Num(GTAO_DEFAULTS["power"], 0.0, 16.0, lo_open=True, doc="exponent on the raw visibility"),
+            "denoise": Num(GTAO_DEFAULTS["denoise"], 0, 8, integer=True,
+                           doc="denoise radius in blocks (the mean over (2r+1)^2 blocks on the same surface; 0: none)"),
+            "resolution": Enum(("half", "full"), GTAO_DEFAULTS["resolution"],
+                               doc="search once per 2x2 block of pixels (half) or per pixel (full)"),
+        }),
         "tonemap": Enum(("aces", "reinhard", "hable", "pbr_neutral", "linear"), "aces", doc="tone-mapping operator"),
         "exposure": Num(0.0, -32.0, 32.0, doc="exposure in EV (radiance x 2^EV before the operator)"),
         "output_transfer": Enum(("srgb", "gamma"), "srgb", doc="display encoding"),

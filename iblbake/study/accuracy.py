@@ -138,8 +138,9 @@ def default_ladder(sc, fx, device_kind: str = "GPU") -> list:
                                    ("soft 16", "soft", 16)):
                 rungs.append(Rung(term, f"shadows {label}", [v for i in range(len(lights)) for v in (
                     (f"lights.{i}.shadows", mode), (f"lights.{i}.shadow_samples", n))]))
-    for term in TERMS:                   # ray-traced AO on the approximate IBL (the reference has visibility)
+    for term in TERMS:                   # AO on the approximate IBL (the reference has visibility)
         if getattr(fx, term) in ("sh", "importance", "prefiltered", "lobe"):
+            rungs.append(Rung(term, "ao gtao", [("effects.ao", "gtao")]))
             for n in (16, 64):
                 rungs.append(Rung(term, f"ao raytraced {n}", [("effects.ao", "raytraced"), ("effects.ao_samples", n)]))
     for term in TERMS:                   # fewer reference samples: Monte Carlo's own trade

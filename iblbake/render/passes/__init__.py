@@ -1,7 +1,7 @@
 """The render passes, in the order they run. Each is one module with its kernel file; plan()
 asks every one whether the scene calls for it (iblbake/render/passes/base.py: the contract)."""
 
-from iblbake.render.passes.ao import AmbientOcclusion
+from iblbake.render.passes.ao import AmbientOcclusion, GroundTruthAO
 from iblbake.render.passes.background import Background
 from iblbake.render.passes.gbuffer import GBuffer
 from iblbake.render.passes.lights import Lights
@@ -10,4 +10,4 @@ from iblbake.render.passes.resolve import Resolve
 from iblbake.render.passes.shade import Shade
 from iblbake.render.passes.tonemap import Tonemap
 
-PASSES = (GBuffer(), AmbientOcclusion(), Shade(), Reference(), Lights(), Background(), Resolve(), Tonemap())
+PASSES = (GBuffer(), AmbientOcclusion(), GroundTruthAO(), Shade(), Reference(), Lights(), Background(), Resolve(), Tonemap())

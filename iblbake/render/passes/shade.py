@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from iblbake.core import sampling
+from iblbake.render.passes.ao import occludes_ibl
 from iblbake.render.passes.base import Pass, mode_defines
 
 
@@ -37,8 +38,10 @@ class Shade(Pass):
             d["DOMINANT_DIRECTION"] = 1
         if fx.emissive:
             d["HAS_EMISSIVE"] = 1
-        if e["ao"] == "raytraced":
+        if e["ao"] != "off" and occludes_ibl(fx):
             d["HAS_AO"] = 1
+            if e["ao_multibounce"] and fx.diffuse == "sh":
+                d["AO_MULTIBOUNCE"] = 1
         return d
 
     def setup(self, ctx) -> dict:
