@@ -7,7 +7,8 @@
  *   LIGHTS_EXACT                   the reference: a light of size > 0 is integrated over its
  *                                  disk (directional) or sphere by exact_samples seeded samples,
  *                                  each shaded and, with VISIBILITY, traced
- * Real time: the light's centre direction is shaded; hard shadows trace one ray to the centre,
+ * Real time: the light's centre direction is shaded (a light with a size: its specular term at
+ * the representative point); hard shadows trace one ray to the centre,
  * soft ones shadow_samples rays over the disk or sphere (the fraction that arrives).
  * numpy twin: iblbake/render/twin.py lights(). */
 #include "common.h"
@@ -16,20 +17,46 @@
 #include "scene.h"
 #include "surface.h"
 
-/* f(v, l) NoL for a light direction l */
-inline float3 light_brdf_cos(const Material mt, float3 n, float3 v, float nov, float3 l)
+/* The specular term of a light of angular radius asin(sin_max) at its representative point
+ * (Karis 2013, "Real Shading in Unreal Engine 4"): the direction of the light's disk closest to
+ * the mirror direction r, with the lobe's energy scaled by (alpha / alpha')^2. Karis widens alpha
+ * by the light's radius over twice its distance (sin_max / 2); over sqrt(VoH) more, the mirror
+ * limit is exact (D V at the widened peak is 1 / (pi alpha'^2 4 NoV), and NoV = VoH there): the
+ * highlight of a sphere light on a glossy plane seen at 17 degrees comes 0.84-0.96 of the exact
+ * integral's energy where the centre's is 0.94-1.0, its relative RMSE 0.2-0.3 where the
+ * centre's is 0.9-4.8 (tests/test_lights.py). *l becomes the direction, the energy is returned. */
+inline float representative_point(float3 n, float3 v, float3 *l, float sin_max, float alpha)
 {
-    const float nol = dot(n, l);
-    if (nol <= 0.0f) return (float3)(0.0f);
+    const float3 r = 2.0f * dot(n, v) * n - v;
+    const float3 c = dot(*l, r) * r - *l;            /* from the centre towards the mirror ray */
+    const float cl = length(c);
+    if (cl > 0.0f) *l = normalize(*l + c * fmin(sin_max / cl, 1.0f));
+    const float voh = fmax(dot(v, normalize(v + *l)), 1e-4f);
+    const float a = fmax(alpha, ALPHA_MIN);
+    const float wide = fmin(a + 0.5f * sin_max / sqrt(voh), 1.0f);
+    return (a / wide) * (a / wide);
+}
+
+/* f(v, l) NoL for a light of centre direction l; with sin_max > 0 the specular term at the
+ * light's representative point */
+inline float3 light_brdf_cos(const Material mt, float3 n, float3 v, float nov, float3 l, float sin_max)
+{
     float3 f = (float3)(0.0f);
 #ifdef LIGHT_DIFFUSE
-    f += diffuse_weight(mt, nov);
+    const float nol = dot(n, l);
+    if (nol > 0.0f) f += diffuse_weight(mt, nov) * nol;
 #endif
 #ifdef LIGHT_SPECULAR
-    const float3 h = normalize(v + l);
-    f += d_ggx(dot(n, h), mt.alpha) * v_smith_ggx_correlated(nov, nol, mt.alpha) * f_schlick(dot(v, h), mt.f0);
+    float3 ls = l;
+    const float energy = sin_max > 0.0f ? representative_point(n, v, &ls, sin_max, mt.alpha) : 1.0f;
+    const float nols = dot(n, ls);
+    if (nols > 0.0f) {
+        const float3 h = normalize(v + ls);
+        f += d_ggx(dot(n, h), mt.alpha) * v_smith_ggx_correlated(nov, nols, mt.alpha) * f_schlick(dot(v, h), mt.f0)
+             * (energy * nols);
+    }
 #endif
-    return f * nol;
+    return f;
 }
 
 /* Uniform in the cone around axis a whose 1 - cos(half angle) is omc (kept apart: the sun's is
@@ -97,7 +124,7 @@ __kernel void lights(__global const float4 *gb_pos, __global const float4 *gb_nr
             float3 acc = (float3)(0.0f);
             for (int k = 0; k < exact_samples; ++k) {
                 const float3 l = cone_direction(wc, omc, (float2)(qmc(ls, sid, k, 0), qmc(ls, sid, k, 1)));
-                const float3 f = light_brdf_cos(mt, nrm, v, nov, l);
+                const float3 f = light_brdf_cos(mt, nrm, v, nov, l, 0.0f);
                 if (f.x + f.y + f.z <= 0.0f) continue;      /* below the horizon: no ray */
 #ifdef VISIBILITY
                 if (occluded_to(origin, l, dist, SCENE_ARGS)) continue;
@@ -107,7 +134,7 @@ __kernel void lights(__global const float4 *gb_pos, __global const float4 *gb_nr
             color += le * (2.0f * IBL_PI * omc) * acc / (float)exact_samples;
             continue;
         }
-        const float3 f = light_brdf_cos(mt, nrm, v, nov, wc);
+        const float3 f = light_brdf_cos(mt, nrm, v, nov, wc, 0.0f);
         if (f.x + f.y + f.z <= 0.0f) continue;
 #ifdef VISIBILITY
         if (occluded_to(origin, wc, dist, SCENE_ARGS)) continue;
@@ -115,7 +142,7 @@ __kernel void lights(__global const float4 *gb_pos, __global const float4 *gb_nr
         color += e * f;
 #else
         /* a surface facing away from the light traces no shadow ray */
-        const float3 f = light_brdf_cos(mt, nrm, v, nov, wc);
+        const float3 f = light_brdf_cos(mt, nrm, v, nov, wc, sin_max);
         if (f.x + f.y + f.z <= 0.0f) continue;
         float vis = 1.0f;
 #ifdef HAS_SHADOWS

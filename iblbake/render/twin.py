@@ -447,19 +447,39 @@ def lobe(v, n, nov, alpha, rough, f0, rot, k, spread, prefiltered, dfg):
     return li * (f0 * ab[:, 0:1] + ab[:, 1:2])
 
 
-def light_brdf_cos(base, metallic, rough, f0, n, v, nov, l, diffuse: bool, specular: bool):
-    """Twin of kernels/lights.cl light_brdf_cos: f(v, l) NoL, per hit and colour channel."""
+def representative_point(n, v, l, sin_max, alpha):
+    """Twin of kernels/lights.cl representative_point: (direction, energy scale) per hit."""
+    r = 2 * (n * v).sum(-1, keepdims=True) * n - v
+    c = (l * r).sum(-1, keepdims=True) * r - l
+    cl = np.linalg.norm(c, axis=-1, keepdims=True)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ls = l + c * np.minimum(sin_max[:, None] / cl, 1)
+    ls = np.where(cl > 0, ls, l)
+    ls /= np.linalg.norm(ls, axis=-1, keepdims=True)
+    h = v + ls
+    voh = np.maximum((v * h).sum(-1) / np.linalg.norm(h, axis=-1), 1e-4)
+    a = np.maximum(alpha, brdf.ALPHA_MIN)
+    energy = (a / np.minimum(a + 0.5 * sin_max / np.sqrt(voh), 1)) ** 2
+    return np.where((sin_max > 0)[:, None], ls, l), np.where(sin_max > 0, energy, 1.0)
+
+
+def light_brdf_cos(base, metallic, rough, f0, n, v, nov, l, diffuse: bool, specular: bool, sin_max=None):
+    """Twin of kernels/lights.cl light_brdf_cos: f(v, l) NoL, per hit and colour channel; with
+    sin_max the specular term at the representative point of a light that size."""
     nol = (n * l).sum(-1)
     out = np.zeros(l.shape[:-1] + (3,))
     if diffuse:
-        out += diffuse_weight(base, metallic, rough, f0, nov)
+        out += np.where((nol > 0)[:, None], diffuse_weight(base, metallic, rough, f0, nov) * np.maximum(nol, 0)[:, None], 0)
     if specular:
-        h = v + l
-        h /= np.linalg.norm(h, axis=-1, keepdims=True)
         alpha = rough ** 2
-        out += (brdf.d_ggx((n * h).sum(-1), alpha) * brdf.v_smith_ggx_correlated(nov, np.maximum(nol, 0), alpha))[:, None] \
-            * brdf.f_schlick((v * h).sum(-1)[:, None], f0)
-    return np.where((nol > 0)[:, None], out * np.maximum(nol, 0)[:, None], 0.0)
+        ls, energy = representative_point(n, v, l, sin_max, alpha) if sin_max is not None else (l, 1.0)
+        nols = (n * ls).sum(-1)
+        h = v + ls
+        h /= np.linalg.norm(h, axis=-1, keepdims=True)
+        spec = (brdf.d_ggx((n * h).sum(-1), alpha) * brdf.v_smith_ggx_correlated(nov, np.maximum(nols, 0), alpha)
+                * energy * np.maximum(nols, 0))[:, None] * brdf.f_schlick((v * h).sum(-1)[:, None], f0)
+        out += np.where((nols > 0)[:, None], spec, 0)
+    return out
 
 
 def _qmc2(seed, sid, k):
@@ -475,9 +495,11 @@ def _cone_direction(a, omc, u):
     return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
 
-def lights(gb, arrays, records, effects: dict, *, diffuse=True, specular=True, exact=False, visibility=True):
+def lights(gb, arrays, records, effects: dict, *, diffuse=True, specular=True, exact=False, visibility=True,
+           representative=True):
     """Per-sample radiance of the `lights` pass (hits only; misses are 0): records from
-    scene.pack.light_records, effects the scene's (reference seed and max_samples)."""
+    scene.pack.light_records, effects the scene's (reference seed and max_samples);
+    representative=False shades a light with a size from its centre alone (for comparison)."""
     hit = gb["hit"]
     out = np.zeros((len(hit), 3))
     v, n, nov, (base, metallic, _, rough, f0) = surface(gb, arrays)
@@ -527,7 +549,8 @@ def lights(gb, arrays, records, effects: dict, *, diffuse=True, specular=True, e
                       for k in range(ns)) / ns
         else:
             vis = np.ones(len(p))
-        color += vis[:, None] * e * shade(wc)
+        color += vis[:, None] * e * light_brdf_cos(base, metallic, rough, f0, n, v, nov, wc, diffuse, specular,
+                                                   sin_max if representative and not exact else None)
     out[hit] = color
     return out
 
