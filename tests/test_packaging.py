@@ -49,3 +49,22 @@ def test_source_checkout_without_install_finds_the_kernels(tmp_path):
     p = subprocess.run([sys.executable, "-S", "-c", code], capture_output=True, text=True, cwd=tmp_path)
     assert p.returncode == 0, p.stderr[-2000:]
     assert int(p.stdout) > 1000
+
+
+HEAVY = ("numpy", "pyopencl", "OpenImageIO", "OpenEXR", "trimesh", "matplotlib", "yaml", "flip_evaluator")
+
+
+def test_help_imports_nothing_heavy():
+    """`iblbake --help` and every command's --help stay instant (Makefiles and shells call them
+    often): none of them imports numpy, pyopencl, OpenImageIO or any other heavy module."""
+    code = ("import contextlib, io, sys\n"
+            "from iblbake.entry import main\n"
+            "for args in ([], ['sh'], ['mips'], ['render'], ['sheet'], ['accuracy'], ['compare'], ['cache'], ['devices']):\n"
+            "    sys.argv = ['iblbake', *args, '--help']\n"
+            "    with contextlib.redirect_stdout(io.StringIO()):\n"
+            "        try: main()\n"
+            "        except SystemExit: pass\n"
+            f"print(sorted(m for m in {HEAVY!r} if m in sys.modules))\n")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert p.stdout.strip() == "[]", p.stdout

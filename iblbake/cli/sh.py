@@ -8,7 +8,6 @@ import os
 import time
 
 import click
-import numpy as np
 
 from iblbake.cli.options import (POLICY_FLAGS, Console, common_options, depfile_option, device_option, finite,
                                   input_options, non_negative)
@@ -138,6 +137,8 @@ def _project_one(env, output, state, bands, window, backend, rotate_y, intensity
                           device=device_label, timings=timings)
     if with_error:
         t0 = time.perf_counter()
+        import numpy as np
+
         doc["error"] = shbake.irradiance_error(image, np.asarray(doc["irradiance"]), bands, rotate_y, intensity)
         doc["timings"]["error_s"] = round(time.perf_counter() - t0, 6)
     doc["elapsed_s"] = round(time.perf_counter() - t_start, 6)
