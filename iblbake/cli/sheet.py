@@ -23,11 +23,23 @@ def _cell_size(ctx, param, value):
     return w, h
 
 
+def _shard(ctx, param, value):
+    if value is None:
+        return None
+    try:
+        i, n = (int(x) for x in value.split("/"))
+    except ValueError:
+        raise click.BadParameter(f"{value!r}: give I/N, e.g. 2/3") from None
+    if not 1 <= i <= n:
+        raise click.BadParameter(f"{value!r}: I from 1 to N")
+    return i, n
+
+
 @click.command("sheet")
 @click.argument("scene_path", metavar="SCENE")
-@click.option("--output", "-o", "outputs", multiple=True, type=click.Path(dir_okay=False), required=True,
+@click.option("--output", "-o", "outputs", multiple=True, type=click.Path(dir_okay=False),
               help="The sheet: .png (tone-mapped cells with title, axis labels and captions) or .exr (the "
-                   "linear cells, a mosaic without text); repeatable.")
+                   "linear cells, a mosaic without text); repeatable. Required but with --shard.")
 @click.option("--rows", "rows", default=None, metavar="KEY.PATH=SPEC",
               help="The row axis, replacing the scene's sweep.rows: KEY.PATH=start:stop:count (a range; "
                    "start:stop:count:log geometric) or KEY.PATH=v1,v2,... (values, as YAML).")
@@ -51,13 +63,26 @@ def _cell_size(ctx, param, value):
                    "`iblbake compare --layout` reads to compare sheets cell by cell).")
 @click.option("--keep-going", is_flag=True,
               help="Render the other cells when one fails, and mark it in the sheet (exit status still 1).")
+@click.option("--resume", is_flag=True,
+              help="Read back the cells an earlier run (killed, failed or a shard) left in the cache; "
+                   "render only the others. Every rendered cell is kept there, keyed by its content.")
+@click.option("--shard", default=None, callback=_shard, metavar="I/N",
+              help="Render only shard I of N (a stable partition of the cells by content, the same on "
+                   "every machine) into the cache, for CI matrices; then --assemble.")
+@click.option("--assemble", is_flag=True,
+              help="Render nothing: build the sheet from the cells the shards left in the cache (a "
+                   "one-line error names the missing ones).")
+@click.option("--jobs", "-j", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Worker processes rendering cells, each with its own OpenCL runtime on --device; bakes "
+                   "are built once in the shared cache. The sheet is the serial one, bit for bit.")
 @click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
               help="Bake cache folder. Default: $IBLBAKE_CACHE, else the per-user cache folder.")
 @depfile_option
 @device_option
 @common_options
 def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, label_format, caption, title,
-                  frames_dir, frames_exr, layout_path, keep_going, cache_dir, depfile, device, quiet, as_json):
+                  frames_dir, frames_exr, layout_path, keep_going, resume, shard, assemble, jobs, cache_dir, depfile,
+                  device, quiet, as_json):
     """Render every cell of the sweep of SCENE (its sweep: section, or --rows / --columns) in one
     process and assemble a contact sheet. Cells share the runtime, every bake, and the passes whose
     inputs they share (a material sweep traces primary rays once, a tone-mapping sweep lights once);
@@ -70,6 +95,10 @@ def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, labe
     from iblbake.study import sheet, sweep
 
     con = Console(quiet, as_json)
+    if shard and assemble:
+        raise click.UsageError("--shard renders one shard's cells, --assemble none: give one of them")
+    if not outputs and not shard:
+        raise click.UsageError("Missing option '--output' / '-o' (only --shard renders without a sheet)")
     for o in outputs:
         if Path(o).suffix.lower() not in (".png", ".exr"):
             raise click.BadParameter(f"{o}: the sheet is written as .png or .exr", param_hint="-o")
@@ -83,8 +112,26 @@ def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, labe
     rt = Runtime(device)
     bakes = render.Bakes(cache_dir)
     with con.stages([c.label or "cell" for c in cells], label="sheet") as step:
-        results = sheet.render_cells(scenes, cells, runtime=rt, bakes=bakes, warn=con.warn, progress=step,
-                                     keep_going=keep_going)
+        if jobs > 1 and not assemble:
+            if shard:
+                raise click.UsageError("--jobs renders every cell; a --shard runs in one process")
+            results = sheet.render_cells_parallel(scenes, cells, jobs, device=device, bakes=bakes, progress=step,
+                                                  keep_going=keep_going, resume=resume)
+        else:
+            results = sheet.render_cells(scenes, cells, runtime=rt, bakes=bakes, warn=con.warn, progress=step,
+                                         keep_going=keep_going, resume=resume, shard=shard, assemble=assemble)
+    if shard:
+        done = [r for r in results if r is not None]
+        failed = [r for r in done if r.error]
+        summary = {"scene": str(scene_path), "shard": list(shard), "device": rt.device_label,
+                   "cells": [r.to_json() for r in done], "of": len(results), "failed": len(failed),
+                   "elapsed_s": round(time.perf_counter() - t_start, 4)}
+        con.result(summary, f"shard {shard[0]}/{shard[1]}: {len(done)} of {len(results)} cells in the cache "
+                            f"{bakes.root} in {summary['elapsed_s']:.3f} s" + (f"; {len(failed)} failed" if failed else ""))
+        if failed:
+            raise IblbakeError(f"{len(failed)} cells of shard {shard[0]}/{shard[1]} failed; first: "
+                               f"{sheet.cell_name(failed[0].cell)}: {failed[0].error}")
+        return
     title = title or (base.data.get("sweep") or {}).get("title") or Path(scene_path).name
     lay = sheet.layout(results, rows_axis, cols_axis, title, caption)
     for o in outputs:

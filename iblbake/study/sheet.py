@@ -40,7 +40,7 @@ class CellResult:
         return {"row": self.cell.row, "column": self.cell.column, "label": self.cell.label,
                 "values": {k: v for k, v in self.cell.values}, "seconds": round(self.seconds, 4),
                 "pass_seconds": round(self.pass_seconds, 4),
-                "reused": rep.get("reused", []),
+                "reused": rep.get("reused", []), "cached": bool(rep.get("cell_cached")),
                 "bakes_cached": [b["name"] for b in rep.get("bakes", []) if b.get("cached")],
                 "passes": {p["name"]: p["seconds"] for p in rep.get("passes", [])},
                 "outputs": self.outputs, "error": self.error}
@@ -57,35 +57,129 @@ def cell_scenes(scene_path, overrides, cells, cell_size=None, keep_going=False):
             out.append(scene_load.load(scene_path, overrides, ["cell.png"], values=values, origin="sweep"))
         except IblbakeError as e:
             if not keep_going:
-                raise type(e)(f"cell (row {c.row}, column {c.column}: {c.label or 'base'}): {e}") from None
+                raise type(e)(f"cell ({cell_name(c)}): {e}") from None
             out.append(e)
     return out
 
 
-def render_cells(scenes, cells, *, runtime, bakes, warn=None, progress=None, keep_going=False):
+def cell_identity(sc) -> str:
+    """What a cell is, whatever renders it: its scene (every value, display settings too, not its
+    outputs), the content of every file it reads, and the renderer's kernel sources. Shards
+    partition cells by it, so every machine of a CI matrix agrees on who renders what."""
+    from iblbake.bake.cache import content_key
+    from iblbake.device.runtime import source_hash
+    from iblbake.io.images import file_sha256
+    from iblbake.render.passes import PASSES
+
+    data = {k: v for k, v in sc.data.items() if k not in ("output", "sweep")}
+    return content_key({"kind": "cell", "v": 1, "scene": data,
+                        "files": [file_sha256(f) for f in scene_load.input_files(sc)[1:]],
+                        "kernels": source_hash(tuple(dict.fromkeys(p.kernel for p in PASSES if p.kernel)))})
+
+
+def cell_key(identity: str, device_kind: str) -> str:
+    """The cache entry of a rendered cell: its identity on one kind of device (CPU and GPU round
+    differently, so each keeps its own frames)."""
+    from iblbake.bake.cache import content_key
+    return "cell-" + content_key({"cell": identity, "device": device_kind})
+
+
+def in_shard(identity: str, shard: tuple) -> bool:
+    """Shard (i, n), i from 1: a stable partition of the cells by identity."""
+    i, n = shard
+    return int(identity, 16) % n == i - 1
+
+
+def cached_cell(bakes, key: str):
+    """The render.Frame a cell's entry holds, or None (not rendered yet, or damaged)."""
     from iblbake import render
-    from iblbake.errors import DeviceError
+    from iblbake.bake import cache
+
+    entry = bakes.root / key
+    manifest = cache.verify(entry)
+    if manifest is None:
+        return None
+    return render.Frame(np.load(entry / "hdr.npy"), np.load(entry / "png.npy") if manifest["png"] else None,
+                        {}, {**manifest["report"], "cell_cached": True})
+
+
+def store_cell(bakes, key: str, frame, warn=None) -> None:
+    from iblbake.bake import cache
+
+    def build(tmp: Path):
+        np.save(tmp / "hdr.npy", frame.hdr)
+        files = [{"name": "hdr.npy"}]
+        if frame.png is not None:
+            np.save(tmp / "png.npy", np.ascontiguousarray(frame.png))
+            files.append({"name": "png.npy"})
+        return {"kind": "cell", "files": files, "png": frame.png is not None, "report": frame.report}
+
+    cache.get_or_build(bakes.root, key, build, warn=warn)
+
+
+def cell_name(c: sweep.Cell) -> str:
+    return f"row {c.row}, column {c.column}: {c.label or 'base'}"
+
+
+def render_cells(scenes, cells, *, runtime, bakes, warn=None, progress=None, keep_going=False, resume=False,
+                 shard=None, assemble=False):
+    """Every cell's CellResult. Each rendered cell is kept in the bake cache under its key; with
+    `resume` (or `assemble`) a cell found there is read back instead of rendered. `shard` (i, n)
+    renders only that shard's cells (the others' results are None); `assemble` renders nothing
+    and fails in one line naming the cells no shard has rendered."""
+    from iblbake import render
 
     reuse = render.Reuse()
     results = []
+    kind = runtime.info.kind if runtime is not None else None
+    if assemble:
+        missing = []
+        for sc, c in zip(scenes, cells):
+            r = CellResult(c)
+            if isinstance(sc, Exception):
+                r.error = str(sc)
+            else:
+                r.frame = cached_cell(bakes, cell_key(cell_identity(sc), kind))
+                if r.frame is None:
+                    missing.append(cell_name(c))
+            results.append(r)
+        if missing:
+            raise IblbakeError(f"--assemble: {len(missing)} of {len(cells)} cells are not in the cache "
+                               f"{bakes.root} (for a {kind} device): {'; '.join(missing[:6])}"
+                               f"{' ...' if len(missing) > 6 else ''}; run their shards first")
+        return results
     for sc, c in zip(scenes, cells):
-        r = CellResult(c)
-        if isinstance(sc, Exception):
-            r.error = str(sc)
-        else:
-            t0 = time.perf_counter()
-            try:
-                r.frame = render.render(sc, runtime=runtime, cache=bakes, reuse=reuse, warn=warn)
-            except (IblbakeError, DeviceError) as e:
-                if not keep_going:
-                    raise type(e)(f"cell (row {c.row}, column {c.column}: {c.label or 'base'}): {e}") from None
-                r.error = str(e)
-                reuse.state = None
-            r.seconds = time.perf_counter() - t0
-        results.append(r)
+        results.append(_render_cell(sc, c, runtime, bakes, reuse, warn, keep_going, resume, shard, kind))
         if progress:
             progress()
     return results
+
+
+def _render_cell(sc, c, runtime, bakes, reuse, warn, keep_going, resume, shard, kind):
+    from iblbake import render
+    from iblbake.errors import DeviceError
+
+    r = CellResult(c)
+    if isinstance(sc, Exception):
+        r.error = str(sc)
+        return r
+    identity = cell_identity(sc)
+    if shard and not in_shard(identity, shard):
+        return None
+    key = cell_key(identity, kind)
+    t0 = time.perf_counter()
+    r.frame = cached_cell(bakes, key) if resume else None
+    if r.frame is None:
+        try:
+            r.frame = render.render(sc, runtime=runtime, cache=bakes, reuse=reuse, warn=warn)
+            store_cell(bakes, key, r.frame, warn)
+        except (IblbakeError, DeviceError) as e:
+            if not keep_going:
+                raise type(e)(f"cell ({cell_name(c)}): {e}") from None
+            r.error = str(e)
+            reuse.state = None
+    r.seconds = time.perf_counter() - t0
+    return r
 
 
 def _text_width(text: str, pt: int) -> int:
@@ -202,3 +296,65 @@ def write_frames(results, folder: Path, exr: bool = False) -> None:
         if exr:
             images.write_exr(f"{stem}.exr", r.frame.hdr, channels=("R", "G", "B", "A"))
             r.outputs.append(f"{stem}.exr")
+
+
+# --jobs N: worker processes, each with its own runtime and bake store on the shared cache (whose
+# entries are built once, under their lock, and read by the rest); every worker keeps its cells
+# in the cache and the parent reads them back, so the sheet is the serial one bit for bit.
+_WORKER: dict = {}
+
+
+def _worker_init(device, cache_root):
+    from iblbake import render
+    from iblbake.device.runtime import Runtime
+
+    _WORKER.update(rt=Runtime(device), bakes=render.Bakes(cache_root), reuse=render.Reuse())
+
+
+def _worker_cell(sc, c, keep_going, resume):
+    w = _WORKER
+    kind = w["rt"].info.kind
+    try:
+        r = _render_cell(sc, c, w["rt"], w["bakes"], w["reuse"], None, True, resume, None, kind)
+    except BaseException as e:           # anything else: one line back to the parent
+        return f"{type(e).__name__}: {e}", 0.0, None, False
+    rendered = r.frame is not None and not r.frame.report.get("cell_cached")
+    return r.error, r.seconds, cell_key(cell_identity(sc), kind), rendered
+
+
+def render_cells_parallel(scenes, cells, jobs: int, *, device, bakes, progress=None, keep_going=False,
+                          resume=False):
+    """render_cells over `jobs` worker processes (spawned: each its own OpenCL runtime)."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    results = [CellResult(c) for c in cells]
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(jobs, mp_context=ctx, initializer=_worker_init,
+                             initargs=(device, str(bakes.root))) as pool:
+        futures = {}
+        for i, (sc, c) in enumerate(zip(scenes, cells)):
+            if isinstance(sc, Exception):
+                results[i].error = str(sc)
+                continue
+            futures[pool.submit(_worker_cell, sc, c, keep_going, resume)] = i
+        from concurrent.futures import as_completed
+        for f in as_completed(futures):
+            i = futures[f]
+            error, seconds, key, rendered = f.result()
+            r = results[i]
+            r.seconds = seconds
+            if error:
+                if not keep_going:
+                    for other in futures:
+                        other.cancel()
+                    raise IblbakeError(f"cell ({cell_name(r.cell)}): {error}")
+                r.error = error
+            else:
+                r.frame = cached_cell(bakes, key)
+                if r.frame is None:
+                    raise IblbakeError(f"cell ({cell_name(r.cell)}): its worker wrote no cache entry {key}")
+                r.frame.report["cell_cached"] = not rendered
+            if progress:
+                progress()
+    return results
