@@ -55,6 +55,7 @@ bench: opencl assets
 	$(BIN)/python benchmarks/bench_render.py
 	$(BIN)/python benchmarks/bench_accuracy.py
 	$(BIN)/python benchmarks/bench_study.py
+	$(BIN)/python benchmarks/bench_scale.py
 
 clean:
 	rm -rf $(OUT) .pytest_cache
