@@ -12,8 +12,6 @@
 #include "layout.h"
 #include "surface.h"
 
-#define HALF_PI 1.57079632679489662f
-
 inline float fract1(float x) { return x - floor(x); }
 
 /* interleaved gradient noise (Jimenez 2014): its 3x3 neighbourhoods hold well-spread values, so

@@ -49,6 +49,12 @@ class Bakes:
                     raise
         return self._memo[key]
 
+    def file_sha256(self, path) -> str:
+        """A file's content hash, computed once per (path, size, mtime) in this store: the cells of
+        a sheet and the rungs of a study key on the same panorama and meshes, over and over."""
+        st = os.stat(path)
+        return self._get(("sha256", str(path), st.st_size, st.st_mtime_ns), lambda: images.file_sha256(path))
+
     def _recall(self, key, make):
         """(value, whether this store already held it): a bake counts as cached when it was."""
         held = key in self._memo
@@ -100,7 +106,7 @@ class Bakes:
             return pack.scene_arrays(sc, (np.zeros((0, 6, 4), np.float32), np.zeros((0, 8), np.float32),
                                           {"meshes": [], "triangles": 0, "load_s": 0.0}))
         try:
-            parts = [{"object": oid, "sha256": images.file_sha256(o["mesh"]["path"]),
+            parts = [{"object": oid, "sha256": self.file_sha256(o["mesh"]["path"]),
                       "material": names.index(o["material"]), **{k: v for k, v in o["mesh"].items() if k != "path"}}
                      for oid, o in meshes]
         except OSError:              # a missing or unreadable mesh: the loader says so, in one line

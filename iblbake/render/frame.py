@@ -139,7 +139,8 @@ def _host_bytes_available() -> int | None:
 
 
 def has_ao(pl: Plan) -> bool:
-    return bool({"ao", "gtao"} & set(pl.pass_names))
+    """Whether some running pass writes ambient occlusion (one float per G-buffer sample)."""
+    return any("ao_buf" in p.writes for p in pl.passes)
 
 
 def tile_rows(rt, scene: Scene, pl: Plan, device_budget: int | None = None) -> int:

@@ -299,13 +299,12 @@ class Study:
     def _reference_key(self, sc, seed) -> str:
         from iblbake.bake.cache import content_key
         from iblbake.device.runtime import source_hash
-        from iblbake.io.images import file_sha256
         from iblbake.render.passes.base import lighting_inputs
 
         inputs = lighting_inputs(sc)
         return "reference-" + content_key({
             "kind": "reference", "v": 1, "scene": inputs, "seed": seed,
-            "files": [file_sha256(f) for f in scene_load.input_files(sc)[1:]],
+            "files": [self.bakes.file_sha256(f) for f in scene_load.input_files(sc)[1:]],
             "kernels": source_hash(("gbuffer.cl", "reference.cl", "resolve.cl"))})
 
     def render_reference(self, term: str) -> dict:

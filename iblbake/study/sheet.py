@@ -5,6 +5,7 @@ render_text), or into a linear EXR mosaic."""
 
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,6 +30,7 @@ class CellResult:
     seconds: float = 0.0
     error: str | None = None
     outputs: list = field(default_factory=list)
+    key: str | None = None            # its cache entry, once known
 
     @property
     def pass_seconds(self) -> float:
@@ -62,19 +64,25 @@ def cell_scenes(scene_path, overrides, cells, cell_size=None, keep_going=False):
     return out
 
 
-def cell_identity(sc) -> str:
-    """What a cell is, whatever renders it: its scene (every value, display settings too, not its
-    outputs), the content of every file it reads, and the renderer's kernel sources. Shards
-    partition cells by it, so every machine of a CI matrix agrees on who renders what."""
-    from iblbake.bake.cache import content_key
+@functools.lru_cache(maxsize=1)
+def _kernels_hash() -> str:
+    """Every pass's kernel source, headers inlined (read once per process)."""
     from iblbake.device.runtime import source_hash
-    from iblbake.io.images import file_sha256
     from iblbake.render.passes import PASSES
+    return source_hash(tuple(dict.fromkeys(p.kernel for p in PASSES if p.kernel)))
+
+
+def cell_identity(sc, bakes) -> str:
+    """What a cell is, whatever renders it: its scene (every value, display settings too, not its
+    outputs), the content of every file it reads (hashed once per store), and the renderer's
+    kernel sources. Shards partition cells by it, so every machine of a CI matrix agrees on who
+    renders what."""
+    from iblbake.bake.cache import content_key
 
     data = {k: v for k, v in sc.data.items() if k not in ("output", "sweep")}
     return content_key({"kind": "cell", "v": 1, "scene": data,
-                        "files": [file_sha256(f) for f in scene_load.input_files(sc)[1:]],
-                        "kernels": source_hash(tuple(dict.fromkeys(p.kernel for p in PASSES if p.kernel)))})
+                        "files": [bakes.file_sha256(f) for f in scene_load.input_files(sc)[1:]],
+                        "kernels": _kernels_hash()})
 
 
 def cell_key(identity: str, device_kind: str) -> str:
@@ -139,7 +147,7 @@ def render_cells(scenes, cells, *, runtime, bakes, warn=None, progress=None, kee
             if isinstance(sc, Exception):
                 r.error = str(sc)
             else:
-                r.frame = cached_cell(bakes, cell_key(cell_identity(sc), kind))
+                r.frame = cached_cell(bakes, cell_key(cell_identity(sc, bakes), kind))
                 if r.frame is None:
                     missing.append(cell_name(c))
             results.append(r)
@@ -163,10 +171,10 @@ def _render_cell(sc, c, runtime, bakes, reuse, warn, keep_going, resume, shard, 
     if isinstance(sc, Exception):
         r.error = str(sc)
         return r
-    identity = cell_identity(sc)
+    identity = cell_identity(sc, bakes)
     if shard and not in_shard(identity, shard):
         return None
-    key = cell_key(identity, kind)
+    key = r.key = cell_key(identity, kind)
     t0 = time.perf_counter()
     r.frame = cached_cell(bakes, key) if resume else None
     if r.frame is None:
@@ -311,7 +319,8 @@ def _worker_init(device, cache_root):
     _WORKER.update(rt=Runtime(device), bakes=render.Bakes(cache_root), reuse=render.Reuse())
 
 
-def _worker_cell(sc, c, keep_going, resume):
+def _worker_cell(sc, c, resume):
+    """One cell in a worker; its error comes back as a value (the parent decides on keep-going)."""
     w = _WORKER
     kind = w["rt"].info.kind
     try:
@@ -319,7 +328,7 @@ def _worker_cell(sc, c, keep_going, resume):
     except BaseException as e:           # anything else: one line back to the parent
         return f"{type(e).__name__}: {e}", 0.0, None, False
     rendered = r.frame is not None and not r.frame.report.get("cell_cached")
-    return r.error, r.seconds, cell_key(cell_identity(sc), kind), rendered
+    return r.error, r.seconds, r.key, rendered
 
 
 def render_cells_parallel(scenes, cells, jobs: int, *, device, bakes, progress=None, keep_going=False,
@@ -337,7 +346,7 @@ def render_cells_parallel(scenes, cells, jobs: int, *, device, bakes, progress=N
             if isinstance(sc, Exception):
                 results[i].error = str(sc)
                 continue
-            futures[pool.submit(_worker_cell, sc, c, keep_going, resume)] = i
+            futures[pool.submit(_worker_cell, sc, c, resume)] = i
         from concurrent.futures import as_completed
         for f in as_completed(futures):
             i = futures[f]
