@@ -212,23 +212,22 @@ def _sheet(scene, tmp_path, *args):
 
 
 def test_shards_then_assemble_equal_the_serial_sheet(tmp_path, small_panoramas):
-    """Shards 1/3, 2/3, 3/3 (a partition by content: each cell in exactly one) leave their cells
-    in the cache; --assemble builds the sheet from them, equal byte for byte to the serial one,
+    """Shards 1/3, 2/3, 3/3 (the cells dealt round-robin in sweep order: each cell in exactly one,
+    two each) leave their cells in the cache; --assemble builds the sheet from them, equal byte for byte to the serial one,
     and fails in one line naming the cells while a shard is missing."""
     scene = sheet_scene(tmp_path, small_panoramas["city"], SWEEP)
     p, serial = _sheet(scene, tmp_path / "serial", "-o", tmp_path / "serial.png", "-o", tmp_path / "serial.exr")
     assert p.returncode == 0, p.stderr
-    counts = []
     for i in (1, 2):
         p, doc = _sheet(scene, tmp_path, "--shard", f"{i}/3")
         assert p.returncode == 0, p.stderr
-        counts.append(len(doc["cells"]))
+        assert [(c["row"], c["column"]) for c in doc["cells"]] == [divmod(k, 3) for k in (i - 1, i + 2)]
     p, _ = _sheet(scene, tmp_path, "--assemble", "-o", tmp_path / "a.png")
-    missing = 6 - sum(counts)
     assert p.returncode != 0 and not (tmp_path / "a.png").exists()
-    assert len(p.stderr.strip().splitlines()) == 1 and f"{missing} of 6 cells are not in the cache" in p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1 and "2 of 6 cells are not in the cache" in p.stderr
+    assert "row 0, column 2" in p.stderr and "row 1, column 2" in p.stderr
     p, doc = _sheet(scene, tmp_path, "--shard", "3/3")
-    assert p.returncode == 0 and sum(counts) + len(doc["cells"]) == 6
+    assert p.returncode == 0 and len(doc["cells"]) == 2
     p, doc = _sheet(scene, tmp_path, "--assemble", "-o", tmp_path / "a.png", "-o", tmp_path / "a.exr")
     assert p.returncode == 0, p.stderr
     assert all(c["cached"] for c in doc["cells"])
@@ -242,7 +241,7 @@ def test_resume_renders_only_the_missing_cells(tmp_path, small_panoramas):
     scene = sheet_scene(tmp_path, small_panoramas["city"], SWEEP)
     p, doc = _sheet(scene, tmp_path, "--shard", "1/2")
     done = {(c["row"], c["column"]) for c in doc["cells"]}
-    assert 0 < len(done) < 6
+    assert done == {(0, 0), (0, 2), (1, 1)}
     p, doc = _sheet(scene, tmp_path, "--resume", "-o", tmp_path / "s.png")
     assert p.returncode == 0, p.stderr
     assert {(c["row"], c["column"]) for c in doc["cells"] if c["cached"]} == done

@@ -75,8 +75,7 @@ def _kernels_hash() -> str:
 def cell_identity(sc, bakes) -> str:
     """What a cell is, whatever renders it: its scene (every value, display settings too, not its
     outputs), the content of every file it reads (hashed once per store), and the renderer's
-    kernel sources. Shards partition cells by it, so every machine of a CI matrix agrees on who
-    renders what."""
+    kernel sources."""
     from iblbake.bake.cache import content_key
 
     data = {k: v for k, v in sc.data.items() if k not in ("output", "sweep")}
@@ -92,10 +91,13 @@ def cell_key(identity: str, device_kind: str) -> str:
     return "cell-" + content_key({"cell": identity, "device": device_kind})
 
 
-def in_shard(identity: str, shard: tuple) -> bool:
-    """Shard (i, n), i from 1: a stable partition of the cells by identity."""
+def in_shard(index: int, shard: tuple) -> bool:
+    """Shard (i, n), i from 1: the cells dealt round-robin in sweep order (row by row). Every
+    machine of a CI matrix expands the same sweep in the same order, so all agree on who renders
+    what wherever their checkouts lie (a partition by content key would not: the key holds the
+    scene's paths), and the shards differ in size by one cell at most."""
     i, n = shard
-    return int(identity, 16) % n == i - 1
+    return index % n == i - 1
 
 
 def cached_cell(bakes, key: str):
@@ -156,14 +158,17 @@ def render_cells(scenes, cells, *, runtime, bakes, warn=None, progress=None, kee
                                f"{bakes.root} (for a {kind} device): {'; '.join(missing[:6])}"
                                f"{' ...' if len(missing) > 6 else ''}; run their shards first")
         return results
-    for sc, c in zip(scenes, cells):
-        results.append(_render_cell(sc, c, runtime, bakes, reuse, warn, keep_going, resume, shard, kind))
+    for index, (sc, c) in enumerate(zip(scenes, cells)):
+        if shard and not in_shard(index, shard):
+            results.append(None)
+            continue
+        results.append(_render_cell(sc, c, runtime, bakes, reuse, warn, keep_going, resume, kind))
         if progress:
             progress()
     return results
 
 
-def _render_cell(sc, c, runtime, bakes, reuse, warn, keep_going, resume, shard, kind):
+def _render_cell(sc, c, runtime, bakes, reuse, warn, keep_going, resume, kind):
     from iblbake import render
     from iblbake.errors import DeviceError
 
@@ -171,10 +176,7 @@ def _render_cell(sc, c, runtime, bakes, reuse, warn, keep_going, resume, shard, 
     if isinstance(sc, Exception):
         r.error = str(sc)
         return r
-    identity = cell_identity(sc, bakes)
-    if shard and not in_shard(identity, shard):
-        return None
-    key = r.key = cell_key(identity, kind)
+    key = r.key = cell_key(cell_identity(sc, bakes), kind)
     t0 = time.perf_counter()
     r.frame = cached_cell(bakes, key) if resume else None
     if r.frame is None:
@@ -324,7 +326,7 @@ def _worker_cell(sc, c, resume):
     w = _WORKER
     kind = w["rt"].info.kind
     try:
-        r = _render_cell(sc, c, w["rt"], w["bakes"], w["reuse"], None, True, resume, None, kind)
+        r = _render_cell(sc, c, w["rt"], w["bakes"], w["reuse"], None, True, resume, kind)
     except BaseException as e:           # anything else: one line back to the parent
         return f"{type(e).__name__}: {e}", 0.0, None, False
     rendered = r.frame is not None and not r.frame.report.get("cell_cached")
