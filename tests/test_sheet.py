@@ -3,6 +3,7 @@ reuse across cells (a tone-mapping sweep lights once, a roughness sweep traces p
 once), the CLI shorthand, and bad sweep specs as one-line errors with nothing written."""
 
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -247,6 +248,20 @@ def test_resume_renders_only_the_missing_cells(tmp_path, small_panoramas):
     assert {(c["row"], c["column"]) for c in doc["cells"] if c["cached"]} == done
     p, doc = _sheet(scene, tmp_path, "-o", tmp_path / "s.png")
     assert not any(c["cached"] for c in doc["cells"])
+
+
+def test_cells_are_shared_by_checkouts_in_other_folders(tmp_path, small_panoramas):
+    """A cell's key holds its files' content, not their paths: a CI job whose checkout lies
+    elsewhere renders the cells the other jobs assemble from one shared cache."""
+    other = tmp_path / "elsewhere"
+    other.mkdir()
+    shutil.copy(small_panoramas["city"], other / "city.exr")
+    p, doc = _sheet(sheet_scene(other, other / "city.exr", SWEEP), tmp_path, "--shard", "1/1")
+    assert p.returncode == 0 and len(doc["cells"]) == 6, p.stderr
+    p, doc = _sheet(sheet_scene(tmp_path, small_panoramas["city"], SWEEP), tmp_path, "--assemble",
+                    "-o", tmp_path / "a.png")
+    assert p.returncode == 0, p.stderr
+    assert all(c["cached"] for c in doc["cells"])
 
 
 def test_two_jobs_equal_the_serial_sheet(tmp_path, small_panoramas):

@@ -73,15 +73,23 @@ def _kernels_hash() -> str:
 
 
 def cell_identity(sc, bakes) -> str:
-    """What a cell is, whatever renders it: its scene (every value, display settings too, not its
-    outputs), the content of every file it reads (hashed once per store), and the renderer's
-    kernel sources."""
+    """What a cell is, whatever renders it and wherever its files lie: its scene (every value,
+    display settings too, not its outputs) with each file it names replaced by that file's content
+    hash (hashed once per store), and the renderer's kernel sources. So CI jobs whose checkouts
+    lie in different folders share one cache of cells."""
     from iblbake.bake.cache import content_key
 
-    data = {k: v for k, v in sc.data.items() if k not in ("output", "sweep")}
-    return content_key({"kind": "cell", "v": 1, "scene": data,
-                        "files": [bakes.file_sha256(f) for f in scene_load.input_files(sc)[1:]],
-                        "kernels": _kernels_hash()})
+    hashes = {f: "sha256:" + bakes.file_sha256(f) for f in scene_load.input_files(sc)[1:]}
+
+    def by_content(v):
+        if isinstance(v, dict):
+            return {k: by_content(x) for k, x in v.items()}
+        if isinstance(v, list):
+            return [by_content(x) for x in v]
+        return hashes.get(v, v) if isinstance(v, str) else v
+
+    data = {k: by_content(v) for k, v in sc.data.items() if k not in ("output", "sweep")}
+    return content_key({"kind": "cell", "v": 2, "scene": data, "kernels": _kernels_hash()})
 
 
 def cell_key(identity: str, device_kind: str) -> str:
