@@ -213,20 +213,24 @@ def _sheet(scene, tmp_path, *args):
 
 
 def test_shards_then_assemble_equal_the_serial_sheet(tmp_path, small_panoramas):
-    """Shards 1/3, 2/3, 3/3 (the cells dealt round-robin in sweep order: each cell in exactly one,
-    two each) leave their cells in the cache; --assemble builds the sheet from them, equal byte for byte to the serial one,
+    """Shards 1/3, 2/3, 3/3 (the cells sorted by key and dealt round-robin: each cell in exactly
+    one, two each) leave their cells in the cache; --assemble builds the sheet from them, equal byte for byte to the serial one,
     and fails in one line naming the cells while a shard is missing."""
     scene = sheet_scene(tmp_path, small_panoramas["city"], SWEEP)
     p, serial = _sheet(scene, tmp_path / "serial", "-o", tmp_path / "serial.png", "-o", tmp_path / "serial.exr")
     assert p.returncode == 0, p.stderr
+    done = set()
     for i in (1, 2):
         p, doc = _sheet(scene, tmp_path, "--shard", f"{i}/3")
         assert p.returncode == 0, p.stderr
-        assert [(c["row"], c["column"]) for c in doc["cells"]] == [divmod(k, 3) for k in (i - 1, i + 2)]
+        cells = {(c["row"], c["column"]) for c in doc["cells"]}
+        assert len(cells) == 2 and not cells & done
+        done |= cells
     p, _ = _sheet(scene, tmp_path, "--assemble", "-o", tmp_path / "a.png")
     assert p.returncode != 0 and not (tmp_path / "a.png").exists()
     assert len(p.stderr.strip().splitlines()) == 1 and "2 of 6 cells are not in the cache" in p.stderr
-    assert "row 0, column 2" in p.stderr and "row 1, column 2" in p.stderr
+    for r, c in {(r, c) for r in range(2) for c in range(3)} - done:
+        assert f"row {r}, column {c}" in p.stderr
     p, doc = _sheet(scene, tmp_path, "--shard", "3/3")
     assert p.returncode == 0 and len(doc["cells"]) == 2
     p, doc = _sheet(scene, tmp_path, "--assemble", "-o", tmp_path / "a.png", "-o", tmp_path / "a.exr")
@@ -242,7 +246,7 @@ def test_resume_renders_only_the_missing_cells(tmp_path, small_panoramas):
     scene = sheet_scene(tmp_path, small_panoramas["city"], SWEEP)
     p, doc = _sheet(scene, tmp_path, "--shard", "1/2")
     done = {(c["row"], c["column"]) for c in doc["cells"]}
-    assert done == {(0, 0), (0, 2), (1, 1)}
+    assert len(done) == 3
     p, doc = _sheet(scene, tmp_path, "--resume", "-o", tmp_path / "s.png")
     assert p.returncode == 0, p.stderr
     assert {(c["row"], c["column"]) for c in doc["cells"] if c["cached"]} == done

@@ -67,8 +67,8 @@ def _shard(ctx, param, value):
               help="Read back the cells an earlier run (killed, failed or a shard) left in the cache; "
                    "render only the others. Every rendered cell is kept there, keyed by its content.")
 @click.option("--shard", default=None, callback=_shard, metavar="I/N",
-              help="Render only shard I of N (the cells dealt round-robin in sweep order, the same on "
-                   "every machine) into the cache, for CI matrices; then --assemble.")
+              help="Render only shard I of N (the cells sorted by content key and dealt round-robin: "
+                   "the same on every machine, balanced) into the cache, for CI matrices; then --assemble.")
 @click.option("--assemble", is_flag=True,
               help="Render nothing: build the sheet from the cells the shards left in the cache (a "
                    "one-line error names the missing ones).")
@@ -111,7 +111,8 @@ def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, labe
     scenes = sheet.cell_scenes(scene_path, overrides, cells, cell_size, keep_going)
     rt = Runtime(device)
     bakes = render.Bakes(cache_dir)
-    todo = [c for i, c in enumerate(cells) if not shard or sheet.in_shard(i, shard)]
+    mine = sheet.shard_cells(scenes, bakes, shard) if shard and not assemble else range(len(cells))
+    todo = [c for i, c in enumerate(cells) if i in mine]
     with con.stages([c.label or "cell" for c in todo], label="sheet") as step:
         if jobs > 1 and not assemble:
             if shard:

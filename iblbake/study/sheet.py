@@ -99,13 +99,16 @@ def cell_key(identity: str, device_kind: str) -> str:
     return "cell-" + content_key({"cell": identity, "device": device_kind})
 
 
-def in_shard(index: int, shard: tuple) -> bool:
-    """Shard (i, n), i from 1: the cells dealt round-robin in sweep order (row by row). Every
-    machine of a CI matrix expands the same sweep in the same order, so all agree on who renders
-    what wherever their checkouts lie (a partition by content key would not: the key holds the
-    scene's paths), and the shards differ in size by one cell at most."""
+def shard_cells(scenes, bakes, shard: tuple) -> set:
+    """The indices of shard (i, n)'s cells, i from 1: the cells sorted by identity and dealt
+    round-robin. A partition by key, so every machine of a CI matrix agrees on who renders what
+    (an identity holds no path), and balanced: no shard holds more than one cell more than
+    another (a key modulo n can leave a small sweep's shard empty). A cell whose scene failed to
+    load sorts last, by position."""
     i, n = shard
-    return index % n == i - 1
+    ids = [f"~{k:09d}" if isinstance(sc, Exception) else cell_identity(sc, bakes) for k, sc in enumerate(scenes)]
+    order = sorted(range(len(scenes)), key=ids.__getitem__)
+    return set(order[i - 1::n])
 
 
 def cached_cell(bakes, key: str):
@@ -166,8 +169,9 @@ def render_cells(scenes, cells, *, runtime, bakes, warn=None, progress=None, kee
                                f"{bakes.root} (for a {kind} device): {'; '.join(missing[:6])}"
                                f"{' ...' if len(missing) > 6 else ''}; run their shards first")
         return results
+    mine = shard_cells(scenes, bakes, shard) if shard else range(len(cells))
     for index, (sc, c) in enumerate(zip(scenes, cells)):
-        if shard and not in_shard(index, shard):
+        if index not in mine:
             results.append(None)
             continue
         results.append(_render_cell(sc, c, runtime, bakes, reuse, warn, keep_going, resume, kind))
