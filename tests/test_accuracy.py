@@ -139,3 +139,19 @@ def test_bad_ladder_is_one_line(tmp_path, study):
     r = run_cli(*args, "-q")
     assert r.returncode != 0 and "effects.sampels" in r.stderr and "Traceback" not in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
+
+
+def test_references_in_two_workers_equal_the_serial_ones(tmp_path, study):
+    """--jobs 2 on a fresh cache: the four reference seeds render in two worker processes, the
+    study reads them back, and its noise and every rung's error are the serial study's (the
+    references are seeded: the same on any process)."""
+    args = list(study["args"])
+    args[args.index("--cache") + 1] = tmp_path / "cache"
+    r = run_cli(*args, "--json", "--jobs", "2")
+    assert r.returncode == 0, r.stderr
+    got, s = json.loads(r.stdout), study["summary"]
+    spread = got["reference_workers"]
+    assert sum(w["references"] for w in spread["workers"]) == 4 and spread["jobs"] == 2
+    assert all(all(got["reference"][t]["cached"]) for t in ("diffuse", "specular"))
+    assert got["reference"]["specular"]["noise"] == s["reference"]["specular"]["noise"]
+    assert [x["relative_rmse"] for x in got["rungs"]] == [x["relative_rmse"] for x in s["rungs"]]

@@ -44,10 +44,15 @@ FILES = {"table.md": "Markdown table", "table.csv": "CSV", "accuracy.json": "JSO
 @click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
               help="Bake cache folder (the reference is cached there too). Default: $IBLBAKE_CACHE, else "
                    "the per-user cache folder.")
+@click.option("--jobs", "-j", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Render the reference seeds in N worker processes (each its own OpenCL runtime on "
+                   "--device or one of --devices) into the cache; the rungs are then timed alone.")
+@click.option("--devices", default=None, metavar="SPEC,SPEC,...",
+              help="With --jobs: one device per worker, in turn, e.g. gpu,cpu.")
 @device_option
 @common_options
 def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repeats, target_noise, max_samples,
-                     visibility, flip, max_error, cache_dir, device, quiet, as_json):
+                     visibility, flip, max_error, cache_dir, jobs, devices, device, quiet, as_json):
     """Render SCENE's converged reference (diffuse and specular with visibility, two seeds, its
     noise measured), then a ladder of approximations of each term the scene calls for (SH bands
     and windows; importance N, mip selection and bias; prefiltered chain size, levels, method and
@@ -80,6 +85,13 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
     for r in rungs:                  # every rung's scene validates before anything renders
         study.load(study.rung_values(r), origin=f"ladder rung {r.label!r}")
     names = [f"reference {t} seed {s}" for t in study.terms for s in settings.seeds] + [r.label for r in rungs]
+    spread = None
+    if jobs > 1:
+        from iblbake.study import workers
+        specs = [d.strip() for d in devices.split(",")] if devices else [device]
+        spread = workers.render_references_parallel(study, jobs, specs)
+    elif devices:
+        raise click.UsageError("--devices gives each worker its device: give --jobs N too")
     with con.stages(names, label="accuracy") as step:
         study.progress = step
         refs = {t: study.render_reference(t) for t in study.terms}
@@ -98,6 +110,8 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
         "frontier": front, "configured": configured,
         "time_split_s": {k: round(v, 3) for k, v in study.times.items()},
     }
+    if spread:
+        summary["reference_workers"] = spread
     if out is not None:
         atomic.write_text(out / "table.md", acc.markdown(rows, front))
         atomic.write_text(out / "table.csv", acc.csv_text(rows, front))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 
@@ -21,6 +22,30 @@ def _cell_size(ctx, param, value):
     if not (1 <= w <= 16384 and 1 <= h <= 16384):
         raise click.BadParameter(f"{value!r}: each side from 1 to 16384")
     return w, h
+
+
+def _devices(ctx, param, value):
+    if value is None:
+        return None
+    specs = [v.strip() for v in value.split(",")]
+    if not all(specs):
+        raise click.BadParameter(f"{value!r}: give device specs separated by commas, e.g. gpu:0,gpu:1,cpu")
+    return specs
+
+
+def _resources(ctx, param, value):
+    if value is None:
+        return None
+    out = {}
+    for part in value.split(","):
+        name, _, amount = part.partition("=")
+        try:
+            out[name.strip()] = float(amount)
+        except ValueError:
+            raise click.BadParameter(f"{value!r}: give NAME=AMOUNT[,NAME=AMOUNT], e.g. GPU=1") from None
+        if not name.strip() or out[name.strip()] <= 0:
+            raise click.BadParameter(f"{part!r}: a resource name and an amount above 0")
+    return out
 
 
 def _shard(ctx, param, value):
@@ -73,16 +98,27 @@ def _shard(ctx, param, value):
               help="Render nothing: build the sheet from the cells the shards left in the cache (a "
                    "one-line error names the missing ones).")
 @click.option("--jobs", "-j", type=click.IntRange(min=1), default=1, show_default=True,
-              help="Worker processes rendering cells, each with its own OpenCL runtime on --device; bakes "
-                   "are built once in the shared cache. The sheet is the serial one, bit for bit.")
+              help="Worker processes rendering cells, each with its own OpenCL runtime on --device (or "
+                   "one of --devices); bakes are built once in the shared cache. The sheet is the serial "
+                   "one, bit for bit. With --scheduler local: the LocalCluster's workers (default: the cores).")
+@click.option("--devices", default=None, callback=_devices, metavar="SPEC,SPEC,...",
+              help="One device per worker, in turn (--jobs, --scheduler local), e.g. gpu:0,gpu:1,cpu.")
+@click.option("--scheduler", default=None, metavar="local|ADDRESS",
+              help="Render the cells on a Dask cluster: 'local' starts a LocalCluster of --jobs worker "
+                   "processes, else the address of a running scheduler (tcp://HOST:PORT). Needs "
+                   "`pip install 'iblbake[distributed]'`. Workers read --cache (a shared folder builds each "
+                   "bake once for all); the panorama and meshes are sent by content where a worker lacks them.")
+@click.option("--resources", default=None, callback=_resources, metavar="NAME=N,...",
+              help="With --scheduler: Dask resources each cell needs (GPU=1 sends cells only to workers "
+                   "started with `dask worker --resources GPU=1`; with local, every worker has them).")
 @click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
               help="Bake cache folder. Default: $IBLBAKE_CACHE, else the per-user cache folder.")
 @depfile_option
 @device_option
 @common_options
 def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, label_format, caption, title,
-                  frames_dir, frames_exr, layout_path, keep_going, resume, shard, assemble, jobs, cache_dir, depfile,
-                  device, quiet, as_json):
+                  frames_dir, frames_exr, layout_path, keep_going, resume, shard, assemble, jobs, devices, scheduler,
+                  resources, cache_dir, depfile, device, quiet, as_json):
     """Render every cell of the sweep of SCENE (its sweep: section, or --rows / --columns) in one
     process and assemble a contact sheet. Cells share the runtime, every bake, and the passes whose
     inputs they share (a material sweep traces primary rays once, a tone-mapping sweep lights once);
@@ -99,6 +135,12 @@ def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, labe
         raise click.UsageError("--shard renders one shard's cells, --assemble none: give one of them")
     if not outputs and not shard:
         raise click.UsageError("Missing option '--output' / '-o' (only --shard renders without a sheet)")
+    if (shard or assemble) and (scheduler or jobs > 1):
+        raise click.UsageError("--shard and --assemble run in one process: leave out --jobs and --scheduler")
+    if resources and not scheduler:
+        raise click.UsageError("--resources tags Dask tasks: give --scheduler too")
+    if devices and not (scheduler or jobs > 1):
+        raise click.UsageError("--devices gives each worker its device: give --jobs N or --scheduler too")
     for o in outputs:
         if Path(o).suffix.lower() not in (".png", ".exr"):
             raise click.BadParameter(f"{o}: the sheet is written as .png or .exr", param_hint="-o")
@@ -113,12 +155,24 @@ def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, labe
     bakes = render.Bakes(cache_dir)
     mine = sheet.shard_cells(scenes, bakes, shard) if shard and not assemble else range(len(cells))
     todo = [c for i, c in enumerate(cells) if i in mine]
+    spread = None                    # what the workers did, with --jobs or --scheduler
     with con.stages([c.label or "cell" for c in todo], label="sheet") as step:
-        if jobs > 1 and not assemble:
-            if shard:
-                raise click.UsageError("--jobs renders every cell; a --shard runs in one process")
-            results = sheet.render_cells_parallel(scenes, cells, jobs, device=device, bakes=bakes, progress=step,
-                                                  keep_going=keep_going, resume=resume)
+        if scheduler:
+            from iblbake.study import workers
+            client, cluster = workers.connect(scheduler, jobs if jobs > 1 else (os.cpu_count() or 1), resources)
+            try:
+                results, spread = workers.render_cells_dask(
+                    scenes, cells, client, devices=devices or [device], bakes=bakes,
+                    resources=resources, progress=step, keep_going=keep_going, resume=resume)
+            finally:
+                client.close()
+                if cluster is not None:
+                    cluster.close()
+        elif jobs > 1:
+            from iblbake.study import workers
+            results, spread = workers.render_cells_parallel(
+                scenes, cells, jobs, devices=devices or [device], bakes=bakes, progress=step,
+                keep_going=keep_going, resume=resume, warn=con.warn)
         else:
             results = sheet.render_cells(scenes, cells, runtime=rt, bakes=bakes, warn=con.warn, progress=step,
                                          keep_going=keep_going, resume=resume, shard=shard, assemble=assemble)
@@ -160,6 +214,8 @@ def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, labe
                "rows": {"key": rows_axis.title, "labels": [s.label for s in rows_axis.steps]},
                "columns": {"key": cols_axis.title, "labels": [s.label for s in cols_axis.steps]},
                "cells": cells_json, "failed": len(failed), "elapsed_s": round(time.perf_counter() - t_start, 4)}
+    if spread:
+        summary["workers"] = spread
     if layout_path:
         from iblbake.io.atomic import write_json
         write_json(layout_path, summary)

@@ -246,7 +246,12 @@ def select_device(spec: str | None = None) -> DeviceInfo:
     version beside the kernel cache) is not probed again. `iblbake devices` always probes."""
     spec = spec or os.environ.get("IBLBAKE_DEVICE") or None
     devices, errors = enumerate_devices()
-    candidates = [d for d in devices if spec is None or _matches(d, spec)]
+    nth = re.fullmatch(r"(gpu|cpu):(\d+)", spec.strip().lower()) if spec else None
+    if nth:                          # the N-th device of a kind, in enumeration order (--devices gpu:0,gpu:1)
+        same = [d for d in devices if d.kind.lower() == nth[1]]
+        candidates = same[int(nth[2]):int(nth[2]) + 1]
+    else:
+        candidates = [d for d in devices if spec is None or _matches(d, spec)]
     if spec and not candidates:
         listed = ", ".join(d.label for d in devices) or "none"
         raise DeviceError(f"no OpenCL device matches --device/IBLBAKE_DEVICE {spec!r}; devices: {listed}")

@@ -727,6 +727,22 @@ def input_files(sc: Scene) -> list:
             *(o["mesh"]["path"] for o in d["objects"] if "mesh" in o)]
 
 
+def with_files(sc: Scene, moved: dict) -> Scene:
+    """The scene reading each file of `moved` (old path -> new path) from its new place: a worker
+    on another machine renders a cell from its own copies of the files (same content)."""
+    def move(v):
+        if isinstance(v, dict):
+            return {k: move(x) for k, x in v.items()}
+        if isinstance(v, list):
+            return [move(x) for x in v]
+        return moved.get(v, v) if isinstance(v, str) else v
+
+    d = sc.data
+    data = {**d, "environment": move(d["environment"]),
+            "objects": [{**o, "mesh": move(o["mesh"])} if "mesh" in o else o for o in d["objects"]]}
+    return Scene(data, sc.source, sc.folder, sc.lines)
+
+
 # ---------------------------------------------------------------------------------------------
 
 

@@ -307,29 +307,36 @@ class Study:
             "files": [self.bakes.file_sha256(f) for f in scene_load.input_files(sc)[1:]],
             "kernels": source_hash(("gbuffer.cl", "reference.cl", "resolve.cl"))})
 
-    def render_reference(self, term: str) -> dict:
-        """The term's reference (two seeds, cached), its noise and what it cost."""
+    def reference_seed(self, term: str, seed: int):
+        """(hdr, manifest, cached): one seed of the term's reference, rendered into the cache or
+        read back from it."""
         from iblbake import render
         from iblbake.bake import cache
         from iblbake.io import images
 
+        sc = self.load(self.reference_values(term, seed), origin="accuracy reference")
+        t0 = time.perf_counter()
+        holder = {}
+
+        def build(tmp: Path):
+            fr = render.render(sc, runtime=self.rt, cache=self.bakes, warn=self.warn)
+            images.write_exr(tmp / "reference.exr", fr.hdr, channels=("R", "G", "B", "A"))
+            holder["frame"] = fr
+            ref = next(p for p in fr.report["passes"] if p["name"] == "reference")
+            return {"kind": "reference", "files": [{"name": "reference.exr"}], "pass": ref,
+                    "seconds": round(time.perf_counter() - t0, 4), "device": fr.report["device"]}
+
+        manifest, hit = cache.get_or_build(self.bakes.root, self._reference_key(sc, seed), build, warn=self.warn)
+        hdr = holder["frame"].hdr if "frame" in holder else \
+            images.read_exr(self.bakes.root / manifest["key"] / "reference.exr")
+        return hdr, manifest, hit
+
+    def render_reference(self, term: str) -> dict:
+        """The term's reference (two seeds, cached), its noise and what it cost."""
         frames, reports, cached = [], [], []
         for seed in self.settings.seeds:
-            sc = self.load(self.reference_values(term, seed), origin="accuracy reference")
             t0 = time.perf_counter()
-            holder = {}
-
-            def build(tmp: Path):
-                fr = render.render(sc, runtime=self.rt, cache=self.bakes, warn=self.warn)
-                images.write_exr(tmp / "reference.exr", fr.hdr, channels=("R", "G", "B", "A"))
-                holder["frame"] = fr
-                ref = next(p for p in fr.report["passes"] if p["name"] == "reference")
-                return {"kind": "reference", "files": [{"name": "reference.exr"}], "pass": ref,
-                        "seconds": round(time.perf_counter() - t0, 4), "device": fr.report["device"]}
-
-            manifest, hit = cache.get_or_build(self.bakes.root, self._reference_key(sc, seed), build, warn=self.warn)
-            hdr = holder["frame"].hdr if "frame" in holder else \
-                images.read_exr(self.bakes.root / manifest["key"] / "reference.exr")
+            hdr, manifest, hit = self.reference_seed(term, seed)
             self.times["reference_s"] += time.perf_counter() - t0
             frames.append(hdr)
             reports.append(manifest)

@@ -174,13 +174,14 @@ def render_cells(scenes, cells, *, runtime, bakes, warn=None, progress=None, kee
         if index not in mine:
             results.append(None)
             continue
-        results.append(_render_cell(sc, c, runtime, bakes, reuse, warn, keep_going, resume, kind))
+        results.append(render_cell(sc, c, runtime, bakes, reuse, warn, keep_going, resume, kind))
         if progress:
             progress()
     return results
 
 
-def _render_cell(sc, c, runtime, bakes, reuse, warn, keep_going, resume, kind):
+def render_cell(sc, c, runtime, bakes, reuse, warn, keep_going, resume, kind):
+    """One cell rendered (or, with `resume`, read back from the cache) and kept in the cache."""
     from iblbake import render
     from iblbake.errors import DeviceError
 
@@ -318,66 +319,3 @@ def write_frames(results, folder: Path, exr: bool = False) -> None:
         if exr:
             images.write_exr(f"{stem}.exr", r.frame.hdr, channels=("R", "G", "B", "A"))
             r.outputs.append(f"{stem}.exr")
-
-
-# --jobs N: worker processes, each with its own runtime and bake store on the shared cache (whose
-# entries are built once, under their lock, and read by the rest); every worker keeps its cells
-# in the cache and the parent reads them back, so the sheet is the serial one bit for bit.
-_WORKER: dict = {}
-
-
-def _worker_init(device, cache_root):
-    from iblbake import render
-    from iblbake.device.runtime import Runtime
-
-    _WORKER.update(rt=Runtime(device), bakes=render.Bakes(cache_root), reuse=render.Reuse())
-
-
-def _worker_cell(sc, c, resume):
-    """One cell in a worker; its error comes back as a value (the parent decides on keep-going)."""
-    w = _WORKER
-    kind = w["rt"].info.kind
-    try:
-        r = _render_cell(sc, c, w["rt"], w["bakes"], w["reuse"], None, True, resume, kind)
-    except BaseException as e:           # anything else: one line back to the parent
-        return f"{type(e).__name__}: {e}", 0.0, None, False
-    rendered = r.frame is not None and not r.frame.report.get("cell_cached")
-    return r.error, r.seconds, r.key, rendered
-
-
-def render_cells_parallel(scenes, cells, jobs: int, *, device, bakes, progress=None, keep_going=False,
-                          resume=False):
-    """render_cells over `jobs` worker processes (spawned: each its own OpenCL runtime)."""
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
-
-    results = [CellResult(c) for c in cells]
-    ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(jobs, mp_context=ctx, initializer=_worker_init,
-                             initargs=(device, str(bakes.root))) as pool:
-        futures = {}
-        for i, (sc, c) in enumerate(zip(scenes, cells)):
-            if isinstance(sc, Exception):
-                results[i].error = str(sc)
-                continue
-            futures[pool.submit(_worker_cell, sc, c, resume)] = i
-        from concurrent.futures import as_completed
-        for f in as_completed(futures):
-            i = futures[f]
-            error, seconds, key, rendered = f.result()
-            r = results[i]
-            r.seconds = seconds
-            if error:
-                if not keep_going:
-                    for other in futures:
-                        other.cancel()
-                    raise IblbakeError(f"cell ({cell_name(r.cell)}): {error}")
-                r.error = error
-            else:
-                r.frame = cached_cell(bakes, key)
-                if r.frame is None:
-                    raise IblbakeError(f"cell ({cell_name(r.cell)}): its worker wrote no cache entry {key}")
-                r.frame.report["cell_cached"] = not rendered
-            if progress:
-                progress()
-    return results

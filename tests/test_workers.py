@@ -1,0 +1,175 @@
+"""Cells rendered in other processes (iblbake.study.workers): local worker processes and a Dask
+LocalCluster give the serial cells bit for bit, a worker SIGKILLed mid-sweep loses nothing (its
+cells are rendered again and counted), bakes are built once across workers, a bad cell fails
+once, and --scheduler without Dask is a one-line error saying what to install."""
+
+import json
+import multiprocessing
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from iblbake import render
+from iblbake.device.runtime import Runtime
+from iblbake.scene import load as scene_load
+from iblbake.study import sheet, sweep, workers
+
+from .conftest import run_cli
+from .test_render import small_panoramas  # noqa: F401  (fixture: city and studio at 256x128)
+from .test_sheet import sheet_scene
+
+# 16 cells, each heavy enough (importance sampling) that a worker is mid-cell when it is killed
+GRID = {"title": "grid", "rows": {"key": "materials.gold.roughness", "range": {"start": 0.1, "stop": 0.9, "count": 4}},
+        "columns": {"key": "materials.gold.metallic", "range": {"start": 0, "stop": 1, "count": 4}}}
+HEAVY = ["effects.specular=importance", "effects.samples=64"]
+
+
+def plan(scene_path, overrides=HEAVY):
+    base = scene_load.load(scene_path, overrides, ["cell.png"])
+    _, _, cells = sweep.plan_sheet(base, None, None, None)
+    return cells, sheet.cell_scenes(scene_path, overrides, cells)
+
+
+@pytest.fixture(scope="module")
+def grid(tmp_path_factory, small_panoramas):
+    """The 16-cell sweep, its scenes, and the serial cells (hdr, png) to compare against."""
+    folder = tmp_path_factory.mktemp("grid")
+    scene = sheet_scene(folder, small_panoramas["city"], GRID, res=(64, 48))
+    cells, scenes = plan(scene)
+    serial = sheet.render_cells(scenes, cells, runtime=Runtime(None), bakes=render.Bakes(folder / "serial"))
+    return scene, cells, scenes, [(r.frame.hdr, r.frame.png) for r in serial]
+
+
+def same_cells(results, serial):
+    return len(results) == len(serial) and all(
+        r.error is None and np.array_equal(r.frame.hdr, h) and np.array_equal(r.frame.png, p)
+        for r, (h, p) in zip(results, serial))
+
+
+def once_each_bake(results):
+    """Every cache entry some cell used (SH, chains: the bakes with an entry) was built by exactly
+    one cell; the others found it cached."""
+    built = {}
+    for r in results:
+        for b in r.frame.report.get("bakes", []):
+            if "entry" not in b:
+                continue
+            built.setdefault(b["name"], 0)
+            built[b["name"]] += not b.get("cached")
+    return built
+
+
+def test_pool_worker_killed_mid_sweep_loses_nothing(tmp_path, grid):
+    """--jobs 2 on a fresh cache: each bake built once across the workers; one worker SIGKILLed
+    after the first finished cell: the pool starts again for the unfinished cells (counted),
+    and every cell equals the serial one."""
+    _, cells, scenes, serial = grid
+    killed = []
+
+    def kill_one():
+        if not killed:
+            victim = multiprocessing.active_children()[0]
+            os.kill(victim.pid, signal.SIGKILL)
+            killed.append(victim.pid)
+
+    results, summary = workers.render_cells_parallel(scenes, cells, 2, devices=[None], bakes=render.Bakes(tmp_path),
+                                                     progress=kill_one)
+    assert killed and same_cells(results, serial)
+    assert 1 <= summary["retried_cells"] < 16 and "failed" not in summary["cells"]
+    assert sum(w["cells"] for w in summary["workers"]) == 16
+    assert len(once_each_bake(results)) >= 2 and set(once_each_bake(results).values()) == {1}
+
+
+def test_dask_local_cluster_equals_serial_and_survives_a_killed_worker(tmp_path, grid):
+    """A LocalCluster of 2 worker processes: the cells equal the serial ones; one worker SIGKILLed
+    after the first finished cell: Dask reschedules what it held, the nanny restarts it, the
+    sweep completes the same, and the summary counts the cells whose worker died."""
+    distributed = pytest.importorskip("distributed")
+    _, cells, scenes, serial = grid
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+                                  silence_logs=50) as cluster, distributed.Client(cluster) as client:
+        results, summary = workers.render_cells_dask(scenes, cells, client, devices=[None],
+                                                     bakes=render.Bakes(tmp_path / "a"))
+        assert same_cells(results, serial) and summary["retried_cells"] == 0
+        assert len(once_each_bake(results)) >= 2 and set(once_each_bake(results).values()) == {1}
+        pids = client.run(os.getpid)
+        killed = []
+
+        def kill_one():
+            if not killed:
+                os.kill(next(iter(pids.values())), signal.SIGKILL)
+                killed.append(1)
+
+        results, summary = workers.render_cells_dask(scenes, cells, client, devices=[None],
+                                                     bakes=render.Bakes(tmp_path / "b"), progress=kill_one)
+    assert killed and same_cells(results, serial)
+    assert summary["retried_cells"] >= 1 and sum(w["cells"] for w in summary["workers"]) == 16
+
+
+def test_cli_scheduler_local_and_jobs_equal_serial(tmp_path, small_panoramas):
+    """The command line: --scheduler local --jobs 2 and --jobs 2 --devices cpu,cpu:0 write the
+    serial sheet byte for byte, with each worker in the summary."""
+    pytest.importorskip("distributed")
+    scene = sheet_scene(tmp_path, small_panoramas["city"], GRID, res=(32, 24))
+    outs = {}
+    for name, extra in [("serial", []), ("dask", ["--scheduler", "local", "--jobs", "2"]),
+                        ("jobs", ["--jobs", "2", "--devices", "cpu,cpu:0"])]:
+        p = run_cli("sheet", scene, "--cache", tmp_path / name, "--json", "-o", tmp_path / f"{name}.png", *extra)
+        assert p.returncode == 0, p.stderr
+        outs[name] = json.loads(p.stdout)
+    assert (tmp_path / "dask.png").read_bytes() == (tmp_path / "serial.png").read_bytes()
+    assert (tmp_path / "jobs.png").read_bytes() == (tmp_path / "serial.png").read_bytes()
+    assert "workers" not in outs["serial"]
+    for name in ("dask", "jobs"):
+        spread = outs[name]["workers"]
+        assert sum(w["cells"] for w in spread["workers"]) == 16 and spread["cells"] == {"rendered": 16}
+    assert outs["jobs"]["workers"]["devices"] == ["cpu", "cpu:0"]
+
+
+def test_a_bad_cell_fails_once_with_its_error(tmp_path, small_panoramas):
+    """A cell whose render fails (its panorama is not an EXR, which only decoding finds) comes
+    back as its one-line error, not retried: --keep-going marks it and the rest render."""
+    pytest.importorskip("distributed")
+    (tmp_path / "gone.exr").write_bytes(b"not an image" * 100)
+    scene = sheet_scene(tmp_path, small_panoramas["city"], {
+        "rows": {"key": "environment.path", "values": [str(small_panoramas["city"]), str(tmp_path / "gone.exr")]}},
+        res=(16, 12))
+    p = run_cli("sheet", scene, "--cache", tmp_path / "c", "--json", "-o", tmp_path / "s.png", "--keep-going",
+                "--scheduler", "local", "--jobs", "2")
+    assert p.returncode == 1 and len(p.stderr.strip().splitlines()) == 1, p.stderr
+    assert "gone.exr" in p.stderr and "Traceback" not in p.stderr
+
+
+def test_scheduler_without_dask_says_what_to_install(tmp_path, small_panoramas):
+    scene = sheet_scene(tmp_path, small_panoramas["city"], GRID, res=(16, 12))
+    code = ("import sys; sys.modules['distributed'] = None; from iblbake.entry import main; "
+            "sys.argv = ['iblbake'] + sys.argv[1:]; main()")
+    p = subprocess.run([sys.executable, "-c", code, "sheet", str(scene), "-o", str(tmp_path / "s.png"),
+                        "--scheduler", "local"], capture_output=True, text=True, timeout=120)
+    assert p.returncode != 0 and len(p.stderr.strip().splitlines()) == 1, p.stderr
+    assert "pip install 'iblbake[distributed]'" in p.stderr and not (tmp_path / "s.png").exists()
+
+
+def test_resume_after_sigkill_of_the_whole_sweep(tmp_path, small_panoramas):
+    """SIGKILL of `iblbake sheet` part way: --resume reads back exactly the cells whose entries
+    the killed run finished and renders the others."""
+    scene = sheet_scene(tmp_path, small_panoramas["city"], GRID, res=(64, 48))
+    cmd = [sys.executable, "-m", "iblbake.cli", "sheet", str(scene), "--cache", str(tmp_path / "c"), "-q",
+           "-o", str(tmp_path / "s.png"), *[a for s in HEAVY for a in ("--set", s)]]
+    proc = subprocess.Popen(cmd)
+    deadline = time.time() + 300
+    while time.time() < deadline and len(list((tmp_path / "c").glob("cell-*"))) < 3:
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    finished = {p.name for p in (tmp_path / "c").glob("cell-*") if (p / "manifest.json").exists()}
+    assert 3 <= len(finished) < 16 and not (tmp_path / "s.png").exists()
+    p = run_cli(*cmd[3:], "--resume", "--json")
+    assert p.returncode == 0, p.stderr
+    cells = json.loads(p.stdout)["cells"]
+    assert sum(c["cached"] for c in cells) == len(finished)
