@@ -1,13 +1,18 @@
 """Sheets beyond one process: a 64-cell sheet (8 x 8, 256x256 cells, importance N = 64, city)
-rendered serially and with `--jobs 2`, whole `iblbake sheet` processes with warm bake caches (the
-cell cache is not read: no --resume), median of --runs, side by side in one run; cells per second
-and the ratio to serial. With --pthreads, each worker's PoCL runs that many threads
-(POCL_MAX_PTHREAD_COUNT), so two workers do not fight over the same cores.
+rendered serially, with `--jobs N` (local worker processes) and with `--scheduler local --jobs N`
+(a Dask LocalCluster of N workers, started and stopped inside the process), whole `iblbake
+sheet` processes with warm bake caches (the cell cache is not read: no --resume), median of
+--runs, interleaved in one run; cells per second, the ratio to serial, and Dask's overhead per
+cell over the local pool. With --pthreads, each worker's PoCL runs that many threads
+(POCL_MAX_PTHREAD_COUNT), so N workers do not fight over the same cores. With --devices, the
+parallel rows give each worker its device (e.g. gpu,cpu,cpu: the GPU worker and CPU workers
+together) and the table adds cells per second per worker.
 
-    python benchmarks/bench_scale.py [--runs 3] [--device SPEC] [--jobs 2] [--pthreads N]
+    python benchmarks/bench_scale.py [--runs 3] [--device SPEC] [--jobs 2] [--pthreads N] [--devices LIST]
 """
 
 import argparse
+import json
 import os
 import statistics
 import subprocess
@@ -22,14 +27,14 @@ AXES = ["--rows", "materials.ball.metallic=0:1:8", "--columns", "materials.ball.
         "--cell-size", "256x256", "--set", "effects.specular=importance", "--set", "effects.samples=64"]
 
 
-def run(cache, out, jobs, device, env):
+def run(cache, out, extra, device, env):
     cmd = [sys.executable, "-m", "iblbake.cli", "sheet", str(SCENE), "-o", str(out), "--cache", str(cache),
-           "-q", "--jobs", str(jobs), *AXES] + (["--device", device] if device else [])
+           "--json", *extra, *AXES] + (["--device", device] if device else [])
     t0 = time.perf_counter()
     p = subprocess.run(cmd, capture_output=True, text=True, env=env)
     if p.returncode != 0:
         sys.exit(p.stderr.strip())
-    return time.perf_counter() - t0
+    return time.perf_counter() - t0, json.loads(p.stdout)
 
 
 def main():
@@ -38,26 +43,49 @@ def main():
     ap.add_argument("--device", default=None)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--pthreads", type=int, default=None)
+    ap.add_argument("--devices", default=None)
     args = ap.parse_args()
-    env = dict(os.environ)
+    try:
+        import distributed  # noqa: F401
+        dask = True
+    except ImportError:
+        dask = False
+    spread = ["--jobs", str(args.jobs)] + (["--devices", args.devices] if args.devices else [])
+    modes = {"serial": [], f"--jobs {args.jobs}": spread}
+    if dask:
+        modes[f"--scheduler local --jobs {args.jobs}"] = ["--scheduler", "local", *spread]
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        run(tmp / "c", tmp / "warm.png", 1, args.device, env)          # bakes and kernel builds
-        rows = []
-        for jobs in (1, args.jobs):
-            e = dict(env)
-            if jobs > 1 and args.pthreads:
-                e["POCL_MAX_PTHREAD_COUNT"] = str(args.pthreads)
-            times = [run(tmp / "c", tmp / f"j{jobs}.png", jobs, args.device, e) for _ in range(args.runs)]
-            rows.append((jobs, statistics.median(times)))
-        same = (tmp / "j1.png").read_bytes() == (tmp / f"j{args.jobs}.png").read_bytes()
-    serial = rows[0][1]
+        run(tmp / "c", tmp / "warm.png", [], args.device, dict(os.environ))    # bakes and kernel builds
+        times = {m: [] for m in modes}
+        docs = {}
+        for _ in range(args.runs):                     # interleaved: the host's load hits every mode alike
+            for i, (m, extra) in enumerate(modes.items()):
+                env = dict(os.environ)
+                if extra and args.pthreads:
+                    env["POCL_MAX_PTHREAD_COUNT"] = str(args.pthreads)
+                t, docs[m] = run(tmp / "c", tmp / f"m{i}.png", extra, args.device, env)
+                times[m].append(t)
+        sheets = [(tmp / f"m{i}.png").read_bytes() for i in range(len(modes))]
+    med = {m: statistics.median(t) for m, t in times.items()}
+    serial = med["serial"]
     print("| sheet of 64 cells | wall s | cells/s | throughput / serial |")
     print("|---|---|---|---|")
-    for jobs, t in rows:
-        print(f"| --jobs {jobs} | {t:.2f} | {64 / t:.1f} | {serial / t:.2f} |")
-    print(f"\nmedian of {args.runs} whole processes; the sheets {'are identical' if same else 'DIFFER'}; "
-          f"{os.cpu_count()} cores")
+    for m, t in med.items():
+        print(f"| {m} | {t:.2f} | {64 / t:.1f} | {serial / t:.2f} |")
+    if dask:
+        d, j = med[f"--scheduler local --jobs {args.jobs}"], med[f"--jobs {args.jobs}"]
+        print(f"\nDask's overhead over the local pool: {1000 * (d - j) / 64:+.1f} ms a cell "
+              f"({d - j:+.2f} s a sheet, the LocalCluster's start and stop included)")
+    else:
+        print("\n(no Dask here: pip install 'iblbake[distributed]' for the --scheduler row)")
+    for m, doc in docs.items():
+        if "workers" in doc:
+            per = ", ".join(f"{w['worker']}: {w['cells']} cells, {w['cells'] / max(w['seconds'], 1e-9):.1f}/s busy"
+                            for w in doc["workers"]["workers"])
+            print(f"{m}: {per}")
+    print(f"\nmedian of {args.runs} whole processes; the sheets "
+          f"{'are identical' if all(x == sheets[0] for x in sheets) else 'DIFFER'}; {os.cpu_count()} cores")
 
 
 if __name__ == "__main__":

@@ -173,3 +173,11 @@ def test_resume_after_sigkill_of_the_whole_sweep(tmp_path, small_panoramas):
     assert p.returncode == 0, p.stderr
     cells = json.loads(p.stdout)["cells"]
     assert sum(c["cached"] for c in cells) == len(finished)
+
+
+def test_unreachable_scheduler_is_one_line(tmp_path, small_panoramas):
+    pytest.importorskip("distributed")
+    scene = sheet_scene(tmp_path, small_panoramas["city"], GRID, res=(16, 12))
+    p = run_cli("sheet", scene, "-o", tmp_path / "s.png", "--scheduler", "tcp://127.0.0.1:9")
+    assert p.returncode == 1 and len(p.stderr.strip().splitlines()) == 1, p.stderr
+    assert "cannot connect" in p.stderr and not (tmp_path / "s.png").exists()

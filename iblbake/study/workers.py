@@ -78,7 +78,16 @@ def _collect(r: sheet.CellResult, out: dict, workers: dict, bakes, keep_going: b
 _DEVICE: list = []     # this pool worker's device spec, taken from the parent's queue at start
 
 
-def _pool_init(devices, cache_root):
+def split_cores(jobs: int) -> dict:
+    """The environment that gives each of `jobs` workers its share of the cores on a PoCL CPU
+    device (PoCL otherwise starts a thread per core in every worker, and N workers fight over
+    them); a value the user set is kept."""
+    key = "POCL_MAX_PTHREAD_COUNT"
+    return {key: os.environ.get(key) or str(max(1, (os.cpu_count() or 1) // jobs))}
+
+
+def _pool_init(devices, cache_root, env):
+    os.environ.update(env)               # before this process loads its OpenCL platforms
     _DEVICE[:] = [devices.get()]
     _worker(_DEVICE[0], cache_root)
 
@@ -99,7 +108,8 @@ def _pool(jobs: int, devices, cache_root: str):
     queue = ctx.Queue()
     for k in range(jobs):
         queue.put(devices[k % len(devices)])
-    return ProcessPoolExecutor(jobs, mp_context=ctx, initializer=_pool_init, initargs=(queue, cache_root))
+    return ProcessPoolExecutor(jobs, mp_context=ctx, initializer=_pool_init,
+                               initargs=(queue, cache_root, split_cores(jobs)))
 
 
 def render_cells_parallel(scenes, cells, jobs: int, *, devices, bakes, progress=None, keep_going=False,
@@ -232,9 +242,10 @@ def connect(scheduler: str, jobs: int, resources: dict):
         if scheduler == "local":
             cluster = distributed.LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
                                                resources=resources or None, dashboard_address=None,
+                                               env=split_cores(jobs),
                                                silence_logs=logging.ERROR)
             return distributed.Client(cluster), cluster
-        return distributed.Client(scheduler, timeout=10), None
+        return distributed.Client(scheduler, timeout=5), None
     except (OSError, TimeoutError, ValueError) as e:
         if cluster is not None:
             cluster.close()
