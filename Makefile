@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.iblbake-installed
 PANOS  := examples/panoramas
 OUT    := examples/out
 
-.PHONY: demo test stress install opencl assets testmodels bench clean
+.PHONY: demo test stress install opencl assets testmodels nodetools bench clean
 
 install: $(STAMP)
 $(STAMP): pyproject.toml
@@ -40,7 +40,11 @@ demo: opencl assets
 testmodels:
 	sh examples/fetch_testmodels.sh tests/data/assimp
 
-test: opencl assets testmodels
+# the real readers of the files iblbake writes (KTX2, glTF), in Node: tests/node/package.json
+nodetools:
+	sh scripts/ensure_node.sh tests/node
+
+test: opencl assets testmodels nodetools
 	$(BIN)/python -m pytest -q tests
 
 # the stress and fuzz suite at full size (10x the fuzz inputs, 24 kill runs per command); prints

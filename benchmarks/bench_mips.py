@@ -5,7 +5,8 @@ at each face size and method, prints the bake time (median of 3, kernels built a
 chain resident beforehand) and the relative RMSE of every level against a float64 brute-force
 reference (every source texel, split into parts smaller than the lobe, exact solid angles)
 evaluated at a random subset of texels per level (the whole level would cost ~1e11 weight
-evaluations at face 256). Then the DFG table's error against a 65,536-sample table.
+evaluations at face 256), and what packing that chain as KTX2 costs against its bake. Then the
+DFG table's error against a 65,536-sample table.
 
     python benchmarks/bench_mips.py [--env city] [--sizes 128 256] [--levels 9] [--texels 96]
 """
@@ -18,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from iblbake.io import images
+from iblbake.io import images, ktx2
 from iblbake.bake import layouts
 from iblbake.bake import mips as mipsbake
 
@@ -83,12 +84,20 @@ def main(argv=None):
             print(f"| {label}{how} | {t:.3f} | {' '.join(f'{e:.2%}' for e in errs)} | {max(errs):.2%} |")
             if kw["method"] == "auto":
                 auto = (t, max(errs))
+                auto_levels = levels
         if face in CMFT_SECONDS:
             t, worst = auto
             ok = t <= TARGET_SECONDS[face] and worst < 0.01
             print(f"\ndefault chain at face {face}: {t:.3f} s = 1/{CMFT_SECONDS[face] / t:.0f} of cmft's "
                   f"{CMFT_SECONDS[face]:g} s (target <= {TARGET_SECONDS[face]:g} s), worst level {worst:.2%} "
                   f"(target < 1%): {'met' if ok else 'NOT met'}")
+        if sizes == [max(1, face >> k) for k in range(len(sizes))]:      # a mip chain: what KTX2 stores
+            cube = [lv.reshape(6, sz, sz, 3) for lv, sz in zip(auto_levels, sizes)]
+            rows = []
+            for fmt in ktx2.FORMATS:
+                tk, data = median_time(lambda: ktx2.cube_bytes(cube, fmt))
+                rows.append(f"{fmt} {tk * 1e3:.0f} ms ({len(data) / 2**20:.1f} MiB, {100 * tk / auto[0]:.1f}% of the bake)")
+            print(f"KTX2 export of the face-{face} chain (mips --ktx2; target <= 10% of the bake): " + ", ".join(rows))
     print("\n(auto: per level r = resample, s = spectral, cT = convolve at T texels per lobe scale, f = fis)")
 
     if not args.no_dfg:

@@ -271,6 +271,37 @@ def load_chain(root: Path, manifest: dict):
     return [images.read_exr(entry / f["name"])[..., :3] for f in manifest["files"]]
 
 
+def check_ktx2_chain(path, opts: dict) -> None:
+    """Fail before baking unless the chain is what KTX2 stores: cube faces, level k of size s >> k."""
+    sizes = opts["sizes"]
+    if opts["layout"] != "cubemap" or sizes != [max(1, sizes[0] >> k) for k in range(len(sizes))]:
+        raise InputError(f"{path}: KTX2 stores a mip chain of cube faces (level k of size s >> k); the chain "
+                         f"would have layout {opts['layout']} and sizes {sizes}: lower --levels or --min-size")
+
+
+def write_ktx2(path: Path, root: Path, manifest: dict, opts: dict, fmt: str) -> None:
+    """The prefiltered cube-map chain of `manifest` as a KTX2 file (atomic). Its roughness per
+    level (k / (K - 1)) goes in the key/value data as iblbake.roughness (JSON)."""
+    import json
+
+    from iblbake.io import atomic, ktx2
+
+    check_ktx2_chain(path, opts)
+    sizes = opts["sizes"]
+    levels = [lv.reshape(6, s, s, -1) for lv, s in zip(load_chain(root, manifest), sizes)]
+    meta = {"iblbake.roughness": json.dumps([round(r, 6) for r in opts["roughness"]]),
+            "iblbake.layout": "GGX-prefiltered radiance; level k has roughness k/(K-1); DESIGN.md axes (+y up)"}
+    atomic.write_bytes(path, ktx2.cube_bytes(levels, fmt, meta, writer=f"iblbake {_version()}"))
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+    try:
+        return version("iblbake")
+    except PackageNotFoundError:
+        return "dev"
+
+
 def bake_prefiltered(baker: Baker, chain, info, root: Path, policies: dict, opts: dict, warn=None,
                      progress=None):
     # the budget decides each level's method, so the resolved value is part of the key

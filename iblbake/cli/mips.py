@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import time
+from pathlib import Path
 
 import click
 
@@ -59,18 +60,24 @@ from iblbake.cli.options import (POLICY_FLAGS, Console, common_options, depfile_
                    "random texels, print it and store it in the entry's manifest (render --report shows it).")
 @click.option("--backend", type=click.Choice(["opencl", "numpy"]), default="opencl", show_default=True,
               help="opencl: the kernels; numpy: their float64 twins (slow; small sizes).")
+@click.option("--ktx2", "ktx2_path", type=click.Path(), default=None, metavar="FILE",
+              help="Also write the prefiltered chain as a KTX2 cube map with its mip levels (faces +X -X +Y "
+                   "-Y +Z -Z, Vulkan's orientation); implies --layout cubemap. With several ENVs, a folder "
+                   "that gets ENV's name with .ktx2.")
+@click.option("--ktx2-format", type=click.Choice(["rgba16f", "rgba32f", "b10g11r11"]), default="rgba16f",
+              show_default=True,
+              help="Texel format of --ktx2: R16G16B16A16_SFLOAT, R32G32B32A32_SFLOAT or B10G11R11_UFLOAT_PACK32.")
 @depfile_option
 @input_options
 @device_option
 @common_options
 def mips_command(envs, cache_dir, layout, size, levels, min_size, method, samples, lod_bias, no_fis,
-                 convolve_budget, dfg_size, dfg_samples, dfg_multiscatter, only, level_sizes, verify, backend, nonfinite, negative,
-                 max_pixels, depfile, device, quiet, as_json):
+                 convolve_budget, dfg_size, dfg_samples, dfg_multiscatter, only, level_sizes, verify, backend,
+                 ktx2_path, ktx2_format, nonfinite, negative, max_pixels, depfile, device, quiet, as_json):
     """Bake the radiance mip chain, the GGX-prefiltered chain and the DFG table of each ENV into a
     content-addressed EXR cache (one process and one device for a whole folder). A second run
     with the same inputs does no work ("cached"). With --depfile the entries' manifests depend on
     their panorama."""
-    from pathlib import Path
 
     from iblbake.bake import cache
     from iblbake.io import images
@@ -79,6 +86,26 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
 
     con = Console(quiet, as_json)
     parts = {"radiance", "prefiltered", "dfg"} if "all" in only else set(only)
+    ktx2_out = {}
+    if ktx2_path:
+        ctx = click.get_current_context()
+        if ctx.get_parameter_source("layout") == click.core.ParameterSource.COMMANDLINE and layout != "cubemap":
+            raise click.UsageError(f"--ktx2 writes a cube map: leave out --layout {layout} (or give cubemap)")
+        if "prefiltered" not in parts:
+            raise click.UsageError("--ktx2 writes the prefiltered chain: give --only prefiltered (or all)")
+        if level_sizes != "halving":
+            raise click.UsageError("--ktx2 stores a mip chain: give --level-sizes halving")
+        layout = "cubemap"
+        from iblbake.io.atomic import check_writable as _writable
+        if len(envs) > 1:
+            folder = Path(ktx2_path)
+            if folder.exists() and not folder.is_dir():
+                raise click.BadParameter(f"{folder}: with several ENVs, --ktx2 names a folder", param_hint="--ktx2")
+            ktx2_out = {env: folder / (Path(env).stem + ".ktx2") for env in envs}
+        else:
+            ktx2_out = {envs[0]: Path(ktx2_path)}
+        for out in ktx2_out.values():
+            _writable(out, "--ktx2 output")
     t_start = time.perf_counter()
     root = Path(cache_dir) if cache_dir else cache.default_root()
     from iblbake.io.atomic import check_writable
@@ -97,6 +124,8 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
             if "prefiltered" in parts:
                 opts = mipsbake.PrefilterOptions(layout, size, levels, min_size, method, samples, lod_bias,
                                                  not no_fis, convolve_budget, level_sizes).resolved(info.height)
+                if env in ktx2_out:
+                    mipsbake.check_ktx2_chain(ktx2_out[env], opts)
                 # an impossible plan (--method spectral on a too sharp level) fails before any bake
                 mipsbake.plan_methods(layouts.radiance_chain_sizes(info.width, info.height),
                                       {**opts, "convolve_budget": baker.convolve_budget(opts)}, "--method")
@@ -123,7 +152,16 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
                                          "methods": [f["method"] for f in pm["files"]]}
                 if verify:
                     report["prefiltered"]["verify"] = mipsbake.verify_prefiltered(root, pm, image, verify)
-        entries = [Path(e["path"]) / "manifest.json" for e in report.values()]
+                if env in ktx2_out:
+                    t0 = time.perf_counter()
+                    out = ktx2_out[env]
+                    out.parent.mkdir(parents=True, exist_ok=True)
+                    mipsbake.write_ktx2(out, root, pm, opts, ktx2_format)
+                    report["ktx2"] = {"path": str(out), "format": ktx2_format, "cached": False,
+                                      "seconds": round(time.perf_counter() - t0, 4), "levels": len(opts["sizes"])}
+        entries = [Path(e["path"]) / "manifest.json" for k, e in report.items() if k != "ktx2"]
+        if "ktx2" in report:
+            entries.append(report["ktx2"]["path"])
         if entries:
             rules.append(([str(x) for x in entries], [os.path.abspath(env)]))
     if "dfg" in parts:                # shared by every panorama: baked once
@@ -139,8 +177,8 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
     lines = []
     for s in summaries:
         s["elapsed_s"] = elapsed
-        lines += [f"{kind}: {'cached' if e['cached'] else 'baked'} {e['path']} ({e['seconds']:.3f} s)"
-                  for kind, e in s["entries"].items() if kind != "dfg"]
+        lines += [f"{kind}: {'wrote' if kind == 'ktx2' else 'cached' if e['cached'] else 'baked'} {e['path']} "
+                  f"({e['seconds']:.3f} s)" for kind, e in s["entries"].items() if kind != "dfg"]
         v = s["entries"].get("prefiltered", {}).get("verify")
         if v:
             lines.append(f"verify: relative RMSE per level against the brute force at {v['texels_per_level']} texels: "

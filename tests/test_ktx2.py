@@ -1,0 +1,169 @@
+"""KTX2 cube maps (`iblbake mips --ktx2`) read back by real readers: ktx-parse (the parser of
+three.js's KTX2Loader) must return every level and face equal to the EXR chain bit for bit
+(float16 and float32; B10G11R11 equal to its round-to-nearest-even packing), and the libktx of
+the official glTF Sample Viewer must open the file with the same format, size and orientation.
+Faces follow Vulkan's cube-map face selection, written out here from the Vulkan specification
+(not from iblbake's conventions): a panorama with six marked directions lands each on its face
+and texel. The packed-float encoder matches a brute-force nearest-even search over every code."""
+
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from iblbake.core import conventions
+from iblbake.io import images, ktx2
+
+from .conftest import run_cli
+from .test_render import small_panoramas  # noqa: F401  (fixture: city and studio at 256x128)
+
+NODE = Path(__file__).parent / "node"
+VK = {"rgba16f": 97, "rgba32f": 109, "b10g11r11": 122}
+
+
+@pytest.fixture(scope="module")
+def readers():
+    if shutil.which("node") is None or not (NODE / "node_modules" / "ktx-parse").is_dir():
+        pytest.skip("the Node readers are not set up: run `make nodetools` (make test does)")
+
+    def run(script, *paths):
+        p = subprocess.run(["node", str(NODE / script), *map(str, paths)], capture_output=True, text=True,
+                           timeout=120)
+        assert p.returncode == 0, p.stderr
+        return json.loads(p.stdout), p.stderr
+    return run
+
+
+def bake(tmp_path, env, fmt, *extra):
+    out = tmp_path / f"chain-{fmt}.ktx2"
+    p = run_cli("mips", env, "--cache", tmp_path / "c", "--ktx2", out, "--ktx2-format", fmt, "--size", "16",
+                "--min-size", "1", "--only", "prefiltered", "--json", *extra)
+    assert p.returncode == 0, p.stderr
+    doc = json.loads(p.stdout)["entries"]
+    entry = Path(doc["prefiltered"]["path"])
+    files = json.loads((entry / "manifest.json").read_text())["files"]
+    chain = [images.read_exr(entry / f["name"])[..., :3] for f in files]
+    return out, chain, doc
+
+
+@pytest.mark.parametrize("fmt", ["rgba16f", "rgba32f", "b10g11r11"])
+def test_ktx_parse_reads_every_level_and_face_back(tmp_path, small_panoramas, readers, fmt):
+    out, chain, doc = bake(tmp_path, small_panoramas["city"], fmt)
+    got = readers("read_ktx2.mjs", out)[0][str(out)]
+    assert "error" not in got, got
+    assert (got["vkFormat"], got["pixelWidth"], got["pixelHeight"], got["pixelDepth"]) == (VK[fmt], 16, 16, 0)
+    assert (got["faceCount"], got["layerCount"], got["supercompressionScheme"]) == (6, 0, 0)
+    assert got["typeSize"] == {"rgba16f": 2, "rgba32f": 4, "b10g11r11": 4}[fmt]
+    assert got["keyValue"]["KTXorientation"] == "rd" and got["keyValue"]["KTXwriter"].startswith("iblbake")
+    assert json.loads(got["keyValue"]["iblbake.roughness"]) == pytest.approx(doc["prefiltered"]["roughness"])
+    dfd = got["dfd"][0]
+    assert (dfd["colorModel"], dfd["colorPrimaries"], dfd["transferFunction"]) == (1, 1, 1)   # RGBSDA, BT.709, linear
+    assert [s["channelType"] & 0xF for s in dfd["samples"]] == ([0, 1, 2] if fmt == "b10g11r11" else [0, 1, 2, 15])
+    assert len(got["levels"]) == len(chain) == 5
+    for k, (level, ref) in enumerate(zip(got["levels"], chain)):
+        s = 16 >> k
+        raw = np.frombuffer(__import__("base64").b64decode(level["data"]), dtype={
+            "rgba16f": "<f2", "rgba32f": "<f4", "b10g11r11": "<u4"}[fmt])
+        ref = ref.reshape(6, s, s, 3)
+        if fmt == "b10g11r11":
+            packed = raw.reshape(6, s, s)
+            assert np.array_equal(packed, ktx2.pack_b10g11r11(ref))
+            back = ktx2.unpack_b10g11r11(packed)
+            # round to nearest: half a unit in the last place, 2^-7 (R, G) and 2^-6 (B) relative
+            rel = np.abs(back - ref) / np.maximum(ref, 2.0 ** -14)
+            assert rel[..., :2].max() <= 2.0 ** -7 and rel[..., 2].max() <= 2.0 ** -6
+        else:
+            texels = raw.reshape(6, s, s, 4)
+            assert np.array_equal(texels[..., :3], ref.astype(texels.dtype)) and np.all(texels[..., 3] == 1)
+        assert level["uncompressedByteLength"] == raw.nbytes
+
+
+def test_libktx_opens_the_file(tmp_path, small_panoramas, readers):
+    outs = [bake(tmp_path, small_panoramas["city"], fmt)[0] for fmt in VK]
+    got, _ = readers("libktx_info.cjs", *outs)
+    for out, fmt in zip(outs, VK):
+        info = got[str(out)]
+        assert info["messages"] == [], info
+        assert (info["vkFormat"], info["baseWidth"], info["baseHeight"]) == (VK[fmt], 16, 16)
+        assert info["numComponents"] == (3 if fmt == "b10g11r11" else 4)
+        assert info["orientation"][:2] == [ord("r"), ord("d")]
+    bad = tmp_path / "bad.ktx2"
+    bad.write_bytes(b"X" + outs[0].read_bytes()[1:])
+    got, _ = readers("libktx_info.cjs", bad)
+    assert got[str(bad)]["error"] and "Not a KTX file" in " ".join(got[str(bad)]["messages"])  # it does check
+
+
+def vulkan_face_texel(d, n):
+    """Vulkan's cube-map face selection and (s, t) (the spec's table): face, row, column."""
+    x, y, z = d
+    ax = np.abs(d)
+    if ax[0] >= ax[1] and ax[0] >= ax[2]:
+        face, sc, tc, ma = (0, -z, -y, ax[0]) if x > 0 else (1, z, -y, ax[0])
+    elif ax[1] >= ax[2]:
+        face, sc, tc, ma = (2, x, z, ax[1]) if y > 0 else (3, x, -z, ax[1])
+    else:
+        face, sc, tc, ma = (4, x, -y, ax[2]) if z > 0 else (5, -x, -y, ax[2])
+    s, t = 0.5 * (sc / ma + 1), 0.5 * (tc / ma + 1)
+    return face, t * n - 0.5, s * n - 0.5             # in texel-centre units
+
+
+def test_marked_directions_land_on_their_face_and_texel(tmp_path, readers):
+    """Six small bright spots (3 degrees across), one inside each face and off its centre (so a
+    flipped or rotated face shows); level 0 (roughness 0: the panorama at each texel's
+    direction) holds each spot on the face Vulkan's face selection gives, centred within one
+    texel of where it puts it, and nowhere else."""
+    w, h, n = 1024, 512, 64
+    dirs = conventions.equirect_texel_dirs(w, h)
+    marks = [np.array(v, float) / np.linalg.norm(v) for v in
+             ([1, 0.3, -0.5], [-1, -0.4, 0.2], [0.35, 1, 0.55], [-0.3, -1, 0.45], [0.5, -0.25, 1], [-0.45, 0.3, -1])]
+    pano = np.full((h, w, 3), 0.01, np.float32)
+    for m in marks:
+        pano[dirs @ m > np.cos(np.radians(1.5))] = 1000.0
+    env = tmp_path / "marks.exr"
+    images.write_exr(env, pano)
+    out, _, _ = bake(tmp_path, env, "rgba32f", "--size", str(n))
+    got = readers("read_ktx2.mjs", out)[0][str(out)]
+    level0 = np.frombuffer(__import__("base64").b64decode(got["levels"][0]["data"]), "<f4").reshape(6, n, n, 4)
+    bright = level0[..., 0] > 100
+    for m in marks:
+        face, row, col = vulkan_face_texel(m, n)
+        rows, cols = np.nonzero(bright[face])
+        assert len(rows) >= 2, (m, face)
+        assert abs(rows.mean() - row) <= 1 and abs(cols.mean() - col) <= 1, (m, face, row, col, rows, cols)
+    assert bright.sum(axis=(1, 2)).min() >= 2            # one spot per face: each face has its own
+
+
+def test_packed_float_encoder_is_nearest_even():
+    """Every finite code decodes and re-encodes to itself; random values and every midpoint
+    between codes encode to the nearest code, ties to even (a brute-force search)."""
+    rng = np.random.default_rng(7)
+    for bits in (6, 5):
+        codes = np.arange(31 << bits, dtype=np.uint32)
+        vals = ktx2.decode_ufloat(codes, bits).astype(np.float64)
+        assert np.all(np.diff(vals) > 0)
+        assert np.array_equal(ktx2.encode_ufloat(vals.astype(np.float32), bits), codes)
+        x = np.concatenate([np.exp(rng.uniform(np.log(1e-9), np.log(6.5e4), 50000)),
+                            (vals[:-1] + vals[1:]) / 2]).astype(np.float32)
+        i = np.searchsorted(vals, x.astype(np.float64))
+        lo, hi = np.clip(i - 1, 0, len(vals) - 1), np.clip(i, 0, len(vals) - 1)
+        dlo, dhi = np.abs(x - vals[lo]), np.abs(vals[hi] - x)
+        best = np.where(dlo < dhi, lo, np.where(dhi < dlo, hi, np.where(lo % 2 == 0, lo, hi)))
+        assert np.array_equal(ktx2.encode_ufloat(x, bits), best)
+    special = ktx2.encode_ufloat(np.array([-1.0, -0.0, 0.0, 1e9, np.inf, np.nan], np.float32), 6)
+    assert list(special[:4]) == [0, 0, 0, (30 << 6) | 63] and special[4] == 31 << 6 and special[5] > 31 << 6
+
+
+def test_bad_ktx2_requests_are_one_line(tmp_path, small_panoramas):
+    env = small_panoramas["city"]
+    cases = [(["--layout", "equirect"], "--ktx2 writes a cube map"),
+             (["--level-sizes", "lobe"], "--level-sizes halving"),
+             (["--size", "16", "--levels", "8"], "lower --levels or --min-size"),
+             (["--only", "dfg"], "--only prefiltered")]
+    for extra, says in cases:
+        p = run_cli("mips", env, "--cache", tmp_path / "c", "--ktx2", tmp_path / "x.ktx2", *extra)
+        assert p.returncode != 0 and says in p.stderr.strip().splitlines()[-1], (extra, p.stderr)
+        assert "Traceback" not in p.stderr
+        assert not (tmp_path / "x.ktx2").exists()
