@@ -73,7 +73,8 @@ from iblbake.cli.options import (POLICY_FLAGS, Console, common_options, depfile_
 @common_options
 def mips_command(envs, cache_dir, layout, size, levels, min_size, method, samples, lod_bias, no_fis,
                  convolve_budget, dfg_size, dfg_samples, dfg_multiscatter, only, level_sizes, verify, backend,
-                 ktx2_path, ktx2_format, nonfinite, negative, max_pixels, depfile, device, quiet, as_json):
+                 ktx2_path, ktx2_format, nonfinite, negative, transfer, primaries, max_pixels, depfile, device,
+                 quiet, as_json):
     """Bake the radiance mip chain, the GGX-prefiltered chain and the DFG table of each ENV into a
     content-addressed EXR cache (one process and one device for a whole folder). A second run
     with the same inputs does no work ("cached"). With --depfile the entries' manifests depend on
@@ -117,10 +118,10 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
         summaries.append({"input": env, "cache": str(root), "device": baker.device_label, "entries": report})
         if parts & {"radiance", "prefiltered"}:
             image, info = images.read_panorama(env, max_pixels=max_pixels, nonfinite=nonfinite, negative=negative,
-                                               names=POLICY_FLAGS)
+                                               transfer=transfer, primaries=primaries, names=POLICY_FLAGS)
             for w in info.warnings:
                 con.warn(w)
-            policies = {"nonfinite": nonfinite, "negative": negative}
+            policies = images.read_policies(nonfinite, negative, transfer, primaries)
             if "prefiltered" in parts:
                 opts = mipsbake.PrefilterOptions(layout, size, levels, min_size, method, samples, lod_bias,
                                                  not no_fis, convolve_budget, level_sizes).resolved(info.height)

@@ -94,11 +94,19 @@ def input_options(f):
                      show_default=True,
                      help="NaN/Inf texels: fail (naming the count and first position), set to 0, or "
                           "clamp (+Inf to the largest finite value, NaN and -Inf to 0).")(f)
+    f = click.option("--input-transfer", "transfer", type=click.Choice(["auto", "srgb", "linear"]), default="auto",
+                     show_default=True,
+                     help="How texels decode to linear: auto (an 8/16-bit PNG or JPEG from sRGB, or the linear "
+                          "or gamma it declares; float images as stored), srgb, or linear.")(f)
+    f = click.option("--primaries", type=click.Choice(["keep", "convert"]), default="keep", show_default=True,
+                     help="An EXR declaring chromaticities other than Rec.709: keep its values as stored, or "
+                          "convert them to Rec.709/D65 (Bradford adaptation of the white).")(f)
     return f
 
 
 # the read policies as this command line names them (the library's messages quote these)
-POLICY_FLAGS = {"max_pixels": "--max-pixels", "nonfinite": "--nonfinite", "negative": "--negative"}
+POLICY_FLAGS = {"max_pixels": "--max-pixels", "nonfinite": "--nonfinite", "negative": "--negative",
+                "transfer": "--input-transfer", "primaries": "--primaries"}
 
 
 def finite(ctx, param, value):

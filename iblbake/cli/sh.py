@@ -63,7 +63,7 @@ def _check_overwrite(output: str, force: bool, source: str):
 @device_option
 @common_options
 def sh_command(envs, output, force, bands, window, backend, rotate_y, intensity, glsl, with_error, nonfinite,
-               negative, max_pixels, depfile, device, quiet, as_json):
+               negative, transfer, primaries, max_pixels, depfile, device, quiet, as_json):
     """Project each panorama ENV onto spherical harmonics and bake irradiance coefficients (one
     process for a whole folder: `iblbake sh *.exr -o DIR/`).
 
@@ -91,7 +91,8 @@ def sh_command(envs, output, force, bands, window, backend, rotate_y, intensity,
             _check_overwrite(out, force, env)
     state = {"rt": None}
     results = [_project_one(env, out, state, bands, window, backend, rotate_y, intensity, glsl, with_error,
-                            nonfinite, negative, max_pixels, device, con) for env, out in zip(envs, outputs)]
+                            nonfinite, negative, transfer, primaries, max_pixels, device, con)
+               for env, out in zip(envs, outputs)]
     if depfile:
         from iblbake.io import depfile as dep
         dep.write(depfile, [([out], [os.path.abspath(env)]) for env, out in zip(envs, outputs) if out])
@@ -107,7 +108,7 @@ def sh_command(envs, output, force, bands, window, backend, rotate_y, intensity,
 
 
 def _project_one(env, output, state, bands, window, backend, rotate_y, intensity, glsl, with_error, nonfinite,
-                 negative, max_pixels, device, con):
+                 negative, transfer, primaries, max_pixels, device, con):
     from iblbake.bake import sh as shbake
     from iblbake.io import images
 
@@ -115,7 +116,7 @@ def _project_one(env, output, state, bands, window, backend, rotate_y, intensity
     with con.stages(["reading", "projecting"], label="sh") as stage:
         t0 = time.perf_counter()
         image, info = images.read_panorama(env, max_pixels=max_pixels, nonfinite=nonfinite, negative=negative,
-                                           names=POLICY_FLAGS)
+                                           transfer=transfer, primaries=primaries, names=POLICY_FLAGS)
         read_s = time.perf_counter() - t0
         stage()
         rt = None
@@ -131,7 +132,8 @@ def _project_one(env, output, state, bands, window, backend, rotate_y, intensity
         con.warn(w)
     coeffs = coeffs * intensity
     options = {"bands": bands, "window": window, "backend": backend, "rotate_y_deg": rotate_y,
-               "intensity": intensity, "nonfinite": nonfinite, "negative": negative}
+               "intensity": intensity, "nonfinite": nonfinite, "negative": negative, "transfer": transfer,
+               "primaries": primaries}
     timings = {"read_s": round(read_s, 6), "project_s": round(project_s, 6)}
     doc = shbake.document(coeffs, bands=bands, window=window, info=info, options=options,
                           device=device_label, timings=timings)

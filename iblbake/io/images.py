@@ -5,6 +5,10 @@ The size is checked from the header before any pixel is decoded. Non-finite texe
 default (count and first position in the message), or are repaired with the nonfinite policy zero|clamp;
 negative texels (every one of Blender's panoramas has tiny ones) are kept as stored by default,
 counted and reported, or clamped / refused with the negative policy.
+An integer (LDR: 8- or 16-bit PNG, JPEG) panorama is decoded from its transfer to linear (sRGB
+unless the file declares linear or a gamma; the transfer policy overrides) with a one-line
+warning that it clips highlights. Declared EXR chromaticities other than Rec.709 are used as
+stored (primaries keep) or converted to Rec.709/D65 with a Bradford adaptation (convert).
 """
 
 from __future__ import annotations
@@ -16,8 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from iblbake.io.atomic import atomic_path
+from iblbake.core.color import REC709
 from iblbake.errors import InputError, IblbakeError
+from iblbake.io.atomic import atomic_path
 
 DEFAULT_MAX_PIXELS = 8192 * 8192
 # Values beyond this cannot be summed in float32 kernels (a row of 8192 of them overflows 3.4e38);
@@ -25,8 +30,8 @@ DEFAULT_MAX_PIXELS = 8192 * 8192
 MAX_ABS_VALUE = 1e30
 NONFINITE_POLICIES = ("error", "zero", "clamp")
 NEGATIVE_POLICIES = ("keep", "clamp", "error")
-# Rec.709 / sRGB primaries and D65 white (x, y) pairs: R, G, B, W.
-REC709 = (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290)
+TRANSFERS = ("auto", "srgb", "linear")
+PRIMARIES = ("keep", "convert")
 
 
 @dataclass
@@ -92,11 +97,53 @@ def _first_position(mask) -> str:
 
 # How the read policies are named in messages: the caller says where each came from (a command-line
 # flag, a scene key); the library itself knows neither.
-POLICY_NAMES = {"max_pixels": "max_pixels", "nonfinite": "nonfinite", "negative": "negative"}
+POLICY_NAMES = {"max_pixels": "max_pixels", "nonfinite": "nonfinite", "negative": "negative",
+                "transfer": "transfer", "primaries": "primaries"}
 
 
-def read_panorama(path, *, max_pixels: int | None = None, nonfinite: str = "error",
-                  negative: str = "keep", names: dict | None = None) -> tuple[np.ndarray, ImageInfo]:
+def read_policies(nonfinite: str, negative: str, transfer: str = "auto", primaries: str = "keep") -> dict:
+    """What a bake keys on besides the file's content: the read policies that change pixels (the
+    new ones only where not their default, so keys made before them still hold)."""
+    out = {"nonfinite": nonfinite, "negative": negative}
+    if transfer != "auto":
+        out["transfer"] = transfer
+    if primaries != "keep":
+        out["primaries"] = primaries
+    return out
+
+
+def _decode_transfer(data, spec, transfer: str, path: str, warnings: list, name: dict):
+    """Integer (LDR) texels to linear; float texels as stored unless told they are sRGB."""
+    from iblbake.core.color import srgb_decode
+
+    integer = str(spec.format) in ("uint8", "uint16", "int8", "int16", "uint32", "int32")
+    declared = str(spec.getattribute("oiio:ColorSpace") or "").lower()
+    how = transfer
+    gamma = None
+    if transfer == "auto":
+        if not integer or "linear" in declared or declared in ("lin_rec709", "scene_linear", "raw"):
+            how = "linear"
+        elif declared.startswith("gamma"):
+            try:
+                gamma, how = float(declared[5:].replace("_", ".")), "gamma"
+            except ValueError:
+                how = "srgb"
+        else:
+            how = "srgb"
+    if integer:
+        warnings.append(f"{path}: an LDR ({spec.format}) panorama: read as {how if how != 'gamma' else f'gamma {gamma:g}'}"
+                        f" to linear, its highlights clipped at 1 (a sun or lamp far too dim for lighting); "
+                        f"use an HDR panorama (EXR, .hdr), or {name['transfer']} to change the decoding")
+    if how == "srgb":
+        return srgb_decode(data).astype(np.float32)
+    if how == "gamma":
+        return np.power(np.maximum(data, 0.0), gamma).astype(np.float32)
+    return data
+
+
+def read_panorama(path, *, max_pixels: int | None = None, nonfinite: str = "error", negative: str = "keep",
+                  transfer: str = "auto", primaries: str = "keep",
+                  names: dict | None = None) -> tuple[np.ndarray, ImageInfo]:
     """Read an HDR image as float32 RGB (H, W, 3) and validate it (see module doc). `names` maps
     max_pixels / nonfinite / negative to what messages call them (a flag or a scene key)."""
     name = {**POLICY_NAMES, **(names or {})}
@@ -127,6 +174,8 @@ def read_panorama(path, *, max_pixels: int | None = None, nonfinite: str = "erro
             msg = " ".join(inp.geterror().split()) or "pixel data unreadable"
             raise InputError(f"{path}: corrupt or truncated image ({msg[:200]})")
         fmt = str(spec.format)
+        warnings = []
+        data = _decode_transfer(np.asarray(data, dtype=np.float32), spec, transfer, path, warnings, name)
     finally:
         inp.close()
     # OIIO may report partial-read errors without failing read_image.
@@ -138,12 +187,20 @@ def read_panorama(path, *, max_pixels: int | None = None, nonfinite: str = "erro
 
     info = ImageInfo(path=path, width=w, height=h, channels_in=names, format=fmt,
                      sha256=file_sha256(path), nonfinite_policy=nonfinite, negative_policy=negative)
+    info.warnings += warnings
     if chroma is not None:
         info.chromaticities = tuple(float(c) for c in chroma)
         if not np.allclose(info.chromaticities, REC709, atol=2e-3):
-            info.warnings.append(
-                f"{path}: declares non-Rec.709 chromaticities {tuple(round(c, 4) for c in chroma)}; "
-                "pixels are used as stored (Rec.709 assumed)")
+            shown = tuple(round(c, 4) for c in chroma)
+            if primaries == "convert":
+                from iblbake.core.color import to_rec709
+                m = to_rec709(info.chromaticities).astype(np.float32)
+                rgb = np.ascontiguousarray(rgb @ m.T)
+                info.warnings.append(f"{path}: converted from its chromaticities {shown} to Rec.709/D65 "
+                                     f"(Bradford adaptation)")
+            else:
+                info.warnings.append(f"{path}: declares non-Rec.709 chromaticities {shown}; pixels are used as "
+                                     f"stored (Rec.709 assumed; {name['primaries']} convert converts them)")
     if w != 2 * h:
         info.warnings.append(f"{path}: {w}x{h} is not 2:1; treated as a full latitude-longitude panorama")
 

@@ -26,7 +26,8 @@ def _geometry_code_hash() -> str:
     return hashlib.sha256((inspect.getsource(geometry) + inspect.getsource(pack)).encode()).hexdigest()[:16]
 
 
-POLICY_KEYS = {"nonfinite": "environment.nonfinite:", "negative": "environment.negative:"}
+POLICY_KEYS = {"nonfinite": "environment.nonfinite:", "negative": "environment.negative:",
+               "transfer": "environment.transfer:", "primaries": "environment.primaries:"}
 
 
 class Bakes:
@@ -65,8 +66,9 @@ class Bakes:
         `sun: extract`, the panorama without its sun, its info's hash that of what is left (every
         bake keys on it)."""
         key = self._env_key(env)
-        image, info = self._get(key, lambda: images.read_panorama(env["path"], nonfinite=env["nonfinite"],
-                                                                  negative=env["negative"], names=POLICY_KEYS))
+        image, info = self._get(key, lambda: images.read_panorama(
+            env["path"], nonfinite=env["nonfinite"], negative=env["negative"], transfer=env["transfer"],
+            primaries=env["primaries"], names=POLICY_KEYS))
         if env.get("sun") != "extract":
             return image, info
         return self._get(key + ("sun",), lambda: self._extract(image, info))[:2]
@@ -75,7 +77,8 @@ class Bakes:
     def _env_key(env: dict) -> tuple:
         """A panorama file's content as far as a read can tell (path, size, mtime), and its policies."""
         st = os.stat(env["path"])
-        return ("env", env["path"], st.st_size, st.st_mtime_ns, env["nonfinite"], env["negative"])
+        return ("env", env["path"], st.st_size, st.st_mtime_ns, env["nonfinite"], env["negative"], env["transfer"],
+                env["primaries"])
 
     def _extract(self, image, info):
         import dataclasses
@@ -140,7 +143,7 @@ class Bakes:
         return getattr(self, f"_{name}")(ctx)
 
     def _policies(self, env):
-        return {"nonfinite": env["nonfinite"], "negative": env["negative"]}
+        return images.read_policies(env["nonfinite"], env["negative"], env["transfer"], env["primaries"])
 
     def _sh(self, ctx):
         fx, env = ctx.scene.data["effects"], ctx.scene.data["environment"]

@@ -266,6 +266,11 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "blur": Num(0.0, 0.0, 1.0, doc="show the background through the prefiltered level of this roughness (0: sharp)"),
         "nonfinite": Enum(("error", "zero", "clamp"), "error", doc="NaN/Inf texels: fail, zero or clamp"),
         "negative": Enum(("keep", "clamp", "error"), "keep", doc="negative texels: keep, clamp to 0, or fail"),
+        "transfer": Enum(("auto", "srgb", "linear"), "auto",
+                         doc="texels to linear: auto (an 8/16-bit PNG or JPEG from sRGB or what it declares; "
+                             "float images as stored), srgb, or linear"),
+        "primaries": Enum(("keep", "convert"), "keep",
+                          doc="EXR chromaticities other than Rec.709: keep the values, or convert to Rec.709/D65"),
         "sun": Enum(("none", "extract"), "none",
                     doc="extract: the panorama's sun (a compact region 1e4 x brighter than the median) leaves the "
                         "panorama and comes back as a directional light of exactly its energy, so it casts shadows"),
