@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.iblbake-installed
 PANOS  := examples/panoramas
 OUT    := examples/out
 
-.PHONY: demo test stress install opencl assets testmodels nodetools bench clean
+.PHONY: demo test stress install opencl assets testmodels readers bench clean
 
 install: $(STAMP)
 $(STAMP): pyproject.toml
@@ -40,11 +40,11 @@ demo: opencl assets
 testmodels:
 	sh examples/fetch_testmodels.sh tests/data/assimp
 
-# the real readers of the files iblbake writes (KTX2, glTF), in Node: tests/node/package.json
-nodetools:
-	sh scripts/ensure_node.sh tests/node
+# the real readers of the files iblbake writes (KTX2, glTF: Node and tests/node/package.json; GLSL: glslang)
+readers:
+	sh scripts/ensure_readers.sh tests/node
 
-test: opencl assets testmodels nodetools
+test: opencl assets testmodels readers
 	$(BIN)/python -m pytest -q tests
 
 # the stress and fuzz suite at full size (10x the fuzz inputs, 24 kill runs per command); prints

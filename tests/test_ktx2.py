@@ -27,7 +27,7 @@ VK = {"rgba16f": 97, "rgba32f": 109, "b10g11r11": 122}
 @pytest.fixture(scope="module")
 def readers():
     if shutil.which("node") is None or not (NODE / "node_modules" / "ktx-parse").is_dir():
-        pytest.skip("the Node readers are not set up: run `make nodetools` (make test does)")
+        pytest.skip("the Node readers are not set up: run `make readers` (make test does)")
 
     def run(script, *paths):
         p = subprocess.run(["node", str(NODE / script), *map(str, paths)], capture_output=True, text=True,

@@ -17,6 +17,7 @@ import numpy as np
 
 from iblbake.core import conventions
 from iblbake.core import sh
+from iblbake.errors import IblbakeError
 
 FORMAT = "iblbake.sh"
 FORMAT_VERSION = 1
@@ -146,6 +147,70 @@ def _rows(coeffs) -> list:
             raise ValueError("non-finite SH coefficient")
         out.append(vals)
     return out
+
+
+# Engine formats (README "SH for engines"). Each engine evaluates its own polynomials in world
+# x, y, z of a unit normal; iblbake's basis for l <= 2 is those polynomials times the positive
+# constants below (no Condon-Shortley phase, z polar axis, the same world: right-handed, +y up),
+# so an export is a rescaling per coefficient, with no sign flips or axis swaps.
+POLY_CONSTANTS = np.array([0.5 / math.sqrt(math.pi)] + [math.sqrt(3.0 / (4.0 * math.pi))] * 3
+                          + [0.5 * math.sqrt(15.0 / math.pi)] * 2 + [0.25 * math.sqrt(5.0 / math.pi)]
+                          + [0.5 * math.sqrt(15.0 / math.pi), 0.25 * math.sqrt(15.0 / math.pi)])
+FORMATS = ("iblbake", "filament", "threejs", "glsl")
+SUFFIX = {"iblbake": ".json", "filament": ".txt", "threejs": ".json", "glsl": ".glsl"}
+NAMES = ["L00", "L1-1", "L10", "L11", "L2-2", "L2-1", "L20", "L21", "L22"]
+
+
+def _nine(doc: dict, key: str, engine: str, most: int = 3) -> np.ndarray:
+    bands = doc["bands"]
+    if bands > most:
+        raise IblbakeError(f"--format {engine} holds at most {most} bands (9 coefficients); give --bands 3 or fewer")
+    return np.asarray(doc[key], np.float64)
+
+
+def filament_coefficients(doc: dict) -> np.ndarray:
+    """Filament's IndirectLight::Builder::irradiance(bands, sh): sh[k] = L_lm A_lm Chat_l / pi
+    with its A_lm carrying the Condon-Shortley signs its basis has; in iblbake's signs that is
+    E_k |A_k| / pi, so Irradiance_SphericalHarmonics(n) (its shader: sh[0] + sh[1] y + sh[2] z +
+    sh[3] x + sh[4] yx + sh[5] yz + sh[6] (3z^2 - 1) + sh[7] zx + sh[8] (x^2 - y^2)) is E(n)/pi,
+    the diffuse light a Lambertian albedo of 1 reflects."""
+    e = _nine(doc, "irradiance", "filament")
+    return e * POLY_CONSTANTS[:len(e), None] / math.pi
+
+
+def filament_text(doc: dict) -> str:
+    """cmgen's sh.txt layout (one "(r, g, b); // name" line per coefficient), which Filament's
+    samples read back."""
+    c = filament_coefficients(doc)
+    return "".join(f"({r:.9g}, {g:.9g}, {b:.9g}); // {NAMES[k]}, irradiance, pre-scaled base"
+                   f"{' (iblbake, from ' + doc['input']['path'] + ')' if k == 0 else ''}\n"
+                   for k, (r, g, b) in enumerate(c))
+
+
+def threejs_coefficients(doc: dict) -> np.ndarray:
+    """three.js's SphericalHarmonics3 (a LightProbe's sh): the radiance coefficients L_lm in its
+    basis, which is iblbake's for l <= 2 (getAt uses 0.282095, 0.488603 y, z, x, 1.092548 xy, yz,
+    0.315392 (3z^2 - 1), 1.092548 xz, 0.546274 (x^2 - y^2)); its getIrradianceAt and shader
+    multiply by pi, 2pi/3, pi/4 themselves. Fewer than 3 bands are padded with zeros."""
+    lr = _nine(doc, "radiance", "threejs")
+    out = np.zeros((9, 3))
+    out[:len(lr)] = lr
+    return out
+
+
+def threejs_json(doc: dict) -> str:
+    """`new THREE.LightProbe(new THREE.SphericalHarmonics3().fromArray(json.sh))`."""
+    import json
+    return json.dumps({"generator": "iblbake", "type": "LightProbe", "source": doc["input"]["path"],
+                       "sh": [round(float(v), 9) for v in threejs_coefficients(doc).ravel()],
+                       "intensity": 1.0}, indent=1) + "\n"
+
+
+def export(doc: dict, fmt: str) -> str:
+    import json
+    if fmt == "iblbake":
+        return json.dumps(doc, indent=2, allow_nan=False) + "\n"
+    return {"filament": filament_text, "threejs": threejs_json, "glsl": glsl_snippet}[fmt](doc)
 
 
 def glsl_snippet(doc: dict) -> str:

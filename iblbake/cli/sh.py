@@ -14,9 +14,9 @@ from iblbake.cli.options import (POLICY_FLAGS, Console, common_options, depfile_
 from iblbake.errors import IblbakeError
 
 
-def _check_overwrite(output: str, force: bool, source: str):
-    """sh replaces its own earlier documents (Makefile reruns) but nothing else unless --force,
-    and never its input."""
+def _check_overwrite(output: str, force: bool, source: str, fmt: str = "iblbake"):
+    """sh replaces its own earlier documents and exports (Makefile reruns) but nothing else
+    unless --force, and never its input."""
     from iblbake.bake import sh as shbake
 
     out = os.path.realpath(output)
@@ -26,12 +26,16 @@ def _check_overwrite(output: str, force: bool, source: str):
         return
     try:
         with open(out, "rb") as f:
-            ours = json.loads(f.read(1 << 22)).get("format") == shbake.FORMAT
+            head = f.read(1 << 22)
+        if fmt == "iblbake":
+            ours = json.loads(head).get("format") == shbake.FORMAT
+        else:                        # every export names iblbake in its first lines
+            ours = b"iblbake" in head[:4096]
     except (OSError, ValueError, AttributeError):
         ours = False
     if not ours:
-        raise IblbakeError(f"{output}: exists and is not an iblbake SH document; pass --force to "
-                           f"overwrite it")
+        raise IblbakeError(f"{output}: exists and is not an iblbake SH {'document' if fmt == 'iblbake' else fmt + ' export'}; "
+                           f"pass --force to overwrite it")
 
 
 @click.command("sh")
@@ -54,7 +58,13 @@ def _check_overwrite(output: str, force: bool, source: str):
               help="Rotate the panorama about +y by DEG degrees (+x towards -z).")
 @click.option("--intensity", type=float, default=1.0, show_default=True, callback=non_negative,
               help="Scale the panorama's radiance.")
-@click.option("--glsl", is_flag=True, help="Print a GLSL function with the irradiance coefficients.")
+@click.option("--format", "fmt", type=click.Choice(["iblbake", "filament", "threejs", "glsl"]), default="iblbake",
+              show_default=True,
+              help="What -o holds (or stdout without -o): iblbake's JSON document; filament: cmgen's sh.txt "
+                   "(IndirectLight irradiance, pre-scaled by its basis constants and 1/pi); threejs: a "
+                   "LightProbe's SphericalHarmonics3 as JSON (radiance coefficients); glsl: a function with "
+                   "the irradiance coefficients. README 'SH for engines' gives each convention.")
+@click.option("--glsl", is_flag=True, help="Print a GLSL function with the irradiance coefficients (--format glsl).")
 @click.option("--error/--no-error", "with_error", default=True, show_default=True,
               help="Measure the SH irradiance against the exact irradiance (float64, every texel) at 256 "
                    "fixed normals: relative RMSE, max relative error, ringing (the JSON's error block).")
@@ -62,7 +72,7 @@ def _check_overwrite(output: str, force: bool, source: str):
 @input_options
 @device_option
 @common_options
-def sh_command(envs, output, force, bands, window, backend, rotate_y, intensity, glsl, with_error, nonfinite,
+def sh_command(envs, output, force, bands, window, backend, rotate_y, intensity, fmt, glsl, with_error, nonfinite,
                negative, transfer, primaries, max_pixels, depfile, device, quiet, as_json):
     """Project each panorama ENV onto spherical harmonics and bake irradiance coefficients (one
     process for a whole folder: `iblbake sh *.exr -o DIR/`).
@@ -73,14 +83,22 @@ def sh_command(envs, output, force, bands, window, backend, rotate_y, intensity,
     """
     from iblbake.io.atomic import check_writable
 
+    from iblbake.bake import sh as shbake
+
     con = Console(quiet, as_json)
+    if glsl:
+        if fmt not in ("iblbake", "glsl"):
+            raise click.UsageError(f"--glsl is --format glsl: leave out --format {fmt}")
+        fmt = "glsl"
+    if fmt in ("filament", "threejs") and bands > 3:
+        raise click.UsageError(f"--format {fmt} holds at most 3 bands (9 coefficients): give --bands 3 or fewer")
     if len(envs) > 1:
-        if glsl:
-            raise IblbakeError("--glsl prints one panorama's function; give one ENV")
+        if fmt != "iblbake" and not output:
+            raise IblbakeError(f"--format {fmt} prints one panorama's coefficients; give one ENV or -o DIR/")
         if output and not (output.endswith("/") or os.path.isdir(output)):
             raise IblbakeError(f"-o {output}: with {len(envs)} panoramas, -o is a folder (end it with /)")
-        outputs = [os.path.join(output, os.path.splitext(os.path.basename(e))[0] + ".json") if output else None
-                   for e in envs]
+        outputs = [os.path.join(output, os.path.splitext(os.path.basename(e))[0] + shbake.SUFFIX[fmt])
+                   if output else None for e in envs]
         if output:
             os.makedirs(output, exist_ok=True)
     else:
@@ -88,9 +106,9 @@ def sh_command(envs, output, force, bands, window, backend, rotate_y, intensity,
     for env, out in zip(envs, outputs):
         if out:
             check_writable(out)
-            _check_overwrite(out, force, env)
+            _check_overwrite(out, force, env, fmt)
     state = {"rt": None}
-    results = [_project_one(env, out, state, bands, window, backend, rotate_y, intensity, glsl, with_error,
+    results = [_project_one(env, out, state, bands, window, backend, rotate_y, intensity, fmt, with_error,
                             nonfinite, negative, transfer, primaries, max_pixels, device, con)
                for env, out in zip(envs, outputs)]
     if depfile:
@@ -98,7 +116,7 @@ def sh_command(envs, output, force, bands, window, backend, rotate_y, intensity,
         dep.write(depfile, [([out], [os.path.abspath(env)]) for env, out in zip(envs, outputs) if out])
     if len(results) == 1:
         summary, human = results[0]
-        if glsl and not as_json:
+        if fmt != "iblbake" and not output and not as_json:
             if not quiet:
                 click.echo(human, err=True)
         else:
@@ -107,7 +125,7 @@ def sh_command(envs, output, force, bands, window, backend, rotate_y, intensity,
         con.result({"panoramas": [s for s, _ in results]}, "\n".join(h for _, h in results))
 
 
-def _project_one(env, output, state, bands, window, backend, rotate_y, intensity, glsl, with_error, nonfinite,
+def _project_one(env, output, state, bands, window, backend, rotate_y, intensity, fmt, with_error, nonfinite,
                  negative, transfer, primaries, max_pixels, device, con):
     from iblbake.bake import sh as shbake
     from iblbake.io import images
@@ -144,11 +162,12 @@ def _project_one(env, output, state, bands, window, backend, rotate_y, intensity
         doc["error"] = shbake.irradiance_error(image, np.asarray(doc["irradiance"]), bands, rotate_y, intensity)
         doc["timings"]["error_s"] = round(time.perf_counter() - t0, 6)
     doc["elapsed_s"] = round(time.perf_counter() - t_start, 6)
+    text = shbake.export(doc, fmt) if fmt != "iblbake" or output else None
     if output:
-        from iblbake.io.atomic import write_json
-        write_json(output, doc)
-    if glsl:
-        click.echo(shbake.glsl_snippet(doc), nl=False)
+        from iblbake.io.atomic import write_text
+        write_text(output, text)
+    elif fmt != "iblbake":
+        click.echo(text, nl=False)
     summary = {k: doc[k] for k in ("format", "format_version", "bands", "window", "irradiance", "device",
                                    "timings", "elapsed_s") + (("error",) if with_error else ())}
     summary["input"] = {k: doc["input"][k] for k in ("path", "width", "height", "sha256")}

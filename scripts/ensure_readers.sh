@@ -1,0 +1,24 @@
+#!/usr/bin/env sh
+# Set up the real readers the tests check iblbake's files with: Node.js (Debian's nodejs and
+# npm) with the npm packages of tests/node/package.json, pinned by its package-lock.json
+# (ktx-parse, @khronosgroup/gltf-viewer for its libktx, gltf-validator), into
+# tests/node/node_modules; and glslangValidator (Debian's glslang-tools) for the GLSL export.
+# What is missing is installed with apt-get.
+set -u
+DIR="${1:-tests/node}"
+SUDO=""
+[ "$(id -u)" = 0 ] || SUDO="sudo"
+need=""
+{ command -v node >/dev/null 2>&1 && command -v npm >/dev/null 2>&1; } || need="nodejs npm"
+command -v glslangValidator >/dev/null 2>&1 || need="$need glslang-tools"
+if [ -n "$need" ]; then
+    if ! command -v apt-get >/dev/null 2>&1; then
+        echo "ensure_readers: missing $need and no apt-get; install Node.js 18 or later and glslang" >&2
+        exit 1
+    fi
+    echo "ensure_readers: installing Debian's $need" >&2
+    $SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq $need >/dev/null || exit 1
+fi
+[ -f "$DIR/node_modules/.iblbake-complete" ] && [ "$DIR/node_modules/.iblbake-complete" -nt "$DIR/package-lock.json" ] && exit 0
+(cd "$DIR" && npm ci --no-audit --no-fund --loglevel=error) || { echo "ensure_readers: npm ci failed in $DIR" >&2; exit 1; }
+touch "$DIR/node_modules/.iblbake-complete"
