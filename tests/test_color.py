@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from iblbake.core import color
+from iblbake.io import color
 from iblbake.io import images
 
 from .conftest import run_cli

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from iblbake.core.color import REC709
+from iblbake.io.color import REC709
 from iblbake.errors import InputError, IblbakeError
 from iblbake.io.atomic import atomic_path
 
@@ -114,7 +114,7 @@ def read_policies(nonfinite: str, negative: str, transfer: str = "auto", primari
 
 def _decode_transfer(data, spec, transfer: str, path: str, warnings: list, name: dict):
     """Integer (LDR) texels to linear; float texels as stored unless told they are sRGB."""
-    from iblbake.core.color import srgb_decode
+    from iblbake.io.color import srgb_decode
 
     integer = str(spec.format) in ("uint8", "uint16", "int8", "int16", "uint32", "int32")
     declared = str(spec.getattribute("oiio:ColorSpace") or "").lower()
@@ -193,7 +193,7 @@ def read_panorama(path, *, max_pixels: int | None = None, nonfinite: str = "erro
         if not np.allclose(info.chromaticities, REC709, atol=2e-3):
             shown = tuple(round(c, 4) for c in chroma)
             if primaries == "convert":
-                from iblbake.core.color import to_rec709
+                from iblbake.io.color import to_rec709
                 m = to_rec709(info.chromaticities).astype(np.float32)
                 rgb = np.ascontiguousarray(rgb @ m.T)
                 info.warnings.append(f"{path}: converted from its chromaticities {shown} to Rec.709/D65 "

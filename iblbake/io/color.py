@@ -1,5 +1,5 @@
-"""Colour: the sRGB transfer's decode (its encode is tonemap.srgb_encode), and RGB primaries to
-Rec.709/D65 through XYZ with a Bradford chromatic adaptation of the white point (the method
+"""Colour of the panoramas read in: the sRGB transfer's decode (its encode, for frames out, is
+core.tonemap.srgb_encode), and RGB primaries to Rec.709/D65 through XYZ with a Bradford chromatic adaptation of the white point (the method
 and matrix as in Lindbloom's "Chromatic Adaptation" and "RGB/XYZ Matrices")."""
 
 from __future__ import annotations
