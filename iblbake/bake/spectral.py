@@ -158,3 +158,16 @@ def prefilter_levels(source, dirs_per_level, roughness, nthreads: int | None = N
         idx, ls = _alm_index(lmax, len(k) - 1)
         out.append(np.clip(synthesize(alm[:, idx] * k[ls], len(k) - 1, dirs, nthreads), lo, hi))
     return out
+
+
+def irradiance(source, dirs, lmax: int, nthreads: int | None = None):
+    """E(n) = int L(w) max(0, n.w) dw at unit directions `dirs` (..., 3), float64 with the
+    source's channels: the panorama's SH to band lmax times the clamped cosine's Ahat_l
+    (Funk-Hecke), synthesised there. The truncation at lmax is the only approximation (Ahat_l
+    falls as l^-5/2; the kink at a sun's terminator converges slowest)."""
+    from iblbake.core import sh
+
+    alm = project_texels(source, lmax, nthreads)
+    _, ls = _alm_index(lmax, lmax)          # each coefficient's l, in ducc0's layout
+    ahat = np.array([sh.truncated_cos_sh(l) for l in range(lmax + 1)])
+    return synthesize(alm * ahat[ls][None, :], lmax, dirs, nthreads)

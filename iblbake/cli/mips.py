@@ -12,6 +12,21 @@ from iblbake.cli.options import (POLICY_FLAGS, Console, common_options, depfile_
                                   input_options, non_negative)
 
 
+def _per_env(envs, path, flag) -> dict:
+    """Each ENV's output file: `path` itself for one ENV, else `path`/ENV-name.ktx2 (a folder)."""
+    from iblbake.io.atomic import check_writable
+    if len(envs) > 1:
+        folder = Path(path)
+        if folder.exists() and not folder.is_dir():
+            raise click.BadParameter(f"{folder}: with several ENVs, {flag} names a folder", param_hint=flag)
+        out = {env: folder / (Path(env).stem + ".ktx2") for env in envs}
+    else:
+        out = {envs[0]: Path(path)}
+    for o in out.values():
+        check_writable(o, f"{flag} output")
+    return out
+
+
 @click.command("mips")
 @click.argument("envs", metavar="ENV...", nargs=-1, required=True)
 @click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
@@ -67,14 +82,25 @@ from iblbake.cli.options import (POLICY_FLAGS, Console, common_options, depfile_
 @click.option("--ktx2-format", type=click.Choice(["rgba16f", "rgba32f", "b10g11r11"]), default="rgba16f",
               show_default=True,
               help="Texel format of --ktx2: R16G16B16A16_SFLOAT, R32G32B32A32_SFLOAT or B10G11R11_UFLOAT_PACK32.")
+@click.option("--irradiance", "irradiance_on", is_flag=True,
+              help="Also bake the Lambert irradiance cube map (the alternative to SH some engines load): "
+                   "E(n) = int L max(0, n.w) dw computed in the SH domain to --irradiance-lmax, its error "
+                   "against the exact sum printed.")
+@click.option("--irradiance-size", type=click.IntRange(1, 1024), default=32, show_default=True,
+              help="Face size of the --irradiance cube map.")
+@click.option("--irradiance-lmax", type=click.IntRange(2, 2048), default=256, show_default=True,
+              help="SH band limit of the --irradiance cube map (the only approximation in it).")
+@click.option("--ktx2-irradiance", "ktx2_irradiance", type=click.Path(), default=None, metavar="FILE",
+              help="Write the --irradiance cube map (implied) as a KTX2 cube map in --ktx2-format. With "
+                   "several ENVs, a folder that gets ENV's name with .ktx2.")
 @depfile_option
 @input_options
 @device_option
 @common_options
 def mips_command(envs, cache_dir, layout, size, levels, min_size, method, samples, lod_bias, no_fis,
                  convolve_budget, dfg_size, dfg_samples, dfg_multiscatter, only, level_sizes, verify, backend,
-                 ktx2_path, ktx2_format, nonfinite, negative, transfer, primaries, max_pixels, depfile, device,
-                 quiet, as_json):
+                 ktx2_path, ktx2_format, irradiance_on, irradiance_size, irradiance_lmax, ktx2_irradiance, nonfinite,
+                 negative, transfer, primaries, max_pixels, depfile, device, quiet, as_json):
     """Bake the radiance mip chain, the GGX-prefiltered chain and the DFG table of each ENV into a
     content-addressed EXR cache (one process and one device for a whole folder). A second run
     with the same inputs does no work ("cached"). With --depfile the entries' manifests depend on
@@ -87,7 +113,10 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
 
     con = Console(quiet, as_json)
     parts = {"radiance", "prefiltered", "dfg"} if "all" in only else set(only)
-    ktx2_out = {}
+    ktx2_out, irr_out = {}, {}
+    irradiance_on = irradiance_on or bool(ktx2_irradiance)
+    if ktx2_irradiance:
+        irr_out = _per_env(envs, ktx2_irradiance, "--ktx2-irradiance")
     if ktx2_path:
         ctx = click.get_current_context()
         if ctx.get_parameter_source("layout") == click.core.ParameterSource.COMMANDLINE and layout != "cubemap":
@@ -97,16 +126,7 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
         if level_sizes != "halving":
             raise click.UsageError("--ktx2 stores a mip chain: give --level-sizes halving")
         layout = "cubemap"
-        from iblbake.io.atomic import check_writable as _writable
-        if len(envs) > 1:
-            folder = Path(ktx2_path)
-            if folder.exists() and not folder.is_dir():
-                raise click.BadParameter(f"{folder}: with several ENVs, --ktx2 names a folder", param_hint="--ktx2")
-            ktx2_out = {env: folder / (Path(env).stem + ".ktx2") for env in envs}
-        else:
-            ktx2_out = {envs[0]: Path(ktx2_path)}
-        for out in ktx2_out.values():
-            _writable(out, "--ktx2 output")
+        ktx2_out = _per_env(envs, ktx2_path, "--ktx2")
     t_start = time.perf_counter()
     root = Path(cache_dir) if cache_dir else cache.default_root()
     from iblbake.io.atomic import check_writable
@@ -116,7 +136,7 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
     for env in envs:
         report = {}
         summaries.append({"input": env, "cache": str(root), "device": baker.device_label, "entries": report})
-        if parts & {"radiance", "prefiltered"}:
+        if parts & {"radiance", "prefiltered"} or irradiance_on:
             image, info = images.read_panorama(env, max_pixels=max_pixels, nonfinite=nonfinite, negative=negative,
                                                transfer=transfer, primaries=primaries, names=POLICY_FLAGS)
             for w in info.warnings:
@@ -130,6 +150,26 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
                 # an impossible plan (--method spectral on a too sharp level) fails before any bake
                 mipsbake.plan_methods(layouts.radiance_chain_sizes(info.width, info.height),
                                       {**opts, "convolve_budget": baker.convolve_budget(opts)}, "--method")
+            if irradiance_on:
+                t0 = time.perf_counter()
+                im, icached, faces = mipsbake.bake_irradiance_cube(image, info, root, policies, irradiance_size,
+                                                                   irradiance_lmax, warn=con.warn)
+                report["irradiance"] = {"path": str(root / im["key"]), "cached": icached, "size": irradiance_size,
+                                        "lmax": irradiance_lmax, "error": im["error"],
+                                        "seconds": round(time.perf_counter() - t0, 4)}
+                if env in irr_out:
+                    from iblbake.io import atomic, ktx2
+                    irr_out[env].parent.mkdir(parents=True, exist_ok=True)
+                    atomic.write_bytes(irr_out[env], ktx2.cube_bytes(
+                        [faces.reshape(6, irradiance_size, irradiance_size, 3)], ktx2_format,
+                        {"iblbake.content": "Lambert irradiance E(n) = int L max(0, n.w) dw (divide by pi for "
+                                            "an albedo-1 surface's radiance)"}, writer=f"iblbake {mipsbake._version()}"))
+                    report["ktx2_irradiance"] = {"path": str(irr_out[env]), "format": ktx2_format, "cached": False,
+                                                 "seconds": 0.0}
+            if not parts & {"radiance", "prefiltered"}:
+                entries = [Path(e["path"]) / "manifest.json" for k, e in report.items() if not k.startswith("ktx2")]
+                rules.append(([str(x) for x in entries], [os.path.abspath(env)]))
+                continue
             t0 = time.perf_counter()
             manifest, cached, chain = mipsbake.bake_radiance(baker, image, info, root, policies, warn=con.warn)
             report["radiance"] = {"path": str(root / manifest["key"]), "cached": cached,
@@ -160,9 +200,8 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
                     mipsbake.write_ktx2(out, root, pm, opts, ktx2_format)
                     report["ktx2"] = {"path": str(out), "format": ktx2_format, "cached": False,
                                       "seconds": round(time.perf_counter() - t0, 4), "levels": len(opts["sizes"])}
-        entries = [Path(e["path"]) / "manifest.json" for k, e in report.items() if k != "ktx2"]
-        if "ktx2" in report:
-            entries.append(report["ktx2"]["path"])
+        entries = [Path(e["path"]) / "manifest.json" for k, e in report.items() if not k.startswith("ktx2")]
+        entries += [report[k]["path"] for k in ("ktx2", "ktx2_irradiance") if k in report]
         if entries:
             rules.append(([str(x) for x in entries], [os.path.abspath(env)]))
     if "dfg" in parts:                # shared by every panorama: baked once
@@ -178,8 +217,12 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
     lines = []
     for s in summaries:
         s["elapsed_s"] = elapsed
-        lines += [f"{kind}: {'wrote' if kind == 'ktx2' else 'cached' if e['cached'] else 'baked'} {e['path']} "
+        lines += [f"{kind}: {'wrote' if kind.startswith('ktx2') else 'cached' if e['cached'] else 'baked'} {e['path']} "
                   f"({e['seconds']:.3f} s)" for kind, e in s["entries"].items() if kind != "dfg"]
+        ie = s["entries"].get("irradiance", {}).get("error")
+        if ie:
+            lines.append(f"irradiance cube: against the exact sum at {ie['normals']} normals, worst "
+                         f"{100 * ie['max_relative_to_peak']:.3f}% of the peak, RMS {100 * ie['rms_relative_to_peak']:.4f}%")
         v = s["entries"].get("prefiltered", {}).get("verify")
         if v:
             lines.append(f"verify: relative RMSE per level against the brute force at {v['texels_per_level']} texels: "

@@ -95,7 +95,9 @@ def truncated_cos_sh(l: int) -> float:
         return 0.0
     h = l // 2
     a0 = (1.0 if h % 2 else -1.0) / ((l + 2) * (l - 1))
-    a1 = math.factorial(l) / (math.factorial(h) * math.factorial(h) * 2.0**l)
+    # l! / (h!^2 2^l), in logs: the factorials overflow a float from l = 171 (the spectral
+    # irradiance goes to l = 1024)
+    a1 = math.exp(math.lgamma(l + 1) - 2.0 * math.lgamma(h + 1) - l * math.log(2.0))
     return 2.0 * math.pi * a0 * a1
 
 
