@@ -61,6 +61,25 @@ inline float3 dir_from_cube(int face, float s, float t)
     return normalize(d);
 }
 
+/* The inverse of dir_from_cube: face by the major axis (Vulkan's cube-map face selection, ties
+ * to x, then y) and its (s, t) in [0, 1]. */
+inline float2 cube_from_dir(float3 d, int *face)
+{
+    const float ax = fabs(d.x), ay = fabs(d.y), az = fabs(d.z);
+    float sc, tc, ma;
+    if (ax >= ay && ax >= az) {
+        ma = ax; tc = -d.y;
+        if (d.x > 0.0f) { *face = 0; sc = -d.z; } else { *face = 1; sc = d.z; }
+    } else if (ay >= az) {
+        ma = ay; sc = d.x;
+        if (d.y > 0.0f) { *face = 2; tc = d.z; } else { *face = 3; tc = -d.z; }
+    } else {
+        ma = az; tc = -d.y;
+        if (d.z > 0.0f) { *face = 4; sc = d.x; } else { *face = 5; sc = -d.x; }
+    }
+    return (float2)(0.5f * (sc / ma + 1.0f), 0.5f * (tc / ma + 1.0f));
+}
+
 inline float3 dir_from_octahedral(float u, float v)
 {
     float x = 2.0f * u - 1.0f, z = 2.0f * v - 1.0f;

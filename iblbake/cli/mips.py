@@ -27,6 +27,11 @@ def _per_env(envs, path, flag) -> dict:
     return out
 
 
+def _inputs_of(env):
+    from iblbake.bake.inputs import files_of
+    return files_of(env)
+
+
 @click.command("mips")
 @click.argument("envs", metavar="ENV...", nargs=-1, required=True)
 @click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
@@ -100,7 +105,7 @@ def _per_env(envs, path, flag) -> dict:
 def mips_command(envs, cache_dir, layout, size, levels, min_size, method, samples, lod_bias, no_fis,
                  convolve_budget, dfg_size, dfg_samples, dfg_multiscatter, only, level_sizes, verify, backend,
                  ktx2_path, ktx2_format, irradiance_on, irradiance_size, irradiance_lmax, ktx2_irradiance, nonfinite,
-                 negative, transfer, primaries, max_pixels, depfile, device, quiet, as_json):
+                 negative, transfer, primaries, input_layout, max_pixels, depfile, device, quiet, as_json):
     """Bake the radiance mip chain, the GGX-prefiltered chain and the DFG table of each ENV into a
     content-addressed EXR cache (one process and one device for a whole folder). A second run
     with the same inputs does no work ("cached"). With --depfile the entries' manifests depend on
@@ -137,11 +142,14 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
         report = {}
         summaries.append({"input": env, "cache": str(root), "device": baker.device_label, "entries": report})
         if parts & {"radiance", "prefiltered"} or irradiance_on:
-            image, info = images.read_panorama(env, max_pixels=max_pixels, nonfinite=nonfinite, negative=negative,
-                                               transfer=transfer, primaries=primaries, names=POLICY_FLAGS)
+            from iblbake.bake import inputs
+            image, info = inputs.read_environment(env, layout=input_layout, runtime=baker.rt, max_pixels=max_pixels,
+                                                  nonfinite=nonfinite,
+                                                  negative=negative, transfer=transfer, primaries=primaries,
+                                                  names=POLICY_FLAGS)
             for w in info.warnings:
                 con.warn(w)
-            policies = images.read_policies(nonfinite, negative, transfer, primaries)
+            policies = images.read_policies(nonfinite, negative, transfer, primaries, input_layout)
             if "prefiltered" in parts:
                 opts = mipsbake.PrefilterOptions(layout, size, levels, min_size, method, samples, lod_bias,
                                                  not no_fis, convolve_budget, level_sizes).resolved(info.height)
@@ -168,7 +176,7 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
                                                  "seconds": 0.0}
             if not parts & {"radiance", "prefiltered"}:
                 entries = [Path(e["path"]) / "manifest.json" for k, e in report.items() if not k.startswith("ktx2")]
-                rules.append(([str(x) for x in entries], [os.path.abspath(env)]))
+                rules.append(([str(x) for x in entries], [os.path.abspath(f) for f in _inputs_of(env)]))
                 continue
             t0 = time.perf_counter()
             manifest, cached, chain = mipsbake.bake_radiance(baker, image, info, root, policies, warn=con.warn)
@@ -203,7 +211,7 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
         entries = [Path(e["path"]) / "manifest.json" for k, e in report.items() if not k.startswith("ktx2")]
         entries += [report[k]["path"] for k in ("ktx2", "ktx2_irradiance") if k in report]
         if entries:
-            rules.append(([str(x) for x in entries], [os.path.abspath(env)]))
+            rules.append(([str(x) for x in entries], [os.path.abspath(f) for f in _inputs_of(env)]))
     if "dfg" in parts:                # shared by every panorama: baked once
         t0 = time.perf_counter()
         dm, dcached = mipsbake.bake_dfg(baker, root, dfg_size, dfg_samples, dfg_multiscatter, warn=con.warn)

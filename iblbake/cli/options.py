@@ -98,6 +98,12 @@ def input_options(f):
                      show_default=True,
                      help="How texels decode to linear: auto (an 8/16-bit PNG or JPEG from sRGB, or the linear "
                           "or gamma it declares; float images as stored), srgb, or linear.")(f)
+    f = click.option("--input-layout", "input_layout", default="auto", show_default=True,
+                     type=click.Choice(["auto", "equirect", "hcross", "vcross", "hstrip", "vstrip", "faces", "ktx2"]),
+                     help="What ENV holds: an equirect panorama, a cube map as a horizontal or vertical cross, "
+                          "a strip of six faces (+X -X +Y -Y +Z -Z), six face files (a path with {face}: px nx "
+                          "py ny pz nz) or a KTX2 cube map; auto goes by {face}, .ktx2, then the aspect ratio. "
+                          "Cube maps are resampled to an equirect panorama.")(f)
     f = click.option("--primaries", type=click.Choice(["keep", "convert"]), default="keep", show_default=True,
                      help="An EXR declaring chromaticities other than Rec.709: keep its values as stored, or "
                           "convert them to Rec.709/D65 (Bradford adaptation of the white).")(f)
@@ -106,7 +112,7 @@ def input_options(f):
 
 # the read policies as this command line names them (the library's messages quote these)
 POLICY_FLAGS = {"max_pixels": "--max-pixels", "nonfinite": "--nonfinite", "negative": "--negative",
-                "transfer": "--input-transfer", "primaries": "--primaries"}
+                "transfer": "--input-transfer", "primaries": "--primaries", "layout": "--input-layout"}
 
 
 def finite(ctx, param, value):

@@ -38,6 +38,11 @@ def _check_overwrite(output: str, force: bool, source: str, fmt: str = "iblbake"
                            f"pass --force to overwrite it")
 
 
+def _inputs_of(env):
+    from iblbake.bake.inputs import files_of
+    return files_of(env)
+
+
 @click.command("sh")
 @click.argument("envs", metavar="ENV...", nargs=-1, required=True)
 @click.option("--output", "-o", type=click.Path(), default=None,
@@ -73,7 +78,7 @@ def _check_overwrite(output: str, force: bool, source: str, fmt: str = "iblbake"
 @device_option
 @common_options
 def sh_command(envs, output, force, bands, window, backend, rotate_y, intensity, fmt, glsl, with_error, nonfinite,
-               negative, transfer, primaries, max_pixels, depfile, device, quiet, as_json):
+               negative, transfer, primaries, input_layout, max_pixels, depfile, device, quiet, as_json):
     """Project each panorama ENV onto spherical harmonics and bake irradiance coefficients (one
     process for a whole folder: `iblbake sh *.exr -o DIR/`).
 
@@ -109,11 +114,11 @@ def sh_command(envs, output, force, bands, window, backend, rotate_y, intensity,
             _check_overwrite(out, force, env, fmt)
     state = {"rt": None}
     results = [_project_one(env, out, state, bands, window, backend, rotate_y, intensity, fmt, with_error,
-                            nonfinite, negative, transfer, primaries, max_pixels, device, con)
+                            nonfinite, negative, transfer, primaries, input_layout, max_pixels, device, con)
                for env, out in zip(envs, outputs)]
     if depfile:
         from iblbake.io import depfile as dep
-        dep.write(depfile, [([out], [os.path.abspath(env)]) for env, out in zip(envs, outputs) if out])
+        dep.write(depfile, [([out], [os.path.abspath(f) for f in _inputs_of(env)]) for env, out in zip(envs, outputs) if out])
     if len(results) == 1:
         summary, human = results[0]
         if fmt != "iblbake" and not output and not as_json:
@@ -126,15 +131,17 @@ def sh_command(envs, output, force, bands, window, backend, rotate_y, intensity,
 
 
 def _project_one(env, output, state, bands, window, backend, rotate_y, intensity, fmt, with_error, nonfinite,
-                 negative, transfer, primaries, max_pixels, device, con):
+                 negative, transfer, primaries, input_layout, max_pixels, device, con):
     from iblbake.bake import sh as shbake
     from iblbake.io import images
 
     t_start = time.perf_counter()
     with con.stages(["reading", "projecting"], label="sh") as stage:
         t0 = time.perf_counter()
-        image, info = images.read_panorama(env, max_pixels=max_pixels, nonfinite=nonfinite, negative=negative,
-                                           transfer=transfer, primaries=primaries, names=POLICY_FLAGS)
+        from iblbake.bake import inputs
+        image, info = inputs.read_environment(env, layout=input_layout, max_pixels=max_pixels, nonfinite=nonfinite,
+                                              negative=negative, transfer=transfer, primaries=primaries,
+                                              names=POLICY_FLAGS)
         read_s = time.perf_counter() - t0
         stage()
         rt = None
@@ -151,7 +158,7 @@ def _project_one(env, output, state, bands, window, backend, rotate_y, intensity
     coeffs = coeffs * intensity
     options = {"bands": bands, "window": window, "backend": backend, "rotate_y_deg": rotate_y,
                "intensity": intensity, "nonfinite": nonfinite, "negative": negative, "transfer": transfer,
-               "primaries": primaries}
+               "primaries": primaries, "input_layout": input_layout}
     timings = {"read_s": round(read_s, 6), "project_s": round(project_s, 6)}
     doc = shbake.document(coeffs, bands=bands, window=window, info=info, options=options,
                           device=device_label, timings=timings)

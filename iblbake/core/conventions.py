@@ -116,6 +116,22 @@ def dir_from_cube(face, s, t):
     return out / np.linalg.norm(out, axis=-1, keepdims=True)
 
 
+def cube_from_dir(d):
+    """(face, s, t) in [0, 1] of directions d[..., 3] (need not be unit): the inverse of
+    dir_from_cube, by the major axis (Vulkan's cube-map face selection, ties to x, then y)."""
+    d = np.asarray(d, dtype=np.float64)
+    x, y, z = d[..., 0], d[..., 1], d[..., 2]
+    ax, ay, az = np.abs(x), np.abs(y), np.abs(z)
+    xm = (ax >= ay) & (ax >= az)
+    ym = ~xm & (ay >= az)
+    face = np.where(xm, np.where(x > 0, 0, 1), np.where(ym, np.where(y > 0, 2, 3), np.where(z > 0, 4, 5)))
+    ma = np.where(xm, ax, np.where(ym, ay, az))
+    sel = [face == f for f in range(5)]
+    sc = np.select(sel, [-z, z, x, x, x], -x)
+    tc = np.select(sel, [-y, -y, z, -z, -y], -y)
+    return face, 0.5 * (sc / ma + 1.0), 0.5 * (tc / ma + 1.0)
+
+
 def cube_texel_dirs(size: int):
     """Directions of the texel centres of the six faces, shape (6, size, size, 3)."""
     c = (np.arange(size) + 0.5) / size

@@ -98,13 +98,16 @@ def _first_position(mask) -> str:
 # How the read policies are named in messages: the caller says where each came from (a command-line
 # flag, a scene key); the library itself knows neither.
 POLICY_NAMES = {"max_pixels": "max_pixels", "nonfinite": "nonfinite", "negative": "negative",
-                "transfer": "transfer", "primaries": "primaries"}
+                "transfer": "transfer", "primaries": "primaries", "layout": "layout"}
 
 
-def read_policies(nonfinite: str, negative: str, transfer: str = "auto", primaries: str = "keep") -> dict:
+def read_policies(nonfinite: str, negative: str, transfer: str = "auto", primaries: str = "keep",
+                  layout: str = "auto") -> dict:
     """What a bake keys on besides the file's content: the read policies that change pixels (the
     new ones only where not their default, so keys made before them still hold)."""
     out = {"nonfinite": nonfinite, "negative": negative}
+    if layout != "auto":
+        out["layout"] = layout
     if transfer != "auto":
         out["transfer"] = transfer
     if primaries != "keep":
@@ -201,9 +204,14 @@ def read_panorama(path, *, max_pixels: int | None = None, nonfinite: str = "erro
             else:
                 info.warnings.append(f"{path}: declares non-Rec.709 chromaticities {shown}; pixels are used as "
                                      f"stored (Rec.709 assumed; {name['primaries']} convert converts them)")
-    if w != 2 * h:
-        info.warnings.append(f"{path}: {w}x{h} is not 2:1; treated as a full latitude-longitude panorama")
+    return validate_texels(rgb, info, names=name), info
 
+
+def validate_texels(rgb: np.ndarray, info: ImageInfo, names: dict | None = None) -> np.ndarray:
+    """Apply info's nonfinite and negative policies to rgb (..., 3): fail in one line, or repair
+    and count (into info)."""
+    name = {**POLICY_NAMES, **(names or {})}
+    path, nonfinite, negative = info.path, info.nonfinite_policy, info.negative_policy
     with np.errstate(invalid="ignore"):
         bad = ~(np.abs(rgb) <= MAX_ABS_VALUE)   # NaN, +-Inf, and values no float32 sum survives
     info.nonfinite = int(bad.sum())
@@ -231,7 +239,7 @@ def read_panorama(path, *, max_pixels: int | None = None, nonfinite: str = "erro
                 f"{_first_position(neg)}; use {name['negative']} keep or {name['negative']} clamp")
         if negative == "clamp":
             np.maximum(rgb, 0.0, out=rgb)
-    return np.ascontiguousarray(rgb), info
+    return np.ascontiguousarray(rgb)
 
 
 def _to_rgb(data: np.ndarray, names: tuple) -> np.ndarray:

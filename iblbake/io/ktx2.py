@@ -148,3 +148,44 @@ def cube_bytes(levels: list, fmt: str = "rgba16f", metadata: dict | None = None,
     index = struct.pack("<4I2Q", dfd_offset, len(dfd), kvd_offset, len(kvd), 0, 0)
     level_index = b"".join(struct.pack("<3Q", offsets[k], len(data[k]), len(data[k])) for k in range(n))
     return header + index + level_index + dfd + kvd + body
+
+
+def read_cube(path) -> np.ndarray:
+    """Level 0 of a KTX2 cube map in one of FORMATS (what iblbake and most HDR bakers write),
+    float32 (6, s, s, 3), faces +X -X +Y -Y +Z -Z. Every header field, the level index and the
+    data's bounds are checked first; anything else is a one-line error naming the file."""
+    path = str(path)
+    try:
+        with open(path, "rb") as f:
+            data = f.read()
+    except OSError as e:
+        raise InputError(f"{path}: cannot read ({e.strerror})") from None
+
+    def bad(what):
+        return InputError(f"{path}: not a KTX2 cube map iblbake reads: {what}")
+
+    if len(data) < 80 or data[:12] != IDENTIFIER:
+        raise bad("no KTX 2.0 identifier" if len(data) >= 12 else "truncated header")
+    vk, type_size, w, h, depth, layers, faces, levels, scheme = struct.unpack_from("<9I", data, 12)
+    fmt = next((k for k, v in FORMATS.items() if v["vk"] == vk), None)
+    if fmt is None:
+        raise bad(f"VkFormat {vk} (iblbake reads {', '.join(v['name'] for v in FORMATS.values())})")
+    if scheme != 0:
+        raise bad(f"supercompression scheme {scheme} (only uncompressed data)")
+    if faces != 6:
+        raise bad(f"{faces} faces (a cube map has 6)")
+    if w != h or w < 1 or depth > 1 or layers > 1:
+        raise bad(f"{w}x{h}, depth {depth}, {layers} layers (a cube map's faces are square, one layer)")
+    if levels < 1 or 80 + 24 * levels > len(data):
+        raise bad(f"level index of {levels} levels runs past the file's {len(data)} bytes")
+    offset, length, _ = struct.unpack_from("<3Q", data, 80)
+    need = 6 * w * w * FORMATS[fmt]["texel"]
+    if length != need:
+        raise bad(f"level 0 holds {length} bytes, 6 faces of {w}x{w} {FORMATS[fmt]['name']} need {need}")
+    if offset + length > len(data):
+        raise bad(f"level 0 ({offset} + {length} bytes) runs past the file's end ({len(data)} bytes; truncated?)")
+    raw = np.frombuffer(data, dtype={"rgba16f": "<f2", "rgba32f": "<f4", "b10g11r11": "<u4"}[fmt],
+                        count=need // FORMATS[fmt]["type_size"] if fmt != "b10g11r11" else need // 4, offset=offset)
+    if fmt == "b10g11r11":
+        return unpack_b10g11r11(raw.reshape(6, w, w))
+    return raw.reshape(6, w, w, 4)[..., :3].astype(np.float32)

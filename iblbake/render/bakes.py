@@ -27,7 +27,8 @@ def _geometry_code_hash() -> str:
 
 
 POLICY_KEYS = {"nonfinite": "environment.nonfinite:", "negative": "environment.negative:",
-               "transfer": "environment.transfer:", "primaries": "environment.primaries:"}
+               "transfer": "environment.transfer:", "primaries": "environment.primaries:",
+               "layout": "environment.layout:"}
 
 
 class Bakes:
@@ -36,6 +37,7 @@ class Bakes:
     def __init__(self, root: Path | None = None):
         self.root = Path(root) if root else cache.default_root()
         self._memo: dict = {}
+        self.runtime = None          # the device a cube-map environment resamples on (render sets it)
 
     def _get(self, key, make):
         for attempt in range(3):
@@ -66,9 +68,10 @@ class Bakes:
         `sun: extract`, the panorama without its sun, its info's hash that of what is left (every
         bake keys on it)."""
         key = self._env_key(env)
-        image, info = self._get(key, lambda: images.read_panorama(
-            env["path"], nonfinite=env["nonfinite"], negative=env["negative"], transfer=env["transfer"],
-            primaries=env["primaries"], names=POLICY_KEYS))
+        from iblbake.bake import inputs
+        image, info = self._get(key, lambda: inputs.read_environment(
+            env["path"], layout=env["layout"], runtime=self.runtime, nonfinite=env["nonfinite"], negative=env["negative"],
+            transfer=env["transfer"], primaries=env["primaries"], names=POLICY_KEYS))
         if env.get("sun") != "extract":
             return image, info
         return self._get(key + ("sun",), lambda: self._extract(image, info))[:2]
@@ -78,7 +81,7 @@ class Bakes:
         """A panorama file's content as far as a read can tell (path, size, mtime), and its policies."""
         st = os.stat(env["path"])
         return ("env", env["path"], st.st_size, st.st_mtime_ns, env["nonfinite"], env["negative"], env["transfer"],
-                env["primaries"])
+                env["primaries"], env["layout"])
 
     def _extract(self, image, info):
         import dataclasses
@@ -143,7 +146,7 @@ class Bakes:
         return getattr(self, f"_{name}")(ctx)
 
     def _policies(self, env):
-        return images.read_policies(env["nonfinite"], env["negative"], env["transfer"], env["primaries"])
+        return images.read_policies(env["nonfinite"], env["negative"], env["transfer"], env["primaries"], env["layout"])
 
     def _sh(self, ctx):
         fx, env = ctx.scene.data["effects"], ctx.scene.data["environment"]

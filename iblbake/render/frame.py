@@ -187,6 +187,7 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
     cam = d["camera"]
     rt = runtime or Runtime(device)
     bakes = cache or Bakes(cache_root)
+    bakes.runtime = bakes.runtime or rt
     rep = Report(rt.device_label)
     builds_before = len(rt.builds)
     ctx = Context(rt, scene, pl, bakes, rep, warn or (lambda _m: None), progress)

@@ -269,6 +269,9 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "transfer": Enum(("auto", "srgb", "linear"), "auto",
                          doc="texels to linear: auto (an 8/16-bit PNG or JPEG from sRGB or what it declares; "
                              "float images as stored), srgb, or linear"),
+        "layout": Enum(("auto", "equirect", "hcross", "vcross", "hstrip", "vstrip", "ktx2"), "auto",
+                       doc="what path holds: an equirect panorama or a cube map (a cross, a strip of six faces, "
+                           "KTX2), resampled to equirect; auto by .ktx2, then the aspect ratio"),
         "primaries": Enum(("keep", "convert"), "keep",
                           doc="EXR chromaticities other than Rec.709: keep the values, or convert to Rec.709/D65"),
         "sun": Enum(("none", "extract"), "none",

@@ -1,0 +1,169 @@
+"""Environment inputs in the forms users have them: an equirect panorama, or a cube map as a
+horizontal or vertical cross, a strip of six faces, six face files, or a KTX2 cube map,
+resampled to the equirect panorama every bake reads.
+
+Layouts (faces in the Vulkan/OpenGL cube-map orientation, DESIGN.md's cubemap layout):
+    hcross (4:3)   . +Y  .  .        vcross (3:4)   . +Y .
+                  -X +Z +X -Z                      -X +Z +X
+                   . -Y  .  .                       . -Y .
+                                                    . -Z .   (-Z turned 180 degrees)
+    hstrip (6:1)  +X -X +Y -Y +Z -Z left to right; vstrip (1:6) the same top to bottom
+    faces          a path with {face}, read as px nx py ny pz nz
+Auto-detection by aspect ratio: 2:1 equirect, 4:3 hcross, 3:4 vcross, 6:1 hstrip, 1:6 vstrip;
+a .ktx2 file is a KTX2 cube map.
+
+Resampling treats the cube map as the box texels it stores: each equirect texel is the mean of
+the cube map over its solid angle, estimated by n x n jittered strata of directions uniform in
+(phi, cos theta) inside the texel (uniform in solid angle), each reading the cube texel it falls
+in: an unbiased estimate of the texel-overlap weights (exact where the texel lies inside one cube
+texel), not the exact overlaps: a bright cube texel's energy lands within a few percent, studio's
+total within 0.2% at face 128.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from iblbake.core import conventions
+from iblbake.errors import InputError
+from iblbake.io import images, ktx2
+
+LAYOUTS = ("auto", "equirect", "hcross", "vcross", "hstrip", "vstrip", "faces", "ktx2")
+FACE_NAMES = ("px", "nx", "py", "ny", "pz", "nz")
+SAMPLES = 4          # per axis, per equirect texel
+# (column, row) of each face in a cross, in face-size units; vcross's -Z is turned 180 degrees
+CROSS = {"hcross": [(2, 1), (0, 1), (1, 0), (1, 2), (1, 1), (3, 1)],
+         "vcross": [(2, 1), (0, 1), (1, 0), (1, 2), (1, 1), (1, 3)]}
+
+
+def detect(path: str, w: int, h: int) -> str:
+    if "{face}" in path:
+        return "faces"
+    if path.lower().endswith(".ktx2"):
+        return "ktx2"
+    for layout, (a, b) in {"equirect": (2, 1), "hcross": (4, 3), "vcross": (3, 4), "hstrip": (6, 1),
+                           "vstrip": (1, 6)}.items():
+        if w * b == h * a:
+            return layout
+    return "equirect"
+
+
+def faces_of(image: np.ndarray, layout: str, path: str) -> np.ndarray:
+    """The six faces (6, s, s, 3) of a cross or strip image."""
+    h, w = image.shape[:2]
+    cols, rows = {"hcross": (4, 3), "vcross": (3, 4), "hstrip": (6, 1), "vstrip": (1, 6)}[layout]
+    if w % cols or h % rows or w // cols != h // rows:
+        raise InputError(f"{path}: {w}x{h} is not a {layout} of square faces ({cols} x {rows} of them); "
+                         f"give --input-layout (environment.layout) for what it is")
+    s = w // cols
+    if layout in CROSS:
+        out = [image[r * s:(r + 1) * s, c * s:(c + 1) * s] for c, r in CROSS[layout]]
+        if layout == "vcross":
+            out[5] = out[5][::-1, ::-1]
+    elif layout == "hstrip":
+        out = [image[:, k * s:(k + 1) * s] for k in range(6)]
+    else:
+        out = [image[k * s:(k + 1) * s] for k in range(6)]
+    return np.stack(out).astype(np.float32)
+
+
+def cube_to_equirect(faces: np.ndarray, samples: int = SAMPLES) -> np.ndarray:
+    """The equirect panorama (4s x 2s: its texels at the equator as wide as the faces' at their
+    centres) holding each texel's mean of the cube map over its solid angle; float64 twin of
+    kernels/cube_input.cl (the same strata, jittered by the same PCG hash of each sample's index:
+    a regular grid would alias with the cube's texel edges)."""
+    from iblbake.core.sampling import hash_uniform
+
+    s = faces.shape[1]
+    h, w = 2 * s, 4 * s
+    n = samples
+    out = np.empty((h, w, faces.shape[-1]), np.float32)
+    i = np.arange(w)[:, None, None]
+    b, a = np.arange(n)[None, :, None], np.arange(n)[None, None, :]
+    for j in range(h):                      # a row at a time: w n^2 directions in memory
+        k = 2 * ((j * w + i) * n * n + b * n + a)
+        u = (i + (a + hash_uniform(k)) / n) / w
+        y0, y1 = math.cos(math.pi * j / h), math.cos(math.pi * (j + 1) / h)
+        y = np.clip(y0 + (y1 - y0) * (b + hash_uniform(k + 1)) / n, -1.0, 1.0)
+        face, fs, ft = conventions.cube_from_dir(conventions.dir_from_equirect_uv(u, np.arccos(y) / math.pi))
+        col = np.minimum((fs * s).astype(np.int64), s - 1)
+        row = np.minimum((ft * s).astype(np.int64), s - 1)
+        out[j] = faces[face, row, col].reshape(w, n * n, -1).mean(axis=1, dtype=np.float64)
+    return out
+
+
+def cube_to_equirect_cl(rt, faces: np.ndarray, samples: int = SAMPLES) -> np.ndarray:
+    """cube_to_equirect on the OpenCL device (kernels/cube_input.cl)."""
+    s = faces.shape[1]
+    h, w = 2 * s, 4 * s
+    f4 = np.zeros((6, s, s, 4), np.float32)
+    f4[..., :3] = faces[..., :3]
+    out = rt.empty(h * w * 16)
+    k = rt.kernel("cube_input.cl", "cube_to_equirect")
+    rt.run(k, (-(-w // 16) * 16, -(-h // 4) * 4), None, rt.to_device(f4), np.int32(s), np.int32(w), np.int32(h),
+           np.int32(samples), out)
+    return rt.read(out, (h, w, 4))[..., :3].copy()
+
+
+def read_environment(path, *, layout: str = "auto", names: dict | None = None, runtime=None, **policies):
+    """(equirect image float32 (H, W, 3), ImageInfo) of an environment in any of LAYOUTS. The
+    read policies (transfer, primaries, nonfinite, negative, max_pixels) apply to what the file
+    holds, before resampling; the info describes the file, its warnings say what was resampled.
+    A cube map resamples on `runtime`'s device where one is given, else by the numpy twin."""
+    path = str(path)
+    if layout == "auto":
+        if "{face}" in path or path.lower().endswith(".ktx2"):
+            layout = detect(path, 0, 0)
+    if layout == "faces":
+        if "{face}" not in path:
+            raise InputError(f"{path}: --input-layout faces needs a path with {{face}} (read as {', '.join(FACE_NAMES)})")
+        faces, info = [], None
+        for name in FACE_NAMES:
+            img, inf = images.read_panorama(path.replace("{face}", name), names=names, **policies)
+            if faces and img.shape != faces[0].shape:
+                raise InputError(f"{path.replace('{face}', name)}: {img.shape[1]}x{img.shape[0]}, the other faces are "
+                                 f"{faces[0].shape[1]}x{faces[0].shape[0]}")
+            if img.shape[0] != img.shape[1]:
+                raise InputError(f"{path.replace('{face}', name)}: a cube face must be square, not "
+                                 f"{img.shape[1]}x{img.shape[0]}")
+            faces.append(img)
+            info = info or inf
+        info.warnings = [w for w in info.warnings if "not 2:1" not in w]
+        info.sha256 = _combined_sha([images.file_sha256(path.replace("{face}", n)) for n in FACE_NAMES])
+        return _resampled(np.stack(faces), info, "six face files", runtime)
+    if layout == "ktx2":
+        faces = ktx2.read_cube(path)
+        info = images.ImageInfo(path=path, width=faces.shape[2], height=faces.shape[1] * 6, channels_in=("R", "G", "B"),
+                                format="ktx2", sha256=images.file_sha256(path), nonfinite_policy=policies.get(
+                                    "nonfinite", "error"), negative_policy=policies.get("negative", "keep"))
+        faces = images.validate_texels(faces.reshape(-1, faces.shape[2], 3), info, names).reshape(faces.shape)
+        return _resampled(faces, info, "a KTX2 cube map", runtime)
+    img, info = images.read_panorama(path, names=names, **policies)
+    if layout == "auto":
+        layout = detect(path, info.width, info.height)
+    if layout == "equirect":
+        if info.width != 2 * info.height:
+            info.warnings.append(f"{path}: {info.width}x{info.height} is not 2:1 (nor 4:3, 3:4, 6:1, 1:6 of a cube "
+                                 f"map); treated as a full latitude-longitude panorama")
+        return img, info
+    return _resampled(faces_of(img, layout, path), info, f"a {layout} cube map", runtime)
+
+
+def files_of(path: str) -> list:
+    """The files an environment path reads (six for a {face} path)."""
+    return [path.replace("{face}", n) for n in FACE_NAMES] if "{face}" in path else [path]
+
+
+def _resampled(faces, info, what: str, runtime=None):
+    eq = cube_to_equirect_cl(runtime, faces) if runtime is not None else cube_to_equirect(faces)
+    info.warnings.append(f"{info.path}: {what} of {faces.shape[1]}x{faces.shape[1]} faces, resampled to a "
+                         f"{eq.shape[1]}x{eq.shape[0]} panorama")
+    info.width, info.height = eq.shape[1], eq.shape[0]
+    return eq, info
+
+
+def _combined_sha(parts) -> str:
+    import hashlib
+    return hashlib.sha256("".join(parts).encode()).hexdigest()
