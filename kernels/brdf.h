@@ -35,6 +35,26 @@ inline float v_smith_ggx_correlated(float nov, float nol, float alpha)
     return 0.5f / fmax(lv + ll, 1e-30f);
 }
 
+/* Sheen (KHR_materials_sheen; Estevez and Kulla 2017): the Charlie NDF, alpha = sheen
+ * roughness^2, and Ashikhmin and Premoze's visibility clamped to [0, 1] (the glTF Sample
+ * Viewer's; Filament's "Neubelt" unclamped). */
+#define SHEEN_ALPHA_MIN 1e-6f
+
+inline float d_charlie(float noh, float alpha)
+{
+    const float a = fmax(alpha, SHEEN_ALPHA_MIN);
+    noh = clamp(noh, 0.0f, 1.0f);
+    const float sin2 = (1.0f - noh) * (1.0f + noh);
+    return (2.0f + 1.0f / a) * pow(sin2, 0.5f / a) * (0.5f / 3.14159265358979323846f);
+}
+
+inline float v_ashikhmin(float nov, float nol)
+{
+    nov = clamp(nov, 0.0f, 1.0f);
+    nol = clamp(nol, 0.0f, 1.0f);
+    return fmin(1.0f / fmax(4.0f * (nol + nov - nol * nov), 1e-30f), 1.0f);   /* clamped as the glTF viewer */
+}
+
 inline float3 f_schlick(float voh, float3 f0)
 {
     float x = 1.0f - clamp(voh, 0.0f, 1.0f);

@@ -188,3 +188,29 @@ __kernel void convolve(__global const float4 *level, const int w, const int h,
     }
     out[idx] = (float4)(acc / fmax(wsum, 1e-30f), 0.0f);
 }
+
+/* Sheen albedo over NoV (x) and sheen roughness (y), the DFG grid: E = int D_charlie(h)
+ * V_ashikhmin NoL dl with N = (0,0,1), V = (sqrt(1-NoV^2), 0, NoV), estimated as Filament's
+ * DFV_Charlie_Uniform: h uniform on the hemisphere (pdf 1/(2 pi)) from Hammersley points, dl =
+ * 4 VoH dh, so E = 8 pi mean(V D NoL VoH). The sheen counterpart of the DFG table's A + B
+ * (KHR_materials_sheen's albedo scaling; the IBL's sheen term is its prefiltered radiance times E). */
+__kernel void dfg_sheen(const int n, const int nsamples, __global float *out)
+{
+    const int x = get_global_id(0), y = get_global_id(1);
+    if (x >= n || y >= n) return;
+    const float nov = fmax((float)x / (float)(n - 1), 1e-4f);
+    const float r = (float)y / (float)(n - 1);
+    const float alpha = r * r;
+    const float3 v = (float3)(sqrt(1.0f - nov * nov), 0.0f, nov);
+    float acc = 0.0f;
+    for (int k = 0; k < nsamples; ++k) {
+        const float2 u = hammersley((uint)k, (uint)nsamples);
+        const float cz = u.x, sz = sqrt(fmax(0.0f, 1.0f - cz * cz)), phi = 2.0f * IBL_PI * u.y;
+        const float3 h = (float3)(sz * cos(phi), sz * sin(phi), cz);
+        const float voh = dot(v, h);
+        const float nol = 2.0f * voh * h.z - v.z;
+        if (nol > 0.0f && voh > 0.0f)
+            acc += v_ashikhmin(nov, nol) * d_charlie(h.z, alpha) * nol * voh;
+    }
+    out[y * n + x] = acc * (8.0f * IBL_PI / (float)nsamples);
+}

@@ -37,6 +37,26 @@ def dfg_twin(size: int, n_samples: int, multiscatter: bool = False):
     return out
 
 
+def sheen_twin(size: int, n_samples: int):
+    """numpy twin of kernels/mips.cl:dfg_sheen, shape (size, size) indexed [roughness, NoV]: the
+    sheen albedo E = int D_charlie V_ashikhmin NoL dl, h uniform on the hemisphere (Filament's
+    DFV_Charlie_Uniform)."""
+    grid = np.arange(size) / (size - 1)
+    nov = np.maximum(grid, 1e-4)[None, :]
+    alpha = (grid * grid)[:, None]
+    vx, vz = np.sqrt(1.0 - nov * nov), nov
+    acc = np.zeros((size, size))
+    for u0, u1 in sampling.hammersley(n_samples):
+        cz = u0
+        sz = np.sqrt(max(0.0, 1.0 - cz * cz))
+        hx = sz * np.cos(2.0 * np.pi * u1)
+        voh = vx * hx + vz * cz
+        nol = 2.0 * voh * cz - vz
+        ok = (nol > 0) & (voh > 0)
+        acc += np.where(ok, brdf.v_ashikhmin(nov, nol) * brdf.d_charlie(cz, alpha) * nol * voh, 0.0)
+    return acc * (8.0 * np.pi / n_samples)
+
+
 def dfg_lookup(table, nov, roughness):
     """Bilinear lookup of a DFG table at (NoV, roughness) on its endpoint-inclusive grid."""
     n = table.shape[0]

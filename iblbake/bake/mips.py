@@ -169,6 +169,14 @@ class OpenCLBaker:
         return rt.read(out, (size, size, 2))
 
 
+    def dfg_sheen(self, size: int, n_samples: int):
+        rt = self.rt
+        out = rt.empty(size * size * 4)
+        k = rt.kernel("mips.cl", "dfg_sheen")
+        rt.run(k, (size, size), None, np.int32(size), np.int32(n_samples), out)
+        return rt.read(out, (size, size))
+
+
 class Baker:
     """Bakes on the OpenCL device (backend 'opencl') or with the numpy twins (backend 'numpy')."""
 
@@ -233,6 +241,12 @@ class Baker:
         if self.gpu:
             return self.gpu.dfg(size, samples, multiscatter)
         return dfg.dfg_twin(size, samples, multiscatter).astype(np.float32)
+
+
+    def dfg_sheen(self, size: int, samples: int):
+        if self.gpu:
+            return self.gpu.dfg_sheen(size, samples)
+        return dfg.sheen_twin(size, samples).astype(np.float32)
 
 
 def _check_finite(name, img):
@@ -317,7 +331,8 @@ def check_ktx2_chain(path, opts: dict) -> None:
                          f"would have layout {opts['layout']} and sizes {sizes}: lower --levels or --min-size")
 
 
-def write_ktx2(path: Path, root: Path, manifest: dict, opts: dict, fmt: str) -> None:
+def write_ktx2(path: Path, root: Path, manifest: dict, opts: dict, fmt: str,
+               content: str = "GGX-prefiltered radiance") -> None:
     """The prefiltered cube-map chain of `manifest` as a KTX2 file (atomic). Its roughness per
     level (k / (K - 1)) goes in the key/value data as iblbake.roughness (JSON)."""
     import json
@@ -328,7 +343,7 @@ def write_ktx2(path: Path, root: Path, manifest: dict, opts: dict, fmt: str) -> 
     sizes = opts["sizes"]
     levels = [lv.reshape(6, s, s, -1) for lv, s in zip(load_chain(root, manifest), sizes)]
     meta = {"iblbake.roughness": json.dumps([round(r, 6) for r in opts["roughness"]]),
-            "iblbake.layout": "GGX-prefiltered radiance; level k has roughness k/(K-1); DESIGN.md axes (+y up)"}
+            "iblbake.layout": f"{content}; level k's roughness in iblbake.roughness; DESIGN.md axes (+y up)"}
     atomic.write_bytes(path, ktx2.cube_bytes(levels, fmt, meta, writer=f"iblbake {_version()}"))
 
 
@@ -396,6 +411,62 @@ def bake_dfg(baker: Baker, root: Path, size: int, samples: int, multiscatter: bo
                        "specular = prefiltered * (F0 * R + F90 * G): R = A (scale), G = B (bias)",
                 "kernel_source_sha256": cl.source_hash("mips.cl"), "device": baker.device_label,
                 "timings": {"bake_s": time.perf_counter() - t0}}
+
+    return cache.get_or_build(root, key, build, warn=warn)
+
+
+# Charlie's lobe collapses onto the horizon ring as roughness -> 0 (beyond any band limit); the
+# sheen's own albedo (the sheen table) goes to 0 there, so level 0 holds this roughness's lobe
+SHEEN_R_MIN = 0.07
+
+
+def sheen_roughness(roughness) -> list:
+    return [max(float(r), SHEEN_R_MIN) for r in roughness]
+
+
+def bake_sheen(image, info, root: Path, policies: dict, opts: dict, warn=None):
+    """The Charlie-prefiltered chain (KHR_materials_sheen's IBL lobe, as glTF-IBL-Sampler filters
+    it: N = V = R, h from D_charlie (n.h), weight NoL), level k of roughness max(k/(K-1), 0.07),
+    in the prefiltered chain's layout and sizes: the spectral route (host, ducc0)."""
+    sizes, layout = opts["sizes"], opts["layout"]
+    rough = sheen_roughness(opts["roughness"])
+    key = cache.content_key({"format": FORMAT, "v": FORMAT_VERSION, "kind": "sheen", "input": info.sha256,
+                             "policies": policies, "layout": layout, "sizes": sizes, "roughness": rough,
+                             "spectral": spectral.source_hash()})
+
+    def build(tmp: Path):
+        t0 = time.perf_counter()
+        dirs = [layouts.layout_dirs(layout, s) for s in sizes]
+        levels = spectral.prefilter_levels(np.asarray(image, np.float64), dirs, rough, ndf="charlie")
+        files = []
+        for k, lvl in enumerate(levels):
+            name = f"sheen_{k:02d}.exr"
+            images.write_exr(tmp / name, lvl.astype(np.float32), compression=images.CACHE_COMPRESSION)
+            files.append({"name": name, "size": sizes[k], "roughness": rough[k], "method": "spectral"})
+        return {"format": FORMAT, "format_version": FORMAT_VERSION, "kind": "sheen", "layout": layout,
+                "files": files, "input": info.to_json(), "parameters": policies,
+                "timings": {"bake_s": round(time.perf_counter() - t0, 4)}}
+
+    return cache.get_or_build(root, key, build, warn=warn)
+
+
+def bake_sheen_dfg(baker: Baker, root: Path, size: int, samples: int, warn=None):
+    """The sheen albedo table E(NoV, r) = int D_charlie V_ashikhmin NoL dl on the DFG's grid."""
+    params = {"size": size, "samples": samples}
+    key = "dfg-sheen-" + cache.content_key({"format": FORMAT, "v": FORMAT_VERSION, "kind": "dfg-sheen", **params,
+                                            "kernel": cl.source_hash("mips.cl")})
+
+    def build(tmp: Path):
+        t0 = time.perf_counter()
+        table = baker.dfg_sheen(size, samples)
+        _check_finite("dfg-sheen", table)
+        images.write_exr(tmp / "dfg_sheen.exr", table[..., None], channels=("Y",),
+                         compression=images.CACHE_COMPRESSION)
+        return {"format": FORMAT, "format_version": FORMAT_VERSION, "kind": "dfg-sheen",
+                "files": [{"name": "dfg_sheen.exr", "width": size, "height": size}], "parameters": params,
+                "axes": "x: NoV = i/(size-1) (clamped to >= 1e-4), y: sheen roughness r = j/(size-1)",
+                "use": "sheen = sheenColor * sheen_chain(R, r) * E(NoV, r); albedo scaling 1 - max(sheenColor) E",
+                "device": baker.device_label, "timings": {"bake_s": time.perf_counter() - t0}}
 
     return cache.get_or_build(root, key, build, warn=warn)
 

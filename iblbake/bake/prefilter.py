@@ -69,18 +69,19 @@ def texel_subsamples(w: int, h: int, s: int):
 
 
 def prefilter_bruteforce(source, dirs, roughness: float, chunk: int | None = None, max_sub: int | None = None,
-                         max_parts: float = 4e6):
+                         max_parts: float = 4e6, ndf: str = "ggx"):
     """The ground truth of a prefiltered texel: the integral over the sphere of the source (piecewise
     constant over its texels) against the lobe, sum L(w) D(h) NoL dOmega / sum D(h) NoL dOmega with
     h = normalize(n + w), NoL = n.w > 0 (the limit of Karis' NoL-weighted estimator, N = V = R).
     Every source texel takes part; each is split into s x s parts with exact solid angles, parts no
     wider than a quarter of the lobe's scale alpha nor than 0.05 rad (the midpoint rule on a wide
     lobe), s capped at max_sub (default: at most max_parts parts in all). float64.
-    Roughness 0 is the mirror: the source read bilinearly at n."""
+    Roughness 0 is the mirror: the source read bilinearly at n. `ndf` charlie: the sheen lobe
+    D_charlie(h) NoL instead (its ring just inside the horizon is as narrow as alpha)."""
     source = np.asarray(source, dtype=np.float64)
     dirs = np.asarray(dirs, dtype=np.float64)
     flat = dirs.reshape(-1, 3)
-    if roughness == 0.0:
+    if roughness == 0.0 and ndf == "ggx":
         u, v = conventions.equirect_uv_from_dir(flat)
         return conventions.bilinear_equirect(source, u, v).reshape(dirs.shape[:-1] + (-1,))
     h, w = source.shape[:2]
@@ -96,7 +97,8 @@ def prefilter_bruteforce(source, dirs, roughness: float, chunk: int | None = Non
         n = flat[i0:i0 + chunk]
         nol = np.einsum("cd,tsd->cts", n, src_dirs)              # (c, texels, parts)
         noh = np.sqrt(np.maximum(0.5 * (1.0 + nol), 0.0))         # n.h with h = (n + w)/|n + w|
-        wgt = (np.where(nol > 0, brdf.d_ggx(noh, alpha) * nol, 0.0) * d_omega).sum(-1)  # (c, texels)
+        d = brdf.d_ggx(noh, alpha) if ndf == "ggx" else brdf.d_charlie(noh, alpha)
+        wgt = (np.where(nol > 0, d * nol, 0.0) * d_omega).sum(-1)  # (c, texels)
         out[i0:i0 + chunk] = (wgt @ values) / wgt.sum(1, keepdims=True)
     return out.reshape(dirs.shape[:-1] + (-1,))
 

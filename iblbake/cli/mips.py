@@ -87,6 +87,12 @@ def _inputs_of(env):
 @click.option("--ktx2-format", type=click.Choice(["rgba16f", "rgba32f", "b10g11r11"]), default="rgba16f",
               show_default=True,
               help="Texel format of --ktx2: R16G16B16A16_SFLOAT, R32G32B32A32_SFLOAT or B10G11R11_UFLOAT_PACK32.")
+@click.option("--sheen", is_flag=True,
+              help="Also bake the Charlie-prefiltered (sheen) chain in the prefiltered chain's layout and sizes "
+                   "(level k of roughness max(k/(K-1), 0.07)) and the sheen albedo table E(NoV, r) on the DFG "
+                   "grid (KHR_materials_sheen).")
+@click.option("--ktx2-sheen", "ktx2_sheen", type=click.Path(), default=None, metavar="FILE",
+              help="Write the --sheen chain (implied) as a KTX2 cube map with its mip levels, as --ktx2.")
 @click.option("--irradiance", "irradiance_on", is_flag=True,
               help="Also bake the Lambert irradiance cube map (the alternative to SH some engines load): "
                    "E(n) = int L max(0, n.w) dw computed in the SH domain to --irradiance-lmax, its error "
@@ -104,7 +110,7 @@ def _inputs_of(env):
 @common_options
 def mips_command(envs, cache_dir, layout, size, levels, min_size, method, samples, lod_bias, no_fis,
                  convolve_budget, dfg_size, dfg_samples, dfg_multiscatter, only, level_sizes, verify, backend,
-                 ktx2_path, ktx2_format, irradiance_on, irradiance_size, irradiance_lmax, ktx2_irradiance, nonfinite,
+                 ktx2_path, ktx2_format, sheen, ktx2_sheen, irradiance_on, irradiance_size, irradiance_lmax, ktx2_irradiance, nonfinite,
                  negative, transfer, primaries, input_layout, max_pixels, depfile, device, quiet, as_json):
     """Bake the radiance mip chain, the GGX-prefiltered chain and the DFG table of each ENV into a
     content-addressed EXR cache (one process and one device for a whole folder). A second run
@@ -118,7 +124,17 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
 
     con = Console(quiet, as_json)
     parts = {"radiance", "prefiltered", "dfg"} if "all" in only else set(only)
-    ktx2_out, irr_out = {}, {}
+    ktx2_out, irr_out, sheen_out = {}, {}, {}
+    sheen = sheen or bool(ktx2_sheen)
+    if sheen and "prefiltered" not in parts:
+        raise click.UsageError("--sheen bakes alongside the prefiltered chain (its layout and sizes): "
+                               "give --only prefiltered (or all)")
+    if ktx2_sheen:
+        if level_sizes != "halving" or (click.get_current_context().get_parameter_source("layout")
+                                        == click.core.ParameterSource.COMMANDLINE and layout != "cubemap"):
+            raise click.UsageError("--ktx2-sheen writes a cube map mip chain: --layout cubemap, --level-sizes halving")
+        layout = "cubemap"
+        sheen_out = _per_env(envs, ktx2_sheen, "--ktx2-sheen")
     irradiance_on = irradiance_on or bool(ktx2_irradiance)
     if ktx2_irradiance:
         irr_out = _per_env(envs, ktx2_irradiance, "--ktx2-irradiance")
@@ -201,6 +217,19 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
                                          "methods": [f["method"] for f in pm["files"]]}
                 if verify:
                     report["prefiltered"]["verify"] = mipsbake.verify_prefiltered(root, pm, image, verify)
+                if sheen:
+                    t0 = time.perf_counter()
+                    sm, scached = mipsbake.bake_sheen(image, info, root, policies, opts, warn=con.warn)
+                    report["sheen"] = {"path": str(root / sm["key"]), "cached": scached,
+                                       "seconds": round(time.perf_counter() - t0, 4), "layout": layout,
+                                       "roughness": [f["roughness"] for f in sm["files"]]}
+                    if env in sheen_out:
+                        sheen_out[env].parent.mkdir(parents=True, exist_ok=True)
+                        mipsbake.write_ktx2(sheen_out[env], root, sm,
+                                            {**opts, "roughness": mipsbake.sheen_roughness(opts["roughness"])},
+                                            ktx2_format, content="Charlie-prefiltered (sheen) radiance")
+                        report["ktx2_sheen"] = {"path": str(sheen_out[env]), "format": ktx2_format, "cached": False,
+                                                "seconds": 0.0}
                 if env in ktx2_out:
                     t0 = time.perf_counter()
                     out = ktx2_out[env]
@@ -209,9 +238,15 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
                     report["ktx2"] = {"path": str(out), "format": ktx2_format, "cached": False,
                                       "seconds": round(time.perf_counter() - t0, 4), "levels": len(opts["sizes"])}
         entries = [Path(e["path"]) / "manifest.json" for k, e in report.items() if not k.startswith("ktx2")]
-        entries += [report[k]["path"] for k in ("ktx2", "ktx2_irradiance") if k in report]
+        entries += [report[k]["path"] for k in ("ktx2", "ktx2_irradiance", "ktx2_sheen") if k in report]
         if entries:
             rules.append(([str(x) for x in entries], [os.path.abspath(f) for f in _inputs_of(env)]))
+    if sheen:                         # shared by every panorama, as the DFG table
+        t0 = time.perf_counter()
+        shm, shcached = mipsbake.bake_sheen_dfg(baker, root, dfg_size, dfg_samples, warn=con.warn)
+        for s in summaries:
+            s["entries"]["dfg_sheen"] = {"path": str(root / shm["key"]), "cached": shcached,
+                                         "seconds": round(time.perf_counter() - t0, 4)}
     if "dfg" in parts:                # shared by every panorama: baked once
         t0 = time.perf_counter()
         dm, dcached = mipsbake.bake_dfg(baker, root, dfg_size, dfg_samples, dfg_multiscatter, warn=con.warn)

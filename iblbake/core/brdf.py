@@ -40,3 +40,25 @@ def f_schlick_roughness(nov, f0, roughness):
     """Roughness-aware Schlick (LearnOpenGL's fresnelSchlickRoughness, after Lagarde 2011) (used only for the diffuse weight kD)."""
     f0 = np.asarray(f0, dtype=np.float64)
     return f0 + (np.maximum(1.0 - roughness, f0) - f0) * (1.0 - np.clip(nov, 0.0, 1.0)) ** 5
+
+
+# --- sheen (KHR_materials_sheen; Estevez and Kulla 2017, "Production Friendly Microfacet Sheen BRDF")
+
+SHEEN_ALPHA_MIN = 1e-6
+
+
+def d_charlie(noh, alpha):
+    """Charlie NDF (2 + 1/alpha) sin(theta_h)^(1/alpha) / (2 pi), alpha = sheen roughness^2;
+    normalised: int D (n.h) dw_h = 1."""
+    a = np.maximum(np.asarray(alpha, dtype=np.float64), SHEEN_ALPHA_MIN)
+    noh = np.clip(noh, 0.0, 1.0)
+    sin2 = (1.0 - noh) * (1.0 + noh)
+    return (2.0 + 1.0 / a) * np.power(sin2, 0.5 / a) / (2.0 * np.pi)
+
+
+def v_ashikhmin(nov, nol):
+    """Ashikhmin and Premoze's visibility 1 / (4 (NoL + NoV - NoL NoV)) clamped to [0, 1], as the
+    glTF Sample Viewer's sheen LUT has it (Filament's "Neubelt" without the clamp): unclamped,
+    the sheen albedo at grazing NoV and low roughness grows without bound (174 at NoV 1e-4)."""
+    nov, nol = np.clip(nov, 0.0, 1.0), np.clip(nol, 0.0, 1.0)
+    return np.minimum(1.0 / np.maximum(4.0 * (nol + nov - nol * nov), 1e-30), 1.0)
