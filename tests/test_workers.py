@@ -65,9 +65,9 @@ def once_each_bake(results):
 
 
 def test_pool_worker_killed_mid_sweep_loses_nothing(tmp_path, grid):
-    """--jobs 2 on a fresh cache: each bake built once across the workers; one worker SIGKILLed
-    after the first finished cell: the pool starts again for the unfinished cells (counted),
-    and every cell equals the serial one."""
+    """--jobs 2 on a fresh cache, one worker SIGKILLed after the first finished cell: the pool
+    starts again for the unfinished cells (counted), every cell equals the serial one, and no
+    bake was built twice."""
     _, cells, scenes, serial = grid
     killed = []
 
@@ -82,7 +82,8 @@ def test_pool_worker_killed_mid_sweep_loses_nothing(tmp_path, grid):
     assert killed and same_cells(results, serial)
     assert 1 <= summary["retried_cells"] < 16 and "failed" not in summary["cells"]
     assert sum(w["cells"] for w in summary["workers"]) == 16
-    assert len(once_each_bake(results)) >= 2 and set(once_each_bake(results).values()) == {1}
+    # built at most once; none of the cells kept may report it when the dead worker built it
+    assert len(once_each_bake(results)) >= 2 and set(once_each_bake(results).values()) <= {0, 1}
 
 
 def test_dask_local_cluster_equals_serial_and_survives_a_killed_worker(tmp_path, grid):
@@ -128,6 +129,10 @@ def test_cli_scheduler_local_and_jobs_equal_serial(tmp_path, small_panoramas):
     for name in ("dask", "jobs"):
         spread = outs[name]["workers"]
         assert sum(w["cells"] for w in spread["workers"]) == 16 and spread["cells"] == {"rendered": 16}
+        names = {b for c in outs[name]["cells"] for b in c["bakes_cached"]}
+        assert names >= {"sh", "prefiltered"}
+        for bake in names:                      # built once across the workers: one cell found it missing
+            assert sum(bake not in c["bakes_cached"] for c in outs[name]["cells"]) == 1, (name, bake)
     assert outs["jobs"]["workers"]["devices"] == ["cpu", "cpu:0"]
 
 

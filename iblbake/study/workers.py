@@ -272,7 +272,10 @@ def render_cells_dask(scenes, cells, client, *, devices, bakes, resources=None, 
         for path in scene_load.input_files(sc)[1:]:
             sha = bakes.file_sha256(path)
             if sha not in shared:
-                shared[sha] = client.scatter(Path(path).read_bytes(), hash=True)
+                # on every worker (data held by one alone is lost with it, and every task needing it
+                # is cancelled: "lost dependencies"), under a key of its own (a content hash would
+                # collide with the same file's key being released from an earlier sweep)
+                shared[sha] = client.scatter(Path(path).read_bytes(), hash=False, broadcast=True)
             files[path] = (sha, shared[sha])
         key = "iblbake-cell-" + sheet.cell_identity(sc, bakes)[:40]
         f = client.submit(_dask_cell, sc, c, list(devices), str(bakes.root), resume, files, key=key,
