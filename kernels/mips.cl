@@ -104,14 +104,21 @@ __kernel void resample(__global const float4 *chain, __constant int *off, __cons
  * h ~ D(h) NoH: the weight of a sample is G_vis = 4 V NoL VoH / NoH (Filament's GDFG * VoH / NoH):
  *   A = mean G_vis (1 - Fc), B = mean G_vis Fc, Fc = (1 - VoH)^5; specular = F0 A + F90 B.
  * MULTISCATTER stores (B, A + B) instead (Filament's layout for energy compensation). */
+/* Texel (x, y) of an n x n table over NoV and roughness: NoV (>= 1e-4), alpha, and V. */
+inline float3 table_view(int x, int y, int n, float *nov, float *alpha)
+{
+    *nov = fmax((float)x / (float)(n - 1), 1e-4f);
+    const float r = (float)y / (float)(n - 1);
+    *alpha = r * r;
+    return (float3)(sqrt(1.0f - *nov * *nov), 0.0f, *nov);
+}
+
 __kernel void dfg(const int n, const int nsamples, __global float2 *out)
 {
     const int x = get_global_id(0), y = get_global_id(1);
     if (x >= n || y >= n) return;
-    const float nov = fmax((float)x / (float)(n - 1), 1e-4f);
-    const float r = (float)y / (float)(n - 1);
-    const float alpha = r * r;
-    const float3 v = (float3)(sqrt(1.0f - nov * nov), 0.0f, nov);
+    float nov, alpha;
+    const float3 v = table_view(x, y, n, &nov, &alpha);
     float a = 0.0f, bsum = 0.0f;
     for (int k = 0; k < nsamples; ++k) {
         const float3 h = sample_ggx_half(hammersley((uint)k, (uint)nsamples), alpha);
@@ -198,10 +205,8 @@ __kernel void dfg_sheen(const int n, const int nsamples, __global float *out)
 {
     const int x = get_global_id(0), y = get_global_id(1);
     if (x >= n || y >= n) return;
-    const float nov = fmax((float)x / (float)(n - 1), 1e-4f);
-    const float r = (float)y / (float)(n - 1);
-    const float alpha = r * r;
-    const float3 v = (float3)(sqrt(1.0f - nov * nov), 0.0f, nov);
+    float nov, alpha;
+    const float3 v = table_view(x, y, n, &nov, &alpha);
     float acc = 0.0f;
     for (int k = 0; k < nsamples; ++k) {
         const float2 u = hammersley((uint)k, (uint)nsamples);

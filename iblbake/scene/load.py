@@ -735,19 +735,21 @@ def input_files(sc: Scene) -> list:
             *(o["mesh"]["path"] for o in d["objects"] if "mesh" in o)]
 
 
+def replace_strings(value, mapping: dict):
+    """`value` (nested dicts and lists) with every string found in `mapping` replaced by its value."""
+    if isinstance(value, dict):
+        return {k: replace_strings(x, mapping) for k, x in value.items()}
+    if isinstance(value, list):
+        return [replace_strings(x, mapping) for x in value]
+    return mapping.get(value, value) if isinstance(value, str) else value
+
+
 def with_files(sc: Scene, moved: dict) -> Scene:
     """The scene reading each file of `moved` (old path -> new path) from its new place: a worker
     on another machine renders a cell from its own copies of the files (same content)."""
-    def move(v):
-        if isinstance(v, dict):
-            return {k: move(x) for k, x in v.items()}
-        if isinstance(v, list):
-            return [move(x) for x in v]
-        return moved.get(v, v) if isinstance(v, str) else v
-
     d = sc.data
-    data = {**d, "environment": move(d["environment"]),
-            "objects": [{**o, "mesh": move(o["mesh"])} if "mesh" in o else o for o in d["objects"]]}
+    data = {**d, "environment": replace_strings(d["environment"], moved),
+            "objects": [replace_strings(o, moved) for o in d["objects"]]}
     return Scene(data, sc.source, sc.folder, sc.lines)
 
 

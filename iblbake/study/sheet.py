@@ -80,15 +80,7 @@ def cell_identity(sc, bakes) -> str:
     from iblbake.bake.cache import content_key
 
     hashes = {f: "sha256:" + bakes.file_sha256(f) for f in scene_load.input_files(sc)[1:]}
-
-    def by_content(v):
-        if isinstance(v, dict):
-            return {k: by_content(x) for k, x in v.items()}
-        if isinstance(v, list):
-            return [by_content(x) for x in v]
-        return hashes.get(v, v) if isinstance(v, str) else v
-
-    data = {k: by_content(v) for k, v in sc.data.items() if k not in ("output", "sweep")}
+    data = scene_load.replace_strings({k: v for k, v in sc.data.items() if k not in ("output", "sweep")}, hashes)
     return content_key({"kind": "cell", "v": 2, "scene": data, "kernels": _kernels_hash()})
 
 
