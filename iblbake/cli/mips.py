@@ -169,8 +169,9 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
             if "prefiltered" in parts:
                 opts = mipsbake.PrefilterOptions(layout, size, levels, min_size, method, samples, lod_bias,
                                                  not no_fis, convolve_budget, level_sizes).resolved(info.height)
-                if env in ktx2_out:
-                    mipsbake.check_ktx2_chain(ktx2_out[env], opts)
+                for out in (ktx2_out.get(env), sheen_out.get(env)):
+                    if out is not None:
+                        mipsbake.check_ktx2_chain(out, opts)
                 # an impossible plan (--method spectral on a too sharp level) fails before any bake
                 mipsbake.plan_methods(layouts.radiance_chain_sizes(info.width, info.height),
                                       {**opts, "convolve_budget": baker.convolve_budget(opts)}, "--method")
