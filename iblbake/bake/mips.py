@@ -323,6 +323,18 @@ def bake_irradiance_cube(image, info, root: Path, policies: dict, size: int, lma
     return manifest, cached, faces
 
 
+def write_irradiance_ktx2(path: Path, faces, fmt: str) -> None:
+    """The irradiance cube map (6s x s faces, stacked) as a one-level KTX2 cube map (atomic)."""
+    from iblbake import __version__
+    from iblbake.io import atomic, ktx2
+
+    s = faces.shape[1]
+    meta = {"iblbake.content": "Lambert irradiance E(n) = int L max(0, n.w) dw (divide by pi for an albedo-1 "
+                               "surface's radiance)"}
+    atomic.write_bytes(path, ktx2.cube_bytes([np.asarray(faces).reshape(6, s, s, -1)], fmt, meta,
+                                             writer=f"iblbake {__version__}"))
+
+
 def check_ktx2_chain(path, opts: dict) -> None:
     """Fail before baking unless the chain is what KTX2 stores: cube faces, level k of size s >> k."""
     sizes = opts["sizes"]
@@ -337,6 +349,7 @@ def write_ktx2(path: Path, root: Path, manifest: dict, opts: dict, fmt: str,
     level (k / (K - 1)) goes in the key/value data as iblbake.roughness (JSON)."""
     import json
 
+    from iblbake import __version__
     from iblbake.io import atomic, ktx2
 
     check_ktx2_chain(path, opts)
@@ -344,15 +357,7 @@ def write_ktx2(path: Path, root: Path, manifest: dict, opts: dict, fmt: str,
     levels = [lv.reshape(6, s, s, -1) for lv, s in zip(load_chain(root, manifest), sizes)]
     meta = {"iblbake.roughness": json.dumps([round(r, 6) for r in opts["roughness"]]),
             "iblbake.layout": f"{content}; level k's roughness in iblbake.roughness; DESIGN.md axes (+y up)"}
-    atomic.write_bytes(path, ktx2.cube_bytes(levels, fmt, meta, writer=f"iblbake {_version()}"))
-
-
-def _version() -> str:
-    from importlib.metadata import PackageNotFoundError, version
-    try:
-        return version("iblbake")
-    except PackageNotFoundError:
-        return "dev"
+    atomic.write_bytes(path, ktx2.cube_bytes(levels, fmt, meta, writer=f"iblbake {__version__}"))
 
 
 def bake_prefiltered(baker: Baker, chain, info, root: Path, policies: dict, opts: dict, warn=None,

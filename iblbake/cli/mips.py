@@ -183,12 +183,8 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
                                         "lmax": irradiance_lmax, "error": im["error"],
                                         "seconds": round(time.perf_counter() - t0, 4)}
                 if env in irr_out:
-                    from iblbake.io import atomic, ktx2
                     irr_out[env].parent.mkdir(parents=True, exist_ok=True)
-                    atomic.write_bytes(irr_out[env], ktx2.cube_bytes(
-                        [faces.reshape(6, irradiance_size, irradiance_size, 3)], ktx2_format,
-                        {"iblbake.content": "Lambert irradiance E(n) = int L max(0, n.w) dw (divide by pi for "
-                                            "an albedo-1 surface's radiance)"}, writer=f"iblbake {mipsbake._version()}"))
+                    mipsbake.write_irradiance_ktx2(irr_out[env], faces, ktx2_format)
                     report["ktx2_irradiance"] = {"path": str(irr_out[env]), "format": ktx2_format, "cached": False,
                                                  "seconds": 0.0}
             if not parts & {"radiance", "prefiltered"}:
