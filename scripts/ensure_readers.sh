@@ -21,4 +21,6 @@ if [ -n "$need" ]; then
 fi
 [ -f "$DIR/node_modules/.iblbake-complete" ] && [ "$DIR/node_modules/.iblbake-complete" -nt "$DIR/package-lock.json" ] && exit 0
 (cd "$DIR" && npm ci --no-audit --no-fund --loglevel=error) || { echo "ensure_readers: npm ci failed in $DIR" >&2; exit 1; }
+# the Sample Viewer's libktx.js is an ES-module package's file: a .cjs copy lets Node require it
+cp "$DIR/node_modules/@khronosgroup/gltf-viewer/dist/libs/libktx.js" "$DIR/node_modules/.libktx.cjs" || exit 1
 touch "$DIR/node_modules/.iblbake-complete"

@@ -4,8 +4,9 @@
 const fs = require('fs');
 const path = require('path');
 const dist = path.join(__dirname, 'node_modules/@khronosgroup/gltf-viewer/dist/libs');
-const cjs = path.join(__dirname, 'node_modules/.libktx.cjs');   // the package is an ES module
-if (!fs.existsSync(cjs)) fs.copyFileSync(path.join(dist, 'libktx.js'), cjs);
+// the package is an ES module: scripts/ensure_readers.sh (make readers) copies its libktx.js here
+const cjs = path.join(__dirname, 'node_modules/.libktx.cjs');
+if (!fs.existsSync(cjs)) { console.error(`${cjs} is missing: run make readers`); process.exit(1); }
 let log = [];
 const say = (s) => log.push(String(s));
 require(cjs)({ locateFile: (f) => path.join(dist, f), print: say, printErr: say }).then((ktx) => {
