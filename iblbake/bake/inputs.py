@@ -38,11 +38,17 @@ CROSS = {"hcross": [(2, 1), (0, 1), (1, 0), (1, 2), (1, 1), (3, 1)],
          "vcross": [(2, 1), (0, 1), (1, 0), (1, 2), (1, 1), (1, 3)]}
 
 
-def detect(path: str, w: int, h: int) -> str:
+def _named_layout(path: str) -> str | None:
+    """The layout a path itself names: six {face} files, or a KTX2 cube map."""
     if "{face}" in path:
         return "faces"
-    if path.lower().endswith(".ktx2"):
-        return "ktx2"
+    return "ktx2" if path.lower().endswith(".ktx2") else None
+
+
+def detect(path: str, w: int, h: int) -> str:
+    named = _named_layout(path)
+    if named:
+        return named
     for layout, (a, b) in {"equirect": (2, 1), "hcross": (4, 3), "vcross": (3, 4), "hstrip": (6, 1),
                            "vstrip": (1, 6)}.items():
         if w * b == h * a:
@@ -114,24 +120,21 @@ def read_environment(path, *, layout: str = "auto", names: dict | None = None, r
     A cube map resamples on `runtime`'s device where one is given, else by the numpy twin."""
     path = str(path)
     if layout == "auto":
-        if "{face}" in path or path.lower().endswith(".ktx2"):
-            layout = detect(path, 0, 0)
+        layout = _named_layout(path) or "auto"
     if layout == "faces":
         if "{face}" not in path:
             raise InputError(f"{path}: --input-layout faces needs a path with {{face}} (read as {', '.join(FACE_NAMES)})")
         faces, info = [], None
-        for name in FACE_NAMES:
-            img, inf = images.read_panorama(path.replace("{face}", name), names=names, **policies)
+        for face_path in files_of(path):
+            img, inf = images.read_panorama(face_path, names=names, **policies)
             if faces and img.shape != faces[0].shape:
-                raise InputError(f"{path.replace('{face}', name)}: {img.shape[1]}x{img.shape[0]}, the other faces are "
+                raise InputError(f"{face_path}: {img.shape[1]}x{img.shape[0]}, the other faces are "
                                  f"{faces[0].shape[1]}x{faces[0].shape[0]}")
             if img.shape[0] != img.shape[1]:
-                raise InputError(f"{path.replace('{face}', name)}: a cube face must be square, not "
-                                 f"{img.shape[1]}x{img.shape[0]}")
+                raise InputError(f"{face_path}: a cube face must be square, not {img.shape[1]}x{img.shape[0]}")
             faces.append(img)
             info = info or inf
-        info.warnings = [w for w in info.warnings if "not 2:1" not in w]
-        info.sha256 = _combined_sha([images.file_sha256(path.replace("{face}", n)) for n in FACE_NAMES])
+        info.sha256 = _combined_sha([images.file_sha256(f) for f in files_of(path)])
         return _resampled(np.stack(faces), info, "six face files", runtime)
     if layout == "ktx2":
         faces = ktx2.read_cube(path)

@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 
 from iblbake.cli.options import (POLICY_FLAGS, Console, common_options, depfile_option, device_option, finite,
-                                  input_options, non_negative)
+                                  input_files_of, input_options, non_negative)
 
 
 def _per_env(envs, path, flag) -> dict:
@@ -25,11 +25,6 @@ def _per_env(envs, path, flag) -> dict:
     for o in out.values():
         check_writable(o, f"{flag} output")
     return out
-
-
-def _inputs_of(env):
-    from iblbake.bake.inputs import files_of
-    return files_of(env)
 
 
 @click.command("mips")
@@ -189,7 +184,7 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
                                                  "seconds": 0.0}
             if not parts & {"radiance", "prefiltered"}:
                 entries = [Path(e["path"]) / "manifest.json" for k, e in report.items() if not k.startswith("ktx2")]
-                rules.append(([str(x) for x in entries], [os.path.abspath(f) for f in _inputs_of(env)]))
+                rules.append(([str(x) for x in entries], [os.path.abspath(f) for f in input_files_of(env)]))
                 continue
             t0 = time.perf_counter()
             manifest, cached, chain = mipsbake.bake_radiance(baker, image, info, root, policies, warn=con.warn)
@@ -237,7 +232,7 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
         entries = [Path(e["path"]) / "manifest.json" for k, e in report.items() if not k.startswith("ktx2")]
         entries += [report[k]["path"] for k in ("ktx2", "ktx2_irradiance", "ktx2_sheen") if k in report]
         if entries:
-            rules.append(([str(x) for x in entries], [os.path.abspath(f) for f in _inputs_of(env)]))
+            rules.append(([str(x) for x in entries], [os.path.abspath(f) for f in input_files_of(env)]))
     if sheen:                         # shared by every panorama, as the DFG table
         t0 = time.perf_counter()
         shm, shcached = mipsbake.bake_sheen_dfg(baker, root, dfg_size, dfg_samples, warn=con.warn)

@@ -132,3 +132,9 @@ def depfile_option(f):
     return click.option("--depfile", type=click.Path(dir_okay=False), default=None, metavar="FILE",
                         help="Also write a Make dependency file (as gcc -MD -MF): the outputs depend on "
                              "every file read. Use with `-include *.d` in a Makefile.")(f)
+
+
+def input_files_of(env: str) -> list:
+    """The files an ENV argument reads (six for a {face} path), for depfiles."""
+    from iblbake.bake.inputs import files_of
+    return files_of(env)

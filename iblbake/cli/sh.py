@@ -10,7 +10,7 @@ import time
 import click
 
 from iblbake.cli.options import (POLICY_FLAGS, Console, common_options, depfile_option, device_option, finite,
-                                  input_options, non_negative)
+                                  input_files_of, input_options, non_negative)
 from iblbake.errors import IblbakeError
 
 
@@ -36,11 +36,6 @@ def _check_overwrite(output: str, force: bool, source: str, fmt: str = "iblbake"
     if not ours:
         raise IblbakeError(f"{output}: exists and is not an iblbake SH {'document' if fmt == 'iblbake' else fmt + ' export'}; "
                            f"pass --force to overwrite it")
-
-
-def _inputs_of(env):
-    from iblbake.bake.inputs import files_of
-    return files_of(env)
 
 
 @click.command("sh")
@@ -118,7 +113,7 @@ def sh_command(envs, output, force, bands, window, backend, rotate_y, intensity,
                for env, out in zip(envs, outputs)]
     if depfile:
         from iblbake.io import depfile as dep
-        dep.write(depfile, [([out], [os.path.abspath(f) for f in _inputs_of(env)]) for env, out in zip(envs, outputs) if out])
+        dep.write(depfile, [([out], [os.path.abspath(f) for f in input_files_of(env)]) for env, out in zip(envs, outputs) if out])
     if len(results) == 1:
         summary, human = results[0]
         if fmt != "iblbake" and not output and not as_json:
