@@ -96,7 +96,7 @@ __kernel void lights(__global const float4 *gb_pos, __global const float4 *gb_nr
         float dist = INFINITY, sin_max;
         if (kind == LIGHT_DIRECTIONAL) {
             wc = r0.xyz;
-            sin_max = sin(r2.w);
+            sin_max = r2.w;                 /* the sine of its angular radius */
         } else {
             const float3 dv = r0.xyz - p;
             const float d = length(dv);

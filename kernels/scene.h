@@ -149,14 +149,20 @@ inline Hit trace_range(float3 o, float3 d, float tmin, float tmax, int any_hit, 
         const float3 inv_d = (float3)(1.0f / (d.x != 0.0f ? d.x : 1e-30f), 1.0f / (d.y != 0.0f ? d.y : 1e-30f),
                                       1.0f / (d.z != 0.0f ? d.z : 1e-30f));
         const RayShear rs = ray_shear(d);
+        /* A node is pushed only when the ray meets its box, with its entry distance: a shadow ray
+         * pops without a second box test (its tmax never shrinks), a closest-hit ray only checks
+         * that entry against the nearest hit found since (the same test, as box_hit's near bound
+         * is the entry and its far bound the widened min of the slabs' and tmax). */
         int stack[64];
+        float near[64];
         int sp = 0;
-        stack[sp++] = 0;
+        float tn;
+        if (box_hit(o, inv_d, bvh[0].xyz, bvh[1].xyz, h.t, &tn)) { stack[0] = 0; near[0] = tn; sp = 1; }
         while (sp > 0) {
-            const int ni = stack[--sp];
+            --sp;
+            if (!any_hit && near[sp] > h.t * 1.0000004f) continue;
+            const int ni = stack[sp];
             const float4 a = bvh[2 * ni], b = bvh[2 * ni + 1];
-            float tn;
-            if (!box_hit(o, inv_d, a.xyz, b.xyz, h.t, &tn)) continue;
             const int count = as_int(b.w), first = as_int(a.w);
             if (count > 0) {
                 for (int k = first; k < first + count; ++k) {
@@ -176,10 +182,10 @@ inline Hit trace_range(float3 o, float3 d, float tmin, float tmax, int any_hit, 
                 const int hl = box_hit(o, inv_d, la.xyz, lb.xyz, h.t, &tl);
                 const int hr = box_hit(o, inv_d, ra.xyz, rb.xyz, h.t, &tr);
                 if (hl && hr) {
-                    if (tl <= tr) { stack[sp++] = first + 1; stack[sp++] = first; }
-                    else { stack[sp++] = first; stack[sp++] = first + 1; }
-                } else if (hl) stack[sp++] = first;
-                else if (hr) stack[sp++] = first + 1;
+                    if (tl <= tr) { stack[sp] = first + 1; near[sp++] = tr; stack[sp] = first; near[sp++] = tl; }
+                    else { stack[sp] = first; near[sp++] = tl; stack[sp] = first + 1; near[sp++] = tr; }
+                } else if (hl) { stack[sp] = first; near[sp++] = tl; }
+                else if (hr) { stack[sp] = first + 1; near[sp++] = tr; }
             }
         }
     }

@@ -514,7 +514,7 @@ def lights(gb, arrays, records, effects: dict, *, diffuse=True, specular=True, e
         if kind == 0:
             wc = np.broadcast_to(r[0, :3], p.shape).copy()
             dist = np.full(len(p), np.inf)
-            sin_max = np.full(len(p), math.sin(r[2, 3]))
+            sin_max = np.full(len(p), r[2, 3])
         else:
             dv = r[0, :3] - p
             d = np.linalg.norm(dv, axis=-1)

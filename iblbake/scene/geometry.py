@@ -2,8 +2,9 @@
 
 Meshes are flattened to one triangle list (every mesh of a scene, world space, float64 on the
 host, float32 on the device) with three shading normals per triangle. The BVH is built on the host
-with numpy, one tree level at a time (object-median split along the widest centroid axis: each
-level is one segmented sort of all primitives), and traversed in kernels/render.cl.
+with numpy, one tree level at a time (each node split where the surface area heuristic is
+lowest over every position of its primitives sorted by centroid on each axis: per level three
+segmented sorts and prefix/suffix bounds of all primitives), and traversed in kernels/scene.h.
 """
 
 from __future__ import annotations
@@ -20,6 +21,9 @@ import numpy as np
 from iblbake.errors import InputError
 
 LEAF_SIZE = 4
+# levels split by the surface area heuristic; deeper ones at the object median, so a tree's depth
+# stays within the kernels' traversal stack (64) whatever the mesh
+SAH_DEPTH = 32
 # corners whose vertex normal turns more than this from the face normal use the face normal
 # (keeps a cube's edges sharp when its corners are shared vertices)
 CREASE_COS = math.cos(math.radians(45.0))
@@ -232,8 +236,59 @@ def _segment_reduce(ufunc, values, starts, counts):
     return ufunc.reduceat(pad, idx, axis=0)[0::2]
 
 
+def _segmented_running_max(x, seg, span):
+    """np.maximum.accumulate restarted at each segment of the sorted segment ids seg: every value
+    is lifted by its segment's index times span (more than the values' range), so an earlier
+    segment never reaches a later one."""
+    off = seg.astype(np.float64)[:, None] * span
+    return np.maximum.accumulate(x + off, axis=0) - off
+
+
+def _half_areas(lo, hi):
+    e = hi - lo
+    return e[:, 0] * e[:, 1] + e[:, 1] * e[:, 2] + e[:, 2] * e[:, 0]
+
+
+def _sah_splits(lo, hi, centroid, prims, seg, s_ct, axis_order):
+    """Per segment the axis and the count left of its best split (the surface area heuristic:
+    left count x left area + right count x right area, over every cut of the primitives sorted
+    on that axis), and per axis the sorted primitives."""
+    nseg = len(s_ct)
+    first = np.cumsum(s_ct) - s_ct                  # segment starts within prims
+    rank = np.arange(len(prims)) - np.repeat(first, s_ct)
+    span = 2.0 * float(np.max(np.abs(np.concatenate([lo[prims], hi[prims]])))) + 1.0
+    best_cost = np.full(nseg, np.inf)
+    best_axis = np.zeros(nseg, np.int64)
+    best_left = s_ct // 2
+    sorted_prims = []
+    for a in range(3):
+        p = prims[axis_order[a]]
+        sorted_prims.append(p)
+        l, h = lo[p], hi[p]
+        left = _half_areas(-_segmented_running_max(-l, seg, span), _segmented_running_max(h, seg, span))
+        rseg = (nseg - 1 - seg)[::-1]
+        right = _half_areas(-_segmented_running_max(-l[::-1], rseg, span),
+                            _segmented_running_max(h[::-1], rseg, span))[::-1]
+        # cut after rank i: left holds i + 1 primitives (prefix i), right the rest (suffix i + 1)
+        n_left = rank + 1
+        cost = np.full(len(p), np.inf)
+        inner = n_left < np.repeat(s_ct, s_ct)
+        idx = np.flatnonzero(inner)
+        cost[idx] = left[idx] * n_left[idx] + right[idx + 1] * (np.repeat(s_ct, s_ct)[idx] - n_left[idx])
+        seg_min = np.minimum.reduceat(cost, first)
+        at = np.flatnonzero(cost == seg_min[seg])
+        at = at[np.unique(seg[at], return_index=True)[1]]   # the first best cut of each segment
+        better = seg_min < best_cost
+        best_cost[better] = seg_min[better]
+        best_axis[better] = a
+        best_left[seg[at][better[seg[at]]]] = n_left[at][better[seg[at]]]
+    return best_axis, best_left, sorted_prims
+
+
 def build_bvh(lo: np.ndarray, hi: np.ndarray, leaf_size: int = LEAF_SIZE) -> BVH:
-    """Object-median BVH over primitive bounds lo, hi (n, 3), built level by level."""
+    """SAH BVH over primitive bounds lo, hi (n, 3), built level by level (nodes of more than
+    leaf_size primitives split; beyond SAH_DEPTH levels at the object median, which bounds the
+    depth the kernels' traversal stacks hold)."""
     t0 = time.perf_counter()
     n = len(lo)
     centroid = 0.5 * (lo + hi)
@@ -251,20 +306,21 @@ def build_bvh(lo: np.ndarray, hi: np.ndarray, leaf_size: int = LEAF_SIZE) -> BVH
         left = np.full(len(level_starts), -1, np.int64)
         if split.any():
             s_st, s_ct = level_starts[split], level_counts[split]
-            cmin = _segment_reduce(np.minimum, centroid[order], s_st, s_ct)
-            cmax = _segment_reduce(np.maximum, centroid[order], s_st, s_ct)
-            axis = np.argmax(cmax - cmin, axis=1)
-            # segmented sort: primitives of each splitting node by their centroid on its axis
             seg = np.repeat(np.arange(len(s_st)), s_ct)
             pos = np.repeat(s_st - (np.cumsum(s_ct) - s_ct), s_ct) + np.arange(s_ct.sum())
             prims = order[pos]
-            # one float64 sort: segment index + centroid scaled into [0, 0.5] within its segment
-            a = axis[seg]
-            lo_a = cmin[seg, a]
-            ext = np.maximum(cmax[seg, a] - lo_a, 1e-300)
-            perm = np.argsort(seg + 0.5 * ((centroid[prims, a] - lo_a) / ext), kind="stable")
-            order[pos] = prims[perm]
-            half = s_ct // 2
+            cmin = _segment_reduce(np.minimum, centroid[prims], np.cumsum(s_ct) - s_ct, s_ct)
+            cmax = _segment_reduce(np.maximum, centroid[prims], np.cumsum(s_ct) - s_ct, s_ct)
+            ext = np.maximum(cmax - cmin, 1e-300)
+            # segmented sort per axis: segment index + centroid scaled into [0, 0.5] within its segment
+            axis_order = [np.argsort(seg + 0.5 * ((centroid[prims, a] - cmin[seg, a]) / ext[seg, a]), kind="stable")
+                          for a in range(3)]
+            if depth < SAH_DEPTH:
+                axis, half, sorted_prims = _sah_splits(lo, hi, centroid, prims, seg, s_ct, axis_order)
+            else:
+                axis, half = np.argmax(cmax - cmin, axis=1), s_ct // 2
+                sorted_prims = [prims[o] for o in axis_order]
+            order[pos] = np.choose(axis[seg], sorted_prims)
             child_st = np.stack([s_st, s_st + half], axis=1).reshape(-1)
             child_ct = np.stack([half, s_ct - half], axis=1).reshape(-1)
             left[split] = next_index + 2 * np.arange(len(s_st))

@@ -138,7 +138,7 @@ def light_records(lights: list) -> np.ndarray:
             d = np.asarray(p["direction"], np.float64)
             r[0, :3] = -d / np.linalg.norm(d)
             r[1, :3] = np.asarray(p["color"]) * p["illuminance"]
-            r[2, 3] = math.radians(p["angular_diameter"]) / 2
+            r[2, 3] = math.sin(math.radians(p["angular_diameter"]) / 2)   # sine of the angular radius
             r[3, :2] = 0.0, 1.0
             continue
         r[0, :3] = p["position"]
