@@ -1,6 +1,7 @@
 """KTX2 cube maps (`iblbake mips --ktx2`) read back by real readers: ktx-parse (the parser of
 three.js's KTX2Loader) must return every level and face equal to the EXR chain bit for bit
-(float16 and float32; B10G11R11 equal to its round-to-nearest-even packing), and the libktx of
+(float16 and float32; B10G11R11 equal to its round-to-nearest-even packing, E5B9G9R9 to the
+shared-exponent encoding of EXT_texture_shared_exponent), and the libktx of
 the official glTF Sample Viewer must open the file with the same format, size and orientation.
 Faces follow Vulkan's cube-map face selection, written out here from the Vulkan specification
 (not from iblbake's conventions): a panorama with six marked directions lands each on its face
@@ -21,7 +22,10 @@ from .conftest import run_cli
 from .test_render import small_panoramas  # noqa: F401  (fixture: city and studio at 256x128)
 
 NODE = Path(__file__).parent / "node"
-VK = {"rgba16f": 97, "rgba32f": 109, "b10g11r11": 122}
+VK = {"rgba16f": 97, "rgba32f": 109, "b10g11r11": 122, "e5b9g9r9": 123}
+# the samples' channel ids (low 4 bits) and qualifiers (high 4) of each format's DFD
+CHANNELS = {"rgba16f": [0xC0, 0xC1, 0xC2, 0xCF], "rgba32f": [0xC0, 0xC1, 0xC2, 0xCF], "b10g11r11": [0x80, 0x81, 0x82],
+            "e5b9g9r9": [0x00, 0x20, 0x01, 0x21, 0x02, 0x22]}
 
 
 @pytest.fixture(scope="module")
@@ -49,24 +53,27 @@ def bake(tmp_path, env, fmt, *extra):
     return out, chain, doc
 
 
-@pytest.mark.parametrize("fmt", ["rgba16f", "rgba32f", "b10g11r11"])
+@pytest.mark.parametrize("fmt", list(VK))
 def test_ktx_parse_reads_every_level_and_face_back(tmp_path, small_panoramas, readers, fmt):
     out, chain, doc = bake(tmp_path, small_panoramas["city"], fmt)
     got = readers("read_ktx2.mjs", out)[0][str(out)]
     assert "error" not in got, got
     assert (got["vkFormat"], got["pixelWidth"], got["pixelHeight"], got["pixelDepth"]) == (VK[fmt], 16, 16, 0)
     assert (got["faceCount"], got["layerCount"], got["supercompressionScheme"]) == (6, 0, 0)
-    assert got["typeSize"] == {"rgba16f": 2, "rgba32f": 4, "b10g11r11": 4}[fmt]
+    assert got["typeSize"] == {"rgba16f": 2, "rgba32f": 4}.get(fmt, 4)
     assert got["keyValue"]["KTXorientation"] == "rd" and got["keyValue"]["KTXwriter"].startswith("iblbake")
     assert json.loads(got["keyValue"]["iblbake.roughness"]) == pytest.approx(doc["prefiltered"]["roughness"])
     dfd = got["dfd"][0]
     assert (dfd["colorModel"], dfd["colorPrimaries"], dfd["transferFunction"]) == (1, 1, 1)   # RGBSDA, BT.709, linear
-    assert [s["channelType"] & 0xF for s in dfd["samples"]] == ([0, 1, 2] if fmt == "b10g11r11" else [0, 1, 2, 15])
+    assert [s["channelType"] for s in dfd["samples"]] == CHANNELS[fmt]
+    if fmt == "e5b9g9r9":      # mantissas at 0, 9, 18 (9 bits), the shared exponent at 27 (5 bits, bias 15)
+        assert [(s["bitOffset"], s["bitLength"], s["lower"], s["upper"]) for s in dfd["samples"]] == \
+            [(0, 8, 0, 8448), (27, 4, 15, 31), (9, 8, 0, 8448), (27, 4, 15, 31), (18, 8, 0, 8448), (27, 4, 15, 31)]
     assert len(got["levels"]) == len(chain) == 5
     for k, (level, ref) in enumerate(zip(got["levels"], chain)):
         s = 16 >> k
         raw = np.frombuffer(__import__("base64").b64decode(level["data"]), dtype={
-            "rgba16f": "<f2", "rgba32f": "<f4", "b10g11r11": "<u4"}[fmt])
+            "rgba16f": "<f2", "rgba32f": "<f4"}.get(fmt, "<u4"))
         ref = ref.reshape(6, s, s, 3)
         if fmt == "b10g11r11":
             packed = raw.reshape(6, s, s)
@@ -75,6 +82,12 @@ def test_ktx_parse_reads_every_level_and_face_back(tmp_path, small_panoramas, re
             # round to nearest: half a unit in the last place, 2^-7 (R, G) and 2^-6 (B) relative
             rel = np.abs(back - ref) / np.maximum(ref, 2.0 ** -14)
             assert rel[..., :2].max() <= 2.0 ** -7 and rel[..., 2].max() <= 2.0 ** -6
+        elif fmt == "e5b9g9r9":
+            packed = raw.reshape(6, s, s)
+            assert np.array_equal(packed, ktx2.pack_e5b9g9r9(ref))
+            # half a unit of a 9-bit mantissa at the exponent of the texel's largest channel
+            err = np.abs(ktx2.unpack_e5b9g9r9(packed) - ref).max(axis=-1)
+            assert np.all(err <= 2.0 ** -9 * ref.max(axis=-1) * (1 + 1e-6))
         else:
             texels = raw.reshape(6, s, s, 4)
             assert np.array_equal(texels[..., :3], ref.astype(texels.dtype)) and np.all(texels[..., 3] == 1)
@@ -88,7 +101,7 @@ def test_libktx_opens_the_file(tmp_path, small_panoramas, readers):
         info = got[str(out)]
         assert info["messages"] == [], info
         assert (info["vkFormat"], info["baseWidth"], info["baseHeight"]) == (VK[fmt], 16, 16)
-        assert info["numComponents"] == (3 if fmt == "b10g11r11" else 4)
+        assert info["numComponents"] == (3 if fmt in ktx2.PACKED else 4)
         assert info["orientation"][:2] == [ord("r"), ord("d")]
     bad = tmp_path / "bad.ktx2"
     bad.write_bytes(b"X" + outs[0].read_bytes()[1:])
@@ -156,6 +169,27 @@ def test_packed_float_encoder_is_nearest_even():
     assert list(special[:4]) == [0, 0, 0, (30 << 6) | 63] and special[4] == 31 << 6 and special[5] > 31 << 6
 
 
+def test_shared_exponent_encoder():
+    """EXT_texture_shared_exponent's encoding: every canonical code (the largest mantissa at
+    least 2^8, or the exponent 0) decodes and re-encodes to itself; any value comes back within
+    half a mantissa unit at its largest channel's exponent (2^-9 of that channel); negatives and
+    NaN give 0, values beyond the largest (65408, +Inf too) give it."""
+    rng = np.random.default_rng(11)
+    m = rng.integers(0, 512, (200000, 3), dtype=np.uint32)
+    e = rng.integers(0, 32, 200000, dtype=np.uint32)
+    m[np.arange(200000), rng.integers(0, 3, 200000)] |= np.where(e > 0, 256, 0).astype(np.uint32)
+    codes = m[:, 0] | (m[:, 1] << 9) | (m[:, 2] << 18) | (e << 27)
+    codes = np.concatenate([codes, [0, 0x1FF, 0xF80001FF, 0xFFFFFFFF, 0x08000100]]).astype(np.uint32)
+    assert np.array_equal(ktx2.pack_e5b9g9r9(ktx2.unpack_e5b9g9r9(codes)), codes)
+    x = np.exp(rng.uniform(np.log(1e-8), np.log(6e4), (100000, 3))) * (rng.random((100000, 3)) < 0.9)
+    back = ktx2.unpack_e5b9g9r9(ktx2.pack_e5b9g9r9(x)).astype(np.float64)
+    # below 2^-15 the exponent is at its floor (0): half a unit there is 2^-25, absolute
+    bound = np.maximum(2.0 ** -9 * x.max(axis=-1), 2.0 ** -25) * (1 + 1e-12)
+    assert np.all(np.abs(back - x).max(axis=-1) <= bound)
+    special = ktx2.unpack_e5b9g9r9(ktx2.pack_e5b9g9r9(np.array([[-1.0, np.nan, 1e9], [np.inf, 0.0, -0.0]])))
+    assert special.tolist() == [[0.0, 0.0, ktx2.E5_MAX], [ktx2.E5_MAX, 0.0, 0.0]]
+
+
 def test_bad_ktx2_requests_are_one_line(tmp_path, small_panoramas):
     env = small_panoramas["city"]
     cases = [(["--layout", "equirect"], "--ktx2 writes a cube map"),
@@ -167,3 +201,16 @@ def test_bad_ktx2_requests_are_one_line(tmp_path, small_panoramas):
         assert p.returncode != 0 and says in p.stderr.strip().splitlines()[-1], (extra, p.stderr)
         assert "Traceback" not in p.stderr
         assert not (tmp_path / "x.ktx2").exists()
+
+
+@pytest.mark.parametrize("fmt", list(VK))
+def test_read_cube_gives_back_what_each_format_stores(tmp_path, fmt):
+    """A cube map as input (`--input-layout ktx2`) reads level 0 as the format stores it."""
+    rng = np.random.default_rng(2)
+    faces = (rng.random((6, 8, 8, 3)) * 50).astype(np.float32)
+    path = tmp_path / f"in-{fmt}.ktx2"
+    path.write_bytes(ktx2.cube_bytes([faces, faces[:, ::2, ::2]], fmt))
+    stored = {"b10g11r11": lambda f: ktx2.unpack_b10g11r11(ktx2.pack_b10g11r11(f)),
+              "e5b9g9r9": lambda f: ktx2.unpack_e5b9g9r9(ktx2.pack_e5b9g9r9(f)),
+              "rgba16f": lambda f: f.astype(np.float16).astype(np.float32), "rgba32f": lambda f: f}[fmt]
+    assert np.array_equal(ktx2.read_cube(path), stored(faces))

@@ -79,9 +79,10 @@ def _per_env(envs, path, flag) -> dict:
               help="Also write the prefiltered chain as a KTX2 cube map with its mip levels (faces +X -X +Y "
                    "-Y +Z -Z, Vulkan's orientation); implies --layout cubemap. With several ENVs, a folder "
                    "that gets ENV's name with .ktx2.")
-@click.option("--ktx2-format", type=click.Choice(["rgba16f", "rgba32f", "b10g11r11"]), default="rgba16f",
+@click.option("--ktx2-format", type=click.Choice(["rgba16f", "rgba32f", "b10g11r11", "e5b9g9r9"]), default="rgba16f",
               show_default=True,
-              help="Texel format of --ktx2: R16G16B16A16_SFLOAT, R32G32B32A32_SFLOAT or B10G11R11_UFLOAT_PACK32.")
+              help="Texel format of --ktx2: R16G16B16A16_SFLOAT, R32G32B32A32_SFLOAT, B10G11R11_UFLOAT_PACK32 or "
+                   "E5B9G9R9_UFLOAT_PACK32.")
 @click.option("--sheen", is_flag=True,
               help="Also bake the Charlie-prefiltered (sheen) chain in the prefiltered chain's layout and sizes "
                    "(level k of roughness max(k/(K-1), 0.07)) and the sheen albedo table E(NoV, r) on the DFG "

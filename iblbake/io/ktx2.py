@@ -28,12 +28,14 @@ FORMATS = {
     "rgba16f": {"vk": 97, "name": "R16G16B16A16_SFLOAT", "type_size": 2, "texel": 8},
     "rgba32f": {"vk": 109, "name": "R32G32B32A32_SFLOAT", "type_size": 4, "texel": 16},
     "b10g11r11": {"vk": 122, "name": "B10G11R11_UFLOAT_PACK32", "type_size": 4, "texel": 4},
+    "e5b9g9r9": {"vk": 123, "name": "E5B9G9R9_UFLOAT_PACK32", "type_size": 4, "texel": 4},
 }
+PACKED = ("b10g11r11", "e5b9g9r9")          # one little-endian u32 per texel, RGB only
 
 # Khronos Data Format: RGBSDA model, BT.709 primaries, linear transfer, straight alpha
 _MODEL_RGBSDA, _PRIMARIES_BT709, _TRANSFER_LINEAR = 1, 1, 1
 _CH_R, _CH_G, _CH_B, _CH_A = 0, 1, 2, 15
-_FLOAT, _SIGNED = 0x80, 0x40           # sample qualifiers in the channelType byte
+_FLOAT, _SIGNED, _EXPONENT = 0x80, 0x40, 0x20    # sample qualifiers in the channelType byte
 _F32_ONE, _F32_MINUS_ONE, _F32_ZERO = 0x3F800000, 0xBF800000, 0
 
 
@@ -42,6 +44,12 @@ def _dfd(fmt: str) -> bytes:
     if fmt == "b10g11r11":       # packed little-endian: R bits 0-10, G 11-21, B 22-31, unsigned float
         samples = [(0, 11, _CH_R | _FLOAT, _F32_ZERO, _F32_ONE), (11, 11, _CH_G | _FLOAT, _F32_ZERO, _F32_ONE),
                    (22, 10, _CH_B | _FLOAT, _F32_ZERO, _F32_ONE)]
+    elif fmt == "e5b9g9r9":
+        # per channel its 9-bit mantissa (bits 0-8, 9-17, 18-26; upper 8448 as libktx's vk2dfd
+        # writes it) and the shared 5-bit exponent (bits 27-31, bias 15 as lower, 31 upper): the
+        # exact descriptor libktx compares a file's against before it accepts the format
+        samples = [s for i, ch in enumerate((_CH_R, _CH_G, _CH_B))
+                   for s in ((9 * i, 9, ch, 0, 8448), (27, 5, ch | _EXPONENT, 15, 31))]
     else:
         bits = 8 * FORMATS[fmt]["type_size"]
         samples = [(i * bits, bits, ch | _FLOAT | _SIGNED, _F32_MINUS_ONE, _F32_ONE)
@@ -108,11 +116,47 @@ def unpack_b10g11r11(x: np.ndarray) -> np.ndarray:
                      decode_ufloat(x >> 22, 5)], axis=-1)
 
 
+# EXT_texture_shared_exponent's RGB9_E5 (Vulkan's E5B9G9R9): three 9-bit mantissas without an
+# implicit one and a 5-bit exponent of bias 15 that they share
+_E5_N, _E5_B = 9, 15
+E5_MAX = (2 ** _E5_N - 1) / 2 ** _E5_N * 2.0 ** (31 - _E5_B)      # 65408
+
+
+def pack_e5b9g9r9(rgb: np.ndarray) -> np.ndarray:
+    """The extension's encoding: channels clamped to [0, E5_MAX] (NaN to 0), the shared exponent
+    from the largest channel's (floor(log2) read from its float32 exponent bits, which is exact),
+    raised by one where that channel's mantissa rounds up to 2^9, each mantissa rounded half up
+    at that exponent (in float64, where x 2^k + 0.5 is exact). Channel by channel: numpy's
+    reductions and broadcasts over a last axis of 3 cost 10x the arithmetic."""
+    rgb = np.asarray(rgb, np.float32)
+    c = [np.minimum(np.where(rgb[..., i] > 0, rgb[..., i], np.float32(0)), np.float32(E5_MAX)) for i in range(3)]
+    top = np.maximum(np.maximum(c[0], c[1]), c[2])
+    e = np.maximum(-_E5_B - 1, (top.view(np.uint32) >> 23).astype(np.int32) - 127) + 1 + _E5_B
+
+    def inverse_scale(e):                     # 2^(B + N - e) as float32 bits: exact, in range
+        return ((_E5_B + _E5_N - e + 127).astype(np.uint32) << 23).view(np.float32).astype(np.float64)
+
+    e = e + (np.floor(top * inverse_scale(e) + 0.5) == 2 ** _E5_N)
+    inv = inverse_scale(e)
+    m = [np.floor(ch * inv + 0.5).astype(np.uint32) for ch in c]
+    return m[0] | (m[1] << 9) | (m[2] << 18) | (e.astype(np.uint32) << 27)
+
+
+def unpack_e5b9g9r9(x: np.ndarray) -> np.ndarray:
+    x = np.asarray(x, np.uint32)
+    scale = np.exp2((x >> 27).astype(np.float64) - _E5_B - _E5_N)
+    return np.stack([(x >> (9 * i) & 0x1FF) * scale for i in range(3)], axis=-1).astype(np.float32)
+
+
+_PACK = {"b10g11r11": pack_b10g11r11, "e5b9g9r9": pack_e5b9g9r9}
+_UNPACK = {"b10g11r11": unpack_b10g11r11, "e5b9g9r9": unpack_e5b9g9r9}
+
+
 def texels(faces: np.ndarray, fmt: str) -> bytes:
     """One level's faces (6, s, s, 3 or 4) as the format's bytes."""
     rgb = np.asarray(faces, np.float32)[..., :3]
-    if fmt == "b10g11r11":
-        return pack_b10g11r11(rgb).astype("<u4").tobytes()
+    if fmt in PACKED:
+        return _PACK[fmt](rgb).astype("<u4").tobytes()
     rgba = np.concatenate([rgb, np.ones(rgb.shape[:-1] + (1,), np.float32)], axis=-1)
     return rgba.astype("<f2" if fmt == "rgba16f" else "<f4").tobytes()
 
@@ -184,8 +228,8 @@ def read_cube(path) -> np.ndarray:
         raise bad(f"level 0 holds {length} bytes, 6 faces of {w}x{w} {FORMATS[fmt]['name']} need {need}")
     if offset + length > len(data):
         raise bad(f"level 0 ({offset} + {length} bytes) runs past the file's end ({len(data)} bytes; truncated?)")
-    raw = np.frombuffer(data, dtype={"rgba16f": "<f2", "rgba32f": "<f4", "b10g11r11": "<u4"}[fmt],
-                        count=need // FORMATS[fmt]["type_size"] if fmt != "b10g11r11" else need // 4, offset=offset)
-    if fmt == "b10g11r11":
-        return unpack_b10g11r11(raw.reshape(6, w, w))
+    if fmt in PACKED:
+        return _UNPACK[fmt](np.frombuffer(data, "<u4", need // 4, offset).reshape(6, w, w))
+    raw = np.frombuffer(data, dtype={"rgba16f": "<f2", "rgba32f": "<f4"}[fmt], count=need // FORMATS[fmt]["type_size"],
+                        offset=offset)
     return raw.reshape(6, w, w, 4)[..., :3].astype(np.float32)
