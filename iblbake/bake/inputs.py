@@ -60,7 +60,7 @@ def faces_of(image: np.ndarray, layout: str, path: str) -> np.ndarray:
     """The six faces (6, s, s, 3) of a cross or strip image."""
     h, w = image.shape[:2]
     cols, rows = {"hcross": (4, 3), "vcross": (3, 4), "hstrip": (6, 1), "vstrip": (1, 6)}[layout]
-    if w % cols or h % rows or w // cols != h // rows:
+    if w % cols or h % rows or w // cols != h // rows or w == 0:
         raise InputError(f"{path}: {w}x{h} is not a {layout} of square faces ({cols} x {rows} of them); "
                          f"give --input-layout (environment.layout) for what it is")
     s = w // cols

@@ -204,7 +204,11 @@ def read_cube(path) -> np.ndarray:
             data = f.read()
     except OSError as e:
         raise InputError(f"{path}: cannot read ({e.strerror})") from None
+    return parse_cube(data, path)
 
+
+def parse_cube(data: bytes, path: str) -> np.ndarray:
+    """read_cube's parse of a file's bytes (what tests/fuzz_readers.py fuzzes), errors naming path."""
     def bad(what):
         return InputError(f"{path}: not a KTX2 cube map iblbake reads: {what}")
 
