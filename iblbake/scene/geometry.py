@@ -24,6 +24,8 @@ LEAF_SIZE = 4
 # levels split by the surface area heuristic; deeper ones at the object median, so a tree's depth
 # stays within the kernels' traversal stack (64) whatever the mesh
 SAH_DEPTH = 32
+# equal bins of a node's centroid extent per axis, between which the heuristic weighs cuts
+SAH_BINS = 32
 # corners whose vertex normal turns more than this from the face normal use the face normal
 # (keeps a cube's edges sharp when its corners are shared vertices)
 CREASE_COS = math.cos(math.radians(45.0))
@@ -236,63 +238,58 @@ def _segment_reduce(ufunc, values, starts, counts):
     return ufunc.reduceat(pad, idx, axis=0)[0::2]
 
 
-def _segmented_running_max(x, seg, span):
-    """np.maximum.accumulate restarted at each segment of the sorted segment ids seg: every value
-    is lifted by its segment's index times span (more than the values' range), so an earlier
-    segment never reaches a later one."""
-    off = seg.astype(np.float64)[:, None] * span
-    return np.maximum.accumulate(x + off, axis=0) - off
-
-
 def _half_areas(lo, hi):
     e = hi - lo
-    return e[:, 0] * e[:, 1] + e[:, 1] * e[:, 2] + e[:, 2] * e[:, 0]
+    return e[..., 0] * e[..., 1] + e[..., 1] * e[..., 2] + e[..., 2] * e[..., 0]
 
 
-def _sah_splits(lo, hi, centroid, prims, seg, s_ct, axis_order):
-    """Per segment the axis and the count left of its best split (the surface area heuristic:
-    left count x left area + right count x right area, over every cut of the primitives sorted
-    on that axis), and per axis the sorted primitives."""
+def _sah_cost(lo, hi, c, p, seg, s_ct, first):
+    """Per segment of p (primitives sorted by their centroids c on one axis, segments of s_ct
+    from first) the lowest surface area heuristic cost (left count x left area + right count x
+    right area) over the cuts between SAH_BINS equal bins of its centroids' extent (binned SAH,
+    Wald 2007), and the left count of the first cut that reaches it. The sorted primitives of a
+    bin are a run: each run is reduced once (reduceat), then bounds accumulate over runs."""
     nseg = len(s_ct)
-    first = np.cumsum(s_ct) - s_ct                  # segment starts within prims
-    rank = np.arange(len(prims)) - np.repeat(first, s_ct)
-    span = 2.0 * float(np.max(np.abs(np.concatenate([lo[prims], hi[prims]])))) + 1.0
-    best_cost = np.full(nseg, np.inf)
-    best_axis = np.zeros(nseg, np.int64)
-    best_left = s_ct // 2
-    sorted_prims = []
-    for a in range(3):
-        p = prims[axis_order[a]]
-        sorted_prims.append(p)
-        l, h = lo[p], hi[p]
-        left = _half_areas(-_segmented_running_max(-l, seg, span), _segmented_running_max(h, seg, span))
-        rseg = (nseg - 1 - seg)[::-1]
-        right = _half_areas(-_segmented_running_max(-l[::-1], rseg, span),
-                            _segmented_running_max(h[::-1], rseg, span))[::-1]
-        # cut after rank i: left holds i + 1 primitives (prefix i), right the rest (suffix i + 1)
-        n_left = rank + 1
-        cost = np.full(len(p), np.inf)
-        inner = n_left < np.repeat(s_ct, s_ct)
-        idx = np.flatnonzero(inner)
-        cost[idx] = left[idx] * n_left[idx] + right[idx + 1] * (np.repeat(s_ct, s_ct)[idx] - n_left[idx])
-        seg_min = np.minimum.reduceat(cost, first)
-        at = np.flatnonzero(cost == seg_min[seg])
-        at = at[np.unique(seg[at], return_index=True)[1]]   # the first best cut of each segment
-        better = seg_min < best_cost
-        best_cost[better] = seg_min[better]
-        best_axis[better] = a
-        best_left[seg[at][better[seg[at]]]] = n_left[at][better[seg[at]]]
-    return best_axis, best_left, sorted_prims
+    cmin = c[first][seg]
+    ext = c[first + s_ct - 1][seg] - cmin
+    b = np.minimum((SAH_BINS * (c - cmin) / np.where(ext > 0, ext, 1)).astype(np.int64), SAH_BINS - 1)
+    key = seg * SAH_BINS + b
+    run0 = np.flatnonzero(np.concatenate([[True], key[1:] != key[:-1]]))    # first primitive of each run
+    run_seg = seg[run0]
+    runs = np.bincount(run_seg, minlength=nseg)
+    j = np.arange(len(run0)) - np.repeat(np.cumsum(runs) - runs, runs)
+    width = int(runs.max())
+    blo, bhi = np.full((nseg, width, 3), np.inf, lo.dtype), np.full((nseg, width, 3), -np.inf, lo.dtype)
+    blo[run_seg, j] = np.minimum.reduceat(lo[p], run0)
+    bhi[run_seg, j] = np.maximum.reduceat(hi[p], run0)
+    n_left = np.zeros((nseg, width), np.int64)          # primitives left of the cut after run k
+    n_left[run_seg, j] = np.concatenate([run0[1:], [len(p)]]) - first[run_seg]
+    left = _half_areas(np.minimum.accumulate(blo, axis=1), np.maximum.accumulate(bhi, axis=1))
+    right = _half_areas(np.minimum.accumulate(blo[:, ::-1], axis=1)[:, ::-1],
+                        np.maximum.accumulate(bhi[:, ::-1], axis=1)[:, ::-1])
+    valid = np.arange(width)[None, :] < (runs - 1)[:, None]
+    with np.errstate(invalid="ignore"):
+        cost = left * n_left + np.concatenate([right[:, 1:], right[:, :1]], axis=1) * (s_ct[:, None] - n_left)
+    cost = np.where(valid, cost, np.inf)
+    k = np.argmin(cost, axis=1)
+    best, n = cost[np.arange(nseg), k], n_left[np.arange(nseg), k]
+    # a segment whose centroids fall in one bin (or coincide) has no cut: the median, at infinite cost
+    return best, np.where(runs > 1, n, s_ct // 2)
 
 
 def build_bvh(lo: np.ndarray, hi: np.ndarray, leaf_size: int = LEAF_SIZE) -> BVH:
-    """SAH BVH over primitive bounds lo, hi (n, 3), built level by level (nodes of more than
-    leaf_size primitives split; beyond SAH_DEPTH levels at the object median, which bounds the
-    depth the kernels' traversal stacks hold)."""
+    """SAH BVH over primitive bounds lo, hi (n, 3), built level by level: every node of more
+    than leaf_size primitives splits at the cut of lowest surface area heuristic cost over its
+    primitives sorted by centroid on each axis (beyond SAH_DEPTH levels at the object median of
+    its widest axis, which bounds the depth the kernels' traversal stacks hold). The primitives
+    are sorted once per axis; a split partitions each axis's order stably, so every node's run
+    stays sorted on all three without sorting again."""
     t0 = time.perf_counter()
     n = len(lo)
     centroid = 0.5 * (lo + hi)
-    order = np.arange(n, dtype=np.int64)
+    by_axis = [np.argsort(centroid[:, a], kind="stable") for a in range(3)]
+    goes_left = np.zeros(n, bool)
+    lo32, hi32 = lo.astype(np.float32), hi.astype(np.float32)      # costs need no more (half the traffic)
     # node records, BFS order; children of a node are adjacent (left, left + 1)
     starts = [np.array([0], np.int64)]
     counts = [np.array([n], np.int64)]
@@ -306,21 +303,30 @@ def build_bvh(lo: np.ndarray, hi: np.ndarray, leaf_size: int = LEAF_SIZE) -> BVH
         left = np.full(len(level_starts), -1, np.int64)
         if split.any():
             s_st, s_ct = level_starts[split], level_counts[split]
+            first = np.cumsum(s_ct) - s_ct                         # segment starts within pos
             seg = np.repeat(np.arange(len(s_st)), s_ct)
-            pos = np.repeat(s_st - (np.cumsum(s_ct) - s_ct), s_ct) + np.arange(s_ct.sum())
-            prims = order[pos]
-            cmin = _segment_reduce(np.minimum, centroid[prims], np.cumsum(s_ct) - s_ct, s_ct)
-            cmax = _segment_reduce(np.maximum, centroid[prims], np.cumsum(s_ct) - s_ct, s_ct)
-            ext = np.maximum(cmax - cmin, 1e-300)
-            # segmented sort per axis: segment index + centroid scaled into [0, 0.5] within its segment
-            axis_order = [np.argsort(seg + 0.5 * ((centroid[prims, a] - cmin[seg, a]) / ext[seg, a]), kind="stable")
-                          for a in range(3)]
+            pos = np.repeat(s_st - first, s_ct) + np.arange(s_ct.sum())
             if depth < SAH_DEPTH:
-                axis, half, sorted_prims = _sah_splits(lo, hi, centroid, prims, seg, s_ct, axis_order)
+                costs = [_sah_cost(lo32, hi32, centroid[by_axis[a][pos], a], by_axis[a][pos], seg, s_ct, first)
+                         for a in range(3)]
+                axis = np.argmin(np.stack([c[0] for c in costs]), axis=0)
+                half = np.choose(axis, [c[1] for c in costs])
             else:
-                axis, half = np.argmax(cmax - cmin, axis=1), s_ct // 2
-                sorted_prims = [prims[o] for o in axis_order]
-            order[pos] = np.choose(axis[seg], sorted_prims)
+                ext = np.stack([centroid[by_axis[a][s_st + s_ct - 1], a] - centroid[by_axis[a][s_st], a]
+                                for a in range(3)])
+                axis, half = np.argmax(ext, axis=0), s_ct // 2
+            rank = pos - np.repeat(s_st, s_ct)
+            chosen = np.choose(axis[seg], [by_axis[a][pos] for a in range(3)])
+            goes_left[chosen] = rank < np.repeat(half, s_ct)
+            for a in range(3):                                     # stable partition of each order
+                prims = by_axis[a][pos]
+                f = goes_left[prims]
+                lrank = np.cumsum(f) - 1
+                rrank = np.cumsum(~f) - 1
+                seg_l = np.concatenate([[0], np.cumsum(f)])[first]
+                seg_r = np.concatenate([[0], np.cumsum(~f)])[first]
+                to = np.repeat(s_st, s_ct) + np.where(f, lrank - seg_l[seg], np.repeat(half, s_ct) + rrank - seg_r[seg])
+                by_axis[a][to] = prims
             child_st = np.stack([s_st, s_st + half], axis=1).reshape(-1)
             child_ct = np.stack([half, s_ct - half], axis=1).reshape(-1)
             left[split] = next_index + 2 * np.arange(len(s_st))
@@ -332,6 +338,7 @@ def build_bvh(lo: np.ndarray, hi: np.ndarray, leaf_size: int = LEAF_SIZE) -> BVH
         starts.append(level_starts)
         counts.append(level_counts)
         depth += 1
+    order = by_axis[0]
     st = np.concatenate(starts)
     ct = np.concatenate(counts)
     left = np.concatenate(firsts)
