@@ -29,9 +29,9 @@ inline float representative_point(float3 n, float3 v, float3 *l, float sin_max, 
 {
     const float3 r = 2.0f * dot(n, v) * n - v;
     const float3 c = dot(*l, r) * r - *l;            /* from the centre towards the mirror ray */
-    const float cl = length(c);
-    if (cl > 0.0f) *l = normalize(*l + c * fmin(sin_max / cl, 1.0f));
-    const float voh = fmax(dot(v, normalize(v + *l)), 1e-4f);
+    const float cl = sqrt(dot(c, c));
+    if (cl > 0.0f) *l = unit3(*l + c * fmin(sin_max / cl, 1.0f));
+    const float voh = fmax(dot(v, unit3(v + *l)), 1e-4f);
     const float a = fmax(alpha, ALPHA_MIN);
     const float wide = fmin(a + 0.5f * sin_max / sqrt(voh), 1.0f);
     return (a / wide) * (a / wide);
@@ -51,7 +51,7 @@ inline float3 light_brdf_cos(const Material mt, float3 n, float3 v, float nov, f
     const float energy = sin_max > 0.0f ? representative_point(n, v, &ls, sin_max, mt.alpha) : 1.0f;
     const float nols = dot(n, ls);
     if (nols > 0.0f) {
-        const float3 h = normalize(v + ls);
+        const float3 h = unit3(v + ls);
         f += d_ggx(dot(n, h), mt.alpha) * v_smith_ggx_correlated(nov, nols, mt.alpha) * f_schlick(dot(v, h), mt.f0)
              * (energy * nols);
     }
