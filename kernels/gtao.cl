@@ -7,12 +7,43 @@
  * The depth buffer is the G-buffer's first sample of every pixel (stride spp) or, when the frame
  * renders in tiles, a full-frame pass of the G-buffer kernel. gtao_denoise then gives every
  * G-buffer sample the mean of the raw values of its pixel's neighbours on the same surface.
+ * A depth sample m >= 16 pixels out along its larger axis reads pixel (x, y) snapped down to a
+ * multiple of 2^k, k = floor(log2 m) - 3 (at most GTAO_LEVELS): level k of gtao_levels holds
+ * every such pixel's position in (w >> k) x (h >> k) texels, so the far samples of a large
+ * radius (hundreds of pixels) read a small array that stays in the caches, as XeGTAO's depth
+ * MIPs do, while each still reads a real surface point (no average across an edge).
  * numpy twin: iblbake/render/twin.py gtao(), gtao_denoise(). */
 #include "common.h"
 #include "layout.h"
 #include "surface.h"
 
+#define GTAO_LEVELS 5
+
 inline float fract1(float x) { return x - floor(x); }
+
+/* texels of level k (k >= 1) before it in gtao_levels, and its width and height */
+inline int level_offset(int k, int width, int height)
+{
+    int off = 0;
+    for (int j = 1; j < k; ++j) off += ((width + (1 << j) - 1) >> j) * ((height + (1 << j) - 1) >> j);
+    return off;
+}
+
+/* One texel of every level 1..GTAO_LEVELS: the position (and miss flag) of pixel (i 2^k, j 2^k) */
+__kernel void gtao_pyramid(__global const float4 *ao_pos, const int ao_stride, const int width, const int height,
+                           __global float4 *gtao_levels)
+{
+    int gid = get_global_id(0);
+    for (int k = 1; k <= GTAO_LEVELS; ++k) {
+        const int wk = (width + (1 << k) - 1) >> k, hk = (height + (1 << k) - 1) >> k;
+        if (gid < wk * hk) {
+            const int i = gid % wk, j = gid / wk;
+            gtao_levels[level_offset(k, width, height) + gid] = ao_pos[((j << k) * width + (i << k)) * ao_stride];
+            return;
+        }
+        gid -= wk * hk;
+    }
+}
 
 /* interleaved gradient noise (Jimenez 2014): its 3x3 neighbourhoods hold well-spread values, so
  * the 3x3 denoise sees as many slice rotations */
@@ -48,13 +79,15 @@ inline float gtao_arc(float ch, float sh, float cos_n, float sin_n, float ang_n)
     return 0.25f * (cos_n + 2.0f * h * sin_n - cos_2h_n);
 }
 
-/* One depth sample of a side: its horizon cosine pulled towards `low` as its distance leaves the
- * radius; off screen and background samples leave the horizon where it is. */
-inline float horizon(__global const float4 *ao_pos, int stride, int width, int height, int qx, int qy,
-                     float3 p, float3 v, float low, float fall_mul, float fall_add, float hc)
+/* One depth sample of a side, read at level k: its horizon cosine pulled towards `low` as its
+ * distance leaves the radius; off screen and background samples leave the horizon where it is. */
+inline float horizon(__global const float4 *ao_pos, int stride, __global const float4 *levels, int k,
+                     int width, int height, int qx, int qy, float3 p, float3 v, float low, float fall_mul,
+                     float fall_add, float hc)
 {
     if (qx < 0 || qy < 0 || qx >= width || qy >= height) return hc;
-    const float4 q = ao_pos[(qy * width + qx) * stride];
+    const float4 q = k == 0 ? ao_pos[(qy * width + qx) * stride]
+                            : levels[level_offset(k, width, height) + (qy >> k) * ((width + (1 << k) - 1) >> k) + (qx >> k)];
     const float3 d = q.xyz - p;
     const float dd = dot(d, d);
     if (q.w == MISS_T || dd <= 0.0f) return hc;
@@ -66,7 +99,7 @@ __kernel void gtao(__constant float4 *cam, const int width, const int height,
                    __global const float4 *ao_pos, __global const float4 *ao_nrm, __global const float4 *ao_dir,
                    const int ao_stride, const float ao_radius, const int gtao_slices, const int gtao_steps,
                    const float gtao_radius_scale, const float gtao_falloff, const float gtao_power,
-                   const int gtao_step, __global float *gtao_raw)
+                   const int gtao_step, __global const float4 *gtao_levels, __global float *gtao_raw)
 {
     /* one value per gtao_step x gtao_step block of pixels, at the block's first pixel */
     const int gid = get_global_id(0);
@@ -112,8 +145,12 @@ __kernel void gtao(__constant float4 *cam, const int width, const int height,
             float t = ((float)st + jit) / (float)gtao_steps;
             t = t * t + min_s;                                     /* denser near the centre */
             const int ox = (int)round(t * c * radius_px), oy = (int)round(-t * s * radius_px);
-            hc0 = horizon(ao_pos, ao_stride, width, height, x + ox, y + oy, p, v, low0, fall_mul, fall_add, hc0);
-            hc1 = horizon(ao_pos, ao_stride, width, height, x - ox, y - oy, p, v, low1, fall_mul, fall_add, hc1);
+            const int m = max(abs(ox), abs(oy));
+            const int k = m < 16 ? 0 : min((31 - (int)clz(m)) - 3, GTAO_LEVELS);
+            hc0 = horizon(ao_pos, ao_stride, gtao_levels, k, width, height, x + ox, y + oy, p, v, low0, fall_mul,
+                          fall_add, hc0);
+            hc1 = horizon(ao_pos, ao_stride, gtao_levels, k, width, height, x - ox, y - oy, p, v, low1, fall_mul,
+                          fall_add, hc1);
         }
         /* h1 = acos(hc0) >= 0 and h0 = -acos(hc1) <= 0 stay within n -+ pi/2 (each starts there
          * and only rises): no clamp */

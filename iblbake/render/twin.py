@@ -299,6 +299,8 @@ def _gtao_blocks(cam: dict, g: dict):
 def gtao(gb, cam: dict, effects: dict):
     """Twin of kernels/gtao.cl gtao: the raw visibility of every block (one pixel, or 2x2 at
     resolution half) from its first pixel's first sample, unclamped; (hl * wl,)."""
+    from iblbake.render.passes.ao import GTAO_LEVELS
+
     w, h = cam["resolution"]
     spp = cam["spp"]
     g = effects["gtao"]
@@ -343,10 +345,13 @@ def gtao(gb, cam: dict, effects: dict):
             # round half away from zero, as OpenCL's round()
             ox = np.trunc(t * c * radius_px + np.copysign(0.5, c)).astype(int)
             oy = np.trunc(-t * s * radius_px + np.copysign(0.5, -s)).astype(int)
+            # far samples read pixel (qx, qy) snapped down to a multiple of 2^k (the kernel's pyramid)
+            m = np.maximum(np.abs(ox), np.abs(oy))
+            k = np.where(m < 16, 0, np.minimum(np.floor(np.log2(np.maximum(m, 1))).astype(int) - 3, GTAO_LEVELS))
             for side, sign in ((0, 1), (1, -1)):
                 qx, qy = x + sign * ox, y + sign * oy
                 inside = (qx >= 0) & (qy >= 0) & (qx < w) & (qy < h)
-                q = np.where(inside, qy * w + qx, 0)
+                q = np.where(inside, ((qy >> k) << k) * w + ((qx >> k) << k), 0)
                 ok = inside & hit[q]
                 dv = pos[q] - p
                 dist = np.linalg.norm(dv, axis=1)

@@ -42,6 +42,13 @@ class AmbientOcclusion(Pass):
         return {"rays_per_sample": k, "rays_per_s": round(n * k / max(s, 1e-9))}
 
 
+GTAO_LEVELS = 5       # kernels/gtao.cl: the position pyramid's levels beyond the full frame
+
+
+def pyramid_texels(w: int, h: int) -> int:
+    return sum(-(-w // (1 << k)) * -(-h // (1 << k)) for k in range(1, GTAO_LEVELS + 1))
+
+
 def gtao_step(g: dict) -> int:
     """Pixels per side of the blocks gtao searches once (effects.gtao.resolution)."""
     return {"full": 1, "half": 2}[g["resolution"]]
@@ -74,7 +81,8 @@ class GroundTruthAO(Pass):
         return {"ao_radius": e["ao_radius"], "gtao_slices": g["slices"], "gtao_steps": g["steps"],
                 "gtao_radius_scale": g["radius_scale"], "gtao_falloff": g["falloff"], "gtao_power": g["power"],
                 "gtao_denoise_radius": g["denoise"], "gtao_step": step,
-                "gtao_raw": ctx.rt.empty(-(-w // step) * -(-h // step) * 4)}
+                "gtao_raw": ctx.rt.empty(-(-w // step) * -(-h // step) * 4),
+                "gtao_levels": ctx.rt.empty(pyramid_texels(w, h) * 16)}
 
     def run(self, ctx):
         args, t = ctx.args[self.name], ctx.table
@@ -89,6 +97,8 @@ class GroundTruthAO(Pass):
             else:
                 args.update(ao_pos=t["gb_pos"], ao_nrm=t["gb_nrm"], ao_dir=t["gb_dir"], ao_stride=t["spp"])
             step = args["gtao_step"]
+            ctx.launch(self, (pyramid_texels(w, h),), function="gtao_pyramid", width=w, height=h,
+                       ao_pos=args["ao_pos"], ao_stride=args["ao_stride"], gtao_levels=args["gtao_levels"])
             ctx.launch(self, (-(-w // step) * -(-h // step),), **args)
         ctx.launch(self, (t["n"],), function="gtao_denoise", **args)
         ctx.rt.finish()
