@@ -17,11 +17,12 @@
 #include "layout.h"
 #include "surface.h"
 
-#define GTAO_LEVELS 5
+/* GTAO_LEVELS (the pyramid's levels beyond the full frame) comes from the host:
+ * iblbake/render/passes/ao.py GTAO_LEVELS, which the twin reads too */
 
 inline float fract1(float x) { return x - floor(x); }
 
-/* texels of level k (k >= 1) before it in gtao_levels, and its width and height */
+/* texels of the levels before level k (k >= 1) in gtao_levels */
 inline int level_offset(int k, int width, int height)
 {
     int off = 0;

@@ -68,6 +68,9 @@ class GroundTruthAO(Pass):
     def runs(self, scene, fx):
         return scene.data["effects"]["ao"] == "gtao" and occludes_ibl(fx)
 
+    def defines(self, scene, fx):
+        return {"GTAO_LEVELS": GTAO_LEVELS}
+
     def scene_inputs(self, scene):
         d = scene.data
         return {"camera": d["camera"], "objects": d["objects"],
