@@ -165,9 +165,9 @@ def test_every_kernel_parameter_is_bound_by_name():
            "ao": {"ao_seed", "ao_samples", "ao_radius"},
            "gtao": {"ao_pos", "ao_nrm", "ao_dir", "ao_stride", "ao_radius", "gtao_slices", "gtao_steps",
                     "gtao_radius_scale", "gtao_falloff", "gtao_power", "gtao_step", "gtao_raw",
-                    "gtao_denoise_radius"},
+                    "gtao_denoise_radius", "gtao_levels"},
            "tonemap": {"exposure_scale", "gamma", "out", "display"}}
-    extra = {"gtao": ["gtao_denoise"]}          # a pass's further kernels
+    extra = {"gtao": ["gtao_pyramid", "gtao_denoise"]}          # a pass's further kernels
     for p in PASSES:
         for fn in [p.function or p.name] + extra.get(p.name, []):
             names = {n for n, _ in runtime.kernel_params(p.kernel, fn)}
