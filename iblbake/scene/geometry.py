@@ -2,9 +2,9 @@
 
 Meshes are flattened to one triangle list (every mesh of a scene, world space, float64 on the
 host, float32 on the device) with three shading normals per triangle. The BVH is built on the host
-with numpy, one tree level at a time (each node split where the surface area heuristic is
-lowest over every position of its primitives sorted by centroid on each axis: per level three
-segmented sorts and prefix/suffix bounds of all primitives), and traversed in kernels/scene.h.
+with numpy, one tree level at a time (each node split where the binned surface area heuristic
+is lowest, over its primitives kept sorted by centroid on each axis), and traversed in
+kernels/scene.h.
 """
 
 from __future__ import annotations
@@ -306,8 +306,9 @@ def build_bvh(lo: np.ndarray, hi: np.ndarray, leaf_size: int = LEAF_SIZE) -> BVH
             first = np.cumsum(s_ct) - s_ct                         # segment starts within pos
             seg = np.repeat(np.arange(len(s_st)), s_ct)
             pos = np.repeat(s_st - first, s_ct) + np.arange(s_ct.sum())
+            sorted_prims = [by_axis[a][pos] for a in range(3)]
             if depth < SAH_DEPTH:
-                costs = [_sah_cost(lo32, hi32, centroid[by_axis[a][pos], a], by_axis[a][pos], seg, s_ct, first)
+                costs = [_sah_cost(lo32, hi32, centroid[sorted_prims[a], a], sorted_prims[a], seg, s_ct, first)
                          for a in range(3)]
                 axis = np.argmin(np.stack([c[0] for c in costs]), axis=0)
                 half = np.choose(axis, [c[1] for c in costs])
@@ -315,17 +316,14 @@ def build_bvh(lo: np.ndarray, hi: np.ndarray, leaf_size: int = LEAF_SIZE) -> BVH
                 ext = np.stack([centroid[by_axis[a][s_st + s_ct - 1], a] - centroid[by_axis[a][s_st], a]
                                 for a in range(3)])
                 axis, half = np.argmax(ext, axis=0), s_ct // 2
-            rank = pos - np.repeat(s_st, s_ct)
-            chosen = np.choose(axis[seg], [by_axis[a][pos] for a in range(3)])
-            goes_left[chosen] = rank < np.repeat(half, s_ct)
-            for a in range(3):                                     # stable partition of each order
-                prims = by_axis[a][pos]
+            start, n_left = np.repeat(s_st, s_ct), np.repeat(half, s_ct)
+            goes_left[np.choose(axis[seg], sorted_prims)] = pos - start < n_left
+            for a in range(3):      # stable partition of each order: lefts, then rights, per segment
+                prims = sorted_prims[a]
                 f = goes_left[prims]
-                lrank = np.cumsum(f) - 1
-                rrank = np.cumsum(~f) - 1
-                seg_l = np.concatenate([[0], np.cumsum(f)])[first]
-                seg_r = np.concatenate([[0], np.cumsum(~f)])[first]
-                to = np.repeat(s_st, s_ct) + np.where(f, lrank - seg_l[seg], np.repeat(half, s_ct) + rrank - seg_r[seg])
+                cl, cr = np.concatenate([[0], np.cumsum(f)]), np.concatenate([[0], np.cumsum(~f)])
+                k = np.arange(len(prims))
+                to = start + np.where(f, cl[k] - cl[first][seg], n_left + cr[k] - cr[first][seg])
                 by_axis[a][to] = prims
             child_st = np.stack([s_st, s_st + half], axis=1).reshape(-1)
             child_ct = np.stack([half, s_ct - half], axis=1).reshape(-1)
