@@ -15,6 +15,18 @@ inline float3 unit3(float3 x)
     return x * rsqrt(dot(x, x));
 }
 
+/* x^e for x >= 0 as exp2(e log2 x), 0 for x = 0: PoCL's pow costs more than whole passes (the
+ * tone map's encoding, GTAO's power, the specular occlusion) */
+inline float pow_fast(float x, float e)
+{
+    return x > 0.0f ? exp2(e * log2(x)) : 0.0f;
+}
+
+inline float3 pow_fast3(float3 x, float e)
+{
+    return select(exp2(e * log2(x)), (float3)(0.0f), islessequal(x, (float3)(0.0f)));
+}
+
 inline float2 equirect_uv_from_dir(float3 d)
 {
     float u = 0.5f - atan2(d.x, d.z) * (0.5f / IBL_PI);

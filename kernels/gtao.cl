@@ -202,6 +202,5 @@ __kernel void gtao_denoise(__constant float4 *cam, const int width, const int he
         }
     }
     const float vis = clamp(wsum > 0.0f ? sum / wsum : gtao_raw[by * wl + bx], 0.0f, 1.0f);
-    /* exp2(power log2 v): PoCL's pow costs as much as the whole denoise */
-    ao_buf[gid] = vis > 0.0f ? exp2(gtao_power * log2(vis)) : 0.0f;
+    ao_buf[gid] = pow_fast(vis, gtao_power);
 }

@@ -41,8 +41,7 @@ inline float2 dfg_lookup(__global const float2 *dfg, const int dfg_size, float n
  * PBR", computeSpecOcclusion): saturate((NoV + ao)^(2^(-16 r - 1)) - 1 + ao). */
 inline float specular_occlusion(float nov, float ao, float roughness)
 {
-    /* exp2(e log2 x) for pow(x, e), x >= 1e-4: PoCL's pow costs more than the rest of the pass */
-    return clamp(exp2(exp2(-16.0f * roughness - 1.0f) * log2(nov + ao)) - 1.0f + ao, 0.0f, 1.0f);
+    return clamp(pow_fast(nov + ao, exp2(-16.0f * roughness - 1.0f)) - 1.0f + ao, 0.0f, 1.0f);
 }
 
 /* Multi-bounce AO (Jimenez et al. 2016, "Practical Real-Time Strategies for Accurate Indirect

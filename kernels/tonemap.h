@@ -3,6 +3,7 @@
  * compiled). OUTPUT_SRGB: 1 exact sRGB encoding, 0 pure gamma (1/gamma). */
 #ifndef IBLBAKE_TONEMAP_H
 #define IBLBAKE_TONEMAP_H
+#include "common.h"
 
 #ifndef TONEMAP
 #define TONEMAP 0
@@ -50,19 +51,13 @@ inline float3 tonemap_operator(float3 x)
 #endif
 }
 
-/* y^e for y in [0, 1] as exp2(e log2 y): PoCL's pow took most of the pass (3 a pixel); 0 stays 0 */
-inline float3 pow01(float3 y, float e)
-{
-    return select(exp2(e * log2(y)), (float3)(0.0f), isequal(y, (float3)(0.0f)));
-}
-
 inline float3 output_transfer(float3 y, float gamma)
 {
     y = clamp(y, 0.0f, 1.0f);
 #if OUTPUT_SRGB
-    return select(1.055f * pow01(y, 1.0f / 2.4f) - 0.055f, 12.92f * y, isless(y, (float3)(0.0031308f)));
+    return select(1.055f * pow_fast3(y, 1.0f / 2.4f) - 0.055f, 12.92f * y, isless(y, (float3)(0.0031308f)));
 #else
-    return pow01(y, 1.0f / gamma);
+    return pow_fast3(y, 1.0f / gamma);
 #endif
 }
 
