@@ -2,8 +2,9 @@
 the KTX2 parser (iblbake/io/ktx2.parse_cube) on mutated files and the cross/strip face
 splitter (iblbake/bake/inputs.faces_of) on images of any shape and layout. Each input must be
 read or refused with an InputError whose message is one line naming the file; anything else
-(another exception, a wrong shape, a non-finite face where the file held finite values) is a
-finding, which atheris reports and saves as crash-<hash> in the working folder.
+(another exception, faces of the wrong shape or type, a face texel that is not one of the
+image's) is a finding, which atheris reports and saves as crash-<hash> in the working folder.
+(Non-finite texels a file holds are read as stored: the texel policies act on them later.)
 
     IBLBAKE_FUZZ_READER=ktx2|layout python tests/fuzz_readers.py [CORPUS_DIR] -atheris_runs=N
 
