@@ -1,8 +1,10 @@
 #!/usr/bin/env sh
 # Set up the real readers the tests check iblbake's files with: Node.js (Debian's nodejs and
 # npm) with the npm packages of tests/node/package.json, pinned by its package-lock.json
-# (ktx-parse, @khronosgroup/gltf-viewer for its libktx, gltf-validator), into
-# tests/node/node_modules; and glslangValidator (Debian's glslang-tools) for the GLSL export.
+# (ktx-parse, @khronosgroup/gltf-viewer for its libktx, gltf-validator, Babylon.js and
+# puppeteer-core), into tests/node/node_modules; Debian's chromium, in which Babylon.js renders
+# the glTF lights (headless, WebGL2 on SwiftShader); and glslangValidator (Debian's
+# glslang-tools) for the GLSL export.
 # What is missing is installed with apt-get.
 set -u
 DIR="${1:-tests/node}"
@@ -11,9 +13,10 @@ SUDO=""
 need=""
 { command -v node >/dev/null 2>&1 && command -v npm >/dev/null 2>&1; } || need="nodejs npm"
 command -v glslangValidator >/dev/null 2>&1 || need="$need glslang-tools"
+[ -x /usr/bin/chromium ] || need="$need chromium"
 if [ -n "$need" ]; then
     if ! command -v apt-get >/dev/null 2>&1; then
-        echo "ensure_readers: missing $need and no apt-get; install Node.js 18 or later and glslang" >&2
+        echo "ensure_readers: missing $need and no apt-get; install Node.js 18 or later, glslang and Chromium" >&2
         exit 1
     fi
     echo "ensure_readers: installing Debian's $need" >&2

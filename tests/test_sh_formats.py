@@ -1,4 +1,4 @@
-"""`iblbake sh --format filament|threejs|glsl`: each export evaluated with that engine's own
+"""`iblbake sh --format filament|threejs|gltf|glsl`: each export evaluated with that engine's own
 formula gives iblbake's irradiance (float64 twin, sh.irradiance) to 1e-5 at 500 directions.
 The engines' formulas, transcribed:
 - Filament, shaders/src/light_indirect.fs, Irradiance_SphericalHarmonics(n) = max(0, sh[0] +
@@ -8,6 +8,13 @@ The engines' formulas, transcribed:
 - three.js, src/math/SphericalHarmonics3.js, getIrradianceAt(normal) with its rounded
   constants 0.886227, 2 * 0.511664, 2 * 0.429043, 0.743125, 0.247708, 0.429043, times
   BRDF_Lambert = albedo / pi;
+- Babylon.js (EXT_lights_image_based's reference loader), packages/dev/core/src/Maths/sphericalPolynomial.ts
+  and its glTF loader: SphericalHarmonics.FromArray(irradianceCoefficients), scaled by intensity
+  and 1/pi (convertIrradianceToLambertianRadiance), pre-scaled by SH3ylmBasisConstants (with
+  their Condon-Shortley minus signs) and evaluated by the PBR shader's computeEnvironmentIrradiance
+  on its trigonometric terms 1, y, z, x, yx, yz, 3z^2 - 1, zx, x^2 - y^2 at the normal in
+  Babylon's left-handed world, where the loader's root node (rotation [0, 1, 0, 0], scaling
+  [1, 1, -1]) puts glTF's (x, y, z) at (-x, y, z); times the albedo;
 - the GLSL snippet compiled by glslangValidator (Debian's glslang-tools) when it is there, and
   its function run here through a line-by-line Python transcription of its loop."""
 
@@ -72,6 +79,20 @@ def test_threejs(baked):
          + np.outer(2.0 * 0.429043 * x * z, c[7]) + np.outer(0.429043 * (x * x - y * y), c[8]))
     # three.js's constants have 6 digits: 2e-6 relative
     assert rel(t, baked["E"]) < 1e-5
+
+
+def test_gltf_as_babylon_reads_it(baked):
+    doc = json.loads(export(baked, "gltf"))
+    c = np.array(doc["irradianceCoefficients"])
+    assert c.shape == (9, 3)
+    basis = [math.sqrt(1 / (4 * math.pi)), -math.sqrt(3 / (4 * math.pi)), math.sqrt(3 / (4 * math.pi)),
+             -math.sqrt(3 / (4 * math.pi)), math.sqrt(15 / (4 * math.pi)), -math.sqrt(15 / (4 * math.pi)),
+             math.sqrt(5 / (16 * math.pi)), -math.sqrt(15 / (4 * math.pi)), math.sqrt(15 / (16 * math.pi))]
+    pre = c / math.pi * np.array(basis)[:, None]       # intensity 1, to Lambertian radiance, preScaleForRendering
+    x, y, z = baked["dirs"].T
+    x = -x                                              # glTF -> Babylon's left-handed world
+    trig = np.stack([np.ones_like(x), y, z, x, y * x, y * z, 3 * z * z - 1, z * x, x * x - y * y], axis=1)
+    assert rel(trig @ pre, baked["E"] / math.pi) < 1e-5
 
 
 def glsl_eval(src: str, d: np.ndarray) -> np.ndarray:

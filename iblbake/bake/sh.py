@@ -156,8 +156,8 @@ def _rows(coeffs) -> list:
 POLY_CONSTANTS = np.array([0.5 / math.sqrt(math.pi)] + [math.sqrt(3.0 / (4.0 * math.pi))] * 3
                           + [0.5 * math.sqrt(15.0 / math.pi)] * 2 + [0.25 * math.sqrt(5.0 / math.pi)]
                           + [0.5 * math.sqrt(15.0 / math.pi), 0.25 * math.sqrt(15.0 / math.pi)])
-FORMATS = ("iblbake", "filament", "threejs", "glsl")
-SUFFIX = {"iblbake": ".json", "filament": ".txt", "threejs": ".json", "glsl": ".glsl"}
+FORMATS = ("iblbake", "filament", "threejs", "gltf", "glsl")
+SUFFIX = {"iblbake": ".json", "filament": ".txt", "threejs": ".json", "gltf": ".json", "glsl": ".glsl"}
 NAMES = ["L00", "L1-1", "L10", "L11", "L2-2", "L2-1", "L20", "L21", "L22"]
 
 
@@ -206,11 +206,37 @@ def threejs_json(doc: dict) -> str:
                        "intensity": 1.0}, indent=1) + "\n"
 
 
+# EXT_lights_image_based's irradianceCoefficients as Babylon.js, the extension's reference loader,
+# reads them (SphericalHarmonics.FromArray, then x intensity / pi and evaluated in its shader's
+# SPHERICAL_HARMONICS path): irradiance E_lm (pre-convolved, not pre-scaled), in Babylon's basis,
+# whose odd-m terms carry the Condon-Shortley sign (l1-1 = -c y, l11 = -c x, l2-1 = -c yz,
+# l21 = -c xz), at the direction in Babylon's left-handed world, where the loader's root node
+# (rotation 180 degrees about y, scale z -1) puts glTF's (x, y, z) at (-x, y, z). Both are signs:
+GLTF_SIGNS = np.array([1, -1, 1, -1, 1, -1, 1, -1, 1]) * np.array([1, 1, 1, -1, -1, 1, 1, -1, 1])
+
+
+def gltf_coefficients(doc: dict) -> np.ndarray:
+    """The 9 x 3 irradianceCoefficients of an EXT_lights_image_based light (fewer bands padded
+    with zeros): E_k times GLTF_SIGNS (Condon-Shortley signs, then the x mirror of the loader)."""
+    e = _nine(doc, "irradiance", "gltf")
+    out = np.zeros((9, 3))
+    out[:len(e)] = e
+    return out * GLTF_SIGNS[:, None]
+
+
+def gltf_json(doc: dict) -> str:
+    """The light's irradianceCoefficients as a JSON fragment (export-gltf writes the whole light)."""
+    import json
+    return json.dumps({"generator": "iblbake", "extension": "EXT_lights_image_based", "source": doc["input"]["path"],
+                       "irradianceCoefficients": [[round(float(v), 9) for v in row]
+                                                  for row in gltf_coefficients(doc)]}, indent=1) + "\n"
+
+
 def export(doc: dict, fmt: str) -> str:
     import json
     if fmt == "iblbake":
         return json.dumps(doc, indent=2, allow_nan=False) + "\n"
-    return {"filament": filament_text, "threejs": threejs_json, "glsl": glsl_snippet}[fmt](doc)
+    return {"filament": filament_text, "threejs": threejs_json, "gltf": gltf_json, "glsl": glsl_snippet}[fmt](doc)
 
 
 def glsl_snippet(doc: dict) -> str:

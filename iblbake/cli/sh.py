@@ -58,12 +58,13 @@ def _check_overwrite(output: str, force: bool, source: str, fmt: str = "iblbake"
               help="Rotate the panorama about +y by DEG degrees (+x towards -z).")
 @click.option("--intensity", type=float, default=1.0, show_default=True, callback=non_negative,
               help="Scale the panorama's radiance.")
-@click.option("--format", "fmt", type=click.Choice(["iblbake", "filament", "threejs", "glsl"]), default="iblbake",
+@click.option("--format", "fmt", type=click.Choice(["iblbake", "filament", "threejs", "gltf", "glsl"]), default="iblbake",
               show_default=True,
               help="What -o holds (or stdout without -o): iblbake's JSON document; filament: cmgen's sh.txt "
                    "(IndirectLight irradiance, pre-scaled by its basis constants and 1/pi); threejs: a "
-                   "LightProbe's SphericalHarmonics3 as JSON (radiance coefficients); glsl: a function with "
-                   "the irradiance coefficients. README 'SH for engines' gives each convention.")
+                   "LightProbe's SphericalHarmonics3 as JSON (radiance coefficients); gltf: an "
+                   "EXT_lights_image_based light's irradianceCoefficients (as Babylon.js reads them; export-gltf "
+                   "writes the whole light); glsl: a function with the irradiance coefficients. README 'SH for engines' gives each convention.")
 @click.option("--glsl", is_flag=True, help="Print a GLSL function with the irradiance coefficients (--format glsl).")
 @click.option("--error/--no-error", "with_error", default=True, show_default=True,
               help="Measure the SH irradiance against the exact irradiance (float64, every texel) at 256 "
@@ -90,7 +91,7 @@ def sh_command(envs, output, force, bands, window, backend, rotate_y, intensity,
         if fmt not in ("iblbake", "glsl"):
             raise click.UsageError(f"--glsl is --format glsl: leave out --format {fmt}")
         fmt = "glsl"
-    if fmt in ("filament", "threejs") and bands > 3:
+    if fmt in ("filament", "threejs", "gltf") and bands > 3:
         raise click.UsageError(f"--format {fmt} holds at most 3 bands (9 coefficients): give --bands 3 or fewer")
     if len(envs) > 1:
         if fmt != "iblbake" and not output:

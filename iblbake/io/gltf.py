@@ -1,0 +1,146 @@
+"""glTF 2.0 files holding one EXT_lights_image_based light (the extension's README in the Khronos
+glTF repository: extensions/2.0/Vendor/EXT_lights_image_based): its irradianceCoefficients,
+and its specularImages, N mips x 6 faces (+X -X +Y -Y +Z -Z) of square power-of-two PNGs, each
+mip half the size of the one above, in RGBD.
+
+RGBD, as Babylon.js (the extension's reference loader) packs and unpacks it (its
+helperFunctions toRGBD / fromRGBD, rgbdMaxRange 255):
+
+    D   = clamp(floor(max(255 / max(r, g, b), 1)) / 255, 0, 1)      stored in alpha
+    rgb = clamp((colour D)^(1/2.2), 0, 1)                            the gamma helps 8-bit steps
+    colour = rgb^2.2 / D                                             (decoding)
+
+so a texel holds up to 255 and keeps about 1/255 of its largest channel; brighter texels clip.
+
+`.gltf` writes the PNGs beside it (STEM_specular_LEVEL_FACE.png, FACE in px nx py ny pz nz) and
+the JSON last; `.glb` holds everything in one binary buffer (glTF's GLB container: 12-byte
+header, a JSON chunk padded with spaces, a BIN chunk padded with zeros, both to 4 bytes).
+Every file is written atomically. The PNGs hold no colour chunk (sRGB, gAMA): RGBD bytes are not
+colours, and OpenImageIO's PNG writer declares sRGB, so pillow writes them.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import struct
+from pathlib import Path
+
+import numpy as np
+
+from iblbake.errors import IblbakeError
+
+EXTENSION = "EXT_lights_image_based"
+FACES = ("px", "nx", "py", "ny", "pz", "nz")
+RGBD_MAX = 255.0          # Babylon's rgbdMaxRange: the largest value a texel holds
+GAMMA = 2.2               # Babylon's LinearEncodePowerApprox
+
+
+def rgbd_encode(colour) -> np.ndarray:
+    """Linear RGB (..., 3), >= 0 -> RGBD bytes (..., 4), exactly as Babylon's toRGBD then an
+    8-bit store (round to nearest). Negative and non-finite values store 0."""
+    c = np.nan_to_num(np.asarray(colour, np.float64), nan=0.0, posinf=RGBD_MAX, neginf=0.0)
+    c = np.maximum(c, 0.0)
+    m = np.maximum(c.max(axis=-1), 1e-6)               # Babylon's maxEps
+    d = np.clip(np.floor(np.maximum(RGBD_MAX / m, 1.0)) / 255.0, 0.0, 1.0)
+    rgb = np.clip(c * d[..., None], 0.0, 1.0) ** (1.0 / GAMMA)
+    return np.rint(np.concatenate([rgb, d[..., None]], axis=-1) * 255.0).astype(np.uint8)
+
+
+def rgbd_decode(rgbd) -> np.ndarray:
+    """RGBD bytes (..., 4) -> linear RGB (..., 3): Babylon's fromRGBD."""
+    b = np.asarray(rgbd, np.float64) / 255.0
+    return (b[..., :3] ** GAMMA) / np.maximum(b[..., 3:4], 1.0 / 255.0)
+
+
+def png_bytes(rgba: np.ndarray) -> bytes:
+    """An 8-bit RGBA PNG with no colour-space chunk."""
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(rgba), "RGBA").save(buf, format="PNG", compress_level=6)
+    return buf.getvalue()
+
+
+def written_by_iblbake(path) -> bool:
+    """Whether `path` is a glTF or GLB file whose asset.generator names iblbake (what export-gltf
+    may replace without --force)."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(1 << 20)
+        if head[:4] == b"glTF":
+            n = struct.unpack_from("<I", head, 12)[0]
+            head = head[20:20 + n]
+        return str(json.loads(head)["asset"]["generator"]).startswith("iblbake")
+    except (OSError, ValueError, KeyError, TypeError, struct.error):
+        return False
+
+
+def sidecars(path, levels: int) -> list:
+    """The PNGs a .gltf light of `levels` mips writes beside itself."""
+    path = Path(path)
+    return [path.with_name(f"{path.stem}_specular_{k}_{face}.png") for k in range(levels) for face in FACES] \
+        if path.suffix.lower() == ".gltf" else []
+
+
+def light_document(coefficients, size: int, levels: int, intensity: float, name: str, extras: dict) -> dict:
+    """The glTF document of one scene lit by one image-based light; images filled in by write()."""
+    coefficients = np.asarray(coefficients, np.float64)
+    if coefficients.shape != (9, 3) or not np.all(np.isfinite(coefficients)):
+        raise ValueError("irradianceCoefficients must be 9 x 3 finite numbers")
+    return {
+        "asset": {"version": "2.0", "generator": extras.get("generator", "iblbake")},
+        "extensionsUsed": [EXTENSION],
+        "extensions": {EXTENSION: {"lights": [{
+            "name": name, "intensity": float(intensity),
+            "irradianceCoefficients": [[float(v) for v in row] for row in coefficients],
+            "specularImageSize": int(size),
+            "specularImages": [[6 * k + f for f in range(6)] for k in range(levels)],
+        }]}},
+        "scene": 0,
+        "scenes": [{"name": name, "extensions": {EXTENSION: {"light": 0}}}],
+        "extras": {k: v for k, v in extras.items() if k != "generator"},
+    }
+
+
+def write(path, coefficients, pngs, size: int, intensity: float = 1.0, name: str = "environment",
+          extras: dict | None = None) -> list:
+    """Write the light: `pngs[k][f]` the PNG bytes of mip k, face f. .gltf or .glb by the path's
+    suffix. Returns the paths written (the document last)."""
+    from iblbake.io import atomic
+
+    path = Path(path)
+    kind = path.suffix.lower()
+    if kind not in (".gltf", ".glb"):
+        raise IblbakeError(f"{path}: a glTF light is written as .gltf (PNGs beside it) or .glb (one file)")
+    if len(pngs) < 1 or any(len(faces) != 6 for faces in pngs):
+        raise ValueError("specular images: every mip needs six faces")
+    doc = light_document(coefficients, size, len(pngs), intensity, name, extras or {})
+    flat = [b for faces in pngs for b in faces]
+    written = []
+    if kind == ".gltf":
+        doc["images"] = []
+        for png, data in zip(sidecars(path, len(pngs)), flat):
+            atomic.write_bytes(png, data)
+            written.append(png)
+            doc["images"].append({"uri": png.name, "mimeType": "image/png"})
+        atomic.write_text(path, json.dumps(doc, indent=1, allow_nan=False) + "\n")
+        return written + [path]
+    views, offset = [], 0
+    for data in flat:
+        views.append({"buffer": 0, "byteOffset": offset, "byteLength": len(data)})
+        offset += -(-len(data) // 4) * 4
+    doc["buffers"] = [{"byteLength": offset}]
+    doc["bufferViews"] = views
+    doc["images"] = [{"bufferView": i, "mimeType": "image/png"} for i in range(len(flat))]
+    atomic.write_bytes(path, glb_bytes(doc, b"".join(d + b"\0" * (-len(d) % 4) for d in flat)))
+    return [path]
+
+
+def glb_bytes(doc: dict, binary: bytes) -> bytes:
+    """glTF's binary container: header (magic, version 2, length), JSON chunk, BIN chunk."""
+    js = json.dumps(doc, separators=(",", ":"), allow_nan=False).encode("utf-8")
+    js += b" " * (-len(js) % 4)
+    binary += b"\0" * (-len(binary) % 4)
+    chunks = struct.pack("<II", len(js), 0x4E4F534A) + js + struct.pack("<II", len(binary), 0x004E4942) + binary
+    return struct.pack("<III", 0x46546C67, 2, 12 + len(chunks)) + chunks
