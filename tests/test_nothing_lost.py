@@ -178,6 +178,33 @@ def _shape(path: Path):
     return (s.height, s.width)
 
 
+def test_kill_loop_export_gltf(tmp_path, stress, random_env):
+    """A .gltf light with its 30 face PNGs and a .glb: a kill leaves any PNG whole (or absent), the
+    .gltf only once every PNG it names is there, no partial .glb and no partial cache entry."""
+    root = tmp_path / "cache"
+    gl, glb = tmp_path / "l.gltf", tmp_path / "l.glb"
+    runs = [cli("export-gltf", random_env, "-o", out, "--cache", root, "--size", "64", "--min-size", "4", "-q")
+            for out in (gl, glb)]
+
+    def check():
+        from iblbake.io import gltf
+        bad = len(cache_entries_ok(root)[1])
+        for png in tmp_path.glob("l_specular_*.png"):
+            bad += not readable_image(png, _shape(png)) or _shape(png)[0] < 4
+        if gl.exists():
+            doc = json.loads(gl.read_text())
+            bad += sum(not (tmp_path / im["uri"]).is_file() for im in doc["images"])
+        if glb.exists():
+            bad += not gltf.written_by_iblbake(glb) or glb.stat().st_size != int.from_bytes(glb.read_bytes()[8:12], "little")
+        for o in [gl, glb, *tmp_path.glob("l_specular_*.png")]:
+            o.unlink(missing_ok=True)
+        return bad
+
+    for k, cmd in enumerate(runs):
+        kill_loop(stress, f"export-gltf {'.gltf' if k == 0 else '.glb'}", cmd, stress_scale(6, 12), check,
+                  (0.2, 2.5), seed=6 + k)
+
+
 def test_kill_loop_sh(tmp_path, stress):
     env = write_exr(tmp_path / "e.exr", np.random.default_rng(0).random((256, 512, 3)).astype(np.float32))
     out = tmp_path / "out.json"
