@@ -20,6 +20,7 @@ opencl: $(STAMP)
 assets: $(STAMP)
 	sh examples/fetch_panoramas.sh $(PANOS)
 	test -f examples/meshes/knot.ply || $(BIN)/python examples/make_mesh.py examples/meshes/knot.ply
+	test -f examples/meshes/tiles.glb -a -f examples/textures/roughness_stripes.png || $(BIN)/python examples/make_textured.py examples
 
 demo: opencl assets
 	mkdir -p $(OUT)/sh

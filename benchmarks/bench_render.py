@@ -54,6 +54,9 @@ CONFIGS = [
     ("mesh, gtao", "mesh.yaml", ["effects.ao=gtao", "effects.ao_radius=1"]),
     ("mesh, raytraced AO 16", "mesh.yaml", ["effects.ao=raytraced", "effects.ao_samples=16", "effects.ao_radius=1"]),
     ("mesh, raytraced AO 64", "mesh.yaml", ["effects.ao=raytraced", "effects.ao_samples=64", "effects.ao_radius=1"]),
+    # the tiled torus of examples/make_textured.py with its own five maps, and the same mesh untextured
+    ("textured mesh, 5 maps", "textured.yaml", []),
+    ("textured mesh, untextured", "textured.yaml", ["objects.0.material=plain"]),
 ]
 # keys a baseline from before them does not know; without them it renders what they switch off
 NEWER_KEYS = ("effects.reference.visibility", "effects.lobe.samples", "lights=", "effects.ao")

@@ -26,6 +26,11 @@
 #define SHADOWS_NONE 0
 #define SHADOWS_HARD 1
 #define SHADOWS_SOFT 2
+#define MAP_BASE_COLOR 0
+#define MAP_METALLIC_ROUGHNESS 1
+#define MAP_NORMAL 2
+#define MAP_OCCLUSION 3
+#define MAP_EMISSIVE 4
 
 #define MATERIAL_FLOAT4S 2
 #define SPHERE_FLOAT4S 2
@@ -33,10 +38,16 @@
 #define TRIANGLE_FLOAT4S 6
 #define BVH_NODE_FLOAT4S 2
 #define LIGHT_FLOAT4S 4
+#define TRIANGLE_ATTR_FLOAT4S 7
+#define MATERIAL_MAPS_FLOAT4S 12
 
 /* gb_pos: hit position, w: distance along the ray (MISS_T where nothing is hit) */
 /* gb_nrm: shading normal facing the viewer, w: material index */
 /* gb_dir: primary ray direction, w: object index */
+/* gb_uv: TEXCOORD_0 and TEXCOORD_1 at the hit (u0, v0, u1, v1) */
+/* gb_tan: unit tangent (the direction of increasing u), w: the bitangent's side */
+/* gb_lod: mip level of the hit's footprint for each set, before the texture's size (x, y) */
+/* gb_mat: 3 per sample: (base colour, metallic), (emissive, roughness), (shading normal, occlusion) */
 #define MISS_T (-1.0f)
 
 #endif

@@ -70,8 +70,8 @@ inline float3 cone_direction(float3 a, float omc, float2 u)
     return normalize(t * (st * cos(phi)) + b * (st * sin(phi)) + a * ct);
 }
 
-__kernel void lights(__global const float4 *gb_pos, __global const float4 *gb_nrm, __global const float4 *gb_dir,
-                     const int n, __global const float4 *materials, __global const float4 *lights, const int nlights,
+__kernel void lights(__global const float4 *gb_pos, SURFACE_PARAMS,
+                     const int n, __global const float4 *lights, const int nlights,
                      SCENE_PARAMS, const int pixel0, const int spp, const uint light_seed, const int exact_samples,
                      __global float4 *radiance)
 {
@@ -82,7 +82,7 @@ __kernel void lights(__global const float4 *gb_pos, __global const float4 *gb_nr
     const uint sid = (uint)(pixel0 * spp + gid);
     Material mt;
     float3 v, nrm;
-    const float nov = surface_at(gb_nrm, gb_dir, materials, gid, &mt, &v, &nrm);
+    const float nov = surface_at(SURFACE_ARGS, gid, &mt, &v, &nrm);
     const float3 p = hitp.xyz;
 #if defined(HAS_SHADOWS) || (defined(LIGHTS_EXACT) && defined(VISIBILITY))
     const float3 origin = ray_offset(p, nrm, gb_dir[gid].xyz, hitp.w);

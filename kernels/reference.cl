@@ -31,9 +31,8 @@
 /* One batch of `batch` samples per G-buffer sample: out = (sum of estimates, sum of the odd-numbered
  * samples' luminance). Samples are numbered globally (first + k), so the frame is the same
  * whatever the batching and wherever the run stops. */
-__kernel void reference(__global const float4 *gb_pos, __global const float4 *gb_nrm,
-                        __global const float4 *gb_dir, const int n,
-                        __global const float4 *materials, const float2 env_rot, const float env_scale,
+__kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int n,
+                        const float2 env_rot, const float env_scale,
                         __global const float4 *img, const int w, const int h,
                         __global const float *marginal, __global const float *conditional,
                         __global const float *pdf_table, SCENE_PARAMS, const int pixel0, const int spp,
@@ -47,7 +46,7 @@ __kernel void reference(__global const float4 *gb_pos, __global const float4 *gb
     if (hitp.w == MISS_T) { out[gid] = (float4)(0.0f); return; }
     Material mt;
     float3 v, nrm;
-    const float nov = surface_at(gb_nrm, gb_dir, materials, gid, &mt, &v, &nrm);
+    const float nov = surface_at(SURFACE_ARGS, gid, &mt, &v, &nrm);
 #ifdef VISIBILITY
     const float3 origin = ray_offset(hitp.xyz, nrm, gb_dir[gid].xyz, hitp.w);
 #endif
@@ -130,7 +129,11 @@ __kernel void reference(__global const float4 *gb_pos, __global const float4 *gb
             }
         }
 #endif
+#ifdef HAS_OCCLUSION_MAP
+        est *= env_scale * mt.occlusion;     /* the material's occlusion map: image-based light only */
+#else
         est *= env_scale;
+#endif
         sum += est;
         if (sk & 1u) odd += dot(est, (float3)(0.2126f, 0.7152f, 0.0722f));
     }

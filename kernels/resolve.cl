@@ -4,7 +4,7 @@
 /* Pixel = mean of its samples' radiance (what every lighting pass added); alpha = coverage. */
 __kernel void resolve(__global const float4 *radiance,
                       __global const float4 *gb_pos, __global const float4 *gb_nrm,
-                      __global const float4 *materials, const int spp, const int npix,
+                      __global const float4 *materials, __global const float4 *gb_mat, const int spp, const int npix,
                       __global float4 *hdr, __global float4 *aov_normal, __global float4 *aov_albedo,
                       __global float *aov_depth)
 {
@@ -23,9 +23,14 @@ __kernel void resolve(__global const float4 *radiance,
         if (p.w != MISS_T) {
             cover += 1.0f;
 #ifdef WRITE_AOVS
+#ifdef HAS_TEXTURES
+            nsum += gb_mat[3 * g + 2].xyz;             /* the material pass's: normal-mapped, textured */
+            asum += gb_mat[3 * g].xyz;
+#else
             const float4 nm = gb_nrm[g];
             nsum += nm.xyz;
             asum += materials[MATERIAL_FLOAT4S * as_int(nm.w)].xyz;
+#endif
             dsum += p.w;
 #endif
         }

@@ -4,12 +4,16 @@
 #ifndef IBLBAKE_SCENE_H
 #define IBLBAKE_SCENE_H
 #include "layout.h"
+#include "texture.h"
 
-/* The geometry buffers every tracing kernel takes, by name (the host binds them from its table) */
+/* The geometry buffers every tracing kernel takes, by name (the host binds them from its table).
+ * tri_attr, mat_maps and the textures are read only where a material cuts out (HAS_ALPHA_MASK) or
+ * has one side (HAS_SINGLE_SIDED); a scene without either binds placeholders. */
 #define SCENE_PARAMS __global const float4 *spheres, const int nspheres, \
                      __global const float4 *planes, const int nplanes, \
-                     __global const float4 *bvh, __global const float4 *tris, const int ntris
-#define SCENE_ARGS spheres, nspheres, planes, nplanes, bvh, tris, ntris
+                     __global const float4 *bvh, __global const float4 *tris, const int ntris, \
+                     __global const float4 *tri_attr, __global const float4 *mat_maps, TEXTURE_PARAMS
+#define SCENE_ARGS spheres, nspheres, planes, nplanes, bvh, tris, ntris, tri_attr, mat_maps, TEXTURE_ARGS
 
 /* ---------------------------------------------------------------------------- camera, rays */
 
@@ -125,6 +129,82 @@ typedef struct {
     float b1, b2;
 } Hit;
 
+/* ---------------------------------------------------------------------------- surface coordinates */
+
+/* A hit's material and geometric normal (unit; a triangle's by its winding, counter-clockwise in
+ * front), before any turning towards the viewer. */
+inline int hit_material(int kind, int index, float3 p, float3 *ng, SCENE_PARAMS)
+{
+    if (kind == 1) {
+        const float4 sp = spheres[SPHERE_FLOAT4S * index];
+        *ng = normalize((p - sp.xyz) / sp.w);
+        return as_int(spheres[SPHERE_FLOAT4S * index + 1].x);
+    }
+    if (kind == 2) {
+        *ng = planes[PLANE_FLOAT4S * index + 1].xyz;
+        return as_int(planes[PLANE_FLOAT4S * index].w);
+    }
+    const float3 v0 = tris[TRIANGLE_FLOAT4S * index].xyz;
+    *ng = normalize(cross(tris[TRIANGLE_FLOAT4S * index + 1].xyz - v0, tris[TRIANGLE_FLOAT4S * index + 2].xyz - v0));
+    return as_int(tris[TRIANGLE_FLOAT4S * index].w);
+}
+
+/* Texture coordinates (u0, v0, u1, v1) at a hit, v down the image as glTF's: a triangle's
+ * interpolated from its corners; a sphere's the panorama mapping of its normal (DESIGN.md:
+ * u = 0.5 - atan2(x, z) / 2 pi, v = acos(y) / pi); a plane's across its width (tangent) and up its
+ * depth (bitangent), [0, 1] over a finite plane, one per unit on an infinite one. Both sets alike
+ * on spheres and planes. */
+inline float4 hit_texcoords(int kind, int index, float3 p, float b1, float b2, SCENE_PARAMS)
+{
+    if (kind == 1) {
+        const float4 sp = spheres[SPHERE_FLOAT4S * index];
+        const float3 n = (p - sp.xyz) / sp.w;
+        const float u = 0.5f - atan2(n.x, n.z) * (0.5f / IBL_PI), v = acos(clamp(n.y, -1.0f, 1.0f)) / IBL_PI;
+        return (float4)(u, v, u, v);
+    }
+    if (kind == 2) {
+        __global const float4 *pl = planes + PLANE_FLOAT4S * index;
+        const float3 q = p - pl[0].xyz;
+        const float a = dot(q, pl[2].xyz), b = dot(q, pl[3].xyz);
+        const float hw = pl[2].w, hd = pl[3].w;
+        const float u = isinf(hw) ? a : 0.5f + 0.5f * a / hw, v = isinf(hd) ? -b : 0.5f - 0.5f * b / hd;
+        return (float4)(u, v, u, v);
+    }
+    __global const float4 *at = tri_attr + TRIANGLE_ATTR_FLOAT4S * index;
+    return (1.0f - b1 - b2) * at[0] + b1 * at[1] + b2 * at[2];
+}
+
+#if defined(HAS_ALPHA_MASK) || defined(HAS_SINGLE_SIDED)
+/* Whether a candidate hit is there at all: a single-sided material's back face is not, nor where
+ * a masked material's alpha (its factor times the base map's alpha at level 0, as an any-hit
+ * shader reads it) is below its cutoff. */
+inline int surface_present(int kind, int index, float3 o, float3 d, float t, float b1, float b2, SCENE_PARAMS)
+{
+    const float3 p = o + t * d;
+    float3 ng;
+    const int m = hit_material(kind, index, p, &ng, SCENE_ARGS);
+    __global const float4 *mm = mat_maps + MATERIAL_MAPS_FLOAT4S * m;
+#ifdef HAS_SINGLE_SIDED
+    if (mm[1].x > 0.5f && dot(ng, d) > 0.0f) return 0;
+#endif
+#ifdef HAS_ALPHA_MASK
+    const float cutoff = mm[0].y;
+    if (cutoff >= 0.0f) {
+        float alpha = mm[0].x;
+        __global const float4 *slot = map_slot(mat_maps, m, MAP_BASE_COLOR);
+        if (map_texture(slot) >= 0)
+            alpha *= texture_sample(TEXTURE_ARGS, map_texture(slot),
+                                    map_uv(slot, hit_texcoords(kind, index, p, b1, b2, SCENE_ARGS)), 0.0f).w;
+        if (alpha < cutoff) return 0;
+    }
+#endif
+    return 1;
+}
+#define PRESENT(kind, index, t, b1, b2) surface_present(kind, index, o, d, t, b1, b2, SCENE_ARGS)
+#else
+#define PRESENT(kind, index, t, b1, b2) 1
+#endif
+
 /* The nearest hit in (tmin, tmax), or with any_hit the first one found (a shadow ray needs no
  * more): h.kind = 0 where there is none. */
 inline Hit trace_range(float3 o, float3 d, float tmin, float tmax, int any_hit, SCENE_PARAMS)
@@ -133,14 +213,16 @@ inline Hit trace_range(float3 o, float3 d, float tmin, float tmax, int any_hit, 
     h.t = tmax; h.kind = 0; h.index = -1; h.b1 = 0.0f; h.b2 = 0.0f;
 #ifdef HAS_SPHERES
     for (int i = 0; i < nspheres; ++i) {
-        const float t = hit_sphere(o, d, spheres[2 * i], tmin, h.t);
-        if (t < h.t) { h.t = t; h.kind = 1; h.index = i; if (any_hit) return h; }
+        float t = hit_sphere(o, d, spheres[2 * i], tmin, h.t);
+        if (t < h.t && !PRESENT(1, i, t, 0.0f, 0.0f))      /* cut out or a back face: the far side */
+            t = hit_sphere(o, d, spheres[2 * i], t, h.t);
+        if (t < h.t && PRESENT(1, i, t, 0.0f, 0.0f)) { h.t = t; h.kind = 1; h.index = i; if (any_hit) return h; }
     }
 #endif
 #ifdef HAS_PLANES
     for (int i = 0; i < nplanes; ++i) {
         const float t = hit_plane(o, d, planes + 4 * i, tmin, h.t);
-        if (t < h.t) { h.t = t; h.kind = 2; h.index = i; if (any_hit) return h; }
+        if (t < h.t && PRESENT(2, i, t, 0.0f, 0.0f)) { h.t = t; h.kind = 2; h.index = i; if (any_hit) return h; }
     }
 #endif
 #ifdef HAS_TRIANGLES
@@ -169,7 +251,7 @@ inline Hit trace_range(float3 o, float3 d, float tmin, float tmax, int any_hit, 
                     float b1, b2;
                     const float t = hit_triangle(o, rs, tris[6 * k].xyz, tris[6 * k + 1].xyz, tris[6 * k + 2].xyz,
                                                  tmin, h.t, &b1, &b2);
-                    if (t < h.t) {
+                    if (t < h.t && PRESENT(3, k, t, b1, b2)) {
                         h.t = t; h.kind = 3; h.index = k; h.b1 = b1; h.b2 = b2;
                         if (any_hit) return h;
                     }

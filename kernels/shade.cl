@@ -3,6 +3,7 @@
  *   SPECULAR_MODE SPECULAR_IMPORTANCE (IMPORTANCE_ACCEPTED, FORCE_MIP0) or SPECULAR_PREFILTERED
  *                 (DOMINANT_DIRECTION) or SPECULAR_LOBE or off
  *   HAS_EMISSIVE  emission
+ *   HAS_OCCLUSION_MAP  the material's occlusion (its map) on the image-based terms
  *   HAS_AO        ambient occlusion (the ao or gtao pass's ao_buf) on the diffuse term (AO_MULTIBOUNCE:
  *                 through the multi-bounce fit), Lagarde's specular occlusion on the specular term
  * numpy twin: iblbake/render/twin.py shade(). */
@@ -60,8 +61,8 @@ inline float3 dominant_direction(float3 n, float3 r, float a)
     return normalize(mix(n, r, s * (sqrt(s) + a)));
 }
 
-__kernel void shade(__global const float4 *gb_pos, __global const float4 *gb_nrm, __global const float4 *gb_dir,
-                    const int n, __global const float4 *materials, const float2 env_rot, const float env_scale,
+__kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
+                    const int n, const float2 env_rot, const float env_scale,
                     __constant float4 *sh_coeffs,
                     __global const float4 *chain, __constant int *off, __constant int *lw, __constant int *lh,
                     const int nlev,
@@ -74,7 +75,7 @@ __kernel void shade(__global const float4 *gb_pos, __global const float4 *gb_nrm
     if (gb_pos[gid].w == MISS_T) return;
     Material mt;
     float3 v, nrm;
-    const float nov = surface_at(gb_nrm, gb_dir, materials, gid, &mt, &v, &nrm);
+    const float nov = surface_at(SURFACE_ARGS, gid, &mt, &v, &nrm);
     float3 color = (float3)(0.0f);
 #ifdef HAS_AO
     const float spec_occ = specular_occlusion(nov, ao_buf[gid], mt.roughness);
@@ -85,9 +86,6 @@ __kernel void shade(__global const float4 *gb_pos, __global const float4 *gb_nrm
 #endif
 #else
     const float diff_occ = 1.0f, spec_occ = 1.0f;
-#endif
-#ifdef HAS_EMISSIVE
-    color += mt.emissive;
 #endif
 #if DIFFUSE_MODE == DIFFUSE_SH
     color += diff_occ * diffuse_weight(mt, nov) * env_scale * sh_irradiance(sh_coeffs, to_env(nrm, env_rot));
@@ -175,6 +173,12 @@ __kernel void shade(__global const float4 *gb_pos, __global const float4 *gb_nrm
             : chain_lookup(chain, off, lw, lh, nlev, to_env(2.0f * nov * nrm - v, env_rot), mt.roughness * (float)(nlev - 1));
         color += spec_occ * env_scale * li * (mt.f0 * ab.x + ab.y);
     }
+#endif
+#ifdef HAS_OCCLUSION_MAP
+    color *= mt.occlusion;             /* the material's occlusion map: image-based light only */
+#endif
+#ifdef HAS_EMISSIVE
+    color += mt.emissive;
 #endif
     radiance[gid] += (float4)(color, 0.0f);   /* lighting passes add */
 }

@@ -1,5 +1,7 @@
 /* What the lighting passes read of a G-buffer sample: its material, view vector and shading
- * normal, and the panorama's rotation. The only reader of the G-buffer's layout (kernels/layout.h).
+ * normal, and the panorama's rotation. The only reader of the G-buffer's layout (kernels/layout.h):
+ * a material from the material table by the sample's index, or with textures (HAS_TEXTURES) the
+ * material pass's per-sample record (kernels/material.cl).
  * numpy twin: iblbake/render/twin.py (surface, diffuse_weight, to_env). */
 #ifndef IBLBAKE_SURFACE_H
 #define IBLBAKE_SURFACE_H
@@ -18,17 +20,24 @@
 typedef struct {
     float3 base, emissive, f0;
     float metallic, roughness, alpha;
+    float occlusion;        /* the material's ambient occlusion (its map): the image-based light only */
 } Material;
 
-/* materials: MATERIAL_FLOAT4S float4 each, (base_color, metallic), (emissive, roughness) */
-inline Material material_at(__global const float4 *materials, int m)
+/* materials: MATERIAL_FLOAT4S float4 each, (base_color, metallic), (emissive, roughness); gb_mat
+ * the same two rows per sample */
+inline Material material_from(float4 a, float4 b)
 {
     Material mt;
-    const float4 a = materials[MATERIAL_FLOAT4S * m], b = materials[MATERIAL_FLOAT4S * m + 1];
     mt.base = a.xyz; mt.metallic = a.w; mt.emissive = b.xyz; mt.roughness = b.w;
     mt.alpha = b.w * b.w;
     mt.f0 = mix((float3)(0.04f), a.xyz, a.w);
+    mt.occlusion = 1.0f;
     return mt;
+}
+
+inline Material material_at(__global const float4 *materials, int m)
+{
+    return material_from(materials[MATERIAL_FLOAT4S * m], materials[MATERIAL_FLOAT4S * m + 1]);
 }
 
 /* A shading normal facing away from the viewer (interpolated normals at silhouettes) is bent
@@ -40,15 +49,26 @@ inline float3 facing_normal(float3 n, float3 v)
     return normalize(n + (1e-4f - nov) * v);
 }
 
+/* The buffers a G-buffer sample's surface is read from (gb_mat: a placeholder without textures) */
+#define SURFACE_PARAMS __global const float4 *gb_nrm, __global const float4 *gb_dir, \
+                       __global const float4 *materials, __global const float4 *gb_mat
+#define SURFACE_ARGS gb_nrm, gb_dir, materials, gb_mat
+
 /* What the lighting passes read of a G-buffer sample: its material, the view vector, the
- * shading normal bent towards the viewer, and NoV (floored at 1e-4). */
-inline float surface_at(__global const float4 *gb_nrm, __global const float4 *gb_dir,
-                        __global const float4 *materials, int gid, Material *mt, float3 *v, float3 *nrm)
+ * shading normal (normal-mapped with textures) bent towards the viewer, and NoV (floored at 1e-4). */
+inline float surface_at(SURFACE_PARAMS, int gid, Material *mt, float3 *v, float3 *nrm)
 {
+    *v = -gb_dir[gid].xyz;
+#ifdef HAS_TEXTURES
+    *mt = material_from(gb_mat[3 * gid], gb_mat[3 * gid + 1]);
+    const float4 no = gb_mat[3 * gid + 2];
+    mt->occlusion = no.w;
+    *nrm = facing_normal(no.xyz, *v);
+#else
     const float4 nm = gb_nrm[gid];
     *mt = material_at(materials, as_int(nm.w));
-    *v = -gb_dir[gid].xyz;
     *nrm = facing_normal(nm.xyz, *v);
+#endif
     return fmax(dot(*nrm, *v), 1e-4f);
 }
 

@@ -36,8 +36,14 @@ def _alarm(signum, frame):
 
 
 def load_mesh(path, cache):
-    from iblbake.scene import geometry
-    tris = geometry.build_triangles([{"mesh": {"path": path}, "material": "m"}], {"m": 0}, "fuzz.yaml")
+    """The mesh as a scene object: a glTF with its own materials (parsed too), the rest with a scene
+    material; texture coordinates and tangents built as for a textured scene."""
+    from iblbake.scene import geometry, materials
+    obj, counts = {"mesh": {"path": path}, "material": "m"}, {}
+    if path.lower().endswith((".gltf", ".glb")):
+        del obj["material"]
+        counts = {0: len(materials.file_materials(path, "fuzz.yaml: objects.0.mesh"))}
+    tris = geometry.build_triangles([obj], {0: 0}, "fuzz.yaml", counts, attributes=True)
     if len(tris):
         lo, hi = geometry.triangle_bounds(tris)
         geometry.build_bvh(lo, hi)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import click
 
-from iblbake.cli.options import Console, common_options, device_option, non_negative
+from iblbake.cli.options import Console, common_options, device_option, non_negative, max_texture_pixels_option
 from iblbake.errors import IblbakeError
 
 FILES = {"table.md": "Markdown table", "table.csv": "CSV", "accuracy.json": "JSON", "plot.png": "error-time plot",
@@ -50,6 +50,7 @@ FILES = {"table.md": "Markdown table", "table.csv": "CSV", "accuracy.json": "JSO
 @click.option("--devices", default=None, metavar="SPEC,SPEC,...",
               help="With --jobs: one device per worker, in turn, e.g. gpu,cpu.")
 @device_option
+@max_texture_pixels_option
 @common_options
 def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repeats, target_noise, max_samples,
                      visibility, flip, max_error, cache_dir, jobs, devices, device, quiet, as_json):

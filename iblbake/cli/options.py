@@ -128,6 +128,19 @@ def non_negative(ctx, param, value):
     return value
 
 
+def _set_max_texture_pixels(ctx, param, value):
+    if value is not None:     # the library (and worker processes) read it from the environment
+        os.environ["IBLBAKE_MAX_TEXTURE_PIXELS"] = str(value)
+    return value
+
+
+def max_texture_pixels_option(f):
+    return click.option("--max-texture-pixels", type=click.IntRange(min=1), default=None, expose_value=False,
+                        callback=_set_max_texture_pixels,
+                        help="Refuse larger material textures before decoding them. Default: "
+                             "$IBLBAKE_MAX_TEXTURE_PIXELS or 8192*8192.")(f)
+
+
 def depfile_option(f):
     return click.option("--depfile", type=click.Path(dir_okay=False), default=None, metavar="FILE",
                         help="Also write a Make dependency file (as gcc -MD -MF): the outputs depend on "

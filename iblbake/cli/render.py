@@ -6,7 +6,7 @@ import contextlib
 
 import click
 
-from iblbake.cli.options import Console, common_options, depfile_option, device_option
+from iblbake.cli.options import Console, common_options, depfile_option, device_option, max_texture_pixels_option
 
 
 def _help_schema(ctx, param, value):
@@ -32,6 +32,7 @@ def _help_schema(ctx, param, value):
               help="Print every scene key with its type, range and default, and exit.")
 @depfile_option
 @device_option
+@max_texture_pixels_option
 @common_options
 def render_command(scene_path, outputs, overrides, cache_dir, show_report, depfile, device, quiet, as_json):
     """Render the scene file SCENE (YAML; see --help-schema and examples/scenes/) with OpenCL.

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from iblbake.cli.options import Console, common_options, depfile_option, device_option
+from iblbake.cli.options import Console, common_options, depfile_option, device_option, max_texture_pixels_option
 from iblbake.errors import IblbakeError
 
 
@@ -115,6 +115,7 @@ def _shard(ctx, param, value):
               help="Bake cache folder. Default: $IBLBAKE_CACHE, else the per-user cache folder.")
 @depfile_option
 @device_option
+@max_texture_pixels_option
 @common_options
 def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, label_format, caption, title,
                   frames_dir, frames_exr, layout_path, keep_going, resume, shard, assemble, jobs, devices, scheduler,

@@ -22,8 +22,18 @@ def _geometry_code_hash() -> str:
     import hashlib
     import inspect
 
-    from iblbake.scene import geometry, pack
-    return hashlib.sha256((inspect.getsource(geometry) + inspect.getsource(pack)).encode()).hexdigest()[:16]
+    from iblbake.scene import geometry, gltf, pack, tangents
+    return hashlib.sha256("".join(inspect.getsource(m) for m in (geometry, gltf, pack, tangents)).encode()).hexdigest()[:16]
+
+
+def _textures_code_hash() -> str:
+    """The texture decoder's, pyramid builder's and glTF reader's source: cached pyramids are
+    rebuilt when they change."""
+    import hashlib
+    import inspect
+
+    from iblbake.scene import gltf, materials, textures
+    return hashlib.sha256("".join(inspect.getsource(m) for m in (gltf, materials, textures)).encode()).hexdigest()[:16]
 
 
 POLICY_KEYS = {"nonfinite": "environment.nonfinite:", "negative": "environment.negative:",
@@ -100,42 +110,93 @@ class Bakes:
         return self._memo[self._env_key(env) + ("sun",)][2]
 
     def geometry(self, sc, warn=None):
-        """The scene's device records; its meshes' triangles and BVH from the cache, keyed by each
-        mesh file's content, transform, normals mode, material and object index (a 1.3M-triangle
-        PLY: seconds to load and build, a fraction of a second to read back)."""
-        from iblbake.scene import pack
+        """The scene's device records; its meshes' triangles, BVH and triangle attributes from the
+        cache, keyed by each mesh file's content (a .gltf's buffers and images too), transform,
+        normals mode, material offset and object index (a 1.3M-triangle PLY: seconds to load and
+        build, a fraction of a second to read back)."""
+        from iblbake.scene import gltf as gltf_file
+        from iblbake.scene import materials, pack
 
         objs = sc.data["objects"]
-        names = list(sc.data["materials"])
         meshes = [(oid, o) for oid, o in enumerate(objs) if "mesh" in o]
         if not meshes:
             return pack.scene_arrays(sc, (np.zeros((0, 6, 4), np.float32), np.zeros((0, 8), np.float32),
-                                          {"meshes": [], "triangles": 0, "load_s": 0.0}))
+                                          {"meshes": [], "triangles": 0, "load_s": 0.0},
+                                          np.zeros((0, 7, 4), np.float32)))
         try:
+            _records, offsets = materials.table(sc)
             parts = [{"object": oid, "sha256": self.file_sha256(o["mesh"]["path"]),
-                      "material": names.index(o["material"]), **{k: v for k, v in o["mesh"].items() if k != "path"}}
+                      "beside": [self.file_sha256(f) for f in gltf_file.external_files(o["mesh"]["path"])],
+                      "material": offsets[oid], "own": materials.brings_materials(o),
+                      **{k: v for k, v in o["mesh"].items() if k != "path"}}
                      for oid, o in meshes]
-        except OSError:              # a missing or unreadable mesh: the loader says so, in one line
+        except (OSError, IblbakeError):   # a missing or unreadable mesh: the loader says so, in one line
             return pack.scene_arrays(sc)
-        key = "geometry-" + cache.content_key({"kind": "geometry", "v": 1, "meshes": parts,
-                                               "code": _geometry_code_hash()})
+        key = "geometry-" + cache.content_key({"kind": "geometry", "v": 2, "meshes": parts,
+                                               "attributes": pack.needs_attributes(sc), "code": _geometry_code_hash()})
 
         def make():
             def build(tmp: Path):
-                arr, nodes, report = pack.mesh_arrays(sc)
+                arr, nodes, report, attr = pack.mesh_arrays(sc)
                 np.save(tmp / "triangles.npy", arr)
                 np.save(tmp / "bvh.npy", nodes)
-                return {"kind": "geometry", "files": [{"name": "triangles.npy"}, {"name": "bvh.npy"}],
-                        "report": report}
+                np.save(tmp / "attributes.npy", attr)
+                return {"kind": "geometry", "files": [{"name": n} for n in ("triangles.npy", "bvh.npy",
+                                                                          "attributes.npy")], "report": report}
 
             manifest, cached = cache.get_or_build(self.root, key, build, warn=warn)
             entry = self.root / manifest["key"]
             arrays = (np.load(entry / "triangles.npy"), np.load(entry / "bvh.npy"),
-                      {**manifest["report"], "cached": cached})
+                      {**manifest["report"], "cached": cached}, np.load(entry / "attributes.npy"))
             return arrays
 
         meshes_arrays = self._get(("geometry", key), make)
         return pack.scene_arrays(sc, meshes_arrays)
+
+    def textures(self, sc, records, warn=None):
+        """(device arrays (texels, tex_levels, tex_info), {(record, map kind): texture index},
+        report) of the records' maps: decoded and filtered once per content, kept in the bake cache
+        (a warm render reads the pyramids back) and in this store (a sheet's cells share them)."""
+        from iblbake.scene import materials, textures as scene_textures
+
+        refs = [(ri, kind, materials.texture_key(ref, kind), self._source_sha(ref["source"]))
+                for ri, r in enumerate(records) for kind, ref in r["maps"].items()]
+        key = "textures-" + cache.content_key({"kind": "textures", "v": 1, "refs": [x[1:] for x in refs],
+                                               "limit": scene_textures.max_texture_pixels(),
+                                               "code": _textures_code_hash()})
+
+        def make():
+            def build(tmp: Path):
+                ts, slots = materials.load_textures(records, self._source_bytes, sc.source)
+                for name, a in zip(("texels", "tex_levels", "tex_info"), ts.arrays()):
+                    np.save(tmp / f"{name}.npy", a)
+                return {"kind": "textures", "files": [{"name": f"{n}.npy"} for n in ("texels", "tex_levels", "tex_info")],
+                        "slots": [[ri, kind, slots[(ri, kind)]] for ri, kind, *_ in refs],
+                        "report": {"textures": len(ts.textures), "texels": ts.texel_count(),
+                                   "decode_and_mips_s": round(ts.upload_s, 4)}}
+
+            manifest, cached = cache.get_or_build(self.root, key, build, warn=warn)
+            entry = self.root / manifest["key"]
+            arrays = tuple(np.load(entry / f"{n}.npy") for n in ("texels", "tex_levels", "tex_info"))
+            slots = {(ri, kind): t for ri, kind, t in manifest["slots"]}
+            return arrays, slots, {**manifest["report"], "cached": cached, "device_bytes": int(arrays[0].nbytes)}
+
+        return self._get(key, make)
+
+    def _source_sha(self, source) -> str:
+        return self.file_sha256(source[1]) + (f":{source[2]}" if source[0] == "gltf" else "")
+
+    def _source_bytes(self, source, where: str) -> bytes:
+        """An image's bytes: a scene texture's file, or a glTF file's image (its own file, data URI
+        or buffer view)."""
+        from iblbake.scene import gltf
+
+        if source[0] == "path":
+            try:
+                return Path(source[1]).read_bytes()
+            except OSError as e:
+                raise IblbakeError(f"{where}: texture {source[1]} cannot be read ({e.strerror})") from None
+        return gltf.read(source[1], where).image(source[2])[0]
 
     def chain(self, rt, levels) -> dict:
         """The device tables of a chain of levels (chain_table), uploaded once per runtime."""

@@ -138,6 +138,15 @@ def _host_bytes_available() -> int | None:
     return min(limits) if limits else None
 
 
+def textured(pl: Plan) -> bool:
+    """Whether the material pass runs (some material in use has a map): the G-buffer then holds
+    texture coordinates, tangents and footprints, and gb_mat the resolved materials."""
+    return "materials" in pl.pass_names
+
+
+TEXTURED_SAMPLE_BYTES = 3 * 16 + 3 * 16   # gb_uv, gb_tan, gb_lod; gb_mat
+
+
 def has_ao(pl: Plan) -> bool:
     """Whether some running pass writes ambient occlusion (one float per G-buffer sample)."""
     return any("ao_buf" in p.writes for p in pl.passes)
@@ -150,7 +159,7 @@ def tile_rows(rt, scene: Scene, pl: Plan, device_budget: int | None = None) -> i
     w, h = scene.data["camera"]["resolution"]
     spp = scene.data["camera"]["spp"]
     per_sample = SAMPLE_BYTES + (REFERENCE_SAMPLE_BYTES if "reference" in pl.pass_names else 0) + \
-        (4 if has_ao(pl) else 0)
+        (4 if has_ao(pl) else 0) + (TEXTURED_SAMPLE_BYTES if textured(pl) else 0)
     row = w * (spp * per_sample + PIXEL_BYTES + (4 + 48 if "gtao" in pl.pass_names else 0))
     largest_row_buffer = w * spp * 16               # one per-sample buffer of one row
     dev = rt.info.device
@@ -228,7 +237,20 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
     cam4[1, :3], cam4[2, :3], cam4[3, :3] = fwd, right, up
 
     def padded(a, shape):
-        return a if len(a) else np.zeros(shape, np.float32)
+        return a if a is not None and len(a) else np.zeros(shape, np.float32)
+
+    from iblbake.scene import materials as scene_materials
+    from iblbake.scene.layout import FLOAT4S
+    records = arrays.records
+    if any(r["maps"] for r in records):
+        t0 = time.perf_counter()
+        (texels, tex_levels, tex_info), slots, trep = bakes.textures(scene, records, ctx.warn)
+        rep.bake("textures", time.perf_counter() - t0, trep.pop("cached"), **trep)
+    else:
+        slots = {}
+        texels, tex_levels, tex_info = (np.zeros((1, 4), np.float32), np.zeros((1, 4), np.int32),
+                                        np.zeros((1, 4), np.int32))
+    _mats, mat_maps = scene_materials.device_arrays(records, slots)
 
     ctx.table.update({
         "cam": rt.to_device(cam4), "width": width, "height": height, "spp": spp,
@@ -237,6 +259,10 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
         "planes": rt.to_device(padded(arrays.planes, (1, 4, 4))), "nplanes": len(arrays.planes),
         "bvh": rt.to_device(padded(arrays.bvh, (1, 8))), "tris": rt.to_device(padded(arrays.tris, (1, 6, 4))),
         "ntris": len(arrays.tris), "materials": rt.to_device(arrays.materials.reshape(-1, 4)),
+        "tri_attr": rt.to_device(padded(arrays.tri_attr, (1, FLOAT4S["TRIANGLE_ATTR"], 4))),
+        "mat_maps": rt.to_device(mat_maps.reshape(-1, 4)), "texels": rt.to_device(texels),
+        "tex_levels": rt.to_device(tex_levels), "tex_info": rt.to_device(tex_info),
+        "texture_count": len(tex_info) if slots else 0,
         "env_rot": np.array([np.cos(rot), np.sin(rot)], np.float32), "env_scale": env["intensity"],
     })
     keys = pass_keys(pl, scene)
@@ -268,7 +294,10 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
         # (re)allocate each buffer whose size this tile and plan need differs from what the table
         # holds (a series of frames reusing buffers may switch AO or AOVs on: their buffers grow,
         # and the passes writing them run, being new or redefined)
+        tex = textured(pl)
         sizes = {"gb_pos": n * 16, "gb_nrm": n * 16, "gb_dir": n * 16, "radiance": n * 16,
+                 "gb_uv": n * 16 if tex else 16, "gb_tan": n * 16 if tex else 16, "gb_lod": n * 16 if tex else 16,
+                 "gb_mat": n * 48 if tex else 48,
                  "ao_buf": n * 4 if has_ao(pl) else 16,
                  "hdr": npix * 16, "png_u8": npix * 4, "display": npix * 16,
                  "aov_normal": npix * 16 if aov else 16, "aov_albedo": npix * 16 if aov else 16,
@@ -287,8 +316,8 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
             extra = p.run(ctx)
             rep.run(p.name, time.perf_counter() - t0, **extra)
     if reuse is not None:
-        buffers = ("gb_pos", "gb_nrm", "gb_dir", "radiance", "ao_buf", "hdr", "png_u8", "display", "aov_normal",
-                   "aov_albedo", "aov_depth", "npix")
+        buffers = ("gb_pos", "gb_nrm", "gb_dir", "gb_uv", "gb_tan", "gb_lod", "gb_mat", "radiance", "ao_buf", "hdr",
+                   "png_u8", "display", "aov_normal", "aov_albedo", "aov_depth", "npix")
         reuse.state = None if len(row0s) > 1 else {
             "runtime": rt, "shape": (width, height, spp), "keys": keys,
             "buffers": {b: ctx.table[b] for b in buffers}, "hdr": ctx.frame_hdr, "aovs": ctx.frame_aovs,

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from iblbake.scene import materials
 from iblbake.scene.load import Scene
 
 
@@ -26,13 +27,14 @@ def effect_modes(scene: Scene) -> Effects:
     d = scene.data
     fx, env = d["effects"], d["environment"]
     notes = []
-    mats = [d["materials"][m] for m in {o["material"] for o in d["objects"]}]
+    mats = materials.used(scene)             # the scene's and the glTF meshes' own
     diffuse, specular = fx["diffuse"], fx["specular"]
     if not d["objects"]:
         if diffuse != "off" or specular != "off":
             notes.append("no objects: no lighting is computed")
         diffuse = specular = "off"
-    elif diffuse != "off" and all(m["metallic"] >= 1.0 or max(m["base_color"]) == 0.0 for m in mats):
+    elif diffuse != "off" and all((m["metallic"] >= 1.0 and not m["maps"].get("metallic_roughness"))
+                                  or max(m["base_color"]) == 0.0 for m in mats):
         notes.append(f"diffuse {diffuse} skipped: every material is metallic or black (kD = 0)")
         diffuse = "off"
     bg = env["background"]
@@ -42,7 +44,7 @@ def effect_modes(scene: Scene) -> Effects:
         background = "blur" if env["blur"] > 0 else "show"
     else:
         background = "hide"
-    emissive = any(max(m["emissive"]) > 0 for m in mats)
+    emissive = any(max(m["emissive"]) > 0 for m in mats)     # an emissive map multiplies the factor
     return Effects(diffuse, specular, background, emissive, notes)
 
 

@@ -90,8 +90,27 @@ def ray_offset(p, n, d, t):
     return p + eps[..., None] * (n - d)
 
 
-def primary(cam: dict, arrays):
-    """Hit records per sample (pixel-major, spp-minor, like the kernel)."""
+def _sphere_roots(o, d, sp):
+    """Both roots t0 <= t1 of rays with a sphere (inf where it is missed): the stable quadratic."""
+    c, r = sp[0, :3], sp[0, 3]
+    f = o - c
+    b = -(f * d).sum(-1)
+    perp = f + b[..., None] * d
+    disc = r * r - (perp ** 2).sum(-1)
+    q = b + np.copysign(np.sqrt(np.maximum(disc, 0)), b)
+    cc = (f ** 2).sum(-1) - r * r
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t0 = np.where(q != 0, cc / q, 0.0)
+    lo, hi = np.minimum(t0, q), np.maximum(t0, q)
+    miss = disc < 0
+    return np.where(miss, np.inf, lo), np.where(miss, np.inf, hi)
+
+
+def primary(cam: dict, arrays, tex=None):
+    """Hit records per sample (pixel-major, spp-minor, like the kernel): position, distance,
+    shading normal towards the viewer, material, and what was hit (kind 1 sphere, 2 plane, 3
+    triangle; its index; a triangle's barycentrics of v1, v2). With `tex` (textures()) a material's
+    cut-outs and back faces are not hit, as kernels/scene.h surface_present."""
     w, h = cam["resolution"]
     spp = cam["spp"]
     pos, fwd, right, up, ortho = camera_vectors(cam)
@@ -112,24 +131,39 @@ def primary(cam: dict, arrays):
     ng = np.zeros((n, 3))
     ns = np.zeros((n, 3))
     mat = np.full(n, -1)
+    kind, index, bary = np.zeros(n, np.int64), np.full(n, -1), np.zeros((n, 2))
     ints = lambda a: np.asarray(a, np.float32).view(np.int32)
-    for sp in arrays.spheres.astype(np.float64):
-        t = _sphere_t(o, d, sp)
+    present = (lambda k, i, t, b: _present(k, i, o, d, t, b, arrays, tex)) if tex is not None else None
+    for i, sp in enumerate(arrays.spheres.astype(np.float64)):
+        t0, t1 = _sphere_roots(o, d, sp)
+        t = np.where(t0 > 0, t0, t1)
+        if present is not None:            # the near side cut out or a back face: the far side
+            t = np.where(present(1, i, np.where(np.isfinite(t), t, 0), None) | ~np.isfinite(t), t,
+                         np.where(t1 > t, t1, np.inf))
+            t = np.where(np.isfinite(t) & present(1, i, np.where(np.isfinite(t), t, 0), None), t, np.inf)
+        t = np.where(t > 0, t, np.inf)
         better = t < t_best
         t_best[better] = t[better]
         c, r = sp[0, :3], sp[0, 3]
         nn = (o[better] + t[better, None] * d[better] - c) / r
         ng[better] = ns[better] = nn / np.linalg.norm(nn, axis=1, keepdims=True)
         mat[better] = ints(sp[1, 0])
-    for pl in arrays.planes.astype(np.float64):
+        kind[better], index[better] = 1, i
+    for i, pl in enumerate(arrays.planes.astype(np.float64)):
         t = _plane_t(o, d, pl)
+        if present is not None:
+            t = np.where(np.isfinite(t) & present(2, i, np.where(np.isfinite(t), t, 0), None), t, np.inf)
         better = t < t_best
         t_best[better] = t[better]
         ng[better] = ns[better] = pl[1, :3]
         mat[better] = ints(pl[0, 3])
+        kind[better], index[better] = 2, i
     tris = arrays.tris.astype(np.float64)
     for k in range(len(tris)):
         t, u, v = _triangle_t(o, d, tris[k])
+        if present is not None:
+            fin = np.isfinite(t)
+            t = np.where(fin & present(3, k, np.where(fin, t, 0), np.stack([u, v], 1)), t, np.inf)
         better = t < t_best
         if not better.any():
             continue
@@ -145,12 +179,201 @@ def primary(cam: dict, arrays):
         ng[better] = fn
         ns[better] = sn
         mat[better] = ints(tris[k, 0, 3])
+        kind[better], index[better] = 3, k
+        bary[better] = np.stack([u[better], v[better]], 1)
     hit = np.isfinite(t_best)
     flip = ((ng * d).sum(1) > 0)[:, None]
+    ng_front = ng.copy()
     ng = np.where(flip, -ng, ng)
+    ns_front = ns.copy()
     ns = np.where(flip, -ns, ns)
     return {"hit": hit, "t": t_best, "pos": o + np.where(hit, t_best, 0)[:, None] * d, "normal": ns,
-            "material": mat, "dir": d}
+            "material": mat, "dir": d, "kind": kind, "index": index, "bary": bary, "flip": flip[:, 0],
+            "geometric": ng, "front_normal": ns_front, "front_geometric": ng_front}
+
+
+# --- textures: the twin of kernels/scene.h hit_texcoords and surface_present, gbuffer.cl's
+# surface coordinates and kernels/material.cl -------------------------------------------------
+
+def textures(scene, arrays):
+    """What the kernels read of the scene's textures: {"set": TextureSet, "slots", "mat_maps"},
+    decoded and filtered by the same host code the renderer uses."""
+    from pathlib import Path
+
+    from iblbake.scene import gltf, materials
+
+    def read(source, where):
+        if source[0] == "path":
+            return Path(source[1]).read_bytes()
+        return gltf.read(source[1], where).image(source[2])[0]
+
+    ts, slots = materials.load_textures(arrays.records, read, scene.source)
+    return {"set": ts, "slots": slots, "mat_maps": materials.device_arrays(arrays.records, slots)[1].astype(np.float64)}
+
+
+def _hit_material(kind, index, p, arrays):
+    """(material, front geometric normal) per ray of one primitive."""
+    ints = lambda a: np.asarray(a, np.float32).view(np.int32)
+    if kind == 1:
+        sp = arrays.spheres[index].astype(np.float64)
+        g = (p - sp[0, :3]) / sp[0, 3]
+        return int(ints(arrays.spheres[index, 1, 0])), g / np.linalg.norm(g, axis=-1, keepdims=True)
+    if kind == 2:
+        return int(ints(arrays.planes[index, 0, 3])), np.broadcast_to(arrays.planes[index, 1, :3].astype(np.float64), p.shape)
+    tri = arrays.tris[index].astype(np.float64)
+    fn = np.cross(tri[1, :3] - tri[0, :3], tri[2, :3] - tri[0, :3])
+    return int(ints(arrays.tris[index, 0, 3])), np.broadcast_to(fn / np.linalg.norm(fn), p.shape)
+
+
+def hit_texcoords(kind, index, p, bary, arrays):
+    """(u0, v0, u1, v1) per ray of one primitive (kernels/scene.h hit_texcoords)."""
+    if kind == 1:
+        sp = arrays.spheres[index].astype(np.float64)
+        nl = (p - sp[0, :3]) / sp[0, 3]
+        u = 0.5 - np.arctan2(nl[:, 0], nl[:, 2]) / (2 * np.pi)
+        v = np.arccos(np.clip(nl[:, 1], -1, 1)) / np.pi
+        return np.stack([u, v, u, v], 1)
+    if kind == 2:
+        pl = arrays.planes[index].astype(np.float64)
+        q = p - pl[0, :3]
+        a, b = q @ pl[2, :3], q @ pl[3, :3]
+        u = a if np.isinf(pl[2, 3]) else 0.5 + 0.5 * a / pl[2, 3]
+        v = -b if np.isinf(pl[3, 3]) else 0.5 - 0.5 * b / pl[3, 3]
+        return np.stack([u, v, u, v], 1)
+    at = arrays.tri_attr[index].astype(np.float64)
+    b1, b2 = bary[:, 0:1], bary[:, 1:2]
+    return (1 - b1 - b2) * at[0] + b1 * at[1] + b2 * at[2]
+
+
+def _slot(tex, m, kind):
+    from iblbake.scene.layout import MAP_KINDS
+    k = MAP_KINDS.index(kind)
+    rows = tex["mat_maps"][m, 2 + 2 * k:4 + 2 * k]
+    texture = int(np.asarray(rows[0, 3], np.float32).view(np.int32))
+    texcoord = int(np.asarray(rows[1, 3], np.float32).view(np.int32))
+    return texture, texcoord, rows[:, :3]
+
+
+def map_uv(rows, texcoord, uv01):
+    uv = uv01[:, 2:4] if texcoord == 1 else uv01[:, 0:2]
+    return uv @ rows[:, :2].T + rows[:, 2]
+
+
+def _present(kind, index, o, d, t, bary, arrays, tex):
+    """Whether each ray's candidate hit on one primitive is there (kernels/scene.h surface_present)."""
+    from iblbake.scene import textures as scene_textures
+
+    p = o + t[:, None] * d
+    m, g = _hit_material(kind, index, p, arrays)
+    mm = tex["mat_maps"][m]
+    ok = np.ones(len(t), bool)
+    if mm[1, 0] > 0.5:
+        ok &= (g * d).sum(1) <= 0
+    if mm[0, 1] >= 0:
+        alpha = np.full(len(t), mm[0, 0])
+        texture, texcoord, rows = _slot(tex, m, "base_color")
+        if texture >= 0:
+            uv = map_uv(rows, texcoord, hit_texcoords(kind, index, p, bary, arrays))
+            alpha = alpha * scene_textures.sample(tex["set"].textures[texture], uv, np.zeros(len(t)))[:, 3]
+        ok &= alpha >= mm[0, 1]
+    return ok
+
+
+def gbuffer_coords(gb, arrays, cam):
+    """The texture coordinates, tangent (w: the bitangent's side, negated with the tangent on a
+    back face) and footprint level of each set at every hit (kernels/gbuffer.cl hit_tangent)."""
+    hit = gb["hit"]
+    n = len(hit)
+    uv, tan, lod = np.zeros((n, 4)), np.zeros((n, 4)), np.zeros((n, 2))
+    _pos, _fwd, _right, up, ortho = camera_vectors(cam)
+    pixel = 2 * np.linalg.norm(up) / (cam["resolution"][1] * math.sqrt(cam["spp"]))
+    for kind in (1, 2, 3):
+        for index in np.unique(gb["index"][hit & (gb["kind"] == kind)]):
+            sel = hit & (gb["kind"] == kind) & (gb["index"] == index)
+            p, ns, bary = gb["pos"][sel], gb["front_normal"][sel], gb["bary"][sel]
+            uv[sel] = hit_texcoords(kind, index, p, bary, arrays)
+            if kind == 1:
+                sp = arrays.spheres[index].astype(np.float64)
+                nl = (p - sp[0, :3]) / sp[0, 3]
+                t = np.stack([-nl[:, 2], np.zeros(len(p)), nl[:, 0]], 1)
+                w = -np.ones(len(p))
+                st = np.maximum(np.sqrt(np.maximum(0, 1 - nl[:, 1] ** 2)), 1e-4)
+                dens = np.repeat((-0.5 * np.log2(2 * np.pi ** 2 * sp[0, 3] ** 2 * st))[:, None], 2, 1)
+            elif kind == 2:
+                pl = arrays.planes[index].astype(np.float64)
+                t = np.broadcast_to(pl[2, :3], p.shape).copy()
+                w = -np.ones(len(p))
+                dd = (0.0 if np.isinf(pl[2, 3]) else -np.log2(2 * pl[2, 3])) + \
+                     (0.0 if np.isinf(pl[3, 3]) else -np.log2(2 * pl[3, 3]))
+                dens = np.full((len(p), 2), 0.5 * dd)
+            else:
+                at = arrays.tri_attr[index].astype(np.float64)
+                b1, b2 = bary[:, 0:1], bary[:, 1:2]
+                t = ((1 - b1 - b2) * at[3] + b1 * at[4] + b2 * at[5])[:, :3]
+                w = np.full(len(p), -1.0 if at[3, 3] < 0 else 1.0)
+                dens = np.broadcast_to(at[6, :2], (len(p), 2))
+            t = t - ns * (ns * t).sum(1, keepdims=True)
+            lt = np.linalg.norm(t, axis=1, keepdims=True)
+            frame = conventions.tangent_frame(ns)[0]
+            t = np.where(lt > 1e-12, t / np.maximum(lt, 1e-300), frame)
+            flip = gb["flip"][sel][:, None]
+            tan[sel] = np.concatenate([np.where(flip, -t, t), np.where(flip[:, 0], -w, w)[:, None]], 1)
+            cone = pixel if ortho else pixel * gb["t"][sel]
+            cos = np.abs((gb["front_geometric"][sel] * gb["dir"][sel]).sum(1))
+            lod[sel] = np.log2(cone / np.maximum(cos, 1e-6))[:, None] + dens
+    gb.update(uv=uv, tangent=tan, lod=lod)
+    return gb
+
+
+def resolve_materials(gb, arrays, tex):
+    """Each hit's material from its factors and maps (kernels/material.cl): gb["resolved"] =
+    (base, metallic, emissive, roughness, shading normal, occlusion) of the hits."""
+    from iblbake.scene import textures as scene_textures
+
+    hit = gb["hit"]
+    idx = gb["material"][hit]
+    m = arrays.materials.astype(np.float64)[idx]
+    base, metallic, emissive, rough = m[:, 0, :3].copy(), m[:, 0, 3].copy(), m[:, 1, :3].copy(), m[:, 1, 3].copy()
+    nrm, occ = gb["normal"][hit].copy(), np.ones(len(idx))
+    uv01, lods, tan = gb["uv"][hit], gb["lod"][hit], gb["tangent"][hit]
+    for mi in np.unique(idx):
+        sel = idx == mi
+        mm = tex["mat_maps"][mi]
+
+        def fetch(kind):
+            texture, texcoord, rows = _slot(tex, mi, kind)
+            if texture < 0:
+                return None
+            t = tex["set"].textures[texture]
+            h, w = t.levels[0].shape[:2]
+            det = abs(rows[0, 0] * rows[1, 1] - rows[0, 1] * rows[1, 0])
+            lod = lods[sel, 1 if texcoord == 1 else 0] + 0.5 * np.log2(w * h * det)
+            return scene_textures.sample(t, map_uv(rows, texcoord, uv01[sel]), lod)
+
+        c = fetch("base_color")
+        if c is not None:
+            base[sel] *= c[:, :3]
+        c = fetch("metallic_roughness")
+        if c is not None:
+            metallic[sel] *= c[:, 2]
+            rough[sel] *= c[:, 1]
+        c = fetch("normal")
+        if c is not None:
+            tn = c[:, :3].copy()
+            tn[:, :2] *= mm[0, 2]
+            nn = nrm[sel]
+            bt = tan[sel, 3:4] * np.cross(nn, tan[sel, :3])
+            pp = tan[sel, :3] * tn[:, 0:1] + bt * tn[:, 1:2] + nn * tn[:, 2:3]
+            lp = np.linalg.norm(pp, axis=1, keepdims=True)
+            nrm[sel] = np.where(lp > 1e-12, pp / np.maximum(lp, 1e-300), nn)
+        c = fetch("occlusion")
+        if c is not None:
+            occ[sel] = 1 + mm[0, 3] * (c[:, 0] - 1)
+        c = fetch("emissive")
+        if c is not None:
+            emissive[sel] *= c[:, :3]
+    gb["resolved"] = (base, np.clip(metallic, 0, 1), emissive, np.clip(rough, 0, 1), nrm, np.clip(occ, 0, 1))
+    return gb
 
 
 def _materials(arrays, idx):
@@ -173,11 +396,22 @@ def to_env(d, rotation_y_deg):
 
 def surface(gb, arrays):
     """Twin of surface_at for every hit sample: view vectors, bent shading normals, NoV and the
-    material columns (base, metallic, emissive, roughness, F0)."""
+    material columns (base, metallic, emissive, roughness, F0): from the material table, or
+    resolve_materials()'s where it ran."""
     hit = gb["hit"]
     v = -gb["dir"][hit]
+    if "resolved" in gb:
+        base, metallic, emissive, rough, nrm, _occ = gb["resolved"]
+        n = facing_normal(nrm, v)
+        f0 = 0.04 * (1 - metallic[:, None]) + base * metallic[:, None]
+        return v, n, np.maximum((n * v).sum(1), 1e-4), (base, metallic, emissive, rough, f0)
     n = facing_normal(gb["normal"][hit], v)
     return v, n, np.maximum((n * v).sum(1), 1e-4), _materials(arrays, gb["material"][hit])
+
+
+def material_occlusion(gb):
+    """The resolved materials' occlusion (1 without textures), per hit."""
+    return gb["resolved"][5] if "resolved" in gb else np.ones(int(gb["hit"].sum()))
 
 
 def diffuse_weight(base, metallic, rough, f0, nov):
@@ -194,7 +428,7 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
     v, n, nov, (base, metallic, emissive, rough, f0) = surface(gb, arrays)
     alpha = rough ** 2
     rot, scale = env["rotation_y"], env["intensity"]
-    color = emissive.copy()
+    color = np.zeros_like(emissive)
     occ = ao[hit] if ao is not None else np.ones(len(n))
     spec_occ = specular_occlusion(nov, occ, rough)[:, None]
     if effects["diffuse"] == "sh":
@@ -243,7 +477,7 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
     elif effects["specular"] == "lobe":
         color += spec_occ * scale * lobe(v, n, nov, alpha, rough, f0, rot, effects["lobe"]["samples"],
                               effects["lobe"]["spread"], prefiltered, dfg)
-    out[hit] = color
+    out[hit] = color * material_occlusion(gb)[:, None] + emissive
     return out
 
 
@@ -608,5 +842,5 @@ def exact(gb, arrays, effects: dict, env: dict, image, sub: int = 2, chunk: int 
         j = np.minimum((w * hgt).astype(np.int64), hgt - 1)
         res[delta] += (image[j, i].astype(np.float64) * env["intensity"]
                        * brdf.f_schlick(nov[delta, None], f0[delta])) * seen[:, None]
-    out[hit] = res
+    out[hit] = res * material_occlusion(gb)[:, None]      # the occlusion map: image-based light only
     return out

@@ -37,9 +37,12 @@ class Triangles:
     v1: np.ndarray                # bit-identical, which the watertight ray test relies on)
     v2: np.ndarray
     normals: np.ndarray           # (n, 3, 3) shading normal per corner, unit
-    material: np.ndarray          # (n,) int32
+    material: np.ndarray          # (n,) int32: a record of the scene's material table
     object_id: np.ndarray         # (n,) int32
     stats: list = field(default_factory=list)   # per mesh: path, triangles, dropped, smooth
+    uv: np.ndarray | None = None          # (n, 3, 4) per corner (u0, v0, u1, v1), NaN where the mesh has none
+    tangents: np.ndarray | None = None    # (n, 3, 4) per corner (tangent, w)
+    uv_density: np.ndarray | None = None  # (n, 2) 0.5 log2(UV area / world area) of each set
 
     def __len__(self):
         return len(self.v0)
@@ -53,6 +56,20 @@ class Triangles:
         return self.v2 - self.v0
 
 
+@dataclass
+class MeshData:
+    """A mesh file's triangles in its own space: per vertex positions, normals, texture
+    coordinates (glTF's convention: v down the image) and tangents (NaN rows where the file has
+    none), and per face the file's material (-1: none, or the glTF default material)."""
+    vertices: np.ndarray
+    faces: np.ndarray
+    normals: np.ndarray
+    uv: list
+    tangents: np.ndarray
+    face_material: np.ndarray
+    smooth: bool
+
+
 def _rotation_xyz(deg):
     rx, ry, rz = np.radians(deg)
     cx, sx, cy, sy, cz, sz = np.cos(rx), np.sin(rx), np.cos(ry), np.sin(ry), np.cos(rz), np.sin(rz)
@@ -62,18 +79,72 @@ def _rotation_xyz(deg):
     return mz @ my @ mx      # x first, then y, then z
 
 
-def load_mesh(spec: dict, where: str):
-    """(vertices (n,3), faces (m,3), vertex normals or None) of a mesh file, checked."""
-    import trimesh
-
+def load_mesh(spec: dict, where: str) -> MeshData:
+    """A mesh file, checked: glTF/GLB through iblbake.scene.gltf (materials, both texture
+    coordinate sets, tangents), the rest through trimesh (geometry and TEXCOORD_0)."""
     path = Path(spec["path"])
     if not path.is_file():
         raise InputError(f"{where}: mesh {path} not found")
-    _refuse_draco(path, where)
+    if path.suffix.lower() in (".gltf", ".glb"):
+        parts = _gltf_parts(path, where)
+    else:
+        parts = _trimesh_parts(path, where)
+    if not parts:
+        raise InputError(f"{where}: mesh {path} has no triangles")
+    vs, fs, ns, uvs, ts, ms = [], [], [], [[], []], [], []
+    base = 0
+    smooth = spec.get("smooth", "auto") != "off"
+    for v, f, n, uv, tan, mat in parts:
+        if f.ndim != 2 or f.shape[1] != 3:
+            raise InputError(f"{where}: mesh {path}: faces are not triangles (shape {f.shape})")
+        bad_idx = (f < 0) | (f >= len(v))
+        if bad_idx.any():
+            k = int(np.argmax(bad_idx.any(axis=1)))
+            raise InputError(f"{where}: mesh {path}: face {k} indexes vertex {int(f[k][bad_idx[k]][0])} "
+                             f"but the mesh has {len(v)} vertices; the file is corrupt")
+        bad = ~np.isfinite(v).all(axis=1)
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise InputError(f"{where}: mesh {path}: vertex {k} is {v[k].tolist()} (not finite; "
+                             f"{int(bad.sum())} such vertices); fix or re-export the mesh")
+        nanrows = lambda w: np.full((len(v), w), np.nan)
+        vs.append(v)
+        fs.append(f.astype(np.int64) + base)
+        ns.append(n if n is not None and smooth else nanrows(3))
+        for k in range(2):
+            uvs[k].append(uv[k] if uv[k] is not None else nanrows(2))
+        ts.append(tan if tan is not None else nanrows(4))
+        ms.append(np.broadcast_to(np.asarray(mat, np.int64), (len(f),)))
+        base += len(v)
+    normals = np.concatenate(ns)
+    return MeshData(np.concatenate(vs), np.concatenate(fs), normals, [np.concatenate(u) for u in uvs],
+                    np.concatenate(ts), np.concatenate(ms), bool(np.isfinite(normals).all(axis=1).any()))
+
+
+def _gltf_parts(path: Path, where: str) -> list:
+    from iblbake.scene import gltf
+
+    try:
+        prims = gltf.read(path, where).primitives()
+    except InputError:
+        raise
+    except MemoryError:
+        raise InputError(f"{where}: mesh {path} claims more data than fits in memory; the file is "
+                         f"corrupt or far too large") from None
+    except (AttributeError, TypeError, KeyError, ValueError, IndexError, OverflowError, RecursionError) as e:
+        text = " ".join(str(e).split())[:120] or type(e).__name__
+        raise InputError(f"{where}: mesh {path} cannot be read ({type(e).__name__}: {text}); check the file "
+                         f"(OBJ, PLY, STL, GLB/glTF)") from None
+    return [(p.positions, p.faces, p.normals, p.texcoords, p.tangents, p.material) for p in prims if len(p.faces)]
+
+
+def _trimesh_parts(path: Path, where: str) -> list:
+    import trimesh
+
     # trimesh logs format warnings itself; ours are one line per problem, so keep it quiet
     logging.getLogger("trimesh").setLevel(logging.CRITICAL)
     try:
-        with warnings.catch_warnings(), np.errstate(all="ignore"):   # NaN vertices are reported below
+        with warnings.catch_warnings(), np.errstate(all="ignore"):   # NaN vertices are reported by load_mesh
             warnings.simplefilter("ignore")
             # not force="mesh": that concatenation drops the normals stored in the file
             loaded = trimesh.load(str(path), process=False)
@@ -84,40 +155,24 @@ def load_mesh(spec: dict, where: str):
         text = " ".join(str(e).split())[:160] or type(e).__name__
         raise InputError(f"{where}: mesh {path} cannot be read ({text}); check the file "
                          f"(OBJ, PLY, STL, GLB/glTF)") from None
-    parts = [p for p in _mesh_parts(loaded) if len(p[0].faces)]
-    if not parts:
-        raise InputError(f"{where}: mesh {path} has no triangles")
-    vs, fs, ns = [], [], []
-    base = 0
-    for g, transform in parts:
+    out = []
+    for g, transform in _mesh_parts(loaded):
+        if not len(g.faces):
+            continue
         v = np.asarray(g.vertices, dtype=np.float64)
-        f = np.asarray(g.faces)
-        if f.ndim != 2 or f.shape[1] != 3:
-            raise InputError(f"{where}: mesh {path}: faces are not triangles (shape {f.shape})")
-        bad_idx = (f < 0) | (f >= len(v))
-        if bad_idx.any():
-            k = int(np.argmax(bad_idx.any(axis=1)))
-            raise InputError(f"{where}: mesh {path}: face {k} indexes vertex {int(f[k][bad_idx[k]][0])} "
-                             f"but the mesh has {len(v)} vertices; the file is corrupt")
         m = transform[:3, :3]
         with np.errstate(all="ignore"):
             v = v @ m.T + transform[:3, 3]
-        bad = ~np.isfinite(v).all(axis=1)
-        if bad.any():
-            k = int(np.argmax(bad))
-            raise InputError(f"{where}: mesh {path}: vertex {k} is {v[k].tolist()} (not finite; "
-                             f"{int(bad.sum())} such vertices); fix or re-export the mesh")
-        n = None
-        if spec.get("smooth", "auto") != "off":
-            n = _vertex_normals(g)
-            if n is not None and abs(np.linalg.det(m)) > 1e-300:
-                n = n @ np.linalg.inv(m)          # normals transform with the inverse transpose
-        vs.append(v)
-        fs.append(f.astype(np.int64) + base)
-        ns.append(n)
-        base += len(v)
-    normals = np.concatenate(ns) if all(n is not None for n in ns) else None
-    return np.concatenate(vs), np.concatenate(fs), normals
+        n = _vertex_normals(g)
+        if n is not None and abs(np.linalg.det(m)) > 1e-300:
+            n = n @ np.linalg.inv(m)                      # normals transform with the inverse transpose
+        uv = getattr(g.visual, "uv", None)
+        if uv is not None and np.shape(uv) == (len(v), 2):
+            uv = np.asarray(uv, np.float64) * [1.0, -1.0] + [0.0, 1.0]   # OpenGL's v up -> glTF's v down
+        else:
+            uv = None
+        out.append((v, np.asarray(g.faces), n, [uv, None], None, -1))
+    return out
 
 
 def _mesh_parts(loaded):
@@ -150,32 +205,30 @@ def _vertex_normals(g):
         return None
 
 
-def _refuse_draco(path: Path, where: str):
-    """Draco-compressed glTF decodes to zeros without the optional DracoPy: say so instead."""
-    if path.suffix.lower() not in (".gltf", ".glb"):
-        return
-    with open(path, "rb") as f:
-        head = f.read(1 << 20)
-    if b"KHR_draco_mesh_compression" in head:
-        raise InputError(f"{where}: mesh {path} uses Draco compression (KHR_draco_mesh_compression), "
-                         f"which iblbake does not decode; export it uncompressed")
-
-
 def transform_matrix(spec: dict):
     scale = spec.get("scale", 1.0)
     s = np.diag(np.broadcast_to(np.asarray(scale, dtype=np.float64), (3,)))
     return _rotation_xyz(spec.get("rotate", [0, 0, 0])) @ s, np.asarray(spec.get("translate", [0, 0, 0]), np.float64)
 
 
-def build_triangles(objects: list, material_index: dict, source: str) -> Triangles:
-    """Every mesh object of the scene as one world-space triangle list."""
+def build_triangles(objects: list, offsets: dict, source: str, file_materials: dict | None = None,
+                    attributes: bool = False) -> Triangles:
+    """Every mesh object of the scene as one world-space triangle list. offsets[object index] is
+    the material record of the object's scene material, or, for an object in file_materials
+    (object index -> how many materials its file has), the first of its file's records (the glTF
+    default material after them, for primitives without one). With `attributes` (a scene whose
+    materials read textures) each corner's texture coordinates and tangent too."""
+    from iblbake.scene import tangents as tangent_space
+
+    file_materials = file_materials or {}
     parts, stats = [], []
     for oid, obj in enumerate(objects):
         if "mesh" not in obj:
             continue
         spec = obj["mesh"]
         where = f"{source}: objects.{oid}.mesh"
-        v, f, vn = load_mesh(spec, where)
+        mesh = load_mesh(spec, where)
+        v, f = mesh.vertices, mesh.faces
         m, t = transform_matrix(spec)
         vw = v @ m.T + t
         tri = vw[f]                                     # (n, 3, 3)
@@ -186,35 +239,46 @@ def build_triangles(objects: list, material_index: dict, source: str) -> Triangl
         keep = np.isfinite(area2) & (area2 > 1e-10 * scale2) & (scale2 > 0)
         face_n = np.zeros_like(cross)
         face_n[keep] = cross[keep] / area2[keep, None]
-        if vn is not None and len(vn) == len(v):
-            # normals transform with the inverse transpose
-            nw = vn @ np.linalg.inv(m)
+        # normals transform with the inverse transpose; rows the file lacks stay NaN
+        with np.errstate(all="ignore"):
+            nw = mesh.normals @ np.linalg.inv(m)
             ln = np.linalg.norm(nw, axis=1, keepdims=True)
-            ok = np.isfinite(nw).all(1, keepdims=True) & (ln > 1e-20)
-            nw = np.where(ok, nw / np.where(ok, ln, 1.0), 0.0)
-            corner = nw[f]                              # (n, 3, 3)
-            # zero-length or creased corners fall back to the face normal; flipped ones follow it
-            d = np.einsum("nkc,nc->nk", corner, face_n)
-            use_face = (np.abs(d) < CREASE_COS)[..., None]
-            corner = np.where(d[..., None] < 0, -corner, corner)
-            corner = np.where(use_face, face_n[:, None, :], corner)
-            smooth = True
-        else:
-            corner = np.repeat(face_n[:, None, :], 3, axis=1)
-            smooth = False
+        ok = np.isfinite(nw).all(1, keepdims=True) & (ln > 1e-20)
+        nw = np.where(ok, nw / np.where(ok, ln, 1.0), 0.0)
+        corner, corner_ok = nw[f], ok[f][..., 0]            # (n, 3, 3), (n, 3)
+        # missing, zero-length or creased corners fall back to the face normal; flipped ones follow it
+        d = np.einsum("nkc,nc->nk", corner, face_n)
+        use_face = ((np.abs(d) < CREASE_COS) | ~corner_ok)[..., None]
+        corner = np.where(d[..., None] < 0, -corner, corner)
+        corner = np.where(use_face, face_n[:, None, :], corner)
+        smooth = mesh.smooth and bool(corner_ok.any())
         n_keep = int(keep.sum())
         if n_keep == 0:
             raise InputError(f"{where}: mesh {spec['path']}: all {len(f)} triangles are degenerate "
                              f"(zero area); nothing to render")
-        parts.append((tri[keep, 0], tri[keep, 1], tri[keep, 2], corner[keep],
-                      np.full(n_keep, material_index[obj["material"]], np.int32), np.full(n_keep, oid, np.int32)))
+        if oid in file_materials:
+            mat = offsets[oid] + np.where(mesh.face_material >= 0, mesh.face_material, file_materials[oid] - 1)
+        else:
+            mat = np.full(len(f), offsets[oid], np.int64)
+        uv = np.concatenate([mesh.uv[0][f], mesh.uv[1][f]], axis=2)          # (n, 3, 4)
+        if attributes:
+            tan = tangent_space.corner_tangents(vw, f, corner, mesh.uv[0], mesh.tangents, m)
+            density = np.stack([tangent_space.uv_density(tri, uv[..., 2 * k:2 * k + 2]) for k in range(2)], axis=1)
+        else:
+            tan, density = np.zeros((len(f), 3, 4)), np.zeros((len(f), 2))
+        parts.append((tri[keep, 0], tri[keep, 1], tri[keep, 2], corner[keep], mat[keep].astype(np.int32),
+                      np.full(n_keep, oid, np.int32), uv[keep], tan[keep], density[keep]))
         stats.append({"object": oid, "path": spec["path"], "triangles": n_keep,
-                      "dropped_degenerate": int(len(f) - n_keep), "smooth_normals": smooth})
+                      "dropped_degenerate": int(len(f) - n_keep), "smooth_normals": smooth,
+                      "texcoords": [bool(np.isfinite(u).all(axis=1).any()) for u in mesh.uv],
+                      "tangents": "file" if np.isfinite(mesh.tangents).all(axis=1).all() else "generated"})
     if not parts:
         z = np.zeros((0, 3))
-        return Triangles(z, z, z, np.zeros((0, 3, 3)), np.zeros(0, np.int32), np.zeros(0, np.int32), stats)
+        return Triangles(z, z, z, np.zeros((0, 3, 3)), np.zeros(0, np.int32), np.zeros(0, np.int32), stats,
+                         np.zeros((0, 3, 4)), np.zeros((0, 3, 4)), np.zeros((0, 2)))
     cols = list(zip(*parts))
-    return Triangles(*(np.concatenate(c) for c in cols), stats=stats)
+    return Triangles(*(np.concatenate(c) for c in cols[:6]), stats=stats, uv=np.concatenate(cols[6]),
+                     tangents=np.concatenate(cols[7]), uv_density=np.concatenate(cols[8]))
 
 
 @dataclass

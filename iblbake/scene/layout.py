@@ -25,12 +25,25 @@ FLOAT4S = {
     # illuminance | shadow mode), (spot axis, the way light travels | radius, or a directional
     # light's angular radius in radians), (spot scale, spot offset, range (0: none), shadow samples)
     "LIGHT": 4,
+    # per corner (u0, v0, u1, v1) of TEXCOORD_0 and _1 (glTF's: v down the image), per corner the
+    # tangent (xyz, w: the bitangent's side), and (0.5 log2 of UV area per world area of each set, -, -)
+    "TRIANGLE_ATTR": 7,
+    # (alpha, alpha cutoff (-1: opaque), normal scale, occlusion strength), (1: single-sided, -, -, -),
+    # then per map kind (MAP_KINDS order) two rows: the UV transform's rows (m00 m01 m02 | texture
+    # index, -1 none) and (m10 m11 m12 | texcoord set)
+    "MATERIAL_MAPS": 12,
 }
+MAP_KINDS = ("base_color", "metallic_roughness", "normal", "occlusion", "emissive")
 # Per-sample G-buffer records, one float4 each: what every pass reads by these names.
 GBUFFER = {
     "gb_pos": "hit position, w: distance along the ray (MISS_T where nothing is hit)",
     "gb_nrm": "shading normal facing the viewer, w: material index",
     "gb_dir": "primary ray direction, w: object index",
+    # with textures (HAS_TEXTURES): the G-buffer pass's surface coordinates, the material pass's output
+    "gb_uv": "TEXCOORD_0 and TEXCOORD_1 at the hit (u0, v0, u1, v1)",
+    "gb_tan": "unit tangent (the direction of increasing u), w: the bitangent's side",
+    "gb_lod": "mip level of the hit's footprint for each set, before the texture's size (x, y)",
+    "gb_mat": "3 per sample: (base colour, metallic), (emissive, roughness), (shading normal, occlusion)",
 }
 MISS_T = -1.0
 
@@ -45,7 +58,8 @@ def header_text() -> str:
             "#ifndef IBLBAKE_LAYOUT_H", "#define IBLBAKE_LAYOUT_H", ""]
     rows += _modes("DIFFUSE", DIFFUSE_MODES) + _modes("SPECULAR", SPECULAR_MODES)
     rows += _modes("BACKGROUND", BACKGROUND_MODES) + _modes("TONEMAP", TONEMAP_IDS)
-    rows += _modes("LIGHT", LIGHT_KINDS) + _modes("SHADOWS", SHADOW_MODES) + [""]
+    rows += _modes("LIGHT", LIGHT_KINDS) + _modes("SHADOWS", SHADOW_MODES)
+    rows += [f"#define MAP_{k.upper()} {i}" for i, k in enumerate(MAP_KINDS)] + [""]
     rows += [f"#define {k}_FLOAT4S {v}" for k, v in FLOAT4S.items()] + [""]
     rows += [f"/* {k}: {v} */" for k, v in GBUFFER.items()]
     rows += [f"#define MISS_T ({MISS_T}f)", "", "#endif", ""]

@@ -183,6 +183,7 @@ class Section:
     required: tuple = ()
     exclusive: tuple = ()        # exactly one of these keys (camera projection, object kind)
     doc: str = ""
+    optional: bool = False       # absent: None (a material's texture), not a section of defaults
 
 
 @dataclass
@@ -238,6 +239,23 @@ CAMERA_COMMON = {
     "up": Vec(**VEC3, default=[0.0, 1.0, 0.0], nonzero=True, doc="up direction"),
 }
 
+def _map_section(doc: str, **extra) -> Section:
+    """A material's texture: an image and how it is read (KHR_texture_transform, a glTF sampler)."""
+    return Section(required=("path",), doc=doc, optional=True, fields={
+        "path": Str(doc="PNG or JPEG (8 or 16 bits, any size); relative to the scene file"),
+        "texcoord": Num(0, 0, 1, integer=True, doc="the mesh's TEXCOORD set (spheres: the panorama mapping "
+                                                   "u = 0.5 - atan2(x, z)/(2 pi), v = acos(y)/pi; planes: across "
+                                                   "their width and depth, 1 per unit if infinite)"),
+        "uv_offset": Vec(n=2, default=[0.0, 0.0], doc="KHR_texture_transform offset"),
+        "uv_scale": Vec(n=2, default=[1.0, 1.0], doc="KHR_texture_transform scale"),
+        "uv_rotation": Num(0.0, doc="KHR_texture_transform rotation, degrees (counter-clockwise in UV)"),
+        "wrap": Enum(("repeat", "clamp", "mirror"), "repeat", doc="outside [0, 1]"),
+        "filter": Enum(("linear", "nearest"), "linear", doc="linear: bilinear and trilinear mipmaps; nearest: "
+                                                           "nearest texel and mip level"),
+        **extra,
+    })
+
+
 # gtao's search, as benchmarks/tune_gtao.py chose it: the lowest AO error against 1024-ray
 # raytraced AO over the two example scenes of that script (README: GTAO)
 GTAO_DEFAULTS = {"slices": 2, "steps": 6, "radius_scale": 2.0, "falloff": 0.6, "power": 1.3, "denoise": 2,
@@ -279,14 +297,30 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                         "panorama and comes back as a directional light of exactly its energy, so it casts shadows"),
         "sun_shadows": Enum(("hard", "soft", "none"), "hard", doc="the extracted sun's shadows"),
     }),
-    "materials": MapOf(doc="named materials", section=Section(doc="a metallic-roughness material", fields={
-        "base_color": Vec(**VEC3, default=[0.8, 0.8, 0.8], lo=0.0, hi=1.0, doc="linear RGB albedo / F0 of metals"),
-        "metallic": Num(0.0, 0.0, 1.0, doc="0 dielectric (F0 = 0.04), 1 metal (F0 = base_color)"),
-        "roughness": Num(0.5, 0.0, 1.0, doc="perceptual roughness r; alpha = r^2"),
-        "emissive": Vec(**VEC3, default=[0.0, 0.0, 0.0], lo=0.0, doc="emitted radiance, linear RGB"),
-    })),
+    "materials": MapOf(doc="named materials (glTF 2.0's metallic-roughness model)", section=Section(
+        doc="a metallic-roughness material", fields={
+            "base_color": Vec(**VEC3, default=[0.8, 0.8, 0.8], lo=0.0, hi=1.0,
+                              doc="linear RGB albedo / F0 of metals (times base_color_map)"),
+            "metallic": Num(0.0, 0.0, 1.0, doc="0 dielectric (F0 = 0.04), 1 metal (F0 = base_color); times the "
+                                               "map's blue"),
+            "roughness": Num(0.5, 0.0, 1.0, doc="perceptual roughness r; alpha = r^2; times the map's green"),
+            "emissive": Vec(**VEC3, default=[0.0, 0.0, 0.0], lo=0.0, doc="emitted radiance, linear RGB (times "
+                                                                         "emissive_map)"),
+            "alpha": Num(1.0, 0.0, 1.0, doc="alpha_mode mask: coverage factor (times the base map's alpha)"),
+            "alpha_mode": Enum(("opaque", "mask"), "opaque", doc="mask: cut out where alpha < alpha_cutoff"),
+            "alpha_cutoff": Num(0.5, 0.0, 1.0, doc="alpha_mode mask: the threshold"),
+            "double_sided": Bool(True, doc="false: surfaces exist only on their front (a sphere's and plane's "
+                                           "normal side, a triangle's counter-clockwise one), as glTF's doubleSided"),
+            "base_color_map": _map_section("base colour texture (sRGB), RGB times base_color, A times alpha"),
+            "metallic_roughness_map": _map_section("metallic (blue) and roughness (green) texture, linear"),
+            "normal_map": _map_section("tangent-space normal texture (glTF's: +y up the image)",
+                                       scale=Num(1.0, doc="the normal's x and y scale")),
+            "occlusion_map": _map_section("ambient occlusion texture (red), on the image-based light only",
+                                          strength=Num(1.0, 0.0, 1.0, doc="1 + strength (red - 1)")),
+            "emissive_map": _map_section("emissive texture (sRGB), times emissive"),
+        })),
     "objects": ListOf(doc="what is in the scene", section=Section(
-        required=("material",), exclusive=("sphere", "plane", "mesh"), doc="one object", fields={
+        exclusive=("sphere", "plane", "mesh"), doc="one object", fields={
             "sphere": Section(required=("radius",), doc="analytic sphere", fields={
                 "center": Vec(**VEC3, default=[0.0, 0.0, 0.0], doc="centre"),
                 "radius": Num(None, 0.0, lo_open=True, doc="radius (> 0)"),
@@ -297,8 +331,9 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                 "size": OneOf((Num(None, 0.0, lo_open=True), Vec(n=2, positive=True)), default=None,
                               doc="side length, or [width, depth]; omitted: infinite"),
             }),
-            "mesh": Section(required=("path",), doc="triangle mesh loaded with trimesh", fields={
-                "path": Str(doc="OBJ, PLY, STL, GLB or glTF; relative to the scene file"),
+            "mesh": Section(required=("path",), doc="triangle mesh: glTF/GLB (with its materials and textures), "
+                                                    "OBJ, PLY, STL (geometry and UVs, through trimesh)", fields={
+                "path": Str(doc="GLB, glTF, OBJ, PLY or STL; relative to the scene file"),
                 "translate": Vec(**VEC3, default=[0.0, 0.0, 0.0], doc="translation"),
                 "rotate": Vec(**VEC3, default=[0.0, 0.0, 0.0], doc="rotation about x, then y, then z, degrees"),
                 "scale": OneOf((Num(None, 0.0, lo_open=True), Vec(n=3, positive=True)), default=1.0,
@@ -306,7 +341,8 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                 "smooth": Enum(("auto", "on", "off"), "auto",
                                doc="shading normals: auto = the file's vertex normals if it has them, else faceted"),
             }),
-            "material": Str(doc="name of a material in `materials`"),
+            "material": Str(doc="name of a material in `materials`; a glTF/GLB mesh without one is shaded "
+                                "with the file's own materials"),
         })),
     "lights": ListOf(doc="analytic lights in the units of glTF's KHR_lights_punctual, added to the IBL and "
                          "shaded with its BRDF", section=Section(
@@ -563,6 +599,9 @@ class _Validator:
             if isinstance(f, Section):
                 if spec.exclusive and k in spec.exclusive and k not in value:
                     continue
+                if f.optional and value.get(k) is None:
+                    out[k] = None
+                    continue
                 out[k] = self.section(f, value.get(k), sub)
             elif isinstance(f, MapOf):
                 m = value.get(k) or {}
@@ -681,13 +720,22 @@ def load(path, overrides=(), outputs=None, values=(), origin: str = "--set") -> 
     cam["projection"] = proj
     # references between sections
     for i, o in enumerate(out["objects"]):
+        if "mesh" in o:
+            o["mesh"]["path"] = str((folder / o["mesh"]["path"]).resolve())
+        if o["material"] is None:
+            if "mesh" in o and Path(o["mesh"]["path"]).suffix.lower() in (".gltf", ".glb"):
+                continue                          # shaded with the file's own materials
+            v.fail(f"objects.{i}", "missing required key 'material' (only a glTF/GLB mesh brings its own)")
         if o["material"] not in out["materials"]:
             near = difflib.get_close_matches(o["material"], list(out["materials"]), 1, 0.6)
             hint = f"did you mean {near[0]!r}?" if near else \
                 f"defined: {', '.join(out['materials']) or 'none'}"
             v.fail(f"objects.{i}.material", f"no material named {o['material']!r} ({hint})")
-        if "mesh" in o:
-            o["mesh"]["path"] = str((folder / o["mesh"]["path"]).resolve())
+    for name, m in out["materials"].items():
+        for key in [k for k in m if k.endswith("_map") and m[k]]:
+            m[key]["path"] = str((folder / m[key]["path"]).resolve())
+            if not Path(m[key]["path"]).is_file():
+                v.fail(f"materials.{name}.{key}.path", f"{m[key]['path']} not found (relative to {folder})")
     for i, lt in enumerate(out["lights"]):
         if "spot" in lt and lt["spot"]["inner_cone_angle"] > lt["spot"]["outer_cone_angle"]:
             v.fail(f"lights.{i}.spot.inner_cone_angle", f"{lt['spot']['inner_cone_angle']:g} is wider than "
@@ -715,6 +763,9 @@ def load(path, overrides=(), outputs=None, values=(), origin: str = "--set") -> 
                 v.fail(f"output.{a}", f"{o[a]}: AOVs are written as .exr")
     # render overwrites its outputs (documented), but never one of its own inputs
     inputs = {str(path.resolve()): "the scene file", str(Path(out["environment"]["path"]).resolve()): "the panorama"}
+    for name, m in out["materials"].items():
+        for key in [k for k in m if k.endswith("_map") and m[k]]:
+            inputs[m[key]["path"]] = f"materials.{name}.{key}"
     for i, obj in enumerate(out["objects"]):
         if "mesh" in obj:
             inputs[str(Path(obj["mesh"]["path"]).resolve())] = f"the mesh of objects.{i}"
@@ -729,10 +780,15 @@ def load(path, overrides=(), outputs=None, values=(), origin: str = "--set") -> 
 
 
 def input_files(sc: Scene) -> list:
-    """Every file rendering the scene reads: the scene itself, its panorama, its meshes."""
+    """Every file rendering the scene reads: the scene itself, its panorama, its meshes (a .gltf's
+    buffers and images beside it too) and textures."""
+    from iblbake.scene.gltf import external_files
+
     d = sc.data
-    return [str(Path(sc.source).resolve()), d["environment"]["path"],
-            *(o["mesh"]["path"] for o in d["objects"] if "mesh" in o)]
+    meshes = [o["mesh"]["path"] for o in d["objects"] if "mesh" in o]
+    maps = [m[k]["path"] for m in d["materials"].values() for k in m if k.endswith("_map") and m[k]]
+    return list(dict.fromkeys([str(Path(sc.source).resolve()), d["environment"]["path"], *meshes,
+                               *(f for p in meshes for f in external_files(p)), *maps]))
 
 
 def replace_strings(value, mapping: dict):
@@ -749,6 +805,7 @@ def with_files(sc: Scene, moved: dict) -> Scene:
     on another machine renders a cell from its own copies of the files (same content)."""
     d = sc.data
     data = {**d, "environment": replace_strings(d["environment"], moved),
+            "materials": replace_strings(d["materials"], moved),
             "objects": [replace_strings(o, moved) for o in d["objects"]]}
     return Scene(data, sc.source, sc.folder, sc.lines)
 

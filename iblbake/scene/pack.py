@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from iblbake.core import sampling
+from iblbake.errors import InputError
 from iblbake.scene.layout import FLOAT4S
 from iblbake.scene import geometry
 from iblbake.scene.load import Scene
@@ -53,6 +54,8 @@ class SceneArrays:
     tris: np.ndarray          # (t, 6, 4) float32, BVH order: v0|material, v1|object, v2, 3 normals
     bvh: np.ndarray           # (nodes, 8) float32
     geometry_report: dict
+    tri_attr: np.ndarray | None = None      # (t, TRIANGLE_ATTR, 4) float32, BVH order (uv, tangents, density)
+    records: list | None = None             # the material table (iblbake.scene.materials)
 
 
 def _int_bits(x):
@@ -60,17 +63,16 @@ def _int_bits(x):
 
 
 def scene_arrays(scene: Scene, meshes=None) -> SceneArrays:
-    """Every record the device reads. `meshes`, the (triangles, BVH nodes, report) of
-    mesh_arrays(), may come from a cache (they are the costly part: a 1.3M-triangle PLY takes
-    seconds to load and split)."""
+    """Every record the device reads but the textures. `meshes`, the (triangles, BVH nodes,
+    report, triangle attributes) of mesh_arrays(), may come from a cache (they are the costly
+    part: a 1.3M-triangle PLY takes seconds to load and split)."""
+    from iblbake.scene import materials
+
     d = scene.data
-    names = list(d["materials"])
-    index = {n: i for i, n in enumerate(names)}
-    mats = np.zeros((max(len(names), 1), FLOAT4S["MATERIAL"], 4), np.float32)
-    for i, n in enumerate(names):
-        m = d["materials"][n]
-        mats[i, 0, :3], mats[i, 0, 3] = m["base_color"], m["metallic"]
-        mats[i, 1, :3], mats[i, 1, 3] = m["emissive"], m["roughness"]
+    records, _offsets = materials.table(scene)
+    names = [r["name"] for r in records]
+    index = {n: i for i, n in enumerate(d["materials"])}
+    mats, _maps = materials.device_arrays(records, {(i, k): 0 for i, r in enumerate(records) for k in r["maps"]})
     spheres, planes = [], []
     for oid, o in enumerate(d["objects"]):
         if "sphere" in o:
@@ -90,18 +92,25 @@ def scene_arrays(scene: Scene, meshes=None) -> SceneArrays:
             a[2, :3], a[2, 3] = t, hw
             a[3, :3], a[3, 3] = b, hd
             planes.append(a)
-    arr, nodes, report = meshes if meshes is not None else mesh_arrays(scene)
+    arr, nodes, report, attr = meshes if meshes is not None else mesh_arrays(scene)
     return SceneArrays(mats, names, np.array(spheres, np.float32).reshape(-1, 2, 4),
-                       np.array(planes, np.float32).reshape(-1, 4, 4), arr, nodes, report)
+                       np.array(planes, np.float32).reshape(-1, 4, 4), arr, nodes, report, attr, records)
 
 
 def mesh_arrays(scene: Scene):
-    """(triangles (t, 6, 4) float32 in BVH order, BVH nodes (n, 8) float32, report) of every mesh
-    object of the scene, in world space."""
-    index = {n: i for i, n in enumerate(scene.data["materials"])}
+    """(triangles (t, 6, 4) float32 in BVH order, BVH nodes (n, 8) float32, report, triangle
+    attributes (t, TRIANGLE_ATTR, 4) float32 in BVH order) of every mesh object of the scene, in
+    world space."""
+    from iblbake.scene import materials
+
     d = scene.data
+    _records, offsets = materials.table(scene)
+    counts = {oid: len(materials.file_materials(o["mesh"]["path"], f"{scene.source}: objects.{oid}.mesh"))
+              for oid, o in enumerate(d["objects"]) if materials.brings_materials(o)}
     t0 = time.perf_counter()
-    tris = geometry.build_triangles(d["objects"], index, scene.source)
+    attributes = needs_attributes(scene)
+    tris = geometry.build_triangles(d["objects"], offsets, scene.source, counts, attributes)
+    check_texcoords(tris, _records, scene)
     load_s = time.perf_counter() - t0
     report = {"meshes": tris.stats, "triangles": len(tris), "load_s": round(load_s, 4)}
     if len(tris):
@@ -115,10 +124,42 @@ def mesh_arrays(scene: Scene):
         arr[:, 3:6, :3] = tris.normals[o]
         nodes = bvh.nodes
         report.update({"bvh_build_s": round(bvh.build_s, 4), "bvh_nodes": bvh.node_count, "bvh_depth": bvh.depth})
+        attr = np.zeros((len(tris) if attributes else 0, FLOAT4S["TRIANGLE_ATTR"], 4), np.float32)
+        if attributes:
+            attr[:, 0:3] = np.nan_to_num(tris.uv[o])
+            attr[:, 3:6] = tris.tangents[o]
+            attr[:, 6, :2] = tris.uv_density[o]
     else:
         arr = np.zeros((0, 6, 4), np.float32)
         nodes = np.zeros((0, 8), np.float32)
-    return arr, nodes, report
+        attr = np.zeros((0, FLOAT4S["TRIANGLE_ATTR"], 4), np.float32)
+    return arr, nodes, report, attr
+
+
+def needs_attributes(scene: Scene) -> bool:
+    """Whether the kernels read the triangles' texture coordinates and tangents (some material
+    in use has a texture or an alpha mask)."""
+    from iblbake.scene import materials
+
+    fx = materials.defines(materials.used(scene))
+    return "HAS_TEXTURES" in fx or "HAS_ALPHA_MASK" in fx
+
+
+def check_texcoords(tris, records, scene) -> None:
+    """A textured material on triangles without the texture coordinates its maps read is an
+    error naming both."""
+    for m in np.unique(tris.material):
+        r = records[m]
+        sets = {ref["texcoord"]: kind for kind, ref in r["maps"].items()}
+        for k, kind in sets.items():
+            sel = tris.material == m
+            bad = ~np.isfinite(tris.uv[sel][..., 2 * k:2 * k + 2]).all(axis=(1, 2))
+            if bad.any():
+                oid = int(tris.object_id[sel][bad][0])
+                path = scene.data["objects"][oid]["mesh"]["path"]
+                raise InputError(f"{scene.source}: objects.{oid}: material {r['name']!r} has a {kind} map "
+                                 f"read through TEXCOORD_{k}, but mesh {path} has no such texture coordinates "
+                                 f"on {int(bad.sum())} of its triangles; give it UVs or another material")
 
 
 def light_records(lights: list) -> np.ndarray:

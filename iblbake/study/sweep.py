@@ -73,6 +73,8 @@ def resolve_key(key: str, data: dict, where: str) -> None:
             node = node.get(part) if isinstance(node, dict) else None
         else:
             raise InputError(f"{where}: {key}: {'.'.join(parts[:i])} is a value, not a section")
+    if isinstance(spec, scene_load.Section) and spec.optional:
+        return                  # a material's map: a step may remove it (null) or give another
     if isinstance(spec, (scene_load.Section, scene_load.MapOf, scene_load.ListOf)):
         inside = ", ".join(spec.fields) if isinstance(spec, scene_load.Section) else "its entries"
         raise InputError(f"{where}: {key}: is a section; sweep one of its values ({inside})")

@@ -210,17 +210,50 @@ def _dask_cell(sc, c, devices, cache_root, resume, files):
     device = devices[int(name) % len(devices)] if name.isdigit() else devices[0]
     w = _worker(device, cache_root)
     moved = {}
+    inputs = Path(worker.local_directory) / "iblbake-inputs"
     for path, (sha, data) in files.items():
-        if os.path.isfile(path) and w["bakes"].file_sha256(path) == sha:
+        if path in moved or (os.path.isfile(path) and w["bakes"].file_sha256(path) == sha):
             continue
-        local = Path(worker.local_directory) / "iblbake-inputs" / f"{sha}{Path(path).suffix}"
-        if not local.is_file():
-            from iblbake.io import atomic
-            local.parent.mkdir(parents=True, exist_ok=True)
-            atomic.write_bytes(local, data)
+        if path.lower().endswith(".gltf"):
+            # a .gltf reads its buffers and images by relative URI: they go beside it, as they were
+            moved.update(_place_gltf(path, sha, data, files, inputs / sha))
+            continue
+        local = inputs / f"{sha}{Path(path).suffix}"
+        _write_once(local, data)
         moved[path] = str(local)
     out = _render(w, scene_load.with_files(sc, moved) if moved else sc, c, resume)
     return {**out, "worker": f"{worker.address} ({w['label']})"}
+
+
+def _write_once(local: Path, data) -> None:
+    if not local.is_file():
+        from iblbake.io import atomic
+        local.parent.mkdir(parents=True, exist_ok=True)
+        atomic.write_bytes(local, data)
+
+
+def _place_gltf(path, sha, data, files, folder: Path) -> dict:
+    """Write a .gltf and the files its URIs name (from `files`, the client's scattered bytes) into
+    `folder` at the same relative places; the moves made."""
+    import json
+    from urllib.parse import unquote
+
+    out = {path: str(folder / Path(path).name)}
+    _write_once(folder / Path(path).name, data)
+    try:
+        doc = json.loads(data)
+        uris = [x.get("uri") for key in ("buffers", "images") for x in doc.get(key, []) if isinstance(x, dict)]
+    except (ValueError, AttributeError, TypeError):
+        return out                                     # the loader reports a broken file
+    for uri in uris:
+        if not isinstance(uri, str) or not uri or uri.startswith("data:"):
+            continue
+        original = str((Path(path).parent / unquote(uri)).resolve())
+        local = (folder / unquote(uri)).resolve()
+        if original in files and folder.resolve() in local.parents:
+            _write_once(local, files[original][1])
+            out[original] = str(local)
+    return out
 
 
 def _suspicious(keys, dask_scheduler=None) -> dict:

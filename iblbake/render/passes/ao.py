@@ -5,7 +5,7 @@ horizon method over the frame's depth buffer, kernels/gtao.cl; twin: twin.gtao, 
 
 from __future__ import annotations
 
-from iblbake.render.passes.base import Pass, geometry_defines
+from iblbake.render.passes.base import Pass, geometry_defines, surface_cuts
 
 
 def occludes_ibl(fx) -> bool:
@@ -27,7 +27,7 @@ class AmbientOcclusion(Pass):
 
     def scene_inputs(self, scene):
         d = scene.data
-        return {"camera": d["camera"], "objects": d["objects"],
+        return {"camera": d["camera"], "objects": d["objects"], "cut": surface_cuts(scene),
                 "ao": {k: d["effects"][k] for k in ("ao", "ao_radius", "ao_samples")},
                 "seed": d["effects"]["reference"]["seed"]}
 

@@ -54,10 +54,24 @@ class Pass:
 
 def geometry_defines(scene: Scene) -> dict:
     """HAS_SPHERES / HAS_PLANES / HAS_TRIANGLES for the primitives the scene has: tracing
-    kernels compile only those intersection loops."""
+    kernels compile only those intersection loops; and the materials' defines, as cut-outs and
+    single-sided surfaces change what a ray meets."""
     kinds = {k for o in scene.data["objects"] for k in ("sphere", "plane", "mesh") if k in o}
-    return {name: 1 for k, name in (("sphere", "HAS_SPHERES"), ("plane", "HAS_PLANES"),
-                                    ("mesh", "HAS_TRIANGLES")) if k in kinds}
+    return {**{name: 1 for k, name in (("sphere", "HAS_SPHERES"), ("plane", "HAS_PLANES"),
+                                       ("mesh", "HAS_TRIANGLES")) if k in kinds}, **material_defines(scene)}
+
+
+def surface_cuts(scene: Scene) -> dict:
+    """What of the scene's materials changes where rays hit: alpha masks and sides."""
+    return {n: {k: m[k] for k in ("alpha", "alpha_mode", "alpha_cutoff", "double_sided", "base_color_map")}
+            for n, m in scene.data["materials"].items()}
+
+
+def material_defines(scene: Scene) -> dict:
+    """HAS_TEXTURES with a HAS_<KIND>_MAP per map kind in use, HAS_ALPHA_MASK, HAS_SINGLE_SIDED
+    (iblbake.scene.materials.defines over the materials some object is shaded with)."""
+    from iblbake.scene import materials
+    return materials.defines(materials.used(scene))
 
 
 def mode_defines(fx: Effects) -> dict:

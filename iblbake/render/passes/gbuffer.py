@@ -2,22 +2,24 @@
 
 from __future__ import annotations
 
-from iblbake.render.passes.base import Pass, geometry_defines
+from iblbake.render.passes.base import Pass, geometry_defines, surface_cuts
 
 
 class GBuffer(Pass):
     name = "gbuffer"
     kernel = "gbuffer.cl"
-    reads = ("cam", "jitter", "spheres", "planes", "bvh", "tris")
-    writes = ("gb_pos", "gb_nrm", "gb_dir")
+    reads = ("cam", "jitter", "spheres", "planes", "bvh", "tris", "tri_attr")
+    writes = ("gb_pos", "gb_nrm", "gb_dir", "gb_uv", "gb_tan", "gb_lod")
 
     def defines(self, scene, fx):
         return geometry_defines(scene)
 
     def scene_inputs(self, scene):
-        # the materials' names only: hits store material indices, values are resolved later
+        # the materials' names only: hits store material indices, values are resolved later; but
+        # what a ray meets depends on cut-outs and sides (alpha masks, single-sided materials)
         d = scene.data
-        return {"camera": d["camera"], "objects": d["objects"], "materials": list(d["materials"])}
+        return {"camera": d["camera"], "objects": d["objects"], "materials": list(d["materials"]),
+                "cut": surface_cuts(scene)}
 
     def run(self, ctx):
         n = ctx.table["n"]

@@ -49,7 +49,7 @@ def _size(lt) -> float:
 class Lights(Pass):
     name = "lights"
     kernel = "lights.cl"
-    reads = ("gb_pos", "gb_nrm", "gb_dir", "materials", "spheres", "planes", "bvh", "tris")
+    reads = ("gb_pos", "gb_nrm", "gb_dir", "materials", "gb_mat", "spheres", "planes", "bvh", "tris")
     writes = ("radiance",)
 
     def runs(self, scene, fx):

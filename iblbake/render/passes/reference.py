@@ -32,7 +32,7 @@ def reference_noise(lum_sum, odd_sum, taken: int) -> float:
 class Reference(Pass):
     name = "reference"
     kernel = "reference.cl"
-    reads = ("gb_pos", "gb_nrm", "gb_dir", "materials", "spheres", "planes", "bvh", "tris")
+    reads = ("gb_pos", "gb_nrm", "gb_dir", "materials", "gb_mat", "spheres", "planes", "bvh", "tris")
     writes = ("radiance",)
 
     def runs(self, scene, fx):

@@ -11,7 +11,7 @@ AOVS = ("normal", "albedo", "depth")
 class Resolve(Pass):
     name = "resolve"
     kernel = "resolve.cl"
-    reads = ("radiance", "gb_pos", "gb_nrm", "materials")
+    reads = ("radiance", "gb_pos", "gb_nrm", "materials", "gb_mat")
     writes = ("hdr", "aov_normal", "aov_albedo", "aov_depth")
 
     def defines(self, scene, fx):

@@ -13,7 +13,7 @@ from iblbake.render.passes.base import Pass, mode_defines
 class Shade(Pass):
     name = "shade"
     kernel = "shade.cl"
-    reads = ("gb_pos", "gb_nrm", "gb_dir", "materials", "ao_buf")
+    reads = ("gb_pos", "gb_nrm", "gb_dir", "materials", "gb_mat", "ao_buf")
     writes = ("radiance",)
 
     def runs(self, scene, fx):
