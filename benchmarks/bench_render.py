@@ -79,13 +79,14 @@ def main():
               "primary Mrays/s | BVH build s |")
         print("|---|---|---|---|---|---|---|---|---|")
     device = None
+    totals = {}                       # per configuration: median of its passes' sum, one-runtime frame, textures
     for name, file, sets in CONFIGS:
         if args.only and args.only != name and (args.json or args.only not in name):
             continue
         if ROOT != SCENES.parents[1]:
             sets = [s for s in sets if not s.startswith(NEWER_KEYS)]
         sc = scene.load(SCENES / file, sets)
-        render.render(sc, device=args.device, cache_root=cache)           # bake + build
+        first = render.render(sc, device=args.device, cache_root=cache)   # bake + build
         ends, passes = [], {}
         for _ in range(args.runs):
             t0 = time.perf_counter()
@@ -114,12 +115,24 @@ def main():
             print(json.dumps({"name": name, "end_s": statistics.median(ends), "light_s": med(light),
                               "lights_s": med("lights"), "gbuffer_s": med("gbuffer")}), flush=True)
             continue
+        totals[name] = {"passes": sum(med(k) for k in passes), "one": statistics.median(reused) if reused else None,
+                        "materials": med("materials"),
+                        "textures": next((b for b in first.report["bakes"] if b["name"] == "textures"), None)}
         one = f"{statistics.median(reused):.3f}" if reused else "-"
         print(f"| {name} | {statistics.median(ends):.3f} | {one} | {med('gbuffer'):.3f} | {med(light):.3f} | "
               f"{med('lights') + med('ao') + med('gtao'):.4f} | {mps:.1f} | "
               f"{n / max(med('gbuffer'), 1e-9) / 1e6:.2f} | {geo.get('bvh_build_s', 0):.3f} |", flush=True)
     if args.json:
         return
+    tex, plain = totals.get("textured mesh, 5 maps"), totals.get("textured mesh, untextured")
+    if tex and plain:
+        t = tex["textures"] or {}
+        print(f"\ntextured / untextured (the same mesh): passes {tex['passes']:.3f} / {plain['passes']:.3f} s = "
+              f"{tex['passes'] / plain['passes']:.2f}x (the materials pass {tex['materials']:.3f} s)"
+              + (f", one runtime {tex['one']:.3f} / {plain['one']:.3f} s = {tex['one'] / plain['one']:.2f}x"
+                 if tex["one"] and plain["one"] else "")
+              + f"; textures: {t.get('textures')} decoded with their mip pyramids in {t.get('decode_and_mips_s')} s "
+                f"(first render), {t.get('device_bytes', 0) / 2**20:.1f} MiB on the device")
     print(f"\ndevice: {device}; median of {args.runs} warm runs; end to end = render() incl. reading the "
           f"panorama, loading cached bakes and the mesh, all passes and read-back")
 

@@ -2,7 +2,8 @@
 any licence): examples/meshes/tiles.glb, a torus of glazed tiles whose glTF material has all five
 maps (base colour, metallic-roughness, normal, occlusion, emissive), and its maps as PNGs under
 examples/textures/ (tiles_*.png) for scene materials, plus roughness_stripes.png (metallic 1,
-roughness 0.05 to 1 across eight stripes) for the roughness-map sphere."""
+roughness 0.02 to 0.8 in six bands down the image, between v = 0.2 and 0.8: the latitudes a
+sphere shows a camera level with it) for the roughness-map sphere."""
 
 import sys
 from pathlib import Path
@@ -68,9 +69,10 @@ torus = trimesh.Trimesh(verts, faces, vertex_normals=ring.reshape(-1, 3),
                         visual=trimesh.visual.TextureVisuals(uv=uv * [1, -1] + [0, 1], material=material), process=False)
 torus.export(meshes / "tiles.glb")
 
-# --- roughness stripes: eight vertical bands, roughness 0.05 .. 1, metallic 1 -----------------------
-stripes = np.linspace(0.05, 1.0, 8)[(np.arange(256) * 8 // 256)]
-sm = np.zeros((64, 256, 3))
-sm[..., 1], sm[..., 2] = stripes[None, :], 1.0
+# --- roughness bands: six down the image (a sphere's latitudes), roughness 0.02 .. 0.8, metallic 1 -----
+v = (np.arange(192) + 0.5) / 192
+bands = np.array([0.02, 0.1, 0.2, 0.35, 0.55, 0.8])[np.clip(((v - 0.2) / 0.6 * 6).astype(int), 0, 5)]
+sm = np.zeros((192, 64, 3))
+sm[..., 1], sm[..., 2] = bands[:, None], 1.0
 Image.fromarray(np.round(sm * 255).astype(np.uint8)).save(textures / "roughness_stripes.png")
 print(f"{meshes / 'tiles.glb'}: {len(faces)} triangles; maps in {textures}")

@@ -106,7 +106,7 @@ __kernel void gbuffer(__constant float4 *cam, const int width, const int height,
     }
 #ifdef HAS_TEXTURES
     float2 density;
-    float4 tw = hit_tangent(h.kind, h.index, p, ns, h.b1, h.b2, &density, SCENE_ARGS);
+    float4 tw = hit_tangent(h.kind, h.index, p, ns, h.b1, h.b2, &density, SCENE_ARGS);     /* the frame: normal maps */
     /* the ray cone's width at the hit (Akenine-Moller et al. 2019): a sample's share of the pixel,
      * spreading with distance for a perspective camera */
     const float pixel = 2.0f * length(cam[3].xyz) / ((float)height * sqrt((float)spp));
@@ -123,7 +123,7 @@ __kernel void gbuffer(__constant float4 *cam, const int width, const int height,
         tw = (float4)(-tw.xyz, -tw.w);
 #endif
     }
-#ifdef HAS_TEXTURES
+#ifdef HAS_NORMAL_MAP
     gb_tan[gid] = tw;
 #endif
     gb_pos[gid] = (float4)(p, h.t);

@@ -31,15 +31,17 @@
 #define MAP_NORMAL 2
 #define MAP_OCCLUSION 3
 #define MAP_EMISSIVE 4
+#define SURFACE_SINGLE_SIDED 1
+#define SURFACE_ALPHA_MASK 2
 
 #define MATERIAL_FLOAT4S 2
 #define SPHERE_FLOAT4S 2
-#define PLANE_FLOAT4S 4
+#define PLANE_FLOAT4S 5
 #define TRIANGLE_FLOAT4S 6
 #define BVH_NODE_FLOAT4S 2
 #define LIGHT_FLOAT4S 4
 #define TRIANGLE_ATTR_FLOAT4S 7
-#define MATERIAL_MAPS_FLOAT4S 12
+#define MATERIAL_MAPS_FLOAT4S 17
 
 /* gb_pos: hit position, w: distance along the ray (MISS_T where nothing is hit) */
 /* gb_nrm: shading normal facing the viewer, w: material index */

@@ -26,14 +26,16 @@ __kernel void materials(__global const float4 *gb_pos, __global const float4 *gb
     const float4 uv = gb_uv[gid];
     const float2 lods = gb_lod[gid].xy;
     __global const float4 *slot;
+    Footprint fp;                        /* shared by the maps of one size, UVs and sampler */
+    int fp_slot = -1;
 #ifdef HAS_BASE_COLOR_MAP
     slot = map_slot(mat_maps, m, MAP_BASE_COLOR);
-    if (map_texture(slot) >= 0) base *= map_sample(TEXTURE_ARGS, slot, uv, lods).xyz;
+    if (map_texture(slot) >= 0) base *= map_sample(TEXTURE_ARGS, slot, uv, lods, &fp_slot, &fp).xyz;
 #endif
 #ifdef HAS_METALLIC_ROUGHNESS_MAP
     slot = map_slot(mat_maps, m, MAP_METALLIC_ROUGHNESS);
     if (map_texture(slot) >= 0) {
-        const float4 mr = map_sample(TEXTURE_ARGS, slot, uv, lods);
+        const float4 mr = map_sample(TEXTURE_ARGS, slot, uv, lods, &fp_slot, &fp);
         metallic *= mr.z;
         roughness *= mr.y;
     }
@@ -42,7 +44,7 @@ __kernel void materials(__global const float4 *gb_pos, __global const float4 *gb
     slot = map_slot(mat_maps, m, MAP_NORMAL);
     if (map_texture(slot) >= 0) {
         const float scale = mat_maps[MATERIAL_MAPS_FLOAT4S * m].z;
-        float3 tn = map_sample(TEXTURE_ARGS, slot, uv, lods).xyz;
+        float3 tn = map_sample(TEXTURE_ARGS, slot, uv, lods, &fp_slot, &fp).xyz;
         tn.xy *= scale;
         const float4 tw = gb_tan[gid];
         const float3 bt = tw.w * cross(nrm, tw.xyz);
@@ -54,11 +56,11 @@ __kernel void materials(__global const float4 *gb_pos, __global const float4 *gb
 #ifdef HAS_OCCLUSION_MAP
     slot = map_slot(mat_maps, m, MAP_OCCLUSION);
     if (map_texture(slot) >= 0)
-        occlusion = 1.0f + mat_maps[MATERIAL_MAPS_FLOAT4S * m].w * (map_sample(TEXTURE_ARGS, slot, uv, lods).x - 1.0f);
+        occlusion = 1.0f + mat_maps[MATERIAL_MAPS_FLOAT4S * m].w * (map_sample(TEXTURE_ARGS, slot, uv, lods, &fp_slot, &fp).x - 1.0f);
 #endif
 #ifdef HAS_EMISSIVE_MAP
     slot = map_slot(mat_maps, m, MAP_EMISSIVE);
-    if (map_texture(slot) >= 0) emissive *= map_sample(TEXTURE_ARGS, slot, uv, lods).xyz;
+    if (map_texture(slot) >= 0) emissive *= map_sample(TEXTURE_ARGS, slot, uv, lods, &fp_slot, &fp).xyz;
 #endif
     gb_mat[3 * gid] = (float4)(base, clamp(metallic, 0.0f, 1.0f));
     gb_mat[3 * gid + 1] = (float4)(emissive, clamp(roughness, 0.0f, 1.0f));

@@ -53,7 +53,7 @@ inline float hit_sphere(float3 o, float3 d, float4 s, float tmin, float tmax)
     return tmax;
 }
 
-/* plane: point.xyz, normal.xyz, tangent.xyz (w: half width), bitangent.xyz (w: half depth) */
+/* plane: point.xyz, normal.xyz, tangent.xyz (w: half width), bitangent.xyz (w: half depth), flags */
 inline float hit_plane(float3 o, float3 d, __global const float4 *pl, float tmin, float tmax)
 {
     const float3 n = pl[1].xyz;
@@ -200,7 +200,15 @@ inline int surface_present(int kind, int index, float3 o, float3 d, float t, flo
 #endif
     return 1;
 }
-#define PRESENT(kind, index, t, b1, b2) surface_present(kind, index, o, d, t, b1, b2, SCENE_ARGS)
+/* only where the primitive's material asks */
+inline int surface_flags(int kind, int index, SCENE_PARAMS)
+{
+    if (kind == 1) return as_int(spheres[SPHERE_FLOAT4S * index + 1].z);
+    if (kind == 2) return as_int(planes[PLANE_FLOAT4S * index + 4].x);
+    return as_int(tris[TRIANGLE_FLOAT4S * index + 2].w);
+}
+#define PRESENT(kind, index, t, b1, b2) \
+    (surface_flags(kind, index, SCENE_ARGS) == 0 || surface_present(kind, index, o, d, t, b1, b2, SCENE_ARGS))
 #else
 #define PRESENT(kind, index, t, b1, b2) 1
 #endif
@@ -221,7 +229,7 @@ inline Hit trace_range(float3 o, float3 d, float tmin, float tmax, int any_hit, 
 #endif
 #ifdef HAS_PLANES
     for (int i = 0; i < nplanes; ++i) {
-        const float t = hit_plane(o, d, planes + 4 * i, tmin, h.t);
+        const float t = hit_plane(o, d, planes + PLANE_FLOAT4S * i, tmin, h.t);
         if (t < h.t && PRESENT(2, i, t, 0.0f, 0.0f)) { h.t = t; h.kind = 2; h.index = i; if (any_hit) return h; }
     }
 #endif

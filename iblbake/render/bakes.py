@@ -181,7 +181,14 @@ class Bakes:
             slots = {(ri, kind): t for ri, kind, t in manifest["slots"]}
             return arrays, slots, {**manifest["report"], "cached": cached, "device_bytes": int(arrays[0].nbytes)}
 
-        return self._get(key, make)
+        (arrays, slots, report), held = self._recall(key, make)
+        return arrays, slots, {**report, "cached": report["cached"] or held}
+
+    def device_textures(self, rt, arrays) -> tuple:
+        """The texture arrays on the device, uploaded once per runtime (a sheet's cells, a study's
+        rungs and a benchmark's frames share them)."""
+        return self._get(("textures-device", id(rt), tuple(id(a) for a in arrays)),
+                         lambda: tuple(rt.to_device(a) for a in arrays))
 
     def _source_sha(self, source) -> str:
         return self.file_sha256(source[1]) + (f":{source[2]}" if source[0] == "gltf" else "")

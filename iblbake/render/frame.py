@@ -250,18 +250,19 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
         slots = {}
         texels, tex_levels, tex_info = (np.zeros((1, 4), np.float32), np.zeros((1, 4), np.int32),
                                         np.zeros((1, 4), np.int32))
-    _mats, mat_maps = scene_materials.device_arrays(records, slots)
+    sizes = {t: (*tex_levels[first, 1:3], bits) for t, (first, _n, bits, _) in enumerate(tex_info)} if slots else {}
+    _mats, mat_maps = scene_materials.device_arrays(records, slots, sizes)
 
     ctx.table.update({
         "cam": rt.to_device(cam4), "width": width, "height": height, "spp": spp,
         "jitter": rt.to_device(pack.pixel_jitter(spp).astype(np.float32)),
         "spheres": rt.to_device(padded(arrays.spheres, (1, 2, 4))), "nspheres": len(arrays.spheres),
-        "planes": rt.to_device(padded(arrays.planes, (1, 4, 4))), "nplanes": len(arrays.planes),
+        "planes": rt.to_device(padded(arrays.planes, (1, FLOAT4S["PLANE"], 4))), "nplanes": len(arrays.planes),
         "bvh": rt.to_device(padded(arrays.bvh, (1, 8))), "tris": rt.to_device(padded(arrays.tris, (1, 6, 4))),
         "ntris": len(arrays.tris), "materials": rt.to_device(arrays.materials.reshape(-1, 4)),
         "tri_attr": rt.to_device(padded(arrays.tri_attr, (1, FLOAT4S["TRIANGLE_ATTR"], 4))),
-        "mat_maps": rt.to_device(mat_maps.reshape(-1, 4)), "texels": rt.to_device(texels),
-        "tex_levels": rt.to_device(tex_levels), "tex_info": rt.to_device(tex_info),
+        "mat_maps": rt.to_device(mat_maps.reshape(-1, 4)),
+        **dict(zip(("texels", "tex_levels", "tex_info"), bakes.device_textures(rt, (texels, tex_levels, tex_info)))),
         "texture_count": len(tex_info) if slots else 0,
         "env_rot": np.array([np.cos(rot), np.sin(rot)], np.float32), "env_scale": env["intensity"],
     })

@@ -208,7 +208,10 @@ def textures(scene, arrays):
         return gltf.read(source[1], where).image(source[2])[0]
 
     ts, slots = materials.load_textures(arrays.records, read, scene.source)
-    return {"set": ts, "slots": slots, "mat_maps": materials.device_arrays(arrays.records, slots)[1].astype(np.float64)}
+    info = ts.arrays()[2]
+    sizes = {t: (*tex.levels[0].shape[1::-1], int(info[t, 2])) for t, tex in enumerate(ts.textures)}
+    return {"set": ts, "slots": slots,
+            "mat_maps": materials.device_arrays(arrays.records, slots, sizes)[1].astype(np.float64)}
 
 
 def _hit_material(kind, index, p, arrays):
@@ -248,7 +251,7 @@ def hit_texcoords(kind, index, p, bary, arrays):
 def _slot(tex, m, kind):
     from iblbake.scene.layout import MAP_KINDS
     k = MAP_KINDS.index(kind)
-    rows = tex["mat_maps"][m, 2 + 2 * k:4 + 2 * k]
+    rows = tex["mat_maps"][m, 2 + 3 * k:4 + 3 * k]
     texture = int(np.asarray(rows[0, 3], np.float32).view(np.int32))
     texcoord = int(np.asarray(rows[1, 3], np.float32).view(np.int32))
     return texture, texcoord, rows[:, :3]

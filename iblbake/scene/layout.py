@@ -17,9 +17,10 @@ SHADOW_MODES = {"none": 0, "hard": 1, "soft": 2}
 # iblbake/scene/pack.py, the kernels index them with these strides.
 FLOAT4S = {
     "MATERIAL": 2,   # (base_color, metallic), (emissive, roughness)
-    "SPHERE": 2,     # (centre, radius), (material, object, -, -)
-    "PLANE": 4,      # (point, material), (normal, object), (tangent, half width), (bitangent, half depth)
-    "TRIANGLE": 6,   # v0|material, v1|object, v2, n0, n1, n2
+    "SPHERE": 2,     # (centre, radius), (material, object, surface flags, -)
+    "PLANE": 5,      # (point, material), (normal, object), (tangent, half width), (bitangent, half depth),
+                     # (surface flags, -, -, -)
+    "TRIANGLE": 6,   # v0|material, v1|object, v2|surface flags, n0, n1, n2
     "BVH_NODE": 2,   # (min, first), (max, count)
     # (position, or the unit direction towards a directional light | kind), (colour x intensity or
     # illuminance | shadow mode), (spot axis, the way light travels | radius, or a directional
@@ -29,11 +30,13 @@ FLOAT4S = {
     # tangent (xyz, w: the bitangent's side), and (0.5 log2 of UV area per world area of each set, -, -)
     "TRIANGLE_ATTR": 7,
     # (alpha, alpha cutoff (-1: opaque), normal scale, occlusion strength), (1: single-sided, -, -, -),
-    # then per map kind (MAP_KINDS order) two rows: the UV transform's rows (m00 m01 m02 | texture
-    # index, -1 none) and (m10 m11 m12 | texcoord set)
-    "MATERIAL_MAPS": 12,
+    # then per map kind (MAP_KINDS order) three rows: the UV transform's rows (m00 m01 m02 | texture
+    # index, -1 none) and (m10 m11 m12 | texcoord set), and (0.5 log2(w h |det M|) of its texture, -, -, -)
+    "MATERIAL_MAPS": 17,
 }
 MAP_KINDS = ("base_color", "metallic_roughness", "normal", "occlusion", "emissive")
+# a sphere's or triangle's material asks for a test at every hit: single-sided, alpha-masked
+SURFACE_FLAGS = {"single_sided": 1, "alpha_mask": 2}
 # Per-sample G-buffer records, one float4 each: what every pass reads by these names.
 GBUFFER = {
     "gb_pos": "hit position, w: distance along the ray (MISS_T where nothing is hit)",
@@ -59,7 +62,8 @@ def header_text() -> str:
     rows += _modes("DIFFUSE", DIFFUSE_MODES) + _modes("SPECULAR", SPECULAR_MODES)
     rows += _modes("BACKGROUND", BACKGROUND_MODES) + _modes("TONEMAP", TONEMAP_IDS)
     rows += _modes("LIGHT", LIGHT_KINDS) + _modes("SHADOWS", SHADOW_MODES)
-    rows += [f"#define MAP_{k.upper()} {i}" for i, k in enumerate(MAP_KINDS)] + [""]
+    rows += [f"#define MAP_{k.upper()} {i}" for i, k in enumerate(MAP_KINDS)]
+    rows += [f"#define SURFACE_{k.upper()} {v}" for k, v in SURFACE_FLAGS.items()] + [""]
     rows += [f"#define {k}_FLOAT4S {v}" for k, v in FLOAT4S.items()] + [""]
     rows += [f"/* {k}: {v} */" for k, v in GBUFFER.items()]
     rows += [f"#define MISS_T ({MISS_T}f)", "", "#endif", ""]

@@ -170,27 +170,46 @@ def load_textures(records, read_file, where: str, max_pixels: int | None = None)
     return ts, slots
 
 
-def device_arrays(records, slots) -> tuple:
-    """(materials (M, 2, 4), mat_maps (M, MATERIAL_MAPS, 4)) float32 for the kernels."""
+def surface_flags(records) -> np.ndarray:
+    """Per record SURFACE_FLAGS (layout.py): what a ray must test where it meets the material."""
+    from iblbake.scene.layout import SURFACE_FLAGS
+
+    return np.array([(0 if r["double_sided"] else SURFACE_FLAGS["single_sided"])
+                     | (SURFACE_FLAGS["alpha_mask"] if r["alpha_mode"] == "mask" else 0) for r in records] or [0],
+                    np.int32)
+
+
+def device_arrays(records, slots, sizes=None) -> tuple:
+    """(materials (M, 2, 4), mat_maps (M, MATERIAL_MAPS, 4)) float32 for the kernels; `sizes`
+    (texture index -> (width, height, sampler bits)) gives each slot's level offset and the first
+    slot of the material whose footprint it shares (the same sizes, sampler, UV set and transform)."""
     from iblbake.scene.layout import FLOAT4S
 
     n = max(len(records), 1)
     mats = np.zeros((n, FLOAT4S["MATERIAL"], 4), np.float32)
     maps = np.zeros((n, FLOAT4S["MATERIAL_MAPS"], 4), np.float32)
     ints = maps.view(np.int32)
-    ints[:, 2::2, 3] = -1                                      # no texture in any slot
+    ints[:, 2::3, 3] = -1                                      # no texture in any slot
     for i, r in enumerate(records):
         mats[i, 0, :3], mats[i, 0, 3] = r["base_color"], r["metallic"]
         mats[i, 1, :3], mats[i, 1, 3] = r["emissive"], r["roughness"]
         maps[i, 0] = [r["alpha"], r["alpha_cutoff"] if r["alpha_mode"] == "mask" else -1.0,
                       r["maps"].get("normal", {}).get("strength", 1.0), r["maps"].get("occlusion", {}).get("strength", 1.0)]
         maps[i, 1, 0] = 0.0 if r["double_sided"] else 1.0
+        shared = {}
         for k, kind in enumerate(textures.MAP_KINDS):
             ref = r["maps"].get(kind)
             if ref is None:
                 continue
             m = np.asarray(ref["transform"], np.float64)
-            maps[i, 2 + 2 * k, :3], maps[i, 3 + 2 * k, :3] = m[0], m[1]
-            ints[i, 2 + 2 * k, 3] = slots[(i, kind)]
-            ints[i, 3 + 2 * k, 3] = ref["texcoord"]
+            t = slots[(i, kind)]
+            maps[i, 2 + 3 * k, :3], maps[i, 3 + 3 * k, :3] = m[0], m[1]
+            ints[i, 2 + 3 * k, 3] = t
+            ints[i, 3 + 3 * k, 3] = ref["texcoord"]
+            ints[i, 4 + 3 * k, 1] = k
+            if sizes is not None:
+                w, h, bits = sizes[t]
+                with np.errstate(divide="ignore"):
+                    maps[i, 4 + 3 * k, 0] = 0.5 * np.log2(w * h * abs(m[0, 0] * m[1, 1] - m[0, 1] * m[1, 0]))
+                ints[i, 4 + 3 * k, 1] = shared.setdefault((w, h, bits, ref["texcoord"], m.tobytes()), k)
     return mats, maps

@@ -50,7 +50,7 @@ class SceneArrays:
     materials: np.ndarray     # (m, 2, 4) float32
     material_names: list
     spheres: np.ndarray       # (s, 2, 4) float32
-    planes: np.ndarray        # (p, 4, 4) float32
+    planes: np.ndarray        # (p, 5, 4) float32
     tris: np.ndarray          # (t, 6, 4) float32, BVH order: v0|material, v1|object, v2, 3 normals
     bvh: np.ndarray           # (nodes, 8) float32
     geometry_report: dict
@@ -73,12 +73,14 @@ def scene_arrays(scene: Scene, meshes=None) -> SceneArrays:
     names = [r["name"] for r in records]
     index = {n: i for i, n in enumerate(d["materials"])}
     mats, _maps = materials.device_arrays(records, {(i, k): 0 for i, r in enumerate(records) for k in r["maps"]})
+    flags = materials.surface_flags(records)
     spheres, planes = [], []
     for oid, o in enumerate(d["objects"]):
         if "sphere" in o:
             s = np.zeros((2, 4), np.float32)
             s[0, :3], s[0, 3] = o["sphere"]["center"], o["sphere"]["radius"]
-            s[1, 0], s[1, 1] = _int_bits(index[o["material"]]), _int_bits(oid)
+            s[1, 0], s[1, 1], s[1, 2] = (_int_bits(index[o["material"]]), _int_bits(oid),
+                                         _int_bits(flags[index[o["material"]]]))
             spheres.append(s)
         elif "plane" in o:
             p = o["plane"]
@@ -86,15 +88,19 @@ def scene_arrays(scene: Scene, meshes=None) -> SceneArrays:
             size = p["size"]
             hw, hd = (math.inf, math.inf) if size is None else \
                 ((size / 2, size / 2) if not isinstance(size, list) else (size[0] / 2, size[1] / 2))
-            a = np.zeros((4, 4), np.float32)
+            a = np.zeros((FLOAT4S["PLANE"], 4), np.float32)
             a[0, :3], a[0, 3] = p["point"], _int_bits(index[o["material"]])
             a[1, :3], a[1, 3] = n, _int_bits(oid)
             a[2, :3], a[2, 3] = t, hw
             a[3, :3], a[3, 3] = b, hd
+            a[4, 0] = _int_bits(flags[index[o["material"]]])
             planes.append(a)
     arr, nodes, report, attr = meshes if meshes is not None else mesh_arrays(scene)
+    if len(arr):                     # the flags of the triangles' materials now (the cache keeps none)
+        arr = arr.copy()
+        arr[:, 2, 3] = _int_bits(flags[arr[:, 0, 3].view(np.int32)])
     return SceneArrays(mats, names, np.array(spheres, np.float32).reshape(-1, 2, 4),
-                       np.array(planes, np.float32).reshape(-1, 4, 4), arr, nodes, report, attr, records)
+                       np.array(planes, np.float32).reshape(-1, FLOAT4S["PLANE"], 4), arr, nodes, report, attr, records)
 
 
 def mesh_arrays(scene: Scene):
