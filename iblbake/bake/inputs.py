@@ -13,26 +13,19 @@ Auto-detection by aspect ratio: 2:1 equirect, 4:3 hcross, 3:4 vcross, 6:1 hstrip
 a .ktx2 file is a KTX2 cube map.
 
 Resampling treats the cube map as the box texels it stores: each equirect texel is the mean of
-the cube map over its solid angle, estimated by n x n jittered strata of directions uniform in
-(phi, cos theta) inside the texel (uniform in solid angle), each reading the cube texel it falls
-in: an unbiased estimate of the texel-overlap weights (exact where the texel lies inside one cube
-texel), not the exact overlaps: a bright cube texel's energy lands within a few percent, studio's
-total within 0.2% at face 128.
+the cube map over its solid angle, by the exact solid angles of its overlaps with the cube
+texels (iblbake/bake/cube_resample.py, in double on the OpenCL device).
 """
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-from iblbake.core import conventions
 from iblbake.errors import InputError
 from iblbake.io import images, ktx2
 
 LAYOUTS = ("auto", "equirect", "hcross", "vcross", "hstrip", "vstrip", "faces", "ktx2")
 FACE_NAMES = ("px", "nx", "py", "ny", "pz", "nz")
-SAMPLES = 4          # per axis, per equirect texel
 # (column, row) of each face in a cross, in face-size units; vcross's -Z is turned 180 degrees
 CROSS = {"hcross": [(2, 1), (0, 1), (1, 0), (1, 2), (1, 1), (3, 1)],
          "vcross": [(2, 1), (0, 1), (1, 0), (1, 2), (1, 1), (1, 3)]}
@@ -73,44 +66,6 @@ def faces_of(image: np.ndarray, layout: str, path: str) -> np.ndarray:
     else:
         out = [image[k * s:(k + 1) * s] for k in range(6)]
     return np.stack(out).astype(np.float32)
-
-
-def cube_to_equirect(faces: np.ndarray, samples: int = SAMPLES) -> np.ndarray:
-    """The equirect panorama (4s x 2s: its texels at the equator as wide as the faces' at their
-    centres) holding each texel's mean of the cube map over its solid angle; float64 twin of
-    kernels/cube_input.cl (the same strata, jittered by the same PCG hash of each sample's index:
-    a regular grid would alias with the cube's texel edges)."""
-    from iblbake.core.sampling import hash_uniform
-
-    s = faces.shape[1]
-    h, w = 2 * s, 4 * s
-    n = samples
-    out = np.empty((h, w, faces.shape[-1]), np.float32)
-    i = np.arange(w)[:, None, None]
-    b, a = np.arange(n)[None, :, None], np.arange(n)[None, None, :]
-    for j in range(h):                      # a row at a time: w n^2 directions in memory
-        k = 2 * ((j * w + i) * n * n + b * n + a)
-        u = (i + (a + hash_uniform(k)) / n) / w
-        y0, y1 = math.cos(math.pi * j / h), math.cos(math.pi * (j + 1) / h)
-        y = np.clip(y0 + (y1 - y0) * (b + hash_uniform(k + 1)) / n, -1.0, 1.0)
-        face, fs, ft = conventions.cube_from_dir(conventions.dir_from_equirect_uv(u, np.arccos(y) / math.pi))
-        col = np.minimum((fs * s).astype(np.int64), s - 1)
-        row = np.minimum((ft * s).astype(np.int64), s - 1)
-        out[j] = faces[face, row, col].reshape(w, n * n, -1).mean(axis=1, dtype=np.float64)
-    return out
-
-
-def cube_to_equirect_cl(rt, faces: np.ndarray, samples: int = SAMPLES) -> np.ndarray:
-    """cube_to_equirect on the OpenCL device (kernels/cube_input.cl)."""
-    s = faces.shape[1]
-    h, w = 2 * s, 4 * s
-    f4 = np.zeros((6, s, s, 4), np.float32)
-    f4[..., :3] = faces[..., :3]
-    out = rt.empty(h * w * 16)
-    k = rt.kernel("cube_input.cl", "cube_to_equirect")
-    rt.run(k, (-(-w // 16) * 16, -(-h // 4) * 4), None, rt.to_device(f4), np.int32(s), np.int32(w), np.int32(h),
-           np.int32(samples), out)
-    return rt.read(out, (h, w, 4))[..., :3].copy()
 
 
 def read_environment(path, *, layout: str = "auto", names: dict | None = None, runtime=None, **policies):
@@ -160,11 +115,30 @@ def files_of(path: str) -> list:
 
 
 def _resampled(faces, info, what: str, runtime=None):
-    eq = cube_to_equirect_cl(runtime, faces) if runtime is not None else cube_to_equirect(faces)
+    from iblbake.bake import cube_resample
+
+    rt = runtime if runtime is not None else _default_runtime()
+    if rt is not None and cube_resample.device_supports(rt):
+        eq = cube_resample.cube_to_equirect_cl(rt, faces)
+    else:
+        if faces.shape[1] > 64:
+            info.warnings.append(f"{info.path}: no OpenCL device with double precision; resampling the "
+                                 f"{faces.shape[1]}x{faces.shape[1]} faces on the host (about "
+                                 f"{faces.shape[1] ** 2 / 6e3:.0f} s)")
+        eq = cube_resample.cube_to_equirect(faces)
     info.warnings.append(f"{info.path}: {what} of {faces.shape[1]}x{faces.shape[1]} faces, resampled to a "
                          f"{eq.shape[1]}x{eq.shape[0]} panorama")
     info.width, info.height = eq.shape[1], eq.shape[0]
     return eq, info
+
+
+def _default_runtime():
+    """The default OpenCL device for a caller that has none (sh's host path), or None."""
+    try:
+        from iblbake.device import runtime as cl
+        return cl.Runtime()
+    except Exception:      # no OpenCL at all: the host twin does it
+        return None
 
 
 def _combined_sha(parts) -> str:
