@@ -112,6 +112,9 @@ class _Edge:
         self.dphi = 0.0 if self.meridian else _azimuth_step(p, q)
         self.integral = 0.0 if self.meridian else _arc_integral(self.n, p, q)
         ys = [p[1], q[1]]
+        if self.meridian:                               # y runs straight between its ends
+            self.bottom, self.top = min(ys), max(ys)
+            return
         top = (-self.n[1] * self.n[0], 1.0 - self.n[1] * self.n[1], -self.n[1] * self.n[2])   # y's projection
         for e in (top, (-top[0], -top[1], -top[2])):                                          # highest, lowest
             if _dot(_cross(p, e), self.n) > 0 and _dot(_cross(e, q), self.n) > 0:
@@ -234,7 +237,7 @@ def overlaps(size: int, width: int, height: int, i: int, north: bool = False):
             j_bottom = min(last, int(math.acos(max(0.0 if north else -1.0, piece.bottom)) * height / math.pi))
             upper = piece.area
             for j in range(j_top, j_bottom + 1):
-                lower = piece.below(ys[j + 1]) if j < height - 1 else 0.0
+                lower = piece.below(ys[j + 1]) if ys[j + 1] > piece.bottom else 0.0
                 if upper != lower:
                     yield face, row, col, j, upper - lower
                 upper = lower
