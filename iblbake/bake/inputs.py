@@ -124,7 +124,7 @@ def _resampled(faces, info, what: str, runtime=None):
         if faces.shape[1] > 64:
             info.warnings.append(f"{info.path}: no OpenCL device with double precision; resampling the "
                                  f"{faces.shape[1]}x{faces.shape[1]} faces on the host (about "
-                                 f"{faces.shape[1] ** 2 / 6e3:.0f} s)")
+                                 f"{faces.shape[1] ** 2 / 4e3:.0f} s)")
         eq = cube_resample.cube_to_equirect(faces)
     info.warnings.append(f"{info.path}: {what} of {faces.shape[1]}x{faces.shape[1]} faces, resampled to a "
                          f"{eq.shape[1]}x{eq.shape[0]} panorama")
