@@ -29,19 +29,9 @@ LUM = np.array([0.2126, 0.7152, 0.0722])
 
 
 def _sphere_t(o, d, sp):
-    """Nearest t > 0 of rays o + t d with sphere record sp (inf where none): the stable quadratic."""
-    c, r = sp[0, :3], sp[0, 3]
-    f = o - c
-    b = -(f * d).sum(-1)
-    perp = f + b[..., None] * d
-    disc = r * r - (perp ** 2).sum(-1)
-    q = b + np.copysign(np.sqrt(np.maximum(disc, 0)), b)
-    cc = (f ** 2).sum(-1) - r * r
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t0 = np.where(q != 0, cc / q, 0.0)
-    lo, hi = np.minimum(t0, q), np.maximum(t0, q)
-    t = np.where(lo > 0, lo, np.where(hi > 0, hi, np.inf))
-    return np.where(disc >= 0, t, np.inf)
+    """Nearest t > 0 of rays o + t d with sphere record sp (inf where none)."""
+    lo, hi = _sphere_roots(o, d, sp)
+    return np.where(lo > 0, lo, np.where(hi > 0, hi, np.inf))
 
 
 def _plane_t(o, d, pl):
