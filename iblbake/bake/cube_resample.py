@@ -27,6 +27,7 @@ Python over the pieces, for tests and for small faces; large faces go through th
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -283,6 +284,7 @@ def cube_to_equirect(faces: np.ndarray, dtype=np.float32) -> np.ndarray:
     return out.astype(dtype)
 
 
+@functools.lru_cache(maxsize=1)
 def symmetries() -> np.ndarray:
     """(16, 6, 2) int32 for the kernel: for the sphere's symmetries that keep the cube and the
     equirect grid (k quarter turns about +y, the mirror x -> -x, the mirror y -> -y, index
@@ -328,4 +330,4 @@ def cube_to_equirect_cl(rt, faces: np.ndarray) -> np.ndarray:
     k = rt.kernel("cube_input.cl", "cube_to_equirect")
     rt.run(k, ((s + 1) // 2,), None, rt.to_device(np.ascontiguousarray(faces[..., :3], np.float32)),
            rt.to_device(symmetries()), np.int32(s), np.int32(w), np.int32(h), scratch, out)
-    return rt.read(out, (h, w, 3))
+    return rt.read_mapped(out, (h, w, 3))

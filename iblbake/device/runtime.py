@@ -376,6 +376,15 @@ class Runtime:
         self._host_arrays.clear()
         return out
 
+    def read_mapped(self, buf, shape, dtype=np.float32):
+        """`buf` as a host array without a copy where the device shares host memory (PoCL's CPU
+        device: no second buffer to fault in and fill); blocking. The array keeps the mapping,
+        and with it the buffer, alive."""
+        out, _ = self.cl.enqueue_map_buffer(self.queue, buf, self.cl.map_flags.READ | self.cl.map_flags.WRITE, 0,
+                                            shape, dtype, is_blocking=True)
+        self._host_arrays.clear()
+        return out
+
     def launch(self, name, function: str, defines: dict | None, global_size, table: dict, **args):
         """Run `function` of kernels/NAME with every parameter bound by name: from `args`, else
         from `table` (the caller's named buffers and values). A name in neither is an error
