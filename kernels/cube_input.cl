@@ -1,11 +1,11 @@
 /* A cube map (faces +X -X +Y -Y +Z -Z of s x s, stacked) resampled to an equirect panorama of
  * w x h by exact texel overlaps: each equirect texel the mean of the cube map's box texels over
- * its solid angle. One work-item per equirect column (a strip between two meridians): every
+ * its solid angle. A work-item takes an equirect column (a strip between two meridians): every
  * cube texel the strip meets is clipped to it (a convex polygon of great-circle arcs, a "piece"),
  * and the piece's solid angle below each parallel that crosses it comes from Green's theorem in
- * the equal-area coordinates (phi, y). The derivation, and the float64 twin this follows line
- * for line, is iblbake/bake/cube_resample.py. In double: the overlaps are differences of O(1)
- * antiderivatives. */
+ * the equal-area coordinates (phi, y); the symmetries below make that column stand for 16. The
+ * derivation, and the float64 twin this follows, is iblbake/bake/cube_resample.py. In double: a
+ * piece's area is a difference of its arcs' integrals, each as large as the strip is wide. */
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 
 #define MAX_POLY 10
