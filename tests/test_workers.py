@@ -186,3 +186,23 @@ def test_unreachable_scheduler_is_one_line(tmp_path, small_panoramas):
     p = run_cli("sheet", scene, "-o", tmp_path / "s.png", "--scheduler", "tcp://127.0.0.1:9")
     assert p.returncode == 1 and len(p.stderr.strip().splitlines()) == 1, p.stderr
     assert "cannot connect" in p.stderr and not (tmp_path / "s.png").exists()
+
+
+def test_a_gltf_goes_to_a_worker_with_the_files_it_names(tmp_path):
+    """A .gltf reads its buffers and images by relative URI: on a worker they are written beside
+    its copy at the same relative places (and only those inside its folder)."""
+    src = tmp_path / "client"
+    (src / "tex").mkdir(parents=True)
+    doc = {"asset": {"version": "2.0"}, "buffers": [{"uri": "m.bin", "byteLength": 4}],
+           "images": [{"uri": "tex/a%20b.png"}, {"uri": "data:image/png;base64,AAAA"}, {"uri": "../outside.png"}]}
+    gltf_path = str(src / "m.gltf")
+    files = {gltf_path: ("s0", json.dumps(doc).encode()), str((src / "m.bin").resolve()): ("s1", b"BIN!"),
+             str((src / "tex" / "a b.png").resolve()): ("s2", b"PNG"),
+             str((tmp_path / "outside.png").resolve()): ("s3", b"OUT")}
+    folder = tmp_path / "worker" / "s0"
+    moved = workers._place_gltf(gltf_path, "s0", files[gltf_path][1], files, folder)
+    assert (folder / "m.gltf").read_bytes() == files[gltf_path][1]
+    assert (folder / "m.bin").read_bytes() == b"BIN!" and (folder / "tex" / "a b.png").read_bytes() == b"PNG"
+    assert not (tmp_path / "worker" / "outside.png").exists()
+    assert moved == {gltf_path: str(folder / "m.gltf"), str((src / "m.bin").resolve()): str((folder / "m.bin").resolve()),
+                     str((src / "tex" / "a b.png").resolve()): str((folder / "tex" / "a b.png").resolve())}

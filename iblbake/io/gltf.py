@@ -31,6 +31,7 @@ import numpy as np
 from iblbake.errors import IblbakeError
 
 EXTENSION = "EXT_lights_image_based"
+GLB_MAGIC, JSON_CHUNK, BIN_CHUNK = 0x46546C67, 0x4E4F534A, 0x004E4942     # "glTF", "JSON", "BIN\0"
 FACES = ("px", "nx", "py", "ny", "pz", "nz")
 RGBD_MAX = 255.0          # Babylon's rgbdMaxRange: the largest value a texel holds
 GAMMA = 2.2               # Babylon's LinearEncodePowerApprox
@@ -62,17 +63,36 @@ def png_bytes(rgba: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
+def split_glb(data: bytes) -> tuple:
+    """(JSON chunk, BIN chunk or None) of a GLB container (data starting with "glTF"); ValueError
+    saying what is wrong with it."""
+    if len(data) < 20:
+        raise ValueError("a GLB shorter than its header")
+    version, length = struct.unpack_from("<II", data, 4)
+    if version != 2 or length > len(data):
+        raise ValueError(f"GLB version {version}, length {length} of {len(data)} bytes")
+    n, kind = struct.unpack_from("<II", data, 12)
+    if kind != JSON_CHUNK or 20 + n > length:
+        raise ValueError("GLB without a JSON chunk first")
+    binary = None
+    pos = 20 + n + (-n % 4)
+    if pos + 8 <= length:
+        bn, bkind = struct.unpack_from("<II", data, pos)
+        if bkind == BIN_CHUNK and pos + 8 + bn <= length:
+            binary = data[pos + 8:pos + 8 + bn]
+    return data[20:20 + n], binary
+
+
 def written_by_iblbake(path) -> bool:
     """Whether `path` is a glTF or GLB file whose asset.generator names iblbake (what export-gltf
     may replace without --force)."""
+    import mmap
+
     try:
-        with open(path, "rb") as f:
-            head = f.read(1 << 20)
-        if head[:4] == b"glTF":
-            n = struct.unpack_from("<I", head, 12)[0]
-            head = head[20:20 + n]
-        return str(json.loads(head)["asset"]["generator"]).startswith("iblbake")
-    except (OSError, ValueError, KeyError, TypeError, struct.error):
+        with open(path, "rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as data:
+            text = split_glb(data)[0] if data[:4] == b"glTF" else data[:]     # a GLB: its JSON chunk only
+        return str(json.loads(text)["asset"]["generator"]).startswith("iblbake")
+    except (OSError, ValueError, KeyError, TypeError):
         return False
 
 
@@ -142,5 +162,5 @@ def glb_bytes(doc: dict, binary: bytes) -> bytes:
     js = json.dumps(doc, separators=(",", ":"), allow_nan=False).encode("utf-8")
     js += b" " * (-len(js) % 4)
     binary += b"\0" * (-len(binary) % 4)
-    chunks = struct.pack("<II", len(js), 0x4E4F534A) + js + struct.pack("<II", len(binary), 0x004E4942) + binary
-    return struct.pack("<III", 0x46546C67, 2, 12 + len(chunks)) + chunks
+    chunks = struct.pack("<II", len(js), JSON_CHUNK) + js + struct.pack("<II", len(binary), BIN_CHUNK) + binary
+    return struct.pack("<III", GLB_MAGIC, 2, 12 + len(chunks)) + chunks

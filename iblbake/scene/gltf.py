@@ -14,7 +14,6 @@ from __future__ import annotations
 import base64
 import json
 import math
-import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import unquote
@@ -22,6 +21,7 @@ from urllib.parse import unquote
 import numpy as np
 
 from iblbake.errors import InputError
+from iblbake.io.gltf import split_glb
 
 COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 NORMALIZE = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0}
@@ -348,20 +348,10 @@ def read(path, where: str) -> Document:
         raise InputError(f"{where}: mesh {path} cannot be read ({e.strerror})") from None
     binary = None
     if data[:4] == b"glTF":
-        if len(data) < 20:
-            _fail(where, path, "a GLB shorter than its header")
-        version, length = struct.unpack_from("<II", data, 4)
-        if version != 2 or length > len(data):
-            _fail(where, path, f"GLB version {version}, length {length} of {len(data)} bytes")
-        n, kind = struct.unpack_from("<II", data, 12)
-        if kind != 0x4E4F534A or 20 + n > length:
-            _fail(where, path, "GLB without a JSON chunk first")
-        text = data[20:20 + n]
-        pos = 20 + n + (-n % 4)
-        if pos + 8 <= length:
-            bn, bkind = struct.unpack_from("<II", data, pos)
-            if bkind == 0x004E4942 and pos + 8 + bn <= length:
-                binary = data[pos + 8:pos + 8 + bn]
+        try:
+            text, binary = split_glb(data)
+        except ValueError as e:
+            _fail(where, path, str(e))
     else:
         text = data
     try:
@@ -376,19 +366,28 @@ def read(path, where: str) -> Document:
     return Document(path, where, doc, binary)
 
 
+def relative_uris(text) -> list:
+    """The files a .gltf document (its JSON text) names by URI, buffers and images, unquoted and
+    relative to it; [] for text that cannot be parsed (the loader reports it)."""
+    try:
+        doc = json.loads(text)
+        uris = [x.get("uri") for key in ("buffers", "images") for x in doc.get(key, []) if isinstance(x, dict)]
+    except (ValueError, AttributeError, TypeError, RecursionError):
+        return []
+    return [unquote(u) for u in uris if isinstance(u, str) and u and not u.startswith("data:")]
+
+
 def external_files(path) -> list:
     """The files a .gltf reads beside itself (buffers and images by relative URI), for depfiles
-    and cache keys; [] for a .glb, or a file that cannot be parsed (the loader reports it)."""
+    and cache keys; [] for a .glb, or a file that cannot be read or parsed (the loader reports it)."""
     path = Path(path)
     if path.suffix.lower() != ".gltf":
         return []
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-        uris = [x.get("uri") for key in ("buffers", "images") for x in doc.get(key, []) if isinstance(x, dict)]
-    except (OSError, ValueError, AttributeError, TypeError, RecursionError):
+        text = path.read_text(encoding="utf-8")
+    except (OSError, ValueError):
         return []
-    return [str((path.parent / unquote(u)).resolve()) for u in uris
-            if isinstance(u, str) and u and not u.startswith("data:")]
+    return [str((path.parent / u).resolve()) for u in relative_uris(text)]
 
 
 def uv_transform(offset, rotation: float, scale) -> np.ndarray:

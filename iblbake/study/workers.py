@@ -235,21 +235,13 @@ def _write_once(local: Path, data) -> None:
 def _place_gltf(path, sha, data, files, folder: Path) -> dict:
     """Write a .gltf and the files its URIs name (from `files`, the client's scattered bytes) into
     `folder` at the same relative places; the moves made."""
-    import json
-    from urllib.parse import unquote
+    from iblbake.scene.gltf import relative_uris
 
     out = {path: str(folder / Path(path).name)}
     _write_once(folder / Path(path).name, data)
-    try:
-        doc = json.loads(data)
-        uris = [x.get("uri") for key in ("buffers", "images") for x in doc.get(key, []) if isinstance(x, dict)]
-    except (ValueError, AttributeError, TypeError):
-        return out                                     # the loader reports a broken file
-    for uri in uris:
-        if not isinstance(uri, str) or not uri or uri.startswith("data:"):
-            continue
-        original = str((Path(path).parent / unquote(uri)).resolve())
-        local = (folder / unquote(uri)).resolve()
+    for uri in relative_uris(data):                    # none for a broken file: the loader reports it
+        original = str((Path(path).parent / uri).resolve())
+        local = (folder / uri).resolve()
         if original in files and folder.resolve() in local.parents:
             _write_once(local, files[original][1])
             out[original] = str(local)
