@@ -167,7 +167,7 @@ class Bakes:
 
         def make():
             def build(tmp: Path):
-                ts, slots = materials.load_textures(records, self._source_bytes, sc.source)
+                ts, slots = materials.load_textures(records, sc.source)
                 for name, a in zip(("texels", "tex_levels", "tex_info"), ts.arrays()):
                     np.save(tmp / f"{name}.npy", a)
                 return {"kind": "textures", "files": [{"name": f"{n}.npy"} for n in ("texels", "tex_levels", "tex_info")],
@@ -192,18 +192,6 @@ class Bakes:
 
     def _source_sha(self, source) -> str:
         return self.file_sha256(source[1]) + (f":{source[2]}" if source[0] == "gltf" else "")
-
-    def _source_bytes(self, source, where: str) -> bytes:
-        """An image's bytes: a scene texture's file, or a glTF file's image (its own file, data URI
-        or buffer view)."""
-        from iblbake.scene import gltf
-
-        if source[0] == "path":
-            try:
-                return Path(source[1]).read_bytes()
-            except OSError as e:
-                raise IblbakeError(f"{where}: texture {source[1]} cannot be read ({e.strerror})") from None
-        return gltf.read(source[1], where).image(source[2])[0]
 
     def chain(self, rt, levels) -> dict:
         """The device tables of a chain of levels (chain_table), uploaded once per runtime."""

@@ -240,6 +240,7 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
         return a if a is not None and len(a) else np.zeros(shape, np.float32)
 
     from iblbake.scene import materials as scene_materials
+    from iblbake.scene import textures as scene_textures
     from iblbake.scene.layout import FLOAT4S
     records = arrays.records
     if any(r["maps"] for r in records):
@@ -250,7 +251,7 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
         slots = {}
         texels, tex_levels, tex_info = (np.zeros((1, 4), np.float32), np.zeros((1, 4), np.int32),
                                         np.zeros((1, 4), np.int32))
-    sizes = {t: (*tex_levels[first, 1:3], bits) for t, (first, _n, bits, _) in enumerate(tex_info)} if slots else {}
+    sizes = scene_textures.sizes(tex_levels, tex_info) if slots else {}
     _mats, mat_maps = scene_materials.device_arrays(records, slots, sizes)
 
     ctx.table.update({

@@ -188,20 +188,12 @@ def primary(cam: dict, arrays, tex=None):
 def textures(scene, arrays):
     """What the kernels read of the scene's textures: {"set": TextureSet, "slots", "mat_maps"},
     decoded and filtered by the same host code the renderer uses."""
-    from pathlib import Path
+    from iblbake.scene import materials, textures as scene_textures
 
-    from iblbake.scene import gltf, materials
-
-    def read(source, where):
-        if source[0] == "path":
-            return Path(source[1]).read_bytes()
-        return gltf.read(source[1], where).image(source[2])[0]
-
-    ts, slots = materials.load_textures(arrays.records, read, scene.source)
-    info = ts.arrays()[2]
-    sizes = {t: (*tex.levels[0].shape[1::-1], int(info[t, 2])) for t, tex in enumerate(ts.textures)}
-    return {"set": ts, "slots": slots,
-            "mat_maps": materials.device_arrays(arrays.records, slots, sizes)[1].astype(np.float64)}
+    ts, slots = materials.load_textures(arrays.records, scene.source)
+    _texels, levels, info = ts.arrays()
+    return {"set": ts, "slots": slots, "mat_maps": materials.device_arrays(
+        arrays.records, slots, scene_textures.sizes(levels, info))[1].astype(np.float64)}
 
 
 def _hit_material(kind, index, p, arrays):
@@ -239,12 +231,14 @@ def hit_texcoords(kind, index, p, bary, arrays):
 
 
 def _slot(tex, m, kind):
+    """(texture, UV set, KHR_texture_transform's 2 x 3 rows, mip level offset) of a material's map
+    slot (kernels/texture.h map_slot, map_uv, map_lod)."""
     from iblbake.scene.layout import MAP_KINDS
     k = MAP_KINDS.index(kind)
-    rows = tex["mat_maps"][m, 2 + 3 * k:4 + 3 * k]
+    rows = tex["mat_maps"][m, 2 + 3 * k:5 + 3 * k]
     texture = int(np.asarray(rows[0, 3], np.float32).view(np.int32))
     texcoord = int(np.asarray(rows[1, 3], np.float32).view(np.int32))
-    return texture, texcoord, rows[:, :3]
+    return texture, texcoord, rows[:2, :3], rows[2, 0]
 
 
 def map_uv(rows, texcoord, uv01):
@@ -264,7 +258,7 @@ def _present(kind, index, o, d, t, bary, arrays, tex):
         ok &= (g * d).sum(1) <= 0
     if mm[0, 1] >= 0:
         alpha = np.full(len(t), mm[0, 0])
-        texture, texcoord, rows = _slot(tex, m, "base_color")
+        texture, texcoord, rows, _lod = _slot(tex, m, "base_color")
         if texture >= 0:
             uv = map_uv(rows, texcoord, hit_texcoords(kind, index, p, bary, arrays))
             alpha = alpha * scene_textures.sample(tex["set"].textures[texture], uv, np.zeros(len(t)))[:, 3]
@@ -334,14 +328,11 @@ def resolve_materials(gb, arrays, tex):
         mm = tex["mat_maps"][mi]
 
         def fetch(kind):
-            texture, texcoord, rows = _slot(tex, mi, kind)
+            texture, texcoord, rows, offset = _slot(tex, mi, kind)
             if texture < 0:
                 return None
-            t = tex["set"].textures[texture]
-            h, w = t.levels[0].shape[:2]
-            det = abs(rows[0, 0] * rows[1, 1] - rows[0, 1] * rows[1, 0])
-            lod = lods[sel, 1 if texcoord == 1 else 0] + 0.5 * np.log2(w * h * det)
-            return scene_textures.sample(t, map_uv(rows, texcoord, uv01[sel]), lod)
+            lod = lods[sel, 1 if texcoord == 1 else 0] + offset
+            return scene_textures.sample(tex["set"].textures[texture], map_uv(rows, texcoord, uv01[sel]), lod)
 
         c = fetch("base_color")
         if c is not None:

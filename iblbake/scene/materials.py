@@ -148,9 +148,22 @@ def texture_key(ref: dict, kind: str) -> tuple:
     return (ref["source"], kind, tuple(ref["wrap"]), ref["mag"], ref["min"])
 
 
-def load_textures(records, read_file, where: str, max_pixels: int | None = None):
-    """(TextureSet, {(record index, kind): texture index}). `read_file(source)` returns an
-    image's bytes (the bake cache reads each once); each distinct texture is decoded once."""
+def read_source(source, where: str) -> bytes:
+    """An image's bytes: a scene texture's file, or a glTF file's image (its own file, data URI
+    or buffer view)."""
+    from iblbake.scene import gltf
+
+    if source[0] == "path":
+        try:
+            return Path(source[1]).read_bytes()
+        except OSError as e:
+            raise InputError(f"{where}: texture {source[1]} cannot be read ({e.strerror})") from None
+    return gltf.read(source[1], where).image(source[2])[0]
+
+
+def load_textures(records, where: str, max_pixels: int | None = None):
+    """(TextureSet, {(record index, kind): texture index}): each distinct texture read and
+    decoded once."""
     import time
 
     t0 = time.perf_counter()
@@ -160,7 +173,7 @@ def load_textures(records, read_file, where: str, max_pixels: int | None = None)
         for kind, ref in r["maps"].items():
             key = texture_key(ref, kind)
             if key not in index:
-                data = read_file(ref["source"], f"{where}: material {r['name']!r}")
+                data = read_source(ref["source"], f"{where}: material {r['name']!r}")
                 img = textures.decode(data, ref["name"], f"{where}: material {r['name']!r}", max_pixels)
                 index[key] = len(ts.textures)
                 ts.textures.append(textures.Texture(ref["name"], kind, textures.pyramid(textures.to_linear(img, kind), kind),

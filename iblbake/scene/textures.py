@@ -175,6 +175,13 @@ class TextureSet:
         return sum(lv.shape[0] * lv.shape[1] for t in self.textures for lv in t.levels)
 
 
+def sizes(tex_levels, tex_info) -> dict:
+    """Texture index -> (width, height, sampler bits) of level 0, from the device arrays (what
+    materials.device_arrays needs to place each map's footprint)."""
+    return {t: (int(tex_levels[first, 1]), int(tex_levels[first, 2]), int(bits))
+            for t, (first, _n, bits, _) in enumerate(tex_info)}
+
+
 # --- sampling: the numpy twin of kernels/texture.h ----------------------------------------------
 
 def _wrap(i, n, mode: str):
