@@ -85,6 +85,7 @@ def packing_error(faces: np.ndarray, packed: np.ndarray, scale: float) -> dict:
     rmse = math.sqrt(float((((yb - y) ** 2) * w)[keep].sum()) / max(float((y * y * w)[keep].sum()), 1e-300))
     return {"clipped_energy": clipped / total, "relative_rmse": rmse}
 
+
 def bake(baker, image, info, root, policies: dict, *, size: int = DEFAULT_SIZE, min_size: int = DEFAULT_MIN_SIZE,
          mapping: str = "babylon", method: str = "auto", warn=None, progress=None) -> dict:
     """The light's parts, each through the bake cache: {"levels": cube levels (6s x s x 3) in
@@ -104,16 +105,9 @@ def bake(baker, image, info, root, policies: dict, *, size: int = DEFAULT_SIZE, 
     t0 = time.perf_counter()
     rm, rcached, chain = mipsbake.bake_radiance(baker, image, info, root, policies, warn=warn)
     entries["radiance"] = {"key": rm["key"], "cached": rcached, "seconds": round(time.perf_counter() - t0, 4)}
-    state = {"chain": chain}
-
-    def chain_levels():
-        if state["chain"] is None:
-            state["chain"] = mipsbake.load_chain(root, rm)
-        return state["chain"]
-
     t0 = time.perf_counter()
-    pm, pcached = mipsbake.bake_prefiltered(baker, chain_levels, info, root, policies, opts, warn=warn,
-                                            progress=progress)
+    pm, pcached = mipsbake.bake_prefiltered(baker, mipsbake.chain_loader(root, rm, chain), info, root, policies,
+                                            opts, warn=warn, progress=progress)
     entries["prefiltered"] = {"key": pm["key"], "cached": pcached, "seconds": round(time.perf_counter() - t0, 4)}
     t0 = time.perf_counter()
     backend = shbake.choose_backend("auto", info.width, info.height, 3)

@@ -285,6 +285,19 @@ def load_chain(root: Path, manifest: dict):
     return [images.read_exr(entry / f["name"])[..., :3] for f in manifest["files"]]
 
 
+def chain_loader(root: Path, manifest: dict, chain=None):
+    """bake_prefiltered's `chain`: the radiance chain bake_radiance gave back (None where it came
+    from the cache), read from the cache on first use only (a cached prefiltered entry needs none)."""
+    state = {"chain": chain}
+
+    def levels():
+        if state["chain"] is None:
+            state["chain"] = load_chain(root, manifest)
+        return state["chain"]
+
+    return levels
+
+
 IRRADIANCE_LMAX = 256      # city at face 32: 1.6e-4 of the peak from the exact sum at worst, 0.07 s
 
 

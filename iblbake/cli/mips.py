@@ -192,13 +192,7 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
             report["radiance"] = {"path": str(root / manifest["key"]), "cached": cached,
                                   "seconds": round(time.perf_counter() - t0, 4), "levels": len(manifest["files"])}
             if "prefiltered" in parts:
-                state = {"chain": chain}
-
-                def chain_levels():
-                    if state["chain"] is None:
-                        state["chain"] = mipsbake.load_chain(root, manifest)
-                    return state["chain"]
-
+                chain_levels = mipsbake.chain_loader(root, manifest, chain)
                 levels_named = [f"level {k} (r = {r:.3g})" for k, r in enumerate(opts["roughness"])]
                 with con.stages(levels_named, label="prefiltering") as step:
                     t0 = time.perf_counter()
