@@ -222,9 +222,11 @@ inline Hit trace_range(float3 o, float3 d, float tmin, float tmax, int any_hit, 
 #ifdef HAS_SPHERES
     for (int i = 0; i < nspheres; ++i) {
         float t = hit_sphere(o, d, spheres[2 * i], tmin, h.t);
-        if (t < h.t && !PRESENT(1, i, t, 0.0f, 0.0f))      /* cut out or a back face: the far side */
+        if (t < h.t && !PRESENT(1, i, t, 0.0f, 0.0f)) {    /* cut out or a back face: the far side */
             t = hit_sphere(o, d, spheres[2 * i], t, h.t);
-        if (t < h.t && PRESENT(1, i, t, 0.0f, 0.0f)) { h.t = t; h.kind = 1; h.index = i; if (any_hit) return h; }
+            if (t < h.t && !PRESENT(1, i, t, 0.0f, 0.0f)) t = h.t;
+        }
+        if (t < h.t) { h.t = t; h.kind = 1; h.index = i; if (any_hit) return h; }
     }
 #endif
 #ifdef HAS_PLANES
