@@ -12,12 +12,13 @@ band y in [y_{j+1}, y_j]. For every cube texel a strip meets:
   y(phi) = -c sgn(n_y) / sqrt(n_y^2 + c^2) with c = n_x sin phi + n_z cos phi, and
   F = atan((n_x d_z - n_z d_x) / n_y) at the circle's point d is an antiderivative of y dphi,
   continuous all round the circle (so the integral of y along an arc is F(q) - F(p), taken as
-  one atan2 of the two, with no square-root cancellation); min(y, Y) differs from y only on the arc's parts above Y, cut
-  where the circle crosses the parallel. A meridian edge contributes nothing (dphi = 0);
+  one atan2 of the two, with no square-root cancellation); min(y, Y) differs from y only on the
+  arc's parts above Y, cut where the circle crosses the parallel. A meridian edge contributes
+  nothing (dphi = 0);
 - a piece holding a pole (a top or bottom face's centre) has it as a vertex, which in (phi, y)
   is the segment y = +-1 across the piece;
 - the piece's share of band j is C(y_j) - C(y_{j+1}), evaluated only at the band edges that cross
-  the piece.
+  the piece;
 - the sphere's symmetries that keep both grids (quarter turns about +y, the mirrors x -> -x
   and y -> -y) make the northern half of one column in 16 (8) stand for the rest.
 Exact up to float64 rounding: a constant stays constant to 1e-13 and every cube texel's energy is

@@ -58,13 +58,14 @@ def _check_overwrite(output: str, force: bool, source: str, fmt: str = "iblbake"
               help="Rotate the panorama about +y by DEG degrees (+x towards -z).")
 @click.option("--intensity", type=float, default=1.0, show_default=True, callback=non_negative,
               help="Scale the panorama's radiance.")
-@click.option("--format", "fmt", type=click.Choice(["iblbake", "filament", "threejs", "gltf", "glsl"]), default="iblbake",
-              show_default=True,
+@click.option("--format", "fmt", type=click.Choice(["iblbake", "filament", "threejs", "gltf", "glsl"]),
+              default="iblbake", show_default=True,
               help="What -o holds (or stdout without -o): iblbake's JSON document; filament: cmgen's sh.txt "
                    "(IndirectLight irradiance, pre-scaled by its basis constants and 1/pi); threejs: a "
                    "LightProbe's SphericalHarmonics3 as JSON (radiance coefficients); gltf: an "
-                   "EXT_lights_image_based light's irradianceCoefficients (as Babylon.js reads them; export-gltf "
-                   "writes the whole light); glsl: a function with the irradiance coefficients. README 'SH for engines' gives each convention.")
+                   "EXT_lights_image_based light's irradianceCoefficients (as Babylon.js reads them; "
+                   "export-gltf writes the whole light); glsl: a function with the irradiance coefficients. "
+                   "README 'SH for engines' gives each convention.")
 @click.option("--glsl", is_flag=True, help="Print a GLSL function with the irradiance coefficients (--format glsl).")
 @click.option("--error/--no-error", "with_error", default=True, show_default=True,
               help="Measure the SH irradiance against the exact irradiance (float64, every texel) at 256 "
