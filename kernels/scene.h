@@ -209,8 +209,10 @@ inline int surface_flags(int kind, int index, SCENE_PARAMS)
 }
 #define PRESENT(kind, index, t, b1, b2) \
     (surface_flags(kind, index, SCENE_ARGS) == 0 || surface_present(kind, index, o, d, t, b1, b2, SCENE_ARGS))
+#define ABSENT(kind, index, t, b1, b2) (!PRESENT(kind, index, t, b1, b2))
 #else
 #define PRESENT(kind, index, t, b1, b2) 1
+#define ABSENT(kind, index, t, b1, b2) 0     /* not !1: clang warns of '&&' with a constant operand */
 #endif
 
 /* The nearest hit in (tmin, tmax), or with any_hit the first one found (a shadow ray needs no
@@ -222,9 +224,9 @@ inline Hit trace_range(float3 o, float3 d, float tmin, float tmax, int any_hit, 
 #ifdef HAS_SPHERES
     for (int i = 0; i < nspheres; ++i) {
         float t = hit_sphere(o, d, spheres[2 * i], tmin, h.t);
-        if (t < h.t && !PRESENT(1, i, t, 0.0f, 0.0f)) {    /* cut out or a back face: the far side */
+        if (t < h.t && ABSENT(1, i, t, 0.0f, 0.0f)) {    /* cut out or a back face: the far side */
             t = hit_sphere(o, d, spheres[2 * i], t, h.t);
-            if (t < h.t && !PRESENT(1, i, t, 0.0f, 0.0f)) t = h.t;
+            if (t < h.t && ABSENT(1, i, t, 0.0f, 0.0f)) t = h.t;
         }
         if (t < h.t) { h.t = t; h.kind = 1; h.index = i; if (any_hit) return h; }
     }
