@@ -106,20 +106,21 @@ def main():
                 render.render(sc, runtime=rt, cache=bakes)
                 reused.append(time.perf_counter() - t0)
         med = lambda k: statistics.median(p["seconds"] for p in passes.get(k, [])) if k in passes else 0.0
-        light = "reference" if "reference" in passes else "shade"
+        # lighting: the reference pass, or shade and the importance pass sampling for it
+        light_s = med("reference") if "reference" in passes else med("importance") + med("shade")
         n = sc["camera"]["resolution"][0] * sc["camera"]["resolution"][1] * sc["camera"]["spp"]
-        samples = {"shade": sc["effects"]["samples"] if sc["effects"]["specular"] == "importance" else 1,
-                   "reference": passes.get("reference", [{}])[0].get("samples_per_pixel", 1)}[light]
-        mps = n * samples / max(med(light), 1e-9) / 1e6
+        samples = passes["reference"][0].get("samples_per_pixel", 1) if "reference" in passes else \
+            sc["effects"]["samples"] if sc["effects"]["specular"] == "importance" else 1
+        mps = n * samples / max(light_s, 1e-9) / 1e6
         if args.json:
-            print(json.dumps({"name": name, "end_s": statistics.median(ends), "light_s": med(light),
+            print(json.dumps({"name": name, "end_s": statistics.median(ends), "light_s": light_s,
                               "lights_s": med("lights"), "gbuffer_s": med("gbuffer")}), flush=True)
             continue
         totals[name] = {"passes": sum(med(k) for k in passes), "one": statistics.median(reused) if reused else None,
                         "materials": med("materials"),
                         "textures": next((b for b in first.report["bakes"] if b["name"] == "textures"), None)}
         one = f"{statistics.median(reused):.3f}" if reused else "-"
-        print(f"| {name} | {statistics.median(ends):.3f} | {one} | {med('gbuffer'):.3f} | {med(light):.3f} | "
+        print(f"| {name} | {statistics.median(ends):.3f} | {one} | {med('gbuffer'):.3f} | {light_s:.3f} | "
               f"{med('lights') + med('ao') + med('gtao'):.4f} | {mps:.1f} | "
               f"{n / max(med('gbuffer'), 1e-9) / 1e6:.2f} | {geo.get('bvh_build_s', 0):.3f} |", flush=True)
     if args.json:

@@ -55,11 +55,17 @@ inline float v_ashikhmin(float nov, float nol)
     return fmin(1.0f / fmax(4.0f * (nol + nov - nol * nov), 1e-30f), 1.0f);   /* clamped as the glTF viewer */
 }
 
+/* Schlick's Fresnel weight c = (1 - VoH)^5: F = f0 + (1 - f0) c */
+inline float schlick_weight(float voh)
+{
+    const float x = 1.0f - clamp(voh, 0.0f, 1.0f);
+    const float x2 = x * x;
+    return x2 * x2 * x;
+}
+
 inline float3 f_schlick(float voh, float3 f0)
 {
-    float x = 1.0f - clamp(voh, 0.0f, 1.0f);
-    float x2 = x * x;
-    return f0 + (1.0f - f0) * (x2 * x2 * x);
+    return f0 + (1.0f - f0) * schlick_weight(voh);
 }
 
 inline float3 f_schlick_roughness(float nov, float3 f0, float roughness)

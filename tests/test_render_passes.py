@@ -157,9 +157,11 @@ def test_every_kernel_parameter_is_bound_by_name():
     table = {"cam", "width", "height", "spp", "jitter", "spheres", "nspheres", "planes", "nplanes", "bvh",
              "tris", "ntris", "materials", "env_rot", "env_scale", "gb_pos", "gb_nrm", "gb_dir", "radiance",
              "hdr", "png_u8", "display", "aov_normal", "aov_albedo", "aov_depth", "n", "npix", "pixel0", "ao_buf",
-             "tri_attr", "mat_maps", "texels", "tex_levels", "tex_info", "gb_uv", "gb_tan", "gb_lod", "gb_mat"}
+             "tri_attr", "mat_maps", "texels", "tex_levels", "tex_info", "gb_uv", "gb_tan", "gb_lod", "gb_mat",
+             "spec_sums"}
     own = {"shade": {"sh_coeffs", "chain", "off", "lw", "lh", "nlev", "hammersley_pts", "nsamples", "mip_bias", "lobe_spread",
                      "dfg", "dfg_size"},
+           "importance": {"chain", "off", "lw", "lh", "nlev", "hammersley_pts", "nsamples", "mip_bias"},
            "background": {"color", "lod", "chain", "off", "lw", "lh", "nlev"},
            "reference": {"img", "w", "h", "marginal", "conditional", "pdf_table", "seed", "first", "batch", "out"},
            "lights": {"lights", "nlights", "light_seed", "exact_samples"},

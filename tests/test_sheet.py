@@ -103,6 +103,25 @@ def test_tonemap_sweep_lights_once_and_roughness_sweep_traces_once(tmp_path, sma
     assert all(c["reused"] == ["gbuffer"] for c in cells[1:]), cells
 
 
+def test_a_metallic_axis_samples_the_panorama_once_per_roughness(tmp_path, small_panoramas):
+    """Importance sampling splits around Fresnel (kernels/shade.cl importance): cells differing only
+    in metallic reuse the two sums, the sheet goes down each metallic column to do so (rendering
+    the importance pass 3 times for 6 cells, not 6), and every cell still equals its own frame."""
+    scene = sheet_scene(tmp_path, small_panoramas["city"], SWEEP)
+    common = ["--cache", tmp_path / "c", "--set", "effects.specular=importance", "--set", "effects.samples=16"]
+    p = run_cli("sheet", scene, "-o", tmp_path / "s.png", "--json", "--frames", tmp_path / "frames", *common)
+    assert p.returncode == 0, p.stderr
+    cells = json.loads(p.stdout)["cells"]
+    sampled = [c for c in cells if "importance" not in c["reused"]]
+    assert [(c["row"], c["column"]) for c in sampled] == [(0, 0), (0, 1), (0, 2)], cells
+    for c in cells:
+        single = tmp_path / f"single_{c['row']}_{c['column']}.png"
+        sets = [a for k, v in c["values"].items() for a in ("--set", f"{k}={v}")]
+        r = run_cli("render", scene, "-o", single, "-q", *common, *sets)
+        assert r.returncode == 0, r.stderr
+        assert np.array_equal(read_png(c["outputs"][0]), read_png(single)), c
+
+
 def test_cli_axis_shorthand():
     assert sweep.parse_cli_axis("effects.samples=1:256:9:log") == {
         "key": "effects.samples", "range": {"start": 1, "stop": 256, "count": 9, "geometric": True}}

@@ -145,6 +145,7 @@ def textured(pl: Plan) -> bool:
 
 
 TEXTURED_SAMPLE_BYTES = 3 * 16 + 3 * 16   # gb_uv, gb_tan, gb_lod; gb_mat
+IMPORTANCE_SAMPLE_BYTES = 2 * 16          # spec_sums: the importance pass's two sums
 
 
 def has_ao(pl: Plan) -> bool:
@@ -159,7 +160,8 @@ def tile_rows(rt, scene: Scene, pl: Plan, device_budget: int | None = None) -> i
     w, h = scene.data["camera"]["resolution"]
     spp = scene.data["camera"]["spp"]
     per_sample = SAMPLE_BYTES + (REFERENCE_SAMPLE_BYTES if "reference" in pl.pass_names else 0) + \
-        (4 if has_ao(pl) else 0) + (TEXTURED_SAMPLE_BYTES if textured(pl) else 0)
+        (4 if has_ao(pl) else 0) + (TEXTURED_SAMPLE_BYTES if textured(pl) else 0) + \
+        (IMPORTANCE_SAMPLE_BYTES if "importance" in pl.pass_names else 0)
     row = w * (spp * per_sample + PIXEL_BYTES + (4 + 48 if "gtao" in pl.pass_names else 0))
     largest_row_buffer = w * spp * 16               # one per-sample buffer of one row
     dev = rt.info.device
@@ -301,6 +303,7 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
                  "gb_uv": n * 16 if tex else 16, "gb_tan": n * 16 if tex else 16, "gb_lod": n * 16 if tex else 16,
                  "gb_mat": n * 48 if tex else 48,
                  "ao_buf": n * 4 if has_ao(pl) else 16,
+                 "spec_sums": n * IMPORTANCE_SAMPLE_BYTES if "importance" in pl.pass_names else 16,
                  "hdr": npix * 16, "png_u8": npix * 4, "display": npix * 16,
                  "aov_normal": npix * 16 if aov else 16, "aov_albedo": npix * 16 if aov else 16,
                  "aov_depth": npix * 4 if aov else 16}
@@ -318,8 +321,8 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
             extra = p.run(ctx)
             rep.run(p.name, time.perf_counter() - t0, **extra)
     if reuse is not None:
-        buffers = ("gb_pos", "gb_nrm", "gb_dir", "gb_uv", "gb_tan", "gb_lod", "gb_mat", "radiance", "ao_buf", "hdr",
-                   "png_u8", "display", "aov_normal", "aov_albedo", "aov_depth", "npix")
+        buffers = ("gb_pos", "gb_nrm", "gb_dir", "gb_uv", "gb_tan", "gb_lod", "gb_mat", "radiance", "ao_buf",
+                   "spec_sums", "hdr", "png_u8", "display", "aov_normal", "aov_albedo", "aov_depth", "npix")
         reuse.state = None if len(row0s) > 1 else {
             "runtime": rt, "shape": (width, height, spp), "keys": keys,
             "buffers": {b: ctx.table[b] for b in buffers}, "hdr": ctx.frame_hdr, "aovs": ctx.frame_aovs,

@@ -143,10 +143,9 @@ def render_cells(scenes, cells, *, runtime, bakes, warn=None, progress=None, kee
     from iblbake import render
 
     reuse = render.Reuse()
-    results = []
     kind = runtime.info.kind if runtime is not None else None
     if assemble:
-        missing = []
+        results, missing = [], []
         for sc, c in zip(scenes, cells):
             r = CellResult(c)
             if isinstance(sc, Exception):
@@ -162,14 +161,42 @@ def render_cells(scenes, cells, *, runtime, bakes, warn=None, progress=None, kee
                                f"{' ...' if len(missing) > 6 else ''}; run their shards first")
         return results
     mine = shard_cells(scenes, bakes, shard) if shard else range(len(cells))
-    for index, (sc, c) in enumerate(zip(scenes, cells)):
-        if index not in mine:
-            results.append(None)
-            continue
-        results.append(render_cell(sc, c, runtime, bakes, reuse, warn, keep_going, resume, kind))
+    results = [None] * len(cells)
+    for index in reuse_order(scenes, cells, mine):
+        results[index] = render_cell(scenes[index], cells[index], runtime, bakes, reuse, warn, keep_going, resume,
+                                     kind)
         if progress:
             progress()
     return results
+
+
+def reuse_order(scenes, cells, indices) -> list:
+    """The order to render the cells in: row by row or column by column, whichever runs fewer
+    passes (a cell reuses each pass whose inputs did not change since the cell before: in a
+    metallic x roughness sheet, going down a metallic column samples the panorama once per
+    roughness instead of once per cell); row by row on a tie. Where the cells go does not change."""
+    from iblbake.render.frame import pass_keys
+    from iblbake.render.plan import plan
+
+    keys = {}
+    for i in indices:
+        if not isinstance(scenes[i], Exception):
+            try:
+                keys[i] = pass_keys(plan(scenes[i]), scenes[i])
+            except (IblbakeError, ValueError):     # the cell fails when rendered, with its name
+                pass
+
+    def passes_run(order):
+        total, before = 0, None
+        for i in order:
+            k = keys.get(i)
+            total += sum(1 for name, v in (k or {}).items() if before is None or before.get(name) != v)
+            before = k
+        return total
+
+    by_rows = sorted(indices, key=lambda i: (cells[i].row, cells[i].column))
+    by_columns = sorted(indices, key=lambda i: (cells[i].column, cells[i].row))
+    return by_columns if passes_run(by_columns) < passes_run(by_rows) else by_rows
 
 
 def render_cell(sc, c, runtime, bakes, reuse, warn, keep_going, resume, kind):

@@ -4,6 +4,7 @@ asks every one whether the scene calls for it (iblbake/render/passes/base.py: th
 from iblbake.render.passes.ao import AmbientOcclusion, GroundTruthAO
 from iblbake.render.passes.background import Background
 from iblbake.render.passes.gbuffer import GBuffer
+from iblbake.render.passes.importance import Importance
 from iblbake.render.passes.lights import Lights
 from iblbake.render.passes.material import Materials
 from iblbake.render.passes.reference import Reference
@@ -11,4 +12,4 @@ from iblbake.render.passes.resolve import Resolve
 from iblbake.render.passes.shade import Shade
 from iblbake.render.passes.tonemap import Tonemap
 
-PASSES = (GBuffer(), Materials(), AmbientOcclusion(), GroundTruthAO(), Shade(), Reference(), Lights(), Background(), Resolve(), Tonemap())
+PASSES = (GBuffer(), Materials(), AmbientOcclusion(), GroundTruthAO(), Importance(), Shade(), Reference(), Lights(), Background(), Resolve(), Tonemap())

@@ -1,5 +1,6 @@
-"""Shade: the approximate lighting terms (SH diffuse, importance, prefiltered or lobe specular,
-emission), added into `radiance` (kernels/shade.cl; twin: iblbake/render/twin.py shade)."""
+"""Shade: the approximate lighting terms (SH diffuse; importance specular from the importance
+pass's sums, prefiltered or lobe specular; emission), added into `radiance` (kernels/shade.cl;
+twin: iblbake/render/twin.py shade)."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from iblbake.render.passes.base import Pass, mode_defines
 class Shade(Pass):
     name = "shade"
     kernel = "shade.cl"
-    reads = ("gb_pos", "gb_nrm", "gb_dir", "materials", "gb_mat", "ao_buf")
+    reads = ("gb_pos", "gb_nrm", "gb_dir", "materials", "gb_mat", "ao_buf", "spec_sums")
     writes = ("radiance",)
 
     def runs(self, scene, fx):
@@ -21,19 +22,13 @@ class Shade(Pass):
 
     def reads_bakes(self, scene, fx):
         return (["sh"] if fx.diffuse == "sh" else []) + \
-            {"importance": ["radiance"], "prefiltered": ["prefiltered", "dfg"],
-             "lobe": ["prefiltered", "dfg"]}.get(fx.specular, [])
+            {"prefiltered": ["prefiltered", "dfg"], "lobe": ["prefiltered", "dfg"]}.get(fx.specular, [])
 
     def defines(self, scene, fx):
         e = scene.data["effects"]
         d = mode_defines(fx)          # shade.cl computes only the sh, importance, prefiltered terms
         if fx.diffuse == "sh":
             d["SH_BANDS"] = e["sh_bands"]
-        if fx.specular == "importance":
-            if e["force_mip0"]:
-                d["FORCE_MIP0"] = 1
-            if e["normalize"] == "accepted":
-                d["IMPORTANCE_ACCEPTED"] = 1
         if fx.specular == "prefiltered" and e["prefilter"]["dominant_direction"]:
             d["DOMINANT_DIRECTION"] = 1
         if fx.emissive:
@@ -49,15 +44,11 @@ class Shade(Pass):
         e, fx, b = ctx.scene.data["effects"], ctx.plan.effects, ctx.loaded
         args = {"sh_coeffs": ctx.rt.to_device(np.pad(b["sh"], ((0, 0), (0, 1))).astype(np.float32)
                                               if "sh" in b else np.zeros((1, 4), np.float32))}
-        chain = {"importance": b.get("radiance"), "prefiltered": b.get("prefiltered"),
-                 "lobe": b.get("prefiltered")}.get(fx.specular)
+        chain = b.get("prefiltered") if fx.specular in ("prefiltered", "lobe") else None
         args.update(ctx.chain(chain) if chain is not None else ctx.no_chain())
-        nsamp = {"importance": e["samples"], "lobe": e["lobe"]["samples"]}.get(fx.specular, 1)
+        nsamp = e["lobe"]["samples"] if fx.specular == "lobe" else 1
         ham = np.zeros((nsamp, 4), np.float32)
-        if fx.specular == "importance":       # (cos phi, sin phi, u1): sample_ggx_half_cs
-            pts = sampling.hammersley(nsamp)
-            ham[:, 0], ham[:, 1], ham[:, 2] = np.cos(2 * np.pi * pts[:, 0]), np.sin(2 * np.pi * pts[:, 0]), pts[:, 1]
-        elif fx.specular == "lobe":           # (u1, u2): sample_ggx_vndf
+        if fx.specular == "lobe":             # (u1, u2): sample_ggx_vndf
             ham[:, :2] = sampling.lobe_points(nsamp)
         dfg = b["dfg"].astype(np.float32) if "dfg" in b else np.zeros((2, 2, 2), np.float32)
         args.update(hammersley_pts=ctx.rt.to_device(ham), nsamples=nsamp, mip_bias=e["mip_bias"], lobe_spread=e["lobe"]["spread"],
@@ -67,5 +58,5 @@ class Shade(Pass):
     def run(self, ctx):
         n, args = ctx.table["n"], ctx.args[self.name]
         s = self.launch_samples(ctx)
-        extra = {"samples": args["nsamples"]} if ctx.plan.effects.specular in ("importance", "lobe") else {}
+        extra = {"samples": args["nsamples"]} if ctx.plan.effects.specular == "lobe" else {}
         return {"mpixel_samples_per_s": round(n * args["nsamples"] / max(s, 1e-9) / 1e6, 2), **extra}
