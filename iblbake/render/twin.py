@@ -405,8 +405,10 @@ def diffuse_weight(base, metallic, rough, f0, nov):
 
 def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, prefiltered=None, dfg=None,
           ao=None):
-    """Per-sample radiance of the `shade` pass (hits only; misses are 0); `ao` the ambient
-    occlusion of every sample (ambient_occlusion) where effects.ao is on."""
+    """Per-sample radiance of the `shade` pass, with the `importance` pass's sums for it (hits
+    only; misses are 0); `ao` the ambient occlusion of every sample (ambient_occlusion) where
+    effects.ao is on. The importance estimate is summed with Fresnel inside, which the kernels
+    split around f0: the same sum, to float rounding."""
     hit = gb["hit"]
     out = np.zeros((len(hit), 3))
     v, n, nov, (base, metallic, emissive, rough, f0) = surface(gb, arrays)
