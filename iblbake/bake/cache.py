@@ -5,8 +5,10 @@
   crash or kill midway never leaves an entry a later run accepts.
 - A per-key file lock (filelock) serialises concurrent builders (make -j): the loser waits, then
   finds the finished entry and reuses it.
-- On reuse every file's sha256 is checked against the manifest; a mismatch is a warning and a
-  rebuild.
+- On reuse every file is checked against the manifest: its size and modification time as the
+  build left them, else (a copied, touched or rewritten entry) its sha256, as git's index does; a
+  mismatch is a warning and a rebuild. (Hashing a render's 33 MB prefiltered chain took 35 ms of
+  every warm render.)
 """
 
 from __future__ import annotations
@@ -63,7 +65,7 @@ def verify(entry: Path, warn: Callable[[str], None] | None = None) -> dict | Non
         manifest = json.loads(mpath.read_text())
         for f in manifest["files"]:
             p = entry / f["name"]
-            if not p.is_file() or file_sha256(p) != f["sha256"]:
+            if not p.is_file() or (_stat(p) != (f.get("bytes"), f.get("mtime_ns")) and file_sha256(p) != f["sha256"]):
                 if warn:
                     warn(f"cache file {p} does not match its manifest hash; rebuilding {entry.name}")
                 return None
@@ -72,6 +74,11 @@ def verify(entry: Path, warn: Callable[[str], None] | None = None) -> dict | Non
             warn(f"cache manifest {mpath} is unreadable; rebuilding {entry.name}")
         return None
     return manifest
+
+
+def _stat(path: Path) -> tuple:
+    st = path.stat()
+    return st.st_size, st.st_mtime_ns
 
 
 def _remove(path: Path):
@@ -111,6 +118,7 @@ def get_or_build(root: Path, key: str, build: Callable[[Path], dict], *,
                 body = build(tmp)
                 for f in body["files"]:
                     f["sha256"] = file_sha256(tmp / f["name"])
+                    f["bytes"], f["mtime_ns"] = _stat(tmp / f["name"])
                 body["key"] = key
                 write_json(tmp / MANIFEST, body)
                 _remove(entry)
