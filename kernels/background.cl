@@ -11,7 +11,7 @@
 
 __kernel void background(__global const float4 *gb_pos, __global const float4 *gb_dir, const int n,
                          const float2 env_rot, const float env_scale, const float4 color,
-                         __global const float4 *chain, __constant int *off, __constant int *lw,
+                         __global const float *chain, __constant int *off, __constant int *lw,
                          __constant int *lh, const int nlev, const float lod, __global float4 *radiance)
 {
     const int gid = get_global_id(0);

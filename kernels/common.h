@@ -51,8 +51,8 @@ inline float equirect_row_solid_angle(int j, int width, int height)
     return (4.0f * IBL_PI / (float)width) * sin(IBL_PI * c / (float)height) * sin(0.5f * IBL_PI / (float)height);
 }
 
-/* Bilinear lookup in an RGBA float image: wraps in u, clamps in v. */
-inline float3 bilinear_equirect(__global const float4 *img, int width, int height, float2 uv)
+/* Bilinear lookup in an RGB float image (3 floats a texel): wraps in u, clamps in v. */
+inline float3 bilinear_equirect(__global const float *img, int width, int height, float2 uv)
 {
     float x = uv.x * (float)width - 0.5f;
     float y = clamp(uv.y * (float)height - 0.5f, 0.0f, (float)(height - 1));
@@ -61,9 +61,9 @@ inline float3 bilinear_equirect(__global const float4 *img, int width, int heigh
     int x0 = (int)fx0 % width; if (x0 < 0) x0 += width;
     int x1 = x0 + 1; if (x1 == width) x1 = 0;
     int y0 = min((int)fy0, height - 1), y1 = min(y0 + 1, height - 1);
-    float4 a = mix(img[y0 * width + x0], img[y0 * width + x1], fx);
-    float4 b = mix(img[y1 * width + x0], img[y1 * width + x1], fx);
-    return mix(a, b, fy).xyz;
+    float3 a = mix(vload3(y0 * width + x0, img), vload3(y0 * width + x1, img), fx);
+    float3 b = mix(vload3(y1 * width + x0, img), vload3(y1 * width + x1, img), fx);
+    return mix(a, b, fy);
 }
 
 /* Face coordinates s, t in [0, 1] (t = 0 the top row) of face 0..5 -> unit direction. */

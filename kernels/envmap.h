@@ -1,5 +1,6 @@
-/* Lookups in a chain of equirect levels stored back to back in one buffer (the radiance chain,
- * the prefiltered chain). Mirrors iblbake/bake/radiance.py: chain_lookup_twin. */
+/* Lookups in a chain of equirect levels stored back to back in one buffer of RGB floats (the
+ * radiance chain, the prefiltered chain; off[] counts texels). Mirrors iblbake/bake/radiance.py:
+ * chain_lookup_twin. */
 #ifndef IBLBAKE_ENVMAP_H
 #define IBLBAKE_ENVMAP_H
 #include "common.h"
@@ -14,7 +15,7 @@ inline float texel_solid_angle(float3 l, int w0, int h0)
     return (2.0f * IBL_PI / w0) * (IBL_PI / h0) * st;
 }
 
-inline float3 chain_lookup(__global const float4 *chain, __constant int *off, __constant int *lw,
+inline float3 chain_lookup(__global const float *chain, __constant int *off, __constant int *lw,
                            __constant int *lh, const int nlev, float3 d, float lod)
 {
     const float2 uv = equirect_uv_from_dir(d);
@@ -23,9 +24,9 @@ inline float3 chain_lookup(__global const float4 *chain, __constant int *off, __
     const int l0 = (int)lod;
     const int l1 = min(l0 + 1, nlev - 1);
     const float f = lod - (float)l0;
-    float3 a = bilinear_equirect(chain + off[l0], lw[l0], lh[l0], uv);
+    float3 a = bilinear_equirect(chain + 3 * (size_t)off[l0], lw[l0], lh[l0], uv);
     if (f <= 0.0f) return a;
-    return mix(a, bilinear_equirect(chain + off[l1], lw[l1], lh[l1], uv), f);
+    return mix(a, bilinear_equirect(chain + 3 * (size_t)off[l1], lw[l1], lh[l1], uv), f);
 }
 
 #endif

@@ -15,16 +15,16 @@
 
 /* Parent texel (i, j) of a dw x dh level = the mean of the child texels it covers, each weighted
  * by the solid angle of the overlap (azimuth overlap x (cos a - cos b)); exact for any sizes. */
-__kernel void downsample(__global float4 *chain, const int src_off, const int sw, const int sh,
+__kernel void downsample(__global float *chain, const int src_off, const int sw, const int sh,
                          const int dst_off, const int dw, const int dh)
 {
-    __global const float4 *src = chain + src_off;
-    __global float4 *dst = chain + dst_off;
+    __global const float *src = chain + 3 * (size_t)src_off;
+    __global float *dst = chain + 3 * (size_t)dst_off;
     const int i = get_global_id(0), j = get_global_id(1);
     if (i >= dw || j >= dh) return;
     const float ua = (float)i * sw / dw, ub = (float)(i + 1) * sw / dw;
     const float va = (float)j * sh / dh, vb = (float)(j + 1) * sh / dh;
-    float4 acc = (float4)(0.0f);
+    float3 acc = (float3)(0.0f);
     float wsum = 0.0f;
     for (int cj = (int)floor(va); cj < (int)ceil(vb) && cj < sh; ++cj) {
         const float lo = fmax(va, (float)cj), hi = fmin(vb, (float)(cj + 1));
@@ -35,11 +35,11 @@ __kernel void downsample(__global float4 *chain, const int src_off, const int sw
         for (int ci = (int)floor(ua); ci < (int)ceil(ub) && ci < sw; ++ci) {
             const float wu = fmin(ub, (float)(ci + 1)) - fmax(ua, (float)ci);
             if (wu <= 0.0f) continue;
-            acc += (wt * wu) * src[cj * sw + ci];
+            acc += (wt * wu) * vload3(cj * sw + ci, src);
             wsum += wt * wu;
         }
     }
-    dst[j * dw + i] = acc / wsum;
+    vstore3(acc / wsum, j * dw + i, dst);
 }
 
 inline float3 output_dir(int idx, int size)
@@ -64,7 +64,7 @@ inline float3 output_dir(int idx, int size)
  * polar row's centre (equirect texels shrink towards the poles). A continuous density, not the
  * row-exact value: a level choice that jumps at row boundaries made float32 and float64 disagree.
  * The estimate is sum L(l) NoL / sum NoL (Karis 2013). */
-__kernel void prefilter(__global const float4 *chain, __constant int *off, __constant int *lw,
+__kernel void prefilter(__global const float *chain, __constant int *off, __constant int *lw,
                         __constant int *lh, const int nlev,
                         __global const float4 *samples, const int nsamples, const float lod_bias,
                         const int use_fis, const int size, const int ntexels, __global float4 *out)
@@ -90,7 +90,7 @@ __kernel void prefilter(__global const float4 *chain, __constant int *off, __con
 }
 
 /* Mirror level (roughness 0): the source resampled to the layout (bilinear in level 0). */
-__kernel void resample(__global const float4 *chain, __constant int *off, __constant int *lw,
+__kernel void resample(__global const float *chain, __constant int *off, __constant int *lw,
                        __constant int *lh, const int nlev, const int size, const int ntexels,
                        __global float4 *out)
 {

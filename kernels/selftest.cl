@@ -23,7 +23,7 @@ __kernel void t_row_solid_angle(const int width, const int height, __global floa
     out[j] = equirect_row_solid_angle(j, width, height);
 }
 
-__kernel void t_bilinear(__global const float4 *img, const int width, const int height,
+__kernel void t_bilinear(__global const float *img, const int width, const int height,
                          __global const float *uv, __global float *out)
 {
     int i = get_global_id(0);
@@ -59,7 +59,7 @@ __kernel void t_sh(__global const float *d, __global float *y)
     for (int k = 0; k < SH_COEFFS; ++k) y[i * SH_COEFFS + k] = Y[k];
 }
 
-__kernel void t_chain_lookup(__global const float4 *chain, __constant int *off, __constant int *lw,
+__kernel void t_chain_lookup(__global const float *chain, __constant int *off, __constant int *lw,
                              __constant int *lh, const int nlev, __global const float *d,
                              __global const float *lod, __global float *out)
 {

@@ -72,7 +72,7 @@ inline float3 dominant_direction(float3 n, float3 r, float a)
  * half-vector warp, mip level from the pdf (filtered importance sampling: Colbert and Krivanek,
  * GPU Gems 3 ch. 20, 2007). */
 __kernel void importance(__global const float4 *gb_pos, SURFACE_PARAMS, const int n, const float2 env_rot,
-                         __global const float4 *chain, __constant int *off, __constant int *lw, __constant int *lh,
+                         __global const float *chain, __constant int *off, __constant int *lw, __constant int *lh,
                          const int nlev, __global const float4 *hammersley_pts, const int nsamples,
                          const float mip_bias, __global float4 *spec_sums)
 {
@@ -124,7 +124,7 @@ __kernel void importance(__global const float4 *gb_pos, SURFACE_PARAMS, const in
 __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
                     const int n, const float2 env_rot, const float env_scale,
                     __constant float4 *sh_coeffs,
-                    __global const float4 *chain, __constant int *off, __constant int *lw, __constant int *lh,
+                    __global const float *chain, __constant int *off, __constant int *lw, __constant int *lh,
                     const int nlev,
                     __global const float4 *hammersley_pts, const int nsamples, const float mip_bias, const float lobe_spread,
                     __global const float2 *dfg, const int dfg_size, __global const float *ao_buf,

@@ -100,19 +100,20 @@ class OpenCLBaker:
         self.rt = rt
 
     def radiance_chain(self, image):
-        """Every level as float32 (h, w, 3), and the device buffer of the concatenated chain."""
+        """Every level as float32 (h, w, 3), views of one array back to back, and the device
+        buffer of the chain (RGB, 3 floats a texel)."""
         rt = self.rt
         sizes = layouts.radiance_chain_sizes(image.shape[1], image.shape[0])
         offsets = np.cumsum([0] + [w * h for w, h in sizes])
-        buf = rt.empty(int(offsets[-1]) * 16)
-        rt.cl.enqueue_copy(rt.queue, buf, radiance.to_rgba(image))
+        buf = rt.empty(int(offsets[-1]) * 12)
+        rt.cl.enqueue_copy(rt.queue, buf, np.ascontiguousarray(np.asarray(image)[..., :3], np.float32))
         k = rt.kernel("mips.cl", "downsample")
         for lvl in range(1, len(sizes)):
             (sw, sh), (dw, dh) = sizes[lvl - 1], sizes[lvl]
             rt.run(k, (dw, dh), None, buf, np.int32(offsets[lvl - 1]), np.int32(sw), np.int32(sh),
                    np.int32(offsets[lvl]), np.int32(dw), np.int32(dh))
-        flat = rt.read(buf, (int(offsets[-1]), 4))
-        levels = [flat[offsets[i]:offsets[i + 1], :3].reshape(h, w, 3) for i, (w, h) in enumerate(sizes)]
+        flat = rt.read(buf, (int(offsets[-1]), 3))
+        levels = [flat[offsets[i]:offsets[i + 1]].reshape(h, w, 3) for i, (w, h) in enumerate(sizes)]
         return levels, (buf, offsets, sizes)
 
     def _chain_args(self, device_chain):
@@ -281,8 +282,11 @@ def bake_radiance(baker: Baker, image, info, root: Path, policies: dict, warn=No
 
 
 def load_chain(root: Path, manifest: dict):
+    """The entry's levels, float32 (h, w, 3), read back to back into one array (a renderer's
+    chain table then uploads that array as it is)."""
     entry = Path(root) / manifest["key"]
-    return [images.read_exr(entry / f["name"])[..., :3] for f in manifest["files"]]
+    return images.read_exrs_back_to_back([entry / f["name"] for f in manifest["files"]],
+                                         [(f["height"], f["width"]) for f in manifest["files"]])
 
 
 def chain_loader(root: Path, manifest: dict, chain=None):

@@ -313,6 +313,23 @@ def read_exr(path) -> np.ndarray:
     return np.asarray(data, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels)
 
 
+def read_exrs_back_to_back(paths, shapes) -> list:
+    """EXRs written by iblbake (a cache entry's levels) read into one float32 array, back to
+    back: their (h, w, 3) views of it. `shapes` (h, w) per file, from the entry's manifest."""
+    total = sum(h * w for h, w in shapes)
+    flat = np.empty(3 * total, np.float32)
+    views, o = [], 0
+    for path, (h, w) in zip(paths, shapes):
+        img = read_exr(path)
+        if img.shape[:2] != (h, w) or img.shape[2] < 3:
+            raise InputError(f"{path}: {img.shape[1]}x{img.shape[0]}x{img.shape[2]}, its manifest says {w}x{h} RGB")
+        view = flat[o:o + 3 * h * w].reshape(h, w, 3)
+        view[...] = img[..., :3]
+        views.append(view)
+        o += 3 * h * w
+    return views
+
+
 def display_path(path) -> str:
     try:
         return str(Path(path).relative_to(Path.cwd()))
