@@ -232,3 +232,25 @@ def test_mesh_triangles_and_bvh_are_cached_by_content(tmp_path, white):
     trimesh.creation.icosphere(subdivisions=2, radius=0.8).export(mesh)
     _, gd = geometry()
     assert not gd["cached"] and gd["triangles"] == 320
+
+
+def test_chain_table_uploads_levels_already_back_to_back_without_a_copy(rt):
+    """Levels that are consecutive views of one float32 array (a chain read from the cache) go
+    up as that array; separate or strided levels are packed; the device holds the same RGB
+    texels either way (kernels/envmap.h reads 3 floats a texel)."""
+    from iblbake.render.bakes import back_to_back, chain_table
+    shapes = [(4, 8), (2, 4), (1, 2)]
+    offs = np.cumsum([0] + [h * w for h, w in shapes])
+    flat = np.random.default_rng(0).random(3 * offs[-1]).astype(np.float32)
+    views = [flat[3 * o:3 * o1].reshape(h, w, 3) for o, o1, (h, w) in zip(offs[:-1], offs[1:], shapes)]
+    packed = back_to_back(views, offs)
+    assert packed is not None and np.shares_memory(packed, flat) and packed.size == flat.size
+    copies = [v.copy() for v in views]
+    assert back_to_back(copies, offs) is None                        # separate arrays: packed
+    assert back_to_back(views[::-1], offs) is None                   # out of order
+    rgba = np.zeros((4, 8, 4), np.float32)
+    assert back_to_back([rgba[..., :3]], offs[:2]) is None           # strided
+    assert back_to_back([views[0]], offs[:2]) is not None            # one contiguous level
+    for levels in (views, copies):
+        c = chain_table(rt, levels)
+        assert np.array_equal(rt.read(c["chain"], (int(offs[-1]), 3)).reshape(-1), flat)
