@@ -285,8 +285,7 @@ def load_chain(root: Path, manifest: dict):
     """The entry's levels, float32 (h, w, 3), read back to back into one array (a renderer's
     chain table then uploads that array as it is)."""
     entry = Path(root) / manifest["key"]
-    return images.read_exrs_back_to_back([entry / f["name"] for f in manifest["files"]],
-                                         [(f["height"], f["width"]) for f in manifest["files"]])
+    return images.read_exrs_back_to_back([entry / f["name"] for f in manifest["files"]])
 
 
 def chain_loader(root: Path, manifest: dict, chain=None):

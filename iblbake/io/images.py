@@ -313,21 +313,34 @@ def read_exr(path) -> np.ndarray:
     return np.asarray(data, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels)
 
 
-def read_exrs_back_to_back(paths, shapes) -> list:
-    """EXRs written by iblbake (a cache entry's levels) read into one float32 array, back to
-    back: their (h, w, 3) views of it. `shapes` (h, w) per file, from the entry's manifest."""
-    total = sum(h * w for h, w in shapes)
-    flat = np.empty(3 * total, np.float32)
-    views, o = [], 0
-    for path, (h, w) in zip(paths, shapes):
-        img = read_exr(path)
-        if img.shape[:2] != (h, w) or img.shape[2] < 3:
-            raise InputError(f"{path}: {img.shape[1]}x{img.shape[0]}x{img.shape[2]}, its manifest says {w}x{h} RGB")
-        view = flat[o:o + 3 * h * w].reshape(h, w, 3)
-        view[...] = img[..., :3]
-        views.append(view)
-        o += 3 * h * w
-    return views
+def read_exrs_back_to_back(paths) -> list:
+    """EXRs written by iblbake (a cache entry's levels) read into one float32 array, back to back,
+    RGB: their (h, w, 3) views of it (each file's size from its header, read first)."""
+    oiio = _oiio()
+    inputs = []
+    try:
+        for path in paths:
+            inp = oiio.ImageInput.open(str(path))
+            if inp is None:
+                raise InputError(f"{path}: cannot read ({' '.join(oiio.geterror().split())[:200]})")
+            inputs.append((path, inp))
+            if inp.spec().nchannels < 3:
+                raise InputError(f"{path}: {inp.spec().nchannels} channels, not RGB")
+        flat = np.empty(3 * sum(inp.spec().width * inp.spec().height for _, inp in inputs), np.float32)
+        views, o = [], 0
+        for path, inp in inputs:
+            spec = inp.spec()
+            data = inp.read_image(0, 0, 0, 3, oiio.FLOAT)
+            if not isinstance(data, np.ndarray):
+                raise InputError(f"{path}: corrupt or truncated EXR")
+            view = flat[o:o + 3 * spec.width * spec.height].reshape(spec.height, spec.width, 3)
+            view[...] = data.reshape(view.shape)
+            views.append(view)
+            o += view.size
+        return views
+    finally:
+        for _, inp in inputs:
+            inp.close()
 
 
 def display_path(path) -> str:
