@@ -209,12 +209,11 @@ static size_t image_texel(__constant const int2 *sym, int g, int face, int row, 
     return ((size_t)e.x * s + r) * s + c;
 }
 
-/* faces: (6, s, s, 3) floats; acc: (w, h, 3) doubles of scratch, a column each; out: (h, w, 3) floats */
-__kernel void cube_to_equirect(__global const float *faces, __constant const int2 *sym, const int s, const int w,
-                               const int h, __global double *acc, __global float *out)
+/* Column i's 8 images (each column's full height) accumulated in acc (8 h 3 doubles), then
+ * divided by each texel's solid angle into out. */
+static void resample_column(__global const float *faces, __constant const int2 *sym, const int s, const int w,
+                            const int h, const int i, __global double *acc, __global float *out)
 {
-    const int i = get_global_id(0);
-    if (i >= (s + 1) / 2) return;
     const int mirrors = 2 * i + 1 == s ? 1 : 2;          /* the middle column of an odd s is its own mirror */
     int columns[8];
     for (int k = 0; k < 4; ++k)
@@ -222,9 +221,7 @@ __kernel void cube_to_equirect(__global const float *faces, __constant const int
             const int c = (m ? w - 1 - i : i) - k * s;
             columns[k * 2 + m] = c < 0 ? c + w : c;
         }
-    for (int k = 0; k < 4; ++k)
-        for (int m = 0; m < mirrors; ++m)
-            for (int j = 0; j < 3 * h; ++j) acc[(size_t)columns[k * 2 + m] * h * 3 + j] = 0.0;
+    for (int j = 0; j < 8 * 3 * h; ++j) acc[j] = 0.0;
     const double phi_lo = 2.0 * M_PI * (0.5 - (double)(i + 1) / (double)w);
     const double phi_hi = 2.0 * M_PI * (0.5 - (double)i / (double)w);
     const int north = h / 2;            /* the northern rows */
@@ -279,7 +276,7 @@ __kernel void cube_to_equirect(__global const float *faces, __constant const int
                         for (int m = 0; m < mirrors; ++m)
                             for (int v = 0; v < 2; ++v) {
                                 const float3 t = value[(k * 2 + m) * 2 + v];
-                                __global double *a = acc + ((size_t)columns[k * 2 + m] * h + (v ? h - 1 - j : j)) * 3;
+                                __global double *a = acc + ((size_t)(k * 2 + m) * h + (v ? h - 1 - j : j)) * 3;
                                 a[0] += part * t.x;
                                 a[1] += part * t.y;
                                 a[2] += part * t.z;
@@ -295,9 +292,22 @@ __kernel void cube_to_equirect(__global const float *faces, __constant const int
             for (int j = 0; j < h; ++j) {
                 const double omega = dphi * (sin(M_PI * (double)(h - 2 * j) / (double)(2 * h)) -
                                              sin(M_PI * (double)(h - 2 * (j + 1)) / (double)(2 * h)));
-                __global const double *a = acc + ((size_t)c * h + j) * 3;
+                __global const double *a = acc + ((size_t)(k * 2 + m) * h + j) * 3;
                 __global float *o = out + ((size_t)j * w + c) * 3;
                 for (int ch = 0; ch < 3; ++ch) o[ch] = (float)(a[ch] / omega);
             }
         }
+}
+
+/* faces: (6, s, s, 3) floats; out: (h, w, 3) floats. A work-item takes columns gid, gid + size,
+ * ... of the (s + 1) / 2 that stand for all; acc is its scratch for one of them, its 8 images'
+ * full height in doubles (8 h 3): the work-items alive at once, not the columns, set the
+ * scratch's size (on a CPU a few per core, so the 0.2 GB a scratch per column took at face 1024,
+ * touched fresh in every call, is 6 MB that stays in cache). */
+__kernel void cube_to_equirect(__global const float *faces, __constant const int2 *sym, const int s, const int w,
+                               const int h, __global double *scratch, __global float *out)
+{
+    __global double *acc = scratch + (size_t)get_global_id(0) * 8 * h * 3;
+    for (int i = get_global_id(0); i < (s + 1) / 2; i += get_global_size(0))
+        resample_column(faces, sym, s, w, h, i, acc, out);
 }
