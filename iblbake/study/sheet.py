@@ -174,29 +174,29 @@ def reuse_order(scenes, cells, indices) -> list:
     """The order to render the cells in: row by row or column by column, whichever runs fewer
     passes (a cell reuses each pass whose inputs did not change since the cell before: in a
     metallic x roughness sheet, going down a metallic column samples the panorama once per
-    roughness instead of once per cell); row by row on a tie. Where the cells go does not change."""
+    roughness instead of once per cell); row by row on a tie. Judged on the first cell and its
+    neighbours along a row and down a column (three plans, not one per cell). Where the cells go
+    does not change."""
     from iblbake.render.frame import pass_keys
     from iblbake.render.plan import plan
 
-    keys = {}
-    for i in indices:
-        if not isinstance(scenes[i], Exception):
-            try:
-                keys[i] = pass_keys(plan(scenes[i]), scenes[i])
-            except (IblbakeError, ValueError):     # the cell fails when rendered, with its name
-                pass
-
-    def passes_run(order):
-        total, before = 0, None
-        for i in order:
-            k = keys.get(i)
-            total += sum(1 for name, v in (k or {}).items() if before is None or before.get(name) != v)
-            before = k
-        return total
-
     by_rows = sorted(indices, key=lambda i: (cells[i].row, cells[i].column))
     by_columns = sorted(indices, key=lambda i: (cells[i].column, cells[i].row))
-    return by_columns if passes_run(by_columns) < passes_run(by_rows) else by_rows
+    at = {(cells[i].row, cells[i].column): i for i in indices}
+    first = cells[by_rows[0]] if by_rows else None
+    probe = [at.get((first.row, first.column)), at.get((first.row, first.column + 1)),
+             at.get((first.row + 1, first.column))] if first else []
+    if len(probe) < 3 or any(i is None or isinstance(scenes[i], Exception) for i in probe):
+        return by_rows
+    try:
+        keys = [pass_keys(plan(scenes[i]), scenes[i]) for i in probe]
+    except (IblbakeError, ValueError):            # the cell fails when rendered, with its name
+        return by_rows
+
+    def changed(a, b):
+        return sum(1 for name in set(a) | set(b) if a.get(name) != b.get(name))
+
+    return by_columns if changed(keys[0], keys[2]) < changed(keys[0], keys[1]) else by_rows
 
 
 def render_cell(sc, c, runtime, bakes, reuse, warn, keep_going, resume, kind):
