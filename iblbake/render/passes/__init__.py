@@ -12,4 +12,5 @@ from iblbake.render.passes.resolve import Resolve
 from iblbake.render.passes.shade import Shade
 from iblbake.render.passes.tonemap import Tonemap
 
-PASSES = (GBuffer(), Materials(), AmbientOcclusion(), GroundTruthAO(), Importance(), Shade(), Reference(), Lights(), Background(), Resolve(), Tonemap())
+PASSES = (GBuffer(), Materials(), AmbientOcclusion(), GroundTruthAO(), Importance(), Shade(), Reference(), Lights(),
+          Background(), Resolve(), Tonemap())
