@@ -55,11 +55,15 @@ class Plan:
     bakes: list               # what they read, in order (sh, radiance, prefiltered, dfg, env_cdf)
     defines: dict             # pass name -> its kernel defines
     notes: list
+    # one program for every pass: a frame with no series after it (each program costs a load,
+    # 25-33 ms on a CPU); a series keeps its passes' programs apart (the tone map's, so that
+    # exposure and operator sweeps reuse the frame program)
+    one_program: bool = False
 
     def program(self, p) -> tuple:
         """(kernel files, defines) of the program pass p is built in: every running pass of the
-        same program, their defines united."""
-        group = [q for q in self.passes if q.kernel and q.program == p.program]
+        same program (of any, with one_program), their defines united."""
+        group = [q for q in self.passes if q.kernel and (self.one_program or q.program == p.program)]
         defines = {}
         for q in group:
             for k, v in self.defines[q.name].items():
