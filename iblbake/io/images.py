@@ -299,48 +299,51 @@ def _write(oiio, path, spec, pixels):
 
 def read_exr(path) -> np.ndarray:
     """Read back an EXR written by iblbake (cache files), float32 (H, W, C)."""
-    oiio = _oiio()
-    inp = oiio.ImageInput.open(str(path))
-    if inp is None:
-        raise InputError(f"{path}: cannot read ({' '.join(oiio.geterror().split())[:200]})")
+    inp = _open_exr(path)
     try:
-        spec = inp.spec()
-        data = inp.read_image(0, 0, 0, spec.nchannels, oiio.FLOAT)
+        return _exr_pixels(inp, path, inp.spec().nchannels)
     finally:
         inp.close()
-    if not isinstance(data, np.ndarray):
-        raise InputError(f"{path}: corrupt or truncated EXR")
-    return np.asarray(data, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels)
 
 
 def read_exrs_back_to_back(paths) -> list:
     """EXRs written by iblbake (a cache entry's levels) read into one float32 array, back to back,
     RGB: their (h, w, 3) views of it (each file's size from its header, read first)."""
-    oiio = _oiio()
     inputs = []
     try:
         for path in paths:
-            inp = oiio.ImageInput.open(str(path))
-            if inp is None:
-                raise InputError(f"{path}: cannot read ({' '.join(oiio.geterror().split())[:200]})")
-            inputs.append((path, inp))
-            if inp.spec().nchannels < 3:
-                raise InputError(f"{path}: {inp.spec().nchannels} channels, not RGB")
+            inputs.append((path, _open_exr(path)))
+            if inputs[-1][1].spec().nchannels < 3:
+                raise InputError(f"{path}: {inputs[-1][1].spec().nchannels} channels, not RGB")
         flat = np.empty(3 * sum(inp.spec().width * inp.spec().height for _, inp in inputs), np.float32)
         views, o = [], 0
         for path, inp in inputs:
             spec = inp.spec()
-            data = inp.read_image(0, 0, 0, 3, oiio.FLOAT)
-            if not isinstance(data, np.ndarray):
-                raise InputError(f"{path}: corrupt or truncated EXR")
             view = flat[o:o + 3 * spec.width * spec.height].reshape(spec.height, spec.width, 3)
-            view[...] = data.reshape(view.shape)
+            view[...] = _exr_pixels(inp, path, 3)
             views.append(view)
             o += view.size
         return views
     finally:
         for _, inp in inputs:
             inp.close()
+
+
+def _open_exr(path):
+    oiio = _oiio()
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise InputError(f"{path}: cannot read ({' '.join(oiio.geterror().split())[:200]})")
+    return inp
+
+
+def _exr_pixels(inp, path, nchannels: int) -> np.ndarray:
+    """The first nchannels of an open image, float32 (H, W, nchannels)."""
+    spec = inp.spec()
+    data = inp.read_image(0, 0, 0, nchannels, _oiio().FLOAT)
+    if not isinstance(data, np.ndarray):
+        raise InputError(f"{path}: corrupt or truncated EXR")
+    return np.asarray(data, dtype=np.float32).reshape(spec.height, spec.width, nchannels)
 
 
 def display_path(path) -> str:
