@@ -193,8 +193,7 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
     from iblbake.device.runtime import Runtime
 
     t_start = time.perf_counter()
-    pl = plan(scene)
-    pl.one_program = reuse is None
+    pl = plan(scene, one_program=reuse is None)
     d = scene.data
     cam = d["camera"]
     rt = runtime or Runtime(device)

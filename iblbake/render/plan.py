@@ -85,7 +85,7 @@ class Plan:
 BAKE_ORDER = ("sh", "radiance", "prefiltered", "dfg", "env_cdf")
 
 
-def plan(scene: Scene) -> Plan:
+def plan(scene: Scene, one_program: bool = False) -> Plan:
     from iblbake.render.passes import PASSES
 
     fx = effect_modes(scene)
@@ -96,4 +96,4 @@ def plan(scene: Scene) -> Plan:
     if not out["frame"] and not any(out[a] for a in ("normal", "albedo", "depth")):
         notes.append("no output requested (output.frame or -o): rendering without writing")
     return Plan(fx, running, [b for b in BAKE_ORDER if b in wanted],
-                {p.name: p.defines(scene, fx) for p in running if p.kernel}, notes)
+                {p.name: p.defines(scene, fx) for p in running if p.kernel}, notes, one_program)
