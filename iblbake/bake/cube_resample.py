@@ -1,28 +1,29 @@
 """A cube map resampled to an equirect panorama by exact texel overlaps: each equirect texel the
 mean of the cube map over its solid angle, the cube map read as the box texels it stores.
 
-In the equal-area coordinates (phi, y) = (atan2(x, z), cos theta) solid angle is area
-(dOmega = dphi dy): an equirect column is a strip phi in [phi_lo, phi_hi] and a texel of it the
-band y in [y_{j+1}, y_j]. For every cube texel a strip meets:
-- the part of the texel inside the strip (a "piece") is a convex polygon: the texel's square in
-  face coordinates clipped by the two meridian planes of the strip's edges (each a line on the
-  face); its edges are arcs of great circles on the sphere;
-- its area below a parallel y = Y is, by Green's theorem in (phi, y), C(Y) = +-(sum over its
-  edges of the integral of min(y(phi), Y) dphi). Along a great circle of normal n,
-  y(phi) = -c sgn(n_y) / sqrt(n_y^2 + c^2) with c = n_x sin phi + n_z cos phi, and
-  F = atan((n_x d_z - n_z d_x) / n_y) at the circle's point d is an antiderivative of y dphi,
-  continuous all round the circle (so the integral of y along an arc is F(q) - F(p), taken as
-  one atan2 of the two, with no square-root cancellation); min(y, Y) differs from y only on the
-  arc's parts above Y, cut where the circle crosses the parallel. A meridian edge contributes
-  nothing (dphi = 0);
-- a piece holding a pole (a top or bottom face's centre) has it as a vertex, which in (phi, y)
-  is the segment y = +-1 across the piece;
-- the piece's share of band j is C(y_j) - C(y_{j+1}), evaluated only at the band edges that cross
-  the piece;
-- the sphere's symmetries that keep both grids (quarter turns about +y, the mirrors x -> -x
-  and y -> -y) make the northern half of one column in 16 (8) stand for the rest.
-Exact up to float64 rounding: a constant stays constant to 1e-13 and every cube texel's energy is
-kept to 1e-13 of itself.
+An equirect column is a strip between two meridians, phi in [phi_lo, phi_hi], and a texel of it
+the band between two parallels, y = cos theta in [y_{j+1}, y_j] (solid angle dphi dy). Every cube
+texel the strip meets leaves a part inside it (a "piece"), and the piece's share of band j is
+C(y_j) - C(y_{j+1}), C(Y) its solid angle below the parallel y = Y, evaluated only at the band
+edges that cross it. On a face at distance 1, dOmega = dA / (1 + rho^2)^(3/2) (rho: distance
+from the face's centre), and both kinds of face have closed forms:
+- a side face (SidePiece): meridians are the lines a = const (phi = centre + atan a), so a piece
+  is the rectangle [a0, a1] x [e0, e1] in the face's coordinates a and e = -b (up); the parallel
+  y = Y = sin(beta) is the curve e = t sqrt(1 + a^2), t = tan(beta); the solid angle of
+  [p, q] x [0, e] is F(q, e) - F(p, e), F(a, e) = atan(a e / sqrt(1 + a^2 + e^2)), and under
+  the parallel's curve it is Y (atan q - atan p);
+- the top and bottom faces (CapPiece): meridians are lines through the face's centre and
+  parallels the circles rho = sqrt(1 - Y^2) / |Y| about it, so a piece is a convex polygon (the
+  texel's square clipped by the strip's two lines), and its solid angle within a circle is a sum
+  over its edges of the triangle the edge makes with the centre (Van Oosterom and Strackee's
+  formula) where the edge runs inside the circle and of the circle's sector, (1 - |Y|) times its
+  angle, where it runs outside.
+Each is well conditioned (no point on the sphere is normalised, no arc cut), and every formula
+reads Y from the table of row edges, so parts of a band add up to dphi (y_j - y_{j+1}) as the
+table gives it: a constant stays constant to 1e-13 and every cube texel's energy is kept to
+1e-12 of itself, at any face size. The sphere's symmetries that keep both grids (quarter turns
+about +y, the mirrors x -> -x and y -> -y) make the northern half of one column in 16 (8) stand
+for the rest.
 
 kernels/cube_input.cl is the OpenCL version (in double), this module its float64 twin: plain
 Python over the pieces, for tests and for small faces; large faces go through the kernel.
@@ -45,8 +46,6 @@ FACE_AXES = (
     ((0, 0, 1), (1, 0, 0), (0, -1, 0)),       # +Z: (a, -b, 1)
     ((0, 0, -1), (-1, 0, 0), (0, -1, 0)),     # -Z: (-a, -b, -1)
 )
-POLE = 1e-12          # a vertex of a top or bottom face this close to its centre is the pole
-MERIDIAN = 1e-14      # |n_y| of a great circle below this: a meridian, vertical in (phi, y)
 
 
 def strip_edges(width: int, i: int):
@@ -84,129 +83,171 @@ def clip(poly: list, line) -> list:
     return out
 
 
-def _cross(p, q):
-    return (p[1] * q[2] - p[2] * q[1], p[2] * q[0] - p[0] * q[2], p[0] * q[1] - p[1] * q[0])
+def _cross2(p, q) -> float:
+    return p[0] * q[1] - p[1] * q[0]
 
 
-def _dot(p, q):
-    return p[0] * q[0] + p[1] * q[1] + p[2] * q[2]
+def _triangle(p, q) -> float:
+    """Signed solid angle of the triangle (face centre, p, q) on a face, p and q in face
+    coordinates: Van Oosterom and Strackee's tan(Omega / 2) = [o u v] / (|o||u||v| + (o.u)|v| +
+    (o.v)|u| + (u.v)|o|) for o = (0, 0, 1), u = (p, 1), v = (q, 1)."""
+    lu, lv = math.sqrt(1.0 + p[0] * p[0] + p[1] * p[1]), math.sqrt(1.0 + q[0] * q[0] + q[1] * q[1])
+    return 2.0 * math.atan2(_cross2(p, q), lu * lv + lu + lv + 1.0 + p[0] * q[0] + p[1] * q[1])
 
 
-def _azimuth_step(p, q) -> float:
-    """phi(q) - phi(p), the azimuth turned from p to q, in (-pi, pi]."""
-    return math.atan2(p[2] * q[0] - p[0] * q[2], p[0] * q[0] + p[2] * q[2])
+def _angle(p, q) -> float:
+    """Signed angle at the face centre from p to q."""
+    return math.atan2(_cross2(p, q), p[0] * q[0] + p[1] * q[1])
 
 
-def _arc_integral(n, a, b) -> float:
-    """The integral of y dphi along the arc a -> b of the great circle of normal n: F(b) - F(a)
-    for F = atan(X / n_y), X = n_x d_z - n_z d_x, as one atan2 (atan u - atan v = atan2(u - v, 1 + uv))."""
-    xa, xb = n[0] * a[2] - n[2] * a[0], n[0] * b[2] - n[2] * b[0]
-    return math.atan2((xb - xa) * n[1], n[1] * n[1] + xa * xb)
+def _fan_within(p, q, rho2: float, cap: float) -> float:
+    """Signed solid angle of the triangle (face centre, p, q) within rho^2 <= rho2, cap = 1 - |Y|
+    the solid angle per radian of the disk: the triangle where the edge runs inside the circle,
+    the disk's sector where it runs outside (the edge p + t (q - p) meets the circle at the
+    roots of A t^2 + 2 B t + C = 0)."""
+    d = (q[0] - p[0], q[1] - p[1])
+    a = d[0] * d[0] + d[1] * d[1]
+    b = p[0] * d[0] + p[1] * d[1]
+    c = p[0] * p[0] + p[1] * p[1] - rho2
+    disc = b * b - a * c
+    if a == 0.0 or disc <= 0.0:
+        return cap * _angle(p, q)
+    root = -(b + math.copysign(math.sqrt(disc), b))           # no cancellation (Numerical Recipes 5.6)
+    t1, t2 = sorted((root / a, c / root if root != 0.0 else 0.0))
+    lo, hi = max(t1, 0.0), min(t2, 1.0)
+    if lo >= hi:
+        return cap * _angle(p, q)
+    x1, x2 = (p[0] + lo * d[0], p[1] + lo * d[1]), (p[0] + hi * d[0], p[1] + hi * d[1])
+    return cap * (_angle(p, x1) + _angle(x2, q)) + _triangle(x1, x2)
 
 
-class _Edge:
-    """A great-circle arc p -> q (unit vectors) of a piece's boundary."""
-
-    def __init__(self, p, q):
-        self.p, self.q = p, q
-        n = _cross(p, q)
-        norm = math.sqrt(_dot(n, n))
-        self.n = (n[0] / norm, n[1] / norm, n[2] / norm) if norm > 0 else (0.0, 0.0, 0.0)
-        self.meridian = abs(self.n[1]) < MERIDIAN     # vertical in (phi, y): no area under it
-        self.dphi = 0.0 if self.meridian else _azimuth_step(p, q)
-        self.integral = 0.0 if self.meridian else _arc_integral(self.n, p, q)
-        ys = [p[1], q[1]]
-        if self.meridian:                               # y runs straight between its ends
-            self.bottom, self.top = min(ys), max(ys)
-            return
-        top = (-self.n[1] * self.n[0], 1.0 - self.n[1] * self.n[1], -self.n[1] * self.n[2])   # y's projection
-        for e in (top, (-top[0], -top[1], -top[2])):                                          # highest, lowest
-            if _dot(_cross(p, e), self.n) > 0 and _dot(_cross(e, q), self.n) > 0:
-                ys.append(e[1] / math.sqrt(_dot(e, e)))
-        self.bottom, self.top = min(ys), max(ys)
-
-    def on_arc(self, d) -> bool:
-        return _dot(_cross(self.p, d), self.n) >= 0 and _dot(_cross(d, self.q), self.n) >= 0
-
-    def excess(self, big_y: float) -> float:
-        """Integral of (y - Y) dphi over the arc's parts above Y (oriented p -> q)."""
-        if self.meridian or self.top <= big_y:
-            return 0.0
-        if self.bottom >= big_y:
-            return self.integral - big_y * self.dphi
-        n = self.n
-        rho2 = n[0] * n[0] + n[2] * n[2]
-        # the circle meets the parallel y = Y where n_x x + n_z z = -n_y Y and x^2 + z^2 = 1 - Y^2
-        h2 = 1.0 - big_y * big_y - (n[1] * big_y) ** 2 / rho2
-        h = math.sqrt(max(h2, 0.0) / rho2)
-        t = -n[1] * big_y / rho2
-        cuts = []
-        for sign in (1.0, -1.0):
-            d = (t * n[0] - sign * h * n[2], big_y, t * n[2] + sign * h * n[0])
-            if self.on_arc(d):
-                cuts.append((-_dot(self.p, d), d))
-        cuts.sort(key=lambda c: c[0])                   # in order from p
-        points = [self.p] + [d for _, d in cuts] + [self.q]
-        above = self.p[1] > big_y if self.p[1] != big_y else not (self.q[1] > big_y)
-        total = 0.0
-        for a, b in zip(points[:-1], points[1:]):
-            if above:
-                total += _arc_integral(n, a, b) - big_y * _azimuth_step(a, b)
-            above = not above
-        return total
-
-
-class Piece:
-    """A texel's part inside a strip, from its polygon in face coordinates: C(Y), the solid angle
-    below the parallel y = Y, and its y range."""
+class CapPiece:
+    """A top (face 2) or bottom (face 3) texel's part inside a strip: a convex polygon in face
+    coordinates (see the module doc), with its solid angle, y range and C(Y)."""
 
     def __init__(self, face: int, poly: list):
-        o, ea, eb = FACE_AXES[face]
-        verts = []                                  # unit vectors, None for the pole
-        for a, b in poly:
-            if face in (2, 3) and abs(a) < POLE and abs(b) < POLE:
-                if verts and verts[-1] is None:
-                    continue
-                verts.append(None)
-                continue
-            d = [o[i] + a * ea[i] + b * eb[i] for i in range(3)]
-            r = math.sqrt(_dot(d, d))
-            verts.append((d[0] / r, d[1] / r, d[2] / r))
-        if len(verts) > 1 and verts[0] is None and verts[-1] is None:
-            verts.pop()
-        self.edges, self.pole, self.pole_dphi = [], None, 0.0
-        n = len(verts) if len(verts) >= 3 else 0     # fewer is a sliver of no area at the pole
-        for k in range(n):
-            p, q = verts[k], verts[(k + 1) % n]
-            if p is None:            # the pole: the segment y = +-1 from the previous vertex's azimuth to the next's
-                prev, nxt = verts[k - 1], q
-                self.pole = 1.0 if face == 2 else -1.0
-                self.pole_dphi = _azimuth_step(prev, nxt)
-            elif q is not None and p != q:
-                self.edges.append(_Edge(p, q))
-        total = sum(e.integral for e in self.edges) + (self.pole or 0.0) * self.pole_dphi
-        self.sign = 1.0 if total >= 0 else -1.0
+        self.pole = 1.0 if face == 2 else -1.0
+        self.poly = poly
+        total = sum(_triangle(p, q) for p, q in zip(poly, poly[1:] + poly[:1]))
+        self.sign = 1.0 if total >= 0.0 else -1.0
         self.area = abs(total)
-        ys = [e.bottom for e in self.edges] + [e.top for e in self.edges] + ([self.pole] if self.pole else [])
-        self.bottom, self.top = (min(ys), max(ys)) if ys else (0.0, 0.0)
+        far2 = max(p[0] * p[0] + p[1] * p[1] for p in poly)
+        near2 = min(_distance2(p, q) for p, q in zip(poly, poly[1:] + poly[:1]))
+        if _contains_centre(poly):
+            near2 = 0.0
+        ys = sorted((self.pole / math.sqrt(1.0 + near2), self.pole / math.sqrt(1.0 + far2)))
+        self.bottom, self.top = ys
 
     def below(self, big_y: float) -> float:
-        """C(Y): the solid angle of the piece where y < Y."""
-        excess = sum(e.excess(big_y) for e in self.edges)
-        if self.pole is not None and self.pole > big_y:
-            excess += (self.pole - big_y) * self.pole_dphi
-        return self.sign * (self.sign * self.area - excess)
+        """C(Y): on the top face the piece outside the circle of Y, on the bottom face inside it."""
+        if big_y * self.pole <= 0.0:
+            return 0.0 if self.pole > 0.0 else self.area
+        z = abs(big_y)
+        rho2 = (1.0 - z) * (1.0 + z) / (z * z)
+        poly = self.poly
+        inside = self.sign * sum(_fan_within(p, q, rho2, 1.0 - z) for p, q in zip(poly, poly[1:] + poly[:1]))
+        return self.area - inside if self.pole > 0.0 else inside
+
+
+def _distance2(p, q) -> float:
+    """Squared distance from the face centre to the segment p q."""
+    d = (q[0] - p[0], q[1] - p[1])
+    a = d[0] * d[0] + d[1] * d[1]
+    t = min(1.0, max(0.0, -(p[0] * d[0] + p[1] * d[1]) / a)) if a > 0.0 else 0.0
+    x = (p[0] + t * d[0], p[1] + t * d[1])
+    return x[0] * x[0] + x[1] * x[1]
+
+
+def _contains_centre(poly) -> bool:
+    """Whether the convex polygon holds the face centre (on its boundary counts)."""
+    sides = [_cross2(p, q) for p, q in zip(poly, poly[1:] + poly[:1])]
+    return all(c >= 0.0 for c in sides) or all(c <= 0.0 for c in sides)
+
+
+# azimuth at a side face's centre: phi = centre + atan(a) on it
+SIDE_CENTRE = {0: math.pi / 2, 1: -math.pi / 2, 4: 0.0, 5: math.pi}
+
+
+def _under(p: float, q: float, e: float) -> float:
+    """Solid angle of [p, q] x [0, e] on a face (signed): F(q, e) - F(p, e) for
+    F(a, e) = atan(a e / sqrt(1 + a^2 + e^2)), as one atan2 (atan u - atan v = atan2(u - v, 1 + uv))."""
+    u, v = q * e / math.sqrt(1.0 + q * q + e * e), p * e / math.sqrt(1.0 + p * p + e * e)
+    return math.atan2(u - v, 1.0 + u * v)
+
+
+def _reach(e: float, t: float) -> float:
+    """|a| beyond which the parallel's curve e = t sqrt(1 + a^2) (t >= 0) runs above e."""
+    if e <= t:
+        return 0.0
+    return math.sqrt((e / t) ** 2 - 1.0) if t > 0.0 else math.inf
+
+
+class SidePiece:
+    """A side-face texel's part inside a strip: the rectangle [a0, a1] x [e0, e1] (see the module
+    doc), with its solid angle, y range and C(Y), as CapPiece."""
+
+    def __init__(self, a0: float, a1: float, e0: float, e1: float):
+        self.a0, self.a1, self.e0, self.e1 = a0, a1, e0, e1
+        self.area = _under(a0, a1, e1) - _under(a0, a1, e0)
+        near = 0.0 if a0 < 0.0 < a1 else min(abs(a0), abs(a1))      # y = e / sqrt(1 + a^2 + e^2)
+        far = max(abs(a0), abs(a1))
+        self.top = e1 / math.sqrt(1.0 + (near if e1 > 0.0 else far) ** 2 + e1 * e1)
+        self.bottom = e0 / math.sqrt(1.0 + (far if e0 > 0.0 else near) ** 2 + e0 * e0)
+
+    def below(self, big_y: float) -> float:
+        """C(Y); below a southern parallel, the rectangle less the part of its mirror image
+        (e -> -e) below the northern one."""
+        if big_y < 0.0:
+            return self.area - _side_below(self.a0, self.a1, -self.e1, -self.e0, -big_y)
+        return _side_below(self.a0, self.a1, self.e0, self.e1, big_y)
+
+
+def _side_below(a0: float, a1: float, e0: float, e1: float, big_y: float) -> float:
+    """C(Y) of the rectangle [a0, a1] x [e0, e1] for 0 <= Y < 1: its columns under the curve
+    e = t sqrt(1 + a^2) whole where the curve runs above e1 (|a| >= reach(e1)), none where it runs
+    below e0 (|a| <= reach(e0)), and from e0 up to the curve between."""
+    t = big_y / math.sqrt((1.0 - big_y) * (1.0 + big_y))
+    r0, r1 = _reach(e0, t), _reach(e1, t)
+    cuts = [a for a in (-r1, -r0, r0, r1) if a0 < a < a1]
+    total = 0.0
+    for p, q in zip([a0, *cuts], [*cuts, a1]):
+        mid = abs(p + q) / 2.0
+        if mid >= r1:
+            total += _under(p, q, e1) - _under(p, q, e0)
+        elif mid >= r0:
+            total += big_y * math.atan2(q - p, 1.0 + p * q) - _under(p, q, e0)
+    return total
+
+
+def side_span(face: int, phi_lo: float, phi_hi: float):
+    """(a_lo, a_hi): the strip phi in [phi_lo, phi_hi] on a side face, or None if it misses it."""
+    lo = math.remainder(phi_lo - SIDE_CENTRE[face], 2.0 * math.pi)
+    hi = lo + (phi_hi - phi_lo)
+    if hi <= -math.pi / 4 or lo >= math.pi / 4:
+        return None
+    return (-1.0 if lo <= -math.pi / 4 else math.tan(lo)), (1.0 if hi >= math.pi / 4 else math.tan(hi))
 
 
 def strip_pieces(face: int, size: int, phi_lo: float, phi_hi: float):
     """(row, column, Piece) for every texel of the face the strip phi in [phi_lo, phi_hi] meets."""
+    edges = [2.0 * k / size - 1.0 for k in range(size + 1)]
+    if face in SIDE_CENTRE:
+        span = side_span(face, phi_lo, phi_hi)
+        if span is None:
+            return
+        a_lo, a_hi = span
+        for row in range(size):
+            for col in range(max(0, int((a_lo + 1) * size / 2)), min(size - 1, int((a_hi + 1) * size / 2)) + 1):
+                a0, a1 = max(a_lo, edges[col]), min(a_hi, edges[col + 1])
+                if a1 > a0:
+                    yield row, col, SidePiece(a0, a1, -edges[row + 1], -edges[row])
+        return
     lines = (_line(face, phi_lo, 1.0), _line(face, phi_hi, -1.0))
     wedge = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
     for line in lines:
         wedge = clip(wedge, line)
     if len(wedge) < 3:
         return
-    edges = [2.0 * k / size - 1.0 for k in range(size + 1)]
     b_min, b_max = min(v[1] for v in wedge), max(v[1] for v in wedge)
     for row in range(max(0, int((b_min + 1) * size / 2)), min(size - 1, int((b_max + 1) * size / 2)) + 1):
         band = clip(clip(wedge, (-edges[row], 0.0, 1.0)), (edges[row + 1], 0.0, -1.0))
@@ -219,7 +260,7 @@ def strip_pieces(face: int, size: int, phi_lo: float, phi_hi: float):
             for line in lines:
                 square = clip(square, line)
             if len(square) >= 3:
-                piece = Piece(face, square)
+                piece = CapPiece(face, square)
                 if piece.area > 0:
                     yield row, col, piece
 
@@ -326,16 +367,19 @@ def device_supports(rt) -> bool:
 
 def cube_to_equirect_cl(rt, faces: np.ndarray) -> np.ndarray:
     """cube_to_equirect on the OpenCL device (kernels/cube_input.cl): a work-item per column on
-    a GPU; on a CPU 8 per core, each taking every 8 x cores-th column with one column's scratch
-    (fresh memory costs this CPU 0.45 ms/MB, and a scratch per column was 0.2 GB at face 1024)."""
+    a GPU; on a CPU 4 per core, each taking blocks of 8 adjacent columns with one block's scratch
+    (fresh memory costs this CPU 0.45 ms/MB, and a scratch per column was 0.2 GB at face 1024;
+    a block writes its texels out a cache line at a time)."""
     s = faces.shape[1]
     h, w = 2 * s, 4 * s
     columns = (s + 1) // 2
-    items = columns if rt.info.kind != "CPU" else min(columns, 8 * rt.info.device.max_compute_units)
+    cpu = rt.info.kind == "CPU"
+    block = 8 if cpu else 1
+    items = min(-(-columns // block), 4 * rt.info.device.max_compute_units) if cpu else columns
     out = rt.empty(h * w * 12)
-    scratch = rt.empty(items * 8 * h * 3 * 8)
-    k = rt.kernel("cube_input.cl", "cube_to_equirect")
-    rt.run(k, (items,), (1,) if rt.info.kind == "CPU" else None,
+    scratch = rt.empty(items * block * 8 * h * 3 * 8)
+    k = rt.kernel("cube_input.cl", "cube_to_equirect", {"BLOCK": block})
+    rt.run(k, (items,), (1,) if cpu else None,
            rt.to_device(np.ascontiguousarray(faces[..., :3], np.float32)), rt.to_device(symmetries()),
-           np.int32(s), np.int32(w), np.int32(h), scratch, out)
+           rt.to_device(row_edges(h)), np.int32(s), np.int32(w), np.int32(h), scratch, out)
     return rt.read_mapped(out, (h, w, 3))
