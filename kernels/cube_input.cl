@@ -265,6 +265,18 @@ static void side_face(__global const float *faces, __constant const int2 *sym, _
     }
 }
 
+/* the first and last texel (columns: along a, rows: along b) a polygon on a face reaches */
+static int2 texel_span(const double2 *poly, int n, int rows, int s)
+{
+    double lo = 2.0, hi = -2.0;
+    for (int k = 0; k < n; ++k) {
+        const double v = rows ? poly[k].y : poly[k].x;
+        lo = fmin(lo, v);
+        hi = fmax(hi, v);
+    }
+    return (int2)(max(0, (int)((lo + 1.0) * s / 2.0)), min(s - 1, (int)((hi + 1.0) * s / 2.0)));
+}
+
 /* The top face's texels in the strip: each clipped by the strip's two meridian planes (lines
  * through the face's centre) to a polygon of great-circle arcs */
 static void top_face(__global const float *faces, __constant const int2 *sym, __global const double *ys, int s,
@@ -277,25 +289,15 @@ static void top_face(__global const float *faces, __constant const int2 *sym, __
     int nw = clip(sq, 4, lo, tmp);
     nw = clip(tmp, nw, hi, wedge);
     if (nw < 3) return;
-    double b_min = 2.0, b_max = -2.0;
-    for (int k = 0; k < nw; ++k) {
-        b_min = fmin(b_min, wedge[k].y);
-        b_max = fmax(b_max, wedge[k].y);
-    }
-    const int r0 = max(0, (int)((b_min + 1.0) * s / 2.0)), r1 = min(s - 1, (int)((b_max + 1.0) * s / 2.0));
+    const int2 rows = texel_span(wedge, nw, 1, s);
     Piece pc;
-    for (int row = r0; row <= r1; ++row) {
+    for (int row = rows.x; row <= rows.y; ++row) {
         const double e0 = 2.0 * row / s - 1.0, e1 = 2.0 * (row + 1) / s - 1.0;
         int nb = clip(wedge, nw, (double3)(-e0, 0.0, 1.0), tmp);
         nb = clip(tmp, nb, (double3)(e1, 0.0, -1.0), band);
         if (nb < 3) continue;
-        double a_min = 2.0, a_max = -2.0;
-        for (int k = 0; k < nb; ++k) {
-            a_min = fmin(a_min, band[k].x);
-            a_max = fmax(a_max, band[k].x);
-        }
-        const int c0 = max(0, (int)((a_min + 1.0) * s / 2.0)), c1 = min(s - 1, (int)((a_max + 1.0) * s / 2.0));
-        for (int col = c0; col <= c1; ++col) {
+        const int2 cols = texel_span(band, nb, 0, s);
+        for (int col = cols.x; col <= cols.y; ++col) {
             const double a0 = 2.0 * col / s - 1.0, a1 = 2.0 * (col + 1) / s - 1.0;
             const double2 texel[4] = {(double2)(a0, e0), (double2)(a1, e0), (double2)(a1, e1), (double2)(a0, e1)};
             int np = clip(texel, 4, lo, tmp);
