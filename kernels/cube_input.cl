@@ -118,7 +118,8 @@ static double fan_within(const Piece *pc, int k, double rho2, double cap)
     const double a = dot(d, d), b = dot(p, d), c = dot(p, p) - rho2;
     const double disc = b * b - a * c;
     if (a == 0.0 || disc <= 0.0) return cap * pc->ang[k];
-    const double root = -(b + copysign(sqrt(disc), b));      /* no cancellation */
+    /* the root of larger magnitude first, the other from their product c / a: no cancellation */
+    const double root = -(b + copysign(sqrt(disc), b));
     const double r1 = root / a, r2 = c / root;
     const double lo = fmax(fmin(r1, r2), 0.0), hi = fmin(fmax(r1, r2), 1.0);
     if (lo >= hi) return cap * pc->ang[k];

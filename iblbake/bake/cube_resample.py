@@ -112,7 +112,8 @@ def _fan_within(p, q, rho2: float, cap: float) -> float:
     disc = b * b - a * c
     if a == 0.0 or disc <= 0.0:
         return cap * _angle(p, q)
-    root = -(b + math.copysign(math.sqrt(disc), b))           # no cancellation (Numerical Recipes 5.6)
+    # the root of larger magnitude first, the other from their product c / a: no cancellation
+    root = -(b + math.copysign(math.sqrt(disc), b))
     t1, t2 = sorted((root / a, c / root if root != 0.0 else 0.0))
     lo, hi = max(t1, 0.0), min(t2, 1.0)
     if lo >= hi:
