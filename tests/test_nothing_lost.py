@@ -108,6 +108,60 @@ def test_kill_loop_mips(tmp_path, stress, random_env):
     assert good == 3 and not bad      # radiance, prefiltered, dfg
 
 
+_CTRL_C_IN_EXTENSION_INIT = """
+import enum, os, signal, sys
+from iblbake import entry
+entry.loaded()
+create = enum.EnumType.__call__
+def ctrl_c_then_create(cls, *args, **kw):
+    # Called straight from an extension module's initialisation (the caller's frame is
+    # importlib's): press Ctrl-C there, as a user might while `iblbake mips` loads pyopencl.
+    if sys._getframe(1).f_code.co_filename.startswith("<frozen importlib"):
+        os.kill(os.getpid(), signal.SIGINT)
+    return create(cls, *args, **kw)
+enum.EnumType.__call__ = ctrl_c_then_create
+try:
+    __import__(sys.argv[1])
+    while True:
+        pass
+except KeyboardInterrupt:
+    enum.EnumType.__call__ = create
+    print(type(sys.modules[sys.argv[1]]).__name__)
+    sys.exit(130)
+"""
+
+
+@pytest.mark.parametrize("module", ["pyopencl", "OpenImageIO"])
+def test_ctrl_c_inside_an_extension_import_is_raised_after_it(module):
+    """A KeyboardInterrupt raised while nanobind creates an enum aborts the process (exit -6: CI
+    saw it once in `mips`' kill loop); once loaded, the CLI holds a Ctrl-C back until the import
+    is done, then raises it."""
+    p = subprocess.run([sys.executable, "-c", _CTRL_C_IN_EXTENSION_INIT, module],
+                       capture_output=True, text=True, timeout=60)
+    assert p.returncode == 130, p.stderr[-500:]
+    assert p.stdout.strip() == "module"
+
+
+def test_a_held_ctrl_c_at_the_end_of_a_run_does_not_kill_it_with_an_alarm(tmp_path):
+    """A Ctrl-C held back by an import that ends the run: the run's work is done and it exits 0,
+    not by the retry alarm firing after Python restored SIGALRM's default (exit -14)."""
+    # The module presses Ctrl-C while it is imported, and leaves an object whose teardown takes
+    # 0.1 s, as pyopencl's does: long enough for a retry alarm to fire after Python's own.
+    (tmp_path / "presses_ctrl_c.py").write_text(
+        "import os, signal, time\n"
+        "class SlowTeardown:\n"
+        "    def __del__(self):\n"
+        "        end = time.monotonic() + 0.1\n"
+        "        while time.monotonic() < end:\n"
+        "            pass\n"
+        "kept = SlowTeardown()\n"
+        "os.kill(os.getpid(), signal.SIGINT)\n")
+    script = "from iblbake import entry\nentry.loaded()\nimport presses_ctrl_c\n"
+    p = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60,
+                       env={**os.environ, "PYTHONPATH": str(tmp_path)}, cwd=tmp_path)
+    assert p.returncode == 0, (p.returncode, p.stderr[-500:])
+
+
 def _scene(folder: Path, env: Path, **effects):
     doc = {"camera": {"perspective": {"position": [0, 0, 4]}, "resolution": [160, 120]},
            "environment": {"path": str(env), "background": "show"},
