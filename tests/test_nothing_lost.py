@@ -145,8 +145,9 @@ def test_ctrl_c_inside_an_extension_import_is_raised_after_it(module):
 def test_a_held_ctrl_c_at_the_end_of_a_run_does_not_kill_it_with_an_alarm(tmp_path):
     """A Ctrl-C held back by an import that ends the run: the run's work is done and it exits 0,
     not by the retry alarm firing after Python restored SIGALRM's default (exit -14)."""
-    # The module presses Ctrl-C while it is imported, and leaves an object whose teardown takes
-    # 0.1 s, as pyopencl's does: long enough for a retry alarm to fire after Python's own.
+    # The module presses Ctrl-C while it is imported and leaves an object whose teardown at exit
+    # takes 0.1 s (a slow library teardown): time for a retry alarm still armed at the end to
+    # fire after Python has restored SIGALRM's default action.
     (tmp_path / "presses_ctrl_c.py").write_text(
         "import os, signal, time\n"
         "class SlowTeardown:\n"
