@@ -2,8 +2,8 @@
 the overlaps of cube texels and equirect texels against closed forms that share none of its
 code: a cube texel's solid angle (the atan formula of its corners), an equirect texel's
 (dphi dy), a side-face texel's part inside a strip (a rectangle on the face), and against dense
-sampling of the overlaps; a constant map at face 1024; the symmetric assembly against the plain per-column sum; the kernel
-against the twin."""
+sampling of the overlaps; a constant map at face 1024; the symmetric assembly against the
+plain per-column sum; the kernel against the twin."""
 
 import math
 

@@ -128,13 +128,13 @@ class CapPiece:
 
     def __init__(self, face: int, poly: list):
         self.pole = 1.0 if face == 2 else -1.0
-        self.poly = poly
-        total = sum(_triangle(p, q) for p, q in zip(poly, poly[1:] + poly[:1]))
+        self.edges = list(zip(poly, poly[1:] + poly[:1]))      # (p, q), read again for every band edge
+        total = sum(_triangle(p, q) for p, q in self.edges)
         self.sign = 1.0 if total >= 0.0 else -1.0
         self.area = abs(total)
         far2 = max(p[0] * p[0] + p[1] * p[1] for p in poly)
-        near2 = min(_distance2(p, q) for p, q in zip(poly, poly[1:] + poly[:1]))
-        if _contains_centre(poly):
+        near2 = min(_distance2(p, q) for p, q in self.edges)
+        if _contains_centre(self.edges):
             near2 = 0.0
         ys = sorted((self.pole / math.sqrt(1.0 + near2), self.pole / math.sqrt(1.0 + far2)))
         self.bottom, self.top = ys
@@ -145,8 +145,7 @@ class CapPiece:
             return 0.0 if self.pole > 0.0 else self.area
         z = abs(big_y)
         rho2 = (1.0 - z) * (1.0 + z) / (z * z)
-        poly = self.poly
-        inside = self.sign * sum(_fan_within(p, q, rho2, 1.0 - z) for p, q in zip(poly, poly[1:] + poly[:1]))
+        inside = self.sign * sum(_fan_within(p, q, rho2, 1.0 - z) for p, q in self.edges)
         return self.area - inside if self.pole > 0.0 else inside
 
 
@@ -159,9 +158,9 @@ def _distance2(p, q) -> float:
     return x[0] * x[0] + x[1] * x[1]
 
 
-def _contains_centre(poly) -> bool:
-    """Whether the convex polygon holds the face centre (on its boundary counts)."""
-    sides = [_cross2(p, q) for p, q in zip(poly, poly[1:] + poly[:1])]
+def _contains_centre(edges) -> bool:
+    """Whether the convex polygon of these edges holds the face centre (on its boundary counts)."""
+    sides = [_cross2(p, q) for p, q in edges]
     return all(c >= 0.0 for c in sides) or all(c <= 0.0 for c in sides)
 
 

@@ -312,9 +312,10 @@ def read_exrs_back_to_back(paths) -> list:
     inputs = []
     try:
         for path in paths:
-            inputs.append((path, _open_exr(path)))
-            if inputs[-1][1].spec().nchannels < 3:
-                raise InputError(f"{path}: {inputs[-1][1].spec().nchannels} channels, not RGB")
+            inp = _open_exr(path)
+            inputs.append((path, inp))
+            if inp.spec().nchannels < 3:
+                raise InputError(f"{path}: {inp.spec().nchannels} channels, not RGB")
         flat = np.empty(3 * sum(inp.spec().width * inp.spec().height for _, inp in inputs), np.float32)
         views, o = [], 0
         for path, inp in inputs:
