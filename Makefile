@@ -52,7 +52,8 @@ test: opencl assets testmodels readers
 # and saves the table of case, bound, measured, result
 stress: opencl assets testmodels
 	IBLBAKE_STRESS=1 IBLBAKE_STRESS_REPORT=docs/stress-table.md $(BIN)/python -m pytest -q -rs \
-	    tests/test_stress.py tests/test_stress_render.py tests/test_fuzz.py tests/test_nothing_lost.py
+	    tests/test_stress.py tests/test_stress_render.py tests/test_fuzz.py tests/test_nothing_lost.py \
+	    tests/test_outputs_guarded.py
 
 bench: opencl assets
 	$(BIN)/python benchmarks/bench_sh.py

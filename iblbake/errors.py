@@ -13,6 +13,13 @@ class InputError(IblbakeError):
     """A bad input file or value."""
 
 
+class UsageError(InputError):
+    """A command-line value that does not parse (a --set or --rows spec): exit 2, as every other
+    usage error."""
+
+    exit_code = 2
+
+
 class DeviceError(IblbakeError):
     """No usable OpenCL device, or a kernel that failed to build or run."""
 

@@ -124,10 +124,10 @@ def test_tiny_and_odd_sizes_work(tmp_path):
 
 
 def test_internal_errors_are_one_line_unless_debug(tmp_path):
-    # an output folder that does not exist is a user error: one line, no traceback
+    # an output folder that cannot be made (a file is in the way) is a user error: one line, no traceback
     env = write_exr(tmp_path / "c.exr", np.ones((4, 8, 3), np.float32))
-    p = run_cli("sh", env, "-o", tmp_path / "no" / "such" / "dir.json")
-    assert_one_line_error(p, "does not exist")
+    p = run_cli("sh", env, "-o", tmp_path / "c.exr" / "such" / "dir.json")
+    assert_one_line_error(p, "is not a folder")
 
 
 def test_usage_errors(tmp_path):

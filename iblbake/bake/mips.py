@@ -63,6 +63,51 @@ class PrefilterOptions:
                 "convolve_budget": self.convolve_budget}
 
 
+# What a prefiltered bake holds on the host: every level of the chain as float32 RGB, and while its
+# largest level bakes, that level's float64 texel directions and float32 results. Measured peak
+# resident size: about 45 bytes per level-0 texel over the fixed start-up (mips --size 1024 and 2048,
+# equirect and cube map); the device's largest buffer is one level as float4.
+CHAIN_BYTES_PER_TEXEL = 12
+WORK_BYTES_PER_TEXEL = 48
+DEVICE_BYTES_PER_TEXEL = 16
+
+
+def chain_bytes(layout: str, sizes) -> tuple[int, int]:
+    """(host bytes, largest device buffer) of baking a prefiltered chain of these level sizes."""
+    texels = [int(np.prod(layouts.layout_shape(layout, s))) for s in sizes]
+    return (CHAIN_BYTES_PER_TEXEL * sum(texels) + WORK_BYTES_PER_TEXEL * max(texels),
+            DEVICE_BYTES_PER_TEXEL * max(texels))
+
+
+def check_chain_fits(layout: str, size: int, sizes_of, rt, flag: str, candidates=None) -> None:
+    """Before any work: InputError naming `flag` and the largest size that fits where the chain of
+    base `size` (level sizes `sizes_of(size)`) needs more host memory than is available or a
+    larger buffer than the device `rt` allocates (rt None: the numpy backend, host only).
+    `candidates`: the sizes the option allows, ascending (default every size up to `size`)."""
+    host = cl.host_bytes_available()
+    max_alloc = rt.info.device.max_mem_alloc_size if rt is not None else None
+
+    def need(s):
+        h, d = chain_bytes(layout, sizes_of(s))
+        if host is not None and h > host:
+            return f"{h / 2**30:.1f} GiB on the host, more than the {max(host, 0) / 2**30:.1f} GiB available"
+        if max_alloc is not None and d > max_alloc:
+            return (f"a {d / 2**30:.1f} GiB buffer on {rt.device_label}, over its largest allocation of "
+                    f"{max_alloc / 2**30:.1f} GiB")
+        return None
+
+    why = need(size)
+    if why is None:
+        return
+    allowed = candidates if candidates is not None else range(1, size + 1)
+    lo, hi = 0, len(allowed) - 1      # bisect for the last allowed size that fits
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        lo, hi = (mid, hi) if need(allowed[mid]) is None else (lo, mid - 1)
+    fits = f"the largest that fits is {allowed[lo]}" if need(allowed[lo]) is None else "no size fits"
+    raise InputError(f"{flag} {size}: the {layout} chain needs {why}; {fits}")
+
+
 CONVOLVE_RESOLUTIONS = (12.0, 6.0)   # texels per lobe scale, finest first (see prefilter.TEXELS_PER_LOBE)
 
 

@@ -157,7 +157,10 @@ POLY_CONSTANTS = np.array([0.5 / math.sqrt(math.pi)] + [math.sqrt(3.0 / (4.0 * m
                           + [0.5 * math.sqrt(15.0 / math.pi)] * 2 + [0.25 * math.sqrt(5.0 / math.pi)]
                           + [0.5 * math.sqrt(15.0 / math.pi), 0.25 * math.sqrt(15.0 / math.pi)])
 FORMATS = ("iblbake", "filament", "threejs", "gltf", "glsl")
-SUFFIX = {"iblbake": ".json", "filament": ".txt", "threejs": ".json", "gltf": ".json", "glsl": ".glsl"}
+# what each format's file may be called; the first is what `sh A B -o DIR/` names them
+SUFFIXES = {"iblbake": (".json",), "filament": (".txt",), "threejs": (".json",), "gltf": (".json",),
+            "glsl": (".glsl", ".frag", ".vert", ".comp", ".h")}
+SUFFIX = {fmt: names[0] for fmt, names in SUFFIXES.items()}
 NAMES = ["L00", "L1-1", "L10", "L11", "L2-2", "L2-1", "L20", "L21", "L22"]
 
 

@@ -64,16 +64,13 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
     from iblbake import render
     from iblbake.device.runtime import Runtime
     from iblbake.io import atomic, images
+    from iblbake.scene import load as scene_load
     from iblbake.study import accuracy as acc
 
     con = Console(quiet, as_json)
     t_start = time.perf_counter()
     out = Path(out_dir) if out_dir else None
-    if out is not None:
-        try:
-            out.mkdir(parents=True, exist_ok=True)
-        except OSError as e:
-            raise IblbakeError(f"{out}: cannot create the output folder ({e.strerror})") from None
+    if out is not None:              # the folder is made when the results are written, not before
         for name in FILES:
             atomic.check_writable(out / name)
     settings = acc.Settings(max_side=max_side, repeats=repeats, target_noise=target_noise, max_samples=max_samples,
@@ -83,8 +80,12 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
     rungs = acc.ladder_from_file(ladder_path, study.scene, study.fx) if ladder_path else \
         acc.default_ladder(study.scene, study.fx, rt.info.kind)
     rungs = [acc.configured_rung(study.scene, t) for t in study.terms] + rungs
+    reads = scene_load.named_input_files(study.scene) + ([("the ladder", ladder_path)] if ladder_path else [])
     for r in rungs:                  # every rung's scene validates before anything renders
-        study.load(study.rung_values(r), origin=f"ladder rung {r.label!r}")
+        reads += scene_load.named_input_files(study.load(study.rung_values(r), origin=f"ladder rung {r.label!r}"))
+    if out is not None:
+        from iblbake.io.guard import refuse_overlaps
+        refuse_overlaps([("-o", str(out / name)) for name in FILES], reads)
     names = [f"reference {t} seed {s}" for t in study.terms for s in settings.seeds] + [r.label for r in rungs]
     spread = None
     if jobs > 1:

@@ -8,8 +8,9 @@ from pathlib import Path
 
 import click
 
-from iblbake.cli.options import (POLICY_FLAGS, Console, common_options, depfile_option, device_option,
-                                  input_files_of, input_options)
+from iblbake.cli.options import (POLICY_FLAGS, Console, check_inputs_exist, common_options, depfile_option,
+                                  device_option, input_files_of, input_options, panorama_reads)
+from iblbake.io.guard import refuse_overlaps
 
 
 def _power_of_two(ctx, param, value):
@@ -77,11 +78,12 @@ def export_gltf_command(env, output, force, size, min_size, mapping, scale, meth
         raise click.BadParameter(f"{output}: give a .gltf or .glb path", param_hint="-o")
     if min_size > size:
         raise click.BadParameter(f"{min_size} is larger than --size {size}", param_hint="--min-size")
-    check_writable(out)
-    if os.path.exists(env) and os.path.realpath(env) == os.path.realpath(out):
-        raise IblbakeError(f"-o {output}: is the input panorama; choose another output path")
     from iblbake.io import gltf
     sizes = gltf_light.level_sizes(size, min_size)
+    writes = [("-o", str(out))] + [("-o (a face image beside it)", str(p)) for p in gltf.sidecars(out, len(sizes))]
+    refuse_overlaps(writes + ([("--depfile", depfile)] if depfile else []), panorama_reads([env]))
+    check_writable(out)
+    check_inputs_exist([env])
     if not force:
         # a light export-gltf wrote (its PNGs with it) is replaced, so Makefile rules rerun; nothing else
         if out.exists() and not gltf.written_by_iblbake(out):
@@ -93,6 +95,8 @@ def export_gltf_command(env, output, force, size, min_size, mapping, scale, meth
     root = Path(cache_dir) if cache_dir else cache.default_root()
     check_writable(root / "manifest.json", "cache", shown=root)
     baker = mipsbake.Baker(backend, device)
+    mipsbake.check_chain_fits("cubemap", size, lambda s: gltf_light.level_sizes(s, min_size), baker.rt, "--size",
+                              candidates=[min_size << k for k in range((size // min_size).bit_length())])
     image, info = inputs.read_environment(env, layout=input_layout, runtime=baker.rt, max_pixels=max_pixels,
                                           nonfinite=nonfinite, negative=negative, transfer=transfer,
                                           primaries=primaries, names=POLICY_FLAGS)

@@ -70,6 +70,7 @@ def cli():
     iblbake render SCENE -o out.png render a scene YAML (see render --help-schema)
     iblbake sheet SCENE -o s.png    a contact sheet of the scene's sweep (or --rows/--columns)
     iblbake deps SCENE              the Make rule of what rendering SCENE reads
+    iblbake accuracy SCENE -o DIR/  each approximation's error against the reference, and its time
     iblbake compare A B             FLIP or RMSE between frames or sheets (per cell), for CI
     iblbake cache [prune]           the bake cache's entries; trim it to a size
     iblbake devices                 OpenCL devices and which one is used

@@ -8,8 +8,10 @@ from pathlib import Path
 
 import click
 
-from iblbake.cli.options import (POLICY_FLAGS, Console, common_options, depfile_option, device_option, finite,
-                                  input_files_of, input_options, non_negative)
+from iblbake.cli.options import (POLICY_FLAGS, Console, check_inputs_exist, check_suffix, common_options,
+                                  depfile_option, device_option, finite, input_files_of, input_options,
+                                  non_negative, panorama_reads)
+from iblbake.io.guard import refuse_overlaps
 
 
 def _per_env(envs, path, flag) -> dict:
@@ -144,11 +146,31 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
             raise click.UsageError("--ktx2 stores a mip chain: give --level-sizes halving")
         layout = "cubemap"
         ktx2_out = _per_env(envs, ktx2_path, "--ktx2")
+    writes = [(flag, str(p)) for flag, outs in (("--ktx2", ktx2_out), ("--ktx2-irradiance", irr_out),
+                                                 ("--ktx2-sheen", sheen_out)) for p in outs.values()]
+    refuse_overlaps(writes + ([("--depfile", depfile)] if depfile else []), panorama_reads(envs))
+    if len(envs) == 1:
+        for flag, p in writes:
+            check_suffix(p, (".ktx2",), flag, "a KTX2 cube map")
+    check_inputs_exist(envs)
     t_start = time.perf_counter()
     root = Path(cache_dir) if cache_dir else cache.default_root()
     from iblbake.io.atomic import check_writable
     check_writable(root / "manifest.json", "cache", shown=root)
     baker = mipsbake.Baker(backend, device)
+
+    def chain_options(height=0):
+        return mipsbake.PrefilterOptions(layout, size, levels, min_size, method, samples, lod_bias, not no_fis,
+                                         convolve_budget, level_sizes).resolved(height)
+
+    def check_size(height=0):         # --size (or the source's height it defaults to) against memory
+        if "prefiltered" in parts:
+            mipsbake.check_chain_fits(layout, chain_options(height)["base_size"],
+                                      lambda s: mipsbake.PrefilterOptions(
+                                          layout, s, levels, min_size, level_sizes=level_sizes).resolved(0)["sizes"],
+                                      baker.rt, "--size")
+    if size is not None:
+        check_size()
     summaries, rules = [], []
     for env in envs:
         report = {}
@@ -163,8 +185,9 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
                 con.warn(w)
             policies = images.read_policies(nonfinite, negative, transfer, primaries, input_layout)
             if "prefiltered" in parts:
-                opts = mipsbake.PrefilterOptions(layout, size, levels, min_size, method, samples, lod_bias,
-                                                 not no_fis, convolve_budget, level_sizes).resolved(info.height)
+                if size is None:
+                    check_size(info.height)
+                opts = chain_options(info.height)
                 for out in (ktx2_out.get(env), sheen_out.get(env)):
                     if out is not None:
                         mipsbake.check_ktx2_chain(out, opts)
@@ -179,7 +202,6 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
                                         "lmax": irradiance_lmax, "error": im["error"],
                                         "seconds": round(time.perf_counter() - t0, 4)}
                 if env in irr_out:
-                    irr_out[env].parent.mkdir(parents=True, exist_ok=True)
                     mipsbake.write_irradiance_ktx2(irr_out[env], faces, ktx2_format)
                     report["ktx2_irradiance"] = {"path": str(irr_out[env]), "format": ktx2_format, "cached": False,
                                                  "seconds": 0.0}
@@ -211,7 +233,6 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
                                        "seconds": round(time.perf_counter() - t0, 4), "layout": layout,
                                        "roughness": [f["roughness"] for f in sm["files"]]}
                     if env in sheen_out:
-                        sheen_out[env].parent.mkdir(parents=True, exist_ok=True)
                         mipsbake.write_ktx2(sheen_out[env], root, sm,
                                             {**opts, "roughness": mipsbake.sheen_roughness(opts["roughness"])},
                                             ktx2_format, content="Charlie-prefiltered (sheen) radiance")
@@ -220,7 +241,6 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
                 if env in ktx2_out:
                     t0 = time.perf_counter()
                     out = ktx2_out[env]
-                    out.parent.mkdir(parents=True, exist_ok=True)
                     mipsbake.write_ktx2(out, root, pm, opts, ktx2_format)
                     report["ktx2"] = {"path": str(out), "format": ktx2_format, "cached": False,
                                       "seconds": round(time.perf_counter() - t0, 4), "levels": len(opts["sizes"])}

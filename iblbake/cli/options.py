@@ -27,6 +27,7 @@ class Console:
     def __init__(self, quiet: bool, as_json: bool):
         self.quiet, self.as_json = quiet, as_json
         self._warned: set = set()
+        self._bar = False                # a progress bar holds the terminal's last line
 
     def note(self, text: str):
         if not self.quiet:
@@ -36,7 +37,8 @@ class Console:
         """Once per message (a sheet's cells read the same panorama)."""
         if not self.quiet and text not in self._warned:
             self._warned.add(text)
-            click.echo(f"iblbake: warning: {text}", err=True)
+            # on its own line: the bar's line is cleared first and redrawn at its next step
+            click.echo(("\r\x1b[2K" if self._bar else "") + f"iblbake: warning: {text}", err=True)
 
     @property
     def interactive(self) -> bool:
@@ -49,22 +51,47 @@ class Console:
         if not self.interactive:
             yield lambda _=1: None
             return
+        import time
+
         names = list(names)
-        with click.progressbar(length=len(names), label=label, file=sys.stderr,
+        n = len(names)
+        # The time left is estimated from the stages after the first: the first pays the kernel
+        # builds and the device's first-launch specialisation (click's own ETA counted it, and
+        # read 2 min 49 s left of a 6 s render).
+        with click.progressbar(length=n, label=label, file=sys.stderr, show_eta=False,
                                item_show_func=lambda i: i) as bar:
             done = [0]
+            anchor = []          # (time, stages done) at the end of the first burst of steps
 
             def step(_=1):   # also fits callers that report progress(1)
                 done[0] += 1
-                bar.update(1, names[done[0]] if done[0] < len(names) else "done")
-            bar.update(0, names[0])
-            yield step
+                now = time.perf_counter()
+                if not anchor or (len(anchor) == 2 and now - anchor[0] < 0.01):
+                    anchor[:] = [now, done[0]]          # steps a batch reports at once
+                elif len(anchor) == 2:
+                    anchor.append(True)
+                item = names[done[0]] if done[0] < n else "done"
+                if len(anchor) == 3 and done[0] < n:
+                    left = (now - anchor[0]) / (done[0] - anchor[1]) * (n - done[0])
+                    item += f", {_duration(left)} left"
+                bar.update(1, item)
+            self._bar = True
+            try:
+                bar.update(0, names[0])
+                yield step
+            finally:
+                self._bar = False
 
     def result(self, summary: dict, human: str):
         if self.as_json:
             click.echo(json.dumps(summary, indent=2, allow_nan=False))
         elif not self.quiet:
             click.echo(human)
+
+
+def _duration(seconds: float) -> str:
+    seconds = int(round(seconds))
+    return f"{seconds // 60} min {seconds % 60:02d} s" if seconds >= 60 else f"{seconds} s"
 
 
 def common_options(f):
@@ -151,3 +178,28 @@ def input_files_of(env: str) -> list:
     """The files an ENV argument reads (six for a {face} path), for depfiles."""
     from iblbake.bake.inputs import files_of
     return files_of(env)
+
+
+def panorama_reads(envs) -> list:
+    """(what, path) of every file the ENV arguments read, for the overwrite guard."""
+    return [("the input panorama", f) for env in envs for f in input_files_of(str(env))]
+
+
+def check_inputs_exist(envs) -> None:
+    """Every ENV names a file, checked before any work (so `sh A missing -o DIR/` bakes nothing)."""
+    import os
+
+    from iblbake.errors import InputError
+    for f in (f for env in envs for f in input_files_of(str(env))):
+        if os.path.isdir(f):
+            raise InputError(f"{f}: is a folder, not a panorama file")
+        if not os.path.exists(f):
+            raise InputError(f"{f}: no such file")
+
+
+def check_suffix(path, suffixes, flag: str, what: str) -> None:
+    """An output's extension says what it holds: refuse `-o x.xyz` before any work."""
+    from pathlib import Path
+    if Path(str(path)).suffix.lower() not in suffixes:
+        raise click.BadParameter(f"{path}: {what} is written as {' or '.join(suffixes)}; give such a path",
+                                 param_hint=flag)

@@ -47,6 +47,8 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, depfi
     con = Console(quiet, as_json)
     sc = scene.load(scene_path, overrides, outputs)
     from iblbake.io.atomic import check_writable
+    from iblbake.io.guard import refuse_overlaps
+    refuse_overlaps(sc.writes + ([("--depfile", depfile)] if depfile else []), scene.named_input_files(sc))
     for p in render.output_paths(sc):
         check_writable(p)
     with con.stages(["reference samples"] * 100, label="render") if (

@@ -9,19 +9,19 @@ import time
 
 import click
 
-from iblbake.cli.options import (POLICY_FLAGS, Console, common_options, depfile_option, device_option, finite,
-                                  input_files_of, input_options, non_negative)
+from iblbake.cli.options import (POLICY_FLAGS, Console, check_inputs_exist, check_suffix, common_options,
+                                  depfile_option, device_option, finite, input_files_of, input_options,
+                                  non_negative, panorama_reads)
+from iblbake.io.guard import refuse_overlaps
 from iblbake.errors import IblbakeError
 
 
-def _check_overwrite(output: str, force: bool, source: str, fmt: str = "iblbake"):
+def _check_overwrite(output: str, force: bool, fmt: str = "iblbake"):
     """sh replaces its own earlier documents and exports (Makefile reruns) but nothing else
-    unless --force, and never its input."""
+    unless --force (and never its input: the guard in sh_command)."""
     from iblbake.bake import sh as shbake
 
     out = os.path.realpath(output)
-    if os.path.exists(source) and out == os.path.realpath(source):
-        raise IblbakeError(f"-o {output}: is the input panorama; choose another output path")
     if force or not os.path.exists(out):
         return
     try:
@@ -101,18 +101,34 @@ def sh_command(envs, output, force, bands, window, backend, rotate_y, intensity,
             raise IblbakeError(f"-o {output}: with {len(envs)} panoramas, -o is a folder (end it with /)")
         outputs = [os.path.join(output, os.path.splitext(os.path.basename(e))[0] + shbake.SUFFIX[fmt])
                    if output else None for e in envs]
-        if output:
-            os.makedirs(output, exist_ok=True)
     else:
         outputs = [output]
-    for env, out in zip(envs, outputs):
+    # one panorama named twice writes its one document once; two panoramas onto one name are refused
+    same = {(os.path.realpath(e), o): o for e, o in zip(envs, outputs) if o}
+    writes = [("-o", o) for o in same.values()] + ([("--depfile", depfile)] if depfile else [])
+    refuse_overlaps(writes, panorama_reads(envs))
+    if len(envs) == 1 and output:
+        check_suffix(output, shbake.SUFFIXES[fmt], "-o", f"--format {fmt}")
+    for flag, out in writes:
+        check_writable(out)
+    for out in outputs:
         if out:
-            check_writable(out)
-            _check_overwrite(out, force, env, fmt)
+            _check_overwrite(out, force, fmt)
+    check_inputs_exist(envs)
     state = {"rt": None}
-    results = [_project_one(env, out, state, bands, window, backend, rotate_y, intensity, fmt, with_error,
+    # every panorama is projected before any file is written: a bad one among several leaves nothing
+    results = [_project_one(env, state, bands, window, backend, rotate_y, intensity, fmt, with_error,
                             nonfinite, negative, transfer, primaries, input_layout, max_pixels, device, con)
-               for env, out in zip(envs, outputs)]
+               for env in envs]
+    from iblbake.io.atomic import write_text
+    for (summary, human, text), out in zip(results, outputs):
+        summary["output"] = out
+        if out:
+            write_text(out, text)
+            human = f"wrote {out}: {human}"
+        elif fmt != "iblbake":
+            click.echo(text, nl=False)
+    results = [(summary, human) for summary, human, _ in results]
     if depfile:
         from iblbake.io import depfile as dep
         dep.write(depfile, [([out], [os.path.abspath(f) for f in input_files_of(env)]) for env, out in zip(envs, outputs) if out])
@@ -127,7 +143,7 @@ def sh_command(envs, output, force, bands, window, backend, rotate_y, intensity,
         con.result({"panoramas": [s for s, _ in results]}, "\n".join(h for _, h in results))
 
 
-def _project_one(env, output, state, bands, window, backend, rotate_y, intensity, fmt, with_error, nonfinite,
+def _project_one(env, state, bands, window, backend, rotate_y, intensity, fmt, with_error, nonfinite,
                  negative, transfer, primaries, input_layout, max_pixels, device, con):
     from iblbake.bake import sh as shbake
     from iblbake.io import images
@@ -166,18 +182,12 @@ def _project_one(env, output, state, bands, window, backend, rotate_y, intensity
         doc["error"] = shbake.irradiance_error(image, np.asarray(doc["irradiance"]), bands, rotate_y, intensity)
         doc["timings"]["error_s"] = round(time.perf_counter() - t0, 6)
     doc["elapsed_s"] = round(time.perf_counter() - t_start, 6)
-    text = shbake.export(doc, fmt) if fmt != "iblbake" or output else None
-    if output:
-        from iblbake.io.atomic import write_text
-        write_text(output, text)
-    elif fmt != "iblbake":
-        click.echo(text, nl=False)
+    text = shbake.export(doc, fmt)
     summary = {k: doc[k] for k in ("format", "format_version", "bands", "window", "irradiance", "device",
                                    "timings", "elapsed_s") + (("error",) if with_error else ())}
     summary["input"] = {k: doc["input"][k] for k in ("path", "width", "height", "sha256")}
-    summary["output"] = output
     dc = doc["radiance"][0]
-    human = (f"{'wrote ' + output + ': ' if output else ''}{bands * bands} SH coefficients of "
+    human = (f"{bands * bands} SH coefficients of "
              f"{info.path} ({info.width}x{info.height}) in {doc['elapsed_s']:.3f} s on {device_label}; "
              f"mean radiance {[round(c / (2 * math.sqrt(math.pi)), 5) for c in dc]}")
     if with_error:
@@ -186,4 +196,4 @@ def _project_one(env, output, state, bands, window, backend, rotate_y, intensity
                   f"{100 * e['max_relative_error']:.1f}%, ringing {100 * e['most_negative_relative']:.2f}% of the mean")
     if info.negative and negative == "keep":
         human += f"; {info.negative} tiny negative values kept (min {info.negative_min:.3g})"
-    return summary, human
+    return summary, human, text

@@ -149,9 +149,19 @@ def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, labe
     t_start = time.perf_counter()
     base = scene_load.load(scene_path, overrides, ["cell.png"])
     rows_axis, cols_axis, cells = sweep.plan_sheet(
-        base, sweep.parse_cli_axis(rows) if rows else None, sweep.parse_cli_axis(columns) if columns else None,
+        base, sweep.parse_cli_axis(rows, "--rows") if rows else None,
+        sweep.parse_cli_axis(columns, "--columns") if columns else None,
         label_format)
     scenes = sheet.cell_scenes(scene_path, overrides, cells, cell_size, keep_going)
+    from iblbake.io.guard import refuse_overlaps
+    writes = [("-o", o) for o in outputs] + [(flag, p) for flag, p in (("--layout", layout_path),
+                                                                       ("--depfile", depfile)) if p]
+    if frames_dir:
+        writes += [("--frames", p) for c in cells for p in sheet.frame_paths(c, frames_dir, frames_exr)]
+    refuse_overlaps(writes, [("the scene file", str(Path(scene_path).resolve()))] + [
+        named for s in scenes if not isinstance(s, Exception) for named in scene_load.named_input_files(s)])
+    for _, p in writes[len(outputs):]:
+        check_writable(p)
     rt = Runtime(device)
     bakes = render.Bakes(cache_dir)
     mine = sheet.shard_cells(scenes, bakes, shard) if shard and not assemble else range(len(cells))

@@ -16,11 +16,15 @@ from iblbake.errors import IblbakeError
 
 @contextlib.contextmanager
 def atomic_path(final: str | os.PathLike):
-    """Yield a temp path in the target's folder; rename it onto `final` on success."""
+    """Yield a temp path in the target's folder; rename it onto `final` on success. A missing
+    output folder is created here, when the result is ready, so a command that fails before it
+    writes leaves no empty folder behind (one rule for every command's outputs)."""
     final = Path(final)
     folder = final.parent if str(final.parent) else Path(".")
-    if not folder.is_dir():
-        raise IblbakeError(f"{final}: output folder {folder} does not exist; create it first")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise IblbakeError(f"{final}: cannot create the output folder {folder}: {e.strerror or e}") from None
     try:
         tmp = _new_file_beside(final, folder)
     except OSError as e:

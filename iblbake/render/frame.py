@@ -9,14 +9,14 @@ device renders in tiles of rows (the same pixels), and one that cannot fit fails
 
 from __future__ import annotations
 
-import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from iblbake.errors import IblbakeError, InputError
+from iblbake.device.runtime import host_bytes_available
+from iblbake.errors import InputError
 from iblbake.render.bakes import Bakes, load_all
 from iblbake.render.plan import Plan, plan
 from iblbake.scene import pack
@@ -115,29 +115,6 @@ class Context:
         return {"chain": self.rt.to_device(np.zeros(4, np.float32)), "off": z, "lw": z, "lh": z, "nlev": 1}
 
 
-def _host_bytes_available() -> int | None:
-    """What this process may still allocate: the address-space limit (ulimit -v) less what it maps
-    now, and the system's available memory, whichever is smaller."""
-    limits = []
-    try:
-        import resource
-        soft = resource.getrlimit(resource.RLIMIT_AS)[0]
-        if soft != resource.RLIM_INFINITY:
-            with open("/proc/self/statm") as f:
-                mapped = int(f.read().split()[0]) * os.sysconf("SC_PAGE_SIZE")
-            limits.append(soft - mapped)
-    except (ImportError, OSError, ValueError):
-        pass
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    limits.append(int(line.split()[1]) * 1024)
-    except OSError:
-        pass
-    return min(limits) if limits else None
-
-
 def textured(pl: Plan) -> bool:
     """Whether the material pass runs (some material in use has a map): the G-buffer then holds
     texture coordinates, tangents and footprints, and gb_mat the resolved materials."""
@@ -167,7 +144,7 @@ def tile_rows(rt, scene: Scene, pl: Plan, device_budget: int | None = None) -> i
     dev = rt.info.device
     budget = device_budget if device_budget is not None else int(dev.global_mem_size * DEVICE_SHARE)
     max_alloc = dev.max_mem_alloc_size
-    host = _host_bytes_available()
+    host = host_bytes_available()
     frame_host = w * h * (16 + 4 + 36)              # hdr, png and AOVs kept in the host's frame
     if rt.info.kind == "CPU" and host is not None:  # a CPU device's buffers are host memory too
         budget = min(budget, (host - frame_host) // 2)
@@ -356,11 +333,6 @@ def write_outputs(frame: Frame, scene: Scene) -> list:
 
     out = scene.data["output"]
     written = []
-    for p in output_paths(scene):
-        try:
-            Path(p).parent.mkdir(parents=True, exist_ok=True)
-        except OSError as e:
-            raise IblbakeError(f"{p}: cannot create its folder ({e.strerror})") from None
     for p in out["frame"]:
         if p.lower().endswith(".png"):
             images.write_png(p, frame.png)

@@ -10,13 +10,14 @@ from __future__ import annotations
 
 import difflib
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import yaml
 
-from iblbake.errors import InputError
+from iblbake.errors import InputError, UsageError
 
 # ---------------------------------------------------------------------------------------------
 # Field types. Each checks one value and returns it normalised, or raises _Bad with the reason.
@@ -553,6 +554,7 @@ class Scene:
     source: str                    # the scene file
     folder: Path
     lines: dict = field(default_factory=dict)
+    writes: list = field(default_factory=list)     # (what names it, path) of every output
 
     def __getitem__(self, k):
         return self.data[k]
@@ -629,8 +631,13 @@ def _apply_override(data: dict, assignment: str) -> str:
     key, sep, raw = assignment.partition("=")
     key = key.strip()
     if not sep or not key:
-        raise InputError(f"--set {assignment!r}: expected KEY.PATH=VALUE, e.g. effects.samples=40")
-    value = _load_with_lines(raw, f"--set {key}")[0] if raw.strip() else None
+        raise UsageError(f"--set {assignment!r}: expected KEY.PATH=VALUE, e.g. effects.samples=40")
+    if not raw.strip():
+        raise UsageError(f"--set {assignment!r}: no value after '='; give one (null takes the default)")
+    try:
+        value = _load_with_lines(raw, f"--set {key}")[0]
+    except InputError as e:              # a value that does not parse is a usage error (exit 2)
+        raise UsageError(str(e)) from None
     set_path(data, key, value, f"--set {key}")
     return key
 
@@ -670,6 +677,13 @@ def _resolve_inside(folder: Path, rel: str, what: str, where: str) -> Path:
         raise InputError(f"{where}: {what}: {rel!r} leaves the scene's folder; write outputs "
                          f"inside it or pass -o on the command line")
     return full
+
+
+def _must_be_file(v, key: str, path: str, what: str, folder: Path) -> None:
+    if Path(path).is_dir():
+        v.fail(key, f"{path} is a folder; give the path of {what} file")
+    if not Path(path).is_file():
+        v.fail(key, f"{path} not found; give the path of {what} (relative to {folder})")
 
 
 def load(path, overrides=(), outputs=None, values=(), origin: str = "--set") -> Scene:
@@ -734,21 +748,18 @@ def load(path, overrides=(), outputs=None, values=(), origin: str = "--set") -> 
     for name, m in out["materials"].items():
         for key in [k for k in m if k.endswith("_map") and m[k]]:
             m[key]["path"] = str((folder / m[key]["path"]).resolve())
-            if not Path(m[key]["path"]).is_file():
-                v.fail(f"materials.{name}.{key}.path", f"{m[key]['path']} not found (relative to {folder})")
+            _must_be_file(v, f"materials.{name}.{key}.path", m[key]["path"], "an image", folder)
     for i, lt in enumerate(out["lights"]):
         if "spot" in lt and lt["spot"]["inner_cone_angle"] > lt["spot"]["outer_cone_angle"]:
             v.fail(f"lights.{i}.spot.inner_cone_angle", f"{lt['spot']['inner_cone_angle']:g} is wider than "
                                                         f"outer_cone_angle {lt['spot']['outer_cone_angle']:g}")
     env = out["environment"]
     env["path"] = str((folder / env["path"]).resolve()) if not Path(env["path"]).is_absolute() else env["path"]
-    if not Path(env["path"]).is_file():
-        v.fail("environment.path", f"{env['path']} not found; give the path of an HDR panorama "
-                                   f"(relative to {folder})")
+    _must_be_file(v, "environment.path", env["path"], "an HDR panorama", folder)
     # outputs: -o replaces output.frame; scene paths stay inside the scene folder
     o = out["output"]
     if outputs:
-        o["frame"] = [str(Path(p).resolve()) for p in outputs]
+        o["frame"] = [os.path.abspath(p) for p in outputs]     # as given: a link is named, not its target
         o["frame_from_cli"] = True
     else:
         o["frame"] = [str(_resolve_inside(folder, p, "output.frame", v.where("output.frame")))
@@ -761,34 +772,32 @@ def load(path, overrides=(), outputs=None, values=(), origin: str = "--set") -> 
             o[a] = str(_resolve_inside(folder, o[a], f"output.{a}", v.where(f"output.{a}")))
             if Path(o[a]).suffix.lower() != ".exr":
                 v.fail(f"output.{a}", f"{o[a]}: AOVs are written as .exr")
-    # render overwrites its outputs (documented), but never one of its own inputs
-    inputs = {str(path.resolve()): "the scene file", str(Path(out["environment"]["path"]).resolve()): "the panorama"}
-    for name, m in out["materials"].items():
-        for key in [k for k in m if k.endswith("_map") and m[k]]:
-            inputs[m[key]["path"]] = f"materials.{name}.{key}"
-    for i, obj in enumerate(out["objects"]):
-        if "mesh" in obj:
-            inputs[str(Path(obj["mesh"]["path"]).resolve())] = f"the mesh of objects.{i}"
-    for key, paths in [("output.frame", o["frame"]), *((f"output.{a}", [o[a]]) for a in AOVS if o[a])]:
-        for p in paths:
-            if str(Path(p).resolve()) in inputs:
-                what = inputs[str(Path(p).resolve())]
-                if o.get("frame_from_cli") and key == "output.frame":
-                    raise InputError(f"-o {p}: is {what}; render would overwrite its own input")
-                v.fail(key, f"{p} is {what}; render would overwrite its own input")
-    return Scene(out, source, folder, lines)
+    # what names each output in the overwrite guard's messages: -o, or the key with its line
+    writes = [("-o" if o.get("frame_from_cli") else f"{v.where('output.frame')}: output.frame", p)
+              for p in o["frame"]] + [(f"{v.where(f'output.{a}')}: output.{a}", o[a]) for a in AOVS if o[a]]
+    return Scene(out, source, folder, lines, writes)
 
 
-def input_files(sc: Scene) -> list:
-    """Every file rendering the scene reads: the scene itself, its panorama, its meshes (a .gltf's
-    buffers and images beside it too) and textures."""
+def named_input_files(sc: Scene) -> list:
+    """(what, path) of every file rendering the scene reads: the scene itself, its panorama, its
+    meshes (a .gltf's buffers and images beside it too) and textures."""
     from iblbake.scene.gltf import external_files
 
     d = sc.data
-    meshes = [o["mesh"]["path"] for o in d["objects"] if "mesh" in o]
-    maps = [m[k]["path"] for m in d["materials"].values() for k in m if k.endswith("_map") and m[k]]
-    return list(dict.fromkeys([str(Path(sc.source).resolve()), d["environment"]["path"], *meshes,
-                               *(f for p in meshes for f in external_files(p)), *maps]))
+    named = [("the scene file", str(Path(sc.source).resolve())), ("the panorama", d["environment"]["path"])]
+    for i, o in enumerate(d["objects"]):
+        if "mesh" in o:
+            named.append((f"the mesh of objects.{i}", o["mesh"]["path"]))
+            named += [(f"a file of the mesh of objects.{i}", f) for f in external_files(o["mesh"]["path"])]
+    named += [(f"materials.{name}.{k}", m[k]["path"]) for name, m in d["materials"].items()
+              for k in m if k.endswith("_map") and m[k]]
+    return named
+
+
+def input_files(sc: Scene) -> list:
+    """The paths of named_input_files, each once (for depfiles)."""
+    return list(dict.fromkeys(p for _, p in named_input_files(sc)))
+
 
 
 def replace_strings(value, mapping: dict):

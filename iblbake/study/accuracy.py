@@ -522,6 +522,7 @@ def plot(rows, front, path, title: str) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib import ticker
 
     terms = [t for t in TERMS if any(r["term"] == t for r in rows)]
     dpi = 100
@@ -542,13 +543,21 @@ def plot(rows, front, path, title: str) -> None:
                 color="tab:red", lw=1.2, zorder=2, label="Pareto frontier")
         ax.set_xscale("log")
         ax.set_yscale("log")
+        for axis in (ax.xaxis, ax.yaxis):  # labels at 1, 2, 5 per decade only: a narrow range
+            axis.set_major_locator(ticker.LogLocator(base=10, subs=(1.0, 2.0, 5.0)))  # gets a few,
+            axis.set_major_formatter(ticker.FuncFormatter(lambda v, _: f"{v:g}"))     # never a pile
+            axis.set_minor_formatter(ticker.NullFormatter())
         ax.set_xlabel("time of the lighting pass per frame (ms, median)")
         ax.set_ylabel("relative RMSE against the reference")
         ax.set_title(f"{t}", fontsize=11)
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=8, loc="upper right")
+    # one legend under the panels, where it hides no point
+    fig.legend(handles=[plt.Line2D([], [], color="tab:red", lw=1.2, marker="o", label="Pareto frontier"),
+                        plt.Line2D([], [], color="tab:green", lw=0, marker="o", label="configured"),
+                        plt.Line2D([], [], color="tab:gray", lw=0, marker="o", label="other rungs")],
+               loc="lower center", ncol=3, fontsize=8, frameon=False)
     fig.suptitle(title, fontsize=12)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.05, 1, 1))
     from iblbake.io.atomic import atomic_path
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=dpi, format="png")
@@ -588,5 +597,14 @@ def error_sheet(study: Study, rungs, title: str) -> np.ndarray:
         for j, (png, label) in enumerate(cells):
             results.append(sheet.CellResult(sweep.Cell(row, j, [], label),
                                             Frame(np.zeros(png.shape[:2] + (4,), np.float32), png, {}, {})))
+    # small study frames (--max-side 64) are enlarged by whole pixels until every header and
+    # caption fits under its cell, rather than cutting the words
+    w = results[0].frame.png.shape[1] if results else 1
+    need = max([sheet.text_width(s.label, sheet.AXIS_PT) for s in columns.steps]
+               + [sheet.text_width(r.cell.label, sheet.CAPTION_PT) for r in results])
+    k = max(1, math.ceil(need / w))
+    if k > 1:
+        for r in results:
+            r.frame.png = np.repeat(np.repeat(r.frame.png, k, axis=0), k, axis=1)
     lay = sheet.layout(results, rows, columns, title, "values")
     return sheet.assemble(results, rows, columns, title, "values", lay)

@@ -224,16 +224,16 @@ def render_cell(sc, c, runtime, bakes, reuse, warn, keep_going, resume, kind):
     return r
 
 
-def _text_width(text: str, pt: int) -> int:
+def text_width(text: str, pt: int) -> int:
     import OpenImageIO as oiio
     return oiio.ImageBufAlgo.text_size(text, pt, "").width if text else 0
 
 
 def _fit(text: str, pt: int, width: int) -> str:
     """The text, cut with an ellipsis to fit `width` pixels."""
-    if _text_width(text, pt) <= width:
+    if text_width(text, pt) <= width:
         return text
-    while text and _text_width(text + "...", pt) > width:
+    while text and text_width(text + "...", pt) > width:
         text = text[:-1]
     return text + "..."
 
@@ -271,10 +271,10 @@ def layout(results, rows: sweep.Axis, columns: sweep.Axis, title: str, caption: 
     has_rows, has_cols = bool(rows.title), bool(columns.title)
     n_lines = max(len(caption_lines(r, caption)) for r in results)
     cap_h = n_lines * (CAPTION_PT + 5) + (4 if n_lines else 0)
-    left = MARGIN + (max(_text_width(x, AXIS_PT) for x in [s.label for s in rows.steps] + [rows.title]) + MARGIN
+    left = MARGIN + (max(text_width(x, AXIS_PT) for x in [s.label for s in rows.steps] + [rows.title]) + MARGIN
                      if has_rows else 0)
     top = MARGIN + TITLE_PT + 8 + (AXIS_PT + 6) * (2 if has_cols else 1 if has_rows else 0)
-    width = max(left + nc * w + (nc - 1) * GAP + MARGIN, _text_width(title, TITLE_PT) + 2 * MARGIN)
+    width = max(left + nc * w + (nc - 1) * GAP + MARGIN, text_width(title, TITLE_PT) + 2 * MARGIN)
     height = top + nr * (h + cap_h) + (nr - 1) * GAP + MARGIN
     return Layout(width, height, left, top, (w, h), cap_h)
 
@@ -326,15 +326,20 @@ def mosaic(results, rows: sweep.Axis, columns: sweep.Axis):
     return out
 
 
+def frame_paths(cell: sweep.Cell, folder: Path, exr: bool = False) -> list:
+    """Where --frames writes a cell's own frame: rRR_cCC.png (and .exr)."""
+    stem = Path(folder) / f"r{cell.row:02d}_c{cell.column:02d}"
+    return [f"{stem}.png"] + ([f"{stem}.exr"] if exr else [])
+
+
 def write_frames(results, folder: Path, exr: bool = False) -> None:
     from iblbake.io import images
-    folder.mkdir(parents=True, exist_ok=True)
     for r in results:
         if r.frame is None:
             continue
-        stem = folder / f"r{r.cell.row:02d}_c{r.cell.column:02d}"
-        images.write_png(f"{stem}.png", r.frame.png)
-        r.outputs.append(f"{stem}.png")
-        if exr:
-            images.write_exr(f"{stem}.exr", r.frame.hdr, channels=("R", "G", "B", "A"))
-            r.outputs.append(f"{stem}.exr")
+        png, *rest = frame_paths(r.cell, folder, exr)
+        images.write_png(png, r.frame.png)
+        r.outputs.append(png)
+        for p in rest:
+            images.write_exr(p, r.frame.hdr, channels=("R", "G", "B", "A"))
+            r.outputs.append(p)

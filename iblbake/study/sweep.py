@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 import yaml
 
-from iblbake.errors import InputError
+from iblbake.errors import InputError, UsageError
 from iblbake.scene import load as scene_load
 
 MAX_STEPS = 256
@@ -164,23 +164,36 @@ def parse_axis(name: str, spec, data: dict, where: str, label_format: str | None
     return Axis(name, title, steps)
 
 
-def parse_cli_axis(text: str) -> dict:
-    """--rows KEY=a:b:n[:log] (a range, geometric with :log) or KEY=v1,v2,... (values, as YAML)."""
+RANGE_SYNTAX = "START:STOP:COUNT[:linear|geometric]"
+SPACINGS = {"linear": False, "geometric": True, "log": True}      # log: the older name of geometric
+
+
+def parse_cli_axis(text: str, flag: str = "--rows") -> dict:
+    """--rows KEY=START:STOP:COUNT[:linear|geometric] (a range) or KEY=v1,v2,... (values, as YAML).
+    A spec that looks like a range (a ':' outside quotes) and is not one is refused, naming the
+    syntax, before anything renders."""
     key, sep, rhs = text.partition("=")
     if not sep or not key.strip() or not rhs.strip():
-        raise InputError(f"{text!r}: expected KEY.PATH=start:stop:count or KEY.PATH=v1,v2,...")
-    parts = rhs.split(":")
-    if len(parts) in (3, 4) and (len(parts) == 3 or parts[3] == "log"):
+        raise UsageError(f"{flag} {text!r}: expected KEY.PATH={RANGE_SYNTAX} or KEY.PATH=v1,v2,...")
+    items = rhs.split(",")
+    if any(":" in x and x.strip()[:1] not in ("'", '"') for x in items):
+        parts = [x.strip() for x in rhs.split(":")]
         try:
-            a, b, n = (yaml.safe_load(x) for x in parts[:3])
+            a, b, n = (yaml.safe_load(x) for x in parts[:3]) if len(parts) in (3, 4) else (None, None, None)
         except yaml.YAMLError:
-            a = None
-        if all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in (a, b)) and isinstance(n, int):
-            return {"key": key.strip(), "range": {"start": a, "stop": b, "count": n, "geometric": len(parts) == 4}}
+            a = b = n = None
+        numbers = all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in (a, b))
+        if len(items) > 1 or not numbers or isinstance(n, bool) or not isinstance(n, int) or (
+                len(parts) == 4 and parts[3] not in SPACINGS):
+            raise UsageError(f"{flag} {text!r}: a range is KEY.PATH={RANGE_SYNTAX} (numbers START and STOP, "
+                             f"a whole COUNT), e.g. 0:1:5 or 1:256:9:geometric; values are v1,v2,... (quote "
+                             f"a value with ':')")
+        geometric = len(parts) == 4 and SPACINGS[parts[3]]
+        return {"key": key.strip(), "range": {"start": a, "stop": b, "count": n, "geometric": geometric}}
     try:
-        vals = [yaml.safe_load(x) for x in rhs.split(",")]
+        vals = [yaml.safe_load(x) for x in items]
     except yaml.YAMLError as e:
-        raise InputError(f"{text!r}: a value does not parse ({' '.join(str(e).split())[:120]})") from None
+        raise UsageError(f"{flag} {text!r}: a value does not parse ({' '.join(str(e).split())[:120]})") from None
     return {"key": key.strip(), "values": vals}
 
 

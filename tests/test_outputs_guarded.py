@@ -1,0 +1,267 @@
+"""Nothing a user owns is overwritten, and every size is refused before work starts (issue 36):
+every writing option of every command against every kind of file the command reads, two outputs
+on one path, bake sizes over the machine's memory, malformed sweep ranges and --set values, one
+rule for missing output folders."""
+
+import hashlib
+import os
+from pathlib import Path
+
+import click
+import numpy as np
+import pytest
+import yaml
+
+from iblbake.cli.main import COMMANDS, cli
+from iblbake.study import sweep
+
+from .conftest import run_cli, write_exr
+
+# Every path-valued option of every command, as what it does with the path. A new option that
+# takes a path fails test_every_path_option_is_known until it is placed here (and, if it
+# writes, walked below).
+READS = {("accuracy", "ladder_path"), ("compare", "layout_path"), ("deps", "outputs")}
+FOLDERS = {("accuracy", "cache_dir"), ("cache", "cache_dir"), ("mips", "cache_dir"), ("export-gltf", "cache_dir"),
+           ("render", "cache_dir"), ("sheet", "cache_dir")}
+WRITES = {("sh", "output"), ("sh", "depfile"), ("mips", "ktx2_path"), ("mips", "ktx2_irradiance"),
+          ("mips", "ktx2_sheen"), ("mips", "depfile"), ("export-gltf", "output"), ("export-gltf", "depfile"),
+          ("render", "outputs"), ("render", "depfile"), ("sheet", "outputs"), ("sheet", "layout_path"),
+          ("sheet", "depfile"), ("sheet", "frames_dir"), ("accuracy", "out_dir")}
+
+
+def _path_options():
+    ctx = click.Context(cli)
+    for name in COMMANDS:
+        cmd = cli.get_command(ctx, name)
+        for sub in (cmd.commands.values() if isinstance(cmd, click.Group) else [cmd]):
+            for p in sub.params:
+                if isinstance(p, click.Option) and isinstance(p.type, click.Path):
+                    yield name, p.name
+
+
+def test_every_path_option_is_known():
+    assert set(_path_options()) == READS | FOLDERS | WRITES
+
+
+@pytest.fixture
+def files(tmp_path):
+    env = Path(write_exr(tmp_path / "in.exr", np.full((16, 32, 3), 0.5, np.float32)))
+    scene = tmp_path / "scene.yaml"
+    scene.write_text(yaml.safe_dump({
+        "camera": {"resolution": [16, 16]}, "environment": {"path": env.name},
+        "materials": {"m": {"base_color": [0.5, 0.5, 0.5], "roughness": 0.5}},
+        "objects": [{"sphere": {"radius": 1}, "material": "m"}],
+        "effects": {"diffuse": "sh", "specular": "prefiltered"}}))
+    return {"env": env, "scene": scene, "dir": tmp_path}
+
+
+def _digest(*paths):
+    return [hashlib.sha256(Path(p).read_bytes()).hexdigest() for p in paths]
+
+
+def _link(target: Path, link: Path) -> Path:
+    link.parent.mkdir(parents=True, exist_ok=True)
+    os.symlink(target, link)
+    return link
+
+
+# (command, option, build(files) -> argv with the option naming a link to what `read` names)
+CASES = [
+    ("sh", "output", "env", lambda f, p: ["sh", f["env"], "-o", p], ".json"),
+    ("sh", "depfile", "env", lambda f, p: ["sh", f["env"], "--depfile", p], ".d"),
+    ("mips", "ktx2_path", "env", lambda f, p: ["mips", f["env"], "--ktx2", p], ".ktx2"),
+    ("mips", "ktx2_irradiance", "env", lambda f, p: ["mips", f["env"], "--ktx2-irradiance", p], ".ktx2"),
+    ("mips", "ktx2_sheen", "env", lambda f, p: ["mips", f["env"], "--ktx2-sheen", p], ".ktx2"),
+    ("mips", "depfile", "env", lambda f, p: ["mips", f["env"], "--depfile", p], ".d"),
+    ("export-gltf", "output", "env", lambda f, p: ["export-gltf", f["env"], "-o", p], ".glb"),
+    ("export-gltf", "depfile", "env", lambda f, p: ["export-gltf", f["env"], "-o", f["dir"] / "l.glb",
+                                                     "--depfile", p], ".d"),
+    ("render", "outputs", "env", lambda f, p: ["render", f["scene"], "-o", p], ".exr"),
+    ("render", "outputs", "scene", lambda f, p: ["render", f["scene"], "-o", p], ".png"),
+    ("render", "depfile", "scene", lambda f, p: ["render", f["scene"], "-o", f["dir"] / "x.png", "--depfile", p], ".d"),
+    ("sheet", "outputs", "env", lambda f, p: ["sheet", f["scene"], "-o", p], ".exr"),
+    ("sheet", "layout_path", "scene", lambda f, p: ["sheet", f["scene"], "-o", f["dir"] / "s.png", "--layout", p], ".json"),
+    ("sheet", "depfile", "env", lambda f, p: ["sheet", f["scene"], "-o", f["dir"] / "s.png", "--depfile", p], ".d"),
+    ("sheet", "frames_dir", "env", lambda f, p: ["sheet", f["scene"], "-o", f["dir"] / "s.png", "--frames", p.parent,
+                                                 "--frames-exr"], "frames/r00_c00.exr"),
+    ("accuracy", "out_dir", "scene", lambda f, p: ["accuracy", f["scene"], "-o", p.parent], "acc/table.md"),
+]
+
+
+def test_the_walk_covers_every_writing_option():
+    assert {(c, o) for c, o, *_ in CASES} == WRITES
+
+
+@pytest.mark.parametrize("command, option, read, argv, name", CASES, ids=[f"{c[0]}-{c[1]}-{c[2]}" for c in CASES])
+def test_no_output_is_an_input(files, command, option, read, argv, name):
+    """Each writing option given (through a symlink) a file the command reads: one line naming the
+    option and what the file is, exit 1, the file unchanged, nothing else written."""
+    target = files[read]
+    link = _link(target, files["dir"] / (name if "/" in name else f"link{name}"))
+    before = _digest(files["env"], files["scene"])
+    listing = sorted(p.name for p in files["dir"].rglob("*"))
+    p = run_cli(*argv(files, link))
+    assert p.returncode == 1, (p.returncode, p.stderr)
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in p.stderr, p.stderr
+    assert "which this command reads" in lines[0] and str(link.name) in lines[0], lines[0]
+    assert ("scene file" if read == "scene" else "panorama") in lines[0], lines[0]
+    assert _digest(files["env"], files["scene"]) == before
+    assert sorted(p.name for p in files["dir"].rglob("*")) == listing
+
+
+def test_a_hard_link_to_the_input_is_the_input(files):
+    hard = files["dir"] / "hard.json"
+    os.link(files["env"], hard)
+    p = run_cli("sh", files["env"], "-o", hard, "--force")
+    assert p.returncode == 1 and "is the input panorama" in p.stderr, p.stderr
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["sh", "{env}", "-o", "{dir}/a.json", "--depfile", "{dir}/a.json"], "--depfile"),
+    (["mips", "{env}", "--ktx2", "{dir}/a.ktx2", "--ktx2-irradiance", "{dir}/a.ktx2"], "--ktx2-irradiance"),
+    (["render", "{scene}", "-o", "{dir}/a.png", "-o", "{dir}/a.png"], "-o"),
+    (["sheet", "{scene}", "-o", "{dir}/a.png", "--layout", "{dir}/a.png"], "--layout"),
+    (["export-gltf", "{env}", "-o", "{dir}/l.gltf", "--depfile", "{dir}/l_specular_0_px.png"], "--depfile"),
+])
+def test_two_outputs_never_share_a_path(files, argv, words):
+    p = run_cli(*[a.format(**files) for a in argv])
+    assert p.returncode == 1, p.stderr
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"Error: {words} ") and "own path" in lines[0], p.stderr
+    assert not any(files["dir"].glob("a.*")) and not any(files["dir"].glob("l*"))
+
+
+# --- sizes --------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("argv, layout", [
+    (["mips", "{env}", "--size", "100000"], "equirect"),
+    (["mips", "{env}", "--size", "30000", "--layout", "cubemap", "--only", "prefiltered"], "cubemap"),
+    (["export-gltf", "{env}", "-o", "{dir}/l.glb", "--size", "131072"], "cubemap"),
+])
+def test_bake_sizes_over_memory_are_refused_before_any_work(files, argv, layout):
+    """The old code baked the radiance entry, then died with MemoryError (37.3 GiB) and left a
+    .lock in the cache (mips), or ran 8 s into INVALID_BUFFER_SIZE (export-gltf)."""
+    cache = files["dir"] / "cache"
+    p = run_cli(*[a.format(**files) for a in argv], "--cache", cache)
+    assert p.returncode == 1, p.stderr
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--size" in lines[0] and f"the {layout} chain needs" in lines[0], p.stderr
+    fits = int(lines[0].rsplit(" ", 1)[1])
+    assert 256 <= fits < int(argv[argv.index("--size") + 1])
+    assert not cache.exists() or not any(cache.iterdir())
+    if argv[0] == "export-gltf":
+        assert fits & (fits - 1) == 0          # the largest power of two, as --size must be
+
+
+def test_the_largest_size_that_fits_is_the_boundary(monkeypatch):
+    """check_chain_fits bisects to the exact boundary of its own memory model."""
+    from iblbake.bake import mips
+    from iblbake.device import runtime
+    host = 3 << 30
+    monkeypatch.setattr(runtime, "host_bytes_available", lambda: host)
+    sizes_of = lambda s: mips.PrefilterOptions("equirect", s).resolved(0)["sizes"]   # noqa: E731
+    with pytest.raises(Exception) as e:
+        mips.check_chain_fits("equirect", 50000, sizes_of, None, "--size")
+    fits = int(str(e.value).rsplit(" ", 1)[1])
+    assert mips.chain_bytes("equirect", sizes_of(fits))[0] <= host < mips.chain_bytes("equirect", sizes_of(fits + 1))[0]
+    mips.check_chain_fits("equirect", fits, sizes_of, None, "--size")      # fits: no error
+
+
+# --- command-line values ------------------------------------------------------------------------
+
+@pytest.mark.parametrize("spec", ["0:1:", "0:1", "0:1:abc", "0:1:3:cubic", "0:1:3:linear:x", "a:b:3", "0:1:2.5",
+                                  "0:1:3,0.5"])
+def test_malformed_ranges_name_the_syntax(spec):
+    with pytest.raises(Exception) as e:
+        sweep.parse_cli_axis(f"materials.m.roughness={spec}", "--rows")
+    assert e.value.exit_code == 2 and "START:STOP:COUNT[:linear|geometric]" in str(e.value)
+
+
+def test_range_spacings():
+    for tail, geometric in (("", False), (":linear", False), (":geometric", True), (":log", True)):
+        assert sweep.parse_cli_axis(f"effects.samples=1:256:9{tail}")["range"] == {
+            "start": 1, "stop": 256, "count": 9, "geometric": geometric}
+    assert sweep.parse_cli_axis("environment.path='a:b.exr',c.exr")["values"] == ["a:b.exr", "c.exr"]
+
+
+def test_a_malformed_range_fails_before_rendering(files):
+    p = run_cli("sheet", files["scene"], "-o", files["dir"] / "s.png", "--rows", "materials.m.roughness=0:1:")
+    assert p.returncode == 2 and "START:STOP:COUNT" in p.stderr and "Traceback" not in p.stderr, p.stderr
+    assert not (files["dir"] / "s.png").exists()
+
+
+@pytest.mark.parametrize("setting, words", [
+    ("camera.resolution=", "no value after '='"), ("camera.resolution", "expected KEY.PATH=VALUE"),
+    ("camera.resolution=[1,", "not valid YAML")])
+def test_malformed_set_is_a_usage_error(files, setting, words):
+    p = run_cli("render", files["scene"], "-o", files["dir"] / "x.png", "--set", setting)
+    assert p.returncode == 2 and words in p.stderr and len(p.stderr.strip().splitlines()) == 1, p.stderr
+    assert not (files["dir"] / "x.png").exists()
+
+
+def test_a_folder_as_the_panorama_is_named_a_folder(files):
+    (files["dir"] / "pano").mkdir()
+    p = run_cli("render", files["scene"], "-o", files["dir"] / "x.png", "--set", "environment.path=pano")
+    assert p.returncode == 1 and "environment.path" in p.stderr and "is a folder" in p.stderr, p.stderr
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["sh", "{env}", "-o", "{dir}/x.xyz"], "--format iblbake is written as .json"),
+    (["sh", "{env}", "--format", "filament", "-o", "{dir}/x.json"], "written as .txt"),
+    (["mips", "{env}", "--ktx2", "{dir}/x.png"], "a KTX2 cube map is written as .ktx2"),
+])
+def test_an_output_extension_that_says_nothing_is_refused(files, argv, words):
+    p = run_cli(*[a.format(**files) for a in argv])
+    assert p.returncode == 2 and words in p.stderr, p.stderr
+    assert not list(files["dir"].glob("x.*"))
+
+
+def test_sh_validates_every_input_before_writing(files):
+    out = files["dir"] / "out"
+    p = run_cli("sh", files["env"], files["dir"] / "missing.exr", "-o", f"{out}/", "--backend", "numpy")
+    assert p.returncode == 1 and "missing.exr: no such file" in p.stderr, p.stderr
+    assert not out.exists()
+    bad = files["dir"] / "bad.exr"
+    bad.write_bytes(b"not an image")
+    p = run_cli("sh", files["env"], bad, "-o", f"{out}/", "--backend", "numpy")
+    assert p.returncode == 1 and "bad.exr" in p.stderr and not out.exists(), p.stderr
+
+
+def test_missing_output_folders_are_made_by_every_command(files):
+    """One rule: a missing folder is created when the output is written (never before the work,
+    so a failed command leaves none)."""
+    d = files["dir"]
+    for argv, made in (
+            (["sh", files["env"], "-o", d / "a" / "sh.json", "--backend", "numpy", "--no-error"], d / "a" / "sh.json"),
+            (["render", files["scene"], "-o", d / "b" / "f.png"], d / "b" / "f.png"),
+            (["sheet", files["scene"], "-o", d / "c" / "s.png", "--layout", d / "c2" / "l.json"], d / "c2" / "l.json"),
+            (["export-gltf", files["env"], "-o", d / "e" / "l.glb", "--size", "16", "--min-size", "8"], d / "e" / "l.glb"),
+            (["mips", files["env"], "--ktx2", d / "f" / "p.ktx2", "--size", "16"], d / "f" / "p.ktx2")):
+        p = run_cli(*argv, "-q")
+        assert p.returncode == 0 and made.is_file(), (argv[0], p.stderr)
+    # a folder under a file cannot be made: one line, before any work
+    p = run_cli("sh", files["env"], "-o", files["env"] / "x.json")
+    assert p.returncode == 1 and "is not a folder" in p.stderr and len(p.stderr.strip().splitlines()) == 1
+
+
+def test_a_failed_accuracy_leaves_no_folder(files):
+    bad = files["dir"] / "ladder.yaml"
+    bad.write_text(yaml.safe_dump({"rungs": [{"key": "effects.sampels", "values": [1]}]}))
+    p = run_cli("accuracy", files["scene"], "--ladder", bad, "-o", files["dir"] / "study")
+    assert p.returncode == 1 and "effects.sampels" in p.stderr
+    assert not (files["dir"] / "study").exists()
+
+
+def test_accuracy_is_in_the_usage_list():
+    p = run_cli("--help")
+    listed = {line.split()[1] for line in p.stdout.splitlines() if line.strip().startswith("iblbake ")}
+    assert listed == set(COMMANDS)
+
+
+def test_two_panoramas_onto_one_name_are_refused(files):
+    other = files["dir"] / "b"
+    other.mkdir()
+    second = Path(write_exr(other / "in.exr", np.full((16, 32, 3), 0.25, np.float32)))
+    p = run_cli("sh", files["env"], second, "-o", f"{files['dir']}/out/", "--backend", "numpy")
+    assert p.returncode == 1 and "is also -o" in p.stderr and not (files["dir"] / "out").exists(), p.stderr
