@@ -301,3 +301,20 @@ def test_two_jobs_equal_the_serial_sheet(tmp_path, small_panoramas):
     built = [c for c in doc["cells"] if "prefiltered" not in c["bakes_cached"]]
     print("cells that baked the prefiltered chain:", [(c["row"], c["column"]) for c in built])
     assert len(built) == 1
+
+
+def test_time_captions_are_medians_of_warm_full_frames(tmp_path, small_panoramas):
+    """--caption time times every cell as --repeat full frames after a warm-up (3 by default),
+    the caption the median, --json every repeat; the cells' pixels are the untimed sheet's."""
+    scene = sheet_scene(tmp_path, small_panoramas["city"], SWEEP)
+    p, plain = _sheet(scene, tmp_path, "-o", tmp_path / "plain.exr")
+    assert p.returncode == 0, p.stderr
+    assert all(c["timing"] is None for c in plain["cells"])
+    for args, k in (([], 3), (["--repeat", "2"], 2)):
+        p, doc = _sheet(scene, tmp_path / f"t{k}", "-o", tmp_path / f"t{k}.exr", "--caption", "time", *args)
+        assert p.returncode == 0, p.stderr
+        for c in doc["cells"]:
+            reps = c["timing"]["repeats"]
+            assert len(reps) == k and all(x > 0 for x in reps)
+            assert c["pass_seconds"] == pytest.approx(float(np.median(reps)), abs=1e-4)
+        assert np.array_equal(images.read_exr(tmp_path / f"t{k}.exr"), images.read_exr(tmp_path / "plain.exr"))

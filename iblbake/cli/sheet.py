@@ -66,8 +66,8 @@ def _shard(ctx, param, value):
               help="The sheet: .png (tone-mapped cells with title, axis labels and captions) or .exr (the "
                    "linear cells, a mosaic without text); repeatable. Required but with --shard.")
 @click.option("--rows", "rows", default=None, metavar="KEY.PATH=SPEC",
-              help="The row axis, replacing the scene's sweep.rows: KEY.PATH=start:stop:count (a range; "
-                   "start:stop:count:log geometric) or KEY.PATH=v1,v2,... (values, as YAML).")
+              help="The row axis, replacing the scene's sweep.rows: KEY.PATH=START:STOP:COUNT[:linear|geometric] "
+                   "(a range, e.g. 0:1:5 or 1:256:9:geometric) or KEY.PATH=v1,v2,... (values, as YAML).")
 @click.option("--columns", "columns", default=None, metavar="KEY.PATH=SPEC", help="The column axis, as --rows.")
 @click.option("--set", "overrides", multiple=True, metavar="KEY.PATH=VALUE",
               help="Override a scene value for every cell (as render --set).")
@@ -77,8 +77,13 @@ def _shard(ctx, param, value):
               help="Caption of a step of a key/values or range axis, a Python format with {value} and {key}, "
                    "e.g. 'r = {value}'. Default: the value.")
 @click.option("--caption", type=click.Choice(["values", "time", "none"]), default="values", show_default=True,
-              help="Under each cell: its values, its values and the time of its passes (kernel builds "
-                   "and bakes are one-off costs, in --json), or nothing.")
+              help="Under each cell: its values, its values and the time of its passes (the median of "
+                   "--repeat full frames after a warm-up; kernel builds and bakes are one-off costs, in "
+                   "--json), or nothing.")
+@click.option("--repeat", type=click.IntRange(0, 100), default=None, metavar="K",
+              help="Time each cell as K full frames (every pass run, as `iblbake render` runs them) after "
+                   "a warm-up frame that pays its programs' first launch; the caption shows the median, "
+                   "--json every repeat. Default: 3 with --caption time, else 0 (not timed).")
 @click.option("--title", default=None, help="The sheet's title. Default: sweep.title, else the scene file's name.")
 @click.option("--frames", "frames_dir", type=click.Path(file_okay=False), default=None,
               help="Also write each cell's own frame here (rRR_cCC.png; with --frames-exr the linear .exr too).")
@@ -117,7 +122,7 @@ def _shard(ctx, param, value):
 @device_option
 @max_texture_pixels_option
 @common_options
-def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, label_format, caption, title,
+def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, label_format, caption, repeat, title,
                   frames_dir, frames_exr, layout_path, keep_going, resume, shard, assemble, jobs, devices, scheduler,
                   resources, cache_dir, depfile, device, quiet, as_json):
     """Render every cell of the sweep of SCENE (its sweep: section, or --rows / --columns) in one
@@ -132,6 +137,8 @@ def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, labe
     from iblbake.study import sheet, sweep
 
     con = Console(quiet, as_json)
+    if repeat is None:
+        repeat = 3 if caption == "time" else 0
     if shard and assemble:
         raise click.UsageError("--shard renders one shard's cells, --assemble none: give one of them")
     if not outputs and not shard:
@@ -174,7 +181,7 @@ def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, labe
             try:
                 results, spread = workers.render_cells_dask(
                     scenes, cells, client, devices=devices or [device], bakes=bakes,
-                    resources=resources, progress=step, keep_going=keep_going, resume=resume)
+                    resources=resources, progress=step, keep_going=keep_going, resume=resume, repeat=repeat)
             finally:
                 client.close()
                 if cluster is not None:
@@ -183,10 +190,11 @@ def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, labe
             from iblbake.study import workers
             results, spread = workers.render_cells_parallel(
                 scenes, cells, jobs, devices=devices or [device], bakes=bakes, progress=step,
-                keep_going=keep_going, resume=resume, warn=con.warn)
+                keep_going=keep_going, resume=resume, warn=con.warn, repeat=repeat)
         else:
             results = sheet.render_cells(scenes, cells, runtime=rt, bakes=bakes, warn=con.warn, progress=step,
-                                         keep_going=keep_going, resume=resume, shard=shard, assemble=assemble)
+                                         keep_going=keep_going, resume=resume, shard=shard, assemble=assemble,
+                                         repeat=repeat)
     if shard:
         done = [r for r in results if r is not None]
         failed = [r for r in done if r.error]

@@ -6,6 +6,7 @@ render_text), or into a linear EXR mosaic."""
 from __future__ import annotations
 
 import functools
+import statistics
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,9 +34,20 @@ class CellResult:
     key: str | None = None            # its cache entry, once known
 
     @property
+    def repeats(self) -> list:
+        """The passes' seconds of each timed full frame (time_frames), where the cell was timed."""
+        return (self.frame.report.get("timing") or {}).get("repeats", []) if self.frame is not None else []
+
+    @property
     def pass_seconds(self) -> float:
-        """What the frame's passes took (kernel builds and bakes are one-off costs, not in it)."""
-        return sum(p["seconds"] for p in self.frame.report["passes"]) if self.frame is not None else 0.0
+        """What the frame's passes take: the median of its timed repeats where it was timed, else
+        what its passes took in the sheet (reused passes cost nothing there). Kernel builds and
+        bakes are one-off costs, not in it."""
+        if self.frame is None:
+            return 0.0
+        if self.repeats:
+            return statistics.median(self.repeats)
+        return sum(p["seconds"] for p in self.frame.report["passes"])
 
     def to_json(self) -> dict:
         rep = self.frame.report if self.frame is not None else {}
@@ -45,6 +57,7 @@ class CellResult:
                 "reused": rep.get("reused", []), "cached": bool(rep.get("cell_cached")),
                 "bakes_cached": [b["name"] for b in rep.get("bakes", []) if b.get("cached")],
                 "passes": {p["name"]: p["seconds"] for p in rep.get("passes", [])},
+                "timing": rep.get("timing"),
                 "outputs": self.outputs, "error": self.error}
 
 
@@ -135,11 +148,12 @@ def cell_name(c: sweep.Cell) -> str:
 
 
 def render_cells(scenes, cells, *, runtime, bakes, warn=None, progress=None, keep_going=False, resume=False,
-                 shard=None, assemble=False):
+                 shard=None, assemble=False, repeat: int = 0):
     """Every cell's CellResult. Each rendered cell is kept in the bake cache under its key; with
     `resume` (or `assemble`) a cell found there is read back instead of rendered. `shard` (i, n)
     renders only that shard's cells (the others' results are None); `assemble` renders nothing
-    and fails in one line naming the cells no shard has rendered."""
+    and fails in one line naming the cells no shard has rendered. `repeat` > 0 times each cell
+    (time_frames) and keeps the repeats in its frame's report."""
     from iblbake import render
 
     reuse = render.Reuse()
@@ -164,7 +178,7 @@ def render_cells(scenes, cells, *, runtime, bakes, warn=None, progress=None, kee
     results = [None] * len(cells)
     for index in reuse_order(scenes, cells, mine):
         results[index] = render_cell(scenes[index], cells[index], runtime, bakes, reuse, warn, keep_going, resume,
-                                     kind)
+                                     kind, repeat)
         if progress:
             progress()
     return results
@@ -199,8 +213,21 @@ def reuse_order(scenes, cells, indices) -> list:
     return by_columns if changed(keys[0], keys[2]) < changed(keys[0], keys[1]) else by_rows
 
 
-def render_cell(sc, c, runtime, bakes, reuse, warn, keep_going, resume, kind):
-    """One cell rendered (or, with `resume`, read back from the cache) and kept in the cache."""
+def time_frames(sc, runtime, bakes, repeat: int) -> list:
+    """The passes' seconds of `repeat` full frames of `sc` (every pass run, no reuse: what
+    `iblbake render` runs), after one warm-up frame that pays the programs' builds and the
+    device's first-launch specialisation (PoCL specialises a program at its first launch: one
+    sample per cell gave the first cell of a sheet that cost, and the ao sheet's captions read
+    off 594 ms against 64 rays 510 ms)."""
+    from iblbake import render
+    render.render(sc, runtime=runtime, cache=bakes)
+    return [round(sum(p["seconds"] for p in render.render(sc, runtime=runtime, cache=bakes).report["passes"]), 6)
+            for _ in range(repeat)]
+
+
+def render_cell(sc, c, runtime, bakes, reuse, warn, keep_going, resume, kind, repeat: int = 0):
+    """One cell rendered (or, with `resume`, read back from the cache) and kept in the cache;
+    with `repeat`, timed by time_frames (a cached cell timed with as many repeats keeps them)."""
     from iblbake import render
     from iblbake.errors import DeviceError
 
@@ -211,9 +238,13 @@ def render_cell(sc, c, runtime, bakes, reuse, warn, keep_going, resume, kind):
     key = r.key = cell_key(cell_identity(sc, bakes), kind)
     t0 = time.perf_counter()
     r.frame = cached_cell(bakes, key) if resume else None
-    if r.frame is None:
+    timed = r.frame is not None and (not repeat or len(r.repeats) == repeat)
+    if r.frame is None or not timed:
         try:
-            r.frame = render.render(sc, runtime=runtime, cache=bakes, reuse=reuse, warn=warn)
+            r.frame = r.frame or render.render(sc, runtime=runtime, cache=bakes, reuse=reuse, warn=warn)
+            if repeat:
+                r.frame.report["timing"] = {"repeats": time_frames(sc, runtime, bakes, repeat),
+                                            "what": f"passes of {repeat} full frames after a warm-up frame"}
             store_cell(bakes, key, r.frame, warn)
         except (IblbakeError, DeviceError) as e:
             if not keep_going:

@@ -32,10 +32,11 @@ def _worker(device, cache_root) -> dict:
     return _STATE[key]
 
 
-def _render(w: dict, sc, c, resume) -> dict:
+def _render(w: dict, sc, c, resume, repeat: int = 0) -> dict:
     """One cell in a worker; its error comes back as a value, so a bad input fails once (no retry)."""
     try:
-        r = sheet.render_cell(sc, c, w["rt"], w["bakes"], w["reuse"], None, True, resume, w["rt"].info.kind)
+        r = sheet.render_cell(sc, c, w["rt"], w["bakes"], w["reuse"], None, True, resume, w["rt"].info.kind,
+                              repeat)
     except Exception as e:               # anything else: one line back to the parent
         return {"error": f"{type(e).__name__}: {e}", "seconds": 0.0, "key": None, "rendered": False}
     return {"error": r.error, "seconds": r.seconds, "key": r.key, "frame": r.frame,
@@ -92,9 +93,9 @@ def _pool_init(devices, cache_root, env):
     _worker(_DEVICE[0], cache_root)
 
 
-def _pool_cell(sc, c, resume, cache_root):
+def _pool_cell(sc, c, resume, cache_root, repeat=0):
     w = _worker(_DEVICE[0], cache_root)
-    out = _render(w, sc, c, resume)
+    out = _render(w, sc, c, resume, repeat)
     out.pop("frame", None)               # the parent reads it from the shared cache
     return {**out, "worker": w["label"]}
 
@@ -113,7 +114,7 @@ def _pool(jobs: int, devices, cache_root: str):
 
 
 def render_cells_parallel(scenes, cells, jobs: int, *, devices, bakes, progress=None, keep_going=False,
-                          resume=False, warn=None):
+                          resume=False, warn=None, repeat: int = 0):
     """(every cell's CellResult, a summary) from `jobs` spawned worker processes, worker k on
     devices[k % len(devices)]. Workers build each bake once between them (the entry's lock) and
     keep their cells in the cache. A worker that dies (SIGKILL, out of memory) breaks the pool: a
@@ -132,7 +133,7 @@ def render_cells_parallel(scenes, cells, jobs: int, *, devices, bakes, progress=
     for attempt in range(RETRIES + 1):
         broken = []
         with _pool(jobs, devices, str(bakes.root)) as pool:
-            futures = {pool.submit(_pool_cell, scenes[i], cells[i], resume or attempt > 0, str(bakes.root)): i
+            futures = {pool.submit(_pool_cell, scenes[i], cells[i], resume or attempt > 0, str(bakes.root), repeat): i
                        for i in todo}
             try:
                 for f in as_completed(futures):
@@ -198,7 +199,7 @@ def render_references_parallel(study, jobs: int, devices, progress=None) -> dict
 
 # --- Dask (--scheduler) ---------------------------------------------------------------------------
 
-def _dask_cell(sc, c, devices, cache_root, resume, files):
+def _dask_cell(sc, c, devices, cache_root, resume, files, repeat=0):
     """One cell on a Dask worker: its device from --devices by the worker's name (a LocalCluster
     names them 0..N-1), the scene's files from their paths where this machine has the same
     content there, else from the bytes the client scattered (written once into the worker's own
@@ -221,7 +222,7 @@ def _dask_cell(sc, c, devices, cache_root, resume, files):
         local = inputs / f"{sha}{Path(path).suffix}"
         _write_once(local, data)
         moved[path] = str(local)
-    out = _render(w, scene_load.with_files(sc, moved) if moved else sc, c, resume)
+    out = _render(w, scene_load.with_files(sc, moved) if moved else sc, c, resume, repeat)
     return {**out, "worker": f"{worker.address} ({w['label']})"}
 
 
@@ -279,7 +280,7 @@ def connect(scheduler: str, jobs: int, resources: dict):
 
 
 def render_cells_dask(scenes, cells, client, *, devices, bakes, resources=None, progress=None, keep_going=False,
-                      resume=False):
+                      resume=False, repeat: int = 0):
     """(every cell's CellResult, a summary) from a Dask cluster's workers. A cell is a task keyed
     by its identity, so a repeated cell is one task and a cell whose worker died is the same task
     rescheduled (Dask's own bookkeeping; counted in the summary). The workers' caches are
@@ -303,7 +304,7 @@ def render_cells_dask(scenes, cells, client, *, devices, bakes, resources=None, 
                 shared[sha] = client.scatter(Path(path).read_bytes(), hash=False, broadcast=True)
             files[path] = (sha, shared[sha])
         key = "iblbake-cell-" + sheet.cell_identity(sc, bakes)[:40]
-        f = client.submit(_dask_cell, sc, c, list(devices), str(bakes.root), resume, files, key=key,
+        f = client.submit(_dask_cell, sc, c, list(devices), str(bakes.root), resume, files, repeat, key=key,
                           resources=resources or None)
         futures.setdefault(f, []).append(i)
     workers = {}
