@@ -9,9 +9,12 @@ OUT    := examples/out
 .PHONY: demo test stress install opencl assets testmodels readers bench clean
 
 install: $(STAMP)
-$(STAMP): pyproject.toml
+# editable_mode=compat: the editable install is a plain path in a .pth file. setuptools' default
+# installs an import-hook finder that site imports (pathlib, re...) for 10-25 ms before any line of
+# iblbake runs, and a Ctrl-C landing there printed a traceback (exit 1) instead of exiting 130.
+$(STAMP): pyproject.toml Makefile
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install -q -e '.[test]'
+	$(BIN)/python -m pip install -q -e '.[test]' --config-settings editable_mode=compat
 	touch $@
 
 opencl: $(STAMP)

@@ -20,7 +20,7 @@ import yaml
 from iblbake.bake import cache
 from iblbake.io import images
 
-from .conftest import run_cli, stress_scale, write_exr
+from .conftest import ROOT, run_cli, stress_scale, write_exr
 
 
 def cli(*args):
@@ -278,6 +278,40 @@ def test_kill_loop_sh(tmp_path, stress):
         return bad + sum(not x.startswith(".out.tmp-") for x in leftovers)
 
     kill_loop(stress, "sh", cmd, stress_scale(20, 24), check, (0.01, 0.8), seed=2)   # from start-up on
+
+
+def test_ctrl_c_on_a_fresh_install_is_exit_130(tmp_path):
+    """Ctrl-C in the first milliseconds of a fresh clone's first run, every module compiled from
+    source (a copy of the package with no __pycache__, PYTHONDONTWRITEBYTECODE): exit 130, 0 or
+    the signal, never a traceback (a fresh clone's make test once got exit 1 from a Ctrl-C in
+    _compile_bytecode; the editable install's import-hook finder imported pathlib and re inside
+    site for 10-25 ms: the Makefile installs the plain path .pth now). The signal comes after the
+    interpreter's own start-up, measured here: before it, no line of iblbake has run."""
+    import shutil
+    import statistics
+    copy = tmp_path / "src"
+    shutil.copytree(ROOT / "iblbake", copy / "iblbake", ignore=shutil.ignore_patterns("__pycache__"))
+    env = {**os.environ, "PYTHONPATH": str(copy), "PYTHONDONTWRITEBYTECODE": "1"}
+    env.pop("CI", None)
+    floor = []
+    for _ in range(3):
+        t0 = time.perf_counter()
+        subprocess.run([sys.executable, "-c", "pass"], env=env, check=True)
+        floor.append(time.perf_counter() - t0)
+    start = 1.5 * statistics.median(floor)
+    src = write_exr(tmp_path / "e.exr", np.full((8, 16, 3), 0.5, np.float32))
+    out = tmp_path / "sh.json"
+    rng = random.Random(7)
+    for _ in range(stress_scale(12, 40)):
+        p = subprocess.Popen([sys.executable, "-m", "iblbake.cli", "sh", src, "-o", out, "--backend", "numpy"],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
+        time.sleep(rng.uniform(start, start + 0.25))
+        p.send_signal(signal.SIGINT)
+        _, err = p.communicate(timeout=120)
+        assert p.returncode in (0, 130, -signal.SIGINT) and b"Traceback" not in err, (p.returncode, err.decode()[-400:])
+        if out.exists():
+            assert json.loads(out.read_text())["format"] == "iblbake.sh"
+    assert not list(copy.rglob("__pycache__"))        # every run compiled the package afresh
 
 
 # --- overwriting and escaping ---------------------------------------------------------------------

@@ -68,3 +68,12 @@ def test_help_imports_nothing_heavy():
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert p.returncode == 0, p.stderr[-2000:]
     assert p.stdout.strip() == "[]", p.stdout
+
+
+def test_the_install_adds_no_import_hook_to_start_up():
+    """make install's editable install is a path in a .pth (editable_mode=compat), not setuptools'
+    import-hook finder, which site imported for 10-25 ms before any line of iblbake could hold a
+    Ctrl-C back (tests/test_nothing_lost.py)."""
+    import sysconfig
+    site = Path(sysconfig.get_paths()["purelib"])
+    assert not list(site.glob("__editable___iblbake*finder.py"))
