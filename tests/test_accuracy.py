@@ -158,3 +158,24 @@ def test_references_in_two_workers_equal_the_serial_ones(tmp_path, study):
     assert all(all(got["reference"][t]["cached"]) for t in ("diffuse", "specular"))
     assert got["reference"]["specular"]["noise"] == s["reference"]["specular"]["noise"]
     assert [x["relative_rmse"] for x in got["rungs"]] == [x["relative_rmse"] for x in s["rungs"]]
+
+
+def test_plot_legend_hides_no_point_and_tick_labels_do_not_overlap(study):
+    """plot.png kept its legend inside the upper right of each panel (over a point) and labelled
+    the minor ticks of a log axis spanning less than a decade, one over another."""
+    import matplotlib.pyplot as plt
+
+    s = study["summary"]
+    fig = accuracy.plot_figure(s["rungs"], s["frontier"], "t")
+    fig.canvas.draw()
+    r = fig.canvas.get_renderer()
+    assert len(fig.legends) == 1
+    legend = fig.legends[0].get_window_extent(r)
+    for ax in fig.axes:
+        assert ax.get_legend() is None and not legend.overlaps(ax.get_window_extent(r))
+        for axis in (ax.xaxis, ax.yaxis):
+            boxes = [t.get_window_extent(r) for t in axis.get_ticklabels(which="both")
+                     if t.get_visible() and t.get_text()]
+            assert boxes, axis
+            assert not any(a.overlaps(b) for i, a in enumerate(boxes) for b in boxes[i + 1:])
+    plt.close(fig)

@@ -265,3 +265,34 @@ def test_two_panoramas_onto_one_name_are_refused(files):
     second = Path(write_exr(other / "in.exr", np.full((16, 32, 3), 0.25, np.float32)))
     p = run_cli("sh", files["env"], second, "-o", f"{files['dir']}/out/", "--backend", "numpy")
     assert p.returncode == 1 and "is also -o" in p.stderr and not (files["dir"] / "out").exists(), p.stderr
+
+
+def test_progress_time_left_skips_the_cold_first_stage_and_warnings_clear_the_bar(monkeypatch):
+    """The first stage pays kernel builds (click's own ETA read 2 min 49 s left of a 6 s render);
+    a warning printed under a bar starts on a cleared line (it printed mid-line)."""
+    import io
+    import sys
+    import time
+
+    from iblbake.cli.options import Console
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+    err = Terminal()
+    monkeypatch.setattr(sys, "stderr", err)
+    monkeypatch.delenv("CI", raising=False)
+    clock = [0.0]
+    monkeypatch.setattr(time, "perf_counter", lambda: clock[0])
+    con = Console(False, False)
+    with con.stages([f"stage {k}" for k in range(10)], label="render") as step:
+        clock[0] = 100.0
+        step()                       # a cold first stage of 100 s
+        clock[0] = 101.0
+        step()                       # then 1 s a stage: 8 left
+        con.warn("careful")
+        clock[0] = 102.0
+        step()
+    text = err.getvalue()
+    assert "8 s left" in text and "7 s left" in text and "min" not in text
+    assert "\r\x1b[2Kiblbake: warning: careful\n" in text

@@ -517,6 +517,17 @@ PLOT_SIZE = (1400, 640)          # pixels
 
 
 def plot(rows, front, path, title: str) -> None:
+    """plot_figure written to `path` (PNG, atomic)."""
+    import matplotlib.pyplot as plt
+
+    fig = plot_figure(rows, front, title)
+    from iblbake.io.atomic import atomic_path
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=fig.dpi, format="png")
+    plt.close(fig)
+
+
+def plot_figure(rows, front, title: str):
     """Log-log error (relative RMSE) against time per frame of the lighting pass, a panel per
     term, each point labelled; the Pareto frontier drawn as a line through its points."""
     import matplotlib
@@ -558,10 +569,7 @@ def plot(rows, front, path, title: str) -> None:
                loc="lower center", ncol=3, fontsize=8, frameon=False)
     fig.suptitle(title, fontsize=12)
     fig.tight_layout(rect=(0, 0.05, 1, 1))
-    from iblbake.io.atomic import atomic_path
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=dpi, format="png")
-    plt.close(fig)
+    return fig
 
 
 def error_sheet(study: Study, rungs, title: str) -> np.ndarray:
