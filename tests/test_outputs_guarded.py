@@ -93,7 +93,7 @@ def test_the_walk_covers_every_writing_option():
 
 
 @pytest.mark.parametrize("command, option, read, argv, name", CASES, ids=[f"{c[0]}-{c[1]}-{c[2]}" for c in CASES])
-def test_no_output_is_an_input(files, command, option, read, argv, name):
+def test_no_output_is_an_input(files, stress, command, option, read, argv, name):
     """Each writing option given (through a symlink) a file the command reads: one line naming the
     option and what the file is, exit 1, the file unchanged, nothing else written."""
     target = files[read]
@@ -106,7 +106,8 @@ def test_no_output_is_an_input(files, command, option, read, argv, name):
     assert len(lines) == 1 and "Traceback" not in p.stderr, p.stderr
     assert "which this command reads" in lines[0] and str(link.name) in lines[0], lines[0]
     assert ("scene file" if read == "scene" else "panorama") in lines[0], lines[0]
-    assert _digest(files["env"], files["scene"]) == before
+    changed = sum(a != b for a, b in zip(_digest(files["env"], files["scene"]), before))
+    stress.check(f"overwrite walk: {command} {option} onto {read} (a link)", changed, 0, "inputs changed")
     assert sorted(p.name for p in files["dir"].rglob("*")) == listing
 
 
@@ -139,7 +140,7 @@ def test_two_outputs_never_share_a_path(files, argv, words):
     (["mips", "{env}", "--size", "30000", "--layout", "cubemap", "--only", "prefiltered"], "cubemap"),
     (["export-gltf", "{env}", "-o", "{dir}/l.glb", "--size", "131072"], "cubemap"),
 ])
-def test_bake_sizes_over_memory_are_refused_before_any_work(files, argv, layout):
+def test_bake_sizes_over_memory_are_refused_before_any_work(files, stress, argv, layout):
     """The old code baked the radiance entry, then died with MemoryError (37.3 GiB) and left a
     .lock in the cache (mips), or ran 8 s into INVALID_BUFFER_SIZE (export-gltf)."""
     cache = files["dir"] / "cache"
@@ -149,7 +150,9 @@ def test_bake_sizes_over_memory_are_refused_before_any_work(files, argv, layout)
     assert len(lines) == 1 and "--size" in lines[0] and f"the {layout} chain needs" in lines[0], p.stderr
     fits = int(lines[0].rsplit(" ", 1)[1])
     assert 256 <= fits < int(argv[argv.index("--size") + 1])
-    assert not cache.exists() or not any(cache.iterdir())
+    left = len(list(cache.iterdir())) if cache.exists() else 0
+    stress.check(f"size limit: {argv[0]} --size {argv[argv.index('--size') + 1]} {layout} (fits {fits})", left, 0,
+                 "cache entries made")
     if argv[0] == "export-gltf":
         assert fits & (fits - 1) == 0          # the largest power of two, as --size must be
 
