@@ -1,6 +1,11 @@
 /* The tone-mapping pass: linear HDR frame -> 8-bit display frame (see tonemap.h).
  * DITHER: add triangular noise of +-1 LSB (a fixed hash of the pixel index, so frames stay
  * bit-identical run to run, and the same in a tiled frame: pixel0 + i) before rounding; twin: iblbake/core/tonemap.py dither_offsets. */
+/* Contraction off, as in a frame's one program, where kernels/scene.h (included by the passes
+ * before this file) turned it off for the rest of the program: the tone map alone in a sheet's
+ * program then rounds as in `iblbake render` (with it on, a*b+c fused into an fma put one pixel
+ * one code value off). */
+#pragma OPENCL FP_CONTRACT OFF
 #include "tonemap.h"
 #include "sampling.h"
 

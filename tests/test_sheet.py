@@ -318,3 +318,26 @@ def test_time_captions_are_medians_of_warm_full_frames(tmp_path, small_panoramas
             assert len(reps) == k and all(x > 0 for x in reps)
             assert c["pass_seconds"] == pytest.approx(float(np.median(reps)), abs=1e-4)
         assert np.array_equal(images.read_exr(tmp_path / f"t{k}.exr"), images.read_exr(tmp_path / "plain.exr"))
+
+
+@pytest.mark.parametrize("settings", [[], ["effects.tonemap=hable", "effects.exposure=0.7"],
+                                      ["output.dither=true", "effects.output_transfer=gamma"],
+                                      ["effects.tonemap=pbr_neutral", "effects.specular=importance"]])
+def test_cells_equal_lone_renders_at_128(tmp_path, small_panoramas, settings):
+    """The 2x3 sheet of issue 32 (128x128, roughness 0.2, 0.6 x metallic 0, 0.5, 1) at several
+    display settings: every cell equals its `iblbake render` frame pixel for pixel. The lone frame
+    builds the tone map into its one program, after kernels/scene.h turned FP contraction off; the
+    sheet's tone map, in a program of its own, fused a multiply-add and put one pixel one code
+    value off until tonemap.cl turned contraction off itself."""
+    scene = sheet_scene(tmp_path, small_panoramas["city"], res=(128, 128))
+    sets = [a for s in settings for a in ("--set", s)]
+    p = run_cli("sheet", scene, "-o", tmp_path / "s.png", "--cache", tmp_path / "c", "--frames", tmp_path / "f",
+                "--rows", "materials.gold.roughness=0.2,0.6", "--columns", "materials.gold.metallic=0,0.5,1", *sets)
+    assert p.returncode == 0, p.stderr
+    for r, rough in enumerate((0.2, 0.6)):
+        for c, metal in enumerate((0, 0.5, 1)):
+            lone = tmp_path / f"lone_{r}{c}.png"
+            q = run_cli("render", scene, "-o", lone, "--cache", tmp_path / "c", "-q", *sets,
+                        "--set", f"materials.gold.roughness={rough}", "--set", f"materials.gold.metallic={metal}")
+            assert q.returncode == 0, q.stderr
+            assert np.array_equal(read_png(tmp_path / "f" / f"r{r:02d}_c{c:02d}.png"), read_png(lone)), (r, c)
