@@ -341,3 +341,16 @@ def test_cells_equal_lone_renders_at_128(tmp_path, small_panoramas, settings):
                         "--set", f"materials.gold.roughness={rough}", "--set", f"materials.gold.metallic={metal}")
             assert q.returncode == 0, q.stderr
             assert np.array_equal(read_png(tmp_path / "f" / f"r{r:02d}_c{c:02d}.png"), read_png(lone)), (r, c)
+
+
+@pytest.mark.parametrize("timing", [None, "x", {"repeats": "x"}, {"repeats": [0.1, "a"]}, {"repeats": [-1.0]},
+                                    {"repeats": None}])
+def test_a_damaged_timing_in_a_cached_cell_counts_as_untimed(timing):
+    """A cell read back from the cache takes its timed repeats from the entry's manifest: what is
+    not a list of non-negative seconds there is ignored (the cell's own pass times are shown)."""
+    frame = _Stub(np.zeros((2, 2, 3), np.uint8))
+    frame.report = {"timing": timing, "passes": [{"seconds": 0.5}]}
+    r = sheet.CellResult(sweep.Cell(0, 0, [], ""), frame=frame)
+    assert r.repeats == [] and r.pass_seconds == 0.5
+    frame.report["timing"] = {"repeats": [0.1, 0.3, 0.2]}
+    assert r.repeats == [0.1, 0.3, 0.2] and r.pass_seconds == 0.2

@@ -36,7 +36,12 @@ class CellResult:
     @property
     def repeats(self) -> list:
         """The passes' seconds of each timed full frame (time_frames), where the cell was timed."""
-        return (self.frame.report.get("timing") or {}).get("repeats", []) if self.frame is not None else []
+        timing = self.frame.report.get("timing") if self.frame is not None else None
+        reps = timing.get("repeats") if isinstance(timing, dict) else None
+        # read back from a cached cell's manifest: a damaged one counts as not timed
+        if not isinstance(reps, list) or not all(isinstance(x, (int, float)) and x >= 0 for x in reps):
+            return []
+        return reps
 
     @property
     def pass_seconds(self) -> float:
