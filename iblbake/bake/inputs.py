@@ -2,7 +2,7 @@
 horizontal or vertical cross, a strip of six faces, six face files, or a KTX2 cube map,
 resampled to the equirect panorama every bake reads.
 
-Layouts (faces in the Vulkan/OpenGL cube-map orientation, DESIGN.md's cubemap layout):
+Layouts (faces in the Vulkan/OpenGL cube-map orientation, docs/conventions.md "Cube maps"):
     hcross (4:3)   . +Y  .  .        vcross (3:4)   . +Y .
                   -X +Z +X -Z                      -X +Z +X
                    . -Y  .  .                       . -Y .

@@ -9,7 +9,7 @@ produce for the same formats):
     the faces +X -X +Y -Y +Z -Z, rows top to bottom
 
 No supercompression, so byteLength == uncompressedByteLength. Faces follow the Vulkan/OpenGL
-cube-map convention, which is DESIGN.md's cubemap layout (conventions.dir_from_cube); the
+cube-map convention, which is iblbake's (docs/conventions.md "Cube maps") (conventions.dir_from_cube); the
 orientation key says "rd" (s to the right, t down), the spec's value for cube maps."""
 
 from __future__ import annotations

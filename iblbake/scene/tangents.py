@@ -26,7 +26,7 @@ def _unit(v):
 
 
 def _frame_tangent(n):
-    """A tangent for normals with no UV layout: Duff et al.'s branchless basis (DESIGN.md)."""
+    """A tangent for normals with no UV layout: Duff et al.'s branchless basis (2017, JCGT 6(1); docs/conventions.md)."""
     s = np.where(n[..., 2] >= 0, 1.0, -1.0)
     a = -1.0 / (s + n[..., 2])
     b = n[..., 0] * n[..., 1] * a
