@@ -32,7 +32,7 @@ from iblbake import render  # noqa: E402
 from iblbake.device.runtime import Runtime  # noqa: E402
 from iblbake.io import images  # noqa: E402
 from iblbake.scene import load as scene  # noqa: E402
-from iblbake.scene.load import GTAO_DEFAULTS  # noqa: E402
+from iblbake.scene.schema import GTAO_DEFAULTS  # noqa: E402
 
 
 def knot():

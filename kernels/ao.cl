@@ -2,7 +2,7 @@
  * fraction of ao_samples rays (Halton points rotated per sample) that leave without a hit closer
  * than ao_radius: the visibility the IBL's diffuse term assumes is 1. Written to `ao`; the shade
  * pass multiplies its diffuse term by it, and its specular term by Lagarde's specular occlusion.
- * numpy twin: iblbake/render/twin.py ambient_occlusion(). */
+ * numpy twin: iblbake/render/twin/ao.py ambient_occlusion(). */
 #include "common.h"
 #include "sampling.h"
 #include "scene.h"
@@ -24,7 +24,8 @@ __kernel void ao(__global const float4 *gb_pos, __global const float4 *gb_nrm, _
     tangent_frame(nrm, &t, &b);
     int open = 0;
     for (int k = 0; k < ao_samples; ++k) {
-        const float3 l = sample_cosine_hemisphere((float2)(qmc(ao_seed, sid, k, 0), qmc(ao_seed, sid, k, 1)));
+        Sampler sp = sampler_start(ao_seed ^ STREAM_AO, sid, k);
+        const float3 l = sample_cosine_hemisphere(sampler_2d(&sp));
         open += !occluded_to(origin, t * l.x + b * l.y + nrm * l.z, ao_radius, SCENE_ARGS);
     }
     ao_buf[gid] = (float)open / (float)ao_samples;

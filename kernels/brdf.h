@@ -1,39 +1,8 @@
-/* Metallic-roughness BRDF terms (docs/conventions.md). Mirrors iblbake/core/brdf.py
- * (tests/test_brdf_sampling.py). */
+/* Metallic-roughness BRDF terms beside GGX (ggx.h): Fresnel and the sheen lobe
+ * (docs/conventions.md). Mirrors iblbake/core/brdf.py (tests/test_brdf_sampling.py). */
 #ifndef IBLBAKE_BRDF_H
 #define IBLBAKE_BRDF_H
-
-#define ALPHA_MIN 1e-7f
-
-inline float d_ggx(float noh, float alpha)
-{
-    float a2 = fmax(alpha * alpha, ALPHA_MIN * ALPHA_MIN);
-    noh = clamp(noh, 0.0f, 1.0f);
-    /* noh^2 (a2 - 1) + 1 written as (1 - noh)(1 + noh) + noh^2 a2: no cancellation to 0 when
-     * noh rounds to 1 and a2 is tiny (roughness -> 0), so D stays finite (1 / (pi a2)) */
-    float d = (1.0f - noh) * (1.0f + noh) + noh * noh * a2;
-    return a2 / (3.14159265358979323846f * d * d);
-}
-
-/* D from sin^2 and cos^2 of the half-vector angle: sin^2 taken as |n x h|^2 keeps its relative
- * precision for near-mirror lobes, where 1 - noh^2 in float32 is only a multiple of 1.2e-7. */
-inline float d_ggx_sc(float sin2, float cos2, float alpha)
-{
-    float a2 = fmax(alpha * alpha, ALPHA_MIN * ALPHA_MIN);
-    float d = sin2 + cos2 * a2;
-    return a2 / (3.14159265358979323846f * d * d);
-}
-
-/* Height-correlated Smith V = G / (4 NoV NoL) (Heitz 2014), as Filament's DFG code. */
-inline float v_smith_ggx_correlated(float nov, float nol, float alpha)
-{
-    float a2 = alpha * alpha;
-    nov = clamp(nov, 0.0f, 1.0f);
-    nol = clamp(nol, 0.0f, 1.0f);
-    float lv = nol * sqrt(nov * nov * (1.0f - a2) + a2);
-    float ll = nov * sqrt(nol * nol * (1.0f - a2) + a2);
-    return 0.5f / fmax(lv + ll, 1e-30f);
-}
+#include "ggx.h"
 
 /* Sheen (KHR_materials_sheen; Estevez and Kulla 2017): the Charlie NDF, alpha = sheen
  * roughness^2, and Ashikhmin and Premoze's visibility clamped to [0, 1] (the glTF Sample

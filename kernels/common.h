@@ -4,7 +4,16 @@
 #ifndef IBLBAKE_COMMON_H
 #define IBLBAKE_COMMON_H
 
+#include "layout.h"
+
 #define IBL_PI 3.14159265358979323846f
+
+/* Rec. 709 relative luminance of linear RGB (the weights: iblbake/core/metrics.py LUMINANCE,
+ * through layout.h) */
+inline float luminance(float3 c)
+{
+    return dot(c, (float3)(LUMINANCE_R, LUMINANCE_G, LUMINANCE_B));
+}
 
 /* x / |x| for the non-zero, finite vectors of shading (a half vector, a light direction):
  * PoCL's normalize guards against overflow and underflow and took as long as the rest of the

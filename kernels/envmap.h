@@ -1,9 +1,15 @@
-/* Lookups in a chain of equirect levels stored back to back in one buffer of RGB floats (the
- * radiance chain, the prefiltered chain; off[] counts texels). Mirrors iblbake/bake/radiance.py:
- * chain_lookup_twin. */
+/* The environment: lookups in a chain of equirect levels stored back to back in one buffer of
+ * RGB floats (the radiance chain, the prefiltered chain; off[] counts texels; CHAIN_PARAMS), and
+ * its importance sampling. Mirrors iblbake/bake/radiance.py: chain_lookup_twin and
+ * iblbake/core/sampling.py: EnvironmentDistribution. */
 #ifndef IBLBAKE_ENVMAP_H
 #define IBLBAKE_ENVMAP_H
 #include "common.h"
+
+/* A chain's kernel parameters and arguments (bound by name from Bakes.chain's table). */
+#define CHAIN_PARAMS __global const float *chain, __constant int *off, __constant int *lw, __constant int *lh, \
+                     const int nlev
+#define CHAIN_ARGS chain, off, lw, lh, nlev
 
 /* Trilinear lookup in the radiance chain: bilinear in two levels, blended. */
 /* Solid angle of a level-0 texel (w0 x h0) of the chain at direction l: (2 pi / w0)(pi / h0)
@@ -15,8 +21,7 @@ inline float texel_solid_angle(float3 l, int w0, int h0)
     return (2.0f * IBL_PI / w0) * (IBL_PI / h0) * st;
 }
 
-inline float3 chain_lookup(__global const float *chain, __constant int *off, __constant int *lw,
-                           __constant int *lh, const int nlev, float3 d, float lod)
+inline float3 chain_lookup(CHAIN_PARAMS, float3 d, float lod)
 {
     const float2 uv = equirect_uv_from_dir(d);
     /* +-inf clamp to the ends; NaN (the 0/0 pdf of a delta lobe) reads level 0 */
@@ -27,6 +32,46 @@ inline float3 chain_lookup(__global const float *chain, __constant int *off, __c
     float3 a = bilinear_equirect(chain + 3 * (size_t)off[l0], lw[l0], lh[l0], uv);
     if (f <= 0.0f) return a;
     return mix(a, bilinear_equirect(chain + 3 * (size_t)off[l1], lw[l1], lh[l1], uv), f);
+}
+
+/* Importance sampling: piecewise constant over the panorama's texels, p(texel) proportional to
+ * luminance x solid angle (tables built by iblbake/core/sampling.py: EnvironmentDistribution).
+ * Row from the marginal CDF, column from the row's CDF, then uniform in (phi, cos theta) inside
+ * the texel, so the pdf over solid angle is p_texel / Omega_texel (the pdf table). */
+inline int cdf_search(__global const float *cdf, int n, float u)
+{
+    int lo = 0, hi = n - 1;                 /* cdf[0..n], cdf[0] = 0, cdf[n] = 1 */
+    while (lo < hi) {
+        const int mid = (lo + hi) >> 1;
+        if (cdf[mid + 1] <= u) lo = mid + 1; else hi = mid;
+    }
+    return lo;
+}
+
+/* Direction in the panorama's frame from four uniforms; *texel = j * w + i. */
+inline float3 sample_env(__global const float *marginal, __global const float *conditional, int w, int h,
+                         float4 u, int *texel)
+{
+    const int j = cdf_search(marginal, h, u.x);
+    const int i = cdf_search(conditional + j * (w + 1), w, u.y);
+    const float uu = ((float)i + u.z) / (float)w;
+    const float c0 = cospi((float)j / h), c1 = cospi((float)(j + 1) / h);
+    const float ct = mix(c0, c1, u.w);
+    const float stt = sqrt(fmax(0.0f, 1.0f - ct * ct)), phi = 2.0f * IBL_PI * (0.5f - uu);
+    *texel = j * w + i;
+    return (float3)(stt * sin(phi), ct, stt * cos(phi));
+}
+
+/* The texel a direction (panorama frame) falls in, nearest: the pdf table's index for it. */
+inline int env_texel_index(float3 e, int w, int h)
+{
+    const float2 uv = equirect_uv_from_dir(e);
+    return min((int)(uv.y * h), h - 1) * w + min((int)(uv.x * w), w - 1);
+}
+
+inline float pdf_env(__global const float *pdf_table, int texel)
+{
+    return pdf_table[texel];
 }
 
 #endif

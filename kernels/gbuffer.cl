@@ -22,7 +22,7 @@ inline float4 hit_tangent(int kind, int index, float3 p, float3 ns, float b1, fl
 {
     float3 t;
     float w;
-    if (kind == 1) {
+    if (kind == PRIM_SPHERE) {
         /* u grows as atan2(x, z) falls: t = (-z, 0, x) / |.|; up the image is +y, cross(n, t) is -y */
         const float4 sp = spheres[SPHERE_FLOAT4S * index];
         const float3 nl = (p - sp.xyz) / sp.w;
@@ -32,7 +32,7 @@ inline float4 hit_tangent(int kind, int index, float3 p, float3 ns, float b1, fl
         const float st = fmax(sqrt(fmax(0.0f, 1.0f - nl.y * nl.y)), 1e-4f);
         const float dens = -0.5f * log2(2.0f * IBL_PI * IBL_PI * sp.w * sp.w * st);
         *density = (float2)(dens, dens);
-    } else if (kind == 2) {
+    } else if (kind == PRIM_PLANE) {
         /* u along the tangent, v down the bitangent; cross(n, t) = -bitangent (plane_frame) */
         __global const float4 *pl = planes + PLANE_FLOAT4S * index;
         t = pl[2].xyz;
@@ -71,7 +71,7 @@ __kernel void gbuffer(__constant float4 *cam, const int width, const int height,
     float3 o, d;
     camera_ray(cam, width, height, pix % width, pix / width, jitter[s], &o, &d);
     const Hit h = trace(o, d, SCENE_ARGS);
-    if (h.kind == 0) {
+    if (h.kind == PRIM_NONE) {
         gb_pos[gid] = (float4)(0.0f, 0.0f, 0.0f, MISS_T);
         gb_nrm[gid] = (float4)(0.0f, 0.0f, 0.0f, as_float(-1));
         gb_dir[gid] = (float4)(d, as_float(-1));
@@ -80,14 +80,14 @@ __kernel void gbuffer(__constant float4 *cam, const int width, const int height,
     const float3 p = o + h.t * d;
     float3 ng, ns;
     int mat = 0, obj = 0;
-    if (h.kind == 1) {
+    if (h.kind == PRIM_SPHERE) {
         const float4 sp = spheres[SPHERE_FLOAT4S * h.index];
         ng = (p - sp.xyz) / sp.w;
         ng = normalize(ng);
         ns = ng;
         mat = as_int(spheres[SPHERE_FLOAT4S * h.index + 1].x);
         obj = as_int(spheres[SPHERE_FLOAT4S * h.index + 1].y);
-    } else if (h.kind == 2) {
+    } else if (h.kind == PRIM_PLANE) {
         ng = planes[PLANE_FLOAT4S * h.index + 1].xyz;
         ns = ng;
         mat = as_int(planes[PLANE_FLOAT4S * h.index].w);

@@ -12,7 +12,7 @@
  * every such pixel's position in (w >> k) x (h >> k) texels, so the far samples of a large
  * radius (hundreds of pixels) read a small array that stays in the caches, as XeGTAO's depth
  * MIPs do, while each still reads a real surface point (no average across an edge).
- * numpy twin: iblbake/render/twin.py gtao(), gtao_denoise(). */
+ * numpy twin: iblbake/render/twin/gtao.py. */
 #include "common.h"
 #include "layout.h"
 #include "surface.h"

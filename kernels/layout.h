@@ -26,6 +26,10 @@
 #define SHADOWS_NONE 0
 #define SHADOWS_HARD 1
 #define SHADOWS_SOFT 2
+#define PRIM_NONE 0
+#define PRIM_SPHERE 1
+#define PRIM_PLANE 2
+#define PRIM_TRIANGLE 3
 #define MAP_BASE_COLOR 0
 #define MAP_METALLIC_ROUGHNESS 1
 #define MAP_NORMAL 2
@@ -51,5 +55,10 @@
 /* gb_lod: mip level of the hit's footprint for each set, before the texture's size (x, y) */
 /* gb_mat: 3 per sample: (base colour, metallic), (emissive, roughness), (shading normal, occlusion) */
 #define MISS_T (-1.0f)
+#define DELTA_ALPHA 0.0001f
+#define LUMINANCE_R 0.2126f
+#define LUMINANCE_G 0.7152f
+#define LUMINANCE_B 0.0722f
+#define STREAM_AO 0x5a0u
 
 #endif

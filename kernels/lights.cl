@@ -10,7 +10,7 @@
  * Real time: the light's centre direction is shaded (a light with a size: its specular term at
  * the representative point); hard shadows trace one ray to the centre,
  * soft ones shadow_samples rays over the disk or sphere (the fraction that arrives).
- * numpy twin: iblbake/render/twin.py lights(). */
+ * numpy twin: iblbake/render/twin/lights.py lights(). */
 #include "common.h"
 #include "brdf.h"
 #include "sampling.h"
@@ -123,7 +123,8 @@ __kernel void lights(__global const float4 *gb_pos, SURFACE_PARAMS,
             const float3 le = e / (IBL_PI * sin_max * sin_max);
             float3 acc = (float3)(0.0f);
             for (int k = 0; k < exact_samples; ++k) {
-                const float3 l = cone_direction(wc, omc, (float2)(qmc(ls, sid, k, 0), qmc(ls, sid, k, 1)));
+                Sampler sp = sampler_start(ls, sid, k);
+                const float3 l = cone_direction(wc, omc, sampler_2d(&sp));
                 const float3 f = light_brdf_cos(mt, nrm, v, nov, l, 0.0f);
                 if (f.x + f.y + f.z <= 0.0f) continue;      /* below the horizon: no ray */
 #ifdef VISIBILITY
@@ -153,7 +154,8 @@ __kernel void lights(__global const float4 *gb_pos, SURFACE_PARAMS,
             const int ns = (int)r3.w;
             int lit = 0;
             for (int k = 0; k < ns; ++k) {
-                const float3 l = cone_direction(wc, omc, (float2)(qmc(ls, sid, k, 0), qmc(ls, sid, k, 1)));
+                Sampler sp = sampler_start(ls, sid, k);
+                const float3 l = cone_direction(wc, omc, sampler_2d(&sp));
                 lit += !occluded_to(origin, l, dist, SCENE_ARGS);
             }
             vis = (float)lit / (float)ns;

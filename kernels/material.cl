@@ -6,7 +6,7 @@
  *   occlusion    1 + strength (map.r - 1): the image-based light only
  *   emissive     factor x map (sRGB-decoded)
  * Each map kind's fetch is compiled only where some material has one (HAS_<KIND>_MAP).
- * numpy twin: iblbake/render/twin.py resolve_materials. */
+ * numpy twin: iblbake/render/twin/material.py resolve_materials. */
 #include "common.h"
 #include "texture.h"
 

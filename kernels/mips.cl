@@ -64,8 +64,7 @@ inline float3 output_dir(int idx, int size)
  * polar row's centre (equirect texels shrink towards the poles). A continuous density, not the
  * row-exact value: a level choice that jumps at row boundaries made float32 and float64 disagree.
  * The estimate is sum L(l) NoL / sum NoL (Karis 2013). */
-__kernel void prefilter(__global const float *chain, __constant int *off, __constant int *lw,
-                        __constant int *lh, const int nlev,
+__kernel void prefilter(CHAIN_PARAMS,
                         __global const float4 *samples, const int nsamples, const float lod_bias,
                         const int use_fis, const int size, const int ntexels, __global float4 *out)
 {
@@ -83,20 +82,19 @@ __kernel void prefilter(__global const float *chain, __constant int *off, __cons
         float lod = 0.0f;
         if (use_fis)
             lod = 0.5f * (s.w - log2(texel_solid_angle(l, w0, h0))) + lod_bias;
-        acc += s.z * chain_lookup(chain, off, lw, lh, nlev, l, lod);
+        acc += s.z * chain_lookup(CHAIN_ARGS, l, lod);
         wsum += s.z;
     }
     out[idx] = (float4)(acc / fmax(wsum, 1e-30f), 0.0f);
 }
 
 /* Mirror level (roughness 0): the source resampled to the layout (bilinear in level 0). */
-__kernel void resample(__global const float *chain, __constant int *off, __constant int *lw,
-                       __constant int *lh, const int nlev, const int size, const int ntexels,
+__kernel void resample(CHAIN_PARAMS, const int size, const int ntexels,
                        __global float4 *out)
 {
     const int idx = get_global_id(0);
     if (idx >= ntexels) return;
-    out[idx] = (float4)(chain_lookup(chain, off, lw, lh, nlev, output_dir(idx, size), 0.0f), 0.0f);
+    out[idx] = (float4)(chain_lookup(CHAIN_ARGS, output_dir(idx, size), 0.0f), 0.0f);
 }
 
 /* DFG over NoV (x) and perceptual roughness (y), both on grids including 0 and 1:

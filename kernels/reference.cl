@@ -6,7 +6,7 @@
  * With VISIBILITY, every sample's light direction is traced for any hit (occluded(), from an
  * offset origin), so the integral is the occluded one: a sphere above a plane darkens the plane.
  *   DIFFUSE_MODE == DIFFUSE_REFERENCE, SPECULAR_MODE == SPECULAR_REFERENCE select the terms.
- * numpy twin (the same integral by quadrature over every texel): iblbake/render/twin.py exact(). */
+ * numpy twin (the same integral by quadrature over every texel): iblbake/render/twin/reference.py exact(). */
 #include "common.h"
 #include "brdf.h"
 #include "sampling.h"
@@ -14,21 +14,13 @@
 #include "scene.h"
 #include "surface.h"
 
-#define DIM_ENV 0
-#define DIM_BRDF 2
-#define DIM_COSINE 4
-#define DIM_JITTER 6
-
-/* GGX lobes narrower than float32 resolves are mirrors here (the twin uses the same bound) */
-#define DELTA_ALPHA 1e-4f
-
 #ifdef VISIBILITY
 #define VISIBLE(l) (!occluded(origin, (l), SCENE_ARGS))
 #else
 #define VISIBLE(l) 1
 #endif
 
-/* One batch of `batch` samples per G-buffer sample: out = (sum of estimates, sum of the odd-numbered
+/* One batch of `batch` samples per G-buffer sample: ref_batch = (sum of estimates, sum of the odd-numbered
  * samples' luminance). Samples are numbered globally (first + k), so the frame is the same
  * whatever the batching and wherever the run stops. */
 __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int n,
@@ -36,14 +28,14 @@ __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int
                         __global const float4 *img, const int w, const int h,
                         __global const float *marginal, __global const float *conditional,
                         __global const float *pdf_table, SCENE_PARAMS, const int pixel0, const int spp,
-                        const uint seed, const int first, const int batch, __global float4 *out)
+                        const uint seed, const int first, const int batch, __global float4 *ref_batch)
 {
     const int gid = get_global_id(0);
     if (gid >= n) return;
     /* the sample's number in the whole frame (a tile starts at pixel0): its random streams */
     const uint sid = (uint)(pixel0 * spp + gid);
     const float4 hitp = gb_pos[gid];
-    if (hitp.w == MISS_T) { out[gid] = (float4)(0.0f); return; }
+    if (hitp.w == MISS_T) { ref_batch[gid] = (float4)(0.0f); return; }
     Material mt;
     float3 v, nrm;
     const float nov = surface_at(SURFACE_ARGS, gid, &mt, &v, &nrm);
@@ -63,12 +55,17 @@ __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int
     float odd = 0.0f;
     for (int k = 0; k < batch; ++k) {
         const uint sk = (uint)(first + k);
+        /* the sample's numbers, in the order of its dimensions: a direction in the
+         * environment's texel (its row and column), the GGX and the cosine warps, the point in
+         * the texel */
+        Sampler sp = sampler_start(seed, sid, sk);
+        const float2 u_env = sampler_2d(&sp), u_ggx = sampler_2d(&sp), u_cos = sampler_2d(&sp),
+                     u_texel = sampler_2d(&sp);
         float3 est = (float3)(0.0f);
         /* strategy 1: the environment */
         {
             int texel;
-            const float4 u = (float4)(qmc(seed, sid, sk, DIM_ENV), qmc(seed, sid, sk, DIM_ENV + 1),
-                                      qmc(seed, sid, sk, DIM_JITTER), qmc(seed, sid, sk, DIM_JITTER + 1));
+            const float4 u = (float4)(u_env, u_texel);
             const float3 l = from_env(sample_env(marginal, conditional, w, h, u, &texel), env_rot);
             const float pe = pdf_env(pdf_table, texel);
             const float nol = dot(nrm, l);
@@ -93,8 +90,7 @@ __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int
 #if DIFFUSE_MODE == DIFFUSE_REFERENCE
         /* strategy 2a: cosine-weighted hemisphere */
         {
-            const float3 ll = sample_cosine_hemisphere((float2)(qmc(seed, sid, sk, DIM_COSINE),
-                                                                qmc(seed, sid, sk, DIM_COSINE + 1)));
+            const float3 ll = sample_cosine_hemisphere(u_cos);
             const float3 l = t * ll.x + b * ll.y + nrm * ll.z;
             const int texel = env_texel_index(to_env(l, env_rot), w, h);
             const float pc = pdf_cosine_hemisphere(ll.z);
@@ -110,8 +106,7 @@ __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int
             if (VISIBLE(l))
                 est += img[env_texel_index(to_env(l, env_rot), w, h)].xyz * f_schlick(nov, mt.f0);
         } else {
-            const float2 u = (float2)(qmc(seed, sid, sk, DIM_BRDF), qmc(seed, sid, sk, DIM_BRDF + 1));
-            const float3 hl = sample_ggx_vndf(vl, mt.alpha, u);
+            const float3 hl = sample_ggx_vndf(vl, mt.alpha, u_ggx);
             const float3 hs = t * hl.x + b * hl.y + nrm * hl.z;
             const float3 l = 2.0f * dot(v, hs) * hs - v;
             const float nol = dot(nrm, l);
@@ -135,7 +130,7 @@ __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int
         est *= env_scale;
 #endif
         sum += est;
-        if (sk & 1u) odd += dot(est, (float3)(0.2126f, 0.7152f, 0.0722f));
+        if (sk & 1u) odd += luminance(est);
     }
-    out[gid] = (float4)(sum, odd);
+    ref_batch[gid] = (float4)(sum, odd);
 }

@@ -1,8 +1,9 @@
 /* The scene's geometry on the device: camera rays, ray-primitive tests, a BVH over triangles, the
  * closest hit (trace) and any hit (occluded) along a ray. Buffer layouts: kernels/layout.h.
- * numpy twin: iblbake/render/twin.py (primary, occluded). */
+ * numpy twin: iblbake/render/twin/gbuffer.py (primary, occluded). */
 #ifndef IBLBAKE_SCENE_H
 #define IBLBAKE_SCENE_H
+#include "common.h"
 #include "layout.h"
 #include "texture.h"
 
@@ -124,7 +125,7 @@ inline int box_hit(float3 o, float3 inv_d, float3 bmin, float3 bmax, float tmax,
 
 typedef struct {
     float t;
-    int kind;      /* 0 none, 1 sphere, 2 plane, 3 triangle */
+    int kind;      /* PRIM_NONE, PRIM_SPHERE, PRIM_PLANE, PRIM_TRIANGLE (layout.h) */
     int index;
     float b1, b2;
 } Hit;
@@ -135,12 +136,12 @@ typedef struct {
  * front), before any turning towards the viewer. */
 inline int hit_material(int kind, int index, float3 p, float3 *ng, SCENE_PARAMS)
 {
-    if (kind == 1) {
+    if (kind == PRIM_SPHERE) {
         const float4 sp = spheres[SPHERE_FLOAT4S * index];
         *ng = normalize((p - sp.xyz) / sp.w);
         return as_int(spheres[SPHERE_FLOAT4S * index + 1].x);
     }
-    if (kind == 2) {
+    if (kind == PRIM_PLANE) {
         *ng = planes[PLANE_FLOAT4S * index + 1].xyz;
         return as_int(planes[PLANE_FLOAT4S * index].w);
     }
@@ -150,19 +151,19 @@ inline int hit_material(int kind, int index, float3 p, float3 *ng, SCENE_PARAMS)
 }
 
 /* Texture coordinates (u0, v0, u1, v1) at a hit, v down the image as glTF's: a triangle's
- * interpolated from its corners; a sphere's the panorama mapping of its normal (DESIGN.md:
+ * interpolated from its corners; a sphere's the panorama mapping of its normal (docs/conventions.md:
  * u = 0.5 - atan2(x, z) / 2 pi, v = acos(y) / pi); a plane's across its width (tangent) and up its
  * depth (bitangent), [0, 1] over a finite plane, one per unit on an infinite one. Both sets alike
  * on spheres and planes. */
 inline float4 hit_texcoords(int kind, int index, float3 p, float b1, float b2, SCENE_PARAMS)
 {
-    if (kind == 1) {
+    if (kind == PRIM_SPHERE) {
         const float4 sp = spheres[SPHERE_FLOAT4S * index];
         const float3 n = (p - sp.xyz) / sp.w;
         const float u = 0.5f - atan2(n.x, n.z) * (0.5f / IBL_PI), v = acos(clamp(n.y, -1.0f, 1.0f)) / IBL_PI;
         return (float4)(u, v, u, v);
     }
-    if (kind == 2) {
+    if (kind == PRIM_PLANE) {
         __global const float4 *pl = planes + PLANE_FLOAT4S * index;
         const float3 q = p - pl[0].xyz;
         const float a = dot(q, pl[2].xyz), b = dot(q, pl[3].xyz);
@@ -203,8 +204,8 @@ inline int surface_present(int kind, int index, float3 o, float3 d, float t, flo
 /* only where the primitive's material asks */
 inline int surface_flags(int kind, int index, SCENE_PARAMS)
 {
-    if (kind == 1) return as_int(spheres[SPHERE_FLOAT4S * index + 1].z);
-    if (kind == 2) return as_int(planes[PLANE_FLOAT4S * index + 4].x);
+    if (kind == PRIM_SPHERE) return as_int(spheres[SPHERE_FLOAT4S * index + 1].z);
+    if (kind == PRIM_PLANE) return as_int(planes[PLANE_FLOAT4S * index + 4].x);
     return as_int(tris[TRIANGLE_FLOAT4S * index + 2].w);
 }
 #define PRESENT(kind, index, t, b1, b2) \
@@ -216,25 +217,25 @@ inline int surface_flags(int kind, int index, SCENE_PARAMS)
 #endif
 
 /* The nearest hit in (tmin, tmax), or with any_hit the first one found (a shadow ray needs no
- * more): h.kind = 0 where there is none. */
+ * more): h.kind = PRIM_NONE where there is none. */
 inline Hit trace_range(float3 o, float3 d, float tmin, float tmax, int any_hit, SCENE_PARAMS)
 {
     Hit h;
-    h.t = tmax; h.kind = 0; h.index = -1; h.b1 = 0.0f; h.b2 = 0.0f;
+    h.t = tmax; h.kind = PRIM_NONE; h.index = -1; h.b1 = 0.0f; h.b2 = 0.0f;
 #ifdef HAS_SPHERES
     for (int i = 0; i < nspheres; ++i) {
         float t = hit_sphere(o, d, spheres[2 * i], tmin, h.t);
-        if (t < h.t && ABSENT(1, i, t, 0.0f, 0.0f)) {    /* cut out or a back face: the far side */
+        if (t < h.t && ABSENT(PRIM_SPHERE, i, t, 0.0f, 0.0f)) {    /* cut out or a back face: the far side */
             t = hit_sphere(o, d, spheres[2 * i], t, h.t);
-            if (t < h.t && ABSENT(1, i, t, 0.0f, 0.0f)) t = h.t;
+            if (t < h.t && ABSENT(PRIM_SPHERE, i, t, 0.0f, 0.0f)) t = h.t;
         }
-        if (t < h.t) { h.t = t; h.kind = 1; h.index = i; if (any_hit) return h; }
+        if (t < h.t) { h.t = t; h.kind = PRIM_SPHERE; h.index = i; if (any_hit) return h; }
     }
 #endif
 #ifdef HAS_PLANES
     for (int i = 0; i < nplanes; ++i) {
         const float t = hit_plane(o, d, planes + PLANE_FLOAT4S * i, tmin, h.t);
-        if (t < h.t && PRESENT(2, i, t, 0.0f, 0.0f)) { h.t = t; h.kind = 2; h.index = i; if (any_hit) return h; }
+        if (t < h.t && PRESENT(PRIM_PLANE, i, t, 0.0f, 0.0f)) { h.t = t; h.kind = PRIM_PLANE; h.index = i; if (any_hit) return h; }
     }
 #endif
 #ifdef HAS_TRIANGLES
@@ -263,8 +264,8 @@ inline Hit trace_range(float3 o, float3 d, float tmin, float tmax, int any_hit, 
                     float b1, b2;
                     const float t = hit_triangle(o, rs, tris[6 * k].xyz, tris[6 * k + 1].xyz, tris[6 * k + 2].xyz,
                                                  tmin, h.t, &b1, &b2);
-                    if (t < h.t && PRESENT(3, k, t, b1, b2)) {
-                        h.t = t; h.kind = 3; h.index = k; h.b1 = b1; h.b2 = b2;
+                    if (t < h.t && PRESENT(PRIM_TRIANGLE, k, t, b1, b2)) {
+                        h.t = t; h.kind = PRIM_TRIANGLE; h.index = k; h.b1 = b1; h.b2 = b2;
                         if (any_hit) return h;
                     }
                 }
@@ -296,13 +297,13 @@ inline Hit trace(float3 o, float3 d, SCENE_PARAMS)
  * point moved off the surface by ray_offset, so the surface does not shadow itself. */
 inline int occluded(float3 o, float3 d, SCENE_PARAMS)
 {
-    return trace_range(o, d, 0.0f, INFINITY, 1, SCENE_ARGS).kind != 0;
+    return trace_range(o, d, 0.0f, INFINITY, 1, SCENE_ARGS).kind != PRIM_NONE;
 }
 
 /* Any hit along o + t d, 0 < t < tmax: a shadow ray towards a light at distance tmax. */
 inline int occluded_to(float3 o, float3 d, float tmax, SCENE_PARAMS)
 {
-    return trace_range(o, d, 0.0f, tmax, 1, SCENE_ARGS).kind != 0;
+    return trace_range(o, d, 0.0f, tmax, 1, SCENE_ARGS).kind != PRIM_NONE;
 }
 
 /* Where a secondary ray starts: the hit p of a primary ray of direction d that travelled t, moved

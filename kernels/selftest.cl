@@ -59,12 +59,11 @@ __kernel void t_sh(__global const float *d, __global float *y)
     for (int k = 0; k < SH_COEFFS; ++k) y[i * SH_COEFFS + k] = Y[k];
 }
 
-__kernel void t_chain_lookup(__global const float *chain, __constant int *off, __constant int *lw,
-                             __constant int *lh, const int nlev, __global const float *d,
+__kernel void t_chain_lookup(CHAIN_PARAMS, __global const float *d,
                              __global const float *lod, __global float *out)
 {
     int i = get_global_id(0);
-    vstore3(chain_lookup(chain, off, lw, lh, nlev, vload3(i, d), lod[i]), i, out);
+    vstore3(chain_lookup(CHAIN_ARGS, vload3(i, d), lod[i]), i, out);
 }
 
 /* Warps of sampling.h on given uniforms (tests/test_sampling.py: chi-square against their pdfs).

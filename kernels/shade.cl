@@ -1,13 +1,13 @@
 /* Shade pass: the approximate lighting terms the scene asks for, added into the radiance buffer.
  *   DIFFUSE_MODE  DIFFUSE_SH (SH_BANDS bands) or off
- *   SPECULAR_MODE SPECULAR_IMPORTANCE (IMPORTANCE_ACCEPTED, FORCE_MIP0: the importance kernel's sums,
+ *   SPECULAR_MODE SPECULAR_IMPORTANCE (the importance pass's sums, kernels/importance.cl,
  *                 combined here with f0) or SPECULAR_PREFILTERED
  *                 (DOMINANT_DIRECTION) or SPECULAR_LOBE or off
  *   HAS_EMISSIVE  emission
  *   HAS_OCCLUSION_MAP  the material's occlusion (its map) on the image-based terms
  *   HAS_AO        ambient occlusion (the ao or gtao pass's ao_buf) on the diffuse term (AO_MULTIBOUNCE:
  *                 through the multi-bounce fit), Lagarde's specular occlusion on the specular term
- * numpy twin: iblbake/render/twin.py shade() (both kernels). */
+ * numpy twin: iblbake/render/twin/shade.py shade(). */
 #include "common.h"
 #include "brdf.h"
 #include "sampling.h"
@@ -62,70 +62,10 @@ inline float3 dominant_direction(float3 n, float3 r, float a)
     return normalize(mix(n, r, s * (sqrt(s) + a)));
 }
 
-#if SPECULAR_MODE == SPECULAR_IMPORTANCE
-/* Importance pass: the importance-sampled specular integral split around Schlick's Fresnel. With
- * F = f0 (1 - c) + c, c = (1 - VoH)^5, the estimate sum L F w (w = V 4 NoL VoH / NoH: f NoL / pdf
- * without F) is f0 sum L w (1 - c) + sum L w c, the split Karis (2013, "Real Shading in Unreal
- * Engine 4") makes for the DFG table, here per sample. The two sums depend on the surface, its
- * roughness and the panorama but not on f0: frames that change only base colour or metallic (a
- * sheet's metallic axis) reuse them, and shade adds f0 A + B. N Hammersley points, GGX
- * half-vector warp, mip level from the pdf (filtered importance sampling: Colbert and Krivanek,
- * GPU Gems 3 ch. 20, 2007). */
-__kernel void importance(__global const float4 *gb_pos, SURFACE_PARAMS, const int n, const float2 env_rot,
-                         __global const float *chain, __constant int *off, __constant int *lw, __constant int *lh,
-                         const int nlev, __global const float4 *hammersley_pts, const int nsamples,
-                         const float mip_bias, __global float4 *spec_sums)
-{
-    const int gid = get_global_id(0);
-    if (gid >= n) return;
-    if (gb_pos[gid].w == MISS_T) return;
-    Material mt;
-    float3 v, nrm;
-    const float nov = surface_at(SURFACE_ARGS, gid, &mt, &v, &nrm);
-    float3 t, b;
-    tangent_frame(nrm, &t, &b);
-    const int w0 = lw[0], h0 = lh[0];
-    float3 sa = (float3)(0.0f), sb = (float3)(0.0f);
-    int accepted = 0;
-    for (int i = 0; i < nsamples; ++i) {
-        const float3 hl = sample_ggx_half_cs(hammersley_pts[i], mt.alpha);
-        const float3 h = t * hl.x + b * hl.y + nrm * hl.z;
-        const float voh = dot(v, h);
-        const float3 l = 2.0f * voh * h - v;
-        const float nol = dot(nrm, l);
-        if (nol <= 0.0f || voh <= 0.0f) continue;
-        ++accepted;
-        const float noh = fmax(hl.z, 1e-7f);
-#ifndef FORCE_MIP0
-        /* solid angle of this sample, 1 / (N pdf(l)), pdf(l) = D(h) NoH / (4 VoH) */
-        const float pdf = d_ggx(noh, mt.alpha) * noh / (4.0f * voh);
-        const float3 le = to_env(l, env_rot);
-        const float lod = -0.5f * log2((float)nsamples * pdf * texel_solid_angle(le, w0, h0)) + mip_bias;
-        const float3 li = chain_lookup(chain, off, lw, lh, nlev, le, lod);
-#else
-        const float3 li = chain_lookup(chain, off, lw, lh, nlev, to_env(l, env_rot), 0.0f);
-#endif
-        /* f NoL / pdf = F V 4 NoL VoH / NoH  (D cancels) */
-        const float3 lwt = li * (v_smith_ggx_correlated(nov, nol, mt.alpha) * 4.0f * nol * voh / noh);
-        const float c = schlick_weight(voh);
-        sa += lwt * (1.0f - c);
-        sb += lwt * c;
-    }
-#ifdef IMPORTANCE_ACCEPTED
-    const float norm = 1.0f / (float)max(accepted, 1);
-#else
-    const float norm = 1.0f / (float)nsamples;
-#endif
-    spec_sums[2 * gid] = (float4)(sa * norm, 0.0f);
-    spec_sums[2 * gid + 1] = (float4)(sb * norm, 0.0f);
-}
-#endif
-
 __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
                     const int n, const float2 env_rot, const float env_scale,
                     __constant float4 *sh_coeffs,
-                    __global const float *chain, __constant int *off, __constant int *lw, __constant int *lh,
-                    const int nlev,
+                    CHAIN_PARAMS,
                     __global const float4 *hammersley_pts, const int nsamples, const float mip_bias, const float lobe_spread,
                     __global const float2 *dfg, const int dfg_size, __global const float *ao_buf,
                     __global const float4 *spec_sums, __global float4 *radiance)
@@ -163,7 +103,7 @@ __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
 #else
         const float3 r = 2.0f * dot(nrm, v) * nrm - v;
 #endif
-        const float3 pre = chain_lookup(chain, off, lw, lh, nlev, to_env(r, env_rot),
+        const float3 pre = chain_lookup(CHAIN_ARGS, to_env(r, env_rot),
                                         mt.roughness * (float)(nlev - 1));
         const float2 ab = dfg_lookup(dfg, dfg_size, nov, mt.roughness);
         color += spec_occ * env_scale * pre * (mt.f0 * ab.x + ab.y);
@@ -193,12 +133,12 @@ __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
             const float pdf = g1 * d_ggx(hl.z, mt.alpha) / (4.0f * nov);
             const float a = fmin(sqrt(lobe_spread / (4.0f * IBL_PI * (float)nsamples * pdf)), mt.alpha);
             const float3 w = f_schlick(voh, mt.f0) * (v_smith_ggx_correlated(nov, nol, mt.alpha) * 4.0f * nov * nol / g1);
-            num += w * chain_lookup(chain, off, lw, lh, nlev, to_env(l, env_rot), sqrt(a) * (float)(nlev - 1));
+            num += w * chain_lookup(CHAIN_ARGS, to_env(l, env_rot), sqrt(a) * (float)(nlev - 1));
             den += w;
         }
         const float2 ab = dfg_lookup(dfg, dfg_size, nov, mt.roughness);
         const float3 li = den.x > 0.0f ? num / den
-            : chain_lookup(chain, off, lw, lh, nlev, to_env(2.0f * nov * nrm - v, env_rot), mt.roughness * (float)(nlev - 1));
+            : chain_lookup(CHAIN_ARGS, to_env(2.0f * nov * nrm - v, env_rot), mt.roughness * (float)(nlev - 1));
         color += spec_occ * env_scale * li * (mt.f0 * ab.x + ab.y);
     }
 #endif

@@ -2,7 +2,7 @@
  * normal, and the panorama's rotation. The only reader of the G-buffer's layout (kernels/layout.h):
  * a material from the material table by the sample's index, or with textures (HAS_TEXTURES) the
  * material pass's per-sample record (kernels/material.cl).
- * numpy twin: iblbake/render/twin.py (surface, diffuse_weight, to_env). */
+ * numpy twin: iblbake/render/twin/surface.py. */
 #ifndef IBLBAKE_SURFACE_H
 #define IBLBAKE_SURFACE_H
 #include "common.h"

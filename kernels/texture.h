@@ -6,7 +6,7 @@
  * bilinear, minification within a level nearest or bilinear and between levels nearest or linear
  * (trilinear), from the mip level of the pixel's footprint (kernels/gbuffer.cl). Material maps:
  * the UV set and KHR_texture_transform of each slot of mat_maps (kernels/layout.h).
- * numpy twin: iblbake/scene/textures.py (sample), iblbake/render/twin.py (resolve_materials). */
+ * numpy twin: iblbake/scene/textures.py (sample), iblbake/render/twin/material.py. */
 #ifndef IBLBAKE_TEXTURE_H
 #define IBLBAKE_TEXTURE_H
 #include "layout.h"

@@ -7,10 +7,10 @@
  * one code value off). */
 #pragma OPENCL FP_CONTRACT OFF
 #include "tonemap.h"
-#include "sampling.h"
+#include "sampler.h"
 
 __kernel void tonemap_u8(__global const float4 *hdr, const float exposure_scale, const float gamma,
-                         const int n, const int pixel0, __global uchar4 *out, __global float4 *display)
+                         const int n, const int pixel0, __global uchar4 *png_u8, __global float4 *display)
 {
     const int i = get_global_id(0);
     if (i >= n) return;
@@ -23,5 +23,5 @@ __kernel void tonemap_u8(__global const float4 *hdr, const float exposure_scale,
 #else
     const float3 q = floor(y * 255.0f + 0.5f);
 #endif
-    out[i] = (uchar4)((uchar)q.x, (uchar)q.y, (uchar)q.z, (uchar)255);
+    png_u8[i] = (uchar4)((uchar)q.x, (uchar)q.y, (uchar)q.z, (uchar)255);
 }

@@ -39,6 +39,7 @@ def load_mesh(path, cache):
     """The mesh as a scene object: a glTF with its own materials (parsed too), the rest with a scene
     material; texture coordinates and tangents built as for a textured scene."""
     from iblbake.scene import geometry, materials
+    from iblbake.scene.bvh import build_bvh
     obj, counts = {"mesh": {"path": path}, "material": "m"}, {}
     if path.lower().endswith((".gltf", ".glb")):
         del obj["material"]
@@ -46,7 +47,7 @@ def load_mesh(path, cache):
     tris = geometry.build_triangles([obj], {0: 0}, "fuzz.yaml", counts, attributes=True)
     if len(tris):
         lo, hi = geometry.triangle_bounds(tris)
-        geometry.build_bvh(lo, hi)
+        build_bvh(lo, hi)
     return True
 
 

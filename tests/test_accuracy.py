@@ -9,7 +9,7 @@ import pytest
 import yaml
 
 from iblbake.io import images
-from iblbake.study import accuracy
+from iblbake.study import accuracy, report
 
 from .conftest import run_cli
 
@@ -75,6 +75,7 @@ def rungs(summary, term):
     return [r for r in summary["rungs"] if r["term"] == term and not r["configured"]]
 
 
+@pytest.mark.slow
 def test_reference_noise_below_half_a_percent(study):
     for term in ("diffuse", "specular"):
         ref = study["summary"]["reference"][term]
@@ -109,7 +110,7 @@ def test_report_files(study):
     assert len(md) == 2 + len(s["rungs"])
     import OpenImageIO as oiio
     spec = oiio.ImageInput.open(str(out / "plot.png")).spec()
-    assert (spec.width, spec.height) == accuracy.PLOT_SIZE
+    assert (spec.width, spec.height) == report.PLOT_SIZE
     # the 40-pixel study frames are enlarged until every caption fits under its cell (they were cut)
     from iblbake.study import sheet
     caption = f"{s['reference']['diffuse']['samples_per_pixel'][0]} spp, noise 0.00%"
@@ -144,6 +145,7 @@ def test_bad_ladder_is_one_line(tmp_path, study):
     assert len(r.stderr.strip().splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_references_in_two_workers_equal_the_serial_ones(tmp_path, study):
     """--jobs 2 on a fresh cache: the four reference seeds render in two worker processes, the
     study reads them back, and its noise and every rung's error are the serial study's (the
@@ -166,7 +168,7 @@ def test_plot_legend_hides_no_point_and_tick_labels_do_not_overlap(study):
     import matplotlib.pyplot as plt
 
     s = study["summary"]
-    fig = accuracy.plot_figure(s["rungs"], s["frontier"], "t")
+    fig = report.plot_figure(s["rungs"], s["frontier"], "t")
     fig.canvas.draw()
     r = fig.canvas.get_renderer()
     assert len(fig.legends) == 1

@@ -1,11 +1,12 @@
-"""The BVH builder (iblbake/scene/geometry.py build_bvh): a valid tree whatever the input, split
+"""The BVH builder (iblbake/scene/bvh.py build_bvh): a valid tree whatever the input, split
 where the surface area heuristic says, its depth bounded for the kernels' traversal stack. The
 kernels' traversal of it is checked against the brute-force twin in test_render*.py."""
 
 import numpy as np
 import pytest
 
-from iblbake.scene import geometry
+from iblbake.scene import bvh as bvh_module
+from iblbake.scene.bvh import LEAF_SIZE, SAH_DEPTH, build_bvh
 
 
 def _check_tree(bvh, lo, hi, leaf_size):
@@ -31,8 +32,8 @@ def test_random_boxes_give_a_valid_tree(n):
     rng = np.random.default_rng(n)
     lo = rng.normal(size=(n, 3)) * [10, 1, 0.1]
     hi = lo + rng.random((n, 3)) * 0.5
-    bvh = geometry.build_bvh(lo, hi)
-    _check_tree(bvh, lo, hi, geometry.LEAF_SIZE)
+    bvh = build_bvh(lo, hi)
+    _check_tree(bvh, lo, hi, LEAF_SIZE)
 
 
 def test_root_splits_between_clusters_not_at_the_median():
@@ -42,11 +43,11 @@ def test_root_splits_between_clusters_not_at_the_median():
     x = np.concatenate([rng.random(10), 100 + rng.random(90)])
     lo = np.stack([x, rng.random(100), rng.random(100)], axis=1)
     hi = lo + 0.01
-    bvh = geometry.build_bvh(lo, hi)
+    bvh = build_bvh(lo, hi)
     ints = bvh.nodes.view(np.int32)
     left = ints[0, 3]
     assert bvh.nodes[left, 4] < 2.0 and bvh.nodes[left + 1, 0] > 99.0     # one cluster per child
-    _check_tree(bvh, lo, hi, geometry.LEAF_SIZE)
+    _check_tree(bvh, lo, hi, LEAF_SIZE)
 
 
 def test_past_sah_depth_the_median_bounds_the_depth(monkeypatch):
@@ -56,9 +57,9 @@ def test_past_sah_depth_the_median_bounds_the_depth(monkeypatch):
     rng = np.random.default_rng(5)
     lo = rng.random((n, 3)) ** 8 * 100          # crowded near 0, sparse far out: uneven SAH cuts
     hi = lo + 0.001
-    assert geometry.SAH_DEPTH + int(np.ceil(np.log2(2 ** 31 / geometry.LEAF_SIZE))) + 1 <= 62
+    assert SAH_DEPTH + int(np.ceil(np.log2(2 ** 31 / LEAF_SIZE))) + 1 <= 62
     for depth in (0, 3):
-        monkeypatch.setattr(geometry, "SAH_DEPTH", depth)
-        bvh = geometry.build_bvh(lo, hi)
-        assert bvh.depth <= depth + int(np.ceil(np.log2(n / geometry.LEAF_SIZE))) + 1
-        _check_tree(bvh, lo, hi, geometry.LEAF_SIZE)
+        monkeypatch.setattr(bvh_module, "SAH_DEPTH", depth)
+        bvh = build_bvh(lo, hi)
+        assert bvh.depth <= depth + int(np.ceil(np.log2(n / LEAF_SIZE))) + 1
+        _check_tree(bvh, lo, hi, LEAF_SIZE)

@@ -49,6 +49,7 @@ def ao_of(sc, cache):
     return np.where(mask, with_ao[..., 0] / np.where(mask, without[..., 0], 1), 1.0), mask
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("resolution, radius", [("half", 1.0), ("full", 1.0), ("half", 12.0)])
 def test_gtao_matches_numpy(tmp_path, white, resolution, radius):
     """The kernel against the twin, raw search and denoise together, through the shaded frame
@@ -97,6 +98,7 @@ def test_open_plane_is_nearly_unoccluded(tmp_path, white):
         assert mask.mean() > 0.5 and ao[mask].mean() > 0.985 and ao[mask].min() > 0.9
 
 
+@pytest.mark.slow
 def test_gtao_against_raytraced_ao(tmp_path, white):
     """GTAO against 1024-ray AO on spheres resting on a plane: the AO images' RMSE (AO in [0, 1])
     beside 16-ray AO's own (its noise)."""
@@ -119,7 +121,8 @@ def test_tiled_frame_equals_untiled(tmp_path, white):
     untiled frame bit for bit (2 spp: the untiled search reads each pixel's first sample)."""
     sc = grid_on_plane(tmp_path, white, res=(96, 54), spp=2)
     whole = render.render(sc, cache_root=tmp_path / "cache")
-    tiled = render.render(sc, cache_root=tmp_path / "cache", device_budget=96 * 8 * (2 * 72 + 128))
+    tiled = render.render(sc, cache_root=tmp_path / "cache",
+                          device_budget=render.frame.frame_bytes(sc, render.plan(sc), 12, tiled=True))
     assert whole.report["tiles"] == 1 and tiled.report["tiles"] > 3
     gt = next(p for p in tiled.report["passes"] if p["name"] == "gtao")
     assert gt["depth_prepass"] is True

@@ -64,6 +64,7 @@ def plane_closed_form(sc, visibility=True):
     return gb, arrays, hit, on_plane, want
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("h", [2 * R, 4 * R])
 def test_reference_visibility_sphere_over_plane_closed_form(tmp_path, white, h):
     sc = sphere_over_plane(tmp_path, white, h)
@@ -105,6 +106,7 @@ def busy_scene(folder, env, fx):
     return scene.load(p)
 
 
+@pytest.mark.external
 @pytest.mark.parametrize("fx", [{"diffuse": "sh", "specular": "prefiltered"},
                                 {"diffuse": "off", "specular": "importance", "samples": 8},
                                 {"diffuse": "reference", "specular": "reference",
@@ -114,7 +116,7 @@ def test_tiled_frame_equals_the_untiled_one(tmp_path, small_panoramas, fx):
     """A device budget of a few rows renders in tiles; every pixel, AOV and 8-bit value is the same."""
     sc = busy_scene(tmp_path, small_panoramas["city"], fx)
     whole = render.render(sc, cache_root=tmp_path / "cache")
-    budget = 37 * (3 * (render.frame.SAMPLE_BYTES + render.frame.REFERENCE_SAMPLE_BYTES) + render.frame.PIXEL_BYTES) * 5
+    budget = render.frame.frame_bytes(sc, render.plan(sc), 5, tiled=True)
     tiled = render.render(sc, cache_root=tmp_path / "cache", device_budget=budget)
     assert whole.report["tiles"] == 1 and tiled.report["tiles"] >= 4      # 23 rows, 5 or 6 per tile
     assert np.array_equal(whole.hdr, tiled.hdr)
@@ -123,6 +125,7 @@ def test_tiled_frame_equals_the_untiled_one(tmp_path, small_panoramas, fx):
         assert np.array_equal(whole.aovs[a], tiled.aovs[a]), a
 
 
+@pytest.mark.slow
 def test_frame_that_cannot_fit_fails_in_one_line(tmp_path):
     """16384 x 16384 under a 6 GiB address-space limit: a one-line error naming camera.resolution,
     exit 1, no abort inside the OpenCL driver, nothing written. On the CPU device, whose buffers
@@ -149,33 +152,67 @@ def test_layout_header_is_the_table():
     assert (ROOT / "kernels" / "layout.h").read_text() == layout.header_text()
 
 
+def test_scene_reference_is_the_schema():
+    """docs/scene.md is exactly what iblbake/scene/schema.py emits (regenerate with `make docs`),
+    and names every key the validator knows."""
+    from iblbake.scene import schema
+    text = (ROOT / "docs" / "scene.md").read_text()
+    assert text == schema.schema_markdown(), "docs/scene.md is stale: run `make docs`"
+    for key in ("effects.reference.target_noise", "materials.NAME.base_color_map.uv_scale", "objects.N.mesh.path",
+                "lights.N.spot.outer_cone_angle", "camera.orthographic.width"):
+        assert f"| `{key}` |" in text, key
+
+
 def test_every_kernel_parameter_is_bound_by_name():
-    """Each pass's kernel parameters are names the frame's table or the pass's own arguments
-    provide (a missing one would be a KeyError at launch, not a shifted argument)."""
+    """Each pass's kernel parameters are names the frame's table (render/frame.py: the scene's
+    values, every declared buffer, the tile's counts) or the pass's own arguments provide (a
+    missing one would be a KeyError at launch, not a shifted argument), and what a pass reads and
+    writes (from its kernels' const and non-const pointers) is in the table."""
     from iblbake.device import runtime
+    from iblbake.render import frame
     from iblbake.render.passes import PASSES
-    table = {"cam", "width", "height", "spp", "jitter", "spheres", "nspheres", "planes", "nplanes", "bvh",
-             "tris", "ntris", "materials", "env_rot", "env_scale", "gb_pos", "gb_nrm", "gb_dir", "radiance",
-             "hdr", "png_u8", "display", "aov_normal", "aov_albedo", "aov_depth", "n", "npix", "pixel0", "ao_buf",
-             "tri_attr", "mat_maps", "texels", "tex_levels", "tex_info", "gb_uv", "gb_tan", "gb_lod", "gb_mat",
-             "spec_sums"}
+    table = set(frame.TABLE_SCENE) | set(frame.buffer_names()) | set(frame.TABLE_TILE)
     own = {"shade": {"sh_coeffs", "chain", "off", "lw", "lh", "nlev", "hammersley_pts", "nsamples", "mip_bias", "lobe_spread",
                      "dfg", "dfg_size"},
            "importance": {"chain", "off", "lw", "lh", "nlev", "hammersley_pts", "nsamples", "mip_bias"},
            "background": {"color", "lod", "chain", "off", "lw", "lh", "nlev"},
-           "reference": {"img", "w", "h", "marginal", "conditional", "pdf_table", "seed", "first", "batch", "out"},
+           "reference": {"img", "w", "h", "marginal", "conditional", "pdf_table", "seed", "first", "batch"},
            "lights": {"lights", "nlights", "light_seed", "exact_samples"},
            "ao": {"ao_seed", "ao_samples", "ao_radius"},
-           "gtao": {"ao_pos", "ao_nrm", "ao_dir", "ao_stride", "ao_radius", "gtao_slices", "gtao_steps",
-                    "gtao_radius_scale", "gtao_falloff", "gtao_power", "gtao_step", "gtao_raw",
-                    "gtao_denoise_radius", "gtao_levels"},
-           "tonemap": {"exposure_scale", "gamma", "out", "display"}}
-    extra = {"gtao": ["gtao_pyramid", "gtao_denoise"]}          # a pass's further kernels
+           "gtao": {"ao_stride", "ao_radius", "gtao_slices", "gtao_steps", "gtao_radius_scale", "gtao_falloff",
+                    "gtao_power", "gtao_step", "gtao_denoise_radius"},
+           "tonemap": {"exposure_scale", "gamma"}}
     for p in PASSES:
-        for fn in [p.function or p.name] + extra.get(p.name, []):
+        for fn in p.kernel_functions():
             names = {n for n, _ in runtime.kernel_params(p.kernel, fn)}
             assert names <= table | own.get(p.name, set()), (fn, names - table - own.get(p.name, set()))
-        assert set(p.reads) | set(p.writes) <= table | {"png"}, p.name
+        assert set(p.reads) | set(p.writes) <= table | own.get(p.name, set()), p.name
+        assert p.writes, p.name                    # every pass leaves something in a buffer
+
+
+@pytest.mark.external
+def test_buffers_follow_the_declarations(tmp_path, small_panoramas):
+    """The frame allocates exactly the declared buffers of the running passes at full size
+    (per sample, per pixel, per frame) and a placeholder for every other, and a tile budget of
+    frame_bytes(rows) gives tiles of those rows."""
+    from iblbake.render import frame
+    from iblbake.render.passes.base import Buffer
+    sc = busy_scene(tmp_path, small_panoramas["city"], {"diffuse": "sh", "specular": "importance", "samples": 4,
+                                                        "ao": "gtao"})
+    pl = render.plan(sc)
+    planned = frame.planned_buffers(pl, tiled=False)
+    assert set(planned) == {"gb_pos", "gb_nrm", "gb_dir", "radiance", "ao_buf", "gtao_raw", "gtao_levels",
+                            "spec_sums", "hdr", "aov_normal", "aov_albedo", "aov_depth", "png_u8", "display"}
+    assert {"ao_pos", "ao_nrm", "ao_dir"} <= set(frame.planned_buffers(pl, tiled=True))
+    w, h = sc.data["camera"]["resolution"]
+    spp = sc.data["camera"]["spp"]
+    one_row = frame.frame_bytes(sc, pl, 1) - frame.frame_bytes(sc, pl, 0)
+    # gb_pos, gb_nrm, gb_dir, radiance (16 each), ao_buf (4), spec_sums (32); hdr, aovs (36), png (4), display
+    assert one_row == w * (spp * (4 * 16 + 4 + 32) + 16 + 36 + 4 + 16)
+    assert planned["spec_sums"] == Buffer("spec_sums", count=2)
+    budget = frame.frame_bytes(sc, pl, 5, tiled=True)
+    f = render.render(sc, cache_root=tmp_path / "cache", device_budget=budget)
+    assert f.report["tiles"] == -(-h // 5)
 
 
 LAYERS = {"core": 0, "io": 0, "device": 1, "bake": 2, "scene": 2, "render": 3, "study": 4, "cli": 5}
@@ -206,6 +243,7 @@ def test_imports_run_downward():
     assert not bad, bad
 
 
+@pytest.mark.slow
 def test_mesh_triangles_and_bvh_are_cached_by_content(tmp_path, white):
     """A second render reads the mesh's triangles and BVH from the cache (the same pixels); a
     changed mesh file, or another transform, builds them again."""

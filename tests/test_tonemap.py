@@ -17,7 +17,7 @@ def run_cl(rt, hdr, op, ev=0.0, srgb=True, gamma=2.2):
     rgba[:, :3] = hdr
     out, disp = rt.empty(n * 4), rt.empty(n * 16)
     rt.launch("tonemap.cl", "tonemap_u8", {"TONEMAP": OPS[op], "OUTPUT_SRGB": int(srgb)}, (n,), {},
-              hdr=rt.to_device(rgba), exposure_scale=2.0 ** ev, gamma=gamma, n=n, pixel0=0, out=out, display=disp)
+              hdr=rt.to_device(rgba), exposure_scale=2.0 ** ev, gamma=gamma, n=n, pixel0=0, png_u8=out, display=disp)
     return rt.read(disp, (n, 4))[:, :3], rt.read(out, (n, 4), np.uint8)[:, :3]
 
 

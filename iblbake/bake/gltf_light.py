@@ -11,7 +11,7 @@ does with the light, and so what is baked here:
   r_k = k/(N-1) for loaders that do that.
 - Its world is left-handed: glTF's (x, y, z) is (-x, y, z) there (the loader's root node), and it
   samples the cube map in that world with every face image's rows bottom to top. In iblbake's
-  cube faces (Vulkan's orientation, DESIGN.md) that is: +X and -X swapped, every face turned
+  cube faces (Vulkan's orientation, docs/conventions.md) that is: +X and -X swapped, every face turned
   180 degrees.
 """
 
@@ -22,6 +22,7 @@ import math
 import numpy as np
 
 from iblbake.bake import layouts
+from iblbake.core.metrics import luminance
 
 MAPPINGS = ("babylon", "linear")
 DEFAULT_SIZE = 256
@@ -61,10 +62,6 @@ def rgbd_scale(levels, requested) -> float:
         return float(requested)
     peak = max(float(np.max(lv)) for lv in levels)
     return max(1.0, peak / 255.0)
-
-
-def luminance(c):
-    return c[..., 0] * 0.2126 + c[..., 1] * 0.7152 + c[..., 2] * 0.0722
 
 
 def packing_error(faces: np.ndarray, packed: np.ndarray, scale: float) -> dict:

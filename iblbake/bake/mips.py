@@ -417,7 +417,7 @@ def write_ktx2(path: Path, root: Path, manifest: dict, opts: dict, fmt: str,
     sizes = opts["sizes"]
     levels = [lv.reshape(6, s, s, -1) for lv, s in zip(load_chain(root, manifest), sizes)]
     meta = {"iblbake.roughness": json.dumps([round(r, 6) for r in opts["roughness"]]),
-            "iblbake.layout": f"{content}; level k's roughness in iblbake.roughness; DESIGN.md axes (+y up)"}
+            "iblbake.layout": f"{content}; level k's roughness in iblbake.roughness; axes: +y up, faces in Vulkan orientation"}
     atomic.write_bytes(path, ktx2.cube_bytes(levels, fmt, meta, writer=f"iblbake {__version__}"))
 
 

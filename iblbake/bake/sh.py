@@ -399,10 +399,10 @@ def irradiance_error(image, irradiance_coeffs, bands: int, rotate_y_deg: float =
     of three keeps it within a fifth of the bake's own time): relative RMSE, the largest
     relative error of a normal, and the ringing (the most negative un-clamped value of any
     channel, and it over the mean irradiance)."""
-    from iblbake.core.metrics import relative_rmse
+    from iblbake.core.metrics import LUMINANCE, relative_rmse
 
     img = np.asarray(image)
-    lum = np.array([0.2126, 0.7152, 0.0722]) if img.shape[-1] >= 3 else np.ones(1)
+    lum = LUMINANCE if img.shape[-1] >= 3 else np.ones(1)
     normals = fibonacci_normals()
     exact = exact_irradiance((img[..., :len(lum)] @ lum.astype(img.dtype))[..., None], normals, rotate_y_deg)[:, 0]
     exact *= intensity

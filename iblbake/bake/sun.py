@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from iblbake.core import conventions
+from iblbake.core.metrics import LUMINANCE
 
 # Blender's panoramas, peak / median luminance: city 6e4, interior 1e5, sunrise 3e5, night 3e5
 # (a lamp: extracted, 4.1 degrees); forest 9e3, sunset 7e3, courtyard 1e3: no sun; studio 2e4 but
@@ -29,7 +30,6 @@ THRESHOLD = 100.0
 MAX_DIAMETER = 6.0       # degrees (the sun's 0.53 spreads over 1.5-4.4 in a 1024x512 panorama)
 RING = 2
 MAX_TEXELS = 1 << 16     # the region search stops here (a bright sky, not a disk)
-LUM = np.array([0.2126, 0.7152, 0.0722])
 
 
 @dataclass
@@ -84,7 +84,7 @@ def extract(image) -> tuple[np.ndarray, Sun | None]:
     """(residual panorama, Sun or None). The image is (H, W, 3) linear RGB."""
     img = np.asarray(image, np.float64)[..., :3]
     h, w = img.shape[:2]
-    lum = img @ LUM
+    lum = img @ LUMINANCE
     median = float(np.median(lum))
     peak = np.unravel_index(int(np.argmax(lum)), lum.shape)
     none = (np.asarray(image, np.float32), None)
@@ -102,13 +102,13 @@ def extract(image) -> tuple[np.ndarray, Sun | None]:
     removed = np.maximum(img[region] - fill, 0.0)           # per texel and channel
     e = (removed * om[region][:, None]).sum(axis=0)           # E per channel, facing the sun
     dirs = conventions.equirect_texel_dirs(w, h)[region]
-    centroid = ((removed @ LUM)[:, None] * om[region][:, None] * dirs).sum(axis=0)
+    centroid = ((removed @ LUMINANCE)[:, None] * om[region][:, None] * dirs).sum(axis=0)
     direction = centroid / np.linalg.norm(centroid)
     residual = img.copy()
     residual[region] = np.minimum(img[region], fill)          # never brighter than it was
-    total = float(((img @ LUM) * om).sum())
-    illum = float(e @ LUM)
+    total = float(((img @ LUMINANCE) * om).sum())
+    illum = float(e @ LUMINANCE)
     sun = Sun(direction=direction.tolist(), color=(e / illum).tolist() if illum > 0 else [1.0, 1.0, 1.0],
               illuminance=illum, angular_diameter=math.degrees(2 * half), texels=n,
-              energy_fraction=float((removed @ LUM * om[region]).sum()) / total if total > 0 else 0.0)
+              energy_fraction=float((removed @ LUMINANCE * om[region]).sum()) / total if total > 0 else 0.0)
     return residual.astype(np.float32), sun

@@ -65,7 +65,7 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
     from iblbake.device.runtime import Runtime
     from iblbake.io import atomic, images
     from iblbake.scene import load as scene_load
-    from iblbake.study import accuracy as acc
+    from iblbake.study import accuracy as acc, ladder, report
 
     con = Console(quiet, as_json)
     t_start = time.perf_counter()
@@ -77,9 +77,9 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
                             flip=flip, visibility=visibility)
     rt = Runtime(device)
     study = acc.Study(scene_path, overrides, settings, runtime=rt, bakes=render.Bakes(cache_dir), warn=con.warn)
-    rungs = acc.ladder_from_file(ladder_path, study.scene, study.fx) if ladder_path else \
-        acc.default_ladder(study.scene, study.fx, rt.info.kind)
-    rungs = [acc.configured_rung(study.scene, t) for t in study.terms] + rungs
+    rungs = ladder.ladder_from_file(ladder_path, study.scene, study.fx) if ladder_path else \
+        ladder.default_ladder(study.scene, study.fx, rt.info.kind)
+    rungs = [ladder.configured_rung(study.scene, t) for t in study.terms] + rungs
     reads = scene_load.named_input_files(study.scene) + ([("the ladder", ladder_path)] if ladder_path else [])
     for r in rungs:                  # every rung's scene validates before anything renders
         reads += scene_load.named_input_files(study.load(study.rung_values(r), origin=f"ladder rung {r.label!r}"))
@@ -115,17 +115,17 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
     if spread:
         summary["reference_workers"] = spread
     if out is not None:
-        atomic.write_text(out / "table.md", acc.markdown(rows, front))
-        atomic.write_text(out / "table.csv", acc.csv_text(rows, front))
-        acc.plot(rows, front, out / "plot.png", title)
-        images.write_png(out / "errors.png", acc.error_sheet(study, rungs, f"{Path(scene_path).name}: best and worst"))
+        atomic.write_text(out / "table.md", report.markdown(rows, front))
+        atomic.write_text(out / "table.csv", report.csv_text(rows, front))
+        report.plot(rows, front, out / "plot.png", title)
+        images.write_png(out / "errors.png", report.error_sheet(study, rungs, f"{Path(scene_path).name}: best and worst"))
         summary["outputs"] = [str(out / n) for n in FILES]
     summary["elapsed_s"] = round(time.perf_counter() - t_start, 3)
     if out is not None:
         atomic.write_text(out / "accuracy.json", json.dumps(summary, indent=2, allow_nan=False) + "\n")
     split = ", ".join(f"{k[:-2]} {v:.1f} s" for k, v in summary["time_split_s"].items())
     noise = ", ".join(f"{t} {100 * refs[t]['noise']:.2f}%" for t in study.terms)
-    con.result(summary, acc.text_table(rows, front)
+    con.result(summary, report.text_table(rows, front)
                + f"\nreference noise (two seeds): {noise}; configured frame: relative RMSE "
                  f"{100 * configured['relative_rmse']:.2f}%\n"
                + f"{len(rows)} rungs in {summary['elapsed_s']:.1f} s ({split}) on {rt.device_label}"

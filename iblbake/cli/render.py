@@ -11,7 +11,7 @@ from iblbake.cli.options import Console, common_options, depfile_option, device_
 
 def _help_schema(ctx, param, value):
     if value and not ctx.resilient_parsing:
-        from iblbake.scene.load import schema_text
+        from iblbake.scene.schema import schema_text
         click.echo(schema_text(), nl=False)
         ctx.exit(0)
 

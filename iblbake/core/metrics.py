@@ -1,4 +1,5 @@
-"""Error metrics shared by tests, benchmarks and the accuracy study."""
+"""Luminance and the image error metrics shared by the bakes, the renderer's noise estimate,
+the accuracy study, tests and benchmarks (kernels/common.h: luminance() is the same weights)."""
 
 from __future__ import annotations
 
@@ -6,8 +7,59 @@ import math
 
 import numpy as np
 
+# Rec. 709 / sRGB relative luminance Y of linear RGB (ITU-R BT.709-6, item 3.2; the primaries
+# iblbake works in: docs/conventions.md)
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+
+def luminance(rgb) -> np.ndarray:
+    """Y of linear Rec. 709 RGB in the last axis (float64)."""
+    return np.asarray(rgb, np.float64)[..., :3] @ LUMINANCE
 
 
 def relative_rmse(a, b):
     a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
     return float(math.sqrt(np.mean((a - b) ** 2)) / max(math.sqrt(np.mean(b ** 2)), 1e-300))
+
+
+def object_mask(hdr) -> np.ndarray:
+    """Pixels fully covered by objects (coverage 1 in every sample of the G-buffer)."""
+    return hdr[..., 3] >= 1.0
+
+
+def error_metrics(got, ref, mask, flip: bool = True) -> dict:
+    """Over the mask, luminance-based except relative RMSE (RGB, metrics.relative_rmse):
+    mean and max of |L - L_ref| / (L_ref + eps), eps = 1% of the mean reference luminance (so
+    black pixels do not divide by zero), and mean HDR-FLIP over the mask."""
+    g, r = got[..., :3][mask].astype(np.float64), ref[..., :3][mask].astype(np.float64)
+    lg, lr = luminance(g), luminance(r)
+    eps = 0.01 * max(lr.mean(), 1e-30)
+    rel = np.abs(lg - lr) / (lr + eps)
+    out = {"relative_rmse": relative_rmse(g, r), "mean_relative_error": float(rel.mean()),
+           "max_relative_error": float(rel.max()), "flip": None}
+    if flip:
+        out["flip"] = hdr_flip(got, ref, mask)
+    return out
+
+
+def hdr_flip(got, ref, mask) -> float:
+    import flip_evaluator
+
+    a = np.ascontiguousarray(np.clip(ref[..., :3], 0, None), np.float32)
+    b = np.ascontiguousarray(np.clip(got[..., :3], 0, None), np.float32)
+    if min(a.shape[:2]) < 2:
+        return float(np.abs(a - b)[mask].mean())
+    err = flip_evaluator.evaluate(a, b, "HDR", applyMagma=False)[0]     # the per-pixel error map
+    return float(np.asarray(err).reshape(mask.shape)[mask].mean())
+
+
+def error_image(got, ref, mask, top: float = 0.5) -> np.ndarray:
+    """An 8-bit heat map (magma) of |L - L_ref| / (L_ref + eps), 0 .. top; black off the mask."""
+    from matplotlib import colormaps
+
+    lg, lr = luminance(got[..., :3]), luminance(ref[..., :3])
+    eps = 0.01 * max(float(lr[mask].mean()) if mask.any() else 0.0, 1e-30)
+    rel = np.clip(np.abs(lg - lr) / (lr + eps) / top, 0, 1)
+    rgb = (colormaps["magma"](rel)[..., :3] * 255 + 0.5).astype(np.uint8)
+    rgb[~mask] = 0
+    return rgb

@@ -8,6 +8,7 @@ import numpy as np
 
 from iblbake.core import brdf
 from iblbake.core import conventions
+from iblbake.core.metrics import LUMINANCE
 
 
 def radical_inverse_vdc(i):
@@ -198,7 +199,7 @@ def env_sampling_tables(image):
     luminance x exact solid angle. Returns (marginal cdf (H+1), conditional cdfs (H, W+1),
     pdf over solid angle per texel (H, W)), float32, built in float64."""
     h, w = image.shape[:2]
-    lum = np.maximum(image[..., :3].astype(np.float64) @ np.array([0.2126, 0.7152, 0.0722]), 0.0)
+    lum = np.maximum(image[..., :3].astype(np.float64) @ LUMINANCE, 0.0)
     omega = conventions.equirect_row_solid_angles(w, h)
     weight = lum * omega[:, None]
     total = weight.sum()

@@ -70,10 +70,9 @@ _SCALARS = {"int": np.int32, "uint": np.uint32, "float": np.float32}
 
 
 @functools.lru_cache(maxsize=None)
-def kernel_params(name, function: str) -> tuple:
-    """((parameter name, converter), ...) of `function` in kernels/NAME, read from its signature
-    (object-like macros such as SCENE_PARAMS expanded), so the host binds arguments by name:
-    a buffer as it is, a scalar cast to its OpenCL type, a float2/float4 to a float32 vector."""
+def _signature(name, function: str) -> tuple:
+    """The parameter declarations of `function` in kernels/NAME as word lists, object-like macros
+    such as SCENE_PARAMS expanded."""
     src = kernel_source(name)
     macros = {m.group(1): m.group(2).replace("\\\n", " ") for m in _DEFINE.finditer(src)}
     m = re.search(rf"__kernel\s+void\s+{function}\s*\(([^)]*)\)", src)
@@ -82,9 +81,16 @@ def kernel_params(name, function: str) -> tuple:
     sig = m.group(1)
     for _ in range(4):                       # macros inside macros
         sig = re.sub(r"\b([A-Z_][A-Z0-9_]*)\b", lambda x: macros.get(x.group(1), x.group(1)), sig)
+    return tuple(tuple(decl.replace("*", " * ").split()) for decl in sig.split(","))
+
+
+@functools.lru_cache(maxsize=None)
+def kernel_params(name, function: str) -> tuple:
+    """((parameter name, converter), ...) of `function` in kernels/NAME, read from its signature,
+    so the host binds arguments by name: a buffer as it is, a scalar cast to its OpenCL type, a
+    float2/float4 to a float32 vector."""
     params = []
-    for decl in sig.split(","):
-        words = decl.replace("*", " * ").split()
+    for words in _signature(name, function):
         pname, kind = words[-1], [w for w in words[:-1] if w not in ("const", "__global", "__constant", "__local")]
         if "*" in kind:
             conv = None
@@ -94,6 +100,13 @@ def kernel_params(name, function: str) -> tuple:
             conv = functools.partial(np.asarray, dtype=np.float32)
         params.append((pname, conv))
     return tuple(params)
+
+
+@functools.lru_cache(maxsize=None)
+def kernel_buffers(name, function: str) -> dict:
+    """{parameter name: written} of the pointer parameters of `function` in kernels/NAME: a
+    `const` or `__constant` pointer is read, any other written (and maybe read)."""
+    return {w[-1]: not ("const" in w or "__constant" in w) for w in _signature(name, function) if "*" in w}
 
 
 @functools.lru_cache(maxsize=None)

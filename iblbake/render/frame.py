@@ -22,12 +22,14 @@ from iblbake.render.plan import Plan, plan
 from iblbake.scene import pack
 from iblbake.scene.load import Scene
 
-# Device bytes per primary sample of the tile: gb_pos, gb_nrm, gb_dir, radiance (+ the reference
-# pass's batch output); per pixel: hdr, the AOVs, the tone-mapped and display buffers.
-SAMPLE_BYTES = 4 * 16
-REFERENCE_SAMPLE_BYTES = 16 + 32          # device batch output + the host's float64 sums
-PIXEL_BYTES = 16 + 36 + 20
 DEVICE_SHARE = 0.5                        # of the device's global memory, for one frame's buffers
+FRAME_HOST_PIXEL_BYTES = 16 + 4 + 36      # the host's frame: hdr, png and AOVs
+PLACEHOLDER_BYTES = 16                    # a buffer no running pass needs, bound for its parameter
+TABLE_TILE = ("n", "npix", "pixel0")      # per tile: samples, pixels, the first pixel's index
+# per frame: the camera, the geometry (scene/pack.py), materials and textures, the panorama's frame
+TABLE_SCENE = ("cam", "width", "height", "spp", "jitter", "spheres", "nspheres", "planes", "nplanes", "bvh", "tris",
+               "ntris", "materials", "tri_attr", "mat_maps", "texels", "tex_levels", "tex_info", "texture_count",
+               "env_rot", "env_scale")
 
 
 class Report:
@@ -115,19 +117,37 @@ class Context:
         return {"chain": self.rt.to_device(np.zeros(4, np.float32)), "off": z, "lw": z, "lh": z, "nlev": 1}
 
 
-def textured(pl: Plan) -> bool:
-    """Whether the material pass runs (some material in use has a map): the G-buffer then holds
-    texture coordinates, tangents and footprints, and gb_mat the resolved materials."""
-    return "materials" in pl.pass_names
+def buffer_names() -> tuple:
+    """Every buffer any pass declares: each is in the frame's table, full size or a placeholder."""
+    from iblbake.render.passes import PASSES
+    return tuple(dict.fromkeys(b.name for p in PASSES for b in p.buffers))
 
 
-TEXTURED_SAMPLE_BYTES = 3 * 16 + 3 * 16   # gb_uv, gb_tan, gb_lod; gb_mat
-IMPORTANCE_SAMPLE_BYTES = 2 * 16          # spec_sums: the importance pass's two sums
+def planned_buffers(pl: Plan, tiled: bool) -> dict:
+    """{name: Buffer} of the buffers the running passes need at full size: each declared by a
+    running pass, with its `when` define among that pass's defines (or TILED, in a tiled frame).
+    Passes declaring one buffer must declare it alike."""
+    out = {}
+    for p in pl.passes:
+        for b in p.buffers:
+            if b.when is not None and not (tiled if b.when == "TILED" else b.when in pl.defines.get(p.name, {})):
+                continue
+            if out.setdefault(b.name, b) != b:
+                raise ValueError(f"passes declare buffer {b.name} differently: {out[b.name]} and {b}")
+    return out
 
 
-def has_ao(pl: Plan) -> bool:
-    """Whether some running pass writes ambient occlusion (one float per G-buffer sample)."""
-    return any("ao_buf" in p.writes for p in pl.passes)
+def frame_bytes(scene: Scene, pl: Plan, rows: int, tiled: bool = False) -> int:
+    """Device bytes of a frame's buffers at tiles of `rows` rows: per-sample and per-pixel
+    buffers of one tile, per-frame buffers once, and the host memory the passes keep per sample
+    (their declarations: render/passes/base.py)."""
+    d = scene.data
+    w, _h = d["camera"]["resolution"]
+    samples, pixels = rows * w * d["camera"]["spp"], rows * w
+    total = samples * sum(p.host_sample_bytes for p in pl.passes)
+    for b in planned_buffers(pl, tiled).values():
+        total += b.element_bytes(d) * {"sample": samples, "pixel": pixels, "frame": 1}[b.per]
+    return total
 
 
 def tile_rows(rt, scene: Scene, pl: Plan, device_budget: int | None = None) -> int:
@@ -136,22 +156,25 @@ def tile_rows(rt, scene: Scene, pl: Plan, device_budget: int | None = None) -> i
     the frame on the host, does not fit."""
     w, h = scene.data["camera"]["resolution"]
     spp = scene.data["camera"]["spp"]
-    per_sample = SAMPLE_BYTES + (REFERENCE_SAMPLE_BYTES if "reference" in pl.pass_names else 0) + \
-        (4 if has_ao(pl) else 0) + (TEXTURED_SAMPLE_BYTES if textured(pl) else 0) + \
-        (IMPORTANCE_SAMPLE_BYTES if "importance" in pl.pass_names else 0)
-    row = w * (spp * per_sample + PIXEL_BYTES + (4 + 48 if "gtao" in pl.pass_names else 0))
-    largest_row_buffer = w * spp * 16               # one per-sample buffer of one row
+    largest = max([b.element_bytes(scene.data) for b in planned_buffers(pl, False).values() if b.per == "sample"],
+                  default=16)
+    largest_row_buffer = w * spp * largest          # the largest per-sample buffer of one row
     dev = rt.info.device
     budget = device_budget if device_budget is not None else int(dev.global_mem_size * DEVICE_SHARE)
     max_alloc = dev.max_mem_alloc_size
     host = host_bytes_available()
-    frame_host = w * h * (16 + 4 + 36)              # hdr, png and AOVs kept in the host's frame
+    frame_host = w * h * FRAME_HOST_PIXEL_BYTES
     if rt.info.kind == "CPU" and host is not None:  # a CPU device's buffers are host memory too
         budget = min(budget, (host - frame_host) // 2)
     if host is not None and frame_host > host:
         raise InputError(f"camera.resolution: {w}x{h} needs {frame_host / 2**30:.1f} GiB on the host for "
                          f"the frame, more than the {max(host, 0) / 2**30:.1f} GiB available; lower it")
-    rows = min(h, budget // row, max_alloc // largest_row_buffer)
+    rows = h if frame_bytes(scene, pl, h) <= budget else 0
+    if rows < h:                    # tiles: the frame buffers a tiled frame needs come off the budget
+        fixed = frame_bytes(scene, pl, 0, tiled=True)
+        rows = max(0, budget - fixed) // max(frame_bytes(scene, pl, 1, tiled=True) - fixed, 1)
+    row = frame_bytes(scene, pl, 1, tiled=True)
+    rows = min(h, rows, max_alloc // largest_row_buffer)
     if rows < 1:
         raise InputError(f"camera.resolution/camera.spp: one row of {w} pixels at {spp} spp needs "
                          f"{row / 2**20:.0f} MiB on {rt.device_label}, over its "
@@ -184,8 +207,7 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
     arrays = bakes.geometry(scene, ctx.warn)
     geo = dict(arrays.geometry_report)
     rep.bake("geometry", time.perf_counter() - t0, geo.pop("cached", False), **geo)
-    extract = d["environment"]["sun"] == "extract" and "lights" in pl.pass_names
-    needs_env = bool(pl.bakes) or pl.effects.background in ("show", "blur") or extract
+    needs_env = bool(pl.bakes) or any(p.reads_environment(scene, pl.effects) for p in pl.passes)
     if needs_env:                     # read only when some bake or pass reads it
         t0 = time.perf_counter()
         ctx.image, info = bakes.environment(d["environment"])
@@ -203,11 +225,12 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
     rows = tile_rows(rt, scene, pl, device_budget)
     ctx.width = width
     ctx.frame_hdr = np.empty((height, width, 4), np.float32)
-    ctx.frame_png = np.empty((height, width, 4), np.uint8) if "tonemap" in pl.pass_names else None
-    aov = "WRITE_AOVS" in pl.defines.get("resolve", {})
+    # the host's frame: what the buffers the passes fill are read back into
+    planned = planned_buffers(pl, False)
+    ctx.frame_png = np.empty((height, width, 4), np.uint8) if "png_u8" in planned else None
     ctx.frame_aovs = {"normal": np.empty((height, width, 4), np.float32),
                       "albedo": np.empty((height, width, 4), np.float32),
-                      "depth": np.empty((height, width), np.float32)} if aov else {}
+                      "depth": np.empty((height, width), np.float32)} if "aov_normal" in planned else {}
     env = d["environment"]
     rot = np.radians(env["rotation_y"])
     pos, fwd, right, up, ortho = pack.camera_vectors(cam)
@@ -253,11 +276,16 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
     run = passes_to_run(pl, keys, prev["keys"] if prev else None)
     if prev is not None:              # the last frame's buffers hold what the skipped passes wrote
         ctx.table.update(prev["buffers"])
-        if "resolve" not in run:
+        kept = {f for p in pl.passes if p.name not in run for f in p.fills}   # and its host frame
+        if "hdr" in kept:
             ctx.frame_hdr = prev["hdr"].copy()
+        if "aovs" in kept:
             ctx.frame_aovs = {a: v.copy() for a, v in prev["aovs"].items()}
-        if "tonemap" not in run and prev["png"] is not None:
+        if "png" in kept and prev["png"] is not None:
             ctx.frame_png = prev["png"].copy()
+    row0s = list(range(0, height, rows))
+    ctx.tile_count = len(row0s)
+    names, planned = buffer_names(), planned_buffers(pl, len(row0s) > 1)
     for p in pl.passes:
         if p.name not in run:
             continue
@@ -266,8 +294,6 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
             rt.kernel(files, p.function or p.name, defines)
         ctx.args[p.name] = p.setup(ctx)
 
-    row0s = list(range(0, height, rows))
-    ctx.tile_count = len(row0s)
     for ctx.tile_index, ctx.row0 in enumerate(row0s):
         ctx.tile_rows = min(rows, height - ctx.row0)
         npix = ctx.tile_rows * width
@@ -275,16 +301,10 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
         # (re)allocate each buffer whose size this tile and plan need differs from what the table
         # holds (a series of frames reusing buffers may switch AO or AOVs on: their buffers grow,
         # and the passes writing them run, being new or redefined)
-        tex = textured(pl)
-        sizes = {"gb_pos": n * 16, "gb_nrm": n * 16, "gb_dir": n * 16, "radiance": n * 16,
-                 "gb_uv": n * 16 if tex else 16, "gb_tan": n * 16 if tex else 16, "gb_lod": n * 16 if tex else 16,
-                 "gb_mat": n * 48 if tex else 48,
-                 "ao_buf": n * 4 if has_ao(pl) else 16,
-                 "spec_sums": n * IMPORTANCE_SAMPLE_BYTES if "importance" in pl.pass_names else 16,
-                 "hdr": npix * 16, "png_u8": npix * 4, "display": npix * 16,
-                 "aov_normal": npix * 16 if aov else 16, "aov_albedo": npix * 16 if aov else 16,
-                 "aov_depth": npix * 4 if aov else 16}
-        for name, nbytes in sizes.items():
+        count = {"sample": n, "pixel": npix, "frame": 1}
+        for name in names:
+            b = planned.get(name)
+            nbytes = b.element_bytes(d) * count[b.per] if b else PLACEHOLDER_BYTES
             if name not in ctx.table or ctx.table[name].size != nbytes:
                 ctx.table[name] = rt.empty(nbytes)
         ctx.table.update({"n": n, "npix": npix, "pixel0": ctx.row0 * width})
@@ -298,11 +318,9 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
             extra = p.run(ctx)
             rep.run(p.name, time.perf_counter() - t0, **extra)
     if reuse is not None:
-        buffers = ("gb_pos", "gb_nrm", "gb_dir", "gb_uv", "gb_tan", "gb_lod", "gb_mat", "radiance", "ao_buf",
-                   "spec_sums", "hdr", "png_u8", "display", "aov_normal", "aov_albedo", "aov_depth", "npix")
         reuse.state = None if len(row0s) > 1 else {
             "runtime": rt, "shape": (width, height, spp), "keys": keys,
-            "buffers": {b: ctx.table[b] for b in buffers}, "hdr": ctx.frame_hdr, "aovs": ctx.frame_aovs,
+            "buffers": {b: ctx.table[b] for b in (*names, *TABLE_TILE)}, "hdr": ctx.frame_hdr, "aovs": ctx.frame_aovs,
             "png": ctx.frame_png}
 
     report = {

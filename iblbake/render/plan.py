@@ -14,13 +14,26 @@ from iblbake.scene import materials
 from iblbake.scene.load import Scene
 
 
+# The modes that approximate image-based light (runtime and baked estimates): AO occludes them,
+# the study's AO rungs apply to them. The reference traces true visibility instead.
+APPROXIMATE_MODES = {"diffuse": ("sh",), "specular": ("importance", "prefiltered", "lobe")}
+
+
 @dataclass
 class Effects:
     diffuse: str          # off | sh | reference
-    specular: str         # off | importance | prefiltered | reference
+    specular: str         # off | importance | prefiltered | lobe | reference
     background: str       # hide | show | color | blur
     emissive: bool
     notes: list = field(default_factory=list)
+
+    def approximate(self, term: str) -> bool:
+        """Whether `term` (diffuse | specular) is computed by an approximate IBL mode."""
+        return getattr(self, term) in APPROXIMATE_MODES[term]
+
+    @property
+    def any_approximate(self) -> bool:
+        return self.approximate("diffuse") or self.approximate("specular")
 
 
 def effect_modes(scene: Scene) -> Effects:

@@ -1,4 +1,5 @@
-"""The one table of what host and kernels must agree on: mode ids and buffer record layouts.
+"""The one table of what host and kernels must agree on: mode ids, primitive kinds, shared
+constants and buffer record layouts.
 
 kernels/layout.h is generated from it (`python -m iblbake.scene.layout > kernels/layout.h`);
 tests/test_render_passes.py checks that the committed header is what this table emits.
@@ -6,12 +7,23 @@ tests/test_render_passes.py checks that the committed header is what this table 
 
 from __future__ import annotations
 
+from iblbake.core.metrics import LUMINANCE
+
 DIFFUSE_MODES = {"off": 0, "sh": 1, "reference": 2}
 SPECULAR_MODES = {"off": 0, "importance": 1, "prefiltered": 2, "reference": 3, "lobe": 4}
 BACKGROUND_MODES = {"hide": 0, "show": 1, "color": 2, "blur": 3}
 TONEMAP_IDS = {"aces": 0, "reinhard": 1, "hable": 2, "pbr_neutral": 3, "linear": 4}
 LIGHT_KINDS = {"directional": 0, "point": 1, "spot": 2}
 SHADOW_MODES = {"none": 0, "hard": 1, "soft": 2}
+# what a ray hit (kernels/scene.h Hit.kind; the twin's gb["kind"])
+PRIM_KINDS = {"none": 0, "sphere": 1, "plane": 2, "triangle": 3}
+# GGX lobes narrower than this alpha (= roughness^2) are mirrors where a path samples them:
+# float32 cannot resolve the lobe (D overflows, the half-vector warp collapses), so the reference
+# takes the mirror direction with weight F (kernels/reference.cl, render/twin, study/accuracy)
+DELTA_ALPHA = 1e-4
+# random streams: a seed ^ its stream, so that two uses of one seed draw independent numbers
+# (kernels/sampler.h; the reference's stream is the seed itself, each light's seed ^ pcg_hash(j + 1))
+RANDOM_STREAMS = {"ao": 0x5A0}
 
 # Records are float4 rows (ints stored bit-cast in float lanes); the host packs them in
 # iblbake/scene/pack.py, the kernels index them with these strides.
@@ -61,12 +73,15 @@ def header_text() -> str:
             "#ifndef IBLBAKE_LAYOUT_H", "#define IBLBAKE_LAYOUT_H", ""]
     rows += _modes("DIFFUSE", DIFFUSE_MODES) + _modes("SPECULAR", SPECULAR_MODES)
     rows += _modes("BACKGROUND", BACKGROUND_MODES) + _modes("TONEMAP", TONEMAP_IDS)
-    rows += _modes("LIGHT", LIGHT_KINDS) + _modes("SHADOWS", SHADOW_MODES)
+    rows += _modes("LIGHT", LIGHT_KINDS) + _modes("SHADOWS", SHADOW_MODES) + _modes("PRIM", PRIM_KINDS)
     rows += [f"#define MAP_{k.upper()} {i}" for i, k in enumerate(MAP_KINDS)]
     rows += [f"#define SURFACE_{k.upper()} {v}" for k, v in SURFACE_FLAGS.items()] + [""]
     rows += [f"#define {k}_FLOAT4S {v}" for k, v in FLOAT4S.items()] + [""]
     rows += [f"/* {k}: {v} */" for k, v in GBUFFER.items()]
-    rows += [f"#define MISS_T ({MISS_T}f)", "", "#endif", ""]
+    rows += [f"#define MISS_T ({MISS_T}f)", f"#define DELTA_ALPHA {DELTA_ALPHA!r}f"]
+    rows += [f"#define LUMINANCE_{c} {w!r}f" for c, w in zip("RGB", LUMINANCE.tolist())]
+    rows += [f"#define STREAM_{k.upper()} {v:#x}u" for k, v in RANDOM_STREAMS.items()]
+    rows += ["", "#endif", ""]
     return "\n".join(rows)
 
 

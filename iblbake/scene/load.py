@@ -1,9 +1,10 @@
-"""Scene files for `iblbake render`: YAML in, a validated, defaults-filled dict out.
+"""Scene files for `iblbake render`: YAML in, a validated, defaults-filled Scene out.
 
-The schema below is the single description of every key: the validator walks it, `render
---help-schema` prints it, and README's scene section is generated from the same table. Errors are
-one line naming the file, the line and the dotted key, with the closest valid key for a typo.
-Values come from the YAML file, then `--set key.path=value` overrides (parsed as YAML scalars).
+load() reads the file (yaml_lines: safe YAML with the line of every key), applies `--set
+key.path=value` overrides (parsed as YAML values) and a sweep cell's values, validates against
+the schema (iblbake.scene.schema, the single description of every key), then resolves what
+refers to what: the camera, materials, files and outputs. Errors are one line naming the file,
+the line and the dotted key, with the closest valid key for a typo.
 """
 
 from __future__ import annotations
@@ -13,539 +14,13 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
-
-import yaml
 
 from iblbake.errors import InputError, UsageError
-
-# ---------------------------------------------------------------------------------------------
-# Field types. Each checks one value and returns it normalised, or raises _Bad with the reason.
-
-
-class _Bad(Exception):
-    pass
-
-
-@dataclass
-class Num:
-    default: Any = None
-    lo: float | None = None
-    hi: float | None = None
-    lo_open: bool = False      # lo excluded (fov 0 is an error, radius must be > 0)
-    integer: bool = False
-    doc: str = ""
-
-    def check(self, v):
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise _Bad(f"{v!r} is not a number")
-        if self.integer and (not float(v).is_integer()):
-            raise _Bad(f"{v!r} is not a whole number")
-        if not math.isfinite(v):
-            raise _Bad(f"{v!r} is not finite")
-        if self.lo is not None and (v < self.lo or (self.lo_open and v == self.lo)):
-            raise _Bad(f"{v!r} is out of range; give a value {'>' if self.lo_open else '>='} {self.lo:g}"
-                       + (f" and <= {self.hi:g}" if self.hi is not None else ""))
-        if self.hi is not None and v > self.hi:
-            raise _Bad(f"{v!r} is out of range; give a value <= {self.hi:g}"
-                       + (f" and {'>' if self.lo_open else '>='} {self.lo:g}" if self.lo is not None else ""))
-        return int(v) if self.integer else float(v)
-
-    def describe(self):
-        rng = ""
-        if self.lo is not None or self.hi is not None:
-            lo = "" if self.lo is None else f"{self.lo:g}{' <' if self.lo_open else ' <='} "
-            hi = "" if self.hi is None else f" <= {self.hi:g}"
-            rng = f" ({lo}x{hi})"
-        return ("integer" if self.integer else "number") + rng
-
-
-@dataclass
-class Vec:
-    n: int = 3
-    default: Any = None
-    lo: float | None = None
-    hi: float | None = None
-    nonzero: bool = False
-    integer: bool = False
-    positive: bool = False
-    doc: str = ""
-
-    def check(self, v):
-        if not isinstance(v, (list, tuple)) or len(v) != self.n:
-            raise _Bad(f"{v!r} is not a list of {self.n} numbers")
-        out = []
-        for x in v:
-            if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
-                raise _Bad(f"{v!r} holds {x!r}, not a finite number")
-            if self.integer and not float(x).is_integer():
-                raise _Bad(f"{v!r} holds {x!r}, not a whole number")
-            if self.lo is not None and x < self.lo:
-                raise _Bad(f"{v!r} holds {x!r}; each value must be >= {self.lo:g}")
-            if self.hi is not None and x > self.hi:
-                raise _Bad(f"{v!r} holds {x!r}; each value must be <= {self.hi:g}")
-            if self.positive and x <= 0:
-                raise _Bad(f"{v!r} holds {x!r}; each value must be > 0")
-            out.append(int(x) if self.integer else float(x))
-        if self.nonzero and all(x == 0 for x in out):
-            raise _Bad(f"{v!r} is the zero vector; give a direction")
-        return out
-
-    def describe(self):
-        return f"[{', '.join(['x'] * self.n)}]" + (" (each >= %g)" % self.lo if self.lo is not None else "")
-
-
-@dataclass
-class Enum:
-    choices: tuple
-    default: Any = None
-    doc: str = ""
-
-    def check(self, v):
-        if isinstance(v, bool) and "on" in self.choices:   # YAML reads `off` as False
-            v = "on" if v else "off"
-        if isinstance(v, bool) and "off" in self.choices and v is False:
-            v = "off"
-        if v not in self.choices:
-            near = difflib.get_close_matches(str(v), [str(c) for c in self.choices], 1, 0.6)
-            hint = f" (did you mean {near[0]!r}?)" if near else ""
-            raise _Bad(f"{v!r} is not one of {' | '.join(map(str, self.choices))}{hint}")
-        return v
-
-    def describe(self):
-        return " | ".join(map(str, self.choices))
-
-
-@dataclass
-class Bool:
-    default: Any = False
-    doc: str = ""
-
-    def check(self, v):
-        if not isinstance(v, bool):
-            raise _Bad(f"{v!r} is not true or false")
-        return v
-
-    def describe(self):
-        return "true | false"
-
-
-@dataclass
-class Str:
-    default: Any = None
-    doc: str = ""
-
-    def check(self, v):
-        if not isinstance(v, str) or not v:
-            raise _Bad(f"{v!r} is not a non-empty string")
-        return v
-
-    def describe(self):
-        return "string"
-
-
-@dataclass
-class OneOf:
-    """The first alternative that accepts the value (e.g. a size: number or [w, h])."""
-    alternatives: tuple
-    default: Any = None
-    doc: str = ""
-
-    def check(self, v):
-        reasons = []
-        for alt in self.alternatives:
-            try:
-                return alt.check(v)
-            except _Bad as e:
-                reasons.append(str(e))
-        raise _Bad(" and ".join(dict.fromkeys(reasons)))
-
-    def describe(self):
-        return " or ".join(a.describe() for a in self.alternatives)
-
-
-@dataclass
-class ColorKey:
-    """{color: [r, g, b]}: the same as the bare list, spelled as the docs say it."""
-    doc: str = ""
-
-    def check(self, v):
-        if not isinstance(v, dict) or list(v) != ["color"]:
-            raise _Bad(f"{v!r} is not {{color: [r, g, b]}}")
-        return Vec(n=3, lo=0.0).check(v["color"])
-
-    def describe(self):
-        return "{color: [r, g, b]}"
-
-
-@dataclass
-class Section:
-    fields: dict
-    required: tuple = ()
-    exclusive: tuple = ()        # exactly one of these keys (camera projection, object kind)
-    doc: str = ""
-    optional: bool = False       # absent: None (a material's texture), not a section of defaults
-
-
-@dataclass
-class MapOf:
-    """A mapping from user names to sections (materials)."""
-    section: Section
-    doc: str = ""
-
-
-@dataclass
-class ListOf:
-    section: Section
-    doc: str = ""
-
-
-@dataclass
-class Raw:
-    """A mapping or list kept as written (the sweep axes, validated by iblbake.study.sweep)."""
-    default: Any = None
-    doc: str = ""
-    kinds: tuple = (dict, list)
-
-    def check(self, v):
-        if not isinstance(v, self.kinds):
-            raise _Bad(f"{v!r} is not a mapping or a list")
-        return v
-
-    def describe(self):
-        return "mapping"
-
-
-@dataclass
-class StrList:
-    default: Any = None
-    doc: str = ""
-
-    def check(self, v):
-        if isinstance(v, str) and v:
-            return [v]
-        if isinstance(v, list) and v and all(isinstance(x, str) and x for x in v):
-            return list(v)
-        raise _Bad(f"{v!r} is not a path or a list of paths")
-
-    def describe(self):
-        return "path or [paths]"
-
-
-VEC3 = dict(n=3)
-
-CAMERA_COMMON = {
-    "position": Vec(**VEC3, doc="camera position (world space, +y up)"),
-    "look_at": Vec(**VEC3, default=[0.0, 0.0, 0.0], doc="point the camera looks at"),
-    "up": Vec(**VEC3, default=[0.0, 1.0, 0.0], nonzero=True, doc="up direction"),
-}
-
-def _map_section(doc: str, **extra) -> Section:
-    """A material's texture: an image and how it is read (KHR_texture_transform, a glTF sampler)."""
-    return Section(required=("path",), doc=doc, optional=True, fields={
-        "path": Str(doc="PNG or JPEG (8 or 16 bits, any size); relative to the scene file"),
-        "texcoord": Num(0, 0, 1, integer=True, doc="the mesh's TEXCOORD set (spheres: the panorama mapping "
-                                                   "u = 0.5 - atan2(x, z)/(2 pi), v = acos(y)/pi; planes: across "
-                                                   "their width and depth, 1 per unit if infinite)"),
-        "uv_offset": Vec(n=2, default=[0.0, 0.0], doc="KHR_texture_transform offset"),
-        "uv_scale": Vec(n=2, default=[1.0, 1.0], doc="KHR_texture_transform scale"),
-        "uv_rotation": Num(0.0, doc="KHR_texture_transform rotation, degrees (counter-clockwise in UV)"),
-        "wrap": Enum(("repeat", "clamp", "mirror"), "repeat", doc="outside [0, 1]"),
-        "filter": Enum(("linear", "nearest"), "linear", doc="linear: bilinear and trilinear mipmaps; nearest: "
-                                                           "nearest texel and mip level"),
-        **extra,
-    })
-
-
-# gtao's search, as benchmarks/tune_gtao.py chose it: the lowest AO error against 1024-ray
-# raytraced AO over the two example scenes of that script (README: GTAO)
-GTAO_DEFAULTS = {"slices": 2, "steps": 6, "radius_scale": 2.0, "falloff": 0.6, "power": 1.3, "denoise": 2,
-                 "resolution": "half"}
-
-SCHEMA = Section(doc="a scene", required=("environment",), fields={
-    "camera": Section(doc="the camera", exclusive=("perspective", "orthographic"), fields={
-        "perspective": Section(required=("position",), doc="pinhole camera", fields={
-            **CAMERA_COMMON,
-            "fov_y": Num(40.0, 0.0, 179.0, lo_open=True, doc="vertical field of view, degrees"),
-        }),
-        "orthographic": Section(required=("position", "width"), doc="parallel projection", fields={
-            **CAMERA_COMMON,
-            "width": Num(None, 0.0, lo_open=True, doc="width of the view in world units"),
-        }),
-        "resolution": Vec(n=2, default=[640, 360], integer=True, positive=True, hi=16384,
-                          doc="[width, height] in pixels"),
-        "spp": Num(1, 1, 1024, integer=True, doc="primary samples per pixel (anti-aliasing)"),
-    }),
-    "environment": Section(required=("path",), doc="the HDR panorama lighting the scene", fields={
-        "path": Str(doc="equirectangular panorama (EXR, HDR, any format iblbake reads); relative to the scene file"),
-        "intensity": Num(1.0, 0.0, doc="radiance scale"),
-        "rotation_y": Num(0.0, doc="rotate the panorama about +y, degrees (+x towards -z)"),
-        "background": OneOf((Enum(("show", "hide")), Vec(n=3, lo=0.0), ColorKey()), default="show",
-                            doc="show the panorama, hide it (black), or a constant [r, g, b]"),
-        "blur": Num(0.0, 0.0, 1.0, doc="show the background through the prefiltered level of this roughness (0: sharp)"),
-        "nonfinite": Enum(("error", "zero", "clamp"), "error", doc="NaN/Inf texels: fail, zero or clamp"),
-        "negative": Enum(("keep", "clamp", "error"), "keep", doc="negative texels: keep, clamp to 0, or fail"),
-        "transfer": Enum(("auto", "srgb", "linear"), "auto",
-                         doc="texels to linear: auto (an 8/16-bit PNG or JPEG from sRGB or what it declares; "
-                             "float images as stored), srgb, or linear"),
-        "layout": Enum(("auto", "equirect", "hcross", "vcross", "hstrip", "vstrip", "ktx2"), "auto",
-                       doc="what path holds: an equirect panorama or a cube map (a cross, a strip of six faces, "
-                           "KTX2), resampled to equirect; auto by .ktx2, then the aspect ratio"),
-        "primaries": Enum(("keep", "convert"), "keep",
-                          doc="EXR chromaticities other than Rec.709: keep the values, or convert to Rec.709/D65"),
-        "sun": Enum(("none", "extract"), "none",
-                    doc="extract: the panorama's sun (a compact region 1e4 x brighter than the median) leaves the "
-                        "panorama and comes back as a directional light of exactly its energy, so it casts shadows"),
-        "sun_shadows": Enum(("hard", "soft", "none"), "hard", doc="the extracted sun's shadows"),
-    }),
-    "materials": MapOf(doc="named materials (glTF 2.0's metallic-roughness model)", section=Section(
-        doc="a metallic-roughness material", fields={
-            "base_color": Vec(**VEC3, default=[0.8, 0.8, 0.8], lo=0.0, hi=1.0,
-                              doc="linear RGB albedo / F0 of metals (times base_color_map)"),
-            "metallic": Num(0.0, 0.0, 1.0, doc="0 dielectric (F0 = 0.04), 1 metal (F0 = base_color); times the "
-                                               "map's blue"),
-            "roughness": Num(0.5, 0.0, 1.0, doc="perceptual roughness r; alpha = r^2; times the map's green"),
-            "emissive": Vec(**VEC3, default=[0.0, 0.0, 0.0], lo=0.0, doc="emitted radiance, linear RGB (times "
-                                                                         "emissive_map)"),
-            "alpha": Num(1.0, 0.0, 1.0, doc="alpha_mode mask: coverage factor (times the base map's alpha)"),
-            "alpha_mode": Enum(("opaque", "mask"), "opaque", doc="mask: cut out where alpha < alpha_cutoff"),
-            "alpha_cutoff": Num(0.5, 0.0, 1.0, doc="alpha_mode mask: the threshold"),
-            "double_sided": Bool(True, doc="false: surfaces exist only on their front (a sphere's and plane's "
-                                           "normal side, a triangle's counter-clockwise one), as glTF's doubleSided"),
-            "base_color_map": _map_section("base colour texture (sRGB), RGB times base_color, A times alpha"),
-            "metallic_roughness_map": _map_section("metallic (blue) and roughness (green) texture, linear"),
-            "normal_map": _map_section("tangent-space normal texture (glTF's: +y up the image)",
-                                       scale=Num(1.0, doc="the normal's x and y scale")),
-            "occlusion_map": _map_section("ambient occlusion texture (red), on the image-based light only",
-                                          strength=Num(1.0, 0.0, 1.0, doc="1 + strength (red - 1)")),
-            "emissive_map": _map_section("emissive texture (sRGB), times emissive"),
-        })),
-    "objects": ListOf(doc="what is in the scene", section=Section(
-        exclusive=("sphere", "plane", "mesh"), doc="one object", fields={
-            "sphere": Section(required=("radius",), doc="analytic sphere", fields={
-                "center": Vec(**VEC3, default=[0.0, 0.0, 0.0], doc="centre"),
-                "radius": Num(None, 0.0, lo_open=True, doc="radius (> 0)"),
-            }),
-            "plane": Section(doc="analytic plane, two-sided", fields={
-                "point": Vec(**VEC3, default=[0.0, 0.0, 0.0], doc="a point on the plane (the centre of a finite one)"),
-                "normal": Vec(**VEC3, default=[0.0, 1.0, 0.0], nonzero=True, doc="plane normal"),
-                "size": OneOf((Num(None, 0.0, lo_open=True), Vec(n=2, positive=True)), default=None,
-                              doc="side length, or [width, depth]; omitted: infinite"),
-            }),
-            "mesh": Section(required=("path",), doc="triangle mesh: glTF/GLB (with its materials and textures), "
-                                                    "OBJ, PLY, STL (geometry and UVs, through trimesh)", fields={
-                "path": Str(doc="GLB, glTF, OBJ, PLY or STL; relative to the scene file"),
-                "translate": Vec(**VEC3, default=[0.0, 0.0, 0.0], doc="translation"),
-                "rotate": Vec(**VEC3, default=[0.0, 0.0, 0.0], doc="rotation about x, then y, then z, degrees"),
-                "scale": OneOf((Num(None, 0.0, lo_open=True), Vec(n=3, positive=True)), default=1.0,
-                               doc="uniform scale or [sx, sy, sz] (> 0)"),
-                "smooth": Enum(("auto", "on", "off"), "auto",
-                               doc="shading normals: auto = the file's vertex normals if it has them, else faceted"),
-            }),
-            "material": Str(doc="name of a material in `materials`; a glTF/GLB mesh without one is shaded "
-                                "with the file's own materials"),
-        })),
-    "lights": ListOf(doc="analytic lights in the units of glTF's KHR_lights_punctual, added to the IBL and "
-                         "shaded with its BRDF", section=Section(
-        exclusive=("directional", "point", "spot"), doc="one light", fields={
-            "directional": Section(doc="a distant light (the sun)", fields={
-                "direction": Vec(**VEC3, default=[0.0, -1.0, 0.0], nonzero=True,
-                                 doc="the way the light travels, towards the scene (a glTF light node's -Z)"),
-                "color": Vec(**VEC3, default=[1.0, 1.0, 1.0], lo=0.0, doc="linear RGB"),
-                "illuminance": Num(1.0, 0.0, doc="lux (lm/m^2) on a surface facing it"),
-                "angular_diameter": Num(0.0, 0.0, 90.0, doc="degrees (the sun: 0.53); a disk this wide "
-                                                           "gives soft shadows their penumbra"),
-            }),
-            "point": Section(required=("position",), doc="a light at a point, or a sphere of `radius`", fields={
-                "position": Vec(**VEC3, doc="centre"),
-                "color": Vec(**VEC3, default=[1.0, 1.0, 1.0], lo=0.0, doc="linear RGB"),
-                "intensity": Num(1.0, 0.0, doc="candela (lm/sr)"),
-                "radius": Num(0.0, 0.0, doc="sphere light radius (0: a point); soft shadows sample it"),
-                "range": Num(None, 0.0, lo_open=True, doc="falloff windowed to 0 at this distance, as "
-                                                          "KHR_lights_punctual recommends; omitted: infinite"),
-            }),
-            "spot": Section(required=("position",), doc="a point light in a cone", fields={
-                "position": Vec(**VEC3, doc="apex"),
-                "direction": Vec(**VEC3, default=[0.0, -1.0, 0.0], nonzero=True, doc="the cone's axis, the way "
-                                                                                    "the light travels"),
-                "color": Vec(**VEC3, default=[1.0, 1.0, 1.0], lo=0.0, doc="linear RGB"),
-                "intensity": Num(1.0, 0.0, doc="candela (lm/sr) on the axis"),
-                "inner_cone_angle": Num(0.0, 0.0, 90.0, doc="degrees from the axis: full intensity inside"),
-                "outer_cone_angle": Num(45.0, 0.0, 90.0, lo_open=True, doc="degrees from the axis: dark outside"),
-                "radius": Num(0.0, 0.0, doc="sphere light radius (0: a point)"),
-                "range": Num(None, 0.0, lo_open=True, doc="as for point"),
-            }),
-            "shadows": Enum(("hard", "soft", "none"), "hard",
-                            doc="hard: one shadow ray to the light's centre; soft: shadow_samples rays over its "
-                                "disk or sphere; none"),
-            "shadow_samples": Num(16, 1, 4096, integer=True, doc="soft: rays per pixel sample (stratified, seeded)"),
-        })),
-    "effects": Section(doc="what the renderer simulates; nothing else is baked, compiled or run", fields={
-        "diffuse": Enum(("sh", "reference", "off"), "sh", doc="diffuse IBL: SH irradiance, Monte Carlo reference, or none"),
-        "sh_bands": Num(3, 1, 8, integer=True, doc="SH bands for diffuse: sh (3 = 9 coefficients)"),
-        "sh_window": Enum(("none", "hann", "lanczos"), "none", doc="SH ringing window"),
-        "specular": Enum(("importance", "prefiltered", "lobe", "reference", "off"), "prefiltered",
-                         doc="specular IBL: runtime GGX importance sampling (Colbert and Krivanek 2007), split sum, "
-                             "lobe (K visible-normal samples reading the prefiltered chain), Monte Carlo reference, none"),
-        "samples": Num(40, 1, 65536, integer=True, doc="importance: GGX samples per pixel"),
-        "mip_bias": Num(1.0, -16.0, 16.0, doc="importance: added to each sample's mip level (Krivanek and "
-                                              "Colbert: 1, closer to the reference; 0: none)"),
-        "force_mip0": Bool(False, doc="importance: read level 0 for every sample (counting-reflections check)"),
-        "normalize": Enum(("total", "accepted"), "total",
-                          doc="importance: divide by all N samples (unbiased) or by the accepted ones (as many real-time shaders do)"),
-        "prefilter": Section(doc="prefiltered: how the chain is baked (as `iblbake mips`)", fields={
-            "method": Enum(("auto", "spectral", "convolve", "fis"), "auto", doc="see iblbake mips --method"),
-            "samples": Num(256, 1, 1 << 20, integer=True, doc="fis samples per texel"),
-            "size": Num(None, 1, 8192, integer=True, doc="base height of the equirect chain (default: source height)"),
-            "levels": Num(13, 2, 32, integer=True, doc="levels K, roughness k/(K-1); between levels the chain "
-                                                          "mixes two blurs (city, r = 0.3: 26% off the reference at "
-                                                          "7 levels, 12.1% at 13, the split sum's own floor 12.0%)"),
-            "level_sizes": Enum(("lobe", "halving"), "lobe",
-                                doc="level heights: lobe (texels no wider than alpha/16, up to size: the exact split "
-                                    "sum within 1%) or halving (size >> k, a mip chain: 2-4% off at r = 0.25 and 1)"),
-            "min_size": Num(32, 1, 8192, integer=True, doc="smallest level height (bilinear lookups in an 8-row "
-                                                          "level of a wide lobe are 2% off the exact split sum)"),
-            "lod_bias": Num(1.0, -16.0, 16.0, doc="fis level bias"),
-            "dominant_direction": Bool(True, doc="read the chain between N and R (Lagarde 2014), not at R: "
-                                                 "closer to the reference on rough metals"),
-            "dfg_size": Num(128, 2, 4096, integer=True, doc="DFG table size"),
-            "dfg_samples": Num(4096, 1, 1 << 20, integer=True, doc="GGX samples per DFG texel"),
-        }),
-        "lobe": Section(doc="lobe: the split sum's chain and DFG table, read along the real lobe", fields={
-            "samples": Num(4, 1, 256, integer=True,
-                           doc="K visible-normal samples per pixel, each reading the chain at its share of the lobe"),
-            "spread": Num(2.0, 0.0625, 1024.0, doc="solid angle each sample reads, in units of its share "
-                                                    "1 / (K pdf) of the lobe (> 1: neighbouring samples overlap)"),
-        }),
-        "reference": Section(doc="reference modes: progressive Monte Carlo with MIS", fields={
-            "max_samples": Num(1024, 1, 1 << 20, integer=True, doc="sample budget per pixel"),
-            "target_noise": Num(0.002, 0.0, 1.0, doc="stop when the frame's relative standard error is below this"),
-            "batch": Num(32, 1, 4096, integer=True, doc="samples per pixel per progressive pass"),
-            "seed": Num(1, 0, 2**31 - 1, integer=True, doc="random seed (renders are reproducible)"),
-            "visibility": Bool(True, doc="trace a shadow ray for every sample: the occluded integral (false: "
-                                         "every object lit as if alone)"),
-        }),
-        "ao": Enum(("off", "gtao", "raytraced"), "off",
-                   doc="ambient occlusion of the IBL: gtao (screen-space horizons, Jimenez et al. 2016) or raytraced "
-                       "(cosine-weighted rays within ao_radius through the BVH) multiplies the diffuse IBL, and "
-                       "Lagarde's specular occlusion the specular IBL"),
-        "ao_radius": Num(1.0, 0.0, lo_open=True, doc="ao: how far an occluder counts (scene units)"),
-        "ao_samples": Num(16, 1, 4096, integer=True, doc="ao raytraced: rays per G-buffer sample (stratified, seeded)"),
-        "ao_multibounce": Bool(False, doc="ao: Jimenez et al.'s multi-bounce fit in the albedo (brighter occlusion "
-                                          "on light surfaces; the reference has no interreflection, so off is closer)"),
-        "gtao": Section(doc="ao gtao: the screen-space search (defaults tuned against raytraced AO: "
-                            "benchmarks/tune_gtao.py)", fields={
-            "slices": Num(GTAO_DEFAULTS["slices"], 1, 64, integer=True, doc="half-planes through the view vector per pixel"),
-            "steps": Num(GTAO_DEFAULTS["steps"], 1, 64, integer=True, doc="depth samples per side of each slice"),
-            "radius_scale": Num(GTAO_DEFAULTS["radius_scale"], 0.0, 16.0, lo_open=True,
-                                doc="search radius over ao_radius (the screen sees only the front surfaces)"),
-            "falloff": Num(GTAO_DEFAULTS["falloff"], 0.0, 1.0, lo_open=True,
-                           doc="share of the radius over which an occluder's weight fades to 0"),
-            "power": Num(GTAO_DEFAULTS["power"], 0.0, 16.0, lo_open=True, doc="exponent on the raw visibility"),
-            "denoise": Num(GTAO_DEFAULTS["denoise"], 0, 8, integer=True,
-                           doc="denoise radius in blocks (the mean over (2r+1)^2 blocks on the same surface; 0: none)"),
-            "resolution": Enum(("half", "full"), GTAO_DEFAULTS["resolution"],
-                               doc="search once per 2x2 block of pixels (half) or per pixel (full)"),
-        }),
-        "tonemap": Enum(("aces", "reinhard", "hable", "pbr_neutral", "linear"), "aces", doc="tone-mapping operator"),
-        "exposure": Num(0.0, -32.0, 32.0, doc="exposure in EV (radiance x 2^EV before the operator)"),
-        "output_transfer": Enum(("srgb", "gamma"), "srgb", doc="display encoding"),
-        "gamma": Num(2.2, 0.0, 10.0, lo_open=True, doc="for output_transfer: gamma"),
-    }),
-    "sweep": Section(doc="what `iblbake sheet` varies: one or two axes of key paths (render ignores it)", fields={
-        "title": Str(doc="the sheet's title (default: the scene file's name)"),
-        "rows": Raw(doc="an axis: {key: KEY.PATH, values: [...]}, {key: KEY.PATH, range: {start, stop, count, "
-                        "geometric}}, or {steps: [{KEY.PATH: value, ..., label: text}, ...]}"),
-        "columns": Raw(doc="an axis, as rows"),
-    }),
-    "output": Section(doc="what is written (relative to the scene file; render overwrites its outputs)", fields={
-        "frame": StrList(doc="frame path(s): .png (tone-mapped 8-bit), .exr (linear RGBA)"),
-        "normal": Str(doc="AOV: world-space shading normal, EXR"),
-        "albedo": Str(doc="AOV: base colour, EXR"),
-        "depth": Str(doc="AOV: distance along the camera ray (0 where nothing is hit), EXR"),
-        "dither": Bool(False, doc="add +-0.5 LSB triangular dither before 8-bit quantisation"),
-    }),
-})
-
+from iblbake.scene.schema import SCHEMA, ListOf, MapOf, Section, _Bad
+from iblbake.scene.yaml_lines import load_with_lines
 
 FRAME_SUFFIXES = (".png", ".exr")
 AOVS = ("normal", "albedo", "depth")
-
-# ---------------------------------------------------------------------------------------------
-# YAML with line numbers: compose the node tree, keep each value's line per dotted path.
-
-
-MAX_SCENE_BYTES = 1 << 20      # a scene is a few KB; a bigger file is a mistake or an attack
-MAX_SCENE_VALUES = 100_000     # values after YAML aliases are expanded (alias bombs stop here)
-MAX_SCENE_DEPTH = 32
-_PLAIN_TAGS = {f"tag:yaml.org,2002:{t}" for t in ("map", "seq", "str", "int", "float", "bool", "null")}
-
-
-def _load_with_lines(text: str, source: str):
-    """Safe YAML (no tags beyond the standard ones, so no object construction) with the line of
-    every dotted key; aliases are expanded under a value and depth budget."""
-    if len(text) > MAX_SCENE_BYTES:
-        raise InputError(f"{source}: {len(text)} characters; a scene file is at most "
-                         f"{MAX_SCENE_BYTES} (meshes and panoramas go in their own files)")
-    try:
-        node = yaml.compose(text, Loader=yaml.SafeLoader)
-    except yaml.YAMLError as e:
-        mark = getattr(e, "problem_mark", None)
-        where = f"{source}:{mark.line + 1}" if mark else source
-        problem = getattr(e, "problem", None) or str(e).splitlines()[0]
-        raise InputError(f"{where}: not valid YAML: {problem}") from None
-    except RecursionError:
-        raise InputError(f"{source}: nested too deeply to be a scene") from None
-    lines: dict[str, int] = {}
-    constructor = yaml.SafeLoader(text)
-    budget = [MAX_SCENE_VALUES]
-
-    def scalar(n, path):
-        try:
-            return constructor.construct_object(n, deep=True)
-        except yaml.YAMLError as e:
-            problem = " ".join(str(getattr(e, "problem", None) or e).split())[:160]
-            raise InputError(f"{source}:{n.start_mark.line + 1}: {path or 'document'}: {problem} "
-                             f"(scene files use plain YAML values, no tags)") from None
-
-    def walk(n, path, depth):
-        if n.tag not in _PLAIN_TAGS:
-            tag = n.tag.replace("tag:yaml.org,2002:", "!!")
-            hint = "quote it if it is text" if tag == "!!timestamp" else "plain values only"
-            raise InputError(f"{source}:{n.start_mark.line + 1}: {path or 'document'}: YAML tag {tag} "
-                             f"is not allowed in a scene ({hint})")
-        budget[0] -= 1
-        if budget[0] < 0:
-            raise InputError(f"{source}: expands to more than {MAX_SCENE_VALUES} values (YAML "
-                             f"aliases?); a scene needs far fewer")
-        if depth > MAX_SCENE_DEPTH:
-            short = path if len(path) < 60 else path[:57] + "..."
-            raise InputError(f"{source}:{n.start_mark.line + 1}: {short}: nested deeper than "
-                             f"{MAX_SCENE_DEPTH} levels (a recursive YAML alias?)")
-        lines.setdefault(path, n.start_mark.line + 1)
-        if isinstance(n, yaml.MappingNode):
-            out = {}
-            for k, v in n.value:
-                key = scalar(k, path) if isinstance(k, yaml.ScalarNode) else k
-                if not isinstance(key, (str, int, float)) or isinstance(key, bool):
-                    what = "a collection" if isinstance(key, yaml.Node) else repr(key)
-                    raise InputError(f"{source}:{k.start_mark.line + 1}: {path or 'document'}: a key "
-                                     f"must be a plain name, not {what}")
-                sub = f"{path}.{key}" if path else str(key)
-                lines[sub] = k.start_mark.line + 1
-                if key in out:
-                    raise InputError(f"{source}:{k.start_mark.line + 1}: {sub}: key given twice")
-                out[key] = walk(v, sub, depth + 1)
-            return out
-        if isinstance(n, yaml.SequenceNode):
-            return [walk(v, f"{path}.{i}" if path else str(i), depth + 1) for i, v in enumerate(n.value)]
-        return scalar(n, path)
-
-    data = walk(node, "", 0) if node is not None else None
-    return data, lines
-
-
-# ---------------------------------------------------------------------------------------------
 
 
 @dataclass
@@ -635,7 +110,7 @@ def _apply_override(data: dict, assignment: str) -> str:
     if not raw.strip():
         raise UsageError(f"--set {assignment!r}: no value after '='; give one (null takes the default)")
     try:
-        value = _load_with_lines(raw, f"--set {key}")[0]
+        value = load_with_lines(raw, f"--set {key}")[0]
     except InputError as e:              # a value that does not parse is a usage error (exit 2)
         raise UsageError(str(e)) from None
     set_path(data, key, value, f"--set {key}")
@@ -692,6 +167,25 @@ def load(path, overrides=(), outputs=None, values=(), origin: str = "--set") -> 
     place the latter came from. `outputs` (from -o) replace output.frame."""
     path = Path(path)
     source = str(path)
+    data, lines = _read(path)
+    overridden = {}
+    for a in overrides:
+        overridden[_apply_override(data, a)] = "--set"
+    for key, value in values:
+        set_path(data, key, value, origin)
+        overridden[key] = origin
+    v = _Validator(source, lines, overridden)
+    out = v.section(SCHEMA, data, "")
+    folder = path.resolve().parent
+    _resolve_camera(v, out["camera"])
+    _resolve_references(v, out, folder)
+    writes = _resolve_outputs(v, out["output"], folder, outputs)
+    return Scene(out, source, folder, lines, writes)
+
+
+def _read(path: Path):
+    """The scene file's YAML as a mapping, and the line of every dotted key."""
+    source = str(path)
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
@@ -702,23 +196,17 @@ def load(path, overrides=(), outputs=None, values=(), origin: str = "--set") -> 
         raise InputError(f"{source}: not a UTF-8 text file; scene files are YAML") from None
     except OSError as e:
         raise InputError(f"{source}: cannot read: {e.strerror}") from None
-    data, lines = _load_with_lines(text, source)
+    data, lines = load_with_lines(text, source)
     if data is None:
         data = {}
     if not isinstance(data, dict):
         raise InputError(f"{source}:1: a scene is a mapping of sections (camera, environment, "
                          f"materials, objects, effects, output), not {type(data).__name__}")
-    overridden = {}
-    for a in overrides:
-        overridden[_apply_override(data, a)] = "--set"
-    for key, value in values:
-        set_path(data, key, value, origin)
-        overridden[key] = origin
-    v = _Validator(source, lines, overridden)
-    out = v.section(SCHEMA, data, "")
-    folder = path.resolve().parent
-    # camera: perspective by default
-    cam = out["camera"]
+    return data, lines
+
+
+def _resolve_camera(v: "_Validator", cam: dict) -> None:
+    """Perspective by default; a view direction and an up vector that define a frame."""
     if "perspective" not in cam and "orthographic" not in cam:
         cam["perspective"] = v.section(SCHEMA.fields["camera"].fields["perspective"],
                                        {"position": [0.0, 0.0, 5.0]}, "camera.perspective")
@@ -732,7 +220,10 @@ def load(path, overrides=(), outputs=None, values=(), origin: str = "--set") -> 
     if math.sqrt(sum(x * x for x in cross)) <= 1e-9 * math.sqrt(sum(x * x for x in fwd)) * math.sqrt(sum(x * x for x in c["up"])):
         v.fail(f"camera.{proj}.up", "is parallel to the view direction; give another up vector")
     cam["projection"] = proj
-    # references between sections
+
+
+def _resolve_references(v: "_Validator", out: dict, folder: Path) -> None:
+    """Objects name materials that exist; meshes, maps and the panorama are files (absolute)."""
     for i, o in enumerate(out["objects"]):
         if "mesh" in o:
             o["mesh"]["path"] = str((folder / o["mesh"]["path"]).resolve())
@@ -756,8 +247,11 @@ def load(path, overrides=(), outputs=None, values=(), origin: str = "--set") -> 
     env = out["environment"]
     env["path"] = str((folder / env["path"]).resolve()) if not Path(env["path"]).is_absolute() else env["path"]
     _must_be_file(v, "environment.path", env["path"], "an HDR panorama", folder)
-    # outputs: -o replaces output.frame; scene paths stay inside the scene folder
-    o = out["output"]
+
+
+def _resolve_outputs(v: "_Validator", o: dict, folder: Path, outputs) -> list:
+    """-o replaces output.frame; scene paths stay inside the scene folder. Returns what names
+    each output in the overwrite guard's messages: -o, or the key with its line."""
     if outputs:
         o["frame"] = [os.path.abspath(p) for p in outputs]     # as given: a link is named, not its target
         o["frame_from_cli"] = True
@@ -772,10 +266,8 @@ def load(path, overrides=(), outputs=None, values=(), origin: str = "--set") -> 
             o[a] = str(_resolve_inside(folder, o[a], f"output.{a}", v.where(f"output.{a}")))
             if Path(o[a]).suffix.lower() != ".exr":
                 v.fail(f"output.{a}", f"{o[a]}: AOVs are written as .exr")
-    # what names each output in the overwrite guard's messages: -o, or the key with its line
-    writes = [("-o" if o.get("frame_from_cli") else f"{v.where('output.frame')}: output.frame", p)
-              for p in o["frame"]] + [(f"{v.where(f'output.{a}')}: output.{a}", o[a]) for a in AOVS if o[a]]
-    return Scene(out, source, folder, lines, writes)
+    return [("-o" if o.get("frame_from_cli") else f"{v.where('output.frame')}: output.frame", p)
+            for p in o["frame"]] + [(f"{v.where(f'output.{a}')}: output.{a}", o[a]) for a in AOVS if o[a]]
 
 
 def named_input_files(sc: Scene) -> list:
@@ -817,39 +309,3 @@ def with_files(sc: Scene, moved: dict) -> Scene:
             "materials": replace_strings(d["materials"], moved),
             "objects": [replace_strings(o, moved) for o in d["objects"]]}
     return Scene(data, sc.source, sc.folder, sc.lines)
-
-
-# ---------------------------------------------------------------------------------------------
-
-
-def schema_text() -> str:
-    """The schema as an indented reference (render --help-schema, README)."""
-    rows = []
-
-    def field_line(indent, k, f):
-        d = getattr(f, "default", None)
-        dflt = "" if d is None else f" (default {d})"
-        return f"{'  ' * indent}{k}: {f.describe()}{dflt} -- {f.doc}"
-
-    def walk(spec, indent):
-        if spec.required:
-            rows.append(f"{'  ' * indent}# required: {', '.join(spec.required)}")
-        if spec.exclusive:
-            rows.append(f"{'  ' * indent}# exactly one of: {', '.join(spec.exclusive)}")
-        for k, f in spec.fields.items():
-            if isinstance(f, Section):
-                rows.append(f"{'  ' * indent}{k}:  # {f.doc}")
-                walk(f, indent + 1)
-            elif isinstance(f, MapOf):
-                rows.append(f"{'  ' * indent}{k}:  # {f.doc}")
-                rows.append(f"{'  ' * (indent + 1)}NAME:  # {f.section.doc}")
-                walk(f.section, indent + 2)
-            elif isinstance(f, ListOf):
-                rows.append(f"{'  ' * indent}{k}:  # {f.doc}; a list of:")
-                rows.append(f"{'  ' * (indent + 1)}- # {f.section.doc}")
-                walk(f.section, indent + 2)
-            else:
-                rows.append(field_line(indent, k, f))
-
-    walk(SCHEMA, 0)
-    return "\n".join(rows) + "\n"

@@ -14,6 +14,7 @@ from iblbake.core import sampling
 from iblbake.errors import InputError
 from iblbake.scene.layout import FLOAT4S
 from iblbake.scene import geometry
+from iblbake.scene.bvh import build_bvh
 from iblbake.scene.load import Scene
 
 
@@ -121,7 +122,7 @@ def mesh_arrays(scene: Scene):
     report = {"meshes": tris.stats, "triangles": len(tris), "load_s": round(load_s, 4)}
     if len(tris):
         lo, hi = geometry.triangle_bounds(tris)
-        bvh = geometry.build_bvh(lo, hi)
+        bvh = build_bvh(lo, hi)
         o = bvh.order
         arr = np.zeros((len(tris), 6, 4), np.float32)
         arr[:, 0, :3], arr[:, 0, 3] = tris.v0[o], _int_bits(tris.material[o])

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import yaml
 
 from iblbake.errors import InputError, UsageError
-from iblbake.scene import load as scene_load
+from iblbake.scene import schema
 
 MAX_STEPS = 256
 AXES = ("rows", "columns")
@@ -49,22 +49,22 @@ def resolve_key(key: str, data: dict, where: str) -> None:
     has: a material or object the scene defines, a field the schema knows."""
     if not isinstance(key, str) or not key:
         raise InputError(f"{where}: expected a key path such as materials.NAME.roughness, got {key!r}")
-    spec, node = scene_load.SCHEMA, data
+    spec, node = schema.SCHEMA, data
     parts = key.split(".")
     for i, part in enumerate(parts):
         sofar = ".".join(parts[:i + 1])
-        if isinstance(spec, scene_load.MapOf):
+        if isinstance(spec, schema.MapOf):
             names = list((node or {}).keys()) if isinstance(node, dict) else []
             if part not in names:
                 raise InputError(f"{where}: {key}: no {sofar.rsplit('.', 1)[0]} named {part!r} in the scene "
                                  f"({', '.join(names) or 'none defined'})")
             spec, node = spec.section, node[part]
-        elif isinstance(spec, scene_load.ListOf):
+        elif isinstance(spec, schema.ListOf):
             n = len(node) if isinstance(node, list) else 0
             if not part.isdigit() or int(part) >= n:
                 raise InputError(f"{where}: {key}: {sofar.rsplit('.', 1)[0]} has no item {part} (it has {n})")
             spec, node = spec.section, node[int(part)]
-        elif isinstance(spec, scene_load.Section):
+        elif isinstance(spec, schema.Section):
             if part not in spec.fields:
                 near = difflib.get_close_matches(part, list(spec.fields), 1, 0.6)
                 hint = f"did you mean {near[0]!r}?" if near else f"valid: {', '.join(spec.fields)}"
@@ -73,10 +73,10 @@ def resolve_key(key: str, data: dict, where: str) -> None:
             node = node.get(part) if isinstance(node, dict) else None
         else:
             raise InputError(f"{where}: {key}: {'.'.join(parts[:i])} is a value, not a section")
-    if isinstance(spec, scene_load.Section) and spec.optional:
+    if isinstance(spec, schema.Section) and spec.optional:
         return                  # a material's map: a step may remove it (null) or give another
-    if isinstance(spec, (scene_load.Section, scene_load.MapOf, scene_load.ListOf)):
-        inside = ", ".join(spec.fields) if isinstance(spec, scene_load.Section) else "its entries"
+    if isinstance(spec, (schema.Section, schema.MapOf, schema.ListOf)):
+        inside = ", ".join(spec.fields) if isinstance(spec, schema.Section) else "its entries"
         raise InputError(f"{where}: {key}: is a section; sweep one of its values ({inside})")
     if key.split(".")[0] == "sweep":
         raise InputError(f"{where}: {key}: a sweep cannot sweep itself")

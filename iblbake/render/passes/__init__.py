@@ -1,9 +1,10 @@
 """The render passes, in the order they run. Each is one module with its kernel file; plan()
 asks every one whether the scene calls for it (iblbake/render/passes/base.py: the contract)."""
 
-from iblbake.render.passes.ao import AmbientOcclusion, GroundTruthAO
+from iblbake.render.passes.ao import AmbientOcclusion
 from iblbake.render.passes.background import Background
 from iblbake.render.passes.gbuffer import GBuffer
+from iblbake.render.passes.gtao import GroundTruthAO
 from iblbake.render.passes.importance import Importance
 from iblbake.render.passes.lights import Lights
 from iblbake.render.passes.material import Materials

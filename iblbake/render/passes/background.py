@@ -5,18 +5,20 @@ from __future__ import annotations
 
 import numpy as np
 
-from iblbake.render.passes.base import Pass
+from iblbake.render.passes.base import Buffer, Pass
 from iblbake.scene.layout import BACKGROUND_MODES
 
 
 class Background(Pass):
     name = "background"
     kernel = "background.cl"
-    reads = ("gb_pos", "gb_dir")
-    writes = ("radiance",)
+    buffers = (Buffer("radiance"),)      # every lighting pass adds into it
 
     def runs(self, scene, fx):
         return fx.background != "hide"
+
+    def reads_environment(self, scene, fx):
+        return fx.background == "show"     # the panorama as it is (blur reads a bake)
 
     def reads_bakes(self, scene, fx):
         return ["prefiltered"] if fx.background == "blur" else []

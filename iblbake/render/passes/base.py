@@ -1,30 +1,80 @@
 """The pass contract. A pass declares when it runs (a predicate on the scene and its effect
-modes), the bakes it reads, the kernel defines it adds, and the named buffers it reads and writes;
-run() carries it out against the render context. Lighting passes only add into `radiance`."""
+modes), the bakes it reads, the kernel defines it adds and the buffers it needs allocated
+(`Buffer`: element type and count, per sample, per pixel or per frame); which named buffers it
+reads and writes follow from its kernels' parameters (`const` or not). setup() prepares its
+per-frame arguments, run() carries out one tile. Lighting passes only add into `radiance`.
+render/frame.py allocates, budgets and reuses buffers from these declarations alone."""
 
 from __future__ import annotations
 
+import functools
 import time
+from dataclasses import dataclass
+from typing import Callable
 
 from iblbake.render.plan import Effects
 from iblbake.scene.load import Scene
+
+ELEMENT_BYTES = {"float4": 16, "float": 4, "uchar4": 4}
+
+
+@dataclass(frozen=True)
+class Buffer:
+    """A device buffer of the frame, bound by `name` to every kernel parameter of that name:
+    `count` elements of `dtype` per G-buffer sample of the tile (per="sample"), per pixel of the
+    tile ("pixel"), or count(scene data) elements once per frame ("frame"). `when` names a define
+    of the declaring pass without which the pass leaves the buffer alone, or "TILED" (needed only
+    when the frame renders in several tiles). A buffer that no running pass needs is bound to a
+    placeholder (the kernels compiled without its feature never touch it)."""
+    name: str
+    dtype: str = "float4"
+    per: str = "sample"
+    count: int | Callable = 1
+    when: str | None = None
+
+    def element_bytes(self, data: dict | None = None) -> int:
+        """Bytes per sample, per pixel, or in all (per frame)."""
+        n = self.count(data) if callable(self.count) else self.count
+        return ELEMENT_BYTES[self.dtype] * n
 
 
 class Pass:
     name = ""
     kernel = None            # kernels/<file> (None: host-only)
     function = None          # the kernel function, by default the pass's name
+    functions: tuple = ()    # further kernels of the same file it launches
     # Passes of one program are built and loaded together (one binary: each program costs a load
     # even from the cache); their defines must agree, and each reads only its own.
     program = "frame"
-    reads: tuple = ()        # named buffers read and written (the context's table)
-    writes: tuple = ()
+    buffers: tuple = ()      # the Buffers this pass needs allocated
+    host_sample_bytes = 0    # host memory it keeps per G-buffer sample of the tile (the tile budget)
+    fills: tuple = ()        # what of the host's frame its run() reads back: hdr, aovs, png
+    host_writes: tuple = ()  # buffers its run() writes from the host (no kernel parameter says so)
+
+    def kernel_functions(self) -> tuple:
+        return (self.function or self.name, *self.functions) if self.kernel else ()
+
+    @property
+    def reads(self) -> tuple:
+        """Named buffers its kernels read (const pointer parameters)."""
+        return _access(self.kernel, self.kernel_functions())[0]
+
+    @property
+    def writes(self) -> tuple:
+        """Named buffers its kernels write (pointer parameters without const), and those its run()
+        writes from the host."""
+        return tuple(dict.fromkeys(_access(self.kernel, self.kernel_functions())[1] + self.host_writes))
 
     def runs(self, scene: Scene, fx: Effects) -> bool:
         return True
 
     def reads_bakes(self, scene: Scene, fx: Effects) -> list:
         return []
+
+    def reads_environment(self, scene: Scene, fx: Effects) -> bool:
+        """Whether setup() reads the panorama itself (ctx.image, ctx.background_image), beyond
+        its bakes: the frame reads it from disk only then."""
+        return False
 
     def defines(self, scene: Scene, fx: Effects) -> dict:
         return {}
@@ -50,6 +100,17 @@ class Pass:
         ctx.launch(self, (ctx.table["n"],), **ctx.args[self.name])
         ctx.rt.finish()
         return time.perf_counter() - t0
+
+
+@functools.lru_cache(maxsize=None)
+def _access(kernel, functions) -> tuple:
+    from iblbake.device.runtime import kernel_buffers
+
+    reads, writes = {}, {}
+    for fn in functions:
+        for name, written in kernel_buffers(kernel, fn).items():
+            (writes if written else reads)[name] = True
+    return tuple(r for r in reads if r not in writes), tuple(writes)
 
 
 def geometry_defines(scene: Scene) -> dict:

@@ -2,14 +2,15 @@
 
 from __future__ import annotations
 
-from iblbake.render.passes.base import Pass, geometry_defines, surface_cuts
+from iblbake.render.passes.base import Buffer, Pass, geometry_defines, surface_cuts
 
 
 class GBuffer(Pass):
     name = "gbuffer"
     kernel = "gbuffer.cl"
-    reads = ("cam", "jitter", "spheres", "planes", "bvh", "tris", "tri_attr")
-    writes = ("gb_pos", "gb_nrm", "gb_dir", "gb_uv", "gb_tan", "gb_lod")
+    # the G-buffer (scene/layout.py GBUFFER); a textured scene's surface coordinates too
+    buffers = (Buffer("gb_pos"), Buffer("gb_nrm"), Buffer("gb_dir"), Buffer("gb_uv", when="HAS_TEXTURES"),
+               Buffer("gb_tan", when="HAS_TEXTURES"), Buffer("gb_lod", when="HAS_TEXTURES"))
 
     def defines(self, scene, fx):
         return geometry_defines(scene)

@@ -1,15 +1,15 @@
-"""Importance: the importance-sampled specular integral (kernels/shade.cl importance), split
+"""Importance: the importance-sampled specular integral (kernels/importance.cl), split
 around Schlick's Fresnel into two sums per sample (`spec_sums`) that the shade pass combines with
 f0. Its reuse key leaves out what changes only f0 (base colour, metallic): a sheet's metallic or
 colour axis samples the panorama once per roughness, and a single frame computes the same two
-sums, so a sheet's cell equals its frame bit for bit (twin: iblbake/render/twin.py shade)."""
+sums, so a sheet's cell equals its frame bit for bit (twin: iblbake/render/twin/shade.py shade)."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from iblbake.core import sampling
-from iblbake.render.passes.base import Pass, lighting_inputs, mode_defines
+from iblbake.render.passes.base import Buffer, Pass, lighting_inputs, mode_defines
 
 # material keys that change only f0 = mix(0.04, base_color, metallic) (and the diffuse weight,
 # which the shade pass computes): the two sums do not read them
@@ -18,9 +18,8 @@ FRESNEL_ONLY = ("base_color", "metallic")
 
 class Importance(Pass):
     name = "importance"
-    kernel = "shade.cl"
-    reads = ("gb_pos", "gb_nrm", "gb_dir", "materials", "gb_mat")
-    writes = ("spec_sums",)
+    kernel = "importance.cl"
+    buffers = (Buffer("spec_sums", count=2),)     # the two sums per sample
 
     def runs(self, scene, fx):
         return fx.specular == "importance"

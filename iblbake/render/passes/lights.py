@@ -1,6 +1,6 @@
 """Lights: analytic lights (directional, point, spot; KHR_lights_punctual units) shaded with the
 IBL's BRDF and shadowed as each light asks, added into `radiance` (kernels/lights.cl; twin:
-iblbake/render/twin.py lights). In a reference frame (every term the scene renders is
+iblbake/render/twin/lights.py lights). In a reference frame (every term the scene renders is
 `reference`) a light with a size is integrated over its disk or sphere, traced with the
 reference's visibility."""
 
@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from iblbake.render.passes.base import Pass, geometry_defines
+from iblbake.render.passes.base import Buffer, Pass, geometry_defines
 from iblbake.scene import pack
 
 
@@ -49,12 +49,14 @@ def _size(lt) -> float:
 class Lights(Pass):
     name = "lights"
     kernel = "lights.cl"
-    reads = ("gb_pos", "gb_nrm", "gb_dir", "materials", "gb_mat", "spheres", "planes", "bvh", "tris")
-    writes = ("radiance",)
+    buffers = (Buffer("radiance"),)      # every lighting pass adds into it
 
     def runs(self, scene, fx):
         has = bool(scene.data["lights"]) or scene.data["environment"]["sun"] == "extract"
         return has and (fx.diffuse != "off" or fx.specular != "off")
+
+    def reads_environment(self, scene, fx):
+        return scene.data["environment"]["sun"] == "extract"     # the sun it extracts
 
     def defines(self, scene, fx):
         d = {}
@@ -72,21 +74,25 @@ class Lights(Pass):
         return d
 
     def setup(self, ctx) -> dict:
+        """The light records (the scene's lights, and the panorama's sun where it is extracted),
+        and for run() the lights and the sun themselves (not kernel arguments)."""
         sc = ctx.scene
-        ctx.sun = ctx.bakes.sun(sc.data["environment"])
-        ctx.frame_lights = frame_lights(sc, ctx.sun)
-        recs = pack.light_records(ctx.frame_lights)
+        sun = ctx.bakes.sun(sc.data["environment"])
+        lights = frame_lights(sc, sun)
+        recs = pack.light_records(lights)
         ref = sc.data["effects"]["reference"]
         return {"lights": ctx.rt.to_device(recs.reshape(-1, 4) if len(recs) else np.zeros((4, 4), np.float32)),
-                "nlights": len(recs), "light_seed": ref["seed"], "exact_samples": ref["max_samples"]}
+                "nlights": len(recs), "light_seed": ref["seed"], "exact_samples": ref["max_samples"],
+                "frame_lights": lights, "sun": sun}
 
     def run(self, ctx):
         n = ctx.table["n"]
         s = self.launch_samples(ctx)
-        rays = shadow_rays_per_sample(ctx.scene, ctx.plan.effects, ctx.frame_lights)
+        args = ctx.args[self.name]
+        rays = shadow_rays_per_sample(ctx.scene, ctx.plan.effects, args["frame_lights"])
         extra = {}
-        if getattr(ctx, "sun", None) is not None:     # what was extracted; the light's direction in world space
-            extra["sun"] = {**ctx.sun.to_json(), "light_direction_world": [
-                round(x, 6) for x in ctx.frame_lights[-1]["directional"]["direction"]]}
+        if args["sun"] is not None:       # what was extracted; the light's direction in world space
+            extra["sun"] = {**args["sun"].to_json(), "light_direction_world": [
+                round(x, 6) for x in args["frame_lights"][-1]["directional"]["direction"]]}
         return {"lights": ctx.args[self.name]["nlights"], "exact": exact(ctx.plan.effects),
                 "shadow_rays_per_sample": rays, "shadow_rays_per_s": round(n * rays / max(s, 1e-9)), **extra}

@@ -1,18 +1,17 @@
 """Materials: each G-buffer sample's material resolved from its material's factors and texture
 maps (base colour, metallic-roughness, normal, occlusion, emissive) into `gb_mat`, which every
-lighting pass reads (kernels/material.cl; twin: iblbake/render/twin.py resolve_materials). Runs
+lighting pass reads (kernels/material.cl; twin: iblbake/render/twin/material.py resolve_materials). Runs
 only where some material in use has a map: an untextured scene reads its material table."""
 
 from __future__ import annotations
 
-from iblbake.render.passes.base import Pass, material_defines
+from iblbake.render.passes.base import Buffer, Pass, material_defines
 
 
 class Materials(Pass):
     name = "materials"
     kernel = "material.cl"
-    reads = ("gb_pos", "gb_nrm", "gb_uv", "gb_tan", "gb_lod", "materials", "mat_maps", "texels")
-    writes = ("gb_mat",)
+    buffers = (Buffer("gb_mat", count=3),)     # (base colour, metallic), (emissive, roughness), (normal, occlusion)
 
     def runs(self, scene, fx):
         return "HAS_TEXTURES" in material_defines(scene)

@@ -1,5 +1,5 @@
 """Reference: progressive Monte Carlo of the exact direct environment lighting, with visibility
-(kernels/reference.cl; twin: iblbake/render/twin.py exact). Batches of samples per G-buffer
+(kernels/reference.cl; twin: iblbake/render/twin/reference.py exact). Batches of samples per G-buffer
 sample until the frame's relative standard error, measured from two independent replicates, is
 below effects.reference.target_noise or max_samples are taken; the mean is added into `radiance`."""
 
@@ -10,9 +10,9 @@ import math
 import numpy as np
 
 from iblbake.bake.radiance import to_rgba
-from iblbake.render.passes.base import Pass, geometry_defines, mode_defines
+from iblbake.core.metrics import luminance
+from iblbake.render.passes.base import Buffer, Pass, geometry_defines, mode_defines
 
-LUM = np.array([0.2126, 0.7152, 0.0722])
 
 
 def reference_noise(lum_sum, odd_sum, taken: int) -> float:
@@ -32,14 +32,19 @@ def reference_noise(lum_sum, odd_sum, taken: int) -> float:
 class Reference(Pass):
     name = "reference"
     kernel = "reference.cl"
-    reads = ("gb_pos", "gb_nrm", "gb_dir", "materials", "gb_mat", "spheres", "planes", "bvh", "tris")
-    writes = ("radiance",)
+    # radiance, and one batch's sums per sample read back (the host adds them up in float64)
+    buffers = (Buffer("radiance"), Buffer("ref_batch"))
+    host_sample_bytes = 32
+    host_writes = ("radiance",)      # the mean, added on the host
 
     def runs(self, scene, fx):
         return "reference" in (fx.diffuse, fx.specular)
 
     def reads_bakes(self, scene, fx):
         return ["env_cdf"]
+
+    def reads_environment(self, scene, fx):
+        return True                   # the texels it samples
 
     def defines(self, scene, fx):
         d = mode_defines(fx)          # reference.cl computes only the reference terms
@@ -59,7 +64,6 @@ class Reference(Pass):
         rt, t = ctx.rt, ctx.table
         n = t["n"]
         hit = rt.read(t["gb_pos"], (n, 4))[:, 3] != -1.0
-        out = rt.empty(n * 16)
         acc = np.zeros((n, 3))
         acc_odd = np.zeros(n)
         taken = 0
@@ -67,8 +71,8 @@ class Reference(Pass):
         batch = ref["batch"] + (ref["batch"] & 1)      # even: both replicates advance together
         while taken < ref["max_samples"]:
             b = min(batch, ref["max_samples"] - taken)
-            ctx.launch(self, (n,), **ctx.args[self.name], seed=ref["seed"], first=taken, batch=b, out=out)
-            r = rt.read(out, (n, 4)).astype(np.float64)
+            ctx.launch(self, (n,), **ctx.args[self.name], seed=ref["seed"], first=taken, batch=b)
+            r = rt.read(t["ref_batch"], (n, 4)).astype(np.float64)
             acc += r[:, :3]
             acc_odd += r[:, 3]
             taken += b
@@ -77,7 +81,7 @@ class Reference(Pass):
             if not hit.any():
                 break
             if taken >= 2 * batch:
-                noise = reference_noise(acc[hit] @ LUM, acc_odd[hit], taken)
+                noise = reference_noise(luminance(acc[hit]), acc_odd[hit], taken)
                 if noise <= ref["target_noise"]:
                     break
         # the mean joins what the other lighting passes added

@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from iblbake.render.passes.base import Pass
+from iblbake.render.passes.base import Buffer, Pass
 
 AOVS = ("normal", "albedo", "depth")
 
@@ -11,8 +11,11 @@ AOVS = ("normal", "albedo", "depth")
 class Resolve(Pass):
     name = "resolve"
     kernel = "resolve.cl"
-    reads = ("radiance", "gb_pos", "gb_nrm", "materials", "gb_mat")
-    writes = ("hdr", "aov_normal", "aov_albedo", "aov_depth")
+    buffers = (Buffer("hdr", per="pixel"), Buffer("aov_normal", per="pixel", when="WRITE_AOVS"),
+               Buffer("aov_albedo", per="pixel", when="WRITE_AOVS"),
+               Buffer("aov_depth", "float", per="pixel", when="WRITE_AOVS"))
+
+    fills = ("hdr", "aovs")
 
     def defines(self, scene, fx):
         return {"WRITE_AOVS": 1} if any(scene.data["output"][a] for a in AOVS) else {}

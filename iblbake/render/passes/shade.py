@@ -1,24 +1,22 @@
 """Shade: the approximate lighting terms (SH diffuse; importance specular from the importance
 pass's sums, prefiltered or lobe specular; emission), added into `radiance` (kernels/shade.cl;
-twin: iblbake/render/twin.py shade)."""
+twin: iblbake/render/twin/shade.py shade)."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from iblbake.core import sampling
-from iblbake.render.passes.ao import occludes_ibl
-from iblbake.render.passes.base import Pass, mode_defines
+from iblbake.render.passes.base import Buffer, Pass, mode_defines
 
 
 class Shade(Pass):
     name = "shade"
     kernel = "shade.cl"
-    reads = ("gb_pos", "gb_nrm", "gb_dir", "materials", "gb_mat", "ao_buf", "spec_sums")
-    writes = ("radiance",)
+    buffers = (Buffer("radiance"),)      # every lighting pass adds into it
 
     def runs(self, scene, fx):
-        return fx.diffuse == "sh" or fx.specular in ("importance", "prefiltered", "lobe") or fx.emissive
+        return fx.any_approximate or fx.emissive
 
     def reads_bakes(self, scene, fx):
         return (["sh"] if fx.diffuse == "sh" else []) + \
@@ -33,7 +31,7 @@ class Shade(Pass):
             d["DOMINANT_DIRECTION"] = 1
         if fx.emissive:
             d["HAS_EMISSIVE"] = 1
-        if e["ao"] != "off" and occludes_ibl(fx):
+        if e["ao"] != "off" and fx.any_approximate:
             d["HAS_AO"] = 1
             if e["ao_multibounce"] and fx.diffuse == "sh":
                 d["AO_MULTIBOUNCE"] = 1

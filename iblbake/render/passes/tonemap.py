@@ -3,7 +3,7 @@ a PNG frame is written."""
 
 from __future__ import annotations
 
-from iblbake.render.passes.base import DISPLAY_KEYS, Pass
+from iblbake.render.passes.base import DISPLAY_KEYS, Buffer, Pass
 from iblbake.scene.layout import TONEMAP_IDS
 
 
@@ -12,8 +12,9 @@ class Tonemap(Pass):
     kernel = "tonemap.cl"
     function = "tonemap_u8"
     program = "tonemap"      # its own: exposure and operator sweeps reuse the frame program
-    reads = ("hdr",)
-    writes = ("png",)
+    buffers = (Buffer("png_u8", "uchar4", per="pixel"), Buffer("display", per="pixel"))
+
+    fills = ("png",)
 
     def runs(self, scene, fx):
         return any(p.lower().endswith(".png") for p in scene.data["output"]["frame"])
@@ -31,7 +32,6 @@ class Tonemap(Pass):
 
     def run(self, ctx):
         t, e = ctx.table, ctx.scene.data["effects"]
-        ctx.launch(self, (t["npix"],), exposure_scale=2.0 ** e["exposure"], gamma=e["gamma"], n=t["npix"],
-                   out=t["png_u8"], display=t["display"])
+        ctx.launch(self, (t["npix"],), exposure_scale=2.0 ** e["exposure"], gamma=e["gamma"], n=t["npix"])
         ctx.rt.read_into(t["png_u8"], ctx.frame_png[ctx.row0:ctx.row0 + ctx.tile_rows])   # RGBA rows
         return {"operator": e["tonemap"]}

@@ -1,0 +1,82 @@
+"""Ground-truth ambient occlusion (effects.ao: gtao; Jimenez et al. 2016): the screen-space
+horizon search over the frame's depth buffer (kernels/gtao.cl; twin: iblbake/render/twin/gtao.py)
+into `ao_buf`, one value per G-buffer sample, which the shade pass applies to the approximate IBL."""
+
+from __future__ import annotations
+
+from iblbake.render.passes.base import Buffer, Pass
+
+
+GTAO_LEVELS = 5       # kernels/gtao.cl: the position pyramid's levels beyond the full frame
+
+
+def pyramid_texels(w: int, h: int) -> int:
+    return sum(-(-w // (1 << k)) * -(-h // (1 << k)) for k in range(1, GTAO_LEVELS + 1))
+
+
+def gtao_step(g: dict) -> int:
+    """Pixels per side of the blocks gtao searches once (effects.gtao.resolution)."""
+    return {"full": 1, "half": 2}[g["resolution"]]
+
+
+def _blocks(d: dict) -> int:
+    w, h = d["camera"]["resolution"]
+    step = gtao_step(d["effects"]["gtao"])
+    return -(-w // step) * -(-h // step)
+
+
+class GroundTruthAO(Pass):
+    """effects.ao: gtao. Per frame (at its first tile) the raw value of every pixel from the
+    depth buffer, then per tile each sample's denoised value. The depth buffer is the G-buffer
+    itself (each pixel's first sample) when the frame is one tile; a tiled frame first traces
+    one sample per pixel over the whole frame with the G-buffer kernel (the same first sample),
+    so tiles see their neighbours and the frame equals its untiled render."""
+    name = "gtao"
+    kernel = "gtao.cl"
+    functions = ("gtao_pyramid", "gtao_denoise")
+    buffers = (Buffer("ao_buf", "float"),
+               # the raw value of every block of pixels, and the position pyramid
+               Buffer("gtao_raw", "float", per="frame", count=lambda d: _blocks(d)),
+               Buffer("gtao_levels", per="frame", count=lambda d: pyramid_texels(*d["camera"]["resolution"])),
+               # a tiled frame's depth buffer: one sample per pixel over the whole frame
+               *(Buffer(b, per="frame", count=lambda d: d["camera"]["resolution"][0] * d["camera"]["resolution"][1],
+                        when="TILED") for b in ("ao_pos", "ao_nrm", "ao_dir")))
+
+    def runs(self, scene, fx):
+        return scene.data["effects"]["ao"] == "gtao" and fx.any_approximate
+
+    def defines(self, scene, fx):
+        return {"GTAO_LEVELS": GTAO_LEVELS}
+
+    def scene_inputs(self, scene):
+        d = scene.data
+        return {"camera": d["camera"], "objects": d["objects"],
+                "ao": {k: d["effects"][k] for k in ("ao", "ao_radius", "gtao")}}
+
+    def setup(self, ctx) -> dict:
+        e = ctx.scene.data["effects"]
+        g = e["gtao"]
+        return {"ao_radius": e["ao_radius"], "gtao_slices": g["slices"], "gtao_steps": g["steps"],
+                "gtao_radius_scale": g["radius_scale"], "gtao_falloff": g["falloff"], "gtao_power": g["power"],
+                "gtao_denoise_radius": g["denoise"], "gtao_step": gtao_step(g)}
+
+    def run(self, ctx):
+        args, t = ctx.args[self.name], ctx.table
+        w, h = t["width"], t["height"]
+        if ctx.tile_index == 0:
+            if ctx.tile_count > 1:      # the whole frame's first samples, as the G-buffer traces them
+                from iblbake.render.passes.gbuffer import GBuffer
+                ctx.launch(GBuffer(), (w * h,), spp=1, pixel0=0, n=w * h, gb_pos=t["ao_pos"],
+                           gb_nrm=t["ao_nrm"], gb_dir=t["ao_dir"])
+                args.update(ao_pos=t["ao_pos"], ao_nrm=t["ao_nrm"], ao_dir=t["ao_dir"], ao_stride=1)
+            else:
+                args.update(ao_pos=t["gb_pos"], ao_nrm=t["gb_nrm"], ao_dir=t["gb_dir"], ao_stride=t["spp"])
+            step = args["gtao_step"]
+            ctx.launch(self, (pyramid_texels(w, h),), function="gtao_pyramid", width=w, height=h,
+                       ao_pos=args["ao_pos"], ao_stride=args["ao_stride"])
+            ctx.launch(self, (-(-w // step) * -(-h // step),), **args)
+        ctx.launch(self, (t["n"],), function="gtao_denoise", **args)
+        ctx.rt.finish()
+        g = ctx.scene.data["effects"]["gtao"]
+        return {"slices": g["slices"], "steps": g["steps"], "denoise": g["denoise"], "resolution": g["resolution"],
+                "depth_prepass": ctx.tile_count > 1}

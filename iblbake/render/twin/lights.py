@@ -1,0 +1,121 @@
+"""The lights pass (kernels/lights.cl): analytic lights with hard and soft shadows, and their
+exact integral. numpy twin, float64."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from iblbake.core import brdf
+from iblbake.core import conventions
+from iblbake.core import sampling
+from iblbake.scene.layout import LIGHT_KINDS
+from iblbake.render.twin.gbuffer import occluded, ray_offset
+from iblbake.render.twin.surface import diffuse_weight, surface
+
+
+def representative_point(n, v, l, sin_max, alpha):
+    """Twin of kernels/lights.cl representative_point: (direction, energy scale) per hit."""
+    r = 2 * (n * v).sum(-1, keepdims=True) * n - v
+    c = (l * r).sum(-1, keepdims=True) * r - l
+    cl = np.linalg.norm(c, axis=-1, keepdims=True)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ls = l + c * np.minimum(sin_max[:, None] / cl, 1)
+    ls = np.where(cl > 0, ls, l)
+    ls /= np.linalg.norm(ls, axis=-1, keepdims=True)
+    h = v + ls
+    voh = np.maximum((v * h).sum(-1) / np.linalg.norm(h, axis=-1), 1e-4)
+    a = np.maximum(alpha, brdf.ALPHA_MIN)
+    energy = (a / np.minimum(a + 0.5 * sin_max / np.sqrt(voh), 1)) ** 2
+    return np.where((sin_max > 0)[:, None], ls, l), np.where(sin_max > 0, energy, 1.0)
+
+
+def light_brdf_cos(base, metallic, rough, f0, n, v, nov, l, diffuse: bool, specular: bool, sin_max=None):
+    """Twin of kernels/lights.cl light_brdf_cos: f(v, l) NoL, per hit and colour channel; with
+    sin_max the specular term at the representative point of a light that size."""
+    nol = (n * l).sum(-1)
+    out = np.zeros(l.shape[:-1] + (3,))
+    if diffuse:
+        out += np.where((nol > 0)[:, None], diffuse_weight(base, metallic, rough, f0, nov) * np.maximum(nol, 0)[:, None], 0)
+    if specular:
+        alpha = rough ** 2
+        ls, energy = representative_point(n, v, l, sin_max, alpha) if sin_max is not None else (l, 1.0)
+        nols = (n * ls).sum(-1)
+        h = v + ls
+        h /= np.linalg.norm(h, axis=-1, keepdims=True)
+        spec = (brdf.d_ggx((n * h).sum(-1), alpha) * brdf.v_smith_ggx_correlated(nov, np.maximum(nols, 0), alpha)
+                * energy * np.maximum(nols, 0))[:, None] * brdf.f_schlick((v * h).sum(-1)[:, None], f0)
+        out += np.where((nols > 0)[:, None], spec, 0)
+    return out
+
+
+def _qmc2(seed, sid, k):
+    """Sample k of the 2D stream of each sample sid (kernels/sampling.h qmc, dimensions 0 and 1)."""
+    return np.stack([sampling.qmc(seed, sid, k, 0), sampling.qmc(seed, sid, k, 1)], -1)
+
+
+def _cone_direction(a, omc, u):
+    x = u[..., 0] * omc
+    ct, st, phi = 1 - x, np.sqrt(np.maximum(0, x * (2 - x))), 2 * np.pi * u[..., 1]
+    t, b = conventions.tangent_frame(a)
+    d = t * (st * np.cos(phi))[:, None] + b * (st * np.sin(phi))[:, None] + a * ct[:, None]
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def lights(gb, arrays, records, effects: dict, *, diffuse=True, specular=True, exact=False, visibility=True,
+           representative=True):
+    """Per-sample radiance of the `lights` pass (hits only; misses are 0): records from
+    scene.pack.light_records, effects the scene's (reference seed and max_samples);
+    representative=False shades a light with a size from its centre alone (for comparison)."""
+    hit = gb["hit"]
+    out = np.zeros((len(hit), 3))
+    v, n, nov, (base, metallic, _, rough, f0) = surface(gb, arrays)
+    p = gb["pos"][hit]
+    origin = ray_offset(p, n, gb["dir"][hit], gb["t"][hit])
+    sid = np.flatnonzero(hit)              # each G-buffer sample's random stream (one tile)
+    seed = effects["reference"]["seed"]
+    color = np.zeros((len(p), 3))
+    shade = lambda l: light_brdf_cos(base, metallic, rough, f0, n, v, nov, l, diffuse, specular)   # noqa: E731
+    for j, r in enumerate(records.astype(np.float64)):
+        kind, e = int(r[0, 3]), np.broadcast_to(r[1, :3], (len(p), 3)).copy()
+        if kind == LIGHT_KINDS["directional"]:
+            wc = np.broadcast_to(r[0, :3], p.shape).copy()
+            dist = np.full(len(p), np.inf)
+            sin_max = np.full(len(p), r[2, 3])
+        else:
+            dv = r[0, :3] - p
+            d = np.linalg.norm(dv, axis=-1)
+            wc = dv / d[:, None]
+            win = 1 / (d * d)
+            if r[3, 2] > 0:
+                win *= np.clip(1 - (d / r[3, 2]) ** 4, 0, 1) ** 2
+            a = np.clip((wc @ -r[2, :3]) * r[3, 0] + r[3, 1], 0, 1)
+            e *= (win * a * a)[:, None]
+            sin_max = np.minimum(r[2, 3] / d, 1.0)
+            dist = np.maximum(d - r[2, 3], 0)
+        omc = sin_max ** 2 / (1 + np.sqrt(np.maximum(0, 1 - sin_max ** 2)))
+        ls = int(np.uint32(seed) ^ sampling.pcg_hash(j + 1))
+        ns = effects["reference"]["max_samples"] if exact else int(r[3, 3])
+        mode = int(r[1, 3])
+
+        if exact and (sin_max > 0).any():
+            le = e / (np.pi * sin_max ** 2)[:, None]
+            acc = np.zeros((len(p), 3))
+            for k in range(ns):
+                l = _cone_direction(wc, omc, _qmc2(ls, sid, k))
+                ok = ~occluded(origin, l, arrays, dist) if visibility else np.ones(len(p), bool)
+                acc += np.where(ok[:, None], shade(l), 0.0)
+            color += le * (2 * np.pi * omc)[:, None] * acc / ns
+            continue
+        if exact:
+            vis = (~occluded(origin, wc, arrays, dist)).astype(float) if visibility else np.ones(len(p))
+        elif mode == 1 or (mode == 2 and (sin_max <= 0).all()):
+            vis = (~occluded(origin, wc, arrays, dist)).astype(float)
+        elif mode == 2:             # soft: the share of ns rays over the disk or sphere that arrive
+            vis = sum(~occluded(origin, _cone_direction(wc, omc, _qmc2(ls, sid, k)), arrays, dist)
+                      for k in range(ns)) / ns
+        else:
+            vis = np.ones(len(p))
+        color += vis[:, None] * e * light_brdf_cos(base, metallic, rough, f0, n, v, nov, wc, diffuse, specular,
+                                                   sin_max if representative and not exact else None)
+    out[hit] = color
+    return out

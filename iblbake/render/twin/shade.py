@@ -1,0 +1,121 @@
+"""The shade pass (kernels/shade.cl): SH diffuse, importance-sampled, prefiltered and lobe
+specular, emission, with AO's specular occlusion and multi-bounce. numpy twin, float64."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from iblbake.core import brdf
+from iblbake.core import conventions
+from iblbake.bake.dfg import dfg_lookup
+from iblbake.bake import radiance
+from iblbake.core import sampling
+from iblbake.core import sh
+from iblbake.render.twin.surface import diffuse_weight, material_occlusion, surface, to_env
+
+
+def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, prefiltered=None, dfg=None,
+          ao=None):
+    """Per-sample radiance of the `shade` pass, with the `importance` pass's sums for it (hits
+    only; misses are 0); `ao` the ambient occlusion of every sample (ambient_occlusion) where
+    effects.ao is on. The importance estimate is summed with Fresnel inside, which the kernels
+    split around f0: the same sum, to float rounding."""
+    hit = gb["hit"]
+    out = np.zeros((len(hit), 3))
+    v, n, nov, (base, metallic, emissive, rough, f0) = surface(gb, arrays)
+    alpha = rough ** 2
+    rot, scale = env["rotation_y"], env["intensity"]
+    color = np.zeros_like(emissive)
+    occ = ao[hit] if ao is not None else np.ones(len(n))
+    spec_occ = specular_occlusion(nov, occ, rough)[:, None]
+    if effects["diffuse"] == "sh":
+        e = np.maximum(sh.evaluate(sh_coeffs, to_env(n, rot), effects["sh_bands"]), 0.0)
+        diff_occ = ao_multibounce(occ, base * (1 - metallic[:, None])) if effects["ao_multibounce"] else occ[:, None]
+        color += diff_occ * diffuse_weight(base, metallic, rough, f0, nov) * scale * e
+    if effects["specular"] == "importance":
+        nsamp = effects["samples"]
+        pts = sampling.hammersley(nsamp).astype(np.float32).astype(np.float64)
+        t, b = conventions.tangent_frame(n)
+        h0, w0 = chain[0].shape[:2]
+        acc = np.zeros((len(n), 3))
+        accepted = np.zeros(len(n))
+        for u in pts:
+            hl = sampling.sample_ggx_half(np.broadcast_to(u, (len(n), 2)), alpha)
+            h = t * hl[:, 0:1] + b * hl[:, 1:2] + n * hl[:, 2:3]
+            voh = (v * h).sum(1)
+            l = 2 * voh[:, None] * h - v
+            nol = (n * l).sum(1)
+            ok = (nol > 0) & (voh > 0)
+            noh = np.maximum(hl[:, 2], 1e-7)
+            le = to_env(l, rot)
+            if effects["force_mip0"]:
+                lod = np.zeros(len(n))
+            else:
+                pdf = brdf.d_ggx(noh, alpha) * noh / (4 * np.maximum(voh, 1e-30))
+                with np.errstate(divide="ignore"):
+                    lod = 0.5 * (np.log2(1.0 / (nsamp * pdf)) - np.log2(radiance.texel_solid_angle_at(w0, h0, le))) \
+                        + effects["mip_bias"]
+            li = radiance.chain_lookup_twin(chain, le, lod)
+            wgt = brdf.v_smith_ggx_correlated(nov, nol, alpha) * 4 * nol * voh / noh
+            contrib = li * brdf.f_schlick(voh[:, None], f0) * wgt[:, None]
+            acc += np.where(ok[:, None], contrib, 0.0)
+            accepted += ok
+        div = np.maximum(accepted, 1)[:, None] if effects["normalize"] == "accepted" else nsamp
+        color += spec_occ * scale * acc / div
+    elif effects["specular"] == "prefiltered":
+        r = 2 * (n * v).sum(1, keepdims=True) * n - v
+        if effects["prefilter"]["dominant_direction"]:
+            s = np.clip(1 - alpha, 0, 1)[:, None]
+            r = n + (r - n) * (s * (np.sqrt(s) + alpha[:, None]))
+            r /= np.linalg.norm(r, axis=1, keepdims=True)
+        pre = radiance.chain_lookup_twin(prefiltered, to_env(r, rot), rough * (len(prefiltered) - 1))
+        ab = dfg_lookup(dfg, nov, rough)
+        color += spec_occ * scale * pre * (f0 * ab[:, 0:1] + ab[:, 1:2])
+    elif effects["specular"] == "lobe":
+        color += spec_occ * scale * lobe(v, n, nov, alpha, rough, f0, rot, effects["lobe"]["samples"],
+                              effects["lobe"]["spread"], prefiltered, dfg)
+    out[hit] = color * material_occlusion(gb)[:, None] + emissive
+    return out
+
+
+def specular_occlusion(nov, ao, roughness):
+    """Twin of shade.cl specular_occlusion (Lagarde and de Rousiers 2014)."""
+    return np.clip((nov + ao) ** np.exp2(-16 * roughness - 1) - 1 + ao, 0, 1)
+
+
+def ao_multibounce(ao, albedo):
+    """Twin of shade.cl ao_multibounce (Jimenez et al. 2016, eq. 10)."""
+    a, b, c = 2.0404 * albedo - 0.3324, -4.7951 * albedo + 0.6417, 2.7552 * albedo + 0.6903
+    v = ao[:, None]
+    return np.maximum(v, ((v * a + b) * v + c) * v)
+
+
+def lobe(v, n, nov, alpha, rough, f0, rot, k, spread, prefiltered, dfg):
+    """Twin of shade.cl's SPECULAR_LOBE block (see the comment there): K visible-normal samples,
+    each reading the prefiltered chain at its share of the lobe, their weighted mean times the
+    DFG table's albedo."""
+    pts = sampling.lobe_points(k).astype(np.float32).astype(np.float64)
+    t, b = conventions.tangent_frame(n)
+    vl = np.stack([(v * t).sum(1), (v * b).sum(1), nov], -1)
+    g1 = sampling.g1_smith(nov, alpha)
+    nlev = len(prefiltered)
+    num = np.zeros((len(n), 3))
+    den = np.zeros((len(n), 3))
+    for u in pts:
+        hl = sampling.sample_ggx_vndf(vl, alpha, np.broadcast_to(u, (len(n), 2)))
+        h = t * hl[:, 0:1] + b * hl[:, 1:2] + n * hl[:, 2:3]
+        voh = (v * h).sum(1)
+        l = 2 * voh[:, None] * h - v
+        nol = (n * l).sum(1)
+        ok = (nol > 0) & (voh > 0)
+        pdf = g1 * brdf.d_ggx(hl[:, 2], alpha) / (4 * nov)
+        a = np.minimum(np.sqrt(spread / (4 * np.pi * k * pdf)), alpha)
+        w = brdf.f_schlick(voh[:, None], f0) * (brdf.v_smith_ggx_correlated(nov, nol, alpha) * 4 * nov * nol / g1)[:, None]
+        w = np.where(ok[:, None], w, 0.0)
+        num += w * radiance.chain_lookup_twin(prefiltered, to_env(l, rot), np.sqrt(a) * (nlev - 1))
+        den += w
+    r = 2 * nov[:, None] * n - v
+    fallback = radiance.chain_lookup_twin(prefiltered, to_env(r, rot), rough * (nlev - 1))
+    li = np.where(den[:, :1] > 0, num / np.where(den > 0, den, 1.0), fallback)
+    ab = dfg_lookup(dfg, nov, rough)
+    return li * (f0 * ab[:, 0:1] + ab[:, 1:2])

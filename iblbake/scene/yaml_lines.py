@@ -1,0 +1,80 @@
+"""YAML with line numbers: safe YAML (the standard tags only, so no object construction), the
+line of every dotted key for error messages, and budgets on size, values and depth that stop
+alias bombs and recursive aliases before they cost memory."""
+
+from __future__ import annotations
+
+import yaml
+
+from iblbake.errors import InputError
+
+
+
+MAX_SCENE_BYTES = 1 << 20      # a scene is a few KB; a bigger file is a mistake or an attack
+MAX_SCENE_VALUES = 100_000     # values after YAML aliases are expanded (alias bombs stop here)
+MAX_SCENE_DEPTH = 32
+_PLAIN_TAGS = {f"tag:yaml.org,2002:{t}" for t in ("map", "seq", "str", "int", "float", "bool", "null")}
+
+
+def load_with_lines(text: str, source: str):
+    """Safe YAML (no tags beyond the standard ones, so no object construction) with the line of
+    every dotted key; aliases are expanded under a value and depth budget."""
+    if len(text) > MAX_SCENE_BYTES:
+        raise InputError(f"{source}: {len(text)} characters; a scene file is at most "
+                         f"{MAX_SCENE_BYTES} (meshes and panoramas go in their own files)")
+    try:
+        node = yaml.compose(text, Loader=yaml.SafeLoader)
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        where = f"{source}:{mark.line + 1}" if mark else source
+        problem = getattr(e, "problem", None) or str(e).splitlines()[0]
+        raise InputError(f"{where}: not valid YAML: {problem}") from None
+    except RecursionError:
+        raise InputError(f"{source}: nested too deeply to be a scene") from None
+    lines: dict[str, int] = {}
+    constructor = yaml.SafeLoader(text)
+    budget = [MAX_SCENE_VALUES]
+
+    def scalar(n, path):
+        try:
+            return constructor.construct_object(n, deep=True)
+        except yaml.YAMLError as e:
+            problem = " ".join(str(getattr(e, "problem", None) or e).split())[:160]
+            raise InputError(f"{source}:{n.start_mark.line + 1}: {path or 'document'}: {problem} "
+                             f"(scene files use plain YAML values, no tags)") from None
+
+    def walk(n, path, depth):
+        if n.tag not in _PLAIN_TAGS:
+            tag = n.tag.replace("tag:yaml.org,2002:", "!!")
+            hint = "quote it if it is text" if tag == "!!timestamp" else "plain values only"
+            raise InputError(f"{source}:{n.start_mark.line + 1}: {path or 'document'}: YAML tag {tag} "
+                             f"is not allowed in a scene ({hint})")
+        budget[0] -= 1
+        if budget[0] < 0:
+            raise InputError(f"{source}: expands to more than {MAX_SCENE_VALUES} values (YAML "
+                             f"aliases?); a scene needs far fewer")
+        if depth > MAX_SCENE_DEPTH:
+            short = path if len(path) < 60 else path[:57] + "..."
+            raise InputError(f"{source}:{n.start_mark.line + 1}: {short}: nested deeper than "
+                             f"{MAX_SCENE_DEPTH} levels (a recursive YAML alias?)")
+        lines.setdefault(path, n.start_mark.line + 1)
+        if isinstance(n, yaml.MappingNode):
+            out = {}
+            for k, v in n.value:
+                key = scalar(k, path) if isinstance(k, yaml.ScalarNode) else k
+                if not isinstance(key, (str, int, float)) or isinstance(key, bool):
+                    what = "a collection" if isinstance(key, yaml.Node) else repr(key)
+                    raise InputError(f"{source}:{k.start_mark.line + 1}: {path or 'document'}: a key "
+                                     f"must be a plain name, not {what}")
+                sub = f"{path}.{key}" if path else str(key)
+                lines[sub] = k.start_mark.line + 1
+                if key in out:
+                    raise InputError(f"{source}:{k.start_mark.line + 1}: {sub}: key given twice")
+                out[key] = walk(v, sub, depth + 1)
+            return out
+        if isinstance(n, yaml.SequenceNode):
+            return [walk(v, f"{path}.{i}" if path else str(i), depth + 1) for i, v in enumerate(n.value)]
+        return scalar(n, path)
+
+    data = walk(node, "", 0) if node is not None else None
+    return data, lines

@@ -1,0 +1,142 @@
+"""The study's ladder: the rungs of approximations `iblbake accuracy` times and measures, one
+factor at a time around the defaults (default_ladder), the scene's own settings
+(configured_rung), or a ladder file in the sweep syntax (ladder_from_file)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from iblbake.errors import InputError
+from iblbake.study import sweep
+
+TERMS = ("diffuse", "specular")
+IMPORTANCE_N = (1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 4096)
+
+
+@dataclass
+class Rung:
+    term: str                     # diffuse | specular
+    label: str
+    values: list                  # [(key path, value)] on top of the scene
+    configured: bool = False      # the scene's own setting of this term
+    result: dict = field(default_factory=dict)
+    frame: object = None          # the last render (render.Frame)
+
+
+def configured_rung(sc, term: str) -> Rung:
+    fx = sc.data["effects"]
+    if term == "diffuse":
+        mode = fx["diffuse"]
+        vals = [("effects.diffuse", mode)]
+        label = f"SH {fx['sh_bands']} bands" + ("" if fx["sh_window"] == "none" else f" {fx['sh_window']}") \
+            if mode == "sh" else mode
+    else:
+        mode = fx["specular"]
+        vals = [("effects.specular", mode)]
+        label = {"importance": f"importance N={fx['samples']}", "lobe": f"lobe K={fx['lobe']['samples']}"}.get(mode, mode)
+    return Rung(term, f"configured: {label}", vals, configured=True)
+
+
+# FIS chain bakes per sample count: N = 1024 over render's 13 lobe-sized levels is a 2-minute bake
+# on a 2-core CPU (no more accurate than spectral): GPUs only by default, --ladder elsewhere
+FIS_SAMPLES = {"GPU": (64, 256, 1024), "CPU": (64, 256)}
+
+
+def default_ladder(sc, fx, device_kind: str = "GPU") -> list:
+    """The rungs of the terms the scene calls for (fx: plan.effect_modes of the scene): a
+    diffuse-only scene runs only diffuse rungs. One factor at a time around the defaults."""
+    rungs = []
+    if fx.diffuse != "off":
+        for window in ("none", "hann"):
+            for bands in range(1, 9):
+                rungs.append(Rung("diffuse", f"SH {bands}" + ("" if window == "none" else f" {window}"),
+                                  [("effects.diffuse", "sh"), ("effects.sh_bands", bands),
+                                   ("effects.sh_window", window)]))
+    if fx.specular != "off":
+        imp = [("effects.specular", "importance")]
+        for n in IMPORTANCE_N:
+            rungs.append(Rung("specular", f"importance N={n}", imp + [("effects.samples", n), ("effects.mip_bias", 1.0)]))
+        for n in IMPORTANCE_N[:9]:
+            rungs.append(Rung("specular", f"importance N={n} bias 0", imp + [("effects.samples", n),
+                                                                            ("effects.mip_bias", 0.0)]))
+            rungs.append(Rung("specular", f"importance N={n} mip 0", imp + [("effects.samples", n),
+                                                                           ("effects.force_mip0", True)]))
+        pre = [("effects.specular", "prefiltered")]
+        rungs.append(Rung("specular", "prefiltered", pre))
+        rungs.append(Rung("specular", "prefiltered no dominant", pre + [("effects.prefilter.dominant_direction", False)]))
+        for size in (64, 128, 256, 512):
+            rungs.append(Rung("specular", f"prefiltered size {size}", pre + [("effects.prefilter.size", size)]))
+        for levels in (5, 7, 9, 17):
+            rungs.append(Rung("specular", f"prefiltered {levels} levels", pre + [("effects.prefilter.levels", levels)]))
+        rungs.append(Rung("specular", "prefiltered halving levels", pre + [("effects.prefilter.level_sizes", "halving"),
+                                                                          ("effects.prefilter.min_size", 8)]))
+        rungs.append(Rung("specular", "prefiltered spectral", pre + [("effects.prefilter.method", "spectral")]))
+        for n in FIS_SAMPLES.get(device_kind, FIS_SAMPLES["CPU"]):
+            rungs.append(Rung("specular", f"prefiltered fis {n}", pre + [("effects.prefilter.method", "fis"),
+                                                                        ("effects.prefilter.samples", n)]))
+        for k in (1, 2, 4, 8, 16):
+            rungs.append(Rung("specular", f"lobe K={k}", [("effects.specular", "lobe"), ("effects.lobe.samples", k)]))
+    lights = sc.data["lights"]
+    for term in TERMS:                   # every light's shadows at once: none, hard, soft at 4 and 16
+        if getattr(fx, term) != "off" and lights:
+            for label, mode, n in (("none", "none", 16), ("hard", "hard", 16), ("soft 4", "soft", 4),
+                                   ("soft 16", "soft", 16)):
+                rungs.append(Rung(term, f"shadows {label}", [v for i in range(len(lights)) for v in (
+                    (f"lights.{i}.shadows", mode), (f"lights.{i}.shadow_samples", n))]))
+    for term in TERMS:                   # AO on the approximate IBL (the reference has visibility)
+        if fx.approximate(term):
+            rungs.append(Rung(term, "ao gtao", [("effects.ao", "gtao")]))
+            for n in (16, 64):
+                rungs.append(Rung(term, f"ao raytraced {n}", [("effects.ao", "raytraced"), ("effects.ao_samples", n)]))
+    for term in TERMS:                   # fewer reference samples: Monte Carlo's own trade
+        if getattr(fx, term) != "off":
+            for n in (16, 64, 256):
+                rungs.append(Rung(term, f"reference {n} spp", [
+                    (f"effects.{term}", "reference"), ("effects.reference.max_samples", n),
+                    ("effects.reference.target_noise", 0.0), ("effects.reference.seed", 7)]))
+    return rungs
+
+
+def ladder_from_file(path, sc, fx) -> list:
+    """rungs: a list of axes in the sweep syntax ({key, values}, {key, range}, {steps}), each
+    with an optional `term:` (default: diffuse where it sets effects.diffuse or effects.sh_*, else
+    specular) and `with:` ({KEY.PATH: value} set on each of its rungs)."""
+    import yaml
+
+    where = str(path)
+    try:
+        doc = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+    except OSError as e:
+        raise InputError(f"{where}: cannot read the ladder ({e.strerror})") from None
+    except yaml.YAMLError as e:
+        raise InputError(f"{where}: not valid YAML ({' '.join(str(e).split())[:160]})") from None
+    if not isinstance(doc, dict) or set(doc) != {"rungs"} or not isinstance(doc["rungs"], list) or not doc["rungs"]:
+        raise InputError(f"{where}: a ladder is {{rungs: [AXIS, ...]}}, each axis as a sweep's "
+                         f"({{key, values}}, {{key, range}} or {{steps}}), with term: and with: optional")
+    rungs = []
+    for i, spec in enumerate(doc["rungs"]):
+        w = f"{where}: rungs.{i}"
+        if not isinstance(spec, dict):
+            raise InputError(f"{w}: expected a map, got {spec!r}")
+        spec = dict(spec)
+        term = spec.pop("term", None)
+        fixed = spec.pop("with", {}) or {}
+        if term is not None and term not in TERMS:
+            raise InputError(f"{w}.term: {term!r}: use diffuse or specular")
+        if not isinstance(fixed, dict):
+            raise InputError(f"{w}.with: expected a map of KEY.PATH: value, got {fixed!r}")
+        for k in fixed:
+            sweep.resolve_key(k, sc.data, f"{w}.with")
+        axis = sweep.parse_axis("rows", spec, sc.data, w, "{key}={value}")
+        for st in axis.steps:
+            vals = list(fixed.items()) + st.values
+            keys = [k for k, _ in vals]
+            t = term or ("diffuse" if any(k == "effects.diffuse" or k.startswith("effects.sh_") for k in keys)
+                         else "specular")
+            if getattr(fx, t) == "off" and not any(k == f"effects.{t}" for k in keys):
+                continue                 # a term the scene does not call for
+            rungs.append(Rung(t, st.label, vals))
+    if not rungs:
+        raise InputError(f"{where}: none of its rungs is of a term the scene renders")
+    return rungs

@@ -1,0 +1,92 @@
+/* Random and quasi-random numbers: Hammersley sets, the PCG hash, Halton points with
+ * Cranley-Patterson rotations (qmc), and the Sampler that hands a kernel the dimensions of one
+ * sample in order. Mirrors iblbake/core/sampling.py. */
+#ifndef IBLBAKE_SAMPLER_H
+#define IBLBAKE_SAMPLER_H
+
+inline float radical_inverse_vdc(uint b)
+{
+    b = (b << 16) | (b >> 16);
+    b = ((b & 0x55555555u) << 1) | ((b & 0xAAAAAAAAu) >> 1);
+    b = ((b & 0x33333333u) << 2) | ((b & 0xCCCCCCCCu) >> 2);
+    b = ((b & 0x0F0F0F0Fu) << 4) | ((b & 0xF0F0F0F0u) >> 4);
+    b = ((b & 0x00FF00FFu) << 8) | ((b & 0xFF00FF00u) >> 8);
+    return (float)b * 2.3283064365386963e-10f;
+}
+
+inline float2 hammersley(uint i, uint n)
+{
+    return (float2)((float)i / (float)n, radical_inverse_vdc(i));
+}
+
+/* PCG hash (Jarzynski and Olano 2020, "Hash Functions for GPU Rendering"): one 32-bit state step
+ * of PCG plus its output permutation. */
+inline uint pcg_hash(uint x)
+{
+    uint state = x * 747796405u + 2891336453u;
+    uint word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
+    return (word >> 22u) ^ word;
+}
+
+inline float hash_uniform(uint x)
+{
+    return (float)(pcg_hash(x) >> 8) * (1.0f / 16777216.0f);
+}
+
+/* Radical inverse of j in base b: Halton points, a quasi-random sequence that stays uniform at
+ * every prefix, so a frame converges faster than with independent random numbers. */
+inline float radical_inverse(uint j, uint b)
+{
+    const float inv_b = 1.0f / (float)b;
+    float f = inv_b, r = 0.0f;
+    while (j > 0u) {
+        r += f * (float)(j % b);
+        j /= b;
+        f *= inv_b;
+    }
+    return fmin(r, 0x1.fffffep-1f);
+}
+
+/* Dimension d of sample j of replicate `rep` for G-buffer sample gid: Halton in base
+ * HALTON_BASES[d], shifted by a random rotation per (seed, gid, replicate, dimension)
+ * (Cranley-Patterson). Two replicates (even and odd sample numbers) with independent rotations
+ * give an honest error estimate (their difference); a variance of QMC samples would not. */
+__constant uint HALTON_BASES[8] = {2u, 3u, 5u, 7u, 11u, 13u, 17u, 19u};
+
+inline float qmc(uint seed, uint gid, uint k, int d)
+{
+    const uint rep = k & 1u, j = k >> 1;
+    const float shift = hash_uniform(seed ^ pcg_hash(gid * 16u + rep * 8u + (uint)d));
+    const float x = radical_inverse(j, HALTON_BASES[d]) + shift;
+    return x >= 1.0f ? x - 1.0f : x;
+}
+
+/* One sample's dimensions, handed out in the order a kernel asks for them, as pbrt-v4's Sampler
+ * (Get1D, Get2D) and Mitsuba 3's (next_1d, next_2d) do: no kernel numbers a dimension by hand.
+ * `seed` already carries the stream (the reference's seed, AO's seed ^ STREAM_AO, a light's);
+ * `gid` the G-buffer sample's number in the frame, `k` the sample's number. At most 8 dimensions
+ * (HALTON_BASES). */
+typedef struct {
+    uint seed, gid, k;
+    int dim;
+} Sampler;
+
+inline Sampler sampler_start(uint seed, uint gid, uint k)
+{
+    Sampler s;
+    s.seed = seed; s.gid = gid; s.k = k; s.dim = 0;
+    return s;
+}
+
+inline float sampler_1d(Sampler *s)
+{
+    return qmc(s->seed, s->gid, s->k, s->dim++);
+}
+
+inline float2 sampler_2d(Sampler *s)
+{
+    const float a = sampler_1d(s);
+    return (float2)(a, sampler_1d(s));
+}
+
+#endif
