@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.iblbake-installed
 PANOS  := examples/panoramas
 OUT    := examples/out
 
-.PHONY: demo test stress install opencl assets testmodels readers bench clean
+.PHONY: demo test check stress install opencl meshes assets testmodels readers bench docs clean
 
 install: $(STAMP)
 # editable_mode=compat: the editable install is a plain path in a .pth file. setuptools' default
@@ -20,10 +20,13 @@ $(STAMP): pyproject.toml Makefile
 opencl: $(STAMP)
 	sh scripts/ensure_opencl.sh $(BIN)/iblbake
 
-assets: $(STAMP)
-	sh examples/fetch_panoramas.sh $(PANOS)
+# the example meshes and textures, made here (no network)
+meshes: $(STAMP)
 	test -f examples/meshes/knot.ply || $(BIN)/python examples/make_mesh.py examples/meshes/knot.ply
 	test -f examples/meshes/tiles.glb -a -f examples/textures/roughness_stripes.png || $(BIN)/python examples/make_textured.py examples
+
+assets: meshes
+	sh examples/fetch_panoramas.sh $(PANOS)
 
 demo: opencl assets
 	mkdir -p $(OUT)/sh
@@ -51,6 +54,11 @@ readers:
 test: opencl assets testmodels readers
 	$(BIN)/python -m pytest -q tests
 
+# the developer loop (at most 3 minutes on a 2-core CPU): no network, synthetic panoramas, no
+# readers, browser, Dask or kill loops, nothing over 3 s (pytest markers: pyproject.toml)
+check: opencl meshes
+	$(BIN)/python -m pytest -q -m "not (slow or external or kill)" tests
+
 # the stress and fuzz suite at full size (10x the fuzz inputs, 24 kill runs per command); prints
 # and saves the table of case, bound, measured, result
 stress: opencl assets testmodels
@@ -65,6 +73,12 @@ bench: opencl assets
 	$(BIN)/python benchmarks/bench_accuracy.py
 	$(BIN)/python benchmarks/bench_study.py
 	$(BIN)/python benchmarks/bench_scale.py
+
+# the generated files: kernels/layout.h from scene/layout.py, docs/scene.md from scene/schema.py
+# (tests fail while either is stale)
+docs: $(STAMP)
+	$(BIN)/python -m iblbake.scene.layout > kernels/layout.h.tmp && mv kernels/layout.h.tmp kernels/layout.h
+	$(BIN)/python -m iblbake.scene.schema > docs/scene.md.tmp && mv docs/scene.md.tmp docs/scene.md
 
 clean:
 	rm -rf $(OUT) .pytest_cache

@@ -105,6 +105,29 @@ def run_cli(*args, cwd=None, env=None):
                           text=True, cwd=cwd, env=full_env, timeout=600)
 
 
+def scene_file(folder, env, *, name="scene.yaml", **sections):
+    """Write a scene file into `folder` and return its path: a unit sphere of material `m` seen
+    from +z at 64x64 under `env` (background hidden), with each top-level section given by
+    keyword replacing the default one (camera=, materials=, objects=, effects=, output=, lights=)
+    and `environment=` merged into the default environment. `materials` holding a base_color is
+    the one material `m`. The shared builder of every test's scenes."""
+    import yaml
+    doc = {"camera": {"perspective": {"position": [0, 0, 3], "fov_y": 45}, "resolution": [64, 64]},
+           "environment": {"path": str(env), "background": "hide"},
+           "materials": {"m": {}},
+           "objects": [{"sphere": {"radius": 1}, "material": "m"}]}
+    env_extra = sections.pop("environment", None) or {}
+    doc["environment"].update(env_extra)
+    for k, v in sections.items():
+        if v is not None:
+            doc[k] = v
+    if "base_color" in doc["materials"]:
+        doc["materials"] = {"m": doc["materials"]}
+    path = Path(folder) / name
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
 def rel_err(a, b):
     a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
     return float(np.abs(a - b).max() / max(np.abs(b).max(), 1e-300))

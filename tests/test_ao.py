@@ -63,6 +63,7 @@ def test_ao_under_a_floating_sphere(tmp_path, white, h_over_r):
     assert ao == pytest.approx(1 - 1 / h_over_r ** 2, rel=1e-3)
 
 
+@pytest.mark.slow
 def test_ao_matches_numpy(tmp_path, white):
     import trimesh
     mesh = tmp_path / "ico.ply"

@@ -1,5 +1,6 @@
 """`iblbake mips` end to end: the cache reuses, detects corruption, survives concurrency and kills."""
 
+import pytest
 import json
 import signal
 import subprocess
@@ -87,6 +88,7 @@ def test_concurrent_runs_share_one_entry(tmp_path):
     assert all(cache.verify(e) is not None for e in entries(root))
 
 
+@pytest.mark.kill
 def test_killed_run_leaves_nothing_a_later_run_accepts(tmp_path):
     env, root = panorama(tmp_path), tmp_path / "c"
     cmd = [sys.executable, "-m", "iblbake.cli", "mips", env, "--cache", str(root), "--size", "32",
@@ -123,6 +125,7 @@ def test_spectral_on_a_too_sharp_level_fails_before_any_bake(tmp_path):
     assert not root.exists() or not entries(root)
 
 
+@pytest.mark.slow
 def test_verify_measures_stores_and_reports(tmp_path):
     """--verify N: each level's relative RMSE against the float64 brute force at N texels, stored
     in the manifest (the files keep their hashes), equal to the benchmark's figures (the same

@@ -1,6 +1,7 @@
 """The bake cache's default home, `iblbake cache` and `cache prune`: least recently used first,
 and safe while other processes render from the same cache."""
 
+import pytest
 import json
 import os
 import subprocess
@@ -24,6 +25,7 @@ def test_default_cache_is_the_per_user_folder(monkeypatch):
     assert str(cache.default_root()) == "/somewhere"
 
 
+@pytest.mark.external
 def test_cache_lists_and_prunes_least_recently_used_first(tmp_path, small_panoramas):
     root = tmp_path / "c"
     for name in ("city", "studio"):
@@ -48,6 +50,8 @@ def test_cache_lists_and_prunes_least_recently_used_first(tmp_path, small_panora
     assert p.returncode == 2 and "500M" in p.stderr
 
 
+@pytest.mark.external
+@pytest.mark.kill
 def test_prune_while_two_renders_run_leaves_both_correct(tmp_path, small_panoramas):
     """A loop pruning the cache to nothing while two renders read it: every entry is old (an hour
     unused) when they start, so the pruner takes what they do not touch first; both renders finish

@@ -92,6 +92,7 @@ def test_primaries_convert_on_a_declared_exr(tmp_path):
     assert conv[-1, 0, 0] < -0.1 and info.negative > 0
 
 
+@pytest.mark.external
 def test_bakes_key_on_the_policies(tmp_path, small_panoramas):
     runs = {}
     for name, extra in [("keep", []), ("convert", ["--primaries", "convert"]), ("srgb", ["--input-transfer", "srgb"])]:

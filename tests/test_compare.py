@@ -2,6 +2,7 @@
 matches a fresh render cell by cell, a shifted highlight fails with the error of every cell
 printed, and bad pairs are one-line errors."""
 
+import pytest
 import json
 
 import numpy as np
@@ -25,6 +26,7 @@ def test_identical_images_pass_at_zero():
     assert len(doc["errors"]) == 4 and all(e["error"] == 0 for e in doc["errors"])
 
 
+@pytest.mark.slow
 def test_stored_reference_sheet_matches_a_fresh_render(tmp_path):
     r = make_reference.render_sheet(tmp_path)
     assert r.returncode == 0, r.stderr
@@ -34,6 +36,7 @@ def test_stored_reference_sheet_matches_a_fresh_render(tmp_path):
     print([e["error"] for e in json.loads(p.stdout)["errors"]])
 
 
+@pytest.mark.slow
 def test_shifted_highlight_fails_per_cell(tmp_path):
     r = make_reference.render_sheet(tmp_path, ["--set", "environment.rotation_y=15"])
     assert r.returncode == 0, r.stderr

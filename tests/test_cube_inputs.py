@@ -126,6 +126,7 @@ def test_bad_cube_maps_are_one_line(tmp_path, cube):
         inputs.read_environment(tmp_path / "odd.exr", layout="faces")
 
 
+@pytest.mark.slow
 def test_ktx2_reader_survives_mutation(tmp_path, cube):
     """500 mutated files (bytes flipped, cut, duplicated): each reads or fails with an
     InputError; nothing else escapes."""

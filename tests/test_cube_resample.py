@@ -65,6 +65,7 @@ def test_a_side_texel_inside_a_strip_is_a_rectangle_on_the_face():
     assert worst < 2e-15                                                                         # measured 5e-16
 
 
+@pytest.mark.slow
 def test_overlaps_match_dense_sampling():
     """600 x 600 points of equal solid angle in each of a few equirect texels (a pole, the face
     corners' latitude, the equator), each in the cube texel it falls in."""

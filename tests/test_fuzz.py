@@ -124,6 +124,7 @@ def assimp_models():
     return sorted(p for p in ASSIMP.rglob("*") if p.suffix.lower() in MESH_SUFFIXES)
 
 
+@pytest.mark.external
 def test_real_malformed_meshes_fail_with_one_line(tmp_path, stress, assimp_models):
     """Every OBJ/PLY/STL/OFF/glTF of assimp-testmodels (its invalid/ folder, out-of-range indices,
     infinities, schema failures, wrong types, Draco): loaded or refused in one line."""
@@ -148,6 +149,7 @@ def test_real_malformed_meshes_fail_with_one_line(tmp_path, stress, assimp_model
         assert by_name[name]["outcome"] == "ok", by_name[name]
 
 
+@pytest.mark.external
 def test_mutated_meshes_fail_cleanly(tmp_path, stress, assimp_models):
     rng = random.Random(7)
     seeds = [ASSIMP / n for n in ("PLY/cube_binary.ply", "PLY/cube.ply", "STL/Spider_binary.stl",
@@ -282,6 +284,7 @@ def hostile_document(base: str, text) -> bytes:
     return (text + yaml.safe_dump(doc, sort_keys=False)).encode()
 
 
+@pytest.mark.slow
 def test_scene_loader_fuzz(tmp_path, stress):
     """Hand-written hostile documents and random mutations of a scene touching every section:
     loaded and rendered (finite frame) or refused in one line naming the scene file; YAML tags
@@ -326,6 +329,7 @@ def test_hostile_scenes_through_the_cli(tmp_path, stress):
     stress.count("inputs fuzzed", 4)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("reader", ["ktx2", "layout"])
 def test_cube_map_readers_under_coverage_guided_fuzzing(tmp_path, stress, reader):
     """tests/fuzz_readers.py under atheris (libFuzzer's engine) per reader: the KTX2 parser

@@ -179,6 +179,7 @@ def export(lit, name, *extra):
     return out, json.loads(p.stdout)
 
 
+@pytest.mark.external
 def test_babylon_renders_the_light_as_iblbake_does(lit, babylon):
     """Babylon's render of the exported light equals iblbake's render of the panorama to about one
     8-bit step: measured 0.005 (mirror: an icosphere's interpolated normals against a sphere),
@@ -210,6 +211,7 @@ def validator():
     return run
 
 
+@pytest.mark.external
 def test_validator_accepts_gltf_and_glb(lit, validator):
     gl, _ = export(lit, "v.gltf")
     glb, summary = export(lit, "v.glb")
@@ -252,6 +254,7 @@ def test_faces_as_babylon_reads_them(lit):
     assert err.max() < 0.02, err.max()     # measured 0.011: RGBD's 8-bit step and the resampled panorama
 
 
+@pytest.mark.slow
 def test_bad_input_is_one_line(lit, tmp_path):
     cases = [(["-o", tmp_path / "x.png"], ".gltf or .glb"), (["-o", tmp_path / "x.gltf", "--size", "100"],
              "not a power of two"), (["-o", tmp_path / "x.gltf", "--size", "32", "--min-size", "64"], "larger than"),

@@ -80,6 +80,7 @@ def test_size_limit_is_checked_before_decoding(tmp_path, monkeypatch):
     assert called
 
 
+@pytest.mark.external
 def test_chromaticities_warning_for_city(panoramas):
     _, info = images.read_panorama(panoramas["city"])
     assert info.chromaticities and any("non-Rec.709" in w for w in info.warnings)

@@ -44,6 +44,7 @@ def test_linear_sky_is_pi_plus_two_pi_thirds_y():
     assert errs[-1] < 6e-5 and all(3.8 < a / b < 4.2 for a, b in zip(errs, errs[1:])), errs
 
 
+@pytest.mark.external
 def test_city_against_the_exact_sum(load_panorama):
     img = load_panorama("city").astype(np.float64)
     n = shbake.fibonacci_normals()
@@ -53,6 +54,7 @@ def test_city_against_the_exact_sum(load_panorama):
         assert err.max() < bound, (lmax, err.max())       # measured 1.4e-3 and 1.6e-4
 
 
+@pytest.mark.external
 def test_cli_cube_and_its_ktx2(tmp_path, small_panoramas):
     out = tmp_path / "irr.ktx2"
     p = run_cli("mips", small_panoramas["city"], "--cache", tmp_path / "c", "--only", "radiance", "--irradiance-size",

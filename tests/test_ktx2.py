@@ -53,6 +53,7 @@ def bake(tmp_path, env, fmt, *extra):
     return out, chain, doc
 
 
+@pytest.mark.external
 @pytest.mark.parametrize("fmt", list(VK))
 def test_ktx_parse_reads_every_level_and_face_back(tmp_path, small_panoramas, readers, fmt):
     out, chain, doc = bake(tmp_path, small_panoramas["city"], fmt)
@@ -94,6 +95,7 @@ def test_ktx_parse_reads_every_level_and_face_back(tmp_path, small_panoramas, re
         assert level["uncompressedByteLength"] == raw.nbytes
 
 
+@pytest.mark.external
 def test_libktx_opens_the_file(tmp_path, small_panoramas, readers):
     outs = [bake(tmp_path, small_panoramas["city"], fmt)[0] for fmt in VK]
     got, _ = readers("libktx_info.cjs", *outs)
@@ -123,6 +125,7 @@ def vulkan_face_texel(d, n):
     return face, t * n - 0.5, s * n - 0.5             # in texel-centre units
 
 
+@pytest.mark.external
 def test_marked_directions_land_on_their_face_and_texel(tmp_path, readers):
     """Six small bright spots (3 degrees across), one inside each face and off its centre (so a
     flipped or rotated face shows); level 0 (roughness 0: the panorama at each texel's
@@ -190,6 +193,7 @@ def test_shared_exponent_encoder():
     assert special.tolist() == [[0.0, 0.0, ktx2.E5_MAX], [ktx2.E5_MAX, 0.0, 0.0]]
 
 
+@pytest.mark.external
 def test_bad_ktx2_requests_are_one_line(tmp_path, small_panoramas):
     env = small_panoramas["city"]
     cases = [(["--layout", "equirect"], "--ktx2 writes a cube map"),

@@ -176,6 +176,7 @@ def busy(tmp_path_factory):
     return d, env, mesh
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("effects", [{"diffuse": "sh", "specular": "prefiltered"},
                                      {"diffuse": "reference", "specular": "reference",
                                       "reference": {"max_samples": 16, "target_noise": 0.0}}])
@@ -246,6 +247,7 @@ def test_bad_spot_cone_is_one_line(tmp_path, black_env):
 
 # --- the panorama's sun ------------------------------------------------------------------------------
 
+@pytest.mark.external
 @pytest.mark.parametrize("name", ["city", "interior", "sunrise"])
 def test_sun_extraction_keeps_the_energy(load_panorama, name):
     """Sun light + residual panorama on a plane facing the sun = the original's irradiance (0.1%:
@@ -271,6 +273,7 @@ def test_sun_extraction_keeps_the_energy(load_panorama, name):
     assert 0 < s.energy_fraction < 1 and (residual <= img[..., :3] + 1e-6).all()
 
 
+@pytest.mark.external
 @pytest.mark.parametrize("name", ["courtyard", "forest", "studio", "sunset"])
 def test_sunless_panoramas_extract_nothing(load_panorama, name):
     from iblbake.bake import sun as sunbake
@@ -279,6 +282,7 @@ def test_sunless_panoramas_extract_nothing(load_panorama, name):
     assert s is None and np.array_equal(residual, img[..., :3].astype(np.float32))
 
 
+@pytest.mark.external
 def test_extracted_sun_casts_a_shadow(tmp_path, panoramas):
     """city with sun: extract: the lights pass reports the sun, and where the sphere's shadow
     falls the plane loses exactly the sun's direct light, E cos(theta) kD albedo / pi (1%; SH
@@ -304,6 +308,7 @@ def test_extracted_sun_casts_a_shadow(tmp_path, panoramas):
     assert np.abs(lost / lambert(sun_e) - 1).max() < 0.01, (lost, lambert(sun_e))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("rough,radius", [(0.1, 0.3), (0.25, 0.3)])
 def test_sphere_light_highlight_at_its_representative_point(tmp_path, black_env, rough, radius):
     """A sphere light over a glossy metal plane seen at 17 degrees: the real-time highlight (the

@@ -38,7 +38,8 @@ def test_radiance_chain_constant_and_mean_preserving(baker, w, h):
         assert np.abs(radiance.solid_angle_mean(a) / m0 - 1).max() < 1e-5
 
 
-@pytest.mark.assets
+@pytest.mark.external
+@pytest.mark.external
 def test_radiance_chain_mean_on_real_panoramas(baker, load_panorama):
     for name in ("city", "studio", "sunset", "night"):
         levels, _ = baker.radiance_chain(load_panorama(name))
@@ -76,6 +77,7 @@ def test_mirror_level_is_the_source_resampled(baker, layout):
         assert np.abs(same - img).max() < 1e-5
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("roughness", [0.25, 0.6, 1.0])
 def test_opencl_prefilter_matches_numpy(baker, roughness):
     img = np.random.default_rng(2).random((16, 32, 3)).astype(np.float32) * 3
@@ -93,7 +95,8 @@ def test_opencl_prefilter_matches_numpy(baker, roughness):
         assert rel_err(got, ref) < 5e-4
 
 
-@pytest.mark.assets
+@pytest.mark.external
+@pytest.mark.external
 @pytest.mark.parametrize("name", ["city", "studio", "sunset"])
 def test_default_chain_against_bruteforce_at_64x32(baker, load_panorama, name):
     """Every default level of a 64x32 source within 2% relative RMSE of the brute-force reference
@@ -110,6 +113,7 @@ def test_default_chain_against_bruteforce_at_64x32(baker, load_panorama, name):
         assert metrics.relative_rmse(lvl, ref) < 0.02, (name, r, metrics.relative_rmse(lvl, ref))
 
 
+@pytest.mark.external
 def test_prefiltered_mean_close_to_source_mean(baker, load_panorama):
     for name in ("studio", "sunset"):
         levels, dev = baker.radiance_chain(load_panorama(name))
@@ -139,6 +143,7 @@ def test_dfg_table(baker):
     assert np.abs(ms[..., 0] - t[..., 1]).max() < 1e-5 and np.abs(ms[..., 1] - t.sum(-1)).max() < 1e-5
 
 
+@pytest.mark.slow
 def test_dfg_white_furnace_energy_below_one_and_converges(baker):
     """A + B is the single-scattering directional albedo of a white (F0 = 1) GGX surface: <= 1,
     1 at r = 0, and falls with roughness at grazing angles; the table converges with samples."""
@@ -202,7 +207,8 @@ def test_spectral_kernel_coefficients_match_direct_quadrature():
             assert abs(k[l] - v / norm) < 1e-10, (r, l)
 
 
-@pytest.mark.assets
+@pytest.mark.external
+@pytest.mark.external
 def test_spectral_against_bruteforce(baker, load_panorama):
     """A 32x16 reduction of city (its sun kept: the hardest case) at a sharp, a medium and a rough
     level, one per layout: within 0.3% relative RMSE of the float64 brute force (every texel,

@@ -15,12 +15,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 
 from iblbake.bake import cache
 from iblbake.io import images
 
-from .conftest import ROOT, run_cli, stress_scale, write_exr
+from .conftest import ROOT, run_cli, scene_file, stress_scale, write_exr
 
 
 def cli(*args):
@@ -95,6 +94,7 @@ def random_env(tmp_path_factory):
     return Path(write_exr(d / "e.exr", (np.random.default_rng(0).random((128, 256, 3)) * 3).astype(np.float32)))
 
 
+@pytest.mark.kill
 def test_kill_loop_mips(tmp_path, stress, random_env):
     root = tmp_path / "cache"
     cmd = cli("mips", random_env, "--cache", root, "--samples", "512", "--dfg-size", "64", "-q")
@@ -142,6 +142,7 @@ def test_ctrl_c_inside_an_extension_import_is_raised_after_it(module):
     assert p.stdout.strip() == "module"
 
 
+@pytest.mark.kill
 def test_a_held_ctrl_c_at_the_end_of_a_run_does_not_kill_it_with_an_alarm(tmp_path):
     """A Ctrl-C held back by an import that ends the run: the run's work is done and it exits 0,
     not by the retry alarm firing after Python restored SIGALRM's default (exit -14)."""
@@ -164,18 +165,15 @@ def test_a_held_ctrl_c_at_the_end_of_a_run_does_not_kill_it_with_an_alarm(tmp_pa
 
 
 def _scene(folder: Path, env: Path, **effects):
-    doc = {"camera": {"perspective": {"position": [0, 0, 4]}, "resolution": [160, 120]},
-           "environment": {"path": str(env), "background": "show"},
-           "materials": {"m": {"base_color": [0.9, 0.6, 0.3], "metallic": 0.5, "roughness": 0.4}},
-           "objects": [{"sphere": {"radius": 1}, "material": "m"}],
-           "effects": {"specular": "importance", "samples": 64, **effects},
-           "output": {"frame": ["out/frame.png", "out/frame.exr"], "normal": "out/normal.exr",
-                      "depth": "out/depth.exr"}}
-    p = folder / "scene.yaml"
-    p.write_text(yaml.safe_dump(doc))
-    return p
+    return scene_file(folder, env, camera={"perspective": {"position": [0, 0, 4]}, "resolution": [160, 120]},
+                      environment={"background": "show"},
+                      materials={"base_color": [0.9, 0.6, 0.3], "metallic": 0.5, "roughness": 0.4},
+                      effects={"specular": "importance", "samples": 64, **effects},
+                      output={"frame": ["out/frame.png", "out/frame.exr"], "normal": "out/normal.exr",
+                              "depth": "out/depth.exr"})
 
 
+@pytest.mark.kill
 def test_kill_loop_render(tmp_path, stress, random_env):
     scene = _scene(tmp_path, random_env)
     root = tmp_path / "cache"
@@ -193,6 +191,7 @@ def test_kill_loop_render(tmp_path, stress, random_env):
     kill_loop(stress, "render", cmd, stress_scale(12, 24), check, (0.2, 3.5), seed=4)
 
 
+@pytest.mark.kill
 def test_kill_loop_sheet(tmp_path, stress, random_env):
     """A 3 x 3 sheet with its frames and layout: a kill at any point leaves no partial sheet, frame
     or layout under its final name and no partial cache entry."""
@@ -233,6 +232,7 @@ def _shape(path: Path):
     return (s.height, s.width)
 
 
+@pytest.mark.kill
 def test_kill_loop_export_gltf(tmp_path, stress, random_env):
     """A .gltf light with its 30 face PNGs and a .glb: a kill leaves any PNG whole (or absent), the
     .gltf only once every PNG it names is there, no partial .glb and no partial cache entry."""
@@ -260,6 +260,7 @@ def test_kill_loop_export_gltf(tmp_path, stress, random_env):
                   (0.2, 2.5), seed=6 + k)
 
 
+@pytest.mark.kill
 def test_kill_loop_sh(tmp_path, stress):
     env = write_exr(tmp_path / "e.exr", np.random.default_rng(0).random((256, 512, 3)).astype(np.float32))
     out = tmp_path / "out.json"
@@ -280,6 +281,7 @@ def test_kill_loop_sh(tmp_path, stress):
     kill_loop(stress, "sh", cmd, stress_scale(20, 24), check, (0.01, 0.8), seed=2)   # from start-up on
 
 
+@pytest.mark.kill
 def test_ctrl_c_on_a_fresh_install_is_exit_130(tmp_path):
     """Ctrl-C in the first milliseconds of a fresh clone's first run, every module compiled from
     source (a copy of the package with no __pycache__, PYTHONDONTWRITEBYTECODE): exit 130, 0 or
@@ -386,6 +388,7 @@ def warm(random_env, tmp_path_factory):
     return d
 
 
+@pytest.mark.slow
 def test_file_size_limit_fails_cleanly(tmp_path, stress, random_env, warm):
     """A write that hits the file-size limit (RLIMIT_FSIZE: what a full disk looks like to a
     writer) gives a one-line error naming the file; no final or temp file is left."""

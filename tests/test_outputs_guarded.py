@@ -92,6 +92,7 @@ def test_the_walk_covers_every_writing_option():
     assert {(c, o) for c, o, *_ in CASES} == WRITES
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("command, option, read, argv, name", CASES, ids=[f"{c[0]}-{c[1]}-{c[2]}" for c in CASES])
 def test_no_output_is_an_input(files, stress, command, option, read, argv, name):
     """Each writing option given (through a symlink) a file the command reads: one line naming the
@@ -231,6 +232,7 @@ def test_sh_validates_every_input_before_writing(files):
     assert p.returncode == 1 and "bad.exr" in p.stderr and not out.exists(), p.stderr
 
 
+@pytest.mark.slow
 def test_missing_output_folders_are_made_by_every_command(files):
     """One rule: a missing folder is created when the output is written (never before the work,
     so a failed command leaves none)."""

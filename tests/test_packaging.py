@@ -1,5 +1,6 @@
 """kernels/ ships inside the package: an editable install and a built wheel both find it."""
 
+import pytest
 import subprocess
 import sys
 import zipfile
@@ -18,6 +19,7 @@ def test_installed_package_finds_every_kernel():
     assert '#include "' not in cl.kernel_source("mips.cl")
 
 
+@pytest.mark.slow
 def test_wheel_contains_the_kernels(tmp_path):
     import shutil
     src = tmp_path / "src"           # a copy: the build leaves build/ and egg-info beside its source

@@ -7,7 +7,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 
 from iblbake.core import conventions
 from iblbake.io import images
@@ -19,23 +18,16 @@ from iblbake.scene import pack
 from iblbake.render import twin as rr
 from iblbake.scene import load as scene
 
-from .conftest import run_cli
+from .conftest import run_cli, scene_file
 
 LUM = np.array([0.2126, 0.7152, 0.0722])
 
 
 def make_scene(folder, env_path, materials, *, objects=None, res=64, effects=None, camera=None,
                background="hide", output=None, rotation_y=0.0):
-    doc = {"camera": camera or {"perspective": {"position": [0, 0, 3], "fov_y": 45}, "resolution": [res, res]},
-           "environment": {"path": str(env_path), "background": background, "rotation_y": rotation_y},
-           "materials": materials if "base_color" not in materials else {"m": materials},
-           "objects": objects or [{"sphere": {"radius": 1}, "material": "m"}],
-           "effects": effects or {}}
-    if output:
-        doc["output"] = output
-    p = Path(folder) / "scene.yaml"
-    p.write_text(yaml.safe_dump(doc))
-    return p
+    return scene_file(folder, env_path, materials=materials, objects=objects, effects=effects or {}, output=output,
+                      camera=camera or {"perspective": {"position": [0, 0, 3], "fov_y": 45}, "resolution": [res, res]},
+                      environment={"background": background, "rotation_y": rotation_y})
 
 
 def render_scene(path, cache, overrides=()):
@@ -99,6 +91,7 @@ def dfg_fine():
 
 # --- white furnace ------------------------------------------------------------------------------
 
+@pytest.mark.slow
 @pytest.mark.parametrize("metallic", [0.0, 1.0])
 @pytest.mark.parametrize("specular", ["importance", "prefiltered", "lobe", "reference"])
 def test_white_furnace(tmp_path, constant_env, dfg_fine, metallic, specular):
@@ -172,6 +165,7 @@ def busy_scene(folder, env, mesh, camera=None, effects=None):
                                         "spp": 2})
 
 
+@pytest.mark.external
 @pytest.mark.parametrize("projection", ["perspective", "orthographic"])
 def test_gbuffer_matches_numpy(tmp_path, small_panoramas, mesh_file, rt, projection):
     cam = {projection: {"position": [0, 1, 3], **({"fov_y": 50} if projection == "perspective" else {"width": 3})},
@@ -201,6 +195,7 @@ def prefiltered_bakes(frame):
             "dfg": images.read_exr(Path(rep["dfg"]["entry"]) / "dfg.exr")[..., :2].astype(np.float64)}
 
 
+@pytest.mark.external
 @pytest.mark.parametrize("effects", [
     {"diffuse": "sh", "specular": "off"},
     {"diffuse": "off", "specular": "importance", "samples": 16},
@@ -234,6 +229,7 @@ def test_shade_matches_numpy(tmp_path, small_panoramas, mesh_file, effects):
     assert np.median(rel) < 1e-4 and np.quantile(rel, 0.98) < 2e-3, (np.median(rel), np.quantile(rel, 0.98))
 
 
+@pytest.mark.external
 def test_reference_converges_to_exact_integral(tmp_path, small_panoramas, load_panorama):
     """The Monte Carlo reference against quadrature over every texel (64x32 city, so the
     quadrature is cheap): relative RMSE < 1% on the sphere for a rough metal and a dielectric."""
@@ -253,6 +249,7 @@ def test_reference_converges_to_exact_integral(tmp_path, small_panoramas, load_p
         assert metrics.relative_rmse(got, want.reshape(24, 24, 3)[hit]) < 0.01
 
 
+@pytest.mark.external
 @pytest.mark.parametrize("env", ["city", "studio"])
 def test_modes_agree_with_reference(tmp_path, panoramas, shared_cache, env):
     """Against the converged reference, relative RMSE on the sphere pixels (metal, r >= 0.25).
@@ -295,6 +292,7 @@ def test_modes_agree_with_reference(tmp_path, panoramas, shared_cache, env):
     assert errs[3] < 0.08 and errs[5] < 0.03 and errs[5] < errs[3]
 
 
+@pytest.mark.external
 @pytest.mark.parametrize("k", [1, 4])
 def test_lobe_on_a_mirror_is_the_split_sum(tmp_path, small_panoramas, k):
     """Roughness 0: every visible-normal sample is the normal, so `lobe` reads level 0 at R
@@ -339,6 +337,7 @@ def exact_dfg(nov, alpha, n_samples=16384):
     return a / n_samples, b / n_samples
 
 
+@pytest.mark.external
 @pytest.mark.parametrize("env", ["city", "studio", "courtyard"])
 def test_prefiltered_matches_split_sum_oracle(tmp_path, small_panoramas_all, shared_cache, env):
     """The split sum, computed exactly: per pixel, the float64 prefiltered integral at the
@@ -387,6 +386,7 @@ def render_defines(frame):
     return [b["defines"] for b in frame.report["kernel_builds"] if "shade.cl" in b["kernel"].split("+")]
 
 
+@pytest.mark.external
 def test_effect_set_bakes_only_what_is_read(tmp_path, small_panoramas):
     env = small_panoramas["studio"]
     mat = {"base_color": [0.8, 0.8, 0.8], "metallic": 0, "roughness": 0.5}
@@ -420,6 +420,7 @@ def test_effect_set_bakes_only_what_is_read(tmp_path, small_panoramas):
     assert "sh" not in bakes_of(f) and f.report["effects"]["diffuse"] == "off"
 
 
+@pytest.mark.external
 def test_report_cli_and_kernel_cache(tmp_path, small_panoramas):
     """--report --json lists passes and bakes; the second run hits every cache and builds
     nothing new on disk (pyopencl's binary cache)."""
@@ -439,6 +440,7 @@ def test_report_cli_and_kernel_cache(tmp_path, small_panoramas):
     assert rep["outputs"] == [str(out)]
 
 
+@pytest.mark.external
 def test_determinism_and_outputs(tmp_path, small_panoramas, mesh_file):
     p = busy_scene(tmp_path, small_panoramas["city"], mesh_file,
                    effects={"diffuse": "reference", "specular": "importance", "samples": 8,

@@ -134,12 +134,14 @@ def city_small(load_panorama):
     return img[::4, ::4].copy()              # 256 x 128 texels: the sun still dominates
 
 
+@pytest.mark.external
 def test_environment_sampler_numpy_chi2(city_small):
     dist = sampling.EnvironmentDistribution(city_small)
     d, _ = dist.sample(uniforms(dims=4))
     chi2_test(histogram(np.stack([d[:, 0], d[:, 2], d[:, 1]], -1)), expected(env_pdf_world(dist)), "numpy environment (city)")
 
 
+@pytest.mark.external
 def test_environment_sampler_opencl_chi2(rt, city_small):
     dist = sampling.EnvironmentDistribution(city_small)
     u = uniforms(dims=4).astype(np.float32)
@@ -153,6 +155,7 @@ def test_environment_sampler_opencl_chi2(rt, city_small):
     assert (r[:, 3].astype(np.int64) == texels).mean() > 0.999     # the same texel choice (float32 CDF ties aside)
 
 
+@pytest.mark.external
 def test_environment_pdf_integrates_to_one(city_small):
     dist = sampling.EnvironmentDistribution(city_small)
     omega = conventions.equirect_solid_angles(dist.width, dist.height)

@@ -65,6 +65,7 @@ def test_opencl_basis_matches_numpy(rt, bands):
     assert np.abs(got - sh.sh_basis(d, bands)).max() < 2e-5
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("w,h", [(1, 1), (2, 1), (7, 3), (50, 24)])
 def test_separable_form_equals_direct_texel_quadrature(w, h):
     img = np.random.default_rng(1).random((h, w, 3))
@@ -164,7 +165,8 @@ def test_single_bright_texel(rt, backend, bands):
         assert abs(turned - 90) < 3 and abs(peak[1] - d[1]) < 0.05
 
 
-@pytest.mark.assets
+@pytest.mark.external
+@pytest.mark.external
 @pytest.mark.parametrize("bands", [3, 8])
 def test_opencl_matches_numpy_on_real_panoramas(rt, load_panorama, bands):
     from .conftest import PANORAMA_NAMES

@@ -59,6 +59,7 @@ def rel(got, want):
     return float(np.abs(got - want).max() / np.abs(want).max())
 
 
+@pytest.mark.external
 def test_filament(baked):
     lines = [ln for ln in export(baked, "filament").splitlines() if ln.strip()]
     c = np.array([[float(v) for v in ln.split(";")[0].strip("() ").split(",")] for ln in lines])
@@ -69,6 +70,7 @@ def test_filament(baked):
     assert rel(diffuse, np.maximum(baked["E"], 0) / math.pi) < 1e-5
 
 
+@pytest.mark.external
 def test_threejs(baked):
     doc = json.loads(export(baked, "threejs"))
     c = np.array(doc["sh"]).reshape(9, 3)
@@ -81,6 +83,7 @@ def test_threejs(baked):
     assert rel(t, baked["E"]) < 1e-5
 
 
+@pytest.mark.external
 def test_gltf_as_babylon_reads_it(baked):
     doc = json.loads(export(baked, "gltf"))
     c = np.array(doc["irradianceCoefficients"])
@@ -129,6 +132,7 @@ def glsl_eval(src: str, d: np.ndarray) -> np.ndarray:
     return out
 
 
+@pytest.mark.external
 @pytest.mark.parametrize("bands", [3, 5])
 def test_glsl(baked, tmp_path, bands):
     src = export(baked, "glsl", "--bands", str(bands))
@@ -145,6 +149,7 @@ def test_glsl(baked, tmp_path, bands):
     assert p.returncode == 0, p.stdout + p.stderr
 
 
+@pytest.mark.external
 def test_format_limits_and_files(baked, tmp_path):
     p = run_cli("sh", baked["env"], "--format", "threejs", "--bands", "4")
     assert p.returncode == 2 and "at most 3 bands" in p.stderr

@@ -58,6 +58,7 @@ def quadrature_albedo(nov, r, nmu=800, nphi=4096):
     return float((f * wmu[:, None]).sum() * 2 * math.pi / nphi)
 
 
+@pytest.mark.slow
 def test_sheen_table_against_the_quadrature(rt):
     """4096 Hammersley samples: within 4e-4 of the converged integral (measured 2.3e-4 worst,
     at r = 1/32, NoV = 1/8), the kernel within 2e-5 of its twin."""
@@ -71,6 +72,7 @@ def test_sheen_table_against_the_quadrature(rt):
             assert abs(twin[j, i] - quadrature_albedo(nov, r)) < 4e-4, (r, nov)
 
 
+@pytest.mark.external
 def test_sheen_chain_constant_and_brute_force(load_panorama):
     const = np.full((32, 64, 3), [0.5, 1.0, 2.0])
     dirs = [layouts.layout_dirs("equirect", 8)]
@@ -87,6 +89,7 @@ def test_sheen_chain_constant_and_brute_force(load_panorama):
         assert err < 1e-3, (r, err)                   # measured 1.8e-4 .. 4.2e-4
 
 
+@pytest.mark.external
 def test_cli_sheen_chain_table_and_ktx2(tmp_path, small_panoramas):
     out = tmp_path / "sheen.ktx2"
     p = run_cli("mips", small_panoramas["city"], "--cache", tmp_path / "c", "--only", "prefiltered", "--sheen",

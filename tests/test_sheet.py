@@ -41,6 +41,7 @@ def read_png(path):
     return oiio.ImageBuf(str(path)).get_pixels(oiio.UINT8)
 
 
+@pytest.mark.external
 def test_two_by_three_sheet_cells_equal_rendered_frames(tmp_path, small_panoramas):
     scene = sheet_scene(tmp_path, small_panoramas["city"], SWEEP)
     out, mosaic = tmp_path / "sheet.png", tmp_path / "sheet.exr"
@@ -86,6 +87,7 @@ class _Stub:
         self.report = {"reused": []}
 
 
+@pytest.mark.external
 def test_tonemap_sweep_lights_once_and_roughness_sweep_traces_once(tmp_path, small_panoramas):
     scene = sheet_scene(tmp_path, small_panoramas["studio"])
     p = run_cli("sheet", scene, "-o", tmp_path / "t.png", "--columns", "effects.tonemap=aces,reinhard,hable",
@@ -103,6 +105,7 @@ def test_tonemap_sweep_lights_once_and_roughness_sweep_traces_once(tmp_path, sma
     assert all(c["reused"] == ["gbuffer"] for c in cells[1:]), cells
 
 
+@pytest.mark.external
 def test_a_metallic_axis_samples_the_panorama_once_per_roughness(tmp_path, small_panoramas):
     """Importance sampling splits around Fresnel (kernels/shade.cl importance): cells differing only
     in metallic reuse the two sums, the sheet goes down each metallic column to do so (rendering
@@ -131,6 +134,7 @@ def test_cli_axis_shorthand():
         [1, 2, 4, 8, 16, 32, 64, 128, 256]
 
 
+@pytest.mark.external
 @pytest.mark.parametrize("spec, words", [
     ({"rows": {"key": "materials.gold.roughnes", "values": [0, 1]}}, ["sweep.rows", "roughnes", "roughness"]),
     ({"rows": {"key": "materials.silver.roughness", "values": [0]}}, ["sweep.rows", "silver"]),
@@ -155,6 +159,7 @@ def test_bad_sweep_specs_fail_in_one_line_and_write_nothing(tmp_path, small_pano
     assert not out.exists()
 
 
+@pytest.mark.external
 def test_keep_going_marks_the_failed_cell(tmp_path, small_panoramas):
     scene = sheet_scene(tmp_path, small_panoramas["studio"])
     out = tmp_path / "k.png"
@@ -166,6 +171,7 @@ def test_keep_going_marks_the_failed_cell(tmp_path, small_panoramas):
     assert out.exists()
 
 
+@pytest.mark.external
 def test_makefile_rebuilds_only_what_reads_a_touched_input(tmp_path, small_panoramas):
     """Two scenes on two panoramas, a Makefile with `-include *.d` from --depfile: a second make
     does nothing; touching one panorama rebuilds only the frame and the sheet that read it; the
@@ -208,6 +214,7 @@ def test_makefile_rebuilds_only_what_reads_a_touched_input(tmp_path, small_panor
     assert after["studio.png"] == before["studio.png"]
 
 
+@pytest.mark.external
 def test_sh_and_mips_take_several_panoramas(tmp_path, small_panoramas):
     out = tmp_path / "sh"
     p = run_cli("sh", small_panoramas["city"], small_panoramas["studio"], "-o", f"{out}/", "--json",
@@ -231,6 +238,7 @@ def _sheet(scene, tmp_path, *args):
     return p, (json.loads(p.stdout) if p.returncode == 0 and p.stdout.strip() else None)
 
 
+@pytest.mark.external
 def test_shards_then_assemble_equal_the_serial_sheet(tmp_path, small_panoramas):
     """Shards 1/3, 2/3, 3/3 (the cells sorted by key and dealt round-robin: each cell in exactly
     one, two each) leave their cells in the cache; --assemble builds the sheet from them, equal byte for byte to the serial one,
@@ -259,6 +267,7 @@ def test_shards_then_assemble_equal_the_serial_sheet(tmp_path, small_panoramas):
     assert np.array_equal(images.read_exr(tmp_path / "a.exr"), images.read_exr(tmp_path / "serial.exr"))
 
 
+@pytest.mark.external
 def test_resume_renders_only_the_missing_cells(tmp_path, small_panoramas):
     """A run that stopped part way (here: one shard of two) left its cells in the cache; --resume
     reads those back and renders the rest; without --resume every cell renders again."""
@@ -273,6 +282,7 @@ def test_resume_renders_only_the_missing_cells(tmp_path, small_panoramas):
     assert not any(c["cached"] for c in doc["cells"])
 
 
+@pytest.mark.external
 def test_cells_are_shared_by_checkouts_in_other_folders(tmp_path, small_panoramas):
     """A cell's key holds its files' content, not their paths: a CI job whose checkout lies
     elsewhere renders the cells the other jobs assemble from one shared cache."""
@@ -287,6 +297,7 @@ def test_cells_are_shared_by_checkouts_in_other_folders(tmp_path, small_panorama
     assert all(c["cached"] for c in doc["cells"])
 
 
+@pytest.mark.external
 def test_two_jobs_equal_the_serial_sheet(tmp_path, small_panoramas):
     """--jobs 2: two worker processes, each its own runtime; bakes built once in the shared cache;
     the sheet equals the serial one byte for byte."""
@@ -303,6 +314,7 @@ def test_two_jobs_equal_the_serial_sheet(tmp_path, small_panoramas):
     assert len(built) == 1
 
 
+@pytest.mark.external
 def test_time_captions_are_medians_of_warm_full_frames(tmp_path, small_panoramas):
     """--caption time times every cell as --repeat full frames after a warm-up (3 by default),
     the caption the median, --json every repeat; the cells' pixels are the untimed sheet's."""
@@ -320,6 +332,7 @@ def test_time_captions_are_medians_of_warm_full_frames(tmp_path, small_panoramas
         assert np.array_equal(images.read_exr(tmp_path / f"t{k}.exr"), images.read_exr(tmp_path / "plain.exr"))
 
 
+@pytest.mark.external
 @pytest.mark.parametrize("settings", [[], ["effects.tonemap=hable", "effects.exposure=0.7"],
                                       ["output.dither=true", "effects.output_transfer=gamma"],
                                       ["effects.tonemap=pbr_neutral", "effects.specular=importance"]])

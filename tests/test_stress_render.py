@@ -13,7 +13,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 
 from iblbake.core import brdf
 from iblbake.core import conventions as cv
@@ -27,6 +26,7 @@ from iblbake.render import twin as rr
 from iblbake.core import sampling
 from iblbake.scene import load as scene
 
+from .conftest import scene_file
 from .test_render import prefiltered_bakes
 
 EXTREMES = [(r, m, b) for r in (0.0, 1e-4, 0.5, 1.0) for m in (0.0, 1.0) for b in (0.0, 1.0)]
@@ -45,13 +45,8 @@ def dfg_fine():
 
 
 def write_scene(folder: Path, env, materials: dict, objects: list, camera: dict, effects: dict, output=None):
-    doc = {"camera": camera, "environment": {"path": str(env), "background": "hide"},
-           "materials": materials, "objects": objects, "effects": effects}
-    if output:
-        doc["output"] = output
-    p = folder / "scene.yaml"
-    p.write_text(yaml.safe_dump(doc))
-    return scene.load(p)
+    return scene.load(scene_file(folder, env, materials=materials, objects=objects, camera=camera, effects=effects,
+                                 output=output))
 
 
 def furnace_prediction(gb, arrays, table):
@@ -115,6 +110,7 @@ def check_furnace(stress, case, sc, frame, env_image, table, bound=None):
 
 # --- materials at their extremes -----------------------------------------------------------------
 
+@pytest.mark.slow
 @pytest.mark.parametrize("specular", ["importance", "prefiltered", "reference"])
 def test_material_extremes_white_furnace(tmp_path, stress, one_env, dfg_fine, specular):
     """Roughness 0, 1e-4, 0.5, 1 x metallic 0, 1 x base_color 0, 1: sixteen spheres (silhouettes
@@ -147,6 +143,7 @@ def _tilted_quad(folder: Path):
     return p
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("specular", ["importance", "prefiltered", "reference"])
 def test_normals_facing_away_back_faces_and_inside_a_sphere(tmp_path, stress, one_env, dfg_fine, specular):
     quad = _tilted_quad(tmp_path)
@@ -191,6 +188,7 @@ def _stretched_icosphere(folder: Path):
     return p
 
 
+@pytest.mark.external
 @pytest.mark.parametrize("scale", [1e6, 1e-6])
 def test_huge_and_tiny_coordinates_render_like_unit_scale(tmp_path, stress, load_panorama, scale):
     """The same mesh, sphere and plane at 1e6 and 1e-6 units with the camera scaled alike: the same
@@ -342,6 +340,7 @@ def test_importance_mip_selection_pdf_extremes(tmp_path, stress, one_env, dfg_fi
 
 # --- suns through the renderer --------------------------------------------------------------------
 
+@pytest.mark.slow
 @pytest.mark.parametrize("value", [1e4, 6.5e4, 1e6])
 def test_sun_panorama_through_every_mode(tmp_path, stress, value):
     """One texel of 1e4 / 6.5e4 (half max) / 1e6 over black: every mode renders a finite frame, and

@@ -19,7 +19,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 
 from iblbake.io import images
 from iblbake.io.color import srgb_decode
@@ -29,6 +28,7 @@ from iblbake.scene import load as scene
 from iblbake.scene import pack
 
 from .conftest import run_cli, write_exr
+from .conftest import scene_file as write_scene_file
 
 QUAD_V = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], float)
 QUAD_F = np.array([[0, 1, 2], [0, 2, 3]])
@@ -104,16 +104,10 @@ def flat_env(folder, value=(0.5, 0.5, 0.5), spot=None, size=256):
 
 
 def scene_file(folder, materials, objects, *, camera=None, effects=None, env=None, background="hide", res=(64, 64)):
-    doc = {"camera": camera or {"orthographic": {"position": [0, 0, 3], "look_at": [0, 0, 0], "width": 2},
-                                "resolution": list(res)},
-           "environment": {"path": env or flat_env(folder), "background": background},
-           "materials": materials, "objects": objects,
-           "effects": {"tonemap": "linear", **(effects or {})}}
-    if "resolution" not in doc["camera"]:
-        doc["camera"]["resolution"] = list(res)
-    p = Path(folder) / "scene.yaml"
-    p.write_text(yaml.safe_dump(doc))
-    return p
+    camera = dict(camera or {"orthographic": {"position": [0, 0, 3], "look_at": [0, 0, 0], "width": 2}})
+    camera.setdefault("resolution", list(res))
+    return write_scene_file(folder, env or flat_env(folder), materials=materials, objects=objects, camera=camera,
+                            environment={"background": background}, effects={"tonemap": "linear", **(effects or {})})
 
 
 def render_scene(path, cache, aovs=(), **load_kw):
@@ -128,6 +122,7 @@ EMISSIVE_ONLY = {"diffuse": "off", "specular": "off"}
 
 # --- values --------------------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_constant_texture_equals_the_factor(tmp_path):
     """A constant base colour map (8-bit sRGB) times a factor equals the material whose factor is
     their product, through SH diffuse and prefiltered specular: 1e-6 of the peak (measured 1.3e-7;
@@ -165,6 +160,7 @@ def test_srgb_decode_is_the_formula(tmp_path):
     assert np.abs(got - want).max() < 1e-6
 
 
+@pytest.mark.slow
 def test_flat_normal_map_changes_nothing(tmp_path):
     """A flat normal map changes nothing: at scale 0 (exactly (0, 0, 1)) the frame of a glossy metal
     quad under a lit sky in perspective equals the frame without the map to 1e-6 of its peak
@@ -207,6 +203,7 @@ def highlight_pixel(spot, normal, cam_pos, fov_y, res):
     return (x + 1) / 2 * res[0], (1 - y) / 2 * res[1]
 
 
+@pytest.mark.slow
 def test_tilted_normal_map_moves_the_highlight(tmp_path):
     """A constant normal map tilted 20 degrees towards +u (the quad's +x): the mirror-like highlight of
     a small bright disk moves to where reflection about the tilted normal puts it, within half a
@@ -381,6 +378,7 @@ def test_texture_transform_wrap_and_texcoord1_hand_computed(tmp_path):
             assert not bad.any(), (wrap, offset, rot, scale, texcoord, int(bad.sum()))
 
 
+@pytest.mark.slow
 def test_alpha_mask_cuts_out(tmp_path):
     """A base colour map whose alpha is a disk of radius 0.35 (of the texture's width), MASK with
     cutoff 0.5 (trimesh writes alphaMode and alphaCutoff): outside it the background colour shows
@@ -428,6 +426,7 @@ def five_map_scene(tmp_path, res=(96, 64)):
                       effects={"diffuse": "sh", "specular": "prefiltered"})
 
 
+@pytest.mark.slow
 def test_textured_kernels_match_their_twin(tmp_path):
     """Every map kind on a glTF quad (the file's material), a sphere and a finite plane (a scene
     material with a transform and mirrored wrap): the kernel's albedo and normal AOVs and its
@@ -465,6 +464,7 @@ def test_textured_kernels_match_their_twin(tmp_path):
     assert full.sum() > 2000
 
 
+@pytest.mark.slow
 def test_untextured_scene_compiles_no_texture_code(tmp_path):
     mesh = quad_glb(tmp_path / "q.glb")
     p = scene_file(tmp_path, {"m": {"base_color": [0.5, 0.5, 0.5]}}, [{"mesh": {"path": mesh}, "material": "m"}])
@@ -484,6 +484,7 @@ def test_untextured_scene_compiles_no_texture_code(tmp_path):
     assert defines & textured == {"HAS_TEXTURES", "HAS_BASE_COLOR_MAP", "HAS_SINGLE_SIDED"}
 
 
+@pytest.mark.external
 def test_real_textured_model(tmp_path):
     """assimp-testmodels' BoxTextured (the Khronos sample: a GLB with an embedded PNG), its own
     material: the albedo AOV is the texture, the kernel's equal to the twin's within 2e-6 (measured

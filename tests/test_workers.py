@@ -64,6 +64,8 @@ def once_each_bake(results):
     return built
 
 
+@pytest.mark.external
+@pytest.mark.kill
 def test_pool_worker_killed_mid_sweep_loses_nothing(tmp_path, grid):
     """--jobs 2 on a fresh cache, one worker SIGKILLed after the first finished cell: the pool
     starts again for the unfinished cells (counted), every cell equals the serial one, and no
@@ -86,6 +88,8 @@ def test_pool_worker_killed_mid_sweep_loses_nothing(tmp_path, grid):
     assert len(once_each_bake(results)) >= 2 and set(once_each_bake(results).values()) <= {0, 1}
 
 
+@pytest.mark.external
+@pytest.mark.kill
 def test_dask_local_cluster_equals_serial_and_survives_a_killed_worker(tmp_path, grid):
     """A LocalCluster of 2 worker processes: the cells equal the serial ones; one worker SIGKILLed
     after the first finished cell: Dask reschedules what it held, the nanny restarts it, the
@@ -112,6 +116,7 @@ def test_dask_local_cluster_equals_serial_and_survives_a_killed_worker(tmp_path,
     assert summary["retried_cells"] >= 1 and sum(w["cells"] for w in summary["workers"]) == 16
 
 
+@pytest.mark.external
 def test_cli_scheduler_local_and_jobs_equal_serial(tmp_path, small_panoramas):
     """The command line: --scheduler local --jobs 2 and --jobs 2 --devices cpu,cpu:0 write the
     serial sheet byte for byte, with each worker in the summary."""
@@ -136,6 +141,7 @@ def test_cli_scheduler_local_and_jobs_equal_serial(tmp_path, small_panoramas):
     assert outs["jobs"]["workers"]["devices"] == ["cpu", "cpu:0"]
 
 
+@pytest.mark.external
 def test_a_bad_cell_fails_once_with_its_error(tmp_path, small_panoramas):
     """A cell whose render fails (its panorama is not an EXR, which only decoding finds) comes
     back as its one-line error, not retried: --keep-going marks it and the rest render."""
@@ -150,6 +156,7 @@ def test_a_bad_cell_fails_once_with_its_error(tmp_path, small_panoramas):
     assert "gone.exr" in p.stderr and "Traceback" not in p.stderr
 
 
+@pytest.mark.external
 def test_scheduler_without_dask_says_what_to_install(tmp_path, small_panoramas):
     scene = sheet_scene(tmp_path, small_panoramas["city"], GRID, res=(16, 12))
     code = ("import sys; sys.modules['distributed'] = None; from iblbake.entry import main; "
@@ -160,6 +167,8 @@ def test_scheduler_without_dask_says_what_to_install(tmp_path, small_panoramas):
     assert "pip install 'iblbake[distributed]'" in p.stderr and not (tmp_path / "s.png").exists()
 
 
+@pytest.mark.external
+@pytest.mark.kill
 def test_resume_after_sigkill_of_the_whole_sweep(tmp_path, small_panoramas):
     """SIGKILL of `iblbake sheet` part way: --resume reads back exactly the cells whose entries
     the killed run finished and renders the others."""
@@ -180,6 +189,7 @@ def test_resume_after_sigkill_of_the_whole_sweep(tmp_path, small_panoramas):
     assert sum(c["cached"] for c in cells) == len(finished)
 
 
+@pytest.mark.external
 def test_unreachable_scheduler_is_one_line(tmp_path, small_panoramas):
     pytest.importorskip("distributed")
     scene = sheet_scene(tmp_path, small_panoramas["city"], GRID, res=(16, 12))
