@@ -378,8 +378,7 @@ def cube_to_equirect_cl(rt, faces: np.ndarray) -> np.ndarray:
     items = min(-(-columns // block), 4 * rt.info.device.max_compute_units) if cpu else columns
     out = rt.empty(h * w * 12)
     scratch = rt.empty(items * block * 8 * h * 3 * 8)
-    k = rt.kernel("cube_input.cl", "cube_to_equirect", {"BLOCK": block})
-    rt.run(k, (items,), (1,) if cpu else None,
-           rt.to_device(np.ascontiguousarray(faces[..., :3], np.float32)), rt.to_device(symmetries()),
-           rt.to_device(row_edges(h)), np.int32(s), np.int32(w), np.int32(h), scratch, out)
+    rt.launch("cube_input.cl", "cube_to_equirect", {"BLOCK": block}, (items,), local_size=(1,) if cpu else None,
+              faces=rt.to_device(np.ascontiguousarray(faces[..., :3], np.float32)), sym=rt.to_device(symmetries()),
+              ys=rt.to_device(row_edges(h)), s=s, w=w, h=h, scratch=scratch, out=out)
     return rt.read_mapped(out, (h, w, 3))

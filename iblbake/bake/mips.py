@@ -152,22 +152,21 @@ class OpenCLBaker:
         offsets = np.cumsum([0] + [w * h for w, h in sizes])
         buf = rt.empty(int(offsets[-1]) * 12)
         rt.cl.enqueue_copy(rt.queue, buf, np.ascontiguousarray(np.asarray(image)[..., :3], np.float32))
-        k = rt.kernel("mips.cl", "downsample")
         for lvl in range(1, len(sizes)):
             (sw, sh), (dw, dh) = sizes[lvl - 1], sizes[lvl]
-            rt.run(k, (dw, dh), None, buf, np.int32(offsets[lvl - 1]), np.int32(sw), np.int32(sh),
-                   np.int32(offsets[lvl]), np.int32(dw), np.int32(dh))
+            rt.launch("mips.cl", "downsample", None, (dw, dh), chain=buf, src_off=offsets[lvl - 1], sw=sw, sh=sh,
+                      dst_off=offsets[lvl], dw=dw, dh=dh)
         flat = rt.read(buf, (int(offsets[-1]), 3))
         levels = [flat[offsets[i]:offsets[i + 1]].reshape(h, w, 3) for i, (w, h) in enumerate(sizes)]
         return levels, (buf, offsets, sizes)
 
-    def _chain_args(self, device_chain):
+    def _chain_args(self, device_chain) -> dict:
+        """CHAIN_PARAMS (kernels/envmap.h) of a device chain, by name."""
         buf, offsets, sizes = device_chain
         rt = self.rt
-        off = rt.to_device(np.asarray(offsets[:-1], np.int32))
-        lw = rt.to_device(np.asarray([w for w, _ in sizes], np.int32))
-        lh = rt.to_device(np.asarray([h for _, h in sizes], np.int32))
-        return (buf, off, lw, lh, np.int32(len(sizes)))
+        return {"chain": buf, "off": rt.to_device(np.asarray(offsets[:-1], np.int32)),
+                "lw": rt.to_device(np.asarray([w for w, _ in sizes], np.int32)),
+                "lh": rt.to_device(np.asarray([h for _, h in sizes], np.int32)), "nlev": len(sizes)}
 
     def prefilter_level(self, device_chain, layout: str, s: int, roughness: float, n_samples: int,
                         lod_bias: float = 0.0, fis: bool = True):
@@ -179,13 +178,11 @@ class OpenCLBaker:
         chain_args = self._chain_args(device_chain)
         global_size = (-(-n // 64) * 64,)
         if roughness == 0.0:
-            k = rt.kernel("mips.cl", "resample", defines)
-            rt.run(k, global_size, None, *chain_args, np.int32(s), np.int32(n), out)
+            rt.launch("mips.cl", "resample", defines, global_size, chain_args, size=s, ntexels=n, out=out)
         else:
             ss = prefilter.ggx_sample_set(roughness * roughness, n_samples)
-            k = rt.kernel("mips.cl", "prefilter", defines)
-            rt.run(k, global_size, None, *chain_args, rt.to_device(ss.rows), np.int32(len(ss.rows)),
-                   np.float32(lod_bias), np.int32(1 if fis else 0), np.int32(s), np.int32(n), out)
+            rt.launch("mips.cl", "prefilter", defines, global_size, chain_args, samples=rt.to_device(ss.rows),
+                      nsamples=len(ss.rows), lod_bias=lod_bias, use_fis=1 if fis else 0, size=s, ntexels=n, out=out)
         return rt.read(out, (n, 4))[:, :3].reshape(shape + (3,))
 
     def convolve_level(self, chain_levels, layout: str, s: int, roughness: float,
@@ -199,27 +196,24 @@ class OpenCLBaker:
         shape = layouts.layout_shape(layout, s)
         n = shape[0] * shape[1]
         out = rt.empty(n * 16)
-        k = rt.kernel("mips.cl", "convolve", {"LAYOUT": layouts.LAYOUT_IDS[layout]})
         col = prefilter.column_sin_cos(src.shape[1] * sub).astype(np.float32)
-        rt.run(k, (-(-n // 64) * 64,), None, rt.to_device(radiance.to_rgba(src)), np.int32(src.shape[1]),
-               np.int32(src.shape[0]), rt.to_device(col), np.int32(sub), np.float32(alpha),
-               np.float32(prefilter.lobe_cutoff(alpha)), np.int32(s), np.int32(n), out)
+        rt.launch("mips.cl", "convolve", {"LAYOUT": layouts.LAYOUT_IDS[layout]}, (-(-n // 64) * 64,),
+                  level=rt.to_device(radiance.to_rgba(src)), w=src.shape[1], h=src.shape[0], col_sc=rt.to_device(col),
+                  sub=sub, alpha=alpha, cos_cut=prefilter.lobe_cutoff(alpha), size=s, ntexels=n, out=out)
         return rt.read(out, (n, 4))[:, :3].reshape(shape + (3,))
 
     def dfg(self, size: int, n_samples: int, multiscatter: bool = False):
         rt = self.rt
         out = rt.empty(size * size * 8)
         defines = {"MULTISCATTER": 1} if multiscatter else {}
-        k = rt.kernel("mips.cl", "dfg", defines)
-        rt.run(k, (size, size), None, np.int32(size), np.int32(n_samples), out)
+        rt.launch("mips.cl", "dfg", defines, (size, size), n=size, nsamples=n_samples, out=out)
         return rt.read(out, (size, size, 2))
 
 
     def dfg_sheen(self, size: int, n_samples: int):
         rt = self.rt
         out = rt.empty(size * size * 4)
-        k = rt.kernel("mips.cl", "dfg_sheen")
-        rt.run(k, (size, size), None, np.int32(size), np.int32(n_samples), out)
+        rt.launch("mips.cl", "dfg_sheen", None, (size, size), n=size, nsamples=n_samples, out=out)
         return rt.read(out, (size, size))
 
 

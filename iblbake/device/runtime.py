@@ -398,10 +398,12 @@ class Runtime:
         self._host_arrays.clear()
         return out
 
-    def launch(self, name, function: str, defines: dict | None, global_size, table: dict, **args):
+    def launch(self, name, function: str, defines: dict | None, global_size, table: dict | None = None,
+               local_size=None, **args):
         """Run `function` of kernels/NAME with every parameter bound by name: from `args`, else
         from `table` (the caller's named buffers and values). A name in neither is an error
         that names it, not a silently shifted argument list."""
+        table = table or {}
         values = []
         for pname, conv in kernel_params(name, function):
             if pname in args:
@@ -412,7 +414,7 @@ class Runtime:
                 raise KeyError(f"kernels/{name} {function}: no value bound to parameter {pname!r}")
             values.append(v if conv is None else conv(v))
         k = self.kernel(name, function, defines)
-        return self.run(k, tuple(global_size), None, *values)
+        return self.run(k, tuple(global_size), local_size, *values)
 
     def read_into(self, buf, out):
         """Blocking copy of `buf` into the contiguous array `out` (rows of a frame, say)."""
