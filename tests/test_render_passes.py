@@ -191,6 +191,13 @@ def test_every_kernel_parameter_is_bound_by_name():
 
 
 @pytest.mark.external
+def test_the_frame_names_no_pass():
+    """render/frame.py derives everything from the passes' declarations: it names none of them."""
+    from iblbake.render.passes import PASSES
+    src = (ROOT / "iblbake" / "render" / "frame.py").read_text()
+    assert not [p.name for p in PASSES if f'"{p.name}"' in src or f"'{p.name}'" in src]
+
+
 def test_buffers_follow_the_declarations(tmp_path, small_panoramas):
     """The frame allocates exactly the declared buffers of the running passes at full size
     (per sample, per pixel, per frame) and a placeholder for every other, and a tile budget of

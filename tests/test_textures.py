@@ -474,7 +474,7 @@ def test_untextured_scene_compiles_no_texture_code(tmp_path):
     textured = {"HAS_TEXTURES", "HAS_ALPHA_MASK", "HAS_SINGLE_SIDED"} | {f"HAS_{k}_MAP" for k in
                                                                          ("BASE_COLOR", "METALLIC_ROUGHNESS", "NORMAL",
                                                                           "OCCLUSION", "EMISSIVE")}
-    assert not (defines | built) & textured and "materials" not in fr.report["effects"]["passes"]
+    assert not (defines | built) & textured and "material" not in fr.report["effects"]["passes"]
     assert not any(b["name"] == "textures" for b in fr.report["bakes"])
     # the file's own (textured, single-sided) material: only the defines it needs
     mesh = quad_glb(tmp_path / "t.glb", base=np.full((4, 4, 3), 128, np.uint8))

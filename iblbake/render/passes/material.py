@@ -9,7 +9,8 @@ from iblbake.render.passes.base import Buffer, Pass, material_defines
 
 
 class Materials(Pass):
-    name = "materials"
+    name = "material"
+    function = "materials"
     kernel = "material.cl"
     buffers = (Buffer("gb_mat", count=3),)     # (base colour, metallic), (emissive, roughness), (normal, occlusion)
 
