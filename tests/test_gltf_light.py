@@ -185,7 +185,7 @@ def test_babylon_renders_the_light_as_iblbake_does(lit, babylon):
     8-bit step: measured 0.005 (mirror: an icosphere's interpolated normals against a sphere),
     0.0022 (rough metal, exactly on mip 2) and 0.0004 (diffuse, the SH) RMS. Babylon as loaded,
     but for what iblbake's split sum leaves out (plainSplitSum) and its loader's gamma slip
-    (linearEnvironment; README). Mips baked at roughness k/(N-1), as the extension's text puts
+    (linearEnvironment; docs/manual.md). Mips baked at roughness k/(N-1), as the extension's text puts
     it, make the rough sphere 10x further off (measured 0.0226)."""
     light, summary = export(lit, "light.gltf")
     assert [round(m["alpha"], 6) for m in summary["mips"]] == [0.0] + [round(SIZE ** (k / (MIPS - 1) - 1), 6)

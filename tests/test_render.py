@@ -253,7 +253,7 @@ def test_reference_converges_to_exact_integral(tmp_path, small_panoramas, load_p
 @pytest.mark.parametrize("env", ["city", "studio"])
 def test_modes_agree_with_reference(tmp_path, panoramas, shared_cache, env):
     """Against the converged reference, relative RMSE on the sphere pixels (metal, r >= 0.25).
-    Measured (README, benchmarks/bench_accuracy.py): importance N = 1024: 0.8-4.4% (one fixed
+    Measured (docs/benchmarks.md, benchmarks/bench_accuracy.py): importance N = 1024: 0.8-4.4% (one fixed
     Hammersley set against the sun), bound 5%; N = 4096: 0.4-2.3%, the 3% check; prefiltered (the
     split sum, an approximation of the integral, not an estimator of it): 11-27%, bound 30%;
     SH diffuse: bound 3%.

@@ -151,7 +151,7 @@ def _rows(coeffs) -> list:
     return out
 
 
-# Engine formats (README "SH for engines"). Each engine evaluates its own polynomials in world
+# Engine formats (docs/manual.md "SH for engines"). Each engine evaluates its own polynomials in world
 # x, y, z of a unit normal; iblbake's basis for l <= 2 is those polynomials times the positive
 # constants below (no Condon-Shortley phase, z polar axis, the same world: right-handed, +y up),
 # so an export is a rescaling per coefficient, with no sign flips or axis swaps.

@@ -64,7 +64,7 @@ def export_gltf_command(env, output, force, size, min_size, mapping, scale, meth
                         transfer, primaries, input_layout, max_pixels, depfile, device, quiet, as_json):
     """Write ENV as a glTF 2.0 image-based light (EXT_lights_image_based): the GGX-prefiltered cube
     map as RGBD PNGs, mip by mip, and the SH irradiance coefficients, in the conventions Babylon.js
-    (the extension's reference loader) reads; README "glTF image-based lights" maps them to
+    (the extension's reference loader) reads; docs/manual.md "export-gltf" maps them to
     iblbake's. Every file is written atomically, the .gltf last."""
     from iblbake.bake import cache, gltf_light, inputs
     from iblbake.bake import mips as mipsbake

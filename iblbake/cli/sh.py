@@ -65,7 +65,7 @@ def _check_overwrite(output: str, force: bool, fmt: str = "iblbake"):
                    "LightProbe's SphericalHarmonics3 as JSON (radiance coefficients); gltf: an "
                    "EXT_lights_image_based light's irradianceCoefficients (as Babylon.js reads them; "
                    "export-gltf writes the whole light); glsl: a function with the irradiance coefficients. "
-                   "README 'SH for engines' gives each convention.")
+                   "docs/manual.md 'SH for engines' gives each convention.")
 @click.option("--glsl", is_flag=True, help="Print a GLSL function with the irradiance coefficients (--format glsl).")
 @click.option("--error/--no-error", "with_error", default=True, show_default=True,
               help="Measure the SH irradiance against the exact irradiance (float64, every texel) at 256 "

@@ -249,7 +249,7 @@ def _map_section(doc: str, **extra) -> Section:
 
 
 # gtao's search, as benchmarks/tune_gtao.py chose it: the lowest AO error against 1024-ray
-# raytraced AO over the two example scenes of that script (README: GTAO)
+# raytraced AO over the two example scenes of that script (docs/manual.md: "Ambient occlusion")
 GTAO_DEFAULTS = {"slices": 2, "steps": 6, "radius_scale": 2.0, "falloff": 0.6, "power": 1.3, "denoise": 2,
                  "resolution": "half"}
 
