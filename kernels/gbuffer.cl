@@ -2,7 +2,10 @@
  * too (the background pass reads their directions). Records: kernels/layout.h. Defines:
  * HAS_SPHERES HAS_PLANES HAS_TRIANGLES (only the primitives the scene has are traced);
  * HAS_TEXTURES: each hit's texture coordinates, tangent frame and footprint too, for the material
- * pass (kernels/material.cl). */
+ * pass (kernels/material.cl).
+ * This file comes first in every frame program (one source of the running passes' files, each
+ * header once), so its includes place the headers: the shading math before scene.h, whose
+ * FP_CONTRACT OFF then holds for everything after it. Every frame has been built that way. */
 #include "common.h"
 #include "brdf.h"
 #include "sampling.h"
