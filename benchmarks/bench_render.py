@@ -71,6 +71,7 @@ def main():
     ap.add_argument("--cache", default=None)
     ap.add_argument("--json", action="store_true", help="one JSON line per configuration")
     ap.add_argument("--baseline", default=None, metavar="DIR")
+    ap.add_argument("--rounds", type=int, default=3, help="with --baseline: alternating rounds per configuration")
     args = ap.parse_args()
     if args.baseline:
         return compare(args)
@@ -158,10 +159,15 @@ def compare(args):
     for name, _, _ in CONFIGS:
         if args.only and args.only not in name:
             continue
-        a, b = _run_one(here, name, args, cache / "this"), _run_one(args.baseline, name, args, cache / "base")
+        # the two sides alternate, round after round, so that a busy spell of a shared machine falls on
+        # both; each side's figure is the median over rounds of its per-round medians
+        rounds = [(_run_one(here, name, args, cache / "this"), _run_one(args.baseline, name, args, cache / "base"))
+                  for _ in range(args.rounds)]
+        a, b = ({k: statistics.median(r[i][k] for r in rounds) for k in ("end_s", "light_s")} for i in (0, 1))
         print(f"| {name} | {a['end_s']:.3f} / {b['end_s']:.3f} | {a['end_s'] / b['end_s']:.2f} | "
               f"{a['light_s']:.3f} / {b['light_s']:.3f} | {a['light_s'] / max(b['light_s'], 1e-9):.2f} |", flush=True)
-    print(f"\nmedians of {args.runs} warm runs, each side in its own process; baseline: {args.baseline}")
+    print(f"\nmedians over {args.rounds} alternating rounds of medians of {args.runs} warm runs, each side in its "
+          f"own process; baseline: {args.baseline}")
 
 
 if __name__ == "__main__":
