@@ -24,7 +24,7 @@ inline float v_ashikhmin(float nov, float nol)
     return fmin(1.0f / fmax(4.0f * (nol + nov - nol * nov), 1e-30f), 1.0f);   /* clamped as the glTF viewer */
 }
 
-/* Schlick's Fresnel weight c = (1 - VoH)^5: F = f0 + (1 - f0) c */
+/* Schlick's Fresnel weight c = (1 - VoH)^5: F = f0 + (f90 - f0) c */
 inline float schlick_weight(float voh)
 {
     const float x = 1.0f - clamp(voh, 0.0f, 1.0f);
@@ -32,16 +32,18 @@ inline float schlick_weight(float voh)
     return x2 * x2 * x;
 }
 
-inline float3 f_schlick(float voh, float3 f0)
+inline float3 f_schlick(float voh, float3 f0, float3 f90)
 {
-    return f0 + (1.0f - f0) * schlick_weight(voh);
+    return f0 + (f90 - f0) * schlick_weight(voh);
 }
 
-inline float3 f_schlick_roughness(float nov, float3 f0, float roughness)
+/* Fdez-Aguera's roughness-dependent Fresnel for the diffuse weight, its grazing value
+ * max(F90 - roughness, F0) (F90 = 1: the usual max(1 - roughness, F0)) */
+inline float3 f_schlick_roughness(float nov, float3 f0, float3 f90, float roughness)
 {
     float x = 1.0f - clamp(nov, 0.0f, 1.0f);
     float x2 = x * x;
-    return f0 + (fmax((float3)(1.0f - roughness), f0) - f0) * (x2 * x2 * x);
+    return f0 + (fmax(f90 - roughness, f0) - f0) * (x2 * x2 * x);
 }
 
 #endif

@@ -11,11 +11,11 @@
 #include "surface.h"
 
 /* The importance-sampled specular integral split around Schlick's Fresnel. With
- * F = f0 (1 - c) + c, c = (1 - VoH)^5, the estimate sum L F w (w = V 4 NoL VoH / NoH: f NoL / pdf
- * without F) is f0 sum L w (1 - c) + sum L w c, the split Karis (2013, "Real Shading in Unreal
+ * F = f0 (1 - c) + f90 c, c = (1 - VoH)^5, the estimate sum L F w (w = V 4 NoL VoH / NoH: f NoL / pdf
+ * without F) is f0 sum L w (1 - c) + f90 sum L w c, the split Karis (2013, "Real Shading in Unreal
  * Engine 4") makes for the DFG table, here per sample. The two sums depend on the surface, its
- * roughness and the panorama but not on f0: frames that change only base colour or metallic (a
- * sheet's metallic axis) reuse them, and shade adds f0 A + B. N Hammersley points, GGX
+ * roughness and the panorama but not on f0 or f90: frames that change only base colour, metallic
+ * or the specular factors (a sheet's metallic axis) reuse them, and shade adds f0 A + f90 B. N Hammersley points, GGX
  * half-vector warp, mip level from the pdf (filtered importance sampling: Colbert and Krivanek,
  * GPU Gems 3 ch. 20, 2007). */
 __kernel void importance(__global const float4 *gb_pos, SURFACE_PARAMS, const int n, const float2 env_rot,

@@ -52,7 +52,7 @@ inline float3 light_brdf_cos(const Material mt, float3 n, float3 v, float nov, f
     const float nols = dot(n, ls);
     if (nols > 0.0f) {
         const float3 h = unit3(v + ls);
-        f += d_ggx(dot(n, h), mt.alpha) * v_smith_ggx_correlated(nov, nols, mt.alpha) * f_schlick(dot(v, h), mt.f0)
+        f += d_ggx(dot(n, h), mt.alpha) * v_smith_ggx_correlated(nov, nols, mt.alpha) * f_schlick(dot(v, h), mt.f0, mt.f90)
              * (energy * nols);
     }
 #endif

@@ -64,8 +64,8 @@ inline float qmc(uint seed, uint gid, uint k, int d)
 /* One sample's dimensions, handed out in the order a kernel asks for them, as pbrt-v4's Sampler
  * (Get1D, Get2D) and Mitsuba 3's (next_1d, next_2d) do: no kernel numbers a dimension by hand.
  * `seed` already carries the stream (the reference's seed, AO's seed ^ STREAM_AO, a light's);
- * `gid` the G-buffer sample's number in the frame, `k` the sample's number. At most 8 dimensions
- * (HALTON_BASES). */
+ * `gid` the G-buffer sample's number in the frame, `k` the sample's number. The first 8 dimensions
+ * are Halton's (HALTON_BASES), later ones hashed. */
 typedef struct {
     uint seed, gid, k;
     int dim;
@@ -80,7 +80,11 @@ inline Sampler sampler_start(uint seed, uint gid, uint k)
 
 inline float sampler_1d(Sampler *s)
 {
-    return qmc(s->seed, s->gid, s->k, s->dim++);
+    const int d = s->dim++;
+    if (d < 8) return qmc(s->seed, s->gid, s->k, d);
+    /* past the Halton bases (a path's later bounces): independent PCG numbers per seed, G-buffer
+     * sample, sample number and dimension */
+    return hash_uniform(s->seed ^ pcg_hash(pcg_hash(s->gid) ^ pcg_hash(s->k * 1024u + (uint)d)));
 }
 
 inline float2 sampler_2d(Sampler *s)

@@ -150,6 +150,38 @@ inline int hit_material(int kind, int index, float3 p, float3 *ng, SCENE_PARAMS)
     return as_int(tris[TRIANGLE_FLOAT4S * index].w);
 }
 
+/* A hit's geometric normal (unit; a triangle's by its winding) and shading normal (a triangle's
+ * interpolated from its corners, on the geometric normal's side), before any turning towards the
+ * viewer; its material and object. The G-buffer's primary hits and the reference's path vertices. */
+inline void hit_normals(int kind, int index, float3 p, float b1, float b2, float3 *ng, float3 *ns, int *mat,
+                        int *obj, SCENE_PARAMS)
+{
+    if (kind == PRIM_SPHERE) {
+        const float4 sp = spheres[SPHERE_FLOAT4S * index];
+        *ng = normalize((p - sp.xyz) / sp.w);
+        *ns = *ng;
+        *mat = as_int(spheres[SPHERE_FLOAT4S * index + 1].x);
+        *obj = as_int(spheres[SPHERE_FLOAT4S * index + 1].y);
+    } else if (kind == PRIM_PLANE) {
+        *ng = planes[PLANE_FLOAT4S * index + 1].xyz;
+        *ns = *ng;
+        *mat = as_int(planes[PLANE_FLOAT4S * index].w);
+        *obj = as_int(planes[PLANE_FLOAT4S * index + 1].w);
+    } else {
+        const int k = index;
+        const float3 v0 = tris[TRIANGLE_FLOAT4S * k].xyz;
+        *ng = normalize(cross(tris[TRIANGLE_FLOAT4S * k + 1].xyz - v0, tris[TRIANGLE_FLOAT4S * k + 2].xyz - v0));
+        const float b0 = 1.0f - b1 - b2;
+        float3 n = b0 * tris[TRIANGLE_FLOAT4S * k + 3].xyz + b1 * tris[TRIANGLE_FLOAT4S * k + 4].xyz
+                   + b2 * tris[TRIANGLE_FLOAT4S * k + 5].xyz;
+        const float ln = length(n);
+        n = ln > 1e-12f ? n / ln : *ng;
+        *ns = dot(n, *ng) < 0.0f ? -n : n;
+        *mat = as_int(tris[TRIANGLE_FLOAT4S * k].w);
+        *obj = as_int(tris[TRIANGLE_FLOAT4S * k + 1].w);
+    }
+}
+
 /* Texture coordinates (u0, v0, u1, v1) at a hit, v down the image as glTF's: a triangle's
  * interpolated from its corners; a sphere's the panorama mapping of its normal (docs/conventions.md:
  * u = 0.5 - atan2(x, z) / 2 pi, v = acos(y) / pi); a plane's across its width (tangent) and up its
@@ -174,6 +206,49 @@ inline float4 hit_texcoords(int kind, int index, float3 p, float b1, float b2, S
     __global const float4 *at = tri_attr + TRIANGLE_ATTR_FLOAT4S * index;
     return (1.0f - b1 - b2) * at[0] + b1 * at[1] + b2 * at[2];
 }
+
+#ifdef HAS_TEXTURES
+/* The hit's tangent (the direction of increasing u in the plane of the shading normal ns, before
+ * any turning towards the viewer) and w, the bitangent's side (bitangent = w cross(n, t) points up
+ * the image); and 0.5 log2 of each set's UV area per world area there. */
+inline float4 hit_tangent(int kind, int index, float3 p, float3 ns, float b1, float b2, float2 *density, SCENE_PARAMS)
+{
+    float3 t;
+    float w;
+    if (kind == PRIM_SPHERE) {
+        /* u grows as atan2(x, z) falls: t = (-z, 0, x) / |.|; up the image is +y, cross(n, t) is -y */
+        const float4 sp = spheres[SPHERE_FLOAT4S * index];
+        const float3 nl = (p - sp.xyz) / sp.w;
+        t = (float3)(-nl.z, 0.0f, nl.x);
+        w = -1.0f;
+        /* du dv / dA = 1 / (2 pi^2 r^2 sin(theta)) of the panorama mapping */
+        const float st = fmax(sqrt(fmax(0.0f, 1.0f - nl.y * nl.y)), 1e-4f);
+        const float dens = -0.5f * log2(2.0f * IBL_PI * IBL_PI * sp.w * sp.w * st);
+        *density = (float2)(dens, dens);
+    } else if (kind == PRIM_PLANE) {
+        /* u along the tangent, v down the bitangent; cross(n, t) = -bitangent (plane_frame) */
+        __global const float4 *pl = planes + PLANE_FLOAT4S * index;
+        t = pl[2].xyz;
+        w = -1.0f;
+        const float dens = (isinf(pl[2].w) ? 0.0f : -log2(2.0f * pl[2].w)) + (isinf(pl[3].w) ? 0.0f : -log2(2.0f * pl[3].w));
+        *density = (float2)(0.5f * dens, 0.5f * dens);
+    } else {
+        __global const float4 *at = tri_attr + TRIANGLE_ATTR_FLOAT4S * index;
+        const float4 tw = (1.0f - b1 - b2) * at[3] + b1 * at[4] + b2 * at[5];
+        t = tw.xyz;
+        w = at[3].w < 0.0f ? -1.0f : 1.0f;
+        *density = at[6].xy;
+    }
+    t -= ns * dot(ns, t);
+    const float lt = length(t);
+    if (lt > 1e-12f) t /= lt;
+    else {
+        float3 b;
+        tangent_frame(ns, &t, &b);
+    }
+    return (float4)(t, w);
+}
+#endif
 
 #if defined(HAS_ALPHA_MASK) || defined(HAS_SINGLE_SIDED)
 /* Whether a candidate hit is there at all: a single-sided material's back face is not, nor where

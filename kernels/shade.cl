@@ -92,8 +92,8 @@ __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
 #endif
 #if SPECULAR_MODE == SPECULAR_IMPORTANCE
     {
-        /* the importance pass's two sums: F = f0 (1 - c) + c */
-        color += spec_occ * env_scale * (mt.f0 * spec_sums[2 * gid].xyz + spec_sums[2 * gid + 1].xyz);
+        /* the importance pass's two sums: F = f0 (1 - c) + f90 c */
+        color += spec_occ * env_scale * (mt.f0 * spec_sums[2 * gid].xyz + mt.f90 * spec_sums[2 * gid + 1].xyz);
     }
 #elif SPECULAR_MODE == SPECULAR_PREFILTERED
     {
@@ -106,7 +106,7 @@ __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
         const float3 pre = chain_lookup(CHAIN_ARGS, to_env(r, env_rot),
                                         mt.roughness * (float)(nlev - 1));
         const float2 ab = dfg_lookup(dfg, dfg_size, nov, mt.roughness);
-        color += spec_occ * env_scale * pre * (mt.f0 * ab.x + ab.y);
+        color += spec_occ * env_scale * pre * (mt.f0 * ab.x + mt.f90 * ab.y);
     }
 #elif SPECULAR_MODE == SPECULAR_LOBE
     {
@@ -132,14 +132,14 @@ __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
             if (nol <= 0.0f || voh <= 0.0f) continue;
             const float pdf = g1 * d_ggx(hl.z, mt.alpha) / (4.0f * nov);
             const float a = fmin(sqrt(lobe_spread / (4.0f * IBL_PI * (float)nsamples * pdf)), mt.alpha);
-            const float3 w = f_schlick(voh, mt.f0) * (v_smith_ggx_correlated(nov, nol, mt.alpha) * 4.0f * nov * nol / g1);
+            const float3 w = f_schlick(voh, mt.f0, mt.f90) * (v_smith_ggx_correlated(nov, nol, mt.alpha) * 4.0f * nov * nol / g1);
             num += w * chain_lookup(CHAIN_ARGS, to_env(l, env_rot), sqrt(a) * (float)(nlev - 1));
             den += w;
         }
         const float2 ab = dfg_lookup(dfg, dfg_size, nov, mt.roughness);
         const float3 li = den.x > 0.0f ? num / den
             : chain_lookup(CHAIN_ARGS, to_env(2.0f * nov * nrm - v, env_rot), mt.roughness * (float)(nlev - 1));
-        color += spec_occ * env_scale * li * (mt.f0 * ab.x + ab.y);
+        color += spec_occ * env_scale * li * (mt.f0 * ab.x + mt.f90 * ab.y);
     }
 #endif
 #ifdef HAS_OCCLUSION_MAP

@@ -18,26 +18,29 @@
 #endif
 
 typedef struct {
-    float3 base, emissive, f0;
+    float3 base, emissive, f0, f90;     /* Schlick's F = f0 + (f90 - f0) (1 - VoH)^5 */
     float metallic, roughness, alpha;
     float occlusion;        /* the material's ambient occlusion (its map): the image-based light only */
 } Material;
 
-/* materials: MATERIAL_FLOAT4S float4 each, (base_color, metallic), (emissive, roughness); gb_mat
- * the same two rows per sample */
-inline Material material_from(float4 a, float4 b)
+/* materials: MATERIAL_FLOAT4S float4 each, (base_color, metallic), (emissive, roughness), (the
+ * dielectric's F0 and F90: KHR_materials_specular, scene/materials.py dielectric_f0); gb_mat the
+ * first two rows per sample. A metal's F0 is its base colour and its F90 1. */
+inline Material material_from(float4 a, float4 b, float4 c)
 {
     Material mt;
     mt.base = a.xyz; mt.metallic = a.w; mt.emissive = b.xyz; mt.roughness = b.w;
     mt.alpha = b.w * b.w;
-    mt.f0 = mix((float3)(0.04f), a.xyz, a.w);
+    mt.f0 = mix(c.xyz, a.xyz, a.w);
+    mt.f90 = (float3)(mix(c.w, 1.0f, a.w));
     mt.occlusion = 1.0f;
     return mt;
 }
 
 inline Material material_at(__global const float4 *materials, int m)
 {
-    return material_from(materials[MATERIAL_FLOAT4S * m], materials[MATERIAL_FLOAT4S * m + 1]);
+    return material_from(materials[MATERIAL_FLOAT4S * m], materials[MATERIAL_FLOAT4S * m + 1],
+                         materials[MATERIAL_FLOAT4S * m + 2]);
 }
 
 /* A shading normal facing away from the viewer (interpolated normals at silhouettes) is bent
@@ -60,7 +63,8 @@ inline float surface_at(SURFACE_PARAMS, int gid, Material *mt, float3 *v, float3
 {
     *v = -gb_dir[gid].xyz;
 #ifdef HAS_TEXTURES
-    *mt = material_from(gb_mat[3 * gid], gb_mat[3 * gid + 1]);
+    *mt = material_from(gb_mat[3 * gid], gb_mat[3 * gid + 1],
+                        materials[MATERIAL_FLOAT4S * as_int(gb_nrm[gid].w) + 2]);
     const float4 no = gb_mat[3 * gid + 2];
     mt->occlusion = no.w;
     *nrm = facing_normal(no.xyz, *v);
@@ -86,7 +90,7 @@ inline float3 from_env(float3 e, float2 rot)
 inline float3 diffuse_weight(const Material mt, float nov)
 {
     /* kD = (1 - F_r(NoV)) (1 - metallic) (docs/conventions.md), times albedo / pi */
-    return (1.0f - f_schlick_roughness(nov, mt.f0, mt.roughness)) * (1.0f - mt.metallic) * mt.base
+    return (1.0f - f_schlick_roughness(nov, mt.f0, mt.f90, mt.roughness)) * (1.0f - mt.metallic) * mt.base
            * (1.0f / IBL_PI);
 }
 

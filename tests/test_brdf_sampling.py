@@ -78,8 +78,8 @@ def test_opencl_brdf_and_sampling_match_numpy(rt):
         float nov = in[4*i], nol = in[4*i+1], a = in[4*i+2], noh = in[4*i+3];
         out[8*i] = d_ggx(noh, a);
         out[8*i+1] = v_smith_ggx_correlated(nov, nol, a);
-        out[8*i+2] = f_schlick(nov, (float3)(0.04f)).x;
-        out[8*i+3] = f_schlick_roughness(nov, (float3)(0.04f), a).x;
+        out[8*i+2] = f_schlick(nov, (float3)(0.04f), (float3)(0.7f)).x;
+        out[8*i+3] = f_schlick_roughness(nov, (float3)(0.04f), (float3)(0.7f), a).x;
         float3 h = sample_ggx_half(hammersley((uint)i, 1000u), a);
         out[8*i+4] = h.x; out[8*i+5] = h.y; out[8*i+6] = h.z; out[8*i+7] = radical_inverse_vdc((uint)i);
     }'''
@@ -97,8 +97,8 @@ def test_opencl_brdf_and_sampling_match_numpy(rt):
     nov, nol, a, noh = inp.T.astype(np.float64)
     assert np.allclose(got[:, 0], brdf.d_ggx(noh, a), rtol=2e-4)
     assert np.allclose(got[:, 1], brdf.v_smith_ggx_correlated(nov, nol, a), rtol=2e-4)
-    assert np.allclose(got[:, 2], brdf.f_schlick(nov, 0.04), rtol=1e-5)
-    assert np.allclose(got[:, 3], brdf.f_schlick_roughness(nov, 0.04, a), rtol=1e-5)
+    assert np.allclose(got[:, 2], brdf.f_schlick(nov, 0.04, 0.7), rtol=1e-5)
+    assert np.allclose(got[:, 3], brdf.f_schlick_roughness(nov, 0.04, a, 0.7), rtol=1e-5)
     h = np.stack([sampling.sample_ggx_half(sampling.hammersley(1000)[i], a[i]) for i in range(1000)])
     assert np.abs(got[:, 4:7] - h).max() < 2e-5
     assert np.allclose(got[:, 7], sampling.radical_inverse_vdc(np.arange(1000)), atol=1e-7)

@@ -42,7 +42,7 @@ def sphere_over_plane(folder, env, h, visibility=True, samples=4096, res=40):
                        {"plane": {"point": [0, 0, 0], "normal": [0, 1, 0]}, "material": "floor"}],
            "effects": {"diffuse": "reference", "specular": "off",
                        "reference": {"max_samples": samples, "target_noise": 0, "batch": 256,
-                                     "visibility": visibility}}}
+                                     "visibility": visibility, "bounces": 1}}}     # the direct light's closed form
     p = Path(folder) / f"sphere_over_plane_{h}.yaml"
     p.write_text(yaml.safe_dump(doc))
     return scene.load(p)
@@ -54,13 +54,13 @@ def plane_closed_form(sc, visibility=True):
     arrays = pack.scene_arrays(sc)
     gb = rr.primary(sc["camera"], arrays)
     hit = gb["hit"]
-    v, n, nov, (base, metallic, _, rough, f0) = rr.surface(gb, arrays)
+    v, n, nov, (base, metallic, _, rough, f0, f90) = rr.surface(gb, arrays)
     on_plane = gb["material"][hit] == sc.data["materials"].__len__() - 1    # floor: the last material
     h = sc.data["objects"][0]["sphere"]["center"][1]
     p = gb["pos"][hit]
     d = np.linalg.norm(p - np.array([0.0, h, 0.0]), axis=1)
     blocked = R * R * h / d ** 3 if visibility else 0.0
-    want = rr.diffuse_weight(base, metallic, rough, f0, nov)[:, 0] * np.pi * (1 - blocked)
+    want = rr.diffuse_weight(base, metallic, rough, f0, f90, nov)[:, 0] * np.pi * (1 - blocked)
     return gb, arrays, hit, on_plane, want
 
 

@@ -50,11 +50,11 @@ def write_scene(folder: Path, env, materials: dict, objects: list, camera: dict,
 
 
 def furnace_prediction(gb, arrays, table):
-    """kD base + F0 A + B per hit sample (the white furnace closed form)."""
-    v, n, nov, (base, metallic, emissive, rough, f0) = rr.surface(gb, arrays)
+    """kD base + F0 A + F90 B per hit sample (the white furnace closed form)."""
+    v, n, nov, (base, metallic, emissive, rough, f0, f90) = rr.surface(gb, arrays)
     ab = dfg.dfg_lookup(table, nov, rough)
-    kd = (1 - brdf.f_schlick_roughness(nov[:, None], f0, rough[:, None])) * (1 - metallic[:, None])
-    return kd * base + f0 * ab[:, 0:1] + ab[:, 1:2]
+    kd = (1 - brdf.f_schlick_roughness(nov[:, None], f0, rough[:, None], f90)) * (1 - metallic[:, None])
+    return kd * base + f0 * ab[:, 0:1] + f90 * ab[:, 1:2]
 
 
 def twin_shade(sc, frame, gb, arrays, env_image):

@@ -36,10 +36,10 @@ def f_schlick(voh, f0, f90=1.0):
     return f0 + (f90 - f0) * (1.0 - np.clip(voh, 0.0, 1.0)) ** 5
 
 
-def f_schlick_roughness(nov, f0, roughness):
+def f_schlick_roughness(nov, f0, roughness, f90=1.0):
     """Roughness-aware Schlick (LearnOpenGL's fresnelSchlickRoughness, after Lagarde 2011) (used only for the diffuse weight kD)."""
     f0 = np.asarray(f0, dtype=np.float64)
-    return f0 + (np.maximum(1.0 - roughness, f0) - f0) * (1.0 - np.clip(nov, 0.0, 1.0)) ** 5
+    return f0 + (np.maximum(f90 - roughness, f0) - f0) * (1.0 - np.clip(nov, 0.0, 1.0)) ** 5
 
 
 # --- sheen (KHR_materials_sheen; Estevez and Kulla 2017, "Production Friendly Microfacet Sheen BRDF")

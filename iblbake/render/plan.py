@@ -8,6 +8,8 @@ decides what is baked, compiled or run.
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass, field
 
 from iblbake.scene import materials
@@ -26,6 +28,7 @@ class Effects:
     background: str       # hide | show | color | blur
     emissive: bool
     notes: list = field(default_factory=list)
+    bounces: int = 1      # the reference's scattering events per path (0: unbounded); 1: direct light
 
     def approximate(self, term: str) -> bool:
         """Whether `term` (diffuse | specular) is computed by an approximate IBL mode."""
@@ -58,7 +61,47 @@ def effect_modes(scene: Scene) -> Effects:
     else:
         background = "hide"
     emissive = any(max(m["emissive"]) > 0 for m in mats)     # an emissive map multiplies the factor
-    return Effects(diffuse, specular, background, emissive, notes)
+    return Effects(diffuse, specular, background, emissive, notes, reference_bounces(scene, diffuse, specular, notes))
+
+
+def _light_passes(scene: Scene, diffuse: str, specular: str) -> bool:
+    return ("reference" in (diffuse, specular) and scene.data["effects"]["reference"]["visibility"]
+            and interreflects(scene))
+
+
+def reference_bounces(scene: Scene, diffuse: str, specular: str, notes: list) -> int:
+    """The reference's bounces (0: unbounded): 1, the direct light, where no light can pass between
+    surfaces (visibility off lights every object alone; one plane, or one sphere seen from outside,
+    never sees itself), so that no path code is compiled or run for it. Bounces 1 is the direct
+    light of the environment as before paths: no emissive surface lights another there."""
+    ref = scene.data["effects"]["reference"]
+    if "reference" not in (diffuse, specular):
+        return 1
+    asked = 0 if ref["bounces"] == "unbounded" else ref["bounces"]
+    if asked == 1:
+        return 1
+    if not ref["visibility"]:
+        notes.append("reference bounces: 1, as visibility is off (every object lit as if alone)")
+        return 1
+    return asked if _light_passes(scene, diffuse, specular) else 1
+
+
+def interreflects(scene: Scene) -> bool:
+    """Whether light can leave one surface of the scene and reach another (or the same one): not
+    for a lone plane, nor a lone sphere every camera ray starts outside of."""
+    objs = scene.data["objects"]
+    if len(objs) != 1 or "mesh" in objs[0]:
+        return len(objs) > 0
+    if "plane" in objs[0]:
+        return False
+    s, cam = objs[0]["sphere"], scene.data["camera"]
+    kind = "perspective" if "perspective" in cam else "orthographic"
+    reach = 0.0
+    if kind == "orthographic":             # the view's half diagonal: where its rays start
+        w, h = cam["resolution"]
+        reach = 0.5 * cam[kind]["width"] * math.hypot(1.0, h / w)
+    d = math.dist(cam[kind]["position"], s["center"])
+    return d <= s["radius"] + reach
 
 
 @dataclass

@@ -34,7 +34,7 @@ MIN = {9728: "nearest", 9729: "linear", 9984: "nearest_mipmap_nearest", 9985: "l
        9986: "nearest_mipmap_linear", 9987: "linear_mipmap_linear"}
 # the glTF default material (spec 3.9.6): base colour 1, metallic 1, roughness 1
 DEFAULT_MATERIAL = {"name": "default", "base_color": [1.0, 1.0, 1.0], "alpha": 1.0, "metallic": 1.0, "roughness": 1.0,
-                    "emissive": [0.0, 0.0, 0.0], "alpha_mode": "opaque", "alpha_cutoff": 0.5, "double_sided": False,
+                    "emissive": [0.0, 0.0, 0.0], "specular": 1.0, "specular_color": [1.0, 1.0, 1.0], "alpha_mode": "opaque", "alpha_cutoff": 0.5, "double_sided": False,
                     "maps": {}}
 
 
@@ -208,6 +208,7 @@ class Document:
         base = _floats(pbr.get("baseColorFactor", [1, 1, 1, 1]), 4, self, f"material {name}: baseColorFactor")
         emissive = _floats(m.get("emissiveFactor", [0, 0, 0]), 3, self, f"material {name}: emissiveFactor")
         strength = ((m.get("extensions") or {}).get("KHR_materials_emissive_strength") or {}).get("emissiveStrength", 1.0)
+        spec = (m.get("extensions") or {}).get("KHR_materials_specular") or {}
         mode = m.get("alphaMode", "OPAQUE")
         if mode not in ("OPAQUE", "MASK", "BLEND"):
             _fail(self.where, self.path, f"material {name}: alphaMode {mode!r}")
@@ -215,6 +216,9 @@ class Document:
                "metallic": _unit(pbr.get("metallicFactor", 1.0), self, f"material {name}: metallicFactor"),
                "roughness": _unit(pbr.get("roughnessFactor", 1.0), self, f"material {name}: roughnessFactor"),
                "emissive": [e * float(strength) for e in emissive], "alpha_mode": mode.lower(),
+               "specular": _unit(spec.get("specularFactor", 1.0), self, f"material {name}: specularFactor"),
+               "specular_color": [max(c, 0.0) for c in _floats(spec.get("specularColorFactor", [1, 1, 1]), 3, self,
+                                                               f"material {name}: specularColorFactor")],
                "alpha_cutoff": float(m.get("alphaCutoff", 0.5)), "double_sided": bool(m.get("doubleSided", False)),
                "maps": {}}
         for kind, info, extra in (("base_color", pbr.get("baseColorTexture"), None),

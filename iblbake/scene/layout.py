@@ -28,7 +28,9 @@ RANDOM_STREAMS = {"ao": 0x5A0}
 # Records are float4 rows (ints stored bit-cast in float lanes); the host packs them in
 # iblbake/scene/pack.py, the kernels index them with these strides.
 FLOAT4S = {
-    "MATERIAL": 2,   # (base_color, metallic), (emissive, roughness)
+    # (base_color, metallic), (emissive, roughness), (the dielectric's F0 times its specular weight, that
+    # weight: its F90) of KHR_materials_specular; Schlick's F90 = mix(weight, 1, metallic)
+    "MATERIAL": 3,
     "SPHERE": 2,     # (centre, radius), (material, object, surface flags, -)
     "PLANE": 5,      # (point, material), (normal, object), (tangent, half width), (bitangent, half depth),
                      # (surface flags, -, -, -)

@@ -1,15 +1,16 @@
 """The scene's material table: its own named materials, then the materials of every glTF mesh
 that brings its own (no `material:` on the object), each as one record:
 
-    base_color (linear RGB factor), alpha, metallic, roughness, emissive, alpha_mode (opaque |
-    mask), alpha_cutoff, double_sided, maps {kind: texture reference}
+    base_color (linear RGB factor), alpha, metallic, roughness, emissive, specular and
+    specular_color (KHR_materials_specular's factors), alpha_mode (opaque | mask), alpha_cutoff,
+    double_sided, maps {kind: texture reference}
 
 A texture reference: source (("path", file) or ("gltf", file, image index)), name (for
 messages), texcoord (0 | 1), transform (KHR_texture_transform's 2 x 3 matrix), wrap (s, t),
 mag, min (glTF sampler filters), strength (normal scale, occlusion strength).
 
-On the device: `materials` (2 float4 per material, as before textures: (base colour, metallic),
-(emissive, roughness)) and `mat_maps` (MATERIAL_MAPS float4s per material, iblbake/scene/layout.py).
+On the device: `materials` (FLOAT4S["MATERIAL"] float4 per material: (base colour, metallic),
+(emissive, roughness), (the dielectric's F0 and F90)) and `mat_maps` (MATERIAL_MAPS float4s per material, iblbake/scene/layout.py).
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ def scene_record(name: str, m: dict) -> dict:
 
     rec = {"name": name, "base_color": list(m["base_color"]), "alpha": m["alpha"], "metallic": m["metallic"],
            "roughness": m["roughness"], "emissive": list(m["emissive"]), "alpha_mode": m["alpha_mode"],
+           "specular": m["specular"], "specular_color": list(m["specular_color"]),
            "alpha_cutoff": m["alpha_cutoff"], "double_sided": m["double_sided"], "maps": {}}
     for key, kind in MAP_KEYS.items():
         t = m.get(key)
@@ -183,6 +185,13 @@ def load_textures(records, where: str, max_pixels: int | None = None):
     return ts, slots
 
 
+def dielectric_f0(r) -> list:
+    """KHR_materials_specular: a dielectric's F0 at IOR 1.5 (0.04) tinted by specular_color,
+    clipped to 1, times its specular weight (which is also its F90: weight 0 leaves no lobe, a pure
+    Lambert surface)."""
+    return [r["specular"] * min(0.04 * c, 1.0) for c in r["specular_color"]]
+
+
 def surface_flags(records) -> np.ndarray:
     """Per record SURFACE_FLAGS (layout.py): what a ray must test where it meets the material."""
     from iblbake.scene.layout import SURFACE_FLAGS
@@ -193,7 +202,7 @@ def surface_flags(records) -> np.ndarray:
 
 
 def device_arrays(records, slots, sizes=None) -> tuple:
-    """(materials (M, 2, 4), mat_maps (M, MATERIAL_MAPS, 4)) float32 for the kernels; `sizes`
+    """(materials (M, FLOAT4S["MATERIAL"], 4), mat_maps (M, MATERIAL_MAPS, 4)) float32 for the kernels; `sizes`
     (texture index -> (width, height, sampler bits)) gives each slot's level offset and the first
     slot of the material whose footprint it shares (the same sizes, sampler, UV set and transform)."""
     from iblbake.scene.layout import FLOAT4S
@@ -206,6 +215,7 @@ def device_arrays(records, slots, sizes=None) -> tuple:
     for i, r in enumerate(records):
         mats[i, 0, :3], mats[i, 0, 3] = r["base_color"], r["metallic"]
         mats[i, 1, :3], mats[i, 1, 3] = r["emissive"], r["roughness"]
+        mats[i, 2, :3], mats[i, 2, 3] = dielectric_f0(r), r["specular"]
         maps[i, 0] = [r["alpha"], r["alpha_cutoff"] if r["alpha_mode"] == "mask" else -1.0,
                       r["maps"].get("normal", {}).get("strength", 1.0), r["maps"].get("occlusion", {}).get("strength", 1.0)]
         maps[i, 1, 0] = 0.0 if r["double_sided"] else 1.0

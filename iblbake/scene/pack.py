@@ -48,7 +48,7 @@ def pixel_jitter(spp: int):
 
 @dataclass
 class SceneArrays:
-    materials: np.ndarray     # (m, 2, 4) float32
+    materials: np.ndarray     # (m, FLOAT4S["MATERIAL"], 4) float32
     material_names: list
     spheres: np.ndarray       # (s, 2, 4) float32
     planes: np.ndarray        # (p, 5, 4) float32

@@ -298,6 +298,11 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
             "roughness": Num(0.5, 0.0, 1.0, doc="perceptual roughness r; alpha = r^2; times the map's green"),
             "emissive": Vec(**VEC3, default=[0.0, 0.0, 0.0], lo=0.0, doc="emitted radiance, linear RGB (times "
                                                                          "emissive_map)"),
+            "specular": Num(1.0, 0.0, 1.0, doc="KHR_materials_specular's specularFactor: a dielectric's specular "
+                                               "weight, its F90 (0: pure Lambert, no GGX lobe and no Fresnel on "
+                                               "the diffuse)"),
+            "specular_color": Vec(**VEC3, default=[1.0, 1.0, 1.0], lo=0.0,
+                                  doc="specularColorFactor: a dielectric's F0 is min(0.04 x this, 1) x specular"),
             "alpha": Num(1.0, 0.0, 1.0, doc="alpha_mode mask: coverage factor (times the base map's alpha)"),
             "alpha_mode": Enum(("opaque", "mask"), "opaque", doc="mask: cut out where alpha < alpha_cutoff"),
             "alpha_cutoff": Num(0.5, 0.0, 1.0, doc="alpha_mode mask: the threshold"),
@@ -415,6 +420,10 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
             "seed": Num(1, 0, 2**31 - 1, integer=True, doc="random seed (renders are reproducible)"),
             "visibility": Bool(True, doc="trace a shadow ray for every sample: the occluded integral (false: "
                                          "every object lit as if alone)"),
+            "bounces": OneOf((Enum(("unbounded",)), Num(None, 1, 1 << 16, integer=True)), default=1,
+                             doc="how many times a path may scatter: 1, the environment's direct light (no "
+                                 "interreflection, no light from emissive surfaces), N, or unbounded (Russian "
+                                 "roulette from bounce 3, unbiased: the converged answer); with visibility false, 1"),
         }),
         "ao": Enum(("off", "gtao", "raytraced"), "off",
                    doc="ambient occlusion of the IBL: gtao (screen-space horizons, Jimenez et al. 2016) or raytraced "

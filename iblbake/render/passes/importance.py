@@ -11,9 +11,10 @@ import numpy as np
 from iblbake.core import sampling
 from iblbake.render.passes.base import Buffer, Pass, lighting_inputs, mode_defines
 
-# material keys that change only f0 = mix(0.04, base_color, metallic) (and the diffuse weight,
-# which the shade pass computes): the two sums do not read them
-FRESNEL_ONLY = ("base_color", "metallic")
+# material keys that change only f0 = mix(0.04 x specular_color x specular, base_color, metallic),
+# f90 = mix(specular, 1, metallic) (and the diffuse weight, which the shade pass computes): the two
+# sums do not read them
+FRESNEL_ONLY = ("base_color", "metallic", "specular", "specular_color")
 
 
 class Importance(Pass):

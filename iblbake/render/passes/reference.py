@@ -50,6 +50,8 @@ class Reference(Pass):
         d = mode_defines(fx)          # reference.cl computes only the reference terms
         if scene.data["effects"]["reference"]["visibility"]:
             d.update(VISIBILITY=1, **geometry_defines(scene))
+        if fx.bounces != 1:
+            d["BOUNCES"] = fx.bounces     # paths, only where light can pass between surfaces (plan.py)
         return d
 
     def setup(self, ctx) -> dict:
@@ -92,4 +94,4 @@ class Reference(Pass):
         return {"samples_per_pixel": taken,
                 "relative_noise": None if not math.isfinite(noise) else round(noise, 6),
                 "stopped": "target_noise" if noise <= ref["target_noise"] else "max_samples",
-                "visibility": bool(ref["visibility"])}
+                "visibility": bool(ref["visibility"]), "bounces": ctx.plan.effects.bounces or "unbounded"}

@@ -29,13 +29,13 @@ def representative_point(n, v, l, sin_max, alpha):
     return np.where((sin_max > 0)[:, None], ls, l), np.where(sin_max > 0, energy, 1.0)
 
 
-def light_brdf_cos(base, metallic, rough, f0, n, v, nov, l, diffuse: bool, specular: bool, sin_max=None):
+def light_brdf_cos(base, metallic, rough, f0, f90, n, v, nov, l, diffuse: bool, specular: bool, sin_max=None):
     """Twin of kernels/lights.cl light_brdf_cos: f(v, l) NoL, per hit and colour channel; with
     sin_max the specular term at the representative point of a light that size."""
     nol = (n * l).sum(-1)
     out = np.zeros(l.shape[:-1] + (3,))
     if diffuse:
-        out += np.where((nol > 0)[:, None], diffuse_weight(base, metallic, rough, f0, nov) * np.maximum(nol, 0)[:, None], 0)
+        out += np.where((nol > 0)[:, None], diffuse_weight(base, metallic, rough, f0, f90, nov) * np.maximum(nol, 0)[:, None], 0)
     if specular:
         alpha = rough ** 2
         ls, energy = representative_point(n, v, l, sin_max, alpha) if sin_max is not None else (l, 1.0)
@@ -43,7 +43,7 @@ def light_brdf_cos(base, metallic, rough, f0, n, v, nov, l, diffuse: bool, specu
         h = v + ls
         h /= np.linalg.norm(h, axis=-1, keepdims=True)
         spec = (brdf.d_ggx((n * h).sum(-1), alpha) * brdf.v_smith_ggx_correlated(nov, np.maximum(nols, 0), alpha)
-                * energy * np.maximum(nols, 0))[:, None] * brdf.f_schlick((v * h).sum(-1)[:, None], f0)
+                * energy * np.maximum(nols, 0))[:, None] * brdf.f_schlick((v * h).sum(-1)[:, None], f0, f90)
         out += np.where((nols > 0)[:, None], spec, 0)
     return out
 
@@ -68,13 +68,13 @@ def lights(gb, arrays, records, effects: dict, *, diffuse=True, specular=True, e
     representative=False shades a light with a size from its centre alone (for comparison)."""
     hit = gb["hit"]
     out = np.zeros((len(hit), 3))
-    v, n, nov, (base, metallic, _, rough, f0) = surface(gb, arrays)
+    v, n, nov, (base, metallic, _, rough, f0, f90) = surface(gb, arrays)
     p = gb["pos"][hit]
     origin = ray_offset(p, n, gb["dir"][hit], gb["t"][hit])
     sid = np.flatnonzero(hit)              # each G-buffer sample's random stream (one tile)
     seed = effects["reference"]["seed"]
     color = np.zeros((len(p), 3))
-    shade = lambda l: light_brdf_cos(base, metallic, rough, f0, n, v, nov, l, diffuse, specular)   # noqa: E731
+    shade = lambda l: light_brdf_cos(base, metallic, rough, f0, f90, n, v, nov, l, diffuse, specular)   # noqa: E731
     for j, r in enumerate(records.astype(np.float64)):
         kind, e = int(r[0, 3]), np.broadcast_to(r[1, :3], (len(p), 3)).copy()
         if kind == LIGHT_KINDS["directional"]:
@@ -115,7 +115,7 @@ def lights(gb, arrays, records, effects: dict, *, diffuse=True, specular=True, e
                       for k in range(ns)) / ns
         else:
             vis = np.ones(len(p))
-        color += vis[:, None] * e * light_brdf_cos(base, metallic, rough, f0, n, v, nov, wc, diffuse, specular,
+        color += vis[:, None] * e * light_brdf_cos(base, metallic, rough, f0, f90, n, v, nov, wc, diffuse, specular,
                                                    sin_max if representative and not exact else None)
     out[hit] = color
     return out

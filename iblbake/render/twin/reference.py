@@ -20,7 +20,7 @@ def exact(gb, arrays, effects: dict, env: dict, image, sub: int = 2, chunk: int 
     """What the `reference` pass converges to, by quadrature over the panorama's texels."""
     hit = gb["hit"]
     out = np.zeros((len(hit), 3))
-    v, n, nov, (base, metallic, emissive, rough, f0) = surface(gb, arrays)
+    v, n, nov, (base, metallic, emissive, rough, f0, f90) = surface(gb, arrays)
     alpha = rough ** 2
     hgt, wid = image.shape[:2]
     dirs, omega = prefilter.texel_subsamples(wid, hgt, sub)
@@ -28,7 +28,7 @@ def exact(gb, arrays, effects: dict, env: dict, image, sub: int = 2, chunk: int 
     omega = omega.reshape(-1)
     radiance = np.repeat(image.reshape(-1, 3).astype(np.float64), sub * sub, axis=0) * env["intensity"]
     res = np.zeros((len(n), 3))
-    kd = diffuse_weight(base, metallic, rough, f0, nov)
+    kd = diffuse_weight(base, metallic, rough, f0, f90, nov)
     delta = alpha < DELTA_ALPHA
     visibility = effects["reference"]["visibility"]
     if visibility:
@@ -47,10 +47,10 @@ def exact(gb, arrays, effects: dict, env: dict, image, sub: int = 2, chunk: int 
             noh = (hv * n[sl, None, :]).sum(2)
             voh = (hv * v[sl, None, :]).sum(2)
             dv = brdf.d_ggx(noh, alpha[sl, None]) * brdf.v_smith_ggx_correlated(nov[sl, None], nol, alpha[sl, None])
-            fw = (1 - np.clip(voh, 0, 1)) ** 5                          # Schlick: F0 + (1 - F0) fw
+            fw = (1 - np.clip(voh, 0, 1)) ** 5                          # Schlick: F0 + (F90 - F0) fw
             a = (dv * w) @ radiance
             bsum = (dv * w * fw) @ radiance
-            res[sl] += np.where(delta[sl, None], 0.0, f0[sl] * a + (1 - f0[sl]) * bsum)
+            res[sl] += np.where(delta[sl, None], 0.0, f0[sl] * a + (f90[sl] - f0[sl]) * bsum)
     if effects["specular"] == "reference" and delta.any():
         # a lobe narrower than float32 resolves (the kernel's DELTA_ALPHA) is a mirror: F(NoV) L(R),
         # L read as the kernel reads it (nearest texel)
@@ -60,6 +60,6 @@ def exact(gb, arrays, effects: dict, env: dict, image, sub: int = 2, chunk: int 
         i = np.minimum((u * wid).astype(np.int64), wid - 1)
         j = np.minimum((w * hgt).astype(np.int64), hgt - 1)
         res[delta] += (image[j, i].astype(np.float64) * env["intensity"]
-                       * brdf.f_schlick(nov[delta, None], f0[delta])) * seen[:, None]
+                       * brdf.f_schlick(nov[delta, None], f0[delta], f90[delta])) * seen[:, None]
     out[hit] = res * material_occlusion(gb)[:, None]      # the occlusion map: image-based light only
     return out

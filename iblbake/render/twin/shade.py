@@ -22,7 +22,7 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
     split around f0: the same sum, to float rounding."""
     hit = gb["hit"]
     out = np.zeros((len(hit), 3))
-    v, n, nov, (base, metallic, emissive, rough, f0) = surface(gb, arrays)
+    v, n, nov, (base, metallic, emissive, rough, f0, f90) = surface(gb, arrays)
     alpha = rough ** 2
     rot, scale = env["rotation_y"], env["intensity"]
     color = np.zeros_like(emissive)
@@ -31,7 +31,7 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
     if effects["diffuse"] == "sh":
         e = np.maximum(sh.evaluate(sh_coeffs, to_env(n, rot), effects["sh_bands"]), 0.0)
         diff_occ = ao_multibounce(occ, base * (1 - metallic[:, None])) if effects["ao_multibounce"] else occ[:, None]
-        color += diff_occ * diffuse_weight(base, metallic, rough, f0, nov) * scale * e
+        color += diff_occ * diffuse_weight(base, metallic, rough, f0, f90, nov) * scale * e
     if effects["specular"] == "importance":
         nsamp = effects["samples"]
         pts = sampling.hammersley(nsamp).astype(np.float32).astype(np.float64)
@@ -57,7 +57,7 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
                         + effects["mip_bias"]
             li = radiance.chain_lookup_twin(chain, le, lod)
             wgt = brdf.v_smith_ggx_correlated(nov, nol, alpha) * 4 * nol * voh / noh
-            contrib = li * brdf.f_schlick(voh[:, None], f0) * wgt[:, None]
+            contrib = li * brdf.f_schlick(voh[:, None], f0, f90) * wgt[:, None]
             acc += np.where(ok[:, None], contrib, 0.0)
             accepted += ok
         div = np.maximum(accepted, 1)[:, None] if effects["normalize"] == "accepted" else nsamp
@@ -70,9 +70,9 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
             r /= np.linalg.norm(r, axis=1, keepdims=True)
         pre = radiance.chain_lookup_twin(prefiltered, to_env(r, rot), rough * (len(prefiltered) - 1))
         ab = dfg_lookup(dfg, nov, rough)
-        color += spec_occ * scale * pre * (f0 * ab[:, 0:1] + ab[:, 1:2])
+        color += spec_occ * scale * pre * (f0 * ab[:, 0:1] + f90 * ab[:, 1:2])
     elif effects["specular"] == "lobe":
-        color += spec_occ * scale * lobe(v, n, nov, alpha, rough, f0, rot, effects["lobe"]["samples"],
+        color += spec_occ * scale * lobe(v, n, nov, alpha, rough, f0, f90, rot, effects["lobe"]["samples"],
                               effects["lobe"]["spread"], prefiltered, dfg)
     out[hit] = color * material_occlusion(gb)[:, None] + emissive
     return out
@@ -90,7 +90,7 @@ def ao_multibounce(ao, albedo):
     return np.maximum(v, ((v * a + b) * v + c) * v)
 
 
-def lobe(v, n, nov, alpha, rough, f0, rot, k, spread, prefiltered, dfg):
+def lobe(v, n, nov, alpha, rough, f0, f90, rot, k, spread, prefiltered, dfg):
     """Twin of shade.cl's SPECULAR_LOBE block (see the comment there): K visible-normal samples,
     each reading the prefiltered chain at its share of the lobe, their weighted mean times the
     DFG table's albedo."""
@@ -110,7 +110,7 @@ def lobe(v, n, nov, alpha, rough, f0, rot, k, spread, prefiltered, dfg):
         ok = (nol > 0) & (voh > 0)
         pdf = g1 * brdf.d_ggx(hl[:, 2], alpha) / (4 * nov)
         a = np.minimum(np.sqrt(spread / (4 * np.pi * k * pdf)), alpha)
-        w = brdf.f_schlick(voh[:, None], f0) * (brdf.v_smith_ggx_correlated(nov, nol, alpha) * 4 * nov * nol / g1)[:, None]
+        w = brdf.f_schlick(voh[:, None], f0, f90) * (brdf.v_smith_ggx_correlated(nov, nol, alpha) * 4 * nov * nol / g1)[:, None]
         w = np.where(ok[:, None], w, 0.0)
         num += w * radiance.chain_lookup_twin(prefiltered, to_env(l, rot), np.sqrt(a) * (nlev - 1))
         den += w
@@ -118,4 +118,4 @@ def lobe(v, n, nov, alpha, rough, f0, rot, k, spread, prefiltered, dfg):
     fallback = radiance.chain_lookup_twin(prefiltered, to_env(r, rot), rough * (nlev - 1))
     li = np.where(den[:, :1] > 0, num / np.where(den > 0, den, 1.0), fallback)
     ab = dfg_lookup(dfg, nov, rough)
-    return li * (f0 * ab[:, 0:1] + ab[:, 1:2])
+    return li * (f0 * ab[:, 0:1] + f90 * ab[:, 1:2])
