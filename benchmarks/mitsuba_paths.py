@@ -1,27 +1,34 @@
 """The path-traced reference against Mitsuba 3's `path`: Mitsuba's own acceptance test per scene.
 
-Each renderer renders each scene K times with independent seeds; per pixel channel the two means
-are compared by a two-sided z-test with both means' variances (from the K renders each), alpha 0.01
-with Sidak's correction over the tested pixel channels, and the scene passes where at least 99.75%
-of them do (Mitsuba's src/render/tests/test_renders.py, which tests an integrator against a
-high-sample reference the same way). Both integrate the pixel's area (Mitsuba's box filter;
-iblbake's camera.spp 64, a fixed Hammersley set, so its renders share that part of the error), and
-silhouette pixels, where a fixed set of sub-pixel points is least like the area, are left out.
+iblbake renders each scene K times with independent seeds; Mitsuba traces a high-sample reference
+along the same rays, every pixel's centre (iblbake's camera.spp 1), keeping each pixel's sample
+variance. Per pixel channel a two-sided z-test compares iblbake's mean with the reference on the two
+means' variances, alpha 0.01 with Sidak's correction over the channels tested, and a scene passes
+where at least 99.75% of them do (Mitsuba's src/render/tests/test_renders.py, which tests an
+integrator against a high-sample reference with its variance the same way). Through the pixel's
+centre both estimate one ray's radiance: no pixel filter enters (with mi.render's box filter a
+fixed set of sub-pixel points against random ones decides the test at every sharp reflection).
+Every surface pixel is tested; the sky, which iblbake shows through its background pass, is not.
 
 Scenes both renderers express exactly (docs/conventions.md):
 - mirror on floor: a mirror sphere (metallic 1, base colour 1, roughness 0: F = 1, Mitsuba's
   `conductor` with material none) resting on a Lambert floor (specular 0 = Mitsuba's `diffuse`)
   of 8 x 8: the sphere's lower half mirrors the lit floor, which a direct-light reference renders black;
 - open box: a Lambert sphere in a box of five Lambert rectangles (red and green side walls, open
-  towards the camera): colour bleeding between the walls and the sphere.
-Panorama: city, box-averaged to 256 x 128 and repeated to 1024 x 512 (each texel 4 x 4), written
-back without chromaticities, so that both read the same texels and Mitsuba's bilinear lookup
-equals iblbake's piecewise-constant one except within an eighth of a texel of its edges.
+  towards the camera): colour bleeding between the walls and the sphere;
+- knot on floor: the 102,400-triangle torus knot (examples/meshes/knot.ply, `make meshes`), Lambert,
+  resting on a Lambert floor of 6 x 4: the BVH, interpolated normals and light between the loops.
+Panorama: courtyard (overcast: its brightest texel 34 x the mean at 256 x 128; city's sun is
+3500 x), box-averaged to 256 x 128 and interpolated bilinearly to 2048 x 1024, written
+back without chromaticities: both read the same texels. Mitsuba interpolates four texels where
+iblbake reads one; where that is all that differs (a mirror's reflection of the sky: deterministic
+in both), the test allows the range of the texel's neighbours along the same path.
 Mitsuba's envmap maps u = atan2(x, -z) / 2 pi, v = acos(y) / pi, the same texel as iblbake's
 u = 0.5 - atan2(x, z) / 2 pi; its rectangle spans [-1, 1]^2 in its xy plane, normal +z.
 
-    .venv/bin/pip install mitsuba
-    .venv/bin/python benchmarks/mitsuba_paths.py [--renders 8] [--spp 256] [--variant scalar_rgb]
+    .venv/bin/pip install mitsuba        # and Debian's libllvm19 for the CPU variant
+    DRJIT_LIBLLVM_PATH=/usr/lib/x86_64-linux-gnu/libLLVM-19.so \
+        .venv/bin/python benchmarks/mitsuba_paths.py [--renders 16] [--spp 256] [--ref-spp 8192]
 """
 
 from __future__ import annotations
@@ -39,7 +46,7 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 RES = (64, 48)
 EYE, TARGET, FOV = [0.0, 1.6, 4.2], [0.0, 0.6, 0.0], 40.0
-PIXEL_SAMPLES = 64
+PANO_WIDTH = 2048
 
 
 def scenes():
@@ -58,34 +65,36 @@ def scenes():
              ("rect", {"center": [1.5, 1.5, 0], "normal": "-x", "half": [1.5, 1.5]}, "green")],
             {"white": ("lambert", [0.7, 0.7, 0.7]), "red": ("lambert", [0.8, 0.15, 0.1]),
              "green": ("lambert", [0.15, 0.7, 0.15])}),
+        "knot on floor": (
+            [("mesh", {"path": str(ROOT / "examples" / "meshes" / "knot.ply"), "translate": [0, 0.51, 0]}, "clay"),
+             ("rect", {"center": [0, 0, 0], "normal": "+y", "half": [3, 2]}, "floor")],
+            {"clay": ("lambert", [0.8, 0.55, 0.35]), "floor": ("lambert", [0.6, 0.6, 0.6])}),
     }
 
 
 AXES = {"+y": [0, 1, 0], "-y": [0, -1, 0], "+z": [0, 0, 1], "-x": [-1, 0, 0], "+x": [1, 0, 0]}
 
 
-def iblbake_doc(pano: Path, objects, mats, spp: int, seed: int, bounces):
+def iblbake_doc(pano: Path, objects, mats, spp: int, seed: int, bounces, depth: Path):
     objs = []
     for kind, p, m in objects:
         if kind == "sphere":
             objs.append({"sphere": p, "material": m})
+        elif kind == "mesh":
+            objs.append({"mesh": {"path": p["path"], "translate": p["translate"]}, "material": m})
         else:
             objs.append({"plane": {"point": p["center"], "normal": AXES[p["normal"]],
                                    "size": [2 * p["half"][0], 2 * p["half"][1]]}, "material": m})
     materials = {n: ({"base_color": c, "metallic": 1, "roughness": 0} if k == "mirror"
                      else {"base_color": c, "roughness": 1, "specular": 0}) for n, (k, c) in mats.items()}
-    # the pixel's area as Mitsuba's box filter integrates it: PIXEL_SAMPLES camera samples, each
-    # with spp / PIXEL_SAMPLES reference samples
-    return {"camera": {"perspective": {"position": EYE, "look_at": TARGET, "fov_y": FOV}, "resolution": list(RES),
-                       "spp": PIXEL_SAMPLES},
+    return {"camera": {"perspective": {"position": EYE, "look_at": TARGET, "fov_y": FOV}, "resolution": list(RES)},
             "environment": {"path": str(pano), "background": "show"},
-            "materials": materials, "objects": objs,
+            "materials": materials, "objects": objs, "output": {"depth": str(depth)},
             "effects": {"diffuse": "reference", "specular": "reference", "tonemap": "linear",
-                        "reference": {"max_samples": max(spp // PIXEL_SAMPLES, 2), "target_noise": 0, "seed": seed,
-                                      "bounces": bounces}}}
+                        "reference": {"max_samples": spp, "target_noise": 0, "seed": seed, "bounces": bounces}}}
 
 
-def mitsuba_dict(mi, pano: Path, objects, mats, max_depth: int, spp: int, seed: int):
+def mitsuba_dict(mi, pano: Path, objects, mats, max_depth: int, spp: int, seed: int, sampler="multijitter"):
     T = mi.ScalarTransform4f
     bsdfs = {n: ({"type": "conductor", "material": "none", "specular_reflectance": {"type": "rgb", "value": c}}
                  if k == "mirror" else {"type": "diffuse", "reflectance": {"type": "rgb", "value": c}})
@@ -95,7 +104,7 @@ def mitsuba_dict(mi, pano: Path, objects, mats, max_depth: int, spp: int, seed: 
                     "to_world": T().look_at(origin=EYE, target=TARGET, up=[0, 1, 0]),
                     "film": {"type": "hdrfilm", "width": RES[0], "height": RES[1], "rfilter": {"type": "box"},
                              "pixel_format": "rgba"},
-                    "sampler": {"type": "multijitter", "sample_count": spp, "seed": seed}},
+                    "sampler": {"type": sampler, "sample_count": spp, "seed": seed}},
          "env": {"type": "envmap", "filename": str(pano)}}
     # a rectangle is [-1, 1]^2 in its xy plane, normal +z: turned so that +z becomes the normal
     turn = {"+y": T().rotate([1, 0, 0], -90), "-y": T().rotate([1, 0, 0], 90), "+z": T(),
@@ -103,29 +112,69 @@ def mitsuba_dict(mi, pano: Path, objects, mats, max_depth: int, spp: int, seed: 
     for i, (kind, p, m) in enumerate(objects):
         if kind == "sphere":
             d[f"o{i}"] = {"type": "sphere", "center": p["center"], "radius": p["radius"], "bsdf": bsdfs[m]}
+        elif kind == "mesh":                  # its vertex normals interpolated, as iblbake's
+            d[f"o{i}"] = {"type": "ply", "filename": p["path"], "to_world": T().translate(p["translate"]),
+                          "bsdf": bsdfs[m]}
         else:
             d[f"o{i}"] = {"type": "rectangle", "bsdf": bsdfs[m],
                           "to_world": T().translate(p["center"]) @ turn[p["normal"]] @ T().scale([p["half"][0], p["half"][1], 1])}
     return d
 
 
-def z_test_pass_rate(a: np.ndarray, b: np.ndarray, mask: np.ndarray, alpha=0.01) -> tuple:
-    """Share of pixel channels (where mask) whose two means agree: a, b (K, H, W, 3) renders."""
+def mitsuba_reference(mi, scene, spp: int, seed: int, chunk: int = 256) -> tuple:
+    """Mitsuba's `path` along every pixel's centre ray (the ray iblbake's camera.spp 1 traces):
+    per pixel channel the mean of spp samples and the variance of that mean (from the samples), in
+    wavefronts of chunk samples per pixel."""
+    import drjit as dr
+    sensor, integrator = scene.sensors()[0], scene.integrator()
+    w, h = RES
+    s1 = np.zeros((h, w, 3))
+    s2 = np.zeros((h, w, 3))
+    taken = 0
+    while taken < spp:
+        n = min(chunk, spp - taken)
+        idx = dr.arange(mi.UInt32, w * h * n)
+        pix = idx // n
+        pos = mi.Vector2f(mi.Float(pix % w) + 0.5, mi.Float(pix // w) + 0.5) / mi.ScalarVector2f(w, h)
+        sampler = mi.load_dict({"type": "independent"})
+        sampler.seed(seed * 7919 + taken, w * h * n)
+        ray, weight = sensor.sample_ray(0.0, 0.0, pos, mi.Point2f(0.5, 0.5))
+        spec, _, _ = integrator.sample(scene, sampler, ray)
+        v = (np.array(spec * weight).T if np.array(spec).shape[0] == 3 else np.array(spec * weight))
+        v = v.reshape(h, w, n, 3)
+        s1 += v.sum(2)
+        s2 += (v * v).sum(2)
+        taken += n
+    mean = s1 / spp
+    return mean, np.maximum(s2 / spp - mean * mean, 0.0) * spp / (spp - 1) / spp
+
+
+def z_test_pass_rate(ib: np.ndarray, ref: np.ndarray, ref_var: np.ndarray, mask: np.ndarray, lookup: np.ndarray,
+                     alpha=0.01) -> tuple:
+    """Mitsuba's acceptance test: the share of pixel channels (where mask) at which iblbake's mean
+    over its K renders (ib: (K, H, W, 3)) and Mitsuba's reference agree, a two-sided z-test on the
+    two means' variances, alpha with Sidak's correction over the channels tested. `lookup` (H, W, 3)
+    bounds what the panorama's lookup convention alone may change at a pixel whose estimate is
+    deterministic (iblbake reads a texel, Mitsuba interpolates four): added to the variance as
+    lookup^2, else the test would compare two lookups at zero variance."""
     from math import erfc
-    ma, mb = a.mean(0), b.mean(0)
-    va, vb = a.var(0, ddof=1) / len(a), b.var(0, ddof=1) / len(b)
-    z = np.abs(ma - mb) / np.sqrt(np.maximum(va + vb, 1e-30))
+    var = ib.var(0, ddof=1) / len(ib) + ref_var + lookup ** 2
+    z = np.abs(ib.mean(0) - ref) / np.sqrt(np.maximum(var, 1e-30))
     p = np.vectorize(lambda x: erfc(x / math.sqrt(2)))(z[mask])
-    level = 1 - (1 - alpha) ** (1 / p.size)        # Sidak
+    level = 1 - (1 - alpha) ** (1 / p.size)
     return float((p > level).mean()), p.size
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--renders", type=int, default=8, help="independent renders per renderer and scene")
-    ap.add_argument("--spp", type=int, default=256, help="samples per pixel of each render")
-    ap.add_argument("--variant", default="scalar_rgb")
+    ap.add_argument("--renders", type=int, default=16, help="iblbake's independent renders (seeds) per scene")
+    ap.add_argument("--spp", type=int, default=256, help="samples per pixel of each iblbake render")
+    ap.add_argument("--ref-spp", type=int, default=8192, help="Mitsuba's samples per pixel (the reference)")
+    ap.add_argument("--variant", default="llvm_ad_rgb", help="llvm_ad_rgb (needs DRJIT_LIBLLVM_PATH) or cuda_ad_rgb")
     ap.add_argument("--only", default=None)
+    ap.add_argument("--no-speed", action="store_true", help="the acceptance test only")
+    ap.add_argument("--target", type=float, default=0.01, help="relative RMSE the speed comparison times")
+    ap.add_argument("--converged", type=int, default=16384, help="samples per pixel of the converged images")
     args = ap.parse_args()
     import mitsuba as mi
     mi.set_variant(args.variant)
@@ -134,57 +183,161 @@ def main():
     from iblbake.io import images
     from iblbake.scene import load
 
-    print("| scene | pixel channels | z-test pass rate | iblbake s / render | Mitsuba s / render |")
+    print("| scene | pixel channels | z-test pass rate | iblbake / Mitsuba (mean) | deterministic channels (lookup range allowed) |")
     print("|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        img, _ = images.read_panorama(ROOT / "examples" / "panoramas" / "city.exr")
+        img, _ = images.read_panorama(ROOT / "examples" / "panoramas" / "courtyard.exr")
         h, w = img.shape[:2]
-        small = img[:, :, :3].reshape(128, h // 128, 256, w // 256, 3).mean((1, 3))   # equal-area rows: close
-        pano = tmp / "city.exr"
-        images.write_exr(pano, np.repeat(np.repeat(small, 4, 0), 4, 1).astype(np.float32))
+        small = img[:, :, :3].reshape(128, h // 128, 256, w // 256, 3).mean((1, 3))
+        pano = tmp / "courtyard.exr"
+        fine = upsample(small, PANO_WIDTH // 256)
+        images.write_exr(pano, fine.astype(np.float32))
+        spread = tmp / "range.exr"
+        images.write_exr(spread, neighbour_range(fine).astype(np.float32))
         rt, bakes = Runtime(), render.Bakes(tmp / "cache")
         for name, (objects, mats) in scenes().items():
             if args.only and args.only not in name:
                 continue
-            ib, ib_t = [], []
+            ib = []
             for k in range(args.renders):
                 p = tmp / f"s{k}.yaml"
-                p.write_text(yaml.safe_dump(iblbake_doc(pano, objects, mats, args.spp, 1 + k, "unbounded")))
-                sc = load.load(p)
-                sc.data["output"]["depth"] = str(tmp / "depth.exr")
+                p.write_text(yaml.safe_dump(iblbake_doc(pano, objects, mats, args.spp, 1 + k, "unbounded",
+                                                        tmp / "depth.exr")))
+                f = render.render(load.load(p), runtime=rt, cache=bakes)
+                ib.append(f.hdr[..., :3].astype(np.float64))
+            ib = np.stack(ib)
+            # where iblbake's estimate is deterministic (the same in every render: a mirror's view of the
+            # sky), the two renderers differ by their lookups alone; bilinear lies within the range of
+            # a texel's neighbours, so that range, followed along the same paths (the frame lit by the
+            # range image), bounds it
+            doc = iblbake_doc(spread, objects, mats, 2, 1, "unbounded", tmp / "depth.exr")
+            p.write_text(yaml.safe_dump(doc))
+            fixed = (ib.var(0) == 0).all(-1, keepdims=True)
+            lookup = np.where(fixed, render.render(load.load(p), runtime=rt, cache=bakes).hdr[..., :3], 0.0)
+            scene = mi.load_dict(mitsuba_dict(mi, pano, objects, mats, 1024, 1, 0))
+            ref, ref_var = mitsuba_reference(mi, scene, args.ref_spp, 1)
+            # every surface pixel, silhouettes too (both trace the pixel's centre); not the sky, which
+            # iblbake shows through its background pass
+            mask = np.repeat((np.asarray(f.aovs["depth"]) > 0)[..., None], 3, -1)
+            rate, n = z_test_pass_rate(ib, ref, ref_var, mask, lookup)
+            fixed_share = float(np.repeat(fixed, 3, -1)[mask].mean())
+            rel = ib.mean(0)[mask].reshape(-1, 3).mean(0) / ref[mask].reshape(-1, 3).mean(0)
+            print(f"| {name} | {n} | {100 * rate:.2f}% ({'pass' if rate >= 0.9975 else 'FAIL'}) | "
+                  f"{np.round(rel, 4).tolist()} | {100 * fixed_share:.1f}% |", flush=True)
+        print(f"\niblbake: {args.renders} renders x {args.spp} samples per pixel (seeds 1-{args.renders}), reference "
+              f"bounces unbounded; Mitsuba {mi.__version__} {args.variant} `path` max_depth 1024, {args.ref_spp} "
+              f"samples per pixel centre; {RES[0]}x{RES[1]}")
+        if not args.no_speed:
+            speed(args, mi, tmp, pano, rt, bakes)
+
+
+def rel_rmse(img: np.ndarray, converged: np.ndarray, mask: np.ndarray) -> float:
+    """RMS over the masked pixels of the luminance error, over the converged image's mean luminance."""
+    from iblbake.core.metrics import luminance
+    a, b = luminance(img[mask]), luminance(converged[mask])
+    return float(np.sqrt(np.mean((a - b) ** 2)) / b.mean())
+
+
+def time_to_error(render_at, converged, mask, target, start=4, limit=1 << 15):
+    """(samples per pixel, seconds, Msamples/s) at which the relative RMSE against `converged`
+    reaches target: renders at doubling sample counts (render_at(n) -> (image, seconds)), the two
+    that bracket the target interpolated in log-log (error and time both power laws of n)."""
+    prev, n = None, start
+    while n <= limit:
+        img, sec = render_at(n)
+        e = rel_rmse(img, converged, mask)
+        if e <= target:
+            if prev is None:
+                return n, sec
+            n0, s0, e0 = prev
+            t = (math.log(e0) - math.log(target)) / (math.log(e0) - math.log(e))
+            return n0 * (n / n0) ** t, s0 * (sec / s0) ** t
+        prev, n = (n, sec, e), n * 2
+    return None
+
+
+def speed(args, mi, tmp: Path, pano: Path, rt, bakes):
+    """Time to 1% relative RMSE against each renderer's own converged image (another seed), warm,
+    the render call only (median of 3 at each sample count), iblbake's reference against Mitsuba's
+    `path` with each of its stratified samplers."""
+    from iblbake import render
+    from iblbake.scene import load
+
+    print(f"\n| scene | renderer | spp to {100 * args.target:g}% | seconds | Msamples/s | iblbake / this |")
+    print("|---|---|---|---|---|---|")
+    for name, (objects, mats) in scenes().items():
+        if args.only and args.only not in name:
+            continue
+        p = tmp / "speed.yaml"
+
+        def ib_at(n, seed=1):
+            p.write_text(yaml.safe_dump(iblbake_doc(pano, objects, mats, n, seed, "unbounded", tmp / "depth.exr")))
+            sc = load.load(p)
+            times, f = [], None
+            for _ in range(3):
                 t0 = time.perf_counter()
                 f = render.render(sc, runtime=rt, cache=bakes)
-                ib_t.append(time.perf_counter() - t0)
-                ib.append(f.hdr[..., :3].astype(np.float64))
-            ms, ms_t = [], []
-            for k in range(args.renders):
-                scene = mi.load_dict(mitsuba_dict(mi, pano, objects, mats, 64, args.spp, 1000 + k))
-                t0 = time.perf_counter()
-                ms.append(np.array(mi.render(scene, spp=args.spp))[..., :3].astype(np.float64))
-                ms_t.append(time.perf_counter() - t0)
-            ib, ms = np.stack(ib), np.stack(ms)
-            # interior pixels: the same surface (depth within 2%) in the 3 x 3 block around them
-            depth = np.asarray(f.aovs["depth"])
-            mask2 = _interior(depth if depth.ndim == 2 else depth[..., 0])
-            mask = np.repeat(mask2[..., None], 3, -1)
-            rate, n = z_test_pass_rate(ib, ms, mask)
-            print(f"| {name} | {n} | {100 * rate:.2f}% ({'pass' if rate >= 0.9975 else 'FAIL'}) | "
-                  f"{statistics.median(ib_t[1:] or ib_t):.3f} | {statistics.median(ms_t[1:] or ms_t):.3f} |", flush=True)
-            rel = ib.mean(0)[mask2].mean(0) / ms.mean(0)[mask2].mean(0)
-            print(f"|   mean of tested pixels, iblbake / Mitsuba | | {np.round(rel, 4).tolist()} | | |")
-    print(f"\n{args.renders} renders x {args.spp} spp per renderer and scene, Mitsuba {mi.__version__} {args.variant} "
-          f"`path` max_depth 64 (multijitter), iblbake reference bounces unbounded; {RES[0]}x{RES[1]}")
+                times.append(time.perf_counter() - t0)
+            return f.hdr[..., :3].astype(np.float64), statistics.median(times)
+
+        conv, _ = ib_at(args.converged, seed=999)
+        p.write_text(yaml.safe_dump(iblbake_doc(pano, objects, mats, 2, 1, "unbounded", tmp / "depth.exr")))
+        mask = np.asarray(render.render(load.load(p), runtime=rt, cache=bakes).aovs["depth"]) > 0
+        rows = [("iblbake reference", time_to_error(ib_at, conv, mask, args.target))]
+        for sampler in ("multijitter", "ldsampler"):
+            def mi_at(n, seed=1, sampler=sampler):
+                scene = mi.load_dict(mitsuba_dict(mi, pano, objects, mats, 1024, n, seed, sampler))
+                mi.render(scene, spp=n)                                         # warm: the kernels
+                times, img = [], None
+                for _ in range(3):
+                    t0 = time.perf_counter()
+                    img = np.array(mi.render(scene, spp=n))
+                    times.append(time.perf_counter() - t0)
+                return img[..., :3].astype(np.float64), statistics.median(times)
+            mconv, _ = mi_at(args.converged, seed=999)
+            rows.append((f"Mitsuba path, {sampler}", time_to_error(mi_at, mconv, mask, args.target)))
+        base = rows[0][1]
+        for who, r in rows:
+            if r is None:
+                print(f"| {name} | {who} | > {1 << 15} | | | |")
+                continue
+            ratio = f"{r[1] / base[1]:.2f}" if base else "-"
+            print(f"| {name} | {who} | {r[0]:.0f} | {r[1]:.3f} | {RES[0] * RES[1] * r[0] / r[1] / 1e6:.2f} | "
+                  f"{ratio} |", flush=True)
+    print(f"\niblbake device: {rt.device_label}; Mitsuba {args.variant}; "
+          f"converged images: {args.converged} samples per pixel, seed 999")
 
 
-def _interior(depth: np.ndarray) -> np.ndarray:
-    d = np.pad(depth, 1, mode="edge")
-    ok = depth > 0
+def neighbour_range(img: np.ndarray) -> np.ndarray:
+    """Per texel the largest difference to its 8 neighbours (wrapping in u): how far a bilinear
+    lookup anywhere in the texel can be from the texel's value."""
+    out = np.zeros_like(img)
+    pad = np.concatenate([img[:, -1:], img, img[:, :1]], 1)
+    pad = np.concatenate([pad[:1], pad, pad[-1:]], 0)
+    h, w = img.shape[:2]
     for dy in (0, 1, 2):
         for dx in (0, 1, 2):
-            nb = d[dy:dy + depth.shape[0], dx:dx + depth.shape[1]]
-            ok &= (nb > 0) & (np.abs(nb - depth) < 0.02 * depth)
-    return ok | (depth == 0) & (np.pad(depth, 1)[1:-1, 1:-1] == 0)
+            out = np.maximum(out, np.abs(pad[dy:dy + h, dx:dx + w] - img))
+    return out
+
+
+def upsample(img: np.ndarray, k: int) -> np.ndarray:
+    """Bilinear between texel centres, k times finer (wrapping in u, clamped in v): a panorama smooth
+    at the scale of its texels, where iblbake's nearest lookup and Mitsuba's bilinear one agree."""
+    h, w = img.shape[:2]
+    def axis(n, wrap):
+        x = (np.arange(n * k) + 0.5) / k - 0.5
+        i0 = np.floor(x).astype(int)
+        f = x - i0
+        i1 = i0 + 1
+        if wrap:
+            return i0 % n, i1 % n, f
+        return np.clip(i0, 0, n - 1), np.clip(i1, 0, n - 1), f
+    j0, j1, fy = axis(h, False)
+    i0, i1, fx = axis(w, True)
+    rows = img[j0] * (1 - fy)[:, None, None] + img[j1] * fy[:, None, None]
+    return rows[:, i0] * (1 - fx)[None, :, None] + rows[:, i1] * fx[None, :, None]
 
 
 if __name__ == "__main__":

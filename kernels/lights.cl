@@ -1,7 +1,7 @@
 /* Lights pass: analytic lights in the units of glTF's KHR_lights_punctual (lux for a directional
  * light, candela for point and spot lights, the spec's range window and spot falloff), shaded
  * with the IBL's BRDF (docs/conventions.md) and shadowed as each light asks, added into the
- * radiance buffer. Records: kernels/layout.h LIGHT_FLOAT4S, packed by iblbake/scene/pack.py.
+ * radiance buffer. A light seen from a point: kernels/light.h.
  *   LIGHT_DIFFUSE, LIGHT_SPECULAR  the BRDF terms the scene renders
  *   HAS_SHADOWS                    some light traces shadow rays (else none is traced)
  *   LIGHTS_EXACT                   the reference: a light of size > 0 is integrated over its
@@ -16,6 +16,7 @@
 #include "sampling.h"
 #include "scene.h"
 #include "surface.h"
+#include "light.h"
 
 /* The specular term of a light of angular radius asin(sin_max) at its representative point
  * (Karis 2013, "Real Shading in Unreal Engine 4"): the direction of the light's disk closest to
@@ -59,17 +60,6 @@ inline float3 light_brdf_cos(const Material mt, float3 n, float3 v, float nov, f
     return f;
 }
 
-/* Uniform in the cone around axis a whose 1 - cos(half angle) is omc (kept apart: the sun's is
- * 1e-5, which 1 - cos in float32 would round); pdf 1 / (2 pi omc). */
-inline float3 cone_direction(float3 a, float omc, float2 u)
-{
-    const float x = u.x * omc;
-    const float ct = 1.0f - x, st = sqrt(fmax(0.0f, x * (2.0f - x))), phi = 2.0f * IBL_PI * u.y;
-    float3 t, b;
-    tangent_frame(a, &t, &b);
-    return normalize(t * (st * cos(phi)) + b * (st * sin(phi)) + a * ct);
-}
-
 __kernel void lights(__global const float4 *gb_pos, SURFACE_PARAMS,
                      const int n, __global const float4 *lights, const int nlights,
                      SCENE_PARAMS, const int pixel0, const int spp, const uint light_seed, const int exact_samples,
@@ -89,34 +79,12 @@ __kernel void lights(__global const float4 *gb_pos, SURFACE_PARAMS,
 #endif
     float3 color = (float3)(0.0f);
     for (int j = 0; j < nlights; ++j) {
-        const float4 r0 = lights[LIGHT_FLOAT4S * j], r1 = lights[LIGHT_FLOAT4S * j + 1];
-        const float4 r2 = lights[LIGHT_FLOAT4S * j + 2], r3 = lights[LIGHT_FLOAT4S * j + 3];
-        const int kind = (int)r0.w;
-        float3 wc, e = r1.xyz;          /* towards the centre; irradiance facing it */
-        float dist = INFINITY, sin_max;
-        if (kind == LIGHT_DIRECTIONAL) {
-            wc = r0.xyz;
-            sin_max = r2.w;                 /* the sine of its angular radius */
-        } else {
-            const float3 dv = r0.xyz - p;
-            const float d = length(dv);
-            wc = dv / d;
-            float win = 1.0f / (d * d);
-            if (r3.z > 0.0f) {           /* KHR: clamp(1 - (d / range)^4, 0, 1)^2 / d^2 */
-                float q = d / r3.z;
-                q = q * q;
-                const float c = clamp(1.0f - q * q, 0.0f, 1.0f);
-                win *= c * c;
-            }
-            const float a = clamp(dot(r2.xyz, -wc) * r3.x + r3.y, 0.0f, 1.0f);   /* spot (1 for a point) */
-            e *= win * a * a;
-            sin_max = fmin(r2.w / d, 1.0f);
-            dist = fmax(d - r2.w, 0.0f);
-        }
+        float3 wc;          /* towards the centre */
+        float dist, sin_max;
+        const float3 e = light_toward(lights, j, p, &wc, &dist, &sin_max);     /* irradiance facing it */
         if (e.x + e.y + e.z <= 0.0f) continue;
         const uint ls = light_seed ^ pcg_hash((uint)j + 1u);
-        /* 1 - cos of the cone the light fills, from its sine without cancellation */
-        const float omc = sin_max * sin_max / (1.0f + sqrt(fmax(0.0f, 1.0f - sin_max * sin_max)));
+        const float omc = light_omc(sin_max);
 #ifdef LIGHTS_EXACT
         if (sin_max > 0.0f) {
             /* radiance of the disk or sphere: E = Le pi sin^2 on a surface facing it */
@@ -147,11 +115,11 @@ __kernel void lights(__global const float4 *gb_pos, SURFACE_PARAMS,
         if (f.x + f.y + f.z <= 0.0f) continue;
         float vis = 1.0f;
 #ifdef HAS_SHADOWS
-        const int shadows = (int)r1.w;
+        const int shadows = (int)lights[LIGHT_FLOAT4S * j + 1].w;
         if (shadows == SHADOWS_HARD || (shadows == SHADOWS_SOFT && sin_max <= 0.0f)) {
             vis = occluded_to(origin, wc, dist, SCENE_ARGS) ? 0.0f : 1.0f;
         } else if (shadows == SHADOWS_SOFT) {
-            const int ns = (int)r3.w;
+            const int ns = (int)lights[LIGHT_FLOAT4S * j + 3].w;
             int lit = 0;
             for (int k = 0; k < ns; ++k) {
                 Sampler sp = sampler_start(ls, sid, k);

@@ -10,7 +10,8 @@
  * each sample also follows a path (path tracing, Kajiya 1986; pbrt-v4's PathIntegrator, Mitsuba 3's
  * `path`): from the first vertex a BSDF-sampled ray finds the surface whose light that vertex
  * receives (the direct estimate has counted the environment seen past it), and every later vertex
- * adds its emission, samples the environment (MIS against the BSDF), scatters with its full
+ * adds its emission, samples the environment (MIS against the BSDF) and every analytic light
+ * (PATH_LIGHTS), scatters with its full
  * material and continues, Russian roulette from the RR_DEPTH-th bounce on with survival
  * min(max throughput, 0.95), unbiased.
  * numpy twin (the same integral by quadrature over every texel): iblbake/render/twin/reference.py exact(). */
@@ -20,9 +21,10 @@
 #include "envmap.h"
 #include "scene.h"
 #include "surface.h"
-#ifdef BOUNCES
+/* unconditionally: a frame program places each header once, where it is first included */
 #include "material.h"
-#endif
+#include "light.h"
+
 
 #if DIFFUSE_MODE == DIFFUSE_REFERENCE
 #define FIRST_DIFFUSE 1
@@ -141,7 +143,8 @@ inline int path_vertex(float3 o, float3 d, Hit h, __global const float4 *materia
 inline float3 follow_path(float3 o, float3 l, Hit h, float3 beta, Sampler *sp, __global const float4 *materials,
                           const float2 env_rot, __global const float4 *img, const int w, const int h_env,
                           __global const float *marginal, __global const float *conditional,
-                          __global const float *pdf_table, SCENE_PARAMS, float3 *env_part)
+                          __global const float *pdf_table, SCENE_PARAMS, float3 *env_part,
+                          __global const float4 *lights, const int nlights)
 {
     float3 emitted = (float3)(0.0f), env = (float3)(0.0f);
     for (int bounce = 2; bounce <= MAX_PATH; ++bounce) {
@@ -169,6 +172,27 @@ inline float3 follow_path(float3 o, float3 l, Hit h, float3 beta, Sampler *sp, _
             if (pe > 0.0f && (f.x > 0.0f || f.y > 0.0f || f.z > 0.0f) && !occluded(origin, le, SCENE_ARGS))
                 env += beta * img[texel].xyz * f * (power_heuristic(pe, pb) / pe);
         }
+#ifdef PATH_LIGHTS
+        /* every analytic light, one direction over its disk or sphere (uniform in the cone it
+         * fills) or its centre; no ray finds a light, so this is its only strategy (no MIS) */
+        for (int j = 0; j < nlights; ++j) {
+            float3 wc;
+            float dist, sin_max;
+            const float3 e = light_toward(lights, j, p, &wc, &dist, &sin_max);
+            const float2 u_light = sampler_2d(sp);
+            if (e.x + e.y + e.z <= 0.0f) continue;
+            float3 ll = wc, le = e;
+            if (sin_max > 0.0f) {          /* radiance E / (pi sin^2) over the cone's solid angle 2 pi omc */
+                const float omc = light_omc(sin_max);
+                ll = cone_direction(wc, omc, u_light);
+                le = e * (2.0f * omc / (sin_max * sin_max));
+            }
+            float pl;
+            const float3 f = bsdf_cos(mt, v, n, nov, ll, ps, 1, 1, &pl);
+            if ((f.x > 0.0f || f.y > 0.0f || f.z > 0.0f) && !occluded_to(origin, ll, dist, SCENE_ARGS))
+                emitted += beta * le * f;
+        }
+#endif
         /* scatter */
         float pb;
         float3 nl;
@@ -193,7 +217,9 @@ inline float3 follow_path(float3 o, float3 l, Hit h, float3 beta, Sampler *sp, _
 }
 #endif
 
-/* One batch of `batch` samples per G-buffer sample: ref_batch = (sum of estimates, sum of the odd-numbered
+/* lights, nlights: the analytic lights a path's later vertices sample (PATH_LIGHTS; the lights
+ * pass lights the first vertex); a placeholder otherwise.
+ * One batch of `batch` samples per G-buffer sample: ref_batch = (sum of estimates, sum of the odd-numbered
  * samples' luminance). Samples are numbered globally (first + k), so the frame is the same
  * whatever the batching and wherever the run stops. */
 __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int n,
@@ -201,7 +227,8 @@ __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int
                         __global const float4 *img, const int w, const int h,
                         __global const float *marginal, __global const float *conditional,
                         __global const float *pdf_table, SCENE_PARAMS, const int pixel0, const int spp,
-                        const uint seed, const int first, const int batch, __global float4 *ref_batch)
+                        const uint seed, const int first, const int batch, __global float4 *ref_batch,
+                        __global const float4 *lights, const int nlights)
 {
     const int gid = get_global_id(0);
     if (gid >= n) return;
@@ -313,7 +340,7 @@ __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int
                 const Hit hh = trace(origin, l, SCENE_ARGS);
                 if (hh.kind != PRIM_NONE)
                     emitted = follow_path(origin, l, hh, wgt, &sp, materials, env_rot, img, w, h, marginal,
-                                          conditional, pdf_table, SCENE_ARGS, &env_part);
+                                          conditional, pdf_table, SCENE_ARGS, &env_part, lights, nlights);
             }
             est = (est + env_part) * env_scale + emitted;
         }

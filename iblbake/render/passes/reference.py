@@ -12,6 +12,8 @@ import numpy as np
 from iblbake.bake.radiance import to_rgba
 from iblbake.core.metrics import luminance
 from iblbake.render.passes.base import Buffer, Pass, geometry_defines, mode_defines
+from iblbake.render.passes.lights import Lights, frame_lights
+from iblbake.scene import pack
 
 
 
@@ -52,14 +54,22 @@ class Reference(Pass):
             d.update(VISIBILITY=1, **geometry_defines(scene))
         if fx.bounces != 1:
             d["BOUNCES"] = fx.bounces     # paths, only where light can pass between surfaces (plan.py)
+            if Lights().runs(scene, fx):
+                d["PATH_LIGHTS"] = 1      # the lights pass lights the first vertex, paths the others
         return d
 
     def setup(self, ctx) -> dict:
         dist = ctx.loaded["env_cdf"]
         rt = ctx.rt
-        return {"img": rt.to_device(to_rgba(ctx.image)), "w": dist.width, "h": dist.height,
-                     "marginal": rt.to_device(dist.marginal), "conditional": rt.to_device(dist.conditional),
-                     "pdf_table": rt.to_device(dist.pdf)}
+        out = {"img": rt.to_device(to_rgba(ctx.image)), "w": dist.width, "h": dist.height,
+               "marginal": rt.to_device(dist.marginal), "conditional": rt.to_device(dist.conditional),
+               "pdf_table": rt.to_device(dist.pdf)}
+        recs = np.zeros((0, 4), np.float32)
+        if "PATH_LIGHTS" in ctx.plan.defines[self.name]:
+            recs = pack.light_records(frame_lights(ctx.scene, ctx.bakes.sun(ctx.scene.data["environment"])))
+        out.update(lights=rt.to_device(recs.reshape(-1, 4) if len(recs) else np.zeros((4, 4), np.float32)),
+                   nlights=len(recs))
+        return out
 
     def run(self, ctx):
         ref = ctx.scene.data["effects"]["reference"]
