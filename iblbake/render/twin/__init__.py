@@ -7,7 +7,8 @@ surface      surface(), diffuse_weight(), facing_normal(), to_env()
 shade        shade(): SH diffuse, importance-sampled, prefiltered and lobe specular, emission
 ao, gtao     ambient_occlusion(); gtao(), gtao_denoise()
 lights       lights(): analytic lights with hard and soft shadows, and their exact integral
-reference    exact(): the integral the `reference` pass estimates, by quadrature
+reference    exact(): the integral the `reference` pass estimates (bounces 1), by quadrature
+paths        radiance(): the reference with paths, sample for sample (bounces > 1)
 """
 
 from iblbake.render.twin.gbuffer import occluded, ray_offset, primary, textures, hit_texcoords, map_uv, gbuffer_coords  # noqa: F401
@@ -18,3 +19,4 @@ from iblbake.render.twin.gtao import gtao_noise, acos_fast, gtao, gtao_denoise  
 from iblbake.render.twin.ao import ambient_occlusion  # noqa: F401
 from iblbake.render.twin.lights import representative_point, light_brdf_cos, lights  # noqa: F401
 from iblbake.render.twin.reference import exact  # noqa: F401
+from iblbake.render.twin.paths import radiance as path_radiance  # noqa: F401
