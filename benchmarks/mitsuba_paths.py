@@ -173,8 +173,10 @@ def main():
     ap.add_argument("--variant", default="llvm_ad_rgb", help="llvm_ad_rgb (needs DRJIT_LIBLLVM_PATH) or cuda_ad_rgb")
     ap.add_argument("--only", default=None)
     ap.add_argument("--no-speed", action="store_true", help="the acceptance test only")
+    ap.add_argument("--no-acceptance", action="store_true", help="the speed comparison only")
     ap.add_argument("--target", type=float, default=0.01, help="relative RMSE the speed comparison times")
     ap.add_argument("--converged", type=int, default=16384, help="samples per pixel of the converged images")
+    ap.add_argument("--speed-scale", type=int, default=1, help="the speed comparison's frames, times 64x48")
     args = ap.parse_args()
     import mitsuba as mi
     mi.set_variant(args.variant)
@@ -197,7 +199,7 @@ def main():
         images.write_exr(spread, neighbour_range(fine).astype(np.float32))
         rt, bakes = Runtime(), render.Bakes(tmp / "cache")
         for name, (objects, mats) in scenes().items():
-            if args.only and args.only not in name:
+            if (args.only and args.only not in name) or args.no_acceptance:
                 continue
             ib = []
             for k in range(args.renders):
@@ -239,14 +241,16 @@ def rel_rmse(img: np.ndarray, converged: np.ndarray, mask: np.ndarray) -> float:
     return float(np.sqrt(np.mean((a - b) ** 2)) / b.mean())
 
 
-def time_to_error(render_at, converged, mask, target, start=4, limit=1 << 15):
-    """(samples per pixel, seconds, Msamples/s) at which the relative RMSE against `converged`
-    reaches target: renders at doubling sample counts (render_at(n) -> (image, seconds)), the two
-    that bracket the target interpolated in log-log (error and time both power laws of n)."""
+def time_to_error(render_at, converged, n_converged: int, mask, target, start=4):
+    """(samples per pixel, seconds) at which the relative RMSE against the truth reaches target:
+    renders at doubling sample counts (render_at(n) -> (image, seconds)), the two that bracket the
+    target interpolated in log-log (error and time both power laws of n). The converged image has
+    noise of its own, n / n_converged of the test image's variance where both fall as 1 / n, so
+    the RMSE against it is divided by sqrt(1 + n / n_converged)."""
     prev, n = None, start
-    while n <= limit:
+    while n <= n_converged:                     # beyond, the converged image is no longer the truth
         img, sec = render_at(n)
-        e = rel_rmse(img, converged, mask)
+        e = rel_rmse(img, converged, mask) / math.sqrt(1 + n / n_converged)
         if e <= target:
             if prev is None:
                 return n, sec
@@ -258,55 +262,58 @@ def time_to_error(render_at, converged, mask, target, start=4, limit=1 << 15):
 
 
 def speed(args, mi, tmp: Path, pano: Path, rt, bakes):
+    global RES
+    RES = (RES[0] * args.speed_scale, RES[1] * args.speed_scale)
     """Time to 1% relative RMSE against each renderer's own converged image (another seed), warm,
     the render call only (median of 3 at each sample count), iblbake's reference against Mitsuba's
     `path` with each of its stratified samplers."""
     from iblbake import render
     from iblbake.scene import load
 
-    print(f"\n| scene | renderer | spp to {100 * args.target:g}% | seconds | Msamples/s | iblbake / this |")
+    print(f"\n| scene | renderer | spp to {100 * args.target:g}% | seconds | Msamples/s | iblbake s / this s |")
     print("|---|---|---|---|---|---|")
     for name, (objects, mats) in scenes().items():
         if args.only and args.only not in name:
             continue
         p = tmp / "speed.yaml"
 
-        def ib_at(n, seed=1):
+        def ib_at(n, seed=1, repeats=3):
             p.write_text(yaml.safe_dump(iblbake_doc(pano, objects, mats, n, seed, "unbounded", tmp / "depth.exr")))
             sc = load.load(p)
             times, f = [], None
-            for _ in range(3):
+            for _ in range(repeats):
                 t0 = time.perf_counter()
                 f = render.render(sc, runtime=rt, cache=bakes)
                 times.append(time.perf_counter() - t0)
             return f.hdr[..., :3].astype(np.float64), statistics.median(times)
 
-        conv, _ = ib_at(args.converged, seed=999)
+        conv, _ = ib_at(args.converged, seed=999, repeats=1)
         p.write_text(yaml.safe_dump(iblbake_doc(pano, objects, mats, 2, 1, "unbounded", tmp / "depth.exr")))
         mask = np.asarray(render.render(load.load(p), runtime=rt, cache=bakes).aovs["depth"]) > 0
-        rows = [("iblbake reference", time_to_error(ib_at, conv, mask, args.target))]
+        rows = [("iblbake reference", time_to_error(ib_at, conv, args.converged, mask, args.target))]
         for sampler in ("multijitter", "ldsampler"):
-            def mi_at(n, seed=1, sampler=sampler):
+            def mi_at(n, seed=1, sampler=sampler, repeats=3):
                 scene = mi.load_dict(mitsuba_dict(mi, pano, objects, mats, 1024, n, seed, sampler))
-                mi.render(scene, spp=n)                                         # warm: the kernels
+                if repeats > 1:
+                    mi.render(scene, spp=n)                                     # warm: the kernels
                 times, img = [], None
-                for _ in range(3):
+                for _ in range(repeats):
                     t0 = time.perf_counter()
                     img = np.array(mi.render(scene, spp=n))
                     times.append(time.perf_counter() - t0)
                 return img[..., :3].astype(np.float64), statistics.median(times)
-            mconv, _ = mi_at(args.converged, seed=999)
-            rows.append((f"Mitsuba path, {sampler}", time_to_error(mi_at, mconv, mask, args.target)))
+            mconv, _ = mi_at(args.converged, seed=999, repeats=1)
+            rows.append((f"Mitsuba path, {sampler}", time_to_error(mi_at, mconv, args.converged, mask, args.target)))
         base = rows[0][1]
         for who, r in rows:
             if r is None:
-                print(f"| {name} | {who} | > {1 << 15} | | | |")
+                print(f"| {name} | {who} | > {args.converged} | | | |")
                 continue
-            ratio = f"{r[1] / base[1]:.2f}" if base else "-"
+            ratio = f"{base[1] / r[1]:.2f}" if base else "-"
             print(f"| {name} | {who} | {r[0]:.0f} | {r[1]:.3f} | {RES[0] * RES[1] * r[0] / r[1] / 1e6:.2f} | "
                   f"{ratio} |", flush=True)
-    print(f"\niblbake device: {rt.device_label}; Mitsuba {args.variant}; "
-          f"converged images: {args.converged} samples per pixel, seed 999")
+    print(f"\n{RES[0]}x{RES[1]}; iblbake device: {rt.device_label}; Mitsuba {args.variant}; converged images: "
+          f"{args.converged} samples per pixel, seed 999; Msamples/s: pixels x spp / seconds")
 
 
 def neighbour_range(img: np.ndarray) -> np.ndarray:

@@ -219,23 +219,26 @@ inline float3 follow_path(float3 o, float3 l, Hit h, float3 beta, Sampler *sp, _
 
 /* lights, nlights: the analytic lights a path's later vertices sample (PATH_LIGHTS; the lights
  * pass lights the first vertex); a placeholder otherwise.
- * One batch of `batch` samples per G-buffer sample: ref_batch = (sum of estimates, sum of the odd-numbered
- * samples' luminance). Samples are numbered globally (first + k), so the frame is the same
- * whatever the batching and wherever the run stops. */
+ * One batch of `batch` samples per G-buffer sample, shared by `slices` work items (slice s takes
+ * samples s, s + slices, ...: a GPU gets enough work items from a small frame; 1 on a CPU):
+ * ref_batch[s n + gid] = (sum of its estimates, sum of its odd-numbered samples' luminance).
+ * Samples are numbered globally (first + k), so the frame is the same whatever the batching and
+ * wherever the run stops. */
 __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int n,
                         const float2 env_rot, const float env_scale,
                         __global const float4 *img, const int w, const int h,
                         __global const float *marginal, __global const float *conditional,
                         __global const float *pdf_table, SCENE_PARAMS, const int pixel0, const int spp,
-                        const uint seed, const int first, const int batch, __global float4 *ref_batch,
-                        __global const float4 *lights, const int nlights)
+                        const uint seed, const int first, const int batch, const int slices,
+                        __global float4 *ref_batch, __global const float4 *lights, const int nlights)
 {
-    const int gid = get_global_id(0);
-    if (gid >= n) return;
+    const int item = get_global_id(0);
+    if (item >= n * slices) return;
+    const int gid = item % n, slice = item / n;
     /* the sample's number in the whole frame (a tile starts at pixel0): its random streams */
     const uint sid = (uint)(pixel0 * spp + gid);
     const float4 hitp = gb_pos[gid];
-    if (hitp.w == MISS_T) { ref_batch[gid] = (float4)(0.0f); return; }
+    if (hitp.w == MISS_T) { ref_batch[item] = (float4)(0.0f); return; }
     Material mt;
     float3 v, nrm;
     const float nov = surface_at(SURFACE_ARGS, gid, &mt, &v, &nrm);
@@ -253,7 +256,7 @@ __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int
 #endif
     float3 sum = (float3)(0.0f);
     float odd = 0.0f;
-    for (int k = 0; k < batch; ++k) {
+    for (int k = slice; k < batch; k += slices) {
         const uint sk = (uint)(first + k);
         /* the sample's numbers, in the order of its dimensions: a direction in the
          * environment's texel (its row and column), the GGX and the cosine warps, the point in
@@ -352,5 +355,5 @@ __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int
         sum += est;
         if (sk & 1u) odd += luminance(est);
     }
-    ref_batch[gid] = (float4)(sum, odd);
+    ref_batch[item] = (float4)(sum, odd);
 }

@@ -65,7 +65,7 @@ inline float qmc(uint seed, uint gid, uint k, int d)
  * (Get1D, Get2D) and Mitsuba 3's (next_1d, next_2d) do: no kernel numbers a dimension by hand.
  * `seed` already carries the stream (the reference's seed, AO's seed ^ STREAM_AO, a light's);
  * `gid` the G-buffer sample's number in the frame, `k` the sample's number. The first 8 dimensions
- * are Halton's (HALTON_BASES), later ones hashed. */
+ * are Halton's (HALTON_BASES), a path's later ones Owen-scrambled Sobol pairs (owen_sobol). */
 typedef struct {
     uint seed, gid, k;
     int dim;
@@ -78,13 +78,61 @@ inline Sampler sampler_start(uint seed, uint gid, uint k)
     return s;
 }
 
+/* A path's dimensions past the first 8: pairs of Owen-scrambled Sobol points, each pair's
+ * sequence shuffled by its own nested uniform scramble of the index (Burley 2020, "Practical
+ * Hash-based Owen Scrambling", JCGT 9(4)): stratified in every pair at every sample count, each
+ * pair independent of the others. */
+inline uint reverse_bits32(uint x)
+{
+    x = (x << 16) | (x >> 16);
+    x = ((x & 0x00FF00FFu) << 8) | ((x & 0xFF00FF00u) >> 8);
+    x = ((x & 0x0F0F0F0Fu) << 4) | ((x & 0xF0F0F0F0u) >> 4);
+    x = ((x & 0x33333333u) << 2) | ((x & 0xCCCCCCCCu) >> 2);
+    return ((x & 0x55555555u) << 1) | ((x & 0xAAAAAAAAu) >> 1);
+}
+
+inline uint laine_karras_permutation(uint x, uint seed)
+{
+    x += seed;
+    x ^= x * 0x6c50b47cu;
+    x ^= x * 0xb82f1e52u;
+    x ^= x * 0xc7afe638u;
+    x ^= x * 0x8d22f6e6u;
+    return x;
+}
+
+inline uint nested_uniform_scramble(uint x, uint seed)
+{
+    return reverse_bits32(laine_karras_permutation(reverse_bits32(x), seed));
+}
+
+/* Sobol's second dimension (direction numbers v0 = 2^31, v_k = v_{k-1} ^ (v_{k-1} >> 1)); its
+ * first is the van der Corput sequence, reverse_bits32(i) */
+inline uint sobol_dim1(uint i)
+{
+    uint r = 0u, v = 0x80000000u;
+    for (; i != 0u; i >>= 1, v ^= v >> 1)
+        if (i & 1u) r ^= v;
+    return r;
+}
+
+/* Coordinate c (0, 1) of pair p of sample j of one stream (seed: the sample's stream, G-buffer
+ * sample and replicate hashed) */
+inline float owen_sobol(uint j, uint seed, int p, int c)
+{
+    const uint s = pcg_hash(seed ^ pcg_hash((uint)p + 0x51ED27u));
+    const uint i = nested_uniform_scramble(j, s);
+    const uint x = c == 0 ? reverse_bits32(i) : sobol_dim1(i);
+    return (float)(nested_uniform_scramble(x, pcg_hash(s + (uint)c + 1u)) >> 8) * (1.0f / 16777216.0f);
+}
+
 inline float sampler_1d(Sampler *s)
 {
     const int d = s->dim++;
     if (d < 8) return qmc(s->seed, s->gid, s->k, d);
-    /* past the Halton bases (a path's later bounces): independent PCG numbers per seed, G-buffer
-     * sample, sample number and dimension */
-    return hash_uniform(s->seed ^ pcg_hash(pcg_hash(s->gid) ^ pcg_hash(s->k * 1024u + (uint)d)));
+    /* a path's: its own stream per (seed, G-buffer sample, replicate), sample k >> 1 of it */
+    const uint stream = pcg_hash(s->seed ^ pcg_hash(s->gid * 2u + (s->k & 1u)));
+    return owen_sobol(s->k >> 1, stream, (d - 8) >> 1, (d - 8) & 1);
 }
 
 inline float2 sampler_2d(Sampler *s)

@@ -416,7 +416,8 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "reference": Section(doc="reference modes: progressive Monte Carlo with MIS", fields={
             "max_samples": Num(1024, 1, 1 << 20, integer=True, doc="sample budget per pixel"),
             "target_noise": Num(0.002, 0.0, 1.0, doc="stop when the frame's relative standard error is below this"),
-            "batch": Num(32, 1, 4096, integer=True, doc="samples per pixel per progressive pass"),
+            "batch": Num(None, 1, 4096, integer=True, doc="samples per pixel per progressive pass (omitted: 32 on "
+                                                          "a CPU, 256 on a GPU, whose launches cost more)"),
             "seed": Num(1, 0, 2**31 - 1, integer=True, doc="random seed (renders are reproducible)"),
             "visibility": Bool(True, doc="trace a shadow ray for every sample: the occluded integral (false: "
                                          "every object lit as if alone)"),

@@ -31,6 +31,19 @@ def reference_noise(lum_sum, odd_sum, taken: int) -> float:
     return math.sqrt(np.mean((even - odd) ** 2) / 4.0) / mean
 
 
+# work items a GPU is given per launch at least, where the frame has fewer G-buffer samples (an
+# H200 holds 132 x 2048 resident threads)
+GPU_ITEMS = 1 << 18
+
+
+def sample_slices(rt, n: int, batch: int) -> int:
+    """Work items per G-buffer sample: on a GPU enough for GPU_ITEMS in all (at most one per
+    sample of the batch); 1 on a CPU, whose cores a frame's samples already fill."""
+    if rt.info.kind != "GPU":
+        return 1
+    return max(1, min(batch, -(-GPU_ITEMS // max(n, 1))))
+
+
 class Reference(Pass):
     name = "reference"
     kernel = "reference.cl"
@@ -80,11 +93,15 @@ class Reference(Pass):
         acc_odd = np.zeros(n)
         taken = 0
         noise = math.inf
-        batch = ref["batch"] + (ref["batch"] & 1)      # even: both replicates advance together
+        batch = ref["batch"] or (256 if rt.info.kind == "GPU" else 32)
+        batch += batch & 1                            # even: both replicates advance together
+        slices = sample_slices(rt, n, batch)
+        out = t["ref_batch"] if slices == 1 else rt.empty(16 * n * slices)      # a GPU: slices x n sums
         while taken < ref["max_samples"]:
             b = min(batch, ref["max_samples"] - taken)
-            ctx.launch(self, (n,), **ctx.args[self.name], seed=ref["seed"], first=taken, batch=b)
-            r = rt.read(t["ref_batch"], (n, 4)).astype(np.float64)
+            ctx.launch(self, (n * min(slices, b),), **ctx.args[self.name], seed=ref["seed"], first=taken, batch=b,
+                       slices=min(slices, b), ref_batch=out)
+            r = rt.read(out, (n * min(slices, b), 4)).astype(np.float64).reshape(-1, n, 4).sum(0)
             acc += r[:, :3]
             acc_odd += r[:, 3]
             taken += b
@@ -104,4 +121,5 @@ class Reference(Pass):
         return {"samples_per_pixel": taken,
                 "relative_noise": None if not math.isfinite(noise) else round(noise, 6),
                 "stopped": "target_noise" if noise <= ref["target_noise"] else "max_samples",
-                "visibility": bool(ref["visibility"]), "bounces": ctx.plan.effects.bounces or "unbounded"}
+                "visibility": bool(ref["visibility"]), "bounces": ctx.plan.effects.bounces or "unbounded",
+                "batch": batch, "work_items_per_sample": slices}
