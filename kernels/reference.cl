@@ -112,8 +112,8 @@ inline float3 bsdf_sample(const Material mt, float3 v, float3 n, float3 t, float
 
 /* Where a path meets a surface: the point, the shading normal bent towards the incoming ray's
  * origin, and the full material, its maps read at level 0 (a later vertex's ray cone is not
- * tracked; docs/manual.md). Returns 0 for the sky. */
-inline int path_vertex(float3 o, float3 d, Hit h, __global const float4 *materials, SCENE_PARAMS,
+ * tracked; docs/conventions.md "Paths"). */
+inline void path_vertex(float3 o, float3 d, Hit h, __global const float4 *materials, SCENE_PARAMS,
                        float3 *p, float3 *n, Material *mt)
 {
     *p = o + h.t * d;
@@ -134,7 +134,6 @@ inline int path_vertex(float3 o, float3 d, Hit h, __global const float4 *materia
     /* two-sided: the surface faces where the ray came from */
     if (dot(ng, d) > 0.0f) ns = -ns;
     *n = facing_normal(ns, -d);
-    return 1;
 }
 
 /* The light a path brings back to the first vertex from direction l (after BSDF weight beta):

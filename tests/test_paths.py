@@ -243,3 +243,29 @@ def test_path_dimensions_are_stratified_owen_sobol():
                 assert len(np.unique(cells)) == 256, (stream, p, a)
     x0, x1 = owen_sobol(j, np.full(256, 1), 0, 0), owen_sobol(j, np.full(256, 1), 1, 0)
     assert abs(np.corrcoef(x0, x1)[0, 1]) < 0.2 and not np.allclose(x0, owen_sobol(j, np.full(256, 2), 0, 0))
+
+
+def test_textured_glb_through_paths(tmp_path, white):
+    """A textured glTF (examples/meshes/tiles.glb: base colour, metallic-roughness and normal maps)
+    on a floor: its maps are read at every path vertex (level 0), the frame is finite, and the
+    light the tiles and the floor exchange makes it brighter than the direct light alone (measured
+    1.11x; bound 1.05x)."""
+    mesh = Path(__file__).resolve().parents[1] / "examples" / "meshes" / "tiles.glb"
+    frames = {}
+    for bounces in (1, "unbounded"):
+        sc = write(tmp_path, f"tiles_{bounces}", {
+            "camera": {"perspective": {"position": [0, 1.2, 2.5], "look_at": [0, 0, 0], "fov_y": 50},
+                       "resolution": [24, 16]},
+            "environment": {"path": str(white), "background": "hide"},
+            "materials": {"floor": {"base_color": [0.7, 0.7, 0.7], **LAMBERT}},
+            "objects": [{"mesh": {"path": str(mesh), "rotate": [-90, 0, 0], "translate": [0, 0.05, 0]}},
+                        {"plane": {"point": [0, 0, 0], "size": 4}, "material": "floor"}],
+            "effects": {"diffuse": "reference", "specular": "reference",
+                        "reference": {"max_samples": 16, "target_noise": 0, "bounces": bounces}}})
+        f = render.render(sc, cache_root=tmp_path / "cache")
+        frames[bounces] = f.hdr[..., :3]
+        assert np.isfinite(f.hdr).all()
+    defines = f.report["effects"]["defines"]["reference"]
+    assert "BOUNCES" in defines and "HAS_TEXTURES" in defines
+    print(f"tiles: unbounded / direct {frames['unbounded'].mean() / frames[1].mean():.3f}")
+    assert frames["unbounded"].mean() > frames[1].mean() * 1.05
