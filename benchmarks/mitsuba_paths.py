@@ -9,6 +9,9 @@ integrator against a high-sample reference with its variance the same way). Thro
 centre both estimate one ray's radiance: no pixel filter enters (with mi.render's box filter a
 fixed set of sub-pixel points against random ones decides the test at every sharp reflection).
 Every surface pixel is tested; the sky, which iblbake shows through its background pass, is not.
+Then the speed at equal error (--no-speed skips it): each renderer's time to 1% relative RMSE
+against its own converged image of another seed, warm, the render call only, iblbake's reference
+against Mitsuba's `path` with multijitter and ldsampler (speed()).
 
 Scenes both renderers express exactly (docs/conventions.md):
 - mirror on floor: a mirror sphere (metallic 1, base colour 1, roughness 0: F = 1, Mitsuba's
