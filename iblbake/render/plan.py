@@ -81,7 +81,8 @@ def reference_bounces(scene: Scene, diffuse: str, specular: str, notes: list) ->
     if asked == 1:
         return 1
     if not ref["visibility"]:
-        notes.append("reference bounces: 1, as visibility is off (every object lit as if alone)")
+        if asked > 1:                    # a count asked for (unbounded is the default: no note)
+            notes.append("reference bounces: 1, as visibility is off (every object lit as if alone)")
         return 1
     return asked if _light_passes(scene, diffuse, specular) else 1
 

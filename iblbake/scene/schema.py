@@ -421,10 +421,10 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
             "seed": Num(1, 0, 2**31 - 1, integer=True, doc="random seed (renders are reproducible)"),
             "visibility": Bool(True, doc="trace a shadow ray for every sample: the occluded integral (false: "
                                          "every object lit as if alone)"),
-            "bounces": OneOf((Enum(("unbounded",)), Num(None, 1, 1 << 16, integer=True)), default=1,
-                             doc="how many times a path may scatter: 1, the environment's direct light (no "
-                                 "interreflection, no light from emissive surfaces), N, or unbounded (Russian "
-                                 "roulette from bounce 3, unbiased: the converged answer); with visibility false, 1"),
+            "bounces": OneOf((Enum(("unbounded",)), Num(None, 1, 1 << 16, integer=True)), default="unbounded",
+                             doc="how many times a path may scatter: unbounded (Russian roulette from bounce 3, "
+                                 "unbiased: the converged answer), N, or 1, the environment's direct light (no "
+                                 "interreflection, no light from emissive surfaces); with visibility false, 1"),
         }),
         "ao": Enum(("off", "gtao", "raytraced"), "off",
                    doc="ambient occlusion of the IBL: gtao (screen-space horizons, Jimenez et al. 2016) or raytraced "
