@@ -16,6 +16,14 @@ FILES = {"table.md": "Markdown table", "table.csv": "CSV", "accuracy.json": "JSO
          "errors.png": "best and worst rungs with error maps"}
 
 
+def bounces_value(v: str):
+    if v == "unbounded":
+        return v
+    if v.isdigit() and 1 <= int(v) <= 1 << 16:
+        return int(v)
+    raise click.BadParameter(f"{v!r}: use unbounded or a count from 1 to 65536")
+
+
 @click.command("accuracy")
 @click.argument("scene_path", metavar="SCENE")
 @click.option("--output", "-o", "out_dir", type=click.Path(file_okay=False), default=None, metavar="DIR",
@@ -37,6 +45,9 @@ FILES = {"table.md": "Markdown table", "table.csv": "CSV", "accuracy.json": "JSO
 @click.option("--visibility/--no-visibility", default=True, show_default=True,
               help="The reference traces occlusion (what the approximations leave out: the frame's true "
                    "error); --no-visibility measures each approximation's own error, every object lit as alone.")
+@click.option("--bounces", default="unbounded", show_default=True, callback=lambda _c, _p, v: bounces_value(v),
+              help="The reference's bounces: unbounded (the converged answer, light between surfaces "
+                   "included) or N; 1 is the direct light alone, the reference before paths.")
 @click.option("--flip/--no-flip", default=True, show_default=True, help="Also measure mean HDR-FLIP.")
 @click.option("--max-error", type=float, default=None, callback=non_negative, metavar="X",
               help="Exit non-zero if the scene as configured (both terms) is further than X (relative RMSE) "
@@ -53,11 +64,12 @@ FILES = {"table.md": "Markdown table", "table.csv": "CSV", "accuracy.json": "JSO
 @max_texture_pixels_option
 @common_options
 def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repeats, target_noise, max_samples,
-                     visibility, flip, max_error, cache_dir, jobs, devices, device, quiet, as_json):
-    """Render SCENE's converged reference (diffuse and specular with visibility, two seeds, its
-    noise measured), then a ladder of approximations of each term the scene calls for (SH bands
+                     visibility, bounces, flip, max_error, cache_dir, jobs, devices, device, quiet, as_json):
+    """Render SCENE's converged reference (diffuse and specular with visibility and every bounce,
+    two seeds, its noise measured), then a ladder of approximations of each term the scene calls for (SH bands
     and windows; importance N, mip selection and bias; prefiltered chain size, levels, method and
-    dominant direction; lobe K; fewer reference samples), each timed (median lighting-pass time;
+    dominant direction; lobe K; AO; fewer reference samples; direct light only where light passes between
+    surfaces), each timed (median lighting-pass time;
     bakes and kernel builds reported apart as one-off costs) and measured over the object pixels:
     relative RMSE, mean and max relative error, HDR-FLIP. Prints the table with each term's
     Pareto frontier of error against time: for an error budget, the cheapest setting."""
@@ -74,11 +86,11 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
         for name in FILES:
             atomic.check_writable(out / name)
     settings = acc.Settings(max_side=max_side, repeats=repeats, target_noise=target_noise, max_samples=max_samples,
-                            flip=flip, visibility=visibility)
+                            flip=flip, visibility=visibility, bounces=bounces)
     rt = Runtime(device)
     study = acc.Study(scene_path, overrides, settings, runtime=rt, bakes=render.Bakes(cache_dir), warn=con.warn)
     rungs = ladder.ladder_from_file(ladder_path, study.scene, study.fx) if ladder_path else \
-        ladder.default_ladder(study.scene, study.fx, rt.info.kind)
+        ladder.default_ladder(study.scene, study.fx, rt.info.kind, paths=study.paths)
     rungs = [ladder.configured_rung(study.scene, t) for t in study.terms] + rungs
     reads = scene_load.named_input_files(study.scene) + ([("the ladder", ladder_path)] if ladder_path else [])
     for r in rungs:                  # every rung's scene validates before anything renders
@@ -106,6 +118,7 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
         "resolution": acc.study_resolution(study.scene, max_side), "repeats": repeats,
         "reference": {t: {k: v for k, v in refs[t].items() if k not in ("hdr", "mask")} | {
             "stopping_rule": f"each seed: relative standard error <= {target_noise} or {max_samples} samples",
+            "bounces": bounces if study.paths else 1,
             "object_pixels": int(refs[t]["mask"].sum()),
             "measured_pixels": int(study.metric_mask(t, refs[t]["hdr"]).sum())} for t in study.terms},
         "rungs": [{**r, "pareto": r["label"] in front.get(r["term"], [])} for r in rows],
@@ -126,7 +139,8 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
     split = ", ".join(f"{k[:-2]} {v:.1f} s" for k, v in summary["time_split_s"].items())
     noise = ", ".join(f"{t} {100 * refs[t]['noise']:.2f}%" for t in study.terms)
     con.result(summary, report.text_table(rows, front)
-               + f"\nreference noise (two seeds): {noise}; configured frame: relative RMSE "
+               + f"\nreference: bounces {bounces if study.paths else '1 (no light passes between surfaces)'}, "
+                 f"noise (two seeds) {noise}; configured frame: relative RMSE "
                  f"{100 * configured['relative_rmse']:.2f}%\n"
                + f"{len(rows)} rungs in {summary['elapsed_s']:.1f} s ({split}) on {rt.device_label}"
                + (f"; wrote {out}/" if out else ""))

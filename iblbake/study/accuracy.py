@@ -7,7 +7,8 @@ specular rung the specular term against the specular reference. Every rung rende
 the study's resolution with the background hidden and emission off (neither is an approximation),
 so the object pixels (full coverage in the G-buffer) are what the metrics read.
 
-Reference: the `reference` modes with visibility, stopped when the frame's relative standard
+Reference: the `reference` modes with visibility and every bounce (`bounces`, default unbounded:
+the converged answer, interreflection included), stopped when the frame's relative standard
 error (its two replicates, render/passes/reference.py) is below `target_noise` or at
 `max_samples`; rendered with two seeds, averaged, and its own noise measured from their
 difference (relative RMSE / 2: the noise of their mean). Cached by content (scene lighting,
@@ -48,6 +49,7 @@ class Settings:
     seeds: tuple = (1, 2)
     flip: bool = True
     visibility: bool = True       # the reference traces occlusion (the approximations do not)
+    bounces: object = "unbounded"  # the reference's bounces (1: direct light only)
 
 
 def study_resolution(sc, max_side: int) -> list:
@@ -81,7 +83,7 @@ class Study:
     """One scene's study: the rungs' scenes, the reference per term, every rung's times and errors."""
 
     def __init__(self, scene_path, overrides, settings: Settings, *, runtime, bakes, warn=None, progress=None):
-        from iblbake.render.plan import effect_modes
+        from iblbake.render.plan import effect_modes, interreflects
 
         self.path, self.overrides, self.settings = scene_path, tuple(overrides), settings
         self.rt, self.bakes = runtime, bakes
@@ -95,6 +97,9 @@ class Study:
             raise InputError(f"{scene_path}: the scene lights nothing (no objects, or diffuse and specular "
                              f"both off): there is no approximation to study")
         self.reference: dict = {}          # term -> {"hdr", "noise", ...}
+        # whether the reference traces paths here (else it is the direct light, and a "direct
+        # only" rung would be the reference itself)
+        self.paths = settings.visibility and settings.bounces != 1 and interreflects(self.scene)
         self._mirrors = None
         self.times = {"reference_s": 0.0, "rungs_s": 0.0, "bakes_s": 0.0}
 
@@ -111,6 +116,7 @@ class Study:
         s = self.settings
         return TERM_ALONE[term] + [(f"effects.{term}", "reference"),
                                    ("effects.reference.visibility", s.visibility),
+                                   ("effects.reference.bounces", s.bounces),
                                    ("effects.reference.max_samples", s.max_samples),
                                    ("effects.reference.target_noise", s.target_noise),
                                    ("effects.reference.batch", self.ref_batch()),
@@ -123,7 +129,7 @@ class Study:
 
         inputs = lighting_inputs(sc)
         return "reference-" + content_key({
-            "kind": "reference", "v": 1, "scene": inputs, "seed": seed,
+            "kind": "reference", "v": 2, "scene": inputs, "seed": seed,
             "files": [self.bakes.file_sha256(f) for f in scene_load.input_files(sc)[1:]],
             "kernels": source_hash(("gbuffer.cl", "reference.cl", "resolve.cl"))})
 
@@ -204,10 +210,11 @@ class Study:
 
     def rung_values(self, rung: Rung) -> list:
         """The rung's term alone, with its values; a reference rung sees what the study's
-        reference sees (visibility), unless it sets it."""
-        vis = [] if any(k == "effects.reference.visibility" for k, _ in rung.values) else \
-            [("effects.reference.visibility", self.settings.visibility)]
-        return TERM_ALONE[rung.term] + vis + rung.values
+        reference sees (visibility, bounces), unless it sets them."""
+        own = {k for k, _ in rung.values}
+        ref = [(k, v) for k, v in (("effects.reference.visibility", self.settings.visibility),
+                                   ("effects.reference.bounces", self.settings.bounces)) if k not in own]
+        return TERM_ALONE[rung.term] + ref + rung.values
 
     def run_rung(self, rung: Rung) -> dict:
         """Render the rung `repeats` times (kernel builds and bakes happen in the first and are

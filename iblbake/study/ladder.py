@@ -43,9 +43,11 @@ def configured_rung(sc, term: str) -> Rung:
 FIS_SAMPLES = {"GPU": (64, 256, 1024), "CPU": (64, 256)}
 
 
-def default_ladder(sc, fx, device_kind: str = "GPU") -> list:
+def default_ladder(sc, fx, device_kind: str = "GPU", paths: bool = False) -> list:
     """The rungs of the terms the scene calls for (fx: plan.effect_modes of the scene): a
-    diffuse-only scene runs only diffuse rungs. One factor at a time around the defaults."""
+    diffuse-only scene runs only diffuse rungs. One factor at a time around the defaults.
+    paths: the study's reference traces interreflection here (Study.paths), so "direct only"
+    (the reference at bounces 1) is a rung: what ignoring the light between surfaces costs."""
     rungs = []
     if fx.diffuse != "off":
         for window in ("none", "hann"):
@@ -89,12 +91,19 @@ def default_ladder(sc, fx, device_kind: str = "GPU") -> list:
             rungs.append(Rung(term, "ao gtao", [("effects.ao", "gtao")]))
             for n in (16, 64):
                 rungs.append(Rung(term, f"ao raytraced {n}", [("effects.ao", "raytraced"), ("effects.ao_samples", n)]))
+            if term == "diffuse" and paths:  # Jimenez et al.'s fit of the bounces AO leaves out
+                rungs.append(Rung(term, "ao gtao multibounce", [("effects.ao", "gtao"), ("effects.ao_multibounce", True)]))
     for term in TERMS:                   # fewer reference samples: Monte Carlo's own trade
         if getattr(fx, term) != "off":
             for n in (16, 64, 256):
                 rungs.append(Rung(term, f"reference {n} spp", [
                     (f"effects.{term}", "reference"), ("effects.reference.max_samples", n),
                     ("effects.reference.target_noise", 0.0), ("effects.reference.seed", 7)]))
+            if paths:                    # the same samples without the bounces: what they cost and buy
+                rungs.append(Rung(term, "direct only 256 spp", [
+                    (f"effects.{term}", "reference"), ("effects.reference.bounces", 1),
+                    ("effects.reference.max_samples", 256), ("effects.reference.target_noise", 0.0),
+                    ("effects.reference.seed", 7)]))
     return rungs
 
 
