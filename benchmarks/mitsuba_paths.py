@@ -20,7 +20,14 @@ Scenes both renderers express exactly (docs/conventions.md):
 - open box: a Lambert sphere in a box of five Lambert rectangles (red and green side walls, open
   towards the camera): colour bleeding between the walls and the sphere;
 - knot on floor: the 102,400-triangle torus knot (examples/meshes/knot.ply, `make meshes`), Lambert,
-  resting on a Lambert floor of 6 x 4: the BVH, interpolated normals and light between the loops.
+  resting on a Lambert floor of 6 x 4: the BVH, interpolated normals and light between the loops;
+- textured glTF: a torus as a GLB (textured_torus(): its own material, a base colour texture in
+  sRGB, KHR_materials_specular specularFactor 0, so Lambert) lying on a Lambert floor, and the
+  same triangles, normals and UVs as a PLY for Mitsuba's `diffuse` with a `bitmap` reflectance.
+  The texture (16 x 8 texels, each a few pixels wide on screen) is magnified everywhere, where
+  iblbake's mip selection reads level 0 and both filter bilinearly (Mitsuba has no mips); glTF's
+  UVs go to the PLY unchanged: both read row 0 of the image at v = 0 (checked with Mitsuba on a
+  quad).
 Panorama: courtyard (overcast: its brightest texel 34 x the mean at 256 x 128; city's sun is
 3500 x), box-averaged to 256 x 128 and interpolated bilinearly to 2048 x 1024, written
 back without chromaticities: both read the same texels. Mitsuba interpolates four texels where
@@ -52,8 +59,9 @@ EYE, TARGET, FOV = [0.0, 1.6, 4.2], [0.0, 0.6, 0.0], 40.0
 PANO_WIDTH = 2048
 
 
-def scenes():
+def scenes(tmp: Path):
     """name -> (objects as (kind, params, material), materials {name: (bsdf kind, rgb)})"""
+    glb, ply, png = textured_torus(tmp)
     return {
         "mirror on floor": (
             [("sphere", {"center": [0, 0.6, 0], "radius": 0.6}, "mirror"),
@@ -72,7 +80,59 @@ def scenes():
             [("mesh", {"path": str(ROOT / "examples" / "meshes" / "knot.ply"), "translate": [0, 0.51, 0]}, "clay"),
              ("rect", {"center": [0, 0, 0], "normal": "+y", "half": [3, 2]}, "floor")],
             {"clay": ("lambert", [0.8, 0.55, 0.35]), "floor": ("lambert", [0.6, 0.6, 0.6])}),
+        "textured glTF": (
+            [("gltf", {"path": str(glb), "ply": str(ply), "texture": str(png)}, None),
+             ("rect", {"center": [0, 0, 0], "normal": "+y", "half": [3, 2]}, "floor")],
+            {"floor": ("lambert", [0.6, 0.6, 0.6])}),
     }
+
+
+def textured_torus(tmp: Path) -> tuple:
+    """A torus lying on y = 0 (radii 0.8 and 0.35; 64 x 32 quads, vertex normals, UVs once round
+    each way) as a GLB whose material is a base colour texture (16 x 8 texels of random tile
+    colours, sRGB), metallic 0, roughness 1, specularFactor 0; and the same mesh as a PLY."""
+    import json
+    import trimesh
+    from PIL import Image
+    from trimesh.visual.material import PBRMaterial
+    from iblbake.io.gltf import glb_bytes
+
+    rng = np.random.default_rng(3)
+    tex = np.round(rng.uniform(0.15, 0.95, (8, 16, 3)) ** (1 / 2.2) * 255).astype(np.uint8)
+    png = tmp / "torus_base.png"
+    Image.fromarray(tex).save(png)
+    nu, nv, big, small = 64, 32, 0.8, 0.35
+    uu, vv = np.meshgrid(np.linspace(0, 1, nu + 1), np.linspace(0, 1, nv + 1), indexing="ij")
+    a, b = 2 * np.pi * uu, 2 * np.pi * vv
+    ring = np.stack([np.cos(a) * np.cos(b), np.sin(b), np.sin(a) * np.cos(b)], -1).reshape(-1, 3)
+    centre = np.stack([np.cos(a), np.zeros_like(a), np.sin(a)], -1).reshape(-1, 3) * big
+    verts = centre + small * ring + [0, small, 0]
+    i, j = np.meshgrid(np.arange(nu), np.arange(nv), indexing="ij")
+    v00, v10, v01, v11 = i * (nv + 1) + j, (i + 1) * (nv + 1) + j, i * (nv + 1) + j + 1, (i + 1) * (nv + 1) + j + 1
+    faces = np.concatenate([np.stack([v00, v01, v10], -1).reshape(-1, 3),
+                            np.stack([v10, v01, v11], -1).reshape(-1, 3)])
+    uv = np.stack([uu, vv], -1).reshape(-1, 2)                  # glTF's convention: v = 0 at row 0
+    mat = PBRMaterial(baseColorTexture=Image.fromarray(tex), metallicFactor=0.0, roughnessFactor=1.0)
+    mesh = trimesh.Trimesh(verts, faces, vertex_normals=ring,
+                           visual=trimesh.visual.TextureVisuals(uv=uv * [1, -1] + [0, 1], material=mat), process=False)
+    glb = tmp / "torus.glb"
+    mesh.export(str(glb))
+    data = glb.read_bytes()                                     # add KHR_materials_specular: Lambert
+    n = int.from_bytes(data[12:16], "little")
+    doc = json.loads(data[20:20 + n])
+    binary = data[20 + n + 8:]
+    doc["materials"][0].setdefault("extensions", {})["KHR_materials_specular"] = {"specularFactor": 0.0}
+    doc["extensionsUsed"] = sorted(set(doc.get("extensionsUsed", [])) | {"KHR_materials_specular"})
+    glb.write_bytes(glb_bytes(doc, binary))
+    ply = tmp / "torus.ply"
+    with open(ply, "wb") as f:
+        f.write(("ply\nformat binary_little_endian 1.0\nelement vertex %d\n" % len(verts)
+                 + "".join(f"property float {c}\n" for c in ("x", "y", "z", "nx", "ny", "nz", "u", "v"))
+                 + "element face %d\nproperty list uchar int vertex_indices\nend_header\n" % len(faces)).encode())
+        f.write(np.concatenate([verts, ring, uv], 1).astype("<f4").tobytes())
+        f.write(np.concatenate([np.full((len(faces), 1), 3, np.uint8).view(np.uint8),
+                                faces.astype("<i4").view(np.uint8).reshape(len(faces), 12)], 1).tobytes())
+    return glb, ply, png
 
 
 AXES = {"+y": [0, 1, 0], "-y": [0, -1, 0], "+z": [0, 0, 1], "-x": [-1, 0, 0], "+x": [1, 0, 0]}
@@ -85,6 +145,8 @@ def iblbake_doc(pano: Path, objects, mats, spp: int, seed: int, bounces, depth: 
             objs.append({"sphere": p, "material": m})
         elif kind == "mesh":
             objs.append({"mesh": {"path": p["path"], "translate": p["translate"]}, "material": m})
+        elif kind == "gltf":                  # the file's own material
+            objs.append({"mesh": {"path": p["path"]}})
         else:
             objs.append({"plane": {"point": p["center"], "normal": AXES[p["normal"]],
                                    "size": [2 * p["half"][0], 2 * p["half"][1]]}, "material": m})
@@ -118,6 +180,9 @@ def mitsuba_dict(mi, pano: Path, objects, mats, max_depth: int, spp: int, seed: 
         elif kind == "mesh":                  # its vertex normals interpolated, as iblbake's
             d[f"o{i}"] = {"type": "ply", "filename": p["path"], "to_world": T().translate(p["translate"]),
                           "bsdf": bsdfs[m]}
+        elif kind == "gltf":                  # its texture in sRGB, decoded to linear as glTF's
+            d[f"o{i}"] = {"type": "ply", "filename": p["ply"], "bsdf": {"type": "diffuse", "reflectance": {
+                "type": "bitmap", "filename": p["texture"], "filter_type": "bilinear", "wrap_mode": "repeat"}}}
         else:
             d[f"o{i}"] = {"type": "rectangle", "bsdf": bsdfs[m],
                           "to_world": T().translate(p["center"]) @ turn[p["normal"]] @ T().scale([p["half"][0], p["half"][1], 1])}
@@ -180,6 +245,8 @@ def main():
     ap.add_argument("--target", type=float, default=0.01, help="relative RMSE the speed comparison times")
     ap.add_argument("--converged", type=int, default=16384, help="samples per pixel of the converged images")
     ap.add_argument("--speed-scale", type=int, default=1, help="the speed comparison's frames, times 64x48")
+    ap.add_argument("--per-bounce", action="store_true",
+                    help="samples per second at each bounce count, both renderers, and where iblbake's time goes")
     args = ap.parse_args()
     import mitsuba as mi
     mi.set_variant(args.variant)
@@ -201,7 +268,7 @@ def main():
         spread = tmp / "range.exr"
         images.write_exr(spread, neighbour_range(fine).astype(np.float32))
         rt, bakes = Runtime(), render.Bakes(tmp / "cache")
-        for name, (objects, mats) in scenes().items():
+        for name, (objects, mats) in scenes(tmp).items():
             if (args.only and args.only not in name) or args.no_acceptance:
                 continue
             ib = []
@@ -233,6 +300,8 @@ def main():
         print(f"\niblbake: {args.renders} renders x {args.spp} samples per pixel (seeds 1-{args.renders}), reference "
               f"bounces unbounded; Mitsuba {mi.__version__} {args.variant} `path` max_depth 1024, {args.ref_spp} "
               f"samples per pixel centre; {RES[0]}x{RES[1]}")
+        if args.per_bounce:
+            per_bounce(args, mi, tmp, pano, rt, bakes)
         if not args.no_speed:
             speed(args, mi, tmp, pano, rt, bakes)
 
@@ -275,7 +344,7 @@ def speed(args, mi, tmp: Path, pano: Path, rt, bakes):
 
     print(f"\n| scene | renderer | spp to {100 * args.target:g}% | seconds | Msamples/s | iblbake s / this s |")
     print("|---|---|---|---|---|---|")
-    for name, (objects, mats) in scenes().items():
+    for name, (objects, mats) in scenes(tmp).items():
         if args.only and args.only not in name:
             continue
         p = tmp / "speed.yaml"
@@ -317,6 +386,54 @@ def speed(args, mi, tmp: Path, pano: Path, rt, bakes):
                   f"{ratio} |", flush=True)
     print(f"\n{RES[0]}x{RES[1]}; iblbake device: {rt.device_label}; Mitsuba {args.variant}; converged images: "
           f"{args.converged} samples per pixel, seed 999; Msamples/s: pixels x spp / seconds")
+
+
+def per_bounce(args, mi, tmp: Path, pano: Path, rt, bakes):
+    """Samples per second per bounce count (--spp samples per pixel, warm, median of 3, the render
+    call), and iblbake's reference pass split by what each step adds: shading alone (visibility
+    off: no ray leaves the G-buffer's surfaces), the direct light's two shadow rays per sample
+    (bounces 1), then each further bounce (a closest-hit ray, its shading and its environment
+    shadow ray). Mitsuba's max_depth counts segments: bounces N is max_depth N + 1."""
+    from iblbake import render
+    from iblbake.scene import load
+
+    steps = [("shading only (visibility off)", 1, False), ("bounces 1 (direct: + shadow rays)", 1, True),
+             ("bounces 2", 2, True), ("bounces 3", 3, True), ("unbounded", "unbounded", True)]
+    print("\n| scene | bounces | iblbake reference pass ms | Msamples/s | Mitsuba max_depth | Mitsuba ms | Msamples/s |")
+    print("|---|---|---|---|---|---|---|")
+    n = RES[0] * RES[1] * args.spp
+    for name, (objects, mats) in scenes(tmp).items():
+        if args.only and args.only not in name:
+            continue
+        for label, bounces, vis in steps:
+            doc = iblbake_doc(pano, objects, mats, args.spp, 1, bounces, tmp / "depth.exr")
+            doc["effects"]["reference"]["visibility"] = vis
+            p = tmp / "bounce.yaml"
+            p.write_text(yaml.safe_dump(doc))
+            sc = load.load(p)
+            times = []
+            for k in range(4):
+                f = render.render(sc, runtime=rt, cache=bakes)
+                if k:
+                    times.append(sum(q["seconds"] for q in f.report["passes"] if q["name"] == "reference"))
+            ib = statistics.median(times)
+            row = f"| {name} | {label} | {1e3 * ib:.1f} | {n / ib / 1e6:.2f} |"
+            if vis:
+                depth = 1024 if bounces == "unbounded" else bounces + 1
+                scene = mi.load_dict(mitsuba_dict(mi, pano, objects, mats, depth, args.spp, 1))
+                mi.render(scene, spp=args.spp)
+                mt = []
+                for _ in range(3):
+                    t0 = time.perf_counter()
+                    np.array(mi.render(scene, spp=args.spp))
+                    mt.append(time.perf_counter() - t0)
+                m = statistics.median(mt)
+                row += f" {depth} | {1e3 * m:.1f} | {n / m / 1e6:.2f} |"
+            else:
+                row += " | | |"
+            print(row, flush=True)
+    print(f"\n{RES[0]}x{RES[1]}, {args.spp} samples per pixel; iblbake device: {rt.device_label}; "
+          f"Mitsuba {args.variant} `path` with multijitter")
 
 
 def neighbour_range(img: np.ndarray) -> np.ndarray:
