@@ -24,8 +24,8 @@ Scenes both renderers express exactly (docs/conventions.md):
 - textured glTF: a torus as a GLB (textured_torus(): its own material, a base colour texture in
   sRGB, KHR_materials_specular specularFactor 0, so Lambert) lying on a Lambert floor, and the
   same triangles, normals and UVs as a PLY for Mitsuba's `diffuse` with a `bitmap` reflectance.
-  The texture (16 x 8 texels, each a few pixels wide on screen) is magnified everywhere, where
-  iblbake's mip selection reads level 0 and both filter bilinearly (Mitsuba has no mips); glTF's
+  The texture (16 x 8 texels, each a few pixels wide on screen) is read bilinearly at level 0 by
+  both: Mitsuba has no mipmaps, and the GLB's sampler asks for none (minFilter LINEAR); glTF's
   UVs go to the PLY unchanged: both read row 0 of the image at v = 0 (checked with Mitsuba on a
   quad).
 Panorama: courtyard (overcast: its brightest texel 34 x the mean at 256 x 128; city's sun is
@@ -122,6 +122,12 @@ def textured_torus(tmp: Path) -> tuple:
     doc = json.loads(data[20:20 + n])
     binary = data[20 + n + 8:]
     doc["materials"][0].setdefault("extensions", {})["KHR_materials_specular"] = {"specularFactor": 0.0}
+    # Mitsuba's bitmap has no mipmaps: the glTF sampler says so too (LINEAR both ways, no mips),
+    # which iblbake honours, so both read level 0 bilinearly also where a pixel's footprint is
+    # large (silhouettes: with trilinear mips 0.6% of the channels failed there)
+    doc["samplers"] = [{"magFilter": 9729, "minFilter": 9729, "wrapS": 10497, "wrapT": 10497}]
+    for t in doc["textures"]:
+        t["sampler"] = 0
     doc["extensionsUsed"] = sorted(set(doc.get("extensionsUsed", [])) | {"KHR_materials_specular"})
     glb.write_bytes(glb_bytes(doc, binary))
     ply = tmp / "torus.ply"
