@@ -110,6 +110,14 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
         study.progress = step
         refs = {t: study.render_reference(t) for t in study.terms}
         rows = [study.run_rung(r) for r in rungs]
+    for t in study.terms:
+        r = refs[t]
+        if "max_samples" in r["stopped"] and r["noise_each"] > 2 * target_noise:
+            con.warn(f"the {t} reference stopped at {max_samples} samples per pixel with noise "
+                     f"{100 * r['noise']:.2f}% (target {100 * target_noise:g}% per seed): errors below about twice "
+                     f"that are its noise. Slow convergence on a path-traced reference is light reaching a "
+                     f"surface by a mirror or a glossy lobe from a small bright source (a caustic), which "
+                     f"only BSDF sampling finds: raise --max-samples, or --bounces 1 for the direct light")
     configured = study.configured_frame()
     front = acc.frontiers(rows)
     title = f"{Path(scene_path).name}: error against time ({rt.device_label})"
