@@ -223,6 +223,27 @@ def test_buffers_follow_the_declarations(tmp_path, small_panoramas):
     assert f.report["tiles"] == -(-h // 5)
 
 
+def test_a_frame_that_lights_nothing_reads_zeros(tmp_path, small_panoramas):
+    """Both terms off and the background hidden: no pass writes radiance, and resolve, which
+    reads it for every sample, still gets it at full size, zero-filled (it was a placeholder of a
+    few bytes: the H200 faulted reading past it, a CPU read whatever lay there). The frame is
+    black with its coverage, and its albedo AOV the materials' base colour."""
+    from iblbake.render import frame
+    sc = busy_scene(tmp_path, small_panoramas["city"], {"diffuse": "off", "specular": "off"})
+    sc.data["environment"]["background"] = "hide"
+    sc.data["materials"]["b"]["emissive"] = [0.0, 0.0, 0.0]
+    sc.data["camera"]["spp"] = 1
+    pl = render.plan(sc)
+    assert not [p.name for p in pl.passes if "radiance" in p.writes]
+    assert "radiance" in frame.planned_buffers(pl, tiled=False)
+    f = render.render(sc, cache_root=tmp_path / "cache")
+    cover = f.hdr[..., 3]
+    assert cover.max() == 1 and np.all(f.hdr[..., :3] == 0)
+    bases = {tuple(np.float32(m["base_color"])) for m in sc.data["materials"].values()}
+    full = f.aovs["albedo"][cover == 1][:, :3]
+    assert {tuple(a) for a in full} <= bases
+
+
 LAYERS = {"core": 0, "io": 0, "device": 1, "bake": 2, "scene": 2, "render": 3, "study": 4, "cli": 5}
 
 

@@ -11,7 +11,8 @@ AOVS = ("normal", "albedo", "depth")
 class Resolve(Pass):
     name = "resolve"
     kernel = "resolve.cl"
-    buffers = (Buffer("hdr", per="pixel"), Buffer("aov_normal", per="pixel", when="WRITE_AOVS"),
+    # radiance: read even where no lighting pass runs (both terms off, background hidden: zeros)
+    buffers = (Buffer("radiance"), Buffer("hdr", per="pixel"), Buffer("aov_normal", per="pixel", when="WRITE_AOVS"),
                Buffer("aov_albedo", per="pixel", when="WRITE_AOVS"),
                Buffer("aov_depth", "float", per="pixel", when="WRITE_AOVS"))
 
