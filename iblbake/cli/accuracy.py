@@ -65,11 +65,11 @@ def bounces_value(v: str):
 @common_options
 def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repeats, target_noise, max_samples,
                      visibility, bounces, flip, max_error, cache_dir, jobs, devices, device, quiet, as_json):
-    """Render SCENE's converged reference (diffuse and specular with visibility and every bounce,
-    two seeds, its noise measured), then a ladder of approximations of each term the scene calls for (SH bands
-    and windows; importance N, mip selection and bias; prefiltered chain size, levels, method and
-    dominant direction; lobe K; AO; fewer reference samples; direct light only where light passes between
-    surfaces), each timed (median lighting-pass time;
+    """Render SCENE's converged reference (diffuse and specular with visibility and every
+    bounce, two seeds, its noise measured), then a ladder of approximations of each term the
+    scene calls for (SH bands and windows; importance N, mip selection and bias; prefiltered chain
+    size, levels, method and dominant direction; lobe K; AO; fewer reference samples; the direct
+    light alone where light passes between surfaces), each timed (median lighting-pass time;
     bakes and kernel builds reported apart as one-off costs) and measured over the object pixels:
     relative RMSE, mean and max relative error, HDR-FLIP. Prints the table with each term's
     Pareto frontier of error against time: for an error budget, the cheapest setting."""
