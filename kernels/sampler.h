@@ -4,14 +4,19 @@
 #ifndef IBLBAKE_SAMPLER_H
 #define IBLBAKE_SAMPLER_H
 
+inline uint reverse_bits32(uint x)
+{
+    x = (x << 16) | (x >> 16);
+    x = ((x & 0x00FF00FFu) << 8) | ((x & 0xFF00FF00u) >> 8);
+    x = ((x & 0x0F0F0F0Fu) << 4) | ((x & 0xF0F0F0F0u) >> 4);
+    x = ((x & 0x33333333u) << 2) | ((x & 0xCCCCCCCCu) >> 2);
+    return ((x & 0x55555555u) << 1) | ((x & 0xAAAAAAAAu) >> 1);
+}
+
+/* Van der Corput's radical inverse in base 2: the index's bits mirrored about the point */
 inline float radical_inverse_vdc(uint b)
 {
-    b = (b << 16) | (b >> 16);
-    b = ((b & 0x55555555u) << 1) | ((b & 0xAAAAAAAAu) >> 1);
-    b = ((b & 0x33333333u) << 2) | ((b & 0xCCCCCCCCu) >> 2);
-    b = ((b & 0x0F0F0F0Fu) << 4) | ((b & 0xF0F0F0F0u) >> 4);
-    b = ((b & 0x00FF00FFu) << 8) | ((b & 0xFF00FF00u) >> 8);
-    return (float)b * 2.3283064365386963e-10f;
+    return (float)reverse_bits32(b) * 2.3283064365386963e-10f;
 }
 
 inline float2 hammersley(uint i, uint n)
@@ -82,14 +87,6 @@ inline Sampler sampler_start(uint seed, uint gid, uint k)
  * sequence shuffled by its own nested uniform scramble of the index (Burley 2020, "Practical
  * Hash-based Owen Scrambling", JCGT 9(4)): stratified in every pair at every sample count, each
  * pair independent of the others. */
-inline uint reverse_bits32(uint x)
-{
-    x = (x << 16) | (x >> 16);
-    x = ((x & 0x00FF00FFu) << 8) | ((x & 0xFF00FF00u) >> 8);
-    x = ((x & 0x0F0F0F0Fu) << 4) | ((x & 0xF0F0F0F0u) >> 4);
-    x = ((x & 0x33333333u) << 2) | ((x & 0xCCCCCCCCu) >> 2);
-    return ((x & 0x55555555u) << 1) | ((x & 0xAAAAAAAAu) >> 1);
-}
 
 inline uint laine_karras_permutation(uint x, uint seed)
 {

@@ -232,7 +232,7 @@ def test_path_dimensions_are_stratified_owen_sobol():
     pair, the first 2^m samples of a stream put exactly one point in each 1/2^m of each axis and
     one in each cell of a 2^a x 2^(m-a) grid (a (0, m, 2)-net: what Owen-scrambled Sobol keeps),
     streams and pairs differ, and every value is in [0, 1)."""
-    from iblbake.render.twin.paths import owen_sobol
+    from iblbake.core.sampling import owen_sobol
     j = np.arange(256)
     for stream in (1, 77, 2 ** 31 + 5):
         for p in (0, 3, 11):

@@ -11,15 +11,22 @@ from iblbake.core import conventions
 from iblbake.core.metrics import LUMINANCE
 
 
+M32 = 0xFFFFFFFF
+
+
+def reverse_bits32(x):
+    """kernels/sampler.h reverse_bits32: the 32 bits of x in reverse order."""
+    x = np.asarray(x, np.uint64) & M32
+    x = ((x << 16) | (x >> 16)) & M32
+    x = ((x & 0x00FF00FF) << 8) | ((x & 0xFF00FF00) >> 8)
+    x = ((x & 0x0F0F0F0F) << 4) | ((x & 0xF0F0F0F0) >> 4)
+    x = ((x & 0x33333333) << 2) | ((x & 0xCCCCCCCC) >> 2)
+    return ((x & 0x55555555) << 1) | ((x & 0xAAAAAAAA) >> 1)
+
+
 def radical_inverse_vdc(i):
     """Van der Corput radical inverse in base 2 of 32-bit integers: bits mirrored about the point."""
-    b = np.asarray(i, dtype=np.uint64) & 0xFFFFFFFF
-    b = ((b << 16) | (b >> 16)) & 0xFFFFFFFF
-    b = ((b & 0x55555555) << 1) | ((b & 0xAAAAAAAA) >> 1)
-    b = ((b & 0x33333333) << 2) | ((b & 0xCCCCCCCC) >> 2)
-    b = ((b & 0x0F0F0F0F) << 4) | ((b & 0xF0F0F0F0) >> 4)
-    b = ((b & 0x00FF00FF) << 8) | ((b & 0xFF00FF00) >> 8)
-    return b.astype(np.float64) * (1.0 / 4294967296.0)
+    return reverse_bits32(i).astype(np.float64) * (1.0 / 4294967296.0)
 
 
 def hammersley(n: int):
@@ -93,6 +100,40 @@ def qmc(seed, gid, k, d: int):
     rep, j = k & 1, k >> 1
     shift = hash_uniform(np.uint32(seed) ^ pcg_hash((gid * 16 + rep * 8 + d) & 0xFFFFFFFF))
     return np.mod(radical_inverse(j, HALTON_BASES[d]) + shift, 1.0)
+
+
+# A path's dimensions past the first 8 (kernels/sampler.h): pairs of Owen-scrambled Sobol points
+def laine_karras_permutation(x, seed):
+    x = (np.asarray(x, np.uint64) + np.asarray(seed, np.uint64)) & M32
+    for m in (0x6c50b47c, 0xb82f1e52, 0xc7afe638, 0x8d22f6e6):
+        x ^= (x * m) & M32
+    return x
+
+
+def nested_uniform_scramble(x, seed):
+    return reverse_bits32(laine_karras_permutation(reverse_bits32(x), seed))
+
+
+def sobol_dim1(i):
+    """Sobol's second dimension (kernels/sampler.h sobol_dim1)."""
+    i = np.asarray(i, np.uint64).copy()
+    r, v = np.zeros_like(i), np.full_like(i, 0x80000000)
+    for _ in range(32):
+        r ^= np.where(i & 1, v, 0)
+        i >>= 1
+        v ^= v >> 1
+    return r
+
+
+def owen_sobol(j, seed, p: int, c: int):
+    """kernels/sampler.h owen_sobol: coordinate c of pair p of sample j of stream seed (Burley
+    2020, "Practical Hash-based Owen Scrambling")."""
+    u32 = lambda a: np.asarray(a, np.uint64).astype(np.uint32)                 # noqa: E731
+    s = pcg_hash(u32(seed) ^ pcg_hash(np.uint32(p + 0x51ED27)))
+    i = nested_uniform_scramble(j, s)
+    x = reverse_bits32(i) if c == 0 else sobol_dim1(i)
+    y = nested_uniform_scramble(x, pcg_hash(u32((s.astype(np.uint64) + c + 1) & M32)))
+    return (y >> 8).astype(np.float64) * (1.0 / 16777216.0)
 
 
 def halton_rotated(n: int, base: int, shift: float):

@@ -286,6 +286,7 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
     row0s = list(range(0, height, rows))
     ctx.tile_count = len(row0s)
     names, planned = buffer_names(), planned_buffers(pl, len(row0s) > 1)
+    writers = [p.name for p in pl.passes if "radiance" in p.writes]
     for p in pl.passes:
         if p.name not in run:
             continue
@@ -308,7 +309,6 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
             if name not in ctx.table or ctx.table[name].size != nbytes:
                 ctx.table[name] = rt.empty(nbytes)
         ctx.table.update({"n": n, "npix": npix, "pixel0": ctx.row0 * width})
-        writers = [p.name for p in pl.passes if "radiance" in p.writes]
         if not writers or any(w in run for w in writers):        # none: resolve reads zeros
             rt.cl.enqueue_fill_buffer(rt.queue, ctx.table["radiance"], np.float32(0), 0, n * 16)
         for p in pl.passes:

@@ -95,15 +95,13 @@ def default_ladder(sc, fx, device_kind: str = "GPU", paths: bool = False) -> lis
                 rungs.append(Rung(term, "ao gtao multibounce", [("effects.ao", "gtao"), ("effects.ao_multibounce", True)]))
     for term in TERMS:                   # fewer reference samples: Monte Carlo's own trade
         if getattr(fx, term) != "off":
+            def spp(n):
+                return [(f"effects.{term}", "reference"), ("effects.reference.max_samples", n),
+                        ("effects.reference.target_noise", 0.0), ("effects.reference.seed", 7)]
             for n in (16, 64, 256):
-                rungs.append(Rung(term, f"reference {n} spp", [
-                    (f"effects.{term}", "reference"), ("effects.reference.max_samples", n),
-                    ("effects.reference.target_noise", 0.0), ("effects.reference.seed", 7)]))
+                rungs.append(Rung(term, f"reference {n} spp", spp(n)))
             if paths:                    # the same samples without the bounces: what they cost and buy
-                rungs.append(Rung(term, "direct only 256 spp", [
-                    (f"effects.{term}", "reference"), ("effects.reference.bounces", 1),
-                    ("effects.reference.max_samples", 256), ("effects.reference.target_noise", 0.0),
-                    ("effects.reference.seed", 7)]))
+                rungs.append(Rung(term, "direct only 256 spp", spp(256) + [("effects.reference.bounces", 1)]))
     return rungs
 
 

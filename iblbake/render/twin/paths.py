@@ -23,58 +23,15 @@ from iblbake.scene.layout import DELTA_ALPHA
 RR_DEPTH, MAX_PATH = 3, 256           # kernels/reference.cl
 
 
-M32 = 0xFFFFFFFF
-
-
-def reverse_bits32(x):
-    x = np.asarray(x, np.uint64) & M32
-    x = ((x << 16) | (x >> 16)) & M32
-    x = ((x & 0x00FF00FF) << 8) | ((x & 0xFF00FF00) >> 8)
-    x = ((x & 0x0F0F0F0F) << 4) | ((x & 0xF0F0F0F0) >> 4)
-    x = ((x & 0x33333333) << 2) | ((x & 0xCCCCCCCC) >> 2)
-    return ((x & 0x55555555) << 1) | ((x & 0xAAAAAAAA) >> 1)
-
-
-def laine_karras_permutation(x, seed):
-    x = (np.asarray(x, np.uint64) + np.asarray(seed, np.uint64)) & M32
-    for m in (0x6c50b47c, 0xb82f1e52, 0xc7afe638, 0x8d22f6e6):
-        x ^= (x * m) & M32
-    return x
-
-
-def nested_uniform_scramble(x, seed):
-    return reverse_bits32(laine_karras_permutation(reverse_bits32(x), seed))
-
-
-def sobol_dim1(i):
-    """Sobol's second dimension (kernels/sampler.h sobol_dim1)."""
-    i = np.asarray(i, np.uint64).copy()
-    r, v = np.zeros_like(i), np.full_like(i, 0x80000000)
-    for _ in range(32):
-        r ^= np.where(i & 1, v, 0)
-        i >>= 1
-        v ^= v >> 1
-    return r
-
-
-def owen_sobol(j, seed, p: int, c: int):
-    """kernels/sampler.h owen_sobol: coordinate c of pair p of sample j of stream seed."""
-    u32 = lambda a: np.asarray(a, np.uint64).astype(np.uint32)                 # noqa: E731
-    s = sampling.pcg_hash(u32(seed) ^ sampling.pcg_hash(np.uint32(p + 0x51ED27)))
-    i = nested_uniform_scramble(j, s)
-    x = reverse_bits32(i) if c == 0 else sobol_dim1(i)
-    y = nested_uniform_scramble(x, sampling.pcg_hash(u32((s.astype(np.uint64) + c + 1) & M32)))
-    return (y >> 8).astype(np.float64) * (1.0 / 16777216.0)
-
-
 def dimension(seed, gid, k, d):
     """kernels/sampler.h sampler_1d: dimension d of sample k of G-buffer sample gid."""
     if d < 8:
         return sampling.qmc(seed, gid, k, d)
     gid = np.asarray(gid, np.uint64)
     k = np.asarray(k, np.uint64)
-    stream = sampling.pcg_hash(np.uint32(seed) ^ sampling.pcg_hash(((gid * 2 + (k & 1)) & M32).astype(np.uint32)))
-    return owen_sobol(k >> 1, stream, (d - 8) >> 1, (d - 8) & 1)
+    stream_index = ((gid * 2 + (k & 1)) & sampling.M32).astype(np.uint32)       # G-buffer sample, replicate
+    stream = sampling.pcg_hash(np.uint32(seed) ^ sampling.pcg_hash(stream_index))
+    return sampling.owen_sobol(k >> 1, stream, (d - 8) >> 1, (d - 8) & 1)
 
 
 class Dims:
