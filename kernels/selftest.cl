@@ -3,6 +3,7 @@
 #include "common.h"
 #include "sh.h"
 #include "envmap.h"
+#include "probes.h"
 
 __kernel void t_equirect_uv(__global const float *d, __global float *uv)
 {
@@ -92,4 +93,19 @@ __kernel void t_env(__global const float *marginal, __global const float *condit
     const int i = get_global_id(0);
     int texel;
     out[i] = (float4)(sample_env(marginal, conditional, w, h, u[i], &texel), (float)texel);
+}
+
+/* probes.h at points p, normals n, view vectors v (float4 each); defines PROBES_SH,
+ * PROBE_VISIBILITY, PROBE_CLASSIFICATION as the shade pass sets them */
+__kernel void t_probes(__global const float4 *p, __global const float4 *n, __global const float4 *v, PROBE_PARAMS,
+                       __global float4 *out)
+{
+    const int i = get_global_id(0);
+    out[i] = (float4)(probe_irradiance(p[i].xyz, n[i].xyz, v[i].xyz, PROBE_ARGS), 0.0f);
+}
+
+__kernel void t_probe_octahedral(__global const float4 *d, __global float2 *uv)
+{
+    const int i = get_global_id(0);
+    uv[i] = probe_octahedral(d[i].xyz);
 }

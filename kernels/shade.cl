@@ -1,5 +1,6 @@
 /* Shade pass: the approximate lighting terms the scene asks for, added into the radiance buffer.
- *   DIFFUSE_MODE  DIFFUSE_SH (SH_BANDS bands) or off
+ *   DIFFUSE_MODE  DIFFUSE_SH (SH_BANDS bands), DIFFUSE_PROBES (the irradiance probes around the point,
+ *                 kernels/probes.h) or off
  *   SPECULAR_MODE SPECULAR_IMPORTANCE (the importance pass's sums, kernels/importance.cl,
  *                 combined here with f0) or SPECULAR_PREFILTERED
  *                 (DOMINANT_DIRECTION) or SPECULAR_LOBE or off
@@ -13,6 +14,7 @@
 #include "sampling.h"
 #include "envmap.h"
 #include "sh.h"
+#include "probes.h"
 #include "scene.h"
 #include "surface.h"
 
@@ -68,7 +70,7 @@ __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
                     CHAIN_PARAMS,
                     __global const float4 *hammersley_pts, const int nsamples, const float mip_bias, const float lobe_spread,
                     __global const float2 *dfg, const int dfg_size, __global const float *ao_buf,
-                    __global const float4 *spec_sums, __global float4 *radiance)
+                    __global const float4 *spec_sums, PROBE_PARAMS, __global float4 *radiance)
 {
     const int gid = get_global_id(0);
     if (gid >= n) return;
@@ -89,6 +91,9 @@ __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
 #endif
 #if DIFFUSE_MODE == DIFFUSE_SH
     color += diff_occ * diffuse_weight(mt, nov) * env_scale * sh_irradiance(sh_coeffs, to_env(nrm, env_rot));
+#elif DIFFUSE_MODE == DIFFUSE_PROBES
+    /* the probes' irradiance holds the panorama's intensity already (their rays read it scaled) */
+    color += diff_occ * diffuse_weight(mt, nov) * probe_irradiance(gb_pos[gid].xyz, nrm, v, PROBE_ARGS);
 #endif
 #if SPECULAR_MODE == SPECULAR_IMPORTANCE
     {

@@ -22,11 +22,11 @@ from .conftest import run_cli, write_exr
 # writes, walked below).
 READS = {("accuracy", "ladder_path"), ("compare", "layout_path"), ("deps", "outputs")}
 FOLDERS = {("accuracy", "cache_dir"), ("cache", "cache_dir"), ("mips", "cache_dir"), ("export-gltf", "cache_dir"),
-           ("render", "cache_dir"), ("sheet", "cache_dir")}
+           ("render", "cache_dir"), ("sheet", "cache_dir"), ("probes", "cache_dir")}
 WRITES = {("sh", "output"), ("sh", "depfile"), ("mips", "ktx2_path"), ("mips", "ktx2_irradiance"),
           ("mips", "ktx2_sheen"), ("mips", "depfile"), ("export-gltf", "output"), ("export-gltf", "depfile"),
           ("render", "outputs"), ("render", "depfile"), ("sheet", "outputs"), ("sheet", "layout_path"),
-          ("sheet", "depfile"), ("sheet", "frames_dir"), ("accuracy", "out_dir")}
+          ("sheet", "depfile"), ("sheet", "frames_dir"), ("accuracy", "out_dir"), ("probes", "out_dir")}
 
 
 def _path_options():
@@ -85,6 +85,7 @@ CASES = [
     ("sheet", "frames_dir", "env", lambda f, p: ["sheet", f["scene"], "-o", f["dir"] / "s.png", "--frames", p.parent,
                                                  "--frames-exr"], "frames/r00_c00.exr"),
     ("accuracy", "out_dir", "scene", lambda f, p: ["accuracy", f["scene"], "-o", p.parent], "acc/table.md"),
+    ("probes", "out_dir", "env", lambda f, p: ["probes", f["scene"], "-o", p.parent], "vol/distance.exr"),
 ]
 
 

@@ -27,7 +27,7 @@ COMMANDS = {
     "accuracy": ("accuracy", "accuracy_command"), "cache": ("cache", "cache_group"), "compare": ("compare", "compare_command"),
     "deps": ("render", "deps_command"), "devices": ("devices", "devices"),
     "export-gltf": ("export_gltf", "export_gltf_command"), "mips": ("mips", "mips_command"),
-    "render": ("render", "render_command"), "sh": ("sh", "sh_command"), "sheet": ("sheet", "sheet_command"),
+    "probes": ("probes", "probes_command"), "render": ("render", "render_command"), "sh": ("sh", "sh_command"), "sheet": ("sheet", "sheet_command"),
 }
 
 
@@ -67,6 +67,7 @@ def cli():
     iblbake sh ENV -o sh.json       spherical-harmonic irradiance coefficients
     iblbake mips ENV --cache DIR    radiance chain, GGX-prefiltered chain, DFG table
     iblbake export-gltf ENV -o l.gltf  a glTF image-based light (EXT_lights_image_based)
+    iblbake probes SCENE -o DIR/    irradiance probes (DDGI): atlases, manifest, GLSL sampler
     iblbake render SCENE -o out.png render a scene YAML (see render --help-schema)
     iblbake sheet SCENE -o s.png    a contact sheet of the scene's sweep (or --rows/--columns)
     iblbake deps SCENE              the Make rule of what rendering SCENE reads

@@ -36,6 +36,38 @@ def _textures_code_hash() -> str:
     return hashlib.sha256("".join(inspect.getsource(m) for m in (gltf, materials, textures)).encode()).hexdigest()[:16]
 
 
+def _probes_code_hash() -> str:
+    """The probe baker's and its tracing kernel's source: cached volumes are rebaked when they change."""
+    import hashlib
+    import inspect
+
+    from iblbake.device.runtime import source_hash
+    from iblbake.render import probes
+    return hashlib.sha256((inspect.getsource(probes) + source_hash("probe_trace.cl")).encode()).hexdigest()[:16]
+
+
+def _external(path) -> list:
+    from iblbake.scene import gltf as gltf_file
+    try:
+        return gltf_file.external_files(path)
+    except (OSError, IblbakeError):
+        return []
+
+
+def _map_refs(materials: dict) -> list:
+    """The texture references (mappings with a path) anywhere in the scene's materials."""
+    out = []
+
+    def walk(v):
+        if isinstance(v, dict):
+            if isinstance(v.get("path"), str):
+                out.append(v)
+            for x in v.values():
+                walk(x)
+    walk(materials)
+    return out
+
+
 POLICY_KEYS = {"nonfinite": "environment.nonfinite:", "negative": "environment.negative:",
                "transfer": "environment.transfer:", "primaries": "environment.primaries:",
                "layout": "environment.layout:"}
@@ -276,16 +308,58 @@ class Bakes:
         dist, hit = self._recall(key, lambda: sampling.EnvironmentDistribution(image))
         return dist, hit, {}
 
+    def _probes(self, ctx):
+        """The scene's irradiance probe volume (render/probes.py), baked by tracing the scene on
+        ctx's device, keyed by everything its rays see: the geometry and materials (their files'
+        content), the lights, the panorama's content and frame, the bake settings and the code."""
+        from iblbake.render import probes
+
+        settings = ctx.scene.data["probes"]
+        key = "probes-" + cache.content_key({"kind": "probes", "v": probes.VERSION, **self._light_transport(ctx.scene),
+                                             "settings": probes.bake_settings(settings),
+                                             "code": _probes_code_hash()})
+
+        def make():
+            def build(tmp: Path):
+                vol = probes.bake(ctx, settings, progress=ctx.progress)
+                names = probes.save(vol, tmp)
+                man = probes.manifest(probes.sampled(vol, settings))
+                return {"kind": "probes", "files": [{"name": n} for n in names], "probes": man}
+
+            manifest, cached = cache.get_or_build(self.root, key, build, warn=ctx.warn)
+            entry = self.root / manifest["key"]
+            return probes.load(entry, manifest["probes"]), manifest, cached
+
+        (vol, manifest, cached), hit = self._recall(key, make)
+        rep = manifest["probes"]["report"]
+        return vol, cached or hit, {"probes": rep["probes"], "rays_traced": rep["rays_traced"],
+                                    "bake_s": rep["seconds"], "inactive": rep["inactive"],
+                                    "relocated": rep["relocated"], "entry": str(self.root / manifest["key"])}
+
+    def _light_transport(self, sc) -> dict:
+        """What light leaving the panorama meets before it reaches a probe: the objects,
+        materials, lights and every file they read (by content), the panorama (by content) and its
+        frame."""
+        d = sc.data
+        env = d["environment"]
+        _image, info = self.environment(env)
+        files = [self.file_sha256(f) for o in d["objects"] if "mesh" in o
+                 for f in (o["mesh"]["path"], *_external(o["mesh"]["path"]))]
+        files += [self.file_sha256(m["path"]) for m in _map_refs(d["materials"])]
+        return {"environment": info.sha256, "frame": {k: env[k] for k in ("rotation_y", "intensity", "sun", "nonfinite",
+                                                                         "negative")},
+                "objects": d["objects"], "materials": d["materials"], "lights": d["lights"], "files": files}
+
 
 def load_all(ctx, names) -> dict:
-    """Every named bake, timed into the context's report."""
-    out = {}
+    """Every named bake into ctx.loaded, in order (a later bake may read an earlier one), timed
+    into the context's report."""
     for name in names:
         t0 = time.perf_counter()
         value, cached, extra = ctx.bakes.load(name, ctx)
         ctx.report.bake(name, time.perf_counter() - t0, cached, **extra)
-        out[name] = value
-    return out
+        ctx.loaded[name] = value
+    return ctx.loaded
 
 
 def chain_table(rt, levels) -> dict:

@@ -103,6 +103,7 @@ class Context:
         self.loaded: dict = {}
         self.image = None
         self.background_image = None
+        self.arrays = None            # the scene's device records (scene/pack.py SceneArrays)
 
     def launch(self, p, global_size, function=None, **args):
         """Run pass p's kernel (or another `function` of its program) over global_size."""
@@ -182,25 +183,14 @@ def tile_rows(rt, scene: Scene, pl: Plan, device_budget: int | None = None) -> i
     return int(rows)
 
 
-def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reuse | None = None,
-           device: str | None = None, cache_root: Path | None = None, warn=None, progress=None,
-           device_budget: int | None = None) -> Frame:
-    """Render `scene`. `runtime` (a device.runtime.Runtime) and `cache` (a Bakes) are reused when
-    given; otherwise made for this frame (`device`, `cache_root`). With `reuse` (a Reuse kept
-    across a series of frames), passes whose inputs did not change since the last frame are not
-    run again. `device_budget` overrides the device bytes a frame's buffers may take (tests
-    force tiling with it)."""
-    from iblbake.device.runtime import Runtime
-
-    t_start = time.perf_counter()
-    pl = plan(scene, one_program=reuse is None)
+def scene_context(scene: Scene, pl: Plan, rt, bakes: Bakes, warn=None, progress=None) -> Context:
+    """A frame's context with the scene on the device: its geometry, materials and textures in the
+    table, the panorama read where a bake or pass reads it (ctx.image). The bakes are not loaded
+    (load_all), so that a bake that traces the scene (the probes) finds the table."""
     d = scene.data
     cam = d["camera"]
-    rt = runtime or Runtime(device)
-    bakes = cache or Bakes(cache_root)
-    bakes.runtime = bakes.runtime or rt
+    width, height = cam["resolution"]
     rep = Report(rt.device_label)
-    builds_before = len(rt.builds)
     ctx = Context(rt, scene, pl, bakes, rep, warn or (lambda _m: None), progress)
 
     t0 = time.perf_counter()
@@ -218,19 +208,6 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
             ctx.warn(w)
         rep.bake("read_environment", time.perf_counter() - t0, False, path=info.path,
                  size=[info.width, info.height])
-    ctx.loaded = load_all(ctx, pl.bakes)
-
-    width, height = cam["resolution"]
-    spp = cam["spp"]
-    rows = tile_rows(rt, scene, pl, device_budget)
-    ctx.width = width
-    ctx.frame_hdr = np.empty((height, width, 4), np.float32)
-    # the host's frame: what the buffers the passes fill are read back into
-    planned = planned_buffers(pl, False)
-    ctx.frame_png = np.empty((height, width, 4), np.uint8) if "png_u8" in planned else None
-    ctx.frame_aovs = {"normal": np.empty((height, width, 4), np.float32),
-                      "albedo": np.empty((height, width, 4), np.float32),
-                      "depth": np.empty((height, width), np.float32)} if "aov_normal" in planned else {}
     env = d["environment"]
     rot = np.radians(env["rotation_y"])
     pos, fwd, right, up, ortho = pack.camera_vectors(cam)
@@ -257,8 +234,8 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
     _mats, mat_maps = scene_materials.device_arrays(records, slots, sizes)
 
     ctx.table.update({
-        "cam": rt.to_device(cam4), "width": width, "height": height, "spp": spp,
-        "jitter": rt.to_device(pack.pixel_jitter(spp).astype(np.float32)),
+        "cam": rt.to_device(cam4), "width": width, "height": height, "spp": cam["spp"],
+        "jitter": rt.to_device(pack.pixel_jitter(cam["spp"]).astype(np.float32)),
         "spheres": rt.to_device(padded(arrays.spheres, (1, 2, 4))), "nspheres": len(arrays.spheres),
         "planes": rt.to_device(padded(arrays.planes, (1, FLOAT4S["PLANE"], 4))), "nplanes": len(arrays.planes),
         "bvh": rt.to_device(padded(arrays.bvh, (1, 8))), "tris": rt.to_device(padded(arrays.tris, (1, 6, 4))),
@@ -269,6 +246,42 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
         "texture_count": len(tex_info) if slots else 0,
         "env_rot": np.array([np.cos(rot), np.sin(rot)], np.float32), "env_scale": env["intensity"],
     })
+    ctx.arrays = arrays
+    return ctx
+
+
+def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reuse | None = None,
+           device: str | None = None, cache_root: Path | None = None, warn=None, progress=None,
+           device_budget: int | None = None) -> Frame:
+    """Render `scene`. `runtime` (a device.runtime.Runtime) and `cache` (a Bakes) are reused when
+    given; otherwise made for this frame (`device`, `cache_root`). With `reuse` (a Reuse kept
+    across a series of frames), passes whose inputs did not change since the last frame are not
+    run again. `device_budget` overrides the device bytes a frame's buffers may take (tests
+    force tiling with it)."""
+    from iblbake.device.runtime import Runtime
+
+    t_start = time.perf_counter()
+    pl = plan(scene, one_program=reuse is None)
+    d = scene.data
+    cam = d["camera"]
+    rt = runtime or Runtime(device)
+    bakes = cache or Bakes(cache_root)
+    bakes.runtime = bakes.runtime or rt
+    builds_before = len(rt.builds)
+    ctx = scene_context(scene, pl, rt, bakes, warn, progress)
+    rep = ctx.report
+    load_all(ctx, pl.bakes)
+    width, height = cam["resolution"]
+    spp = cam["spp"]
+    rows = tile_rows(rt, scene, pl, device_budget)
+    ctx.width = width
+    ctx.frame_hdr = np.empty((height, width, 4), np.float32)
+    # the host's frame: what the buffers the passes fill are read back into
+    planned = planned_buffers(pl, False)
+    ctx.frame_png = np.empty((height, width, 4), np.uint8) if "png_u8" in planned else None
+    ctx.frame_aovs = {"normal": np.empty((height, width, 4), np.float32),
+                      "albedo": np.empty((height, width, 4), np.float32),
+                      "depth": np.empty((height, width), np.float32)} if "aov_normal" in planned else {}
     keys = pass_keys(pl, scene)
     prev = reuse.state if reuse is not None else None
     if prev is not None and not (prev["runtime"] is rt and prev["shape"] == (width, height, spp) and rows == height):

@@ -18,12 +18,12 @@ from iblbake.scene.load import Scene
 
 # The modes that approximate image-based light (runtime and baked estimates): AO occludes them,
 # the study's AO rungs apply to them. The reference traces true visibility instead.
-APPROXIMATE_MODES = {"diffuse": ("sh",), "specular": ("importance", "prefiltered", "lobe")}
+APPROXIMATE_MODES = {"diffuse": ("sh", "probes"), "specular": ("importance", "prefiltered", "lobe")}
 
 
 @dataclass
 class Effects:
-    diffuse: str          # off | sh | reference
+    diffuse: str          # off | sh | probes | reference
     specular: str         # off | importance | prefiltered | lobe | reference
     background: str       # hide | show | color | blur
     emissive: bool
@@ -139,7 +139,7 @@ class Plan:
                 "defines": self.defines, "notes": self.notes}
 
 
-BAKE_ORDER = ("sh", "radiance", "prefiltered", "dfg", "env_cdf")
+BAKE_ORDER = ("sh", "radiance", "prefiltered", "dfg", "env_cdf", "probes")
 
 
 def plan(scene: Scene, one_program: bool = False) -> Plan:

@@ -376,8 +376,44 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                                 "disk or sphere; none"),
             "shadow_samples": Num(16, 1, 4096, integer=True, doc="soft: rays per pixel sample (stratified, seeded)"),
         })),
+    "probes": Section(doc="the irradiance probe volume (DDGI) that `effects.diffuse: probes` reads and `iblbake probes` "
+                          "bakes; lengths in units of the probe spacing are of its smallest axis", fields={
+        "min": Vec(**VEC3, doc="the first corner probe's position (with max: the box the probes span; omitted: auto, "
+                               "the probes at the centres of equal cells of the scene's bounds)"),
+        "max": Vec(**VEC3, doc="the opposite corner probe's position"),
+        "counts": Vec(**VEC3, integer=True, lo=1, hi=256, doc="probes along x, y, z (omitted: from spacing, else 8 "
+                                                               "along the longest axis and as many as fit the others)"),
+        "spacing": Num(None, 0.0, lo_open=True, doc="the distance between probes, where counts is omitted"),
+        "rays": Num(256, 8, 1 << 16, integer=True, doc="rays per probe (a spherical Fibonacci set, randomly rotated)"),
+        "bounces": OneOf((Enum(("unbounded",)), Num(None, 1, 1 << 16, integer=True)), default="unbounded",
+                         doc="how many times the light a probe ray brings back may have scattered: unbounded (the "
+                             "reference's paths, Russian roulette), or N (1: the surfaces the probe sees, lit "
+                             "directly)"),
+        "irradiance": Enum(("octahedral", "sh"), "octahedral",
+                           doc="what each probe stores: DDGI's octahedral irradiance map, or L2 SH irradiance "
+                               "(9 RGB coefficients, least squares over its rays)"),
+        "irradiance_texels": Num(6, 2, 64, integer=True, doc="octahedral irradiance: interior texels per side (DDGI: 6; "
+                                                              "the atlas adds a 1-texel border)"),
+        "distance_texels": Num(14, 2, 64, integer=True, doc="distance moments: interior texels per side (DDGI: 14)"),
+        "distance_exponent": Num(50.0, 1.0, 1000.0, doc="sharpness of the distance moments' cosine weights (RTXGI: 50)"),
+        "visibility": Bool(True, doc="DDGI's weights: wrap shading and the Chebyshev test on the distance moments, "
+                                     "so light does not leak through walls (false: trilinear interpolation alone)"),
+        "normal_bias": Num(0.1, 0.0, 1.0, doc="visibility: the sample point moved along the normal (spacing units)"),
+        "view_bias": Num(0.1, 0.0, 1.0, doc="visibility: the sample point moved towards the viewer (spacing units)"),
+        "relocation": Bool(True, doc="move a probe out of geometry or away from a surface it nearly touches, at most "
+                                     "45% of a cell (RTXGI's relocation)"),
+        "classification": Bool(True, doc="switch off a probe inside geometry or with no surface in its cells "
+                                         "(RTXGI's classification): it is neither blended nor sampled"),
+        "backface_threshold": Num(0.25, 0.0, 1.0, doc="the share of a probe's rays meeting back faces above which "
+                                                       "it is inside geometry"),
+        "min_frontface_distance": Num(0.25, 0.0, 0.45, doc="relocation: the nearest front face a probe may keep "
+                                                            "(spacing units)"),
+        "seed": Num(1, 0, 2**31 - 1, integer=True, doc="random seed of the rays' rotation and paths"),
+    }),
     "effects": Section(doc="what the renderer simulates; nothing else is baked, compiled or run", fields={
-        "diffuse": Enum(("sh", "reference", "off"), "sh", doc="diffuse IBL: SH irradiance, Monte Carlo reference, or none"),
+        "diffuse": Enum(("sh", "probes", "reference", "off"), "sh",
+                        doc="diffuse IBL: SH irradiance of the panorama, irradiance probes (`probes`: the light "
+                            "between surfaces too), Monte Carlo reference, or none"),
         "sh_bands": Num(3, 1, 8, integer=True, doc="SH bands for diffuse: sh (3 = 9 coefficients)"),
         "sh_window": Enum(("none", "hann", "lanczos"), "none", doc="SH ringing window"),
         "specular": Enum(("importance", "prefiltered", "lobe", "reference", "off"), "prefiltered",

@@ -1,4 +1,4 @@
-"""Shade: the approximate lighting terms (SH diffuse; importance specular from the importance
+"""Shade: the approximate lighting terms (SH or probe diffuse; importance specular from the importance
 pass's sums, prefiltered or lobe specular; emission), added into `radiance` (kernels/shade.cl;
 twin: iblbake/render/twin/shade.py shade)."""
 
@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from iblbake.core import sampling
+from iblbake.render import probes
 from iblbake.render.passes.base import Buffer, Pass, mode_defines
 
 
@@ -19,7 +20,7 @@ class Shade(Pass):
         return fx.any_approximate or fx.emissive
 
     def reads_bakes(self, scene, fx):
-        return (["sh"] if fx.diffuse == "sh" else []) + \
+        return {"sh": ["sh"], "probes": ["probes"]}.get(fx.diffuse, []) + \
             {"prefiltered": ["prefiltered", "dfg"], "lobe": ["prefiltered", "dfg"]}.get(fx.specular, [])
 
     def defines(self, scene, fx):
@@ -27,6 +28,8 @@ class Shade(Pass):
         d = mode_defines(fx)          # shade.cl computes only the sh, importance, prefiltered terms
         if fx.diffuse == "sh":
             d["SH_BANDS"] = e["sh_bands"]
+        if fx.diffuse == "probes":
+            d.update(probe_defines(scene.data["probes"]))
         if fx.specular == "prefiltered" and e["prefilter"]["dominant_direction"]:
             d["DOMINANT_DIRECTION"] = 1
         if fx.emissive:
@@ -48,6 +51,7 @@ class Shade(Pass):
         ham = np.zeros((nsamp, 4), np.float32)
         if fx.specular == "lobe":             # (u1, u2): sample_ggx_vndf
             ham[:, :2] = sampling.lobe_points(nsamp)
+        args.update(probe_args(ctx.rt, probes.sampled(b["probes"], ctx.scene.data["probes"]) if "probes" in b else None))
         dfg = b["dfg"].astype(np.float32) if "dfg" in b else np.zeros((2, 2, 2), np.float32)
         args.update(hammersley_pts=ctx.rt.to_device(ham), nsamples=nsamp, mip_bias=e["mip_bias"], lobe_spread=e["lobe"]["spread"],
                     dfg=ctx.rt.to_device(dfg.reshape(-1, 2)), dfg_size=dfg.shape[0])
@@ -58,3 +62,30 @@ class Shade(Pass):
         s = self.launch_samples(ctx)
         extra = {"samples": args["nsamples"]} if ctx.plan.effects.specular == "lobe" else {}
         return {"mpixel_samples_per_s": round(n * args["nsamples"] / max(s, 1e-9) / 1e6, 2), **extra}
+
+
+def probe_defines(settings: dict) -> dict:
+    """kernels/probes.h's switches for a scene's probes section."""
+    d = {"PROBES_SH": 1} if settings["irradiance"] == "sh" else {}
+    if settings["visibility"]:
+        d["PROBE_VISIBILITY"] = 1
+    if settings["classification"]:
+        d["PROBE_CLASSIFICATION"] = 1
+    return d
+
+
+def probe_args(rt, vol) -> dict:
+    """PROBE_PARAMS of a sampled volume (render/probes.py sampled), placeholders without one."""
+    if vol is None:
+        z = rt.to_device(np.zeros((1, 4), np.float32))
+        return {"probe_data": z, "probe_irr": z, "probe_dist": z, "probe_origin": np.zeros(4), "probe_spacing": np.ones(4),
+                "probe_nx": 1, "probe_ny": 1, "probe_nz": 1, "probe_irr_texels": 1, "probe_dist_texels": 1}
+    irr = np.asarray(vol["irradiance"], np.float32)
+    dist = np.asarray(vol["distance"], np.float32)
+    return {"probe_data": rt.to_device(np.asarray(vol["data"], np.float32)),
+            "probe_irr": rt.to_device(np.pad(irr, [(0, 0)] * (irr.ndim - 1) + [(0, 1)]).reshape(-1, 4)),
+            "probe_dist": rt.to_device(np.pad(dist, ((0, 0), (0, 0), (0, 2))).reshape(-1, 4)),
+            "probe_origin": np.array([*vol["origin"], vol["normal_bias"]], np.float32),
+            "probe_spacing": np.array([*vol["spacing"], vol["view_bias"]], np.float32),
+            **dict(zip(("probe_nx", "probe_ny", "probe_nz"), vol["counts"])),
+            "probe_irr_texels": vol["irradiance_texels"], "probe_dist_texels": vol["distance_texels"]}

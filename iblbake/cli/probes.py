@@ -1,0 +1,83 @@
+"""`iblbake probes`: bake a scene's irradiance probe volume into files an engine reads."""
+
+from __future__ import annotations
+
+import contextlib
+from pathlib import Path
+
+import click
+
+from iblbake.cli.options import Console, common_options, device_option, max_texture_pixels_option
+
+
+@click.command("probes")
+@click.argument("scene_path", metavar="SCENE")
+@click.option("--output", "-o", "out_dir", required=True, type=click.Path(file_okay=False),
+              help="Folder for probes.json, the atlases (EXR) and probes.glsl; created if missing, its files "
+                   "of those names replaced (atomically).")
+@click.option("--set", "overrides", multiple=True, metavar="KEY.PATH=VALUE",
+              help="Override a scene value, e.g. --set probes.rays=512 --set probes.irradiance=sh (as render --set).")
+@click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
+              help="Bake cache folder (as render). Default: $IBLBAKE_CACHE, else the per-user cache folder.")
+@device_option
+@max_texture_pixels_option
+@common_options
+def probes_command(scene_path, out_dir, overrides, cache_dir, device, quiet, as_json):
+    """Bake the irradiance probes of SCENE (its `probes:` section; see render --help-schema) by
+    tracing paths from every probe, and write them as RTXGI-layout EXR atlases with a JSON
+    manifest and a GLSL function that samples them. `render` bakes the same volume on demand
+    (cached by content) where a scene sets effects.diffuse: probes."""
+    from iblbake.device.runtime import Runtime
+    from iblbake.io import atomic
+    from iblbake.io.guard import refuse_overlaps
+    from iblbake.render import probes
+    from iblbake.render.bakes import Bakes
+    from iblbake.render.frame import scene_context
+    from iblbake.render.plan import plan
+    from iblbake.scene import load as scene
+
+    con = Console(quiet, as_json)
+    sc = scene.load(scene_path, overrides, [])
+    sc.data["effects"]["diffuse"] = "probes"            # what the volume is for: its plan reads the panorama
+    if not sc.data["objects"]:
+        raise click.UsageError(f"{scene_path}: the scene has no objects; probes light objects (add some)")
+    out = Path(out_dir)
+    rep_name = probes.FILES[sc.data["probes"]["irradiance"]]
+    names = ["probes.json", rep_name, "distance.exr", "probe_data.exr", "probes.glsl"]
+    refuse_overlaps([("--output", out / n) for n in names], scene.named_input_files(sc))
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise click.UsageError(f"{out}: cannot create the folder ({e.strerror})") from None
+    for n in names:
+        atomic.check_writable(out / n)
+    rt = Runtime(device)
+    bakes = Bakes(cache_dir)
+    bakes.runtime = rt
+    pl = plan(sc)
+    with con.stages(["probe rays"] * 100, label="probes") if con.interactive else contextlib.nullcontext(None) as step:
+        last = [0]
+
+        def progress(frac):
+            while step is not None and last[0] < int(frac * 100):
+                step()
+                last[0] += 1
+
+        ctx = scene_context(sc, pl, rt, bakes, con.warn, progress)
+        vol, cached, extra = bakes.load("probes", ctx)
+    vol = probes.sampled(vol, sc.data["probes"])
+    man = probes.manifest(vol)
+    entry = Path(extra["entry"])
+    for n in names[1:4]:
+        atomic.write_bytes(out / n, (entry / n).read_bytes())
+    atomic.write_json(out / "probes.json", man)
+    atomic.write_text(out / "probes.glsl", probes.glsl(vol, man))
+    r = man["report"]
+    summary = {"scene": sc.source, "output": str(out), "files": names, "cached": cached, "device": rt.device_label,
+               "grid": man["grid"], "representation": man["representation"], "states": man["states"],
+               "rays_traced": r["rays_traced"], "bake_s": r["seconds"], "relocated": r["relocated"]}
+    nx, ny, nz = man["grid"]["counts"]
+    con.result(summary, f"wrote {out}/ ({nx}x{ny}x{nz} probes, {man['representation']}, "
+                        f"{man['states']['inactive']} inactive, {r['relocated']} relocated; "
+                        f"{r['rays_traced']} rays in {r['seconds']:.2f} s{' (cached)' if cached else ''} "
+                        f"on {rt.device_label})")

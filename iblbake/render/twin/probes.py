@@ -1,0 +1,130 @@
+"""Irradiance probes (kernels/probes.h): RTXGI's octahedral mapping and atlas layout, and the
+irradiance at surface points from the eight probes around each. numpy twin, float64."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from iblbake.core import sh
+
+CRUSH = 0.2                 # Irradiance.hlsl: weights below it are crushed, w^3 / CRUSH^2
+WRAP_FLOOR = 0.2            # the wrap-shading term's offset
+CHEBYSHEV_FLOOR = 0.05      # visibility never quite 0: some probe must count
+TRILINEAR_FLOOR = 0.001     # with visibility, as RTXGI
+
+
+def octahedral(d):
+    """DDGIGetOctahedralCoordinates: unit directions (..., 3) -> [-1, 1]^2, +z at the centre."""
+    d = np.asarray(d, np.float64)
+    uv = d[..., :2] / np.abs(d).sum(-1, keepdims=True)
+    s = np.where(uv >= 0, 1.0, -1.0)
+    folded = (1 - np.abs(uv[..., ::-1])) * s
+    return np.where(d[..., 2:3] < 0, folded, uv)
+
+
+def octahedral_direction(uv):
+    """DDGIGetOctahedralDirection: the inverse of octahedral()."""
+    uv = np.asarray(uv, np.float64)
+    d = np.concatenate([uv, 1 - np.abs(uv).sum(-1, keepdims=True)], -1)
+    s = np.where(uv >= 0, 1.0, -1.0)
+    folded = (1 - np.abs(uv[..., ::-1])) * s
+    d[..., :2] = np.where(d[..., 2:3] < 0, folded, d[..., :2])
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def texel_directions(n: int):
+    """The directions of a probe's n x n interior texels, row by row (DDGIGetNormalizedOctahedral-
+    Coordinates: texel centres)."""
+    c = (np.arange(n) + 0.5) / n * 2 - 1
+    u, v = np.meshgrid(c, c)
+    return octahedral_direction(np.stack([u, v], -1)).reshape(-1, 3)
+
+
+def probe_index(c, counts):
+    """Probe index of grid coordinates c (..., 3) (RTXGI, right-handed, y up)."""
+    nx, _ny, nz = counts
+    return c[..., 1] * nx * nz + c[..., 2] * nx + c[..., 0]
+
+
+def probe_coords(index, counts):
+    """Grid coordinates (..., 3) of probe indices: the inverse of probe_index."""
+    nx, _ny, nz = counts
+    index = np.asarray(index)
+    return np.stack([index % nx, index // (nx * nz), (index // nx) % nz], -1)
+
+
+def tile_origin(index, n: int, counts):
+    """(column, row) of the first texel of probe `index`'s tile (border included) in its atlas."""
+    nx, _ny, nz = counts
+    index = np.asarray(index)
+    return np.stack([(index % nx + index // (nx * nz) * nx) * (n + 2), (index // nx) % nz * (n + 2)], -1)
+
+
+def atlas_read(atlas, index, oct_uv, n: int, counts):
+    """Bilinear reads of probe tiles at octahedral coordinates (DDGIGetProbeUV, then the filter)."""
+    t0 = tile_origin(index, n, counts).astype(np.float64)
+    x = t0[..., 0] + 0.5 * (n + 2) + oct_uv[..., 0] * 0.5 * n - 0.5
+    y = t0[..., 1] + 0.5 * (n + 2) + oct_uv[..., 1] * 0.5 * n - 0.5
+    x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
+    fx, fy = (x - x0)[..., None], (y - y0)[..., None]
+    a, b = atlas[y0, x0], atlas[y0, x0 + 1]
+    c, d = atlas[y0 + 1, x0], atlas[y0 + 1, x0 + 1]
+    return (a * (1 - fx) + b * fx) * (1 - fy) + (c * (1 - fx) + d * fx) * fy
+
+
+def irradiance_at(volume, index, n):
+    """Each probe's own irradiance at normals n (>= 0)."""
+    if volume["representation"] == "sh":
+        e = np.einsum("...k,...kc->...c", sh.sh_basis(n, 3), volume["irradiance"][index])
+    else:
+        e = atlas_read(volume["irradiance"], index, octahedral(n), volume["irradiance_texels"], volume["counts"])[..., :3]
+    return np.maximum(e, 0.0)
+
+
+def irradiance(volume, p, n, v, *, visibility: bool, classification: bool):
+    """Twin of probe_irradiance for points p, normals n, view vectors v (m, 3). `volume`: counts,
+    origin, spacing, normal_bias and view_bias (world units), data (probes, 4: offset in world
+    units, state), representation, irradiance (sh: (probes, 9, 3); else the atlas), distance
+    (the moments' atlas), irradiance_texels, distance_texels."""
+    counts = np.asarray(volume["counts"])
+    origin, spacing = np.asarray(volume["origin"], np.float64), np.asarray(volume["spacing"], np.float64)
+    biased = p + n * volume["normal_bias"] + v * volume["view_bias"]
+    g = (biased - origin) / spacing
+    base = np.clip(np.floor(g).astype(int), 0, counts - 1)
+    alpha = np.clip(g - base, 0, 1)
+    total = np.zeros((len(p), 3))
+    wsum = np.zeros(len(p))
+    for i in range(8):
+        off = np.array([i & 1, (i >> 1) & 1, (i >> 2) & 1])
+        c = np.clip(base + off, 0, counts - 1)
+        index = probe_index(c, counts)
+        data = volume["data"][index]
+        tri3 = np.where(off == 1, alpha, 1 - alpha)
+        e = irradiance_at(volume, index, n)
+        live = data[:, 3] == 0 if classification else np.ones(len(p), bool)
+        if visibility:
+            pp = origin + c * spacing + data[:, :3]
+            tri = np.maximum(tri3, TRILINEAR_FLOOR)
+            to_p = pp - p
+            wrap = 0.5 * ((to_p / np.linalg.norm(to_p, axis=1, keepdims=True) * n).sum(1) + 1)
+            w = wrap * wrap + WRAP_FLOOR
+            to_probe = pp - biased
+            dist = np.linalg.norm(to_probe, axis=1)
+            m = atlas_read(volume["distance"], index, octahedral(-to_probe / dist[:, None]), volume["distance_texels"],
+                           volume["counts"])
+            var = np.abs(m[:, 0] ** 2 - m[:, 1])
+            dv = dist - m[:, 0]
+            with np.errstate(invalid="ignore", divide="ignore"):
+                cheb = np.where(dist > m[:, 0], (var / (var + dv * dv)) ** 3, 1.0)
+            w = np.maximum(1e-6, w * np.maximum(CHEBYSHEV_FLOOR, cheb))
+            w = np.where(w < CRUSH, w ** 3 / CRUSH ** 2, w) * tri.prod(1)
+            value = np.sqrt(e)
+        else:
+            w = tri3.prod(1)
+            value = e
+        w = np.where(live, w, 0.0)
+        total += w[:, None] * value
+        wsum += w
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = np.where(wsum[:, None] > 0, total / np.where(wsum > 0, wsum, 1)[:, None], 0.0)
+    return out * out if visibility else out

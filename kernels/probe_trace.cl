@@ -1,0 +1,51 @@
+/* Probe rays: the light arriving at each irradiance probe along each of its ray directions, by the
+ * reference's path tracer (kernels/paths.h follow_path), and how far the ray went (the probes'
+ * distance moments and their relocation and classification read it; DDGI, Majercik et al. 2019).
+ *   a miss:       the panorama's texel in that direction, times env_scale; distance +INFINITY
+ *   a back face:  (a sphere's inside, a triangle seen against its winding; a plane has none) no
+ *                 light; distance -t, negative as RTXGI marks it (RTXGI stores -0.2 t)
+ *   a front face: the surface's emission plus the light it scatters towards the probe, every
+ *                 bounce the scene's BOUNCES allows; distance t
+ * shade = 0: distances only (relocation looks at nothing else).
+ * Work item (probe first + i, ray r): out[i nrays + r]; the ray's random stream is its probe and
+ * ray number, so a bake is the same however it is split into launches.
+ * numpy twin of what the probes make of these rays: iblbake/render/probes.py (project). */
+#include "common.h"
+#include "envmap.h"
+#include "scene.h"
+#include "surface.h"
+#include "material.h"
+#include "light.h"
+#include "paths.h"
+
+__kernel void probe_trace(__global const float4 *probe_pos, __global const float4 *ray_dirs, const int nrays,
+                          const int first, const int count, const uint seed, const int shade,
+                          const float2 env_rot, const float env_scale,
+                          __global const float4 *img, const int w, const int h,
+                          __global const float *marginal, __global const float *conditional,
+                          __global const float *pdf_table, __global const float4 *materials, SCENE_PARAMS,
+                          __global const float4 *lights, const int nlights, __global float4 *ray_out)
+{
+    const int item = get_global_id(0);
+    if (item >= count * nrays) return;
+    const int probe = first + item / nrays, r = item % nrays;
+    const float3 o = probe_pos[probe].xyz, d = ray_dirs[r].xyz;
+    const Hit hh = trace(o, d, SCENE_ARGS);
+    if (hh.kind == PRIM_NONE) {
+        ray_out[item] = (float4)(img[env_texel_index(to_env(d, env_rot), w, h)].xyz * env_scale, INFINITY);
+        return;
+    }
+    float3 ng, ns;
+    int m, obj;
+    hit_normals(hh.kind, hh.index, o + hh.t * d, hh.b1, hh.b2, &ng, &ns, &m, &obj, SCENE_ARGS);
+    const int back = hh.kind != PRIM_PLANE && dot(ng, d) > 0.0f;
+    if (back || !shade) {
+        ray_out[item] = (float4)(0.0f, 0.0f, 0.0f, back ? -hh.t : hh.t);
+        return;
+    }
+    Sampler sp = sampler_start(seed, (uint)probe, (uint)r);
+    float3 env_part;
+    const float3 emitted = follow_path(o, d, hh, (float3)(1.0f), &sp, materials, env_rot, img, w, h, marginal,
+                                       conditional, pdf_table, SCENE_ARGS, &env_part, lights, nlights);
+    ray_out[item] = (float4)(env_part * env_scale + emitted, hh.t);
+}

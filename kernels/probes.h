@@ -1,0 +1,128 @@
+/* Irradiance probes: the diffuse light at a surface point from the eight probes of the grid cell
+ * around it, as RTXGI's DDGIGetVolumeIrradiance (Irradiance.hlsl, RTXGI-DDGI 1.x; Majercik et al.
+ * 2019 and 2021) specifies; constants and layouts in docs/conventions.md "Irradiance probes".
+ *   PROBES_SH          each probe stores L2 SH irradiance coefficients (world frame, sh.h's basis),
+ *                      else RTXGI's octahedral irradiance atlas (n x n texels plus a 1-texel border)
+ *   PROBE_VISIBILITY   DDGI's weights: wrap shading, Chebyshev visibility on the distance moments'
+ *                      atlas, the weight crush and the blend in sqrt(E) (RTXGI's gamma-2 leftover);
+ *                      without it plain trilinear interpolation of E (an irradiance volume)
+ *   PROBE_CLASSIFICATION  probes marked inactive (probe_data.w = 1) do not contribute
+ * Probe index (RTXGI, right-handed y up): gy nx nz + gz nx + gx; its atlas tile: column gx + gy nx,
+ * row gz. numpy twin: iblbake/render/twin/probes.py. */
+#ifndef IBLBAKE_PROBES_H
+#define IBLBAKE_PROBES_H
+#include "common.h"
+#include "sh.h"
+
+#define PROBE_PARAMS __global const float4 *probe_data, __global const float4 *probe_irr, \
+                     __global const float4 *probe_dist, const float4 probe_origin, const float4 probe_spacing, \
+                     const int probe_nx, const int probe_ny, const int probe_nz, const int probe_irr_texels, \
+                     const int probe_dist_texels
+#define PROBE_ARGS probe_data, probe_irr, probe_dist, probe_origin, probe_spacing, probe_nx, probe_ny, probe_nz, \
+                   probe_irr_texels, probe_dist_texels
+
+/* DDGIGetOctahedralCoordinates: [-1, 1]^2, +z at the centre, -z at the corners */
+inline float2 probe_octahedral(float3 d)
+{
+    float2 uv = d.xy / (fabs(d.x) + fabs(d.y) + fabs(d.z));
+    if (d.z < 0.0f) {
+        const float2 s = (float2)(uv.x >= 0.0f ? 1.0f : -1.0f, uv.y >= 0.0f ? 1.0f : -1.0f);
+        uv = (1.0f - fabs(uv.yx)) * s;
+    }
+    return uv;
+}
+
+/* A bilinear read of probe `index`'s tile (n interior texels, border 1) at octahedral coordinates
+ * oct, in an atlas of nx ny tiles across (DDGIGetProbeUV, then the hardware's bilinear filter:
+ * texel centres at half-integers). */
+inline float4 probe_atlas_read(__global const float4 *atlas, int index, float2 oct, int n, int nx, int ny, int nz)
+{
+    const int tile = n + 2, width = tile * nx * ny;
+    const int col = index % nx + (index / (nx * nz)) * nx, row = (index / nx) % nz;
+    const float x = (float)(col * tile) + 0.5f * (float)tile + oct.x * 0.5f * (float)n - 0.5f;
+    const float y = (float)(row * tile) + 0.5f * (float)tile + oct.y * 0.5f * (float)n - 0.5f;
+    const float fx0 = floor(x), fy0 = floor(y);
+    const int x0 = (int)fx0, y0 = (int)fy0;
+    const float fx = x - fx0, fy = y - fy0;
+    const float4 a = atlas[y0 * width + x0], b = atlas[y0 * width + x0 + 1];
+    const float4 c = atlas[(y0 + 1) * width + x0], d = atlas[(y0 + 1) * width + x0 + 1];
+    return mix(mix(a, b, fx), mix(c, d, fx), fy);
+}
+
+/* One probe's irradiance at normal n (>= 0: an SH fit rings) */
+inline float3 probe_irradiance_at(__global const float4 *probe_irr, int index, float3 n, int texels, int nx, int ny,
+                                  int nz)
+{
+#ifdef PROBES_SH
+    float Y[9];
+    sh_eval(n, Y);
+    float3 e = (float3)(0.0f);
+    for (int k = 0; k < 9; ++k) e += probe_irr[9 * index + k].xyz * Y[k];
+    return fmax(e, (float3)(0.0f));
+#else
+    return fmax(probe_atlas_read(probe_irr, index, probe_octahedral(n), texels, nx, ny, nz).xyz, (float3)(0.0f));
+#endif
+}
+
+/* The irradiance at surface point p with shading normal n seen along v (towards the viewer).
+ * probe_origin.xyz: probe (0, 0, 0); .w the normal bias; probe_spacing.xyz the cell; .w the view
+ * bias (both in world units). No contributing probe (all eight inactive): 0, as RTXGI. */
+inline float3 probe_irradiance(float3 p, float3 n, float3 v, PROBE_PARAMS)
+{
+    const float3 origin = probe_origin.xyz, spacing = probe_spacing.xyz;
+    const int3 last = (int3)(probe_nx - 1, probe_ny - 1, probe_nz - 1);
+    const float3 biased = p + n * probe_origin.w + v * probe_spacing.w;
+    const float3 g = (biased - origin) / spacing;
+    const int3 base = clamp(convert_int3(floor(g)), (int3)(0), last);
+    const float3 alpha = clamp(g - convert_float3(base), 0.0f, 1.0f);
+    float3 sum = (float3)(0.0f);
+    float wsum = 0.0f;
+    for (int i = 0; i < 8; ++i) {
+        const int3 off = (int3)(i & 1, (i >> 1) & 1, (i >> 2) & 1);
+        const int3 c = clamp(base + off, (int3)(0), last);
+        const int index = c.y * probe_nx * probe_nz + c.z * probe_nx + c.x;
+        const float4 data = probe_data[index];
+#ifdef PROBE_CLASSIFICATION
+        if (data.w != 0.0f) continue;
+#endif
+        const float3 tri3 = select(1.0f - alpha, alpha, off == (int3)(1));
+        const float3 e = probe_irradiance_at(probe_irr, index, n, probe_irr_texels, probe_nx, probe_ny, probe_nz);
+#ifdef PROBE_VISIBILITY
+        const float3 pp = origin + convert_float3(c) * spacing + data.xyz;
+        const float3 tri = fmax(tri3, 0.001f);
+        /* wrap shading: a probe behind the surface still counts a little */
+        const float wrap = 0.5f * (dot(normalize(pp - p), n) + 1.0f);
+        float w = wrap * wrap + 0.2f;
+        /* Chebyshev's bound on the chance the probe sees the point, from the mean and mean square
+         * of the probe's distances towards it */
+        const float3 to_probe = pp - biased;
+        const float dist = length(to_probe);
+        const float2 m = probe_atlas_read(probe_dist, index, probe_octahedral(-to_probe / dist), probe_dist_texels,
+                                          probe_nx, probe_ny, probe_nz).xy;
+        float cheb = 1.0f;
+        if (dist > m.x) {
+            const float var = fabs(m.x * m.x - m.y), dv = dist - m.x;
+            cheb = var / (var + dv * dv);
+            cheb = cheb * cheb * cheb;
+        }
+        w *= fmax(0.05f, cheb);
+        w = fmax(1e-6f, w);
+        if (w < 0.2f) w *= w * w * (1.0f / (0.2f * 0.2f));     /* crush tiny weights, continuously */
+        w *= tri.x * tri.y * tri.z;
+        sum += w * sqrt(e);
+#else
+        const float w = tri3.x * tri3.y * tri3.z;
+        sum += w * e;
+#endif
+        wsum += w;
+    }
+    if (!(wsum > 0.0f)) return (float3)(0.0f);
+#ifdef PROBE_VISIBILITY
+    const float3 s = sum / wsum;
+    return s * s;
+#else
+    return sum / wsum;
+#endif
+}
+
+#endif
