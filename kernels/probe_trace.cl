@@ -1,7 +1,11 @@
 /* Probe rays: the light arriving at each irradiance probe along each of its ray directions, by the
  * reference's path tracer (kernels/paths.h follow_path), and how far the ray went (the probes'
  * distance moments and their relocation and classification read it; DDGI, Majercik et al. 2019).
- *   a miss:       the panorama's texel in that direction, times env_scale; distance +INFINITY
+ *   a miss:       the panorama averaged over the ray's share of the sphere, ray_solid_angle = 4 pi / rays
+ *                 (the radiance chain at that footprint, as the importance pass filters its samples),
+ *                 times env_scale; distance +INFINITY. A sun smaller than a ray's share is neither
+ *                 missed nor hit by chance: its light lands in the ray whose share holds it, seen or
+ *                 shadowed as that ray is (the probes' own angular resolution)
  *   a back face:  (a sphere's inside, a triangle seen against its winding; a plane has none) no
  *                 light; distance -t, negative as RTXGI marks it (RTXGI stores -0.2 t)
  *   a front face: the surface's emission plus the light it scatters towards the probe, every
@@ -23,7 +27,8 @@ __kernel void probe_trace(__global const float4 *probe_pos, __global const float
                           const float2 env_rot, const float env_scale,
                           __global const float4 *img, const int w, const int h,
                           __global const float *marginal, __global const float *conditional,
-                          __global const float *pdf_table, __global const float4 *materials, SCENE_PARAMS,
+                          __global const float *pdf_table, CHAIN_PARAMS, const float ray_solid_angle,
+                          __global const float4 *materials, SCENE_PARAMS,
                           __global const float4 *lights, const int nlights, __global float4 *ray_out)
 {
     const int item = get_global_id(0);
@@ -32,7 +37,9 @@ __kernel void probe_trace(__global const float4 *probe_pos, __global const float
     const float3 o = probe_pos[probe].xyz, d = ray_dirs[r].xyz;
     const Hit hh = trace(o, d, SCENE_ARGS);
     if (hh.kind == PRIM_NONE) {
-        ray_out[item] = (float4)(img[env_texel_index(to_env(d, env_rot), w, h)].xyz * env_scale, INFINITY);
+        const float3 e = to_env(d, env_rot);
+        const float lod = 0.5f * log2(ray_solid_angle / texel_solid_angle(e, lw[0], lh[0]));
+        ray_out[item] = (float4)(chain_lookup(CHAIN_ARGS, e, lod) * env_scale, INFINITY);
         return;
     }
     float3 ng, ns;

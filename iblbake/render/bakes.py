@@ -328,7 +328,7 @@ class Bakes:
 
             manifest, cached = cache.get_or_build(self.root, key, build, warn=ctx.warn)
             entry = self.root / manifest["key"]
-            return probes.load(entry, manifest["probes"]), manifest, cached
+            return probes.load(entry, manifest.get("probes"), cache.MANIFEST), manifest, cached
 
         (vol, manifest, cached), hit = self._recall(key, make)
         rep = manifest["probes"]["report"]

@@ -99,14 +99,13 @@ def grid_of(settings: dict, arrays) -> Grid:
         lo, hi = b
         cells = True                      # probes at the centres of equal cells of the bounds
     extent = hi - lo
-    if settings["counts"] is not None:
+    if isinstance(settings["counts"], list):
         counts = np.asarray(settings["counts"], int)
     else:
-        step = settings["spacing"] or max(float(extent.max()), 1e-6) / (DEFAULT_LONGEST - (0 if cells else 1))
+        longest = settings["counts"] or DEFAULT_LONGEST
+        step = settings["spacing"] or max(float(extent.max()), 1e-6) / max(longest - (0 if cells else 1), 1)
         counts = np.maximum(1, np.round(extent / step).astype(int) + (0 if cells else 1))
-        if cells:
-            counts = np.maximum(counts, 1)
-    counts = np.where(extent > 0, np.maximum(counts, 2 if not cells else 1), 1)
+    counts = np.where(extent > 0, np.maximum(counts, 1 if cells else 2), 1)
     if cells:
         spacing = np.where(extent > 0, extent / counts, 1.0)
         origin = lo + 0.5 * np.where(extent > 0, spacing, 0.0)
@@ -165,13 +164,14 @@ class Tracer:
         rt = self.rt = ctx.rt
         self.ctx, self.settings = ctx, settings
         dist = ctx.bakes.load("env_cdf", ctx)[0]
+        chain = ctx.bakes.load("radiance", ctx)[0]     # what an escaping probe ray reads (probe_trace.cl)
         self.defines = trace_defines(ctx.scene, settings["bounces"])
         recs = np.zeros((0, 4), np.float32)
         if "PATH_LIGHTS" in self.defines:
             recs = pack.light_records(frame_lights(ctx.scene, ctx.bakes.sun(ctx.scene.data["environment"])))
         self.args = {"img": rt.to_device(to_rgba(ctx.image)), "w": dist.width, "h": dist.height,
                      "marginal": rt.to_device(dist.marginal), "conditional": rt.to_device(dist.conditional),
-                     "pdf_table": rt.to_device(dist.pdf), "nlights": len(recs),
+                     "pdf_table": rt.to_device(dist.pdf), "nlights": len(recs), **ctx.chain(chain),
                      "lights": rt.to_device(recs.reshape(-1, 4) if len(recs) else np.zeros((4, 4), np.float32))}
         self.rays_traced = 0
 
@@ -187,6 +187,7 @@ class Tracer:
             count = min(per_launch, n - first)
             rt.launch("probe_trace.cl", "probe_trace", self.defines, (count * nrays,), self.ctx.table, **self.args,
                       probe_pos=pos, ray_dirs=dir_buf, nrays=nrays, first=first, count=count,
+                      ray_solid_angle=4 * np.pi / nrays,
                       seed=self.settings["seed"], shade=int(shade), ray_out=buf)
             out[first:first + count] = rt.read(buf, (count * nrays, 4)).reshape(count, nrays, 4)
             if progress:
@@ -427,25 +428,34 @@ def _bad(path, what: str):
     return IblbakeError(f"{path}: {what}; bake the probes again (iblbake probes, or delete the cache entry)")
 
 
-def load(folder: Path, man: dict) -> dict:
-    """A volume from its folder and manifest, every image checked against the manifest: shapes,
-    finite and non-negative values, states 0 or 1, offsets within 45% of a cell."""
+def load(folder: Path, man: dict, manifest_name: str = "probes.json") -> dict:
+    """A volume from its folder and manifest (manifest_name: how the folder calls it), every
+    value checked: the manifest's types and ranges, the images' shapes against it, finite and
+    non-negative values, states 0 or 1, offsets within 45% of a cell."""
     from iblbake.io import images
 
     folder = Path(folder)
-    if man.get("format") != FORMAT or man.get("version") != VERSION:
-        raise _bad(folder, f"not an {FORMAT} v{VERSION} manifest")
+    where = folder / manifest_name
+    if not isinstance(man, dict) or man.get("format") != FORMAT or man.get("version") != VERSION:
+        raise _bad(where, f"not an {FORMAT} v{VERSION} manifest")
     try:
         g = man["grid"]
-        grid = Grid(tuple(float(x) for x in g["origin"]), tuple(float(x) for x in g["spacing"]),
-                    tuple(int(x) for x in g["counts"]))
-        rep, n, nd = man["representation"], int(man["irradiance_texels"]), int(man["distance_texels"])
-        settings = dict(man["settings"])
+        vecs = [g["origin"], g["spacing"], g["counts"]]
+        if not all(isinstance(v, list) and len(v) == 3 and all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                                                for x in v) for v in vecs):
+            raise ValueError("grid: origin, spacing and counts must be 3 numbers each")
+        grid = Grid(tuple(float(x) for x in vecs[0]), tuple(float(x) for x in vecs[1]), tuple(int(x) for x in vecs[2]))
+        rep, n, nd = man["representation"], man["irradiance_texels"], man["distance_texels"]
+        settings = man["settings"]
+        if not (isinstance(rep, str) and rep in FILES and all(isinstance(x, int) and not isinstance(x, bool)
+                                                               for x in (n, nd))
+                and isinstance(settings, dict) and isinstance(settings.get("classification"), bool)):
+            raise ValueError("representation, texels or settings")
     except (KeyError, TypeError, ValueError) as e:
-        raise _bad(folder / "probes.json", f"manifest lacks or mangles {e}") from None
-    if rep not in FILES or len(grid.counts) != 3 or min(grid.counts) < 1 or min(grid.spacing) <= 0 \
+        raise _bad(where, f"manifest lacks or mangles {e}") from None
+    if min(grid.counts) < 1 or grid.count > 1 << 20 or min(grid.spacing) <= 0 \
             or not all(math.isfinite(x) for x in grid.origin + grid.spacing) or not (2 <= n <= 64 and 2 <= nd <= 64):
-        raise _bad(folder / "probes.json", "its grid or representation is out of range")
+        raise _bad(where, "its grid or texel counts are out of range")
     nx, ny, nz = grid.counts
 
     def read(name, shape):

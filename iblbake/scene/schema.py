@@ -381,8 +381,9 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "min": Vec(**VEC3, doc="the first corner probe's position (with max: the box the probes span; omitted: auto, "
                                "the probes at the centres of equal cells of the scene's bounds)"),
         "max": Vec(**VEC3, doc="the opposite corner probe's position"),
-        "counts": Vec(**VEC3, integer=True, lo=1, hi=256, doc="probes along x, y, z (omitted: from spacing, else 8 "
-                                                               "along the longest axis and as many as fit the others)"),
+        "counts": OneOf((Num(None, 1, 256, integer=True), Vec(**VEC3, integer=True, lo=1, hi=256)), default=None,
+                        doc="probes along x, y, z, or N: N along the longest axis and as many as keep the "
+                            "cells near cubes along the others (omitted: from spacing, else 8)"),
         "spacing": Num(None, 0.0, lo_open=True, doc="the distance between probes, where counts is omitted"),
         "rays": Num(256, 8, 1 << 16, integer=True, doc="rays per probe (a spherical Fibonacci set, randomly rotated)"),
         "bounces": OneOf((Enum(("unbounded",)), Num(None, 1, 1 << 16, integer=True)), default="unbounded",

@@ -86,6 +86,9 @@ def default_ladder(sc, fx, device_kind: str = "GPU", paths: bool = False) -> lis
                                    ("soft 16", "soft", 16)):
                 rungs.append(Rung(term, f"shadows {label}", [v for i in range(len(lights)) for v in (
                     (f"lights.{i}.shadows", mode), (f"lights.{i}.shadow_samples", n))]))
+    if fx.diffuse != "off" and paths:    # irradiance probes: the light between surfaces, baked
+        for label, vals in probe_rungs():
+            rungs.append(Rung("diffuse", label, [("effects.diffuse", "probes")] + vals))
     for term in TERMS:                   # AO on the approximate IBL (the reference has visibility)
         if fx.approximate(term):
             rungs.append(Rung(term, "ao gtao", [("effects.ao", "gtao")]))
@@ -103,6 +106,16 @@ def default_ladder(sc, fx, device_kind: str = "GPU", paths: bool = False) -> lis
             if paths:                    # the same samples without the bounces: what they cost and buy
                 rungs.append(Rung(term, "direct only 256 spp", spp(256) + [("effects.reference.bounces", 1)]))
     return rungs
+
+
+def probe_rungs() -> list:
+    """(label, values) of the probe rungs: one factor at a time around 8 probes along the longest
+    axis, 256 rays, octahedral irradiance, DDGI's visibility."""
+    base = {"counts": 8, "rays": 256, "irradiance": "octahedral", "visibility": True}
+    steps = [("probes 8", {}), ("probes 4", {"counts": 4}), ("probes 16", {"counts": 16}),
+             ("probes 8 rays 64", {"rays": 64}), ("probes 8 rays 1024", {"rays": 1024}),
+             ("probes 8 sh", {"irradiance": "sh"}), ("probes 8 no visibility", {"visibility": False})]
+    return [(label, [(f"probes.{k}", v) for k, v in {**base, **own}.items()]) for label, own in steps]
 
 
 def ladder_from_file(path, sc, fx) -> list:
