@@ -64,6 +64,18 @@ inline float3 probe_irradiance_at(__global const float4 *probe_irr, int index, f
 #endif
 }
 
+/* How much of the probes' irradiance a point takes (RTXGI's DDGIGetVolumeBlendWeight): 1 inside
+ * the box the probes span, falling linearly to 0 one spacing outside it along each axis (the rest
+ * from what lies outside every volume: the panorama's SH). */
+inline float probe_volume_weight(float3 p, const float4 probe_origin, const float4 probe_spacing, const int probe_nx,
+                                 const int probe_ny, const int probe_nz)
+{
+    const float3 half_extent = 0.5f * probe_spacing.xyz * (float3)(probe_nx - 1, probe_ny - 1, probe_nz - 1);
+    const float3 delta = fabs(p - (probe_origin.xyz + half_extent)) - half_extent;
+    const float3 w = 1.0f - clamp(delta / probe_spacing.xyz, 0.0f, 1.0f);
+    return w.x * w.y * w.z;
+}
+
 /* The irradiance at surface point p with shading normal n seen along v (towards the viewer).
  * probe_origin.xyz: probe (0, 0, 0); .w the normal bias; probe_spacing.xyz the cell; .w the view
  * bias (both in world units). No contributing probe (all eight inactive): 0, as RTXGI. */

@@ -18,7 +18,7 @@
 #include "scene.h"
 #include "surface.h"
 
-#if DIFFUSE_MODE == DIFFUSE_SH
+#if DIFFUSE_MODE == DIFFUSE_SH || DIFFUSE_MODE == DIFFUSE_PROBES
 inline float3 sh_irradiance(__constant float4 *coeffs, float3 n)
 {
     float Y[SH_COEFFS];
@@ -92,8 +92,15 @@ __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
 #if DIFFUSE_MODE == DIFFUSE_SH
     color += diff_occ * diffuse_weight(mt, nov) * env_scale * sh_irradiance(sh_coeffs, to_env(nrm, env_rot));
 #elif DIFFUSE_MODE == DIFFUSE_PROBES
-    /* the probes' irradiance holds the panorama's intensity already (their rays read it scaled) */
-    color += diff_occ * diffuse_weight(mt, nov) * probe_irradiance(gb_pos[gid].xyz, nrm, v, PROBE_ARGS);
+    {
+        /* the probes' irradiance holds the panorama's intensity already (their rays read it
+         * scaled); outside the volume, the panorama's SH takes over */
+        const float3 p = gb_pos[gid].xyz;
+        const float wv = probe_volume_weight(p, probe_origin, probe_spacing, probe_nx, probe_ny, probe_nz);
+        float3 e = wv > 0.0f ? wv * probe_irradiance(p, nrm, v, PROBE_ARGS) : (float3)(0.0f);
+        if (wv < 1.0f) e += (1.0f - wv) * env_scale * sh_irradiance(sh_coeffs, to_env(nrm, env_rot));
+        color += diff_occ * diffuse_weight(mt, nov) * e;
+    }
 #endif
 #if SPECULAR_MODE == SPECULAR_IMPORTANCE
     {

@@ -238,7 +238,7 @@ def rooms(folder, sky, visibility, diffuse="probes", **probe_keys):
         "environment": {"path": str(sky)},
         "materials": {"white": {"base_color": [0.8, 0.8, 0.8], "roughness": 1, "specular": 0}},
         "objects": objs,
-        "probes": {"counts": [8, 4, 4], "visibility": visibility, **probe_keys},
+        "probes": {"visibility": visibility, **probe_keys},
         "effects": {"diffuse": diffuse, "specular": "off",
                     "reference": {"max_samples": 64, "target_noise": 0}}})
 
@@ -246,17 +246,17 @@ def rooms(folder, sky, visibility, diffuse="probes", **probe_keys):
 @pytest.mark.slow
 def test_visibility_stops_light_leaking_through_a_thin_wall(tmp_path, rt, sky):
     """The closed room receives no light at all (the reference: 0; the panorama's SH, which knows no
-    walls: 0.6); without visibility the lit room's probes beside the wall bleed into its floor
-    (measured: 0.034 over the view); with DDGI's visibility a hundredth of that at most remains
-    (measured 0.25% of it, 8.5e-5; the issue asks for a tenth)."""
+    walls: 0.6); without visibility the probes beside the wall and above the roof (8 along the
+    longest axis, cells of 0.62) bleed the sky into it (measured: 0.21 over the view); with DDGI's
+    visibility at most 8% of that remains (measured 2.7%, 0.0056; the issue asks for a tenth)."""
     cache = Bakes(tmp_path / "cache")
     lit = lambda f: f.hdr[..., :3][f.hdr[..., 3] > 0.999].mean()      # noqa: E731
     without = lit(render.render(rooms(tmp_path, sky, False), runtime=rt, cache=cache))
     with_vis = lit(render.render(rooms(tmp_path, sky, True), runtime=rt, cache=cache))
     ref = lit(render.render(rooms(tmp_path, sky, True, "reference"), runtime=rt, cache=cache))
     assert ref == 0.0
-    assert without > 0.015
-    assert with_vis <= 0.01 * without
+    assert without > 0.1
+    assert with_vis <= 0.08 * without
 
 
 def test_probes_are_baked_and_compiled_only_where_asked(tmp_path, sky):
@@ -264,7 +264,7 @@ def test_probes_are_baked_and_compiled_only_where_asked(tmp_path, sky):
     pl = render.plan(sc)
     assert "probes" not in pl.bakes and "PROBE_VISIBILITY" not in pl.defines["shade"]
     pl = render.plan(sphere_scene(tmp_path, sky, "probes", "sh"))
-    assert pl.bakes == ["probes"]
+    assert pl.bakes == ["sh", "probes"]              # the SH: outside the probes' volume
     assert pl.defines["shade"]["DIFFUSE_MODE"] == 3 and pl.defines["shade"]["PROBES_SH"] == 1
     assert pl.defines["shade"]["PROBE_VISIBILITY"] == 1 and pl.defines["shade"]["PROBE_CLASSIFICATION"] == 1
 
@@ -404,3 +404,31 @@ def test_probe_files_fuzzed(tmp_path, sky, stress):
         assert set(np.unique(vol["data"][:, 3])) <= {0.0, 1.0}
     stress.count("inputs fuzzed", n)
     assert refused > n // 3
+
+
+def test_frame_matches_the_twin(tmp_path, rt, sky):
+    """A whole frame with diffuse probes (the two rooms seen from outside on an endless ground,
+    visibility on: inside the volume, at its edge and beyond it, where the panorama's SH takes
+    over) against the numpy twin of the shade pass on the twin's G-buffer, with the volume the
+    frame read (measured 1.3e-6 of the brightest pixel)."""
+    from iblbake.render import twin as rr
+    from iblbake.render.twin import probes as ptwin
+    from iblbake.scene import pack
+
+    doc = yaml.safe_load(Path(rooms(tmp_path, sky, True).source).read_text())
+    doc["objects"].append({"plane": {"point": [0, -0.05, 0]}, "material": "white"})
+    doc["camera"] = {"perspective": {"position": [0.5, 2.5, 6], "look_at": [0, 0.5, 0], "fov_y": 50},
+                     "resolution": [32, 24]}
+    sc = write(tmp_path, "rooms_outside", doc)
+    bakes = Bakes(tmp_path / "cache")
+    frame = render.render(sc, runtime=rt, cache=bakes)
+    vol = next(v[0] for k, v in bakes._memo.items() if isinstance(k, str) and k.startswith("probes-"))
+    arrays = pack.scene_arrays(sc)
+    gb = rr.primary(sc["camera"], arrays)
+    coeffs = sh.project(images.read_exr(sky)[..., :3], 3) * sh.ahat(3)[:, None]
+    want = rr.shade(gb, arrays, sc["effects"], sc["environment"], sh_coeffs=coeffs,
+                    probes=probes.sampled(vol, sc["probes"]))[gb["hit"]]
+    got = frame.hdr[..., :3].reshape(-1, 3)[gb["hit"]]
+    w = ptwin.volume_weight(probes.sampled(vol, sc["probes"]), gb["pos"][gb["hit"]])
+    assert (w == 1).any() and (w == 0).any() and ((w > 0) & (w < 1)).any()
+    assert np.abs(got - want).max() / want.max() < 1e-5

@@ -82,40 +82,49 @@ def scene_bounds(arrays) -> tuple | None:
 
 
 def grid_of(settings: dict, arrays) -> Grid:
-    """The probe grid a scene's `probes` section asks for (docs/scene.md)."""
+    """The probe grid a scene's `probes` section asks for (docs/scene.md): probes at min and at max
+    (counts along each axis, or one spacing apart), or automatically cubic cells (N along the
+    longest axis, or `spacing`) whose probes overhang the scene's bounds on every side (by at most
+    half a cell), so that every surface has probes on both of its sides: the outer probes of a
+    wall or floor on the volume's edge see its outer face (RTXGI's volumes enclose the scene)."""
     if (settings["min"] is None) != (settings["max"] is None):
         raise IblbakeError("probes: give both min and max, or neither (auto: the scene's bounds)")
+    counts = settings["counts"]
     if settings["min"] is not None:
         lo, hi = np.asarray(settings["min"], np.float64), np.asarray(settings["max"], np.float64)
         if np.any(hi < lo):
             raise IblbakeError(f"probes.max {settings['max']} is below probes.min {settings['min']} on some axis; "
                                "give max >= min")
-        cells = False                     # probes at min and at max
+        extent = hi - lo
+        if isinstance(counts, list):
+            n = np.asarray(counts, int)
+        else:
+            step = settings["spacing"] or max(float(extent.max()), 1e-6) / max((counts or DEFAULT_LONGEST) - 1, 1)
+            n = np.round(extent / step).astype(int) + 1
+        n = np.where(extent > 0, np.maximum(n, 2), 1)
+        spacing = np.where(n > 1, extent / np.maximum(n - 1, 1), 1.0)
+        origin = lo
     else:
         b = scene_bounds(arrays)
         if b is None:
             raise IblbakeError("probes: the scene has no bounded geometry for an automatic grid; "
                                "give probes.min and probes.max")
         lo, hi = b
-        cells = True                      # probes at the centres of equal cells of the bounds
-    extent = hi - lo
-    if isinstance(settings["counts"], list):
-        counts = np.asarray(settings["counts"], int)
-    else:
-        longest = settings["counts"] or DEFAULT_LONGEST
-        step = settings["spacing"] or max(float(extent.max()), 1e-6) / max(longest - (0 if cells else 1), 1)
-        counts = np.maximum(1, np.round(extent / step).astype(int) + (0 if cells else 1))
-    counts = np.where(extent > 0, np.maximum(counts, 1 if cells else 2), 1)
-    if cells:
-        spacing = np.where(extent > 0, extent / counts, 1.0)
-        origin = lo + 0.5 * np.where(extent > 0, spacing, 0.0)
-    else:
-        spacing = np.where(counts > 1, extent / np.maximum(counts - 1, 1), 1.0)
-        origin = lo
-    if counts.prod() > 1 << 20:
-        raise IblbakeError(f"probes: {int(counts.prod())} probes ({' x '.join(map(str, counts))}); "
+        extent = hi - lo
+        if isinstance(counts, list):               # each axis its own spacing, a quarter cell over
+            n = np.maximum(np.asarray(counts, int), 2)
+            step = np.where(extent > 0, extent / (n - 1.5), max(float(extent.max()), 1e-6) / 0.5)
+        else:
+            longest = max(counts or DEFAULT_LONGEST, 2)
+            step = np.full(3, settings["spacing"] or max(float(extent.max()), 1e-6) / (longest - 1.5))
+            n = np.floor(extent / step).astype(int) + 2
+        pad = ((n - 1) * step - extent) / 2
+        spacing = step
+        origin = lo - pad
+    if n.prod() > 1 << 20:
+        raise IblbakeError(f"probes: {int(n.prod())} probes ({' x '.join(map(str, n))}); "
                            "give fewer counts or a larger spacing (at most 1048576)")
-    return Grid(tuple(origin.tolist()), tuple(float(s) for s in spacing), tuple(int(c) for c in counts))
+    return Grid(tuple(float(x) for x in origin), tuple(float(x) for x in spacing), tuple(int(c) for c in n))
 
 
 def spherical_fibonacci(n: int) -> np.ndarray:

@@ -379,7 +379,7 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
     "probes": Section(doc="the irradiance probe volume (DDGI) that `effects.diffuse: probes` reads and `iblbake probes` "
                           "bakes; lengths in units of the probe spacing are of its smallest axis", fields={
         "min": Vec(**VEC3, doc="the first corner probe's position (with max: the box the probes span; omitted: auto, "
-                               "the probes at the centres of equal cells of the scene's bounds)"),
+                               "cubic cells whose probes overhang the scene's bounds by at most half a cell)"),
         "max": Vec(**VEC3, doc="the opposite corner probe's position"),
         "counts": OneOf((Num(None, 1, 256, integer=True), Vec(**VEC3, integer=True, lo=1, hi=256)), default=None,
                         doc="probes along x, y, z, or N: N along the longest axis and as many as keep the "

@@ -20,14 +20,14 @@ class Shade(Pass):
         return fx.any_approximate or fx.emissive
 
     def reads_bakes(self, scene, fx):
-        return {"sh": ["sh"], "probes": ["probes"]}.get(fx.diffuse, []) + \
+        return {"sh": ["sh"], "probes": ["sh", "probes"]}.get(fx.diffuse, []) + \
             {"prefiltered": ["prefiltered", "dfg"], "lobe": ["prefiltered", "dfg"]}.get(fx.specular, [])
 
     def defines(self, scene, fx):
         e = scene.data["effects"]
         d = mode_defines(fx)          # shade.cl computes only the sh, importance, prefiltered terms
-        if fx.diffuse == "sh":
-            d["SH_BANDS"] = e["sh_bands"]
+        if fx.diffuse in ("sh", "probes"):
+            d["SH_BANDS"] = e["sh_bands"]     # probes: the SH outside their volume
         if fx.diffuse == "probes":
             d.update(probe_defines(scene.data["probes"]))
         if fx.specular == "prefiltered" and e["prefilter"]["dominant_direction"]:

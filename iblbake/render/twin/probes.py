@@ -81,6 +81,14 @@ def irradiance_at(volume, index, n):
     return np.maximum(e, 0.0)
 
 
+def volume_weight(volume, p):
+    """Twin of probe_volume_weight (RTXGI's DDGIGetVolumeBlendWeight)."""
+    spacing = np.asarray(volume["spacing"], np.float64)
+    half = 0.5 * spacing * (np.asarray(volume["counts"]) - 1)
+    delta = np.abs(p - (np.asarray(volume["origin"]) + half)) - half
+    return (1 - np.clip(delta / spacing, 0, 1)).prod(-1)
+
+
 def irradiance(volume, p, n, v, *, visibility: bool, classification: bool):
     """Twin of probe_irradiance for points p, normals n, view vectors v (m, 3). `volume`: counts,
     origin, spacing, normal_bias and view_bias (world units), data (probes, 4: offset in world

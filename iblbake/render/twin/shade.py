@@ -11,15 +11,18 @@ from iblbake.bake.dfg import dfg_lookup
 from iblbake.bake import radiance
 from iblbake.core import sampling
 from iblbake.core import sh
+from iblbake.render.twin import probes as probe_twin
 from iblbake.render.twin.surface import diffuse_weight, material_occlusion, surface, to_env
 
 
 def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, prefiltered=None, dfg=None,
-          ao=None):
+          ao=None, probes=None):
     """Per-sample radiance of the `shade` pass, with the `importance` pass's sums for it (hits
     only; misses are 0); `ao` the ambient occlusion of every sample (ambient_occlusion) where
     effects.ao is on. The importance estimate is summed with Fresnel inside, which the kernels
-    split around f0: the same sum, to float rounding."""
+    split around f0: the same sum, to float rounding. `probes`: the sampled probe volume
+    (render/probes.py sampled) where effects.diffuse is probes, sh_coeffs then the panorama's SH
+    that takes over outside it."""
     hit = gb["hit"]
     out = np.zeros((len(hit), 3))
     v, n, nov, (base, metallic, emissive, rough, f0, f90) = surface(gb, arrays)
@@ -32,6 +35,14 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
         e = np.maximum(sh.evaluate(sh_coeffs, to_env(n, rot), effects["sh_bands"]), 0.0)
         diff_occ = ao_multibounce(occ, base * (1 - metallic[:, None])) if effects["ao_multibounce"] else occ[:, None]
         color += diff_occ * diffuse_weight(base, metallic, rough, f0, f90, nov) * scale * e
+    elif effects["diffuse"] == "probes":
+        p = gb["pos"][hit]
+        wv = probe_twin.volume_weight(probes, p)[:, None]
+        e = wv * probe_twin.irradiance(probes, p, n, v, visibility=probes["visibility"],
+                                       classification=probes["classification"])
+        e += (1 - wv) * scale * np.maximum(sh.evaluate(sh_coeffs, to_env(n, rot), effects["sh_bands"]), 0.0)
+        diff_occ = ao_multibounce(occ, base * (1 - metallic[:, None])) if effects["ao_multibounce"] else occ[:, None]
+        color += diff_occ * diffuse_weight(base, metallic, rough, f0, f90, nov) * e
     if effects["specular"] == "importance":
         nsamp = effects["samples"]
         pts = sampling.hammersley(nsamp).astype(np.float32).astype(np.float64)
