@@ -84,9 +84,9 @@ def scene_bounds(arrays) -> tuple | None:
 def grid_of(settings: dict, arrays) -> Grid:
     """The probe grid a scene's `probes` section asks for (docs/scene.md): probes at min and at max
     (counts along each axis, or one spacing apart), or automatically cubic cells (N along the
-    longest axis, or `spacing`) whose probes overhang the scene's bounds on every side (by at most
-    half a cell), so that every surface has probes on both of its sides: the outer probes of a
-    wall or floor on the volume's edge see its outer face (RTXGI's volumes enclose the scene)."""
+    longest axis, or `spacing`) whose probes overhang the scene's bounds on every side by at least
+    half a cell, so that every surface has probes on both of its sides: the outer probes of a
+    wall or floor on the bounds see its outer face (RTXGI's volumes enclose the scene)."""
     if (settings["min"] is None) != (settings["max"] is None):
         raise IblbakeError("probes: give both min and max, or neither (auto: the scene's bounds)")
     counts = settings["counts"]
@@ -111,16 +111,15 @@ def grid_of(settings: dict, arrays) -> Grid:
                                "give probes.min and probes.max")
         lo, hi = b
         extent = hi - lo
-        if isinstance(counts, list):               # each axis its own spacing, a quarter cell over
+        if isinstance(counts, list):               # each axis its own spacing
             n = np.maximum(np.asarray(counts, int), 2)
-            step = np.where(extent > 0, extent / (n - 1.5), max(float(extent.max()), 1e-6) / 0.5)
+            step = np.where(extent > 0, extent / np.maximum(n - 2, 0.5), max(float(extent.max()), 1e-6))
         else:
-            longest = max(counts or DEFAULT_LONGEST, 2)
-            step = np.full(3, settings["spacing"] or max(float(extent.max()), 1e-6) / (longest - 1.5))
-            n = np.floor(extent / step).astype(int) + 2
-        pad = ((n - 1) * step - extent) / 2
+            longest = max(counts or DEFAULT_LONGEST, 3)
+            step = np.full(3, settings["spacing"] or max(float(extent.max()), 1e-6) / (longest - 2))
+            n = np.ceil(extent / step - 1e-9).astype(int) + 2
         spacing = step
-        origin = lo - pad
+        origin = (lo + hi) / 2 - (n - 1) * step / 2         # centred: at least half a cell over each face
     if n.prod() > 1 << 20:
         raise IblbakeError(f"probes: {int(n.prod())} probes ({' x '.join(map(str, n))}); "
                            "give fewer counts or a larger spacing (at most 1048576)")
@@ -224,9 +223,15 @@ def relocate(tracer: Tracer, grid: Grid, settings: dict, progress=None) -> np.nd
         tb = np.where(back, -t, np.inf)
         tf = np.where(back, np.inf, t)
         tfar = np.where(back, -1.0, t)
-        ib, i_near, i_far = tb.argmin(1), tf.argmin(1), tfar.argmax(1)
+        ib, i_near = tb.argmin(1), tf.argmin(1)
         rows = np.arange(len(t))
-        near, far = tf[rows, i_near], tfar[rows, i_far]
+        near = tf[rows, i_near]
+        # the farthest front face (a miss counts as farthest, as RTXGI's 1e27); among equals (every
+        # miss) the one most opposite the nearest face
+        farthest = tfar.max(1, keepdims=True)
+        opposite = dirs @ dirs.T                                  # (rays, rays): cosines between rays
+        i_far = np.where(tfar >= farthest, -opposite[i_near], -np.inf).argmax(1)
+        far = tfar[rows, i_far]
         full = offset.copy()
         inside = (n_back > 0) & (n_back / FIXED_RAYS > settings["backface_threshold"])
         full[inside] += dirs[ib[inside]] * (tb[rows, ib][inside] + 0.5 * min_front)[:, None]

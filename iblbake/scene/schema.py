@@ -407,8 +407,10 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                                          "(RTXGI's classification): it is neither blended nor sampled"),
         "backface_threshold": Num(0.25, 0.0, 1.0, doc="the share of a probe's rays meeting back faces above which "
                                                        "it is inside geometry"),
-        "min_frontface_distance": Num(0.25, 0.0, 0.45, doc="relocation: the nearest front face a probe may keep "
-                                                            "(spacing units)"),
+        "min_frontface_distance": Num(0.4, 0.0, 0.45, doc="relocation: the nearest front face a probe may keep "
+                                                           "(spacing units; a probe just behind a floor sees it at "
+                                                           "grazing angles, where the distance moments' variance "
+                                                           "lets the floor's far side through)"),
         "seed": Num(1, 0, 2**31 - 1, integer=True, doc="random seed of the rays' rotation and paths"),
     }),
     "effects": Section(doc="what the renderer simulates; nothing else is baked, compiled or run", fields={
