@@ -105,6 +105,19 @@ def test_octahedral_mapping_kernel_twin_and_inverse(rt):
     assert np.allclose(twin.octahedral([[0, 0, 1.0]]), 0) and np.allclose(np.abs(twin.octahedral([[0, 0, -1.0]])), 1)
 
 
+def test_atlas_layout_is_rtxgis():
+    """Probe (gx, gy, gz)'s tile at column gx + gy nx, row gz (DDGIGetProbeUV, y up), as the
+    sampler reads it (twin.tile_origin; the kernel: the kernel-twin tests)."""
+    counts, n = (3, 4, 5), 4
+    tiles = np.random.default_rng(0).random((60, n + 2, n + 2, 2))
+    at = probes.atlas(tiles, counts)
+    assert at.shape == (5 * (n + 2), 12 * (n + 2), 2)
+    for i, (x, y) in enumerate(twin.tile_origin(np.arange(60), n, counts)):
+        assert np.array_equal(at[y:y + n + 2, x:x + n + 2], tiles[i])
+    gx, gy, gz = twin.probe_coords(np.arange(60), counts).T
+    assert np.array_equal(twin.tile_origin(np.arange(60), n, counts), np.stack([gx + gy * 3, gz], -1) * (n + 2))
+
+
 def test_borders_wrap_the_octahedron():
     """Bilinear reads near a tile's edges, which reach into its border, are as close to the smooth
     field the texels sample as reads inside it (8 x 8 texels, a field linear in the direction:

@@ -285,12 +285,10 @@ def with_borders(tiles: np.ndarray) -> np.ndarray:
 def atlas(tiles: np.ndarray, counts) -> np.ndarray:
     """Bordered tiles (probes, t, t, c) laid out as RTXGI's atlas (DDGIGetProbeUV, y up)."""
     nx, ny, nz = counts
-    t = tiles.shape[1]
-    out = np.zeros((t * nz, t * nx * ny, tiles.shape[3]), tiles.dtype)
-    o = twin.tile_origin(np.arange(len(tiles)), t - 2, counts)
-    for i, (x, y) in enumerate(o):
-        out[y:y + t, x:x + t] = tiles[i]
-    return out
+    t, c = tiles.shape[1], tiles.shape[3]
+    # probe index gy nx nz + gz nx + gx: tiles as (gy, gz, gx); atlas rows gz, columns gy nx + gx
+    return np.ascontiguousarray(tiles.reshape(ny, nz, nx, t, t, c).transpose(1, 3, 0, 2, 4, 5)
+                                .reshape(nz * t, ny * nx * t, c))
 
 
 def project(radiance, t, dirs, grid: Grid, settings: dict):
@@ -302,31 +300,33 @@ def project(radiance, t, dirs, grid: Grid, settings: dict):
     the clamped cosine. Distance moments: weights cos^distance_exponent, the mean of min(|t|,
     1.5 |spacing|) and of its square over every ray (RTXGI halves both; the moments here are the
     means the Chebyshev test reads)."""
+    p, r = t.shape
     front = (t >= 0).astype(np.float64)
     blends = (1 - front).mean(1) < BACKFACE_BLEND_LIMIT
     lit = radiance * front[..., None]
+    lit_rows = lit.transpose(0, 2, 1).reshape(p * 3, r)            # one GEMM for every probe and colour
     if settings["irradiance"] == "sh":
         y = sh.sh_basis(dirs, 3)                                    # (rays, 9)
-        a = np.einsum("rk,pr,rj->pkj", y, front, y)
-        b = np.einsum("rk,prc->pkc", y, lit)
+        a = np.einsum("pr,rk,rj->pkj", front, y, y, optimize=True)
+        b = (lit_rows @ y).reshape(p, 3, 9).transpose(0, 2, 1)
         a[~blends] = np.eye(9)
         coeffs = np.linalg.solve(a, b) * sh.ahat(3)[None, :, None]
         irr = np.where(blends[:, None, None], coeffs, 0.0)
     else:
         n = settings["irradiance_texels"]
         w = np.maximum(0.0, twin.texel_directions(n) @ dirs.T)      # (texels, rays)
-        num = np.einsum("tr,prc->ptc", w, lit)
+        num = (lit_rows @ w.T).reshape(p, 3, n * n).transpose(0, 2, 1)
         den = front @ w.T
         with np.errstate(invalid="ignore", divide="ignore"):
             e = np.where(den[..., None] > 0, np.pi * num / np.where(den > 0, den, 1)[..., None], 0.0)
         e[~blends] = 0.0
-        irr = atlas(with_borders(e.reshape(len(e), n, n, 3)), grid.counts)
+        irr = atlas(with_borders(e.reshape(p, n, n, 3)), grid.counts)
     nd = settings["distance_texels"]
     wd = np.maximum(0.0, twin.texel_directions(nd) @ dirs.T) ** settings["distance_exponent"]
     d = np.minimum(np.abs(t), MAX_DISTANCE * float(np.linalg.norm(grid.spacing)))
     wsum = wd.sum(1)
     moments = np.stack([d @ wd.T, (d * d) @ wd.T], -1) / np.where(wsum > 0, wsum, 1)[None, :, None]
-    dist = atlas(with_borders(moments.reshape(len(d), nd, nd, 2)), grid.counts)
+    dist = atlas(with_borders(moments.reshape(p, nd, nd, 2)), grid.counts)
     return irr, dist
 
 

@@ -385,7 +385,10 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                         doc="probes along x, y, z, or N: N along the longest axis and as many as keep the "
                             "cells near cubes along the others (omitted: from spacing, else 8)"),
         "spacing": Num(None, 0.0, lo_open=True, doc="the distance between probes, where counts is omitted"),
-        "rays": Num(256, 8, 1 << 16, integer=True, doc="rays per probe (a spherical Fibonacci set, randomly rotated)"),
+        "rays": Num(1024, 16, 1 << 16, integer=True,
+                    doc="rays per probe, one path each (a spherical Fibonacci set, randomly rotated; DDGI traces "
+                        "256 a frame and accumulates frames, a bake takes them at once: an unextracted sun's "
+                        "visibility needs them)"),
         "bounces": OneOf((Enum(("unbounded",)), Num(None, 1, 1 << 16, integer=True)), default="unbounded",
                          doc="how many times the light a probe ray brings back may have scattered: unbounded (the "
                              "reference's paths, Russian roulette), or N (1: the surfaces the probe sees, lit "

@@ -110,10 +110,10 @@ def default_ladder(sc, fx, device_kind: str = "GPU", paths: bool = False) -> lis
 
 def probe_rungs() -> list:
     """(label, values) of the probe rungs: one factor at a time around 8 probes along the longest
-    axis, 256 rays, octahedral irradiance, DDGI's visibility."""
-    base = {"counts": 8, "rays": 256, "irradiance": "octahedral", "visibility": True}
+    axis, 1024 rays, octahedral irradiance, DDGI's visibility."""
+    base = {"counts": 8, "rays": 1024, "irradiance": "octahedral", "visibility": True}
     steps = [("probes 8", {}), ("probes 4", {"counts": 4}), ("probes 16", {"counts": 16}),
-             ("probes 8 rays 64", {"rays": 64}), ("probes 8 rays 1024", {"rays": 1024}),
+             ("probes 8 rays 256", {"rays": 256}), ("probes 8 rays 4096", {"rays": 4096}),
              ("probes 8 sh", {"irradiance": "sh"}), ("probes 8 no visibility", {"visibility": False})]
     return [(label, [(f"probes.{k}", v) for k, v in {**base, **own}.items()]) for label, own in steps]
 
