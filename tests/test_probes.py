@@ -359,7 +359,8 @@ def test_glsl_transcribes_the_volume(tmp_path, sky):
     for rep_src in (src, src.replace("#define PROBES_SH 1", "#define PROBES_SH 0")):
         shader = tmp_path / "probes.frag"
         shader.write_text("#version 330 core\n" + rep_src + "\nin vec3 P;\nin vec3 N;\nin vec3 V;\nout vec4 color;\n"
-                          "void main() { color = vec4(probeIrradiance(P, normalize(N), normalize(V)), 1.0); }\n")
+                          "void main() { color = vec4(probeIrradiance(P, normalize(N), normalize(V)) * probeVolumeWeight(P), "
+                          "1.0); }\n")
         p = subprocess.run(["glslangValidator", str(shader)], capture_output=True, text=True, timeout=60)
         assert p.returncode == 0, p.stdout + p.stderr
 

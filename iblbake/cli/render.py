@@ -51,8 +51,10 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, depfi
     refuse_overlaps(sc.writes + ([("--depfile", depfile)] if depfile else []), scene.named_input_files(sc))
     for p in render.output_paths(sc):
         check_writable(p)
-    with con.stages(["reference samples"] * 100, label="render") if (
-            "reference" in render.plan(sc).pass_names and con.interactive) else contextlib.nullcontext(None) as step:
+    pl = render.plan(sc)
+    long_work = "reference" in pl.pass_names or "probes" in pl.bakes     # paths: a bar on a terminal
+    with con.stages(["paths"] * 100, label="render") if (
+            long_work and con.interactive) else contextlib.nullcontext(None) as step:
         last = [0]
 
         def progress(frac):

@@ -538,8 +538,9 @@ def glsl(volume: dict, man: dict) -> str:
 //   probeIrradianceAtlas  {man['files']['irradiance']} ({'nearest' if sh_rep else 'linear'} filtering)
 //   probeDistanceAtlas    distance.exr (linear filtering)
 //   probeDataTexture      probe_data.exr (nearest)
-// diffuse = albedo / PI * probeIrradiance(P, N, V): world position, unit shading normal, unit
-// vector towards the viewer.
+// diffuse = albedo / PI * mix(skyIrradiance(N), probeIrradiance(P, N, V), probeVolumeWeight(P)):
+// world position, unit shading normal, unit vector towards the viewer; the sky's irradiance (say
+// `iblbake sh --glsl`'s shIrradiance) takes over outside the volume.
 #define PROBES_SH {int(sh_rep)}
 #define PROBE_VISIBILITY {int(volume['visibility'])}
 #define PROBE_CLASSIFICATION {int(volume['classification'])}
@@ -580,6 +581,13 @@ vec3 probeOwnIrradiance(int index, vec3 d) {{
     return max(textureLod(probeIrradianceAtlas, probeUV(index, probeOctahedral(d), PROBE_IRRADIANCE_TEXELS), 0.0).rgb,
                vec3(0.0));
 #endif
+}}
+
+float probeVolumeWeight(vec3 p) {{
+    vec3 halfExtent = 0.5 * PROBE_SPACING * vec3(PROBE_COUNTS - 1);
+    vec3 delta = abs(p - (PROBE_ORIGIN + halfExtent)) - halfExtent;
+    vec3 w = 1.0 - clamp(delta / PROBE_SPACING, 0.0, 1.0);
+    return w.x * w.y * w.z;
 }}
 
 vec3 probeIrradiance(vec3 p, vec3 n, vec3 v) {{
