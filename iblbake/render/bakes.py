@@ -222,6 +222,11 @@ class Bakes:
         return self._get(("textures-device", id(rt), tuple(id(a) for a in arrays)),
                          lambda: tuple(rt.to_device(a) for a in arrays))
 
+    def on_device(self, rt, arrays, upload):
+        """upload()'s device buffers of the host arrays, made once per runtime and arrays (kept
+        alive by the memo, so their ids stay theirs)."""
+        return self._get(("on-device", id(rt), tuple(id(a) for a in arrays)), lambda: (arrays, upload()))[1]
+
     def _source_sha(self, source) -> str:
         return self.file_sha256(source[1]) + (f":{source[2]}" if source[0] == "gltf" else "")
 

@@ -51,7 +51,8 @@ class Shade(Pass):
         ham = np.zeros((nsamp, 4), np.float32)
         if fx.specular == "lobe":             # (u1, u2): sample_ggx_vndf
             ham[:, :2] = sampling.lobe_points(nsamp)
-        args.update(probe_args(ctx.rt, probes.sampled(b["probes"], ctx.scene.data["probes"]) if "probes" in b else None))
+        args.update(probe_args(ctx.rt, probes.sampled(b["probes"], ctx.scene.data["probes"]) if "probes" in b else None,
+                               ctx.bakes))
         dfg = b["dfg"].astype(np.float32) if "dfg" in b else np.zeros((2, 2, 2), np.float32)
         args.update(hammersley_pts=ctx.rt.to_device(ham), nsamples=nsamp, mip_bias=e["mip_bias"], lobe_spread=e["lobe"]["spread"],
                     dfg=ctx.rt.to_device(dfg.reshape(-1, 2)), dfg_size=dfg.shape[0])
@@ -74,17 +75,23 @@ def probe_defines(settings: dict) -> dict:
     return d
 
 
-def probe_args(rt, vol) -> dict:
-    """PROBE_PARAMS of a sampled volume (render/probes.py sampled), placeholders without one."""
+def probe_args(rt, vol, bakes=None) -> dict:
+    """PROBE_PARAMS of a sampled volume (render/probes.py sampled), placeholders without one. With
+    `bakes` (render.Bakes) its atlases go up once per runtime (a series of frames, a study's rungs)."""
     if vol is None:
         z = rt.to_device(np.zeros((1, 4), np.float32))
         return {"probe_data": z, "probe_irr": z, "probe_dist": z, "probe_origin": np.zeros(4), "probe_spacing": np.ones(4),
                 "probe_nx": 1, "probe_ny": 1, "probe_nz": 1, "probe_irr_texels": 1, "probe_dist_texels": 1}
-    irr = np.asarray(vol["irradiance"], np.float32)
-    dist = np.asarray(vol["distance"], np.float32)
-    return {"probe_data": rt.to_device(np.asarray(vol["data"], np.float32)),
-            "probe_irr": rt.to_device(np.pad(irr, [(0, 0)] * (irr.ndim - 1) + [(0, 1)]).reshape(-1, 4)),
-            "probe_dist": rt.to_device(np.pad(dist, ((0, 0), (0, 0), (0, 2))).reshape(-1, 4)),
+
+    def upload():
+        irr = np.asarray(vol["irradiance"], np.float32)
+        dist = np.asarray(vol["distance"], np.float32)
+        return (rt.to_device(np.asarray(vol["data"], np.float32)),
+                rt.to_device(np.pad(irr, [(0, 0)] * (irr.ndim - 1) + [(0, 1)]).reshape(-1, 4)),
+                rt.to_device(np.pad(dist, ((0, 0), (0, 0), (0, 2))).reshape(-1, 4)))
+    data, irr, dist = bakes.on_device(rt, (vol["data"], vol["irradiance"], vol["distance"]), upload) \
+        if bakes is not None else upload()
+    return {"probe_data": data, "probe_irr": irr, "probe_dist": dist,
             "probe_origin": np.array([*vol["origin"], vol["normal_bias"]], np.float32),
             "probe_spacing": np.array([*vol["spacing"], vol["view_bias"]], np.float32),
             **dict(zip(("probe_nx", "probe_ny", "probe_nz"), vol["counts"])),
