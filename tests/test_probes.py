@@ -446,3 +446,59 @@ def test_frame_matches_the_twin(tmp_path, rt, sky):
     w = ptwin.volume_weight(probes.sampled(vol, sc["probes"]), gb["pos"][gb["hit"]])
     assert (w == 1).any() and (w == 0).any() and ((w > 0) & (w < 1)).any()
     assert np.abs(got - want).max() / want.max() < 1e-4
+
+
+@pytest.mark.parametrize("bounces", [1, 2, "unbounded"])
+def test_probe_rays_in_a_glowing_box(tmp_path, rt, bounces):
+    """Probes inside a closed box of six planes of albedo a = 0.5 (Lambert) emitting E, a black
+    sky: a ray brings E (1 + a + ... + a^k) after k bounces, so each probe's irradiance is pi
+    times that at every texel: exactly at one bounce (E (1 + a): every cosine-sampled path's
+    weight is a), and from the second on, where Russian roulette starts (the path tracer's third
+    vertex), within its noise: the mean of 8 x 4096 rays within 0.5% (measured 0.006% at two
+    bounces, 0.06% unbounded)."""
+    black = tmp_path / "black.exr"
+    images.write_exr(black, np.zeros((16, 32, 3), np.float32))
+    a, e = 0.5, np.array([0.4, 0.2, 0.1])
+    walls = [([0, -1, 0], [0, 1, 0]), ([0, 1, 0], [0, -1, 0]), ([-1, 0, 0], [1, 0, 0]), ([1, 0, 0], [-1, 0, 0]),
+             ([0, 0, -1], [0, 0, 1]), ([0, 0, 1], [0, 0, -1])]
+    sc = write(tmp_path, f"box_{bounces}", {
+        "camera": {"perspective": {"position": [0, 0, 0.5], "look_at": [0, 0, 0]}, "resolution": [8, 8]},
+        "environment": {"path": str(black)},
+        "materials": {"wall": {"base_color": [a] * 3, "emissive": e.tolist(), "roughness": 1, "specular": 0}},
+        "objects": [{"plane": {"point": p, "normal": nrm, "size": 2}, "material": "wall"} for p, nrm in walls],
+        "probes": {"min": [-0.5] * 3, "max": [0.5] * 3, "counts": [2, 2, 2], "rays": 4096, "bounces": bounces,
+                   "relocation": False, "classification": False},
+        "effects": {"diffuse": "probes", "specular": "off"}})
+    bakes = Bakes(tmp_path / "cache")
+    render.render(sc, runtime=rt, cache=bakes)
+    vol = next(v[0] for k, v in bakes._memo.items() if isinstance(k, str) and k.startswith("probes-"))
+    n = vol["irradiance_texels"]
+    tiles = vol["irradiance"].reshape(2, n + 2, 4, n + 2, 3)[:, 1:-1, :, 1:-1]
+    want = math.pi * e * (1 / (1 - a) if bounces == "unbounded" else sum(a ** j for j in range(bounces + 1)))
+    if bounces == 1:
+        assert np.abs(tiles / want - 1).max() < 1e-5
+    else:
+        assert np.abs(tiles.mean((0, 1, 2, 3)) / want - 1).max() < 0.005
+
+
+def test_bad_probe_settings_are_one_line_errors(tmp_path, sky):
+    base = yaml.safe_load(Path(far_sphere_scene(tmp_path, sky, "sh").source).read_text())
+    cases = [({"min": [0, 0, 0]}, "give both min and max"),
+             ({"min": [1, 1, 1], "max": [0, 2, 2]}, "below probes.min"),
+             ({"counts": [0, 2, 2]}, "probes.counts"),
+             ({"irradiance": "spherical"}, "probes.irradiance"),
+             ({"counts": [256, 256, 256]}, "at most 1048576")]
+    for i, (keys, words) in enumerate(cases):
+        doc = json.loads(json.dumps(base))
+        doc["probes"] = {k: v for k, v in doc["probes"].items() if k not in ("min", "max")} | keys
+        p = tmp_path / f"bad{i}.yaml"
+        p.write_text(yaml.safe_dump(doc))
+        r = run_cli("probes", p, "-o", tmp_path / f"out{i}", "--cache", tmp_path / "cache")
+        assert r.returncode == 1 and words in r.stderr and len(r.stderr.strip().splitlines()) == 1, (keys, r.stderr)
+    doc = json.loads(json.dumps(base))
+    doc["objects"] = [{"plane": {"point": [0, 0, 0]}, "material": "m"}]
+    doc["probes"] = {}
+    p = tmp_path / "unbounded.yaml"
+    p.write_text(yaml.safe_dump(doc))
+    r = run_cli("probes", p, "-o", tmp_path / "o", "--cache", tmp_path / "cache")
+    assert r.returncode == 1 and "give probes.min and probes.max" in r.stderr, r.stderr

@@ -336,8 +336,7 @@ def bake(ctx, settings: dict, progress=None) -> dict:
     """The volume of ctx's scene (a render Context with its scene tables uploaded): a dict of the
     arrays (as load() returns) and a report."""
     t0 = time.perf_counter()
-    arrays = ctx.bakes.geometry(ctx.scene)
-    grid = grid_of(settings, arrays)
+    grid = grid_of(settings, ctx.arrays if ctx.arrays is not None else ctx.bakes.geometry(ctx.scene))
     tracer = Tracer(ctx, settings)
     offset = relocate(tracer, grid, settings, progress) if settings["relocation"] else np.zeros((grid.count, 3))
     dirs = ray_directions(settings["rays"], settings["seed"])
