@@ -4,7 +4,8 @@ it mirrors, re-exported here.
 gbuffer      primary() (the G-buffer by brute force), occluded(), textures(), gbuffer_coords()
 material     resolve_materials()
 surface      surface(), diffuse_weight(), facing_normal(), to_env()
-shade        shade(): SH diffuse, importance-sampled, prefiltered and lobe specular, emission
+shade        shade(): SH or probe diffuse, importance-sampled, prefiltered and lobe specular, emission
+probes       irradiance(), volume_weight(): the irradiance probes' sampling (kernels/probes.h)
 ao, gtao     ambient_occlusion(); gtao(), gtao_denoise()
 lights       lights(): analytic lights with hard and soft shadows, and their exact integral
 reference    exact(): the integral the `reference` pass estimates (bounces 1), by quadrature
