@@ -17,11 +17,12 @@ FILES = {"table.md": "Markdown table", "table.csv": "CSV", "accuracy.json": "JSO
 
 
 def bounces_value(v: str):
+    from iblbake.scene.schema import MAX_BOUNCES     # the scene key's range, effects.reference.bounces
     if v == "unbounded":
         return v
-    if v.isdigit() and 1 <= int(v) <= 1 << 16:
+    if v.isdigit() and 1 <= int(v) <= MAX_BOUNCES:
         return int(v)
-    raise click.BadParameter(f"{v!r}: use unbounded or a count from 1 to 65536")
+    raise click.BadParameter(f"{v!r}: use unbounded or a count from 1 to {MAX_BOUNCES}")
 
 
 @click.command("accuracy")

@@ -224,6 +224,12 @@ class StrList:
 
 
 VEC3 = dict(n=3)
+MAX_BOUNCES = 1 << 16
+
+
+def bounces_field(doc: str) -> OneOf:
+    """A path's scattering count: unbounded (Russian roulette) or 1 .. MAX_BOUNCES."""
+    return OneOf((Enum(("unbounded",)), Num(None, 1, MAX_BOUNCES, integer=True)), default="unbounded", doc=doc)
 
 CAMERA_COMMON = {
     "position": Vec(**VEC3, doc="camera position (world space, +y up)"),
@@ -389,10 +395,9 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                     doc="rays per probe, one path each (a spherical Fibonacci set, randomly rotated; DDGI traces "
                         "256 a frame and accumulates frames, a bake takes them at once: an unextracted sun's "
                         "visibility needs them)"),
-        "bounces": OneOf((Enum(("unbounded",)), Num(None, 1, 1 << 16, integer=True)), default="unbounded",
-                         doc="how many times the light a probe ray brings back may have scattered: unbounded (the "
-                             "reference's paths, Russian roulette), or N (1: the surfaces the probe sees, lit "
-                             "directly)"),
+        "bounces": bounces_field("how many times the light a probe ray brings back may have scattered: unbounded "
+                                 "(the reference's paths, Russian roulette), or N (1: the surfaces the probe sees, "
+                                 "lit directly)"),
         "irradiance": Enum(("octahedral", "sh"), "octahedral",
                            doc="what each probe stores: DDGI's octahedral irradiance map, or L2 SH irradiance "
                                "(9 RGB coefficients, least squares over its rays)"),
@@ -463,8 +468,7 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
             "seed": Num(1, 0, 2**31 - 1, integer=True, doc="random seed (renders are reproducible)"),
             "visibility": Bool(True, doc="trace a shadow ray for every sample: the occluded integral (false: "
                                          "every object lit as if alone)"),
-            "bounces": OneOf((Enum(("unbounded",)), Num(None, 1, 1 << 16, integer=True)), default="unbounded",
-                             doc="how many times a path may scatter: unbounded (Russian roulette from bounce 3, "
+            "bounces": bounces_field("how many times a path may scatter: unbounded (Russian roulette from bounce 3, "
                                  "unbiased: the converged answer), N, or 1, the environment's direct light (no "
                                  "interreflection, no light from emissive surfaces); with visibility false, 1"),
         }),
