@@ -1,7 +1,8 @@
 /* Probe rays: the light arriving at each irradiance probe along each of its ray directions, by the
  * reference's path tracer (kernels/paths.h follow_path), and how far the ray went (the probes'
  * distance moments and their relocation and classification read it; DDGI, Majercik et al. 2019).
- *   a miss:       the panorama averaged over the ray's share of the sphere, ray_solid_angle = 4 pi / rays
+ *   a miss:       the panorama averaged over the ray's share of the sphere (ray_dirs[r].w, or where that
+ *                 is 0 ray_solid_angle = 4 pi / rays)
  *                 (the radiance chain at that footprint, as the importance pass filters its samples),
  *                 times env_scale; distance +INFINITY. A sun smaller than a ray's share is neither
  *                 missed nor hit by chance: its light lands in the ray whose share holds it, seen or
@@ -12,7 +13,8 @@
  *                 bounce the scene's BOUNCES allows; distance t
  * shade = 0: distances only (relocation looks at nothing else).
  * Work item (probe first + i, ray r): out[i nrays + r]; the ray's random stream is its probe and
- * ray number, so a bake is the same however it is split into launches.
+ * ray number ray0 + r, so a bake is the same however it is split into launches. The reflection
+ * probes' captures (iblbake/render/reflection_probes.py) trace their texels' rays here too.
  * numpy twin of what the probes make of these rays: iblbake/render/probes.py (project). */
 #include "common.h"
 #include "envmap.h"
@@ -23,7 +25,7 @@
 #include "paths.h"
 
 __kernel void probe_trace(__global const float4 *probe_pos, __global const float4 *ray_dirs, const int nrays,
-                          const int first, const int count, const uint seed, const int shade,
+                          const int first, const int count, const int ray0, const uint seed, const int shade,
                           const float2 env_rot, const float env_scale,
                           __global const float4 *img, const int w, const int h,
                           __global const float *marginal, __global const float *conditional,
@@ -38,7 +40,8 @@ __kernel void probe_trace(__global const float4 *probe_pos, __global const float
     const Hit hh = trace(o, d, SCENE_ARGS);
     if (hh.kind == PRIM_NONE) {
         const float3 e = to_env(d, env_rot);
-        const float lod = 0.5f * log2(ray_solid_angle / texel_solid_angle(e, lw[0], lh[0]));
+        const float share = ray_dirs[r].w > 0.0f ? ray_dirs[r].w : ray_solid_angle;
+        const float lod = 0.5f * log2(share / texel_solid_angle(e, lw[0], lh[0]));
         ray_out[item] = (float4)(chain_lookup(CHAIN_ARGS, e, lod) * env_scale, INFINITY);
         return;
     }
@@ -50,7 +53,7 @@ __kernel void probe_trace(__global const float4 *probe_pos, __global const float
         ray_out[item] = (float4)(0.0f, 0.0f, 0.0f, back ? -hh.t : hh.t);
         return;
     }
-    Sampler sp = sampler_start(seed, (uint)probe, (uint)r);
+    Sampler sp = sampler_start(seed, (uint)probe, (uint)(ray0 + r));
     float3 env_part;
     const float3 emitted = follow_path(o, d, hh, (float3)(1.0f), &sp, materials, env_rot, img, w, h, marginal,
                                        conditional, pdf_table, SCENE_ARGS, &env_part, lights, nlights);

@@ -3,7 +3,8 @@
  *                 kernels/probes.h) or off
  *   SPECULAR_MODE SPECULAR_IMPORTANCE (the importance pass's sums, kernels/importance.cl,
  *                 combined here with f0) or SPECULAR_PREFILTERED
- *                 (DOMINANT_DIRECTION) or SPECULAR_LOBE or off
+ *                 (DOMINANT_DIRECTION; HAS_REFLECTION_PROBES: the local probes' captures where they
+ *                 reach, kernels/reflection_probes.h) or SPECULAR_LOBE or off
  *   HAS_EMISSIVE  emission
  *   HAS_OCCLUSION_MAP  the material's occlusion (its map) on the image-based terms
  *   HAS_AO        ambient occlusion (the ao or gtao pass's ao_buf) on the diffuse term (AO_MULTIBOUNCE:
@@ -15,6 +16,7 @@
 #include "envmap.h"
 #include "sh.h"
 #include "probes.h"
+#include "reflection_probes.h"
 #include "scene.h"
 #include "surface.h"
 
@@ -70,7 +72,7 @@ __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
                     CHAIN_PARAMS,
                     __global const float4 *hammersley_pts, const int nsamples, const float mip_bias, const float lobe_spread,
                     __global const float2 *dfg, const int dfg_size, __global const float *ao_buf,
-                    __global const float4 *spec_sums, PROBE_PARAMS, __global float4 *radiance)
+                    __global const float4 *spec_sums, PROBE_PARAMS, RPROBE_PARAMS, __global float4 *radiance)
 {
     const int gid = get_global_id(0);
     if (gid >= n) return;
@@ -118,7 +120,14 @@ __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
         const float3 pre = chain_lookup(CHAIN_ARGS, to_env(r, env_rot),
                                         mt.roughness * (float)(nlev - 1));
         const float2 ab = dfg_lookup(dfg, dfg_size, nov, mt.roughness);
+#ifdef HAS_REFLECTION_PROBES
+        /* the local captures (world frame, the panorama's intensity in them) where they reach */
+        const float3 li = reflection_probes(gb_pos[gid].xyz, r, mt.roughness * (float)(rp_nlev - 1), env_scale * pre,
+                                            RPROBE_ARGS);
+        color += spec_occ * li * (mt.f0 * ab.x + mt.f90 * ab.y);
+#else
         color += spec_occ * env_scale * pre * (mt.f0 * ab.x + mt.f90 * ab.y);
+#endif
     }
 #elif SPECULAR_MODE == SPECULAR_LOBE
     {

@@ -174,7 +174,8 @@ def test_every_kernel_parameter_is_bound_by_name():
     table = set(frame.TABLE_SCENE) | set(frame.buffer_names()) | set(frame.TABLE_TILE)
     own = {"shade": {"sh_coeffs", "chain", "off", "lw", "lh", "nlev", "hammersley_pts", "nsamples", "mip_bias", "lobe_spread",
                      "dfg", "dfg_size", "probe_data", "probe_irr", "probe_dist", "probe_origin", "probe_spacing",
-                     "probe_nx", "probe_ny", "probe_nz", "probe_irr_texels", "probe_dist_texels"},
+                     "probe_nx", "probe_ny", "probe_nz", "probe_irr_texels", "probe_dist_texels", "rp_chain", "rp_off",
+                     "rp_lw", "rp_lh", "rp_nlev", "rp_count", "rp_info"},
            "importance": {"chain", "off", "lw", "lh", "nlev", "hammersley_pts", "nsamples", "mip_bias"},
            "background": {"color", "lod", "chain", "off", "lw", "lh", "nlev"},
            "reference": {"img", "w", "h", "marginal", "conditional", "pdf_table", "seed", "first", "batch", "slices",

@@ -37,13 +37,15 @@ def _textures_code_hash() -> str:
 
 
 def _probes_code_hash() -> str:
-    """The probe baker's and its tracing kernel's source: cached volumes are rebaked when they change."""
+    """The probe bakers' and their tracing kernel's source: cached volumes and captures are rebaked
+    when they change."""
     import hashlib
     import inspect
 
     from iblbake.device.runtime import source_hash
-    from iblbake.render import probes
-    return hashlib.sha256((inspect.getsource(probes) + source_hash("probe_trace.cl")).encode()).hexdigest()[:16]
+    from iblbake.render import probes, reflection_probes
+    return hashlib.sha256((inspect.getsource(probes) + inspect.getsource(reflection_probes)
+                           + source_hash("probe_trace.cl")).encode()).hexdigest()[:16]
 
 
 def _external(path) -> list:
@@ -269,17 +271,22 @@ class Bakes:
     def _prefiltered(self, ctx):
         p, env = ctx.scene.data["effects"]["prefilter"], ctx.scene.data["environment"]
         image, info = self.environment(env)
-        base = p["size"] or layouts.default_base_size("equirect", info.height)
+        rkey = ("radiance", info.sha256, env["nonfinite"], env["negative"])
+        baker = self._baker(ctx)
+        # the radiance chain in memory only: no radiance entry of its own
+        return self.prefilter(ctx, image, info, p["size"] or layouts.default_base_size("equirect", info.height),
+                              lambda: self._memo[rkey][0] if rkey in self._memo else baker.radiance_chain(image))
+
+    def prefilter(self, ctx, image, info, base: int, chain_levels):
+        """(levels, cached, report fields) of a panorama's prefiltered chain as the scene's
+        effects.prefilter asks, `base` rows at level 0; chain_levels() its radiance chain."""
+        p, env = ctx.scene.data["effects"]["prefilter"], ctx.scene.data["environment"]
         opts = mipsbake.PrefilterOptions("equirect", base, p["levels"], p["min_size"], p["method"], p["samples"],
                                          p["lod_bias"], True, level_sizes=p["level_sizes"]).resolved(info.height)
         opts["method_name"] = "effects.prefilter.method:"
         key = ("prefiltered", info.sha256, env["nonfinite"], env["negative"],
                tuple(sorted((k, str(v)) for k, v in opts.items())))
         baker = self._baker(ctx)
-
-        def chain_levels():       # the radiance chain in memory only: no radiance entry of its own
-            rkey = ("radiance", info.sha256, env["nonfinite"], env["negative"])
-            return self._memo[rkey][0] if rkey in self._memo else baker.radiance_chain(image)
 
         def make():
             pm, cached = mipsbake.bake_prefiltered(baker, chain_levels, info, self.root, self._policies(env),
@@ -340,6 +347,46 @@ class Bakes:
         return vol, cached or hit, {"probes": rep["probes"], "rays_traced": rep["rays_traced"],
                                     "bake_s": rep["seconds"], "inactive": rep["inactive"],
                                     "relocated": rep["relocated"], "entry": str(self.root / manifest["key"])}
+
+    def _reflection_probes(self, ctx):
+        """Each reflection probe's capture (render/reflection_probes.py: the scene traced from its
+        position, cached by content as the irradiance probes are) and its prefiltered chain."""
+        import hashlib
+
+        from iblbake.io.images import ImageInfo
+        from iblbake.render import reflection_probes as rp
+
+        transport = self._light_transport(ctx.scene)
+        out, cached_all, rays = [], True, 0
+        for k, settings in enumerate(ctx.scene.data["reflection_probes"]):
+            key = "reflection-" + cache.content_key({"kind": "reflection", "v": 1, "index": k, **transport,
+                                                     "settings": settings, "code": _probes_code_hash()})
+
+            def make(settings=settings, k=k, key=key):
+                def build(tmp: Path):
+                    images.write_exr(tmp / "capture.exr", rp.capture(rp.tracer(ctx, settings), k, settings,
+                                                                     ctx.progress))
+                    return {"kind": "reflection", "files": [{"name": "capture.exr"}], "probe": settings}
+
+                manifest, cached = cache.get_or_build(self.root, key, build, warn=ctx.warn)
+                path = self.root / manifest["key"] / "capture.exr"
+                image = images.read_exr(path)[..., :3]
+                size = settings["size"]
+                if image.shape != (size, 2 * size, 3) or not np.isfinite(image).all() or (image < 0).any():
+                    raise IblbakeError(f"{path}: not a {2 * size}x{size} capture of finite, non-negative radiance; "
+                                       f"delete the cache entry to bake it again")
+                return np.ascontiguousarray(image, np.float32), cached
+
+            image, cached = self._get(("reflection", key), make)
+            info = ImageInfo(f"reflection probe {k}", image.shape[1], image.shape[0], ("R", "G", "B"), "float32",
+                             hashlib.sha256(image.tobytes()).hexdigest())
+            baker = self._baker(ctx)
+            levels, pre_cached, _extra = self.prefilter(ctx, image, info, image.shape[0],
+                                                        lambda image=image: baker.radiance_chain(image))
+            out.append({"settings": settings, "levels": levels})
+            cached_all = cached_all and cached and pre_cached
+            rays += 0 if cached else 2 * settings["size"] ** 2 * settings["samples"]
+        return out, cached_all, {"probes": len(out), "rays_traced": rays}
 
     def _light_transport(self, sc) -> dict:
         """What light leaving the panorama meets before it reaches a probe: the objects,

@@ -139,7 +139,7 @@ class Plan:
                 "defines": self.defines, "notes": self.notes}
 
 
-BAKE_ORDER = ("sh", "radiance", "prefiltered", "dfg", "env_cdf", "probes")
+BAKE_ORDER = ("sh", "radiance", "prefiltered", "dfg", "env_cdf", "probes", "reflection_probes")
 
 
 def plan(scene: Scene, one_program: bool = False) -> Plan:

@@ -183,18 +183,21 @@ class Tracer:
                      "lights": rt.to_device(recs.reshape(-1, 4) if len(recs) else np.zeros((4, 4), np.float32))}
         self.rays_traced = 0
 
-    def trace(self, positions, dirs, shade: bool, progress=None, done=0.0, share=1.0):
-        """(radiance (probes, rays, 3), signed distance (probes, rays)) from every position."""
+    def trace(self, positions, dirs, shade: bool, progress=None, done=0.0, share=1.0, probe0=0, ray0=0):
+        """(radiance (probes, rays, 3), signed distance (probes, rays)) from every position; dirs
+        (rays, 3), or (rays, 4) with each ray's share of the sphere in w (probe_trace.cl). probe0,
+        ray0: the first probe's and ray's numbers (their random streams)."""
         rt, n, nrays = self.rt, len(positions), len(dirs)
-        pos = rt.to_device(np.pad(np.asarray(positions, np.float32), ((0, 0), (0, 1))))
-        dir_buf = rt.to_device(np.pad(np.asarray(dirs, np.float32), ((0, 0), (0, 1))))
+        pos = rt.to_device(np.pad(np.asarray(positions, np.float32), ((probe0, 0), (0, 1))))
+        dirs = np.asarray(dirs, np.float32)
+        dir_buf = rt.to_device(dirs if dirs.shape[1] == 4 else np.pad(dirs, ((0, 0), (0, 1))))
         per_launch = max(1, (1 << (20 if rt.info.kind == "GPU" else 16)) // nrays)
         out = np.empty((n, nrays, 4), np.float32)
         buf = rt.empty(16 * min(n, per_launch) * nrays)
         for first in range(0, n, per_launch):
             count = min(per_launch, n - first)
             rt.launch("probe_trace.cl", "probe_trace", self.defines, (count * nrays,), self.ctx.table, **self.args,
-                      probe_pos=pos, ray_dirs=dir_buf, nrays=nrays, first=first, count=count,
+                      probe_pos=pos, ray_dirs=dir_buf, nrays=nrays, first=probe0 + first, count=count, ray0=ray0,
                       ray_solid_angle=4 * np.pi / nrays,
                       seed=self.settings["seed"], shade=int(shade), ray_out=buf)
             out[first:first + count] = rt.read(buf, (count * nrays, 4)).reshape(count, nrays, 4)

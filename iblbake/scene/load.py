@@ -179,6 +179,7 @@ def load(path, overrides=(), outputs=None, values=(), origin: str = "--set") -> 
     folder = path.resolve().parent
     _resolve_camera(v, out["camera"])
     _resolve_references(v, out, folder)
+    _resolve_reflection_probes(v, out["reflection_probes"])
     writes = _resolve_outputs(v, out["output"], folder, outputs)
     return Scene(out, source, folder, lines, writes)
 
@@ -247,6 +248,23 @@ def _resolve_references(v: "_Validator", out: dict, folder: Path) -> None:
     env = out["environment"]
     env["path"] = str((folder / env["path"]).resolve()) if not Path(env["path"]).is_absolute() else env["path"]
     _must_be_file(v, "environment.path", env["path"], "an HDR panorama", folder)
+
+
+def _resolve_reflection_probes(v: "_Validator", probes: list) -> None:
+    """Each probe's influence is whole (a box's corners in order, a sphere's radius) and holds it."""
+    for i, p in enumerate(probes):
+        where = f"reflection_probes.{i}"
+        if p["shape"] == "box":
+            for k in ("min", "max"):
+                if p[k] is None:
+                    v.fail(where, f"missing required key '{k}' (a box influence has min and max corners)")
+            if any(lo >= hi for lo, hi in zip(p["min"], p["max"])):
+                v.fail(f"{where}.max", f"{p['max']} is not above min {p['min']} on every axis")
+            if any(not lo <= x <= hi for lo, x, hi in zip(p["min"], p["position"], p["max"])):
+                v.fail(f"{where}.position", f"{p['position']} lies outside the box {p['min']}..{p['max']}; "
+                                            "put the probe inside its influence")
+        elif p["radius"] is None:
+            v.fail(where, "missing required key 'radius' (a sphere influence about position)")
 
 
 def _resolve_outputs(v: "_Validator", o: dict, folder: Path, outputs) -> list:

@@ -421,6 +421,27 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                                                            "lets the floor's far side through)"),
         "seed": Num(1, 0, 2**31 - 1, integer=True, doc="random seed of the rays' rotation and paths"),
     }),
+    "reflection_probes": ListOf(doc="local reflection probes (Lagarde and Zanuttini 2012): radiance captured by the "
+                                    "path tracer at a point, prefiltered as the distant chain, read by `specular: "
+                                    "prefiltered` inside each probe's influence with parallax correction",
+                                section=Section(required=("position",), doc="one probe", fields={
+        "position": Vec(**VEC3, doc="where the probe captures (inside its influence)"),
+        "shape": Enum(("box", "sphere"), "box", doc="the influence and parallax proxy: a box (min, max) or a sphere "
+                                                    "(radius about position)"),
+        "min": Vec(**VEC3, doc="box: the influence's lower corner"),
+        "max": Vec(**VEC3, doc="box: the influence's upper corner"),
+        "radius": Num(None, 0.0, lo_open=True, doc="sphere: the influence's radius"),
+        "parallax": Bool(True, doc="read the capture where the reflected ray leaves the proxy (false: as if the "
+                                   "captured surroundings were infinitely far, a distant probe)"),
+        "blend": Num(0.1, 0.0, 1.0, doc="the share of each half extent (or of the radius) beyond the influence over "
+                                        "which the probe fades out (inside it, the probe's capture alone)"),
+        "size": Num(128, 4, 2048, integer=True, doc="capture height in texels (an equirect of 2 size x size; the "
+                                                   "prefiltered chain's base, effects.prefilter.size ignored)"),
+        "samples": Num(64, 1, 1 << 16, integer=True, doc="paths per capture texel (stratified in the texel)"),
+        "bounces": bounces_field("how many times the light a capture ray brings back may have scattered (1: the "
+                                 "surfaces it sees, lit directly)"),
+        "seed": Num(1, 0, 2**31 - 1, integer=True, doc="random seed of the capture's paths"),
+    })),
     "effects": Section(doc="what the renderer simulates; nothing else is baked, compiled or run", fields={
         "diffuse": Enum(("sh", "probes", "reference", "off"), "sh",
                         doc="diffuse IBL: SH irradiance of the panorama, irradiance probes (`probes`: the light "

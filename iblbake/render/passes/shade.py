@@ -21,7 +21,8 @@ class Shade(Pass):
 
     def reads_bakes(self, scene, fx):
         return {"sh": ["sh"], "probes": ["sh", "probes"]}.get(fx.diffuse, []) + \
-            {"prefiltered": ["prefiltered", "dfg"], "lobe": ["prefiltered", "dfg"]}.get(fx.specular, [])
+            {"prefiltered": ["prefiltered", "dfg"], "lobe": ["prefiltered", "dfg"]}.get(fx.specular, []) + \
+            (["reflection_probes"] if reflects_locally(scene, fx) else [])
 
     def defines(self, scene, fx):
         e = scene.data["effects"]
@@ -32,6 +33,8 @@ class Shade(Pass):
             d.update(probe_defines(scene.data["probes"]))
         if fx.specular == "prefiltered" and e["prefilter"]["dominant_direction"]:
             d["DOMINANT_DIRECTION"] = 1
+        if reflects_locally(scene, fx):
+            d["HAS_REFLECTION_PROBES"] = 1
         if fx.emissive:
             d["HAS_EMISSIVE"] = 1
         if e["ao"] != "off" and fx.any_approximate:
@@ -53,6 +56,7 @@ class Shade(Pass):
             ham[:, :2] = sampling.lobe_points(nsamp)
         args.update(probe_args(ctx.rt, probes.sampled(b["probes"], ctx.scene.data["probes"]) if "probes" in b else None,
                                ctx.bakes))
+        args.update(rprobe_args(ctx.rt, b.get("reflection_probes"), ctx.bakes))
         dfg = b["dfg"].astype(np.float32) if "dfg" in b else np.zeros((2, 2, 2), np.float32)
         args.update(hammersley_pts=ctx.rt.to_device(ham), nsamples=nsamp, mip_bias=e["mip_bias"], lobe_spread=e["lobe"]["spread"],
                     dfg=ctx.rt.to_device(dfg.reshape(-1, 2)), dfg_size=dfg.shape[0])
@@ -63,6 +67,43 @@ class Shade(Pass):
         s = self.launch_samples(ctx)
         extra = {"samples": args["nsamples"]} if ctx.plan.effects.specular == "lobe" else {}
         return {"mpixel_samples_per_s": round(n * args["nsamples"] / max(s, 1e-9) / 1e6, 2), **extra}
+
+
+def reflects_locally(scene, fx) -> bool:
+    """Whether the scene's reflection probes are read: by the split sum (`prefiltered`)."""
+    return fx.specular == "prefiltered" and bool(scene.data["reflection_probes"])
+
+
+def rprobe_args(rt, captured, bakes=None) -> dict:
+    """RPROBE_PARAMS of the reflection probes' chains (Bakes._reflection_probes), placeholders
+    without them. Every probe's chain has the same level sizes (one capture size and prefilter)."""
+    zf, zi = rt.to_device(np.zeros(4, np.float32)), rt.to_device(np.zeros(4, np.int32))
+    if not captured:
+        return {"rp_chain": zf, "rp_off": zi, "rp_lw": zi, "rp_lh": zi, "rp_nlev": 1, "rp_count": 0,
+                "rp_info": rt.to_device(np.zeros((4, 4), np.float32))}
+    sizes = [[lv.shape[:2] for lv in c["levels"]] for c in captured]
+    if any(s != sizes[0] for s in sizes):
+        from iblbake.errors import IblbakeError
+        raise IblbakeError("reflection_probes: every probe needs the same size (their chains share one table)")
+
+    def upload():
+        flat = np.concatenate([np.asarray(lv[..., :3], np.float32).reshape(-1) for c in captured for lv in c["levels"]])
+        counts = [h * w for h, w in sizes[0]] * len(captured)
+        off = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int32)
+        info = np.zeros((len(captured), 4, 4), np.float32)
+        for k, c in enumerate(captured):
+            st = c["settings"]
+            box = st["shape"] == "box"
+            info[k, 0] = [*st["position"], 0.0 if box else 1.0]
+            info[k, 1] = [*(st["min"] if box else st["position"]), st["blend"]]
+            info[k, 2] = [*(st["max"] if box else st["position"]), 0.0 if box else st["radius"]]
+            info[k, 3, 0] = 1.0 if st["parallax"] else 0.0
+        return (rt.to_device(flat), rt.to_device(off), rt.to_device(np.array([w for _h, w in sizes[0]], np.int32)),
+                rt.to_device(np.array([h for h, _w in sizes[0]], np.int32)), rt.to_device(info.reshape(-1, 4)))
+    chain, off, lw, lh, info = bakes.on_device(rt, tuple(lv for c in captured for lv in c["levels"]), upload) \
+        if bakes is not None else upload()
+    return {"rp_chain": chain, "rp_off": off, "rp_lw": lw, "rp_lh": lh, "rp_nlev": len(sizes[0]),
+            "rp_count": len(captured), "rp_info": info}
 
 
 def probe_defines(settings: dict) -> dict:

@@ -6,6 +6,7 @@ material     resolve_materials()
 surface      surface(), diffuse_weight(), facing_normal(), to_env()
 shade        shade(): SH or probe diffuse, importance-sampled, prefiltered and lobe specular, emission
 probes       irradiance(), volume_weight(): the irradiance probes' sampling (kernels/probes.h)
+reflection_probes  weight(), direction(), blend(): local reflection probes (kernels/reflection_probes.h)
 ao, gtao     ambient_occlusion(); gtao(), gtao_denoise()
 lights       lights(): analytic lights with hard and soft shadows, and their exact integral
 reference    exact(): the integral the `reference` pass estimates (bounces 1), by quadrature

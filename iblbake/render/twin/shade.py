@@ -12,17 +12,19 @@ from iblbake.bake import radiance
 from iblbake.core import sampling
 from iblbake.core import sh
 from iblbake.render.twin import probes as probe_twin
+from iblbake.render.twin import reflection_probes as rp_twin
 from iblbake.render.twin.surface import diffuse_weight, material_occlusion, surface, to_env
 
 
 def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, prefiltered=None, dfg=None,
-          ao=None, probes=None):
+          ao=None, probes=None, reflection_probes=None):
     """Per-sample radiance of the `shade` pass, with the `importance` pass's sums for it (hits
     only; misses are 0); `ao` the ambient occlusion of every sample (ambient_occlusion) where
     effects.ao is on. The importance estimate is summed with Fresnel inside, which the kernels
     split around f0: the same sum, to float rounding. `probes`: the sampled probe volume
     (render/probes.py sampled) where effects.diffuse is probes, sh_coeffs then the panorama's SH
-    that takes over outside it."""
+    that takes over outside it. `reflection_probes`: the captured probes [{settings, levels}]
+    (Bakes._reflection_probes) where specular is prefiltered."""
     hit = gb["hit"]
     out = np.zeros((len(hit), 3))
     v, n, nov, (base, metallic, emissive, rough, f0, f90) = surface(gb, arrays)
@@ -81,7 +83,11 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
             r /= np.linalg.norm(r, axis=1, keepdims=True)
         pre = radiance.chain_lookup_twin(prefiltered, to_env(r, rot), rough * (len(prefiltered) - 1))
         ab = dfg_lookup(dfg, nov, rough)
-        color += spec_occ * scale * pre * (f0 * ab[:, 0:1] + f90 * ab[:, 1:2])
+        li = scale * pre
+        if reflection_probes:
+            nlev = len(reflection_probes[0]["levels"])
+            li = rp_twin.blend(reflection_probes, gb["pos"][hit], r, rough * (nlev - 1), li)
+        color += spec_occ * li * (f0 * ab[:, 0:1] + f90 * ab[:, 1:2])
     elif effects["specular"] == "lobe":
         color += spec_occ * scale * lobe(v, n, nov, alpha, rough, f0, f90, rot, effects["lobe"]["samples"],
                               effects["lobe"]["spread"], prefiltered, dfg)

@@ -1,0 +1,53 @@
+"""Local reflection probes (Lagarde and Zanuttini 2012, "Local image-based lighting with
+parallax-corrected cubemaps"; Unity's reflection probes, Unreal's box and sphere captures): the
+radiance arriving at a point of the scene from every direction, captured by the reference's path
+tracer (kernels/probe_trace.cl) into an equirect panorama, then prefiltered by the same code as
+the distant panorama's chain (render/bakes.py). `specular: prefiltered` reads it inside the
+probe's influence, along the reflected ray corrected to where it leaves the probe's box or sphere
+(kernels/reflection_probes.h; twin: render/twin/reflection_probes.py). Conventions:
+docs/conventions.md "Reflection probes"."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from iblbake.core import conventions, sampling
+from iblbake.render import probes
+
+CHUNK_RAYS = 1 << 20          # capture rays per launch (a 512-row capture at 64 samples is 33M)
+
+
+def capture_directions(size: int, samples: int) -> np.ndarray:
+    """(texels * samples, 4): each texel's samples, stratified (Hammersley points, a single sample
+    at the centre), row by row, the sample fastest; w each sample's share of the texel's exact
+    solid angle."""
+    h, w = size, 2 * size
+    n = samples
+    k = np.arange(n)
+    jitter = np.stack([(k + 0.5) / n, np.mod(sampling.radical_inverse_vdc(k.astype(np.uint32)) + 0.5 / n, 1.0)], -1)
+    j, i = np.meshgrid(np.arange(h), np.arange(w), indexing="ij")
+    u = (i[..., None] + jitter[:, 0]) / w
+    v = (j[..., None] + jitter[:, 1]) / h
+    d = conventions.dir_from_equirect_uv(u, v)
+    share = np.broadcast_to(conventions.equirect_row_solid_angles(w, h)[:, None, None] / n, (h, w, n))
+    return np.concatenate([d, share[..., None]], -1).reshape(-1, 4)
+
+
+def capture(tracer, index: int, settings: dict, progress=None) -> np.ndarray:
+    """(size, 2 size, 3) float32: the mean radiance of each texel's paths from the probe's
+    position (probe number `index`: its random streams)."""
+    size, n = settings["size"], settings["samples"]
+    dirs = capture_directions(size, n)
+    sums = np.zeros((len(dirs) // n, 3))
+    per = max(n, CHUNK_RAYS // n * n)              # whole texels per launch
+    pos = np.asarray([settings["position"]], np.float64)
+    for r0 in range(0, len(dirs), per):
+        rad, _t = tracer.trace(pos, dirs[r0:r0 + per], True, probe0=index, ray0=r0)
+        sums[r0 // n:(r0 + len(rad[0])) // n] = rad[0].reshape(-1, n, 3).mean(1)
+        if progress:
+            progress(min(1.0, (r0 + per) / len(dirs)))
+    return sums.reshape(size, 2 * size, 3).astype(np.float32)
+
+
+def tracer(ctx, settings: dict):
+    return probes.Tracer(ctx, {"bounces": settings["bounces"], "seed": settings["seed"]})

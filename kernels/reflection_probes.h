@@ -1,0 +1,81 @@
+/* Local reflection probes (Lagarde and Zanuttini 2012): prefiltered captures read inside each
+ * probe's influence along the reflected ray corrected to where it leaves the probe's proxy (its
+ * box or sphere), blended by each influence's fade, the distant chain taking what is left.
+ * rp_info, 4 float4 per probe: (position, shape: 0 box, 1 sphere), (min, blend), (max, radius),
+ * (parallax, 0, 0, 0). The probes' chains lie back to back in rp_chain, level l of probe k at
+ * rp_off[k rp_nlev + l] texels, every probe's levels rp_lw x rp_lh.
+ * numpy twin: iblbake/render/twin/reflection_probes.py. */
+#ifndef IBLBAKE_REFLECTION_PROBES_H
+#define IBLBAKE_REFLECTION_PROBES_H
+#include "common.h"
+
+#define RPROBE_PARAMS __global const float *rp_chain, __global const int *rp_off, __global const int *rp_lw, \
+                      __global const int *rp_lh, const int rp_nlev, const int rp_count, __global const float4 *rp_info
+#define RPROBE_ARGS rp_chain, rp_off, rp_lw, rp_lh, rp_nlev, rp_count, rp_info
+
+/* How much of probe k's capture a point takes: 1 inside its box or sphere (a room-sized box
+ * covers the room's own walls and floor), falling to 0 over `blend` of each half extent (a box)
+ * or of the radius (a sphere) beyond it; blend 0: 1 inside, 0 outside. */
+inline float rprobe_weight(float3 p, float4 a, float4 b, float4 c)
+{
+    float over;
+    if (a.w < 0.5f) {
+        const float3 half_extent = 0.5f * (c.xyz - b.xyz);
+        const float3 rel = (fabs(p - 0.5f * (b.xyz + c.xyz)) - half_extent) / half_extent;
+        over = fmax(rel.x, fmax(rel.y, rel.z));       /* <= 0 inside; 1 a half extent out */
+    } else {
+        over = length(p - a.xyz) / c.w - 1.0f;
+    }
+    if (over <= 0.0f) return 1.0f;
+    return b.w > 0.0f ? fmax(1.0f - over / b.w, 0.0f) : 0.0f;
+}
+
+/* The capture's direction for the ray p + t r (p inside the proxy): towards where it leaves the
+ * box (the slabs' nearest exit) or the sphere (the far root), seen from the probe's position. */
+inline float3 rprobe_direction(float3 p, float3 r, float4 a, float4 b, float4 c)
+{
+    float t;
+    if (a.w < 0.5f) {
+        const float3 far = select(b.xyz, c.xyz, isgreater(r, (float3)(0.0f)));
+        const float3 tt = (far - p) / r;               /* +inf along an axis r does not move on */
+        t = fmin(tt.x, fmin(tt.y, tt.z));
+    } else {
+        const float3 o = p - a.xyz;
+        const float bb = dot(o, r), cc = dot(o, o) - c.w * c.w;
+        t = -bb + sqrt(fmax(bb * bb - cc, 0.0f));
+    }
+    return normalize(p + fmax(t, 0.0f) * r - a.xyz);
+}
+
+/* Trilinear read of probe k's chain (chain_lookup's, on the probes' tables) */
+inline float3 rprobe_lookup(RPROBE_PARAMS, int k, float3 d, float lod)
+{
+    const float2 uv = equirect_uv_from_dir(d);
+    lod = isnan(lod) ? 0.0f : clamp(lod, 0.0f, (float)(rp_nlev - 1));
+    const int l0 = (int)lod, l1 = min(l0 + 1, rp_nlev - 1);
+    const float f = lod - (float)l0;
+    const float3 x = bilinear_equirect(rp_chain + 3 * (size_t)rp_off[k * rp_nlev + l0], rp_lw[l0], rp_lh[l0], uv);
+    if (f <= 0.0f) return x;
+    return mix(x, bilinear_equirect(rp_chain + 3 * (size_t)rp_off[k * rp_nlev + l1], rp_lw[l1], rp_lh[l1], uv), f);
+}
+
+/* The prefiltered radiance at point p along r (world frame) at chain level lod: the probes whose
+ * influence holds p, weighted (their weights normalised where they sum past 1), and `distant`
+ * (the panorama's chain, scaled) for the rest. Captures hold the panorama's intensity and frame. */
+inline float3 reflection_probes(float3 p, float3 r, float lod, float3 distant, RPROBE_PARAMS)
+{
+    float3 acc = (float3)(0.0f);
+    float wsum = 0.0f;
+    for (int k = 0; k < rp_count; ++k) {
+        const float4 a = rp_info[4 * k], b = rp_info[4 * k + 1], c = rp_info[4 * k + 2], e = rp_info[4 * k + 3];
+        const float w = rprobe_weight(p, a, b, c);
+        if (w <= 0.0f) continue;
+        const float3 d = e.x > 0.5f ? rprobe_direction(p, r, a, b, c) : r;
+        acc += w * rprobe_lookup(RPROBE_ARGS, k, d, lod);
+        wsum += w;
+    }
+    if (wsum > 1.0f) return acc / wsum;
+    return acc + (1.0f - wsum) * distant;
+}
+
+#endif
