@@ -163,12 +163,22 @@ def test_reflection_probes_run_only_where_the_split_sum_reads_them(tmp_path, sky
     probe = {"position": [0, 0, -1], "min": [-2, -2, -2], "max": [2, 2, 2]}
     pl = render.plan(window(tmp_path, sky, [probe]))
     assert "reflection_probes" in pl.bakes and pl.defines["shade"]["HAS_REFLECTION_PROBES"] == 1
-    for name, sc in (("none", window(tmp_path, sky, [], "none")),
+    off = yaml.safe_load(Path(window(tmp_path, sky, [probe]).source).read_text())
+    off["effects"]["reflection_probes"] = False
+    for name, sc in (("none", window(tmp_path, sky, [], "none")), ("switched off", write(tmp_path, "off", off)),
                      ("importance", write(tmp_path, "imp", {**yaml.safe_load(Path(window(tmp_path, sky, [probe]).source)
                                                                               .read_text()),
                                                            "effects": {"diffuse": "off", "specular": "importance"}}))):
         pl = render.plan(sc)
         assert "reflection_probes" not in pl.bakes and "HAS_REFLECTION_PROBES" not in pl.defines.get("shade", {}), name
+    from iblbake.render.plan import effect_modes
+    from iblbake.study import ladder
+    sc = window(tmp_path, sky, [probe])
+    labels = [r.label for r in ladder.default_ladder(sc, effect_modes(sc), "CPU")]
+    assert {"prefiltered + reflection probes", "prefiltered, distant only"} <= set(labels)
+    sc = window(tmp_path, sky, [], "plain2")
+    assert not any("reflection" in r.label or "distant only" in r.label
+                   for r in ladder.default_ladder(sc, effect_modes(sc), "CPU"))
 
 
 @pytest.mark.parametrize("probe, words", [

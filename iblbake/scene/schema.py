@@ -493,6 +493,8 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                                  "unbiased: the converged answer), N, or 1, the environment's direct light (no "
                                  "interreflection, no light from emissive surfaces); with visibility false, 1"),
         }),
+        "reflection_probes": Bool(True, doc="prefiltered: read the scene's reflection probes where they reach "
+                                            "(false: the distant panorama's chain alone)"),
         "ao": Enum(("off", "gtao", "raytraced"), "off",
                    doc="ambient occlusion of the IBL: gtao (screen-space horizons, Jimenez et al. 2016) or raytraced "
                        "(cosine-weighted rays within ao_radius through the BVH) multiplies the diffuse IBL, and "

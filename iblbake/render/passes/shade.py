@@ -71,7 +71,8 @@ class Shade(Pass):
 
 def reflects_locally(scene, fx) -> bool:
     """Whether the scene's reflection probes are read: by the split sum (`prefiltered`)."""
-    return fx.specular == "prefiltered" and bool(scene.data["reflection_probes"])
+    return (fx.specular == "prefiltered" and bool(scene.data["reflection_probes"])
+            and scene.data["effects"]["reflection_probes"])
 
 
 def rprobe_args(rt, captured, bakes=None) -> dict:
