@@ -502,3 +502,20 @@ def test_bad_probe_settings_are_one_line_errors(tmp_path, sky):
     p.write_text(yaml.safe_dump(doc))
     r = run_cli("probes", p, "-o", tmp_path / "o", "--cache", tmp_path / "cache")
     assert r.returncode == 1 and "give probes.min and probes.max" in r.stderr, r.stderr
+
+
+def test_a_series_reruns_the_shade_pass_when_only_the_probes_change(tmp_path, rt, sky):
+    """A sheet's cells reuse unchanged passes (render.Reuse): a cell that changes only the probes'
+    bake (counts) or their sampling (a bias: no define changes) shades again (before probes were
+    a lighting input, both were reused)."""
+    reuse = render.Reuse()
+    bakes = Bakes(tmp_path / "cache")
+    doc = yaml.safe_load(Path(rooms(tmp_path, sky, True).source).read_text())
+    frames = []
+    for i, keys in enumerate(({}, {"counts": 4}, {"counts": 4, "normal_bias": 0.4})):
+        d = json.loads(json.dumps(doc))
+        d["probes"].update(keys)
+        f = render.render(write(tmp_path, f"series{i}", d), runtime=rt, cache=bakes, reuse=reuse)
+        assert "shade" not in f.report["reused"], keys
+        frames.append(f.hdr)
+    assert np.abs(frames[0] - frames[1]).max() > 1e-3 and np.abs(frames[0] - frames[2]).max() > 1e-3

@@ -127,7 +127,8 @@ class Study:
         from iblbake.device.runtime import source_hash
         from iblbake.render.passes.base import lighting_inputs
 
-        inputs = lighting_inputs(sc)
+        # the reference reads neither kind of probe: their settings do not key it
+        inputs = {k: v for k, v in lighting_inputs(sc).items() if k not in ("probes", "reflection_probes")}
         return "reference-" + content_key({
             "kind": "reference", "v": 2, "scene": inputs, "seed": seed,
             "files": [self.bakes.file_sha256(f) for f in scene_load.input_files(sc)[1:]],
