@@ -128,6 +128,15 @@ def scene_file(folder, env, *, name="scene.yaml", **sections):
     return path
 
 
+def load_scene(folder, name, doc):
+    """Write the scene `doc` (a dict) as folder/NAME.yaml and load it (iblbake.scene.load)."""
+    import yaml
+    from iblbake.scene import load as scene_load
+    path = Path(folder) / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    return scene_load.load(path)
+
+
 def rel_err(a, b):
     a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
     return float(np.abs(a - b).max() / max(np.abs(b).max(), 1e-300))

@@ -7,11 +7,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 
 from iblbake import render
 from iblbake.io import images
-from iblbake.scene import load as scene
+from tests.conftest import load_scene
 
 
 @pytest.fixture(scope="module")
@@ -31,10 +30,7 @@ def black(tmp_path_factory):
 LAMBERT = {"roughness": 1, "specular": 0}
 
 
-def write(folder, name, doc):
-    p = Path(folder) / f"{name}.yaml"
-    p.write_text(yaml.safe_dump(doc))
-    return scene.load(p)
+write = load_scene
 
 
 def furnace(folder, env, bounces, samples):

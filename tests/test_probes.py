@@ -23,14 +23,10 @@ from iblbake.render import probes
 from iblbake.render.bakes import Bakes
 from iblbake.render.passes.shade import probe_args, probe_defines
 from iblbake.render.twin import probes as twin
-from iblbake.scene import load as scene
-from tests.conftest import run_cli
+from tests.conftest import load_scene, run_cli
 
 
-def write(folder, name, doc):
-    p = Path(folder) / f"{name}.yaml"
-    p.write_text(yaml.safe_dump(doc))
-    return scene.load(p)
+write = load_scene
 
 
 @pytest.fixture(scope="module")

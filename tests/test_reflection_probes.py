@@ -13,15 +13,11 @@ import yaml
 from iblbake import render
 from iblbake.io import images
 from iblbake.render.bakes import Bakes
-from iblbake.scene import load as scene
 from iblbake.scene import pack
-from tests.conftest import run_cli
+from tests.conftest import load_scene, run_cli
 
 
-def write(folder, name, doc):
-    p = Path(folder) / f"{name}.yaml"
-    p.write_text(yaml.safe_dump(doc))
-    return scene.load(p)
+write = load_scene
 
 
 @pytest.fixture(scope="module")
