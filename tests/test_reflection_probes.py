@@ -189,3 +189,22 @@ def test_bad_reflection_probes_are_one_line_errors(tmp_path, sky, probe, words):
     p.write_text(yaml.safe_dump({"environment": {"path": str(sky)}, "reflection_probes": [probe]}))
     r = run_cli("render", p, "-o", tmp_path / "x.png")
     assert r.returncode == 1 and words in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
+def test_iblbake_probes_writes_the_captures_for_engines(tmp_path, sky):
+    """`iblbake probes` writes each reflection probe's capture beside the irradiance volume (the
+    sky capture: the panorama), listed in probes.json; `iblbake mips` prefilters it into a KTX2
+    cube map as it does any panorama."""
+    probe = {"position": [0, 0, -1], "min": [-2, -2, -2], "max": [2, 2, 2], "size": 32, "samples": 1}
+    sc = window(tmp_path, sky, [probe])
+    out = tmp_path / "vol"
+    r = run_cli("probes", sc.source, "-o", out, "--cache", tmp_path / "cache", "-q")
+    assert r.returncode == 0, r.stderr
+    man = yaml.safe_load((out / "probes.json").read_text())
+    assert [p["file"] for p in man["reflection_probes"]] == ["reflection_0.exr"]
+    cap = images.read_exr(out / "reflection_0.exr")[..., :3]
+    want = images.read_exr(sky)[..., :3]
+    assert np.abs(cap - want).max() / want.max() < 2e-6
+    r = run_cli("mips", out / "reflection_0.exr", "--layout", "cubemap", "--size", "16", "--ktx2", tmp_path / "r0.ktx2",
+                "--cache", tmp_path / "cache", "-q")
+    assert r.returncode == 0 and (tmp_path / "r0.ktx2").stat().st_size > 1000, r.stderr

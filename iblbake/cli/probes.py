@@ -1,4 +1,5 @@
-"""`iblbake probes`: bake a scene's irradiance probe volume into files an engine reads."""
+"""`iblbake probes`: bake a scene's irradiance probe volume (and its reflection probes' captures)
+into files an engine reads."""
 
 from __future__ import annotations
 
@@ -25,7 +26,8 @@ from iblbake.cli.options import Console, common_options, device_option, max_text
 def probes_command(scene_path, out_dir, overrides, cache_dir, device, quiet, as_json):
     """Bake the irradiance probes of SCENE (its `probes:` section; see render --help-schema) by
     tracing paths from every probe, and write them as RTXGI-layout EXR atlases with a JSON
-    manifest and a GLSL function that samples them. `render` bakes the same volume on demand
+    manifest and a GLSL function that samples them, and each reflection probe's capture
+    (reflection_K.exr: `iblbake mips` prefilters it). `render` bakes the same volume on demand
     (cached by content) where a scene sets effects.diffuse: probes."""
     from iblbake.device.runtime import Runtime
     from iblbake.io import atomic
@@ -43,7 +45,8 @@ def probes_command(scene_path, out_dir, overrides, cache_dir, device, quiet, as_
         raise click.UsageError(f"{scene_path}: the scene has no objects; probes light objects (add some)")
     out = Path(out_dir)
     rep_name = probes.FILES[sc.data["probes"]["irradiance"]]
-    names = ["probes.json", rep_name, "distance.exr", "probe_data.exr", "probes.glsl"]
+    captures = [f"reflection_{k}.exr" for k in range(len(sc.data["reflection_probes"]))]
+    names = ["probes.json", rep_name, "distance.exr", "probe_data.exr", "probes.glsl", *captures]
     refuse_overlaps([("--output", out / n) for n in names], scene.named_input_files(sc))
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -65,8 +68,15 @@ def probes_command(scene_path, out_dir, overrides, cache_dir, device, quiet, as_
 
         ctx = scene_context(sc, pl, rt, bakes, con.warn, progress)
         vol, cached, extra = bakes.load("probes", ctx)
+        reflections = bakes.load("reflection_probes", ctx)[0] if captures else []
     vol = probes.sampled(vol, sc.data["probes"])
     man = probes.manifest(vol)
+    from iblbake.io import images
+    for name, c in zip(captures, reflections):     # an engine prefilters them (iblbake mips --ktx2)
+        images.write_exr(out / name, c["capture"])
+    man["reflection_probes"] = [{"file": name, **c["settings"],
+                                 "layout": "equirect in the world frame (the panoramas' mapping), linear RGB"}
+                                for name, c in zip(captures, reflections)]
     entry = Path(extra["entry"])
     for n in names[1:4]:
         atomic.write_bytes(out / n, (entry / n).read_bytes())

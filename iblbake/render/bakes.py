@@ -383,7 +383,7 @@ class Bakes:
             baker = self._baker(ctx)
             levels, pre_cached, _extra = self.prefilter(ctx, image, info, image.shape[0],
                                                         lambda image=image: baker.radiance_chain(image))
-            out.append({"settings": settings, "levels": levels})
+            out.append({"settings": settings, "levels": levels, "capture": image})
             cached_all = cached_all and cached and pre_cached
             rays += 0 if cached else 2 * settings["size"] ** 2 * settings["samples"]
         return out, cached_all, {"probes": len(out), "rays_traced": rays}
