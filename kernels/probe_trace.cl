@@ -8,7 +8,9 @@
  *                 missed nor hit by chance: its light lands in the ray whose share holds it, seen or
  *                 shadowed as that ray is (the probes' own angular resolution)
  *   a back face:  (a sphere's inside, a triangle seen against its winding; a plane has none) no
- *                 light; distance -t, negative as RTXGI marks it (RTXGI stores -0.2 t)
+ *                 light where back_faces_black (the irradiance probes: a probe inside geometry),
+ *                 else shaded as the front (captures: surfaces are two-sided); distance -t,
+ *                 negative as RTXGI marks it (RTXGI stores -0.2 t)
  *   a front face: the surface's emission plus the light it scatters towards the probe, every
  *                 bounce the scene's BOUNCES allows; distance t
  * shade = 0: distances only (relocation looks at nothing else).
@@ -26,6 +28,7 @@
 
 __kernel void probe_trace(__global const float4 *probe_pos, __global const float4 *ray_dirs, const int nrays,
                           const int first, const int count, const int ray0, const uint seed, const int shade,
+                          const int back_faces_black,
                           const float2 env_rot, const float env_scale,
                           __global const float4 *img, const int w, const int h,
                           __global const float *marginal, __global const float *conditional,
@@ -49,7 +52,7 @@ __kernel void probe_trace(__global const float4 *probe_pos, __global const float
     int m, obj;
     hit_normals(hh.kind, hh.index, o + hh.t * d, hh.b1, hh.b2, &ng, &ns, &m, &obj, SCENE_ARGS);
     const int back = hh.kind != PRIM_PLANE && dot(ng, d) > 0.0f;
-    if (back || !shade) {
+    if ((back && back_faces_black) || !shade) {
         ray_out[item] = (float4)(0.0f, 0.0f, 0.0f, back ? -hh.t : hh.t);
         return;
     }
@@ -57,5 +60,5 @@ __kernel void probe_trace(__global const float4 *probe_pos, __global const float
     float3 env_part;
     const float3 emitted = follow_path(o, d, hh, (float3)(1.0f), &sp, materials, env_rot, img, w, h, marginal,
                                        conditional, pdf_table, SCENE_ARGS, &env_part, lights, nlights);
-    ray_out[item] = (float4)(env_part * env_scale + emitted, hh.t);
+    ray_out[item] = (float4)(env_part * env_scale + emitted, back ? -hh.t : hh.t);
 }

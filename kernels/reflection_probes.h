@@ -2,8 +2,11 @@
  * probe's influence along the reflected ray corrected to where it leaves the probe's proxy (its
  * box or sphere), blended by each influence's fade, the distant chain taking what is left.
  * rp_info, 4 float4 per probe: (position, shape: 0 box, 1 sphere), (min, blend), (max, radius),
- * (parallax, 0, 0, 0). The probes' chains lie back to back in rp_chain, level l of probe k at
- * rp_off[k rp_nlev + l] texels, every probe's levels rp_lw x rp_lh.
+ * (parallax, 0, 0, 0). Each probe has two chains, its capture's radiance of the scene (chain 2k)
+ * and the coverage of its texels by the scene (chain 2k + 1, grey): the sky past the scene is the
+ * distant chain's, read along the reflected ray itself (infinitely far: no parallax moves it).
+ * The chains lie back to back in rp_chain, level l of chain c at rp_off[c rp_nlev + l] texels,
+ * every level rp_lw x rp_lh.
  * numpy twin: iblbake/render/twin/reflection_probes.py. */
 #ifndef IBLBAKE_REFLECTION_PROBES_H
 #define IBLBAKE_REFLECTION_PROBES_H
@@ -47,16 +50,16 @@ inline float3 rprobe_direction(float3 p, float3 r, float4 a, float4 b, float4 c)
     return normalize(p + fmax(t, 0.0f) * r - a.xyz);
 }
 
-/* Trilinear read of probe k's chain (chain_lookup's, on the probes' tables) */
-inline float3 rprobe_lookup(RPROBE_PARAMS, int k, float3 d, float lod)
+/* Trilinear read of chain c (chain_lookup's, on the probes' tables) */
+inline float3 rprobe_lookup(RPROBE_PARAMS, int c, float3 d, float lod)
 {
     const float2 uv = equirect_uv_from_dir(d);
     lod = isnan(lod) ? 0.0f : clamp(lod, 0.0f, (float)(rp_nlev - 1));
     const int l0 = (int)lod, l1 = min(l0 + 1, rp_nlev - 1);
     const float f = lod - (float)l0;
-    const float3 x = bilinear_equirect(rp_chain + 3 * (size_t)rp_off[k * rp_nlev + l0], rp_lw[l0], rp_lh[l0], uv);
+    const float3 x = bilinear_equirect(rp_chain + 3 * (size_t)rp_off[c * rp_nlev + l0], rp_lw[l0], rp_lh[l0], uv);
     if (f <= 0.0f) return x;
-    return mix(x, bilinear_equirect(rp_chain + 3 * (size_t)rp_off[k * rp_nlev + l1], rp_lw[l1], rp_lh[l1], uv), f);
+    return mix(x, bilinear_equirect(rp_chain + 3 * (size_t)rp_off[c * rp_nlev + l1], rp_lw[l1], rp_lh[l1], uv), f);
 }
 
 /* The prefiltered radiance at point p along r (world frame) at chain level lod: the probes whose
@@ -71,7 +74,8 @@ inline float3 reflection_probes(float3 p, float3 r, float lod, float3 distant, R
         const float w = rprobe_weight(p, a, b, c);
         if (w <= 0.0f) continue;
         const float3 d = e.x > 0.5f ? rprobe_direction(p, r, a, b, c) : r;
-        acc += w * rprobe_lookup(RPROBE_ARGS, k, d, lod);
+        const float cover = rprobe_lookup(RPROBE_ARGS, 2 * k + 1, d, lod).x;
+        acc += w * (rprobe_lookup(RPROBE_ARGS, 2 * k, d, lod) + (1.0f - cover) * distant);
         wsum += w;
     }
     if (wsum > 1.0f) return acc / wsum;

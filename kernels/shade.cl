@@ -5,6 +5,8 @@
  *                 combined here with f0) or SPECULAR_PREFILTERED
  *                 (DOMINANT_DIRECTION; HAS_REFLECTION_PROBES: the local probes' captures where they
  *                 reach, kernels/reflection_probes.h) or SPECULAR_LOBE or off
+ *   HAS_SSR       (prefiltered) the reflected environment, its weight and radiance, into ssr_env, which
+ *                 the ssr pass replaces where its rays meet the frame (kernels/ssr.cl)
  *   HAS_EMISSIVE  emission
  *   HAS_OCCLUSION_MAP  the material's occlusion (its map) on the image-based terms
  *   HAS_AO        ambient occlusion (the ao or gtao pass's ao_buf) on the diffuse term (AO_MULTIBOUNCE:
@@ -72,7 +74,8 @@ __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
                     CHAIN_PARAMS,
                     __global const float4 *hammersley_pts, const int nsamples, const float mip_bias, const float lobe_spread,
                     __global const float2 *dfg, const int dfg_size, __global const float *ao_buf,
-                    __global const float4 *spec_sums, PROBE_PARAMS, RPROBE_PARAMS, __global float4 *radiance)
+                    __global const float4 *spec_sums, PROBE_PARAMS, RPROBE_PARAMS, __global float4 *ssr_env,
+                    __global float4 *radiance)
 {
     const int gid = get_global_id(0);
     if (gid >= n) return;
@@ -81,6 +84,9 @@ __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
     float3 v, nrm;
     const float nov = surface_at(SURFACE_ARGS, gid, &mt, &v, &nrm);
     float3 color = (float3)(0.0f);
+#ifdef HAS_SSR
+    float3 ssr_w = (float3)(0.0f), ssr_li = (float3)(0.0f);
+#endif
 #ifdef HAS_AO
     const float spec_occ = specular_occlusion(nov, ao_buf[gid], mt.roughness);
 #ifdef AO_MULTIBOUNCE
@@ -127,6 +133,13 @@ __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
         color += spec_occ * li * (mt.f0 * ab.x + mt.f90 * ab.y);
 #else
         color += spec_occ * env_scale * pre * (mt.f0 * ab.x + mt.f90 * ab.y);
+#ifdef HAS_SSR
+        const float3 li = env_scale * pre;
+#endif
+#endif
+#ifdef HAS_SSR
+        ssr_w = spec_occ * (mt.f0 * ab.x + mt.f90 * ab.y);
+        ssr_li = li;
 #endif
     }
 #elif SPECULAR_MODE == SPECULAR_LOBE
@@ -165,6 +178,13 @@ __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
 #endif
 #ifdef HAS_OCCLUSION_MAP
     color *= mt.occlusion;             /* the material's occlusion map: image-based light only */
+#ifdef HAS_SSR
+    ssr_w *= mt.occlusion;
+#endif
+#endif
+#ifdef HAS_SSR
+    ssr_env[2 * gid] = (float4)(ssr_w, 0.0f);
+    ssr_env[2 * gid + 1] = (float4)(ssr_li, 0.0f);
 #endif
 #ifdef HAS_EMISSIVE
     color += mt.emissive;

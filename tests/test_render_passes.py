@@ -184,7 +184,9 @@ def test_every_kernel_parameter_is_bound_by_name():
            "ao": {"ao_seed", "ao_samples", "ao_radius"},
            "gtao": {"ao_stride", "ao_radius", "gtao_slices", "gtao_steps", "gtao_radius_scale", "gtao_falloff",
                     "gtao_power", "gtao_step", "gtao_denoise_radius"},
-           "tonemap": {"exposure_scale", "gamma"}}
+           "tonemap": {"exposure_scale", "gamma"},
+           "ssr": {"max_roughness", "thickness", "steps", "rays", "ray_length", "seed", "hiz_off", "nlev", "src", "sw",
+                   "sh", "dst", "dw", "dh"}}
     for p in PASSES:
         for fn in p.kernel_functions():
             names = {n for n, _ in runtime.kernel_params(p.kernel, fn)}

@@ -73,9 +73,11 @@ def probes_command(scene_path, out_dir, overrides, cache_dir, device, quiet, as_
     man = probes.manifest(vol)
     from iblbake.io import images
     for name, c in zip(captures, reflections):     # an engine prefilters them (iblbake mips --ktx2)
-        images.write_exr(out / name, c["capture"])
+        images.write_exr(out / name, c["capture"], channels=("R", "G", "B", "A"))
     man["reflection_probes"] = [{"file": name, **c["settings"],
-                                 "layout": "equirect in the world frame (the panoramas' mapping), linear RGB"}
+                                 "layout": "equirect in the world frame (the panoramas' mapping); RGB the linear "
+                                           "radiance of the scene, A the share of the texel the scene covers (the "
+                                           "rest is the distant panorama along the reflected ray)"}
                                 for name, c in zip(captures, reflections)]
     entry = Path(extra["entry"])
     for n in names[1:4]:

@@ -365,27 +365,35 @@ class Bakes:
             def make(settings=settings, k=k, key=key):
                 def build(tmp: Path):
                     images.write_exr(tmp / "capture.exr", rp.capture(rp.tracer(ctx, settings), k, settings,
-                                                                     ctx.progress))
+                                                                     ctx.progress), channels=("R", "G", "B", "A"))
                     return {"kind": "reflection", "files": [{"name": "capture.exr"}], "probe": settings}
 
                 manifest, cached = cache.get_or_build(self.root, key, build, warn=ctx.warn)
                 path = self.root / manifest["key"] / "capture.exr"
-                image = images.read_exr(path)[..., :3]
+                image = images.read_exr(path)
                 size = settings["size"]
-                if image.shape != (size, 2 * size, 3) or not np.isfinite(image).all() or (image < 0).any():
-                    raise IblbakeError(f"{path}: not a {2 * size}x{size} capture of finite, non-negative radiance; "
-                                       f"delete the cache entry to bake it again")
+                if image.shape != (size, 2 * size, 4) or not np.isfinite(image).all() or (image < 0).any() \
+                        or (image[..., 3] > 1).any():
+                    raise IblbakeError(f"{path}: not a {2 * size}x{size} RGBA capture of finite, non-negative "
+                                       f"radiance and coverage; delete the cache entry to bake it again")
                 return np.ascontiguousarray(image, np.float32), cached
 
             image, cached = self._get(("reflection", key), make)
-            info = ImageInfo(f"reflection probe {k}", image.shape[1], image.shape[0], ("R", "G", "B"), "float32",
-                             hashlib.sha256(image.tobytes()).hexdigest())
+            traced = not cached
             baker = self._baker(ctx)
-            levels, pre_cached, _extra = self.prefilter(ctx, image, info, image.shape[0],
-                                                        lambda image=image: baker.radiance_chain(image))
-            out.append({"settings": settings, "levels": levels, "capture": image})
-            cached_all = cached_all and cached and pre_cached
-            rays += 0 if cached else 2 * settings["size"] ** 2 * settings["samples"]
+            chains = []
+            for part, img in (("radiance", image[..., :3]), ("coverage", np.repeat(image[..., 3:], 3, -1))):
+                img = np.ascontiguousarray(img)
+                info = ImageInfo(f"reflection probe {k} {part}", img.shape[1], img.shape[0], ("R", "G", "B"),
+                                 "float32", hashlib.sha256(img.tobytes()).hexdigest())
+                levels, pre_cached, _extra = self.prefilter(ctx, img, info, img.shape[0],
+                                                            lambda img=img: baker.radiance_chain(img))
+                chains.append(levels)
+                cached = cached and pre_cached
+            levels, coverage = chains
+            out.append({"settings": settings, "levels": levels, "coverage": coverage, "capture": image})
+            cached_all = cached_all and cached
+            rays += 2 * settings["size"] ** 2 * settings["samples"] if traced else 0
         return out, cached_all, {"probes": len(out), "rays_traced": rays}
 
     def _light_transport(self, sc) -> dict:

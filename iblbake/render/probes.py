@@ -164,13 +164,13 @@ def trace_defines(scene, bounces) -> dict:
 class Tracer:
     """Probe rays on the frame context's device, with its scene tables and panorama."""
 
-    def __init__(self, ctx, settings: dict):
+    def __init__(self, ctx, settings: dict, back_faces_black: bool = True):
         from iblbake.bake.radiance import to_rgba
         from iblbake.render.passes.lights import frame_lights
         from iblbake.scene import pack
 
         rt = self.rt = ctx.rt
-        self.ctx, self.settings = ctx, settings
+        self.ctx, self.settings, self.back_faces_black = ctx, settings, back_faces_black
         dist = ctx.bakes.load("env_cdf", ctx)[0]
         chain = ctx.bakes.load("radiance", ctx)[0]     # what an escaping probe ray reads (probe_trace.cl)
         self.defines = trace_defines(ctx.scene, settings["bounces"])
@@ -199,7 +199,8 @@ class Tracer:
             rt.launch("probe_trace.cl", "probe_trace", self.defines, (count * nrays,), self.ctx.table, **self.args,
                       probe_pos=pos, ray_dirs=dir_buf, nrays=nrays, first=probe0 + first, count=count, ray0=ray0,
                       ray_solid_angle=4 * np.pi / nrays,
-                      seed=self.settings["seed"], shade=int(shade), ray_out=buf)
+                      seed=self.settings["seed"], shade=int(shade), back_faces_black=int(self.back_faces_black),
+                      ray_out=buf)
             out[first:first + count] = rt.read(buf, (count * nrays, 4)).reshape(count, nrays, 4)
             if progress:
                 progress(done + share * (first + count) / n)

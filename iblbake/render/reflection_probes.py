@@ -34,20 +34,26 @@ def capture_directions(size: int, samples: int) -> np.ndarray:
 
 
 def capture(tracer, index: int, settings: dict, progress=None) -> np.ndarray:
-    """(size, 2 size, 3) float32: the mean radiance of each texel's paths from the probe's
-    position (probe number `index`: its random streams)."""
+    """(size, 2 size, 4) float32: per texel the mean radiance of its paths from the probe's
+    position that met the scene (RGB) and the share of them that did (A, the coverage); the sky
+    seen past the scene is left to the distant chain, read along the reflected ray itself (it is
+    infinitely far: no parallax moves it). Probe number `index`: its random streams."""
     size, n = settings["size"], settings["samples"]
     dirs = capture_directions(size, n)
-    sums = np.zeros((len(dirs) // n, 3))
+    sums = np.zeros((len(dirs) // n, 4))
     per = max(n, CHUNK_RAYS // n * n)              # whole texels per launch
     pos = np.asarray([settings["position"]], np.float64)
     for r0 in range(0, len(dirs), per):
-        rad, _t = tracer.trace(pos, dirs[r0:r0 + per], True, probe0=index, ray0=r0)
-        sums[r0 // n:(r0 + len(rad[0])) // n] = rad[0].reshape(-1, n, 3).mean(1)
+        rad, t = tracer.trace(pos, dirs[r0:r0 + per], True, probe0=index, ray0=r0)
+        met = np.isfinite(np.abs(t[0]))[:, None]
+        rows = np.concatenate([np.where(met, rad[0], 0.0), met.astype(np.float64)], 1)
+        sums[r0 // n:(r0 + len(rad[0])) // n] = rows.reshape(-1, n, 4).mean(1)
         if progress:
             progress(min(1.0, (r0 + per) / len(dirs)))
-    return sums.reshape(size, 2 * size, 3).astype(np.float32)
+    return sums.reshape(size, 2 * size, 4).astype(np.float32)
 
 
 def tracer(ctx, settings: dict):
-    return probes.Tracer(ctx, {"bounces": settings["bounces"], "seed": settings["seed"]})
+    """Capture rays see surfaces from either side, as the camera does (the irradiance probes' rays
+    do not: a probe inside geometry)."""
+    return probes.Tracer(ctx, {"bounces": settings["bounces"], "seed": settings["seed"]}, back_faces_black=False)

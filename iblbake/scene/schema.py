@@ -493,6 +493,19 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                                  "unbiased: the converged answer), N, or 1, the environment's direct light (no "
                                  "interreflection, no light from emissive surfaces); with visibility false, 1"),
         }),
+        "ssr": Enum(("off", "on"), "off", doc="stochastic screen-space reflections (Stachowiak 2015) over the split "
+                                             "sum (specular: prefiltered): GGX rays marched through the frame's Hi-Z, its own "
+                                             "lit radiance where they hit"),
+        "ssr_settings": Section(doc="ssr: the march", fields={
+            "max_roughness": Num(0.5, 0.0, 1.0, doc="surfaces rougher than this keep the probes' or panorama's "
+                                                    "reflection (faded over its last fifth)"),
+            "thickness": Num(0.1, 0.0, lo_open=True, doc="how far behind the depth buffer a surface is taken to reach "
+                                                        "(scene units along the view)"),
+            "steps": Num(64, 1, 4096, integer=True, doc="march iterations per ray (Hi-Z cells visited)"),
+            "rays": Num(1, 1, 256, integer=True, doc="GGX visible-normal rays per G-buffer sample"),
+            "ray_length": Num(50.0, 0.0, lo_open=True, doc="how far a ray is followed (scene units)"),
+            "seed": Num(1, 0, 2**31 - 1, integer=True, doc="random seed of the rays"),
+        }),
         "reflection_probes": Bool(True, doc="prefiltered: read the scene's reflection probes where they reach "
                                             "(false: the distant panorama's chain alone)"),
         "ao": Enum(("off", "gtao", "raytraced"), "off",

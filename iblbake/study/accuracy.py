@@ -231,7 +231,7 @@ class Study:
         while len(lighting) < self.settings.repeats:
             first = frame is None
             fr = render.render(sc, runtime=self.rt, cache=self.bakes, warn=self.warn)
-            light = sum(p["seconds"] for p in fr.report["passes"] if p["name"] in ("importance", "shade", "reference"))
+            light = sum(p["seconds"] for p in fr.report["passes"] if p["name"] in ("importance", "shade", "reference", "ssr"))
             if first:
                 bakes = [b for b in fr.report["bakes"] if b["name"] not in ("geometry", "read_environment")]
             frame = fr

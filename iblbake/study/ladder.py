@@ -79,8 +79,13 @@ def default_ladder(sc, fx, device_kind: str = "GPU", paths: bool = False) -> lis
                                                                         ("effects.prefilter.samples", n)]))
         for k in (1, 2, 4, 8, 16):
             rungs.append(Rung("specular", f"lobe K={k}", [("effects.specular", "lobe"), ("effects.lobe.samples", k)]))
-        if sc.data["reflection_probes"]:     # the scene's local probes, and the distant chain alone
+        # the scene reflected: screen-space reflections, and the scene's own reflection probes
+        rungs.append(Rung("specular", "prefiltered + ssr", pre + [("effects.ssr", "on"),
+                                                                 ("effects.reflection_probes", False)]))
+        if sc.data["reflection_probes"]:
             rungs.append(Rung("specular", "prefiltered + reflection probes", pre + [("effects.reflection_probes", True)]))
+            rungs.append(Rung("specular", "prefiltered + reflection probes + ssr",
+                              pre + [("effects.reflection_probes", True), ("effects.ssr", "on")]))
             rungs.append(Rung("specular", "prefiltered, distant only", pre + [("effects.reflection_probes", False)]))
     lights = sc.data["lights"]
     for term in TERMS:                   # every light's shadows at once: none, hard, soft at 4 and 16

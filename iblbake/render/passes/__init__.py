@@ -11,7 +11,8 @@ from iblbake.render.passes.material import Materials
 from iblbake.render.passes.reference import Reference
 from iblbake.render.passes.resolve import Resolve
 from iblbake.render.passes.shade import Shade
+from iblbake.render.passes.ssr import ScreenSpaceReflections
 from iblbake.render.passes.tonemap import Tonemap
 
 PASSES = (GBuffer(), Materials(), AmbientOcclusion(), GroundTruthAO(), Importance(), Shade(), Reference(), Lights(),
-          Background(), Resolve(), Tonemap())
+          ScreenSpaceReflections(), Background(), Resolve(), Tonemap())

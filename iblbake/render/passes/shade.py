@@ -14,7 +14,8 @@ from iblbake.render.passes.base import Buffer, Pass, mode_defines
 class Shade(Pass):
     name = "shade"
     kernel = "shade.cl"
-    buffers = (Buffer("radiance"),)      # every lighting pass adds into it
+    # every lighting pass adds into radiance; ssr_env: the reflected environment the ssr pass replaces
+    buffers = (Buffer("radiance"), Buffer("ssr_env", count=2, when="HAS_SSR"))
 
     def runs(self, scene, fx):
         return fx.any_approximate or fx.emissive
@@ -35,6 +36,8 @@ class Shade(Pass):
             d["DOMINANT_DIRECTION"] = 1
         if reflects_locally(scene, fx):
             d["HAS_REFLECTION_PROBES"] = 1
+        if screen_space(scene, fx):
+            d["HAS_SSR"] = 1
         if fx.emissive:
             d["HAS_EMISSIVE"] = 1
         if e["ao"] != "off" and fx.any_approximate:
@@ -69,6 +72,11 @@ class Shade(Pass):
         return {"mpixel_samples_per_s": round(n * args["nsamples"] / max(s, 1e-9) / 1e6, 2), **extra}
 
 
+def screen_space(scene, fx) -> bool:
+    """Whether screen-space reflections run: over the split sum's environment (and probes)."""
+    return fx.specular == "prefiltered" and scene.data["effects"]["ssr"] == "on"
+
+
 def reflects_locally(scene, fx) -> bool:
     """Whether the scene's reflection probes are read: by the split sum (`prefiltered`)."""
     return (fx.specular == "prefiltered" and bool(scene.data["reflection_probes"])
@@ -88,8 +96,9 @@ def rprobe_args(rt, captured, bakes=None) -> dict:
         raise IblbakeError("reflection_probes: every probe needs the same size (their chains share one table)")
 
     def upload():
-        flat = np.concatenate([np.asarray(lv[..., :3], np.float32).reshape(-1) for c in captured for lv in c["levels"]])
-        counts = [h * w for h, w in sizes[0]] * len(captured)
+        flat = np.concatenate([np.asarray(lv[..., :3], np.float32).reshape(-1) for c in captured
+                               for chain in (c["levels"], c["coverage"]) for lv in chain])
+        counts = [h * w for h, w in sizes[0]] * (2 * len(captured))      # each probe: radiance, coverage
         off = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int32)
         info = np.zeros((len(captured), 4, 4), np.float32)
         for k, c in enumerate(captured):
@@ -101,7 +110,8 @@ def rprobe_args(rt, captured, bakes=None) -> dict:
             info[k, 3, 0] = 1.0 if st["parallax"] else 0.0
         return (rt.to_device(flat), rt.to_device(off), rt.to_device(np.array([w for _h, w in sizes[0]], np.int32)),
                 rt.to_device(np.array([h for h, _w in sizes[0]], np.int32)), rt.to_device(info.reshape(-1, 4)))
-    chain, off, lw, lh, info = bakes.on_device(rt, tuple(lv for c in captured for lv in c["levels"]), upload) \
+    chain, off, lw, lh, info = bakes.on_device(rt, tuple(lv for c in captured for lv in c["levels"] + c["coverage"]),
+                                               upload) \
         if bakes is not None else upload()
     return {"rp_chain": chain, "rp_off": off, "rp_lw": lw, "rp_lh": lh, "rp_nlev": len(sizes[0]),
             "rp_count": len(captured), "rp_info": info}

@@ -39,15 +39,16 @@ def direction(st: dict, p, r):
 
 
 def blend(captured: list, p, r, lod, distant):
-    """Twin of reflection_probes: captured [{settings, levels}], distant the scaled distant chain's
-    radiance at (p, r) (m, 3)."""
+    """Twin of reflection_probes: captured [{settings, levels, coverage}], distant the scaled
+    distant chain's radiance at (p, r) (m, 3), which also fills each capture's uncovered share."""
     acc = np.zeros_like(distant)
     wsum = np.zeros(len(p))
     for c in captured:
         st = c["settings"]
         w = weight(st, p)
         d = direction(st, p, r) if st["parallax"] else r
-        acc += w[:, None] * radiance.chain_lookup_twin(c["levels"], d, lod)
+        cover = radiance.chain_lookup_twin(c["coverage"], d, lod)[:, :1]
+        acc += w[:, None] * (radiance.chain_lookup_twin(c["levels"], d, lod) + (1 - cover) * distant)
         wsum += w
     over = wsum > 1
     out = acc + (1 - wsum)[:, None] * distant

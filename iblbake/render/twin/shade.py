@@ -17,14 +17,16 @@ from iblbake.render.twin.surface import diffuse_weight, material_occlusion, surf
 
 
 def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, prefiltered=None, dfg=None,
-          ao=None, probes=None, reflection_probes=None):
+          ao=None, probes=None, reflection_probes=None, ssr_out=None):
     """Per-sample radiance of the `shade` pass, with the `importance` pass's sums for it (hits
     only; misses are 0); `ao` the ambient occlusion of every sample (ambient_occlusion) where
     effects.ao is on. The importance estimate is summed with Fresnel inside, which the kernels
     split around f0: the same sum, to float rounding. `probes`: the sampled probe volume
     (render/probes.py sampled) where effects.diffuse is probes, sh_coeffs then the panorama's SH
     that takes over outside it. `reflection_probes`: the captured probes [{settings, levels}]
-    (Bakes._reflection_probes) where specular is prefiltered."""
+    (Bakes._reflection_probes) where specular is prefiltered. `ssr_out` (a dict) receives the
+    reflected environment's weight and radiance per hit sample ("w", "li"), as HAS_SSR writes
+    ssr_env for the ssr pass (twin/ssr.py)."""
     hit = gb["hit"]
     out = np.zeros((len(hit), 3))
     v, n, nov, (base, metallic, emissive, rough, f0, f90) = surface(gb, arrays)
@@ -88,6 +90,9 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
             nlev = len(reflection_probes[0]["levels"])
             li = rp_twin.blend(reflection_probes, gb["pos"][hit], r, rough * (nlev - 1), li)
         color += spec_occ * li * (f0 * ab[:, 0:1] + f90 * ab[:, 1:2])
+        if ssr_out is not None:
+            ssr_out["w"] = spec_occ * (f0 * ab[:, 0:1] + f90 * ab[:, 1:2]) * material_occlusion(gb)[:, None]
+            ssr_out["li"] = li
     elif effects["specular"] == "lobe":
         color += spec_occ * scale * lobe(v, n, nov, alpha, rough, f0, f90, rot, effects["lobe"]["samples"],
                               effects["lobe"]["spread"], prefiltered, dfg)
