@@ -113,3 +113,19 @@ def test_ssr_runs_only_where_asked(tmp_path, sky):
                      ("importance", wall(tmp_path, sky, specular="importance", name="i"))):
         pl = render.plan(sc)
         assert "ssr" not in pl.pass_names and "HAS_SSR" not in pl.defines.get("shade", {}), name
+
+
+def test_the_study_measures_ssr_on_the_whole_frame(tmp_path, sky):
+    """A specular rung with SSR renders both terms (its rays see the lit frame, diffuse light
+    included) and the study subtracts the diffuse term alone; other rungs render their term alone."""
+    from iblbake.device.runtime import Runtime
+    from iblbake.study import accuracy
+    from iblbake.study.ladder import Rung
+
+    sc = wall(tmp_path, sky, name="study")
+    st = accuracy.Study(sc.source, (), accuracy.Settings(), runtime=Runtime(), bakes=Bakes(tmp_path / "c"))
+    with_ssr = Rung("specular", "ssr", [("effects.specular", "prefiltered"), ("effects.ssr", "on")])
+    without = Rung("specular", "plain", [("effects.specular", "prefiltered"), ("effects.ssr", "off")])
+    assert st.reflects_frame(with_ssr) and not st.reflects_frame(without)
+    assert ("effects.diffuse", "off") not in st.rung_values(with_ssr)
+    assert ("effects.diffuse", "off") in st.rung_values(without)

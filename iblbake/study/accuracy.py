@@ -215,7 +215,15 @@ class Study:
         own = {k for k, _ in rung.values}
         ref = [(k, v) for k, v in (("effects.reference.visibility", self.settings.visibility),
                                    ("effects.reference.bounces", self.settings.bounces)) if k not in own]
+        if self.reflects_frame(rung):
+            return ref + rung.values            # both terms: its rays see the whole lit frame
         return TERM_ALONE[rung.term] + ref + rung.values
+
+    def reflects_frame(self, rung: Rung) -> bool:
+        """A specular rung with screen-space reflections: its rays read the frame's lighting, both
+        terms, so it renders both and the study subtracts the diffuse term rendered alone."""
+        return rung.term == "specular" and dict(rung.values).get("effects.ssr") == "on" \
+            and self.scene.data["effects"]["diffuse"] != "off"
 
     def run_rung(self, rung: Rung) -> dict:
         """Render the rung `repeats` times (kernel builds and bakes happen in the first and are
@@ -241,6 +249,12 @@ class Study:
                 continue
             lighting.append(light)
             whole.append(fr.report["elapsed_s"])
+        if self.reflects_frame(rung):           # the specular term: the frame less its diffuse term
+            alone = [(k, v) for k, v in rung.values if k != "effects.ssr"] + [("effects.specular", "off")]
+            diffuse = render.render(self.load(alone), runtime=self.rt, cache=self.bakes, warn=self.warn)
+            hdr = frame.hdr.copy()
+            hdr[..., :3] -= diffuse.hdr[..., :3]
+            frame.hdr = hdr
         builds = sum(b["seconds"] for b in self.rt.builds[builds_before:])
         ref = self.reference[rung.term]
         mask = self.metric_mask(rung.term, frame.hdr)
