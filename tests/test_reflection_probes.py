@@ -50,15 +50,15 @@ def captures(bakes):
 
 def test_a_capture_of_the_open_sky_leaves_it_to_the_distant_chain(tmp_path, rt, sky):
     """A capture that sees only the sky holds no radiance and no coverage (the sky past the scene
-    is the distant chain's, read along the reflected ray); with or without parallax the probe
-    then shades the plate exactly as `prefiltered` does (measured 0 and 0)."""
+    is the distant chain's, read along the reflected ray); with or without parallax, a box or a
+    sphere proxy, the probe then shades the plate exactly as `prefiltered` does (measured 0)."""
     bakes = Bakes(tmp_path / "cache")
     distant = render.render(window(tmp_path, sky, [], "plain"), runtime=rt, cache=bakes)
     hit = distant.hdr[..., 3] > 0.999
-    for parallax in (False, True):
-        probe = {"position": [0, 0, -1], "min": [-2, -2, -2], "max": [2, 2, 2], "size": 32, "samples": 1,
-                 "parallax": parallax}
-        with_probe = render.render(window(tmp_path, sky, [probe], f"w{parallax}"), runtime=rt, cache=bakes)
+    for shape, parallax in (("box", False), ("box", True), ("sphere", True)):
+        probe = {"position": [0, 0, -1], "size": 32, "samples": 1, "parallax": parallax, "shape": shape,
+                 **({"min": [-2, -2, -2], "max": [2, 2, 2]} if shape == "box" else {"radius": 3})}
+        with_probe = render.render(window(tmp_path, sky, [probe], f"w{shape}{parallax}"), runtime=rt, cache=bakes)
         for image, _cached in captures(bakes):
             assert image.shape == (32, 64, 4) and not image.any()
         a, b = with_probe.hdr[hit][:, :3], distant.hdr[hit][:, :3]
