@@ -17,35 +17,33 @@ from iblbake.core import sampling
 from iblbake.errors import IblbakeError
 from iblbake.io import images
 
-def _geometry_code_hash() -> str:
-    """The mesh loader's and BVH builder's source: a cached BVH is rebuilt when they change."""
+def _code_hash(modules, extra: str = "") -> str:
+    """The modules' source (and `extra`: a kernel's source hash): a cached bake is rebuilt when its
+    code changes."""
     import hashlib
     import inspect
+    return hashlib.sha256(("".join(inspect.getsource(m) for m in modules) + extra).encode()).hexdigest()[:16]
 
+
+def _geometry_code_hash() -> str:
+    """The mesh loader's and BVH builder's source: a cached BVH is rebuilt when they change."""
     from iblbake.scene import geometry, gltf, pack, tangents
-    return hashlib.sha256("".join(inspect.getsource(m) for m in (geometry, gltf, pack, tangents)).encode()).hexdigest()[:16]
+    return _code_hash((geometry, gltf, pack, tangents))
 
 
 def _textures_code_hash() -> str:
     """The texture decoder's, pyramid builder's and glTF reader's source: cached pyramids are
     rebuilt when they change."""
-    import hashlib
-    import inspect
-
     from iblbake.scene import gltf, materials, textures
-    return hashlib.sha256("".join(inspect.getsource(m) for m in (gltf, materials, textures)).encode()).hexdigest()[:16]
+    return _code_hash((gltf, materials, textures))
 
 
 def _probes_code_hash() -> str:
     """The probe bakers' and their tracing kernel's source: cached volumes and captures are rebaked
     when they change."""
-    import hashlib
-    import inspect
-
     from iblbake.device.runtime import source_hash
     from iblbake.render import probes, reflection_probes
-    return hashlib.sha256((inspect.getsource(probes) + inspect.getsource(reflection_probes)
-                           + source_hash("probe_trace.cl")).encode()).hexdigest()[:16]
+    return _code_hash((probes, reflection_probes), source_hash("probe_trace.cl"))
 
 
 def _external(path) -> list:
@@ -221,8 +219,7 @@ class Bakes:
     def device_textures(self, rt, arrays) -> tuple:
         """The texture arrays on the device, uploaded once per runtime (a sheet's cells, a study's
         rungs and a benchmark's frames share them)."""
-        return self._get(("textures-device", id(rt), tuple(id(a) for a in arrays)),
-                         lambda: tuple(rt.to_device(a) for a in arrays))
+        return self.on_device(rt, arrays, lambda: tuple(rt.to_device(a) for a in arrays))
 
     def on_device(self, rt, arrays, upload):
         """upload()'s device buffers of the host arrays, made once per runtime and arrays (kept

@@ -165,8 +165,8 @@ class Tracer:
     """Probe rays on the frame context's device, with its scene tables and panorama."""
 
     def __init__(self, ctx, settings: dict, back_faces_black: bool = True):
-        from iblbake.bake.radiance import to_rgba
         from iblbake.render.passes.lights import frame_lights
+        from iblbake.render.passes.reference import environment_args
         from iblbake.scene import pack
 
         rt = self.rt = ctx.rt
@@ -177,9 +177,7 @@ class Tracer:
         recs = np.zeros((0, 4), np.float32)
         if "PATH_LIGHTS" in self.defines:
             recs = pack.light_records(frame_lights(ctx.scene, ctx.bakes.sun(ctx.scene.data["environment"])))
-        self.args = {"img": rt.to_device(to_rgba(ctx.image)), "w": dist.width, "h": dist.height,
-                     "marginal": rt.to_device(dist.marginal), "conditional": rt.to_device(dist.conditional),
-                     "pdf_table": rt.to_device(dist.pdf), "nlights": len(recs), **ctx.chain(chain),
+        self.args = {**environment_args(ctx, dist), "nlights": len(recs), **ctx.chain(chain),
                      "lights": rt.to_device(recs.reshape(-1, 4) if len(recs) else np.zeros((4, 4), np.float32))}
         self.rays_traced = 0
 

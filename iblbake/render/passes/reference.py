@@ -44,6 +44,19 @@ def sample_slices(rt, n: int, batch: int) -> int:
     return max(1, min(batch, -(-GPU_ITEMS // max(n, 1))))
 
 
+def environment_args(ctx, dist) -> dict:
+    """The panorama's texels and importance-sampling tables (dist: sampling.EnvironmentDistribution)
+    as the named arguments of the kernels that sample it (reference.cl, probe_trace.cl), uploaded
+    once per runtime and panorama (a study's references, a volume's and its captures' rays)."""
+    rt = ctx.rt
+
+    def upload():
+        return {"img": rt.to_device(to_rgba(ctx.image)), "marginal": rt.to_device(dist.marginal),
+                "conditional": rt.to_device(dist.conditional), "pdf_table": rt.to_device(dist.pdf)}
+    return {**ctx.bakes.on_device(rt, (ctx.image, dist.marginal, dist.conditional, dist.pdf), upload),
+            "w": dist.width, "h": dist.height}
+
+
 class Reference(Pass):
     name = "reference"
     kernel = "reference.cl"
@@ -72,11 +85,8 @@ class Reference(Pass):
         return d
 
     def setup(self, ctx) -> dict:
-        dist = ctx.loaded["env_cdf"]
         rt = ctx.rt
-        out = {"img": rt.to_device(to_rgba(ctx.image)), "w": dist.width, "h": dist.height,
-               "marginal": rt.to_device(dist.marginal), "conditional": rt.to_device(dist.conditional),
-               "pdf_table": rt.to_device(dist.pdf)}
+        out = environment_args(ctx, ctx.loaded["env_cdf"])
         recs = np.zeros((0, 4), np.float32)
         if "PATH_LIGHTS" in ctx.plan.defines[self.name]:
             recs = pack.light_records(frame_lights(ctx.scene, ctx.bakes.sun(ctx.scene.data["environment"])))

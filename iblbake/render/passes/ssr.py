@@ -4,6 +4,8 @@ through its own depth pyramid: a ray that leaves the tile keeps the environment.
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from iblbake.render.passes.base import Buffer, Pass
@@ -42,8 +44,6 @@ class ScreenSpaceReflections(Pass):
                 "rays": s["rays"], "ray_length": s["ray_length"], "seed": s["seed"]}
 
     def run(self, ctx):
-        import time
-
         rt, t = ctx.rt, ctx.table
         t0 = time.perf_counter()
         levels = pyramid(ctx.width, ctx.tile_rows)
