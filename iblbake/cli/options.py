@@ -82,6 +82,19 @@ class Console:
             finally:
                 self._bar = False
 
+    @contextlib.contextmanager
+    def fraction(self, label: str, name: str):
+        """stages() over 100 steps of one named kind of work, fed by the fraction done (0 to 1):
+        yields progress(frac), for the library's progress callbacks."""
+        with self.stages([name] * 100, label) as step:
+            done = [0]
+
+            def progress(frac):
+                while done[0] < min(int(frac * 100), 100):
+                    step()
+                    done[0] += 1
+            yield progress
+
     def result(self, summary: dict, human: str):
         if self.as_json:
             click.echo(json.dumps(summary, indent=2, allow_nan=False))

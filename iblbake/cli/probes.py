@@ -3,7 +3,6 @@ into files an engine reads."""
 
 from __future__ import annotations
 
-import contextlib
 from pathlib import Path
 
 import click
@@ -58,14 +57,7 @@ def probes_command(scene_path, out_dir, overrides, cache_dir, device, quiet, as_
     bakes = Bakes(cache_dir)
     bakes.runtime = rt
     pl = plan(sc)
-    with con.stages(["probe rays"] * 100, label="probes") if con.interactive else contextlib.nullcontext(None) as step:
-        last = [0]
-
-        def progress(frac):
-            while step is not None and last[0] < int(frac * 100):
-                step()
-                last[0] += 1
-
+    with con.fraction("probes", "probe rays") as progress:
         ctx = scene_context(sc, pl, rt, bakes, con.warn, progress)
         vol, cached, extra = bakes.load("probes", ctx)
         reflections = bakes.load("reflection_probes", ctx)[0] if captures else []

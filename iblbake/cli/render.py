@@ -52,19 +52,9 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, depfi
     for p in render.output_paths(sc):
         check_writable(p)
     pl = render.plan(sc)
-    long_work = "reference" in pl.pass_names or "probes" in pl.bakes     # paths: a bar on a terminal
-    with con.stages(["paths"] * 100, label="render") if (
-            long_work and con.interactive) else contextlib.nullcontext(None) as step:
-        last = [0]
-
-        def progress(frac):
-            if step is None:
-                return
-            k = int(frac * 100)
-            while last[0] < k:
-                step()
-                last[0] += 1
-
+    # paths (the reference, probe rays, reflection captures): a bar on a terminal
+    long_work = "reference" in pl.pass_names or {"probes", "reflection_probes"} & set(pl.bakes)
+    with con.fraction("render", "paths") if long_work else contextlib.nullcontext(None) as progress:
         frame = render.render(sc, device=device, cache_root=cache_dir, warn=con.warn, progress=progress)
     written = render.write_outputs(frame, sc)
     if depfile:
