@@ -128,6 +128,17 @@ def scene_file(folder, env, *, name="scene.yaml", **sections):
     return path
 
 
+@pytest.fixture(scope="session")
+def lobed_sky(tmp_path_factory):
+    """A smooth 64 x 32 sky of three lobes of colour, no sun: the probe and SSR tests' panorama."""
+    from iblbake.io import images
+    p = tmp_path_factory.mktemp("lobed") / "sky.exr"
+    v, u = np.meshgrid((np.arange(32) + 0.5) / 32, (np.arange(64) + 0.5) / 64, indexing="ij")
+    img = np.stack([1 + 0.8 * np.cos(2 * np.pi * u), 1 + 0.6 * np.cos(np.pi * v), 1 + 0.5 * np.sin(2 * np.pi * u)], -1)
+    images.write_exr(p, img.astype(np.float32))
+    return p
+
+
 def load_scene(folder, name, doc):
     """Write the scene `doc` (a dict) as folder/NAME.yaml and load it (iblbake.scene.load)."""
     import yaml

@@ -20,14 +20,9 @@ from tests.conftest import load_scene, run_cli
 write = load_scene
 
 
-@pytest.fixture(scope="module")
-def sky(tmp_path_factory):
-    """A smooth 64 x 32 sky of three lobes of colour."""
-    p = tmp_path_factory.mktemp("rsky") / "sky.exr"
-    v, u = np.meshgrid((np.arange(32) + 0.5) / 32, (np.arange(64) + 0.5) / 64, indexing="ij")
-    img = np.stack([1 + 0.8 * np.cos(2 * np.pi * u), 1 + 0.6 * np.cos(np.pi * v), 1 + 0.5 * np.sin(2 * np.pi * u)], -1)
-    images.write_exr(p, img.astype(np.float32))
-    return p
+@pytest.fixture
+def sky(lobed_sky):
+    return lobed_sky
 
 
 def window(folder, sky, probes, name="window"):
