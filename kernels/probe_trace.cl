@@ -7,13 +7,17 @@
  *                 times env_scale; distance +INFINITY. A sun smaller than a ray's share is neither
  *                 missed nor hit by chance: its light lands in the ray whose share holds it, seen or
  *                 shadowed as that ray is (the probes' own angular resolution)
- *   a back face:  (a sphere's inside, a triangle seen against its winding; a plane has none) no
- *                 light where back_faces_black (the irradiance probes: a probe inside geometry),
- *                 else shaded as the front (captures: surfaces are two-sided); distance -t,
- *                 negative as RTXGI marks it (RTXGI stores -0.2 t)
+ *   a back face:  (scene.h probe_back_face: the inside of a solid, the back of a single-sided
+ *                 surface; a double-sided open surface has none, docs/conventions.md "Sides") no
+ *                 light where back_faces_black (the irradiance probes: a probe inside geometry,
+ *                 whose rays see single-sided surfaces from behind too, as RTXGI's do), else
+ *                 shaded as the camera sees it (captures: their rays meet what camera rays meet);
+ *                 distance -t, negative as RTXGI marks it (RTXGI stores -0.2 t)
  *   a front face: the surface's emission plus the light it scatters towards the probe, every
  *                 bounce the scene's BOUNCES allows; distance t
- * shade = 0: distances only (relocation looks at nothing else).
+ * shade = 0: distances only (relocation looks at nothing else). ray_obj: the object each ray met
+ * (-1: none), for the bakes' warnings. skip_obj[object] != 0 (where skip): the first ray passes
+ * through that object (a capture's exclude list; later bounces see it).
  * Work item (probe first + i, ray r): out[i nrays + r]; the ray's random stream is its probe and
  * ray number ray0 + r, so a bake is the same however it is split into launches. The reflection
  * probes' captures (iblbake/render/reflection_probes.py) trace their texels' rays here too.
@@ -34,13 +38,17 @@ __kernel void probe_trace(__global const float4 *probe_pos, __global const float
                           __global const float *marginal, __global const float *conditional,
                           __global const float *pdf_table, CHAIN_PARAMS, const float ray_solid_angle,
                           __global const float4 *materials, SCENE_PARAMS,
-                          __global const float4 *lights, const int nlights, __global float4 *ray_out)
+                          __global const float4 *lights, const int nlights, __global const int *skip_obj,
+                          const int skip, __global float4 *ray_out, __global int *ray_obj)
 {
     const int item = get_global_id(0);
     if (item >= count * nrays) return;
     const int probe = first + item / nrays, r = item % nrays;
     const float3 o = probe_pos[probe].xyz, d = ray_dirs[r].xyz;
-    const Hit hh = trace(o, d, SCENE_ARGS);
+    Hit hh = trace_range(o, d, 0.0f, INFINITY, 0, !back_faces_black, SCENE_ARGS);
+    for (int k = 0; skip && k < 64 && hh.kind != PRIM_NONE && skip_obj[hit_object(hh.kind, hh.index, SCENE_ARGS)]; ++k)
+        hh = trace_range(o, d, hh.t, INFINITY, 0, !back_faces_black, SCENE_ARGS);
+    ray_obj[item] = hh.kind == PRIM_NONE ? -1 : hit_object(hh.kind, hh.index, SCENE_ARGS);
     if (hh.kind == PRIM_NONE) {
         const float3 e = to_env(d, env_rot);
         const float share = ray_dirs[r].w > 0.0f ? ray_dirs[r].w : ray_solid_angle;
@@ -51,7 +59,7 @@ __kernel void probe_trace(__global const float4 *probe_pos, __global const float
     float3 ng, ns;
     int m, obj;
     hit_normals(hh.kind, hh.index, o + hh.t * d, hh.b1, hh.b2, &ng, &ns, &m, &obj, SCENE_ARGS);
-    const int back = hh.kind != PRIM_PLANE && dot(ng, d) > 0.0f;
+    const int back = probe_back_face(hh.kind, hh.index, ng, d, SCENE_ARGS);
     if ((back && back_faces_black) || !shade) {
         ray_out[item] = (float4)(0.0f, 0.0f, 0.0f, back ? -hh.t : hh.t);
         return;

@@ -20,6 +20,10 @@
                      const int probe_dist_texels
 #define PROBE_ARGS probe_data, probe_irr, probe_dist, probe_origin, probe_spacing, probe_nx, probe_ny, probe_nz, \
                    probe_irr_texels, probe_dist_texels
+/* where a point's irradiance came from (probe_irradiance's w) */
+#define PROBE_SOURCE_CELL 1.0f
+#define PROBE_SOURCE_NEAREST 2.0f
+#define PROBE_SOURCE_NONE 0.0f
 
 /* DDGIGetOctahedralCoordinates: [-1, 1]^2, +z at the centre, -z at the corners */
 inline float2 probe_octahedral(float3 d)
@@ -76,10 +80,55 @@ inline float probe_volume_weight(float3 p, const float4 probe_origin, const floa
     return w.x * w.y * w.z;
 }
 
-/* The irradiance at surface point p with shading normal n seen along v (towards the viewer).
- * probe_origin.xyz: probe (0, 0, 0); .w the normal bias; probe_spacing.xyz the cell; .w the view
- * bias (both in world units). No contributing probe (all eight inactive): 0, as RTXGI. */
-inline float3 probe_irradiance(float3 p, float3 n, float3 v, PROBE_PARAMS)
+/* Probe c's weight at the biased point (its factor `falloff`: the trilinear one, or the fallback's
+ * inverse square distance) and its value (sqrt E with visibility, E without): 0 for an inactive
+ * probe. */
+inline float probe_contribution(int3 c, float3 p, float3 biased, float3 n, float3 falloff, float3 *value,
+                                PROBE_PARAMS)
+{
+    const float3 origin = probe_origin.xyz, spacing = probe_spacing.xyz;
+    const int index = c.y * probe_nx * probe_nz + c.z * probe_nx + c.x;
+    const float4 data = probe_data[index];
+#ifdef PROBE_CLASSIFICATION
+    if (data.w != 0.0f) return 0.0f;
+#endif
+    const float3 e = probe_irradiance_at(probe_irr, index, n, probe_irr_texels, probe_nx, probe_ny, probe_nz);
+#ifdef PROBE_VISIBILITY
+    const float3 pp = origin + convert_float3(c) * spacing + data.xyz;
+    const float3 tri = fmax(falloff, 0.001f);
+    /* wrap shading: a probe behind the surface still counts a little */
+    const float wrap = 0.5f * (dot(normalize(pp - p), n) + 1.0f);
+    float w = wrap * wrap + 0.2f;
+    /* Chebyshev's bound on the chance the probe sees the point, from the mean and mean square
+     * of the probe's distances towards it */
+    const float3 to_probe = pp - biased;
+    const float dist = length(to_probe);
+    const float2 m = probe_atlas_read(probe_dist, index, probe_octahedral(-to_probe / dist), probe_dist_texels,
+                                      probe_nx, probe_ny, probe_nz).xy;
+    float cheb = 1.0f;
+    if (dist > m.x) {
+        const float var = fabs(m.x * m.x - m.y), dv = dist - m.x;
+        cheb = var / (var + dv * dv);
+        cheb = cheb * cheb * cheb;
+    }
+    w *= fmax(0.05f, cheb);
+    w = fmax(1e-6f, w);
+    if (w < 0.2f) w *= w * w * (1.0f / (0.2f * 0.2f));     /* crush tiny weights, continuously */
+    *value = sqrt(e);
+    return w * tri.x * tri.y * tri.z;
+#else
+    *value = e;
+    return falloff.x * falloff.y * falloff.z;
+#endif
+}
+
+/* The irradiance at surface point p with shading normal n seen along v (towards the viewer), in
+ * xyz; w where it came from (PROBE_SOURCE_*): the eight probes of the cell around the point
+ * (RTXGI), or where all eight are inactive the active probes of the 4 x 4 x 4 around it, each
+ * weighted by its inverse square distance (in cells) with the same visibility (RTXGI returns 0
+ * there), or none of those (0: the caller falls back to the panorama). probe_origin.xyz: probe
+ * (0, 0, 0); .w the normal bias; probe_spacing.xyz the cell; .w the view bias (world units). */
+inline float4 probe_irradiance(float3 p, float3 n, float3 v, PROBE_PARAMS)
 {
     const float3 origin = probe_origin.xyz, spacing = probe_spacing.xyz;
     const int3 last = (int3)(probe_nx - 1, probe_ny - 1, probe_nz - 1);
@@ -87,53 +136,35 @@ inline float3 probe_irradiance(float3 p, float3 n, float3 v, PROBE_PARAMS)
     const float3 g = (biased - origin) / spacing;
     const int3 base = clamp(convert_int3(floor(g)), (int3)(0), last);
     const float3 alpha = clamp(g - convert_float3(base), 0.0f, 1.0f);
-    float3 sum = (float3)(0.0f);
-    float wsum = 0.0f;
+    float3 sum = (float3)(0.0f), value;
+    float wsum = 0.0f, source = PROBE_SOURCE_CELL;
     for (int i = 0; i < 8; ++i) {
         const int3 off = (int3)(i & 1, (i >> 1) & 1, (i >> 2) & 1);
-        const int3 c = clamp(base + off, (int3)(0), last);
-        const int index = c.y * probe_nx * probe_nz + c.z * probe_nx + c.x;
-        const float4 data = probe_data[index];
-#ifdef PROBE_CLASSIFICATION
-        if (data.w != 0.0f) continue;
-#endif
-        const float3 tri3 = select(1.0f - alpha, alpha, off == (int3)(1));
-        const float3 e = probe_irradiance_at(probe_irr, index, n, probe_irr_texels, probe_nx, probe_ny, probe_nz);
-#ifdef PROBE_VISIBILITY
-        const float3 pp = origin + convert_float3(c) * spacing + data.xyz;
-        const float3 tri = fmax(tri3, 0.001f);
-        /* wrap shading: a probe behind the surface still counts a little */
-        const float wrap = 0.5f * (dot(normalize(pp - p), n) + 1.0f);
-        float w = wrap * wrap + 0.2f;
-        /* Chebyshev's bound on the chance the probe sees the point, from the mean and mean square
-         * of the probe's distances towards it */
-        const float3 to_probe = pp - biased;
-        const float dist = length(to_probe);
-        const float2 m = probe_atlas_read(probe_dist, index, probe_octahedral(-to_probe / dist), probe_dist_texels,
-                                          probe_nx, probe_ny, probe_nz).xy;
-        float cheb = 1.0f;
-        if (dist > m.x) {
-            const float var = fabs(m.x * m.x - m.y), dv = dist - m.x;
-            cheb = var / (var + dv * dv);
-            cheb = cheb * cheb * cheb;
-        }
-        w *= fmax(0.05f, cheb);
-        w = fmax(1e-6f, w);
-        if (w < 0.2f) w *= w * w * (1.0f / (0.2f * 0.2f));     /* crush tiny weights, continuously */
-        w *= tri.x * tri.y * tri.z;
-        sum += w * sqrt(e);
-#else
-        const float w = tri3.x * tri3.y * tri3.z;
-        sum += w * e;
-#endif
+        const float w = probe_contribution(clamp(base + off, (int3)(0), last), p, biased, n,
+                                           select(1.0f - alpha, alpha, off == (int3)(1)), &value, PROBE_ARGS);
+        sum += w * value;
         wsum += w;
     }
-    if (!(wsum > 0.0f)) return (float3)(0.0f);
+    if (!(wsum > 0.0f)) {
+        source = PROBE_SOURCE_NEAREST;
+        const int3 lo = max(base - 1, (int3)(0)), hi = min(base + 2, last);
+        for (int z = lo.z; z <= hi.z; ++z)
+            for (int y = lo.y; y <= hi.y; ++y)
+                for (int x = lo.x; x <= hi.x; ++x) {
+                    const float3 dc = convert_float3((int3)(x, y, z)) - g;
+                    const float f = 1.0f / fmax(dot(dc, dc), 0.01f);
+                    const float w = probe_contribution((int3)(x, y, z), p, biased, n, (float3)(f, 1.0f, 1.0f), &value,
+                                                       PROBE_ARGS);
+                    sum += w * value;
+                    wsum += w;
+                }
+    }
+    if (!(wsum > 0.0f)) return (float4)(0.0f, 0.0f, 0.0f, PROBE_SOURCE_NONE);
 #ifdef PROBE_VISIBILITY
     const float3 s = sum / wsum;
-    return s * s;
+    return (float4)(s * s, source);
 #else
-    return sum / wsum;
+    return (float4)(sum / wsum, source);
 #endif
 }
 

@@ -150,6 +150,14 @@ inline int hit_material(int kind, int index, float3 p, float3 *ng, SCENE_PARAMS)
     return as_int(tris[TRIANGLE_FLOAT4S * index].w);
 }
 
+/* The object a hit belongs to (objects.N of the scene) */
+inline int hit_object(int kind, int index, SCENE_PARAMS)
+{
+    if (kind == PRIM_SPHERE) return as_int(spheres[SPHERE_FLOAT4S * index + 1].y);
+    if (kind == PRIM_PLANE) return as_int(planes[PLANE_FLOAT4S * index + 1].w);
+    return as_int(tris[TRIANGLE_FLOAT4S * index + 1].w);
+}
+
 /* A hit's geometric normal (unit; a triangle's by its winding) and shading normal (a triangle's
  * interpolated from its corners, on the geometric normal's side), before any turning towards the
  * viewer; its material and object. The G-buffer's primary hits and the reference's path vertices. */
@@ -250,18 +258,40 @@ inline float4 hit_tangent(int kind, int index, float3 p, float3 ns, float b1, fl
 }
 #endif
 
+/* A primitive's SURFACE_FLAGS (layout.h): what its material asks of every hit, and whether it
+ * bounds a solid */
+inline int surface_flags(int kind, int index, SCENE_PARAMS)
+{
+    if (kind == PRIM_SPHERE) return as_int(spheres[SPHERE_FLOAT4S * index + 1].z);
+    if (kind == PRIM_PLANE) return as_int(planes[PLANE_FLOAT4S * index + 4].x);
+    return as_int(tris[TRIANGLE_FLOAT4S * index + 2].w);
+}
+
+/* Whether an irradiance probe's ray that meets this hit (geometric normal ng, by the winding) from
+ * direction d sees a back face, the probe being inside geometry (docs/conventions.md "Sides"): the
+ * inside of a solid (a sphere, a closed mesh, flipped where wound inwards), or the back of a
+ * single-sided surface. A double-sided open surface is a front face from either side. */
+inline int probe_back_face(int kind, int index, float3 ng, float3 d, SCENE_PARAMS)
+{
+    const int f = surface_flags(kind, index, SCENE_ARGS);
+    const float s = dot(ng, d);
+    if (f & SURFACE_SOLID) return (f & SURFACE_SOLID_FLIPPED) ? s < 0.0f : s > 0.0f;
+    return (f & SURFACE_SINGLE_SIDED) && s > 0.0f;
+}
+
 #if defined(HAS_ALPHA_MASK) || defined(HAS_SINGLE_SIDED)
-/* Whether a candidate hit is there at all: a single-sided material's back face is not, nor where
- * a masked material's alpha (its factor times the base map's alpha at level 0, as an any-hit
- * shader reads it) is below its cutoff. */
-inline int surface_present(int kind, int index, float3 o, float3 d, float t, float b1, float b2, SCENE_PARAMS)
+/* Whether a candidate hit is there at all: a single-sided material's back face is not (where cull),
+ * nor where a masked material's alpha (its factor times the base map's alpha at level 0, as an
+ * any-hit shader reads it) is below its cutoff. */
+inline int surface_present(int kind, int index, float3 o, float3 d, float t, float b1, float b2, int cull,
+                           SCENE_PARAMS)
 {
     const float3 p = o + t * d;
     float3 ng;
     const int m = hit_material(kind, index, p, &ng, SCENE_ARGS);
     __global const float4 *mm = mat_maps + MATERIAL_MAPS_FLOAT4S * m;
 #ifdef HAS_SINGLE_SIDED
-    if (mm[1].x > 0.5f && dot(ng, d) > 0.0f) return 0;
+    if (cull && mm[1].x > 0.5f && dot(ng, d) > 0.0f) return 0;
 #endif
 #ifdef HAS_ALPHA_MASK
     const float cutoff = mm[0].y;
@@ -277,14 +307,9 @@ inline int surface_present(int kind, int index, float3 o, float3 d, float t, flo
     return 1;
 }
 /* only where the primitive's material asks */
-inline int surface_flags(int kind, int index, SCENE_PARAMS)
-{
-    if (kind == PRIM_SPHERE) return as_int(spheres[SPHERE_FLOAT4S * index + 1].z);
-    if (kind == PRIM_PLANE) return as_int(planes[PLANE_FLOAT4S * index + 4].x);
-    return as_int(tris[TRIANGLE_FLOAT4S * index + 2].w);
-}
 #define PRESENT(kind, index, t, b1, b2) \
-    (surface_flags(kind, index, SCENE_ARGS) == 0 || surface_present(kind, index, o, d, t, b1, b2, SCENE_ARGS))
+    ((surface_flags(kind, index, SCENE_ARGS) & (SURFACE_SINGLE_SIDED | SURFACE_ALPHA_MASK)) == 0 \
+     || surface_present(kind, index, o, d, t, b1, b2, cull, SCENE_ARGS))
 #define ABSENT(kind, index, t, b1, b2) (!PRESENT(kind, index, t, b1, b2))
 #else
 #define PRESENT(kind, index, t, b1, b2) 1
@@ -292,8 +317,9 @@ inline int surface_flags(int kind, int index, SCENE_PARAMS)
 #endif
 
 /* The nearest hit in (tmin, tmax), or with any_hit the first one found (a shadow ray needs no
- * more): h.kind = PRIM_NONE where there is none. */
-inline Hit trace_range(float3 o, float3 d, float tmin, float tmax, int any_hit, SCENE_PARAMS)
+ * more): h.kind = PRIM_NONE where there is none. cull: single-sided surfaces are not there from
+ * behind (every ray of the renderer); 0: they are (an irradiance probe sees their backs). */
+inline Hit trace_range(float3 o, float3 d, float tmin, float tmax, int any_hit, int cull, SCENE_PARAMS)
 {
     Hit h;
     h.t = tmax; h.kind = PRIM_NONE; h.index = -1; h.b1 = 0.0f; h.b2 = 0.0f;
@@ -365,20 +391,20 @@ inline Hit trace_range(float3 o, float3 d, float tmin, float tmax, int any_hit, 
 
 inline Hit trace(float3 o, float3 d, SCENE_PARAMS)
 {
-    return trace_range(o, d, 0.0f, INFINITY, 0, SCENE_ARGS);
+    return trace_range(o, d, 0.0f, INFINITY, 0, 1, SCENE_ARGS);
 }
 
 /* Any hit along o + t d, t > 0: the shadow ray of a lighting sample. The origin is the shaded
  * point moved off the surface by ray_offset, so the surface does not shadow itself. */
 inline int occluded(float3 o, float3 d, SCENE_PARAMS)
 {
-    return trace_range(o, d, 0.0f, INFINITY, 1, SCENE_ARGS).kind != PRIM_NONE;
+    return trace_range(o, d, 0.0f, INFINITY, 1, 1, SCENE_ARGS).kind != PRIM_NONE;
 }
 
 /* Any hit along o + t d, 0 < t < tmax: a shadow ray towards a light at distance tmax. */
 inline int occluded_to(float3 o, float3 d, float tmax, SCENE_PARAMS)
 {
-    return trace_range(o, d, 0.0f, tmax, 1, SCENE_ARGS).kind != PRIM_NONE;
+    return trace_range(o, d, 0.0f, tmax, 1, 1, SCENE_ARGS).kind != PRIM_NONE;
 }
 
 /* Where a secondary ray starts: the hit p of a primary ray of direction d that travelled t, moved

@@ -101,7 +101,7 @@ __kernel void t_probes(__global const float4 *p, __global const float4 *n, __glo
                        __global float4 *out)
 {
     const int i = get_global_id(0);
-    out[i] = (float4)(probe_irradiance(p[i].xyz, n[i].xyz, v[i].xyz, PROBE_ARGS), 0.0f);
+    out[i] = probe_irradiance(p[i].xyz, n[i].xyz, v[i].xyz, PROBE_ARGS);
 }
 
 __kernel void t_probe_octahedral(__global const float4 *d, __global float2 *uv)

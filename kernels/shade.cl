@@ -1,6 +1,6 @@
 /* Shade pass: the approximate lighting terms the scene asks for, added into the radiance buffer.
  *   DIFFUSE_MODE  DIFFUSE_SH (SH_BANDS bands), DIFFUSE_PROBES (the irradiance probes around the point,
- *                 kernels/probes.h) or off
+ *                 kernels/probes.h; probe_stats counts the samples that fell back) or off
  *   SPECULAR_MODE SPECULAR_IMPORTANCE (the importance pass's sums, kernels/importance.cl,
  *                 combined here with f0) or SPECULAR_PREFILTERED
  *                 (DOMINANT_DIRECTION; HAS_REFLECTION_PROBES: the local probes' captures where they
@@ -75,7 +75,7 @@ __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
                     __global const float4 *hammersley_pts, const int nsamples, const float mip_bias, const float lobe_spread,
                     __global const float2 *dfg, const int dfg_size, __global const float *ao_buf,
                     __global const float4 *spec_sums, PROBE_PARAMS, RPROBE_PARAMS, __global float4 *ssr_env,
-                    __global float4 *radiance)
+                    __global int *probe_stats, __global float4 *radiance)
 {
     const int gid = get_global_id(0);
     if (gid >= n) return;
@@ -102,11 +102,22 @@ __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
 #elif DIFFUSE_MODE == DIFFUSE_PROBES
     {
         /* the probes' irradiance holds the panorama's intensity already (their rays read it
-         * scaled); outside the volume, the panorama's SH takes over */
+         * scaled); outside the volume, and where no active probe is near (counted in probe_stats:
+         * [0] the nearest active probes stood in for the cell's, [1] none did), the panorama's SH */
         const float3 p = gb_pos[gid].xyz;
         const float wv = probe_volume_weight(p, probe_origin, probe_spacing, probe_nx, probe_ny, probe_nz);
-        float3 e = wv > 0.0f ? wv * probe_irradiance(p, nrm, v, PROBE_ARGS) : (float3)(0.0f);
-        if (wv < 1.0f) e += (1.0f - wv) * env_scale * sh_irradiance(sh_coeffs, to_env(nrm, env_rot));
+        float3 sky = (float3)(0.0f);
+        if (wv < 1.0f) sky = env_scale * sh_irradiance(sh_coeffs, to_env(nrm, env_rot));
+        float3 e = (1.0f - wv) * sky;
+        if (wv > 0.0f) {
+            float4 pe = probe_irradiance(p, nrm, v, PROBE_ARGS);
+            if (pe.w == PROBE_SOURCE_NEAREST) atomic_inc(&probe_stats[0]);
+            if (pe.w == PROBE_SOURCE_NONE) {
+                atomic_inc(&probe_stats[1]);
+                pe.xyz = env_scale * sh_irradiance(sh_coeffs, to_env(nrm, env_rot));
+            }
+            e += wv * pe.xyz;
+        }
         color += diff_occ * diffuse_weight(mt, nov) * e;
     }
 #endif

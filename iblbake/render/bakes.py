@@ -154,7 +154,7 @@ class Bakes:
         if not meshes:
             return pack.scene_arrays(sc, (np.zeros((0, 6, 4), np.float32), np.zeros((0, 8), np.float32),
                                           {"meshes": [], "triangles": 0, "load_s": 0.0},
-                                          np.zeros((0, 7, 4), np.float32)))
+                                          np.zeros((0, 7, 4), np.float32), np.zeros((0, 2), np.int32)))
         try:
             _records, offsets = materials.table(sc)
             parts = [{"object": oid, "sha256": self.file_sha256(o["mesh"]["path"]),
@@ -164,22 +164,25 @@ class Bakes:
                      for oid, o in meshes]
         except (OSError, IblbakeError):   # a missing or unreadable mesh: the loader says so, in one line
             return pack.scene_arrays(sc)
-        key = "geometry-" + cache.content_key({"kind": "geometry", "v": 2, "meshes": parts,
+        key = "geometry-" + cache.content_key({"kind": "geometry", "v": 3, "meshes": parts,
                                                "attributes": pack.needs_attributes(sc), "code": _geometry_code_hash()})
 
         def make():
             def build(tmp: Path):
-                arr, nodes, report, attr = pack.mesh_arrays(sc)
+                arr, nodes, report, attr, closed = pack.mesh_arrays(sc)
                 np.save(tmp / "triangles.npy", arr)
                 np.save(tmp / "bvh.npy", nodes)
                 np.save(tmp / "attributes.npy", attr)
+                np.save(tmp / "closed.npy", closed)
                 return {"kind": "geometry", "files": [{"name": n} for n in ("triangles.npy", "bvh.npy",
-                                                                          "attributes.npy")], "report": report}
+                                                                          "attributes.npy", "closed.npy")],
+                        "report": report}
 
             manifest, cached = cache.get_or_build(self.root, key, build, warn=warn)
             entry = self.root / manifest["key"]
             arrays = (np.load(entry / "triangles.npy"), np.load(entry / "bvh.npy"),
-                      {**manifest["report"], "cached": cached}, np.load(entry / "attributes.npy"))
+                      {**manifest["report"], "cached": cached}, np.load(entry / "attributes.npy"),
+                      np.load(entry / "closed.npy"))
             return arrays
 
         meshes_arrays = self._get(("geometry", key), make)
@@ -341,9 +344,12 @@ class Bakes:
 
         (vol, manifest, cached), hit = self._recall(key, make)
         rep = manifest["probes"]["report"]
+        for w in probes.warnings(rep, ctx.scene.data):    # said for a cached volume too
+            ctx.warn(w)
         return vol, cached or hit, {"probes": rep["probes"], "rays_traced": rep["rays_traced"],
                                     "bake_s": rep["seconds"], "inactive": rep["inactive"],
-                                    "relocated": rep["relocated"], "entry": str(self.root / manifest["key"])}
+                                    "relocated": rep["relocated"], "inside_geometry": rep.get("inside_geometry", 0),
+                                    "entry": str(self.root / manifest["key"])}
 
     def _reflection_probes(self, ctx):
         """Each reflection probe's capture (render/reflection_probes.py: the scene traced from its

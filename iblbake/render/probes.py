@@ -164,7 +164,7 @@ def trace_defines(scene, bounces) -> dict:
 class Tracer:
     """Probe rays on the frame context's device, with its scene tables and panorama."""
 
-    def __init__(self, ctx, settings: dict, back_faces_black: bool = True):
+    def __init__(self, ctx, settings: dict, back_faces_black: bool = True, skip_objects=()):
         from iblbake.render.passes.lights import frame_lights
         from iblbake.render.passes.reference import environment_args
         from iblbake.scene import pack
@@ -177,49 +177,73 @@ class Tracer:
         recs = np.zeros((0, 4), np.float32)
         if "PATH_LIGHTS" in self.defines:
             recs = pack.light_records(frame_lights(ctx.scene, ctx.bakes.sun(ctx.scene.data["environment"])))
+        skip = np.zeros(max(len(ctx.scene.data["objects"]), 1), np.int32)
+        skip[list(skip_objects)] = 1
         self.args = {**environment_args(ctx, dist), "nlights": len(recs), **ctx.chain(chain),
-                     "lights": rt.to_device(recs.reshape(-1, 4) if len(recs) else np.zeros((4, 4), np.float32))}
+                     "lights": rt.to_device(recs.reshape(-1, 4) if len(recs) else np.zeros((4, 4), np.float32)),
+                     "skip_obj": rt.to_device(skip), "skip": int(bool(len(skip_objects)))}
         self.rays_traced = 0
 
     def trace(self, positions, dirs, shade: bool, progress=None, done=0.0, share=1.0, probe0=0, ray0=0):
-        """(radiance (probes, rays, 3), signed distance (probes, rays)) from every position; dirs
-        (rays, 3), or (rays, 4) with each ray's share of the sphere in w (probe_trace.cl). probe0,
-        ray0: the first probe's and ray's numbers (their random streams)."""
+        """(radiance (probes, rays, 3), signed distance (probes, rays), the object each ray met
+        (probes, rays), -1 none) from every position; dirs (rays, 3), or (rays, 4) with each ray's
+        share of the sphere in w (probe_trace.cl). probe0, ray0: the first probe's and ray's
+        numbers (their random streams)."""
         rt, n, nrays = self.rt, len(positions), len(dirs)
         pos = rt.to_device(np.pad(np.asarray(positions, np.float32), ((probe0, 0), (0, 1))))
         dirs = np.asarray(dirs, np.float32)
         dir_buf = rt.to_device(dirs if dirs.shape[1] == 4 else np.pad(dirs, ((0, 0), (0, 1))))
         per_launch = max(1, (1 << (20 if rt.info.kind == "GPU" else 16)) // nrays)
         out = np.empty((n, nrays, 4), np.float32)
+        obj = np.empty((n, nrays), np.int32)
         buf = rt.empty(16 * min(n, per_launch) * nrays)
+        obj_buf = rt.empty(4 * min(n, per_launch) * nrays)
         for first in range(0, n, per_launch):
             count = min(per_launch, n - first)
             rt.launch("probe_trace.cl", "probe_trace", self.defines, (count * nrays,), self.ctx.table, **self.args,
                       probe_pos=pos, ray_dirs=dir_buf, nrays=nrays, first=probe0 + first, count=count, ray0=ray0,
                       ray_solid_angle=4 * np.pi / nrays,
                       seed=self.settings["seed"], shade=int(shade), back_faces_black=int(self.back_faces_black),
-                      ray_out=buf)
+                      ray_out=buf, ray_obj=obj_buf)
             out[first:first + count] = rt.read(buf, (count * nrays, 4)).reshape(count, nrays, 4)
+            obj[first:first + count] = rt.read(obj_buf, (count * nrays,), np.int32).reshape(count, nrays)
             if progress:
                 progress(done + share * (first + count) / n)
         self.rays_traced += n * nrays
-        return out[..., :3].astype(np.float64), out[..., 3].astype(np.float64)
+        return out[..., :3].astype(np.float64), out[..., 3].astype(np.float64), obj
 
 
-def relocate(tracer: Tracer, grid: Grid, settings: dict, progress=None) -> np.ndarray:
+def inside_geometry(t, obj, threshold: float):
+    """(whether each probe is inside geometry: its rays meet back faces more often than the
+    threshold; the object most of them meet, -1 for a probe that is not)."""
+    back = t < 0
+    inside = back.mean(1) > threshold
+    who = np.full(len(t), -1)
+    for p in np.nonzero(inside)[0]:
+        ids, counts = np.unique(obj[p][back[p]], return_counts=True)
+        who[p] = ids[counts.argmax()]
+    return inside, who
+
+
+def relocate(tracer: Tracer, grid: Grid, settings: dict, progress=None):
     """Probe offsets (world units) after RELOCATION_PASSES of RTXGI's ProbeRelocationCS on the
     FIXED_RAYS unrotated rays: a probe whose rays meet back faces more often than the threshold is
     inside geometry and moves out past the nearest one; one nearer a front face than
     min_frontface_distance moves towards the farthest (RTXGI steps one world unit there; here
     min(min_frontface_distance, half that distance)); one far from everything moves back
-    towards its grid position. A move that would leave 45% of the cell is not made."""
+    towards its grid position. A move that would leave 45% of the cell is not made. Returns the
+    offsets and inside_geometry() at the grid positions."""
     dirs = spherical_fibonacci(FIXED_RAYS)
     base = grid.positions()
     spacing = np.asarray(grid.spacing)
     min_front = settings["min_frontface_distance"] * grid.unit
     offset = np.zeros_like(base)
+    at_grid = None
     for k in range(RELOCATION_PASSES):
-        _, t = tracer.trace(base + offset, dirs, False, progress, 0.2 * k / RELOCATION_PASSES, 0.2 / RELOCATION_PASSES)
+        _, t, obj = tracer.trace(base + offset, dirs, False, progress, 0.2 * k / RELOCATION_PASSES,
+                                 0.2 / RELOCATION_PASSES)
+        if at_grid is None:
+            at_grid = inside_geometry(t, obj, settings["backface_threshold"])
         back = t < 0
         n_back = back.sum(1)
         tb = np.where(back, -t, np.inf)
@@ -251,7 +275,7 @@ def relocate(tracer: Tracer, grid: Grid, settings: dict, progress=None) -> np.nd
         if np.array_equal(new, offset):
             break
         offset = new
-    return offset
+    return offset, at_grid
 
 
 def classify(t, dirs, grid: Grid, settings: dict) -> np.ndarray:
@@ -340,17 +364,49 @@ def bake(ctx, settings: dict, progress=None) -> dict:
     t0 = time.perf_counter()
     grid = grid_of(settings, ctx.arrays if ctx.arrays is not None else ctx.bakes.geometry(ctx.scene))
     tracer = Tracer(ctx, settings)
-    offset = relocate(tracer, grid, settings, progress) if settings["relocation"] else np.zeros((grid.count, 3))
+    if settings["relocation"]:
+        offset, at_grid = relocate(tracer, grid, settings, progress)
+    else:
+        offset, at_grid = np.zeros((grid.count, 3)), None
     dirs = ray_directions(settings["rays"], settings["seed"])
     base = 0.2 if settings["relocation"] else 0.0
-    radiance, t = tracer.trace(grid.positions() + offset, dirs, True, progress, base, 1.0 - base)
+    radiance, t, obj = tracer.trace(grid.positions() + offset, dirs, True, progress, base, 1.0 - base)
     states = classify(t, dirs, grid, settings) if settings["classification"] else np.zeros(grid.count, int)
     irr, dist = project(radiance, t, dirs, grid, settings)
     data = np.concatenate([offset, states[:, None].astype(np.float64)], 1)
-    return volume_dict(grid, settings, irr, dist, data, {
-        "probes": grid.count, "rays_per_probe": settings["rays"], "rays_traced": tracer.rays_traced,
-        "inactive": int((states == INACTIVE).sum()), "relocated": int((np.abs(offset).sum(1) > 0).sum()),
-        "seconds": round(time.perf_counter() - t0, 4)})
+    inside, who = inside_geometry(t, obj, settings["backface_threshold"])
+    if at_grid is not None:                       # inside at their grid positions: moved out, or not
+        who = np.where(at_grid[0], at_grid[1], who)
+        inside = inside | at_grid[0]
+    objects = {}
+    for o in who[inside]:
+        objects[int(o)] = objects.get(int(o), 0) + 1
+    report = {"probes": grid.count, "rays_per_probe": settings["rays"], "rays_traced": tracer.rays_traced,
+              "inactive": int((states == INACTIVE).sum()), "relocated": int((np.abs(offset).sum(1) > 0).sum()),
+              "inside_geometry": int(inside.sum()),
+              "inside_objects": {str(k): v for k, v in sorted(objects.items(), key=lambda kv: -kv[1])},
+              "seconds": round(time.perf_counter() - t0, 4)}
+    return volume_dict(grid, settings, irr, dist, data, report)
+
+
+INSIDE_WARN = 0.25      # the share of probes inside geometry (at their grid positions or after) that is said
+
+
+def warnings(report: dict, scene_data: dict) -> list:
+    """What a bake's report says a user should know: more than INSIDE_WARN of the probes were inside
+    geometry (relocated out of it, or switched off), with the objects whose back faces they saw."""
+    from iblbake.scene.load import object_label
+
+    n, inside = report["probes"], report.get("inside_geometry", 0)
+    if not n or inside <= INSIDE_WARN * n:
+        return []
+    objs = report.get("inside_objects", {})
+    named = ", ".join(f"{object_label(scene_data, int(o))}: {c}" for o, c in list(objs.items())[:3]
+                      if int(o) < len(scene_data["objects"]))
+    return [f"probes: {inside} of {n} probes ({100 * inside / n:.0f}%) are inside geometry (their rays meet the back "
+            f"faces of {named}{', ...' if len(objs) > 3 else ''}); {report['inactive']} probes are off. A double-sided "
+            "surface is a front face to probes on either side: set objects.N.solid: false on a closed shell they "
+            "should see from within, or move the grid (probes.min, probes.max)"]
 
 
 SAMPLING_KEYS = ("visibility", "normal_bias", "view_bias")   # read when shading, not baked

@@ -44,7 +44,7 @@ def capture(tracer, index: int, settings: dict, progress=None) -> np.ndarray:
     per = max(n, CHUNK_RAYS // n * n)              # whole texels per launch
     pos = np.asarray([settings["position"]], np.float64)
     for r0 in range(0, len(dirs), per):
-        rad, t = tracer.trace(pos, dirs[r0:r0 + per], True, probe0=index, ray0=r0)
+        rad, t, _obj = tracer.trace(pos, dirs[r0:r0 + per], True, probe0=index, ray0=r0)
         met = np.isfinite(np.abs(t[0]))[:, None]
         rows = np.concatenate([np.where(met, rad[0], 0.0), met.astype(np.float64)], 1)
         sums[r0 // n:(r0 + len(rad[0])) // n] = rows.reshape(-1, n, 4).mean(1)
@@ -53,7 +53,15 @@ def capture(tracer, index: int, settings: dict, progress=None) -> np.ndarray:
     return sums.reshape(size, 2 * size, 4).astype(np.float32)
 
 
+def excluded(scene_data: dict, settings: dict) -> list:
+    """The objects a probe's capture looks through: its exclude list, and every object not seen
+    by reflection captures (objects.N.reflection_captures: false)."""
+    return sorted(set(settings.get("exclude_ids") or []) |
+                  {i for i, o in enumerate(scene_data["objects"]) if not o["reflection_captures"]})
+
+
 def tracer(ctx, settings: dict):
-    """Capture rays see surfaces from either side, as the camera does (the irradiance probes' rays
-    do not: a probe inside geometry)."""
-    return probes.Tracer(ctx, {"bounces": settings["bounces"], "seed": settings["seed"]}, back_faces_black=False)
+    """Capture rays meet what camera rays meet, from either side of a double-sided surface (the
+    irradiance probes' rays see back faces: a probe inside geometry), but the excluded objects."""
+    return probes.Tracer(ctx, {"bounces": settings["bounces"], "seed": settings["seed"]}, back_faces_black=False,
+                         skip_objects=excluded(ctx.scene.data, settings))

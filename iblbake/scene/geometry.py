@@ -33,6 +33,8 @@ class Triangles:
     uv: np.ndarray | None = None          # (n, 3, 4) per corner (u0, v0, u1, v1), NaN where the mesh has none
     tangents: np.ndarray | None = None    # (n, 3, 4) per corner (tangent, w)
     uv_density: np.ndarray | None = None  # (n, 2) 0.5 log2(UV area / world area) of each set
+    component: np.ndarray | None = None   # (n,) int32: its connected component (shared edges), scene-wide
+    solid: np.ndarray | None = None       # (n,) int32: 0 open, 1 a closed component wound outwards, -1 inwards
 
     def __len__(self):
         return len(self.v0)
@@ -265,10 +267,101 @@ def build_triangles(objects: list, offsets: dict, source: str, file_materials: d
     if not parts:
         z = np.zeros((0, 3))
         return Triangles(z, z, z, np.zeros((0, 3, 3)), np.zeros(0, np.int32), np.zeros(0, np.int32), stats,
-                         np.zeros((0, 3, 4)), np.zeros((0, 3, 4)), np.zeros((0, 2)))
+                         np.zeros((0, 3, 4)), np.zeros((0, 3, 4)), np.zeros((0, 2)), np.zeros(0, np.int32),
+                         np.zeros(0, np.int32))
     cols = list(zip(*parts))
-    return Triangles(*(np.concatenate(c) for c in cols[:6]), stats=stats, uv=np.concatenate(cols[6]),
+    tris = Triangles(*(np.concatenate(c) for c in cols[:6]), stats=stats, uv=np.concatenate(cols[6]),
                      tangents=np.concatenate(cols[7]), uv_density=np.concatenate(cols[8]))
+    # closed components, each object's own (two objects' faces never weld into one solid)
+    tris.component, tris.solid = np.zeros(len(tris), np.int32), np.zeros(len(tris), np.int32)
+    base = 0
+    for st in stats:
+        sel = np.nonzero(tris.object_id == st["object"])[0]
+        comp, solid = closed_components(tris.v0[sel], tris.v1[sel], tris.v2[sel])
+        tris.component[sel], tris.solid[sel] = comp + base, solid
+        base += int(comp.max()) + 1 if len(comp) else 0
+        st["components"] = int(len(np.unique(comp)))
+        st["closed_components"] = int(len(np.unique(comp[solid != 0])))
+    return tris
+
+
+def closed_components(v0, v1, v2):
+    """(component (n,) int32, solid (n,) int32) of triangles given by their corners: faces sharing an
+    edge (corners welded where bit-identical) form a component; a component is closed when every
+    edge of it is shared by exactly two of its faces wound against each other (watertight and
+    consistently wound, trimesh's is_watertight and is_winding_consistent), and its solid is then
+    the sign of its enclosed volume (divergence theorem: +1 wound outwards, -1 inwards; 0 open).
+    A closed component bounds a solid whatever its sides (docs/conventions.md "Sides")."""
+    n = len(v0)
+    if n == 0:
+        return np.zeros(0, np.int32), np.zeros(0, np.int32)
+    corners = np.stack([v0, v1, v2], 1).reshape(-1, 3)
+    by = np.lexsort(corners.T[::-1])                     # weld: one id per distinct position
+    s = corners[by]
+    vid = np.empty(len(by), np.int64)
+    vid[by] = np.cumsum(np.r_[True, (s[1:] != s[:-1]).any(1)]) - 1
+    vid = vid.reshape(n, 3)
+    a = vid.reshape(-1)
+    b = vid[:, [1, 2, 0]].reshape(-1)
+    face = np.repeat(np.arange(n), 3)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    key = lo.astype(np.int64) * (int(vid.max()) + 1) + hi
+    order = np.argsort(key, kind="stable")
+    ks, fs = key[order], face[order]
+    first = np.r_[True, ks[1:] != ks[:-1]]
+    group = np.cumsum(first) - 1
+    count = np.bincount(group)
+    # union of the faces around each shared edge: pointer jumping to the smallest face id
+    parent = np.arange(n)
+    f1, f2 = fs[~first], fs[np.nonzero(~first)[0] - 1]
+    while len(f1):
+        r1, r2 = parent[f1], parent[f2]
+        diff = r1 != r2
+        if not diff.any():
+            break
+        np.minimum.at(parent, np.maximum(r1, r2)[diff], np.minimum(r1, r2)[diff])
+        while True:
+            jumped = parent[parent]
+            if np.array_equal(jumped, parent):
+                break
+            parent = jumped
+    _, comp = np.unique(parent, return_inverse=True)
+    # an edge is manifold and consistently wound where two faces share it and their directed
+    # edges are opposite: (a, b) in one, (b, a) in the other
+    forward = (a < b)[order]
+    good_edge = (count == 2) & (np.bincount(group, weights=forward) == 1)
+    bad_face = np.zeros(n, bool)
+    bad_face[fs[~good_edge[group]]] = True
+    ncomp = int(comp.max()) + 1
+    open_comp = np.bincount(comp, weights=bad_face, minlength=ncomp) > 0
+    volume = np.bincount(comp, weights=np.einsum("ij,ij->i", v0, np.cross(v1, v2)), minlength=ncomp)
+    solid = np.where(open_comp | (volume == 0), 0, np.sign(volume)).astype(np.int32)
+    return comp.astype(np.int32), solid[comp]
+
+
+def inside_closed(point, v0, v1, v2, component, solid) -> set:
+    """The closed components (of closed_components) that enclose `point`: a ray from it crosses
+    their surface an odd number of times (Moller-Trumbore in float64, along a direction no edge of
+    an axis-aligned mesh lies in)."""
+    sel = np.nonzero(solid != 0)[0]
+    if not len(sel):
+        return set()
+    d = np.array([0.5773502691896258, 0.5773502691896258, 0.5773502691896258]) + [1e-3, -2e-3, 3e-3]
+    d /= np.linalg.norm(d)
+    o = np.asarray(point, np.float64)
+    a, e1, e2 = v0[sel], v1[sel] - v0[sel], v2[sel] - v0[sel]
+    p = np.cross(d, e2)
+    det = np.einsum("ij,ij->i", p, e1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / det
+        sv = o - a
+        u = np.einsum("ij,ij->i", sv, p) * inv
+        q = np.cross(sv, e1)
+        v = (q @ d) * inv
+        t = np.einsum("ij,ij->i", q, e2) * inv
+    crossed = (det != 0) & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
+    hits = np.bincount(component[sel][crossed], minlength=int(component.max()) + 1)
+    return {int(c) for c in np.nonzero(hits % 2 == 1)[0]}
 
 
 def triangle_bounds(tris: Triangles):

@@ -49,8 +49,10 @@ FLOAT4S = {
     "MATERIAL_MAPS": 17,
 }
 MAP_KINDS = ("base_color", "metallic_roughness", "normal", "occlusion", "emissive")
-# a sphere's or triangle's material asks for a test at every hit: single-sided, alpha-masked
-SURFACE_FLAGS = {"single_sided": 1, "alpha_mask": 2}
+# a primitive's surface flags: its material asks for a test at every hit (single-sided, alpha-masked);
+# it bounds a solid, whose inside an irradiance probe's ray meets from behind its normal (flipped:
+# in front of it, a closed mesh wound inwards) (docs/conventions.md "Sides")
+SURFACE_FLAGS = {"single_sided": 1, "alpha_mask": 2, "solid": 4, "solid_flipped": 8}
 # Per-sample G-buffer records, one float4 each: what every pass reads by these names.
 GBUFFER = {
     "gb_pos": "hit position, w: distance along the ray (MISS_T where nothing is hit)",

@@ -179,6 +179,7 @@ def load(path, overrides=(), outputs=None, values=(), origin: str = "--set") -> 
     folder = path.resolve().parent
     _resolve_camera(v, out["camera"])
     _resolve_references(v, out, folder)
+    _resolve_names(v, out)
     _resolve_reflection_probes(v, out["reflection_probes"])
     writes = _resolve_outputs(v, out["output"], folder, outputs)
     return Scene(out, source, folder, lines, writes)
@@ -248,6 +249,40 @@ def _resolve_references(v: "_Validator", out: dict, folder: Path) -> None:
     env = out["environment"]
     env["path"] = str((folder / env["path"]).resolve()) if not Path(env["path"]).is_absolute() else env["path"]
     _must_be_file(v, "environment.path", env["path"], "an HDR panorama", folder)
+
+
+def _resolve_names(v: "_Validator", out: dict) -> None:
+    """Object names are unique; each reflection probe's `exclude` names objects (by name or
+    objects.N): their indices go into its exclude_ids."""
+    given = {}
+    for i, o in enumerate(out["objects"]):
+        if o["name"] is not None:
+            if o["name"] in given:
+                v.fail(f"objects.{i}.name", f"{o['name']!r} is the name of objects.{given[o['name']]} too; "
+                                            "give each object its own name")
+            given[o["name"]] = i
+    for k, p in enumerate(out["reflection_probes"]):
+        ids = []
+        for name in p["exclude"] or []:
+            if name in given:
+                ids.append(given[name])
+            elif name.startswith("objects.") and name[8:].isdigit() and int(name[8:]) < len(out["objects"]):
+                ids.append(int(name[8:]))
+            else:
+                near = difflib.get_close_matches(name, list(given), 1, 0.6)
+                hint = f"did you mean {near[0]!r}?" if near else \
+                    f"name objects with objects.N.name, or write objects.N ({len(out['objects'])} objects)"
+                v.fail(f"reflection_probes.{k}.exclude", f"no object named {name!r} ({hint})")
+        p["exclude_ids"] = sorted(set(ids))
+
+
+def object_label(data: dict, oid: int) -> str:
+    """What messages call object oid: its name and index, or its index and what it is."""
+    o = data["objects"][oid]
+    if o.get("name"):
+        return f"{o['name']!r} (objects.{oid})"
+    kind = "mesh " + Path(o["mesh"]["path"]).name if "mesh" in o else ("sphere" if "sphere" in o else "plane")
+    return f"objects.{oid} ({kind})"
 
 
 def _resolve_reflection_probes(v: "_Validator", probes: list) -> None:

@@ -12,7 +12,7 @@ import numpy as np
 
 from iblbake.core import sampling
 from iblbake.errors import InputError
-from iblbake.scene.layout import FLOAT4S
+from iblbake.scene.layout import FLOAT4S, SURFACE_FLAGS
 from iblbake.scene import geometry
 from iblbake.scene.bvh import build_bvh
 from iblbake.scene.load import Scene
@@ -57,6 +57,7 @@ class SceneArrays:
     geometry_report: dict
     tri_attr: np.ndarray | None = None      # (t, TRIANGLE_ATTR, 4) float32, BVH order (uv, tangents, density)
     records: list | None = None             # the material table (iblbake.scene.materials)
+    tri_closed: np.ndarray | None = None    # (t, 2) int32, BVH order: component, its solid (geometry.closed_components)
 
 
 def _int_bits(x):
@@ -65,7 +66,7 @@ def _int_bits(x):
 
 def scene_arrays(scene: Scene, meshes=None) -> SceneArrays:
     """Every record the device reads but the textures. `meshes`, the (triangles, BVH nodes,
-    report, triangle attributes) of mesh_arrays(), may come from a cache (they are the costly
+    report, triangle attributes, closed parts) of mesh_arrays(), may come from a cache (they are the costly
     part: a 1.3M-triangle PLY takes seconds to load and split)."""
     from iblbake.scene import materials
 
@@ -96,18 +97,62 @@ def scene_arrays(scene: Scene, meshes=None) -> SceneArrays:
             a[3, :3], a[3, 3] = b, hd
             a[4, 0] = _int_bits(flags[index[o["material"]]])
             planes.append(a)
-    arr, nodes, report, attr = meshes if meshes is not None else mesh_arrays(scene)
+    arr, nodes, report, attr, closed = meshes if meshes is not None else mesh_arrays(scene)
     if len(arr):                     # the flags of the triangles' materials now (the cache keeps none)
         arr = arr.copy()
-        arr[:, 2, 3] = _int_bits(flags[arr[:, 0, 3].view(np.int32)])
-    return SceneArrays(mats, names, np.array(spheres, np.float32).reshape(-1, 2, 4),
-                       np.array(planes, np.float32).reshape(-1, FLOAT4S["PLANE"], 4), arr, nodes, report, attr, records)
+        tri_flags = flags[arr[:, 0, 3].view(np.int32)]
+        arr[:, 2, 3] = _int_bits(tri_flags | solid_flags(scene, arr, closed, tri_flags))
+    spheres = np.array(spheres, np.float32).reshape(-1, 2, 4)
+    for i, s in enumerate(spheres):
+        oid = int(s[1, 1:2].view(np.int32)[0])
+        f = int(s[1, 2:3].view(np.int32)[0])
+        if not f & SURFACE_FLAGS["single_sided"] and solid_object(d["objects"][oid], True,
+                                                                   _camera_inside_sphere(scene, s[0])):
+            s[1, 2] = _int_bits(f | SURFACE_FLAGS["solid"])
+    return SceneArrays(mats, names, spheres, np.array(planes, np.float32).reshape(-1, FLOAT4S["PLANE"], 4), arr, nodes,
+                       report, attr, records, closed)
+
+
+def solid_object(obj: dict, closed: bool, camera_inside: bool) -> bool:
+    """Whether a closed part of an object bounds a solid to the probes (objects.N.solid): auto,
+    where it is closed and the camera is not inside it (a room seen from within is no solid)."""
+    return obj["solid"] is True or (obj["solid"] == "auto" and closed and not camera_inside)
+
+
+def _camera_inside_sphere(scene: Scene, s) -> bool:
+    pos = np.asarray(camera_vectors(scene.data["camera"])[0])
+    return float(np.linalg.norm(pos - s[:3].astype(np.float64))) < float(s[3])
+
+
+def solid_flags(scene: Scene, arr, closed, tri_flags) -> np.ndarray:
+    """SURFACE_FLAGS' solid bits of each triangle (docs/conventions.md "Sides"): a double-sided
+    triangle of a closed component bounds a solid (flipped where the component is wound inwards),
+    as the object's `solid` key decides; a single-sided one has its back face by its winding."""
+    out = np.zeros(len(arr), np.int32)
+    if closed is None or not len(arr):
+        return out
+    from iblbake.scene import geometry
+    comp, sign = closed[:, 0], closed[:, 1]
+    v = arr[:, :3, :3].astype(np.float64)
+    inside = geometry.inside_closed(camera_vectors(scene.data["camera"])[0], v[:, 0], v[:, 1], v[:, 2], comp, sign)
+    objs = scene.data["objects"]
+    oid = arr[:, 1, 3].view(np.int32)
+    for o in np.unique(oid):
+        sel = oid == o
+        obj = objs[int(o)]
+        for c in np.unique(comp[sel]):
+            part = sel & (comp == c)
+            sg = int(sign[part][0])
+            if solid_object(obj, sg != 0, int(c) in inside):
+                out[part] = SURFACE_FLAGS["solid"] | (SURFACE_FLAGS["solid_flipped"] if sg < 0 else 0)
+    return np.where(tri_flags & SURFACE_FLAGS["single_sided"], 0, out)
 
 
 def mesh_arrays(scene: Scene):
     """(triangles (t, 6, 4) float32 in BVH order, BVH nodes (n, 8) float32, report, triangle
-    attributes (t, TRIANGLE_ATTR, 4) float32 in BVH order) of every mesh object of the scene, in
-    world space."""
+    attributes (t, TRIANGLE_ATTR, 4) float32 in BVH order, closed parts (t, 2) int32 in BVH order:
+    component and solid, geometry.closed_components) of every mesh object of the scene, in world
+    space."""
     from iblbake.scene import materials
 
     d = scene.data
@@ -136,11 +181,13 @@ def mesh_arrays(scene: Scene):
             attr[:, 0:3] = np.nan_to_num(tris.uv[o])
             attr[:, 3:6] = tris.tangents[o]
             attr[:, 6, :2] = tris.uv_density[o]
+        closed = np.stack([tris.component[o], tris.solid[o]], 1).astype(np.int32)
     else:
         arr = np.zeros((0, 6, 4), np.float32)
         nodes = np.zeros((0, 8), np.float32)
         attr = np.zeros((0, FLOAT4S["TRIANGLE_ATTR"], 4), np.float32)
-    return arr, nodes, report, attr
+        closed = np.zeros((0, 2), np.int32)
+    return arr, nodes, report, attr, closed
 
 
 def needs_attributes(scene: Scene) -> bool:

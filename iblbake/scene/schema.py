@@ -211,16 +211,17 @@ class Raw:
 class StrList:
     default: Any = None
     doc: str = ""
+    what: str = "path"
 
     def check(self, v):
         if isinstance(v, str) and v:
             return [v]
         if isinstance(v, list) and v and all(isinstance(x, str) and x for x in v):
             return list(v)
-        raise _Bad(f"{v!r} is not a path or a list of paths")
+        raise _Bad(f"{v!r} is not a {self.what} or a list of {self.what}s")
 
     def describe(self):
-        return "path or [paths]"
+        return f"{self.what} or [{self.what}s]"
 
 
 VEC3 = dict(n=3)
@@ -346,6 +347,17 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
             }),
             "material": Str(doc="name of a material in `materials`; a glTF/GLB mesh without one is shaded "
                                 "with the file's own materials"),
+            "name": Str(doc="what messages and reflection_probes.N.exclude call the object (default: objects.N, "
+                            "its index)"),
+            "solid": OneOf((Enum(("auto",)), Bool()), default="auto",
+                           doc="whether the object bounds a solid, whose inside the irradiance probes treat as inside "
+                               "geometry (docs/conventions.md \"Sides\"): auto = a sphere, or a mesh's closed "
+                               "(watertight, consistently wound) parts, unless the camera is inside them (a room); "
+                               "false: a shell, a front face to probes from either side (double-sided only)"),
+            "reflection_captures": Bool(True, doc="seen by the reflection probes' captures (false: their first "
+                                                  "rays pass through it, as Unreal's Visible in Reflection Captures "
+                                                  "and Unity's culling mask; it still shadows and reflects light "
+                                                  "further along the paths)"),
         })),
     "lights": ListOf(doc="analytic lights in the units of glTF's KHR_lights_punctual, added to the IBL and "
                          "shaded with its BRDF", section=Section(
@@ -441,6 +453,8 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "bounces": bounces_field("how many times the light a capture ray brings back may have scattered (1: the "
                                  "surfaces it sees, lit directly)"),
         "seed": Num(1, 0, 2**31 - 1, integer=True, doc="random seed of the capture's paths"),
+        "exclude": StrList(what="name", doc="objects (their names, or objects.N) this probe's capture looks through: a probe at "
+                               "a reflective object's centre excludes that object to capture its surroundings"),
     })),
     "effects": Section(doc="what the renderer simulates; nothing else is baked, compiled or run", fields={
         "diffuse": Enum(("sh", "probes", "reference", "off"), "sh",

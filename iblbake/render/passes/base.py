@@ -15,7 +15,7 @@ from typing import Callable
 from iblbake.render.plan import Effects
 from iblbake.scene.load import Scene
 
-ELEMENT_BYTES = {"float4": 16, "float": 4, "uchar4": 4}
+ELEMENT_BYTES = {"float4": 16, "float": 4, "uchar4": 4, "int": 4}
 
 
 @dataclass(frozen=True)

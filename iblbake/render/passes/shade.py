@@ -15,7 +15,9 @@ class Shade(Pass):
     name = "shade"
     kernel = "shade.cl"
     # every lighting pass adds into radiance; ssr_env: the reflected environment the ssr pass replaces
-    buffers = (Buffer("radiance"), Buffer("ssr_env", count=2, when="HAS_SSR"))
+    buffers = (Buffer("radiance"), Buffer("ssr_env", count=2, when="HAS_SSR"),
+               Buffer("probe_stats", "int", per="frame", count=2, when="PROBE_STATS"))
+    host_writes = ("probe_stats",)
 
     def runs(self, scene, fx):
         return fx.any_approximate or fx.emissive
@@ -31,7 +33,7 @@ class Shade(Pass):
         if fx.diffuse in ("sh", "probes"):
             d["SH_BANDS"] = e["sh_bands"]     # probes: the SH outside their volume
         if fx.diffuse == "probes":
-            d.update(probe_defines(scene.data["probes"]))
+            d.update(probe_defines(scene.data["probes"]), PROBE_STATS=1)
         if fx.specular == "prefiltered" and e["prefilter"]["dominant_direction"]:
             d["DOMINANT_DIRECTION"] = 1
         if reflects_locally(scene, fx):
@@ -67,8 +69,17 @@ class Shade(Pass):
 
     def run(self, ctx):
         n, args = ctx.table["n"], ctx.args[self.name]
+        probes_in = ctx.plan.effects.diffuse == "probes"
+        if probes_in:
+            ctx.rt.cl.enqueue_fill_buffer(ctx.rt.queue, ctx.table["probe_stats"], np.int32(0), 0, 8)
         s = self.launch_samples(ctx)
         extra = {"samples": args["nsamples"]} if ctx.plan.effects.specular == "lobe" else {}
+        if probes_in:                 # the samples whose cell's probes were all off, summed over tiles
+            near, none = ctx.rt.read(ctx.table["probe_stats"], (2,), np.int32).tolist()
+            tot = ctx.__dict__.setdefault("probe_fallback", [0, 0])
+            tot[0] += near
+            tot[1] += none
+            extra.update(probe_fallback_nearest=tot[0], probe_fallback_sky=tot[1])
         return {"mpixel_samples_per_s": round(n * args["nsamples"] / max(s, 1e-9) / 1e6, 2), **extra}
 
 

@@ -89,11 +89,52 @@ def volume_weight(volume, p):
     return (1 - np.clip(delta / spacing, 0, 1)).prod(-1)
 
 
+SOURCE_NONE, SOURCE_CELL, SOURCE_NEAREST = 0, 1, 2      # kernels/probes.h PROBE_SOURCE_*
+
+
+def contribution(volume, c, p, biased, n, falloff, visibility: bool, classification: bool):
+    """Twin of probe_contribution: (weight (m,), value (m, 3)) of probes at grid coordinates c."""
+    counts = np.asarray(volume["counts"])
+    origin, spacing = np.asarray(volume["origin"], np.float64), np.asarray(volume["spacing"], np.float64)
+    index = probe_index(c, counts)
+    data = volume["data"][index]
+    e = irradiance_at(volume, index, n)
+    live = data[:, 3] == 0 if classification else np.ones(len(p), bool)
+    if visibility:
+        pp = origin + c * spacing + data[:, :3]
+        tri = np.maximum(falloff, TRILINEAR_FLOOR)
+        to_p = pp - p
+        wrap = 0.5 * ((to_p / np.linalg.norm(to_p, axis=1, keepdims=True) * n).sum(1) + 1)
+        w = wrap * wrap + WRAP_FLOOR
+        to_probe = pp - biased
+        dist = np.linalg.norm(to_probe, axis=1)
+        m = atlas_read(volume["distance"], index, octahedral(-to_probe / dist[:, None]), volume["distance_texels"],
+                       volume["counts"])
+        var = np.abs(m[:, 0] ** 2 - m[:, 1])
+        dv = dist - m[:, 0]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            cheb = np.where(dist > m[:, 0], (var / (var + dv * dv)) ** 3, 1.0)
+        w = np.maximum(1e-6, w * np.maximum(CHEBYSHEV_FLOOR, cheb))
+        w = np.where(w < CRUSH, w ** 3 / CRUSH ** 2, w) * tri.prod(1)
+        value = np.sqrt(e)
+    else:
+        w = falloff.prod(1)
+        value = e
+    return np.where(live, w, 0.0), value
+
+
 def irradiance(volume, p, n, v, *, visibility: bool, classification: bool):
-    """Twin of probe_irradiance for points p, normals n, view vectors v (m, 3). `volume`: counts,
-    origin, spacing, normal_bias and view_bias (world units), data (probes, 4: offset in world
-    units, state), representation, irradiance (sh: (probes, 9, 3); else the atlas), distance
-    (the moments' atlas), irradiance_texels, distance_texels."""
+    """The irradiance part of irradiance_and_source."""
+    return irradiance_and_source(volume, p, n, v, visibility=visibility, classification=classification)[0]
+
+
+def irradiance_and_source(volume, p, n, v, *, visibility: bool, classification: bool):
+    """Twin of probe_irradiance for points p, normals n, view vectors v (m, 3): (irradiance (m, 3),
+    source (m,): SOURCE_CELL the cell's eight probes, SOURCE_NEAREST the active probes of the 4^3
+    around it by inverse square distance where all eight are off, SOURCE_NONE neither (0)).
+    `volume`: counts, origin, spacing, normal_bias and view_bias (world units), data (probes, 4:
+    offset in world units, state), representation, irradiance (sh: (probes, 9, 3); else the atlas),
+    distance (the moments' atlas), irradiance_texels, distance_texels."""
     counts = np.asarray(volume["counts"])
     origin, spacing = np.asarray(volume["origin"], np.float64), np.asarray(volume["spacing"], np.float64)
     biased = p + n * volume["normal_bias"] + v * volume["view_bias"]
@@ -104,35 +145,26 @@ def irradiance(volume, p, n, v, *, visibility: bool, classification: bool):
     wsum = np.zeros(len(p))
     for i in range(8):
         off = np.array([i & 1, (i >> 1) & 1, (i >> 2) & 1])
-        c = np.clip(base + off, 0, counts - 1)
-        index = probe_index(c, counts)
-        data = volume["data"][index]
-        tri3 = np.where(off == 1, alpha, 1 - alpha)
-        e = irradiance_at(volume, index, n)
-        live = data[:, 3] == 0 if classification else np.ones(len(p), bool)
-        if visibility:
-            pp = origin + c * spacing + data[:, :3]
-            tri = np.maximum(tri3, TRILINEAR_FLOOR)
-            to_p = pp - p
-            wrap = 0.5 * ((to_p / np.linalg.norm(to_p, axis=1, keepdims=True) * n).sum(1) + 1)
-            w = wrap * wrap + WRAP_FLOOR
-            to_probe = pp - biased
-            dist = np.linalg.norm(to_probe, axis=1)
-            m = atlas_read(volume["distance"], index, octahedral(-to_probe / dist[:, None]), volume["distance_texels"],
-                           volume["counts"])
-            var = np.abs(m[:, 0] ** 2 - m[:, 1])
-            dv = dist - m[:, 0]
-            with np.errstate(invalid="ignore", divide="ignore"):
-                cheb = np.where(dist > m[:, 0], (var / (var + dv * dv)) ** 3, 1.0)
-            w = np.maximum(1e-6, w * np.maximum(CHEBYSHEV_FLOOR, cheb))
-            w = np.where(w < CRUSH, w ** 3 / CRUSH ** 2, w) * tri.prod(1)
-            value = np.sqrt(e)
-        else:
-            w = tri3.prod(1)
-            value = e
-        w = np.where(live, w, 0.0)
+        w, value = contribution(volume, np.clip(base + off, 0, counts - 1), p, biased, n,
+                                np.where(off == 1, alpha, 1 - alpha), visibility, classification)
         total += w[:, None] * value
         wsum += w
+    source = np.where(wsum > 0, SOURCE_CELL, SOURCE_NEAREST)
+    wide = np.nonzero(wsum <= 0)[0]
+    for dz in range(-1, 3):
+        for dy in range(-1, 3):
+            for dx in range(-1, 3):
+                if not len(wide):
+                    break
+                c = base[wide] + [dx, dy, dz]
+                inside = ((c >= 0) & (c < counts)).all(1)
+                rows, c = wide[inside], c[inside]
+                dc = c - g[rows]
+                f = np.stack([1 / np.maximum((dc * dc).sum(1), 0.01), np.ones(len(rows)), np.ones(len(rows))], 1)
+                w, value = contribution(volume, c, p[rows], biased[rows], n[rows], f, visibility, classification)
+                total[rows] += w[:, None] * value
+                wsum[rows] += w
+    source = np.where(wsum > 0, source, SOURCE_NONE)
     with np.errstate(invalid="ignore", divide="ignore"):
         out = np.where(wsum[:, None] > 0, total / np.where(wsum > 0, wsum, 1)[:, None], 0.0)
-    return out * out if visibility else out
+    return (out * out if visibility else out), source
