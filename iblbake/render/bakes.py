@@ -362,16 +362,21 @@ class Bakes:
         transport = self._light_transport(ctx.scene)
         out, cached_all, rays = [], True, 0
         for k, settings in enumerate(ctx.scene.data["reflection_probes"]):
-            key = "reflection-" + cache.content_key({"kind": "reflection", "v": 1, "index": k, **transport,
+            key = "reflection-" + cache.content_key({"kind": "reflection", "v": 2, "index": k, **transport,
                                                      "settings": settings, "code": _probes_code_hash()})
 
             def make(settings=settings, k=k, key=key):
                 def build(tmp: Path):
-                    images.write_exr(tmp / "capture.exr", rp.capture(rp.tracer(ctx, settings), k, settings,
-                                                                     ctx.progress), channels=("R", "G", "B", "A"))
-                    return {"kind": "reflection", "files": [{"name": "capture.exr"}], "probe": settings}
+                    image, report = rp.capture(rp.tracer(ctx, settings), k, settings, ctx.progress)
+                    images.write_exr(tmp / "capture.exr", image, channels=("R", "G", "B", "A"))
+                    return {"kind": "reflection", "files": [{"name": "capture.exr"}], "probe": settings,
+                            "report": report}
 
                 manifest, cached = cache.get_or_build(self.root, key, build, warn=ctx.warn)
+                report = manifest.get("report")
+                if not isinstance(report, dict) or not isinstance(report.get("inside"), dict):
+                    raise IblbakeError(f"{self.root / manifest['key']}: a reflection capture without its report; "
+                                       "delete the cache entry to bake it again")
                 path = self.root / manifest["key"] / "capture.exr"
                 image = images.read_exr(path)
                 size = settings["size"]
@@ -379,9 +384,11 @@ class Bakes:
                         or (image[..., 3] > 1).any():
                     raise IblbakeError(f"{path}: not a {2 * size}x{size} RGBA capture of finite, non-negative "
                                        f"radiance and coverage; delete the cache entry to bake it again")
-                return np.ascontiguousarray(image, np.float32), cached
+                return np.ascontiguousarray(image, np.float32), cached, report
 
-            image, cached = self._get(("reflection", key), make)
+            image, cached, report = self._get(("reflection", key), make)
+            for w in rp.warnings(k, report, ctx.scene.data):     # said for a cached capture too
+                ctx.warn(w)
             traced = not cached
             baker = self._baker(ctx)
             chains = []

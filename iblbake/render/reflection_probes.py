@@ -33,24 +33,46 @@ def capture_directions(size: int, samples: int) -> np.ndarray:
     return np.concatenate([d, share[..., None]], -1).reshape(-1, 4)
 
 
-def capture(tracer, index: int, settings: dict, progress=None) -> np.ndarray:
-    """(size, 2 size, 4) float32: per texel the mean radiance of its paths from the probe's
-    position that met the scene (RGB) and the share of them that did (A, the coverage); the sky
-    seen past the scene is left to the distant chain, read along the reflected ray itself (it is
-    infinitely far: no parallax moves it). Probe number `index`: its random streams."""
+def capture(tracer, index: int, settings: dict, progress=None):
+    """((size, 2 size, 4) float32: per texel the mean radiance of its paths from the probe's
+    position that met the scene (RGB) and the share of them that did (A, the coverage); report:
+    {"inside": {object: share of the solid angle whose rays met its inside}}). The sky seen past
+    the scene is left to the distant chain, read along the reflected ray itself (it is infinitely
+    far: no parallax moves it). Probe number `index`: its random streams."""
     size, n = settings["size"], settings["samples"]
     dirs = capture_directions(size, n)
     sums = np.zeros((len(dirs) // n, 4))
     per = max(n, CHUNK_RAYS // n * n)              # whole texels per launch
     pos = np.asarray([settings["position"]], np.float64)
+    inside = {}
     for r0 in range(0, len(dirs), per):
-        rad, t, _obj = tracer.trace(pos, dirs[r0:r0 + per], True, probe0=index, ray0=r0)
+        rad, t, obj = tracer.trace(pos, dirs[r0:r0 + per], True, probe0=index, ray0=r0)
         met = np.isfinite(np.abs(t[0]))[:, None]
         rows = np.concatenate([np.where(met, rad[0], 0.0), met.astype(np.float64)], 1)
         sums[r0 // n:(r0 + len(rad[0])) // n] = rows.reshape(-1, n, 4).mean(1)
+        back = t[0] < 0                            # the inside of a solid (scene.h probe_back_face)
+        share = dirs[r0:r0 + per, 3]
+        for o in np.unique(obj[0][back]):
+            inside[int(o)] = inside.get(int(o), 0.0) + float(share[back & (obj[0] == o)].sum()) / (4 * np.pi)
         if progress:
             progress(min(1.0, (r0 + per) / len(dirs)))
-    return sums.reshape(size, 2 * size, 4).astype(np.float32)
+    return sums.reshape(size, 2 * size, 4).astype(np.float32), {"inside": {str(k): round(v, 4)
+                                                                           for k, v in inside.items()}}
+
+
+INSIDE_WARN = 0.25     # a capture whose rays meet this share of an object's inside is inside it
+
+
+def warnings(k: int, report: dict, scene_data: dict) -> list:
+    """A capture from inside an object: its rays meet that object's inside over more than
+    INSIDE_WARN of the sphere (the probe sees the object's inner walls, not the room)."""
+    from iblbake.scene.load import object_label
+
+    return [f"reflection_probes.{k}: its position {scene_data['reflection_probes'][k]['position']} lies inside "
+            f"{object_label(scene_data, int(o))} ({100 * share:.0f}% of its capture sees that object's inside); add "
+            f"it to reflection_probes.{k}.exclude or move the probe"
+            for o, share in report.get("inside", {}).items() if share > INSIDE_WARN
+            and int(o) < len(scene_data["objects"])]
 
 
 def excluded(scene_data: dict, settings: dict) -> list:
