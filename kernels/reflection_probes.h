@@ -33,9 +33,9 @@ inline float rprobe_weight(float3 p, float4 a, float4 b, float4 c)
     return b.w > 0.0f ? fmax(1.0f - over / b.w, 0.0f) : 0.0f;
 }
 
-/* The capture's direction for the ray p + t r (p inside the proxy): towards where it leaves the
- * box (the slabs' nearest exit) or the sphere (the far root), seen from the probe's position. */
-inline float3 rprobe_direction(float3 p, float3 r, float4 a, float4 b, float4 c)
+/* Where the ray p + t r (p inside the proxy) leaves the box (the slabs' nearest exit) or the
+ * sphere (the far root). */
+inline float3 rprobe_exit(float3 p, float3 r, float4 a, float4 b, float4 c)
 {
     float t;
     if (a.w < 0.5f) {
@@ -47,7 +47,32 @@ inline float3 rprobe_direction(float3 p, float3 r, float4 a, float4 b, float4 c)
         const float bb = dot(o, r), cc = dot(o, o) - c.w * c.w;
         t = -bb + sqrt(fmax(bb * bb - cc, 0.0f));
     }
-    return normalize(p + fmax(t, 0.0f) * r - a.xyz);
+    return p + fmax(t, 0.0f) * r;
+}
+
+/* The capture's direction for the ray p + t r: towards its exit, seen from the probe's position. */
+inline float3 rprobe_direction(float3 p, float3 r, float4 a, float4 b, float4 c)
+{
+    return normalize(rprobe_exit(p, r, a, b, c) - a.xyz);
+}
+
+/* How much of the reflection along p + t r that meets the scene at x the probes at p already hold:
+ * the influence-weighted share of parallax probes whose proxy the ray leaves within 3% of its
+ * travel from x (a wall or floor on the proxy: the capture, read with parallax, shows that very
+ * point). Screen-space reflections defer to them there and add what lies off every proxy. */
+inline float reflection_probes_hold(float3 p, float3 r, float3 x, __global const float4 *rp_info, const int rp_count)
+{
+    float held = 0.0f, wsum = 0.0f;
+    const float travel = distance(p, x);
+    for (int k = 0; k < rp_count; ++k) {
+        const float4 a = rp_info[4 * k], b = rp_info[4 * k + 1], c = rp_info[4 * k + 2], e = rp_info[4 * k + 3];
+        const float w = rprobe_weight(p, a, b, c);
+        if (w <= 0.0f) continue;
+        wsum += w;
+        if (e.x > 0.5f)
+            held += w * clamp(1.0f - distance(rprobe_exit(p, r, a, b, c), x) / (0.03f * travel), 0.0f, 1.0f);
+    }
+    return wsum > 1.0f ? held / wsum : held;
 }
 
 /* Trilinear read of chain c (chain_lookup's, on the probes' tables) */

@@ -110,15 +110,26 @@ def busy_scene(folder, env, fx):
 @pytest.mark.parametrize("fx", [{"diffuse": "sh", "specular": "prefiltered"},
                                 {"diffuse": "off", "specular": "importance", "samples": 8},
                                 {"diffuse": "reference", "specular": "reference",
-                                 "reference": {"max_samples": 16, "target_noise": 0}}],
-                         ids=["prefiltered", "importance", "reference"])
+                                 "reference": {"max_samples": 16, "target_noise": 0}},
+                                {"diffuse": "sh", "specular": "prefiltered", "ssr": "on",
+                                 "ssr_settings": {"max_roughness": 0.7}}],
+                         ids=["prefiltered", "importance", "reference", "ssr"])
 def test_tiled_frame_equals_the_untiled_one(tmp_path, small_panoramas, fx):
-    """A device budget of a few rows renders in tiles; every pixel, AOV and 8-bit value is the same."""
+    """A device budget of a few rows renders in tiles; every pixel, AOV and 8-bit value is the same.
+    SSR's rays read any pixel of the frame: a tiled frame gathers every tile first (two sweeps), so
+    its rays see what an untiled frame's do (before, a ray leaving its tile kept the environment)."""
     sc = busy_scene(tmp_path, small_panoramas["city"], fx)
     whole = render.render(sc, cache_root=tmp_path / "cache")
     budget = render.frame.frame_bytes(sc, render.plan(sc), 5, tiled=True)
     tiled = render.render(sc, cache_root=tmp_path / "cache", device_budget=budget)
     assert whole.report["tiles"] == 1 and tiled.report["tiles"] >= 4      # 23 rows, 5 or 6 per tile
+    if fx.get("ssr") == "on":
+        ssr = next(p for p in tiled.report["passes"] if p["name"] == "ssr")
+        assert ssr["sweeps"] == 2
+        spec_only = render.render(busy_scene(tmp_path, small_panoramas["city"], {**fx, "ssr": "off"}),
+                                  cache_root=tmp_path / "cache")
+        changed = np.abs(whole.hdr - spec_only.hdr)[..., :3].max(-1) > 1e-3
+        assert changed.mean() > 0.05, changed.mean()          # SSR did something to compare
     assert np.array_equal(whole.hdr, tiled.hdr)
     assert np.array_equal(whole.png, tiled.png)
     for a in ("normal", "albedo", "depth"):

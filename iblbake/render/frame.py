@@ -308,7 +308,8 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
             rt.kernel(files, p.function or p.name, defines)
         ctx.args[p.name] = p.setup(ctx)
 
-    for ctx.tile_index, ctx.row0 in enumerate(row0s):
+    def start_tile(index, row0):
+        ctx.tile_index, ctx.row0 = index, row0
         ctx.tile_rows = min(rows, height - ctx.row0)
         npix = ctx.tile_rows * width
         n = npix * spp
@@ -324,6 +325,30 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
         ctx.table.update({"n": n, "npix": npix, "pixel0": ctx.row0 * width})
         if not writers or any(w in run for w in writers):        # none: resolve reads zeros
             rt.cl.enqueue_fill_buffer(rt.queue, ctx.table["radiance"], np.float32(0), 0, n * 16)
+
+    # A whole-frame pass (SSR: its rays read any pixel) in a tiled frame: a first sweep runs the
+    # passes before it over every tile and gathers what it reads of each into frame-sized buffers;
+    # it then works on the whole frame, and the second sweep runs every pass again (the per-sample
+    # buffers of a tile do not outlive it) with that pass applying what it found.
+    whole = next((p for p in pl.passes if getattr(p, "whole_frame", False) and p.name in run), None)
+    if whole is not None and len(row0s) > 1:
+        before = pl.passes[:pl.passes.index(whole)]
+        gather_s = 0.0
+        for index, row0 in enumerate(row0s):
+            start_tile(index, row0)
+            for p in before:
+                if p.name in run:
+                    p.run(ctx)
+            t0 = time.perf_counter()
+            whole.gather(ctx)
+            gather_s += time.perf_counter() - t0
+        t0 = time.perf_counter()
+        whole.frame_run(ctx)
+        rt.finish()
+        rep.run(whole.name, gather_s + time.perf_counter() - t0, sweeps=2)
+
+    for index, row0 in enumerate(row0s):
+        start_tile(index, row0)
         for p in pl.passes:
             if p.name not in run:
                 rep.run(p.name, 0.0, reused=True)

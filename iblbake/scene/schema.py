@@ -513,10 +513,13 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "ssr_settings": Section(doc="ssr: the march", fields={
             "max_roughness": Num(0.5, 0.0, 1.0, doc="surfaces rougher than this keep the probes' or panorama's "
                                                     "reflection (faded over its last fifth)"),
-            "thickness": Num(0.1, 0.0, lo_open=True, doc="how far behind the depth buffer a surface is taken to reach "
-                                                        "(scene units along the view)"),
+            "thickness": Num(0.1, 0.0, lo_open=True, doc="how far behind the depth buffer a candidate hit may lie "
+                                                        "(scene units along the view); a candidate is kept only where "
+                                                        "the ray crosses the hit surface's own plane within a pixel"),
             "steps": Num(64, 1, 4096, integer=True, doc="march iterations per ray (Hi-Z cells visited)"),
-            "rays": Num(1, 1, 256, integer=True, doc="GGX visible-normal rays per G-buffer sample"),
+            "rays": Num(4, 1, 256, integer=True, doc="GGX visible-normal rays per pixel at max_roughness, fewer below "
+                                                     "it (roughness / max_roughness of them; a mirror: 1), before the "
+                                                     "spatial resolve"),
             "ray_length": Num(50.0, 0.0, lo_open=True, doc="how far a ray is followed (scene units)"),
             "seed": Num(1, 0, 2**31 - 1, integer=True, doc="random seed of the rays"),
         }),

@@ -1,6 +1,7 @@
-"""SSR: stochastic screen-space reflections over the split sum's (or the lobe's) environment,
-after the lighting passes (kernels/ssr.cl; twin: iblbake/render/twin/ssr.py). Each tile marches
-through its own depth pyramid: a ray that leaves the tile keeps the environment."""
+"""SSR: stochastic screen-space reflections over the split sum's environment (and the reflection
+probes'), after the lighting passes (kernels/ssr.cl; twin: iblbake/render/twin/ssr.py). Its rays
+read the whole frame, so it is a whole-frame pass (render/frame.py): every tile's first samples are
+gathered before any ray is marched, and a tiled frame gives the pixels an untiled one does."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import time
 import numpy as np
 
 from iblbake.render.passes.base import Buffer, Pass
-from iblbake.render.passes.shade import screen_space
+from iblbake.render.passes.shade import reflects_locally, rprobe_args, screen_space
 
 
 def pyramid(width: int, rows: int) -> list:
@@ -23,36 +24,71 @@ def pyramid(width: int, rows: int) -> list:
         w, h = (w + 1) // 2, (h + 1) // 2
 
 
+def _pixels(d) -> int:
+    w, h = d["camera"]["resolution"]
+    return w * h
+
+
+def _hiz_floats(d) -> int:
+    w, h = d["camera"]["resolution"]
+    last = pyramid(w, h)[-1]
+    return last[2] + last[0] * last[1]
+
+
 class ScreenSpaceReflections(Pass):
     name = "ssr"
     kernel = "ssr.cl"
-    functions = ("ssr_depth", "ssr_reduce")
-    # the lit frame's copy (read while radiance is written) and the depth pyramid (under 3 floats a
-    # pixel: 4/3 of the pixels, plus a row and a column a level)
-    buffers = (Buffer("radiance"), Buffer("ssr_src"), Buffer("ssr_hiz", "float", per="pixel", count=3))
-    host_writes = ("ssr_src",)
+    functions = ("ssr_gather", "ssr_depth", "ssr_reduce", "ssr_trace", "ssr_resolve")
+    whole_frame = True
+    # per pixel of the whole frame: its first sample's position and depth, normal and roughness, lit
+    # radiance (3 float4); the depth pyramid; each pixel's traced and resolved reflection
+    buffers = (Buffer("radiance"), Buffer("ssr_pix", per="frame", count=lambda d: 3 * _pixels(d)),
+               Buffer("ssr_hiz", "float", per="frame", count=_hiz_floats),
+               Buffer("ssr_hit", per="frame", count=_pixels), Buffer("ssr_res", per="frame", count=_pixels))
 
     def runs(self, scene, fx):
         return screen_space(scene, fx)
 
+    def reads_bakes(self, scene, fx):
+        return ["reflection_probes"] if reflects_locally(scene, fx) else []
+
     def defines(self, scene, fx):
-        return {"HAS_SSR": 1}
+        return {"HAS_SSR": 1, **({"HAS_REFLECTION_PROBES": 1} if reflects_locally(scene, fx) else {})}
 
     def setup(self, ctx) -> dict:
         s = ctx.scene.data["effects"]["ssr_settings"]
+        ctx.ssr_gathered = False
+        rp = rprobe_args(ctx.rt, ctx.loaded.get("reflection_probes"), ctx.bakes)
         return {"max_roughness": s["max_roughness"], "thickness": s["thickness"], "steps": s["steps"],
-                "rays": s["rays"], "ray_length": s["ray_length"], "seed": s["seed"]}
+                "rays": s["rays"], "ray_length": s["ray_length"], "seed": s["seed"], "rp_info": rp["rp_info"],
+                "rp_count": rp["rp_count"]}
 
-    def run(self, ctx):
-        rt, t = ctx.rt, ctx.table
-        t0 = time.perf_counter()
-        levels = pyramid(ctx.width, ctx.tile_rows)
+    def gather(self, ctx):
+        """This tile's first samples into the frame's ssr_pix."""
+        ctx.launch(self, (ctx.table["npix"],), "ssr_gather")
+
+    def frame_run(self, ctx):
+        """Once the whole frame is gathered: the pyramid, every pixel's rays and the resolve."""
+        rt, a = ctx.rt, ctx.args[self.name]
+        w, h = ctx.scene.data["camera"]["resolution"]
+        levels = pyramid(w, h)
         off = rt.to_device(np.array([o for _w, _h, o in levels], np.int32))
-        rt.cl.enqueue_copy(rt.queue, t["ssr_src"], t["radiance"], byte_count=16 * t["n"])
-        ctx.launch(self, (t["npix"],), "ssr_depth")
+        ctx.launch(self, (w * h,), "ssr_depth", npix=w * h)
         for (sw, sh, so), (dw, dh, do) in zip(levels, levels[1:]):
             ctx.launch(self, (dw * dh,), "ssr_reduce", src=so, sw=sw, sh=sh, dst=do, dw=dw, dh=dh)
-        ctx.launch(self, (t["n"],), **ctx.args[self.name], hiz_off=off, nlev=len(levels))
-        rt.finish()
-        return {"levels": len(levels), "rays_per_sample": ctx.args[self.name]["rays"],
-                "mrays_per_s": round(t["n"] * ctx.args[self.name]["rays"] / max(time.perf_counter() - t0, 1e-9) / 1e6, 2)}
+        ctx.launch(self, (w * h,), "ssr_trace", hiz_off=off, nlev=len(levels), **{k: a[k] for k in (
+            "max_roughness", "thickness", "steps", "rays", "ray_length", "seed", "rp_info", "rp_count")})
+        ctx.launch(self, (w * h,), "ssr_resolve", max_roughness=a["max_roughness"])
+        ctx.ssr_gathered = True
+        ctx.ssr_levels = len(levels)
+
+    def run(self, ctx):
+        t0 = time.perf_counter()
+        if not ctx.ssr_gathered:          # one tile: the frame is this tile
+            self.gather(ctx)
+            self.frame_run(ctx)
+        ctx.launch(self, (ctx.table["n"],))
+        ctx.rt.finish()
+        w, h = ctx.scene.data["camera"]["resolution"]
+        return {"levels": ctx.ssr_levels, "rays_at_max_roughness": ctx.args[self.name]["rays"],
+                "mpixels_per_s": round(w * h / max(time.perf_counter() - t0, 1e-9) / 1e6, 2)}

@@ -22,6 +22,12 @@ def weight(st: dict, p):
 
 def direction(st: dict, p, r):
     """Twin of rprobe_direction: towards where p + t r leaves the proxy, from the probe."""
+    d = exit_point(st, p, r) - np.asarray(st["position"], np.float64)
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def exit_point(st: dict, p, r):
+    """Twin of rprobe_exit: where p + t r leaves the probe's box or sphere."""
     pos = np.asarray(st["position"], np.float64)
     if st["shape"] == "box":
         lo, hi = np.asarray(st["min"], np.float64), np.asarray(st["max"], np.float64)
@@ -34,8 +40,7 @@ def direction(st: dict, p, r):
         b = (o * r).sum(-1)
         c = (o * o).sum(-1) - st["radius"] ** 2
         t = -b + np.sqrt(np.maximum(b * b - c, 0.0))
-    d = p + np.maximum(t, 0.0)[:, None] * r - pos
-    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+    return p + np.maximum(t, 0.0)[:, None] * r
 
 
 def blend(captured: list, p, r, lod, distant):

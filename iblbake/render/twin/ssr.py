@@ -1,11 +1,13 @@
-"""Stochastic screen-space reflections (kernels/ssr.cl): the depth pyramid, the Hi-Z march and
-the replacement of the reflected environment. numpy twin, float64; one tile (the whole frame)."""
+"""Stochastic screen-space reflections (kernels/ssr.cl): the gathered frame, its depth pyramid, the
+validated Hi-Z march, the resolve and the replacement of the reflected environment. numpy twin,
+float64, the whole frame."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from iblbake.core import conventions, sampling
+from iblbake.render.twin import reflection_probes as rp_twin
 from iblbake.render.twin.surface import surface
 from iblbake.scene import pack
 from iblbake.scene.layout import DELTA_ALPHA
@@ -24,12 +26,35 @@ def project(cam: dict, x):
     return np.stack([0.5 * (sx + 1) * w, 0.5 * (1 - sy) * h, z], -1)
 
 
-def hiz(cam: dict, gb, spp: int) -> list:
-    """The min-depth pyramid, level 0 each pixel's first sample's view depth (+inf: nothing)."""
+RESOLVE_RADIUS = 3            # kernels/ssr.cl SSR_RESOLVE_RADIUS
+
+
+def gather(cam: dict, gb, arrays, src):
+    """Twin of ssr_gather: per pixel its first sample's (position, view depth: +inf nothing),
+    (normal, roughness), lit radiance."""
     w, h = cam["resolution"]
+    spp = cam["spp"]
     first = np.arange(w * h) * spp
-    z = np.where(gb["hit"][first], project(cam, gb["pos"][first])[:, 2], np.inf).reshape(h, w)
-    levels = [z]
+    hit = gb["hit"][first]
+    v, n, _nov, (_b, _m, _e, rough, _f0, _f90) = surface(gb, arrays)
+    rows = np.cumsum(gb["hit"]) - 1                  # surface() holds the hit samples only
+    pos = np.zeros((w * h, 3))
+    z = np.full(w * h, np.inf)
+    nrm = np.tile([0.0, 0.0, 1.0], (w * h, 1))
+    r = np.full(w * h, 2.0)
+    lit = np.zeros((w * h, 3))
+    k = first[hit]
+    pos[hit] = gb["pos"][k]
+    z[hit] = project(cam, pos[hit])[:, 2]
+    nrm[hit] = n[rows[k]]
+    r[hit] = rough[rows[k]]
+    lit[hit] = src[k]
+    return {"pos": pos, "z": z, "n": nrm, "rough": r, "lit": lit}
+
+
+def hiz(z, w: int, h: int) -> list:
+    """The min-depth pyramid of level 0 z (h w,), down to 1 x 1."""
+    levels = [z.reshape(h, w)]
     while levels[-1].shape != (1, 1):
         a = levels[-1]
         hh, ww = (a.shape[0] + 1) // 2, (a.shape[1] + 1) // 2
@@ -39,8 +64,23 @@ def hiz(cam: dict, gb, spp: int) -> list:
     return levels
 
 
-def march(levels, s0, z0, s1, z1, ortho: bool, steps: int, thickness: float):
-    """Twin of ssr_march for rays (m): the hit pixel's index y w + x, or -1."""
+def plausible(pix, cam, c, p0, l):
+    """Twin of ssr_plausible: (plausibility, where the ray meets the plane of pixel c's surface)."""
+    w, h = cam["resolution"]
+    s, nc = pix["pos"][c], pix["n"][c]
+    den = (l * nc).sum(1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((s - p0) * nc).sum(1) / den
+    x = p0 + t[:, None] * l
+    q = project(cam, x)
+    d = q[:, :2] - np.stack([c % w + 0.5, c // w + 0.5], -1)
+    conf = np.clip(2 - np.linalg.norm(d, axis=1), 0, 1)
+    return np.where((den < 0) & (t > 0), conf, 0.0), x
+
+
+def march(levels, s0, z0, s1, z1, ortho: bool, steps: int, thickness: float, pix, cam, p0, l):
+    """Twin of ssr_march for rays (m): (the hit pixel's index y w + x or -1, its plausibility, where
+    the ray meets its plane)."""
     h, w = levels[0].shape
     ds = s1 - s0
     m = len(s0)
@@ -51,6 +91,8 @@ def march(levels, s0, z0, s1, z1, ortho: bool, steps: int, thickness: float):
         t = np.minimum(tt.min(1), 1.0) + 1e-4
     level = np.zeros(m, int)
     hit = np.full(m, -1)
+    conf = np.zeros(m)
+    xs = np.zeros((m, 3))
     live = t < 1
     for _ in range(steps):
         if not live.any():
@@ -81,65 +123,135 @@ def march(levels, s0, z0, s1, z1, ortho: bool, steps: int, thickness: float):
         front = np.maximum(za, zb) < cell_min
         down = ~front & (level[idx] > 0)
         bottom = ~front & (level[idx] == 0)
-        got = bottom & (np.minimum(za, zb) <= cell_min + thickness)
-        hit[idx[got]] = cy[got] * w + cx[got]
+        cand = bottom & (np.minimum(za, zb) <= cell_min + thickness)
+        c = cy * w + cx
+        pc, px = plausible(pix, cam, c, p0[idx], l[idx])
+        got = cand & (pc > 0)
+        hit[idx[got]] = c[got]
+        conf[idx[got]] = pc[got]
+        xs[idx[got]] = px[got]
         live[idx[got]] = False
         step_on = front | (bottom & ~got)
         t[idx[step_on]] = t_exit[step_on] + 1e-4
         level[idx[front]] = np.minimum(level[idx[front]] + 1, len(levels) - 1)
         level[idx[down]] -= 1
         live &= t < 1
-    return hit
+    return hit, conf, xs
 
 
 def depth_at(z0, z1, t, ortho):
     return z0 + (z1 - z0) * t if ortho else 1 / (1 / z0 + (1 / z1 - 1 / z0) * t)
 
 
-def ssr(gb, arrays, effects: dict, cam: dict, src, ssr_w, ssr_li):
-    """Twin of the ssr kernel: the frame's radiance per sample (src, the lit frame) with the
-    reflected environment (weight ssr_w, radiance ssr_li per hit sample) replaced where the rays
-    meet the frame."""
-    s = effects["ssr_settings"]
-    spp = cam["spp"]
+def held(captured, p, r, x):
+    """Twin of reflection_probes_hold: the share of the reflection along p + t r meeting x that the
+    parallax probes at p hold (their proxy left within 3% of the travel from x)."""
+    out, wsum = np.zeros(len(p)), np.zeros(len(p))
+    travel = np.linalg.norm(x - p, axis=1)
+    for c in captured or []:
+        st = c["settings"]
+        w = rp_twin.weight(st, p)
+        wsum += w
+        if st["parallax"]:
+            e = rp_twin.exit_point(st, p, r)
+            out += w * np.clip(1 - np.linalg.norm(e - x, axis=1) / (0.03 * travel), 0, 1)
+    return np.where(wsum > 1, out / np.where(wsum > 1, wsum, 1), out)
+
+
+def trace(pix, cam: dict, s: dict, captured=None):
+    """Twin of ssr_trace: per pixel (H, C), the mean over its rays of conf L_hit and of conf."""
     w, h = cam["resolution"]
-    hitmask = gb["hit"]
-    out = src.copy()
-    v, n, nov, (_base, _metallic, _emissive, rough, _f0, _f90) = surface(gb, arrays)
-    alpha = rough ** 2
-    rows = np.nonzero(hitmask)[0]
-    sel = (rough <= s["max_roughness"]) & (ssr_w > 0).any(1)
-    levels = hiz(cam, gb, spp)
     pos, fwd, _right, _up, ortho = pack.camera_vectors(cam)
+    levels = hiz(pix["z"], w, h)
+    sel = np.nonzero(np.isfinite(pix["z"]) & (pix["rough"] <= s["max_roughness"]))[0]
+    out = np.zeros((w * h, 4))
+    if not len(sel):
+        return out
+    p, n, rough = pix["pos"][sel], pix["n"][sel], pix["rough"][sel]
+    v = np.broadcast_to(-fwd, p.shape) if ortho else (pos - p) / np.linalg.norm(pos - p, axis=1, keepdims=True)
+    nov = np.maximum((n * v).sum(1), 1e-4)
+    alpha = rough ** 2
     t, b = conventions.tangent_frame(n)
     vl = np.stack([(v * t).sum(1), (v * b).sum(1), nov], -1)
     fade_r = np.clip((s["max_roughness"] - rough) / (0.2 * s["max_roughness"]), 0, 1)
-    acc = np.zeros((len(rows), 3))
-    p = gb["pos"][hitmask]
-    for k in range(s["rays"]):
-        u = np.stack([sampling.qmc(s["seed"], rows, k, d) for d in (0, 1)], -1)
+    count = np.maximum(1, np.ceil(s["rays"] * np.float32(rough) / max(s["max_roughness"], 1e-6))).astype(int)
+    acc, csum = np.zeros((len(sel), 3)), np.zeros(len(sel))
+    p0 = p + n * (1e-4 * (1 + np.linalg.norm(p - pos, axis=1)))[:, None]
+    for k in range(int(count.max())):
+        u = np.stack([sampling.qmc(s["seed"], sel, k, d) for d in (0, 1)], -1)
         hl = np.where((alpha < DELTA_ALPHA)[:, None], [0.0, 0.0, 1.0], sampling.sample_ggx_vndf(vl, alpha, u))
         hv = t * hl[:, 0:1] + b * hl[:, 1:2] + n * hl[:, 2:3]
         l = 2 * (v * hv).sum(1, keepdims=True) * hv - v
-        got = ssr_li.copy()
-        up = sel & ((n * l).sum(1) > 0)
-        p0 = p + n * (1e-4 * (1 + gb["t"][hitmask]))[:, None]
-        z0 = (p0 - pos) @ fwd
-        dz = l @ fwd
-        length = np.full(len(p), s["ray_length"])
+        i = np.nonzero((k < count) & ((n * l).sum(1) > 0))[0]
+        z0 = (p0[i] - pos) @ fwd
+        dz = l[i] @ fwd
+        length = np.full(len(i), s["ray_length"])
         if not ortho:
             with np.errstate(divide="ignore", invalid="ignore"):
                 length = np.where(dz < 0, np.minimum(length, 0.99 * (z0 - 1e-3) / -dz), length)
-        a = project(cam, p0)
-        c = project(cam, p0 + length[:, None] * l)
-        i = np.nonzero(up)[0]
-        hit = march(levels, a[i, :2], a[i, 2], c[i, :2], c[i, 2], ortho, s["steps"], s["thickness"])
+        a = project(cam, p0[i])
+        c = project(cam, p0[i] + length[:, None] * l[i])
+        hit, conf, x = march(levels, a[:, :2], a[:, 2], c[:, :2], c[:, 2], ortho, s["steps"], s["thickness"], pix, cam,
+                             p0[i], l[i])
         ok = hit >= 0
         hx, hy = (hit[ok] % w + 0.5) / w, (hit[ok] // w + 0.5) / h
         fade_e = np.clip(np.minimum(np.minimum(hx, 1 - hx), np.minimum(hy, 1 - hy)) / 0.05, 0, 1)
-        f = (fade_r[i[ok]] * fade_e)[:, None]
-        got[i[ok]] = ssr_li[i[ok]] * (1 - f) + src[hit[ok] * spp] * f
-        acc += got
-    new = src[hitmask] + np.where(sel[:, None], ssr_w * (acc / s["rays"] - ssr_li), 0.0)
-    out[hitmask] = new
+        f = conf[ok] * fade_r[i[ok]] * fade_e
+        if captured:
+            f = f * (1 - held(captured, p0[i[ok]], l[i[ok]], x[ok]))
+        acc[i[ok]] += f[:, None] * pix["lit"][hit[ok]]
+        csum[i[ok]] += f
+    out[sel, :3] = acc / count[:, None]
+    out[sel, 3] = csum / count
+    return out
+
+
+def resolve(pix, hits, cam: dict, max_roughness: float):
+    """Twin of ssr_resolve: each pixel's (H, C), the weighted mean over its neighbours on the same
+    surface."""
+    w, h = cam["resolution"]
+    out = np.zeros((w * h, 4))
+    for px in np.nonzero(np.isfinite(pix["z"]) & (pix["rough"] <= max_roughness))[0]:
+        r = pix["rough"][px]
+        radius = int(np.ceil(np.float32(RESOLVE_RADIUS * min(r / max(max_roughness, 1e-6), 1.0))))
+        sigma2 = max(0.25 * radius * radius, 0.25)
+        x, y = px % w, px // w
+        acc, wsum = np.zeros(4), 0.0
+        for dy in range(-radius, radius + 1):
+            for dx in range(-radius, radius + 1):
+                qx, qy = x + dx, y + dy
+                if not (0 <= qx < w and 0 <= qy < h):
+                    continue
+                q = qy * w + qx
+                if q == px:
+                    wt = 1.0
+                elif not np.isfinite(pix["z"][q]):
+                    wt = 0.0
+                else:
+                    cn = float(pix["n"][px] @ pix["n"][q])
+                    dz = abs(pix["z"][q] - pix["z"][px]) / (0.02 * pix["z"][px])
+                    dr = abs(pix["rough"][q] - r) / 0.1
+                    wt = 0.0 if cn < 0.95 else np.exp(-0.5 * (dx * dx + dy * dy) / sigma2 - dz * dz - dr * dr) * cn ** 16
+                acc += wt * hits[q]
+                wsum += wt
+        out[px] = acc / wsum
+    return out
+
+
+def ssr(gb, arrays, effects: dict, cam: dict, src, ssr_w, ssr_li, captured=None):
+    """Twin of the ssr pass: the frame's radiance per sample (src, the lit frame) with the
+    reflected environment (weight ssr_w, radiance ssr_li per hit sample) replaced by the resolved
+    reflection of the sample's pixel, where the sample lies on that pixel's first sample's surface.
+    `captured`: the reflection probes (Bakes._reflection_probes) where they are read."""
+    s = effects["ssr_settings"]
+    spp = cam["spp"]
+    pix = gather(cam, gb, arrays, src)
+    res = resolve(pix, trace(pix, cam, s, captured), cam, s["max_roughness"])
+    out = src.copy()
+    k = np.nonzero(gb["hit"])[0]
+    px = k // spp
+    same = np.linalg.norm(gb["pos"][k] - pix["pos"][px], axis=1) <= 0.02 * pix["z"][px]
+    live = same & (ssr_w > 0).any(1)
+    r = res[px]
+    out[k] = src[k] + np.where(live[:, None], ssr_w * (r[:, :3] - r[:, 3:4] * ssr_li), 0.0)
     return out
