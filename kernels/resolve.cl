@@ -3,10 +3,10 @@
 
 /* Pixel = mean of its samples' radiance (what every lighting pass added); alpha = coverage. */
 __kernel void resolve(__global const float4 *radiance,
-                      __global const float4 *gb_pos, __global const float4 *gb_nrm,
+                      __global const float4 *gb_pos, __global const float4 *gb_nrm, __global const float4 *gb_dir,
                       __global const float4 *materials, __global const float4 *gb_mat, const int spp, const int npix,
                       __global float4 *hdr, __global float4 *aov_normal, __global float4 *aov_albedo,
-                      __global float *aov_depth)
+                      __global float *aov_depth, __global float *aov_object)
 {
     const int px = get_global_id(0);
     if (px >= npix) return;
@@ -41,5 +41,7 @@ __kernel void resolve(__global const float4 *radiance,
     aov_normal[px] = (float4)(nsum * inv, cover * inv);
     aov_albedo[px] = (float4)(asum * inv, cover * inv);
     aov_depth[px] = cover > 0.0f ? dsum / cover : 0.0f;
+    /* the first sample's object (objects.N), -1 where it hit nothing */
+    aov_object[px] = gb_pos[px * spp].w != MISS_T ? (float)as_int(gb_dir[px * spp].w) : -1.0f;
 #endif
 }

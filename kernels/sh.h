@@ -42,4 +42,15 @@ inline void sh_eval(float3 d, float *Y)
     }
 }
 
+/* Irradiance at normal n from SH_COEFFS irradiance coefficients (E_lm = Ahat_l L_lm; docs/conventions.md),
+ * clamped at 0: a band-limited fit rings below zero behind a bright sun. */
+inline float3 sh_irradiance(__constant float4 *coeffs, float3 n)
+{
+    float Y[SH_COEFFS];
+    sh_eval(n, Y);
+    float3 e = (float3)(0.0f);
+    for (int k = 0; k < SH_COEFFS; ++k) e += coeffs[k].xyz * Y[k];
+    return fmax(e, (float3)(0.0f));
+}
+
 #endif

@@ -21,7 +21,7 @@ from iblbake.errors import IblbakeError
 from iblbake.io import images
 from iblbake.render import probes
 from iblbake.render.bakes import Bakes
-from iblbake.render.passes.shade import probe_args, probe_defines
+from iblbake.render.sources.probes import probe_args, probe_defines
 from iblbake.render.twin import probes as twin
 from tests.conftest import load_scene, run_cli
 

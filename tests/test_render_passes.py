@@ -132,7 +132,7 @@ def test_tiled_frame_equals_the_untiled_one(tmp_path, small_panoramas, fx):
         assert changed.mean() > 0.05, changed.mean()          # SSR did something to compare
     assert np.array_equal(whole.hdr, tiled.hdr)
     assert np.array_equal(whole.png, tiled.png)
-    for a in ("normal", "albedo", "depth"):
+    for a in ("normal", "albedo", "depth", "object"):
         assert np.array_equal(whole.aovs[a], tiled.aovs[a]), a
 
 
@@ -183,21 +183,7 @@ def test_every_kernel_parameter_is_bound_by_name():
     from iblbake.render import frame
     from iblbake.render.passes import PASSES
     table = set(frame.TABLE_SCENE) | set(frame.buffer_names()) | set(frame.TABLE_TILE)
-    own = {"shade": {"sh_coeffs", "chain", "off", "lw", "lh", "nlev", "hammersley_pts", "nsamples", "mip_bias", "lobe_spread",
-                     "dfg", "dfg_size", "probe_data", "probe_irr", "probe_dist", "probe_origin", "probe_spacing",
-                     "probe_nx", "probe_ny", "probe_nz", "probe_irr_texels", "probe_dist_texels", "rp_chain", "rp_off",
-                     "rp_lw", "rp_lh", "rp_nlev", "rp_count", "rp_info"},
-           "importance": {"chain", "off", "lw", "lh", "nlev", "hammersley_pts", "nsamples", "mip_bias"},
-           "background": {"color", "lod", "chain", "off", "lw", "lh", "nlev"},
-           "reference": {"img", "w", "h", "marginal", "conditional", "pdf_table", "seed", "first", "batch", "slices",
-                         "lights", "nlights"},
-           "lights": {"lights", "nlights", "light_seed", "exact_samples"},
-           "ao": {"ao_seed", "ao_samples", "ao_radius"},
-           "gtao": {"ao_stride", "ao_radius", "gtao_slices", "gtao_steps", "gtao_radius_scale", "gtao_falloff",
-                    "gtao_power", "gtao_step", "gtao_denoise_radius"},
-           "tonemap": {"exposure_scale", "gamma"},
-           "ssr": {"max_roughness", "thickness", "steps", "rays", "ray_length", "seed", "hiz_off", "nlev", "src", "sw",
-                   "sh", "dst", "dw", "dh"}}
+    own = {p.name: set(p.bound_params()) for p in PASSES}        # the passes' (and shade's sources') declarations
     for p in PASSES:
         for fn in p.kernel_functions():
             names = {n for n, _ in runtime.kernel_params(p.kernel, fn)}
@@ -225,13 +211,13 @@ def test_buffers_follow_the_declarations(tmp_path, small_panoramas):
     pl = render.plan(sc)
     planned = frame.planned_buffers(pl, tiled=False)
     assert set(planned) == {"gb_pos", "gb_nrm", "gb_dir", "radiance", "ao_buf", "gtao_raw", "gtao_levels",
-                            "spec_sums", "hdr", "aov_normal", "aov_albedo", "aov_depth", "png_u8", "display"}
+                            "spec_sums", "hdr", "aov_normal", "aov_albedo", "aov_depth", "aov_object", "png_u8", "display"}
     assert {"ao_pos", "ao_nrm", "ao_dir"} <= set(frame.planned_buffers(pl, tiled=True))
     w, h = sc.data["camera"]["resolution"]
     spp = sc.data["camera"]["spp"]
     one_row = frame.frame_bytes(sc, pl, 1) - frame.frame_bytes(sc, pl, 0)
-    # gb_pos, gb_nrm, gb_dir, radiance (16 each), ao_buf (4), spec_sums (32); hdr, aovs (36), png (4), display
-    assert one_row == w * (spp * (4 * 16 + 4 + 32) + 16 + 36 + 4 + 16)
+    # gb_pos, gb_nrm, gb_dir, radiance (16 each), ao_buf (4), spec_sums (32); hdr, aovs (40), png (4), display
+    assert one_row == w * (spp * (4 * 16 + 4 + 32) + 16 + 40 + 4 + 16)
     assert planned["spec_sums"] == Buffer("spec_sums", count=2)
     budget = frame.frame_bytes(sc, pl, 5, tiled=True)
     f = render.render(sc, cache_root=tmp_path / "cache", device_budget=budget)

@@ -3,6 +3,6 @@ context, tiles and outputs), bakes (what passes read), twin (the numpy renderer)
 
 from iblbake.render.bakes import Bakes
 from iblbake.render.frame import Frame, Reuse, output_paths, render, write_outputs
-from iblbake.render.plan import plan
+from iblbake.render.plan import lighting_passes, plan
 
-__all__ = ["Bakes", "Frame", "Reuse", "output_paths", "plan", "render", "write_outputs"]
+__all__ = ["Bakes", "Frame", "Reuse", "lighting_passes", "output_paths", "plan", "render", "write_outputs"]

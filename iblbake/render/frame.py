@@ -20,10 +20,10 @@ from iblbake.errors import InputError
 from iblbake.render.bakes import Bakes, load_all
 from iblbake.render.plan import Plan, plan
 from iblbake.scene import pack
-from iblbake.scene.load import Scene
+from iblbake.scene.load import AOVS, Scene
 
 DEVICE_SHARE = 0.5                        # of the device's global memory, for one frame's buffers
-FRAME_HOST_PIXEL_BYTES = 16 + 4 + 36      # the host's frame: hdr, png and AOVs
+FRAME_HOST_PIXEL_BYTES = 16 + 4 + 40      # the host's frame: hdr, png and AOVs
 PLACEHOLDER_BYTES = 16                    # a buffer no running pass needs, bound for its parameter
 TABLE_TILE = ("n", "npix", "pixel0")      # per tile: samples, pixels, the first pixel's index
 # per frame: the camera, the geometry (scene/pack.py), materials and textures, the panorama's frame
@@ -281,7 +281,8 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
     ctx.frame_png = np.empty((height, width, 4), np.uint8) if "png_u8" in planned else None
     ctx.frame_aovs = {"normal": np.empty((height, width, 4), np.float32),
                       "albedo": np.empty((height, width, 4), np.float32),
-                      "depth": np.empty((height, width), np.float32)} if "aov_normal" in planned else {}
+                      "depth": np.empty((height, width), np.float32),
+                      "object": np.empty((height, width), np.float32)} if "aov_normal" in planned else {}
     keys = pass_keys(pl, scene)
     prev = reuse.state if reuse is not None else None
     if prev is not None and not (prev["runtime"] is rt and prev["shape"] == (width, height, spp) and rows == height):
@@ -381,7 +382,7 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
 
 def output_paths(scene: Scene) -> list:
     out = scene.data["output"]
-    return [*out["frame"], *(out[a] for a in ("normal", "albedo", "depth") if out[a])]
+    return [*out["frame"], *(out[a] for a in AOVS if out[a])]
 
 
 def write_outputs(frame: Frame, scene: Scene) -> list:
@@ -396,11 +397,11 @@ def write_outputs(frame: Frame, scene: Scene) -> list:
         else:
             images.write_exr(p, frame.hdr, channels=("R", "G", "B", "A"))
         written.append(p)
-    for a in ("normal", "albedo", "depth"):
+    for a in AOVS:
         if out[a]:
             img = frame.aovs[a]
-            if a == "depth":
-                images.write_exr(out[a], img[..., None], channels=("Z",))
+            if a in ("depth", "object"):
+                images.write_exr(out[a], img[..., None], channels=("Z" if a == "depth" else "Y",))
             else:
                 images.write_exr(out[a], img, channels=("R", "G", "B", "A"))
             written.append(out[a])

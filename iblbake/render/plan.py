@@ -13,7 +13,7 @@ import math
 from dataclasses import dataclass, field
 
 from iblbake.scene import materials
-from iblbake.scene.load import Scene
+from iblbake.scene.load import AOVS, Scene
 
 
 # The modes that approximate image-based light (runtime and baked estimates): AO occludes them,
@@ -139,6 +139,24 @@ class Plan:
                 "defines": self.defines, "notes": self.notes}
 
 
+def lighting_passes(pl: Plan) -> list:
+    """The names of the passes that light the frame: those that add into radiance, and those whose
+    every output only they read (the importance pass's sums, AO's occlusion): what a study times as
+    a rung's lighting."""
+    names = {p.name for p in pl.passes if "radiance" in p.writes}
+    grew = True
+    while grew:
+        grew = False
+        for p in pl.passes:
+            if p.name in names or not p.writes:
+                continue
+            readers = {q.name for q in pl.passes if q is not p and set(q.reads) & set(p.writes)}
+            if readers and readers <= names:
+                names.add(p.name)
+                grew = True
+    return [p.name for p in pl.passes if p.name in names]
+
+
 BAKE_ORDER = ("sh", "radiance", "prefiltered", "dfg", "env_cdf", "probes", "reflection_probes")
 
 
@@ -150,7 +168,7 @@ def plan(scene: Scene, one_program: bool = False) -> Plan:
     wanted = {b for p in running for b in p.reads_bakes(scene, fx)}
     notes = list(fx.notes)
     out = scene.data["output"]
-    if not out["frame"] and not any(out[a] for a in ("normal", "albedo", "depth")):
+    if not out["frame"] and not any(out[a] for a in AOVS):
         notes.append("no output requested (output.frame or -o): rendering without writing")
     return Plan(fx, running, [b for b in BAKE_ORDER if b in wanted],
                 {p.name: p.defines(scene, fx) for p in running if p.kernel}, notes, one_program)

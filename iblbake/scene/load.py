@@ -20,7 +20,7 @@ from iblbake.scene.schema import SCHEMA, ListOf, MapOf, Section, _Bad
 from iblbake.scene.yaml_lines import load_with_lines
 
 FRAME_SUFFIXES = (".png", ".exr")
-AOVS = ("normal", "albedo", "depth")
+AOVS = ("normal", "albedo", "depth", "object")
 
 
 @dataclass

@@ -563,6 +563,7 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "normal": Str(doc="AOV: world-space shading normal, EXR"),
         "albedo": Str(doc="AOV: base colour, EXR"),
         "depth": Str(doc="AOV: distance along the camera ray (0 where nothing is hit), EXR"),
+        "object": Str(doc="AOV: the object (its index N in objects) each pixel's first sample hit, -1 where none, EXR"),
         "dither": Bool(False, doc="add +-0.5 LSB triangular dither before 8-bit quantisation"),
     }),
 })

@@ -63,7 +63,7 @@ def base_values(sc, settings: Settings) -> list:
     vals = [("camera.resolution", study_resolution(sc, settings.max_side)),
             ("environment.background", "hide")]
     vals += [(f"materials.{m}.emissive", [0.0, 0.0, 0.0]) for m in sc.data["materials"]]
-    vals += [(f"output.{a}", None) for a in ("normal", "albedo", "depth")]
+    vals += [(f"output.{a}", None) for a in scene_load.AOVS]
     return vals
 
 
@@ -232,6 +232,7 @@ class Study:
         from iblbake import render
 
         sc = self.load(self.rung_values(rung))
+        lighting_names = set(render.lighting_passes(render.plan(sc)))
         t0 = time.perf_counter()
         lighting, whole, frame = [], [], None
         builds_before = len(self.rt.builds)
@@ -239,7 +240,7 @@ class Study:
         while len(lighting) < self.settings.repeats:
             first = frame is None
             fr = render.render(sc, runtime=self.rt, cache=self.bakes, warn=self.warn)
-            light = sum(p["seconds"] for p in fr.report["passes"] if p["name"] in ("importance", "shade", "reference", "ssr"))
+            light = sum(p["seconds"] for p in fr.report["passes"] if p["name"] in lighting_names)
             if first:
                 bakes = [b for b in fr.report["bakes"] if b["name"] not in ("geometry", "read_environment")]
             frame = fr

@@ -72,7 +72,7 @@ def cell_scenes(scene_path, overrides, cells, cell_size=None, keep_going=False):
     size = [("camera.resolution", list(cell_size))] if cell_size else []
     out = []
     for c in cells:
-        values = c.values + size + [(f"output.{a}", None) for a in ("normal", "albedo", "depth")]
+        values = c.values + size + [(f"output.{a}", None) for a in scene_load.AOVS]
         try:
             out.append(scene_load.load(scene_path, overrides, ["cell.png"], values=values, origin="sweep"))
         except IblbakeError as e:

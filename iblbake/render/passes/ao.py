@@ -11,6 +11,7 @@ from iblbake.render.passes.base import Buffer, Pass, geometry_defines, surface_c
 class AmbientOcclusion(Pass):
     name = "ao"
     kernel = "ao.cl"
+    params = ("ao_seed", "ao_samples", "ao_radius")
     buffers = (Buffer("ao_buf", "float"),)
 
     def runs(self, scene, fx):

@@ -12,6 +12,7 @@ from iblbake.scene.layout import BACKGROUND_MODES
 class Background(Pass):
     name = "background"
     kernel = "background.cl"
+    params = ("color", "lod", "chain", "off", "lw", "lh", "nlev")
     buffers = (Buffer("radiance"),)      # every lighting pass adds into it
 
     def runs(self, scene, fx):

@@ -9,33 +9,10 @@ from __future__ import annotations
 
 import functools
 import time
-from dataclasses import dataclass
-from typing import Callable
 
+from iblbake.render.buffers import ELEMENT_BYTES, Buffer  # noqa: F401 (the pass contract's record)
 from iblbake.render.plan import Effects
 from iblbake.scene.load import Scene
-
-ELEMENT_BYTES = {"float4": 16, "float": 4, "uchar4": 4, "int": 4}
-
-
-@dataclass(frozen=True)
-class Buffer:
-    """A device buffer of the frame, bound by `name` to every kernel parameter of that name:
-    `count` elements of `dtype` per G-buffer sample of the tile (per="sample"), per pixel of the
-    tile ("pixel"), or count(scene data) elements once per frame ("frame"). `when` names a define
-    of the declaring pass without which the pass leaves the buffer alone, or "TILED" (needed only
-    when the frame renders in several tiles). A buffer that no running pass needs is bound to a
-    placeholder (the kernels compiled without its feature never touch it)."""
-    name: str
-    dtype: str = "float4"
-    per: str = "sample"
-    count: int | Callable = 1
-    when: str | None = None
-
-    def element_bytes(self, data: dict | None = None) -> int:
-        """Bytes per sample, per pixel, or in all (per frame)."""
-        n = self.count(data) if callable(self.count) else self.count
-        return ELEMENT_BYTES[self.dtype] * n
 
 
 class Pass:
@@ -50,6 +27,12 @@ class Pass:
     host_sample_bytes = 0    # host memory it keeps per G-buffer sample of the tile (the tile budget)
     fills: tuple = ()        # what of the host's frame its run() reads back: hdr, aovs, png
     host_writes: tuple = ()  # buffers its run() writes from the host (no kernel parameter says so)
+    params: tuple = ()       # kernel parameters its setup() and run() bind (the frame's table binds the rest)
+
+    def bound_params(self) -> tuple:
+        """The kernel parameters this pass binds itself (tests/test_render_passes.py checks that
+        these and the frame's table cover every parameter of its kernels)."""
+        return self.params
 
     def kernel_functions(self) -> tuple:
         return (self.function or self.name, *self.functions) if self.kernel else ()

@@ -33,6 +33,8 @@ class GroundTruthAO(Pass):
     so tiles see their neighbours and the frame equals its untiled render."""
     name = "gtao"
     kernel = "gtao.cl"
+    params = ("ao_stride", "ao_radius", "gtao_slices", "gtao_steps", "gtao_radius_scale", "gtao_falloff", "gtao_power",
+              "gtao_step", "gtao_denoise_radius")
     functions = ("gtao_pyramid", "gtao_denoise")
     buffers = (Buffer("ao_buf", "float"),
                # the raw value of every block of pixels, and the position pyramid

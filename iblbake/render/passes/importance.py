@@ -20,6 +20,7 @@ FRESNEL_ONLY = ("base_color", "metallic", "specular", "specular_color")
 class Importance(Pass):
     name = "importance"
     kernel = "importance.cl"
+    params = ("chain", "off", "lw", "lh", "nlev", "hammersley_pts", "nsamples", "mip_bias")
     buffers = (Buffer("spec_sums", count=2),)     # the two sums per sample
 
     def runs(self, scene, fx):

@@ -49,6 +49,7 @@ def _size(lt) -> float:
 class Lights(Pass):
     name = "lights"
     kernel = "lights.cl"
+    params = ("lights", "nlights", "light_seed", "exact_samples")
     buffers = (Buffer("radiance"),)      # every lighting pass adds into it
 
     def runs(self, scene, fx):

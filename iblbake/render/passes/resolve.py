@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from iblbake.render.passes.base import Buffer, Pass
 
-AOVS = ("normal", "albedo", "depth")
+from iblbake.scene.load import AOVS
 
 
 class Resolve(Pass):
@@ -14,7 +14,8 @@ class Resolve(Pass):
     # radiance: read even where no lighting pass runs (both terms off, background hidden: zeros)
     buffers = (Buffer("radiance"), Buffer("hdr", per="pixel"), Buffer("aov_normal", per="pixel", when="WRITE_AOVS"),
                Buffer("aov_albedo", per="pixel", when="WRITE_AOVS"),
-               Buffer("aov_depth", "float", per="pixel", when="WRITE_AOVS"))
+               Buffer("aov_depth", "float", per="pixel", when="WRITE_AOVS"),
+               Buffer("aov_object", "float", per="pixel", when="WRITE_AOVS"))
 
     fills = ("hdr", "aovs")
 
@@ -31,6 +32,6 @@ class Resolve(Pass):
         sl = slice(ctx.row0, ctx.row0 + rows)
         ctx.rt.read_into(t["hdr"], ctx.frame_hdr[sl])        # whole rows: contiguous
         if "WRITE_AOVS" in ctx.plan.defines[self.name]:
-            for a in ("normal", "albedo", "depth"):
+            for a in AOVS:
                 ctx.rt.read_into(t[f"aov_{a}"], ctx.frame_aovs[a][sl])
         return {}

@@ -10,7 +10,8 @@ import time
 import numpy as np
 
 from iblbake.render.passes.base import Buffer, Pass
-from iblbake.render.passes.shade import reflects_locally, rprobe_args, screen_space
+from iblbake.render.sources.reflection_probes import reflects_locally, rprobe_args
+from iblbake.render.sources.ssr import screen_space
 
 
 def pyramid(width: int, rows: int) -> list:
@@ -38,6 +39,8 @@ def _hiz_floats(d) -> int:
 class ScreenSpaceReflections(Pass):
     name = "ssr"
     kernel = "ssr.cl"
+    params = ("max_roughness", "thickness", "steps", "rays", "ray_length", "seed", "rp_info", "rp_count", "hiz_off", "nlev",
+              "src", "sw", "sh", "dst", "dw", "dh")
     functions = ("ssr_gather", "ssr_depth", "ssr_reduce", "ssr_trace", "ssr_resolve")
     whole_frame = True
     # per pixel of the whole frame: its first sample's position and depth, normal and roughness, lit

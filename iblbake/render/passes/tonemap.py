@@ -10,6 +10,7 @@ from iblbake.scene.layout import TONEMAP_IDS
 class Tonemap(Pass):
     name = "tonemap"
     kernel = "tonemap.cl"
+    params = ("exposure_scale", "gamma")
     function = "tonemap_u8"
     program = "tonemap"      # its own: exposure and operator sweeps reuse the frame program
     buffers = (Buffer("png_u8", "uchar4", per="pixel"), Buffer("display", per="pixel"))

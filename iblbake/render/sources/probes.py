@@ -1,0 +1,70 @@
+"""Irradiance probes (`diffuse: probes`): the DDGI volume baked by render/probes.py, sampled as
+RTXGI does, with its fallbacks counted in probe_stats. Kernel: kernels/probes.h probes_diffuse."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from iblbake.render import probes
+from iblbake.render.buffers import Buffer
+from iblbake.render.sources.base import Source
+
+PARAMS = ("probe_data", "probe_irr", "probe_dist", "probe_origin", "probe_spacing", "probe_nx", "probe_ny", "probe_nz",
+          "probe_irr_texels", "probe_dist_texels")
+
+
+class IrradianceProbes(Source):
+    name = "probes"
+    header = "probes.h"
+    params = PARAMS
+    sections = ("probes",)
+    # the samples that fell back: [0] to the nearest active probes, [1] to the panorama's SH
+    buffers = (Buffer("probe_stats", "int", per="frame", count=2, when="PROBE_STATS"),)
+
+    def runs(self, scene, fx):
+        return fx.diffuse == "probes"
+
+    def defines(self, scene, fx):
+        return {**probe_defines(scene.data["probes"]), "PROBE_STATS": 1}
+
+    def reads_bakes(self, scene, fx):
+        return ["probes"]
+
+    def args(self, ctx):
+        return probe_args(ctx.rt, probes.sampled(ctx.loaded["probes"], ctx.scene.data["probes"]), ctx.bakes)
+
+    def placeholders(self, rt):
+        return probe_args(rt, None)
+
+
+def probe_defines(settings: dict) -> dict:
+    """kernels/probes.h's switches for a scene's probes section."""
+    d = {"PROBES_SH": 1} if settings["irradiance"] == "sh" else {}
+    if settings["visibility"]:
+        d["PROBE_VISIBILITY"] = 1
+    if settings["classification"]:
+        d["PROBE_CLASSIFICATION"] = 1
+    return d
+
+
+def probe_args(rt, vol, bakes=None) -> dict:
+    """PROBE_PARAMS of a sampled volume (render/probes.py sampled), placeholders without one. With
+    `bakes` (render.Bakes) its atlases go up once per runtime (a series of frames, a study's rungs)."""
+    if vol is None:
+        z = rt.to_device(np.zeros((1, 4), np.float32))
+        return {"probe_data": z, "probe_irr": z, "probe_dist": z, "probe_origin": np.zeros(4), "probe_spacing": np.ones(4),
+                "probe_nx": 1, "probe_ny": 1, "probe_nz": 1, "probe_irr_texels": 1, "probe_dist_texels": 1}
+
+    def upload():
+        irr = np.asarray(vol["irradiance"], np.float32)
+        dist = np.asarray(vol["distance"], np.float32)
+        return (rt.to_device(np.asarray(vol["data"], np.float32)),
+                rt.to_device(np.pad(irr, [(0, 0)] * (irr.ndim - 1) + [(0, 1)]).reshape(-1, 4)),
+                rt.to_device(np.pad(dist, ((0, 0), (0, 0), (0, 2))).reshape(-1, 4)))
+    data, irr, dist = bakes.on_device(rt, (vol["data"], vol["irradiance"], vol["distance"]), upload) \
+        if bakes is not None else upload()
+    return {"probe_data": data, "probe_irr": irr, "probe_dist": dist,
+            "probe_origin": np.array([*vol["origin"], vol["normal_bias"]], np.float32),
+            "probe_spacing": np.array([*vol["spacing"], vol["view_bias"]], np.float32),
+            **dict(zip(("probe_nx", "probe_ny", "probe_nz"), vol["counts"])),
+            "probe_irr_texels": vol["irradiance_texels"], "probe_dist_texels": vol["distance_texels"]}
