@@ -40,7 +40,7 @@ def window(folder, sky, probes, name="window"):
 
 def captures(bakes):
     """(image, cached) of every capture the store holds."""
-    return [v for k, v in bakes._memo.items() if isinstance(k, tuple) and k[0] == "reflection"]
+    return [v[:2] for k, v in bakes._memo.items() if isinstance(k, tuple) and k[0] == "reflection"]
 
 
 def test_a_capture_of_the_open_sky_leaves_it_to_the_distant_chain(tmp_path, rt, sky):
