@@ -192,7 +192,6 @@ def test_every_kernel_parameter_is_bound_by_name():
         assert p.writes, p.name                    # every pass leaves something in a buffer
 
 
-@pytest.mark.external
 def test_the_frame_names_no_pass():
     """render/frame.py derives everything from the passes' declarations: it names none of them."""
     from iblbake.render.passes import PASSES
@@ -200,14 +199,13 @@ def test_the_frame_names_no_pass():
     assert not [p.name for p in PASSES if f'"{p.name}"' in src or f"'{p.name}'" in src]
 
 
-def test_buffers_follow_the_declarations(tmp_path, small_panoramas):
+def test_buffers_follow_the_declarations(tmp_path, lobed_sky):
     """The frame allocates exactly the declared buffers of the running passes at full size
     (per sample, per pixel, per frame) and a placeholder for every other, and a tile budget of
     frame_bytes(rows) gives tiles of those rows."""
     from iblbake.render import frame
     from iblbake.render.passes.base import Buffer
-    sc = busy_scene(tmp_path, small_panoramas["city"], {"diffuse": "sh", "specular": "importance", "samples": 4,
-                                                        "ao": "gtao"})
+    sc = busy_scene(tmp_path, lobed_sky, {"diffuse": "sh", "specular": "importance", "samples": 4, "ao": "gtao"})
     pl = render.plan(sc)
     planned = frame.planned_buffers(pl, tiled=False)
     assert set(planned) == {"gb_pos", "gb_nrm", "gb_dir", "radiance", "ao_buf", "gtao_raw", "gtao_levels",
@@ -224,13 +222,13 @@ def test_buffers_follow_the_declarations(tmp_path, small_panoramas):
     assert f.report["tiles"] == -(-h // 5)
 
 
-def test_a_frame_that_lights_nothing_reads_zeros(tmp_path, small_panoramas):
+def test_a_frame_that_lights_nothing_reads_zeros(tmp_path, lobed_sky):
     """Both terms off and the background hidden: no pass writes radiance, and resolve, which
     reads it for every sample, still gets it at full size, zero-filled (it was a placeholder of a
     few bytes: the H200 faulted reading past it, a CPU read whatever lay there). The frame is
     black with its coverage, and its albedo AOV the materials' base colour."""
     from iblbake.render import frame
-    sc = busy_scene(tmp_path, small_panoramas["city"], {"diffuse": "off", "specular": "off"})
+    sc = busy_scene(tmp_path, lobed_sky, {"diffuse": "off", "specular": "off"})
     sc.data["environment"]["background"] = "hide"
     sc.data["materials"]["b"]["emissive"] = [0.0, 0.0, 0.0]
     sc.data["camera"]["spp"] = 1

@@ -30,9 +30,11 @@ def bounces_value(v: str):
 @click.option("--output", "-o", "out_dir", type=click.Path(file_okay=False), default=None, metavar="DIR",
               help="Write table.md, table.csv, accuracy.json, plot.png (error against time, the Pareto "
                    "frontier marked) and errors.png (best and worst rungs beside their error maps) here.")
-@click.option("--ladder", "ladder_path", type=click.Path(dir_okay=False), default=None, metavar="FILE",
-              help="The rungs to run instead of the default ladder: {rungs: [AXIS, ...]}, each axis in the "
-                   "sweep syntax ({key, values}, {key, range}, {steps}) with optional term: and with:.")
+@click.option("--ladder", "ladder_path", type=click.Path(dir_okay=False), default=None, metavar="FILE|realtime",
+              help="The rungs to run instead of the default ladder: `realtime` (the real-time modes as shipped: "
+                   "SH, GTAO, probes; importance, the split sum, lobe, SSR, reflection probes), or a file "
+                   "{rungs: [AXIS, ...]}, each axis in the sweep syntax ({key, values}, {key, range}, {steps}) "
+                   "with optional term: and with:.")
 @click.option("--set", "overrides", multiple=True, metavar="KEY.PATH=VALUE",
               help="Override a scene value for the reference and every rung (as render --set).")
 @click.option("--max-side", type=click.IntRange(8, 8192), default=320, show_default=True,
@@ -90,8 +92,13 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
                             flip=flip, visibility=visibility, bounces=bounces)
     rt = Runtime(device)
     study = acc.Study(scene_path, overrides, settings, runtime=rt, bakes=render.Bakes(cache_dir), warn=con.warn)
-    rungs = ladder.ladder_from_file(ladder_path, study.scene, study.fx) if ladder_path else \
-        ladder.default_ladder(study.scene, study.fx, rt.info.kind, paths=study.paths)
+    if ladder_path in ladder.LADDERS:
+        rungs = ladder.LADDERS[ladder_path](study.scene, study.fx)
+        ladder_path = None
+    elif ladder_path:
+        rungs = ladder.ladder_from_file(ladder_path, study.scene, study.fx)
+    else:
+        rungs = ladder.default_ladder(study.scene, study.fx, rt.info.kind, paths=study.paths)
     rungs = [ladder.configured_rung(study.scene, t) for t in study.terms] + rungs
     reads = scene_load.named_input_files(study.scene) + ([("the ladder", ladder_path)] if ladder_path else [])
     for r in rungs:                  # every rung's scene validates before anything renders

@@ -42,6 +42,22 @@ def error_metrics(got, ref, mask, flip: bool = True) -> dict:
     return out
 
 
+def region_errors(got, ref, mask, regions) -> dict:
+    """{region id: relative error of the region's mean colour} over the mask's pixels of each
+    region id (an object index AOV: -1 none): |mean - mean_ref| summed over RGB over the reference
+    mean's sum. A region's mean is what a viewer reads off a surface (how bright, what colour),
+    and Monte Carlo noise in the reference averages out of it."""
+    out = {}
+    for rid in np.unique(regions[mask]):
+        if rid < 0:
+            continue
+        sel = mask & (regions == rid)
+        g = got[..., :3][sel].astype(np.float64).mean(0)
+        r = ref[..., :3][sel].astype(np.float64).mean(0)
+        out[int(rid)] = float(np.abs(g - r).sum() / max(r.sum(), 1e-30))
+    return out
+
+
 def hdr_flip(got, ref, mask) -> float:
     import flip_evaluator
 

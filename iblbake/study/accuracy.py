@@ -28,7 +28,7 @@ import numpy as np
 from iblbake.errors import InputError
 from iblbake.scene import load as scene_load
 from iblbake.scene.layout import DELTA_ALPHA
-from iblbake.core.metrics import error_metrics, object_mask
+from iblbake.core.metrics import error_metrics, object_mask, region_errors
 from iblbake.study.ladder import TERMS, Rung
 
 # A term alone: the other term off
@@ -101,6 +101,7 @@ class Study:
         # only" rung would be the reference itself)
         self.paths = settings.visibility and settings.bounces != 1 and interreflects(self.scene)
         self._mirrors = None
+        self._objects = None
         self.times = {"reference_s": 0.0, "rungs_s": 0.0, "bakes_s": 0.0}
 
     def load(self, values, origin="ladder"):
@@ -200,6 +201,24 @@ class Study:
         fr = render.render(self.load(vals, origin="accuracy"), runtime=self.rt, cache=self.bakes, warn=self.warn)
         return object_mask(fr.hdr) & (fr.aovs["albedo"][..., 0] < MIRROR_ROUGHNESS)
 
+    def object_regions(self) -> np.ndarray:
+        """Each pixel's object index (-1: none), from one G-buffer render's object AOV: the regions
+        the study's region errors read."""
+        from iblbake import render
+
+        if self._objects is None:
+            vals = [("effects.diffuse", "off"), ("effects.specular", "off"), ("output.object", "study-object.exr")]
+            fr = render.render(self.load(vals, origin="accuracy"), runtime=self.rt, cache=self.bakes, warn=self.warn)
+            self._objects = np.rint(fr.aovs["object"]).astype(int)
+        return self._objects
+
+    def region_metrics(self, hdr, ref, mask) -> dict:
+        """The rung's error per object region (metrics.region_errors: its mean colour's relative
+        error), keyed by what messages call the object, and the worst of them."""
+        errs = region_errors(hdr, ref, mask, self.object_regions())
+        named = {scene_load.object_label(self.scene.data, k): round(v, 5) for k, v in errs.items()}
+        return {"region_errors": named, "worst_region_error": max(errs.values(), default=0.0)}
+
     def metric_mask(self, term: str, hdr) -> np.ndarray:
         mask = self.reference[term]["mask"] & object_mask(hdr)
         if term == "specular":
@@ -267,7 +286,8 @@ class Study:
             "bake_s": round(sum(b["seconds"] for b in bakes if not b["cached"]), 4),
             "bakes": [{"name": b["name"], "seconds": b["seconds"], "cached": b["cached"]} for b in bakes],
             "kernel_build_s": round(builds, 4),
-            **error_metrics(frame.hdr, ref["hdr"], mask, self.settings.flip)}
+            **error_metrics(frame.hdr, ref["hdr"], mask, self.settings.flip),
+            **self.region_metrics(frame.hdr, ref["hdr"], mask)}
         rung.frame = frame
         self.times["rungs_s"] += time.perf_counter() - t0 - builds - rung.result["bake_s"]
         self.times["bakes_s"] += rung.result["bake_s"] + builds

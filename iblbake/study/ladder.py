@@ -116,6 +116,36 @@ def default_ladder(sc, fx, device_kind: str = "GPU", paths: bool = False) -> lis
     return rungs
 
 
+def realtime_ladder(sc, fx) -> list:
+    """The real-time modes of each term the scene calls for, as shipped (`--ladder realtime`; the
+    corpus of docs/benchmarks.md): diffuse SH, SH with GTAO, irradiance probes (octahedral, L2 SH);
+    specular importance N=64, the split sum with the distant panorama alone, the lobe K=4, the
+    split sum with SSR, and with the scene's reflection probes, with and without SSR."""
+    rungs = []
+    if fx.diffuse != "off":
+        rungs += [Rung("diffuse", "SH", [("effects.diffuse", "sh"), ("effects.ao", "off")]),
+                  Rung("diffuse", "SH + GTAO", [("effects.diffuse", "sh"), ("effects.ao", "gtao")]),
+                  Rung("diffuse", "probes", [("effects.diffuse", "probes"), ("effects.ao", "off")]),
+                  Rung("diffuse", "probes, L2 SH", [("effects.diffuse", "probes"), ("effects.ao", "off"),
+                                                   ("probes.irradiance", "sh")])]
+    if fx.specular != "off":
+        distant = [("effects.specular", "prefiltered"), ("effects.reflection_probes", False), ("effects.ao", "off")]
+        rungs += [Rung("specular", "importance N=64", [("effects.specular", "importance"), ("effects.samples", 64),
+                                                       ("effects.ao", "off")]),
+                  Rung("specular", "distant", distant),
+                  Rung("specular", "lobe K=4", [("effects.specular", "lobe"), ("effects.lobe.samples", 4),
+                                                ("effects.ao", "off")]),
+                  Rung("specular", "distant + SSR", distant + [("effects.ssr", "on")])]
+        if sc.data["reflection_probes"]:
+            local = [("effects.specular", "prefiltered"), ("effects.reflection_probes", True), ("effects.ao", "off")]
+            rungs += [Rung("specular", "reflection probes", local),
+                      Rung("specular", "reflection probes + SSR", local + [("effects.ssr", "on")])]
+    return rungs
+
+
+LADDERS = {"realtime": realtime_ladder}       # --ladder NAME
+
+
 def probe_rungs() -> list:
     """(label, values) of the probe rungs: one factor at a time around 8 probes along the longest
     axis, 1024 rays, octahedral irradiance, DDGI's visibility."""

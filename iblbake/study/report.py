@@ -15,7 +15,7 @@ from iblbake.study.ladder import TERMS
 
 COLUMNS = (("term", "term"), ("label", "setting"), ("time_ms", "time ms"), ("bake_s", "bake s"),
            ("relative_rmse", "rel. RMSE"), ("mean_relative_error", "mean rel."), ("max_relative_error", "max rel."),
-           ("flip", "HDR-FLIP"), ("pareto", "frontier"))
+           ("worst_region_error", "worst object"), ("flip", "HDR-FLIP"), ("pareto", "frontier"))
 
 
 def table_rows(rows, front) -> list:
@@ -24,6 +24,7 @@ def table_rows(rows, front) -> list:
         out.append({"term": r["term"], "label": r["label"], "time_ms": r["time_s"] * 1000, "bake_s": r["bake_s"],
                     "relative_rmse": r["relative_rmse"], "mean_relative_error": r["mean_relative_error"],
                     "max_relative_error": r["max_relative_error"], "flip": r["flip"],
+                    "worst_region_error": r.get("worst_region_error"),
                     "pareto": r["label"] in front.get(r["term"], [])})
     return out
 
@@ -33,7 +34,7 @@ def _fmt(key, v) -> str:
         return "-"
     if key == "pareto":
         return "*" if v else ""
-    if key in ("relative_rmse", "mean_relative_error", "max_relative_error"):
+    if key in ("relative_rmse", "mean_relative_error", "max_relative_error", "worst_region_error"):
         return f"{100 * v:.2f}%"
     if key == "flip":
         return f"{v:.4f}"

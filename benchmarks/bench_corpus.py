@@ -1,0 +1,88 @@
+"""The real-time GI corpus (examples/corpus/*.yaml) judged against the converged reference: every
+scene under each panorama through `iblbake accuracy --ladder realtime` (study/ladder.py
+realtime_ladder: SH, SH + GTAO, probes; importance, distant split sum, lobe, SSR, reflection probes),
+one row per scene, panorama, term and mode: relative RMSE of the term, the worst object's region
+error (its mean colour), and the lighting passes' and whole frame's times. Prints the Markdown table
+docs/benchmarks.md holds; --json writes every figure.
+
+    .venv/bin/python benchmarks/bench_corpus.py [--panoramas studio,city] [--max-side 96]
+        [--max-samples 8192] [--target-noise 0.005] [--scenes box_out,resting] [--json out.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+
+def study_scene(path, panorama, args, rt, bakes) -> dict:
+    from iblbake.study import accuracy as acc, ladder
+
+    settings = acc.Settings(max_side=args.max_side, repeats=args.repeats, target_noise=args.target_noise,
+                            max_samples=args.max_samples, flip=False)
+    pano = ROOT / "examples" / "panoramas" / f"{panorama}.exr"
+    study = acc.Study(path, [f"environment.path={pano}"], settings, runtime=rt, bakes=bakes,
+                      warn=lambda m: print(f"  warning: {m}", file=sys.stderr))
+    rungs = ladder.realtime_ladder(study.scene, study.fx)
+    refs = {t: study.render_reference(t) for t in study.terms}
+    rows = [study.run_rung(r) for r in rungs]
+    return {"scene": Path(path).stem, "panorama": panorama,
+            "reference_noise": {t: refs[t]["noise"] for t in study.terms},
+            "reference_spp": {t: refs[t]["samples_per_pixel"] for t in study.terms},
+            "rungs": [{k: r[k] for k in ("term", "label", "relative_rmse", "worst_region_error", "region_errors",
+                                         "time_s", "frame_s", "bake_s")} for r in rows]}
+
+
+def markdown(results) -> str:
+    out = ["| scene | panorama | term | mode | rel. RMSE | worst object | lighting ms | frame ms |",
+           "|---|---|---|---|---|---|---|---|"]
+    for res in results:
+        for r in res["rungs"]:
+            out.append(f"| {res['scene']} | {res['panorama']} | {r['term']} | {r['label']} | "
+                       f"{100 * r['relative_rmse']:.1f}% | {100 * r['worst_region_error']:.1f}% | "
+                       f"{1000 * r['time_s']:.2f} | {1000 * r['frame_s']:.1f} |")
+    return "\n".join(out) + "\n"
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--panoramas", default="studio,city")
+    ap.add_argument("--scenes", default=None, help="comma-separated names (default: every corpus scene)")
+    ap.add_argument("--max-side", type=int, default=96)
+    ap.add_argument("--max-samples", type=int, default=8192)
+    ap.add_argument("--target-noise", type=float, default=0.005)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--device", default=None)
+    ap.add_argument("--cache", default=None)
+    ap.add_argument("--json", default=None)
+    args = ap.parse_args()
+
+    from iblbake import render
+    from iblbake.device.runtime import Runtime
+
+    rt = Runtime(args.device)
+    bakes = render.Bakes(args.cache)
+    names = args.scenes.split(",") if args.scenes else None
+    paths = [p for p in sorted((ROOT / "examples" / "corpus").glob("*.yaml")) if names is None or p.stem in names]
+    results = []
+    for path in paths:
+        for pano in args.panoramas.split(","):
+            t0 = time.perf_counter()
+            results.append(study_scene(path, pano, args, rt, bakes))
+            print(f"{path.stem} under {pano}: {time.perf_counter() - t0:.1f} s", file=sys.stderr)
+    print(f"device: {rt.device_label}; {args.max_side} px on the longer side; reference: two seeds to "
+          f"{args.target_noise} or {args.max_samples} samples per pixel\n")
+    print(markdown(results))
+    if args.json:
+        Path(args.json).write_text(json.dumps({"device": rt.device_label, "args": vars(args), "results": results},
+                                              indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
