@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.iblbake-installed
 PANOS  := examples/panoramas
 OUT    := examples/out
 
-.PHONY: demo test check stress install opencl meshes assets testmodels readers bench docs clean
+.PHONY: demo test check stress install opencl meshes assets testmodels readers peers bench docs clean
 
 install: $(STAMP)
 # editable_mode=compat: the editable install is a plain path in a .pth file. setuptools' default
@@ -52,7 +52,11 @@ testmodels:
 readers:
 	sh scripts/ensure_readers.sh tests/node
 
-test: opencl assets testmodels readers
+# the peer renderer the path tracer is tested against: Mitsuba 3 (PyPI) on Debian's LLVM 19
+peers: $(STAMP)
+	sh scripts/ensure_peers.sh $(BIN)/python
+
+test: opencl assets testmodels readers peers
 	$(BIN)/python -m pytest -q tests
 
 # the developer loop (at most 3 minutes on a 2-core CPU): no network, synthetic panoramas, no

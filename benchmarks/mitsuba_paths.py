@@ -80,6 +80,17 @@ def scenes(tmp: Path):
             [("mesh", {"path": str(ROOT / "examples" / "meshes" / "knot.ply"), "translate": [0, 0.51, 0]}, "clay"),
              ("rect", {"center": [0, 0, 0], "normal": "+y", "half": [3, 2]}, "floor")],
             {"clay": ("lambert", [0.8, 0.55, 0.35]), "floor": ("lambert", [0.6, 0.6, 0.6])}),
+        # glossy interreflection: rough metal (GGX, alpha 0.09; F = 1 in both: base colour 1, Mitsuba's
+        # roughconductor with material none) on a rough metal floor, in the box's coloured light
+        "glossy box": (
+            [("sphere", {"center": [0, 0.5, 0], "radius": 0.5}, "metal"),
+             ("rect", {"center": [0, 0, 0], "normal": "+y", "half": [1.5, 1.5]}, "brushed"),
+             ("rect", {"center": [0, 1.5, -1.5], "normal": "+z", "half": [1.5, 1.5]}, "white"),
+             ("rect", {"center": [-1.5, 1.5, 0], "normal": "+x", "half": [1.5, 1.5]}, "red"),
+             ("rect", {"center": [1.5, 1.5, 0], "normal": "-x", "half": [1.5, 1.5]}, "green")],
+            {"metal": ("metal", [1, 1, 1], 0.3), "brushed": ("metal", [1, 1, 1], 0.5),
+             "white": ("lambert", [0.7, 0.7, 0.7]), "red": ("lambert", [0.8, 0.15, 0.1]),
+             "green": ("lambert", [0.15, 0.7, 0.15])}),
         "textured glTF": (
             [("gltf", {"path": str(glb), "ply": str(ply), "texture": str(png)}, None),
              ("rect", {"center": [0, 0, 0], "normal": "+y", "half": [3, 2]}, "floor")],
@@ -156,8 +167,11 @@ def iblbake_doc(pano: Path, objects, mats, spp: int, seed: int, bounces, depth: 
         else:
             objs.append({"plane": {"point": p["center"], "normal": AXES[p["normal"]],
                                    "size": [2 * p["half"][0], 2 * p["half"][1]]}, "material": m})
-    materials = {n: ({"base_color": c, "metallic": 1, "roughness": 0} if k == "mirror"
-                     else {"base_color": c, "roughness": 1, "specular": 0}) for n, (k, c) in mats.items()}
+    def material(kind, c, rough=0.0):
+        if kind in ("mirror", "metal"):
+            return {"base_color": c, "metallic": 1, "roughness": rough}
+        return {"base_color": c, "roughness": 1, "specular": 0}
+    materials = {n: material(*m) for n, m in mats.items()}
     return {"camera": {"perspective": {"position": EYE, "look_at": TARGET, "fov_y": FOV}, "resolution": list(RES)},
             "environment": {"path": str(pano), "background": "show"},
             "materials": materials, "objects": objs, "output": {"depth": str(depth)},
@@ -167,9 +181,14 @@ def iblbake_doc(pano: Path, objects, mats, spp: int, seed: int, bounces, depth: 
 
 def mitsuba_dict(mi, pano: Path, objects, mats, max_depth: int, spp: int, seed: int, sampler="multijitter"):
     T = mi.ScalarTransform4f
-    bsdfs = {n: ({"type": "conductor", "material": "none", "specular_reflectance": {"type": "rgb", "value": c}}
-                 if k == "mirror" else {"type": "diffuse", "reflectance": {"type": "rgb", "value": c}})
-             for n, (k, c) in mats.items()}
+    def bsdf(kind, c, rough=0.0):
+        if kind == "mirror":
+            return {"type": "conductor", "material": "none", "specular_reflectance": {"type": "rgb", "value": c}}
+        if kind == "metal":                   # iblbake's alpha = roughness^2
+            return {"type": "roughconductor", "material": "none", "distribution": "ggx", "alpha": rough * rough,
+                    "specular_reflectance": {"type": "rgb", "value": c}}
+        return {"type": "diffuse", "reflectance": {"type": "rgb", "value": c}}
+    bsdfs = {n: bsdf(*m) for n, m in mats.items()}
     d = {"type": "scene", "integrator": {"type": "path", "max_depth": max_depth},
          "sensor": {"type": "perspective", "fov": FOV, "fov_axis": "y",
                     "to_world": T().look_at(origin=EYE, target=TARGET, up=[0, 1, 0]),
@@ -239,6 +258,54 @@ def z_test_pass_rate(ib: np.ndarray, ref: np.ndarray, ref_var: np.ndarray, mask:
     return float((p > level).mean()), p.size
 
 
+def panorama_pair(tmp: Path):
+    """(the panorama both renderers read, the range image of its texels' neighbours): courtyard
+    box-averaged to 256 x 128, interpolated to PANO_WIDTH, no chromaticities."""
+    from iblbake.io import images
+    img, _ = images.read_panorama(ROOT / "examples" / "panoramas" / "courtyard.exr")
+    h, w = img.shape[:2]
+    small = img[:, :, :3].reshape(128, h // 128, 256, w // 256, 3).mean((1, 3))
+    pano = tmp / "courtyard.exr"
+    fine = upsample(small, PANO_WIDTH // 256)
+    images.write_exr(pano, fine.astype(np.float32))
+    spread = tmp / "range.exr"
+    images.write_exr(spread, neighbour_range(fine).astype(np.float32))
+    return pano, spread
+
+
+def acceptance(mi, tmp: Path, pano: Path, spread: Path, objects, mats, renders: int, spp: int, ref_spp: int, rt,
+               bakes) -> dict:
+    """Mitsuba's acceptance test of one scene: iblbake's `renders` renders of spp samples (seeds 1..)
+    against Mitsuba's `path` at ref_spp per pixel centre. {rate, channels, ratio (iblbake's mean
+    over Mitsuba's, RGB), deterministic (the share of channels iblbake's estimate does not vary)}."""
+    from iblbake import render
+    from iblbake.scene import load
+
+    ib = []
+    for k in range(renders):
+        p = tmp / f"s{k}.yaml"
+        p.write_text(yaml.safe_dump(iblbake_doc(pano, objects, mats, spp, 1 + k, "unbounded", tmp / "depth.exr")))
+        f = render.render(load.load(p), runtime=rt, cache=bakes)
+        ib.append(f.hdr[..., :3].astype(np.float64))
+    ib = np.stack(ib)
+    # where iblbake's estimate is deterministic (the same in every render: a mirror's view of the
+    # sky), the two renderers differ by their lookups alone; bilinear lies within the range of
+    # a texel's neighbours, so that range, followed along the same paths (the frame lit by the
+    # range image), bounds it
+    doc = iblbake_doc(spread, objects, mats, 2, 1, "unbounded", tmp / "depth.exr")
+    p.write_text(yaml.safe_dump(doc))
+    fixed = (ib.var(0) == 0).all(-1, keepdims=True)
+    lookup = np.where(fixed, render.render(load.load(p), runtime=rt, cache=bakes).hdr[..., :3], 0.0)
+    scene = mi.load_dict(mitsuba_dict(mi, pano, objects, mats, 1024, 1, 0))
+    ref, ref_var = mitsuba_reference(mi, scene, ref_spp, 1)
+    # every surface pixel, silhouettes too (both trace the pixel's centre); not the sky, which
+    # iblbake shows through its background pass
+    mask = np.repeat((np.asarray(f.aovs["depth"]) > 0)[..., None], 3, -1)
+    rate, n = z_test_pass_rate(ib, ref, ref_var, mask, lookup)
+    return {"rate": rate, "channels": n, "deterministic": float(np.repeat(fixed, 3, -1)[mask].mean()),
+            "ratio": ib.mean(0)[mask].reshape(-1, 3).mean(0) / ref[mask].reshape(-1, 3).mean(0)}
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--renders", type=int, default=16, help="iblbake's independent renders (seeds) per scene")
@@ -258,51 +325,19 @@ def main():
     mi.set_variant(args.variant)
     from iblbake import render
     from iblbake.device.runtime import Runtime
-    from iblbake.io import images
-    from iblbake.scene import load
 
     print("| scene | pixel channels | z-test pass rate | iblbake / Mitsuba (mean) | deterministic channels (lookup range allowed) |")
     print("|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        img, _ = images.read_panorama(ROOT / "examples" / "panoramas" / "courtyard.exr")
-        h, w = img.shape[:2]
-        small = img[:, :, :3].reshape(128, h // 128, 256, w // 256, 3).mean((1, 3))
-        pano = tmp / "courtyard.exr"
-        fine = upsample(small, PANO_WIDTH // 256)
-        images.write_exr(pano, fine.astype(np.float32))
-        spread = tmp / "range.exr"
-        images.write_exr(spread, neighbour_range(fine).astype(np.float32))
+        pano, spread = panorama_pair(tmp)
         rt, bakes = Runtime(), render.Bakes(tmp / "cache")
         for name, (objects, mats) in scenes(tmp).items():
             if (args.only and args.only not in name) or args.no_acceptance:
                 continue
-            ib = []
-            for k in range(args.renders):
-                p = tmp / f"s{k}.yaml"
-                p.write_text(yaml.safe_dump(iblbake_doc(pano, objects, mats, args.spp, 1 + k, "unbounded",
-                                                        tmp / "depth.exr")))
-                f = render.render(load.load(p), runtime=rt, cache=bakes)
-                ib.append(f.hdr[..., :3].astype(np.float64))
-            ib = np.stack(ib)
-            # where iblbake's estimate is deterministic (the same in every render: a mirror's view of the
-            # sky), the two renderers differ by their lookups alone; bilinear lies within the range of
-            # a texel's neighbours, so that range, followed along the same paths (the frame lit by the
-            # range image), bounds it
-            doc = iblbake_doc(spread, objects, mats, 2, 1, "unbounded", tmp / "depth.exr")
-            p.write_text(yaml.safe_dump(doc))
-            fixed = (ib.var(0) == 0).all(-1, keepdims=True)
-            lookup = np.where(fixed, render.render(load.load(p), runtime=rt, cache=bakes).hdr[..., :3], 0.0)
-            scene = mi.load_dict(mitsuba_dict(mi, pano, objects, mats, 1024, 1, 0))
-            ref, ref_var = mitsuba_reference(mi, scene, args.ref_spp, 1)
-            # every surface pixel, silhouettes too (both trace the pixel's centre); not the sky, which
-            # iblbake shows through its background pass
-            mask = np.repeat((np.asarray(f.aovs["depth"]) > 0)[..., None], 3, -1)
-            rate, n = z_test_pass_rate(ib, ref, ref_var, mask, lookup)
-            fixed_share = float(np.repeat(fixed, 3, -1)[mask].mean())
-            rel = ib.mean(0)[mask].reshape(-1, 3).mean(0) / ref[mask].reshape(-1, 3).mean(0)
-            print(f"| {name} | {n} | {100 * rate:.2f}% ({'pass' if rate >= 0.9975 else 'FAIL'}) | "
-                  f"{np.round(rel, 4).tolist()} | {100 * fixed_share:.1f}% |", flush=True)
+            res = acceptance(mi, tmp, pano, spread, objects, mats, args.renders, args.spp, args.ref_spp, rt, bakes)
+            print(f"| {name} | {res['channels']} | {100 * res['rate']:.2f}% ({'pass' if res['rate'] >= 0.9975 else 'FAIL'}) | "
+                  f"{np.round(res['ratio'], 4).tolist()} | {100 * res['deterministic']:.1f}% |", flush=True)
         print(f"\niblbake: {args.renders} renders x {args.spp} samples per pixel (seeds 1-{args.renders}), reference "
               f"bounces unbounded; Mitsuba {mi.__version__} {args.variant} `path` max_depth 1024, {args.ref_spp} "
               f"samples per pixel centre; {RES[0]}x{RES[1]}")
