@@ -346,7 +346,9 @@ def project(radiance, t, dirs, grid: Grid, settings: dict):
         with np.errstate(invalid="ignore", divide="ignore"):
             e = np.where(den[..., None] > 0, np.pi * num / np.where(den > 0, den, 1)[..., None], 0.0)
         e[~blends] = 0.0
-        irr = atlas(with_borders(e.reshape(p, n, n, 3)), grid.counts)
+        # irradiance is >= 0: the panorama's tiny negative texels (environment.negative: keep) reach a
+        # few rays, and read back a negative texel would fail the volume's check
+        irr = atlas(with_borders(np.maximum(e, 0.0).reshape(p, n, n, 3)), grid.counts)
     nd = settings["distance_texels"]
     wd = np.maximum(0.0, twin.texel_directions(nd) @ dirs.T) ** settings["distance_exponent"]
     d = np.minimum(np.abs(t), MAX_DISTANCE * float(np.linalg.norm(grid.spacing)))

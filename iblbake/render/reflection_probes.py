@@ -56,6 +56,9 @@ def capture(tracer, index: int, settings: dict, progress=None):
             inside[int(o)] = inside.get(int(o), 0.0) + float(share[back & (obj[0] == o)].sum()) / (4 * np.pi)
         if progress:
             progress(min(1.0, (r0 + per) / len(dirs)))
+    # radiance is >= 0; the panorama's tiny negative texels (environment.negative: keep) reach a few
+    # paths, and read back a negative value would fail the capture's check
+    sums[:, :3] = np.maximum(sums[:, :3], 0.0)
     return sums.reshape(size, 2 * size, 4).astype(np.float32), {"inside": {str(k): round(v, 4)
                                                                            for k, v in inside.items()}}
 
