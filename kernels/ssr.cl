@@ -107,15 +107,33 @@ inline float ssr_plausible(__global const float4 *ssr_pix, __constant float4 *ca
     return clamp(2.0f - length(d), 0.0f, 1.0f);
 }
 
+/* How far the depth buffer's surface at pixel c spans in depth across a pixel: the largest step to
+ * a neighbour (a floor seen at a grazing angle changes depth faster than any one thickness) */
+inline float ssr_depth_extent(__global const float *ssr_hiz, int c, int width, int height)
+{
+    const float z = ssr_hiz[c];
+    const int x = c % width, y = c / width;
+    float e = 0.0f;
+    if (x > 0 && isfinite(ssr_hiz[c - 1])) e = fmax(e, fabs(ssr_hiz[c - 1] - z));
+    if (x + 1 < width && isfinite(ssr_hiz[c + 1])) e = fmax(e, fabs(ssr_hiz[c + 1] - z));
+    if (y > 0 && isfinite(ssr_hiz[c - width])) e = fmax(e, fabs(ssr_hiz[c - width] - z));
+    if (y + 1 < height && isfinite(ssr_hiz[c + width])) e = fmax(e, fabs(ssr_hiz[c + width] - z));
+    return e;
+}
+
 /* March one ray p0 + t l (its screen segment s0 -> s1, depths z0, z1): the hit pixel, or -1; its
- * plausibility in *conf, where the ray meets the hit surface's plane in *x. A candidate (the depth buffer's surface within `thickness` in front of
- * the ray's depths across the pixel) that is not plausible is passed by. */
+ * plausibility in *conf, where the ray meets the hit surface's plane in *x. A candidate (the depth
+ * buffer's surface in front of the ray's depths across the pixel by at most `thickness` plus the
+ * surface's own depth extent there) that is not plausible is passed by. */
 inline int ssr_march(float2 s0, float z0, float2 s1, float z1, int ortho, __global const float *ssr_hiz,
                      __global const int *hiz_off, const int nlev, const int width, const int height, const int steps,
                      const float thickness, __global const float4 *ssr_pix, __constant float4 *cam, float3 p0,
                      float3 l, float *conf, float3 *x)
 {
     const float2 ds = s1 - s0;
+    /* steps past a cell's edge by a hundredth of a pixel (in t: a segment to a point near the eye
+     * plane spans thousands of pixels, where a fixed step in t would jump over thin crossings) */
+    const float eps = 0.01f / fmax(length(ds), 1e-6f);
     int level = 0;
     float t = 0.0f;
     *conf = 0.0f;
@@ -124,7 +142,7 @@ inline int ssr_march(float2 s0, float z0, float2 s1, float z1, int ortho, __glob
         const float2 cell = floor(s0);
         const float2 edge = cell + select((float2)(0.0f), (float2)(1.0f), isgreater(ds, (float2)(0.0f)));
         const float2 tt = (edge - s0) / ds;
-        t = fmin(fmin(isnan(tt.x) ? INFINITY : tt.x, isnan(tt.y) ? INFINITY : tt.y), 1.0f) + 1e-4f;
+        t = fmin(fmin(isnan(tt.x) ? INFINITY : tt.x, isnan(tt.y) ? INFINITY : tt.y), 1.0f) + eps;
     }
     for (int i = 0; i < steps && t < 1.0f; ++i) {
         const float2 s = s0 + t * ds;
@@ -141,19 +159,19 @@ inline int ssr_march(float2 s0, float z0, float2 s1, float z1, int ortho, __glob
         const float za = ssr_depth_at(z0, z1, t, ortho), zb = ssr_depth_at(z0, z1, t_exit, ortho);
         const float cell_min = ssr_hiz[hiz_off[level] + cy * lw + cx];
         if (fmax(za, zb) < cell_min) {          /* in front of everything in the cell: skip it */
-            t = t_exit + 1e-4f;
+            t = t_exit + eps;
             level = min(level + 1, nlev - 1);
         } else if (level > 0) {
             --level;                            /* look closer */
         } else {
-            if (fmin(za, zb) <= cell_min + thickness) {
+            if (fmin(za, zb) <= cell_min + thickness + ssr_depth_extent(ssr_hiz, cy * width + cx, width, height)) {
                 const float c = ssr_plausible(ssr_pix, cam, width, height, cy * width + cx, p0, l, x);
                 if (c > 0.0f) {
                     *conf = c;
                     return cy * width + cx;
                 }
             }
-            t = t_exit + 1e-4f;
+            t = t_exit + eps;
         }
     }
     return -1;

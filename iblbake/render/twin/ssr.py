@@ -84,11 +84,12 @@ def march(levels, s0, z0, s1, z1, ortho: bool, steps: int, thickness: float, pix
     h, w = levels[0].shape
     ds = s1 - s0
     m = len(s0)
+    eps = 0.01 / np.maximum(np.linalg.norm(ds, axis=1), 1e-6)      # a hundredth of a pixel
     with np.errstate(divide="ignore", invalid="ignore"):
         edge = np.floor(s0) + (ds > 0)
         tt = (edge - s0) / ds
         tt = np.where(np.isnan(tt), np.inf, tt)
-        t = np.minimum(tt.min(1), 1.0) + 1e-4
+        t = np.minimum(tt.min(1), 1.0) + eps
     level = np.zeros(m, int)
     hit = np.full(m, -1)
     conf = np.zeros(m)
@@ -123,7 +124,7 @@ def march(levels, s0, z0, s1, z1, ortho: bool, steps: int, thickness: float, pix
         front = np.maximum(za, zb) < cell_min
         down = ~front & (level[idx] > 0)
         bottom = ~front & (level[idx] == 0)
-        cand = bottom & (np.minimum(za, zb) <= cell_min + thickness)
+        cand = bottom & (np.minimum(za, zb) <= cell_min + thickness + depth_extent(levels[0], cx, cy))
         c = cy * w + cx
         pc, px = plausible(pix, cam, c, p0[idx], l[idx])
         got = cand & (pc > 0)
@@ -132,11 +133,27 @@ def march(levels, s0, z0, s1, z1, ortho: bool, steps: int, thickness: float, pix
         xs[idx[got]] = px[got]
         live[idx[got]] = False
         step_on = front | (bottom & ~got)
-        t[idx[step_on]] = t_exit[step_on] + 1e-4
+        t[idx[step_on]] = t_exit[step_on] + eps[idx[step_on]]
         level[idx[front]] = np.minimum(level[idx[front]] + 1, len(levels) - 1)
         level[idx[down]] -= 1
         live &= t < 1
     return hit, conf, xs
+
+
+def depth_extent(z0, cx, cy):
+    """Twin of ssr_depth_extent: the largest depth step from pixels (cx, cy) of level 0 to a
+    neighbour (where both are finite)."""
+    h, w = z0.shape
+    e = np.zeros(len(cx))
+    z = z0[np.clip(cy, 0, h - 1), np.clip(cx, 0, w - 1)]
+    for dx, dy in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+        qx, qy = cx + dx, cy + dy
+        inside = (qx >= 0) & (qx < w) & (qy >= 0) & (qy < h)
+        q = z0[np.clip(qy, 0, h - 1), np.clip(qx, 0, w - 1)]
+        ok = inside & np.isfinite(q)
+        with np.errstate(invalid="ignore"):
+            e = np.where(ok, np.maximum(e, np.abs(q - z)), e)
+    return e
 
 
 def depth_at(z0, z1, t, ortho):
