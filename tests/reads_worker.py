@@ -132,7 +132,7 @@ def main():
         if t:
             t.join()
         print(json.dumps({"kind": kind, "path": path, "outcome": outcome, "message": message,
-                          "seconds": round(time.perf_counter() - t0, 3)}), flush=True)
+                          "seconds": round(time.perf_counter() - t0, 5)}), flush=True)
 
 
 if __name__ == "__main__":
