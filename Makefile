@@ -64,12 +64,13 @@ test: opencl assets testmodels readers peers
 check: opencl meshes
 	$(BIN)/python -m pytest -q -m "not (slow or external or kill)" tests
 
-# the stress and fuzz suite at full size (10x the fuzz inputs, 24 kill runs per command); prints
-# and saves the table of case, bound, measured, result
+# the stress and fuzz suite at full size (10x the fuzz inputs, 24 kill runs per command, every
+# writer of every command onto a full disk, every reader given special files); prints and saves
+# the table of case, bound, measured, result
 stress: opencl assets testmodels
 	IBLBAKE_STRESS=1 IBLBAKE_STRESS_REPORT=docs/stress-table.md $(BIN)/python -m pytest -q -rs \
 	    tests/test_stress.py tests/test_stress_render.py tests/test_fuzz.py tests/test_nothing_lost.py \
-	    tests/test_outputs_guarded.py
+	    tests/test_outputs_guarded.py tests/test_full_disk.py tests/test_bounded_reads.py
 
 bench: opencl assets
 	$(BIN)/python benchmarks/bench_sh.py

@@ -4,6 +4,7 @@ on one path, bake sizes over the machine's memory, malformed sweep ranges and --
 rule for missing output folders."""
 
 import hashlib
+import json
 import os
 from pathlib import Path
 
@@ -13,6 +14,7 @@ import pytest
 import yaml
 
 from iblbake.cli.main import COMMANDS, cli
+from iblbake.io import images
 from iblbake.study import sweep
 
 from .conftest import run_cli, write_exr
@@ -302,3 +304,153 @@ def test_progress_time_left_skips_the_cold_first_stage_and_warnings_clear_the_ba
     text = err.getvalue()
     assert "8 s left" in text and "7 s left" in text and "min" not in text
     assert "\r\x1b[2Kiblbake: warning: careful\n" in text
+
+
+# --- one overwrite rule (issue 43): a file iblbake did not write is replaced only with --force ----
+
+FOREIGN = {".png": None, ".exr": None, ".json": b'{"mine": true}\n', ".ktx2": b"\xabKTX 20\xbb\r\n\x1a\nnot ours",
+           ".d": b"all:\n\techo mine\n", ".md": b"# my notes\n", ".csv": b"a,b\n1,2\n", ".glsl": b"// my shader\n",
+           ".gltf": b'{"asset": {"version": "2.0", "generator": "Blender"}}'}
+
+
+def _foreign(path: Path) -> bytes:
+    """A file of `path`'s kind that some other tool wrote (Pillow's PNG, an EXR without iblbake's mark)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    suffix = path.suffix.lower()
+    if suffix == ".png":
+        from PIL import Image
+        Image.fromarray(np.zeros((4, 4, 3), np.uint8)).save(path)
+    elif suffix == ".exr":
+        import OpenImageIO as oiio
+        out = oiio.ImageOutput.create(str(path))
+        out.open(str(path), oiio.ImageSpec(4, 4, 3, oiio.FLOAT))
+        out.write_image(np.zeros((4, 4, 3), np.float32))
+        out.close()
+    else:
+        path.write_bytes(FOREIGN[suffix])
+    return path.read_bytes()
+
+
+def test_the_mark_tells_iblbakes_files_from_others(tmp_path):
+    """guard.written_by_iblbake: each writer's mark is read back; another tool's file of every kind is not."""
+    from iblbake.io import atomic, depfile, guard, ktx2
+    from iblbake.study import report
+    d = tmp_path
+    images.write_png(d / "a.png", np.zeros((4, 4, 3), np.uint8))
+    images.write_exr(d / "a.exr", np.zeros((4, 4, 3), np.float32))
+    atomic.write_bytes(d / "a.ktx2", ktx2.cube_bytes([np.zeros((6, 4, 4, 3), np.float32)], "rgba16f", {},
+                                                     writer=guard.mark()))
+    atomic.write_json(d / "a.json", {"generator": guard.mark(), "cells": []})
+    depfile.write(d / "a.d", [(["x.png"], ["scene.yaml"])])
+    atomic.write_text(d / "a.md", report.markdown([], {}))
+    atomic.write_text(d / "a.csv", report.csv_text([], {}))
+    report.plot([{"term": "diffuse", "label": "SH 3", "time_s": 1e-3, "relative_rmse": 0.1, "configured": True}],
+                {"diffuse": ["SH 3"]}, d / "plot.png", "t")
+    for name in ("a.png", "a.exr", "a.ktx2", "a.json", "a.d", "plot.png"):
+        assert guard.written_by_iblbake(d / name), name
+    for name in ("a.md", "a.csv"):
+        assert guard.written_by_iblbake(d / name, report.header_lines()) and not guard.written_by_iblbake(d / name)
+    for suffix in FOREIGN:
+        f = d / "other" / f"x{suffix}"
+        _foreign(f)
+        assert not guard.written_by_iblbake(f, report.header_lines()), suffix
+
+
+# (command, option, argv(files, path), output name): every writing option onto another tool's file
+OVERWRITES = [
+    ("sh", "output", lambda f, p: ["sh", f["env"], "-o", p], "x.json"),
+    ("sh", "depfile", lambda f, p: ["sh", f["env"], "--depfile", p], "x.d"),
+    ("mips", "ktx2_path", lambda f, p: ["mips", f["env"], "--ktx2", p], "x.ktx2"),
+    ("mips", "ktx2_irradiance", lambda f, p: ["mips", f["env"], "--ktx2-irradiance", p], "x.ktx2"),
+    ("mips", "ktx2_sheen", lambda f, p: ["mips", f["env"], "--ktx2-sheen", p], "x.ktx2"),
+    ("mips", "depfile", lambda f, p: ["mips", f["env"], "--depfile", p], "x.d"),
+    ("export-gltf", "output", lambda f, p: ["export-gltf", f["env"], "-o", p], "x.gltf"),
+    ("export-gltf", "depfile", lambda f, p: ["export-gltf", f["env"], "-o", f["dir"] / "l.glb", "--depfile", p], "x.d"),
+    ("render", "outputs", lambda f, p: ["render", f["scene"], "-o", p], "x.png"),
+    ("render", "outputs", lambda f, p: ["render", f["scene"], "-o", p], "x.exr"),
+    ("render", "depfile", lambda f, p: ["render", f["scene"], "-o", f["dir"] / "y.png", "--depfile", p], "x.d"),
+    ("sheet", "outputs", lambda f, p: ["sheet", f["scene"], "-o", p], "x.png"),
+    ("sheet", "layout_path", lambda f, p: ["sheet", f["scene"], "-o", f["dir"] / "s.png", "--layout", p], "x.json"),
+    ("sheet", "depfile", lambda f, p: ["sheet", f["scene"], "-o", f["dir"] / "s.png", "--depfile", p], "x.d"),
+    ("sheet", "frames_dir", lambda f, p: ["sheet", f["scene"], "-o", f["dir"] / "s.png", "--frames", p.parent],
+     "frames/r00_c00.png"),
+    ("accuracy", "out_dir", lambda f, p: ["accuracy", f["scene"], "-o", p.parent], "study/table.md"),
+    ("probes", "out_dir", lambda f, p: ["probes", f["scene"], "-o", p.parent], "vol/probes.glsl"),
+    ("probes", "out_dir", lambda f, p: ["probes", f["scene"], "-o", p.parent], "vol/probes.json"),
+]
+
+
+def test_the_overwrite_walk_covers_every_writing_option():
+    assert {(c, o) for c, o, *_ in OVERWRITES} == WRITES
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("command, option, argv, name", OVERWRITES,
+                         ids=[f"{c[0]}-{c[1]}-{c[3]}" for c in OVERWRITES])
+def test_a_file_iblbake_did_not_write_needs_force(files, stress, command, option, argv, name):
+    """probes -o DIR replaced a user's probes.json and probes.glsl, accuracy -o DIR a user's
+    table.md, render -o any PNG, all silently; sh and export-gltf asked for --force. One rule now:
+    refused in one line before any work, the file unchanged."""
+    target = files["dir"] / name
+    before = _foreign(target)
+    p = run_cli(*argv(files, target))
+    assert p.returncode == 1, (p.returncode, p.stderr)
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--force" in lines[0] and target.name in lines[0], p.stderr
+    stress.check(f"overwrite rule: {command} {option} onto another tool's {target.suffix}",
+                 int(target.read_bytes() != before), 0, "files changed")
+
+
+@pytest.mark.slow
+def test_force_replaces_and_own_files_are_replaced_without_it(files):
+    """render: its own earlier frame is replaced without --force; another tool's only with it."""
+    frame = files["dir"] / "f.png"
+    _foreign(frame)
+    assert run_cli("render", files["scene"], "-o", frame).returncode == 1
+    p = run_cli("render", files["scene"], "-o", frame, "--force")
+    assert p.returncode == 0, p.stderr
+    from iblbake.io import guard
+    assert guard.written_by_iblbake(frame)
+    frame.write_bytes(frame.read_bytes())          # touched, still iblbake's
+    p = run_cli("render", files["scene"], "-o", frame)
+    assert p.returncode == 0, p.stderr
+    vol = files["dir"] / "vol"
+    _foreign(vol / "probes.json")
+    assert run_cli("probes", files["scene"], "-o", vol, "--force", "-q").returncode == 0
+    assert json.loads((vol / "probes.json").read_text())["format"] == "iblbake-probes"
+    assert run_cli("probes", files["scene"], "-o", vol, "-q").returncode == 0      # now its own
+
+
+# --- failures leave nothing (issue 43) -------------------------------------------------------------
+
+def test_a_probe_grid_error_leaves_no_output_folder(files):
+    """probes made its -o folder before baking: a grid error (max below min) left it empty."""
+    out = files["dir"] / "fresh" / "vol"
+    p = run_cli("probes", files["scene"], "-o", out, "--set", "probes.min=[1,1,1]", "--set", "probes.max=[0,0,0]")
+    assert p.returncode == 1 and "probes.max" in p.stderr and len(p.stderr.strip().splitlines()) == 1, p.stderr
+    assert not (files["dir"] / "fresh").exists()
+
+
+def test_mips_bakes_every_panorama_before_writing_any_output(files):
+    """mips a.exr bad.exr --ktx2 DIR/ wrote a.ktx2, then failed on bad.exr (sh validates all first)."""
+    bad = files["dir"] / "bad.exr"
+    bad.write_bytes(b"not an image")
+    out = files["dir"] / "ktx"
+    p = run_cli("mips", files["env"], bad, "--ktx2", f"{out}/", "--size", "8", "--min-size", "4",
+                "--depfile", files["dir"] / "m.d", "--cache", files["dir"] / "cache")
+    assert p.returncode == 1 and "bad.exr" in p.stderr and len(p.stderr.strip().splitlines()) == 1, p.stderr
+    assert not out.exists() and not (files["dir"] / "m.d").exists()
+
+
+@pytest.mark.parametrize("argv", [
+    ["render", "{scene}", "-o", "{dir}/f.png"], ["sheet", "{scene}", "-o", "{dir}/f.png"],
+    ["mips", "{env}", "--ktx2", "{dir}/f.ktx2"], ["export-gltf", "{env}", "-o", "{dir}/f.glb"]],
+    ids=lambda a: a[0])
+def test_a_depfile_into_a_read_only_folder_fails_before_any_work(files, argv):
+    """render found it only after the frame was written (exit 1 with the frame on disk)."""
+    from .test_nothing_lost import read_only_folder
+    with read_only_folder(files["dir"] / "ro") as ro:
+        p = run_cli(*[a.format(**files) for a in argv], "--depfile", ro / "f.d", "--cache", files["dir"] / "c")
+        assert p.returncode == 1 and "f.d" in p.stderr and len(p.stderr.strip().splitlines()) == 1, p.stderr
+        assert "not writable" in p.stderr, p.stderr
+    assert not list(files["dir"].glob("f.*")) and not (files["dir"] / "c").exists()

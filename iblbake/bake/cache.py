@@ -22,7 +22,8 @@ from pathlib import Path
 from typing import Callable
 
 from iblbake.io.atomic import write_json
-from iblbake.errors import IblbakeError
+from iblbake.errors import IblbakeError, InputError
+from iblbake.io import reads
 from iblbake.io.images import file_sha256
 
 MANIFEST = "manifest.json"
@@ -62,18 +63,23 @@ def verify(entry: Path, warn: Callable[[str], None] | None = None) -> dict | Non
     if not mpath.is_file():
         return None
     try:
-        manifest = json.loads(mpath.read_text())
+        manifest = read_manifest(mpath)
         for f in manifest["files"]:
             p = entry / f["name"]
             if not p.is_file() or (_stat(p) != (f.get("bytes"), f.get("mtime_ns")) and file_sha256(p) != f["sha256"]):
                 if warn:
                     warn(f"cache file {p} does not match its manifest hash; rebuilding {entry.name}")
                 return None
-    except (ValueError, KeyError, TypeError, OSError):
+    except (ValueError, KeyError, TypeError, OSError, InputError):
         if warn:
             warn(f"cache manifest {mpath} is unreadable; rebuilding {entry.name}")
         return None
     return manifest
+
+
+def read_manifest(mpath: Path) -> dict:
+    """An entry's manifest: a regular file of at most reads.JSON_BYTES (an InputError otherwise)."""
+    return json.loads(reads.read_text(mpath, reads.JSON_BYTES, "a cache manifest"))
 
 
 def _stat(path: Path) -> tuple:
@@ -143,10 +149,10 @@ def entries(root: Path) -> list:
         if e.name.startswith(".") or not m.is_file():
             continue
         try:
-            kind = json.loads(m.read_text()).get("kind", "?")
+            kind = read_manifest(m).get("kind", "?")
             size = sum(f.stat().st_size for f in e.iterdir() if f.is_file())
             used = m.stat().st_mtime
-        except (OSError, ValueError):
+        except (OSError, ValueError, InputError, AttributeError):
             continue
         out.append({"key": e.name, "kind": kind, "bytes": size, "used": used, "path": str(e)})
     return sorted(out, key=lambda x: -x["used"])

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from iblbake.errors import InputError
-from iblbake.io import images, ktx2
+from iblbake.io import images, ktx2, reads
 
 LAYOUTS = ("auto", "equirect", "hcross", "vcross", "hstrip", "vstrip", "faces", "ktx2")
 FACE_NAMES = ("px", "nx", "py", "ny", "pz", "nz")
@@ -92,7 +92,8 @@ def read_environment(path, *, layout: str = "auto", names: dict | None = None, r
         info.sha256 = _combined_sha([images.file_sha256(f) for f in files_of(path)])
         return _resampled(np.stack(faces), info, "six face files", runtime)
     if layout == "ktx2":
-        faces = ktx2.read_cube(path)
+        limit = policies.get("max_pixels") or images.max_pixels_default()
+        faces = ktx2.read_cube(path, reads.image_bytes(limit))
         info = images.ImageInfo(path=path, width=faces.shape[2], height=faces.shape[1] * 6, channels_in=("R", "G", "B"),
                                 format="ktx2", sha256=images.file_sha256(path), nonfinite_policy=policies.get(
                                     "nonfinite", "error"), negative_policy=policies.get("negative", "keep"))

@@ -378,8 +378,9 @@ def bake_irradiance_cube(image, info, root: Path, policies: dict, size: int, lma
     return manifest, cached, faces
 
 
-def write_irradiance_ktx2(path: Path, faces, fmt: str) -> None:
-    """The irradiance cube map (6s x s faces, stacked) as a one-level KTX2 cube map (atomic)."""
+def write_irradiance_ktx2(path: Path, faces, fmt: str, batch=None) -> None:
+    """The irradiance cube map (6s x s faces, stacked) as a one-level KTX2 cube map (atomic: with
+    `batch`'s other outputs, atomic.Batch, where given)."""
     from iblbake import __version__
     from iblbake.io import atomic, ktx2
 
@@ -387,7 +388,7 @@ def write_irradiance_ktx2(path: Path, faces, fmt: str) -> None:
     meta = {"iblbake.content": "Lambert irradiance E(n) = int L max(0, n.w) dw (divide by pi for an albedo-1 "
                                "surface's radiance)"}
     atomic.write_bytes(path, ktx2.cube_bytes([np.asarray(faces).reshape(6, s, s, -1)], fmt, meta,
-                                             writer=f"iblbake {__version__}"))
+                                             writer=f"iblbake {__version__}"), batch)
 
 
 def check_ktx2_chain(path, opts: dict) -> None:
@@ -399,9 +400,10 @@ def check_ktx2_chain(path, opts: dict) -> None:
 
 
 def write_ktx2(path: Path, root: Path, manifest: dict, opts: dict, fmt: str,
-               content: str = "GGX-prefiltered radiance") -> None:
-    """The prefiltered cube-map chain of `manifest` as a KTX2 file (atomic). Its roughness per
-    level (k / (K - 1)) goes in the key/value data as iblbake.roughness (JSON)."""
+               content: str = "GGX-prefiltered radiance", batch=None) -> None:
+    """The prefiltered cube-map chain of `manifest` as a KTX2 file (atomic: with `batch`'s other
+    outputs, where given). Its roughness per level (k / (K - 1)) goes in the key/value data as
+    iblbake.roughness (JSON)."""
     import json
 
     from iblbake import __version__
@@ -412,7 +414,7 @@ def write_ktx2(path: Path, root: Path, manifest: dict, opts: dict, fmt: str,
     levels = [lv.reshape(6, s, s, -1) for lv, s in zip(load_chain(root, manifest), sizes)]
     meta = {"iblbake.roughness": json.dumps([round(r, 6) for r in opts["roughness"]]),
             "iblbake.layout": f"{content}; level k's roughness in iblbake.roughness; axes: +y up, faces in Vulkan orientation"}
-    atomic.write_bytes(path, ktx2.cube_bytes(levels, fmt, meta, writer=f"iblbake {__version__}"))
+    atomic.write_bytes(path, ktx2.cube_bytes(levels, fmt, meta, writer=f"iblbake {__version__}"), batch)
 
 
 def bake_prefiltered(baker: Baker, chain, info, root: Path, policies: dict, opts: dict, warn=None,

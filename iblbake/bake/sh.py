@@ -319,7 +319,9 @@ def bake_irradiance(rt, image, info, root, policies: dict, bands: int, window: s
                 "device": rt.device_label}
 
     manifest, cached = cache.get_or_build(root, key, build, warn=warn)
-    coeffs = np.asarray(json.loads((root / manifest["key"] / "irradiance.json").read_text())["irradiance"])
+    from iblbake.io import reads
+    coeffs = np.asarray(json.loads(reads.read_text(root / manifest["key"] / "irradiance.json", reads.JSON_BYTES,
+                                                   "a cached SH document"))["irradiance"])
     return coeffs, manifest, cached
 
 

@@ -9,7 +9,8 @@ from pathlib import Path
 
 import click
 
-from iblbake.cli.options import Console, common_options, device_option, non_negative, max_texture_pixels_option
+from iblbake.cli.options import (Console, common_options, device_option, force_option, max_pixels_option,
+                                  max_texture_pixels_option, non_negative, refuse_foreign)
 from iblbake.errors import IblbakeError
 
 FILES = {"table.md": "Markdown table", "table.csv": "CSV", "accuracy.json": "JSON", "plot.png": "error-time plot",
@@ -63,11 +64,13 @@ def bounces_value(v: str):
                    "--device or one of --devices) into the cache; the rungs are then timed alone.")
 @click.option("--devices", default=None, metavar="SPEC,SPEC,...",
               help="With --jobs: one device per worker, in turn, e.g. gpu,cpu.")
+@force_option
 @device_option
+@max_pixels_option
 @max_texture_pixels_option
 @common_options
 def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repeats, target_noise, max_samples,
-                     visibility, bounces, flip, max_error, cache_dir, jobs, devices, device, quiet, as_json):
+                     visibility, bounces, flip, max_error, cache_dir, jobs, devices, force, device, quiet, as_json):
     """Render SCENE's converged reference (diffuse and specular with visibility and every
     bounce, two seeds, its noise measured), then a ladder of approximations of each term the
     scene calls for (SH bands and windows; importance N, mip selection and bias; prefiltered chain
@@ -92,6 +95,11 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
                             flip=flip, visibility=visibility, bounces=bounces)
     rt = Runtime(device)
     study = acc.Study(scene_path, overrides, settings, runtime=rt, bakes=render.Bakes(cache_dir), warn=con.warn)
+    if click.get_current_context().get_parameter_source("bounces") == click.core.ParameterSource.COMMANDLINE \
+            and bounces != 1 and not study.paths:
+        why = ("with --no-visibility every object is lit as if alone, so no light passes between them"
+               if not visibility else "no light passes between this scene's surfaces")
+        con.warn(f"--bounces {bounces}: {why}; the reference is the direct light (bounces 1)")
     if ladder_path in ladder.LADDERS:
         rungs = ladder.LADDERS[ladder_path](study.scene, study.fx)
         ladder_path = None
@@ -99,6 +107,11 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
         rungs = ladder.ladder_from_file(ladder_path, study.scene, study.fx)
     else:
         rungs = ladder.default_ladder(study.scene, study.fx, rt.info.kind, paths=study.paths)
+        over = [r for r in rungs if dict(r.values).get("effects.reference.max_samples", 0) > max_samples]
+        if over:                     # measured against a reference of fewer samples: their error is its noise
+            con.warn(f"left out {len(over)} rungs with more samples than the reference's --max-samples "
+                     f"{max_samples}: {', '.join(r.label for r in over)}")
+            rungs = [r for r in rungs if r not in over]
     rungs = [ladder.configured_rung(study.scene, t) for t in study.terms] + rungs
     reads = scene_load.named_input_files(study.scene) + ([("the ladder", ladder_path)] if ladder_path else [])
     for r in rungs:                  # every rung's scene validates before anything renders
@@ -106,6 +119,7 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
     if out is not None:
         from iblbake.io.guard import refuse_overlaps
         refuse_overlaps([("-o", str(out / name)) for name in FILES], reads)
+        refuse_foreign([("-o", str(out / name)) for name in FILES], force, report.header_lines())
     names = [f"reference {t} seed {s}" for t in study.terms for s in settings.seeds] + [r.label for r in rungs]
     spread = None
     if jobs > 1:
@@ -128,6 +142,11 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
                      f"only BSDF sampling finds: raise --max-samples, or --bounces 1 for the direct light")
     configured = study.configured_frame()
     front = acc.frontiers(rows)
+    high = acc.above_reference(rows)
+    if high:
+        con.warn(f"{len(high)} {'rungs have' if len(high) > 1 else 'rung has'} more samples than the reference reached "
+                 f"({', '.join(r['label'] for r in high)}): their error is the reference's noise; kept off "
+                 f"the frontier (raise --max-samples above theirs to measure them)")
     title = f"{Path(scene_path).name}: error against time ({rt.device_label})"
     summary = {
         "scene": str(scene_path), "device": rt.device_label,
@@ -144,14 +163,18 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
     if spread:
         summary["reference_workers"] = spread
     if out is not None:
-        atomic.write_text(out / "table.md", report.markdown(rows, front))
-        atomic.write_text(out / "table.csv", report.csv_text(rows, front))
-        report.plot(rows, front, out / "plot.png", title)
-        images.write_png(out / "errors.png", report.error_sheet(study, rungs, f"{Path(scene_path).name}: best and worst"))
-        summary["outputs"] = [str(out / n) for n in FILES]
+        from iblbake.io.guard import mark
+        with atomic.Batch() as batch:    # the five files replaced together, or none (a full disk)
+            batch.write_text(out / "table.md", report.markdown(rows, front))
+            batch.write_text(out / "table.csv", report.csv_text(rows, front))
+            report.plot(rows, front, out / "plot.png", title, batch)
+            images.write_png(out / "errors.png",
+                             report.error_sheet(study, rungs, f"{Path(scene_path).name}: best and worst"), batch)
+            summary["outputs"] = [str(out / n) for n in FILES]
+            summary["elapsed_s"] = round(time.perf_counter() - t_start, 3)
+            batch.write_text(out / "accuracy.json",
+                             json.dumps({"generator": mark(), **summary}, indent=2, allow_nan=False) + "\n")
     summary["elapsed_s"] = round(time.perf_counter() - t_start, 3)
-    if out is not None:
-        atomic.write_text(out / "accuracy.json", json.dumps(summary, indent=2, allow_nan=False) + "\n")
     split = ", ".join(f"{k[:-2]} {v:.1f} s" for k, v in summary["time_split_s"].items())
     noise = ", ".join(f"{t} {100 * refs[t]['noise']:.2f}%" for t in study.terms)
     con.result(summary, report.text_table(rows, front)

@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-import json
-
 import click
 
 from iblbake.cli.options import Console, common_options, non_negative
-from iblbake.errors import IblbakeError, InputError
+from iblbake.errors import IblbakeError
 
 
 @click.command("compare")
@@ -27,15 +25,7 @@ def compare_command(reference, test, metric, tolerance, layout_path, quiet, as_j
     cell for sheets, and exit 1 where any is above --tolerance."""
     from iblbake.study import compare
 
-    boxes = None
-    if layout_path:
-        try:
-            with open(layout_path) as f:
-                cells = json.load(f)["cells"]
-        except (OSError, ValueError, KeyError, TypeError) as e:
-            raise InputError(f"{layout_path}: not a sheet layout written by iblbake sheet --layout ({e})") from None
-        key = "exr_box" if str(reference).lower().endswith(".exr") else "png_box"
-        boxes = [(f"r{c['row']}c{c['column']} {c['label']}".strip(), *c[key]) for c in cells if c.get(key)]
+    boxes = compare.read_layout(layout_path, reference) if layout_path else None
     errors = compare.compare(reference, test, metric, boxes)
     over = [(n, e) for n, e in errors if not e <= tolerance]
     summary = {"reference": reference, "test": test, "metric": metric, "tolerance": tolerance,

@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 
 from iblbake.cli.options import (POLICY_FLAGS, Console, check_inputs_exist, common_options, depfile_option,
-                                  device_option, input_files_of, input_options, panorama_reads)
+                                  device_option, input_files_of, input_options, panorama_reads, refuse_foreign)
 from iblbake.io.guard import refuse_overlaps
 
 
@@ -36,7 +36,7 @@ def _scale(ctx, param, value):
 @click.option("--output", "-o", type=click.Path(dir_okay=False), required=True,
               help="OUT.gltf (the face PNGs beside it, OUT_specular_MIP_FACE.png) or OUT.glb (one file).")
 @click.option("--force", "-f", is_flag=True,
-              help="Overwrite -o (and its face PNGs) even where it is not a light iblbake wrote.")
+              help="Overwrite -o (and its face PNGs, --depfile) even where it is not a light iblbake wrote.")
 @click.option("--size", type=click.IntRange(min=1), default=256, show_default=True, callback=_power_of_two,
               help="specularImageSize: the face size of mip 0 (a power of two).")
 @click.option("--min-size", type=click.IntRange(min=1), default=16, show_default=True, callback=_power_of_two,
@@ -91,6 +91,9 @@ def export_gltf_command(env, output, force, size, min_size, mapping, scale, meth
         taken = [p for p in gltf.sidecars(out, len(sizes)) if p.exists()]
         if taken and not (out.exists() and gltf.written_by_iblbake(out)):
             raise IblbakeError(f"{taken[0]}: exists (a face image -o would write); pass --force to overwrite it")
+    if depfile:
+        refuse_foreign([("--depfile", depfile)], force)
+        check_writable(depfile)
     t_start = time.perf_counter()
     root = Path(cache_dir) if cache_dir else cache.default_root()
     check_writable(root / "manifest.json", "cache", shown=root)

@@ -9,8 +9,8 @@ from pathlib import Path
 import click
 
 from iblbake.cli.options import (POLICY_FLAGS, Console, check_inputs_exist, check_suffix, common_options,
-                                  depfile_option, device_option, finite, input_files_of, input_options,
-                                  non_negative, panorama_reads)
+                                  depfile_option, device_option, finite, force_option, input_files_of,
+                                  input_options, non_negative, panorama_reads, refuse_foreign)
 from iblbake.io.guard import refuse_overlaps
 
 
@@ -103,13 +103,14 @@ def _per_env(envs, path, flag) -> dict:
               help="Write the --irradiance cube map (implied) as a KTX2 cube map in --ktx2-format. With "
                    "several ENVs, a folder that gets ENV's name with .ktx2.")
 @depfile_option
+@force_option
 @input_options
 @device_option
 @common_options
 def mips_command(envs, cache_dir, layout, size, levels, min_size, method, samples, lod_bias, no_fis,
                  convolve_budget, dfg_size, dfg_samples, dfg_multiscatter, only, level_sizes, verify, backend,
                  ktx2_path, ktx2_format, sheen, ktx2_sheen, irradiance_on, irradiance_size, irradiance_lmax, ktx2_irradiance, nonfinite,
-                 negative, transfer, primaries, input_layout, max_pixels, depfile, device, quiet, as_json):
+                 negative, transfer, primaries, input_layout, max_pixels, depfile, force, device, quiet, as_json):
     """Bake the radiance mip chain, the GGX-prefiltered chain and the DFG table of each ENV into a
     content-addressed EXR cache (one process and one device for a whole folder). A second run
     with the same inputs does no work ("cached"). With --depfile the entries' manifests depend on
@@ -148,11 +149,19 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
         ktx2_out = _per_env(envs, ktx2_path, "--ktx2")
     writes = [(flag, str(p)) for flag, outs in (("--ktx2", ktx2_out), ("--ktx2-irradiance", irr_out),
                                                  ("--ktx2-sheen", sheen_out)) for p in outs.values()]
-    refuse_overlaps(writes + ([("--depfile", depfile)] if depfile else []), panorama_reads(envs))
+    writes += [("--depfile", depfile)] if depfile else []
+    refuse_overlaps(writes, panorama_reads(envs))
     if len(envs) == 1:
         for flag, p in writes:
-            check_suffix(p, (".ktx2",), flag, "a KTX2 cube map")
+            if flag != "--depfile":
+                check_suffix(p, (".ktx2",), flag, "a KTX2 cube map")
+    from iblbake.io import atomic
+    for _, p in writes:              # before any bake: a read-only folder is not found at the end
+        atomic.check_writable(p)
+    refuse_foreign(writes, force)
     check_inputs_exist(envs)
+    # every output is written once every panorama has baked: a bad one among several leaves none
+    pending = []
     t_start = time.perf_counter()
     root = Path(cache_dir) if cache_dir else cache.default_root()
     from iblbake.io.atomic import check_writable
@@ -202,7 +211,7 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
                                         "lmax": irradiance_lmax, "error": im["error"],
                                         "seconds": round(time.perf_counter() - t0, 4)}
                 if env in irr_out:
-                    mipsbake.write_irradiance_ktx2(irr_out[env], faces, ktx2_format)
+                    pending.append(lambda b, o=irr_out[env], f=faces: mipsbake.write_irradiance_ktx2(o, f, ktx2_format, b))
                     report["ktx2_irradiance"] = {"path": str(irr_out[env]), "format": ktx2_format, "cached": False,
                                                  "seconds": 0.0}
             if not parts & {"radiance", "prefiltered"}:
@@ -233,17 +242,22 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
                                        "seconds": round(time.perf_counter() - t0, 4), "layout": layout,
                                        "roughness": [f["roughness"] for f in sm["files"]]}
                     if env in sheen_out:
-                        mipsbake.write_ktx2(sheen_out[env], root, sm,
-                                            {**opts, "roughness": mipsbake.sheen_roughness(opts["roughness"])},
-                                            ktx2_format, content="Charlie-prefiltered (sheen) radiance")
+                        mipsbake.check_ktx2_chain(sheen_out[env], opts)
+                        pending.append(lambda b, o=sheen_out[env], m=sm, op=opts: mipsbake.write_ktx2(
+                            o, root, m, {**op, "roughness": mipsbake.sheen_roughness(op["roughness"])},
+                            ktx2_format, content="Charlie-prefiltered (sheen) radiance", batch=b))
                         report["ktx2_sheen"] = {"path": str(sheen_out[env]), "format": ktx2_format, "cached": False,
                                                 "seconds": 0.0}
                 if env in ktx2_out:
-                    t0 = time.perf_counter()
                     out = ktx2_out[env]
-                    mipsbake.write_ktx2(out, root, pm, opts, ktx2_format)
-                    report["ktx2"] = {"path": str(out), "format": ktx2_format, "cached": False,
-                                      "seconds": round(time.perf_counter() - t0, 4), "levels": len(opts["sizes"])}
+                    rep = report["ktx2"] = {"path": str(out), "format": ktx2_format, "cached": False,
+                                            "seconds": 0.0, "levels": len(opts["sizes"])}
+
+                    def ktx2_write(b, out=out, m=pm, op=opts, rep=rep):
+                        t0 = time.perf_counter()
+                        mipsbake.write_ktx2(out, root, m, op, ktx2_format, batch=b)
+                        rep["seconds"] = round(time.perf_counter() - t0, 4)
+                    pending.append(ktx2_write)
         entries = [Path(e["path"]) / "manifest.json" for k, e in report.items() if not k.startswith("ktx2")]
         entries += [report[k]["path"] for k in ("ktx2", "ktx2_irradiance", "ktx2_sheen") if k in report]
         if entries:
@@ -260,9 +274,12 @@ def mips_command(envs, cache_dir, layout, size, levels, min_size, method, sample
         dfg_entry = {"path": str(root / dm["key"]), "cached": dcached, "seconds": round(time.perf_counter() - t0, 4)}
         for s in summaries:
             s["entries"]["dfg"] = dfg_entry
-    if depfile:
-        from iblbake.io import depfile as dep
-        dep.write(depfile, rules)
+    with atomic.Batch() as batch:    # every KTX2 file and the depfile, together
+        for write in pending:
+            write(batch)
+        if depfile:
+            from iblbake.io import depfile as dep
+            dep.write(depfile, rules, batch)
     elapsed = round(time.perf_counter() - t_start, 4)
     lines = []
     for s in summaries:

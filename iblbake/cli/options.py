@@ -174,11 +174,39 @@ def _set_max_texture_pixels(ctx, param, value):
     return value
 
 
+def _set_max_pixels(ctx, param, value):
+    if value is not None:     # the library (and worker processes) read it from the environment
+        os.environ["IBLBAKE_MAX_PIXELS"] = str(value)
+    return value
+
+
+def max_pixels_option(f):
+    """--max-pixels for the commands that read a scene's panorama (sh, mips and export-gltf take
+    it with their input options)."""
+    return click.option("--max-pixels", type=click.IntRange(min=1), default=None, expose_value=False,
+                        callback=_set_max_pixels,
+                        help="Refuse larger panoramas before decoding them. Default: $IBLBAKE_MAX_PIXELS "
+                             "or 8192*8192.")(f)
+
+
 def max_texture_pixels_option(f):
     return click.option("--max-texture-pixels", type=click.IntRange(min=1), default=None, expose_value=False,
                         callback=_set_max_texture_pixels,
                         help="Refuse larger material textures before decoding them. Default: "
                              "$IBLBAKE_MAX_TEXTURE_PIXELS or 8192*8192.")(f)
+
+
+def force_option(f):
+    """--force: the one overwrite rule (iblbake.io.guard.refuse_foreign) let through."""
+    return click.option("--force", "-f", is_flag=True,
+                        help="Overwrite existing outputs even where they are not files iblbake wrote "
+                             "(iblbake's own earlier outputs are replaced without it).")(f)
+
+
+def refuse_foreign(writes, force: bool, first_lines=()) -> None:
+    """Every output that exists and is not iblbake's is refused unless --force (before any work)."""
+    from iblbake.io.guard import refuse_foreign as refuse
+    refuse([(flag, p) for flag, p in writes if p], force, first_lines)
 
 
 def depfile_option(f):

@@ -7,22 +7,25 @@ from pathlib import Path
 
 import click
 
-from iblbake.cli.options import Console, common_options, device_option, max_texture_pixels_option
+from iblbake.cli.options import (Console, common_options, device_option, force_option, max_pixels_option,
+                                  max_texture_pixels_option, refuse_foreign)
 
 
 @click.command("probes")
 @click.argument("scene_path", metavar="SCENE")
 @click.option("--output", "-o", "out_dir", required=True, type=click.Path(file_okay=False),
-              help="Folder for probes.json, the atlases (EXR) and probes.glsl; created if missing, its files "
-                   "of those names replaced (atomically).")
+              help="Folder for probes.json, the atlases (EXR) and probes.glsl; created if missing. Files of "
+                   "those names iblbake wrote are replaced (together, atomically); other files need --force.")
 @click.option("--set", "overrides", multiple=True, metavar="KEY.PATH=VALUE",
               help="Override a scene value, e.g. --set probes.rays=512 --set probes.irradiance=sh (as render --set).")
 @click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
               help="Bake cache folder (as render). Default: $IBLBAKE_CACHE, else the per-user cache folder.")
+@force_option
 @device_option
+@max_pixels_option
 @max_texture_pixels_option
 @common_options
-def probes_command(scene_path, out_dir, overrides, cache_dir, device, quiet, as_json):
+def probes_command(scene_path, out_dir, overrides, cache_dir, force, device, quiet, as_json):
     """Bake the irradiance probes of SCENE (its `probes:` section; see render --help-schema) by
     tracing paths from every probe, and write them as RTXGI-layout EXR atlases with a JSON
     manifest and a GLSL function that samples them, and each reflection probe's capture
@@ -46,13 +49,11 @@ def probes_command(scene_path, out_dir, overrides, cache_dir, device, quiet, as_
     rep_name = probes.FILES[sc.data["probes"]["irradiance"]]
     captures = [f"reflection_{k}.exr" for k in range(len(sc.data["reflection_probes"]))]
     names = ["probes.json", rep_name, "distance.exr", "probe_data.exr", "probes.glsl", *captures]
-    refuse_overlaps([("--output", out / n) for n in names], scene.named_input_files(sc))
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise click.UsageError(f"{out}: cannot create the folder ({e.strerror})") from None
-    for n in names:
+    writes = [("--output", out / n) for n in names]
+    refuse_overlaps(writes, scene.named_input_files(sc))
+    for n in names:                  # the folder is made when the files are written, not before
         atomic.check_writable(out / n)
+    refuse_foreign(writes, force)
     rt = Runtime(device)
     bakes = Bakes(cache_dir)
     bakes.runtime = rt
@@ -63,19 +64,20 @@ def probes_command(scene_path, out_dir, overrides, cache_dir, device, quiet, as_
         reflections = bakes.load("reflection_probes", ctx)[0] if captures else []
     vol = probes.sampled(vol, sc.data["probes"])
     man = probes.manifest(vol)
-    from iblbake.io import images
-    for name, c in zip(captures, reflections):     # an engine prefilters them (iblbake mips --ktx2)
-        images.write_exr(out / name, c["capture"], channels=("R", "G", "B", "A"))
     man["reflection_probes"] = [{"file": name, **c["settings"],
                                  "layout": "equirect in the world frame (the panoramas' mapping); RGB the linear "
                                            "radiance of the scene, A the share of the texel the scene covers (the "
                                            "rest is the distant panorama along the reflected ray)"}
                                 for name, c in zip(captures, reflections)]
     entry = Path(extra["entry"])
-    for n in names[1:4]:
-        atomic.write_bytes(out / n, (entry / n).read_bytes())
-    atomic.write_json(out / "probes.json", man)
-    atomic.write_text(out / "probes.glsl", probes.glsl(vol, man))
+    from iblbake.io import images, reads
+    with atomic.Batch() as batch:    # every file of the folder replaced together, or none
+        for name, c in zip(captures, reflections):     # an engine prefilters them (iblbake mips --ktx2)
+            images.write_exr(out / name, c["capture"], channels=("R", "G", "B", "A"), batch=batch)
+        for n in names[1:4]:         # the cache entry's atlases (verified against their manifest)
+            batch.write_bytes(out / n, reads.read_bytes(entry / n, 1 << 40, "a cached atlas"))
+        batch.write_json(out / "probes.json", man)
+        batch.write_text(out / "probes.glsl", probes.glsl(vol, man))
     r = man["report"]
     summary = {"scene": sc.source, "output": str(out), "files": names, "cached": cached, "device": rt.device_label,
                "grid": man["grid"], "representation": man["representation"], "states": man["states"],

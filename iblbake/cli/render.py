@@ -6,7 +6,8 @@ import contextlib
 
 import click
 
-from iblbake.cli.options import Console, common_options, depfile_option, device_option, max_texture_pixels_option
+from iblbake.cli.options import (Console, common_options, depfile_option, device_option, force_option,
+                                  max_pixels_option, max_texture_pixels_option, refuse_foreign)
 
 
 def _help_schema(ctx, param, value):
@@ -20,7 +21,7 @@ def _help_schema(ctx, param, value):
 @click.argument("scene_path", metavar="SCENE", required=False)
 @click.option("--output", "-o", "outputs", multiple=True, type=click.Path(dir_okay=False),
               help="Frame path (.png tone-mapped, .exr linear); repeatable. Replaces output.frame of the "
-                   "scene. Existing files are overwritten (atomically).")
+                   "scene. Earlier frames iblbake wrote are replaced (atomically); other files need --force.")
 @click.option("--set", "overrides", multiple=True, metavar="KEY.PATH=VALUE",
               help="Override a scene value, e.g. --set effects.samples=40 --set materials.gold.roughness=0.3 "
                    "--set objects.0.sphere.radius=2 (repeatable; values parse as YAML).")
@@ -31,10 +32,12 @@ def _help_schema(ctx, param, value):
 @click.option("--help-schema", is_flag=True, expose_value=False, is_eager=True, callback=_help_schema,
               help="Print every scene key with its type, range and default, and exit.")
 @depfile_option
+@force_option
 @device_option
+@max_pixels_option
 @max_texture_pixels_option
 @common_options
-def render_command(scene_path, outputs, overrides, cache_dir, show_report, depfile, device, quiet, as_json):
+def render_command(scene_path, outputs, overrides, cache_dir, show_report, depfile, force, device, quiet, as_json):
     """Render the scene file SCENE (YAML; see --help-schema and examples/scenes/) with OpenCL.
 
     Only the effects the scene calls for are baked, compiled and run; --report shows which.
@@ -48,9 +51,11 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, depfi
     sc = scene.load(scene_path, overrides, outputs)
     from iblbake.io.atomic import check_writable
     from iblbake.io.guard import refuse_overlaps
-    refuse_overlaps(sc.writes + ([("--depfile", depfile)] if depfile else []), scene.named_input_files(sc))
-    for p in render.output_paths(sc):
+    writes = sc.writes + ([("--depfile", depfile)] if depfile else [])
+    refuse_overlaps(writes, scene.named_input_files(sc))
+    for _, p in writes:              # every output, the depfile too, before the frame is rendered
         check_writable(p)
+    refuse_foreign(writes, force)
     pl = render.plan(sc)
     # paths (the reference, probe rays, reflection captures): a bar on a terminal
     long_work = "reference" in pl.pass_names or {"probes", "reflection_probes"} & set(pl.bakes)
@@ -82,10 +87,19 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, depfi
         for b in rep["kernel_builds"]:
             lines.append(f"build {b['kernel']:<16} {b['seconds']:8.3f} s")
     w, h = rep["resolution"]
-    lines.append(f"{'wrote ' + ', '.join(written) if written else 'rendered'} ({w}x{h}, {rep['spp']} spp) "
+    lines.append(f"{'wrote ' + ', '.join(written) if written else 'rendered'} ({w}x{h}, {_samples(rep)}) "
                  f"in {rep['elapsed_s']:.3f} s on {rep['device']}")
     con.result(summary, "\n".join(lines))
 
+
+def _samples(rep: dict) -> str:
+    """The frame's samples per pixel as it was lit: a path-traced reference's own count (where it
+    stopped), not the G-buffer's camera.spp."""
+    ref = next((p for p in rep["passes"] if p["name"] == "reference"), None)
+    if ref is None or "samples_per_pixel" not in ref:
+        return f"{rep['spp']} spp"
+    why = f", stopped by {ref['stopped']}" if ref.get("stopped") else ""
+    return f"{ref['samples_per_pixel']} samples per pixel (reference{why})"
 
 
 @click.command("deps")

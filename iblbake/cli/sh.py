@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import time
@@ -11,31 +10,9 @@ import click
 
 from iblbake.cli.options import (POLICY_FLAGS, Console, check_inputs_exist, check_suffix, common_options,
                                   depfile_option, device_option, finite, input_files_of, input_options,
-                                  non_negative, panorama_reads)
+                                  non_negative, panorama_reads, refuse_foreign)
 from iblbake.io.guard import refuse_overlaps
 from iblbake.errors import IblbakeError
-
-
-def _check_overwrite(output: str, force: bool, fmt: str = "iblbake"):
-    """sh replaces its own earlier documents and exports (Makefile reruns) but nothing else
-    unless --force (and never its input: the guard in sh_command)."""
-    from iblbake.bake import sh as shbake
-
-    out = os.path.realpath(output)
-    if force or not os.path.exists(out):
-        return
-    try:
-        with open(out, "rb") as f:
-            head = f.read(1 << 22)
-        if fmt == "iblbake":
-            ours = json.loads(head).get("format") == shbake.FORMAT
-        else:                        # every export names iblbake in its first lines
-            ours = b"iblbake" in head[:4096]
-    except (OSError, ValueError, AttributeError):
-        ours = False
-    if not ours:
-        raise IblbakeError(f"{output}: exists and is not an iblbake SH {'document' if fmt == 'iblbake' else fmt + ' export'}; "
-                           f"pass --force to overwrite it")
 
 
 @click.command("sh")
@@ -44,7 +21,8 @@ def _check_overwrite(output: str, force: bool, fmt: str = "iblbake"):
               help="Write the JSON document here (atomically); with several ENV, a folder (DIR/NAME.json "
                    "each). Without it, nothing is written. An existing iblbake SH document is replaced; any "
                    "other existing file needs --force.")
-@click.option("--force", "-f", is_flag=True, help="Overwrite --output even if it is not an iblbake SH document.")
+@click.option("--force", "-f", is_flag=True, help="Overwrite --output (and --depfile) even where it is not a file "
+                                                  "iblbake wrote.")
 @click.option("--bands", type=click.IntRange(1, 16), default=3, show_default=True,
               help="Number of SH bands (l = 0..bands-1; 3 gives the classic 9 coefficients).")
 @click.option("--window", type=click.Choice(["none", "hann", "lanczos"]), default="none", show_default=True,
@@ -111,9 +89,7 @@ def sh_command(envs, output, force, bands, window, backend, rotate_y, intensity,
         check_suffix(output, shbake.SUFFIXES[fmt], "-o", f"--format {fmt}")
     for flag, out in writes:
         check_writable(out)
-    for out in outputs:
-        if out:
-            _check_overwrite(out, force, fmt)
+    refuse_foreign(writes, force)      # its own earlier documents are replaced (Makefile reruns)
     check_inputs_exist(envs)
     state = {"rt": None}
     # every panorama is projected before any file is written: a bad one among several leaves nothing
@@ -195,5 +171,6 @@ def _project_one(env, state, bands, window, backend, rotate_y, intensity, fmt, w
         human += (f"; irradiance against the exact: relative RMSE {100 * e['relative_rmse']:.2f}%, max "
                   f"{100 * e['max_relative_error']:.1f}%, ringing {100 * e['most_negative_relative']:.2f}% of the mean")
     if info.negative and negative == "keep":
-        human += f"; {info.negative} tiny negative values kept (min {info.negative_min:.3g})"
+        human += (f"; {info.negative} {'tiny ' if info.negative_tiny else ''}negative values kept "
+                  f"(min {info.negative_min:.3g}{'' if info.negative_tiny else ', see the warning'})")
     return summary, human, text

@@ -8,7 +8,8 @@ from pathlib import Path
 
 import click
 
-from iblbake.cli.options import Console, common_options, depfile_option, device_option, max_texture_pixels_option
+from iblbake.cli.options import (Console, common_options, depfile_option, device_option, force_option,
+                                  max_pixels_option, max_texture_pixels_option, refuse_foreign)
 from iblbake.errors import IblbakeError
 
 
@@ -119,12 +120,14 @@ def _shard(ctx, param, value):
 @click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
               help="Bake cache folder. Default: $IBLBAKE_CACHE, else the per-user cache folder.")
 @depfile_option
+@force_option
 @device_option
+@max_pixels_option
 @max_texture_pixels_option
 @common_options
 def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, label_format, caption, repeat, title,
                   frames_dir, frames_exr, layout_path, keep_going, resume, shard, assemble, jobs, devices, scheduler,
-                  resources, cache_dir, depfile, device, quiet, as_json):
+                  resources, cache_dir, depfile, force, device, quiet, as_json):
     """Render every cell of the sweep of SCENE (its sweep: section, or --rows / --columns) in one
     process and assemble a contact sheet. Cells share the runtime, every bake, and the passes whose
     inputs they share (a material sweep traces primary rays once, a tone-mapping sweep lights once);
@@ -169,6 +172,7 @@ def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, labe
         named for s in scenes if not isinstance(s, Exception) for named in scene_load.named_input_files(s)])
     for _, p in writes[len(outputs):]:
         check_writable(p)
+    refuse_foreign(writes, force)
     rt = Runtime(device)
     bakes = render.Bakes(cache_dir)
     mine = sheet.shard_cells(scenes, bakes, shard) if shard and not assemble else range(len(cells))
@@ -209,35 +213,38 @@ def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, labe
         return
     title = title or (base.data.get("sweep") or {}).get("title") or Path(scene_path).name
     lay = sheet.layout(results, rows_axis, cols_axis, title, caption)
-    for o in outputs:
-        if o.lower().endswith(".png"):
-            images.write_png(o, sheet.assemble(results, rows_axis, cols_axis, title, caption, lay))
-        else:
-            images.write_exr(o, sheet.mosaic(results, rows_axis, cols_axis), channels=("R", "G", "B", "A"))
-    if frames_dir:
-        sheet.write_frames(results, Path(frames_dir), frames_exr)
-    if depfile:                      # every file any cell read (a cell may sweep the panorama or a mesh)
-        from iblbake.io import depfile as dep
-        read = [f for s in scenes if not isinstance(s, Exception) for f in scene_load.input_files(s)]
-        dep.write(depfile, [(list(outputs), read)])
-    failed = [r for r in results if r.error]
-    cells_json = []
-    for r in results:
-        c = r.to_json()
-        x, y = lay.origin(r.cell.row, r.cell.column)
-        w, h = lay.cell
-        c["png_box"] = [x, y, w, h]
-        c["exr_box"] = [r.cell.column * (w + sheet.GAP), r.cell.row * (h + sheet.GAP), w, h]
-        cells_json.append(c)
-    summary = {"scene": str(scene_path), "outputs": list(outputs), "device": rt.device_label,
-               "rows": {"key": rows_axis.title, "labels": [s.label for s in rows_axis.steps]},
-               "columns": {"key": cols_axis.title, "labels": [s.label for s in cols_axis.steps]},
-               "cells": cells_json, "failed": len(failed), "elapsed_s": round(time.perf_counter() - t_start, 4)}
-    if spread:
-        summary["workers"] = spread
-    if layout_path:
-        from iblbake.io.atomic import write_json
-        write_json(layout_path, summary)
+    from iblbake.io import atomic
+    from iblbake.io.guard import mark
+    with atomic.Batch() as batch:    # the sheets, frames, layout and depfile: all replaced, or none
+        for o in outputs:
+            if o.lower().endswith(".png"):
+                images.write_png(o, sheet.assemble(results, rows_axis, cols_axis, title, caption, lay), batch)
+            else:
+                images.write_exr(o, sheet.mosaic(results, rows_axis, cols_axis), channels=("R", "G", "B", "A"),
+                                 batch=batch)
+        if frames_dir:
+            sheet.write_frames(results, Path(frames_dir), frames_exr, batch)
+        if depfile:                  # every file any cell read (a cell may sweep the panorama or a mesh)
+            from iblbake.io import depfile as dep
+            read = [f for s in scenes if not isinstance(s, Exception) for f in scene_load.input_files(s)]
+            dep.write(depfile, [(list(outputs), read)], batch)
+        failed = [r for r in results if r.error]
+        cells_json = []
+        for r in results:
+            c = r.to_json()
+            x, y = lay.origin(r.cell.row, r.cell.column)
+            w, h = lay.cell
+            c["png_box"] = [x, y, w, h]
+            c["exr_box"] = [r.cell.column * (w + sheet.GAP), r.cell.row * (h + sheet.GAP), w, h]
+            cells_json.append(c)
+        summary = {"scene": str(scene_path), "outputs": list(outputs), "device": rt.device_label,
+                   "rows": {"key": rows_axis.title, "labels": [s.label for s in rows_axis.steps]},
+                   "columns": {"key": cols_axis.title, "labels": [s.label for s in cols_axis.steps]},
+                   "cells": cells_json, "failed": len(failed), "elapsed_s": round(time.perf_counter() - t_start, 4)}
+        if spread:
+            summary["workers"] = spread
+        if layout_path:
+            atomic.write_json(layout_path, {"generator": mark(), **summary}, batch)
     con.result(summary, f"wrote {', '.join(outputs)}: {len(rows_axis.steps)} x {len(cols_axis.steps)} cells "
                         f"in {summary['elapsed_s']:.3f} s on {rt.device_label}"
                         + (f"; {len(failed)} failed" if failed else ""))

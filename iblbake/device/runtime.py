@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from iblbake.errors import DeviceError
+from iblbake.errors import DeviceError, IblbakeError
 
 FIX_HINT = (
     "fix: on Debian/Ubuntu run `sudo apt-get install pocl-opencl-icd` (PoCL 3.1, a CPU device "
@@ -237,10 +237,10 @@ def _verdict_key(info: DeviceInfo) -> str:
 def _load_verdicts() -> dict:
     import json
     try:
-        with open(_verdict_path()) as f:
-            v = json.load(f)
+        from iblbake.io import reads
+        v = json.loads(reads.read_text(_verdict_path(), reads.JSON_BYTES, "the device verdicts"))
         return v if isinstance(v, dict) else {}
-    except (OSError, ValueError):
+    except (OSError, ValueError, IblbakeError):     # missing or unreadable: probe again
         return {}
 
 

@@ -35,6 +35,7 @@ def write_rules(rules) -> str:
     return "\n".join(_head(t, p) for t, p in rules) + "\n" + "".join(f"{d}:\n" for d in inputs)
 
 
-def write(path, rules) -> None:
-    """rules: [(targets, prerequisites), ...]; the phony rules for the inputs once."""
-    write_text(path, write_rules(rules))
+def write(path, rules, batch=None) -> None:
+    """rules: [(targets, prerequisites), ...]; the phony rules for the inputs once (written with
+    `batch`'s other outputs, atomic.Batch, where given)."""
+    write_text(path, write_rules(rules), batch)

@@ -21,7 +21,6 @@ colours, and OpenImageIO's PNG writer declares sRGB, so pillow writes them.
 
 from __future__ import annotations
 
-import io
 import json
 import struct
 from pathlib import Path
@@ -56,11 +55,8 @@ def rgbd_decode(rgbd) -> np.ndarray:
 
 def png_bytes(rgba: np.ndarray) -> bytes:
     """An 8-bit RGBA PNG with no colour-space chunk."""
-    from PIL import Image
-
-    buf = io.BytesIO()
-    Image.fromarray(np.ascontiguousarray(rgba), "RGBA").save(buf, format="PNG", compress_level=6)
-    return buf.getvalue()
+    from iblbake.io.images import png_bytes
+    return png_bytes(np.ascontiguousarray(rgba, np.uint8), colour=False)
 
 
 def split_glb(data: bytes) -> tuple:
@@ -86,13 +82,19 @@ def split_glb(data: bytes) -> tuple:
 def written_by_iblbake(path) -> bool:
     """Whether `path` is a glTF or GLB file whose asset.generator names iblbake (what export-gltf
     may replace without --force)."""
-    import mmap
+    from iblbake.io import reads
 
     try:
-        with open(path, "rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as data:
-            text = split_glb(data)[0] if data[:4] == b"glTF" else data[:]     # a GLB: its JSON chunk only
+        head = reads.read_head(path, 20)
+        if head[:4] == b"glTF":         # a GLB: its JSON chunk only, the images not read
+            n, kind = struct.unpack_from("<II", head, 12)
+            if kind != JSON_CHUNK or n > reads.JSON_BYTES:
+                return False
+            text = reads.read_head(path, 20 + n)[20:]
+        else:
+            text = reads.read_bytes(path, reads.JSON_BYTES, "a glTF document")
         return str(json.loads(text)["asset"]["generator"]).startswith("iblbake")
-    except (OSError, ValueError, KeyError, TypeError):
+    except (OSError, ValueError, KeyError, TypeError, struct.error, IblbakeError):
         return False
 
 
@@ -140,11 +142,12 @@ def write(path, coefficients, pngs, size: int, intensity: float = 1.0, name: str
     written = []
     if kind == ".gltf":
         doc["images"] = []
-        for png, data in zip(sidecars(path, len(pngs)), flat):
-            atomic.write_bytes(png, data)
-            written.append(png)
-            doc["images"].append({"uri": png.name, "mimeType": "image/png"})
-        atomic.write_text(path, json.dumps(doc, indent=1, allow_nan=False) + "\n")
+        with atomic.Batch() as batch:       # every face, then the document (renamed last), or none
+            for png, data in zip(sidecars(path, len(pngs)), flat):
+                batch.write_bytes(png, data)
+                written.append(png)
+                doc["images"].append({"uri": png.name, "mimeType": "image/png"})
+            batch.write_text(path, json.dumps(doc, indent=1, allow_nan=False) + "\n")
         return written + [path]
     views, offset = [], 0
     for data in flat:

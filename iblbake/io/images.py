@@ -28,6 +28,10 @@ DEFAULT_MAX_PIXELS = 8192 * 8192
 # Values beyond this cannot be summed in float32 kernels (a row of 8192 of them overflows 3.4e38);
 # no real radiance comes near it (Blender's suns peak at 3.4e4), but a corrupted file does.
 MAX_ABS_VALUE = 1e30
+# Negative values holding more than this share of a panorama's summed |value| are reported when
+# kept: a filter's ringing holds far less (Blender's eight: at most 6.2e-7), a broken or offset
+# file (every texel -1) all of it.
+NEGATIVE_TINY_SHARE = 1e-4
 NONFINITE_POLICIES = ("error", "zero", "clamp")
 NEGATIVE_POLICIES = ("keep", "clamp", "error")
 TRANSFERS = ("auto", "srgb", "linear")
@@ -48,7 +52,14 @@ class ImageInfo:
     negative: int = 0
     negative_min: float = 0.0
     negative_policy: str = "keep"
+    negative_share: float = 0.0     # the negative values' share of the summed |value|
     warnings: list = field(default_factory=list)
+
+    @property
+    def negative_tiny(self) -> bool:
+        """Negatives no one would see: a resampling filter's undershoot (Blender's panoramas hold
+        up to 6e-7 of their energy in them, >= -0.004), kept without a warning."""
+        return self.negative_share <= NEGATIVE_TINY_SHARE
 
     def to_json(self) -> dict:
         return {
@@ -78,8 +89,10 @@ def max_pixels_default() -> int:
 
 
 def file_sha256(path) -> str:
+    """The file's sha256, read in blocks (a regular file only: a device or a FIFO never ends)."""
+    from iblbake.io.reads import open_checked
     h = hashlib.sha256()
-    with open(path, "rb") as f:
+    with open_checked(path, 1 << 62) as f:
         for block in iter(lambda: f.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
@@ -96,8 +109,9 @@ def _first_position(mask) -> str:
 
 
 # How the read policies are named in messages: the caller says where each came from (a command-line
-# flag, a scene key); the library itself knows neither.
-POLICY_NAMES = {"max_pixels": "max_pixels", "nonfinite": "nonfinite", "negative": "negative",
+# flag, a scene key); the library itself knows neither. The pixel limit has no scene key: every
+# command that reads a panorama takes --max-pixels (and $IBLBAKE_MAX_PIXELS).
+POLICY_NAMES = {"max_pixels": "--max-pixels", "nonfinite": "nonfinite", "negative": "negative",
                 "transfer": "transfer", "primaries": "primaries", "layout": "layout"}
 
 
@@ -157,6 +171,9 @@ def read_panorama(path, *, max_pixels: int | None = None, nonfinite: str = "erro
         raise InputError(f"{path}: no such file")
     if os.path.isdir(path):
         raise InputError(f"{path}: is a folder, not an image")
+    from iblbake.io import reads          # before OpenImageIO opens it: a FIFO blocks, a device never ends
+    reads.check_file(path, reads.image_bytes(limit), "a panorama",
+                     f" of at most {limit} pixels ({name['max_pixels']} or IBLBAKE_MAX_PIXELS raises it)")
     inp = oiio.ImageInput.open(path)
     if inp is None:
         msg = " ".join(oiio.geterror().split()) or "unknown format"
@@ -233,6 +250,12 @@ def validate_texels(rgb: np.ndarray, info: ImageInfo, names: dict | None = None)
     info.negative = int(neg.sum())
     if info.negative:
         info.negative_min = float(rgb.min())
+        info.negative_share = float(-rgb[neg].sum(dtype=np.float64) / max(np.abs(rgb).sum(dtype=np.float64), 1e-300))
+        if negative == "keep" and not info.negative_tiny:      # counted and reported, as documented
+            info.warnings.append(
+                f"{path}: {info.negative} negative values kept as stored (min {info.negative_min:.3g}, "
+                f"{100 * info.negative_share:.3g}% of the panorama's energy): they subtract light; "
+                f"{name['negative']} clamp sets them to 0, {name['negative']} error refuses them")
         if negative == "error":
             raise InputError(
                 f"{path}: {info.negative} negative values (min {info.negative_min:.3g}), first at "
@@ -261,8 +284,10 @@ CACHE_COMPRESSION = "none"
 
 
 def write_exr(path, image, *, half: bool = False, channels=("R", "G", "B"), attributes=None,
-              compression: str = "zip"):
-    """Write a linear float (or half) EXR atomically."""
+              compression: str = "zip", batch=None):
+    """Write a linear float (or half) EXR atomically (with `batch`'s other outputs, where given),
+    named iblbake's in its Software attribute."""
+    from iblbake.io.guard import mark
     oiio = _oiio()
     image = np.ascontiguousarray(image, dtype=np.float32)
     if image.ndim == 2:
@@ -271,30 +296,47 @@ def write_exr(path, image, *, half: bool = False, channels=("R", "G", "B"), attr
     spec = oiio.ImageSpec(w, h, nc, oiio.HALF if half else oiio.FLOAT)
     spec.channelnames = tuple(channels[:nc])
     spec.attribute("compression", compression)
+    spec.attribute("Software", mark())
     for k, v in (attributes or {}).items():
         spec.attribute(k, v)
-    _write(oiio, path, spec, image)
-
-
-def write_png(path, image_u8):
-    """Write an 8-bit RGB(A) PNG atomically."""
-    oiio = _oiio()
-    image_u8 = np.ascontiguousarray(image_u8, dtype=np.uint8)
-    h, w, nc = image_u8.shape
-    spec = oiio.ImageSpec(w, h, nc, oiio.UINT8)
-    _write(oiio, path, spec, image_u8)
-
-
-def _write(oiio, path, spec, pixels):
-    with atomic_path(path) as tmp:
+    with atomic_path(path, batch) as tmp:
         out = oiio.ImageOutput.create(tmp)
         if out is None:
             raise IblbakeError(f"{path}: no writer for this format ({oiio.geterror()})")
-        ok = out.open(tmp, spec) and out.write_image(pixels)
-        err = out.geterror()
-        out.close()
-        if not ok:
-            raise IblbakeError(f"{path}: write failed ({' '.join(err.split())[:200]})")
+        ok = out.open(tmp, spec) and out.write_image(image)
+        closed = out.close()            # the last tiles and the offset table are written here
+        err = out.geterror() or oiio.geterror()
+        if not (ok and closed) or err:
+            raise IblbakeError(f"{path}: write failed ({' '.join(err.split())[:200] or 'the writer gave no reason'})")
+
+
+def png_bytes(image_u8, colour: bool = True) -> bytes:
+    """An 8-bit grey, RGB or RGBA PNG in memory (so that every byte of it is written by
+    atomic.write_bytes, which checks each write: OpenImageIO's PNG writer reported no error on a
+    full disk and left an empty file), named iblbake's in a tEXt Software chunk. colour: declared
+    sRGB (sRGB and gAMA chunks); RGBD and other non-colour bytes declare nothing."""
+    import io
+
+    from PIL import Image, PngImagePlugin
+
+    from iblbake.io.guard import mark
+    image_u8 = np.ascontiguousarray(image_u8, dtype=np.uint8)
+    if image_u8.ndim == 3 and image_u8.shape[2] == 1:
+        image_u8 = image_u8[..., 0]
+    info = PngImagePlugin.PngInfo()
+    info.add_text("Software", mark())
+    if colour:
+        info.add(b"sRGB", b"\x00")
+        info.add(b"gAMA", (45455).to_bytes(4, "big"))
+    buf = io.BytesIO()
+    Image.fromarray(image_u8).save(buf, format="PNG", compress_level=6, pnginfo=info)
+    return buf.getvalue()
+
+
+def write_png(path, image_u8, batch=None):
+    """Write an 8-bit RGB(A) PNG atomically (with `batch`'s other outputs, where given)."""
+    from iblbake.io.atomic import write_bytes
+    write_bytes(path, png_bytes(image_u8), batch)
 
 
 def read_exr(path) -> np.ndarray:

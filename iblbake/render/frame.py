@@ -386,23 +386,25 @@ def output_paths(scene: Scene) -> list:
 
 
 def write_outputs(frame: Frame, scene: Scene) -> list:
-    """Write every requested output atomically; returns the paths written."""
-    from iblbake.io import images
+    """Write every requested output atomically, together (`batch`, atomic.Batch: all replaced or,
+    on a failed write, none); returns the paths written."""
+    from iblbake.io import atomic, images
 
     out = scene.data["output"]
     written = []
-    for p in out["frame"]:
-        if p.lower().endswith(".png"):
-            images.write_png(p, frame.png)
-        else:
-            images.write_exr(p, frame.hdr, channels=("R", "G", "B", "A"))
-        written.append(p)
-    for a in AOVS:
-        if out[a]:
-            img = frame.aovs[a]
-            if a in ("depth", "object"):
-                images.write_exr(out[a], img[..., None], channels=("Z" if a == "depth" else "Y",))
+    with atomic.Batch() as batch:
+        for p in out["frame"]:
+            if p.lower().endswith(".png"):
+                images.write_png(p, frame.png, batch)
             else:
-                images.write_exr(out[a], img, channels=("R", "G", "B", "A"))
-            written.append(out[a])
+                images.write_exr(p, frame.hdr, channels=("R", "G", "B", "A"), batch=batch)
+            written.append(p)
+        for a in AOVS:
+            if out[a]:
+                img = frame.aovs[a]
+                if a in ("depth", "object"):
+                    images.write_exr(out[a], img[..., None], channels=("Z" if a == "depth" else "Y",), batch=batch)
+                else:
+                    images.write_exr(out[a], img, channels=("R", "G", "B", "A"), batch=batch)
+                written.append(out[a])
     return written

@@ -75,7 +75,7 @@ def load_mesh(spec: dict, where: str) -> MeshData:
     """A mesh file, checked: glTF/GLB through iblbake.scene.gltf (materials, both texture
     coordinate sets, tangents), the rest through trimesh (geometry and TEXCOORD_0)."""
     path = Path(spec["path"])
-    if not path.is_file():
+    if not path.exists():
         raise InputError(f"{where}: mesh {path} not found")
     if path.suffix.lower() in (".gltf", ".glb"):
         parts = _gltf_parts(path, where)
@@ -132,6 +132,12 @@ def _gltf_parts(path: Path, where: str) -> list:
 
 def _trimesh_parts(path: Path, where: str) -> list:
     import trimesh
+
+    from iblbake.io import reads
+    try:        # trimesh reads what it is given whole: a device or a FIFO would never end
+        reads.check_file(path, reads.mesh_bytes(), "a mesh", reads.MESH_HINT)
+    except InputError as e:
+        raise InputError(f"{where}: mesh {e}") from None
 
     # trimesh logs format warnings itself; ours are one line per problem, so keep it quiet
     logging.getLogger("trimesh").setLevel(logging.CRITICAL)

@@ -14,6 +14,7 @@ from __future__ import annotations
 import base64
 import json
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import unquote
@@ -22,6 +23,7 @@ import numpy as np
 
 from iblbake.errors import InputError
 from iblbake.io.gltf import split_glb
+from iblbake.io import reads
 
 COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 NORMALIZE = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0}
@@ -101,11 +103,13 @@ class Document:
             except ValueError:
                 _fail(self.where, self.path, f"{what}: its data uri is not valid base64")
         f = (self.path.parent / unquote(uri))
-        try:
-            return f.read_bytes()
-        except OSError as e:
+        if not f.exists():
             raise InputError(f"{self.where}: mesh {self.path}: {what} {uri!r} cannot be read "
-                             f"({e.strerror or e}); it must be where the URI says, beside the file") from None
+                             f"(no such file); it must be where the URI says, beside the file")
+        try:
+            return reads.read_bytes(f, reads.mesh_bytes(), f"a glTF {what.split()[0]}", reads.MESH_HINT)
+        except InputError as e:
+            raise InputError(f"{self.where}: mesh {self.path}: {what} {uri!r}: {e}") from None
 
     def view(self, i: int):
         """(bytes of the buffer, offset, length, stride) of bufferView i, bounds checked."""
@@ -347,9 +351,9 @@ def read(path, where: str) -> Document:
     """Parse a .gltf (JSON) or .glb (binary container) file."""
     path = Path(path)
     try:
-        data = path.read_bytes()
-    except OSError as e:
-        raise InputError(f"{where}: mesh {path} cannot be read ({e.strerror})") from None
+        data = reads.read_bytes(path, reads.mesh_bytes(), "a mesh", reads.MESH_HINT)
+    except InputError as e:
+        raise InputError(f"{where}: mesh {e}") from None
     binary = None
     if data[:4] == b"glTF":
         try:
@@ -388,10 +392,10 @@ def external_files(path) -> list:
     if path.suffix.lower() != ".gltf":
         return []
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, ValueError):
+        text = reads.read_text(path, reads.mesh_bytes(), "a mesh")
+    except (InputError, ValueError):
         return []
-    return [str((path.parent / u).resolve()) for u in relative_uris(text)]
+    return [os.path.normpath(path.parent / u) for u in relative_uris(text)]     # a link named as given
 
 
 def uv_transform(offset, rotation: float, scale) -> np.ndarray:

@@ -17,7 +17,8 @@ from pathlib import Path
 
 from iblbake.errors import InputError, UsageError
 from iblbake.scene.schema import SCHEMA, ListOf, MapOf, Section, _Bad
-from iblbake.scene.yaml_lines import load_with_lines
+from iblbake.io import reads
+from iblbake.scene.yaml_lines import MAX_SCENE_BYTES, load_with_lines
 
 FRAME_SUFFIXES = (".png", ".exr")
 AOVS = ("normal", "albedo", "depth", "object")
@@ -154,11 +155,17 @@ def _resolve_inside(folder: Path, rel: str, what: str, where: str) -> Path:
     return full
 
 
-def _must_be_file(v, key: str, path: str, what: str, folder: Path) -> None:
+def _must_be_file(v, key: str, path: str, what: str, folder: Path, limit: int, hint: str = "") -> None:
+    """A regular file within its kind's size limit (checked before anything opens it: a device
+    or a FIFO would be read forever or block)."""
     if Path(path).is_dir():
         v.fail(key, f"{path} is a folder; give the path of {what} file")
-    if not Path(path).is_file():
+    if not os.path.exists(path):
         v.fail(key, f"{path} not found; give the path of {what} (relative to {folder})")
+    try:
+        reads.check_file(path, limit, what, hint)
+    except InputError as e:
+        v.fail(key, str(e))
 
 
 def load(path, overrides=(), outputs=None, values=(), origin: str = "--set") -> Scene:
@@ -188,16 +195,12 @@ def load(path, overrides=(), outputs=None, values=(), origin: str = "--set") -> 
 def _read(path: Path):
     """The scene file's YAML as a mapping, and the line of every dotted key."""
     source = str(path)
+    if not os.path.lexists(path):
+        raise InputError(f"{source}: scene file not found")
     try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"{source}: scene file not found") from None
-    except IsADirectoryError:
-        raise InputError(f"{source}: is a folder, not a scene file") from None
+        text = reads.read_text(path, MAX_SCENE_BYTES, "a scene file", " (meshes and panoramas go in their own files)")
     except UnicodeDecodeError:
         raise InputError(f"{source}: not a UTF-8 text file; scene files are YAML") from None
-    except OSError as e:
-        raise InputError(f"{source}: cannot read: {e.strerror}") from None
     data, lines = load_with_lines(text, source)
     if data is None:
         data = {}
@@ -228,7 +231,9 @@ def _resolve_references(v: "_Validator", out: dict, folder: Path) -> None:
     """Objects name materials that exist; meshes, maps and the panorama are files (absolute)."""
     for i, o in enumerate(out["objects"]):
         if "mesh" in o:
-            o["mesh"]["path"] = str((folder / o["mesh"]["path"]).resolve())
+            given = os.path.normpath(folder / o["mesh"]["path"])      # a link named as given
+            o["mesh"]["path"] = str(Path(given).resolve())
+            _check_mesh_files(v, f"objects.{i}.mesh.path", given)
         if o["material"] is None:
             if "mesh" in o and Path(o["mesh"]["path"]).suffix.lower() in (".gltf", ".glb"):
                 continue                          # shaded with the file's own materials
@@ -238,17 +243,40 @@ def _resolve_references(v: "_Validator", out: dict, folder: Path) -> None:
             hint = f"did you mean {near[0]!r}?" if near else \
                 f"defined: {', '.join(out['materials']) or 'none'}"
             v.fail(f"objects.{i}.material", f"no material named {o['material']!r} ({hint})")
+    from iblbake.io.images import max_pixels_default
+    from iblbake.scene.textures import max_texture_pixels
+
     for name, m in out["materials"].items():
         for key in [k for k in m if k.endswith("_map") and m[k]]:
-            m[key]["path"] = str((folder / m[key]["path"]).resolve())
-            _must_be_file(v, f"materials.{name}.{key}.path", m[key]["path"], "an image", folder)
+            given = os.path.normpath(folder / m[key]["path"])
+            m[key]["path"] = str(Path(given).resolve())
+            _must_be_file(v, f"materials.{name}.{key}.path", given, "an image", folder,
+                          reads.image_bytes(max_texture_pixels()), " (--max-texture-pixels raises it)")
     for i, lt in enumerate(out["lights"]):
         if "spot" in lt and lt["spot"]["inner_cone_angle"] > lt["spot"]["outer_cone_angle"]:
             v.fail(f"lights.{i}.spot.inner_cone_angle", f"{lt['spot']['inner_cone_angle']:g} is wider than "
                                                         f"outer_cone_angle {lt['spot']['outer_cone_angle']:g}")
     env = out["environment"]
     env["path"] = str((folder / env["path"]).resolve()) if not Path(env["path"]).is_absolute() else env["path"]
-    _must_be_file(v, "environment.path", env["path"], "an HDR panorama", folder)
+    limit = max_pixels_default()
+    _must_be_file(v, "environment.path", env["path"], "an HDR panorama", folder, reads.image_bytes(limit),
+                  f" of at most {limit} pixels (--max-pixels or IBLBAKE_MAX_PIXELS raises it)")
+
+
+def _check_mesh_files(v: "_Validator", key: str, path: str) -> None:
+    """A mesh (and the buffers and images a .gltf names beside it) is a regular file within the
+    mesh limit; a missing one is the mesh loader's to report, with its own words."""
+    from iblbake.scene.gltf import external_files
+
+    if not os.path.exists(path):
+        return
+    try:
+        reads.check_file(path, reads.mesh_bytes(), "a mesh", reads.MESH_HINT)
+        for f in external_files(path):
+            if os.path.exists(f):
+                reads.check_file(f, reads.mesh_bytes(), "a glTF buffer or image", reads.MESH_HINT)
+    except InputError as e:
+        v.fail(key, str(e))
 
 
 def _resolve_names(v: "_Validator", out: dict) -> None:

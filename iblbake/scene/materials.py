@@ -156,10 +156,12 @@ def read_source(source, where: str) -> bytes:
     from iblbake.scene import gltf
 
     if source[0] == "path":
+        from iblbake.io import reads
         try:
-            return Path(source[1]).read_bytes()
-        except OSError as e:
-            raise InputError(f"{where}: texture {source[1]} cannot be read ({e.strerror})") from None
+            return reads.read_bytes(source[1], reads.image_bytes(textures.max_texture_pixels()), "a texture",
+                                    " (--max-texture-pixels raises it)")
+        except InputError as e:
+            raise InputError(f"{where}: texture {e}") from None
     return gltf.read(source[1], where).image(source[2])[0]
 
 

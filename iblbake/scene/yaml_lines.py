@@ -4,9 +4,23 @@ alias bombs and recursive aliases before they cost memory."""
 
 from __future__ import annotations
 
+import re
+
 import yaml
 
 from iblbake.errors import InputError
+
+
+class Loader(yaml.SafeLoader):
+    """SafeLoader reading numbers as a user writes them: YAML 1.1's float needs a dot and a signed
+    exponent (1.0e+30), so 1e-6, 1e3, 1E3, 0.5e1 and 1.0e30 were strings (and then "not a
+    number"). Plain scalars in scientific notation are floats here, as in YAML 1.2 and JSON."""
+
+
+Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."))
 
 
 
@@ -23,7 +37,7 @@ def load_with_lines(text: str, source: str):
         raise InputError(f"{source}: {len(text)} characters; a scene file is at most "
                          f"{MAX_SCENE_BYTES} (meshes and panoramas go in their own files)")
     try:
-        node = yaml.compose(text, Loader=yaml.SafeLoader)
+        node = yaml.compose(text, Loader=Loader)
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         where = f"{source}:{mark.line + 1}" if mark else source
@@ -32,7 +46,7 @@ def load_with_lines(text: str, source: str):
     except RecursionError:
         raise InputError(f"{source}: nested too deeply to be a scene") from None
     lines: dict[str, int] = {}
-    constructor = yaml.SafeLoader(text)
+    constructor = Loader(text)
     budget = [MAX_SCENE_VALUES]
 
     def scalar(n, path):
@@ -78,3 +92,8 @@ def load_with_lines(text: str, source: str):
 
     data = walk(node, "", 0) if node is not None else None
     return data, lines
+
+
+def parse_value(text: str, source: str):
+    """One value as a scene file would read it (a --set value, a sweep step on the command line)."""
+    return load_with_lines(text, source)[0]

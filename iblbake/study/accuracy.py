@@ -275,6 +275,7 @@ class Study:
             hdr = frame.hdr.copy()
             hdr[..., :3] -= diffuse.hdr[..., :3]
             frame.hdr = hdr
+            frame.png = display(sc, hdr, frame.png)    # errors.png shows the term measured, not the frame
         builds = sum(b["seconds"] for b in self.rt.builds[builds_before:])
         ref = self.reference[rung.term]
         mask = self.metric_mask(rung.term, frame.hdr)
@@ -288,6 +289,12 @@ class Study:
             "kernel_build_s": round(builds, 4),
             **error_metrics(frame.hdr, ref["hdr"], mask, self.settings.flip),
             **self.region_metrics(frame.hdr, ref["hdr"], mask)}
+        if rung.result["mode"] == "reference":
+            # more samples than the reference it is measured against: its error is the reference's
+            # own noise, not its own, so it is kept off the frontier (and the study says so)
+            samples = sc.data["effects"]["reference"]["max_samples"]
+            rung.result["max_samples"] = samples
+            rung.result["above_reference"] = samples > max(ref["samples_per_pixel"])
         rung.frame = frame
         self.times["rungs_s"] += time.perf_counter() - t0 - builds - rung.result["bake_s"]
         self.times["bakes_s"] += rung.result["bake_s"] + builds
@@ -309,11 +316,28 @@ class Study:
         return {"label": "configured frame", **error_metrics(fr.hdr, ref, mask, self.settings.flip)}
 
 
+def display(sc, hdr, like) -> np.ndarray:
+    """`hdr` tone-mapped as the scene's frames are (its 8-bit PNG values, in the shape of `like`)."""
+    from iblbake.core import tonemap
+    fx = sc.data["effects"]
+    png = tonemap.to_u8(tonemap.tonemap(hdr[..., :3], fx["tonemap"], fx["exposure"], fx["output_transfer"], fx["gamma"]))
+    if like is not None and like.shape[-1] == 4:
+        png = np.concatenate([png, like[..., 3:]], axis=-1)
+    return png
+
+
+def above_reference(rows) -> list:
+    """The reference rungs with more samples than the study's reference (a --max-samples below
+    theirs): measured against a noisier reference than themselves."""
+    return [r for r in rows if r.get("above_reference")]
+
+
 def frontiers(rows) -> dict:
-    """term -> labels on its Pareto frontier of (time, relative RMSE), by increasing time."""
+    """term -> labels on its Pareto frontier of (time, relative RMSE), by increasing time; rungs
+    with more samples than the reference are left out of it (their error is its noise)."""
     out = {}
     for t in TERMS:
-        sel = [r for r in rows if r["term"] == t]
+        sel = [r for r in rows if r["term"] == t and not r.get("above_reference")]
         if sel:
             out[t] = [sel[i]["label"] for i in pareto([(r["time_s"], r["relative_rmse"]) for r in sel])]
     return out

@@ -4,6 +4,9 @@ linear values, for whole frames or per cell of a sheet."""
 
 from __future__ import annotations
 
+import contextlib
+import os
+
 import numpy as np
 
 from iblbake.core.metrics import relative_rmse
@@ -13,16 +16,70 @@ from iblbake.io import images
 METRICS = ("flip", "rmse")
 
 
+def read_layout(path, reference) -> list:
+    """The boxes (name, x, y, w, h) of a sheet layout (iblbake sheet --layout) for the reference's
+    kind (the PNG's or the EXR's)."""
+    import json
+
+    from iblbake.io import reads
+    try:
+        cells = json.loads(reads.read_text(path, reads.JSON_BYTES, "a sheet layout"))["cells"]
+        key = "exr_box" if str(reference).lower().endswith(".exr") else "png_box"
+        return [(f"r{c['row']}c{c['column']} {c['label']}".strip(), *c[key]) for c in cells if c.get(key)]
+    except InputError:
+        raise
+    except (ValueError, KeyError, TypeError) as e:
+        raise InputError(f"{path}: not a sheet layout written by iblbake sheet --layout "
+                         f"({' '.join(str(e).split())[:120]})") from None
+
+
+@contextlib.contextmanager
+def _native_stderr_held():
+    """File descriptor 2 pointed at /dev/null while a native decoder runs (its messages come back
+    through OpenImageIO's geterror, as one line of ours)."""
+    import sys
+    sys.stderr.flush()
+    saved = os.dup(2)
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(null)
+
+
 def read(path) -> tuple[np.ndarray, bool]:
     """(RGB float image, is HDR): a PNG as [0, 1] display values, anything else as linear."""
     p = str(path)
     if p.lower().endswith(".png"):
         import OpenImageIO as oiio
-        buf = oiio.ImageBuf(p)
-        px = buf.get_pixels(oiio.FLOAT)
-        if px is None or buf.has_error:
-            raise InputError(f"{p}: cannot read as an image ({' '.join(buf.geterror().split())[:160]})")
-        return np.asarray(px)[..., :3], False
+
+        from iblbake.io import reads
+        if not os.path.exists(p):
+            raise InputError(f"{p}: no such file")
+        reads.check_file(p, reads.image_bytes(images.max_pixels_default()), "a PNG frame",
+                         " (IBLBAKE_MAX_PIXELS raises it)")
+        # ImageInput, not ImageBuf: a broken file's ImageBuf printed OpenImageIO's pending-error dump
+        # on stdout (breaking --json), an assertion on stderr and its message over and over
+        inp = oiio.ImageInput.open(p)
+        if inp is None:
+            msg = " ".join(dict.fromkeys(oiio.geterror().split("\n")))
+            raise InputError(f"{p}: cannot read as a PNG ({' '.join(msg.split())[:160] or 'unknown format'})")
+        try:
+            spec = inp.spec()
+            with _native_stderr_held():      # libpng prints its own line before OIIO reports it
+                px = inp.read_image(0, 0, 0, spec.nchannels, oiio.FLOAT)
+            err = inp.geterror()
+        finally:
+            inp.close()
+        if not isinstance(px, np.ndarray) or err:
+            raise InputError(f"{p}: corrupt or truncated PNG ({' '.join(err.split())[:160] or 'no pixels'})")
+        px = np.asarray(px, np.float32).reshape(spec.height, spec.width, spec.nchannels)
+        if spec.nchannels < 3:
+            px = np.repeat(px[..., :1], 3, axis=-1)
+        return px[..., :3], False
     img, _ = images.read_panorama(p, nonfinite="zero")
     return img, True
 

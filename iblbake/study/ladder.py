@@ -160,15 +160,16 @@ def ladder_from_file(path, sc, fx) -> list:
     """rungs: a list of axes in the sweep syntax ({key, values}, {key, range}, {steps}), each
     with an optional `term:` (default: diffuse where it sets effects.diffuse or effects.sh_*, else
     specular) and `with:` ({KEY.PATH: value} set on each of its rungs)."""
-    import yaml
+    from iblbake.io import reads
+    from iblbake.scene.yaml_lines import MAX_SCENE_BYTES, load_with_lines
 
     where = str(path)
-    try:
-        doc = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
-    except OSError as e:
-        raise InputError(f"{where}: cannot read the ladder ({e.strerror})") from None
-    except yaml.YAMLError as e:
-        raise InputError(f"{where}: not valid YAML ({' '.join(str(e).split())[:160]})") from None
+    if not Path(path).exists():
+        raise InputError(f"{where}: cannot read the ladder (no such file)")
+    try:       # as a scene is read: bounded, safe, numbers as a user writes them
+        doc = load_with_lines(reads.read_text(path, MAX_SCENE_BYTES, "a ladder"), where)[0]
+    except UnicodeDecodeError:
+        raise InputError(f"{where}: not a UTF-8 text file; a ladder is YAML") from None
     if not isinstance(doc, dict) or set(doc) != {"rungs"} or not isinstance(doc["rungs"], list) or not doc["rungs"]:
         raise InputError(f"{where}: a ladder is {{rungs: [AXIS, ...]}}, each axis as a sweep's "
                          f"({{key, values}}, {{key, range}} or {{steps}}), with term: and with: optional")

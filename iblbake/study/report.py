@@ -72,15 +72,26 @@ def csv_text(rows, front) -> str:
 PLOT_SIZE = (1400, 640)          # pixels
 
 
-def plot(rows, front, path, title: str) -> None:
-    """plot_figure written to `path` (PNG, atomic)."""
+def plot(rows, front, path, title: str, batch=None) -> None:
+    """plot_figure written to `path` (PNG, atomic: with `batch`'s other outputs where given),
+    named iblbake's in its Software chunk (the overwrite rule's mark)."""
+    import io
+
     import matplotlib.pyplot as plt
 
+    from iblbake.io.atomic import write_bytes
+    from iblbake.io.guard import mark
+
     fig = plot_figure(rows, front, title)
-    from iblbake.io.atomic import atomic_path
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=fig.dpi, format="png")
+    buf = io.BytesIO()
+    fig.savefig(buf, dpi=fig.dpi, format="png", metadata={"Software": mark()})
     plt.close(fig)
+    write_bytes(path, buf.getvalue(), batch)
+
+
+def header_lines() -> tuple:
+    """The first lines of table.md and table.csv: what marks them as iblbake's (the overwrite rule)."""
+    return markdown([], {}).split("\n", 1)[0], csv_text([], {}).split("\n", 1)[0]
 
 
 def plot_figure(rows, front, title: str):
@@ -102,8 +113,6 @@ def plot_figure(rows, front, title: str):
             ax.scatter([x], [y], s=36 if r["label"] in on else 14,
                        color="tab:red" if r["label"] in on else ("tab:green" if r["configured"] else "tab:gray"),
                        zorder=3)
-            ax.annotate(r["label"], (x, y), fontsize=6, xytext=(3, 2), textcoords="offset points",
-                        color="black" if r["label"] in on else "dimgray")
         fr = [r for r in sel if r["label"] in on]
         fr.sort(key=lambda r: r["time_s"])
         ax.plot([max(r["time_s"] * 1000, 1e-3) for r in fr], [max(r["relative_rmse"], 1e-5) for r in fr],
@@ -125,7 +134,74 @@ def plot_figure(rows, front, title: str):
                loc="lower center", ncol=3, fontsize=8, frameon=False)
     fig.suptitle(title, fontsize=12)
     fig.tight_layout(rect=(0, 0.05, 1, 1))
+    fig.canvas.draw()                    # the final limits and layout (autoscaling waits for a draw)
+    for ax, t in zip(axes[0], terms):    # labels last: their places depend on the final layout
+        on = set(front.get(t, []))
+        sel = [r for r in rows if r["term"] == t]
+        place_labels(ax, [(max(r["time_s"] * 1000, 1e-3), max(r["relative_rmse"], 1e-5), r["label"],
+                           "black" if r["label"] in on else "dimgray", r["label"] in on) for r in sel])
     return fig
+
+
+LABEL_PT = 6
+_RINGS_PX = (3, 8, 14, 22, 32, 44, 58, 76, 98, 124, 156)
+_ANGLES = [k * math.pi / 8 for k in range(16)]
+
+
+def place_labels(ax, points) -> None:
+    """Label each point (x, y, text, colour, first) without one label over another or over a
+    point: a simple repel. The frontier's labels are placed first, each label at the nearest free
+    spot on rings around its point (inside the panel), with a leader line once it is moved off;
+    where no spot is free, the least covered one."""
+    fig = ax.figure
+    renderer = fig.canvas.get_renderer()
+    panel = ax.get_window_extent(renderer)
+    xy = ax.transData.transform([(x, y) for x, y, *_ in points]) if points else np.zeros((0, 2))
+    marks = [(px - 4, py - 4, px + 4, py + 4) for px, py in xy]
+    placed = []
+
+    def covered(box) -> float:
+        area = 0.0
+        for o in placed + marks:
+            w = min(box[2], o[2]) - max(box[0], o[0])
+            h = min(box[3], o[3]) - max(box[1], o[1])
+            if w > 0 and h > 0:
+                area += w * h
+        outside = (max(panel.x0 - box[0], 0) + max(box[2] - panel.x1, 0)) * (box[3] - box[1]) + \
+                  (max(panel.y0 - box[1], 0) + max(box[3] - panel.y1, 0)) * (box[2] - box[0])
+        return area + 4 * outside
+
+    order = sorted(range(len(points)), key=lambda i: (not points[i][4], -xy[i][1]))
+    for i in order:
+        x, y, text, colour, _ = points[i]
+        probe = ax.text(0, 0, text, fontsize=LABEL_PT)
+        ext = probe.get_window_extent(renderer)
+        probe.remove()
+        w, h = ext.width + 2, ext.height + 2
+        px, py = xy[i]
+        best = None
+        for r in _RINGS_PX:
+            for a in _ANGLES:
+                dx, dy = r * math.cos(a), r * math.sin(a)
+                left, bottom = dx >= -1e-9, dy >= -1e-9       # the label grows away from its point
+                x0 = px + dx if left else px + dx - w
+                y0 = py + dy if bottom else py + dy - h
+                box = (x0, y0, x0 + w, y0 + h)
+                cost = covered(box)
+                if best is None or cost < best[0]:
+                    best = (cost, r, dx, dy, left, bottom, box)
+                if cost == 0:
+                    break
+            if best[0] == 0:
+                break
+        _, r, dx, dy, left, bottom, box = best
+        placed.append(box)
+        far = r > _RINGS_PX[1]
+        ax.annotate(text, (x, y), xytext=(dx + (1 if left else -1), dy + (1 if bottom else -1)),
+                    textcoords="offset pixels", fontsize=LABEL_PT, color=colour,
+                    ha="left" if left else "right", va="bottom" if bottom else "top", zorder=4,
+                    arrowprops={"arrowstyle": "-", "color": "0.6", "lw": 0.5, "shrinkA": 0, "shrinkB": 2}
+                    if far else None)
 
 
 def error_sheet(study, rungs, title: str) -> np.ndarray:

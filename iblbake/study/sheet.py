@@ -368,14 +368,15 @@ def frame_paths(cell: sweep.Cell, folder: Path, exr: bool = False) -> list:
     return [f"{stem}.png"] + ([f"{stem}.exr"] if exr else [])
 
 
-def write_frames(results, folder: Path, exr: bool = False) -> None:
+def write_frames(results, folder: Path, exr: bool = False, batch=None) -> None:
+    """Each cell's frame into `folder` (with `batch`'s other outputs, atomic.Batch, where given)."""
     from iblbake.io import images
     for r in results:
         if r.frame is None:
             continue
         png, *rest = frame_paths(r.cell, folder, exr)
-        images.write_png(png, r.frame.png)
+        images.write_png(png, r.frame.png, batch)
         r.outputs.append(png)
         for p in rest:
-            images.write_exr(p, r.frame.hdr, channels=("R", "G", "B", "A"))
+            images.write_exr(p, r.frame.hdr, channels=("R", "G", "B", "A"), batch=batch)
             r.outputs.append(p)

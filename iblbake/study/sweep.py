@@ -14,8 +14,6 @@ import difflib
 import math
 from dataclasses import dataclass, field
 
-import yaml
-
 from iblbake.errors import InputError, UsageError
 from iblbake.scene import schema
 
@@ -175,12 +173,12 @@ def parse_cli_axis(text: str, flag: str = "--rows") -> dict:
     key, sep, rhs = text.partition("=")
     if not sep or not key.strip() or not rhs.strip():
         raise UsageError(f"{flag} {text!r}: expected KEY.PATH={RANGE_SYNTAX} or KEY.PATH=v1,v2,...")
-    items = rhs.split(",")
-    if any(":" in x and x.strip()[:1] not in ("'", '"') for x in items):
+    items = split_values(rhs)
+    if any(":" in x and x.strip()[:1] not in ("'", '"', "[", "{") for x in items):
         parts = [x.strip() for x in rhs.split(":")]
         try:
-            a, b, n = (yaml.safe_load(x) for x in parts[:3]) if len(parts) in (3, 4) else (None, None, None)
-        except yaml.YAMLError:
+            a, b, n = (_value(x, flag) for x in parts[:3]) if len(parts) in (3, 4) else (None, None, None)
+        except InputError:
             a = b = n = None
         numbers = all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in (a, b))
         if len(items) > 1 or not numbers or isinstance(n, bool) or not isinstance(n, int) or (
@@ -191,10 +189,35 @@ def parse_cli_axis(text: str, flag: str = "--rows") -> dict:
         geometric = len(parts) == 4 and SPACINGS[parts[3]]
         return {"key": key.strip(), "range": {"start": a, "stop": b, "count": n, "geometric": geometric}}
     try:
-        vals = [yaml.safe_load(x) for x in items]
-    except yaml.YAMLError as e:
-        raise UsageError(f"{flag} {text!r}: a value does not parse ({' '.join(str(e).split())[:120]})") from None
+        vals = [_value(x, flag) for x in items]
+    except InputError as e:
+        raise UsageError(f"{flag} {text!r}: a value does not parse ({str(e).split(': ', 1)[-1][:120]})") from None
     return {"key": key.strip(), "values": vals}
+
+
+def _value(text: str, flag: str):
+    """A step's value read as a scene file reads it (numbers in scientific notation included)."""
+    from iblbake.scene.yaml_lines import parse_value
+    return parse_value(text.strip(), flag)
+
+
+def split_values(text: str) -> list:
+    """v1,v2,... split at the commas outside brackets, braces and quotes, so a list-valued key
+    sweeps whole lists: base_color=[1,0,0],[0,1,0] is two values."""
+    out, depth, quote, start = [], 0, None, 0
+    for i, ch in enumerate(text):
+        if quote:
+            quote = None if ch == quote else quote
+        elif ch in "'\"":
+            quote = ch
+        elif ch in "[{":
+            depth += 1
+        elif ch in "]}":
+            depth = max(depth - 1, 0)
+        elif ch == "," and depth == 0:
+            out.append(text[start:i])
+            start = i + 1
+    return out + [text[start:]]
 
 
 def plan_sheet(sc, rows=None, columns=None, label_format: str | None = None) -> tuple:
