@@ -228,3 +228,81 @@ def test_iblbake_probes_writes_the_captures_for_engines(tmp_path, sky):
     r = run_cli("mips", out / "reflection_0.exr", "--layout", "cubemap", "--size", "16", "--ktx2", tmp_path / "r0.ktx2",
                 "--cache", tmp_path / "cache", "-q")
     assert r.returncode == 0 and (tmp_path / "r0.ktx2").stat().st_size > 1000, r.stderr
+
+
+WALL_COLOURS = {"+x": [1.0, 0.1, 0.1], "-x": [0.1, 1.0, 0.1], "+y": [0.1, 0.1, 1.0], "-y": [1.0, 1.0, 0.1],
+                "+z": [0.1, 1.0, 1.0], "-z": [1.0, 0.1, 1.0]}
+
+
+def glowing_room(folder, name, **probe):
+    """A closed box [-2, 2] x [0, 3] x [-2, 2] of six black planes each glowing its own colour, a
+    black sky, a sphere of radius 0.3 at (0.7, 1.2, 0.4), and a reflection probe there, off the
+    room's centre (so that which wall a texel sees depends on where the probe is)."""
+    black = Path(folder) / "black.exr"
+    if not black.exists():
+        images.write_exr(black, np.zeros((8, 16, 3), np.float32))
+    walls = {"+x": ([2, 1.5, 0], [-1, 0, 0]), "-x": ([-2, 1.5, 0], [1, 0, 0]), "+y": ([0, 3, 0], [0, -1, 0]),
+             "-y": ([0, 0, 0], [0, 1, 0]), "+z": ([0, 1.5, 2], [0, 0, -1]), "-z": ([0, 1.5, -2], [0, 0, 1])}
+    mats = {f"w{k}": {"base_color": [0, 0, 0], "emissive": c, "specular": 0} for k, c in WALL_COLOURS.items()}
+    objs = [{"plane": {"point": p, "normal": nrm, "size": 4.01 if k[1] != "y" else [4.01, 4.01]}, "material": f"w{k}"}
+            for k, (p, nrm) in walls.items()]
+    objs.append({"sphere": {"center": [0.7, 1.2, 0.4], "radius": 0.3}, "material": "ball", "name": "ball"})
+    mats["ball"] = {"base_color": [0.5, 0.5, 0.5], "metallic": 1, "roughness": 0.3}
+    return write(folder, name, {
+        "camera": {"perspective": {"position": [0, 1.5, 1.5], "look_at": [0.7, 1.2, 0.4]}, "resolution": [8, 8]},
+        "environment": {"path": str(black)}, "materials": mats, "objects": objs,
+        "reflection_probes": [{"position": [0.7, 1.2, 0.4], "min": [-2, 0, -2], "max": [2, 3, 2], "size": 16,
+                               "samples": 4, "bounces": 1, **probe}],
+        "effects": {"diffuse": "off", "specular": "prefiltered"}})
+
+
+def wall_seen(p, d):
+    """Which wall the ray p + t d meets first in the room, and how far from that wall's edges."""
+    lo, hi = np.array([-2.0, 0.0, -2.0]), np.array([2.0, 3.0, 2.0])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(d > 0, (hi - p) / d, (lo - p) / d)
+    axis = t.argmin(1)
+    tt = t[np.arange(len(d)), axis]
+    q = p + tt[:, None] * d
+    margin = np.min(np.where(np.eye(3, dtype=bool)[axis], np.inf, np.minimum(q - lo, hi - q)), 1)
+    names = np.array([["-x", "+x"], ["-y", "+y"], ["-z", "+z"]])[axis, (d[np.arange(len(d)), axis] > 0).astype(int)]
+    return names, margin
+
+
+@pytest.mark.parametrize("how", ["exclude", "reflection_captures"])
+def test_a_capture_shows_each_wall_where_it_is(tmp_path, rt, how):
+    """The probe sits inside the small metal sphere; excluded from the capture (by the probe's
+    exclude list, or the object's reflection_captures: false) the sphere lets the capture's first
+    rays through: every texel whose rays all meet one wall, away from its edges, holds that wall's
+    glow exactly (to float32) and covers its texel. A mirrored or turned capture puts the colours
+    on the wrong texels, which this test sees (the walls all differ); so does parallax from the
+    probe's off-centre position."""
+    from iblbake.core import conventions
+    if how == "exclude":
+        sc = glowing_room(tmp_path, how, exclude=["ball"])
+    else:
+        sc = glowing_room(tmp_path, how)
+        sc.data["objects"][-1]["reflection_captures"] = False
+    warned = []
+    bakes = Bakes(tmp_path / "cache")
+    render.render(sc, runtime=rt, cache=bakes, warn=warned.append)
+    (image, _cached), = captures(bakes)
+    assert not [w for w in warned if "inside" in w]
+    size = 16
+    v, u = np.meshgrid((np.arange(size) + 0.5) / size, (np.arange(2 * size) + 0.5) / (2 * size), indexing="ij")
+    d = conventions.dir_from_equirect_uv(u, v).reshape(-1, 3)
+    names, margin = wall_seen(np.array([0.7, 1.2, 0.4]), d)
+    clear = margin > 0.5                        # the texel's rays meet one wall (a texel spans ~0.4 there)
+    got = image.reshape(-1, 4)
+    assert clear.sum() > 200 and (got[:, 3] == 1).all()
+    want = np.array([WALL_COLOURS[n] for n in names])
+    assert np.abs(got[clear, :3] - want[clear]).max() < 1e-6
+
+
+def test_a_probe_inside_an_object_says_so(tmp_path, rt):
+    """The same probe without the exclude list captures the sphere's inside all around: render
+    says in one line that its position lies inside the named object and how to fix it."""
+    warned = []
+    render.render(glowing_room(tmp_path, "inside"), runtime=rt, cache_root=tmp_path / "cache", warn=warned.append)
+    said = [w for w in warned if "lies inside" in w]
+    assert len(said) == 1 and "'ball' (objects.6)" in said[0] and "exclude" in said[0] and "\n" not in said[0]
