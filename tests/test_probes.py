@@ -564,3 +564,37 @@ def test_probes_under_a_lobed_sky_point_where_the_sky_is(tmp_path, rt, lobed_sky
     assert np.abs(got / want - 1).max() < 0.01, np.abs(got / want - 1).max()
     turned = exact(n @ np.array([[0.0, 0, 1], [0, 1, 0], [-1, 0, 0]]))
     assert np.abs(got / turned - 1).max() > 0.05
+
+
+@pytest.mark.parametrize("counts, want", [(3, 3), (5, 5), (12, 12), ([2, 3, 4], None)])
+def test_counts_mean_what_the_schema_says(counts, want):
+    """probes.counts N: an automatic grid takes exactly N probes along the scene's longest axis (1,
+    2 and 3 all gave 3, [1, 1, 1] gave 2 x 2 x 2, without a word); a list, those per axis."""
+    from types import SimpleNamespace
+    arrays = SimpleNamespace(spheres=np.array([[[0, 0, 0, 1.0], [0, 0, 0, 0]], [[3, 0, 0, 1.0], [0, 0, 0, 0]]]),
+                             planes=np.zeros((0, 5, 4)), tris=np.zeros((0, 6, 4)))
+    g = probes.grid_of(settings(counts=counts), arrays)
+    if want is None:
+        assert g.counts == (2, 3, 4)
+    else:
+        assert g.counts[0] == want and max(g.counts) == want
+
+
+@pytest.mark.parametrize("keys, words", [({"counts": 1}, "at least 3"), ({"counts": 2}, "at least 3"),
+                                         ({"counts": [1, 1, 1]}, "at least 2 per axis"),
+                                         ({"counts": [1, 2, 2], "min": [0, 0, 0], "max": [1, 1, 1]},
+                                          "at least 2 there")])
+def test_too_few_probes_are_said(keys, words):
+    from types import SimpleNamespace
+    arrays = SimpleNamespace(spheres=np.array([[[0, 0, 0, 1.0], [0, 0, 0, 0]]]), planes=np.zeros((0, 5, 4)),
+                             tris=np.zeros((0, 6, 4)))
+    with pytest.raises(IblbakeError, match=words):
+        probes.grid_of(settings(**keys), arrays)
+
+
+def test_an_atlas_too_wide_for_a_gpu_is_said():
+    vol = {"counts": (100, 16, 4), "irradiance_texels": 6, "distance_texels": 14, "representation": "octahedral"}
+    said = probes.warnings({"probes": 6400, "inside_geometry": 0}, {"objects": []}, vol)
+    assert len(said) == 1 and "distance atlas is 25600 x 64" in said[0] and "16384" in said[0]
+    vol["counts"] = (10, 8, 10)
+    assert probes.warnings({"probes": 800, "inside_geometry": 0}, {"objects": []}, vol) == []

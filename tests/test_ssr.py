@@ -104,8 +104,13 @@ def test_frame_matches_the_twin(tmp_path, rt, sky, roughness):
 
 
 def test_ssr_runs_only_where_asked(tmp_path, sky):
+    """SSR runs over the split sum, and says so in the plan (--report's effects line); asked for
+    with another specular mode it does nothing, and the plan says that in a note (it said nothing)."""
     pl = render.plan(wall(tmp_path, sky))
-    assert "ssr" in pl.pass_names and pl.defines["shade"]["HAS_SSR"] == 1
+    assert "ssr" in pl.pass_names and pl.defines["shade"]["HAS_SSR"] == 1 and pl.to_json()["ssr"]
+    imp = render.plan(wall(tmp_path, sky, specular="importance", name="imp"))
+    assert not imp.to_json()["ssr"] and any("effects.ssr: on does nothing with specular importance" in n
+                                            for n in imp.notes)
     assert pl.pass_names.index("ssr") > pl.pass_names.index("shade")
     for name, sc in (("off", wall(tmp_path, sky, "off", name="o")),
                      ("importance", wall(tmp_path, sky, specular="importance", name="i"))):

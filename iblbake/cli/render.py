@@ -74,7 +74,8 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, depfi
         e = rep["effects"]
         lines.append(f"device: {rep['device']}")
         lines.append(f"effects: diffuse={e['diffuse']} specular={e['specular']} background={e['background']}"
-                     f"{' emissive' if e['emissive'] else ''}")
+                     f"{' emissive' if e['emissive'] else ''}{' reflection_probes' if e['reflection_probes'] else ''}"
+                     f"{' ssr' if e['ssr'] else ''}")
         for name, defs in e["defines"].items():
             lines.append(f"defines {name}: " + (" ".join(f"{k}={v}" for k, v in defs.items()) or "-"))
         for b in rep["bakes"]:

@@ -344,7 +344,7 @@ class Bakes:
 
         (vol, manifest, cached), hit = self._recall(key, make)
         rep = manifest["probes"]["report"]
-        for w in probes.warnings(rep, ctx.scene.data):    # said for a cached volume too
+        for w in probes.warnings(rep, ctx.scene.data, vol):    # said for a cached volume too
             ctx.warn(w)
         return vol, cached or hit, {"probes": rep["probes"], "rays_traced": rep["rays_traced"],
                                     "bake_s": rep["seconds"], "inactive": rep["inactive"],

@@ -53,6 +53,13 @@ def effect_modes(scene: Scene) -> Effects:
                                   or max(m["base_color"]) == 0.0 for m in mats):
         notes.append(f"diffuse {diffuse} skipped: every material is metallic or black (kD = 0)")
         diffuse = "off"
+    if specular != "prefiltered":            # what only the split sum reads, said where it goes unread
+        if fx["ssr"] == "on" and specular != "off":
+            notes.append(f"effects.ssr: on does nothing with specular {specular}: screen-space reflections replace the "
+                         "split sum's reflected environment (effects.specular: prefiltered)")
+        if d["reflection_probes"] and fx["reflection_probes"] and specular != "off":
+            notes.append(f"reflection_probes: {len(d['reflection_probes'])} not read with specular {specular}: the "
+                         "split sum reads them (effects.specular: prefiltered)")
     bg = env["background"]
     if isinstance(bg, list):
         background = "color"
@@ -135,7 +142,8 @@ class Plan:
     def to_json(self) -> dict:
         e = self.effects
         return {"diffuse": e.diffuse, "specular": e.specular, "background": e.background,
-                "emissive": e.emissive, "bakes": self.bakes, "passes": self.pass_names,
+                "emissive": e.emissive, "ssr": "ssr" in self.pass_names,
+                "reflection_probes": "reflection_probes" in self.bakes, "bakes": self.bakes, "passes": self.pass_names,
                 "defines": self.defines, "notes": self.notes}
 
 

@@ -98,7 +98,15 @@ def grid_of(settings: dict, arrays) -> Grid:
         extent = hi - lo
         if isinstance(counts, list):
             n = np.asarray(counts, int)
+            short = [k for k in range(3) if extent[k] > 0 and n[k] < 2]
+            if short:
+                raise IblbakeError(f"probes.counts {counts}: probes.min and probes.max differ along "
+                                   f"{'xyz'[short[0]]}, so a probe at each takes 2; give at least 2 there, or the "
+                                   f"same min and max")
         else:
+            if counts is not None and counts < 2 and extent.max() > 0:
+                raise IblbakeError(f"probes.counts {counts}: probes at min and at max take 2 along the longest axis; "
+                                   f"give at least 2")
             step = settings["spacing"] or max(float(extent.max()), 1e-6) / max((counts or DEFAULT_LONGEST) - 1, 1)
             n = np.round(extent / step).astype(int) + 1
         n = np.where(extent > 0, np.maximum(n, 2), 1)
@@ -111,11 +119,21 @@ def grid_of(settings: dict, arrays) -> Grid:
                                "give probes.min and probes.max")
         lo, hi = b
         extent = hi - lo
+        # an automatic grid overhangs the bounds on every side: its probes are N along the longest
+        # axis (N - 2 cells over the bounds, half a cell beyond each end), so N >= 3 there, and
+        # counts given per axis put probes on both sides of the scene along each (>= 2)
         if isinstance(counts, list):               # each axis its own spacing
-            n = np.maximum(np.asarray(counts, int), 2)
+            if min(counts) < 2:
+                raise IblbakeError(f"probes.counts {counts}: an automatic grid puts probes on both sides of the "
+                                   f"scene along each axis; give at least 2 per axis, or probes.min and probes.max")
+            n = np.asarray(counts, int)
             step = np.where(extent > 0, extent / np.maximum(n - 2, 0.5), max(float(extent.max()), 1e-6))
         else:
-            longest = max(counts or DEFAULT_LONGEST, 3)
+            longest = counts or DEFAULT_LONGEST
+            if longest < 3:
+                raise IblbakeError(f"probes.counts {longest}: an automatic grid overhangs the scene by half a cell on "
+                                   f"every side, so it needs at least 3 probes along its longest axis; give 3 or "
+                                   f"more, or probes.min and probes.max")
             step = np.full(3, settings["spacing"] or max(float(extent.max()), 1e-6) / (longest - 2))
             n = np.ceil(extent / step - 1e-9).astype(int) + 2
         spacing = step
@@ -394,18 +412,32 @@ def bake(ctx, settings: dict, progress=None) -> dict:
 INSIDE_WARN = 0.25      # the share of probes inside geometry (at their grid positions or after) that is said
 
 
-def warnings(report: dict, scene_data: dict) -> list:
+MAX_ATLAS_SIDE = 16384       # texels: the largest 2D texture most GPUs take (Vulkan's and D3D12's limit)
+
+
+def warnings(report: dict, scene_data: dict, volume: dict | None = None) -> list:
     """What a bake's report says a user should know: more than INSIDE_WARN of the probes were inside
-    geometry (relocated out of it, or switched off), with the objects whose back faces they saw."""
+    geometry (relocated out of it, or switched off), with the objects whose back faces they saw; an
+    atlas wider or taller than MAX_ATLAS_SIDE (an engine cannot load it as one texture)."""
     from iblbake.scene.load import object_label
 
+    out = []
+    if volume is not None:
+        nx, ny, nz = volume["counts"]
+        for what, texels in (("irradiance", volume["irradiance_texels"]), ("distance", volume["distance_texels"])):
+            if what == "irradiance" and volume["representation"] == "sh":
+                continue
+            w, h = (texels + 2) * nx * ny, (texels + 2) * nz
+            if max(w, h) > MAX_ATLAS_SIDE:
+                out.append(f"probes: the {what} atlas is {w} x {h} texels, over the {MAX_ATLAS_SIDE} most GPUs take "
+                           f"in one texture; give fewer probes (probes.counts, probes.spacing) or texels")
     n, inside = report["probes"], report.get("inside_geometry", 0)
     if not n or inside <= INSIDE_WARN * n:
-        return []
+        return out
     objs = report.get("inside_objects", {})
     named = ", ".join(f"{object_label(scene_data, int(o))}: {c}" for o, c in list(objs.items())[:3]
                       if int(o) < len(scene_data["objects"]))
-    return [f"probes: {inside} of {n} probes ({100 * inside / n:.0f}%) are inside geometry (their rays meet the back "
+    return out + [f"probes: {inside} of {n} probes ({100 * inside / n:.0f}%) are inside geometry (their rays meet the back "
             f"faces of {named}{', ...' if len(objs) > 3 else ''}); {report['inactive']} probes are off. A double-sided "
             "surface is a front face to probes on either side: set objects.N.solid: false on a closed shell they "
             "should see from within, or move the grid (probes.min, probes.max)"]

@@ -401,7 +401,8 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "max": Vec(**VEC3, doc="the opposite corner probe's position"),
         "counts": OneOf((Num(None, 1, 256, integer=True), Vec(**VEC3, integer=True, lo=1, hi=256)), default=None,
                         doc="probes along x, y, z, or N: N along the longest axis and as many as keep the "
-                            "cells near cubes along the others (omitted: from spacing, else 8)"),
+                            "cells near cubes along the others (omitted: from spacing, else 8); an automatic grid "
+                            "takes N >= 3 (or >= 2 per axis), min and max >= 2 along an axis they differ on"),
         "spacing": Num(None, 0.0, lo_open=True, doc="the distance between probes, where counts is omitted"),
         "rays": Num(1024, 16, 1 << 16, integer=True,
                     doc="rays per probe, one path each (a spherical Fibonacci set, randomly rotated; DDGI traces "
