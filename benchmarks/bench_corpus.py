@@ -75,13 +75,13 @@ def main():
         for pano in args.panoramas.split(","):
             t0 = time.perf_counter()
             results.append(study_scene(path, pano, args, rt, bakes))
-            print(f"{path.stem} under {pano}: {time.perf_counter() - t0:.1f} s", file=sys.stderr)
+            print(f"{path.stem} under {pano}: {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
+            if args.json:                 # after every study: a run cut short keeps what it measured
+                Path(args.json).write_text(json.dumps({"device": rt.device_label, "args": vars(args),
+                                                       "results": results}, indent=1) + "\n")
     print(f"device: {rt.device_label}; {args.max_side} px on the longer side; reference: two seeds to "
           f"{args.target_noise} or {args.max_samples} samples per pixel\n")
     print(markdown(results))
-    if args.json:
-        Path(args.json).write_text(json.dumps({"device": rt.device_label, "args": vars(args), "results": results},
-                                              indent=1) + "\n")
 
 
 if __name__ == "__main__":

@@ -2,7 +2,7 @@
  * probe's influence along the reflected ray corrected to where it leaves the probe's proxy (its
  * box or sphere), blended by each influence's fade, the distant chain taking what is left.
  * rp_info, 4 float4 per probe: (position, shape: 0 box, 1 sphere), (min, blend), (max, radius),
- * (parallax, 0, 0, 0). Each probe has two chains, its capture's radiance of the scene (chain 2k)
+ * (parallax, the capture's texel in radians, 0, 0). Each probe has two chains, its capture's radiance of the scene (chain 2k)
  * and the coverage of its texels by the scene (chain 2k + 1, grey): the sky past the scene is the
  * distant chain's, read along the reflected ray itself (infinitely far: no parallax moves it).
  * The chains lie back to back in rp_chain, level l of chain c at rp_off[c rp_nlev + l] texels,
@@ -56,11 +56,14 @@ inline float3 rprobe_direction(float3 p, float3 r, float4 a, float4 b, float4 c)
     return normalize(rprobe_exit(p, r, a, b, c) - a.xyz);
 }
 
-/* How much of the reflection along p + t r that meets the scene at x the probes at p already hold:
- * the influence-weighted share of parallax probes whose proxy the ray leaves within 3% of its
- * travel from x (a wall or floor on the proxy: the capture, read with parallax, shows that very
- * point). Screen-space reflections defer to them there and add what lies off every proxy. */
-inline float reflection_probes_hold(float3 p, float3 r, float3 x, __global const float4 *rp_info, const int rp_count)
+/* How much of the reflection along p + t r that meets the scene at x the probes at p already hold,
+ * for a lobe of GGX alpha: the influence-weighted share of parallax probes whose proxy the ray
+ * leaves within 3% of its travel from x (a wall or floor on the proxy: the capture, read with
+ * parallax, shows that very point), to the capture's resolution (a lobe narrower than its texel,
+ * a mirror's, sees more of the frame than of it). Screen-space reflections defer to them there and
+ * add what lies off every proxy. */
+inline float reflection_probes_hold(float3 p, float3 r, float3 x, float alpha, __global const float4 *rp_info,
+                                    const int rp_count)
 {
     float held = 0.0f, wsum = 0.0f;
     const float travel = distance(p, x);
@@ -70,7 +73,8 @@ inline float reflection_probes_hold(float3 p, float3 r, float3 x, __global const
         if (w <= 0.0f) continue;
         wsum += w;
         if (e.x > 0.5f)
-            held += w * clamp(1.0f - distance(rprobe_exit(p, r, a, b, c), x) / (0.03f * travel), 0.0f, 1.0f);
+            held += w * clamp(1.0f - distance(rprobe_exit(p, r, a, b, c), x) / (0.03f * travel), 0.0f, 1.0f)
+                    * clamp(alpha / e.y, 0.0f, 1.0f);
     }
     return wsum > 1.0f ? held / wsum : held;
 }

@@ -187,7 +187,7 @@ __kernel void ssr_trace(__global const float4 *ssr_pix, __constant float4 *cam, 
                         __global const float *ssr_hiz, __global const int *hiz_off, const int nlev,
                         __global float4 *ssr_hit, const float max_roughness, const float thickness, const int steps,
                         const int rays, const float ray_length, const uint seed, __global const float4 *rp_info,
-                        const int rp_count)
+                        const int rp_count, const int defer_to_probes)
 {
     const int px = get_global_id(0);
     if (px >= width * height) return;
@@ -229,7 +229,7 @@ __kernel void ssr_trace(__global const float4 *ssr_pix, __constant float4 *cam, 
         const float fade_e = clamp(fmin(fmin(ex, 1.0f - ex), fmin(ey, 1.0f - ey)) / 0.05f, 0.0f, 1.0f);
         float f = conf * fade_r * fade_e;
 #ifdef HAS_REFLECTION_PROBES
-        f *= 1.0f - reflection_probes_hold(p0, l, x, rp_info, rp_count);
+        if (defer_to_probes) f *= 1.0f - reflection_probes_hold(p0, l, x, alpha, rp_info, rp_count);
 #endif
         sum += f * ssr_pix[3 * hit + 2].xyz;
         csum += f;

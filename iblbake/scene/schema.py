@@ -523,6 +523,10 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                                                      "spatial resolve"),
             "ray_length": Num(50.0, 0.0, lo_open=True, doc="how far a ray is followed (scene units)"),
             "seed": Num(1, 0, 2**31 - 1, integer=True, doc="random seed of the rays"),
+            "defer_to_probes": Bool(True, doc="where a ray meets a reflection probe's own box or sphere (a wall, a "
+                                              "floor), take the probe's path-traced capture of that point over the "
+                                              "frame's, as far as the capture resolves the lobe (false: the frame "
+                                              "wherever a ray hits; sharper where the frame's light is right)"),
         }),
         "reflection_probes": Bool(True, doc="prefiltered: read the scene's reflection probes where they reach "
                                             "(false: the distant panorama's chain alone)"),

@@ -139,7 +139,9 @@ def realtime_ladder(sc, fx) -> list:
         if sc.data["reflection_probes"]:
             local = [("effects.specular", "prefiltered"), ("effects.reflection_probes", True), ("effects.ao", "off")]
             rungs += [Rung("specular", "reflection probes", local),
-                      Rung("specular", "reflection probes + SSR", local + [("effects.ssr", "on")])]
+                      Rung("specular", "reflection probes + SSR", local + [("effects.ssr", "on")]),
+                      Rung("specular", "reflection probes + SSR over them", local + [
+                          ("effects.ssr", "on"), ("effects.ssr_settings.defer_to_probes", False)])]
     return rungs
 
 

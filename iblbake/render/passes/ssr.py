@@ -39,7 +39,8 @@ def _hiz_floats(d) -> int:
 class ScreenSpaceReflections(Pass):
     name = "ssr"
     kernel = "ssr.cl"
-    params = ("max_roughness", "thickness", "steps", "rays", "ray_length", "seed", "rp_info", "rp_count", "hiz_off", "nlev",
+    params = ("max_roughness", "thickness", "steps", "rays", "ray_length", "seed", "rp_info", "rp_count",
+              "defer_to_probes", "hiz_off", "nlev",
               "src", "sw", "sh", "dst", "dw", "dh")
     functions = ("ssr_gather", "ssr_depth", "ssr_reduce", "ssr_trace", "ssr_resolve")
     whole_frame = True
@@ -64,7 +65,7 @@ class ScreenSpaceReflections(Pass):
         rp = rprobe_args(ctx.rt, ctx.loaded.get("reflection_probes"), ctx.bakes)
         return {"max_roughness": s["max_roughness"], "thickness": s["thickness"], "steps": s["steps"],
                 "rays": s["rays"], "ray_length": s["ray_length"], "seed": s["seed"], "rp_info": rp["rp_info"],
-                "rp_count": rp["rp_count"]}
+                "rp_count": rp["rp_count"], "defer_to_probes": int(s["defer_to_probes"])}
 
     def gather(self, ctx):
         """This tile's first samples into the frame's ssr_pix."""
@@ -80,7 +81,8 @@ class ScreenSpaceReflections(Pass):
         for (sw, sh, so), (dw, dh, do) in zip(levels, levels[1:]):
             ctx.launch(self, (dw * dh,), "ssr_reduce", src=so, sw=sw, sh=sh, dst=do, dw=dw, dh=dh)
         ctx.launch(self, (w * h,), "ssr_trace", hiz_off=off, nlev=len(levels), **{k: a[k] for k in (
-            "max_roughness", "thickness", "steps", "rays", "ray_length", "seed", "rp_info", "rp_count")})
+            "max_roughness", "thickness", "steps", "rays", "ray_length", "seed", "rp_info", "rp_count",
+            "defer_to_probes")})
         ctx.launch(self, (w * h,), "ssr_resolve", max_roughness=a["max_roughness"])
         ctx.ssr_gathered = True
         ctx.ssr_levels = len(levels)

@@ -63,6 +63,7 @@ def rprobe_args(rt, captured, bakes=None) -> dict:
             info[k, 1] = [*(st["min"] if box else st["position"]), st["blend"]]
             info[k, 2] = [*(st["max"] if box else st["position"]), 0.0 if box else st["radius"]]
             info[k, 3, 0] = 1.0 if st["parallax"] else 0.0
+            info[k, 3, 1] = np.pi / st["size"]          # the capture's texel, in radians (its rows)
         return (rt.to_device(flat), rt.to_device(off), rt.to_device(np.array([w for _h, w in sizes[0]], np.int32)),
                 rt.to_device(np.array([h for h, _w in sizes[0]], np.int32)), rt.to_device(info.reshape(-1, 4)))
     chain, off, lw, lh, info = bakes.on_device(rt, tuple(lv for c in captured for lv in c["levels"] + c["coverage"]),

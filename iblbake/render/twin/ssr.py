@@ -160,9 +160,10 @@ def depth_at(z0, z1, t, ortho):
     return z0 + (z1 - z0) * t if ortho else 1 / (1 / z0 + (1 / z1 - 1 / z0) * t)
 
 
-def held(captured, p, r, x):
+def held(captured, p, r, x, alpha):
     """Twin of reflection_probes_hold: the share of the reflection along p + t r meeting x that the
-    parallax probes at p hold (their proxy left within 3% of the travel from x)."""
+    parallax probes at p hold (their proxy left within 3% of the travel from x), for lobes of GGX
+    alpha, to each capture's resolution."""
     out, wsum = np.zeros(len(p)), np.zeros(len(p))
     travel = np.linalg.norm(x - p, axis=1)
     for c in captured or []:
@@ -171,7 +172,8 @@ def held(captured, p, r, x):
         wsum += w
         if st["parallax"]:
             e = rp_twin.exit_point(st, p, r)
-            out += w * np.clip(1 - np.linalg.norm(e - x, axis=1) / (0.03 * travel), 0, 1)
+            out += w * np.clip(1 - np.linalg.norm(e - x, axis=1) / (0.03 * travel), 0, 1) \
+                * np.clip(alpha / np.float32(np.pi / st["size"]), 0, 1)
     return np.where(wsum > 1, out / np.where(wsum > 1, wsum, 1), out)
 
 
@@ -214,8 +216,8 @@ def trace(pix, cam: dict, s: dict, captured=None):
         hx, hy = (hit[ok] % w + 0.5) / w, (hit[ok] // w + 0.5) / h
         fade_e = np.clip(np.minimum(np.minimum(hx, 1 - hx), np.minimum(hy, 1 - hy)) / 0.05, 0, 1)
         f = conf[ok] * fade_r[i[ok]] * fade_e
-        if captured:
-            f = f * (1 - held(captured, p0[i[ok]], l[i[ok]], x[ok]))
+        if captured and s["defer_to_probes"]:
+            f = f * (1 - held(captured, p0[i[ok]], l[i[ok]], x[ok], alpha[i[ok]]))
         acc[i[ok]] += f[:, None] * pix["lit"][hit[ok]]
         csum[i[ok]] += f
     out[sel, :3] = acc / count[:, None]
