@@ -7,11 +7,11 @@
  *                 times env_scale; distance +INFINITY. A sun smaller than a ray's share is neither
  *                 missed nor hit by chance: its light lands in the ray whose share holds it, seen or
  *                 shadowed as that ray is (the probes' own angular resolution)
- *   a back face:  (scene.h probe_back_face: the inside of a solid, the back of a single-sided
- *                 surface; a double-sided open surface has none, docs/conventions.md "Sides") no
- *                 light where back_faces_black (the irradiance probes: a probe inside geometry,
- *                 whose rays see single-sided surfaces from behind too, as RTXGI's do), else
- *                 shaded as the camera sees it (captures: their rays meet what camera rays meet);
+ *   a back face:  (scene.h probe_back_face: the inside of a solid; an open surface has none,
+ *                 docs/conventions.md "Sides") no light where back_faces_black (the irradiance
+ *                 probes: a probe inside geometry, whose rays meet a closed single-sided mesh from
+ *                 inside too), else shaded as the camera sees it (captures: their rays meet what
+ *                 camera rays meet);
  *                 distance -t, negative as RTXGI marks it (RTXGI stores -0.2 t)
  *   a front face: the surface's emission plus the light it scatters towards the probe, every
  *                 bounce the scene's BOUNCES allows; distance t
@@ -45,9 +45,10 @@ __kernel void probe_trace(__global const float4 *probe_pos, __global const float
     if (item >= count * nrays) return;
     const int probe = first + item / nrays, r = item % nrays;
     const float3 o = probe_pos[probe].xyz, d = ray_dirs[r].xyz;
-    Hit hh = trace_range(o, d, 0.0f, INFINITY, 0, !back_faces_black, SCENE_ARGS);
+    const int cull = back_faces_black ? 2 : 1;       /* a probe meets solids' insides; a capture, what the camera does */
+    Hit hh = trace_range(o, d, 0.0f, INFINITY, 0, cull, SCENE_ARGS);
     for (int k = 0; skip && k < 64 && hh.kind != PRIM_NONE && skip_obj[hit_object(hh.kind, hh.index, SCENE_ARGS)]; ++k)
-        hh = trace_range(o, d, hh.t, INFINITY, 0, !back_faces_black, SCENE_ARGS);
+        hh = trace_range(o, d, hh.t, INFINITY, 0, cull, SCENE_ARGS);
     ray_obj[item] = hh.kind == PRIM_NONE ? -1 : hit_object(hh.kind, hh.index, SCENE_ARGS);
     if (hh.kind == PRIM_NONE) {
         const float3 e = to_env(d, env_rot);

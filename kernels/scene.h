@@ -269,8 +269,10 @@ inline int surface_flags(int kind, int index, SCENE_PARAMS)
 
 /* Whether an irradiance probe's ray that meets this hit (geometric normal ng, by the winding) from
  * direction d sees a back face, the probe being inside geometry (docs/conventions.md "Sides"): the
- * inside of a solid (a sphere, a closed mesh, flipped where wound inwards), or the back of a
- * single-sided surface. A double-sided open surface is a front face from either side. */
+ * inside of a solid (a sphere, a closed mesh: by its volume where double-sided, flipped where
+ * wound inwards; by its winding where single-sided). An open surface is a front face from either
+ * side where double-sided, and not there from behind where single-sided (the ray passes, as every
+ * ray does). */
 inline int probe_back_face(int kind, int index, float3 ng, float3 d, SCENE_PARAMS)
 {
     const int f = surface_flags(kind, index, SCENE_ARGS);
@@ -280,9 +282,10 @@ inline int probe_back_face(int kind, int index, float3 ng, float3 d, SCENE_PARAM
 }
 
 #if defined(HAS_ALPHA_MASK) || defined(HAS_SINGLE_SIDED)
-/* Whether a candidate hit is there at all: a single-sided material's back face is not (where cull),
- * nor where a masked material's alpha (its factor times the base map's alpha at level 0, as an
- * any-hit shader reads it) is below its cutoff. */
+/* Whether a candidate hit is there at all: a single-sided material's back face is not (cull 1:
+ * every ray of the renderer; cull 2: an irradiance probe's, which sees a solid's back faces), nor
+ * where a masked material's alpha (its factor times the base map's alpha at level 0, as an any-hit
+ * shader reads it) is below its cutoff. */
 inline int surface_present(int kind, int index, float3 o, float3 d, float t, float b1, float b2, int cull,
                            SCENE_PARAMS)
 {
@@ -291,7 +294,8 @@ inline int surface_present(int kind, int index, float3 o, float3 d, float t, flo
     const int m = hit_material(kind, index, p, &ng, SCENE_ARGS);
     __global const float4 *mm = mat_maps + MATERIAL_MAPS_FLOAT4S * m;
 #ifdef HAS_SINGLE_SIDED
-    if (cull && mm[1].x > 0.5f && dot(ng, d) > 0.0f) return 0;
+    if (cull && mm[1].x > 0.5f && dot(ng, d) > 0.0f
+        && !(cull == 2 && (surface_flags(kind, index, SCENE_ARGS) & SURFACE_SOLID))) return 0;
 #endif
 #ifdef HAS_ALPHA_MASK
     const float cutoff = mm[0].y;
@@ -317,8 +321,9 @@ inline int surface_present(int kind, int index, float3 o, float3 d, float t, flo
 #endif
 
 /* The nearest hit in (tmin, tmax), or with any_hit the first one found (a shadow ray needs no
- * more): h.kind = PRIM_NONE where there is none. cull: single-sided surfaces are not there from
- * behind (every ray of the renderer); 0: they are (an irradiance probe sees their backs). */
+ * more): h.kind = PRIM_NONE where there is none. cull 1: single-sided surfaces are not there from
+ * behind (every ray of the renderer); 2: but for solids' (an irradiance probe meets a closed
+ * single-sided mesh's inside); 0: they are. */
 inline Hit trace_range(float3 o, float3 d, float tmin, float tmax, int any_hit, int cull, SCENE_PARAMS)
 {
     Hit h;

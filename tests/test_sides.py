@@ -78,8 +78,8 @@ def flags_of(arrays):
 def test_which_surfaces_bound_a_solid(tmp_path, lobed_sky):
     """A closed double-sided mesh and a sphere bound solids (flipped where the mesh is wound
     inwards); the same with the camera inside them, or `solid: false`, bound none (a room, a
-    dome); a single-sided material keeps its winding's back face and no solid bit; `solid: true`
-    makes an open mesh one."""
+    dome); a closed single-sided mesh bounds one by its winding (never flipped: it is there from
+    its front alone); `solid: true` makes an open mesh one."""
     S, F, ONE = SURFACE_FLAGS["solid"], SURFACE_FLAGS["solid_flipped"], SURFACE_FLAGS["single_sided"]
     cube, inv = write_cube(tmp_path, "cube"), write_cube(tmp_path, "inv", inward=True)
 
@@ -98,7 +98,8 @@ def test_which_surfaces_bound_a_solid(tmp_path, lobed_sky):
     assert set(tri) == {0} and set(sph) == {S}
     assert set(flags_of(arrays(camera=(3, 0, 0.5)))[1]) == {0}     # inside the sphere: a dome
     assert set(flags_of(arrays(solid=False))[0]) == {0}
-    assert set(flags_of(arrays(material="one"))[0]) == {ONE}
+    assert set(flags_of(arrays(material="one"))[0]) == {ONE | S}        # by its winding: never flipped
+    assert set(flags_of(arrays(material="one", path=inv))[0]) == {ONE | S}
     quad = tmp_path / "quad.obj"
     quad.write_text("v 0 0 0\nv 1 0 0\nv 1 0 1\nv 0 0 1\nf 1 2 3\nf 1 3 4\n")
     assert set(flags_of(arrays(path=quad))[0]) == {0}
@@ -237,25 +238,34 @@ def test_the_shade_pass_counts_the_samples_that_fell_back(tmp_path, rt, lobed_sk
     assert np.abs(f.hdr[hit] - with_sh.hdr[hit]).max() <= 1e-5 * with_sh.hdr[hit].max()
 
 
-def test_probe_rays_see_single_sided_backs_and_double_sided_fronts(tmp_path, rt, lobed_sky):
-    """A probe 0.5 behind a single-sided quad facing away meets its back (distance < 0), the
-    camera and the reference see through it; the same quad double-sided is a front face."""
+def test_probe_rays_pass_single_sided_backs_and_meet_solids_insides(tmp_path, rt, lobed_sky):
+    """A probe 0.5 behind a single-sided quad facing away: its ray passes through (as the camera's,
+    the paths' and the captures' do: the light behind it reaches the probe); the same quad
+    double-sided is a front face; a probe inside a closed single-sided cube meets its inside, a
+    back face (the probe is inside geometry)."""
+    from iblbake.render.frame import scene_context
     quad = tmp_path / "q.obj"
     quad.write_text("v -2 -2 0\nv 2 -2 0\nv 2 2 0\nv -2 2 0\nf 1 2 3\nf 1 3 4\n")      # faces +z
-    for sided, want_back in ((False, True), (True, False)):
-        sc = load_scene(tmp_path, f"q{sided}", {
+    cube = write_cube(tmp_path, "c", centre=(0, 0, -3), half=0.5)
+
+    def trace(path, sided, origin):
+        sc = load_scene(tmp_path, f"q{sided}{path.stem}", {
             "camera": {"perspective": {"position": [0, 0, 3], "look_at": [0, 0, 0]}, "resolution": [8, 8]},
             "environment": {"path": str(lobed_sky)},
             "materials": {"m": {"double_sided": sided}},
-            "objects": [{"mesh": {"path": str(quad)}, "material": "m"}],
+            "objects": [{"mesh": {"path": str(path)}, "material": "m"}],
             "effects": {"diffuse": "probes", "specular": "off"}})
-        from iblbake.render.frame import scene_context
         ctx = scene_context(sc, render.plan(sc), rt, Bakes(tmp_path / "c"))
         ctx.bakes.load("radiance", ctx)
         tracer = probes.Tracer(ctx, {"bounces": 1, "seed": 1})
-        _rad, t, obj = tracer.trace(np.array([[0, 0, -0.5]]), np.array([[0, 0, 1.0], [0, 0, -1.0]]), True)
-        assert obj[0, 0] == 0 and obj[0, 1] == -1
-        assert (t[0, 0] < 0) == want_back and math.isclose(abs(t[0, 0]), 0.5, rel_tol=1e-5)
+        return tracer.trace(np.array([origin]), np.array([[0, 0, 1.0], [0, 0, -1.0]]), True)
+
+    _rad, t, obj = trace(quad, False, [0, 0, -0.5])
+    assert obj[0, 0] == -1 and np.isinf(t[0, 0])                    # through the single-sided back
+    _rad, t, obj = trace(quad, True, [0, 0, -0.5])
+    assert obj[0, 0] == 0 and math.isclose(t[0, 0], 0.5, rel_tol=1e-5)
+    _rad, t, obj = trace(cube, False, [0, 0, -3])
+    assert (obj[0] == 0).all() and (t[0] < 0).all() and np.allclose(-t[0], 0.5, rtol=1e-5)
 
 
 def test_negative_texels_do_not_spoil_a_bake(tmp_path, rt):

@@ -106,8 +106,7 @@ def scene_arrays(scene: Scene, meshes=None) -> SceneArrays:
     for i, s in enumerate(spheres):
         oid = int(s[1, 1:2].view(np.int32)[0])
         f = int(s[1, 2:3].view(np.int32)[0])
-        if not f & SURFACE_FLAGS["single_sided"] and solid_object(d["objects"][oid], True,
-                                                                   _camera_inside_sphere(scene, s[0])):
+        if solid_object(d["objects"][oid], True, _camera_inside_sphere(scene, s[0])):
             s[1, 2] = _int_bits(f | SURFACE_FLAGS["solid"])
     return SceneArrays(mats, names, spheres, np.array(planes, np.float32).reshape(-1, FLOAT4S["PLANE"], 4), arr, nodes,
                        report, attr, records, closed)
@@ -125,9 +124,10 @@ def _camera_inside_sphere(scene: Scene, s) -> bool:
 
 
 def solid_flags(scene: Scene, arr, closed, tri_flags) -> np.ndarray:
-    """SURFACE_FLAGS' solid bits of each triangle (docs/conventions.md "Sides"): a double-sided
-    triangle of a closed component bounds a solid (flipped where the component is wound inwards),
-    as the object's `solid` key decides; a single-sided one has its back face by its winding."""
+    """SURFACE_FLAGS' solid bits of each triangle (docs/conventions.md "Sides"): a triangle of a
+    closed component bounds a solid, as the object's `solid` key decides: inside it by the
+    component's volume where double-sided (flipped where wound inwards), by its winding where
+    single-sided (a single-sided surface is there from its front alone)."""
     out = np.zeros(len(arr), np.int32)
     if closed is None or not len(arr):
         return out
@@ -145,7 +145,7 @@ def solid_flags(scene: Scene, arr, closed, tri_flags) -> np.ndarray:
             sg = int(sign[part][0])
             if solid_object(obj, sg != 0, int(c) in inside):
                 out[part] = SURFACE_FLAGS["solid"] | (SURFACE_FLAGS["solid_flipped"] if sg < 0 else 0)
-    return np.where(tri_flags & SURFACE_FLAGS["single_sided"], 0, out)
+    return np.where(tri_flags & SURFACE_FLAGS["single_sided"], out & SURFACE_FLAGS["solid"], out)
 
 
 def mesh_arrays(scene: Scene):
