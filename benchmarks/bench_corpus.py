@@ -50,6 +50,38 @@ def markdown(results) -> str:
     return "\n".join(out) + "\n"
 
 
+DIFFUSE = ("SH", "SH + GTAO", "probes", "probes, L2 SH")
+SPECULAR = ("importance N=64", "distant", "lobe K=4", "distant + SSR", "reflection probes", "reflection probes + SSR",
+            "reflection probes + SSR over them")
+
+
+def compact(results) -> str:
+    """One row per scene and panorama: each mode's relative RMSE of its term (the best of the
+    diffuse and of the specular modes in bold), then the median lighting time of every mode."""
+    head = ["scene", "panorama"] + [f"diffuse: {m}" for m in DIFFUSE] + [f"specular: {m}" for m in SPECULAR]
+    out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    times = {}
+    for res in results:
+        rows = {r["label"]: r for r in res["rungs"]}
+        cells = [res["scene"], res["panorama"]]
+        for group in (DIFFUSE, SPECULAR):
+            have = [m for m in group if m in rows]
+            best = min((rows[m]["relative_rmse"] for m in have), default=None)
+            for m in group:
+                if m not in rows:
+                    cells.append("")
+                    continue
+                v = f"{100 * rows[m]['relative_rmse']:.1f}%"
+                cells.append(f"**{v}**" if rows[m]["relative_rmse"] == best else v)
+                times.setdefault(m, []).append(rows[m]["time_s"])
+        out.append("| " + " | ".join(cells) + " |")
+    import statistics
+    out += ["", "| mode | median lighting ms (scenes) |", "|---|---|"]
+    out += [f"| {m} | {1000 * statistics.median(times[m]):.2f} ({len(times[m])}) |" for m in DIFFUSE + SPECULAR
+            if m in times]
+    return "\n".join(out) + "\n"
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--panoramas", default="studio,city")
@@ -81,6 +113,7 @@ def main():
                                                        "results": results}, indent=1) + "\n")
     print(f"device: {rt.device_label}; {args.max_side} px on the longer side; reference: two seeds to "
           f"{args.target_noise} or {args.max_samples} samples per pixel\n")
+    print(compact(results))
     print(markdown(results))
 
 
