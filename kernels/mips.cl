@@ -111,9 +111,9 @@ inline float3 table_view(int x, int y, int n, float *nov, float *alpha)
     return (float3)(sqrt(1.0f - *nov * *nov), 0.0f, *nov);
 }
 
-__kernel void dfg(const int n, const int nsamples, __global float2 *out)
+__kernel void dfg(const int n, const int y0, const int nsamples, __global float2 *out)
 {
-    const int x = get_global_id(0), y = get_global_id(1);
+    const int x = get_global_id(0), y = y0 + get_global_id(1);
     if (x >= n || y >= n) return;
     float nov, alpha;
     const float3 v = table_view(x, y, n, &nov, &alpha);

@@ -472,3 +472,23 @@ def test_read_only_folder_fails_cleanly(tmp_path, stress, random_env, warm):
         p = run_cli("mips", random_env, "--cache", ro, "--size", "32")
         _one_line_failure(p, str(ro))
         assert not any(ro.iterdir())
+
+
+@pytest.mark.kill
+def test_ctrl_c_during_a_fresh_dfg_bake_is_prompt(tmp_path):
+    """A fresh cache bakes the DFG table (67M samples: 5 s on a 2-core CPU); Ctrl-C during it ends
+    the bake within a second and a half, not at its end (it was one launch: 5-8 s): the table is
+    baked a band of rows a launch, and the signal lands between bands."""
+    code = ("import sys, time; from pathlib import Path; from iblbake.bake import mips; "
+            "b = mips.Baker('opencl'); b.dfg(8, 8, False); print('ready', flush=True); "
+            f"mips.bake_dfg(b, Path({str(tmp_path / 'c')!r}), 128, 4096, False)")
+    p = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert p.stdout.readline().strip() == b"ready"     # the program built: the table's bake begins
+    time.sleep(1.0)
+    sent = time.time()
+    p.send_signal(signal.SIGINT)
+    p.wait(timeout=60)
+    waited = time.time() - sent
+    assert p.returncode != 0 and b"KeyboardInterrupt" in p.stderr.read()
+    assert waited < 1.5, waited
+    assert not list((tmp_path / "c").glob("dfg-*/dfg.exr"))        # nothing half-baked under its name

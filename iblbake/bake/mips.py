@@ -206,7 +206,13 @@ class OpenCLBaker:
         rt = self.rt
         out = rt.empty(size * size * 8)
         defines = {"MULTISCATTER": 1} if multiscatter else {}
-        rt.launch("mips.cl", "dfg", defines, (size, size), n=size, nsamples=n_samples, out=out)
+        # a band of rows a launch, waited for: Ctrl-C lands between bands (the whole table is one
+        # launch of seconds on a CPU), and no launch runs into a GPU's watchdog
+        band = max(1, (1 << 22) // max(size * n_samples, 1))
+        for y0 in range(0, size, band):
+            rt.launch("mips.cl", "dfg", defines, (size, min(band, size - y0)), n=size, y0=y0, nsamples=n_samples,
+                      out=out)
+            rt.finish()
         return rt.read(out, (size, size, 2))
 
 
