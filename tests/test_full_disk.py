@@ -82,7 +82,7 @@ def inputs(tmp_path_factory):
                        objects=[{"sphere": {"radius": 1}, "material": "m"},
                                 {"plane": {"point": [0, -1, 0], "normal": [0, 1, 0], "size": 6}, "material": "m"}],
                        effects={"diffuse": "sh", "specular": "prefiltered"},
-                       probes={"counts": 2, "rays": 64})
+                       probes={"counts": 3, "rays": 64})
     ladder = d / "ladder.yaml"
     ladder.write_text(yaml.safe_dump({"rungs": [{"key": "effects.sh_bands", "values": [2]}]}))
     return {"env": env, "scene": scene, "ladder": ladder, "cache": d / "cache"}
