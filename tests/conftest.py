@@ -1,3 +1,4 @@
+import contextlib
 import os
 import shutil
 import subprocess
@@ -219,3 +220,17 @@ def pytest_terminal_summary(terminalreporter):
         Path(dest).parent.mkdir(parents=True, exist_ok=True)
         write_text(dest, head + text)
         terminalreporter.write_line(f"stress table written to {dest}")
+
+
+@contextlib.contextmanager
+def mounted_tmpfs(path, options: str):
+    """A tmpfs mounted at `path` with mount `options` (e.g. "size=256k", "ro,size=64k") for the
+    full-disk and read-only tests; skips where mounting is not allowed (not root, a container)."""
+    path.mkdir(parents=True, exist_ok=True)
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(path)], capture_output=True)
+    if r.returncode:
+        pytest.skip(f"cannot mount a tmpfs here ({r.stderr.decode().strip()})")
+    try:
+        yield path
+    finally:
+        subprocess.run(["umount", "-l", str(path)])

@@ -21,19 +21,7 @@ import yaml
 from iblbake.errors import IblbakeError
 from iblbake.io import images
 
-from .conftest import scene_file, write_exr
-
-
-@contextlib.contextmanager
-def tmpfs(path: Path, size: str):
-    path.mkdir(parents=True, exist_ok=True)
-    r = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(path)], capture_output=True)
-    if r.returncode:
-        pytest.skip(f"cannot mount a tmpfs here ({r.stderr.decode().strip()})")
-    try:
-        yield path
-    finally:
-        subprocess.run(["umount", "-l", str(path)])
+from .conftest import mounted_tmpfs, scene_file, write_exr
 
 
 @contextlib.contextmanager
@@ -60,7 +48,7 @@ def _tree(folder: Path) -> dict:
 def test_a_png_onto_a_full_disk_keeps_the_old_file(tmp_path, stress):
     """The library's writer: an IblbakeError naming the file, the earlier frame byte for byte."""
     img = (np.random.default_rng(0).random((96, 128, 3)) * 255).astype(np.uint8)
-    with tmpfs(tmp_path / "disk", "1m") as disk:
+    with mounted_tmpfs(tmp_path / "disk", "size=1m") as disk:
         images.write_png(disk / "keep.png", img)
         before = (disk / "keep.png").read_bytes()
         with filled(disk):
@@ -123,7 +111,7 @@ def _run(argv, inputs, out):
 @pytest.mark.slow
 @pytest.mark.parametrize("case, argv", WRITERS, ids=[w[0] for w in WRITERS])
 def test_every_writer_keeps_the_old_files_on_a_full_disk(tmp_path, stress, inputs, case, argv):
-    with tmpfs(tmp_path / "disk", "16m") as disk:
+    with mounted_tmpfs(tmp_path / "disk", "size=16m") as disk:
         out = disk / "o"
         out.mkdir()
         p = _run(argv, inputs, out)

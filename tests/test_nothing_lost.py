@@ -19,7 +19,7 @@ import pytest
 from iblbake.bake import cache
 from iblbake.io import images
 
-from .conftest import ROOT, run_cli, scene_file, stress_scale, write_exr
+from .conftest import ROOT, mounted_tmpfs, run_cli, scene_file, stress_scale, write_exr
 
 
 def cli(*args):
@@ -412,18 +412,6 @@ def test_file_size_limit_fails_cleanly(tmp_path, stress, random_env, warm):
     assert cache_entries_ok(root) == (0, [])
     assert all(x.endswith(".lock") for x in left), left
     stress.count("partial files found", len([x for x in left if not x.endswith(".lock")]))
-
-
-@contextlib.contextmanager
-def mounted_tmpfs(path: Path, options: str):
-    path.mkdir(parents=True, exist_ok=True)
-    r = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(path)], capture_output=True)
-    if r.returncode:
-        pytest.skip(f"cannot mount a tmpfs here ({r.stderr.decode().strip()}); RLIMIT_FSIZE test covers it")
-    try:
-        yield path
-    finally:
-        subprocess.run(["umount", "-l", str(path)])
 
 
 def test_full_disk_fails_cleanly(tmp_path, stress, random_env, warm):
