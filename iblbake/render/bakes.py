@@ -327,7 +327,7 @@ class Bakes:
         from iblbake.render import probes
 
         settings = ctx.scene.data["probes"]
-        key = "probes-" + cache.content_key({"kind": "probes", "v": probes.VERSION, **self._light_transport(ctx.scene),
+        key = "probes-" + cache.content_key({"kind": "probes", "v": probes.VERSION, **self._light_transport(ctx),
                                              "settings": probes.bake_settings(settings),
                                              "code": _probes_code_hash()})
 
@@ -359,7 +359,7 @@ class Bakes:
         from iblbake.io.images import ImageInfo
         from iblbake.render import reflection_probes as rp
 
-        transport = self._light_transport(ctx.scene)
+        transport = self._light_transport(ctx)
         out, cached_all, rays = [], True, 0
         for k, settings in enumerate(ctx.scene.data["reflection_probes"]):
             key = "reflection-" + cache.content_key({"kind": "reflection", "v": 2, "index": k, **transport,
@@ -406,10 +406,13 @@ class Bakes:
             rays += 2 * settings["size"] ** 2 * settings["samples"] if traced else 0
         return out, cached_all, {"probes": len(out), "rays_traced": rays}
 
-    def _light_transport(self, sc) -> dict:
+    def _light_transport(self, ctx) -> dict:
         """What light leaving the panorama meets before it reaches a probe: the objects,
         materials, lights and every file they read (by content), the panorama (by content) and its
-        frame."""
+        frame, and which surfaces bound solids (`solid: auto` decides by the camera's position)."""
+        from iblbake.scene import pack
+
+        sc = ctx.scene
         d = sc.data
         env = d["environment"]
         _image, info = self.environment(env)
@@ -418,7 +421,8 @@ class Bakes:
         files += [self.file_sha256(m["path"]) for m in _map_refs(d["materials"])]
         return {"environment": info.sha256, "frame": {k: env[k] for k in ("rotation_y", "intensity", "sun", "nonfinite",
                                                                          "negative")},
-                "objects": d["objects"], "materials": d["materials"], "lights": d["lights"], "files": files}
+                "objects": d["objects"], "materials": d["materials"], "lights": d["lights"], "files": files,
+                "solids": pack.solids_digest(ctx.arrays if ctx.arrays is not None else self.geometry(sc, ctx.warn))}
 
 
 def load_all(ctx, names) -> dict:

@@ -112,6 +112,21 @@ def scene_arrays(scene: Scene, meshes=None) -> SceneArrays:
                        report, attr, records, closed)
 
 
+def solids_digest(arrays: SceneArrays) -> str:
+    """A digest of which surfaces bound solids (SURFACE_FLAGS solid, solid_flipped) in the packed
+    scene: what `objects.N.solid: auto` decided from the camera's position. A traced bake's cache
+    key holds it (the same objects make a room or a solid as the camera moves in or out)."""
+    import hashlib
+
+    bits = SURFACE_FLAGS["solid"] | SURFACE_FLAGS["solid_flipped"]
+    h = hashlib.sha256()
+    for a in (arrays.tris[:, 2, 3] if len(arrays.tris) else np.zeros(0, np.float32),
+              arrays.spheres[:, 1, 2] if len(arrays.spheres) else np.zeros(0, np.float32)):
+        h.update((np.ascontiguousarray(a, np.float32).view(np.int32) & bits).astype(np.int8).tobytes())
+        h.update(b"|")
+    return h.hexdigest()[:16]
+
+
 def solid_object(obj: dict, closed: bool, camera_inside: bool) -> bool:
     """Whether a closed part of an object bounds a solid to the probes (objects.N.solid): auto,
     where it is closed and the camera is not inside it (a room seen from within is no solid)."""
