@@ -234,3 +234,13 @@ def mounted_tmpfs(path, options: str):
         yield path
     finally:
         subprocess.run(["umount", "-l", str(path)])
+
+
+class BakeContext:
+    """What Bakes' traced bakes (`_reflection_probes`, `_probes`) read of a frame's context: the
+    scene, the runtime, the bakes' store (the geometry comes from it), no warnings, no progress."""
+
+    def __init__(self, sc, rt, bakes):
+        self.scene, self.rt, self.bakes = sc, rt, bakes
+        self.warn, self.progress = (lambda _m: None), None
+        self.arrays = None

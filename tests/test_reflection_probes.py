@@ -14,7 +14,7 @@ from iblbake import render
 from iblbake.io import images
 from iblbake.render.bakes import Bakes
 from iblbake.scene import pack
-from tests.conftest import load_scene, run_cli
+from tests.conftest import BakeContext, load_scene, run_cli
 
 
 write = load_scene
@@ -158,21 +158,13 @@ def test_frame_matches_the_twin(tmp_path, rt):
     distant = next(v[0] for k, v in bakes._memo.items() if isinstance(k, tuple) and k[0] == "prefiltered"
                    and k[1] == env_sha)
     table = next(v[0] for k, v in bakes._memo.items() if isinstance(k, tuple) and k[0] == "dfg")
-    captured = bakes._reflection_probes(SimpleCtx(sc, bakes, rt))[0]
+    captured = bakes._reflection_probes(BakeContext(sc, rt, bakes))[0]
     arrays = pack.scene_arrays(sc)
     gb = rr.primary(sc["camera"], arrays)
     want = rr.shade(gb, arrays, sc["effects"], sc["environment"], prefiltered=distant, dfg=table,
                     reflection_probes=captured)[gb["hit"]]
     got = frame.hdr[..., :3].reshape(-1, 3)[gb["hit"]]
     assert np.abs(got - want).max() / want.max() < 2e-6
-
-
-class SimpleCtx:
-    """What Bakes._reflection_probes reads of a frame's context, once its captures are cached."""
-
-    def __init__(self, sc, bakes, rt):
-        self.scene, self.bakes, self.rt = sc, bakes, rt
-        self.warn, self.progress = (lambda _m: None), None
 
 
 def test_reflection_probes_run_only_where_the_split_sum_reads_them(tmp_path, sky):

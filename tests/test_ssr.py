@@ -10,7 +10,7 @@ from iblbake.core import sh
 from iblbake.io import images
 from iblbake.render.bakes import Bakes
 from iblbake.scene import pack
-from tests.conftest import load_scene
+from tests.conftest import BakeContext, load_scene
 
 from pathlib import Path
 
@@ -214,7 +214,7 @@ def test_more_frames_match_the_twin(tmp_path, rt, case):
     env_sha = bakes.environment(sc.data["environment"])[1].sha256
     pre = next(v[0] for k, v in memo.items() if k[0] == "prefiltered" and k[1] == env_sha)
     table = next(v[0] for k, v in memo.items() if k[0] == "dfg")
-    captured = bakes._reflection_probes(_Ctx(sc, rt, bakes))[0] if kw.get("probe") else None
+    captured = bakes._reflection_probes(BakeContext(sc, rt, bakes))[0] if kw.get("probe") else None
     arrays = pack.scene_arrays(sc)
     gb = rr.primary(sc["camera"], arrays)
     out = {}
@@ -230,11 +230,3 @@ def test_more_frames_match_the_twin(tmp_path, rt, case):
     assert changed[hit].mean() > 0.05 or case == "reflection probe"      # SSR changed some to compare
     close = np.abs(got - want_px).max(1)[hit] <= 1e-4 * want_px.max()
     assert close.mean() > 0.99, close.mean()
-
-
-class _Ctx:
-    """What Bakes._reflection_probes reads of a frame's context (the captures are memoised)."""
-
-    def __init__(self, sc, rt, bakes):
-        self.scene, self.rt, self.bakes = sc, rt, bakes
-        self.warn, self.progress = (lambda _m: None), None
