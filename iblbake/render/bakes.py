@@ -349,6 +349,7 @@ class Bakes:
         return vol, cached or hit, {"probes": rep["probes"], "rays_traced": rep["rays_traced"],
                                     "bake_s": rep["seconds"], "inactive": rep["inactive"],
                                     "relocated": rep["relocated"], "inside_geometry": rep.get("inside_geometry", 0),
+                                    "outside_camera_room": rep.get("outside_camera_room", 0),
                                     "entry": str(self.root / manifest["key"])}
 
     def _reflection_probes(self, ctx):
