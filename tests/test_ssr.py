@@ -112,6 +112,8 @@ def test_ssr_runs_only_where_asked(tmp_path, sky):
     assert not imp.to_json()["ssr"] and any("effects.ssr: on does nothing with specular importance" in n
                                             for n in imp.notes)
     assert pl.pass_names.index("ssr") > pl.pass_names.index("shade")
+    off = render.plan(wall(tmp_path, sky, specular="off", name="spec_off"))     # it said nothing here
+    assert any("effects.ssr: on does nothing with specular off" in n for n in off.notes)
     for name, sc in (("off", wall(tmp_path, sky, "off", name="o")),
                      ("importance", wall(tmp_path, sky, specular="importance", name="i"))):
         pl = render.plan(sc)
@@ -123,7 +125,7 @@ def test_the_study_measures_ssr_on_the_whole_frame(tmp_path, sky):
     included) and the study subtracts the diffuse term alone; other rungs render their term alone."""
     from iblbake.device.runtime import Runtime
     from iblbake.study import accuracy
-    from iblbake.study.ladder import Rung
+    from iblbake.study.ladder import Rung, configured_rung, realtime_ladder
 
     sc = wall(tmp_path, sky, name="study")
     st = accuracy.Study(sc.source, (), accuracy.Settings(), runtime=Runtime(), bakes=Bakes(tmp_path / "c"))
@@ -132,6 +134,15 @@ def test_the_study_measures_ssr_on_the_whole_frame(tmp_path, sky):
     assert st.reflects_frame(with_ssr) and not st.reflects_frame(without)
     assert ("effects.diffuse", "off") not in st.rung_values(with_ssr)
     assert ("effects.diffuse", "off") in st.rung_values(without)
+    # the scene asks for SSR: a rung that does not say runs it, over the whole frame; the real-time
+    # ladder's rungs without SSR turn it off (a new user's `distant` rung ran SSR over a frame
+    # without its diffuse light: 70.7% where the distant chain is 55.1%), and the configured rung
+    # measures SSR as configured, saying so in its label
+    assert st.reflects_frame(Rung("specular", "scene's", [("effects.specular", "prefiltered")]))
+    rungs = {r.label: r for r in realtime_ladder(st.scene, st.fx)}
+    assert not st.reflects_frame(rungs["distant"]) and st.reflects_frame(rungs["distant + SSR"])
+    conf = configured_rung(st.scene, "specular")
+    assert st.reflects_frame(conf) and conf.label == "configured: prefiltered + SSR"
 
 
 def mirror_ball(folder, ortho=False, spp=1, probe=False, roughness=0.0, name="ball"):

@@ -54,10 +54,10 @@ def effect_modes(scene: Scene) -> Effects:
         notes.append(f"diffuse {diffuse} skipped: every material is metallic or black (kD = 0)")
         diffuse = "off"
     if specular != "prefiltered":            # what only the split sum reads, said where it goes unread
-        if fx["ssr"] == "on" and specular != "off":
+        if fx["ssr"] == "on":
             notes.append(f"effects.ssr: on does nothing with specular {specular}: screen-space reflections replace the "
                          "split sum's reflected environment (effects.specular: prefiltered)")
-        if d["reflection_probes"] and fx["reflection_probes"] and specular != "off":
+        if d["reflection_probes"] and fx["reflection_probes"]:
             notes.append(f"reflection_probes: {len(d['reflection_probes'])} not read with specular {specular}: the "
                          "split sum reads them (effects.specular: prefiltered)")
     bg = env["background"]

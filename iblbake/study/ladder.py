@@ -35,6 +35,11 @@ def configured_rung(sc, term: str) -> Rung:
         mode = fx["specular"]
         vals = [("effects.specular", mode)]
         label = {"importance": f"importance N={fx['samples']}", "lobe": f"lobe K={fx['lobe']['samples']}"}.get(mode, mode)
+        if mode == "prefiltered" and sc.data["reflection_probes"] and fx["reflection_probes"]:
+            label += " + reflection probes"
+        if mode == "prefiltered" and fx["ssr"] == "on":          # measured over the lit frame
+            vals.append(("effects.ssr", "on"))
+            label += " + SSR"
     return Rung(term, f"configured: {label}", vals, configured=True)
 
 
@@ -129,16 +134,17 @@ def realtime_ladder(sc, fx) -> list:
                   Rung("diffuse", "probes, L2 SH", [("effects.diffuse", "probes"), ("effects.ao", "off"),
                                                    ("probes.irradiance", "sh")])]
     if fx.specular != "off":
+        # every rung says whether SSR runs: a scene's `ssr: on` is not to leak into the rungs without it
         distant = [("effects.specular", "prefiltered"), ("effects.reflection_probes", False), ("effects.ao", "off")]
         rungs += [Rung("specular", "importance N=64", [("effects.specular", "importance"), ("effects.samples", 64),
                                                        ("effects.ao", "off")]),
-                  Rung("specular", "distant", distant),
+                  Rung("specular", "distant", distant + [("effects.ssr", "off")]),
                   Rung("specular", "lobe K=4", [("effects.specular", "lobe"), ("effects.lobe.samples", 4),
                                                 ("effects.ao", "off")]),
                   Rung("specular", "distant + SSR", distant + [("effects.ssr", "on")])]
         if sc.data["reflection_probes"]:
             local = [("effects.specular", "prefiltered"), ("effects.reflection_probes", True), ("effects.ao", "off")]
-            rungs += [Rung("specular", "reflection probes", local),
+            rungs += [Rung("specular", "reflection probes", local + [("effects.ssr", "off")]),
                       Rung("specular", "reflection probes + SSR", local + [("effects.ssr", "on")]),
                       Rung("specular", "reflection probes + SSR over them", local + [
                           ("effects.ssr", "on"), ("effects.ssr_settings.defer_to_probes", False)])]
