@@ -40,7 +40,7 @@ def study_scene(path, panorama, args, rt, bakes) -> dict:
 
 
 def markdown(results) -> str:
-    out = ["| scene | panorama | term | mode | rel. RMSE | worst object | lighting ms | frame ms |",
+    out = ["| scene | panorama | term | mode | rel. RMSE | worst object mean | lighting ms | frame ms |",
            "|---|---|---|---|---|---|---|---|"]
     for res in results:
         for r in res["rungs"]:

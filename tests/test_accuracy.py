@@ -262,3 +262,17 @@ def test_probes_beat_sh_with_gtao_in_the_open_box(tmp_path, panoramas):
     print(f"SH + gtao {sh_gtao:.4f}, probes 8 {probe:.4f}")
     assert probe < 0.13 and sh_gtao > 2 * probe
     assert [b["name"] for b in rungs["probes 8"]["bakes"]][-1] == "probes" and rungs["probes 8"]["bake_s"] > 0
+
+
+def test_a_black_reference_is_said_not_divided_by(tmp_path):
+    """A scene no light reaches (a black panorama): every relative error would divide by zero (a new
+    user's closed room printed 1.5e301% on every row); the study says so in one line, naming the
+    term and what to do, and exits 1."""
+    from .conftest import scene_file, write_exr
+    env = write_exr(tmp_path / "black.exr", np.zeros((8, 16, 3), np.float32))
+    p = scene_file(tmp_path, env, camera={"perspective": {"position": [0, 0, 3], "fov_y": 45}, "resolution": [16, 16]},
+                   effects={"diffuse": "sh", "specular": "off"})
+    r = run_cli("accuracy", p, "--repeats", 1, "--no-flip", "--max-samples", 16, "--cache", tmp_path / "c")
+    assert r.returncode == 1 and "Traceback" not in r.stderr
+    line = [x for x in r.stderr.splitlines() if x.startswith("Error")]
+    assert len(line) == 1 and "diffuse term's reference is black" in line[0] and "effects.diffuse=off" in line[0], r.stderr

@@ -178,8 +178,13 @@ class Study:
             w, h = study_resolution(self.scene, self.settings.max_side)
             raise InputError(f"{self.path}: at {w}x{h} no pixel is fully covered by an object; raise --max-side "
                              f"or move the camera closer")
+        if not np.any(frames[0][..., :3][mask]) and not np.any(frames[1][..., :3][mask]):
+            # every relative error divides by the reference (a new user's closed room printed 1.5e301%)
+            raise InputError(f"{self.path}: the {term} term's reference is black on every object pixel (no light "
+                             f"reaches what the camera sees), so its relative errors are undefined; light the scene, "
+                             f"or leave the term out (--set effects.{term}=off)")
         from iblbake.core.metrics import relative_rmse
-        between = relative_rmse(frames[0][..., :3][mask], frames[1][..., :3][mask]) if mask.any() else 0.0
+        between = relative_rmse(frames[0][..., :3][mask], frames[1][..., :3][mask])
         mean = frames[0].copy()
         mean[..., :3] = 0.5 * (frames[0][..., :3] + frames[1][..., :3])
         out = {"hdr": mean, "mask": mask, "noise": between / 2, "noise_each": between / math.sqrt(2),

@@ -15,7 +15,7 @@ from iblbake.study.ladder import TERMS
 
 COLUMNS = (("term", "term"), ("label", "setting"), ("time_ms", "time ms"), ("bake_s", "bake s"),
            ("relative_rmse", "rel. RMSE"), ("mean_relative_error", "mean rel."), ("max_relative_error", "max rel."),
-           ("worst_region_error", "worst object"), ("flip", "HDR-FLIP"), ("pareto", "frontier"))
+           ("worst_region_error", "worst object mean"), ("flip", "HDR-FLIP"), ("pareto", "frontier"))
 
 
 def table_rows(rows, front) -> list:
