@@ -17,7 +17,7 @@ import yaml
 
 from iblbake import render
 from iblbake.core import sh
-from iblbake.errors import IblbakeError
+from iblbake.errors import IblbakeError, InputError
 from iblbake.io import images
 from iblbake.render import probes
 from iblbake.render.bakes import Bakes
@@ -598,3 +598,28 @@ def test_an_atlas_too_wide_for_a_gpu_is_said():
     assert len(said) == 1 and "distance atlas is 25600 x 64" in said[0] and "16384" in said[0]
     vol["counts"] = (10, 8, 10)
     assert probes.warnings({"probes": 800, "inside_geometry": 0}, {"objects": []}, vol) == []
+
+
+@pytest.mark.parametrize("probes_section, rprobe, words", [
+    ({"counts": 4, "spacing": 0.5}, None, "probes.spacing: give probes.counts or probes.spacing, not both"),
+    ({"min": [0, 0, 0], "max": [1, -1, 1]}, None, "probes.max: [1.0, -1.0, 1.0] is below probes.min"),
+    ({"min": [0, 0, 0]}, None, "probes.max: probes.min and probes.max go together"),
+    (None, {"position": [0, 0, 0], "min": [-1, -1, -1], "max": [1, 1, 1], "radius": 2},
+     "reflection_probes.0.radius: is a sphere influence's"),
+    (None, {"position": [0, 0, 0], "shape": "sphere", "radius": 2, "min": [-1, -1, -1]},
+     "reflection_probes.0.min: is a box influence's corner")])
+def test_keys_that_decide_together_are_checked_at_load(tmp_path, sky, probes_section, rprobe, words):
+    """A new user's trial: counts beside spacing dropped counts, a box probe's radius and a sphere
+    probe's corners were taken without a word, and a grid's max below its min was said without the
+    scene's file. Each is refused at load, one line naming the file, line and key."""
+    doc = {"camera": {"perspective": {"position": [0, 0, 3]}, "resolution": [8, 8]},
+           "environment": {"path": str(sky)}, "materials": {"m": {}},
+           "objects": [{"sphere": {"radius": 1}, "material": "m"}]}
+    if probes_section is not None:
+        doc["probes"] = probes_section
+    if rprobe is not None:
+        doc["reflection_probes"] = [rprobe]
+    with pytest.raises(InputError) as e:
+        load_scene(tmp_path, "keys", doc)
+    msg = str(e.value)
+    assert words in msg and msg.startswith(str(tmp_path / "keys.yaml")) and "\n" not in msg, msg

@@ -408,7 +408,10 @@ def bake(ctx, settings: dict, progress=None) -> dict:
     arrays (as load() returns) and a report."""
     t0 = time.perf_counter()
     arrays = ctx.arrays if ctx.arrays is not None else ctx.bakes.geometry(ctx.scene)
-    grid = grid_of(settings, arrays)
+    try:
+        grid = grid_of(settings, arrays)
+    except IblbakeError as e:             # said as the scene's other errors are: naming its file
+        raise IblbakeError(f"{ctx.scene.source}: {e}") from None
     tracer = Tracer(ctx, settings)
     if settings["relocation"]:
         offset, at_grid = relocate(tracer, grid, settings, progress)

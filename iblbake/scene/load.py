@@ -188,6 +188,7 @@ def load(path, overrides=(), outputs=None, values=(), origin: str = "--set") -> 
     _resolve_references(v, out, folder)
     _resolve_names(v, out)
     _resolve_reflection_probes(v, out["reflection_probes"])
+    _resolve_probes(v, out["probes"])
     writes = _resolve_outputs(v, out["output"], folder, outputs)
     return Scene(out, source, folder, lines, writes)
 
@@ -326,8 +327,28 @@ def _resolve_reflection_probes(v: "_Validator", probes: list) -> None:
             if any(not lo <= x <= hi for lo, x, hi in zip(p["min"], p["position"], p["max"])):
                 v.fail(f"{where}.position", f"{p['position']} lies outside the box {p['min']}..{p['max']}; "
                                             "put the probe inside its influence")
-        elif p["radius"] is None:
-            v.fail(where, "missing required key 'radius' (a sphere influence about position)")
+            if p["radius"] is not None:
+                v.fail(f"{where}.radius", "is a sphere influence's; a box influence is its min and max (shape: "
+                                          "sphere takes radius)")
+        else:
+            if p["radius"] is None:
+                v.fail(where, "missing required key 'radius' (a sphere influence about position)")
+            for k in ("min", "max"):
+                if p[k] is not None:
+                    v.fail(f"{where}.{k}", "is a box influence's corner; a sphere influence is its radius about "
+                                           "position (shape: box takes min and max)")
+
+
+def _resolve_probes(v: "_Validator", p: dict) -> None:
+    """The probe grid's keys that decide it together: min with max, counts or spacing."""
+    if (p["min"] is None) != (p["max"] is None):
+        v.fail("probes.max" if p["max"] is None else "probes.min",
+               "probes.min and probes.max go together (the box the probes span); give both, or neither for an "
+               "automatic grid")
+    if p["min"] is not None and any(hi < lo for lo, hi in zip(p["min"], p["max"])):
+        v.fail("probes.max", f"{p['max']} is below probes.min {p['min']} on some axis; give max >= min")
+    if p["counts"] is not None and p["spacing"] is not None:
+        v.fail("probes.spacing", "give probes.counts or probes.spacing, not both (each decides the grid)")
 
 
 def _resolve_outputs(v: "_Validator", o: dict, folder: Path, outputs) -> list:
