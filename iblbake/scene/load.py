@@ -343,7 +343,7 @@ def _resolve_probes(v: "_Validator", p: dict) -> None:
     """The probe grid's keys that decide it together: min with max, counts or spacing."""
     if (p["min"] is None) != (p["max"] is None):
         v.fail("probes.max" if p["max"] is None else "probes.min",
-               "probes.min and probes.max go together (the box the probes span); give both, or neither for an "
+               "probes.min and probes.max go together (the box the probes span): give both min and max, or neither for an "
                "automatic grid")
     if p["min"] is not None and any(hi < lo for lo, hi in zip(p["min"], p["max"])):
         v.fail("probes.max", f"{p['max']} is below probes.min {p['min']} on some axis; give max >= min")
