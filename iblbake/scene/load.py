@@ -173,8 +173,22 @@ def load(path, overrides=(), outputs=None, values=(), origin: str = "--set") -> 
     (key path, value) pairs applied after them (a sweep cell's), `origin` what errors call the
     place the latter came from. `outputs` (from -o) replace output.frame."""
     path = Path(path)
-    source = str(path)
     data, lines = _read(path)
+    return _validated(data, lines, str(path), path.resolve().parent, overrides, outputs, values, origin)
+
+
+def load_data(data: dict, folder=".", overrides=(), outputs=None, values=(), origin: str = "--set",
+              source: str = "<scene>") -> Scene:
+    """load() of a scene given as a mapping (what a scene file's YAML holds) instead of a file:
+    relative paths resolve in `folder`, errors name `source` (no line numbers)."""
+    import copy
+    if not isinstance(data, dict):
+        raise InputError(f"{source}: a scene is a mapping of sections (camera, environment, "
+                         f"materials, objects, effects, output), not {type(data).__name__}")
+    return _validated(copy.deepcopy(data), {}, source, Path(folder).resolve(), overrides, outputs, values, origin)
+
+
+def _validated(data, lines, source, folder, overrides, outputs, values, origin) -> Scene:
     overridden = {}
     for a in overrides:
         overridden[_apply_override(data, a)] = "--set"
@@ -183,7 +197,6 @@ def load(path, overrides=(), outputs=None, values=(), origin: str = "--set") -> 
         overridden[key] = origin
     v = _Validator(source, lines, overridden)
     out = v.section(SCHEMA, data, "")
-    folder = path.resolve().parent
     _resolve_camera(v, out["camera"])
     _resolve_references(v, out, folder)
     _resolve_names(v, out)
