@@ -24,3 +24,7 @@ class DeviceError(IblbakeError):
     """No usable OpenCL device, or a kernel that failed to build or run."""
 
     exit_code = 3
+
+
+# the public name (iblbake.Error): every error the library raises for the user is one
+Error = IblbakeError

@@ -79,7 +79,7 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
     bakes and kernel builds reported apart as one-off costs) and measured over the object pixels:
     relative RMSE, mean and max relative error, HDR-FLIP. Prints the table with each term's
     Pareto frontier of error against time: for an error budget, the cheapest setting."""
-    from iblbake import render
+    from iblbake.render import Bakes
     from iblbake.device.runtime import Runtime
     from iblbake.io import atomic, images
     from iblbake.scene import load as scene_load
@@ -94,7 +94,7 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
     settings = acc.Settings(max_side=max_side, repeats=repeats, target_noise=target_noise, max_samples=max_samples,
                             flip=flip, visibility=visibility, bounces=bounces)
     rt = Runtime(device)
-    study = acc.Study(scene_path, overrides, settings, runtime=rt, bakes=render.Bakes(cache_dir), warn=con.warn)
+    study = acc.Study(scene_path, overrides, settings, runtime=rt, bakes=Bakes(cache_dir), warn=con.warn)
     if click.get_current_context().get_parameter_source("bounces") == click.core.ParameterSource.COMMANDLINE \
             and bounces != 1 and not study.paths:
         why = ("with --no-visibility every object is lit as if alone, so no light passes between them"

@@ -42,7 +42,7 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, depfi
 
     Only the effects the scene calls for are baked, compiled and run; --report shows which.
     """
-    from iblbake import render
+    from iblbake.render import output_paths, plan, render, write_outputs
     from iblbake.scene import load as scene
 
     if scene_path is None:
@@ -56,12 +56,12 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, depfi
     for _, p in writes:              # every output, the depfile too, before the frame is rendered
         check_writable(p)
     refuse_foreign(writes, force)
-    pl = render.plan(sc)
+    pl = plan(sc)
     # paths (the reference, probe rays, reflection captures): a bar on a terminal
     long_work = "reference" in pl.pass_names or {"probes", "reflection_probes"} & set(pl.bakes)
     with con.fraction("render", "paths") if long_work else contextlib.nullcontext(None) as progress:
-        frame = render.render(sc, device=device, cache_root=cache_dir, warn=con.warn, progress=progress)
-    written = render.write_outputs(frame, sc)
+        frame = render(sc, device=device, cache_root=cache_dir, warn=con.warn, progress=progress)
+    written = write_outputs(frame, sc)
     if depfile:
         from iblbake.io import depfile as dep
         dep.write(depfile, [(written, scene.input_files(sc))])
@@ -111,10 +111,10 @@ def _samples(rep: dict) -> str:
 def deps_command(scene_path, overrides, outputs):
     """Print the Make rule that `render --depfile` writes: SCENE's outputs depend on the scene file,
     its panorama and its meshes."""
-    from iblbake import render
+    from iblbake.render import output_paths, plan, render, write_outputs
     from iblbake.io.depfile import rule
     from iblbake.scene import load as scene
 
     sc = scene.load(scene_path, overrides, outputs or None)
-    targets = render.output_paths(sc) or [str(scene_path)]
+    targets = output_paths(sc) or [str(scene_path)]
     click.echo(rule(targets, scene.input_files(sc)), nl=False)

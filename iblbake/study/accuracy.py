@@ -138,7 +138,7 @@ class Study:
     def reference_seed(self, term: str, seed: int):
         """(hdr, manifest, cached): one seed of the term's reference, rendered into the cache or
         read back from it."""
-        from iblbake import render
+        from iblbake.render import lighting_passes, plan, render
         from iblbake.bake import cache
         from iblbake.io import images
 
@@ -147,7 +147,7 @@ class Study:
         holder = {}
 
         def build(tmp: Path):
-            fr = render.render(sc, runtime=self.rt, cache=self.bakes, warn=self.warn)
+            fr = render(sc, runtime=self.rt, cache=self.bakes, warn=self.warn)
             images.write_exr(tmp / "reference.exr", fr.hdr, channels=("R", "G", "B", "A"))
             holder["frame"] = fr
             ref = next(p for p in fr.report["passes"] if p["name"] == "reference")
@@ -193,22 +193,22 @@ class Study:
         the scene has other surfaces: every mode reads a mirror's one direction exactly, and
         what differs there is the panorama's reconstruction filter (the reference's texels, the
         lookups' bilinear), which a sun turns into most of the frame's RMSE."""
-        from iblbake import render
+        from iblbake.render import lighting_passes, plan, render
 
         vals = [("effects.diffuse", "off"), ("effects.specular", "off"), ("output.albedo", "study-roughness.exr")]
         vals += [(f"materials.{m}.base_color", [float(v["roughness"])] * 3)
                  for m, v in self.scene.data["materials"].items()]
-        fr = render.render(self.load(vals, origin="accuracy"), runtime=self.rt, cache=self.bakes, warn=self.warn)
+        fr = render(self.load(vals, origin="accuracy"), runtime=self.rt, cache=self.bakes, warn=self.warn)
         return object_mask(fr.hdr) & (fr.aovs["albedo"][..., 0] < MIRROR_ROUGHNESS)
 
     def object_regions(self) -> np.ndarray:
         """Each pixel's object index (-1: none), from one G-buffer render's object AOV: the regions
         the study's region errors read."""
-        from iblbake import render
+        from iblbake.render import lighting_passes, plan, render
 
         if self._objects is None:
             vals = [("effects.diffuse", "off"), ("effects.specular", "off"), ("output.object", "study-object.exr")]
-            fr = render.render(self.load(vals, origin="accuracy"), runtime=self.rt, cache=self.bakes, warn=self.warn)
+            fr = render(self.load(vals, origin="accuracy"), runtime=self.rt, cache=self.bakes, warn=self.warn)
             self._objects = np.rint(fr.aovs["object"]).astype(int)
         return self._objects
 
@@ -248,17 +248,17 @@ class Study:
         """Render the rung `repeats` times (kernel builds and bakes happen in the first and are
         reported apart); time = median over the renders of its lighting pass (shade or
         reference); frame = median of the whole render."""
-        from iblbake import render
+        from iblbake.render import lighting_passes, plan, render
 
         sc = self.load(self.rung_values(rung))
-        lighting_names = set(render.lighting_passes(render.plan(sc)))
+        lighting_names = set(lighting_passes(plan(sc)))
         t0 = time.perf_counter()
         lighting, whole, frame = [], [], None
         builds_before = len(self.rt.builds)
         bakes = []
         while len(lighting) < self.settings.repeats:
             first = frame is None
-            fr = render.render(sc, runtime=self.rt, cache=self.bakes, warn=self.warn)
+            fr = render(sc, runtime=self.rt, cache=self.bakes, warn=self.warn)
             light = sum(p["seconds"] for p in fr.report["passes"] if p["name"] in lighting_names)
             if first:
                 bakes = [b for b in fr.report["bakes"] if b["name"] not in ("geometry", "read_environment")]
@@ -271,7 +271,7 @@ class Study:
             whole.append(fr.report["elapsed_s"])
         if self.reflects_frame(rung):           # the specular term: the frame less its diffuse term
             alone = [(k, v) for k, v in rung.values if k != "effects.ssr"] + [("effects.specular", "off")]
-            diffuse = render.render(self.load(alone), runtime=self.rt, cache=self.bakes, warn=self.warn)
+            diffuse = render(self.load(alone), runtime=self.rt, cache=self.bakes, warn=self.warn)
             hdr = frame.hdr.copy()
             hdr[..., :3] -= diffuse.hdr[..., :3]
             frame.hdr = hdr
@@ -303,10 +303,10 @@ class Study:
 
     def configured_frame(self) -> dict:
         """The scene as configured (both terms) against the sum of the term references."""
-        from iblbake import render
+        from iblbake.render import lighting_passes, plan, render
 
         sc = self.load([])
-        fr = render.render(sc, runtime=self.rt, cache=self.bakes, warn=self.warn)
+        fr = render(sc, runtime=self.rt, cache=self.bakes, warn=self.warn)
         ref = np.zeros_like(fr.hdr)
         mask = object_mask(fr.hdr)
         for t in self.terms:
