@@ -54,6 +54,11 @@ class Frame:
     aovs: dict
     report: dict
 
+    @property
+    def tonemapped(self):
+        """The public name of png (iblbake.api.Frame): what write_outputs reads of either."""
+        return self.png
+
 
 class Reuse:
     """What the last frame of a series left on the device, for the next one: its buffers, host
@@ -395,7 +400,7 @@ def write_outputs(frame: Frame, scene: Scene) -> list:
     with atomic.Batch() as batch:
         for p in out["frame"]:
             if p.lower().endswith(".png"):
-                images.write_png(p, frame.png, batch)
+                images.write_png(p, frame.tonemapped, batch)
             else:
                 images.write_exr(p, frame.hdr, channels=("R", "G", "B", "A"), batch=batch)
             written.append(p)
