@@ -459,7 +459,11 @@ def bake_probes(scene, device: str | None = None, *, cache=None, warn=None, prog
     from iblbake.render.frame import scene_context
     from iblbake.render.plan import plan
 
+    import copy
+    import dataclasses
+
     sc = _scene(scene)
+    sc = dataclasses.replace(sc, data=copy.deepcopy(sc.data))       # the caller's scene is left as it was
     sc.data["effects"]["diffuse"] = "probes"            # what the volume is for: its plan reads the panorama
     if not sc.data["objects"]:
         raise InputError(f"{sc.source}: the scene has no objects; probes light objects (add some)")
