@@ -357,7 +357,8 @@ class Frame:
 
     hdr: float32 (H, W, 4), linear RGB radiance and coverage (alpha).
     tonemapped: uint8 (H, W, 3), the display image (the scene's effects.tonemap, exposure and
-        output transfer), what a PNG output holds.
+        output transfer): what a PNG output holds (tone-mapped on the host, undithered, where
+        the scene writes no PNG).
     aovs: normal and albedo (H, W, 4) float32, depth and object (H, W) float32, where rendered.
     report: the effect set, every bake and pass with its seconds and cache hit, the kernel
         builds, the device, the resolution and elapsed_s.
@@ -397,9 +398,14 @@ class Renderer:
         progress(fraction) the share of long work (path tracing, probe rays) done."""
         from iblbake.render import frame as render_frame
 
-        f = render_frame.render(_scene(scene), runtime=self.runtime, cache=self.bakes, reuse=self._reuse,
+        sc = _scene(scene)
+        f = render_frame.render(sc, runtime=self.runtime, cache=self.bakes, reuse=self._reuse,
                                 warn=warn, progress=progress)
-        return Frame(f.hdr, f.png, f.aovs, f.report)
+        png = f.png
+        if png is None:              # the device tone-maps only for a PNG output: the same operator on the host
+            from iblbake.study.accuracy import display
+            png = display(sc, f.hdr, None)
+        return Frame(f.hdr, png, f.aovs, f.report)
 
 
 def _scene(scene):
