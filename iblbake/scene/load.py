@@ -26,6 +26,11 @@ AOVS = ("normal", "albedo", "depth", "object")
 
 @dataclass
 class Scene:
+    """A validated scene: data holds every key of docs/scene.md (defaults filled, paths
+    absolute); source is the scene file (or what a mapping was called), folder where its
+    relative paths resolve, lines the line of each dotted key, writes (what names it, path) of
+    every output."""
+
     data: dict                     # validated, defaults filled, paths absolute
     source: str                    # the scene file
     folder: Path
