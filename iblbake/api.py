@@ -351,25 +351,6 @@ def load_scene(path_or_dict, overrides=(), *, folder=".", outputs=None):
     return scene_load.load(path_or_dict, overrides, outputs)
 
 
-@dataclass
-class Frame:
-    """A rendered frame.
-
-    hdr: float32 (H, W, 4), linear RGB radiance and coverage (alpha).
-    tonemapped: uint8 (H, W, 3), the display image (the scene's effects.tonemap, exposure and
-        output transfer): what a PNG output holds (tone-mapped on the host, undithered, where
-        the scene writes no PNG).
-    aovs: normal and albedo (H, W, 4) float32, depth and object (H, W) float32, where rendered.
-    report: the effect set, every bake and pass with its seconds and cache hit, the kernel
-        builds, the device, the resolution and elapsed_s.
-    """
-
-    hdr: object
-    tonemapped: object
-    aovs: dict
-    report: dict
-
-
 class Renderer:
     """Renders scenes on one OpenCL runtime and one bake cache, across calls: kernels are built
     once, bakes (SH, chains, DFG, probes) are kept in memory and in the cache folder, and with
@@ -381,10 +362,9 @@ class Renderer:
     """
 
     def __init__(self, device: str | None = None, cache=None, reuse: bool = True):
-        from iblbake.device.runtime import Runtime
         from iblbake.render import Bakes, Reuse
 
-        self.runtime = Runtime(device)
+        self.runtime = _runtime(device)
         self.bakes = Bakes(cache)
         self.bakes.runtime = self.runtime
         self._reuse = Reuse() if reuse else None
@@ -394,18 +374,13 @@ class Renderer:
         return self.runtime.device_label
 
     def render(self, scene, *, warn=None, progress=None) -> Frame:
-        """Render a Scene (load_scene) into a Frame. warn(message) gets the warnings;
-        progress(fraction) the share of long work (path tracing, probe rays) done."""
+        """Render a Scene (load_scene) into a Frame (iblbake.Frame: hdr, tonemapped, aovs,
+        report). warn(message) gets the warnings; progress(fraction) the share of long work
+        (path tracing, probe rays) done."""
         from iblbake.render import frame as render_frame
 
-        sc = _scene(scene)
-        f = render_frame.render(sc, runtime=self.runtime, cache=self.bakes, reuse=self._reuse,
-                                warn=warn, progress=progress)
-        png = f.png
-        if png is None:              # the device tone-maps only for a PNG output: the same operator on the host
-            from iblbake.study.accuracy import display
-            png = display(sc, f.hdr, None)
-        return Frame(f.hdr, png, f.aovs, f.report)
+        return render_frame.render(_scene(scene), runtime=self.runtime, cache=self.bakes, reuse=self._reuse,
+                                   warn=warn, progress=progress)
 
 
 def _scene(scene):
@@ -460,7 +435,6 @@ class ProbeVolume:
 def bake_probes(scene, device: str | None = None, *, cache=None, warn=None, progress=None) -> ProbeVolume:
     """Bake a scene's irradiance probe volume (its `probes:` section) by tracing paths from every
     probe, and each reflection probe's capture; cached by content in `cache` (as render)."""
-    from iblbake.device.runtime import Runtime
     from iblbake.render import Bakes, probes
     from iblbake.render.frame import scene_context
     from iblbake.render.plan import plan
@@ -473,7 +447,7 @@ def bake_probes(scene, device: str | None = None, *, cache=None, warn=None, prog
     sc.data["effects"]["diffuse"] = "probes"            # what the volume is for: its plan reads the panorama
     if not sc.data["objects"]:
         raise InputError(f"{sc.source}: the scene has no objects; probes light objects (add some)")
-    rt = Runtime(device)
+    rt = _runtime(device)
     bakes = Bakes(cache)
     bakes.runtime = rt
     ctx = scene_context(sc, plan(sc), rt, bakes, warn, progress)
@@ -538,7 +512,6 @@ def accuracy(scene, ladder=None, *, overrides=(), max_side: int = 320, repeats: 
     before_run(study, rungs, reads): called once every rung's scene has validated and before
         anything renders; reads are (what, path) of every file the study reads.
     """
-    from iblbake.device.runtime import Runtime
     from iblbake.render import Bakes
     from iblbake.scene import load as scene_load
     from iblbake.study import accuracy as acc, ladder as ladders
@@ -548,7 +521,7 @@ def accuracy(scene, ladder=None, *, overrides=(), max_side: int = 320, repeats: 
     bounces = "unbounded" if bounces is None else bounces
     settings = acc.Settings(max_side=max_side, repeats=repeats, target_noise=target_noise, max_samples=max_samples,
                             flip=flip, visibility=visibility, bounces=bounces)
-    rt = Runtime(device)
+    rt = _runtime(device)
     study = acc.Study(str(scene), overrides, settings, runtime=rt, bakes=Bakes(cache), warn=warn)
     if given and bounces != 1 and not study.paths:
         why = ("with --no-visibility every object is lit as if alone, so no light passes between them"
@@ -613,9 +586,12 @@ def accuracy(scene, ladder=None, *, overrides=(), max_side: int = 320, repeats: 
 
 
 def __getattr__(name):
-    # the scene class lives with its loader (iblbake.scene.load), which imports the schema and
-    # YAML: loaded when asked for, as everything here
+    # the scene and frame classes live with their loader and renderer (iblbake.scene.load,
+    # iblbake.render.frame), which import the schema, YAML and numpy: loaded when asked for
     if name == "Scene":
         from iblbake.scene.load import Scene
         return Scene
+    if name == "Frame":
+        from iblbake.render.frame import Frame
+        return Frame
     raise AttributeError(f"module 'iblbake.api' has no attribute {name!r}")

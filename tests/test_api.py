@@ -136,3 +136,22 @@ def test_the_band_energy_example_plots_two_panoramas(tmp_path):
     assert float(lines["overcast"].split("%")[0]) < 1e-6
     assert float(lines["sun"].split("%")[0]) > 20
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize("dither", [False, True])
+def test_tonemapped_without_a_png_output_is_the_devices(tmp_path, dither):
+    """A scene that writes no PNG is not tone-mapped on the device: Frame.tonemapped applies the
+    same operator and dither on the host, within one 8-bit step of the device's (float32 there)."""
+    sky = write_exr(tmp_path / "sky.exr", np.linspace(0.05, 3, 16 * 32 * 3).reshape(16, 32, 3))
+    scene = {"camera": {"perspective": {"position": [0, 0, 3], "fov_y": 40}, "resolution": [24, 16]},
+             "environment": {"path": sky}, "materials": {"m": {"base_color": [0.7, 0.6, 0.5]}},
+             "objects": [{"sphere": {"radius": 1}, "material": "m"}],
+             "effects": {"diffuse": "sh", "specular": "off", "tonemap": "hable", "exposure": 0.5},
+             "output": {"dither": dither}}
+    renderer = iblbake.Renderer(cache=tmp_path / "cache", reuse=False)
+    host = renderer.render(iblbake.load_scene(scene))
+    device = renderer.render(iblbake.load_scene(scene, outputs=[str(tmp_path / "f.png")]))
+    assert host.png is None and device.png is not None
+    assert np.array_equal(host.hdr, device.hdr)
+    step = np.abs(host.tonemapped.astype(int) - device.tonemapped.astype(int))
+    assert step.max() <= 1 and (step == 0).mean() > 0.99

@@ -319,8 +319,7 @@ class Study:
 def display(sc, hdr, like) -> np.ndarray:
     """`hdr` tone-mapped as the scene's frames are (its 8-bit PNG values, in the shape of `like`)."""
     from iblbake.core import tonemap
-    fx = sc.data["effects"]
-    png = tonemap.to_u8(tonemap.tonemap(hdr[..., :3], fx["tonemap"], fx["exposure"], fx["output_transfer"], fx["gamma"]))
+    png = tonemap.display_u8(hdr, sc.data["effects"])
     if like is not None and like.shape[-1] == 4:
         png = np.concatenate([png, like[..., 3:]], axis=-1)
     return png
