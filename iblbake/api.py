@@ -33,6 +33,12 @@ def _runtime(device: str | None):
     return _RUNTIMES[key]
 
 
+def _whole(value) -> bool:
+    """A whole number (a numpy integer too), not a bool."""
+    import numbers
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+
+
 def _choice(name: str, value, choices) -> None:
     if value not in choices:
         raise InputError(f"{name} {value!r}: use one of {', '.join(map(str, choices))}")
@@ -228,7 +234,8 @@ def sh(panorama: Panorama, bands: int = 3, window: str | None = None, *, rotate_
     from iblbake.core import sh as core_sh
 
     window = window or "none"
-    if not (isinstance(bands, int) and 1 <= bands <= core_sh.MAX_BANDS):
+    bands = int(bands) if _whole(bands) else bands
+    if not (_whole(bands) and 1 <= bands <= core_sh.MAX_BANDS):
         raise InputError(f"bands {bands!r}: use 1 to {core_sh.MAX_BANDS}")
     _choice("window", window, core_sh.WINDOWS)
     _choice("backend", backend, ("auto", *shbake.BACKENDS))
@@ -298,8 +305,9 @@ def prefilter(panorama: Panorama, size: int | None = None, levels: int | None = 
     _choice("backend", backend, ("opencl", "numpy"))
     for name, v, least in (("size", size, 1), ("levels", levels, 1), ("min_size", min_size, 1),
                            ("samples", samples, 1)):
-        if v is not None and not (isinstance(v, int) and v >= least):
+        if v is not None and not (_whole(v) and v >= least):
             raise InputError(f"{name} {v!r}: give a whole number >= {least}")
+    size, levels, min_size, samples = (None if v is None else int(v) for v in (size, levels, min_size, samples))
     baker = mipsbake.Baker(backend, rt=_runtime(device) if backend == "opencl" else None)
 
     def options(s):
@@ -322,12 +330,12 @@ def dfg(size: int = 128, *, samples: int = 4096, multiscatter: bool = False, bac
     from iblbake.bake import mips as mipsbake
 
     _choice("backend", backend, ("opencl", "numpy"))
-    if not (isinstance(size, int) and 2 <= size <= 4096):
+    if not (_whole(size) and 2 <= size <= 4096):
         raise InputError(f"size {size!r}: use 2 to 4096")
-    if not (isinstance(samples, int) and samples >= 1):
+    if not (_whole(samples) and samples >= 1):
         raise InputError(f"samples {samples!r}: give a whole number >= 1")
     baker = mipsbake.Baker(backend, rt=_runtime(device) if backend == "opencl" else None)
-    return mipsbake.dfg_table(baker, size, samples, multiscatter)
+    return mipsbake.dfg_table(baker, int(size), int(samples), bool(multiscatter))
 
 
 # ------------------------------------------------------------------------------ scenes, frames
