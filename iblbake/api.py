@@ -511,7 +511,9 @@ def accuracy(scene, ladder=None, *, overrides=(), max_side: int = 320, repeats: 
     scene: a scene file (the study loads it at `max_side` with each rung's values).
     ladder: None (the default ladder for the scene and device), 'realtime' (the real-time modes
         as shipped) or a ladder file ({rungs: [AXIS, ...]} in the sweep syntax).
-    bounces: the reference's bounces, 'unbounded' (None: unbounded, the default) or 1 to 64.
+    bounces: the reference's bounces: 'unbounded' or a count (1: the direct light alone). None is
+        unbounded; a value given, other than 1, is warned about where no light passes between
+        the scene's surfaces (the reference is then the direct light).
     target_noise, max_samples: the reference's stopping rule per seed.
     jobs, devices: render the reference seeds in `jobs` worker processes, one device spec each
         in turn (a list), into the cache.
