@@ -32,7 +32,7 @@ from iblbake.core import conventions
 from iblbake.io import images
 from iblbake.core import metrics
 from iblbake.bake import radiance
-from iblbake import render
+from iblbake.render import render
 from iblbake.scene import load as scene  # noqa: E402
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
@@ -47,7 +47,7 @@ def render_sphere(folder: Path, cache: Path, env: str, r: float, effects: dict):
            "effects": {"diffuse": "off", **effects}}
     p = folder / "scene.yaml"
     p.write_text(yaml.safe_dump(doc))
-    return render.render(scene.load(p), cache_root=cache).hdr
+    return render(scene.load(p), cache_root=cache).hdr
 
 
 def renderer_table(envs, roughness, cache: Path):

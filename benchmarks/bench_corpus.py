@@ -95,11 +95,11 @@ def main():
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
 
-    from iblbake import render
+    from iblbake.render import Bakes
     from iblbake.device.runtime import Runtime
 
     rt = Runtime(args.device)
-    bakes = render.Bakes(args.cache)
+    bakes = Bakes(args.cache)
     names = args.scenes.split(",") if args.scenes else None
     paths = [p for p in sorted((ROOT / "examples" / "corpus").glob("*.yaml")) if names is None or p.stem in names]
     results = []

@@ -22,7 +22,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from iblbake import render  # noqa: E402
+from iblbake.render import render  # noqa: E402
 from iblbake.device.runtime import Runtime  # noqa: E402
 from iblbake.render import probes  # noqa: E402
 from iblbake.render.bakes import Bakes  # noqa: E402
@@ -48,8 +48,8 @@ def bake_once(rt, path, extra, root):
 
 def frame_time(rt, bakes, path, values, runs):
     sc = scene.load(path, [*FRAME, *values], [])
-    render.render(sc, runtime=rt, cache=bakes)                 # bakes, builds, the first launch
-    return statistics.median(render.render(sc, runtime=rt, cache=bakes).report["elapsed_s"] for _ in range(runs))
+    render(sc, runtime=rt, cache=bakes)                 # bakes, builds, the first launch
+    return statistics.median(render(sc, runtime=rt, cache=bakes).report["elapsed_s"] for _ in range(runs))
 
 
 def main():

@@ -25,7 +25,7 @@ ROOT = Path(os.environ.get("IBLBAKE_BENCH_SOURCE") or Path(__file__).resolve().p
 sys.path.insert(0, str(ROOT))
 SCENES = Path(__file__).resolve().parents[1] / "examples" / "scenes"    # the same scenes for both sides
 
-from iblbake import render  # noqa: E402
+from iblbake.render import Bakes, render  # noqa: E402
 try:
     import iblbake.scene.load as scene  # noqa: E402
 except ImportError:                           # a baseline from before the layered package
@@ -91,11 +91,11 @@ def main():
             if ROOT == SCENES.parents[1]:
                 raise
             sc = scene.load(SCENES / file, [s for s in sets if not s.startswith(NEWER_KEYS)])
-        first = render.render(sc, device=args.device, cache_root=cache)   # bake + build
+        first = render(sc, device=args.device, cache_root=cache)   # bake + build
         ends, passes = [], {}
         for _ in range(args.runs):
             t0 = time.perf_counter()
-            f = render.render(sc, device=args.device, cache_root=cache)
+            f = render(sc, device=args.device, cache_root=cache)
             ends.append(time.perf_counter() - t0)
             for p in f.report["passes"]:
                 passes.setdefault(p["name"], []).append(p)
@@ -104,11 +104,11 @@ def main():
         reused = []                   # the same frame with one runtime and bake store kept (a sheet's cells)
         if hasattr(render, "Bakes"):
             from iblbake.device.runtime import Runtime
-            rt, bakes = Runtime(args.device), render.Bakes(cache)
-            render.render(sc, runtime=rt, cache=bakes)
+            rt, bakes = Runtime(args.device), Bakes(cache)
+            render(sc, runtime=rt, cache=bakes)
             for _ in range(args.runs):
                 t0 = time.perf_counter()
-                render.render(sc, runtime=rt, cache=bakes)
+                render(sc, runtime=rt, cache=bakes)
                 reused.append(time.perf_counter() - t0)
         med = lambda k: statistics.median(p["seconds"] for p in passes.get(k, [])) if k in passes else 0.0
         # lighting: the reference pass, or shade and the importance pass sampling for it

@@ -32,7 +32,7 @@ EYE, TARGET = [0, 5, 7], [0, 0.9, 0]
 
 
 def iblbake_frames(pano: Path, folder: Path) -> dict:
-    from iblbake import render
+    from iblbake.render import render
     from iblbake.scene import load
 
     out = {}
@@ -50,7 +50,7 @@ def iblbake_frames(pano: Path, folder: Path) -> dict:
                            "reference": {"visibility": visibility, "max_samples": 4096, "target_noise": 0.001}}}
         p = folder / f"{name}.yaml"
         p.write_text(yaml.safe_dump(doc))
-        out[name] = render.render(load.load(p)).hdr
+        out[name] = render(load.load(p)).hdr
     return out
 
 

@@ -278,14 +278,14 @@ def acceptance(mi, tmp: Path, pano: Path, spread: Path, objects, mats, renders: 
     """Mitsuba's acceptance test of one scene: iblbake's `renders` renders of spp samples (seeds 1..)
     against Mitsuba's `path` at ref_spp per pixel centre. {rate, channels, ratio (iblbake's mean
     over Mitsuba's, RGB), deterministic (the share of channels iblbake's estimate does not vary)}."""
-    from iblbake import render
+    from iblbake.render import render
     from iblbake.scene import load
 
     ib = []
     for k in range(renders):
         p = tmp / f"s{k}.yaml"
         p.write_text(yaml.safe_dump(iblbake_doc(pano, objects, mats, spp, 1 + k, "unbounded", tmp / "depth.exr")))
-        f = render.render(load.load(p), runtime=rt, cache=bakes)
+        f = render(load.load(p), runtime=rt, cache=bakes)
         ib.append(f.hdr[..., :3].astype(np.float64))
     ib = np.stack(ib)
     # where iblbake's estimate is deterministic (the same in every render: a mirror's view of the
@@ -295,7 +295,7 @@ def acceptance(mi, tmp: Path, pano: Path, spread: Path, objects, mats, renders: 
     doc = iblbake_doc(spread, objects, mats, 2, 1, "unbounded", tmp / "depth.exr")
     p.write_text(yaml.safe_dump(doc))
     fixed = (ib.var(0) == 0).all(-1, keepdims=True)
-    lookup = np.where(fixed, render.render(load.load(p), runtime=rt, cache=bakes).hdr[..., :3], 0.0)
+    lookup = np.where(fixed, render(load.load(p), runtime=rt, cache=bakes).hdr[..., :3], 0.0)
     scene = mi.load_dict(mitsuba_dict(mi, pano, objects, mats, 1024, 1, 0))
     ref, ref_var = mitsuba_reference(mi, scene, ref_spp, 1)
     # every surface pixel, silhouettes too (both trace the pixel's centre); not the sky, which
@@ -323,7 +323,7 @@ def main():
     args = ap.parse_args()
     import mitsuba as mi
     mi.set_variant(args.variant)
-    from iblbake import render
+    from iblbake.render import Bakes
     from iblbake.device.runtime import Runtime
 
     print("| scene | pixel channels | z-test pass rate | iblbake / Mitsuba (mean) | deterministic channels (lookup range allowed) |")
@@ -331,7 +331,7 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         pano, spread = panorama_pair(tmp)
-        rt, bakes = Runtime(), render.Bakes(tmp / "cache")
+        rt, bakes = Runtime(), Bakes(tmp / "cache")
         for name, (objects, mats) in scenes(tmp).items():
             if (args.only and args.only not in name) or args.no_acceptance:
                 continue
@@ -380,7 +380,7 @@ def speed(args, mi, tmp: Path, pano: Path, rt, bakes):
     """Time to 1% relative RMSE against each renderer's own converged image (another seed), warm,
     the render call only (median of 3 at each sample count), iblbake's reference against Mitsuba's
     `path` with each of its stratified samplers."""
-    from iblbake import render
+    from iblbake.render import render
     from iblbake.scene import load
 
     print(f"\n| scene | renderer | spp to {100 * args.target:g}% | seconds | Msamples/s | iblbake s / this s |")
@@ -396,13 +396,13 @@ def speed(args, mi, tmp: Path, pano: Path, rt, bakes):
             times, f = [], None
             for _ in range(repeats):
                 t0 = time.perf_counter()
-                f = render.render(sc, runtime=rt, cache=bakes)
+                f = render(sc, runtime=rt, cache=bakes)
                 times.append(time.perf_counter() - t0)
             return f.hdr[..., :3].astype(np.float64), statistics.median(times)
 
         conv, _ = ib_at(args.converged, seed=999, repeats=1)
         p.write_text(yaml.safe_dump(iblbake_doc(pano, objects, mats, 2, 1, "unbounded", tmp / "depth.exr")))
-        mask = np.asarray(render.render(load.load(p), runtime=rt, cache=bakes).aovs["depth"]) > 0
+        mask = np.asarray(render(load.load(p), runtime=rt, cache=bakes).aovs["depth"]) > 0
         rows = [("iblbake reference", time_to_error(ib_at, conv, args.converged, mask, args.target))]
         for sampler in ("multijitter", "ldsampler"):
             def mi_at(n, seed=1, sampler=sampler, repeats=3):
@@ -435,7 +435,7 @@ def per_bounce(args, mi, tmp: Path, pano: Path, rt, bakes):
     off: no ray leaves the G-buffer's surfaces), the direct light's two shadow rays per sample
     (bounces 1), then each further bounce (a closest-hit ray, its shading and its environment
     shadow ray). Mitsuba's max_depth counts segments: bounces N is max_depth N + 1."""
-    from iblbake import render
+    from iblbake.render import render
     from iblbake.scene import load
 
     steps = [("shading only (visibility off)", 1, False), ("bounces 1 (direct: + shadow rays)", 1, True),
@@ -454,7 +454,7 @@ def per_bounce(args, mi, tmp: Path, pano: Path, rt, bakes):
             sc = load.load(p)
             times = []
             for k in range(4):
-                f = render.render(sc, runtime=rt, cache=bakes)
+                f = render(sc, runtime=rt, cache=bakes)
                 if k:
                     times.append(sum(q["seconds"] for q in f.report["passes"] if q["name"] == "reference"))
             ib = statistics.median(times)

@@ -28,7 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 SCENES = ROOT / "examples" / "scenes"
 
-from iblbake import render  # noqa: E402
+from iblbake.render import Bakes, render  # noqa: E402
 from iblbake.device.runtime import Runtime  # noqa: E402
 from iblbake.io import images  # noqa: E402
 from iblbake.scene import load as scene  # noqa: E402
@@ -65,7 +65,7 @@ def ao_scene(tmp, doc, radius, side, effects):
 def frame(rt, bakes, sc, runs=1):
     times, fr = [], None
     for _ in range(runs):
-        fr = render.render(sc, runtime=rt, cache=bakes)
+        fr = render(sc, runtime=rt, cache=bakes)
         times.append(sum(p["seconds"] for p in fr.report["passes"] if p["name"] in ("ao", "gtao")))
     return fr, statistics.median(times)
 
@@ -93,7 +93,7 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         images.write_exr(tmp / "white.exr", np.ones((16, 32, 3), np.float32))
-        bakes = render.Bakes(tmp / "cache")
+        bakes = Bakes(tmp / "cache")
         cases = []
         for name, doc, radius in (knot(), grid()):
             open_fr, _ = frame(rt, bakes, ao_scene(tmp, doc, radius, args.side, {"ao": "off"}))

@@ -1,3 +1,48 @@
-"""iblbake: bake image-based lighting data and check what it looks like."""
+"""iblbake: bake image-based lighting data and check what it looks like.
+
+The public API is iblbake.api, re-exported here (docs/api.md): `import iblbake` loads only this
+file and iblbake.errors; the API module and what it calls (numpy, OpenImageIO, pyopencl) load on
+first use of a name, so a build script or the command line pays for what it calls."""
+
+import sys
+import types
+
+from iblbake.errors import DeviceError, Error, InputError, UsageError
 
 __version__ = "0.1.0"
+
+# what follows semantic versioning from 0.1.0: a name removed here is a major version
+__all__ = [
+    "Accuracy", "Chain", "DeviceError", "Error", "Frame", "InputError", "Panorama", "ProbeVolume", "Renderer",
+    "SH", "Scene", "UsageError", "accuracy", "bake_probes", "dfg", "load_panorama", "load_scene", "prefilter",
+    "render", "sh",
+]
+_LAZY = frozenset(__all__) - {"DeviceError", "Error", "InputError", "UsageError"}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        from iblbake import api
+        value = getattr(api, name)
+        globals()[name] = value          # once: later lookups are plain attribute reads
+        return value
+    raise AttributeError(f"module 'iblbake' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | _LAZY)
+
+
+class _Package(types.ModuleType):
+    """The public function iblbake.render shares its name with the subpackage iblbake.render.
+    The import system binds a subpackage on its parent once it loads, which would put the
+    subpackage where the function is; the function keeps the name (code that wants the
+    subpackage imports from it: `from iblbake.render import frame`)."""
+
+    def __setattr__(self, name, value):
+        if name in _LAZY and isinstance(value, types.ModuleType):
+            return
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package

@@ -4,13 +4,14 @@ library never imports click."""
 
 
 class IblbakeError(Exception):
-    """A failure the user can act on."""
+    """A failure the user can act on: its message is one line naming the file, key or value and
+    what to do; exit_code is what the command line exits with."""
 
     exit_code = 1
 
 
 class InputError(IblbakeError):
-    """A bad input file or value."""
+    """A bad input file or value (a panorama, a scene, a mesh, an argument)."""
 
 
 class UsageError(InputError):
@@ -24,3 +25,7 @@ class DeviceError(IblbakeError):
     """No usable OpenCL device, or a kernel that failed to build or run."""
 
     exit_code = 3
+
+
+# the public name (iblbake.Error): every error the library raises for the user is one
+Error = IblbakeError

@@ -58,7 +58,7 @@ def load_image(path, cache):
 
 
 def load_scene(path, cache):
-    from iblbake import render
+    from iblbake.render import render
     from iblbake.scene import load as scene
     sc = scene.load(path)
     # keep every accepted mutation cheap to render: tiny frame, few reference samples
@@ -68,7 +68,7 @@ def load_scene(path, cache):
     fx["samples"] = min(fx["samples"], 64)
     fx["reference"]["max_samples"] = min(fx["reference"]["max_samples"], 32)
     fx["prefilter"]["samples"] = min(fx["prefilter"]["samples"], 64)
-    frame = render.render(sc, cache_root=Path(cache), warn=lambda _: None)
+    frame = render(sc, cache_root=Path(cache), warn=lambda _: None)
     return bool(np.isfinite(frame.hdr).all())   # the PNG is made from it (uint8, always finite)
 
 

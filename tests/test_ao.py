@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import yaml
 
-from iblbake import render
+from iblbake.render import Bakes, Reuse, render
 from iblbake.io import images
 from iblbake.render import twin as rr
 from iblbake.scene import load as scene
@@ -40,9 +40,9 @@ def side_view(folder, env, sphere=None, effects=None, res=33):
 
 def test_open_plane_is_unoccluded(tmp_path, white):
     sc = side_view(tmp_path, white, effects={"ao_samples": 64})
-    with_ao = render.render(sc, cache_root=tmp_path / "cache").hdr
+    with_ao = render(sc, cache_root=tmp_path / "cache").hdr
     sc.data["effects"]["ao"] = "off"
-    without = render.render(sc, cache_root=tmp_path / "cache").hdr
+    without = render(sc, cache_root=tmp_path / "cache").hdr
     hit = without[..., 3] == 1
     assert hit.sum() > 300 and np.array_equal(with_ao[hit], without[hit])
 
@@ -55,9 +55,9 @@ def test_ao_under_a_floating_sphere(tmp_path, white, h_over_r):
     R = 0.5
     sc = side_view(tmp_path, white, sphere={"center": [0, h_over_r * R, 0], "radius": R})
     c = 16
-    with_ball = render.render(sc, cache_root=tmp_path / "cache").hdr[c, c, :3]
+    with_ball = render(sc, cache_root=tmp_path / "cache").hdr[c, c, :3]
     sc.data["objects"] = sc.data["objects"][:1]
-    open_ = render.render(sc, cache_root=tmp_path / "cache").hdr[c, c, :3]
+    open_ = render(sc, cache_root=tmp_path / "cache").hdr[c, c, :3]
     ao = float((with_ball / open_).mean())
     print(f"h = {h_over_r} R: AO {ao:.7f} against {1 - 1 / h_over_r ** 2:.7f}")
     assert ao == pytest.approx(1 - 1 / h_over_r ** 2, rel=1e-3)
@@ -81,7 +81,7 @@ def test_ao_matches_numpy(tmp_path, white):
     p = tmp_path / "scene.yaml"
     p.write_text(yaml.safe_dump(doc))
     sc = scene.load(p)
-    frame = render.render(sc, cache_root=tmp_path / "cache")
+    frame = render(sc, cache_root=tmp_path / "cache")
     arrays = pack.scene_arrays(sc)
     gb = rr.primary(sc["camera"], arrays)
     from iblbake.core import sh
@@ -100,11 +100,11 @@ def test_ao_matches_numpy(tmp_path, white):
 
 def test_ao_gating(tmp_path, white):
     sc = side_view(tmp_path, white, effects={"ao": "off"})
-    fr = render.render(sc, cache_root=tmp_path / "cache")
+    fr = render(sc, cache_root=tmp_path / "cache")
     assert "ao" not in fr.report["effects"]["passes"] and "HAS_AO" not in fr.report["effects"]["defines"]["shade"]
     sc = side_view(tmp_path, white, effects={"diffuse": "reference", "ao_samples": 4,
                                              "reference": {"max_samples": 4, "target_noise": 0}})
-    fr = render.render(sc, cache_root=tmp_path / "cache")
+    fr = render(sc, cache_root=tmp_path / "cache")
     assert "ao" not in fr.report["effects"]["passes"]          # the reference traces true visibility
 
 
@@ -112,12 +112,12 @@ def test_a_series_switching_ao_on_reuses_safely(tmp_path, white):
     """Frames of one series (a sheet's cells: one runtime, Reuse) switching AO and AOVs on grow
     those buffers instead of writing past them: the second frame equals its own fresh render."""
     from iblbake.device.runtime import Runtime
-    rt, bakes, reuse = Runtime(), render.Bakes(tmp_path / "cache"), render.Reuse()
+    rt, bakes, reuse = Runtime(), Bakes(tmp_path / "cache"), Reuse()
     sc_off = side_view(tmp_path, white, effects={"ao": "off"}, res=48)
-    render.render(sc_off, runtime=rt, cache=bakes, reuse=reuse)
+    render(sc_off, runtime=rt, cache=bakes, reuse=reuse)
     sc_on = side_view(tmp_path, white, sphere={"center": [0, 1.0, 0], "radius": 0.5},
                       effects={"ao_samples": 32}, res=48)
     sc_on.data["output"]["albedo"] = str(tmp_path / "a.exr")
-    series = render.render(sc_on, runtime=rt, cache=bakes, reuse=reuse)
-    fresh = render.render(sc_on, cache_root=tmp_path / "cache")
+    series = render(sc_on, runtime=rt, cache=bakes, reuse=reuse)
+    fresh = render(sc_on, cache_root=tmp_path / "cache")
     assert np.array_equal(series.hdr, fresh.hdr) and np.array_equal(series.aovs["albedo"], fresh.aovs["albedo"])

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from iblbake import render
+from iblbake.render import render
 from iblbake.render.bakes import Bakes
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -80,12 +80,12 @@ def test_the_gold_sphere_mirrors_the_floor(tmp_path, runtime, panoramas, panoram
 
     def spec(*extra):
         sc = load.load(path, sets + list(extra))
-        f = render.render(sc, runtime=runtime, cache=bakes)
+        f = render(sc, runtime=runtime, cache=bakes)
         if "effects.ssr=on" in extra:              # its rays read the lit frame: both terms, less the diffuse
-            d = render.render(load.load(path, sets + [e for e in extra if "ssr" not in e] + ["effects.specular=off"]),
+            d = render(load.load(path, sets + [e for e in extra if "ssr" not in e] + ["effects.specular=off"]),
                               runtime=runtime, cache=bakes)
             return f.hdr[..., :3] - d.hdr[..., :3]
-        return render.render(load.load(path, sets + list(extra) + ["effects.diffuse=off"]), runtime=runtime,
+        return render(load.load(path, sets + list(extra) + ["effects.diffuse=off"]), runtime=runtime,
                              cache=bakes).hdr[..., :3]
 
     ref = spec("effects.specular=reference", "effects.reference.max_samples=2048", "effects.reference.target_noise=0")

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import yaml
 
-from iblbake import render
+from iblbake.render import frame, plan, render
 from iblbake.io import images
 from iblbake.render import twin as rr
 from iblbake.scene import load as scene
@@ -40,10 +40,10 @@ def grid_on_plane(folder, env, effects=None, res=(160, 90), spp=1, camera=None):
 
 def ao_of(sc, cache):
     """(AO image, coverage mask): the frame over the same frame without AO."""
-    with_ao = render.render(sc, cache_root=cache).hdr
+    with_ao = render(sc, cache_root=cache).hdr
     ao = sc.data["effects"]["ao"]
     sc.data["effects"]["ao"] = "off"
-    without = render.render(sc, cache_root=cache).hdr
+    without = render(sc, cache_root=cache).hdr
     sc.data["effects"]["ao"] = ao
     mask = without[..., 3] == 1
     return np.where(mask, with_ao[..., 0] / np.where(mask, without[..., 0], 1), 1.0), mask
@@ -63,7 +63,7 @@ def test_gtao_matches_numpy(tmp_path, white, resolution, radius):
     sc.data["materials"]["m"] = {**sc.data["materials"]["w"], "base_color": [0.9, 0.6, 0.3], "metallic": 1,
                                  "roughness": 0.3}
     sc.data["objects"][1]["material"] = "m"
-    frame = render.render(sc, cache_root=tmp_path / "cache")
+    frame = render(sc, cache_root=tmp_path / "cache")
     arrays = pack.scene_arrays(sc)
     gb = rr.primary(sc["camera"], arrays)
     from iblbake.core import sh
@@ -120,9 +120,9 @@ def test_tiled_frame_equals_untiled(tmp_path, white):
     """A frame rendered in tiles traces its depth buffer over the whole frame first: it equals the
     untiled frame bit for bit (2 spp: the untiled search reads each pixel's first sample)."""
     sc = grid_on_plane(tmp_path, white, res=(96, 54), spp=2)
-    whole = render.render(sc, cache_root=tmp_path / "cache")
-    tiled = render.render(sc, cache_root=tmp_path / "cache",
-                          device_budget=render.frame.frame_bytes(sc, render.plan(sc), 12, tiled=True))
+    whole = render(sc, cache_root=tmp_path / "cache")
+    tiled = render(sc, cache_root=tmp_path / "cache",
+                          device_budget=frame.frame_bytes(sc, plan(sc), 12, tiled=True))
     assert whole.report["tiles"] == 1 and tiled.report["tiles"] > 3
     gt = next(p for p in tiled.report["passes"] if p["name"] == "gtao")
     assert gt["depth_prepass"] is True
@@ -142,13 +142,13 @@ def test_multibounce_fit():
 
 def test_gtao_gating(tmp_path, white):
     sc = grid_on_plane(tmp_path, white)
-    fr = render.render(sc, cache_root=tmp_path / "cache")
+    fr = render(sc, cache_root=tmp_path / "cache")
     fx = fr.report["effects"]
     assert "gtao" in fx["passes"] and "ao" not in fx["passes"] and "HAS_AO" in fx["defines"]["shade"]
     assert "AO_MULTIBOUNCE" not in fx["defines"]["shade"]
     sc = grid_on_plane(tmp_path, white, {"diffuse": "reference", "reference": {"max_samples": 4, "target_noise": 0}})
-    fr = render.render(sc, cache_root=tmp_path / "cache")
+    fr = render(sc, cache_root=tmp_path / "cache")
     assert "gtao" not in fr.report["effects"]["passes"]          # the reference traces true visibility
     sc = grid_on_plane(tmp_path, white, {"ao": "off"})
-    fr = render.render(sc, cache_root=tmp_path / "cache")
+    fr = render(sc, cache_root=tmp_path / "cache")
     assert "gtao" not in fr.report["effects"]["passes"] and "HAS_AO" not in fr.report["effects"]["defines"]["shade"]

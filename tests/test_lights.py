@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from iblbake.core.metrics import luminance
-from iblbake import render
+from iblbake.render import render
 from iblbake.io import images
 from iblbake.render import twin as rr
 from iblbake.scene import load as scene
@@ -59,7 +59,7 @@ def test_directional_light_cosine_law(tmp_path, black_env):
         t = math.radians(theta)
         sc = top_view_scene(tmp_path, black_env, [{"directional": {
             "direction": [math.sin(t), -math.cos(t), 0.0], "illuminance": 2.5}, "shadows": "none"}])
-        hdr = render.render(sc, cache_root=tmp_path / "cache").hdr
+        hdr = render(sc, cache_root=tmp_path / "cache").hdr
         want = lambert(2.5 * math.cos(t))
         assert np.abs(hdr[..., :3] / want - 1).max() < 1e-4, theta
 
@@ -70,7 +70,7 @@ def test_point_light_inverse_square_and_range(tmp_path, black_env):
         sc = top_view_scene(tmp_path, black_env, [{"point": {"position": [0.3, h, -0.2], "intensity": 4.0,
                                                              **({"range": rng} if rng else {})},
                                                    "shadows": "none"}])
-        hdr = render.render(sc, cache_root=tmp_path / "cache").hdr[..., 0]
+        hdr = render(sc, cache_root=tmp_path / "cache").hdr[..., 0]
         x, z = plane_points()
         d2 = (x - 0.3) ** 2 + h * h + (z + 0.2) ** 2
         d = np.sqrt(d2)
@@ -90,7 +90,7 @@ def test_spot_cone_edges(tmp_path, black_env):
     sc = top_view_scene(tmp_path, black_env, [{"spot": {"position": [0, h, 0], "direction": [0, -1, 0],
                                                         "intensity": 3.0, "inner_cone_angle": inner,
                                                         "outer_cone_angle": outer}, "shadows": "none"}])
-    hdr = render.render(sc, cache_root=tmp_path / "cache").hdr[..., 0]
+    hdr = render(sc, cache_root=tmp_path / "cache").hdr[..., 0]
     x, z = plane_points()
     d2 = x * x + h * h + z * z
     cos_axis = h / np.sqrt(d2)
@@ -120,7 +120,7 @@ def test_hard_shadow_of_a_sphere_is_the_analytic_ellipse(tmp_path, black_env):
                             objects=[{"sphere": {"center": c, "radius": R}, "material": "ball"}], res=res)
         # look past the sphere: see the plane only (the ball lit or not is not the shadow)
         sc.data["objects"][1]["material"] = "floor"
-        hdr = render.render(sc, cache_root=tmp_path / "cache").hdr[..., 0]
+        hdr = render(sc, cache_root=tmp_path / "cache").hdr[..., 0]
         lit = lambert(math.cos(t))
         x, z = plane_points(res)
         on_ball = x * x + z * z < R * R                   # the ball hides the plane there, seen from above
@@ -143,7 +143,7 @@ def test_soft_penumbra_widens_with_the_light(tmp_path, black_env):
                                                                    "angular_diameter": diameter},
                                                    "shadows": "soft", "shadow_samples": 64}],
                             objects=[{"sphere": {"center": [0, 1.5, 0], "radius": 0.5}, "material": "floor"}])
-        hdr = render.render(sc, cache_root=tmp_path / "cache").hdr[..., 0]
+        hdr = render(sc, cache_root=tmp_path / "cache").hdr[..., 0]
         lit = lambert(1 / math.sqrt(1.09))
         x, z = plane_points()
         visible = x * x + z * z > 0.55 ** 2
@@ -159,7 +159,7 @@ def test_exact_disk_integral_facing_the_light(tmp_path, black_env):
                                                                "angular_diameter": 10.0}}],
                         effects={"diffuse": "reference", "specular": "off",
                                  "reference": {"max_samples": 256, "target_noise": 0.0}})
-    fr = render.render(sc, cache_root=tmp_path / "cache")
+    fr = render(sc, cache_root=tmp_path / "cache")
     assert "LIGHTS_EXACT" in next(b["defines"] for b in fr.report["kernel_builds"] if "lights.cl" in b["kernel"])
     print("exact disk: worst relative error", np.abs(fr.hdr[..., :3] / lambert(2.0) - 1).max())
     assert np.abs(fr.hdr[..., :3] / lambert(2.0) - 1).max() < 1e-4
@@ -204,7 +204,7 @@ def test_lights_match_numpy(busy, effects):
     p = d / "scene.yaml"
     p.write_text(yaml.safe_dump(doc))
     sc = scene.load(p)
-    frame = render.render(sc, cache_root=d / "cache")
+    frame = render(sc, cache_root=d / "cache")
     arrays = pack.scene_arrays(sc)
     gb = rr.primary(sc["camera"], arrays)
     from iblbake.render.passes.lights import exact
@@ -224,18 +224,18 @@ def test_gating(tmp_path, black_env):
     """No lights: no lights pass and no light code. Lights without shadows: no shadow ray and
     no tracing code in the pass."""
     sc = top_view_scene(tmp_path, black_env, [])
-    fr = render.render(sc, cache_root=tmp_path / "cache")
+    fr = render(sc, cache_root=tmp_path / "cache")
     assert "lights" not in fr.report["effects"]["passes"]
     assert not any("lights.cl" in b["kernel"] for b in fr.report["kernel_builds"])
     sc = top_view_scene(tmp_path, black_env, [{"point": {"position": [0, 1, 0]}, "shadows": "none"}])
-    fr = render.render(sc, cache_root=tmp_path / "cache")
+    fr = render(sc, cache_root=tmp_path / "cache")
     lp = next(p for p in fr.report["passes"] if p["name"] == "lights")
     assert lp["shadow_rays_per_sample"] == 0
     assert "HAS_SHADOWS" not in fr.report["effects"]["defines"]["lights"]
     sc = top_view_scene(tmp_path, black_env, [{"point": {"position": [0, 1, 0]}, "shadows": "hard"},
                                               {"directional": {"angular_diameter": 2}, "shadows": "soft",
                                                "shadow_samples": 9}])
-    fr = render.render(sc, cache_root=tmp_path / "cache")
+    fr = render(sc, cache_root=tmp_path / "cache")
     assert next(p for p in fr.report["passes"] if p["name"] == "lights")["shadow_rays_per_sample"] == 10
 
 
@@ -296,7 +296,7 @@ def test_extracted_sun_casts_a_shadow(tmp_path, panoramas):
                             objects=[{"sphere": {"center": [0, 0.8, 0], "radius": 0.4}, "material": "floor"}]
                             if with_ball else None)
         sc.data["environment"]["sun"] = "extract"
-        fr = render.render(sc, cache_root=tmp_path / "cache")
+        fr = render(sc, cache_root=tmp_path / "cache")
         results[with_ball] = fr
     lp = next(p for p in results[True].report["passes"] if p["name"] == "lights")
     d = np.array(lp["sun"]["light_direction_world"])           # the way the sunlight travels
@@ -328,7 +328,7 @@ def test_sphere_light_highlight_at_its_representative_point(tmp_path, black_env,
     p = tmp_path / "scene.yaml"
     p.write_text(yaml.safe_dump(doc))
     sc = scene.load(p)
-    got = render.render(sc, cache_root=tmp_path / "cache").hdr[..., 0].reshape(-1)
+    got = render(sc, cache_root=tmp_path / "cache").hdr[..., 0].reshape(-1)
     arrays = pack.scene_arrays(sc)
     gb = rr.primary(sc["camera"], arrays)
     records = pack.light_records(sc["lights"])

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from iblbake import render
+from iblbake.render import render
 from iblbake.io import images
 from tests.conftest import load_scene
 
@@ -52,14 +52,14 @@ def test_white_furnace_converges_to_one(tmp_path, white):
     not bias); the direct light alone (bounces 1) misses what the sphere and the floor send each
     other: 10% or more at the contact."""
     sc = furnace(tmp_path, white, "unbounded", 1024)
-    f = render.render(sc, cache_root=tmp_path / "cache")
+    f = render(sc, cache_root=tmp_path / "cache")
     hit = f.hdr[..., 3] > 0.999
     got = f.hdr[..., :3][hit]
     print(f"furnace: mean {got.mean():.5f}, worst {np.abs(got - 1).max():.4f} over {hit.sum()} px")
     assert abs(got.mean() - 1) < 3e-3 and np.abs(got - 1).max() < 0.07
     ref = next(p for p in f.report["passes"] if p["name"] == "reference")
     assert ref["bounces"] == "unbounded" and "BOUNCES" in f.report["effects"]["defines"]["reference"]
-    direct = render.render(furnace(tmp_path, white, 1, 256), cache_root=tmp_path / "cache").hdr[..., :3][hit]
+    direct = render(furnace(tmp_path, white, 1, 256), cache_root=tmp_path / "cache").hdr[..., :3][hit]
     print(f"direct only: mean {direct.mean():.4f}, min {direct.min():.4f}")
     assert direct.min() < 0.9 and direct.mean() < got.mean() - 0.02
 
@@ -82,7 +82,7 @@ def test_enclosure_is_emission_over_one_minus_albedo(tmp_path, black, bounces):
     before Russian roulette starts (bounce 3): every path's estimate is the sum itself; from there
     on, and unbounded (E / (1 - a)), roulette's noise: mean within 0.5%, measured 0.16%."""
     a, e = 0.5, np.array([1.0, 0.5, 0.25])
-    f = render.render(enclosure(tmp_path, black, a, e.tolist(), bounces), cache_root=tmp_path / "cache")
+    f = render(enclosure(tmp_path, black, a, e.tolist(), bounces), cache_root=tmp_path / "cache")
     got = f.hdr[..., :3].reshape(-1, 3)
     # bounces 1 is the environment's direct light only: the walls' light reaches nothing
     want = e / (1 - a) if bounces == "unbounded" else e * sum(a ** j for j in range(bounces + 1 if bounces > 1 else 1))
@@ -108,7 +108,7 @@ def test_no_path_where_light_cannot_pass(tmp_path, white):
                                                                                      "bounces": "unbounded"}}})
     inside = write(tmp_path, "inside", {**base, "objects": [{"sphere": {"radius": 5}, "material": "m"}]})
     for sc, paths in ((lone, False), (unseen, False), (inside, True)):
-        f = render.render(sc, cache_root=tmp_path / "cache")
+        f = render(sc, cache_root=tmp_path / "cache")
         assert ("BOUNCES" in f.report["effects"]["defines"]["reference"]) == paths, sc.source
 
 
@@ -123,7 +123,7 @@ def test_point_light_in_an_enclosure(tmp_path, black, bounces):
     sc = enclosure(tmp_path, black, a, [0, 0, 0], bounces, samples=512)
     sc.data["lights"] = [{"point": {"position": [0, 0, 0], "color": [1, 1, 1], "intensity": intensity,
                                     "radius": 0.0, "range": None}, "shadows": "hard", "shadow_samples": 16}]
-    f = render.render(sc, cache_root=tmp_path / "cache")
+    f = render(sc, cache_root=tmp_path / "cache")
     assert "PATH_LIGHTS" in f.report["effects"]["defines"]["reference"]
     direct = a * intensity / radius ** 2 / np.pi
     got = f.hdr[..., :3].reshape(-1, 3)
@@ -158,7 +158,7 @@ def test_shadow_rays_lose_no_light_on_a_lone_sphere(tmp_path):
             "objects": [{"sphere": {"center": [0, 0, 0], "radius": 0.6}, "material": "m"}],
             "effects": {"diffuse": "reference", "specular": "reference",
                         "reference": {"max_samples": 64, "target_noise": 0, "visibility": visibility}}})
-        frames.append(render.render(sc, cache_root=tmp_path / "cache").hdr[..., :3])
+        frames.append(render(sc, cache_root=tmp_path / "cache").hdr[..., :3])
     hit = frames[1].sum(-1) > 0
     rel = np.abs(frames[0][hit] / frames[1][hit] - 1)
     assert hit.sum() > 1000 and rel.max() < 1e-6, rel.max()
@@ -193,7 +193,7 @@ def test_kernel_traces_the_twins_paths(tmp_path):
                     {"plane": {"point": [0, 0, 0], "size": 5}, "material": "floor"}],
         "effects": {"diffuse": "reference", "specular": "reference",
                     "reference": {"max_samples": 32, "target_noise": 0, "batch": 16, "bounces": "unbounded"}}})
-    got = render.render(sc, cache_root=tmp_path / "cache").hdr[..., :3].reshape(-1, 3)
+    got = render(sc, cache_root=tmp_path / "cache").hdr[..., :3].reshape(-1, 3)
     arrays = pack.scene_arrays(sc)
     gb = rr.primary(sc["camera"], arrays)
     want = paths.radiance(gb, arrays, sc["effects"], sc["environment"], img, sampling.EnvironmentDistribution(img), 32)
@@ -211,9 +211,9 @@ def test_sample_slices_keep_the_frame(tmp_path, white, monkeypatch):
     max relative difference 3.6e-7), with the odd sums and the sample count alike."""
     from iblbake.render.passes import reference as ref_pass
     sc = furnace(tmp_path, white, "unbounded", 64)
-    one = render.render(sc, cache_root=tmp_path / "cache")
+    one = render(sc, cache_root=tmp_path / "cache")
     monkeypatch.setattr(ref_pass, "sample_slices", lambda rt, n, batch: 5)
-    five = render.render(sc, cache_root=tmp_path / "cache")
+    five = render(sc, cache_root=tmp_path / "cache")
     a, b = one.hdr[..., :3], five.hdr[..., :3]
     hit = one.hdr[..., 3] > 0
     rel = np.abs(a[hit] - b[hit]) / np.maximum(a[hit], 1e-6)
@@ -258,7 +258,7 @@ def test_textured_glb_through_paths(tmp_path, white):
                         {"plane": {"point": [0, 0, 0], "size": 4}, "material": "floor"}],
             "effects": {"diffuse": "reference", "specular": "reference",
                         "reference": {"max_samples": 16, "target_noise": 0, "bounces": bounces}}})
-        f = render.render(sc, cache_root=tmp_path / "cache")
+        f = render(sc, cache_root=tmp_path / "cache")
         frames[bounces] = f.hdr[..., :3]
         assert np.isfinite(f.hdr).all()
     defines = f.report["effects"]["defines"]["reference"]
@@ -288,12 +288,12 @@ def test_glossy_interreflection_passes_mitsubas_acceptance_test(tmp_path):
     mi.set_variant("llvm_ad_rgb")
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
     import mitsuba_paths as mp
-    from iblbake import render
+    from iblbake.render import Bakes
     from iblbake.device.runtime import Runtime
 
     pano, spread = mp.panorama_pair(tmp_path)
     objects, mats = mp.scenes(tmp_path)["glossy box"]
     res = mp.acceptance(mi, tmp_path, pano, spread, objects, mats, 6, 128, 4096, Runtime(),
-                        render.Bakes(tmp_path / "cache"))
+                        Bakes(tmp_path / "cache"))
     assert res["rate"] >= 0.9975, res
     assert np.abs(res["ratio"] - 1).max() < 0.01, res

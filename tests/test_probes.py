@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import yaml
 
-from iblbake import render
+from iblbake.render import Reuse, plan, render
 from iblbake.core import sh
 from iblbake.errors import IblbakeError, InputError
 from iblbake.io import images
@@ -207,7 +207,7 @@ def test_uniform_sky_probes_are_the_environment_sh(tmp_path, rt, sky, rep):
     direction (SH: the closed form 0.75 pi sqrt(4 pi) in Y00, 0 elsewhere; both to float32), and a
     Lambert sphere shaded from them equals `diffuse: sh` to float32 rounding."""
     bakes = Bakes(tmp_path / "cache")
-    frame = render.render(far_sphere_scene(tmp_path, sky, rep), runtime=rt, cache=bakes)
+    frame = render(far_sphere_scene(tmp_path, sky, rep), runtime=rt, cache=bakes)
     vol = bakes._memo[next(k for k in bakes._memo if isinstance(k, str) and k.startswith("probes-"))][0]
     assert frame.report["bakes"][-1]["name"] == "probes"
     if rep == "sh":
@@ -220,8 +220,8 @@ def test_uniform_sky_probes_are_the_environment_sh(tmp_path, rt, sky, rep):
         assert vol["irradiance"].shape == ((n + 2) * 2, (n + 2) * 4, 3)
     doc = json.loads(run_cli("sh", sky, "--json", "-q").stdout)
     assert abs(doc["irradiance"][0][0] - 0.75 * math.pi * math.sqrt(4 * math.pi)) < 1e-5
-    with_sh = render.render(sphere_scene(tmp_path, sky, "sh"), runtime=rt, cache_root=tmp_path / "cache")
-    with_probes = render.render(sphere_scene(tmp_path, sky, "probes", rep), runtime=rt,
+    with_sh = render(sphere_scene(tmp_path, sky, "sh"), runtime=rt, cache_root=tmp_path / "cache")
+    with_probes = render(sphere_scene(tmp_path, sky, "probes", rep), runtime=rt,
                                 cache=Given(tmp_path / "cache", vol))
     hit = with_sh.hdr[..., 3] > 0.999
     a, b = with_sh.hdr[hit][:, :3], with_probes.hdr[hit][:, :3]
@@ -267,9 +267,9 @@ def test_visibility_stops_light_leaking_through_a_thin_wall(tmp_path, rt, sky):
     Chebyshev's bound through."""
     cache = Bakes(tmp_path / "cache")
     lit = lambda f: f.hdr[..., :3][f.hdr[..., 3] > 0.999].mean()      # noqa: E731
-    without = lit(render.render(rooms(tmp_path, sky, False), runtime=rt, cache=cache))
-    with_vis = lit(render.render(rooms(tmp_path, sky, True), runtime=rt, cache=cache))
-    ref = lit(render.render(rooms(tmp_path, sky, True, "reference"), runtime=rt, cache=cache))
+    without = lit(render(rooms(tmp_path, sky, False), runtime=rt, cache=cache))
+    with_vis = lit(render(rooms(tmp_path, sky, True), runtime=rt, cache=cache))
+    ref = lit(render(rooms(tmp_path, sky, True, "reference"), runtime=rt, cache=cache))
     assert ref == 0.0
     assert without > 0.1
     assert with_vis <= 0.06 * without
@@ -277,9 +277,9 @@ def test_visibility_stops_light_leaking_through_a_thin_wall(tmp_path, rt, sky):
 
 def test_probes_are_baked_and_compiled_only_where_asked(tmp_path, sky):
     sc = sphere_scene(tmp_path, sky, "sh")
-    pl = render.plan(sc)
+    pl = plan(sc)
     assert "probes" not in pl.bakes and "PROBE_VISIBILITY" not in pl.defines["shade"]
-    pl = render.plan(sphere_scene(tmp_path, sky, "probes", "sh"))
+    pl = plan(sphere_scene(tmp_path, sky, "probes", "sh"))
     assert pl.bakes == ["sh", "probes"]              # the SH: outside the probes' volume
     assert pl.defines["shade"]["DIFFUSE_MODE"] == 3 and pl.defines["shade"]["PROBES_SH"] == 1
     assert pl.defines["shade"]["PROBE_VISIBILITY"] == 1 and pl.defines["shade"]["PROBE_CLASSIFICATION"] == 1
@@ -297,7 +297,7 @@ def test_relocation_and_classification(tmp_path, rt, sky):
         "probes": {"min": [-2, -2, -2], "max": [6, 2, 2], "counts": [5, 3, 3], "rays": 128},
         "effects": {"diffuse": "probes", "specular": "off"}})
     bakes = Bakes(tmp_path / "cache")
-    render.render(sc, runtime=rt, cache=bakes)
+    render(sc, runtime=rt, cache=bakes)
     vol = next(v[0] for k, v in bakes._memo.items() if isinstance(k, str) and k.startswith("probes-"))
     centre = twin.probe_index(np.array([1, 1, 1]), (5, 3, 3))
     off = vol["data"][centre, :3]
@@ -441,7 +441,7 @@ def test_frame_matches_the_twin(tmp_path, rt, sky):
                      "resolution": [32, 24]}
     sc = write(tmp_path, "rooms_outside", doc)
     bakes = Bakes(tmp_path / "cache")
-    frame = render.render(sc, runtime=rt, cache=bakes)
+    frame = render(sc, runtime=rt, cache=bakes)
     vol = next(v[0] for k, v in bakes._memo.items() if isinstance(k, str) and k.startswith("probes-"))
     arrays = pack.scene_arrays(sc)
     gb = rr.primary(sc["camera"], arrays)
@@ -478,7 +478,7 @@ def test_probe_rays_in_a_glowing_box(tmp_path, rt, bounces):
                    "relocation": False, "classification": False},
         "effects": {"diffuse": "probes", "specular": "off"}})
     bakes = Bakes(tmp_path / "cache")
-    render.render(sc, runtime=rt, cache=bakes)
+    render(sc, runtime=rt, cache=bakes)
     vol = next(v[0] for k, v in bakes._memo.items() if isinstance(k, str) and k.startswith("probes-"))
     n = vol["irradiance_texels"]
     tiles = vol["irradiance"].reshape(2, n + 2, 4, n + 2, 3)[:, 1:-1, :, 1:-1]
@@ -513,17 +513,17 @@ def test_bad_probe_settings_are_one_line_errors(tmp_path, sky):
 
 
 def test_a_series_reruns_the_shade_pass_when_only_the_probes_change(tmp_path, rt, sky):
-    """A sheet's cells reuse unchanged passes (render.Reuse): a cell that changes only the probes'
+    """A sheet's cells reuse unchanged passes (Reuse): a cell that changes only the probes'
     bake (counts) or their sampling (a bias: no define changes) shades again (before probes were
     a lighting input, both were reused)."""
-    reuse = render.Reuse()
+    reuse = Reuse()
     bakes = Bakes(tmp_path / "cache")
     doc = yaml.safe_load(Path(rooms(tmp_path, sky, True).source).read_text())
     frames = []
     for i, keys in enumerate(({}, {"counts": 4}, {"counts": 4, "normal_bias": 0.4})):
         d = json.loads(json.dumps(doc))
         d["probes"].update(keys)
-        f = render.render(write(tmp_path, f"series{i}", d), runtime=rt, cache=bakes, reuse=reuse)
+        f = render(write(tmp_path, f"series{i}", d), runtime=rt, cache=bakes, reuse=reuse)
         assert "shade" not in f.report["reused"], keys
         frames.append(f.hdr)
     assert np.abs(frames[0] - frames[1]).max() > 1e-3 and np.abs(frames[0] - frames[2]).max() > 1e-3
@@ -541,7 +541,7 @@ def test_probes_under_a_lobed_sky_point_where_the_sky_is(tmp_path, rt, lobed_sky
     sc = far_sphere_scene(tmp_path, lobed_sky, rep)
     sc.data["probes"]["rays"] = 1024
     bakes = Bakes(tmp_path / "cache")
-    render.render(sc, runtime=rt, cache=bakes)
+    render(sc, runtime=rt, cache=bakes)
     vol = bakes._memo[next(k for k in bakes._memo if isinstance(k, str) and k.startswith("probes-"))][0]
     img = images.read_exr(lobed_sky)[..., :3].astype(np.float64)
     h, w = img.shape[:2]

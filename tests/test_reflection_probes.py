@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import yaml
 
-from iblbake import render
+from iblbake.render import plan, render
 from iblbake.io import images
 from iblbake.render.bakes import Bakes
 from iblbake.scene import pack
@@ -48,12 +48,12 @@ def test_a_capture_of_the_open_sky_leaves_it_to_the_distant_chain(tmp_path, rt, 
     is the distant chain's, read along the reflected ray); with or without parallax, a box or a
     sphere proxy, the probe then shades the plate exactly as `prefiltered` does (measured 0)."""
     bakes = Bakes(tmp_path / "cache")
-    distant = render.render(window(tmp_path, sky, [], "plain"), runtime=rt, cache=bakes)
+    distant = render(window(tmp_path, sky, [], "plain"), runtime=rt, cache=bakes)
     hit = distant.hdr[..., 3] > 0.999
     for shape, parallax in (("box", False), ("box", True), ("sphere", True)):
         probe = {"position": [0, 0, -1], "size": 32, "samples": 1, "parallax": parallax, "shape": shape,
                  **({"min": [-2, -2, -2], "max": [2, 2, 2]} if shape == "box" else {"radius": 3})}
-        with_probe = render.render(window(tmp_path, sky, [probe], f"w{shape}{parallax}"), runtime=rt, cache=bakes)
+        with_probe = render(window(tmp_path, sky, [probe], f"w{shape}{parallax}"), runtime=rt, cache=bakes)
         for image, _cached in captures(bakes):
             assert image.shape == (32, 64, 4) and not image.any()
         a, b = with_probe.hdr[hit][:, :3], distant.hdr[hit][:, :3]
@@ -75,7 +75,7 @@ def test_a_probe_inside_a_sphere_sees_it_all_around(tmp_path, rt, sky):
         "reflection_probes": [{"shape": "sphere", "position": [0, 1, 0], "radius": 2.9, "size": 16, "samples": 2}],
         "effects": {"diffuse": "off", "specular": "prefiltered"}})
     bakes = Bakes(tmp_path / "cache")
-    render.render(sc, runtime=rt, cache=bakes)
+    render(sc, runtime=rt, cache=bakes)
     (image, _cached), = captures(bakes)
     assert (image[..., 3] == 1).all()
     ratio = image[..., :3] / [0.5, 1.0, 2.0]
@@ -128,7 +128,7 @@ def test_parallax_puts_a_wall_mark_where_the_mirror_shows_it(tmp_path, rt):
     spots = {}
     for parallax in (True, False):
         sc = room(tmp_path, parallax, f"room_{parallax}")
-        f = render.render(sc, runtime=rt, cache_root=tmp_path / "cache")
+        f = render(sc, runtime=rt, cache_root=tmp_path / "cache")
         floor = f.aovs["normal"][..., 1] > 0.99
         lum = f.hdr[..., :3].mean(-1) * floor
         ys, xs = np.nonzero(lum > 0.25 * lum.max())
@@ -153,7 +153,7 @@ def test_frame_matches_the_twin(tmp_path, rt):
     doc["output"] = {}
     sc = write(tmp_path, "room_twin2", doc)
     bakes = Bakes(tmp_path / "cache")
-    frame = render.render(sc, runtime=rt, cache=bakes)
+    frame = render(sc, runtime=rt, cache=bakes)
     env_sha = bakes.environment(sc.data["environment"])[1].sha256
     distant = next(v[0] for k, v in bakes._memo.items() if isinstance(k, tuple) and k[0] == "prefiltered"
                    and k[1] == env_sha)
@@ -169,7 +169,7 @@ def test_frame_matches_the_twin(tmp_path, rt):
 
 def test_reflection_probes_run_only_where_the_split_sum_reads_them(tmp_path, sky):
     probe = {"position": [0, 0, -1], "min": [-2, -2, -2], "max": [2, 2, 2]}
-    pl = render.plan(window(tmp_path, sky, [probe]))
+    pl = plan(window(tmp_path, sky, [probe]))
     assert "reflection_probes" in pl.bakes and pl.defines["shade"]["HAS_REFLECTION_PROBES"] == 1
     off = yaml.safe_load(Path(window(tmp_path, sky, [probe]).source).read_text())
     off["effects"]["reflection_probes"] = False
@@ -177,7 +177,7 @@ def test_reflection_probes_run_only_where_the_split_sum_reads_them(tmp_path, sky
                      ("importance", write(tmp_path, "imp", {**yaml.safe_load(Path(window(tmp_path, sky, [probe]).source)
                                                                               .read_text()),
                                                            "effects": {"diffuse": "off", "specular": "importance"}}))):
-        pl = render.plan(sc)
+        pl = plan(sc)
         assert "reflection_probes" not in pl.bakes and "HAS_REFLECTION_PROBES" not in pl.defines.get("shade", {}), name
     from iblbake.render.plan import effect_modes
     from iblbake.study import ladder
@@ -277,7 +277,7 @@ def test_a_capture_shows_each_wall_where_it_is(tmp_path, rt, how):
         sc.data["objects"][-1]["reflection_captures"] = False
     warned = []
     bakes = Bakes(tmp_path / "cache")
-    render.render(sc, runtime=rt, cache=bakes, warn=warned.append)
+    render(sc, runtime=rt, cache=bakes, warn=warned.append)
     (image, _cached), = captures(bakes)
     assert not [w for w in warned if "inside" in w]
     size = 16
@@ -295,6 +295,6 @@ def test_a_probe_inside_an_object_says_so(tmp_path, rt):
     """The same probe without the exclude list captures the sphere's inside all around: render
     says in one line that its position lies inside the named object and how to fix it."""
     warned = []
-    render.render(glowing_room(tmp_path, "inside"), runtime=rt, cache_root=tmp_path / "cache", warn=warned.append)
+    render(glowing_room(tmp_path, "inside"), runtime=rt, cache_root=tmp_path / "cache", warn=warned.append)
     said = [w for w in warned if "lies inside" in w]
     assert len(said) == 1 and "'ball' (objects.6)" in said[0] and "exclude" in said[0] and "\n" not in said[0]

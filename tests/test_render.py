@@ -13,7 +13,7 @@ from iblbake.io import images
 from iblbake.bake import dfg
 from iblbake.core import metrics
 from iblbake.bake import radiance
-from iblbake import render
+from iblbake.render import render
 from iblbake.scene import pack
 from iblbake.render import twin as rr
 from iblbake.scene import load as scene
@@ -32,7 +32,7 @@ def make_scene(folder, env_path, materials, *, objects=None, res=64, effects=Non
 
 def render_scene(path, cache, overrides=()):
     sc = scene.load(path, overrides)
-    return sc, render.render(sc, cache_root=cache)
+    return sc, render(sc, cache_root=cache)
 
 
 def sphere_pixels(sc):
@@ -201,7 +201,7 @@ def test_gbuffer_matches_numpy(tmp_path, small_panoramas, mesh_file, rt, project
                    effects={"diffuse": "off", "specular": "off"})
     sc = scene.load(p, (), )
     sc.data["output"]["normal"] = str(tmp_path / "n.exr")   # ask for AOVs
-    frame = render.render(sc, cache_root=tmp_path / "cache")
+    frame = render(sc, cache_root=tmp_path / "cache")
     gb = rr.primary(sc["camera"], pack.scene_arrays(sc))
     cover = gb["hit"].reshape(-1, 2).mean(1).reshape(48, 64)
     # coverage agrees except where a float32 and a float64 ray disagree on an edge
@@ -236,7 +236,7 @@ def test_shade_matches_numpy(tmp_path, small_panoramas, mesh_file, effects):
 
     p = busy_scene(tmp_path, small_panoramas["city"], mesh_file, effects=effects)
     sc = scene.load(p)
-    frame = render.render(sc, cache_root=tmp_path / "cache")
+    frame = render(sc, cache_root=tmp_path / "cache")
     arrays = pack.scene_arrays(sc)
     gb = rr.primary(sc["camera"], arrays)
     image = images.read_panorama(sc["environment"]["path"])[0]

@@ -190,21 +190,21 @@ def test_the_study_says_what_it_changed(tmp_path, floor_scene):
 def test_an_ssr_rungs_thumbnail_is_the_specular_term(tmp_path, floor_scene, rt):
     """errors.png showed an SSR rung's whole frame (the PNG of both terms) beside the error map of
     the specular term that was measured."""
-    from iblbake import render
+    from iblbake.render import Bakes, render
     from iblbake.core import tonemap
     from iblbake.study import accuracy as acc
     from iblbake.study.ladder import Rung
 
     floor_scene.write_text(floor_scene.read_text().replace("specular: 'off'", "specular: prefiltered"))
     study = acc.Study(floor_scene, [], acc.Settings(max_side=12, repeats=1, max_samples=8, flip=False),
-                      runtime=rt, bakes=render.Bakes(tmp_path / "cache"))
+                      runtime=rt, bakes=Bakes(tmp_path / "cache"))
     study.render_reference("specular")
     rung = Rung("specular", "prefiltered + ssr", [("effects.specular", "prefiltered"), ("effects.ssr", "on")])
     study.run_rung(rung)
     fx = study.scene.data["effects"]
     term = tonemap.to_u8(tonemap.tonemap(rung.frame.hdr[..., :3], fx["tonemap"], fx["exposure"],
                                          fx["output_transfer"], fx["gamma"]))
-    both = render.render(study.load(study.rung_values(rung)), runtime=rt, cache=study.bakes).png
+    both = render(study.load(study.rung_values(rung)), runtime=rt, cache=study.bakes).png
     assert np.array_equal(rung.frame.png[..., :3], term)
     assert np.abs(both[..., :3].astype(int) - term.astype(int)).max() > 10     # the diffuse term is not in it
 

@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from iblbake import render
+from iblbake.render import plan, render
 from iblbake.io import images
 from iblbake.render import probes
 from iblbake.render.bakes import Bakes
@@ -145,7 +145,7 @@ def test_a_box_of_quads_lights_its_sphere_whichever_way_they_are_wound(tmp_path,
     vols, frames, warned = [], [], []     # out of the box, into it
     for inward in (False, True):
         bakes = Bakes(tmp_path / "cache")
-        frames.append(render.render(open_box(tmp_path, lobed_sky, inward), runtime=rt, cache=bakes,
+        frames.append(render(open_box(tmp_path, lobed_sky, inward), runtime=rt, cache=bakes,
                                     warn=warned.append))
         vols.append(baked(bakes))
     a, b = vols
@@ -158,9 +158,9 @@ def test_a_box_of_quads_lights_its_sphere_whichever_way_they_are_wound(tmp_path,
     for v in vols:                                 # inside geometry: only the sphere's own probes
         assert set(v["report"]["inside_objects"]) <= {"0"}, v["report"]
     assert not [w for w in warned if "inside geometry" in w]
-    ref = render.render(open_box(tmp_path, lobed_sky, False, "reference"), runtime=rt,
+    ref = render(open_box(tmp_path, lobed_sky, False, "reference"), runtime=rt,
                         cache_root=tmp_path / "cache")
-    sh = render.render(open_box(tmp_path, lobed_sky, False, "sh"), runtime=rt, cache_root=tmp_path / "cache")
+    sh = render(open_box(tmp_path, lobed_sky, False, "sh"), runtime=rt, cache_root=tmp_path / "cache")
     from iblbake.render import twin as rr
     sc = open_box(tmp_path, lobed_sky, False, "reference")
     gb = rr.primary(sc["camera"], pack.scene_arrays(sc))
@@ -186,7 +186,7 @@ def test_probes_inside_a_solid_are_said_with_its_name(tmp_path, rt, lobed_sky):
            "effects": {"diffuse": "probes", "specular": "off"}}
     warned = []
     bakes = Bakes(tmp_path / "cache")
-    render.render(load_scene(tmp_path, "crate", doc), runtime=rt, cache=bakes, warn=warned.append)
+    render(load_scene(tmp_path, "crate", doc), runtime=rt, cache=bakes, warn=warned.append)
     rep = baked(bakes)["report"]
     assert rep["inside_geometry"] >= 27 and rep["inside_objects"] == {"0": rep["inside_geometry"]}
     said = [w for w in warned if "inside geometry" in w]
@@ -195,7 +195,7 @@ def test_probes_inside_a_solid_are_said_with_its_name(tmp_path, rt, lobed_sky):
     room = {**doc, "camera": {"perspective": {"position": [0.3, 0.2, 0.5], "look_at": [0, 0, -1]},
                               "resolution": [8, 8]}}
     bakes = Bakes(tmp_path / "cache")
-    render.render(load_scene(tmp_path, "room", room), runtime=rt, cache=bakes, warn=warned.append)
+    render(load_scene(tmp_path, "room", room), runtime=rt, cache=bakes, warn=warned.append)
     assert baked(bakes)["report"]["inside_geometry"] == 0 and not warned
 
 
@@ -216,14 +216,14 @@ def test_a_closed_room_is_dark_and_its_outside_probes_are_off(tmp_path, rt, lobe
     for counts in (8, 3):
         bakes = Bakes(tmp_path / "cache")
         sc = load_scene(tmp_path, f"room{counts}", {**doc, "probes": {"rays": 64, "counts": counts}})
-        frame = render.render(sc, runtime=rt, cache=bakes)
+        frame = render(sc, runtime=rt, cache=bakes)
         vol = baked(bakes)
         pos = vol["grid"].positions() + vol["data"][:, :3]
         outside = (np.abs(pos) >= 1.0).any(1)
         assert outside.any() and vol["report"]["outside_camera_room"] == int(outside.sum())
         assert (vol["data"][outside, 3] == probes.INACTIVE).all()
         assert frame.hdr[..., :3].max() == 0.0, counts
-    sh = render.render(load_scene(tmp_path, "room_sh", {**doc, "effects": {"diffuse": "sh", "specular": "off"}}),
+    sh = render(load_scene(tmp_path, "room_sh", {**doc, "effects": {"diffuse": "sh", "specular": "off"}}),
                        runtime=rt, cache=Bakes(tmp_path / "cache"))
     assert sh.hdr[..., :3].mean() > 0.1               # SH, blind to the walls, lights the room
 
@@ -257,11 +257,11 @@ def test_the_shade_pass_counts_the_samples_that_fell_back(tmp_path, rt, lobed_sk
     from tests.test_probes import Given, sphere_scene
     sc = sphere_scene(tmp_path, lobed_sky, "probes")
     bakes = Bakes(tmp_path / "cache")
-    render.render(sc, runtime=rt, cache=bakes)
+    render(sc, runtime=rt, cache=bakes)
     vol = baked(bakes)
     vol = {**vol, "data": np.concatenate([vol["data"][:, :3], np.ones((len(vol["data"]), 1))], 1)}
-    f = render.render(sc, runtime=rt, cache=Given(tmp_path / "cache", vol))
-    with_sh = render.render(sphere_scene(tmp_path, lobed_sky, "sh"), runtime=rt, cache_root=tmp_path / "cache")
+    f = render(sc, runtime=rt, cache=Given(tmp_path / "cache", vol))
+    with_sh = render(sphere_scene(tmp_path, lobed_sky, "sh"), runtime=rt, cache_root=tmp_path / "cache")
     hit = f.hdr[..., 3] > 0
     shade = next(p for p in f.report["passes"] if p["name"] == "shade")
     assert shade["probe_fallback_sky"] == int(hit.sum()) and shade["probe_fallback_nearest"] == 0
@@ -285,7 +285,7 @@ def test_probe_rays_pass_single_sided_backs_and_meet_solids_insides(tmp_path, rt
             "materials": {"m": {"double_sided": sided}},
             "objects": [{"mesh": {"path": str(path)}, "material": "m"}],
             "effects": {"diffuse": "probes", "specular": "off"}})
-        ctx = scene_context(sc, render.plan(sc), rt, Bakes(tmp_path / "c"))
+        ctx = scene_context(sc, plan(sc), rt, Bakes(tmp_path / "c"))
         ctx.bakes.load("radiance", ctx)
         tracer = probes.Tracer(ctx, {"bounces": 1, "seed": 1})
         return tracer.trace(np.array([origin]), np.array([[0, 0, 1.0], [0, 0, -1.0]]), True)
@@ -320,7 +320,7 @@ def test_negative_texels_do_not_spoil_a_bake(tmp_path, rt):
         "effects": {"diffuse": "probes", "specular": "prefiltered"}})
     for _ in range(2):                            # baked, then read back from the cache
         bakes = Bakes(tmp_path / "cache")
-        render.render(sc, runtime=rt, cache=bakes)
+        render(sc, runtime=rt, cache=bakes)
         assert (baked(bakes)["irradiance"] >= 0).all()
         (capture, _cached, _report), = [v for k, v in bakes._memo.items() if isinstance(k, tuple)
                                         and k[0] == "reflection"]

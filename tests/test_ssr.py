@@ -5,7 +5,7 @@ against the numpy twin of the Hi-Z march, and what runs where SSR is not asked f
 import numpy as np
 import pytest
 
-from iblbake import render
+from iblbake.render import plan, render
 from iblbake.core import sh
 from iblbake.io import images
 from iblbake.render.bakes import Bakes
@@ -40,8 +40,8 @@ def test_a_mirror_floor_shows_the_wall_where_the_mirror_puts_it(tmp_path, rt, sk
     y = 0 meets z = -1.5 inside the wall) shows that wall point's radiance in the same frame:
     the median relative difference 1e-4 at most (measured 6e-6 over 695 pixels), against 450%
     without SSR (the panorama's reflection there)."""
-    f_on = render.render(wall(tmp_path, sky), runtime=rt, cache_root=tmp_path / "cache")
-    f_off = render.render(wall(tmp_path, sky, "off", name="off"), runtime=rt, cache_root=tmp_path / "cache")
+    f_on = render(wall(tmp_path, sky), runtime=rt, cache_root=tmp_path / "cache")
+    f_off = render(wall(tmp_path, sky, "off", name="off"), runtime=rt, cache_root=tmp_path / "cache")
     sc = wall(tmp_path, sky)
     cam = sc.data["camera"]
     w, h = cam["resolution"]
@@ -85,7 +85,7 @@ def test_frame_matches_the_twin(tmp_path, rt, sky, roughness):
 
     sc = wall(tmp_path, sky, roughness=roughness, name=f"twin{roughness}")
     bakes = Bakes(tmp_path / "cache")
-    frame = render.render(sc, runtime=rt, cache=bakes)
+    frame = render(sc, runtime=rt, cache=bakes)
     env_sha = bakes.environment(sc.data["environment"])[1].sha256
     memo = {k: v for k, v in bakes._memo.items() if isinstance(k, tuple)}
     pre = next(v[0] for k, v in memo.items() if k[0] == "prefiltered" and k[1] == env_sha)
@@ -106,17 +106,17 @@ def test_frame_matches_the_twin(tmp_path, rt, sky, roughness):
 def test_ssr_runs_only_where_asked(tmp_path, sky):
     """SSR runs over the split sum, and says so in the plan (--report's effects line); asked for
     with another specular mode it does nothing, and the plan says that in a note (it said nothing)."""
-    pl = render.plan(wall(tmp_path, sky))
+    pl = plan(wall(tmp_path, sky))
     assert "ssr" in pl.pass_names and pl.defines["shade"]["HAS_SSR"] == 1 and pl.to_json()["ssr"]
-    imp = render.plan(wall(tmp_path, sky, specular="importance", name="imp"))
+    imp = plan(wall(tmp_path, sky, specular="importance", name="imp"))
     assert not imp.to_json()["ssr"] and any("effects.ssr: on does nothing with specular importance" in n
                                             for n in imp.notes)
     assert pl.pass_names.index("ssr") > pl.pass_names.index("shade")
-    off = render.plan(wall(tmp_path, sky, specular="off", name="spec_off"))     # it said nothing here
+    off = plan(wall(tmp_path, sky, specular="off", name="spec_off"))     # it said nothing here
     assert any("effects.ssr: on does nothing with specular off" in n for n in off.notes)
     for name, sc in (("off", wall(tmp_path, sky, "off", name="o")),
                      ("importance", wall(tmp_path, sky, specular="importance", name="i"))):
-        pl = render.plan(sc)
+        pl = plan(sc)
         assert "ssr" not in pl.pass_names and "HAS_SSR" not in pl.defines.get("shade", {}), name
 
 
@@ -177,7 +177,7 @@ def test_a_curved_mirror_shows_the_floor_it_reflects(tmp_path, rt, ortho):
     from iblbake.render import twin as rr
     from iblbake.render.twin.ssr import project
     sc = mirror_ball(tmp_path, ortho=ortho, name=f"ball{ortho}")
-    f = render.render(sc, runtime=rt, cache_root=tmp_path / "cache")
+    f = render(sc, runtime=rt, cache_root=tmp_path / "cache")
     cam = sc["camera"]
     pos, fwd = (np.asarray(v) for v in pack.camera_vectors(cam)[:2])
     gb = rr.primary(cam, pack.scene_arrays(sc))
@@ -203,7 +203,7 @@ def test_a_curved_mirror_shows_the_floor_it_reflects(tmp_path, rt, ortho):
     rel = np.abs(f.hdr[..., :3].reshape(-1, 3)[sel] - [0.6, 0.3, 0.15]).max(1) / 0.6
     assert np.median(rel) < 0.01 and np.quantile(rel, 0.9) < 0.05, (np.median(rel), np.quantile(rel, 0.9))
     sc.data["effects"]["ssr"] = "off"
-    off = render.render(sc, runtime=rt, cache_root=tmp_path / "cache")
+    off = render(sc, runtime=rt, cache_root=tmp_path / "cache")
     assert np.abs(off.hdr[..., :3].reshape(-1, 3)[sel]).max() < 1e-6
 
 
@@ -220,7 +220,7 @@ def test_more_frames_match_the_twin(tmp_path, rt, case):
           "rough": {"roughness": 0.3}}[case]
     sc = mirror_ball(tmp_path, name=case.replace(" ", "_"), **kw)
     bakes = Bakes(tmp_path / "cache")
-    frame = render.render(sc, runtime=rt, cache=bakes)
+    frame = render(sc, runtime=rt, cache=bakes)
     memo = {k: v for k, v in bakes._memo.items() if isinstance(k, tuple)}
     env_sha = bakes.environment(sc.data["environment"])[1].sha256
     pre = next(v[0] for k, v in memo.items() if k[0] == "prefiltered" and k[1] == env_sha)

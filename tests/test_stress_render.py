@@ -19,7 +19,7 @@ from iblbake.core import conventions as cv
 from iblbake.io import images
 from iblbake.bake import dfg
 from iblbake.bake import radiance
-from iblbake import render
+from iblbake.render import render
 from iblbake.render.bakes import chain_table
 from iblbake.scene import pack
 from iblbake.render import twin as rr
@@ -125,7 +125,7 @@ def test_material_extremes_white_furnace(tmp_path, stress, one_env, dfg_fine, sp
           "reference": {"max_samples": 256, "target_noise": 0, "visibility": False}}
     sc = write_scene(tmp_path, one_env, mats, objs, cam, fx,
                      output={"frame": ["f.exr"], "normal": "n.exr", "albedo": "a.exr", "depth": "d.exr"})
-    frame = render.render(sc, cache_root=tmp_path / "cache")
+    frame = render(sc, cache_root=tmp_path / "cache")
     check_furnace(stress, f"extremes r(0,1e-4,.5,1) x metallic x base, {specular}", sc, frame,
                   np.ones((16, 32, 3)), dfg_fine)
 
@@ -165,14 +165,14 @@ def test_normals_facing_away_back_faces_and_inside_a_sphere(tmp_path, stress, on
     floor, back = gb["material"][hit] == names.index("rough"), gb["material"][hit] == names.index("mirror")
     assert floor.sum() > 100 and (nov[floor] < 0).all(), "the case needs interpolated normals facing away"
     assert back.sum() > 100, "the back face is seen (surfaces are two-sided)"
-    frame = render.render(sc, cache_root=tmp_path / "cache")
+    frame = render(sc, cache_root=tmp_path / "cache")
     check_furnace(stress, f"NoV < 0 normals and back faces, {specular}", sc, frame, np.ones((16, 32, 3)),
                   dfg_fine)
     # inside a sphere: every pixel sees the inner wall
     objs = [{"sphere": {"radius": 2}, "material": "rough"}]
     cam = {"perspective": {"position": [0.3, 0.2, 0.1], "look_at": [0, 0, -1], "fov_y": 90}, "resolution": [64, 48]}
     sc = write_scene(tmp_path, one_env, mats, objs, cam, fx)
-    frame = render.render(sc, cache_root=tmp_path / "cache")
+    frame = render(sc, cache_root=tmp_path / "cache")
     assert frame.hdr[..., 3].min() == 1
     check_furnace(stress, f"camera inside a sphere, {specular}", sc, frame, np.ones((16, 32, 3)), dfg_fine)
 
@@ -207,7 +207,7 @@ def test_huge_and_tiny_coordinates_render_like_unit_scale(tmp_path, stress, load
         cam = {"perspective": {"position": [0, 1.5 * s, 6 * s], "look_at": [0, 0, 0], "fov_y": 45},
                "resolution": [96, 64]}
         sc = write_scene(d, env, mats, objs, cam, {"specular": "prefiltered"})
-        return render.render(sc, cache_root=tmp_path / "cache").hdr
+        return render(sc, cache_root=tmp_path / "cache").hdr
 
     ref, got = frame_at(1.0), frame_at(scale)
     assert np.isfinite(got).all()
@@ -234,7 +234,7 @@ def test_degenerate_duplicated_and_zero_normal_meshes(tmp_path, stress, one_env,
     objs = [{"mesh": {"path": str(p), "translate": [-0.4, -0.4, 0]}, "material": "m"}]
     cam = {"perspective": {"position": [0, 0, 2.2], "fov_y": 40}, "resolution": [64, 64]}
     sc = write_scene(tmp_path, one_env, mats, objs, cam, {"specular": "importance", "samples": 128})
-    frame = render.render(sc, cache_root=tmp_path / "cache")
+    frame = render(sc, cache_root=tmp_path / "cache")
     mesh_stats = [b for b in frame.report["bakes"] if b["name"] == "geometry"][0]["meshes"][0]
     assert mesh_stats["dropped_degenerate"] == 2 and mesh_stats["triangles"] == 3, mesh_stats
     check_furnace(stress, "degenerate, duplicated, zero/NaN-normal mesh", sc, frame, np.ones((16, 32, 3)), dfg_fine)
@@ -326,7 +326,7 @@ def test_importance_mip_selection_pdf_extremes(tmp_path, stress, one_env, dfg_fi
     for n in (1, 3, 7, 100):
         sc = write_scene(tmp_path, one_env, mats, objs, cam, {"specular": "importance", "samples": n,
                                                               "diffuse": "off"})
-        frame = render.render(sc, cache_root=tmp_path / "cache")
+        frame = render(sc, cache_root=tmp_path / "cache")
         assert np.isfinite(frame.hdr).all()
         arrays = pack.scene_arrays(sc)
         gb = rr.primary(sc["camera"], arrays)
@@ -357,7 +357,7 @@ def test_sun_panorama_through_every_mode(tmp_path, stress, value):
     for spec, diff in (("importance", "sh"), ("prefiltered", "sh"), ("reference", "reference")):
         sc = write_scene(tmp_path, env, mats, objs, cam, {"specular": spec, "diffuse": diff, "sh_bands": 8,
                                                           "reference": {"max_samples": 64}})
-        frame = render.render(sc, cache_root=tmp_path / "cache")
+        frame = render(sc, cache_root=tmp_path / "cache")
         assert np.isfinite(frame.hdr).all() and frame.hdr.min() >= 0, spec
         if spec == "prefiltered":
             rep = {b["name"]: b for b in frame.report["bakes"]}
@@ -381,7 +381,7 @@ def test_no_rays_slip_through_shared_edges(stress):
                     ["effects.specular=off", "effects.diffuse=off", "output.depth=depth.exr"], ["unused.exr"])
     import tempfile
     with tempfile.TemporaryDirectory() as d:
-        frame = render.render(sc, cache_root=Path(d))
+        frame = render(sc, cache_root=Path(d))
     z = frame.aovs["depth"].reshape(frame.hdr.shape[:2])
     c = z[1:-1, 1:-1]
     nb = np.stack([z[:-2, 1:-1], z[2:, 1:-1], z[1:-1, :-2], z[1:-1, 2:]])

@@ -14,7 +14,7 @@ import time
 import numpy as np
 import pytest
 
-from iblbake import render
+from iblbake.render import Bakes
 from iblbake.device.runtime import Runtime
 from iblbake.scene import load as scene_load
 from iblbake.study import sheet, sweep, workers
@@ -41,7 +41,7 @@ def grid(tmp_path_factory, small_panoramas):
     folder = tmp_path_factory.mktemp("grid")
     scene = sheet_scene(folder, small_panoramas["city"], GRID, res=(64, 48))
     cells, scenes = plan(scene)
-    serial = sheet.render_cells(scenes, cells, runtime=Runtime(None), bakes=render.Bakes(folder / "serial"))
+    serial = sheet.render_cells(scenes, cells, runtime=Runtime(None), bakes=Bakes(folder / "serial"))
     return scene, cells, scenes, [(r.frame.hdr, r.frame.png) for r in serial]
 
 
@@ -79,7 +79,7 @@ def test_pool_worker_killed_mid_sweep_loses_nothing(tmp_path, grid):
             os.kill(victim.pid, signal.SIGKILL)
             killed.append(victim.pid)
 
-    results, summary = workers.render_cells_parallel(scenes, cells, 2, devices=[None], bakes=render.Bakes(tmp_path),
+    results, summary = workers.render_cells_parallel(scenes, cells, 2, devices=[None], bakes=Bakes(tmp_path),
                                                      progress=kill_one)
     assert killed and same_cells(results, serial)
     assert 1 <= summary["retried_cells"] < 16 and "failed" not in summary["cells"]
@@ -99,7 +99,7 @@ def test_dask_local_cluster_equals_serial_and_survives_a_killed_worker(tmp_path,
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
                                   silence_logs=50) as cluster, distributed.Client(cluster) as client:
         results, summary = workers.render_cells_dask(scenes, cells, client, devices=[None],
-                                                     bakes=render.Bakes(tmp_path / "a"))
+                                                     bakes=Bakes(tmp_path / "a"))
         assert same_cells(results, serial) and summary["retried_cells"] == 0
         assert len(once_each_bake(results)) >= 2 and set(once_each_bake(results).values()) == {1}
         pids = client.run(os.getpid)
@@ -111,7 +111,7 @@ def test_dask_local_cluster_equals_serial_and_survives_a_killed_worker(tmp_path,
                 killed.append(1)
 
         results, summary = workers.render_cells_dask(scenes, cells, client, devices=[None],
-                                                     bakes=render.Bakes(tmp_path / "b"), progress=kill_one)
+                                                     bakes=Bakes(tmp_path / "b"), progress=kill_one)
     assert killed and same_cells(results, serial)
     assert summary["retried_cells"] >= 1 and sum(w["cells"] for w in summary["workers"]) == 16
 

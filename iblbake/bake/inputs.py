@@ -90,6 +90,7 @@ def read_environment(path, *, layout: str = "auto", names: dict | None = None, r
             faces.append(img)
             info = info or inf
         info.sha256 = _combined_sha([images.file_sha256(f) for f in files_of(path)])
+        info.layout = "faces"
         return _resampled(np.stack(faces), info, "six face files", runtime)
     if layout == "ktx2":
         limit = policies.get("max_pixels") or images.max_pixels_default()
@@ -98,10 +99,12 @@ def read_environment(path, *, layout: str = "auto", names: dict | None = None, r
                                 format="ktx2", sha256=images.file_sha256(path), nonfinite_policy=policies.get(
                                     "nonfinite", "error"), negative_policy=policies.get("negative", "keep"))
         faces = images.validate_texels(faces.reshape(-1, faces.shape[2], 3), info, names).reshape(faces.shape)
+        info.layout = "ktx2"
         return _resampled(faces, info, "a KTX2 cube map", runtime)
     img, info = images.read_panorama(path, names=names, **policies)
     if layout == "auto":
         layout = detect(path, info.width, info.height)
+    info.layout = layout
     if layout == "equirect":
         if info.width != 2 * info.height:
             info.warnings.append(f"{path}: {info.width}x{info.height} is not 2:1 (nor 4:3, 3:4, 6:1, 1:6 of a cube "

@@ -460,7 +460,7 @@ def bake_prefiltered(baker: Baker, chain, info, root: Path, policies: dict, opts
 _DFG_TABLES: dict = {}      # (device, size, samples, multiscatter) -> the table this process baked
 
 
-def _dfg_table(baker: Baker, size: int, samples: int, multiscatter: bool):
+def dfg_table(baker: Baker, size: int, samples: int, multiscatter: bool):
     """The DFG table, baked once per process and device (a second cache folder gets the same
     table written into its entry, not baked again: 67M samples, 5 s on a 2-core CPU)."""
     key = (baker.device_label, size, samples, multiscatter)
@@ -476,7 +476,7 @@ def bake_dfg(baker: Baker, root: Path, size: int, samples: int, multiscatter: bo
 
     def build(tmp: Path):
         t0 = time.perf_counter()
-        table = _dfg_table(baker, size, samples, multiscatter)
+        table = dfg_table(baker, size, samples, multiscatter)
         _check_finite("dfg", table)
         channels = ("B", "A+B") if multiscatter else ("A", "B")
         images.write_exr(tmp / "dfg.exr", table, channels=("R", "G"), compression=images.CACHE_COMPRESSION,

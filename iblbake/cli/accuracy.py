@@ -3,6 +3,7 @@ is from the converged reference (iblbake/study/accuracy.py)."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import time
 from pathlib import Path
@@ -79,11 +80,9 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
     bakes and kernel builds reported apart as one-off costs) and measured over the object pixels:
     relative RMSE, mean and max relative error, HDR-FLIP. Prints the table with each term's
     Pareto frontier of error against time: for an error budget, the cheapest setting."""
-    from iblbake import render
-    from iblbake.device.runtime import Runtime
+    from iblbake import api
     from iblbake.io import atomic, images
-    from iblbake.scene import load as scene_load
-    from iblbake.study import accuracy as acc, ladder, report
+    from iblbake.study import report
 
     con = Console(quiet, as_json)
     t_start = time.perf_counter()
@@ -91,77 +90,29 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
     if out is not None:              # the folder is made when the results are written, not before
         for name in FILES:
             atomic.check_writable(out / name)
-    settings = acc.Settings(max_side=max_side, repeats=repeats, target_noise=target_noise, max_samples=max_samples,
-                            flip=flip, visibility=visibility, bounces=bounces)
-    rt = Runtime(device)
-    study = acc.Study(scene_path, overrides, settings, runtime=rt, bakes=render.Bakes(cache_dir), warn=con.warn)
-    if click.get_current_context().get_parameter_source("bounces") == click.core.ParameterSource.COMMANDLINE \
-            and bounces != 1 and not study.paths:
-        why = ("with --no-visibility every object is lit as if alone, so no light passes between them"
-               if not visibility else "no light passes between this scene's surfaces")
-        con.warn(f"--bounces {bounces}: {why}; the reference is the direct light (bounces 1)")
-    if ladder_path in ladder.LADDERS:
-        rungs = ladder.LADDERS[ladder_path](study.scene, study.fx)
-        ladder_path = None
-    elif ladder_path:
-        rungs = ladder.ladder_from_file(ladder_path, study.scene, study.fx)
-    else:
-        rungs = ladder.default_ladder(study.scene, study.fx, rt.info.kind, paths=study.paths)
-        over = [r for r in rungs if dict(r.values).get("effects.reference.max_samples", 0) > max_samples]
-        if over:                     # measured against a reference of fewer samples: their error is its noise
-            con.warn(f"left out {len(over)} rungs with more samples than the reference's --max-samples "
-                     f"{max_samples}: {', '.join(r.label for r in over)}")
-            rungs = [r for r in rungs if r not in over]
-    rungs = [ladder.configured_rung(study.scene, t) for t in study.terms] + rungs
-    reads = scene_load.named_input_files(study.scene) + ([("the ladder", ladder_path)] if ladder_path else [])
-    for r in rungs:                  # every rung's scene validates before anything renders
-        reads += scene_load.named_input_files(study.load(study.rung_values(r), origin=f"ladder rung {r.label!r}"))
-    if out is not None:
-        from iblbake.io.guard import refuse_overlaps
-        refuse_overlaps([("-o", str(out / name)) for name in FILES], reads)
-        refuse_foreign([("-o", str(out / name)) for name in FILES], force, report.header_lines())
-    names = [f"reference {t} seed {s}" for t in study.terms for s in settings.seeds] + [r.label for r in rungs]
-    spread = None
-    if jobs > 1:
-        from iblbake.study import workers
-        specs = [d.strip() for d in devices.split(",")] if devices else [device]
-        spread = workers.render_references_parallel(study, jobs, specs)
-    elif devices:
+    if devices and jobs == 1:
         raise click.UsageError("--devices gives each worker its device: give --jobs N too")
-    with con.stages(names, label="accuracy") as step:
-        study.progress = step
-        refs = {t: study.render_reference(t) for t in study.terms}
-        rows = [study.run_rung(r) for r in rungs]
-    for t in study.terms:
-        r = refs[t]
-        if "max_samples" in r["stopped"] and r["noise_each"] > 2 * target_noise:
-            con.warn(f"the {t} reference stopped at {max_samples} samples per pixel with noise "
-                     f"{100 * r['noise']:.2f}% (target {100 * target_noise:g}% per seed): errors below about twice "
-                     f"that are its noise. Slow convergence on a path-traced reference is light reaching a "
-                     f"surface by a mirror or a glossy lobe from a small bright source (a caustic), which "
-                     f"only BSDF sampling finds: raise --max-samples, or --bounces 1 for the direct light")
-    configured = study.configured_frame()
-    front = acc.frontiers(rows)
-    high = acc.above_reference(rows)
-    if high:
-        con.warn(f"{len(high)} {'rungs have' if len(high) > 1 else 'rung has'} more samples than the reference reached "
-                 f"({', '.join(r['label'] for r in high)}): their error is the reference's noise; kept off "
-                 f"the frontier (raise --max-samples above theirs to measure them)")
-    title = f"{Path(scene_path).name}: error against time ({rt.device_label})"
-    summary = {
-        "scene": str(scene_path), "device": rt.device_label,
-        "resolution": acc.study_resolution(study.scene, max_side), "repeats": repeats,
-        "reference": {t: {k: v for k, v in refs[t].items() if k not in ("hdr", "mask")} | {
-            "stopping_rule": f"each seed: relative standard error <= {target_noise} or {max_samples} samples",
-            "bounces": bounces if study.paths else 1,
-            "object_pixels": int(refs[t]["mask"].sum()),
-            "measured_pixels": int(study.metric_mask(t, refs[t]["hdr"]).sum())} for t in study.terms},
-        "rungs": [{**r, "pareto": r["label"] in front.get(r["term"], [])} for r in rows],
-        "frontier": front, "configured": configured,
-        "time_split_s": {k: round(v, 3) for k, v in study.times.items()},
-    }
-    if spread:
-        summary["reference_workers"] = spread
+    given = click.get_current_context().get_parameter_source("bounces") == click.core.ParameterSource.COMMANDLINE
+    stack = contextlib.ExitStack()
+
+    def before_run(study, rungs, reads):
+        if out is not None:
+            from iblbake.io.guard import refuse_overlaps
+            refuse_overlaps([("-o", str(out / name)) for name in FILES], reads)
+            refuse_foreign([("-o", str(out / name)) for name in FILES], force, report.header_lines())
+        names = [f"reference {t} seed {s}" for t in study.terms for s in study.settings.seeds] + [r.label for r in rungs]
+        progress[0] = stack.enter_context(con.stages(names, label="accuracy"))
+
+    progress = [None]
+    with stack:
+        result = api.accuracy(scene_path, ladder_path, overrides=overrides, max_side=max_side, repeats=repeats,
+                              target_noise=target_noise, max_samples=max_samples, visibility=visibility,
+                              bounces=bounces if given else None, flip=flip, cache=cache_dir, device=device,
+                              jobs=jobs, devices=[d.strip() for d in devices.split(",")] if devices else None,
+                              warn=con.warn, progress=lambda: progress[0](), before_run=before_run)
+    study, rungs, rows, front, refs = result.study, result.rungs, result.records, result.frontier, result.reference
+    configured, summary = result.configured, result.summary
+    title = f"{Path(scene_path).name}: error against time ({summary['device']})"
     if out is not None:
         from iblbake.io.guard import mark
         with atomic.Batch() as batch:    # the five files replaced together, or none (a full disk)
@@ -181,7 +132,7 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
                + f"\nreference: bounces {bounces if study.paths else '1 (no light passes between surfaces)'}, "
                  f"noise (two seeds) {noise}; configured frame: relative RMSE "
                  f"{100 * configured['relative_rmse']:.2f}%\n"
-               + f"{len(rows)} rungs in {summary['elapsed_s']:.1f} s ({split}) on {rt.device_label}"
+               + f"{len(rows)} rungs in {summary['elapsed_s']:.1f} s ({split}) on {summary['device']}"
                + (f"; wrote {out}/" if out else ""))
     if max_error is not None and configured["relative_rmse"] > max_error:
         raise IblbakeError(f"{scene_path}: as configured, relative RMSE {configured['relative_rmse']:.4f} against "

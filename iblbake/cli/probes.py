@@ -31,19 +31,15 @@ def probes_command(scene_path, out_dir, overrides, cache_dir, force, device, qui
     manifest and a GLSL function that samples them, and each reflection probe's capture
     (reflection_K.exr: `iblbake mips` prefilters it). `render` bakes the same volume on demand
     (cached by content) where a scene sets effects.diffuse: probes."""
-    from iblbake.device.runtime import Runtime
+    from iblbake import api
     from iblbake.io import atomic
     from iblbake.io.guard import refuse_overlaps
     from iblbake.render import probes
-    from iblbake.render.bakes import Bakes
-    from iblbake.render.frame import scene_context
-    from iblbake.render.plan import plan
     from iblbake.scene import load as scene
 
     con = Console(quiet, as_json)
-    sc = scene.load(scene_path, overrides, [])
-    sc.data["effects"]["diffuse"] = "probes"            # what the volume is for: its plan reads the panorama
-    if not sc.data["objects"]:
+    sc = api.load_scene(scene_path, overrides, outputs=[])
+    if not sc.data["objects"]:       # a usage error here, before the folder's checks (the library says it too)
         raise click.UsageError(f"{scene_path}: the scene has no objects; probes light objects (add some)")
     out = Path(out_dir)
     rep_name = probes.FILES[sc.data["probes"]["irradiance"]]
@@ -54,36 +50,24 @@ def probes_command(scene_path, out_dir, overrides, cache_dir, force, device, qui
     for n in names:                  # the folder is made when the files are written, not before
         atomic.check_writable(out / n)
     refuse_foreign(writes, force)
-    rt = Runtime(device)
-    bakes = Bakes(cache_dir)
-    bakes.runtime = rt
-    pl = plan(sc)
     with con.fraction("probes", "probe rays") as progress:
-        ctx = scene_context(sc, pl, rt, bakes, con.warn, progress)
-        vol, cached, extra = bakes.load("probes", ctx)
-        reflections = bakes.load("reflection_probes", ctx)[0] if captures else []
-    vol = probes.sampled(vol, sc.data["probes"])
-    man = probes.manifest(vol)
-    man["reflection_probes"] = [{"file": name, **c["settings"],
-                                 "layout": "equirect in the world frame (the panoramas' mapping); RGB the linear "
-                                           "radiance of the scene, A the share of the texel the scene covers (the "
-                                           "rest is the distant panorama along the reflected ray)"}
-                                for name, c in zip(captures, reflections)]
-    entry = Path(extra["entry"])
+        vol = api.bake_probes(sc, device, cache=cache_dir, warn=con.warn, progress=progress)
+    man, cached = vol.manifest, vol.cached
+    entry = Path(vol.entry)
     from iblbake.io import images, reads
     with atomic.Batch() as batch:    # every file of the folder replaced together, or none
-        for name, c in zip(captures, reflections):     # an engine prefilters them (iblbake mips --ktx2)
+        for name, c in zip(captures, vol.reflections):     # an engine prefilters them (iblbake mips --ktx2)
             images.write_exr(out / name, c["capture"], channels=("R", "G", "B", "A"), batch=batch)
         for n in names[1:4]:         # the cache entry's atlases (verified against their manifest)
             batch.write_bytes(out / n, reads.read_bytes(entry / n, 1 << 40, "a cached atlas"))
         batch.write_json(out / "probes.json", man)
-        batch.write_text(out / "probes.glsl", probes.glsl(vol, man))
+        batch.write_text(out / "probes.glsl", vol.glsl())
     r = man["report"]
-    summary = {"scene": sc.source, "output": str(out), "files": names, "cached": cached, "device": rt.device_label,
+    summary = {"scene": sc.source, "output": str(out), "files": names, "cached": cached, "device": vol.device,
                "grid": man["grid"], "representation": man["representation"], "states": man["states"],
                "rays_traced": r["rays_traced"], "bake_s": r["seconds"], "relocated": r["relocated"]}
     nx, ny, nz = man["grid"]["counts"]
     con.result(summary, f"wrote {out}/ ({nx}x{ny}x{nz} probes, {man['representation']}, "
                         f"{man['states']['inactive']} inactive, {r['relocated']} relocated; "
                         f"{r['rays_traced']} rays in {r['seconds']:.2f} s{' (cached)' if cached else ''} "
-                        f"on {rt.device_label})")
+                        f"on {vol.device})")

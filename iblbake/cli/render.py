@@ -42,13 +42,14 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, depfi
 
     Only the effects the scene calls for are baked, compiled and run; --report shows which.
     """
-    from iblbake import render
+    from iblbake import api
+    from iblbake.render import plan, write_outputs
     from iblbake.scene import load as scene
 
     if scene_path is None:
         raise click.UsageError("missing SCENE (a scene YAML file; see --help-schema)")
     con = Console(quiet, as_json)
-    sc = scene.load(scene_path, overrides, outputs)
+    sc = api.load_scene(scene_path, overrides, outputs=outputs)
     from iblbake.io.atomic import check_writable
     from iblbake.io.guard import refuse_overlaps
     writes = sc.writes + ([("--depfile", depfile)] if depfile else [])
@@ -56,12 +57,12 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, depfi
     for _, p in writes:              # every output, the depfile too, before the frame is rendered
         check_writable(p)
     refuse_foreign(writes, force)
-    pl = render.plan(sc)
+    pl = plan(sc)
     # paths (the reference, probe rays, reflection captures): a bar on a terminal
     long_work = "reference" in pl.pass_names or {"probes", "reflection_probes"} & set(pl.bakes)
     with con.fraction("render", "paths") if long_work else contextlib.nullcontext(None) as progress:
-        frame = render.render(sc, device=device, cache_root=cache_dir, warn=con.warn, progress=progress)
-    written = render.write_outputs(frame, sc)
+        frame = api.render(sc, device, cache=cache_dir, warn=con.warn, progress=progress)
+    written = write_outputs(frame, sc)
     if depfile:
         from iblbake.io import depfile as dep
         dep.write(depfile, [(written, scene.input_files(sc))])
@@ -111,10 +112,11 @@ def _samples(rep: dict) -> str:
 def deps_command(scene_path, overrides, outputs):
     """Print the Make rule that `render --depfile` writes: SCENE's outputs depend on the scene file,
     its panorama and its meshes."""
-    from iblbake import render
+    from iblbake import api
     from iblbake.io.depfile import rule
+    from iblbake.render import output_paths
     from iblbake.scene import load as scene
 
-    sc = scene.load(scene_path, overrides, outputs or None)
-    targets = render.output_paths(sc) or [str(scene_path)]
+    sc = api.load_scene(scene_path, overrides, outputs=outputs or None)
+    targets = output_paths(sc) or [str(scene_path)]
     click.echo(rule(targets, scene.input_files(sc)), nl=False)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 import os
-import time
 
 import click
 
@@ -91,9 +90,8 @@ def sh_command(envs, output, force, bands, window, backend, rotate_y, intensity,
         check_writable(out)
     refuse_foreign(writes, force)      # its own earlier documents are replaced (Makefile reruns)
     check_inputs_exist(envs)
-    state = {"rt": None}
     # every panorama is projected before any file is written: a bad one among several leaves nothing
-    results = [_project_one(env, state, bands, window, backend, rotate_y, intensity, fmt, with_error,
+    results = [_project_one(env, bands, window, backend, rotate_y, intensity, fmt, with_error,
                             nonfinite, negative, transfer, primaries, input_layout, max_pixels, device, con)
                for env in envs]
     from iblbake.io.atomic import write_text
@@ -119,52 +117,27 @@ def sh_command(envs, output, force, bands, window, backend, rotate_y, intensity,
         con.result({"panoramas": [s for s, _ in results]}, "\n".join(h for _, h in results))
 
 
-def _project_one(env, state, bands, window, backend, rotate_y, intensity, fmt, with_error, nonfinite,
-                 negative, transfer, primaries, input_layout, max_pixels, device, con):
-    from iblbake.bake import sh as shbake
-    from iblbake.io import images
+def _project_one(env, bands, window, backend, rotate_y, intensity, fmt, with_error, nonfinite, negative, transfer,
+                 primaries, input_layout, max_pixels, device, con):
+    from iblbake import api
 
-    t_start = time.perf_counter()
     with con.stages(["reading", "projecting"], label="sh") as stage:
-        t0 = time.perf_counter()
-        from iblbake.bake import inputs
-        image, info = inputs.read_environment(env, layout=input_layout, max_pixels=max_pixels, nonfinite=nonfinite,
-                                              negative=negative, transfer=transfer, primaries=primaries,
-                                              names=POLICY_FLAGS)
-        read_s = time.perf_counter() - t0
+        pano = api.load_panorama(env, primaries, layout=input_layout, nonfinite=nonfinite, negative=negative,
+                                 transfer=transfer, max_pixels=max_pixels, names=POLICY_FLAGS)
         stage()
-        rt = None
-        device_label = "numpy (float64, host)"
-        backend = shbake.choose_backend(backend, info.width, info.height, bands)
-        if backend == "opencl":
-            from iblbake.device import runtime as cl
-            rt = state["rt"] = state["rt"] or cl.Runtime(device)      # one runtime for every panorama
-            device_label = rt.device_label
-        coeffs, project_s = shbake.project(image, bands, backend, rt, rotate_y)
+        result = api.sh(pano, bands, window, rotate_y=rotate_y, intensity=intensity, backend=backend, device=device,
+                        error=with_error)
         stage()
-    for w in info.warnings:
+    for w in pano.warnings:
         con.warn(w)
-    coeffs = coeffs * intensity
-    options = {"bands": bands, "window": window, "backend": backend, "rotate_y_deg": rotate_y,
-               "intensity": intensity, "nonfinite": nonfinite, "negative": negative, "transfer": transfer,
-               "primaries": primaries, "input_layout": input_layout}
-    timings = {"read_s": round(read_s, 6), "project_s": round(project_s, 6)}
-    doc = shbake.document(coeffs, bands=bands, window=window, info=info, options=options,
-                          device=device_label, timings=timings)
-    if with_error:
-        t0 = time.perf_counter()
-        import numpy as np
-
-        doc["error"] = shbake.irradiance_error(image, np.asarray(doc["irradiance"]), bands, rotate_y, intensity)
-        doc["timings"]["error_s"] = round(time.perf_counter() - t0, 6)
-    doc["elapsed_s"] = round(time.perf_counter() - t_start, 6)
-    text = shbake.export(doc, fmt)
+    doc, info = result.document, pano.info
+    text = result.export(fmt)
     summary = {k: doc[k] for k in ("format", "format_version", "bands", "window", "irradiance", "device",
                                    "timings", "elapsed_s") + (("error",) if with_error else ())}
     summary["input"] = {k: doc["input"][k] for k in ("path", "width", "height", "sha256")}
     dc = doc["radiance"][0]
     human = (f"{bands * bands} SH coefficients of "
-             f"{info.path} ({info.width}x{info.height}) in {doc['elapsed_s']:.3f} s on {device_label}; "
+             f"{info.path} ({info.width}x{info.height}) in {doc['elapsed_s']:.3f} s on {doc['device']}; "
              f"mean radiance {[round(c / (2 * math.sqrt(math.pi)), 5) for c in dc]}")
     if with_error:
         e = doc["error"]

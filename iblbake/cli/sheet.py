@@ -132,7 +132,7 @@ def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, labe
     process and assemble a contact sheet. Cells share the runtime, every bake, and the passes whose
     inputs they share (a material sweep traces primary rays once, a tone-mapping sweep lights once);
     each cell's pixels are what `iblbake render` writes for the same settings."""
-    from iblbake import render
+    from iblbake.render import Bakes
     from iblbake.device.runtime import Runtime
     from iblbake.io import images
     from iblbake.io.atomic import check_writable
@@ -174,7 +174,7 @@ def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, labe
         check_writable(p)
     refuse_foreign(writes, force)
     rt = Runtime(device)
-    bakes = render.Bakes(cache_dir)
+    bakes = Bakes(cache_dir)
     mine = sheet.shard_cells(scenes, bakes, shard) if shard and not assemble else range(len(cells))
     todo = [c for i, c in enumerate(cells) if i in mine]
     spread = None                    # what the workers did, with --jobs or --scheduler

@@ -101,3 +101,12 @@ def to_u8_dithered(display):
     flat = d.reshape(-1, d.shape[-1])
     off = dither_offsets(len(flat))[:, None]
     return np.clip(np.floor(flat * 255.0 + 0.5 + off), 0, 255).astype(np.uint8).reshape(d.shape)
+
+
+def display_u8(hdr, effects: dict, dither: bool = False):
+    """A frame's 8-bit display image on the host, (..., 3) uint8: a scene's effects (tonemap,
+    exposure, output_transfer, gamma) applied to hdr's RGB, as kernels/tonemap.cl does, with its
+    dither where asked."""
+    d = tonemap(np.asarray(hdr)[..., :3], effects["tonemap"], effects["exposure"], effects["output_transfer"],
+                effects["gamma"])
+    return to_u8_dithered(d) if dither else to_u8(d)

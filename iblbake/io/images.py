@@ -54,6 +54,7 @@ class ImageInfo:
     negative_policy: str = "keep"
     negative_share: float = 0.0     # the negative values' share of the summed |value|
     warnings: list = field(default_factory=list)
+    layout: str = "equirect"      # what the file held (bake.inputs.LAYOUTS); pixels are equirect
 
     @property
     def negative_tiny(self) -> bool:

@@ -10,7 +10,7 @@ device renders in tiles of rows (the same pixels), and one that cannot fit fails
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +18,7 @@ import numpy as np
 from iblbake.device.runtime import host_bytes_available
 from iblbake.errors import InputError
 from iblbake.render.bakes import Bakes, load_all
+from iblbake.render.passes.base import DISPLAY_KEYS
 from iblbake.render.plan import Plan, plan
 from iblbake.scene import pack
 from iblbake.scene.load import AOVS, Scene
@@ -49,10 +50,38 @@ class Report:
 
 @dataclass
 class Frame:
-    hdr: np.ndarray                 # (h, w, 4) linear RGB + coverage
-    png: np.ndarray | None          # (h, w, 3) uint8
+    """A rendered frame (iblbake.Frame).
+
+    hdr: float32 (H, W, 4), linear RGB radiance and coverage (alpha).
+    png: uint8 (H, W, 3) as the device tone-mapped it, where the scene writes a PNG, else None;
+        tonemapped is the display image either way.
+    aovs: normal and albedo (H, W, 4) float32, depth and object (H, W) float32, where rendered.
+    report: the effect set, every bake and pass with its seconds and cache hit, the kernel
+        builds, the device, the resolution and elapsed_s.
+    display: the scene's tone map settings (effects.tonemap, exposure, output_transfer, gamma
+        and output.dither), for tonemapped.
+    """
+
+    hdr: np.ndarray
+    png: np.ndarray | None
     aovs: dict
     report: dict
+    display: dict | None = None
+    _host_png: np.ndarray | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def tonemapped(self) -> np.ndarray:
+        """uint8 (H, W, 3), the display image: what a PNG output holds. Where the device did not
+        tone-map (no PNG output), the same operator and dither on the host, on first use."""
+        if self.png is not None:
+            return self.png
+        if self._host_png is None:
+            from iblbake.core import tonemap
+            d = self.display
+            if d is None:
+                raise ValueError("a frame without its display settings has no tone-mapped image")
+            self._host_png = tonemap.display_u8(self.hdr, d, d.get("dither", False))
+        return self._host_png
 
 
 class Reuse:
@@ -377,7 +406,8 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
         "elapsed_s": round(time.perf_counter() - t_start, 4),
     }
     png = ctx.frame_png[..., :3] if ctx.frame_png is not None else None     # RGBA as read back; RGB shown
-    return Frame(ctx.frame_hdr, png, ctx.frame_aovs, report)
+    display = {**{k: d["effects"][k] for k in DISPLAY_KEYS}, "dither": d["output"]["dither"]}
+    return Frame(ctx.frame_hdr, png, ctx.frame_aovs, report, display)
 
 
 def output_paths(scene: Scene) -> list:
@@ -395,7 +425,7 @@ def write_outputs(frame: Frame, scene: Scene) -> list:
     with atomic.Batch() as batch:
         for p in out["frame"]:
             if p.lower().endswith(".png"):
-                images.write_png(p, frame.png, batch)
+                images.write_png(p, frame.tonemapped, batch)
             else:
                 images.write_exr(p, frame.hdr, channels=("R", "G", "B", "A"), batch=batch)
             written.append(p)

@@ -26,6 +26,11 @@ AOVS = ("normal", "albedo", "depth", "object")
 
 @dataclass
 class Scene:
+    """A validated scene: data holds every key of docs/scene.md (defaults filled, paths
+    absolute); source is the scene file (or what a mapping was called), folder where its
+    relative paths resolve, lines the line of each dotted key, writes (what names it, path) of
+    every output."""
+
     data: dict                     # validated, defaults filled, paths absolute
     source: str                    # the scene file
     folder: Path
@@ -173,8 +178,22 @@ def load(path, overrides=(), outputs=None, values=(), origin: str = "--set") -> 
     (key path, value) pairs applied after them (a sweep cell's), `origin` what errors call the
     place the latter came from. `outputs` (from -o) replace output.frame."""
     path = Path(path)
-    source = str(path)
     data, lines = _read(path)
+    return _validated(data, lines, str(path), path.resolve().parent, overrides, outputs, values, origin)
+
+
+def load_data(data: dict, folder=".", overrides=(), outputs=None, values=(), origin: str = "--set",
+              source: str = "<scene>") -> Scene:
+    """load() of a scene given as a mapping (what a scene file's YAML holds) instead of a file:
+    relative paths resolve in `folder`, errors name `source` (no line numbers)."""
+    import copy
+    if not isinstance(data, dict):
+        raise InputError(f"{source}: a scene is a mapping of sections (camera, environment, "
+                         f"materials, objects, effects, output), not {type(data).__name__}")
+    return _validated(copy.deepcopy(data), {}, source, Path(folder).resolve(), overrides, outputs, values, origin)
+
+
+def _validated(data, lines, source, folder, overrides, outputs, values, origin) -> Scene:
     overridden = {}
     for a in overrides:
         overridden[_apply_override(data, a)] = "--set"
@@ -183,7 +202,6 @@ def load(path, overrides=(), outputs=None, values=(), origin: str = "--set") -> 
         overridden[key] = origin
     v = _Validator(source, lines, overridden)
     out = v.section(SCHEMA, data, "")
-    folder = path.resolve().parent
     _resolve_camera(v, out["camera"])
     _resolve_references(v, out, folder)
     _resolve_names(v, out)

@@ -141,7 +141,7 @@ class Study:
     def reference_seed(self, term: str, seed: int):
         """(hdr, manifest, cached): one seed of the term's reference, rendered into the cache or
         read back from it."""
-        from iblbake import render
+        from iblbake.render import render
         from iblbake.bake import cache
         from iblbake.io import images
 
@@ -150,7 +150,7 @@ class Study:
         holder = {}
 
         def build(tmp: Path):
-            fr = render.render(sc, runtime=self.rt, cache=self.bakes, warn=self.warn)
+            fr = render(sc, runtime=self.rt, cache=self.bakes, warn=self.warn)
             images.write_exr(tmp / "reference.exr", fr.hdr, channels=("R", "G", "B", "A"))
             holder["frame"] = fr
             ref = next(p for p in fr.report["passes"] if p["name"] == "reference")
@@ -201,22 +201,22 @@ class Study:
         the scene has other surfaces: every mode reads a mirror's one direction exactly, and
         what differs there is the panorama's reconstruction filter (the reference's texels, the
         lookups' bilinear), which a sun turns into most of the frame's RMSE."""
-        from iblbake import render
+        from iblbake.render import render
 
         vals = [("effects.diffuse", "off"), *NO_SPECULAR, ("output.albedo", "study-roughness.exr")]
         vals += [(f"materials.{m}.base_color", [float(v["roughness"])] * 3)
                  for m, v in self.scene.data["materials"].items()]
-        fr = render.render(self.load(vals, origin="accuracy"), runtime=self.rt, cache=self.bakes, warn=self.warn)
+        fr = render(self.load(vals, origin="accuracy"), runtime=self.rt, cache=self.bakes, warn=self.warn)
         return object_mask(fr.hdr) & (fr.aovs["albedo"][..., 0] < MIRROR_ROUGHNESS)
 
     def object_regions(self) -> np.ndarray:
         """Each pixel's object index (-1: none), from one G-buffer render's object AOV: the regions
         the study's region errors read."""
-        from iblbake import render
+        from iblbake.render import render
 
         if self._objects is None:
             vals = [("effects.diffuse", "off"), *NO_SPECULAR, ("output.object", "study-object.exr")]
-            fr = render.render(self.load(vals, origin="accuracy"), runtime=self.rt, cache=self.bakes, warn=self.warn)
+            fr = render(self.load(vals, origin="accuracy"), runtime=self.rt, cache=self.bakes, warn=self.warn)
             self._objects = np.rint(fr.aovs["object"]).astype(int)
         return self._objects
 
@@ -259,17 +259,17 @@ class Study:
         """Render the rung `repeats` times (kernel builds and bakes happen in the first and are
         reported apart); time = median over the renders of its lighting pass (shade or
         reference); frame = median of the whole render."""
-        from iblbake import render
+        from iblbake.render import lighting_passes, plan, render
 
         sc = self.load(self.rung_values(rung))
-        lighting_names = set(render.lighting_passes(render.plan(sc)))
+        lighting_names = set(lighting_passes(plan(sc)))
         t0 = time.perf_counter()
         lighting, whole, frame = [], [], None
         builds_before = len(self.rt.builds)
         bakes = []
         while len(lighting) < self.settings.repeats:
             first = frame is None
-            fr = render.render(sc, runtime=self.rt, cache=self.bakes, warn=self.warn)
+            fr = render(sc, runtime=self.rt, cache=self.bakes, warn=self.warn)
             light = sum(p["seconds"] for p in fr.report["passes"] if p["name"] in lighting_names)
             if first:
                 bakes = [b for b in fr.report["bakes"] if b["name"] not in ("geometry", "read_environment")]
@@ -284,7 +284,7 @@ class Study:
             whole.append(fr.report["elapsed_s"])
         if self.reflects_frame(rung):           # the specular term: the frame less its diffuse term
             alone = [(k, v) for k, v in rung.values if k not in dict(NO_SPECULAR)] + NO_SPECULAR
-            diffuse = render.render(self.load(alone), runtime=self.rt, cache=self.bakes, warn=self.warn)
+            diffuse = render(self.load(alone), runtime=self.rt, cache=self.bakes, warn=self.warn)
             hdr = frame.hdr.copy()
             hdr[..., :3] -= diffuse.hdr[..., :3]
             frame.hdr = hdr
@@ -316,10 +316,10 @@ class Study:
 
     def configured_frame(self) -> dict:
         """The scene as configured (both terms) against the sum of the term references."""
-        from iblbake import render
+        from iblbake.render import render
 
         sc = self.load([])
-        fr = render.render(sc, runtime=self.rt, cache=self.bakes, warn=self.warn)
+        fr = render(sc, runtime=self.rt, cache=self.bakes, warn=self.warn)
         ref = np.zeros_like(fr.hdr)
         mask = object_mask(fr.hdr)
         for t in self.terms:
@@ -332,8 +332,7 @@ class Study:
 def display(sc, hdr, like) -> np.ndarray:
     """`hdr` tone-mapped as the scene's frames are (its 8-bit PNG values, in the shape of `like`)."""
     from iblbake.core import tonemap
-    fx = sc.data["effects"]
-    png = tonemap.to_u8(tonemap.tonemap(hdr[..., :3], fx["tonemap"], fx["exposure"], fx["output_transfer"], fx["gamma"]))
+    png = tonemap.display_u8(hdr, sc.data["effects"])
     if like is not None and like.shape[-1] == 4:
         png = np.concatenate([png, like[..., 3:]], axis=-1)
     return png

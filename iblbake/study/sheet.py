@@ -27,7 +27,7 @@ TITLE_PT, AXIS_PT, CAPTION_PT = 22, 16, 13
 @dataclass
 class CellResult:
     cell: sweep.Cell
-    frame: object = None              # render.Frame, None where the cell failed
+    frame: object = None              # Frame, None where the cell failed
     seconds: float = 0.0
     error: str | None = None
     outputs: list = field(default_factory=list)
@@ -122,15 +122,15 @@ def shard_cells(scenes, bakes, shard: tuple) -> set:
 
 
 def cached_cell(bakes, key: str):
-    """The render.Frame a cell's entry holds, or None (not rendered yet, or damaged)."""
-    from iblbake import render
+    """The Frame a cell's entry holds, or None (not rendered yet, or damaged)."""
+    from iblbake.render import Frame
     from iblbake.bake import cache
 
     entry = bakes.root / key
     manifest = cache.verify(entry)
     if manifest is None:
         return None
-    return render.Frame(np.load(entry / "hdr.npy"), np.load(entry / "png.npy") if manifest["png"] else None,
+    return Frame(np.load(entry / "hdr.npy"), np.load(entry / "png.npy") if manifest["png"] else None,
                         {}, {**manifest["report"], "cell_cached": True})
 
 
@@ -159,9 +159,9 @@ def render_cells(scenes, cells, *, runtime, bakes, warn=None, progress=None, kee
     renders only that shard's cells (the others' results are None); `assemble` renders nothing
     and fails in one line naming the cells no shard has rendered. `repeat` > 0 times each cell
     (time_frames) and keeps the repeats in its frame's report."""
-    from iblbake import render
+    from iblbake.render import Reuse
 
-    reuse = render.Reuse()
+    reuse = Reuse()
     kind = runtime.info.kind if runtime is not None else None
     if assemble:
         results, missing = [], []
@@ -224,16 +224,16 @@ def time_frames(sc, runtime, bakes, repeat: int) -> list:
     device's first-launch specialisation (PoCL specialises a program at its first launch: one
     sample per cell gave the first cell of a sheet that cost, and the ao sheet's captions read
     off 594 ms against 64 rays 510 ms)."""
-    from iblbake import render
-    render.render(sc, runtime=runtime, cache=bakes)
-    return [round(sum(p["seconds"] for p in render.render(sc, runtime=runtime, cache=bakes).report["passes"]), 6)
+    from iblbake.render import render
+    render(sc, runtime=runtime, cache=bakes)
+    return [round(sum(p["seconds"] for p in render(sc, runtime=runtime, cache=bakes).report["passes"]), 6)
             for _ in range(repeat)]
 
 
 def render_cell(sc, c, runtime, bakes, reuse, warn, keep_going, resume, kind, repeat: int = 0):
     """One cell rendered (or, with `resume`, read back from the cache) and kept in the cache;
     with `repeat`, timed by time_frames (a cached cell timed with as many repeats keeps them)."""
-    from iblbake import render
+    from iblbake.render import render
     from iblbake.errors import DeviceError
 
     r = CellResult(c)
@@ -246,7 +246,7 @@ def render_cell(sc, c, runtime, bakes, reuse, warn, keep_going, resume, kind, re
     timed = r.frame is not None and (not repeat or len(r.repeats) == repeat)
     if r.frame is None or not timed:
         try:
-            r.frame = r.frame or render.render(sc, runtime=runtime, cache=bakes, reuse=reuse, warn=warn)
+            r.frame = r.frame or render(sc, runtime=runtime, cache=bakes, reuse=reuse, warn=warn)
             if repeat:
                 r.frame.report["timing"] = {"repeats": time_frames(sc, runtime, bakes, repeat),
                                             "what": f"passes of {repeat} full frames after a warm-up frame"}

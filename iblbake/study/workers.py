@@ -24,10 +24,10 @@ _STATE: dict = {}      # this worker process: one runtime, bake store and reuse 
 def _worker(device, cache_root) -> dict:
     key = (device, cache_root)
     if key not in _STATE:
-        from iblbake import render
+        from iblbake.render import Bakes, Reuse
         from iblbake.device.runtime import Runtime
         rt = Runtime(device)
-        _STATE[key] = {"rt": rt, "bakes": render.Bakes(cache_root), "reuse": render.Reuse(),
+        _STATE[key] = {"rt": rt, "bakes": Bakes(cache_root), "reuse": Reuse(),
                        "label": f"pid {os.getpid()} on {rt.device_label}"}
     return _STATE[key]
 
