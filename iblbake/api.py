@@ -120,15 +120,16 @@ def _colour_space(info, primaries: str) -> str:
     return "linear, in the file's declared chromaticities, kept as stored (primaries='convert' converts them)"
 
 
-def load_panorama(path, primaries: str = "keep", *, layout: str = "auto", nonfinite: str = "error",
+def load_panorama(path, primaries: str = "auto", *, layout: str = "auto", nonfinite: str = "error",
                   negative: str = "keep", transfer: str = "auto", max_pixels: int | None = None,
                   names: dict | None = None) -> Panorama:
     """Read an environment file into a Panorama.
 
     path: an EXR, HDR, PFM, TIFF, PNG or JPEG panorama, a cube map (a cross or strip of six faces,
         a KTX2 cube map) or six face files (a path containing {face}: px nx py ny pz nz).
-    primaries: 'keep' the values of a file declaring non-Rec.709 chromaticities as stored, or
-        'convert' them to Rec.709/D65.
+    primaries: a file declaring non-Rec.709 chromaticities: 'auto' keeps its values as stored and
+        says so in Panorama.warnings, 'keep' keeps them silently, 'convert' converts them to
+        Rec.709/D65.
     layout: what the file holds ('auto' goes by {face}, .ktx2, then the aspect ratio); cube maps
         are resampled to an equirect panorama.
     nonfinite: NaN/Inf texels 'error' (the default), 'zero' or 'clamp'.
@@ -142,7 +143,7 @@ def load_panorama(path, primaries: str = "keep", *, layout: str = "auto", nonfin
     from iblbake.bake import inputs
 
     _choice("layout", layout, inputs.LAYOUTS)
-    _choice("primaries", primaries, ("keep", "convert"))
+    _choice("primaries", primaries, ("auto", "keep", "convert"))
     _choice("nonfinite", nonfinite, ("error", "zero", "clamp"))
     _choice("negative", negative, ("keep", "clamp", "error"))
     _choice("transfer", transfer, ("auto", "srgb", "linear"))

@@ -102,11 +102,18 @@ def test_bakes_key_on_the_policies(tmp_path, small_panoramas):
     assert len({r["path"] for r in runs.values()}) == 3 and not any(r["cached"] for r in runs.values())
     city = Path(__file__).resolve().parents[1] / "examples" / "panoramas" / "city.exr"   # declares D50 sRGB
     docs = []
-    for how in ("keep", "convert"):
+    said = {}
+    for how in ("auto", "keep", "convert"):
         p = run_cli("sh", city, "--primaries", how, "--json")
         assert p.returncode == 0, p.stderr
-        assert ("Bradford" in p.stderr) == (how == "convert") and len(p.stderr.strip().splitlines()) == 1
+        said[how] = p.stderr.strip().splitlines()
         docs.append(np.array(json.loads(p.stdout)["irradiance"], dtype=float))
+    # auto says what it kept; keep, asked for, is silent (a new user could not silence it); convert
+    # says what it did
+    assert len(said["auto"]) == 1 and "declares non-Rec.709" in said["auto"][0] and not said["keep"]
+    assert len(said["convert"]) == 1 and "Bradford" in said["convert"][0]
+    assert np.array_equal(docs[0], docs[1])
+    docs = [docs[0], docs[2]]
     # city's primaries are sRGB's adapted to D50: converting back moves its colours by ~1e-4
     rel = np.abs(docs[1] - docs[0]).max() / np.abs(docs[0]).max()
     assert 1e-6 < rel < 1e-3

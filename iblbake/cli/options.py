@@ -144,9 +144,10 @@ def input_options(f):
                           "a strip of six faces (+X -X +Y -Y +Z -Z), six face files (a path with {face}: px nx "
                           "py ny pz nz) or a KTX2 cube map; auto goes by {face}, .ktx2, then the aspect ratio. "
                           "Cube maps are resampled to an equirect panorama.")(f)
-    f = click.option("--primaries", type=click.Choice(["keep", "convert"]), default="keep", show_default=True,
-                     help="An EXR declaring chromaticities other than Rec.709: keep its values as stored, or "
-                          "convert them to Rec.709/D65 (Bradford adaptation of the white).")(f)
+    f = click.option("--primaries", type=click.Choice(["auto", "keep", "convert"]), default="auto", show_default=True,
+                     help="An EXR declaring chromaticities other than Rec.709: keep its values as stored and say "
+                          "so (auto), keep them silently (keep), or convert them to Rec.709/D65 (Bradford "
+                          "adaptation of the white).")(f)
     return f
 
 

@@ -8,7 +8,8 @@ counted and reported, or clamped / refused with the negative policy.
 An integer (LDR: 8- or 16-bit PNG, JPEG) panorama is decoded from its transfer to linear (sRGB
 unless the file declares linear or a gamma; the transfer policy overrides) with a one-line
 warning that it clips highlights. Declared EXR chromaticities other than Rec.709 are used as
-stored (primaries keep) or converted to Rec.709/D65 with a Bradford adaptation (convert).
+stored (primaries auto, with a warning; keep, without) or converted to Rec.709/D65 with a Bradford
+adaptation (convert).
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ NEGATIVE_TINY_SHARE = 1e-4
 NONFINITE_POLICIES = ("error", "zero", "clamp")
 NEGATIVE_POLICIES = ("keep", "clamp", "error")
 TRANSFERS = ("auto", "srgb", "linear")
-PRIMARIES = ("keep", "convert")
+PRIMARIES = ("auto", "keep", "convert")
 
 
 @dataclass
@@ -116,7 +117,7 @@ POLICY_NAMES = {"max_pixels": "--max-pixels", "nonfinite": "nonfinite", "negativ
                 "transfer": "transfer", "primaries": "primaries", "layout": "layout"}
 
 
-def read_policies(nonfinite: str, negative: str, transfer: str = "auto", primaries: str = "keep",
+def read_policies(nonfinite: str, negative: str, transfer: str = "auto", primaries: str = "auto",
                   layout: str = "auto") -> dict:
     """What a bake keys on besides the file's content: the read policies that change pixels (the
     new ones only where not their default, so keys made before them still hold)."""
@@ -125,7 +126,7 @@ def read_policies(nonfinite: str, negative: str, transfer: str = "auto", primari
         out["layout"] = layout
     if transfer != "auto":
         out["transfer"] = transfer
-    if primaries != "keep":
+    if primaries == "convert":              # auto and keep read the same pixels
         out["primaries"] = primaries
     return out
 
@@ -160,7 +161,7 @@ def _decode_transfer(data, spec, transfer: str, path: str, warnings: list, name:
 
 
 def read_panorama(path, *, max_pixels: int | None = None, nonfinite: str = "error", negative: str = "keep",
-                  transfer: str = "auto", primaries: str = "keep",
+                  transfer: str = "auto", primaries: str = "auto",
                   names: dict | None = None) -> tuple[np.ndarray, ImageInfo]:
     """Read an HDR image as float32 RGB (H, W, 3) and validate it (see module doc). `names` maps
     max_pixels / nonfinite / negative to what messages call them (a flag or a scene key)."""
@@ -219,9 +220,10 @@ def read_panorama(path, *, max_pixels: int | None = None, nonfinite: str = "erro
                 rgb = np.ascontiguousarray(rgb @ m.T)
                 info.warnings.append(f"{path}: converted from its chromaticities {shown} to Rec.709/D65 "
                                      f"(Bradford adaptation)")
-            else:
+            elif primaries == "auto":          # keep: the user knows, and is not told again
                 info.warnings.append(f"{path}: declares non-Rec.709 chromaticities {shown}; pixels are used as "
-                                     f"stored (Rec.709 assumed; {name['primaries']} convert converts them)")
+                                     f"stored (Rec.709 assumed; {name['primaries']} convert converts them, "
+                                     f"{name['primaries']} keep keeps them without this warning)")
     return validate_texels(rgb, info, names=name), info
 
 

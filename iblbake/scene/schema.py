@@ -289,8 +289,9 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "layout": Enum(("auto", "equirect", "hcross", "vcross", "hstrip", "vstrip", "ktx2"), "auto",
                        doc="what path holds: an equirect panorama or a cube map (a cross, a strip of six faces, "
                            "KTX2), resampled to equirect; auto by .ktx2, then the aspect ratio"),
-        "primaries": Enum(("keep", "convert"), "keep",
-                          doc="EXR chromaticities other than Rec.709: keep the values, or convert to Rec.709/D65"),
+        "primaries": Enum(("auto", "keep", "convert"), "auto",
+                          doc="EXR chromaticities other than Rec.709: keep the values and say so (auto), keep them "
+                              "silently (keep), or convert to Rec.709/D65"),
         "sun": Enum(("none", "extract"), "none",
                     doc="extract: the panorama's sun (a compact region 1e4 x brighter than the median) leaves the "
                         "panorama and comes back as a directional light of exactly its energy, so it casts shadows"),
