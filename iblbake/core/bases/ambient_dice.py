@@ -86,7 +86,7 @@ def radiance(coeffs, dirs, opts) -> np.ndarray:
 
 def irradiance(coeffs, normals, opts) -> np.ndarray:
     t = np.asarray(normals, np.float64) @ vertices().T
-    return common.legendre_series(irradiance_profile(), t) @ np.asarray(coeffs, np.float64)
+    return np.maximum(0.0, common.legendre_series(irradiance_profile(), t) @ np.asarray(coeffs, np.float64))
 
 
 def validate(coeffs, opts) -> np.ndarray:

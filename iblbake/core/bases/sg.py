@@ -119,7 +119,9 @@ def exact_irradiance(mu_dot_n, lam: float, lmax: int = 40) -> np.ndarray:
 
 def irradiance(coeffs, normals, opts) -> np.ndarray:
     k = opts["sg_lobes"]
-    return hill_irradiance(np.asarray(normals, np.float64) @ axes(k).T, sharpness(k)) @ np.asarray(coeffs, np.float64)
+    # clamped at 0 as SH: least squares can go negative behind a sun
+    return np.maximum(0.0, hill_irradiance(np.asarray(normals, np.float64) @ axes(k).T, sharpness(k))
+                      @ np.asarray(coeffs, np.float64))
 
 
 def validate(coeffs, opts) -> np.ndarray:
