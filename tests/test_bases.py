@@ -284,3 +284,22 @@ def test_glsl_compiles(name, opts, tmp_path):
                       f"void main() {{ color = vec4({fn}(normalize(N)), 1.0); }}\n")
     p = subprocess.run(["glslangValidator", str(shader)], capture_output=True, text=True, timeout=60)
     assert p.returncode == 0, p.stdout + p.stderr
+
+
+def test_bases_ladder_is_the_registry():
+    """`iblbake accuracy --ladder bases`: one diffuse rung per registered basis and size, each
+    setting only keys the schema has."""
+    from types import SimpleNamespace
+
+    from iblbake.scene.schema import SCHEMA
+    from iblbake.study import ladder
+
+    rungs = ladder.bases_ladder(None, SimpleNamespace(diffuse="sh"))
+    labels = [BASES[n].label(o) for n, o in VARIANTS]
+    assert [r.label for r in rungs] == labels and len(set(labels)) == len(labels)
+    fields = SCHEMA.fields["effects"].fields
+    for r, (name, opts) in zip(rungs, VARIANTS):
+        vals = dict(r.values)
+        assert r.term == "diffuse" and vals["effects.diffuse"] == name and name in fields["diffuse"].choices
+        assert all(k.split(".", 1)[1] in fields for k in vals)
+    assert ladder.bases_ladder(None, SimpleNamespace(diffuse="off")) == []
