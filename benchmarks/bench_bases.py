@@ -3,8 +3,9 @@
 cosine convolution of the panorama (bake/sh.py exact_irradiance: every texel, exact solid angles)
 at 4096 Fibonacci normals, in luminance: relative RMSE and the largest relative error of a
 normal (floor 1e-3 of the mean, as `iblbake sh`'s error block); bytes per probe (floats x 3
-channels, fp16 and fp32); projection time (the float64 twin, 1024 x 512, median of 3) and
-evaluation time (the kernel header on the OpenCL device, ns per normal over 2^20 normals).
+channels, fp16 and fp32, and Haar's 2-byte index per kept coefficient: core/bases probe_bytes);
+projection time (the float64 twin, 1024 x 512, median of 3) and
+evaluation time (the kernel header on the OpenCL device, ns per normal over 2^16 normals).
 
 Prints a markdown table and writes the error-against-bytes plot (one curve per basis family) to
 docs/images/bases_error_bytes.png (matplotlib, imported here only). Run: .venv/bin/python
@@ -21,14 +22,14 @@ import numpy as np
 
 from iblbake.bake import sh as bake_sh
 from iblbake.core import sh as core_sh
-from iblbake.core.bases import BASES
+from iblbake.core.bases import BASES, probe_bytes
 from iblbake.core.metrics import LUMINANCE
 from iblbake.device import runtime as cl
 from iblbake.io import images
 
 ROOT = Path(__file__).resolve().parents[1]
 NORMALS = 4096
-EVAL_NORMALS = 1 << 20
+EVAL_NORMALS = 1 << 16
 
 
 def median_time(fn, repeat=3):
@@ -96,6 +97,7 @@ def main():
             proj = median_time(lambda: m.project(pans[names[0]], opts))
             ev_s = eval_seconds(rt, name, opts, coeffs, ev_dev, out)
             rows.append({"label": m.label(opts), "family": family(name, opts), "floats": m.floats(opts),
+                         "bytes": (probe_bytes(name, opts, 2), probe_bytes(name, opts, 4)),
                          "rmse": rmse, "max": mx, "project_ms": proj * 1e3, "eval_ns": ev_s / EVAL_NORMALS * 1e9})
     print_table(rows, names)
     plot(rows, args.plot)
@@ -106,7 +108,7 @@ def family(name, opts):
         return "SH" + ("" if opts["sh_window"] == "none" else f" {opts['sh_window']}")
     if name == "sg":
         return "SG " + ("LS" if opts["sg_fit"] == "least_squares" else "NNLS")
-    return BASES[name].label(opts)
+    return BASES[name].TITLE
 
 
 def print_table(rows, names):
@@ -115,7 +117,7 @@ def print_table(rows, names):
     print("| " + " | ".join(head) + " |")
     print("|" + "---|" * len(head))
     for r in rows:
-        cells = [r["label"], str(r["floats"]), f"{r['floats'] * 6} ({r['floats'] * 12})"]
+        cells = [r["label"], str(r["floats"]), f"{r['bytes'][0]} ({r['bytes'][1]})"]
         cells += [f"{100 * r['rmse'][n]:.2f}" for n in names]
         cells += [f"{100 * np.mean(list(r['rmse'].values())):.2f}", f"{100 * max(r['max'].values()):.1f}",
                   f"{r['project_ms']:.1f}", f"{r['eval_ns']:.2f}"]
@@ -130,15 +132,16 @@ def plot(rows, path):
     fig, ax = plt.subplots(figsize=(7, 4.5))
     fams = list(dict.fromkeys(r["family"] for r in rows))
     for f in fams:
-        pts = sorted((r["floats"] * 6, 100 * np.mean(list(r["rmse"].values()))) for r in rows if r["family"] == f)
+        pts = sorted((r["bytes"][0], 100 * np.mean(list(r["rmse"].values()))) for r in rows if r["family"] == f)
         x, y = zip(*pts)
         ax.plot(x, y, "o-", label=f)
-    ax.set_xlabel("bytes per probe (fp16 RGB)")
+    ax.set_xscale("log")
+    ax.set_xlabel("bytes per probe (fp16 RGB; Haar: and its indices)")
     ax.set_ylabel("diffuse irradiance relative RMSE, % (mean of panoramas)")
     ax.set_yscale("log")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
-    ax.set_title("Directional bases: error against bytes (8 example panoramas)")
+    ax.set_title("Directional bases: diffuse error against bytes (8 panoramas)")
     fig.tight_layout()
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)

@@ -10,5 +10,6 @@
 #include "basis_zh3.h"
 #include "basis_sg.h"
 #include "basis_ambient_dice.h"
+#include "basis_haar.h"
 
 #endif

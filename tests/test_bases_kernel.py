@@ -23,11 +23,12 @@ def sky(w=64, h=32):
 @pytest.mark.parametrize("name,opts", VARIANTS, ids=lambda x: str(x))
 def test_kernel_matches_twin(rt, name, opts):
     """float32 against float64: measured <= 3.9e-7 of the largest irradiance (SG6; Geomerics' pow
-    2.7e-7)."""
+    2.7e-7), Haar's sum of up to 1024 clipped squares 1.5e-6 (256 kept); Haar at 600 normals (its
+    float64 twin is a loop over terms)."""
     m = BASES[name]
     c = m.project(sky(), opts)
     rng = np.random.default_rng(1)
-    n = rng.normal(size=(3000, 3))
+    n = rng.normal(size=(600 if name == "haar" else 3000, 3))
     n = np.concatenate([n / np.linalg.norm(n, axis=1, keepdims=True), np.eye(3), -np.eye(3)])
     k = rt.kernel("selftest.cl", "t_basis_irradiance", m.defines(opts))
     out = rt.empty(len(n) * 3 * 4)
@@ -36,17 +37,17 @@ def test_kernel_matches_twin(rt, name, opts):
     got = rt.read(out, (len(n), 3))
     want = m.irradiance(c, n, opts)
     err = np.abs(got - want).max() / np.abs(want).max()
-    assert err < 1.5e-6, err
+    assert err < (5e-6 if name == "haar" else 1.5e-6), err
 
 
-RENDERED = [(n, BASES[n].variants()[-1]) for n in DIFFUSE]
+RENDERED = [(n, BASES[n].variants()[-1 if n != "haar" else 2]) for n in DIFFUSE]
 
 
 @pytest.mark.parametrize("name,opts", RENDERED, ids=lambda x: str(x))
 def test_render_matches_shade_twin(tmp_path, name, opts):
     """`effects.diffuse: <basis>` end to end (schema, plan, the cached `basis` bake, the source, the
     shade kernel with only that header) against the shade twin on the float64 projection:
-    measured <= 1.1e-6 of the brightest pixel; only the scene's basis compiled."""
+    measured <= 1.1e-6 of the brightest pixel (Haar 64: 1.0e-6); only the scene's basis compiled."""
     from iblbake import render
     from iblbake.io import images
     from iblbake.render import twin as rr

@@ -34,7 +34,7 @@ def bounces_value(v: str):
 @click.option("--ladder", "ladder_path", type=click.Path(dir_okay=False), default=None, metavar="FILE|realtime|bases",
               help="The rungs to run instead of the default ladder: `realtime` (the real-time modes as shipped: "
                    "SH, GTAO, probes; importance, the split sum, lobe, SSR, reflection probes), `bases` (every "
-                   "directional basis and size of the diffuse light: SH, L1 Geomerics, ZH3, SG, ambient dice), "
+                   "directional basis and size of the diffuse light: SH, L1 Geomerics, ZH3, SG, ambient dice, Haar), "
                    "or a file "
                    "{rungs: [AXIS, ...]}, each axis in the sweep syntax ({key, values}, {key, range}, {steps}) "
                    "with optional term: and with:.")

@@ -82,7 +82,8 @@ def pack(coeffs, opts) -> np.ndarray:
 
 def glsl(coeffs, opts) -> str:
     return f"""// iblbake L1 SH with Geomerics' non-linear reconstruction; radiance coefficients k = l (l + 1) + m,
-// real orthonormal SH (Y1 ~ y, Y2 ~ z, Y3 ~ x); world +y up. diffuse = albedo / PI * l1GeomericsIrradiance(normalize(N));
+// real orthonormal SH (Y1 ~ y, Y2 ~ z, Y3 ~ x); world +y up.
+// diffuse = albedo / PI * l1GeomericsIrradiance(normalize(N));
 {common.glsl_vec3_array("L1_SH", np.asarray(coeffs)[:, :3])}
 
 float l1GeomericsChannel(float l0, vec3 l1, vec3 n) {{

@@ -145,7 +145,8 @@ def pack(coeffs, opts) -> np.ndarray:
 
 def glsl(coeffs, opts) -> str:
     k = opts["sg_lobes"]
-    return f"""// iblbake spherical Gaussians: {k} lobes ({opts['sg_fit']}), G(w) = A exp(lambda (mu.w - 1)); world +y up.
+    return f"""// iblbake spherical Gaussians: {k} lobes ({opts['sg_fit']}), G(w) = A exp(lambda (mu.w - 1));
+// world +y up.
 // irradiance: Hill's fitted SG-cosine product; diffuse = albedo / PI * sgIrradiance(normalize(N));
 const int SG_LOBES = {k};
 const float SG_SHARPNESS = {sharpness(k):.9g};

@@ -1,5 +1,5 @@
 """The panorama's diffuse light from a directional basis (`diffuse:` any of core/bases DIFFUSE:
-L1 Geomerics, ZH3, SG, ambient dice): the `basis` bake's coefficients, packed by the basis, read
+L1 Geomerics, ZH3, SG, ambient dice, Haar): the `basis` bake's coefficients, packed by the basis, read
 by the one header its define selects (kernels/bases.h basis_irradiance)."""
 
 from __future__ import annotations
