@@ -360,3 +360,14 @@ def test_haar_keeps_the_means_and_the_largest():
     detail = ~scaling
     worst_kept = energy[np.isin(codes, kept) & detail].min()
     assert (energy[detail & ~np.isin(codes, kept)] <= worst_kept).all()
+
+
+def test_haar_cube_map_against_finer_pieces(monkeypatch):
+    """The cube map's texels (each panorama texel in 4 x 4 pieces) against 32 x 32 pieces, the
+    overlaps nearly exact: measured 2.9e-3 of the largest texel on a smooth 128 x 64 sky."""
+    from iblbake.core.bases import haar
+    img = smooth_sky(128, 64)
+    coarse = haar.cube_average(img)
+    monkeypatch.setattr(haar, "SPLIT", 32)
+    fine = haar.cube_average(img)
+    assert np.abs(coarse - fine).max() < 8e-3 * np.abs(fine).max()

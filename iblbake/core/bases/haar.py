@@ -2,9 +2,8 @@
 "All-Frequency Shadows Using Non-linear Wavelet Lighting Approximation", SIGGRAPH 2003): a
 non-linear approximation, so each kept coefficient carries its index.
 
-- Cube map: the panorama averaged over each texel of six FACE x FACE faces (docs/conventions.md
-  "Cube maps"), each texel from SUB x SUB subsamples weighted by their solid angle, each
-  subsample the panorama texel it falls in (the panorama is piecewise constant).
+- Cube map: six FACE x FACE faces (docs/conventions.md "Cube maps"), each texel the solid-angle
+  weighted mean of the pieces of panorama texels that fall in it (cube_average).
 - Per face, the orthonormal 2-D Haar pyramid in the texel measure: at block size 2^s
   (s = 1..log2 FACE) the averages (a + b + c + d)/2 of each 2 x 2 block of the level below and
   its three details, H = (top - bottom)/2, V = (left - right)/2, D = (diagonal)/2; the last
@@ -26,7 +25,6 @@ reads it as an exact float."""
 
 from __future__ import annotations
 
-import functools
 import math
 
 import numpy as np
@@ -42,7 +40,7 @@ OPTIONS = {"haar_coefficients": (KEPT, 64, "haar: the cube-map Haar coefficients
                                             "faces' means)")}
 FACE = 32
 LEVELS = 5            # log2 FACE
-SUB = 16
+SPLIT = 4
 
 
 def variants() -> list:
@@ -62,34 +60,40 @@ def index_bytes(opts) -> int:
     return 2 * opts["haar_coefficients"]
 
 
-@functools.lru_cache(maxsize=1)
-def _subsample_grid():
-    """Face coordinates (s, t) of the SUB x SUB subsamples of every texel, (FACE, FACE, SUB^2),
-    and their solid-angle weights normalised per texel."""
-    c = (np.arange(FACE * SUB) + 0.5) / (FACE * SUB)
-    t, s = np.meshgrid(c, c, indexing="ij")
-    a, b = 2 * s - 1, 2 * t - 1
-    w = (1 + a * a + b * b) ** -1.5                  # the cube face's solid-angle density
-
-    def per_texel(x):
-        return x.reshape(FACE, SUB, FACE, SUB).transpose(0, 2, 1, 3).reshape(FACE, FACE, SUB * SUB)
-    w = per_texel(w)
-    return per_texel(s), per_texel(t), w / w.sum(-1, keepdims=True)
-
-
 def cube_average(image) -> np.ndarray:
-    """(6, FACE, FACE, C): the panorama's mean over each cube texel (SUB = 16: 0.85% irradiance
-    RMSE on city at 128 kept, where 8 left 6.2% from the sun's texels hit or missed)."""
+    """(6, FACE, FACE, C): each panorama texel split into SPLIT x SPLIT pieces of equal share of
+    its solid angle (SPLIT rows weighted by sin theta), each piece given to the cube texel its
+    centre falls in; a cube texel's value the weighted mean of what it received, so a uniform
+    sky stays exact. Sampling the panorama at cube subsamples instead left a sun's energy to
+    which subsamples hit it: 10.1% irradiance RMSE on sunrise with 256 kept at 16 x 16 subsamples,
+    2.2% so."""
     img = np.asarray(image, np.float64)
-    h, w = img.shape[:2]
-    s, t, wt = _subsample_grid()
-    out = np.empty((6, FACE, FACE, img.shape[2]))
-    for f in range(6):
-        u, v = conventions.equirect_uv_from_dir(conventions.dir_from_cube(f, s, t))
-        i = np.minimum((u * w).astype(np.int64), w - 1)
-        j = np.minimum((v * h).astype(np.int64), h - 1)
-        out[f] = np.einsum("yxs,yxsc->yxc", wt, img[j, i])
-    return out
+    h, w, nch = img.shape
+    x = (np.arange(SPLIT) + 0.5) / SPLIT
+    om = conventions.equirect_row_solid_angles(w, h)
+    phi = conventions.equirect_phi(w)[:, None] + (0.5 - x[None, :]) * (2 * np.pi / w)    # (w, SPLIT)
+    cells = 6 * FACE * FACE
+    acc, wsum = np.zeros((nch, cells)), np.zeros(cells)
+    for j in range(h):
+        th = np.pi * (j + x) / h
+        share = np.sin(th) / np.sin(th).sum() * om[j] / SPLIT                         # (SPLIT,)
+        st = np.sin(th)[:, None, None]
+        d = np.stack(np.broadcast_arrays(st * np.sin(phi), np.cos(th)[:, None, None], st * np.cos(phi)), -1)
+        f, s, t = conventions.cube_from_dir(d)                                       # (SPLIT, w, SPLIT)
+        cell = ((f * FACE + np.minimum((t * FACE).astype(np.int64), FACE - 1)) * FACE
+                + np.minimum((s * FACE).astype(np.int64), FACE - 1)).reshape(-1)
+        wt = np.broadcast_to(share[:, None, None], f.shape).reshape(-1)
+        wsum += np.bincount(cell, wt, cells)
+        col = np.broadcast_to(np.arange(w)[None, :, None], f.shape).reshape(-1)
+        for ch in range(nch):
+            acc[ch] += np.bincount(cell, wt * img[j, col, ch], cells)
+    # a cube texel no piece fell in (a panorama coarser than the cube map) takes the panorama
+    # texel at its centre
+    u, v = conventions.equirect_uv_from_dir(conventions.cube_texel_dirs(FACE).reshape(-1, 3))
+    centre = img[np.minimum((v * h).astype(np.int64), h - 1), np.minimum((u * w).astype(np.int64), w - 1)]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = np.where(wsum[:, None] > 0, (acc / np.where(wsum > 0, wsum, 1.0)).T, centre)
+    return out.reshape(6, FACE, FACE, nch)
 
 
 def forward(cube):
