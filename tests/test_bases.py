@@ -371,3 +371,16 @@ def test_haar_cube_map_against_finer_pieces(monkeypatch):
     monkeypatch.setattr(haar, "SPLIT", 32)
     fine = haar.cube_average(img)
     assert np.abs(coarse - fine).max() < 8e-3 * np.abs(fine).max()
+
+
+@pytest.mark.parametrize("name,opts", [v for v in VARIANTS if BASES[v[0]].HEADER], ids=lambda x: str(x))
+def test_glsl_declares_the_coefficients(name, opts):
+    """The transcription the SH snippet's test makes: the GLSL's first vec3 array is the
+    coefficients (R, G, B) row for row, to its 9 significant digits."""
+    m = BASES[name]
+    c = m.project(smooth_sky(32, 16), opts)
+    src = m.glsl(c, opts)
+    body = src.split("](\n", 1)[1].split("\n);", 1)[0]
+    rows = np.array([[float(v) for v in grp.split(")")[0].split(",")] for grp in body.split("vec3(")[1:]])
+    assert rows.shape == (m.floats(opts), 3)
+    assert np.abs(rows - c[:, :3]).max() <= 1e-8 * np.abs(c[:, :3]).max()
