@@ -384,3 +384,38 @@ def test_glsl_declares_the_coefficients(name, opts):
     rows = np.array([[float(v) for v in grp.split(")")[0].split(",")] for grp in body.split("vec3(")[1:]])
     assert rows.shape == (m.floats(opts), 3)
     assert np.abs(rows - c[:, :3]).max() <= 1e-8 * np.abs(c[:, :3]).max()
+
+
+def test_cached_coefficients_are_checked_when_read(tmp_path, monkeypatch):
+    """The `basis` bake: built once, read back from the cache; an entry rewritten behind the
+    cache's back is rebuilt (its manifest hash, with a warning), and coefficients that match their
+    manifest but not their basis are refused naming the file (the basis's validate)."""
+    import json
+
+    from iblbake.bake import bases as bake_bases
+    from iblbake.bake import cache
+    from iblbake.errors import IblbakeError
+    from iblbake.io.images import ImageInfo
+
+    img = smooth_sky(32, 16)
+    info = ImageInfo("sky", 32, 16, ("R", "G", "B"), "float32", "0" * 64)
+    opts = {"sg_lobes": 5, "sg_fit": "nnls"}
+    c, manifest, cached = bake_bases.bake(img, info, tmp_path, {}, "sg", opts)
+    assert not cached and np.allclose(c, sg.project(img, opts))
+    c2, _, cached = bake_bases.bake(img, info, tmp_path, {}, "sg", opts)
+    assert cached and np.array_equal(c, c2)
+    path = tmp_path / manifest["key"] / "coefficients.json"
+    doc = json.loads(path.read_text())
+    doc["coefficients"][0][0] = -1.0
+    path.write_text(json.dumps(doc))
+    warned = []
+    c3, _, cached = bake_bases.bake(img, info, tmp_path, {}, "sg", opts, warn=warned.append)
+    assert not cached and np.array_equal(c, c3) and "rebuilding" in warned[0]
+
+    def build(tmp):                        # an entry that matches its manifest, not its basis
+        (tmp / "coefficients.json").write_text(json.dumps({"coefficients": [[-1.0, 0.0, 0.0]] * 5}))
+        return {"kind": "basis", "files": [{"name": "coefficients.json"}]}
+    real = cache.get_or_build
+    monkeypatch.setattr(cache, "get_or_build", lambda root, key, _build, **kw: real(root, key, build, **kw))
+    with pytest.raises(IblbakeError, match=r"coefficients\.json: .*negative"):
+        bake_bases.bake(img, info, tmp_path / "other", {}, "sg", opts)

@@ -40,8 +40,8 @@ def bake(image, info, root, policies: dict, name: str, opts: dict, warn=None):
     def build(tmp: Path):
         t0 = time.perf_counter()
         c = m.project(np.asarray(image)[..., :3], opts)
-        write_json(tmp / "coefficients.json", {"basis": name, "options": opts, "layout": m.__doc__.split("Layout:")[-1]
-                                               .strip() if "Layout:" in m.__doc__ else "", "coefficients": c.tolist()})
+        # rows of per-channel values in the order docs/conventions.md "Directional bases" gives
+        write_json(tmp / "coefficients.json", {"basis": name, "options": opts, "coefficients": c.tolist()})
         return {"kind": "basis", "files": [{"name": "coefficients.json"}], "parameters": {"basis": name, **opts,
                 **policies}, "input": info.to_json(), "project_s": round(time.perf_counter() - t0, 4)}
 
