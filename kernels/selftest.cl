@@ -2,6 +2,7 @@
  * conventions (tests/test_conventions.py, tests/test_sh.py). Not used by any command. */
 #include "common.h"
 #include "sh.h"
+#include "bases.h"
 #include "envmap.h"
 #include "probes.h"
 
@@ -108,4 +109,20 @@ __kernel void t_probe_octahedral(__global const float4 *d, __global float2 *uv)
 {
     const int i = get_global_id(0);
     uv[i] = probe_octahedral(d[i].xyz);
+}
+
+#ifdef HAS_BASIS
+/* the scene's directional basis (BASIS_<NAME>) at normals: tests/test_bases_kernel.py */
+__kernel void t_basis_irradiance(__constant float4 *basis_coeffs, __global const float *n, __global float *e)
+{
+    int i = get_global_id(0);
+    vstore3(basis_irradiance(basis_coeffs, vload3(i, n)), i, e);
+}
+#endif
+
+/* the SH irradiance of the shade pass at normals (SH_BANDS bands): benchmarks/bench_bases.py */
+__kernel void t_sh_irradiance(__constant float4 *coeffs, __global const float *n, __global float *e)
+{
+    int i = get_global_id(0);
+    vstore3(sh_irradiance(coeffs, vload3(i, n)), i, e);
 }

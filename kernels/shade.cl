@@ -1,5 +1,6 @@
 /* Shade pass: the approximate lighting terms the scene asks for, added into the radiance buffer.
- *   DIFFUSE_MODE  DIFFUSE_SH (SH_BANDS bands), DIFFUSE_PROBES (the irradiance probes around the point,
+ *   DIFFUSE_MODE  DIFFUSE_SH (SH_BANDS bands), DIFFUSE_BASIS (the directional basis BASIS_<NAME>
+ *                 selects, kernels/bases.h), DIFFUSE_PROBES (the irradiance probes around the point,
  *                 kernels/probes.h; probe_stats counts the samples that fell back) or off
  *   SPECULAR_MODE SPECULAR_IMPORTANCE (the importance pass's sums, kernels/importance.cl,
  *                 combined here with f0) or SPECULAR_PREFILTERED
@@ -17,6 +18,7 @@
 #include "sampling.h"
 #include "envmap.h"
 #include "sh.h"
+#include "bases.h"
 #include "probes.h"
 #include "importance.h"
 #include "split_sum.h"
@@ -45,7 +47,7 @@ inline float3 ao_multibounce(float ao, float3 albedo)
  * arguments); this kernel only dispatches to them and applies occlusion. */
 __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
                     const int n, const float2 env_rot, const float env_scale,
-                    __constant float4 *sh_coeffs, CHAIN_PARAMS, __global const float2 *dfg, const int dfg_size,
+                    __constant float4 *sh_coeffs, __constant float4 *basis_coeffs, CHAIN_PARAMS, __global const float2 *dfg, const int dfg_size,
                     LOBE_PARAMS, __global const float *ao_buf, __global const float4 *spec_sums, PROBE_PARAMS,
                     RPROBE_PARAMS, __global float4 *ssr_env, __global int *probe_stats, __global float4 *radiance)
 {
@@ -68,6 +70,8 @@ __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
 #endif
 #if DIFFUSE_MODE == DIFFUSE_SH
     color += diff_occ * diffuse_weight(mt, nov) * env_scale * sh_irradiance(sh_coeffs, to_env(nrm, env_rot));
+#elif DIFFUSE_MODE == DIFFUSE_BASIS
+    color += diff_occ * diffuse_weight(mt, nov) * env_scale * basis_irradiance(basis_coeffs, to_env(nrm, env_rot));
 #elif DIFFUSE_MODE == DIFFUSE_PROBES
     color += diff_occ * diffuse_weight(mt, nov)
              * probes_diffuse(gb_pos[gid].xyz, nrm, v, env_scale * sh_irradiance(sh_coeffs, to_env(nrm, env_rot)),

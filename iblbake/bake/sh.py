@@ -332,11 +332,8 @@ ERROR_NORMALS = 256
 
 def fibonacci_normals(n: int = ERROR_NORMALS):
     """n fixed unit normals spread evenly over the sphere (a Fibonacci lattice, +y polar)."""
-    k = np.arange(n)
-    y = 1.0 - (2 * k + 1) / n
-    phi = k * np.pi * (3.0 - np.sqrt(5.0))
-    s = np.sqrt(np.maximum(0.0, 1.0 - y * y))
-    return np.stack([s * np.sin(phi), y, s * np.cos(phi)], -1)
+    from iblbake.core.bases.common import fibonacci_sphere
+    return fibonacci_sphere(n)
 
 
 def exact_irradiance(image, normals, rotate_y_deg: float = 0.0):

@@ -252,6 +252,21 @@ class Bakes:
             ctx.rt, image, info, self.root, self._policies(env), bands, window, warn=ctx.warn))
         return coeffs, cached or hit, {"bands": bands, "entry": str(self.root / manifest["key"])}
 
+    def _basis(self, ctx):
+        """The panorama projected onto the scene's directional basis (bake/bases.py)."""
+        from iblbake.bake import bases as bake_bases
+        from iblbake.core import bases
+
+        fx, env = ctx.scene.data["effects"], ctx.scene.data["environment"]
+        image, info = self.environment(env)
+        name = fx["diffuse"]
+        opts = bases.options_of(name, fx)
+        key = ("basis", info.sha256, name, tuple(sorted(opts.items())), env["nonfinite"], env["negative"])
+        (coeffs, manifest, cached), hit = self._recall(key, lambda: bake_bases.bake(
+            image, info, self.root, self._policies(env), name, opts, warn=ctx.warn))
+        return coeffs, cached or hit, {"basis": name, **opts, "floats": bases.BASES[name].floats(opts),
+                                       "entry": str(self.root / manifest["key"])}
+
     def _baker(self, ctx):
         return self._get(("baker", id(ctx.rt)), lambda: mipsbake.Baker("opencl", rt=ctx.rt))
 

@@ -12,18 +12,19 @@ import math
 
 from dataclasses import dataclass, field
 
+from iblbake.core import bases
 from iblbake.scene import materials
 from iblbake.scene.load import AOVS, Scene
 
 
 # The modes that approximate image-based light (runtime and baked estimates): AO occludes them,
 # the study's AO rungs apply to them. The reference traces true visibility instead.
-APPROXIMATE_MODES = {"diffuse": ("sh", "probes"), "specular": ("importance", "prefiltered", "lobe")}
+APPROXIMATE_MODES = {"diffuse": ("sh", "probes") + bases.DIFFUSE, "specular": ("importance", "prefiltered", "lobe")}
 
 
 @dataclass
 class Effects:
-    diffuse: str          # off | sh | probes | reference
+    diffuse: str          # off | sh | probes | reference | a basis of core/bases (DIFFUSE)
     specular: str         # off | importance | prefiltered | lobe | reference
     background: str       # hide | show | color | blur
     emissive: bool
@@ -165,7 +166,7 @@ def lighting_passes(pl: Plan) -> list:
     return [p.name for p in pl.passes if p.name in names]
 
 
-BAKE_ORDER = ("sh", "radiance", "prefiltered", "dfg", "env_cdf", "probes", "reflection_probes")
+BAKE_ORDER = ("sh", "basis", "radiance", "prefiltered", "dfg", "env_cdf", "probes", "reflection_probes")
 
 
 def plan(scene: Scene, one_program: bool = False) -> Plan:

@@ -11,6 +11,8 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from iblbake.core import bases
+
 # Field types. Each checks one value and returns it normalised, or raises _Bad with the reason.
 
 
@@ -459,11 +461,15 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                                "a reflective object's centre excludes that object to capture its surroundings"),
     })),
     "effects": Section(doc="what the renderer simulates; nothing else is baked, compiled or run", fields={
-        "diffuse": Enum(("sh", "probes", "reference", "off"), "sh",
-                        doc="diffuse IBL: SH irradiance of the panorama, irradiance probes (`probes`: the light "
-                            "between surfaces too), Monte Carlo reference, or none"),
+        "diffuse": Enum(("sh",) + bases.DIFFUSE + ("probes", "reference", "off"), "sh",
+                        doc="diffuse IBL: SH irradiance of the panorama, another directional basis of it ("
+                            + ", ".join(f"`{n}`: {bases.BASES[n].TITLE}" for n in bases.DIFFUSE)
+                            + "; docs/conventions.md), irradiance probes (`probes`: the light between surfaces "
+                              "too), Monte Carlo reference, or none"),
         "sh_bands": Num(3, 1, 8, integer=True, doc="SH bands for diffuse: sh (3 = 9 coefficients)"),
         "sh_window": Enum(("none", "hann", "lanczos"), "none", doc="SH ringing window"),
+        **{k: Enum(choices, default, doc=doc) for n in bases.DIFFUSE
+           for k, (choices, default, doc) in bases.BASES[n].OPTIONS.items()},
         "specular": Enum(("importance", "prefiltered", "lobe", "reference", "off"), "prefiltered",
                          doc="specular IBL: runtime GGX importance sampling (Colbert and Krivanek 2007), split sum, "
                              "lobe (K visible-normal samples reading the prefiltered chain), Monte Carlo reference, none"),

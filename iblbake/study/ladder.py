@@ -151,7 +151,18 @@ def realtime_ladder(sc, fx) -> list:
     return rungs
 
 
-LADDERS = {"realtime": realtime_ladder}       # --ladder NAME
+def bases_ladder(sc, fx) -> list:
+    """Every registered directional basis and size of the panorama's diffuse light (`--ladder
+    bases`; core/bases, the shoot-out of docs/benchmarks.md), AO off: a basis against the other."""
+    from iblbake.core.bases import BASES
+    if fx.diffuse == "off":
+        return []
+    return [Rung("diffuse", m.label(opts), [("effects.diffuse", name), *((f"effects.{k}", v) for k, v in opts.items()),
+                                            ("effects.ao", "off")])
+            for name, m in BASES.items() for opts in m.variants()]
+
+
+LADDERS = {"realtime": realtime_ladder, "bases": bases_ladder}       # --ladder NAME
 
 
 def probe_rungs() -> list:

@@ -119,8 +119,10 @@ def material_defines(scene: Scene) -> dict:
 
 
 def mode_defines(fx: Effects) -> dict:
+    from iblbake.core.bases import DIFFUSE
     from iblbake.scene.layout import DIFFUSE_MODES, SPECULAR_MODES
-    return {"DIFFUSE_MODE": DIFFUSE_MODES[fx.diffuse], "SPECULAR_MODE": SPECULAR_MODES[fx.specular]}
+    diffuse = "basis" if fx.diffuse in DIFFUSE else fx.diffuse        # one mode, its header by BASIS_<NAME>
+    return {"DIFFUSE_MODE": DIFFUSE_MODES[diffuse], "SPECULAR_MODE": SPECULAR_MODES[fx.specular]}
 
 
 DISPLAY_KEYS = ("tonemap", "exposure", "output_transfer", "gamma")

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from iblbake.core import brdf
+from iblbake.core import bases, brdf
 from iblbake.core import conventions
 from iblbake.bake.dfg import dfg_lookup
 from iblbake.bake import radiance
@@ -17,13 +17,13 @@ from iblbake.render.twin.surface import diffuse_weight, material_occlusion, surf
 
 
 def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, prefiltered=None, dfg=None,
-          ao=None, probes=None, reflection_probes=None, ssr_out=None):
+          ao=None, probes=None, reflection_probes=None, ssr_out=None, basis_coeffs=None):
     """Per-sample radiance of the `shade` pass, with the `importance` pass's sums for it (hits
     only; misses are 0); `ao` the ambient occlusion of every sample (ambient_occlusion) where
     effects.ao is on. The importance estimate is summed with Fresnel inside, which the kernels
     split around f0: the same sum, to float rounding. `probes`: the sampled probe volume
     (render/probes.py sampled) where effects.diffuse is probes, sh_coeffs then the panorama's SH
-    that takes over outside it. `reflection_probes`: the captured probes [{settings, levels}]
+    that takes over outside it. `basis_coeffs`: the `basis` bake where diffuse is a directional basis. `reflection_probes`: the captured probes [{settings, levels}]
     (Bakes._reflection_probes) where specular is prefiltered. `ssr_out` (a dict) receives the
     reflected environment's weight and radiance per hit sample ("w", "li"), as HAS_SSR writes
     ssr_env for the ssr pass (twin/ssr.py)."""
@@ -39,6 +39,10 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
         e = np.maximum(sh.evaluate(sh_coeffs, to_env(n, rot), effects["sh_bands"]), 0.0)
         diff_occ = ao_multibounce(occ, base * (1 - metallic[:, None])) if effects["ao_multibounce"] else occ[:, None]
         color += diff_occ * diffuse_weight(base, metallic, rough, f0, f90, nov) * scale * e
+    elif effects["diffuse"] in bases.DIFFUSE:
+        m = bases.BASES[effects["diffuse"]]
+        e = m.irradiance(basis_coeffs, to_env(n, rot), bases.options_of(effects["diffuse"], effects))
+        color += occ[:, None] * diffuse_weight(base, metallic, rough, f0, f90, nov) * scale * e
     elif effects["diffuse"] == "probes":
         p = gb["pos"][hit]
         wv = probe_twin.volume_weight(probes, p)[:, None]

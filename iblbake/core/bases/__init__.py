@@ -1,0 +1,27 @@
+"""The directional bases of the distant environment's diffuse light, registered once: each module
+here is one basis (its float64 projection and evaluation, the twin of its kernel header; its
+coefficient layout and checks; its GLSL function), and the scene's `effects.diffuse` choices and
+options, the render source (render/sources/basis.py), the tests and the shoot-out
+(benchmarks/bench_bases.py) are derived from BASES. `sh` keeps its own kernel source
+(render/sources/sh.py; HEADER None). Adding a basis: README's checklist."""
+
+from __future__ import annotations
+
+from iblbake.core.bases import ambient_dice, haar, l1_geomerics, sg, sh, zh3
+
+BASES = {m.NAME: m for m in (sh, l1_geomerics, zh3, sg, ambient_dice, haar)}
+
+# the ones evaluated by the generic source and kernels/bases.h (sh has its own)
+DIFFUSE = tuple(n for n, m in BASES.items() if m.HEADER)
+
+
+def probe_bytes(name: str, opts: dict, bytes_per_float: int) -> int:
+    """Bytes per probe: floats x 3 channels x bytes_per_float, and the indices a non-linear basis
+    (Haar) keeps beside its values."""
+    m = BASES[name]
+    return m.floats(opts) * 3 * bytes_per_float + (m.index_bytes(opts) if hasattr(m, "index_bytes") else 0)
+
+
+def options_of(name: str, effects: dict) -> dict:
+    """The scene's options of basis `name` (its OPTIONS keys from effects)."""
+    return {k: effects[k] for k in BASES[name].OPTIONS}

@@ -1,0 +1,170 @@
+"""Spherical Gaussians with fixed axes and one sharpness (the "SG Series", Pettineo 2016;
+BakingLab's SG5-12): G_k(w) = A_k exp(lambda (mu_k . w - 1)), so the fit is linear in A.
+
+- Axes: K points of the spherical Fibonacci lattice, +y polar (common.fibonacci_sphere).
+- Sharpness: the one lambda whose lobe integrates to its share of the sphere, 4 pi / K:
+  int exp(lambda (mu.w - 1)) dw = 2 pi (1 - e^{-2 lambda}) / lambda = 4 pi / K (K = 5: 2.48,
+  6: 2.99, 9: 4.50, 12: 6.00), so that K lobes of amplitude 1 hold a uniform sky's energy.
+- Least squares (Roughton and Sloan's exact form): the moments b_k = int L G_k dw over the
+  panorama's texels, then Gram A = b with the lobes' exact Gram matrix
+  int G_i G_j dw = 4 pi e^{-2 lambda} sinh(r)/r, r = lambda |mu_i + mu_j|.
+- NNLS: the same normal equations with A >= 0 (Lawson-Hanson, common.nnls_gram).
+- Irradiance: Hill's fitted SG-cosine product (Pettineo, SG Series part 3, "SGIrradianceFitted",
+  after Stephen Hill 2016): with c0 = 0.36, c1 = 1/(4 c0), scale = 1 + 2 e^{-2 lambda} - 1/lambda,
+  bias = (e^{-lambda} - e^{-2 lambda})/lambda - e^{-2 lambda}, x = sqrt(1 - scale),
+  y = (c0 mu.n + c1 x)^2 / x where |c0 mu.n| <= c1 x, else saturate(mu.n);
+  E = (scale y + bias) 2 pi A / lambda (the published approximate SG integral).
+
+Layout: K rows (lobe k in lattice order) of per-channel amplitudes."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from iblbake.core.bases import common
+
+NAME = "sg"
+TITLE = "SG"
+HEADER = "basis_sg.h"
+LOBES = (5, 6, 9, 12)
+FITS = ("least_squares", "nnls")
+OPTIONS = {"sg_lobes": (LOBES, 9, "sg: spherical Gaussian lobes (fixed Fibonacci axes, one sharpness)"),
+           "sg_fit": (FITS, "least_squares", "sg: the fit, exact least squares or non-negative least squares")}
+HILL_C0 = 0.36
+
+
+def variants() -> list:
+    return [{"sg_lobes": k, "sg_fit": f} for f in FITS for k in LOBES]
+
+
+def label(opts) -> str:
+    return f"SG{opts['sg_lobes']} {'LS' if opts['sg_fit'] == 'least_squares' else 'NNLS'}"
+
+
+def floats(opts) -> int:
+    return opts["sg_lobes"]
+
+
+def sharpness(k: int) -> float:
+    """lambda with 2 pi (1 - e^{-2 lambda}) / lambda = 4 pi / k (bisection; the left side falls)."""
+    lo, hi = 1e-6, 1e3
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if (1.0 - math.exp(-2.0 * mid)) / mid > 2.0 / k:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def axes(k: int) -> np.ndarray:
+    return common.fibonacci_sphere(k)
+
+
+def lobes(d, k: int) -> np.ndarray:
+    """G_k(d) with unit amplitude, (..., K)."""
+    lam = sharpness(k)
+    return np.exp(lam * (np.asarray(d, np.float64) @ axes(k).T - 1.0))
+
+
+def gram(k: int) -> np.ndarray:
+    """int G_i G_j dw = 2 pi (e^{r - 2 lambda} - e^{-r - 2 lambda}) / r, r = lambda |mu_i + mu_j|
+    (4 pi e^{-2 lambda} at r = 0)."""
+    lam, mu = sharpness(k), axes(k)
+    r = lam * np.linalg.norm(mu[:, None] + mu[None, :], axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        g = 2 * np.pi * (np.exp(r - 2 * lam) - np.exp(-r - 2 * lam)) / r
+    return np.where(r > 1e-12, g, 4 * np.pi * math.exp(-2 * lam))
+
+
+def fit(b, opts) -> np.ndarray:
+    """Amplitudes (K, C) from the moments b (K, C)."""
+    g = gram(opts["sg_lobes"])
+    if opts["sg_fit"] == "least_squares":
+        return np.linalg.solve(g, b)
+    return np.stack([common.nnls_gram(g, b[:, c]) for c in range(b.shape[1])], -1)
+
+
+def project(image, opts) -> np.ndarray:
+    k = opts["sg_lobes"]
+    return fit(common.moments(image, lambda d: lobes(d, k)), opts)
+
+
+def radiance(coeffs, dirs, opts) -> np.ndarray:
+    return lobes(dirs, opts["sg_lobes"]) @ np.asarray(coeffs, np.float64)
+
+
+def hill_irradiance(mu_dot_n, lam: float) -> np.ndarray:
+    """Hill's fitted irradiance of a unit-amplitude SG (the module's docstring)."""
+    mdn = np.asarray(mu_dot_n, np.float64)
+    c1 = 1.0 / (4.0 * HILL_C0)
+    eml = math.exp(-lam)
+    em2l = eml * eml
+    scale = 1.0 + 2.0 * em2l - 1.0 / lam
+    bias = (eml - em2l) / lam - em2l
+    x = math.sqrt(1.0 - scale)
+    x0, x1 = HILL_C0 * mdn, c1 * x
+    y = np.where(np.abs(x0) <= x1, (x0 + x1) ** 2 / x, np.clip(mdn, 0.0, 1.0))
+    return (scale * y + bias) * 2.0 * math.pi / lam
+
+
+def exact_irradiance(mu_dot_n, lam: float, lmax: int = 40) -> np.ndarray:
+    """The float64 cosine convolution of a unit SG (Funk-Hecke, converged by lmax 40 for lambda
+    <= 12): what hill_irradiance approximates."""
+    f_l = common.zonal_moments(lambda t: np.exp(lam * (t - 1.0)), lmax)
+    return common.legendre_series(common.funk_hecke(f_l, common.cosine_moments(lmax)), mu_dot_n)
+
+
+def irradiance(coeffs, normals, opts) -> np.ndarray:
+    k = opts["sg_lobes"]
+    # clamped at 0 as SH: least squares can go negative behind a sun
+    return np.maximum(0.0, hill_irradiance(np.asarray(normals, np.float64) @ axes(k).T, sharpness(k))
+                      @ np.asarray(coeffs, np.float64))
+
+
+def validate(coeffs, opts) -> np.ndarray:
+    return common.check_coefficients(coeffs, opts["sg_lobes"], f"SG{opts['sg_lobes']} amplitudes",
+                                     nonnegative=opts["sg_fit"] == "nnls")
+
+
+def defines(opts) -> dict:
+    return {"BASIS_SG": 1, "SG_LOBES": opts["sg_lobes"]}
+
+
+def pack(coeffs, opts) -> np.ndarray:
+    """What kernels/basis_sg.h reads: K rows (A rgb, 0), then K rows (mu xyz, lambda)."""
+    k = opts["sg_lobes"]
+    out = np.zeros((2 * k, 4), np.float32)
+    out[:k, :3] = np.asarray(coeffs)[:, :3]
+    out[k:, :3] = axes(k)
+    out[k:, 3] = sharpness(k)
+    return out
+
+
+def glsl(coeffs, opts) -> str:
+    k = opts["sg_lobes"]
+    return f"""// iblbake spherical Gaussians: {k} lobes ({opts['sg_fit']}), G(w) = A exp(lambda (mu.w - 1));
+// world +y up.
+// irradiance: Hill's fitted SG-cosine product; diffuse = albedo / PI * sgIrradiance(normalize(N));
+const int SG_LOBES = {k};
+const float SG_SHARPNESS = {sharpness(k):.9g};
+{common.glsl_vec3_array("SG_AMPLITUDE", np.asarray(coeffs)[:, :3])}
+{common.glsl_vec3_array("SG_AXIS", axes(k))}
+
+vec3 sgIrradiance(vec3 n) {{
+    float lam = SG_SHARPNESS;
+    float eml = exp(-lam), em2l = eml * eml;
+    float scale = 1.0 + 2.0 * em2l - 1.0 / lam;
+    float bias = (eml - em2l) / lam - em2l;
+    float x = sqrt(1.0 - scale), x1 = x / (4.0 * {HILL_C0});
+    vec3 e = vec3(0.0);
+    for (int k = 0; k < SG_LOBES; ++k) {{
+        float mdn = dot(SG_AXIS[k], n), x0 = {HILL_C0} * mdn;
+        float y = abs(x0) <= x1 ? (x0 + x1) * (x0 + x1) / x : clamp(mdn, 0.0, 1.0);
+        e += SG_AMPLITUDE[k] * ((scale * y + bias) * 6.28318530717959 / lam);
+    }}
+    return max(e, vec3(0.0));
+}}
+"""
