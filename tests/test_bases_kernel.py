@@ -48,7 +48,7 @@ def test_render_matches_shade_twin(tmp_path, name, opts):
     """`effects.diffuse: <basis>` end to end (schema, plan, the cached `basis` bake, the source, the
     shade kernel with only that header) against the shade twin on the float64 projection:
     measured <= 1.1e-6 of the brightest pixel (Haar 64: 1.0e-6); only the scene's basis compiled."""
-    from iblbake import render
+    from iblbake.render import render
     from iblbake.io import images
     from iblbake.render import twin as rr
     from iblbake.render.plan import plan
@@ -65,7 +65,7 @@ def test_render_matches_shade_twin(tmp_path, name, opts):
                                materials={"base_color": [0.8, 0.6, 0.4], "roughness": 0.5}, effects=fx))
     defines = plan(sc).defines["shade"]
     assert [k for k in defines if k.startswith("BASIS_")] == [f"BASIS_{name.upper()}"]
-    frame = render.render(sc, cache_root=tmp_path / "cache")
+    frame = render(sc, cache_root=tmp_path / "cache")
     arrays = pack.scene_arrays(sc)
     gb = rr.primary(sc["camera"], arrays)
     hit = gb["hit"]
@@ -74,5 +74,5 @@ def test_render_matches_shade_twin(tmp_path, name, opts):
     got = frame.hdr[..., :3].reshape(-1, 3)[hit]
     err = np.abs(got - want).max() / want.max()
     assert hit.sum() > 100 and err < 5e-6, err
-    again = render.render(sc, cache_root=tmp_path / "cache")          # the bake read back from the cache
+    again = render(sc, cache_root=tmp_path / "cache")          # the bake read back from the cache
     assert np.array_equal(again.hdr, frame.hdr)

@@ -8,7 +8,6 @@ counted)."""
 import math
 
 import numpy as np
-import pytest
 
 from iblbake.render import plan, render
 from iblbake.io import images

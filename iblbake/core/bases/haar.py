@@ -25,7 +25,6 @@ reads it as an exact float."""
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
