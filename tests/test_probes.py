@@ -623,3 +623,15 @@ def test_keys_that_decide_together_are_checked_at_load(tmp_path, sky, probes_sec
         load_scene(tmp_path, "keys", doc)
     msg = str(e.value)
     assert words in msg and msg.startswith(str(tmp_path / "keys.yaml")) and "\n" not in msg, msg
+
+
+def test_a_solid_made_by_hand_is_named_in_the_advice():
+    """Probes inside an object the user set `solid: true`: the warning says to undo that (a new
+    user's open box, made a solid, was told only to set `solid: false` on closed shells)."""
+    vol = {"counts": (4, 4, 4), "irradiance_texels": 6, "distance_texels": 14, "representation": "octahedral"}
+    rep = {"probes": 64, "inside_geometry": 40, "inactive": 40, "inside_objects": {"0": 40}}
+    forced = {"objects": [{"name": "box", "solid": True, "mesh": {"path": "box.obj"}}]}
+    said = probes.warnings(rep, forced, vol)
+    assert len(said) == 1 and "'box' (objects.0) is solid: true" in said[0] and "objects.0.solid: auto" in said[0]
+    auto = {"objects": [{"name": "box", "solid": "auto", "mesh": {"path": "box.obj"}}]}
+    assert "set objects.N.solid: false" in probes.warnings(rep, auto, vol)[0]

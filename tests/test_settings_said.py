@@ -239,3 +239,22 @@ def test_the_plots_labels_do_not_pile_up(tmp_path, floor_scene):
                    for b in boxes)
     plt.close(fig)
     assert len(rows) > 60 and piled == 0, piled
+
+
+def test_what_a_new_user_tripped_on_is_said_plainly(tmp_path, lobed_sky):
+    """A new user's trial: an error in a key set by --set named the file's first line (or the line
+    it replaced), `exclude: []` was refused, a mistyped built-in ladder was 'no such file' alone,
+    and a sweep of on/off labelled its columns False / True."""
+    from iblbake.scene import load as scene_load
+    from iblbake.study import ladder, sweep
+    from iblbake.errors import InputError
+    from .conftest import scene_file
+    p = scene_file(tmp_path, lobed_sky)
+    with pytest.raises(InputError) as e:
+        scene_load.load(p, ["probes={counts: 4, spacing: 0.5}"])
+    assert f"{p}: --set: probes.spacing:" in str(e.value), str(e.value)
+    sc = scene_load.load(p, ["reflection_probes=[{position: [0, 0, 0], min: [-2, -2, -2], max: [2, 2, 2], exclude: []}]"])
+    assert sc.data["reflection_probes"][0]["exclude_ids"] == []
+    with pytest.raises(InputError, match="did you mean --ladder realtime"):
+        ladder.ladder_from_file("realtim", sc, None)
+    assert [sweep.format_value(v) for v in (False, True, 0.5)] == ["off", "on", "0.5"]

@@ -65,7 +65,8 @@ def probes_command(scene_path, out_dir, overrides, cache_dir, force, device, qui
     r = man["report"]
     summary = {"scene": sc.source, "output": str(out), "files": names, "cached": cached, "device": vol.device,
                "grid": man["grid"], "representation": man["representation"], "states": man["states"],
-               "rays_traced": r["rays_traced"], "bake_s": r["seconds"], "relocated": r["relocated"]}
+               "rays_traced": r["rays_traced"], "bake_s": r["seconds"], "relocated": r["relocated"],
+               "inside_geometry": r.get("inside_geometry", 0), "outside_camera_room": r.get("outside_camera_room", 0)}
     nx, ny, nz = man["grid"]["counts"]
     con.result(summary, f"wrote {out}/ ({nx}x{ny}x{nz} probes, {man['representation']}, "
                         f"{man['states']['inactive']} inactive, {r['relocated']} relocated; "

@@ -469,10 +469,16 @@ def warnings(report: dict, scene_data: dict, volume: dict | None = None) -> list
     objs = report.get("inside_objects", {})
     named = ", ".join(f"{object_label(scene_data, int(o))}: {c}" for o, c in list(objs.items())[:3]
                       if int(o) < len(scene_data["objects"]))
+    forced = [int(o) for o in objs if int(o) < len(scene_data["objects"]) and scene_data["objects"][int(o)]["solid"] is True]
+    if forced:       # the user made it a solid: the advice is to undo that, not to add solid: false
+        advice = (f"{object_label(scene_data, forced[0])} is solid: true (an open mesh bounds a solid by its winding "
+                  f"then); set objects.{forced[0]}.solid: auto where probes should see it from either side, or move "
+                  "the grid (probes.min, probes.max)")
+    else:
+        advice = ("a double-sided surface is a front face to probes on either side: set objects.N.solid: false on a "
+                  "closed shell they should see from within, or move the grid (probes.min, probes.max)")
     return out + [f"probes: {inside} of {n} probes ({100 * inside / n:.0f}%) are inside geometry (their rays meet the back "
-            f"faces of {named}{', ...' if len(objs) > 3 else ''}); {report['inactive']} probes are off. A double-sided "
-            "surface is a front face to probes on either side: set objects.N.solid: false on a closed shell they "
-            "should see from within, or move the grid (probes.min, probes.max)"]
+                  f"faces of {named}{', ...' if len(objs) > 3 else ''}); {report['inactive']} probes are off; {advice}"]
 
 
 SAMPLING_KEYS = ("visibility", "normal_bias", "view_bias")   # read when shading, not baked

@@ -46,8 +46,11 @@ class _Validator:
         self.source, self.lines, self.overridden = source, lines, overridden
 
     def where(self, path: str) -> str:
-        if path in self.overridden:
-            return f"{self.source}: {self.overridden[path]}"
+        p = path
+        while p:                  # a key set by --set (or a sweep), or inside one: not the file's line
+            if p in self.overridden:
+                return f"{self.source}: {self.overridden[p]}"
+            p = p.rpartition(".")[0]
         p = path
         while p and p not in self.lines:
             p = p.rpartition(".")[0]

@@ -214,11 +214,12 @@ class StrList:
     default: Any = None
     doc: str = ""
     what: str = "path"
+    empty: bool = False          # [] allowed (none: `exclude: []`)
 
     def check(self, v):
         if isinstance(v, str) and v:
             return [v]
-        if isinstance(v, list) and v and all(isinstance(x, str) and x for x in v):
+        if isinstance(v, list) and (v or self.empty) and all(isinstance(x, str) and x for x in v):
             return list(v)
         raise _Bad(f"{v!r} is not a {self.what} or a list of {self.what}s")
 
@@ -457,7 +458,7 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "bounces": bounces_field("how many times the light a capture ray brings back may have scattered (1: the "
                                  "surfaces it sees, lit directly)"),
         "seed": Num(1, 0, 2**31 - 1, integer=True, doc="random seed of the capture's paths"),
-        "exclude": StrList(what="name", doc="objects (their names, or objects.N) this probe's capture looks through: a probe at "
+        "exclude": StrList(what="name", empty=True, doc="objects (their names, or objects.N) this probe's capture looks through: a probe at "
                                "a reflective object's centre excludes that object to capture its surroundings"),
     })),
     "effects": Section(doc="what the renderer simulates; nothing else is baked, compiled or run", fields={

@@ -184,7 +184,10 @@ def ladder_from_file(path, sc, fx) -> list:
 
     where = str(path)
     if not Path(path).exists():
-        raise InputError(f"{where}: cannot read the ladder (no such file)")
+        import difflib
+        near = difflib.get_close_matches(str(path), list(LADDERS), 1, 0.6)
+        hint = f"; did you mean --ladder {near[0]}?" if near else f"; or name a built-in one: {', '.join(LADDERS)}"
+        raise InputError(f"{where}: cannot read the ladder (no such file){hint}")
     try:       # as a scene is read: bounded, safe, numbers as a user writes them
         doc = load_with_lines(reads.read_text(path, MAX_SCENE_BYTES, "a ladder"), where)[0]
     except UnicodeDecodeError:

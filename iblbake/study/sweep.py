@@ -106,6 +106,8 @@ def _range(spec, where: str) -> list:
 
 
 def format_value(v) -> str:
+    if isinstance(v, bool):       # YAML's on/off and true/false: the schema reads both as switches
+        return "on" if v else "off"
     if isinstance(v, float):
         return f"{v:.4g}"
     if isinstance(v, list):
