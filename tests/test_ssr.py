@@ -20,11 +20,12 @@ def sky(lobed_sky):
     return lobed_sky
 
 
-def wall(folder, sky, ssr="on", specular="prefiltered", roughness=0.0, name="wall"):
+def wall(folder, sky, ssr="on", specular="prefiltered", roughness=0.0, name="wall", spp=1):
     """A mirror floor (roughness `roughness`) before a painted wall at z = -1.5 with a glowing
     sphere in front of it."""
     return load_scene(folder, name, {
-        "camera": {"perspective": {"position": [0, 1.0, 4], "look_at": [0, 0.6, 0], "fov_y": 50}, "resolution": [96, 72]},
+        "camera": {"perspective": {"position": [0, 1.0, 4], "look_at": [0, 0.6, 0], "fov_y": 50}, "resolution": [96, 72],
+                   "spp": spp},
         "environment": {"path": str(sky), "background": "hide"},
         "materials": {"mirror": {"base_color": [1, 1, 1], "metallic": 1, "roughness": roughness},
                       "paint": {"base_color": [0.8, 0.3, 0.1], "roughness": 0.8},
@@ -35,14 +36,17 @@ def wall(folder, sky, ssr="on", specular="prefiltered", roughness=0.0, name="wal
         "effects": {"diffuse": "sh", "specular": specular, "ssr": ssr}})
 
 
-def test_a_mirror_floor_shows_the_wall_where_the_mirror_puts_it(tmp_path, rt, sky):
+@pytest.mark.parametrize("spp", [1, 4])
+def test_a_mirror_floor_shows_the_wall_where_the_mirror_puts_it(tmp_path, rt, sky, spp):
     """Each floor pixel whose mirror ray meets the wall (the closed form: the ray reflected in
     y = 0 meets z = -1.5 inside the wall) shows that wall point's radiance in the same frame:
     the median relative difference 1e-4 at most (measured 6e-6 over 695 pixels), against 450%
-    without SSR (the panorama's reflection there)."""
-    f_on = render.render(wall(tmp_path, sky), runtime=rt, cache_root=tmp_path / "cache")
-    f_off = render.render(wall(tmp_path, sky, "off", name="off"), runtime=rt, cache_root=tmp_path / "cache")
-    sc = wall(tmp_path, sky)
+    without SSR (the panorama's reflection there). At 4 spp 4e-4 (measured 8e-5): a sample took its
+    pixel's reflection only within 2% of the view depth of the first sample's point, which a floor
+    at a grazing angle leaves within a pixel, and its other samples kept the panorama (117%)."""
+    f_on = render.render(wall(tmp_path, sky, spp=spp), runtime=rt, cache_root=tmp_path / "cache")
+    f_off = render.render(wall(tmp_path, sky, "off", name="off", spp=spp), runtime=rt, cache_root=tmp_path / "cache")
+    sc = wall(tmp_path, sky, spp=spp)
     cam = sc.data["camera"]
     w, h = cam["resolution"]
     pos, fwd, right, up, _ = pack.camera_vectors(cam)
@@ -72,7 +76,8 @@ def test_a_mirror_floor_shows_the_wall_where_the_mirror_puts_it(tmp_path, rt, sk
     wall_px = f_on.hdr[np.clip(qy.astype(int), 0, h - 1), np.clip(qx.astype(int), 0, w - 1)][..., :3]
     got, off = f_on.hdr[..., :3], f_off.hdr[..., :3]
     rel = lambda a: np.median(np.abs(a[inside] - wall_px[inside]).mean(-1) / wall_px[inside].mean(-1))  # noqa: E731
-    assert rel(got) < 1e-4 and rel(off) > 1.0, (rel(got), rel(off))
+    tol = 1e-4 if spp == 1 else 4e-4         # the hit pixel's first sample stands for the pixel
+    assert rel(got) < tol and rel(off) > 1.0, (rel(got), rel(off))
 
 
 @pytest.mark.parametrize("roughness", [0.0, 0.3])

@@ -48,8 +48,21 @@ def gather(cam: dict, gb, arrays, src):
     z[hit] = project(cam, pos[hit])[:, 2]
     nrm[hit] = n[rows[k]]
     r[hit] = rough[rows[k]]
-    lit[hit] = src[k]
-    return {"pos": pos, "z": z, "n": nrm, "rough": r, "lit": lit}
+    pix = {"pos": pos, "z": z, "n": nrm, "rough": r, "lit": lit}
+    # the lit radiance: the mean over the pixel's samples on the first one's plane
+    k = np.nonzero(gb["hit"])[0]
+    on = k[on_plane(gb, pix, k // spp, k)]
+    sums, counts = np.zeros((w * h, 3)), np.zeros(w * h)
+    np.add.at(sums, on // spp, src[on])
+    np.add.at(counts, on // spp, 1)
+    lit[hit] = sums[hit] / counts[hit, None]
+    return pix
+
+
+def on_plane(gb, pix, px, k):
+    """Twin of ssr's same-surface test: whether samples k lie within 2% of the view depth of the
+    tangent plane of their pixels px's first sample."""
+    return np.abs(((gb["pos"][k] - pix["pos"][px]) * pix["n"][px]).sum(1)) <= 0.02 * pix["z"][px]
 
 
 def hiz(z, w: int, h: int) -> list:
@@ -269,7 +282,7 @@ def ssr(gb, arrays, effects: dict, cam: dict, src, ssr_w, ssr_li, captured=None)
     out = src.copy()
     k = np.nonzero(gb["hit"])[0]
     px = k // spp
-    same = np.linalg.norm(gb["pos"][k] - pix["pos"][px], axis=1) <= 0.02 * pix["z"][px]
+    same = on_plane(gb, pix, k // spp, k)
     live = same & (ssr_w > 0).any(1)
     r = res[px]
     out[k] = src[k] + np.where(live[:, None], ssr_w * (r[:, :3] - r[:, 3:4] * ssr_li), 0.0)
