@@ -223,11 +223,12 @@ __kernel void ssr_trace(__global const float4 *ssr_pix, __constant float4 *cam, 
         const float3 h = t * hl.x + b * hl.y + nrm * hl.z;
         const float3 l = 2.0f * dot(v, h) * h - v;
         if (!(dot(nrm, l) > 0.0f)) continue;                 /* below the horizon: the environment */
-        const float3 p0 = p + nrm * (1e-4f * (1.0f + length(p - cam[0].xyz)));
+        /* the offset in proportion to the distance and to p's own float precision: no scene unit */
+        const float3 p0 = p + nrm * (1e-4f * (length(p) + length(p - cam[0].xyz)));
         float len = ray_length;
         const float dz = dot(l, cam[1].xyz);
         const float z0 = dot(p0 - cam[0].xyz, cam[1].xyz);
-        if (!ortho && dz < 0.0f) len = fmin(len, 0.99f * (z0 - 1e-3f) / -dz);   /* stay before the eye */
+        if (!ortho && dz < 0.0f) len = fmin(len, 0.99f * z0 / -dz);   /* stay before the eye */
         const float3 a = ssr_project(cam, width, height, p0), c = ssr_project(cam, width, height, p0 + len * l);
         float conf;
         float3 x;

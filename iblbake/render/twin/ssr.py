@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from iblbake.core import conventions, sampling
+from iblbake.render.sources.ssr import march_lengths
 from iblbake.render.twin import reflection_probes as rp_twin
 from iblbake.render.twin.surface import surface
 from iblbake.scene import pack
@@ -208,7 +209,7 @@ def trace(pix, cam: dict, s: dict, captured=None):
     fade_r = np.clip((s["max_roughness"] - rough) / (0.2 * s["max_roughness"]), 0, 1)
     count = np.maximum(1, np.ceil(s["rays"] * np.float32(rough) / max(s["max_roughness"], 1e-6))).astype(int)
     acc, csum = np.zeros((len(sel), 3)), np.zeros(len(sel))
-    p0 = p + n * (1e-4 * (1 + np.linalg.norm(p - pos, axis=1)))[:, None]
+    p0 = p + n * (1e-4 * (np.linalg.norm(p, axis=1) + np.linalg.norm(p - pos, axis=1)))[:, None]
     for k in range(int(count.max())):
         u = np.stack([sampling.qmc(s["seed"], sel, k, d) for d in (0, 1)], -1)
         hl = np.where((alpha < DELTA_ALPHA)[:, None], [0.0, 0.0, 1.0], sampling.sample_ggx_vndf(vl, alpha, u))
@@ -220,7 +221,7 @@ def trace(pix, cam: dict, s: dict, captured=None):
         length = np.full(len(i), s["ray_length"])
         if not ortho:
             with np.errstate(divide="ignore", invalid="ignore"):
-                length = np.where(dz < 0, np.minimum(length, 0.99 * (z0 - 1e-3) / -dz), length)
+                length = np.where(dz < 0, np.minimum(length, 0.99 * z0 / -dz), length)
         a = project(cam, p0[i])
         c = project(cam, p0[i] + length[:, None] * l[i])
         hit, conf, x = march(levels, a[:, :2], a[:, 2], c[:, :2], c[:, 2], ortho, s["steps"], s["thickness"], pix, cam,
@@ -275,7 +276,7 @@ def ssr(gb, arrays, effects: dict, cam: dict, src, ssr_w, ssr_li, captured=None)
     reflected environment (weight ssr_w, radiance ssr_li per hit sample) replaced by the resolved
     reflection of the sample's pixel, where the sample lies on that pixel's first sample's surface.
     `captured`: the reflection probes (Bakes._reflection_probes) where they are read."""
-    s = effects["ssr_settings"]
+    s = {**effects["ssr_settings"], **march_lengths(effects["ssr_settings"], arrays, cam)}
     spp = cam["spp"]
     pix = gather(cam, gb, arrays, src)
     res = resolve(pix, trace(pix, cam, s, captured), cam, s["max_roughness"])
