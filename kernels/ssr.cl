@@ -29,7 +29,8 @@
 #include "surface.h"
 #include "reflection_probes.h"
 
-#define SSR_RESOLVE_RADIUS 3      /* pixels, at max_roughness (a mirror: none) */
+#define SSR_RESOLVE_RADIUS 3      /* pixels, at max_roughness; times sqrt(r / max_roughness) below
+                                     (a glossy pixel's few rays need neighbours; a mirror: none) */
 
 /* Continuous pixel coordinates (x right, y down; pixel centres at + 0.5) and view depth of x */
 inline float3 ssr_project(__constant float4 *cam, int width, int height, float3 x)
@@ -266,7 +267,7 @@ __kernel void ssr_resolve(__global const float4 *ssr_pix, __global const float4 
     if (px >= width * height) return;
     const float4 pz = ssr_pix[3 * px], nr = ssr_pix[3 * px + 1];
     if (!isfinite(pz.w) || nr.w > max_roughness) { ssr_res[px] = (float4)(0.0f); return; }
-    const int radius = (int)ceil((float)SSR_RESOLVE_RADIUS * fmin(nr.w / fmax(max_roughness, 1e-6f), 1.0f));
+    const int radius = (int)ceil((float)SSR_RESOLVE_RADIUS * sqrt(fmin(nr.w / fmax(max_roughness, 1e-6f), 1.0f)));
     const float sigma2 = fmax(0.25f * (float)(radius * radius), 0.25f);
     const int x = px % width, y = px / width;
     float4 acc = (float4)(0.0f);

@@ -246,7 +246,7 @@ def resolve(pix, hits, cam: dict, max_roughness: float):
     out = np.zeros((w * h, 4))
     for px in np.nonzero(np.isfinite(pix["z"]) & (pix["rough"] <= max_roughness))[0]:
         r = pix["rough"][px]
-        radius = int(np.ceil(np.float32(RESOLVE_RADIUS * min(r / max(max_roughness, 1e-6), 1.0))))
+        radius = int(np.ceil(np.float32(RESOLVE_RADIUS) * np.sqrt(np.float32(min(r / max(max_roughness, 1e-6), 1.0)))))
         sigma2 = max(0.25 * radius * radius, 0.25)
         x, y = px % w, px // w
         acc, wsum = np.zeros(4), 0.0
