@@ -15,7 +15,7 @@
  * Everything the rays read is the whole frame's (ssr_pix, gathered from every tile before the
  * march), so a tiled frame gives the same pixels.
  *   ssr_gather   per tile pixel: its first sample's position and view depth, normal and roughness,
- *                lit radiance (ssr_pix, 3 float4 a pixel)
+ *                lit radiance (of the samples on its plane; ssr_pix, 3 float4 a pixel)
  *   ssr_depth    Hi-Z level 0 (+inf: nothing); ssr_reduce level k + 1: the min of each 2 x 2
  *   ssr_trace    per pixel: its rays, marched and validated, into (H, C) (ssr_hit)
  *   ssr_resolve  per pixel: the weighted mean of (H, C) over its neighbours (ssr_res)
@@ -29,7 +29,8 @@
 #include "surface.h"
 #include "reflection_probes.h"
 
-#define SSR_RESOLVE_RADIUS 3      /* pixels, at max_roughness (a mirror: none) */
+#define SSR_RESOLVE_RADIUS 3      /* pixels, at max_roughness; times sqrt(r / max_roughness) below
+                                     (a glossy pixel's few rays need neighbours; a mirror: none) */
 
 /* Continuous pixel coordinates (x right, y down; pixel centres at + 0.5) and view depth of x */
 inline float3 ssr_project(__constant float4 *cam, int width, int height, float3 x)
@@ -61,7 +62,17 @@ __kernel void ssr_gather(__global const float4 *gb_pos, SURFACE_PARAMS, __consta
     surface_at(SURFACE_ARGS, gid, &mt, &v, &nrm);
     ssr_pix[3 * px] = (float4)(p.xyz, ssr_project(cam, width, height, p.xyz).z);
     ssr_pix[3 * px + 1] = (float4)(nrm, mt.roughness);
-    ssr_pix[3 * px + 2] = (float4)(radiance[gid].xyz, 1.0f);
+    /* the lit radiance: the mean over the pixel's samples on the first one's plane (ssr's test) */
+    float3 sum = (float3)(0.0f);
+    int k = 0;
+    const float z = ssr_pix[3 * px].w;
+    for (int j = 0; j < spp; ++j) {
+        const float4 q = gb_pos[gid + j];
+        if (q.w == MISS_T || !(fabs(dot(q.xyz - p.xyz, nrm)) <= 0.02f * z)) continue;
+        sum += radiance[gid + j].xyz;
+        ++k;
+    }
+    ssr_pix[3 * px + 2] = (float4)(sum / (float)k, 1.0f);
 }
 
 __kernel void ssr_depth(__global const float4 *ssr_pix, const int npix, __global float *ssr_hiz)
@@ -213,11 +224,12 @@ __kernel void ssr_trace(__global const float4 *ssr_pix, __constant float4 *cam, 
         const float3 h = t * hl.x + b * hl.y + nrm * hl.z;
         const float3 l = 2.0f * dot(v, h) * h - v;
         if (!(dot(nrm, l) > 0.0f)) continue;                 /* below the horizon: the environment */
-        const float3 p0 = p + nrm * (1e-4f * (1.0f + length(p - cam[0].xyz)));
+        /* the offset in proportion to the distance and to p's own float precision: no scene unit */
+        const float3 p0 = p + nrm * (1e-4f * (length(p) + length(p - cam[0].xyz)));
         float len = ray_length;
         const float dz = dot(l, cam[1].xyz);
         const float z0 = dot(p0 - cam[0].xyz, cam[1].xyz);
-        if (!ortho && dz < 0.0f) len = fmin(len, 0.99f * (z0 - 1e-3f) / -dz);   /* stay before the eye */
+        if (!ortho && dz < 0.0f) len = fmin(len, 0.99f * z0 / -dz);   /* stay before the eye */
         const float3 a = ssr_project(cam, width, height, p0), c = ssr_project(cam, width, height, p0 + len * l);
         float conf;
         float3 x;
@@ -255,7 +267,7 @@ __kernel void ssr_resolve(__global const float4 *ssr_pix, __global const float4 
     if (px >= width * height) return;
     const float4 pz = ssr_pix[3 * px], nr = ssr_pix[3 * px + 1];
     if (!isfinite(pz.w) || nr.w > max_roughness) { ssr_res[px] = (float4)(0.0f); return; }
-    const int radius = (int)ceil((float)SSR_RESOLVE_RADIUS * fmin(nr.w / fmax(max_roughness, 1e-6f), 1.0f));
+    const int radius = (int)ceil((float)SSR_RESOLVE_RADIUS * sqrt(fmin(nr.w / fmax(max_roughness, 1e-6f), 1.0f)));
     const float sigma2 = fmax(0.25f * (float)(radius * radius), 0.25f);
     const int x = px % width, y = px / width;
     float4 acc = (float4)(0.0f);
@@ -274,7 +286,9 @@ __kernel void ssr_resolve(__global const float4 *ssr_pix, __global const float4 
 }
 
 /* A sample takes its pixel's resolved reflection where it lies on the pixel's first sample's
- * surface (within 2% of its view depth): an edge pixel's other surface keeps its environment. */
+ * surface: within 2% of its view depth of that sample's tangent plane (not of the point: a floor
+ * seen at a grazing angle spans more depth across one pixel, and its other samples kept the
+ * environment at spp > 1). An edge pixel's other surface keeps its environment. */
 __kernel void ssr(__global const float4 *gb_pos, const int spp, const int n, const int pixel0,
                   __global const float4 *ssr_pix, __global const float4 *ssr_env, __global const float4 *ssr_res,
                   __global float4 *radiance)
@@ -287,7 +301,7 @@ __kernel void ssr(__global const float4 *gb_pos, const int spp, const int n, con
     if (!(w.x > 0.0f || w.y > 0.0f || w.z > 0.0f)) return;
     const int px = pixel0 + gid / spp;
     const float4 first = ssr_pix[3 * px];
-    if (!(distance(p.xyz, first.xyz) <= 0.02f * first.w)) return;
+    if (!(fabs(dot(p.xyz - first.xyz, ssr_pix[3 * px + 1].xyz)) <= 0.02f * first.w)) return;
     const float4 r = ssr_res[px];
     radiance[gid] += (float4)(w * (r.xyz - r.w * li), 0.0f);
 }

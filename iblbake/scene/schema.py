@@ -522,14 +522,20 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "ssr_settings": Section(doc="ssr: the march", fields={
             "max_roughness": Num(0.5, 0.0, 1.0, doc="surfaces rougher than this keep the probes' or panorama's "
                                                     "reflection (faded over its last fifth)"),
-            "thickness": Num(0.1, 0.0, lo_open=True, doc="how far behind the depth buffer a candidate hit may lie "
-                                                        "(scene units along the view); a candidate is kept only where "
-                                                        "the ray crosses the hit surface's own plane within a pixel"),
+            "thickness": OneOf((Enum(("auto",)), Num(None, 0.0, lo_open=True)), default="auto",
+                               doc="how far behind the depth buffer a candidate hit may lie (along the view): auto = "
+                                   "1% of the scene's extent (the diagonal of the bounds of its geometry and the "
+                                   "camera; 0.1 where only infinite planes bound it), so a scaled scene gives the "
+                                   "same frame, or scene units; a candidate is kept only where the ray crosses the "
+                                   "hit surface's own plane within a pixel"),
             "steps": Num(64, 1, 4096, integer=True, doc="march iterations per ray (Hi-Z cells visited)"),
             "rays": Num(4, 1, 256, integer=True, doc="GGX visible-normal rays per pixel at max_roughness, fewer below "
                                                      "it (roughness / max_roughness of them; a mirror: 1), before the "
                                                      "spatial resolve"),
-            "ray_length": Num(50.0, 0.0, lo_open=True, doc="how far a ray is followed (scene units)"),
+            "ray_length": OneOf((Enum(("auto",)), Num(None, 0.0, lo_open=True)), default="auto",
+                                doc="how far a ray is followed: auto = the scene's extent (as thickness's; 50 where "
+                                    "only infinite planes bound it), as far as a ray inside the bounds can meet them, "
+                                    "or scene units"),
             "seed": Num(1, 0, 2**31 - 1, integer=True, doc="random seed of the rays"),
             "defer_to_probes": Bool(True, doc="where a ray meets a reflection probe's own box or sphere (a wall, a "
                                               "floor), take the probe's path-traced capture of that point over the "

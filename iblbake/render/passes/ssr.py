@@ -11,7 +11,7 @@ import numpy as np
 
 from iblbake.render.passes.base import Buffer, Pass
 from iblbake.render.sources.reflection_probes import reflects_locally, rprobe_args
-from iblbake.render.sources.ssr import screen_space
+from iblbake.render.sources.ssr import march_lengths, screen_space
 
 
 def pyramid(width: int, rows: int) -> list:
@@ -63,8 +63,9 @@ class ScreenSpaceReflections(Pass):
         s = ctx.scene.data["effects"]["ssr_settings"]
         ctx.ssr_gathered = False
         rp = rprobe_args(ctx.rt, ctx.loaded.get("reflection_probes"), ctx.bakes)
-        return {"max_roughness": s["max_roughness"], "thickness": s["thickness"], "steps": s["steps"],
-                "rays": s["rays"], "ray_length": s["ray_length"], "seed": s["seed"], "rp_info": rp["rp_info"],
+        lengths = march_lengths(s, ctx.arrays, ctx.scene.data["camera"])
+        return {"max_roughness": s["max_roughness"], "thickness": lengths["thickness"], "steps": s["steps"],
+                "rays": s["rays"], "ray_length": lengths["ray_length"], "seed": s["seed"], "rp_info": rp["rp_info"],
                 "rp_count": rp["rp_count"], "defer_to_probes": int(s["defer_to_probes"])}
 
     def gather(self, ctx):

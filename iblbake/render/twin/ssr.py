@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from iblbake.core import conventions, sampling
+from iblbake.render.sources.ssr import march_lengths
 from iblbake.render.twin import reflection_probes as rp_twin
 from iblbake.render.twin.surface import surface
 from iblbake.scene import pack
@@ -48,8 +49,21 @@ def gather(cam: dict, gb, arrays, src):
     z[hit] = project(cam, pos[hit])[:, 2]
     nrm[hit] = n[rows[k]]
     r[hit] = rough[rows[k]]
-    lit[hit] = src[k]
-    return {"pos": pos, "z": z, "n": nrm, "rough": r, "lit": lit}
+    pix = {"pos": pos, "z": z, "n": nrm, "rough": r, "lit": lit}
+    # the lit radiance: the mean over the pixel's samples on the first one's plane
+    k = np.nonzero(gb["hit"])[0]
+    on = k[on_plane(gb, pix, k // spp, k)]
+    sums, counts = np.zeros((w * h, 3)), np.zeros(w * h)
+    np.add.at(sums, on // spp, src[on])
+    np.add.at(counts, on // spp, 1)
+    lit[hit] = sums[hit] / counts[hit, None]
+    return pix
+
+
+def on_plane(gb, pix, px, k):
+    """Twin of ssr's same-surface test: whether samples k lie within 2% of the view depth of the
+    tangent plane of their pixels px's first sample."""
+    return np.abs(((gb["pos"][k] - pix["pos"][px]) * pix["n"][px]).sum(1)) <= 0.02 * pix["z"][px]
 
 
 def hiz(z, w: int, h: int) -> list:
@@ -195,7 +209,7 @@ def trace(pix, cam: dict, s: dict, captured=None):
     fade_r = np.clip((s["max_roughness"] - rough) / (0.2 * s["max_roughness"]), 0, 1)
     count = np.maximum(1, np.ceil(s["rays"] * np.float32(rough) / max(s["max_roughness"], 1e-6))).astype(int)
     acc, csum = np.zeros((len(sel), 3)), np.zeros(len(sel))
-    p0 = p + n * (1e-4 * (1 + np.linalg.norm(p - pos, axis=1)))[:, None]
+    p0 = p + n * (1e-4 * (np.linalg.norm(p, axis=1) + np.linalg.norm(p - pos, axis=1)))[:, None]
     for k in range(int(count.max())):
         u = np.stack([sampling.qmc(s["seed"], sel, k, d) for d in (0, 1)], -1)
         hl = np.where((alpha < DELTA_ALPHA)[:, None], [0.0, 0.0, 1.0], sampling.sample_ggx_vndf(vl, alpha, u))
@@ -207,7 +221,7 @@ def trace(pix, cam: dict, s: dict, captured=None):
         length = np.full(len(i), s["ray_length"])
         if not ortho:
             with np.errstate(divide="ignore", invalid="ignore"):
-                length = np.where(dz < 0, np.minimum(length, 0.99 * (z0 - 1e-3) / -dz), length)
+                length = np.where(dz < 0, np.minimum(length, 0.99 * z0 / -dz), length)
         a = project(cam, p0[i])
         c = project(cam, p0[i] + length[:, None] * l[i])
         hit, conf, x = march(levels, a[:, :2], a[:, 2], c[:, :2], c[:, 2], ortho, s["steps"], s["thickness"], pix, cam,
@@ -232,7 +246,7 @@ def resolve(pix, hits, cam: dict, max_roughness: float):
     out = np.zeros((w * h, 4))
     for px in np.nonzero(np.isfinite(pix["z"]) & (pix["rough"] <= max_roughness))[0]:
         r = pix["rough"][px]
-        radius = int(np.ceil(np.float32(RESOLVE_RADIUS * min(r / max(max_roughness, 1e-6), 1.0))))
+        radius = int(np.ceil(np.float32(RESOLVE_RADIUS) * np.sqrt(np.float32(min(r / max(max_roughness, 1e-6), 1.0)))))
         sigma2 = max(0.25 * radius * radius, 0.25)
         x, y = px % w, px // w
         acc, wsum = np.zeros(4), 0.0
@@ -262,14 +276,14 @@ def ssr(gb, arrays, effects: dict, cam: dict, src, ssr_w, ssr_li, captured=None)
     reflected environment (weight ssr_w, radiance ssr_li per hit sample) replaced by the resolved
     reflection of the sample's pixel, where the sample lies on that pixel's first sample's surface.
     `captured`: the reflection probes (Bakes._reflection_probes) where they are read."""
-    s = effects["ssr_settings"]
+    s = {**effects["ssr_settings"], **march_lengths(effects["ssr_settings"], arrays, cam)}
     spp = cam["spp"]
     pix = gather(cam, gb, arrays, src)
     res = resolve(pix, trace(pix, cam, s, captured), cam, s["max_roughness"])
     out = src.copy()
     k = np.nonzero(gb["hit"])[0]
     px = k // spp
-    same = np.linalg.norm(gb["pos"][k] - pix["pos"][px], axis=1) <= 0.02 * pix["z"][px]
+    same = on_plane(gb, pix, k // spp, k)
     live = same & (ssr_w > 0).any(1)
     r = res[px]
     out[k] = src[k] + np.where(live[:, None], ssr_w * (r[:, :3] - r[:, 3:4] * ssr_li), 0.0)
