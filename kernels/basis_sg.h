@@ -6,7 +6,7 @@
 #ifdef BASIS_SG
 #define HAS_BASIS 1
 
-inline float3 basis_irradiance(__constant float4 *bc, float3 n)
+inline float3 basis_irradiance(BASIS_SPACE const float4 *bc, float3 n)
 {
     const float lam = bc[SG_LOBES].w;
     const float eml = exp(-lam), em2l = eml * eml;

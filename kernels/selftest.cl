@@ -113,7 +113,7 @@ __kernel void t_probe_octahedral(__global const float4 *d, __global float2 *uv)
 
 #ifdef HAS_BASIS
 /* the scene's directional basis (BASIS_<NAME>) at normals: tests/test_bases_kernel.py */
-__kernel void t_basis_irradiance(__constant float4 *basis_coeffs, __global const float *n, __global float *e)
+__kernel void t_basis_irradiance(BASIS_SPACE const float4 *basis_coeffs, __global const float *n, __global float *e)
 {
     int i = get_global_id(0);
     vstore3(basis_irradiance(basis_coeffs, vload3(i, n)), i, e);

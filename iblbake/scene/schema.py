@@ -414,9 +414,15 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "bounces": bounces_field("how many times the light a probe ray brings back may have scattered: unbounded "
                                  "(the reference's paths, Russian roulette), or N (1: the surfaces the probe sees, "
                                  "lit directly)"),
-        "irradiance": Enum(("octahedral", "sh"), "octahedral",
-                           doc="what each probe stores: DDGI's octahedral irradiance map, or L2 SH irradiance "
-                               "(9 RGB coefficients, least squares over its rays)"),
+        "irradiance": Enum(("octahedral", "sh") + bases.PROBES, "octahedral",
+                           doc="what each probe stores: DDGI's octahedral irradiance map, L2 SH irradiance "
+                               "(9 RGB coefficients, least squares over its rays), or a directional basis fitted "
+                               "to its rays, "
+                               + ", ".join(f"`{n}`: {bases.BASES[n].TITLE}" for n in bases.PROBES)
+                               + " (docs/conventions.md 'Directional bases'; its options are the probes' keys "
+                                 "of the effects' names)"),
+        **{k: Enum(choices, default, doc=doc + " (the probes' basis)") for n in bases.PROBES
+           for k, (choices, default, doc) in bases.BASES[n].OPTIONS.items()},
         "irradiance_texels": Num(6, 2, 64, integer=True, doc="octahedral irradiance: interior texels per side (DDGI: 6; "
                                                               "the atlas adds a 1-texel border)"),
         "distance_texels": Num(14, 2, 64, integer=True, doc="distance moments: interior texels per side (DDGI: 14)"),

@@ -33,6 +33,7 @@ FITS = ("least_squares", "nnls")
 OPTIONS = {"sg_lobes": (LOBES, 9, "sg: spherical Gaussian lobes (fixed Fibonacci axes, one sharpness)"),
            "sg_fit": (FITS, "least_squares", "sg: the fit, exact least squares or non-negative least squares")}
 HILL_C0 = 0.36
+GLSL_COEFFS, GLSL_IRRADIANCE = "SG_AMPLITUDE", "sgIrradiance"     # glsl()'s names (the probes' sampler)
 
 
 def variants() -> list:
@@ -80,16 +81,24 @@ def gram(k: int) -> np.ndarray:
 
 
 def fit(b, opts) -> np.ndarray:
-    """Amplitudes (K, C) from the moments b (K, C)."""
+    """Amplitudes (..., K, C) from the moments b (..., K, C) (one fit per leading index: a probe)."""
+    b = np.asarray(b, np.float64)
     g = gram(opts["sg_lobes"])
     if opts["sg_fit"] == "least_squares":
-        return np.linalg.solve(g, b)
-    return np.stack([common.nnls_gram(g, b[:, c]) for c in range(b.shape[1])], -1)
+        return np.linalg.solve(g, b.reshape(-1, *b.shape[-2:])).reshape(b.shape)
+    cols = np.moveaxis(b, -2, -1).reshape(-1, b.shape[-2])
+    return np.moveaxis(np.stack([common.nnls_gram(g, c) for c in cols]).reshape(*b.shape[:-2], b.shape[-1], -1), -1, -2)
 
 
 def project(image, opts) -> np.ndarray:
     k = opts["sg_lobes"]
     return fit(common.moments(image, lambda d: lobes(d, k)), opts)
+
+
+def project_rays(values, dirs, opts) -> np.ndarray:
+    """The fit from probe rays (common.ray_moments): values (P, R, C) -> (P, K, C)."""
+    k = opts["sg_lobes"]
+    return fit(common.ray_moments(values, dirs, lambda d: lobes(d, k)), opts)
 
 
 def radiance(coeffs, dirs, opts) -> np.ndarray:
