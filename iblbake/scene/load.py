@@ -207,6 +207,7 @@ def _validated(data, lines, source, folder, overrides, outputs, values, origin) 
     _resolve_names(v, out)
     _resolve_reflection_probes(v, out["reflection_probes"])
     _resolve_probes(v, out["probes"])
+    _resolve_basis_specular(v, out["effects"])
     writes = _resolve_outputs(v, out["output"], folder, outputs)
     return Scene(out, source, folder, lines, writes)
 
@@ -355,6 +356,14 @@ def _resolve_reflection_probes(v: "_Validator", probes: list) -> None:
                 if p[k] is not None:
                     v.fail(f"{where}.{k}", "is a box influence's corner; a sphere influence is its radius about "
                                            "position (shape: box takes min and max)")
+
+
+def _resolve_basis_specular(v: "_Validator", fx: dict) -> None:
+    """`specular: basis` reads the basis `diffuse` names: one that carries specular (core/bases)."""
+    from iblbake.core import bases
+    if fx["specular"] == "basis" and fx["diffuse"] not in bases.SPECULAR:
+        v.fail("effects.specular", f"basis reads the diffuse basis's specular; effects.diffuse is {fx['diffuse']!r}: "
+                                   f"give effects.diffuse {' or '.join(bases.SPECULAR)} (the bases that carry it)")
 
 
 def _resolve_probes(v: "_Validator", p: dict) -> None:

@@ -162,7 +162,22 @@ def bases_ladder(sc, fx) -> list:
             for name, m in BASES.items() for opts in m.variants()]
 
 
-LADDERS = {"realtime": realtime_ladder, "bases": bases_ladder}       # --ladder NAME
+def probe_bases_ladder(sc, fx) -> list:
+    """Every representation the irradiance probes can store (`--ladder probe_bases`: the octahedral
+    map, L2 SH, and each registered basis and size that fits from a probe's rays, core/bases
+    PROBES), the scene's probes section otherwise as it is, AO off: the probes' diffuse term."""
+    from iblbake.core.bases import BASES, PROBES
+    if fx.diffuse == "off" or not sc.data["objects"]:
+        return []
+    base = [("effects.diffuse", "probes"), ("effects.ao", "off")]
+    return [Rung("diffuse", "probes, octahedral", base + [("probes.irradiance", "octahedral")]),
+            Rung("diffuse", "probes, SH L2", base + [("probes.irradiance", "sh")])] + [
+        Rung("diffuse", f"probes, {BASES[name].label(opts)}",
+             base + [("probes.irradiance", name), *((f"probes.{k}", v) for k, v in opts.items())])
+        for name in PROBES for opts in BASES[name].variants()]
+
+
+LADDERS = {"realtime": realtime_ladder, "bases": bases_ladder, "probe_bases": probe_bases_ladder}  # --ladder NAME
 
 
 def probe_rungs() -> list:

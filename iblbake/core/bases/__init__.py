@@ -16,6 +16,8 @@ DIFFUSE = tuple(n for n, m in BASES.items() if m.HEADER)
 # the ones an irradiance probe can store: those that fit from a probe's rays (project_rays; the
 # probes' own sh and octahedral maps aside, render/probes.py)
 PROBES = tuple(n for n, m in BASES.items() if m.HEADER and hasattr(m, "project_rays"))
+# the ones that carry a specular lobe (specular_radiance; `effects.specular: basis`)
+SPECULAR = tuple(n for n, m in BASES.items() if m.HEADER and getattr(m, "SPECULAR", False))
 
 
 def probe_bytes(name: str, opts: dict, bytes_per_float: int) -> int:

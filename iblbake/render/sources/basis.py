@@ -1,6 +1,7 @@
 """The panorama's diffuse light from a directional basis (`diffuse:` any of core/bases DIFFUSE:
 L1 Geomerics, ZH3, SG, ambient dice, Haar): the `basis` bake's coefficients, packed by the basis, read
-by the one header its define selects (kernels/bases.h basis_irradiance)."""
+by the one header its define selects (kernels/bases.h basis_irradiance); and `specular: basis`, its
+specular radiance along the lobe with the split sum's DFG table."""
 
 from __future__ import annotations
 
@@ -33,3 +34,28 @@ class DirectionalBasis(Source):
 
     def placeholders(self, rt):
         return {"basis_coeffs": rt.to_device(np.zeros((1, 4), np.float32))}
+
+
+class BasisSpecular(DirectionalBasis):
+    """`specular: basis`: the split sum's DFG table times the diffuse basis's radiance along the
+    warped GGX lobe (core/bases SPECULAR). It binds the basis's coefficients itself: a scene of
+    metals has no diffuse term, but its basis still lights the specular one."""
+    name = "basis_specular"
+    params = ("basis_coeffs", "dfg", "dfg_size")
+
+    def runs(self, scene, fx):
+        return fx.specular == "basis"
+
+    def defines(self, scene, fx):
+        return bases.BASES[scene.data["effects"]["diffuse"]].defines(self._opts(scene))
+
+    def reads_bakes(self, scene, fx):
+        return ["basis", "dfg"]
+
+    def args(self, ctx):
+        from iblbake.render.sources.prefiltered import dfg_args
+        return {**super().args(ctx), **dfg_args(ctx.rt, ctx.loaded["dfg"])}
+
+    def placeholders(self, rt):
+        from iblbake.render.sources.prefiltered import dfg_args
+        return {**super().placeholders(rt), **dfg_args(rt, None)}
