@@ -6,7 +6,7 @@
  *                 combined here with f0) or SPECULAR_PREFILTERED
  *                 (DOMINANT_DIRECTION; HAS_REFLECTION_PROBES: the local probes' captures where they
  *                 reach, kernels/reflection_probes.h) or SPECULAR_LOBE or SPECULAR_BASIS (the split sum
- *                 with the diffuse basis's basis_specular_radiance, kernels/basis_sg.h) or off
+ *                 with the frame's basis's basis_specular_radiance, kernels/basis_sg.h) or off
  *   HAS_SSR       (prefiltered) the reflected environment, its weight and radiance, into ssr_env, which
  *                 the ssr pass replaces where its rays meet the frame (kernels/ssr.cl)
  *   HAS_EMISSIVE  emission

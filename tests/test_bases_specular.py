@@ -1,7 +1,7 @@
-"""Specular from a directional basis (`effects.specular: basis`, core/bases SPECULAR: SG): the warped
+"""Specular from a directional basis (`effects.specular: sg`, core/bases SPECULAR): the warped
 GGX lobe's radiance against the float64 quadrature of the GGX lobe on the basis's own radiance (the
 approximation's error measured), the kernel header against the twin, a rough metal sphere
-rendered by kernel and twin, and the schema's check that the diffuse basis carries specular."""
+rendered by kernel and twin, and the load's check of one basis a frame."""
 
 import numpy as np
 import pytest
@@ -9,6 +9,7 @@ import pytest
 from iblbake.core import bases, brdf
 from iblbake.core.bases import common
 from iblbake.errors import InputError
+from iblbake.render.plan import plan
 from tests.conftest import load_scene
 
 SG = bases.BASES["sg"]
@@ -105,7 +106,7 @@ def test_kernel_matches_twin(rt):
         assert np.abs(got - want).max() / want.max() < 4e-6
 
 
-def metal_scene(folder, sky, specular="basis", diffuse="sg"):
+def metal_scene(folder, sky, specular="sg", diffuse="sg"):
     return load_scene(folder, f"metal_{specular}_{diffuse}", {
         "camera": {"perspective": {"position": [0, 0, 3], "look_at": [0, 0, 0], "fov_y": 40}, "resolution": [24, 24]},
         "environment": {"path": str(sky)},
@@ -123,7 +124,7 @@ def sky(tmp_path_factory):
 
 
 def test_rough_metal_sphere_kernel_matches_twin(tmp_path, rt, sky):
-    """A rough metal sphere, diffuse sg and specular basis end to end (schema, plan, the `basis` and
+    """A rough metal sphere, diffuse and specular sg end to end (schema, plan, the `basis` and
     `dfg` bakes, the source, SPECULAR_BASIS in the shade kernel): the frame's hit pixels against the
     shade twin on the float64 projection and the frame's DFG table: lit everywhere (the sky
     reflected without a chain), within 5e-6 of the brightest (measured 1.2e-6, float32)."""
@@ -150,6 +151,8 @@ def test_rough_metal_sphere_kernel_matches_twin(tmp_path, rt, sky):
     assert err < 5e-6, err
 
 
-def test_specular_basis_needs_a_basis_that_carries_it(tmp_path, sky):
-    with pytest.raises(InputError, match="effects.specular: basis reads the diffuse basis's specular"):
-        metal_scene(tmp_path, sky, "basis", "zh3")
+def test_one_basis_a_frame(tmp_path, sky):
+    with pytest.raises(InputError, match="effects.specular: sg beside effects.diffuse: zh3: a frame lights from one"):
+        metal_scene(tmp_path, sky, "sg", "zh3")
+    sc = metal_scene(tmp_path, sky, "sg", "off")           # the study's specular term alone
+    assert plan(sc).defines["shade"]["SG_LOBES"] == 9

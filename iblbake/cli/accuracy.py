@@ -37,7 +37,7 @@ def bounces_value(v: str):
                    "SH, GTAO, probes; importance, the split sum, lobe, SSR, reflection probes), `bases` (every "
                    "directional basis and size of the diffuse light: SH, L1 Geomerics, ZH3, SG, ambient dice, Haar), "
                    "`probe_bases` (every representation of the irradiance probes: octahedral, L2 SH and the bases "
-                   "that fit from a probe's rays), "
+                   "that fit from a probe's rays; and the specular term from the bases that carry it), "
                    "or a file "
                    "{rungs: [AXIS, ...]}, each axis in the sweep syntax ({key, values}, {key, range}, {steps}) "
                    "with optional term: and with:.")

@@ -263,7 +263,7 @@ class Bakes:
 
         fx, env = ctx.scene.data["effects"], ctx.scene.data["environment"]
         image, info = self.environment(env)
-        name = fx["diffuse"]
+        name = bases.frame_basis(fx)              # the diffuse basis, else the specular one
         opts = bases.options_of(name, fx)
         key = ("basis", info.sha256, name, tuple(sorted(opts.items())), env["nonfinite"], env["negative"])
         (coeffs, manifest, cached), hit = self._recall(key, lambda: bake_bases.bake(

@@ -15,7 +15,7 @@ BakingLab's SG5-12): G_k(w) = A_k exp(lambda (mu_k . w - 1)), so the fit is line
   y = (c0 mu.n + c1 x)^2 / x where |c0 mu.n| <= c1 x, else saturate(mu.n);
   E = (scale y + bias) 2 pi A / lambda (the published approximate SG integral).
 
-- Specular (`effects.specular: basis`): the split sum with the SG in place of the prefiltered
+- Specular (`effects.specular: sg`): the split sum with the SG in place of the prefiltered
   chain. The GGX NDF as an SG about n, sharpness 2/alpha^2 (Pettineo, SG Series part 4,
   DistributionTermSG), warped with sharpness lambda_w = 2/alpha^2 / (4 max(n.v, 1e-4)) (Wang et
   al. 2009's warp, as Pettineo's WarpDistributionSG: the Jacobian of h -> r at h = n), its axis
@@ -52,7 +52,7 @@ OPTIONS = {"sg_lobes": (LOBES, 9, "sg: spherical Gaussian lobes (fixed Fibonacci
            "sg_fit": (FITS, "least_squares", "sg: the fit, exact least squares or non-negative least squares")}
 HILL_C0 = 0.36
 GLSL_COEFFS, GLSL_IRRADIANCE = "SG_AMPLITUDE", "sgIrradiance"     # glsl()'s names (the probes' sampler)
-SPECULAR = True        # specular_radiance, kernels/basis_sg.h basis_specular_radiance: `specular: basis`
+SPECULAR = True        # specular_radiance, kernels/basis_sg.h basis_specular_radiance: `specular: sg`
 
 
 def variants() -> list:

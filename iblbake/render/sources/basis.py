@@ -1,7 +1,7 @@
 """The panorama's diffuse light from a directional basis (`diffuse:` any of core/bases DIFFUSE:
 L1 Geomerics, ZH3, SG, ambient dice, Haar): the `basis` bake's coefficients, packed by the basis, read
-by the one header its define selects (kernels/bases.h basis_irradiance); and `specular: basis`, its
-specular radiance along the lobe with the split sum's DFG table."""
+by the one header its define selects (kernels/bases.h basis_irradiance); and `specular:` a basis that
+carries it, its radiance along the lobe with the split sum's DFG table."""
 
 from __future__ import annotations
 
@@ -20,16 +20,16 @@ class DirectionalBasis(Source):
         return fx.diffuse in bases.DIFFUSE
 
     def _opts(self, scene):
-        return bases.options_of(scene.data["effects"]["diffuse"], scene.data["effects"])
+        return bases.options_of(bases.frame_basis(scene.data["effects"]), scene.data["effects"])
 
     def defines(self, scene, fx):
-        return bases.BASES[fx.diffuse].defines(self._opts(scene))
+        return bases.BASES[bases.frame_basis(scene.data["effects"])].defines(self._opts(scene))
 
     def reads_bakes(self, scene, fx):
         return ["basis"]
 
     def args(self, ctx):
-        m = bases.BASES[ctx.scene.data["effects"]["diffuse"]]
+        m = bases.BASES[bases.frame_basis(ctx.scene.data["effects"])]
         return {"basis_coeffs": ctx.rt.to_device(m.pack(ctx.loaded["basis"], self._opts(ctx.scene)))}
 
     def placeholders(self, rt):
@@ -37,17 +37,14 @@ class DirectionalBasis(Source):
 
 
 class BasisSpecular(DirectionalBasis):
-    """`specular: basis`: the split sum's DFG table times the diffuse basis's radiance along the
-    warped GGX lobe (core/bases SPECULAR). It binds the basis's coefficients itself: a scene of
-    metals has no diffuse term, but its basis still lights the specular one."""
+    """`specular: <basis>` (core/bases SPECULAR: sg): the split sum's DFG table times the basis's
+    radiance along the warped GGX lobe. It binds the basis's coefficients itself: a frame of
+    metals, or the study's specular term alone, has no diffuse term."""
     name = "basis_specular"
     params = ("basis_coeffs", "dfg", "dfg_size")
 
     def runs(self, scene, fx):
-        return fx.specular == "basis"
-
-    def defines(self, scene, fx):
-        return bases.BASES[scene.data["effects"]["diffuse"]].defines(self._opts(scene))
+        return fx.specular in bases.SPECULAR
 
     def reads_bakes(self, scene, fx):
         return ["basis", "dfg"]
