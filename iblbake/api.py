@@ -414,7 +414,8 @@ class ProbeVolume:
     """A scene's irradiance probe volume (DDGI, RTXGI's layouts; docs/manual.md 'iblbake probes').
 
     irradiance: float32, the octahedral atlas (rows, columns, 3) or, for probes.irradiance: sh,
-        (probes, 9, 3) SH irradiance coefficients (SH's convention).
+        (probes, 9, 3) SH irradiance coefficients (SH's convention), or for a directional basis
+        (probes, floats, 3) its radiance coefficients (manifest['basis'] says its layout).
     distance: float32 atlas of the ray distances' moments (R: mean distance, G: its square).
     data: float32 (probes, 4): each probe's offset from its grid position in world units, and
         its state (0 active, 1 inactive).

@@ -6,7 +6,7 @@
 #ifdef BASIS_AMBIENT_DICE
 #define HAS_BASIS 1
 
-inline float3 basis_irradiance(__constant float4 *bc, float3 n)
+inline float3 basis_irradiance(BASIS_SPACE const float4 *bc, float3 n)
 {
     const float4 c = bc[24];
     float3 e = (float3)(0.0f);

@@ -49,7 +49,7 @@ inline float haar_rect(int f, float s0, float t0, float s1, float t1, float3 n)
     return (above && below) ? e + haar_segment(xo, xi, n) : e;
 }
 
-inline float3 basis_irradiance(__constant float4 *bc, float3 n)
+inline float3 basis_irradiance(BASIS_SPACE const float4 *bc, float3 n)
 {
     float3 e = (float3)(0.0f);
     for (int k = 0; k < HAAR_TERMS; ++k) {

@@ -17,7 +17,7 @@ inline float l1_geomerics_channel(float l0, float3 l1, float3 n)
     return r0 * (a + (1.0f - a) * (p + 1.0f) * pow(q, p));
 }
 
-inline float3 basis_irradiance(__constant float4 *bc, float3 n)
+inline float3 basis_irradiance(BASIS_SPACE const float4 *bc, float3 n)
 {
     return (float3)(l1_geomerics_channel(bc[0].x, (float3)(bc[3].x, bc[1].x, bc[2].x), n),
                     l1_geomerics_channel(bc[0].y, (float3)(bc[3].y, bc[1].y, bc[2].y), n),

@@ -2,6 +2,9 @@
  * around it, as RTXGI's DDGIGetVolumeIrradiance (Irradiance.hlsl, RTXGI-DDGI 1.x; Majercik et al.
  * 2019 and 2021) specifies; constants and layouts in docs/conventions.md "Irradiance probes".
  *   PROBES_SH          each probe stores L2 SH irradiance coefficients (world frame, sh.h's basis),
+ *   PROBES_BASIS       each probe stores a directional basis's radiance coefficients, packed by its
+ *                      module (PROBE_BASIS_ROWS float4 rows a probe), evaluated by its header's
+ *                      basis_irradiance (kernels/bases.h, BASIS_SPACE __global)
  *                      else RTXGI's octahedral irradiance atlas (n x n texels plus a 1-texel border)
  *   PROBE_VISIBILITY   DDGI's weights: wrap shading, Chebyshev visibility on the distance moments'
  *                      atlas, the weight crush and the blend in sqrt(E) (RTXGI's gamma-2 leftover);
@@ -13,6 +16,7 @@
 #define IBLBAKE_PROBES_H
 #include "common.h"
 #include "sh.h"
+#include "bases.h"
 
 #define PROBE_PARAMS __global const float4 *probe_data, __global const float4 *probe_irr, \
                      __global const float4 *probe_dist, const float4 probe_origin, const float4 probe_spacing, \
@@ -63,6 +67,8 @@ inline float3 probe_irradiance_at(__global const float4 *probe_irr, int index, f
     float3 e = (float3)(0.0f);
     for (int k = 0; k < 9; ++k) e += probe_irr[9 * index + k].xyz * Y[k];
     return fmax(e, (float3)(0.0f));
+#elif defined(PROBES_BASIS)
+    return basis_irradiance(probe_irr + PROBE_BASIS_ROWS * index, n);
 #else
     return fmax(probe_atlas_read(probe_irr, index, probe_octahedral(n), texels, nx, ny, nz).xyz, (float3)(0.0f));
 #endif

@@ -113,11 +113,21 @@ __kernel void t_probe_octahedral(__global const float4 *d, __global float2 *uv)
 
 #ifdef HAS_BASIS
 /* the scene's directional basis (BASIS_<NAME>) at normals: tests/test_bases_kernel.py */
-__kernel void t_basis_irradiance(__constant float4 *basis_coeffs, __global const float *n, __global float *e)
+__kernel void t_basis_irradiance(BASIS_SPACE const float4 *basis_coeffs, __global const float *n, __global float *e)
 {
     int i = get_global_id(0);
     vstore3(basis_irradiance(basis_coeffs, vload3(i, n)), i, e);
 }
+#ifdef HAS_BASIS_SPECULAR
+/* the basis's specular radiance along r (xyz) with warp sharpness from (alpha, n.v) in w, z of rw2:
+ * tests/test_bases_specular.py */
+__kernel void t_basis_specular(BASIS_SPACE const float4 *basis_coeffs, __global const float4 *r,
+                               __global const float2 *an, __global float *e)
+{
+    int i = get_global_id(0);
+    vstore3(basis_specular_radiance(basis_coeffs, r[i].xyz, basis_warp_sharpness(an[i].x, an[i].y)), i, e);
+}
+#endif
 #endif
 
 /* the SH irradiance of the shade pass at normals (SH_BANDS bands): benchmarks/bench_bases.py */

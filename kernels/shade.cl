@@ -5,7 +5,8 @@
  *   SPECULAR_MODE SPECULAR_IMPORTANCE (the importance pass's sums, kernels/importance.cl,
  *                 combined here with f0) or SPECULAR_PREFILTERED
  *                 (DOMINANT_DIRECTION; HAS_REFLECTION_PROBES: the local probes' captures where they
- *                 reach, kernels/reflection_probes.h) or SPECULAR_LOBE or off
+ *                 reach, kernels/reflection_probes.h) or SPECULAR_LOBE or SPECULAR_BASIS (the split sum
+ *                 with the frame's basis's basis_specular_radiance, kernels/basis_sg.h) or off
  *   HAS_SSR       (prefiltered) the reflected environment, its weight and radiance, into ssr_env, which
  *                 the ssr pass replaces where its rays meet the frame (kernels/ssr.cl)
  *   HAS_EMISSIVE  emission
@@ -99,6 +100,12 @@ __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
     }
 #elif SPECULAR_MODE == SPECULAR_LOBE
     color += spec_occ * env_scale * lobe_specular(CHAIN_ARGS, dfg, dfg_size, LOBE_ARGS, mt, nrm, v, nov, env_rot);
+#elif SPECULAR_MODE == SPECULAR_BASIS && defined(HAS_BASIS_SPECULAR)
+    /* the split sum with the basis's radiance along the warped lobe (kernels/basis_sg.h) */
+    color += spec_occ * env_scale * split_sum_albedo(dfg, dfg_size, mt, nov)
+             * basis_specular_radiance(basis_coeffs,
+                                       to_env(dominant_direction(nrm, 2.0f * dot(nrm, v) * nrm - v, mt.alpha), env_rot),
+                                       basis_warp_sharpness(mt.alpha, nov));
 #endif
 #ifdef HAS_OCCLUSION_MAP
     color *= mt.occlusion;             /* the material's occlusion map: image-based light only */

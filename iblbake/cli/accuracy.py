@@ -32,10 +32,12 @@ def bounces_value(v: str):
 @click.option("--output", "-o", "out_dir", type=click.Path(file_okay=False), default=None, metavar="DIR",
               help="Write table.md, table.csv, accuracy.json, plot.png (error against time, the Pareto "
                    "frontier marked) and errors.png (best and worst rungs beside their error maps) here.")
-@click.option("--ladder", "ladder_path", type=click.Path(dir_okay=False), default=None, metavar="FILE|realtime|bases",
+@click.option("--ladder", "ladder_path", type=click.Path(dir_okay=False), default=None, metavar="FILE|realtime|bases|probe_bases",
               help="The rungs to run instead of the default ladder: `realtime` (the real-time modes as shipped: "
                    "SH, GTAO, probes; importance, the split sum, lobe, SSR, reflection probes), `bases` (every "
                    "directional basis and size of the diffuse light: SH, L1 Geomerics, ZH3, SG, ambient dice, Haar), "
+                   "`probe_bases` (every representation of the irradiance probes: octahedral, L2 SH and the bases "
+                   "that fit from a probe's rays; and the specular term from the bases that carry it), "
                    "or a file "
                    "{rungs: [AXIS, ...]}, each axis in the sweep syntax ({key, values}, {key, range}, {steps}) "
                    "with optional term: and with:.")

@@ -41,9 +41,13 @@ def _textures_code_hash() -> str:
 def _probes_code_hash() -> str:
     """The probe bakers' and their tracing kernel's source: cached volumes and captures are rebaked
     when they change."""
+    from iblbake.core import bases
+    from iblbake.core.bases import common
     from iblbake.device.runtime import source_hash
     from iblbake.render import probes, reflection_probes
-    return _code_hash((probes, reflection_probes), source_hash("probe_trace.cl"))
+    # the probe bases' fits too (core/bases project_rays)
+    return _code_hash((probes, reflection_probes, common, *(bases.BASES[n] for n in bases.PROBES)),
+                      source_hash("probe_trace.cl"))
 
 
 def _external(path) -> list:
@@ -259,7 +263,7 @@ class Bakes:
 
         fx, env = ctx.scene.data["effects"], ctx.scene.data["environment"]
         image, info = self.environment(env)
-        name = fx["diffuse"]
+        name = bases.frame_basis(fx)              # the diffuse basis, else the specular one
         opts = bases.options_of(name, fx)
         key = ("basis", info.sha256, name, tuple(sorted(opts.items())), env["nonfinite"], env["negative"])
         (coeffs, manifest, cached), hit = self._recall(key, lambda: bake_bases.bake(

@@ -19,7 +19,7 @@ from iblbake.scene.load import AOVS, Scene
 
 # The modes that approximate image-based light (runtime and baked estimates): AO occludes them,
 # the study's AO rungs apply to them. The reference traces true visibility instead.
-APPROXIMATE_MODES = {"diffuse": ("sh", "probes") + bases.DIFFUSE, "specular": ("importance", "prefiltered", "lobe")}
+APPROXIMATE_MODES = {"diffuse": ("sh", "probes") + bases.DIFFUSE, "specular": ("importance", "prefiltered", "lobe") + bases.SPECULAR}
 
 
 @dataclass

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from iblbake.core import sh
+from iblbake.core import bases, sh
 from iblbake.errors import IblbakeError
 from iblbake.render.twin import probes as twin
 
@@ -29,7 +29,15 @@ MAX_OFFSET = 0.45                # of a cell, per axis (RTXGI: the ellipsoid x^2
 BACKFACE_BLEND_LIMIT = 0.1       # a probe with this share of back-face rays blends no irradiance
 MAX_DISTANCE = 1.5               # probeMaxRayDistance: 1.5 |spacing|, what a miss counts as
 DEFAULT_LONGEST = 8              # probes along the longest axis where counts and spacing are omitted
-FILES = {"octahedral": "irradiance.exr", "sh": "irradiance_sh.exr"}
+# a directional basis (core/bases PROBES) stores each probe's radiance coefficients in its layout
+FILES = {"octahedral": "irradiance.exr", "sh": "irradiance_sh.exr", **{n: f"basis_{n}.exr" for n in bases.PROBES}}
+
+
+def basis_options(settings: dict) -> dict:
+    """The options of the probes' basis: the probes section's keys of the same names as the
+    basis's effects keys (probes.sg_lobes, probes.sg_fit), so a probe basis is set apart from the
+    distant one."""
+    return {k: settings[k] for k in bases.BASES[settings["irradiance"]].OPTIONS}
 
 
 @dataclass(frozen=True)
@@ -368,7 +376,8 @@ def project(radiance, t, dirs, grid: Grid, settings: dict):
     L2 fit of those rays' radiance (a field in the span, a uniform sky, is exact), convolved with
     the clamped cosine. Distance moments: weights cos^distance_exponent, the mean of min(|t|,
     1.5 |spacing|) and of its square over every ray (RTXGI halves both; the moments here are the
-    means the Chebyshev test reads)."""
+    means the Chebyshev test reads). A directional basis (core/bases PROBES): its own project_rays
+    on the same rays, back-face rays black: (probes, floats, 3) radiance coefficients."""
     p, r = t.shape
     front = (t >= 0).astype(np.float64)
     blends = (1 - front).mean(1) < BACKFACE_BLEND_LIMIT
@@ -380,6 +389,10 @@ def project(radiance, t, dirs, grid: Grid, settings: dict):
         b = (lit_rows @ y).reshape(p, 3, 9).transpose(0, 2, 1)
         a[~blends] = np.eye(9)
         coeffs = np.linalg.solve(a, b) * sh.ahat(3)[None, :, None]
+        irr = np.where(blends[:, None, None], coeffs, 0.0)
+    elif settings["irradiance"] in bases.PROBES:
+        # the basis's own fit on the rays (an equal-area set: moments 4 pi / N sum L B), back faces black
+        coeffs = bases.BASES[settings["irradiance"]].project_rays(lit, dirs, basis_options(settings))
         irr = np.where(blends[:, None, None], coeffs, 0.0)
     else:
         n = settings["irradiance_texels"]
@@ -457,7 +470,7 @@ def warnings(report: dict, scene_data: dict, volume: dict | None = None) -> list
     if volume is not None:
         nx, ny, nz = volume["counts"]
         for what, texels in (("irradiance", volume["irradiance_texels"]), ("distance", volume["distance_texels"])):
-            if what == "irradiance" and volume["representation"] == "sh":
+            if what == "irradiance" and volume["representation"] != "octahedral":
                 continue
             w, h = (texels + 2) * nx * ny, (texels + 2) * nz
             if max(w, h) > MAX_ATLAS_SIDE:
@@ -539,7 +552,19 @@ def manifest(volume: dict) -> dict:
                           "A = state (0 active, 1 inactive), as RTXGI's probe data texture",
         },
         "report": volume["report"],
+        **({"basis": basis_manifest(volume)} if volume["representation"] in bases.PROBES else {}),
     }
+
+
+def basis_manifest(volume: dict) -> dict:
+    """What a basis's file holds: the basis, its options and its layout (the basis module's)."""
+    rep = volume["representation"]
+    m = bases.BASES[rep]
+    return {"name": rep, "title": m.TITLE, "options": basis_options(volume["settings"]), "floats": m.floats(
+            basis_options(volume["settings"])),
+            "layout": f"{FILES[rep]}: row = probe index, column k = coefficient k of the basis (RGB radiance "
+                      f"coefficients, world frame; back-face rays black): " + m.__doc__.split("Layout:")[1].strip(),
+            "irradiance": "docs/conventions.md 'Directional bases'; probes.glsl's probeOwnIrradiance evaluates it"}
 
 
 def data_texture(data: np.ndarray, grid: Grid) -> np.ndarray:
@@ -594,6 +619,10 @@ def load(folder: Path, man: dict, manifest_name: str = "probes.json") -> dict:
                                                                for x in (n, nd))
                 and isinstance(settings, dict) and isinstance(settings.get("classification"), bool)):
             raise ValueError("representation, texels or settings")
+        if rep in bases.PROBES:
+            for k, (choices, _default, _doc) in bases.BASES[rep].OPTIONS.items():
+                if settings.get(k) not in choices:
+                    raise ValueError(f"settings.{k}")
     except (KeyError, TypeError, ValueError) as e:
         raise _bad(where, f"manifest lacks or mangles {e}") from None
     if min(grid.counts) < 1 or grid.count > 1 << 20 or min(grid.spacing) <= 0 \
@@ -617,6 +646,14 @@ def load(folder: Path, man: dict, manifest_name: str = "probes.json") -> dict:
 
     if rep == "sh":
         irr = read(FILES[rep], (grid.count, 9, 3))
+    elif rep in bases.PROBES:
+        m = bases.BASES[rep]
+        opts = {k: settings[k] for k in m.OPTIONS}
+        irr = read(FILES[rep], (grid.count, m.floats(opts), 3))
+        try:                          # every probe's coefficients as one basis's columns
+            m.validate(irr.transpose(1, 0, 2).reshape(irr.shape[1], -1), opts)
+        except ValueError as e:
+            raise _bad(folder / FILES[rep], str(e)) from None
     else:
         irr = read(FILES[rep], ((n + 2) * nz, (n + 2) * nx * ny, 3))
         if (irr < 0).any():
@@ -652,6 +689,23 @@ SH_GLSL = ("0.28209479177387814", "0.4886025119029199 * d.y", "0.488602511902919
            "0.5462742152960396 * (d.x * d.x - d.y * d.y)")     # sh.h's basis at l <= 2, term by term
 
 
+def basis_glsl(name: str, opts: dict) -> tuple:
+    """(the basis's own GLSL function (core/bases glsl) with its coefficient array a variable
+    instead of a constant, the lines of probeOwnIrradiance that fill it from the probe's row of the
+    file and call it): one formula, the basis module's."""
+    import re
+    m = bases.BASES[name]
+    k = m.floats(opts)
+    src = m.glsl(np.zeros((k, 3)), opts)
+    src, found = re.subn(rf"const vec3 {m.GLSL_COEFFS}\[{k}\] = vec3\[{k}\]\(.*?\n\);",
+                         f"vec3 {m.GLSL_COEFFS}[{k}];     // the probe's coefficients (probeOwnIrradiance)", src,
+                         flags=re.S)
+    assert found == 1, name
+    own = (f"    for (int k = 0; k < {k}; ++k) {m.GLSL_COEFFS}[k] = texelFetch(probeIrradianceAtlas, ivec2(k, index), "
+           f"0).rgb;\n    return {m.GLSL_IRRADIANCE}(d);")
+    return src, own
+
+
 def glsl(volume: dict, man: dict) -> str:
     """A GLSL function sampling the written files as kernels/probes.h does (the hardware's bilinear
     filter in place of its reads), the volume's grid and settings baked in."""
@@ -659,18 +713,23 @@ def glsl(volume: dict, man: dict) -> str:
         return "vec3(" + ", ".join(f"{x:.9g}" for x in v) + ")"
 
     nx, ny, nz = volume["counts"]
-    sh_rep = volume["representation"] == "sh"
+    rep = volume["representation"]
+    sh_rep = rep == "sh"
     basis = "\n".join(f"    Y[{k}] = {e};" for k, e in enumerate(SH_GLSL))
+    basis_src, own = "", ""
+    if rep in bases.PROBES:
+        basis_src, own = basis_glsl(rep, basis_options(volume["settings"]))
     return f"""// iblbake irradiance probes: {nx} x {ny} x {nz}, {volume['representation']} irradiance, RTXGI-DDGI layout
 // (probes.json holds the conventions). Bind the files as 2D float textures, each with its first
 // (top) row at t = 0, clamped to the edge:
-//   probeIrradianceAtlas  {man['files']['irradiance']} ({'nearest' if sh_rep else 'linear'} filtering)
+//   probeIrradianceAtlas  {man['files']['irradiance']} ({'linear' if rep == 'octahedral' else 'nearest'} filtering)
 //   probeDistanceAtlas    distance.exr (linear filtering)
 //   probeDataTexture      probe_data.exr (nearest)
 // diffuse = albedo / PI * mix(skyIrradiance(N), probeIrradiance(P, N, V), probeVolumeWeight(P)):
 // world position, unit shading normal, unit vector towards the viewer; the sky's irradiance (say
 // `iblbake sh --glsl`'s shIrradiance) takes over outside the volume.
 #define PROBES_SH {int(sh_rep)}
+#define PROBES_BASIS {int(bool(basis_src))}
 #define PROBE_VISIBILITY {int(volume['visibility'])}
 #define PROBE_CLASSIFICATION {int(volume['classification'])}
 const ivec3 PROBE_COUNTS = ivec3({nx}, {ny}, {nz});
@@ -684,7 +743,7 @@ const int PROBE_DISTANCE_TEXELS = {volume['distance_texels']};
 uniform sampler2D probeIrradianceAtlas;
 uniform sampler2D probeDistanceAtlas;
 uniform sampler2D probeDataTexture;
-
+{basis_src}
 vec2 probeOctahedral(vec3 d) {{
     vec2 uv = d.xy / (abs(d.x) + abs(d.y) + abs(d.z));
     if (d.z < 0.0) uv = (1.0 - abs(uv.yx)) * vec2(uv.x >= 0.0 ? 1.0 : -1.0, uv.y >= 0.0 ? 1.0 : -1.0);
@@ -706,6 +765,8 @@ vec3 probeOwnIrradiance(int index, vec3 d) {{
     vec3 e = vec3(0.0);
     for (int k = 0; k < 9; ++k) e += texelFetch(probeIrradianceAtlas, ivec2(k, index), 0).rgb * Y[k];
     return max(e, vec3(0.0));
+#elif PROBES_BASIS
+{own}
 #else
     return max(textureLod(probeIrradianceAtlas, probeUV(index, probeOctahedral(d), PROBE_IRRADIANCE_TEXELS), 0.0).rgb,
                vec3(0.0));

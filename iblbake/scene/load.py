@@ -210,6 +210,7 @@ def _validated(data, lines, source, folder, overrides, outputs, values, origin) 
     _resolve_names(v, out)
     _resolve_reflection_probes(v, out["reflection_probes"])
     _resolve_probes(v, out["probes"])
+    _resolve_basis_specular(v, out["effects"], out["probes"])
     writes = _resolve_outputs(v, out["output"], folder, outputs)
     return Scene(out, source, folder, lines, writes)
 
@@ -358,6 +359,19 @@ def _resolve_reflection_probes(v: "_Validator", probes: list) -> None:
                 if p[k] is not None:
                     v.fail(f"{where}.{k}", "is a box influence's corner; a sphere influence is its radius about "
                                            "position (shape: box takes min and max)")
+
+
+def _resolve_basis_specular(v: "_Validator", fx: dict, probes: dict) -> None:
+    """A specular basis (core/bases SPECULAR) beside a different diffuse basis, or beside probes that
+    store one: the shade pass compiles one basis header a frame (kernels/bases.h)."""
+    from iblbake.core import bases
+    s, d = fx["specular"], fx["diffuse"]
+    if s in bases.SPECULAR and d in bases.DIFFUSE and d != s:
+        v.fail("effects.specular", f"{s} beside effects.diffuse: {d}: a frame lights from one directional basis; "
+                                   f"give effects.diffuse {s} (or sh, probes) or another specular mode")
+    if s in bases.SPECULAR and d == "probes" and probes["irradiance"] in bases.PROBES:
+        v.fail("effects.specular", f"{s} beside probes storing {probes['irradiance']}: a frame lights from one "
+                                   f"directional basis; give probes.irradiance octahedral or sh, or another specular mode")
 
 
 def _resolve_probes(v: "_Validator", p: dict) -> None:

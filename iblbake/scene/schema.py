@@ -415,9 +415,15 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "bounces": bounces_field("how many times the light a probe ray brings back may have scattered: unbounded "
                                  "(the reference's paths, Russian roulette), or N (1: the surfaces the probe sees, "
                                  "lit directly)"),
-        "irradiance": Enum(("octahedral", "sh"), "octahedral",
-                           doc="what each probe stores: DDGI's octahedral irradiance map, or L2 SH irradiance "
-                               "(9 RGB coefficients, least squares over its rays)"),
+        "irradiance": Enum(("octahedral", "sh") + bases.PROBES, "octahedral",
+                           doc="what each probe stores: DDGI's octahedral irradiance map, L2 SH irradiance "
+                               "(9 RGB coefficients, least squares over its rays), or a directional basis fitted "
+                               "to its rays, "
+                               + ", ".join(f"`{n}`: {bases.BASES[n].TITLE}" for n in bases.PROBES)
+                               + " (docs/conventions.md 'Directional bases'; its options are the probes' keys "
+                                 "of the effects' names)"),
+        **{k: Enum(choices, default, doc=doc + " (the probes' basis)") for n in bases.PROBES
+           for k, (choices, default, doc) in bases.BASES[n].OPTIONS.items()},
         "irradiance_texels": Num(6, 2, 64, integer=True, doc="octahedral irradiance: interior texels per side (DDGI: 6; "
                                                               "the atlas adds a 1-texel border)"),
         "distance_texels": Num(14, 2, 64, integer=True, doc="distance moments: interior texels per side (DDGI: 14)"),
@@ -471,9 +477,13 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "sh_window": Enum(("none", "hann", "lanczos"), "none", doc="SH ringing window"),
         **{k: Enum(choices, default, doc=doc) for n in bases.DIFFUSE
            for k, (choices, default, doc) in bases.BASES[n].OPTIONS.items()},
-        "specular": Enum(("importance", "prefiltered", "lobe", "reference", "off"), "prefiltered",
+        "specular": Enum(("importance", "prefiltered", "lobe") + bases.SPECULAR + ("reference", "off"), "prefiltered",
                          doc="specular IBL: runtime GGX importance sampling (Colbert and Krivanek 2007), split sum, "
-                             "lobe (K visible-normal samples reading the prefiltered chain), Monte Carlo reference, none"),
+                             "lobe (K visible-normal samples reading the prefiltered chain), a directional basis ("
+                             + ", ".join(f"`{n}`: {bases.BASES[n].TITLE}" for n in bases.SPECULAR)
+                             + ": the split sum with the basis's radiance along the lobe in place of the chain, its "
+                               "options the effects' keys, the same basis as a basis diffuse; docs/conventions.md "
+                               "'Directional bases'), Monte Carlo reference, none"),
         "samples": Num(40, 1, 65536, integer=True, doc="importance: GGX samples per pixel"),
         "mip_bias": Num(1.0, -16.0, 16.0, doc="importance: added to each sample's mip level (Krivanek and "
                                               "Colbert: 1, closer to the reference; 0: none)"),

@@ -162,7 +162,31 @@ def bases_ladder(sc, fx) -> list:
             for name, m in BASES.items() for opts in m.variants()]
 
 
-LADDERS = {"realtime": realtime_ladder, "bases": bases_ladder}       # --ladder NAME
+def probe_bases_ladder(sc, fx) -> list:
+    """Every representation the irradiance probes can store (`--ladder probe_bases`: the octahedral
+    map, L2 SH, and each registered basis and size that fits from a probe's rays, core/bases
+    PROBES), the scene's probes section otherwise as it is: the probes' diffuse term; and the
+    specular term from each basis that carries it (core/bases SPECULAR) beside the split sum's
+    chain. AO off."""
+    from iblbake.core.bases import BASES, PROBES, SPECULAR
+    rungs = []
+    if fx.diffuse != "off" and sc.data["objects"]:
+        base = [("effects.diffuse", "probes"), ("effects.ao", "off")]
+        rungs += [Rung("diffuse", "probes, octahedral", base + [("probes.irradiance", "octahedral")]),
+                  Rung("diffuse", "probes, SH L2", base + [("probes.irradiance", "sh")])] + [
+            Rung("diffuse", f"probes, {BASES[name].label(opts)}",
+                 base + [("probes.irradiance", name), *((f"probes.{k}", v) for k, v in opts.items())])
+            for name in PROBES for opts in BASES[name].variants()]
+    if fx.specular != "off":
+        off = [("effects.ao", "off"), ("effects.ssr", "off"), ("effects.reflection_probes", False)]
+        rungs += [Rung("specular", "prefiltered (distant)", [("effects.specular", "prefiltered")] + off)] + [
+            Rung("specular", f"{BASES[name].label(opts)} specular",
+                 [("effects.specular", name), *((f"effects.{k}", v) for k, v in opts.items())] + off)
+            for name in SPECULAR for opts in BASES[name].variants()]
+    return rungs
+
+
+LADDERS = {"realtime": realtime_ladder, "bases": bases_ladder, "probe_bases": probe_bases_ladder}  # --ladder NAME
 
 
 def probe_rungs() -> list:

@@ -13,6 +13,19 @@ BASES = {m.NAME: m for m in (sh, l1_geomerics, zh3, sg, ambient_dice, haar)}
 
 # the ones evaluated by the generic source and kernels/bases.h (sh has its own)
 DIFFUSE = tuple(n for n, m in BASES.items() if m.HEADER)
+# the ones an irradiance probe can store: those that fit from a probe's rays (project_rays; the
+# probes' own sh and octahedral maps aside, render/probes.py)
+PROBES = tuple(n for n, m in BASES.items() if m.HEADER and hasattr(m, "project_rays"))
+# the ones that carry a specular lobe (specular_radiance): `effects.specular: <name>`
+SPECULAR = tuple(n for n, m in BASES.items() if m.HEADER and getattr(m, "SPECULAR", False))
+
+
+def frame_basis(effects: dict) -> str | None:
+    """The one basis a frame's shade pass compiles (kernels/bases.h: one BASIS_<NAME>): the diffuse
+    one, else the specular one (scene/load.py refuses two different ones)."""
+    if effects["diffuse"] in DIFFUSE:
+        return effects["diffuse"]
+    return effects["specular"] if effects["specular"] in SPECULAR else None
 
 
 def probe_bytes(name: str, opts: dict, bytes_per_float: int) -> int:

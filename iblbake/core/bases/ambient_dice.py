@@ -33,6 +33,7 @@ HEADER = "basis_ambient_dice.h"
 OPTIONS: dict = {}
 VERTICES = 12
 _T = (np.sqrt(5.0) - 1.0) / 2.0
+GLSL_COEFFS, GLSL_IRRADIANCE = "AD_VALUE", "ambientDiceIrradiance"     # glsl()'s names (the probes' sampler)
 
 
 def variants() -> list:
@@ -78,6 +79,12 @@ def irradiance_profile() -> np.ndarray:
 
 def project(image, opts) -> np.ndarray:
     return np.linalg.solve(gram(), common.moments(image, lobes))
+
+
+def project_rays(values, dirs, opts) -> np.ndarray:
+    """The fit from probe rays (common.ray_moments): values (P, R, C) -> (P, 12, C)."""
+    b = common.ray_moments(values, dirs, lobes)
+    return np.linalg.solve(gram(), b.reshape(-1, *b.shape[-2:])).reshape(b.shape)
 
 
 def radiance(coeffs, dirs, opts) -> np.ndarray:

@@ -13,6 +13,8 @@ import numpy as np
 from iblbake.core import conventions
 from iblbake.core import sh as core_sh
 
+FOUR_PI = 4.0 * math.pi
+
 
 def texel_rows(image, rows: int = 64):
     """(image rows (r, W, C), directions (r, W, 3), solid angle per texel (r,)) of an equirect
@@ -32,6 +34,14 @@ def moments(image, lobes) -> np.ndarray:
         part = np.einsum("rwk,rwc,r->kc", lobes(d), img, om, optimize=True)
         out = part if out is None else out + part
     return out
+
+
+def ray_moments(values, dirs, lobes) -> np.ndarray:
+    """The moments from ray samples instead of texels: values (..., R, C) of R rays along dirs
+    (R, 3) that share the sphere equally (the probes' spherical Fibonacci set), so each weighs
+    4 pi / R: b_k = 4 pi / R sum_i L_i f_k(d_i), shape (..., K, C)."""
+    f = lobes(np.asarray(dirs, np.float64))
+    return np.einsum("rk,...rc->...kc", f, np.asarray(values, np.float64), optimize=True) * (FOUR_PI / f.shape[0])
 
 
 def fibonacci_sphere(n: int) -> np.ndarray:
@@ -145,4 +155,4 @@ def glsl_float_array(name: str, vals) -> str:
     return f"const float {name}[{len(vals)}] = float[{len(vals)}](" + ", ".join(f"{float(v):.9g}" for v in vals) + ");"
 
 
-FOUR_PI = 4.0 * math.pi
+

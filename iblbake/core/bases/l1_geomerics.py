@@ -26,6 +26,7 @@ HEADER = "basis_l1_geomerics.h"
 OPTIONS: dict = {}
 Y0 = 0.5 / math.sqrt(math.pi)
 Y1 = math.sqrt(3.0 / (4.0 * math.pi))
+GLSL_COEFFS, GLSL_IRRADIANCE = "L1_SH", "l1GeomericsIrradiance"     # glsl()'s names (the probes' sampler)
 
 
 def variants() -> list:
@@ -42,6 +43,11 @@ def floats(opts) -> int:
 
 def project(image, opts) -> np.ndarray:
     return core_sh.project(image, 2)
+
+
+def project_rays(values, dirs, opts) -> np.ndarray:
+    """From probe rays: their L1 SH moments (common.ray_moments), (P, 4, C)."""
+    return common.ray_moments(values, dirs, lambda d: core_sh.sh_basis(d, 2))
 
 
 def radiance(coeffs, dirs, opts) -> np.ndarray:

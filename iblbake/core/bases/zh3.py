@@ -23,6 +23,7 @@ TITLE = "ZH3"
 HEADER = "basis_zh3.h"
 OPTIONS: dict = {}
 ZONAL = math.sqrt(5.0 / (16.0 * math.pi))
+GLSL_COEFFS, GLSL_IRRADIANCE = "ZH3", "zh3Irradiance"     # glsl()'s names (the probes' sampler)
 
 
 def variants() -> list:
@@ -52,6 +53,12 @@ def from_l2(sh9) -> np.ndarray:
 
 def project(image, opts) -> np.ndarray:
     return from_l2(core_sh.project(image, 3))
+
+
+def project_rays(values, dirs, opts) -> np.ndarray:
+    """From probe rays: their L2 SH moments (common.ray_moments), then from_l2 per probe."""
+    sh9 = common.ray_moments(values, dirs, lambda d: core_sh.sh_basis(d, 3))
+    return np.stack([from_l2(c) for c in sh9.reshape(-1, *sh9.shape[-2:])]).reshape(*sh9.shape[:-2], 5, sh9.shape[-1])
 
 
 def _zonal(coeffs, d):

@@ -119,10 +119,11 @@ def material_defines(scene: Scene) -> dict:
 
 
 def mode_defines(fx: Effects) -> dict:
-    from iblbake.core.bases import DIFFUSE
+    from iblbake.core.bases import DIFFUSE, SPECULAR
     from iblbake.scene.layout import DIFFUSE_MODES, SPECULAR_MODES
     diffuse = "basis" if fx.diffuse in DIFFUSE else fx.diffuse        # one mode, its header by BASIS_<NAME>
-    return {"DIFFUSE_MODE": DIFFUSE_MODES[diffuse], "SPECULAR_MODE": SPECULAR_MODES[fx.specular]}
+    specular = "basis" if fx.specular in SPECULAR else fx.specular
+    return {"DIFFUSE_MODE": DIFFUSE_MODES[diffuse], "SPECULAR_MODE": SPECULAR_MODES[specular]}
 
 
 DISPLAY_KEYS = ("tonemap", "exposure", "output_transfer", "gamma")

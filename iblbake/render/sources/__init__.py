@@ -1,7 +1,7 @@
 """The lighting sources the shade pass composes (render/sources/base.py: the contract), in the
 order shade.cl adds them."""
 
-from iblbake.render.sources.basis import DirectionalBasis
+from iblbake.render.sources.basis import BasisSpecular, DirectionalBasis
 from iblbake.render.sources.importance import ImportanceSampled
 from iblbake.render.sources.lobe import Lobe
 from iblbake.render.sources.prefiltered import SplitSum
@@ -10,5 +10,5 @@ from iblbake.render.sources.reflection_probes import ReflectionProbes
 from iblbake.render.sources.sh import SphericalHarmonics
 from iblbake.render.sources.ssr import ScreenSpaceSplit
 
-SOURCES = (SphericalHarmonics(), DirectionalBasis(), IrradianceProbes(), ImportanceSampled(), SplitSum(), Lobe(), ReflectionProbes(),
+SOURCES = (SphericalHarmonics(), DirectionalBasis(), IrradianceProbes(), ImportanceSampled(), SplitSum(), Lobe(), BasisSpecular(), ReflectionProbes(),
            ScreenSpaceSplit())

@@ -97,6 +97,12 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
         if ssr_out is not None:
             ssr_out["w"] = spec_occ * (f0 * ab[:, 0:1] + f90 * ab[:, 1:2]) * material_occlusion(gb)[:, None]
             ssr_out["li"] = li
+    elif effects["specular"] in bases.SPECULAR:         # kernels/shade.cl SPECULAR_BASIS
+        m = bases.BASES[effects["specular"]]
+        li = scale * m.specular_radiance(basis_coeffs, to_env(m.lobe_axis(n, v, alpha), rot), m.warp_sharpness(alpha, nov),
+                                         bases.options_of(effects["specular"], effects))
+        ab = dfg_lookup(dfg, nov, rough)
+        color += spec_occ * li * (f0 * ab[:, 0:1] + f90 * ab[:, 1:2])
     elif effects["specular"] == "lobe":
         color += spec_occ * scale * lobe(v, n, nov, alpha, rough, f0, f90, rot, effects["lobe"]["samples"],
                               effects["lobe"]["spread"], prefiltered, dfg)
