@@ -306,6 +306,7 @@ def test_bases_ladder_is_the_registry():
     assert ladder.bases_ladder(None, SimpleNamespace(diffuse="off")) == []
 
 
+@pytest.mark.slow       # make test; make check keeps under 3 minutes
 def test_haar_square_irradiance_closed_forms():
     """Lambert's formula on clipped face squares: the six faces make the whole sphere (pi for
     every normal, to 1e-15); one +Z square against the integral in the face plane,

@@ -123,6 +123,7 @@ def sky(tmp_path_factory):
     return p
 
 
+@pytest.mark.slow           # over 3 s on the 2-core CPU: make test, not make check
 def test_rough_metal_sphere_kernel_matches_twin(tmp_path, rt, sky):
     """A rough metal sphere, diffuse and specular sg end to end (schema, plan, the `basis` and
     `dfg` bakes, the source, SPECULAR_BASIS in the shade kernel): the frame's hit pixels against the

@@ -43,6 +43,7 @@ def captures(bakes):
     return [v[:2] for k, v in bakes._memo.items() if isinstance(k, tuple) and k[0] == "reflection"]
 
 
+@pytest.mark.slow       # make test; make check keeps under 3 minutes
 def test_a_capture_of_the_open_sky_leaves_it_to_the_distant_chain(tmp_path, rt, sky):
     """A capture that sees only the sky holds no radiance and no coverage (the sky past the scene
     is the distant chain's, read along the reflected ray); with or without parallax, a box or a
@@ -60,6 +61,7 @@ def test_a_capture_of_the_open_sky_leaves_it_to_the_distant_chain(tmp_path, rt, 
         assert hit.sum() > 200 and np.abs(a - b).max() / b.max() < 1e-6
 
 
+@pytest.mark.slow       # make test; make check keeps under 3 minutes
 def test_a_probe_inside_a_sphere_sees_it_all_around(tmp_path, rt, sky):
     """A probe inside a glowing sphere of radius 3 (emission E, black, the sky shut out; its
     inside is a back face, which captures shade as the camera does): every texel of the capture
@@ -120,6 +122,7 @@ def project(cam, x, w, h):
     return np.array([(sx + 1) / 2 * w, (1 - sy) / 2 * h])
 
 
+@pytest.mark.slow       # make test; make check keeps under 3 minutes
 def test_parallax_puts_a_wall_mark_where_the_mirror_shows_it(tmp_path, rt):
     """The mark mirrored in the floor appears along the camera's ray to its mirror image
     (-1.98, -1.2, 0.3); with the box proxy the probe's reflection of it lands within 2 pixels of
@@ -140,6 +143,7 @@ def test_parallax_puts_a_wall_mark_where_the_mirror_shows_it(tmp_path, rt):
     assert np.linalg.norm(spots[False] - want) > 12.0, (spots, want)
 
 
+@pytest.mark.slow           # over 3 s on the 2-core CPU: make test, not make check
 def test_frame_matches_the_twin(tmp_path, rt):
     """The room frame (two probes: the box and a sphere around the mark's corner, overlapping)
     against the shade pass's twin on its G-buffer with the same chains (measured 3.3e-7)."""
@@ -204,6 +208,7 @@ def test_bad_reflection_probes_are_one_line_errors(tmp_path, sky, probe, words):
     assert r.returncode == 1 and words in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
 
 
+@pytest.mark.slow           # over 3 s on the 2-core CPU: make test, not make check
 def test_iblbake_probes_writes_the_captures_for_engines(tmp_path, sky):
     """`iblbake probes` writes each reflection probe's capture beside the irradiance volume (RGB
     the scene's radiance, A its coverage), listed in probes.json; `iblbake mips` prefilters it
@@ -261,6 +266,7 @@ def wall_seen(p, d):
     return names, margin
 
 
+@pytest.mark.slow       # make test; make check keeps under 3 minutes
 @pytest.mark.parametrize("how", ["exclude", "reflection_captures"])
 def test_a_capture_shows_each_wall_where_it_is(tmp_path, rt, how):
     """The probe sits inside the small metal sphere; excluded from the capture (by the probe's
