@@ -74,8 +74,10 @@ def synthetic(counts, spacing, origin, rep="octahedral", value=None, rng=None, t
 
 
 def kernel_irradiance(rt, vol, p, n, v, visibility, classification):
-    defines = {"SH_BANDS": 3, **probe_defines({"irradiance": vol["representation"], "visibility": visibility,
-                                              "classification": classification})}
+    """t_probes (kernels/selftest.cl) at points p, normals n, view directions v, with the volume's
+    switches and its basis's options (a basis volume's settings carry them)."""
+    defines = {"SH_BANDS": 3, **probe_defines({**vol.get("settings", {}), "irradiance": vol["representation"],
+                                              "visibility": visibility, "classification": classification})}
     out = rt.empty(16 * len(p))
 
     def f4(a):

@@ -18,8 +18,7 @@ from iblbake.render import probes, render
 from iblbake.render.bakes import Bakes
 from iblbake.render.twin import probes as twin
 from tests.conftest import run_cli
-from iblbake.render.sources.probes import probe_args, probe_defines
-from tests.test_probes import Given, far_sphere_scene, settings, sphere_scene, synthetic, unit
+from tests.test_probes import Given, far_sphere_scene, kernel_irradiance, settings, sphere_scene, synthetic, unit
 
 # every probe basis, and each SG size by least squares and NNLS at K = 9
 CASES = [(n, o) for n in bases.PROBES for o in bases.BASES[n].variants()
@@ -64,19 +63,6 @@ def test_kernel_matches_twin(rt, name, opts):
     got = kernel_irradiance(rt, vol, p, n, v, True, True)
     assert (want > 0).mean() > 0.9
     assert np.abs(got - want).max() / want.max() < 1e-5
-
-
-def kernel_irradiance(rt, vol, p, n, v, visibility, classification):
-    """t_probes with the basis's defines (its options from the volume's settings)."""
-    defines = {"SH_BANDS": 3, **probe_defines({**vol["settings"], "visibility": visibility,
-                                               "classification": classification})}
-    out = rt.empty(16 * len(p))
-
-    def f4(a):
-        return rt.to_device(np.pad(np.asarray(a, np.float32), ((0, 0), (0, 1))))
-    rt.launch("selftest.cl", "t_probes", defines, (len(p),), {}, p=f4(p), n=f4(n), v=f4(v), out=out,
-              **probe_args(rt, vol))
-    return rt.read(out, (len(p), 4))[:, :3].astype(np.float64)
 
 
 # at 1024 rays: SG's K fixed lobes cannot make a constant (tests/test_bases.py test_uniform_sky; from

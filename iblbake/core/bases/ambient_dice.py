@@ -112,8 +112,7 @@ def _power_profile() -> np.ndarray:
 def pack(coeffs, opts) -> np.ndarray:
     """What kernels/basis_ambient_dice.h reads: 12 rows (value rgb, 0), 12 rows (vertex xyz, 0),
     then the profile's power coefficients (t^0, t^1, t^2, t^4)."""
-    out = np.zeros((2 * VERTICES + 1, 4), np.float32)
-    out[:VERTICES, :3] = np.asarray(coeffs)[:, :3]
+    out = common.rgb_rows(coeffs, 2 * VERTICES + 1)
     out[VERTICES:2 * VERTICES, :3] = vertices()
     p = _power_profile()
     out[-1] = [p[0], p[1], p[2], p[4]]

@@ -156,3 +156,12 @@ def glsl_float_array(name: str, vals) -> str:
 
 
 
+
+
+def rgb_rows(coeffs, rows: int) -> np.ndarray:
+    """A kernel block of `rows` float4 rows, the coefficients' RGB in the first ones (a header's
+    per-basis tables, such as lobe axes, fill the rest)."""
+    out = np.zeros((rows, 4), np.float32)
+    c = np.asarray(coeffs)
+    out[:len(c), :3] = c[:, :3]
+    return out

@@ -81,9 +81,7 @@ def defines(opts) -> dict:
 
 def pack(coeffs, opts) -> np.ndarray:
     """4 rows (coefficient k, rgb)."""
-    out = np.zeros((4, 4), np.float32)
-    out[:, :3] = np.asarray(coeffs)[:, :3]
-    return out
+    return common.rgb_rows(coeffs, 4)
 
 
 def glsl(coeffs, opts) -> str:

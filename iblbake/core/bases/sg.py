@@ -198,8 +198,7 @@ def defines(opts) -> dict:
 def pack(coeffs, opts) -> np.ndarray:
     """What kernels/basis_sg.h reads: K rows (A rgb, 0), then K rows (mu xyz, lambda)."""
     k = opts["sg_lobes"]
-    out = np.zeros((2 * k, 4), np.float32)
-    out[:k, :3] = np.asarray(coeffs)[:, :3]
+    out = common.rgb_rows(coeffs, 2 * k)
     out[k:, :3] = axes(k)
     out[k:, 3] = sharpness(k)
     return out

@@ -87,9 +87,7 @@ def defines(opts) -> dict:
 
 def pack(coeffs, opts) -> np.ndarray:
     """5 rows (coefficient, rgb)."""
-    out = np.zeros((5, 4), np.float32)
-    out[:, :3] = np.asarray(coeffs)[:, :3]
-    return out
+    return common.rgb_rows(coeffs, 5)
 
 
 def glsl(coeffs, opts) -> str:
