@@ -94,14 +94,20 @@ class Reuse:
         self.state = None
 
 
-def pass_keys(pl: Plan, scene: Scene) -> dict:
+def pass_keys(pl: Plan, scene: Scene, loaded: dict | None = None) -> dict:
+    """Each pass's input key: the scene values it reads, its defines, the keys upstream of it, and
+    which baked value each bake it reads is (a panorama rewritten at the same path bakes anew: the
+    scene is the same, the bake's value is not; a Renderer kept the last frame's image)."""
     from iblbake.bake.cache import content_key
 
+    loaded = loaded or {}
     keys = {}
     for i, p in enumerate(pl.passes):
         upstream = [keys[q.name] for q in pl.passes[:i] if set(q.writes) & set(p.reads)]
+        # the bakes' store keeps each value it baked alive (memoised by content): its id names it
+        bakes = [(b, id(loaded.get(b))) for b in p.reads_bakes(scene, pl.effects)]
         keys[p.name] = content_key({"scene": p.scene_inputs(scene), "defines": pl.defines.get(p.name),
-                                    "upstream": upstream})
+                                    "upstream": upstream, "bakes": bakes})
     return keys
 
 
@@ -312,7 +318,7 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
                       "albedo": np.empty((height, width, 4), np.float32),
                       "depth": np.empty((height, width), np.float32),
                       "object": np.empty((height, width), np.float32)} if "aov_normal" in planned else {}
-    keys = pass_keys(pl, scene)
+    keys = pass_keys(pl, scene, ctx.loaded)
     prev = reuse.state if reuse is not None else None
     if prev is not None and not (prev["runtime"] is rt and prev["shape"] == (width, height, spp) and rows == height):
         prev = None
