@@ -172,3 +172,14 @@ def test_device_probe_prints_no_compiler_warning(monkeypatch):
         info = runtime.probe(devices[0])
     assert info.ok, info.reason
     assert not [w for w in seen if "compiler" in str(w.category).lower()], [str(w.message) for w in seen]
+
+
+def test_a_cold_kernel_build_prints_nothing(tmp_path):
+    """PoCL's clang writes "13 warnings generated." (its float16 builtins' ABI notes) straight to
+    file descriptor 2 on a cold build of sh_project.cl: `-q` printed it on every fresh machine
+    (and the API's "prints nothing" broke). The line is dropped; the output is unchanged."""
+    from .conftest import write_exr
+    env = write_exr(tmp_path / "sky.exr", np.full((16, 32, 3), 0.5, np.float32))
+    r = run_cli("sh", env, "-q", "-o", tmp_path / "sh.json", "--backend", "opencl",
+                env={"POCL_CACHE_DIR": str(tmp_path / "pocl"), "IBLBAKE_KERNEL_CACHE": str(tmp_path / "kernels")})
+    assert r.returncode == 0 and r.stderr == "" and r.stdout == "", (r.stdout, r.stderr)

@@ -13,6 +13,7 @@ import functools
 import hashlib
 import os
 import re
+import sys
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -169,10 +170,32 @@ def enumerate_devices() -> tuple[list[DeviceInfo], list[str]]:
 @contextlib.contextmanager
 def _quiet_build_log(cl):
     """Successful builds can log (NVIDIA notes every inlined kernel) and pyopencl turns that log
-    into a multi-line CompilerWarning on stderr; failures raise and are reported, the rest is noise."""
-    with warnings.catch_warnings():
+    into a multi-line CompilerWarning on stderr; failures raise and are reported, the rest is noise.
+    PoCL's clang also writes its count ("13 warnings generated.": sh_project.cl's float16 ABI
+    notes, about its own builtins) straight to file descriptor 2, past Python, on every cold
+    build (-q, --json and the API's "prints nothing"): those lines are dropped, anything else
+    written there meanwhile is passed on."""
+    import tempfile
+
+    with warnings.catch_warnings(), tempfile.TemporaryFile() as tmp:
         warnings.simplefilter("ignore", cl.CompilerWarning)
-        yield
+        try:
+            sys.stderr.flush()
+            saved = os.dup(2)
+        except (OSError, ValueError):          # no descriptor 2 (a service, an embedding)
+            yield
+            return
+        os.dup2(tmp.fileno(), 2)
+        try:
+            yield
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            tmp.seek(0)
+            text = tmp.read().decode(errors="replace")
+            rest = "".join(ln for ln in text.splitlines(True) if not re.fullmatch(r"\d+ warnings? generated\.\s*", ln))
+            if rest:
+                sys.stderr.write(rest)
 
 
 def probe(info: DeviceInfo) -> DeviceInfo:
