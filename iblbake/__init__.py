@@ -5,6 +5,18 @@ file and iblbake.errors; the API module and what it calls (numpy, OpenImageIO, p
 first use of a name, so a build script or the command line pays for what it calls."""
 
 import sys
+
+if sys.argv[:1] == ["-m"]:
+    # `python -m iblbake.cli`: runpy imports this package (in a fresh clone, compiling it) before
+    # the entry point can say how Ctrl-C is handled, so its quiet exit (iblbake.entry) is set here
+    # first, with the builtin _signal (the signal module's enums take a millisecond to import).
+    # sys.argv[0] is "-m" exactly while the module is being located (the docs of -m): a library
+    # import never takes this branch.
+    import _signal
+
+    _signal.signal(_signal.SIGINT, lambda signum, frame: (sys.stderr.write("iblbake: interrupted\n"),
+                                                          __import__("os")._exit(130)))
+
 import types
 
 from iblbake.errors import DeviceError, Error, InputError, UsageError

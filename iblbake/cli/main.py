@@ -80,20 +80,29 @@ def cli():
 
 def main():
     """Run the CLI (iblbake.entry.main is the console script)."""
-    from iblbake.entry import loaded
+    from iblbake.entry import finished, loaded
     loaded()
+    code = 130
+    try:
+        code = _run()
+        finished()
+    except KeyboardInterrupt:       # raised once (iblbake.entry): a second Ctrl-C is dropped
+        finished()
+        click.echo("iblbake: interrupted", err=True)
+    sys.exit(code)
+
+
+def _run() -> int:
+    """The command's exit code; its errors printed as one line each."""
     try:
         rv = cli.main(standalone_mode=False, prog_name="iblbake")
     except IblbakeError as e:
         click.echo(f"Error: {e}", err=True)
-        sys.exit(e.exit_code)
+        return e.exit_code
     except click.ClickException as e:
         e.show()
-        sys.exit(e.exit_code)
+        return e.exit_code
     except click.exceptions.Abort:
         click.echo("iblbake: interrupted", err=True)
-        sys.exit(130)
-    except KeyboardInterrupt:
-        click.echo("iblbake: interrupted", err=True)
-        sys.exit(130)
-    sys.exit(rv if isinstance(rv, int) else 0)
+        return 130
+    return rv if isinstance(rv, int) else 0
