@@ -23,28 +23,22 @@ inline float3 basis_irradiance(BASIS_SPACE const float4 *bc, float3 n)
     return fmax(e, (float3)(0.0f));
 }
 
-/* The radiance along the warped GGX lobe about r of sharpness lam_w (sg.py specular_radiance:
- * Pettineo's SG warp of the NDF, the normalised SG-SG inner product) */
+/* s[k]: the normalised SG-SG inner product of lobe k with the warped GGX lobe about r of
+ * sharpness lam_w (sg.py specular_weights; kernels/bases.h sums s[k] A_k) */
 #define HAS_BASIS_SPECULAR 1
-inline float3 basis_specular_radiance(BASIS_SPACE const float4 *bc, float3 r, float lam_w)
+#define BASIS_SPECULAR_ROWS SG_LOBES
+inline void basis_specular_weights(BASIS_SPACE const float4 *bc, __global const float *basis_table, float3 r,
+                                   float lam_w, float *s)
 {
     const float lam = bc[SG_LOBES].w;
     const float norm = lam_w / -expm1(-2.0f * lam_w);
-    float3 e = (float3)(0.0f);
     for (int k = 0; k < SG_LOBES; ++k) {
         const float t = dot(bc[SG_LOBES + k].xyz, r);
         const float d = sqrt(fmax(lam * lam + lam_w * lam_w + 2.0f * lam * lam_w * t, 1e-12f));
         /* d - lam - lam_w without cancellation (sg.py) */
         const float x = lam * (lam + 2.0f * lam_w * t) / (d + lam_w) - lam;
-        e += bc[k].xyz * ((exp(x) - exp(-d - lam - lam_w)) / d * norm);
+        s[k] = (exp(x) - exp(-d - lam - lam_w)) / d * norm;
     }
-    return fmax(e, (float3)(0.0f));
-}
-
-/* the warped lobe's sharpness at alpha = roughness^2 and n.v (sg.py warp_sharpness) */
-inline float basis_warp_sharpness(float alpha, float nov)
-{
-    return 2.0f / fmax(alpha * alpha, 1e-8f) / (4.0f * fmax(nov, 1e-4f));
 }
 
 #endif

@@ -86,11 +86,22 @@ inline float probe_volume_weight(float3 p, const float4 probe_origin, const floa
     return w.x * w.y * w.z;
 }
 
+/* One probe's value: its irradiance at n, or given the warped specular lobe's weights `spec`
+ * (kernels/bases.h basis_specular_weights; a basis that carries one) its radiance along the lobe */
+inline float3 probe_value(__global const float4 *probe_irr, int index, float3 n, const float *spec, int texels,
+                          int nx, int ny, int nz)
+{
+#if defined(PROBES_BASIS) && defined(HAS_BASIS_SPECULAR)
+    if (spec) return basis_weighted(probe_irr + PROBE_BASIS_ROWS * index, spec);
+#endif
+    return probe_irradiance_at(probe_irr, index, n, texels, nx, ny, nz);
+}
+
 /* Probe c's weight at the biased point (its factor `falloff`: the trilinear one, or the fallback's
- * inverse square distance) and its value (sqrt E with visibility, E without): 0 for an inactive
- * probe. */
-inline float probe_contribution(int3 c, float3 p, float3 biased, float3 n, float3 falloff, float3 *value,
-                                PROBE_PARAMS)
+ * inverse square distance) and its value (probe_value; the irradiance as sqrt E with visibility,
+ * E without; the specular radiance as it is): 0 for an inactive probe. */
+inline float probe_contribution(int3 c, float3 p, float3 biased, float3 n, float3 falloff, const float *spec,
+                                float3 *value, PROBE_PARAMS)
 {
     const float3 origin = probe_origin.xyz, spacing = probe_spacing.xyz;
     const int index = c.y * probe_nx * probe_nz + c.z * probe_nx + c.x;
@@ -98,7 +109,7 @@ inline float probe_contribution(int3 c, float3 p, float3 biased, float3 n, float
 #ifdef PROBE_CLASSIFICATION
     if (data.w != 0.0f) return 0.0f;
 #endif
-    const float3 e = probe_irradiance_at(probe_irr, index, n, probe_irr_texels, probe_nx, probe_ny, probe_nz);
+    const float3 e = probe_value(probe_irr, index, n, spec, probe_irr_texels, probe_nx, probe_ny, probe_nz);
 #ifdef PROBE_VISIBILITY
     const float3 pp = origin + convert_float3(c) * spacing + data.xyz;
     const float3 tri = fmax(falloff, 0.001f);
@@ -120,7 +131,7 @@ inline float probe_contribution(int3 c, float3 p, float3 biased, float3 n, float
     w *= fmax(0.05f, cheb);
     w = fmax(1e-6f, w);
     if (w < 0.2f) w *= w * w * (1.0f / (0.2f * 0.2f));     /* crush tiny weights, continuously */
-    *value = sqrt(e);
+    *value = spec ? e : sqrt(e);
     return w * tri.x * tri.y * tri.z;
 #else
     *value = e;
@@ -133,8 +144,10 @@ inline float probe_contribution(int3 c, float3 p, float3 biased, float3 n, float
  * (RTXGI), or where all eight are inactive the active probes of the 4 x 4 x 4 around it, each
  * weighted by its inverse square distance (in cells) with the same visibility (RTXGI returns 0
  * there), or none of those (0: the caller falls back to the panorama). probe_origin.xyz: probe
- * (0, 0, 0); .w the normal bias; probe_spacing.xyz the cell; .w the view bias (world units). */
-inline float4 probe_irradiance(float3 p, float3 n, float3 v, PROBE_PARAMS)
+ * (0, 0, 0); .w the normal bias; probe_spacing.xyz the cell; .w the view bias (world units).
+ * Given `spec` (the warped lobe's weights) the radiance along the lobe instead, the same weights
+ * blending it linearly. */
+inline float4 probe_blend(float3 p, float3 n, float3 v, const float *spec, PROBE_PARAMS)
 {
     const float3 origin = probe_origin.xyz, spacing = probe_spacing.xyz;
     const int3 last = (int3)(probe_nx - 1, probe_ny - 1, probe_nz - 1);
@@ -147,7 +160,7 @@ inline float4 probe_irradiance(float3 p, float3 n, float3 v, PROBE_PARAMS)
     for (int i = 0; i < 8; ++i) {
         const int3 off = (int3)(i & 1, (i >> 1) & 1, (i >> 2) & 1);
         const float w = probe_contribution(clamp(base + off, (int3)(0), last), p, biased, n,
-                                           select(1.0f - alpha, alpha, off == (int3)(1)), &value, PROBE_ARGS);
+                                           select(1.0f - alpha, alpha, off == (int3)(1)), spec, &value, PROBE_ARGS);
         sum += w * value;
         wsum += w;
     }
@@ -159,19 +172,23 @@ inline float4 probe_irradiance(float3 p, float3 n, float3 v, PROBE_PARAMS)
                 for (int x = lo.x; x <= hi.x; ++x) {
                     const float3 dc = convert_float3((int3)(x, y, z)) - g;
                     const float f = 1.0f / fmax(dot(dc, dc), 0.01f);
-                    const float w = probe_contribution((int3)(x, y, z), p, biased, n, (float3)(f, 1.0f, 1.0f), &value,
-                                                       PROBE_ARGS);
+                    const float w = probe_contribution((int3)(x, y, z), p, biased, n, (float3)(f, 1.0f, 1.0f), spec,
+                                                       &value, PROBE_ARGS);
                     sum += w * value;
                     wsum += w;
                 }
     }
     if (!(wsum > 0.0f)) return (float4)(0.0f, 0.0f, 0.0f, PROBE_SOURCE_NONE);
-#ifdef PROBE_VISIBILITY
     const float3 s = sum / wsum;
-    return (float4)(s * s, source);
-#else
-    return (float4)(sum / wsum, source);
+#ifdef PROBE_VISIBILITY
+    if (!spec) return (float4)(s * s, source);
 #endif
+    return (float4)(s, source);
+}
+
+inline float4 probe_irradiance(float3 p, float3 n, float3 v, PROBE_PARAMS)
+{
+    return probe_blend(p, n, v, (const float *)0, PROBE_ARGS);
 }
 
 /* The diffuse irradiance at p with the probes (their irradiance holds the panorama's intensity
@@ -190,5 +207,27 @@ inline float3 probes_diffuse(float3 p, float3 n, float3 v, float3 sky, PROBE_PAR
     }
     return e;
 }
+
+#if defined(PROBES_BASIS) && defined(HAS_BASIS_SPECULAR)
+/* The radiance along the warped GGX lobe (axis d, world frame; sharpness lam_w) at p from probes
+ * whose basis carries a specular lobe (`specular: probes`), blended by the volume's weight with
+ * `sky` (the distant split sum's radiance) outside it, and `sky` where no active probe is near;
+ * probe_stats[2], [3] count those samples as [0], [1] do the irradiance's. */
+inline float3 probes_specular(float3 p, float3 n, float3 v, float3 d, float lam_w, float3 sky,
+                              __global const float *basis_table, PROBE_PARAMS, __global int *probe_stats)
+{
+    const float wv = probe_volume_weight(p, probe_origin, probe_spacing, probe_nx, probe_ny, probe_nz);
+    float3 li = (1.0f - wv) * sky;
+    if (wv > 0.0f) {
+        float s[BASIS_SPECULAR_ROWS];
+        basis_specular_weights(probe_irr, basis_table, d, lam_w, s);   /* the lobes' axes: any probe's block */
+        const float4 pl = probe_blend(p, n, v, s, PROBE_ARGS);
+        if (pl.w == PROBE_SOURCE_NEAREST) atomic_inc(&probe_stats[2]);
+        if (pl.w == PROBE_SOURCE_NONE) atomic_inc(&probe_stats[3]);
+        li += wv * (pl.w == PROBE_SOURCE_NONE ? sky : pl.xyz);
+    }
+    return li;
+}
+#endif
 
 #endif

@@ -105,6 +105,20 @@ __kernel void t_probes(__global const float4 *p, __global const float4 *n, __glo
     out[i] = probe_irradiance(p[i].xyz, n[i].xyz, v[i].xyz, PROBE_ARGS);
 }
 
+#if defined(PROBES_BASIS) && defined(HAS_BASIS_SPECULAR)
+/* probes.h's specular radiance along the warped lobe (axis d.xyz, sharpness d.w) at points p, normals
+ * n, view vectors v: tests/test_probes_specular.py */
+__kernel void t_probe_specular(__global const float4 *p, __global const float4 *n, __global const float4 *v,
+                               __global const float4 *d, __global const float *basis_table, PROBE_PARAMS,
+                               __global float4 *out)
+{
+    const int i = get_global_id(0);
+    float s[BASIS_SPECULAR_ROWS];
+    basis_specular_weights(probe_irr, basis_table, d[i].xyz, d[i].w, s);
+    out[i] = probe_blend(p[i].xyz, n[i].xyz, v[i].xyz, s, PROBE_ARGS);
+}
+#endif
+
 __kernel void t_probe_octahedral(__global const float4 *d, __global float2 *uv)
 {
     const int i = get_global_id(0);
@@ -119,13 +133,14 @@ __kernel void t_basis_irradiance(BASIS_SPACE const float4 *basis_coeffs, __globa
     vstore3(basis_irradiance(basis_coeffs, vload3(i, n)), i, e);
 }
 #ifdef HAS_BASIS_SPECULAR
-/* the basis's specular radiance along r (xyz) with warp sharpness from (alpha, n.v) in w, z of rw2:
+/* the basis's specular radiance along r (xyz) with warp sharpness from (alpha, n.v) in an:
  * tests/test_bases_specular.py */
-__kernel void t_basis_specular(BASIS_SPACE const float4 *basis_coeffs, __global const float4 *r,
-                               __global const float2 *an, __global float *e)
+__kernel void t_basis_specular(BASIS_SPACE const float4 *basis_coeffs, __global const float *basis_table,
+                               __global const float4 *r, __global const float2 *an, __global float *e)
 {
     int i = get_global_id(0);
-    vstore3(basis_specular_radiance(basis_coeffs, r[i].xyz, basis_warp_sharpness(an[i].x, an[i].y)), i, e);
+    vstore3(basis_specular_radiance(basis_coeffs, basis_table, r[i].xyz, basis_warp_sharpness(an[i].x, an[i].y)),
+            i, e);
 }
 #endif
 #endif

@@ -6,7 +6,8 @@
  *                 combined here with f0) or SPECULAR_PREFILTERED
  *                 (DOMINANT_DIRECTION; HAS_REFLECTION_PROBES: the local probes' captures where they
  *                 reach, kernels/reflection_probes.h) or SPECULAR_LOBE or SPECULAR_BASIS (the split sum
- *                 with the frame's basis's basis_specular_radiance, kernels/basis_sg.h) or off
+ *                 with the frame's basis's basis_specular_radiance, kernels/bases.h) or SPECULAR_PROBES
+ *                 (the same from the irradiance probes' basis, kernels/probes.h probes_specular) or off
  *   HAS_SSR       (prefiltered) the reflected environment, its weight and radiance, into ssr_env, which
  *                 the ssr pass replaces where its rays meet the frame (kernels/ssr.cl)
  *   HAS_EMISSIVE  emission
@@ -48,7 +49,8 @@ inline float3 ao_multibounce(float ao, float3 albedo)
  * arguments); this kernel only dispatches to them and applies occlusion. */
 __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
                     const int n, const float2 env_rot, const float env_scale,
-                    __constant float4 *sh_coeffs, __constant float4 *basis_coeffs, CHAIN_PARAMS, __global const float2 *dfg, const int dfg_size,
+                    __constant float4 *sh_coeffs, __constant float4 *basis_coeffs, __global const float *basis_table,
+                    CHAIN_PARAMS, __global const float2 *dfg, const int dfg_size,
                     LOBE_PARAMS, __global const float *ao_buf, __global const float4 *spec_sums, PROBE_PARAMS,
                     RPROBE_PARAMS, __global float4 *ssr_env, __global int *probe_stats, __global float4 *radiance)
 {
@@ -101,11 +103,22 @@ __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
 #elif SPECULAR_MODE == SPECULAR_LOBE
     color += spec_occ * env_scale * lobe_specular(CHAIN_ARGS, dfg, dfg_size, LOBE_ARGS, mt, nrm, v, nov, env_rot);
 #elif SPECULAR_MODE == SPECULAR_BASIS && defined(HAS_BASIS_SPECULAR)
-    /* the split sum with the basis's radiance along the warped lobe (kernels/basis_sg.h) */
+    /* the split sum with the basis's radiance along the warped lobe (kernels/bases.h) */
     color += spec_occ * env_scale * split_sum_albedo(dfg, dfg_size, mt, nov)
-             * basis_specular_radiance(basis_coeffs,
+             * basis_specular_radiance(basis_coeffs, basis_table,
                                        to_env(dominant_direction(nrm, 2.0f * dot(nrm, v) * nrm - v, mt.alpha), env_rot),
                                        basis_warp_sharpness(mt.alpha, nov));
+#elif SPECULAR_MODE == SPECULAR_PROBES && defined(PROBES_BASIS) && defined(HAS_BASIS_SPECULAR)
+    /* the split sum with the probes' radiance along the warped lobe (world frame; their radiance
+     * holds the panorama's intensity), the distant chain's where they do not reach */
+    {
+        const float3 sky = env_scale * split_sum_radiance(CHAIN_ARGS, split_sum_direction(nrm, v, mt.alpha), env_rot,
+                                                          mt.roughness);
+        const float3 d = dominant_direction(nrm, 2.0f * dot(nrm, v) * nrm - v, mt.alpha);
+        color += spec_occ * split_sum_albedo(dfg, dfg_size, mt, nov)
+                 * probes_specular(gb_pos[gid].xyz, nrm, v, d, basis_warp_sharpness(mt.alpha, nov), sky, basis_table,
+                                   PROBE_ARGS, probe_stats);
+    }
 #endif
 #ifdef HAS_OCCLUSION_MAP
     color *= mt.occlusion;             /* the material's occlusion map: image-based light only */

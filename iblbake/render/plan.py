@@ -19,13 +19,14 @@ from iblbake.scene.load import AOVS, Scene
 
 # The modes that approximate image-based light (runtime and baked estimates): AO occludes them,
 # the study's AO rungs apply to them. The reference traces true visibility instead.
-APPROXIMATE_MODES = {"diffuse": ("sh", "probes") + bases.DIFFUSE, "specular": ("importance", "prefiltered", "lobe") + bases.SPECULAR}
+APPROXIMATE_MODES = {"diffuse": ("sh", "probes") + bases.DIFFUSE,
+                     "specular": ("importance", "prefiltered", "lobe", "probes") + bases.SPECULAR}
 
 
 @dataclass
 class Effects:
     diffuse: str          # off | sh | probes | reference | a basis of core/bases (DIFFUSE)
-    specular: str         # off | importance | prefiltered | lobe | reference
+    specular: str         # off | importance | prefiltered | lobe | probes | reference | a basis (SPECULAR)
     background: str       # hide | show | color | blur
     emissive: bool
     notes: list = field(default_factory=list)

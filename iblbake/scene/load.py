@@ -363,7 +363,8 @@ def _resolve_reflection_probes(v: "_Validator", probes: list) -> None:
 
 def _resolve_basis_specular(v: "_Validator", fx: dict, probes: dict) -> None:
     """A specular basis (core/bases SPECULAR) beside a different diffuse basis, or beside probes that
-    store one: the shade pass compiles one basis header a frame (kernels/bases.h)."""
+    store one: the shade pass compiles one basis header a frame (kernels/bases.h); `specular:
+    probes` from probes whose basis carries a specular lobe, beside no distant basis."""
     from iblbake.core import bases
     s, d = fx["specular"], fx["diffuse"]
     if s in bases.SPECULAR and d in bases.DIFFUSE and d != s:
@@ -372,6 +373,13 @@ def _resolve_basis_specular(v: "_Validator", fx: dict, probes: dict) -> None:
     if s in bases.SPECULAR and d == "probes" and probes["irradiance"] in bases.PROBES:
         v.fail("effects.specular", f"{s} beside probes storing {probes['irradiance']}: a frame lights from one "
                                    f"directional basis; give probes.irradiance octahedral or sh, or another specular mode")
+    if s == "probes" and probes["irradiance"] not in bases.SPECULAR:
+        v.fail("probes.irradiance", f"{probes['irradiance']} stores no specular lobe, which effects.specular: probes "
+                                    f"reads; give probes.irradiance {' or '.join(bases.SPECULAR)}, or another "
+                                    "specular mode")
+    if s == "probes" and d in bases.DIFFUSE:
+        v.fail("effects.specular", f"probes beside effects.diffuse: {d}: a frame lights from one directional basis; "
+                                   "give effects.diffuse probes (or sh), or another specular mode")
 
 
 def _resolve_probes(v: "_Validator", p: dict) -> None:

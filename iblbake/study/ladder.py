@@ -167,7 +167,7 @@ def probe_bases_ladder(sc, fx) -> list:
     map, L2 SH, and each registered basis and size that fits from a probe's rays, core/bases
     PROBES), the scene's probes section otherwise as it is: the probes' diffuse term; and the
     specular term from each basis that carries it (core/bases SPECULAR) beside the split sum's
-    chain. AO off."""
+    chain, of the panorama and of the probes (`specular: probes`). AO off."""
     from iblbake.core.bases import BASES, PROBES, SPECULAR
     rungs = []
     if fx.diffuse != "off" and sc.data["objects"]:
@@ -183,6 +183,11 @@ def probe_bases_ladder(sc, fx) -> list:
             Rung("specular", f"{BASES[name].label(opts)} specular",
                  [("effects.specular", name), *((f"effects.{k}", v) for k, v in opts.items())] + off)
             for name in SPECULAR for opts in BASES[name].variants()]
+        if sc.data["objects"]:          # the same bases in the probes: the room's light along the lobe
+            rungs += [Rung("specular", f"probes, {BASES[name].label(opts)} specular",
+                           [("effects.specular", "probes"), ("probes.irradiance", name),
+                            *((f"probes.{k}", v) for k, v in opts.items())] + off)
+                      for name in SPECULAR if name in PROBES for opts in BASES[name].variants()]
     return rungs
 
 

@@ -7,6 +7,8 @@ options, the render source (render/sources/basis.py), the tests and the shoot-ou
 
 from __future__ import annotations
 
+import numpy as np
+
 from iblbake.core.bases import ambient_dice, haar, l1_geomerics, sg, sh, zh3
 
 BASES = {m.NAME: m for m in (sh, l1_geomerics, zh3, sg, ambient_dice, haar)}
@@ -16,7 +18,8 @@ DIFFUSE = tuple(n for n, m in BASES.items() if m.HEADER)
 # the ones an irradiance probe can store: those that fit from a probe's rays (project_rays; the
 # probes' own sh and octahedral maps aside, render/probes.py)
 PROBES = tuple(n for n, m in BASES.items() if m.HEADER and hasattr(m, "project_rays"))
-# the ones that carry a specular lobe (specular_radiance): `effects.specular: <name>`
+# the ones that carry a specular lobe (specular_weights, kernels/bases.h basis_specular_radiance):
+# `effects.specular: <name>` for the panorama, `specular: probes` for probes that store one
 SPECULAR = tuple(n for n, m in BASES.items() if m.HEADER and getattr(m, "SPECULAR", False))
 
 
@@ -38,3 +41,18 @@ def probe_bytes(name: str, opts: dict, bytes_per_float: int) -> int:
 def options_of(name: str, effects: dict) -> dict:
     """The scene's options of basis `name` (its OPTIONS keys from effects)."""
     return {k: effects[k] for k in BASES[name].OPTIONS}
+
+
+def specular_radiance(name: str, coeffs, r, lam_w, opts: dict) -> np.ndarray:
+    """The radiance (..., C) along the warped GGX lobe about r (..., 3) of sharpness lam_w (...,)
+    (common.lobe_axis, common.warp_sharpness) from basis `name`'s coefficients (K, C): linear in
+    them, sum_k s_k c_k with the basis's specular_weights s, clamped at 0 (kernels/bases.h)."""
+    s = BASES[name].specular_weights(r, lam_w, opts)
+    return np.maximum(0.0, s @ np.asarray(coeffs, np.float64))
+
+
+def specular_table(name: str, opts: dict) -> np.ndarray | None:
+    """The table a basis's kernel reads its specular weights from (float32, flat; kernels/bases.h
+    basis_table), or None where it has a closed form."""
+    m = BASES[name]
+    return m.specular_table(opts).astype(np.float32).ravel() if hasattr(m, "specular_table") else None

@@ -15,6 +15,20 @@ Irradiance: the cosine convolution of w is exactly a Legendre series of degree 4
 moments of w vanish past l = 4 and the cosine's odd ones past l = 1):
 E_i(n) = sum_{l in 0,1,2,4} (2l+1)/(4 pi) w_l Ahat_l P_l(v_i . n), its constants derived here.
 
+Specular (`effects.specular: ambient_dice`, and `specular: probes` from ambient-dice probes): the
+split sum with the radiance along the warped GGX lobe, as SG's (sg.py: Pettineo's warp, a
+normalised spherical Gaussian about the dominant direction, sharpness lambda_w; the DFG table
+outside): sum_i c_i h(v_i . r, lambda_w), h the lobe w convolved with the normalised SG (a von
+Mises-Fisher density). By Funk-Hecke h(mu, lambda) = sum_l a_l(lambda) w_l P_l(mu), w_l the
+Legendre coefficients of w (exact Gauss-Legendre on each half, w being a polynomial on [0, 1]),
+a_l = I_{l+1/2}(lambda) / I_{1/2}(lambda) the density's own (their ratios a_l / a_{l-1} by
+Miller's backward recurrence r_l = 1 / ((2l + 1)/lambda + r_{l+1}); a_1 = coth lambda - 1/lambda).
+The kernel reads h from a table (TABLE_ROWS rows of log2 lambda from TABLE_LOG2_LO in steps of
+TABLE_STEP, TABLE_COLS columns of mu over [-1, 1], bilinear; beyond its ends the end rows): within
+5.4e-4 of the lobe's peak 0.6 of the series (measured; tests/test_bases_specular.py), the 12 weights
+then divided by their sum, which the exact h make 1 (a uniform sky is exact). Roughton 2019 fits a
+different approximation (a lerp between the mirror value and the diffuse fit, scaled by a LUT).
+
 Axes (vertex 2j = +a_j, 2j+1 = -a_j, normalised; t = 1/golden ratio):
 a = (1, t, 0), (-1, t, 0), (0, 1, t), (0, 1, -t), (t, 0, 1), (-t, 0, 1).
 Layout: 12 rows (vertex order above) of per-channel values."""
@@ -22,6 +36,7 @@ Layout: 12 rows (vertex order above) of per-channel values."""
 from __future__ import annotations
 
 import functools
+import math
 
 import numpy as np
 
@@ -34,6 +49,8 @@ OPTIONS: dict = {}
 VERTICES = 12
 _T = (np.sqrt(5.0) - 1.0) / 2.0
 GLSL_COEFFS, GLSL_IRRADIANCE = "AD_VALUE", "ambientDiceIrradiance"     # glsl()'s names (the probes' sampler)
+SPECULAR = True        # specular_weights, kernels/basis_ambient_dice.h: `specular: ambient_dice`
+TABLE_LOG2_LO, TABLE_STEP, TABLE_ROWS, TABLE_COLS = -2.0, 0.25, 65, 129   # lambda 0.25 .. 16384
 
 
 def variants() -> list:
@@ -96,12 +113,83 @@ def irradiance(coeffs, normals, opts) -> np.ndarray:
     return np.maximum(0.0, common.legendre_series(irradiance_profile(), t) @ np.asarray(coeffs, np.float64))
 
 
+def _legendre(t, lmax: int) -> np.ndarray:
+    return common._legendre_all(t, lmax)
+
+
+def lobe_legendre(lmax: int) -> np.ndarray:
+    """w_l, l = 0..lmax: w(t) = sum_l w_l P_l(t) (exact: w is 0 on [-1, 0] and a polynomial on [0, 1])."""
+    x, wq = np.polynomial.legendre.leggauss(lmax // 2 + 8)
+    t, wq = 0.5 * (x + 1.0), 0.5 * wq
+    return (2 * np.arange(lmax + 1) + 1) / 2 * (_legendre(t, lmax) @ (lobe(t) * wq))
+
+
+def vmf_eigenvalues(lam, lmax: int) -> np.ndarray:
+    """a_l(lambda), l = 0..lmax, of the normalised SG exp(lambda (r.w - 1)) / its integral (the
+    module's docstring), shape lam.shape + (lmax + 1,)."""
+    lam = np.asarray(lam, np.float64)[..., None]
+    top = lmax + 64 + int(4.0 * math.sqrt(float(lam.max())))
+    ratios = np.empty(lam.shape[:-1] + (lmax + 1,))
+    r = np.zeros(lam.shape)
+    for l in range(top, 0, -1):
+        r = 1.0 / ((2 * l + 1) / lam + r)
+        if l <= lmax:
+            ratios[..., l] = r[..., 0]
+    ratios[..., 0] = 1.0
+    return np.cumprod(ratios, -1)
+
+
+def lobe_convolved(mu, lam) -> np.ndarray:
+    """h(mu, lambda): lobe w averaged over the normalised SG of sharpness lambda about an axis at
+    cosine mu from the vertex (float64 series, converged: lmax grows with sqrt(lambda)); mu (M,),
+    lam (N,) -> (N, M)."""
+    lam = np.atleast_1d(np.asarray(lam, np.float64))
+    lmax = int(64 + 7.0 * math.sqrt(float(lam.max())))
+    coeff = vmf_eigenvalues(lam, lmax) * lobe_legendre(lmax)
+    return coeff @ _legendre(np.clip(np.asarray(mu, np.float64), -1.0, 1.0), lmax)
+
+
+@functools.lru_cache(maxsize=1)
+def _table() -> np.ndarray:
+    lam = 2.0 ** (TABLE_LOG2_LO + TABLE_STEP * np.arange(TABLE_ROWS))
+    out = lobe_convolved(np.linspace(-1.0, 1.0, TABLE_COLS), lam)
+    out.setflags(write=False)
+    return out
+
+
+def specular_table(opts) -> np.ndarray:
+    """The kernel's table of h (TABLE_ROWS, TABLE_COLS), float64."""
+    return _table()
+
+
+def table_lookup(mu, lam) -> np.ndarray:
+    """h(mu, lambda) read from the table as kernels/basis_ambient_dice.h does (bilinear, clamped to
+    its ends)."""
+    t = _table()
+    x = np.clip((np.log2(np.maximum(np.asarray(lam, np.float64), 1e-30)) - TABLE_LOG2_LO) / TABLE_STEP,
+                0.0, TABLE_ROWS - 1.0)
+    y = (np.clip(np.asarray(mu, np.float64), -1.0, 1.0) + 1.0) * 0.5 * (TABLE_COLS - 1)
+    x0 = np.minimum(np.floor(x).astype(int), TABLE_ROWS - 2)
+    y0 = np.minimum(np.floor(y).astype(int), TABLE_COLS - 2)
+    fx, fy = x - x0, y - y0
+    return ((t[x0, y0] * (1 - fy) + t[x0, y0 + 1] * fy) * (1 - fx)
+            + (t[x0 + 1, y0] * (1 - fy) + t[x0 + 1, y0 + 1] * fy) * fx)
+
+
+def specular_weights(r, lam_w, opts) -> np.ndarray:
+    """s_i (..., 12): the radiance along the warped lobe about r of sharpness lam_w is sum_i s_i c_i."""
+    mu = np.asarray(r, np.float64) @ vertices().T
+    s = table_lookup(mu, np.asarray(lam_w, np.float64)[..., None])
+    return s / s.sum(-1, keepdims=True)     # the exact h sum to 1 (the lobes' partition of unity)
+
+
 def validate(coeffs, opts) -> np.ndarray:
     return common.check_coefficients(coeffs, VERTICES, "ambient dice values")
 
 
 def defines(opts) -> dict:
-    return {"BASIS_AMBIENT_DICE": 1}
+    return {"BASIS_AMBIENT_DICE": 1, "AD_TABLE_ROWS": TABLE_ROWS, "AD_TABLE_COLS": TABLE_COLS,
+            "AD_TABLE_LOG2_LO": f"{TABLE_LOG2_LO}f", "AD_TABLE_STEP": f"{TABLE_STEP}f"}
 
 
 def _power_profile() -> np.ndarray:

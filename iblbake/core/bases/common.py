@@ -155,7 +155,23 @@ def glsl_float_array(name: str, vals) -> str:
     return f"const float {name}[{len(vals)}] = float[{len(vals)}](" + ", ".join(f"{float(v):.9g}" for v in vals) + ");"
 
 
+# --- the warped GGX lobe every specular basis reads its radiance along (sg.py's docstring derives it)
 
+def warp_sharpness(alpha, nov) -> np.ndarray:
+    """The warped NDF lobe's sharpness 2/alpha^2 / (4 n.v) (Pettineo's SG warp; kernels/bases.h
+    basis_warp_sharpness); alpha = roughness^2."""
+    a2 = np.maximum(np.asarray(alpha, np.float64) ** 2, 1e-8)
+    return 2.0 / a2 / (4.0 * np.maximum(np.asarray(nov, np.float64), 1e-4))
+
+
+def lobe_axis(n, v, alpha) -> np.ndarray:
+    """The warped lobe's axis: the dominant direction between n and the mirror direction
+    (kernels/split_sum.h dominant_direction)."""
+    n, v = np.asarray(n, np.float64), np.asarray(v, np.float64)
+    r = 2 * (n * v).sum(-1, keepdims=True) * n - v
+    s = np.clip(1 - np.asarray(alpha, np.float64), 0, 1)[..., None]
+    d = n + (r - n) * (s * (np.sqrt(s) + np.asarray(alpha, np.float64)[..., None]))
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
 
 def rgb_rows(coeffs, rows: int) -> np.ndarray:

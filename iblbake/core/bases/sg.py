@@ -152,12 +152,6 @@ def irradiance(coeffs, normals, opts) -> np.ndarray:
                       @ np.asarray(coeffs, np.float64))
 
 
-def warp_sharpness(alpha, nov) -> np.ndarray:
-    """The warped NDF lobe's sharpness (the module's docstring); alpha = roughness^2."""
-    a2 = np.maximum(np.asarray(alpha, np.float64) ** 2, 1e-8)
-    return 2.0 / a2 / (4.0 * np.maximum(np.asarray(nov, np.float64), 1e-4))
-
-
 def sg_inner_normalised(mu_dot_r, lam: float, lam_w) -> np.ndarray:
     """int G(mu, lam) G(r, lam_w) dw / int G(r, lam_w) dw for unit-amplitude lobes (the module's
     docstring), from exponents that stay in range for any sharpness."""
@@ -169,21 +163,11 @@ def sg_inner_normalised(mu_dot_r, lam: float, lam_w) -> np.ndarray:
     return inner * lw / -np.expm1(-2.0 * lw)
 
 
-def lobe_axis(n, v, alpha) -> np.ndarray:
-    """The warped lobe's axis: the dominant direction between n and the mirror direction
-    (kernels/split_sum.h dominant_direction; the module's docstring)."""
-    n, v = np.asarray(n, np.float64), np.asarray(v, np.float64)
-    r = 2 * (n * v).sum(-1, keepdims=True) * n - v
-    s = np.clip(1 - np.asarray(alpha, np.float64), 0, 1)[..., None]
-    d = n + (r - n) * (s * (np.sqrt(s) + np.asarray(alpha, np.float64)[..., None]))
-    return d / np.linalg.norm(d, axis=-1, keepdims=True)
-
-
-def specular_radiance(coeffs, r, lam_w, opts) -> np.ndarray:
-    """The radiance along the warped lobe about r (..., 3) of sharpness lam_w (...,): (..., C)."""
+def specular_weights(r, lam_w, opts) -> np.ndarray:
+    """s_k (..., K): the radiance along the warped lobe about r (..., 3) of sharpness lam_w (...,)
+    is sum_k s_k A_k, s_k the normalised SG-SG inner product of lobe k with the warped lobe."""
     k = opts["sg_lobes"]
-    w = sg_inner_normalised(np.asarray(r, np.float64) @ axes(k).T, sharpness(k), np.asarray(lam_w)[..., None])
-    return np.maximum(0.0, w @ np.asarray(coeffs, np.float64))
+    return sg_inner_normalised(np.asarray(r, np.float64) @ axes(k).T, sharpness(k), np.asarray(lam_w)[..., None])
 
 
 def validate(coeffs, opts) -> np.ndarray:

@@ -55,17 +55,21 @@ class Shade(Pass):
 
     def run(self, ctx):
         n = ctx.table["n"]
-        probes_in = ctx.plan.effects.diffuse == "probes"
+        fx = ctx.plan.effects
+        probes_in = "probes" in (fx.diffuse, fx.specular)
         if probes_in:
-            ctx.rt.cl.enqueue_fill_buffer(ctx.rt.queue, ctx.table["probe_stats"], np.int32(0), 0, 8)
+            ctx.rt.cl.enqueue_fill_buffer(ctx.rt.queue, ctx.table["probe_stats"], np.int32(0), 0, 16)
         s = self.launch_samples(ctx)
         lobe = ctx.plan.effects.specular == "lobe"
         k = ctx.args[self.name]["lobe_samples"] if lobe else 1
         extra = {"samples": k} if lobe else {}
         if probes_in:                 # the samples whose cell's probes were all off, summed over tiles
-            near, none = ctx.rt.read(ctx.table["probe_stats"], (2,), np.int32).tolist()
-            tot = ctx.__dict__.setdefault("probe_fallback", [0, 0])
-            tot[0] += near
-            tot[1] += none
-            extra.update(probe_fallback_nearest=tot[0], probe_fallback_sky=tot[1])
+            counts = ctx.rt.read(ctx.table["probe_stats"], (4,), np.int32).tolist()
+            tot = ctx.__dict__.setdefault("probe_fallback", [0, 0, 0, 0])
+            for i, c in enumerate(counts):
+                tot[i] += c
+            if fx.diffuse == "probes":
+                extra.update(probe_fallback_nearest=tot[0], probe_fallback_sky=tot[1])
+            if fx.specular == "probes":
+                extra.update(probe_specular_fallback_nearest=tot[2], probe_specular_fallback_sky=tot[3])
         return {"mpixel_samples_per_s": round(n * k / max(s, 1e-9) / 1e6, 2), **extra}

@@ -5,10 +5,11 @@ from iblbake.render.sources.basis import BasisSpecular, DirectionalBasis
 from iblbake.render.sources.importance import ImportanceSampled
 from iblbake.render.sources.lobe import Lobe
 from iblbake.render.sources.prefiltered import SplitSum
-from iblbake.render.sources.probes import IrradianceProbes
+from iblbake.render.sources.probes import IrradianceProbes, ProbeSpecular
 from iblbake.render.sources.reflection_probes import ReflectionProbes
 from iblbake.render.sources.sh import SphericalHarmonics
 from iblbake.render.sources.ssr import ScreenSpaceSplit
 
-SOURCES = (SphericalHarmonics(), DirectionalBasis(), IrradianceProbes(), ImportanceSampled(), SplitSum(), Lobe(), BasisSpecular(), ReflectionProbes(),
+SOURCES = (SphericalHarmonics(), DirectionalBasis(), IrradianceProbes(), ImportanceSampled(), SplitSum(), Lobe(), BasisSpecular(), ProbeSpecular(),
+           ReflectionProbes(),
            ScreenSpaceSplit())

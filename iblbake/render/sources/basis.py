@@ -11,10 +11,17 @@ from iblbake.core import bases
 from iblbake.render.sources.base import Source
 
 
+def table_args(rt, name: str | None, opts: dict | None) -> dict:
+    """basis_table: the table basis `name` reads its specular weights from (core/bases
+    specular_table), a placeholder for one that needs none."""
+    t = bases.specular_table(name, opts) if name else None
+    return {"basis_table": rt.to_device(t if t is not None else np.zeros(1, np.float32))}
+
+
 class DirectionalBasis(Source):
     name = "basis"
     header = "bases.h"
-    params = ("basis_coeffs",)
+    params = ("basis_coeffs", "basis_table")
 
     def runs(self, scene, fx):
         return fx.diffuse in bases.DIFFUSE
@@ -29,11 +36,13 @@ class DirectionalBasis(Source):
         return ["basis"]
 
     def args(self, ctx):
-        m = bases.BASES[bases.frame_basis(ctx.scene.data["effects"])]
-        return {"basis_coeffs": ctx.rt.to_device(m.pack(ctx.loaded["basis"], self._opts(ctx.scene)))}
+        name = bases.frame_basis(ctx.scene.data["effects"])
+        opts = self._opts(ctx.scene)
+        return {"basis_coeffs": ctx.rt.to_device(bases.BASES[name].pack(ctx.loaded["basis"], opts)),
+                **table_args(ctx.rt, name, opts)}
 
     def placeholders(self, rt):
-        return {"basis_coeffs": rt.to_device(np.zeros((1, 4), np.float32))}
+        return {"basis_coeffs": rt.to_device(np.zeros((1, 4), np.float32)), **table_args(rt, None, None)}
 
 
 class BasisSpecular(DirectionalBasis):
@@ -41,7 +50,7 @@ class BasisSpecular(DirectionalBasis):
     radiance along the warped GGX lobe. It binds the basis's coefficients itself: a frame of
     metals, or the study's specular term alone, has no diffuse term."""
     name = "basis_specular"
-    params = ("basis_coeffs", "dfg", "dfg_size")
+    params = ("basis_coeffs", "basis_table", "dfg", "dfg_size")
 
     def runs(self, scene, fx):
         return fx.specular in bases.SPECULAR

@@ -19,8 +19,9 @@ class IrradianceProbes(Source):
     header = "probes.h"
     params = PARAMS
     sections = ("probes",)
-    # the samples that fell back: [0] to the nearest active probes, [1] to the panorama's SH
-    buffers = (Buffer("probe_stats", "int", per="frame", count=2, when="PROBE_STATS"),)
+    # the samples that fell back: [0] to the nearest active probes, [1] to the panorama's SH; [2],
+    # [3] the same of the probes' specular (ProbeSpecular)
+    buffers = (Buffer("probe_stats", "int", per="frame", count=4, when="PROBE_STATS"),)
 
     def runs(self, scene, fx):
         return fx.diffuse == "probes"
@@ -78,3 +79,34 @@ def probe_args(rt, vol, bakes=None) -> dict:
             "probe_spacing": np.array([*vol["spacing"], vol["view_bias"]], np.float32),
             **dict(zip(("probe_nx", "probe_ny", "probe_nz"), vol["counts"])),
             "probe_irr_texels": vol["irradiance_texels"], "probe_dist_texels": vol["distance_texels"]}
+
+
+class ProbeSpecular(Source):
+    """`specular: probes`: the split sum with the radiance along the warped GGX lobe from probes whose
+    basis carries one (core/bases SPECULAR: sg, ambient dice), blended by the irradiance's weights,
+    so a rough metal reflects the room without a reflection probe; the distant chain outside the
+    volume. Kernel: kernels/probes.h probes_specular."""
+    name = "probe_specular"
+    header = "probes.h"
+    params = PARAMS + ("basis_table", "chain", "off", "lw", "lh", "nlev", "dfg", "dfg_size")
+    sections = ("probes",)
+
+    def runs(self, scene, fx):
+        return fx.specular == "probes"
+
+    def defines(self, scene, fx):
+        d = {**probe_defines(scene.data["probes"]), "PROBE_STATS": 1}
+        if scene.data["effects"]["prefilter"]["dominant_direction"]:
+            d["DOMINANT_DIRECTION"] = 1
+        return d
+
+    def reads_bakes(self, scene, fx):
+        return ["probes", "prefiltered", "dfg"]
+
+    def args(self, ctx):
+        from iblbake.render.sources.basis import table_args
+        from iblbake.render.sources.prefiltered import dfg_args
+        settings = ctx.scene.data["probes"]
+        return {**probe_args(ctx.rt, probes.sampled(ctx.loaded["probes"], settings), ctx.bakes),
+                **table_args(ctx.rt, settings["irradiance"], probes.basis_options(settings)),
+                **ctx.chain(ctx.loaded["prefiltered"]), **dfg_args(ctx.rt, ctx.loaded["dfg"])}

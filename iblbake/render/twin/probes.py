@@ -101,13 +101,22 @@ def volume_weight(volume, p):
 SOURCE_NONE, SOURCE_CELL, SOURCE_NEAREST = 0, 1, 2      # kernels/probes.h PROBE_SOURCE_*
 
 
-def contribution(volume, c, p, biased, n, falloff, visibility: bool, classification: bool):
-    """Twin of probe_contribution: (weight (m,), value (m, 3)) of probes at grid coordinates c."""
+def specular_at(volume, index, spec):
+    """Each probe's radiance along the warped lobe: sum_k s_k c_k of its basis block, >= 0
+    (kernels/bases.h basis_weighted); spec (m, K) the lobe's weights at each point."""
+    c = np.asarray(volume["irradiance"], np.float64)[index]          # (m, K, C)
+    return np.maximum(0.0, np.einsum("mk,mkc->mc", spec, c))
+
+
+def contribution(volume, c, p, biased, n, falloff, visibility: bool, classification: bool, spec=None):
+    """Twin of probe_contribution: (weight (m,), value (m, 3)) of probes at grid coordinates c; the
+    value is the irradiance (its square root with visibility) or, given the specular lobe's weights
+    spec (m, K), the radiance along it (linear)."""
     counts = np.asarray(volume["counts"])
     origin, spacing = np.asarray(volume["origin"], np.float64), np.asarray(volume["spacing"], np.float64)
     index = probe_index(c, counts)
     data = volume["data"][index]
-    e = irradiance_at(volume, index, n)
+    e = irradiance_at(volume, index, n) if spec is None else specular_at(volume, index, spec)
     live = data[:, 3] == 0 if classification else np.ones(len(p), bool)
     if visibility:
         pp = origin + c * spacing + data[:, :3]
@@ -125,7 +134,7 @@ def contribution(volume, c, p, biased, n, falloff, visibility: bool, classificat
             cheb = np.where(dist > m[:, 0], (var / (var + dv * dv)) ** 3, 1.0)
         w = np.maximum(1e-6, w * np.maximum(CHEBYSHEV_FLOOR, cheb))
         w = np.where(w < CRUSH, w ** 3 / CRUSH ** 2, w) * tri.prod(1)
-        value = np.sqrt(e)
+        value = np.sqrt(e) if spec is None else e
     else:
         w = falloff.prod(1)
         value = e
@@ -137,13 +146,15 @@ def irradiance(volume, p, n, v, *, visibility: bool, classification: bool):
     return irradiance_and_source(volume, p, n, v, visibility=visibility, classification=classification)[0]
 
 
-def irradiance_and_source(volume, p, n, v, *, visibility: bool, classification: bool):
+def irradiance_and_source(volume, p, n, v, *, visibility: bool, classification: bool, spec=None):
     """Twin of probe_irradiance for points p, normals n, view vectors v (m, 3): (irradiance (m, 3),
     source (m,): SOURCE_CELL the cell's eight probes, SOURCE_NEAREST the active probes of the 4^3
     around it by inverse square distance where all eight are off, SOURCE_NONE neither (0)).
     `volume`: counts, origin, spacing, normal_bias and view_bias (world units), data (probes, 4:
     offset in world units, state), representation, irradiance (sh: (probes, 9, 3); else the atlas),
-    distance (the moments' atlas), irradiance_texels, distance_texels."""
+    distance (the moments' atlas), irradiance_texels, distance_texels. With `spec` (m, K), the
+    specular lobe's weights of a basis that carries one, the radiance along the lobe instead
+    (kernels/probes.h probe_specular: the same weights, blended linearly)."""
     counts = np.asarray(volume["counts"])
     origin, spacing = np.asarray(volume["origin"], np.float64), np.asarray(volume["spacing"], np.float64)
     biased = p + n * volume["normal_bias"] + v * volume["view_bias"]
@@ -155,7 +166,7 @@ def irradiance_and_source(volume, p, n, v, *, visibility: bool, classification: 
     for i in range(8):
         off = np.array([i & 1, (i >> 1) & 1, (i >> 2) & 1])
         w, value = contribution(volume, np.clip(base + off, 0, counts - 1), p, biased, n,
-                                np.where(off == 1, alpha, 1 - alpha), visibility, classification)
+                                np.where(off == 1, alpha, 1 - alpha), visibility, classification, spec)
         total += w[:, None] * value
         wsum += w
     source = np.where(wsum > 0, SOURCE_CELL, SOURCE_NEAREST)
@@ -170,10 +181,21 @@ def irradiance_and_source(volume, p, n, v, *, visibility: bool, classification: 
                 rows, c = wide[inside], c[inside]
                 dc = c - g[rows]
                 f = np.stack([1 / np.maximum((dc * dc).sum(1), 0.01), np.ones(len(rows)), np.ones(len(rows))], 1)
-                w, value = contribution(volume, c, p[rows], biased[rows], n[rows], f, visibility, classification)
+                w, value = contribution(volume, c, p[rows], biased[rows], n[rows], f, visibility, classification,
+                                        None if spec is None else spec[rows])
                 total[rows] += w[:, None] * value
                 wsum[rows] += w
     source = np.where(wsum > 0, source, SOURCE_NONE)
     with np.errstate(invalid="ignore", divide="ignore"):
         out = np.where(wsum[:, None] > 0, total / np.where(wsum > 0, wsum, 1)[:, None], 0.0)
-    return (out * out if visibility else out), source
+    return (out * out if visibility and spec is None else out), source
+
+
+def specular(volume, p, n, v, spec, sky):
+    """Twin of probes_specular: the radiance along the warped lobe from the probes (spec (m, K) the
+    lobe's weights, core/bases specular_weights), blended by the volume's weight with `sky` (the
+    distant split sum's radiance) outside it and where no active probe is near."""
+    wv = volume_weight(volume, p)[:, None]
+    li, source = irradiance_and_source(volume, p, n, v, visibility=volume["visibility"],
+                                       classification=volume["classification"], spec=spec)
+    return (1 - wv) * sky + wv * np.where((source == SOURCE_NONE)[:, None], sky, li)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from iblbake.core import bases, brdf
+from iblbake.core.bases import common
 from iblbake.core import conventions
 from iblbake.bake.dfg import dfg_lookup
 from iblbake.bake import radiance
@@ -46,9 +47,10 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
     elif effects["diffuse"] == "probes":
         p = gb["pos"][hit]
         wv = probe_twin.volume_weight(probes, p)[:, None]
-        e = wv * probe_twin.irradiance(probes, p, n, v, visibility=probes["visibility"],
-                                       classification=probes["classification"])
-        e += (1 - wv) * scale * np.maximum(sh.evaluate(sh_coeffs, to_env(n, rot), effects["sh_bands"]), 0.0)
+        sky = scale * np.maximum(sh.evaluate(sh_coeffs, to_env(n, rot), effects["sh_bands"]), 0.0)
+        e, source = probe_twin.irradiance_and_source(probes, p, n, v, visibility=probes["visibility"],
+                                                     classification=probes["classification"])
+        e = wv * np.where((source == probe_twin.SOURCE_NONE)[:, None], sky, e) + (1 - wv) * sky
         diff_occ = ao_multibounce(occ, base * (1 - metallic[:, None])) if effects["ao_multibounce"] else occ[:, None]
         color += diff_occ * diffuse_weight(base, metallic, rough, f0, f90, nov) * e
     if effects["specular"] == "importance":
@@ -97,10 +99,23 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
         if ssr_out is not None:
             ssr_out["w"] = spec_occ * (f0 * ab[:, 0:1] + f90 * ab[:, 1:2]) * material_occlusion(gb)[:, None]
             ssr_out["li"] = li
+    elif effects["specular"] == "probes":              # kernels/shade.cl SPECULAR_PROBES
+        r = 2 * (n * v).sum(1, keepdims=True) * n - v
+        if effects["prefilter"]["dominant_direction"]:
+            s = np.clip(1 - alpha, 0, 1)[:, None]
+            r = n + (r - n) * (s * (np.sqrt(s) + alpha[:, None]))
+            r /= np.linalg.norm(r, axis=1, keepdims=True)
+        sky = scale * radiance.chain_lookup_twin(prefiltered, to_env(r, rot), rough * (len(prefiltered) - 1))
+        name = probes["representation"]
+        spec = bases.BASES[name].specular_weights(common.lobe_axis(n, v, alpha), common.warp_sharpness(alpha, nov),
+                                                  {k: probes["settings"][k] for k in bases.BASES[name].OPTIONS})
+        li = probe_twin.specular(probes, gb["pos"][hit], n, v, spec, sky)
+        ab = dfg_lookup(dfg, nov, rough)
+        color += spec_occ * li * (f0 * ab[:, 0:1] + f90 * ab[:, 1:2])
     elif effects["specular"] in bases.SPECULAR:         # kernels/shade.cl SPECULAR_BASIS
-        m = bases.BASES[effects["specular"]]
-        li = scale * m.specular_radiance(basis_coeffs, to_env(m.lobe_axis(n, v, alpha), rot), m.warp_sharpness(alpha, nov),
-                                         bases.options_of(effects["specular"], effects))
+        name = effects["specular"]
+        li = scale * bases.specular_radiance(name, basis_coeffs, to_env(common.lobe_axis(n, v, alpha), rot),
+                                             common.warp_sharpness(alpha, nov), bases.options_of(name, effects))
         ab = dfg_lookup(dfg, nov, rough)
         color += spec_occ * li * (f0 * ab[:, 0:1] + f90 * ab[:, 1:2])
     elif effects["specular"] == "lobe":
