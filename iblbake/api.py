@@ -268,6 +268,117 @@ def sh(panorama: Panorama, bands: int = 3, window: str | None = None, *, rotate_
     return SH(bands, window, np.asarray(doc["radiance"]), np.asarray(doc["irradiance"]), doc.get("error"), doc)
 
 
+# ----------------------------------------------------------------------------- directional bases
+
+@dataclass
+class Basis:
+    """A panorama's light in a directional basis other than SH (docs/conventions.md "Directional
+    bases": l1_geomerics, zh3, sg, ambient_dice, haar), in the world frame (+y up).
+
+    name, options: the basis and its options (sg: sg_lobes, sg_fit; haar: haar_coefficients).
+    label: its name in tables ("SG9 LS"). coefficients: float64 (rows, 3) of radiance
+        coefficients, rows as document['layout'] says (haar: (rows, 4), the 4th column each
+        kept coefficient's code).
+    error: the irradiance against the exact (float64, every texel) at 256 normals
+        (relative_rmse, max_relative_error), or None. document: the JSON `iblbake basis` writes.
+    specular: whether the basis carries a specular lobe (sg, ambient_dice).
+    """
+
+    name: str
+    options: dict
+    label: str
+    coefficients: object
+    error: dict | None
+    document: dict
+
+    @property
+    def specular(self) -> bool:
+        from iblbake.core import bases
+        return self.name in bases.SPECULAR
+
+    def irradiance(self, normals):
+        """E(n) = int L max(0, n.w) dw at unit normals (..., 3): (..., 3), clamped at 0."""
+        import numpy as np
+
+        from iblbake.core import bases
+        return bases.BASES[self.name].irradiance(self.coefficients, np.asarray(normals, np.float64), self.options)
+
+    def specular_radiance(self, normals, views, roughness):
+        """The radiance along the warped GGX lobe (the split sum's first factor from the basis:
+        times the DFG table's F0 A + F90 B it is the specular light): unit normals and unit
+        vectors towards the viewer (..., 3), perceptual roughness (...,) or a number: (..., 3).
+        Only for a basis that carries a specular lobe (sg, ambient_dice)."""
+        import numpy as np
+
+        from iblbake.core import bases
+        from iblbake.core.bases import common
+        if not self.specular:
+            raise InputError(f"basis {self.name} carries no specular lobe: use one of {', '.join(bases.SPECULAR)}")
+        n, v = np.asarray(normals, np.float64), np.asarray(views, np.float64)
+        alpha = np.broadcast_to(np.asarray(roughness, np.float64) ** 2, n.shape[:-1])
+        nov = np.clip((n * v).sum(-1), 0.0, 1.0)
+        return bases.specular_radiance(self.name, self.coefficients, common.lobe_axis(n, v, alpha),
+                                       common.warp_sharpness(alpha, nov), self.options)
+
+    def to_glsl(self) -> str:
+        """The basis's GLSL: its coefficients and an irradiance function (and, for sg, a
+        specular one); `iblbake basis --glsl` prints it."""
+        from iblbake.core import bases
+        return bases.BASES[self.name].glsl(self.coefficients, self.options)
+
+    def export(self, fmt: str = "iblbake") -> str:
+        """The text `iblbake basis --format FMT` writes: iblbake (the JSON document) or glsl."""
+        import json
+        _choice("format", fmt, ("iblbake", "glsl"))
+        return self.to_glsl() if fmt == "glsl" else json.dumps(self.document, indent=1) + "\n"
+
+
+def basis(panorama: Panorama, name: str, *, intensity: float = 1.0, error: bool = True, **options) -> Basis:
+    """Project a panorama onto a directional basis (float64, exact texel integrals; least squares
+    where the basis's lobes are not orthogonal).
+
+    name: l1_geomerics, zh3, sg, ambient_dice or haar (spherical harmonics: iblbake.sh).
+    options: the basis's own (sg_lobes 5 | 6 | 9 | 12, sg_fit 'least_squares' | 'nnls';
+        haar_coefficients 16 | 32 | 64 | 128 | 256); the schema's defaults where left out.
+    intensity: a scale of the radiance (>= 0). error: measure the irradiance (Basis.error).
+    """
+    import math
+
+    from iblbake.bake import bases as bakebases
+    from iblbake.core import bases
+
+    names = tuple(n for n in bases.BASES if n != "sh")
+    if name == "sh":
+        raise InputError("basis sh: spherical harmonics are iblbake.sh (bands, window)")
+    _choice("basis", name, names)
+    m = bases.BASES[name]
+    for k in options:
+        if k not in m.OPTIONS:
+            raise InputError(f"{k}: not an option of basis {name}"
+                             + (f" (its options: {', '.join(m.OPTIONS)})" if m.OPTIONS else " (it has none)"))
+    opts = {}
+    for k, (choices, default, _doc) in m.OPTIONS.items():
+        value = options.get(k, default)
+        if value not in choices or isinstance(value, bool):
+            raise InputError(f"{k} {value!r}: use one of {', '.join(map(str, choices))}")
+        opts[k] = int(value) if _whole(value) else value
+    if not (math.isfinite(intensity) and intensity >= 0):
+        raise InputError(f"intensity {intensity}: give a finite number >= 0")
+    t0 = time.perf_counter()
+    coeffs = m.project(panorama.pixels[..., :3], opts)
+    coeffs[:, :3] *= intensity
+    timings = {"read_s": round(panorama.read_s, 6), "project_s": round(time.perf_counter() - t0, 6)}
+    read = {**{k: v for k, v in panorama.policies.items() if k != "layout"},
+            "input_layout": panorama.policies["layout"], "intensity": intensity}
+    doc = bakebases.document(coeffs, name=name, opts=opts, info=panorama.info, options=read, timings=timings)
+    if error:
+        t1 = time.perf_counter()
+        doc["error"] = bakebases.irradiance_error(panorama.pixels, name, opts, coeffs, intensity)
+        doc["timings"]["error_s"] = round(time.perf_counter() - t1, 6)
+    doc["elapsed_s"] = round(panorama.read_s + time.perf_counter() - t0, 6)
+    return Basis(name, opts, m.label(opts), coeffs, doc.get("error"), doc)
+
+
 # ------------------------------------------------------------------------- prefiltered chain, DFG
 
 @dataclass

@@ -14,9 +14,9 @@ from tests.conftest import run_cli, write_exr
 
 # semantic versioning (docs/api.md): a public name may be added here, never taken away
 PUBLIC = {
-    "Accuracy", "Chain", "DeviceError", "Error", "Frame", "InputError", "Panorama", "ProbeVolume", "Renderer",
-    "SH", "Scene", "UsageError", "accuracy", "bake_probes", "dfg", "load_panorama", "load_scene", "prefilter",
-    "render", "sh",
+    "Accuracy", "Basis", "Chain", "DeviceError", "Error", "Frame", "InputError", "Panorama", "ProbeVolume",
+    "Renderer", "SH", "Scene", "UsageError", "accuracy", "bake_probes", "basis", "dfg", "load_panorama",
+    "load_scene", "prefilter", "render", "sh",
 }
 HEAVY = ("numpy", "pyopencl", "OpenImageIO", "OpenEXR", "trimesh", "yaml", "click", "matplotlib")
 

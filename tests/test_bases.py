@@ -279,10 +279,10 @@ def test_glsl_compiles(name, opts, tmp_path):
         pytest.skip("glslangValidator not installed (Debian's glslang-tools; make readers installs it)")
     m = BASES[name]
     src = m.glsl(m.project(smooth_sky(32, 16), opts), opts)
-    fn = src.split("\nvec3 ")[-1].split("(")[0]
+    spec = (f" + {m.GLSL_SPECULAR}(normalize(N), normalize(V), 0.5)" if hasattr(m, "GLSL_SPECULAR") else "")
     shader = tmp_path / "probe.frag"
-    shader.write_text("#version 330 core\n" + src + f"\nin vec3 N;\nout vec4 color;\n"
-                      f"void main() {{ color = vec4({fn}(normalize(N)), 1.0); }}\n")
+    shader.write_text("#version 330 core\n" + src + f"\nin vec3 N;\nin vec3 V;\nout vec4 color;\n"
+                      f"void main() {{ color = vec4({m.GLSL_IRRADIANCE}(normalize(N)){spec}, 1.0); }}\n")
     p = subprocess.run(["glslangValidator", str(shader)], capture_output=True, text=True, timeout=60)
     assert p.returncode == 0, p.stdout + p.stderr
 

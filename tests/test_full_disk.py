@@ -80,6 +80,8 @@ def inputs(tmp_path_factory):
 WRITERS = [
     ("sh -o json + depfile", ["sh", "{env}", "-o", "{out}/sh.json", "--depfile", "{out}/sh.d", "--backend", "numpy"]),
     ("sh --format glsl", ["sh", "{env}", "--format", "glsl", "-o", "{out}/sh.glsl", "--backend", "numpy"]),
+    ("basis -o json + table + depfile", ["basis", "{env}", "--basis", "ambient_dice", "-o", "{out}/b.json",
+                                         "--specular-table", "{out}/t.exr", "--depfile", "{out}/b.d"]),
     ("mips --ktx2 --ktx2-irradiance --ktx2-sheen + depfile",
      ["mips", "{env}", "--size", "8", "--min-size", "4", "--ktx2", "{out}/p.ktx2", "--ktx2-irradiance", "{out}/i.ktx2",
       "--irradiance-size", "4", "--ktx2-sheen", "{out}/s.ktx2", "--depfile", "{out}/m.d", "--cache", "{cache}"]),

@@ -25,7 +25,8 @@ from .conftest import run_cli, write_exr
 READS = {("accuracy", "ladder_path"), ("compare", "layout_path"), ("deps", "outputs")}
 FOLDERS = {("accuracy", "cache_dir"), ("cache", "cache_dir"), ("mips", "cache_dir"), ("export-gltf", "cache_dir"),
            ("render", "cache_dir"), ("sheet", "cache_dir"), ("probes", "cache_dir")}
-WRITES = {("sh", "output"), ("sh", "depfile"), ("mips", "ktx2_path"), ("mips", "ktx2_irradiance"),
+WRITES = {("sh", "output"), ("sh", "depfile"), ("basis", "output"), ("basis", "depfile"), ("basis", "specular_table"),
+          ("mips", "ktx2_path"), ("mips", "ktx2_irradiance"),
           ("mips", "ktx2_sheen"), ("mips", "depfile"), ("export-gltf", "output"), ("export-gltf", "depfile"),
           ("render", "outputs"), ("render", "depfile"), ("sheet", "outputs"), ("sheet", "layout_path"),
           ("sheet", "depfile"), ("sheet", "frames_dir"), ("accuracy", "out_dir"), ("probes", "out_dir")}
@@ -71,6 +72,10 @@ def _link(target: Path, link: Path) -> Path:
 CASES = [
     ("sh", "output", "env", lambda f, p: ["sh", f["env"], "-o", p], ".json"),
     ("sh", "depfile", "env", lambda f, p: ["sh", f["env"], "--depfile", p], ".d"),
+    ("basis", "output", "env", lambda f, p: ["basis", f["env"], "--basis", "zh3", "-o", p], ".json"),
+    ("basis", "depfile", "env", lambda f, p: ["basis", f["env"], "--basis", "zh3", "--depfile", p], ".d"),
+    ("basis", "specular_table", "env", lambda f, p: ["basis", f["env"], "--basis", "ambient_dice",
+                                                      "--specular-table", p], ".exr"),
     ("mips", "ktx2_path", "env", lambda f, p: ["mips", f["env"], "--ktx2", p], ".ktx2"),
     ("mips", "ktx2_irradiance", "env", lambda f, p: ["mips", f["env"], "--ktx2-irradiance", p], ".ktx2"),
     ("mips", "ktx2_sheen", "env", lambda f, p: ["mips", f["env"], "--ktx2-sheen", p], ".ktx2"),
@@ -360,6 +365,10 @@ def test_the_mark_tells_iblbakes_files_from_others(tmp_path):
 OVERWRITES = [
     ("sh", "output", lambda f, p: ["sh", f["env"], "-o", p], "x.json"),
     ("sh", "depfile", lambda f, p: ["sh", f["env"], "--depfile", p], "x.d"),
+    ("basis", "output", lambda f, p: ["basis", f["env"], "--basis", "zh3", "-o", p], "x.json"),
+    ("basis", "depfile", lambda f, p: ["basis", f["env"], "--basis", "zh3", "--depfile", p], "x.d"),
+    ("basis", "specular_table", lambda f, p: ["basis", f["env"], "--basis", "ambient_dice", "--specular-table", p],
+     "x.exr"),
     ("mips", "ktx2_path", lambda f, p: ["mips", f["env"], "--ktx2", p], "x.ktx2"),
     ("mips", "ktx2_irradiance", lambda f, p: ["mips", f["env"], "--ktx2-irradiance", p], "x.ktx2"),
     ("mips", "ktx2_sheen", lambda f, p: ["mips", f["env"], "--ktx2-sheen", p], "x.ktx2"),

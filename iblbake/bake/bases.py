@@ -53,3 +53,47 @@ def bake(image, info, root, policies: dict, name: str, opts: dict, warn=None):
     except (ValueError, TypeError) as e:
         raise IblbakeError(f"{path}: {e}; delete the cache entry to bake it again") from None
     return coeffs, manifest, cached
+
+
+FORMAT = "iblbake.basis"
+FORMAT_VERSION = 1
+
+
+def layout_text(name: str) -> str:
+    """The basis module's "Layout:" paragraph: what its coefficient rows hold."""
+    from iblbake.core.bases import BASES
+    return " ".join(BASES[name].__doc__.split("Layout:")[1].split())
+
+
+def document(coeffs, *, name: str, opts: dict, info, options: dict, timings: dict) -> dict:
+    """The JSON document `iblbake basis` writes (format iblbake.basis, version 1): the basis, its
+    options and layout, the radiance coefficients as rows (R, G, B[, index]) in the world frame,
+    the bytes a probe of it takes, the input and the read options."""
+    from iblbake.core import bases
+    m = bases.BASES[name]
+    c = np.asarray(coeffs, np.float64)
+    return {"format": FORMAT, "format_version": FORMAT_VERSION, "basis": name, "title": m.TITLE,
+            "label": m.label(opts), "options": opts, "floats": m.floats(opts),
+            "bytes": {"fp16": bases.probe_bytes(name, opts, 2), "fp32": bases.probe_bytes(name, opts, 4)},
+            "specular": name in bases.SPECULAR,
+            "layout": layout_text(name), "frame": "world, +y up (docs/conventions.md 'Space and directions')",
+            "irradiance": "docs/conventions.md 'Directional bases': E(n) = int L max(0, n.w) dw, clamped at 0",
+            "coefficients": [[float(v) for v in row] for row in c],
+            "input": info.to_json(), "options_read": options, "timings": timings}
+
+
+def irradiance_error(image, name: str, opts: dict, coeffs, intensity: float = 1.0) -> dict:
+    """The basis's irradiance against the exact irradiance at the 256 fixed normals, in luminance,
+    as `iblbake sh`'s error block (bake/sh.py irradiance_error)."""
+    from iblbake.bake import sh as shbake
+    from iblbake.core import bases
+    from iblbake.core.metrics import LUMINANCE, relative_rmse
+    img = np.asarray(image)
+    normals = shbake.fibonacci_normals()
+    exact = shbake.exact_irradiance((img[..., :3] @ LUMINANCE.astype(img.dtype))[..., None], normals)[:, 0] * intensity
+    approx = bases.BASES[name].irradiance(coeffs, normals, opts)[:, :3] @ LUMINANCE
+    floor = 1e-3 * max(float(exact.mean()), 1e-300)
+    return {"normals": len(normals), "metric": "luminance",
+            "against": "sum over every texel of L max(0, n.d) dOmega, float64",
+            "relative_rmse": relative_rmse(approx, exact),
+            "max_relative_error": float((np.abs(approx - exact) / (exact + floor)).max())}

@@ -24,7 +24,8 @@ from iblbake.errors import IblbakeError
 
 # command name -> (module, attribute): imported on first use
 COMMANDS = {
-    "accuracy": ("accuracy", "accuracy_command"), "cache": ("cache", "cache_group"), "compare": ("compare", "compare_command"),
+    "accuracy": ("accuracy", "accuracy_command"), "basis": ("basis", "basis_command"), "cache": ("cache", "cache_group"),
+    "compare": ("compare", "compare_command"),
     "deps": ("render", "deps_command"), "devices": ("devices", "devices"),
     "export-gltf": ("export_gltf", "export_gltf_command"), "mips": ("mips", "mips_command"),
     "probes": ("probes", "probes_command"), "render": ("render", "render_command"), "sh": ("sh", "sh_command"), "sheet": ("sheet", "sheet_command"),
@@ -65,6 +66,7 @@ def cli():
 
     \b
     iblbake sh ENV -o sh.json       spherical-harmonic irradiance coefficients
+    iblbake basis ENV --basis zh3   another directional basis (ZH3, SG, ambient dice, Haar...)
     iblbake mips ENV --cache DIR    radiance chain, GGX-prefiltered chain, DFG table
     iblbake export-gltf ENV -o l.gltf  a glTF image-based light (EXT_lights_image_based)
     iblbake probes SCENE -o DIR/    irradiance probes (DDGI): atlases, manifest, GLSL sampler

@@ -310,7 +310,21 @@ def write_exr(path, image, *, half: bool = False, channels=("R", "G", "B"), attr
         closed = out.close()            # the last tiles and the offset table are written here
         err = out.geterror() or oiio.geterror()
         if not (ok and closed) or err:
-            raise IblbakeError(f"{path}: write failed ({' '.join(err.split())[:200] or 'the writer gave no reason'})")
+            raise IblbakeError(f"{path}: write failed ({_write_reason(tmp, image.nbytes, err)})")
+
+
+def _write_reason(tmp, nbytes: int, err: str) -> str:
+    """Why OpenImageIO's writer failed, in words: its messages do not carry the OS error, so a
+    full disk (less free than the pixels take, or 64 KiB) is said as the OS would say it."""
+    import shutil
+    try:
+        free = shutil.disk_usage(Path(tmp).parent).free
+    except OSError:
+        free = None
+    text = " ".join(err.split())[:200] or "the writer gave no reason"
+    if free is not None and free < max(nbytes, 1 << 16):
+        return f"No space left on device: {free} bytes free; {text}"
+    return text
 
 
 def png_bytes(image_u8, colour: bool = True) -> bytes:

@@ -49,6 +49,7 @@ OPTIONS: dict = {}
 VERTICES = 12
 _T = (np.sqrt(5.0) - 1.0) / 2.0
 GLSL_COEFFS, GLSL_IRRADIANCE = "AD_VALUE", "ambientDiceIrradiance"     # glsl()'s names (the probes' sampler)
+GLSL_SPECULAR = "ambientDiceSpecularRadiance"
 SPECULAR = True        # specular_weights, kernels/basis_ambient_dice.h: `specular: ambient_dice`
 TABLE_LOG2_LO, TABLE_STEP, TABLE_ROWS, TABLE_COLS = -2.0, 0.25, 65, 129   # lambda 0.25 .. 16384
 
@@ -222,5 +223,34 @@ vec3 ambientDiceIrradiance(vec3 n) {{
         e += AD_VALUE[i] * ({p[0]:.9g} + {p[1]:.9g} * t + {p[2]:.9g} * t2 + {p[4]:.9g} * t2 * t2);
     }}
     return max(e, vec3(0.0));
+}}
+{common.GLSL_WARP}
+// specular = (F0 A + F90 B) (the split sum's DFG table at n.v, roughness) * ambientDiceSpecularRadiance(N, V,
+// roughness): each lobe averaged over the warped GGX lobe, h(v_i.d, lambda) read from the table
+// `iblbake basis --specular-table FILE.exr` writes ({TABLE_COLS} x {TABLE_ROWS}, R: column j is v_i.d = -1 + 2 j / {TABLE_COLS - 1},
+// row i log2 lambda = {TABLE_LOG2_LO} + {TABLE_STEP} i; bind it unfiltered: this reads it bilinearly)
+uniform sampler2D ambientDiceSpecularTable;
+
+vec3 ambientDiceSpecularRadiance(vec3 n, vec3 v, float roughness) {{
+    float alpha = roughness * roughness;
+    vec3 d = basisLobeAxis(n, v, alpha);
+    float x = clamp((log2(max(basisWarpSharpness(alpha, dot(n, v)), 1e-30)) - ({TABLE_LOG2_LO})) / {TABLE_STEP}, 0.0,
+                    {TABLE_ROWS - 1}.0);
+    int x0 = min(int(x), {TABLE_ROWS - 2});
+    float fx = x - float(x0), sum = 0.0;
+    vec3 e = vec3(0.0);
+    for (int i = 0; i < 12; ++i) {{
+        float y = (clamp(dot(AD_VERTEX[i], d), -1.0, 1.0) + 1.0) * 0.5 * {TABLE_COLS - 1}.0;
+        int y0 = min(int(y), {TABLE_COLS - 2});
+        float fy = y - float(y0);
+        float a = texelFetch(ambientDiceSpecularTable, ivec2(y0, x0), 0).r;
+        float b = texelFetch(ambientDiceSpecularTable, ivec2(y0 + 1, x0), 0).r;
+        float c = texelFetch(ambientDiceSpecularTable, ivec2(y0, x0 + 1), 0).r;
+        float f = texelFetch(ambientDiceSpecularTable, ivec2(y0 + 1, x0 + 1), 0).r;
+        float w = mix(mix(a, b, fy), mix(c, f, fy), fx);
+        e += AD_VALUE[i] * w;
+        sum += w;
+    }}
+    return max(e / sum, vec3(0.0));
 }}
 """

@@ -174,6 +174,22 @@ def lobe_axis(n, v, alpha) -> np.ndarray:
     return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
 
+# the warp in GLSL (warp_sharpness, lobe_axis): what each specular basis's GLSL function reads
+GLSL_WARP = """
+// the warped GGX lobe (Pettineo's SG warp about the split sum's dominant direction): its axis and
+// sharpness at unit normal n, unit vector towards the viewer v, alpha = roughness^2
+vec3 basisLobeAxis(vec3 n, vec3 v, float alpha) {
+    vec3 r = 2.0 * dot(n, v) * n - v;
+    float s = clamp(1.0 - alpha, 0.0, 1.0);
+    return normalize(n + (r - n) * (s * (sqrt(s) + alpha)));
+}
+
+float basisWarpSharpness(float alpha, float nov) {
+    return 2.0 / max(alpha * alpha, 1e-8) / (4.0 * max(nov, 1e-4));
+}
+"""
+
+
 def rgb_rows(coeffs, rows: int) -> np.ndarray:
     """A kernel block of `rows` float4 rows, the coefficients' RGB in the first ones (a header's
     per-basis tables, such as lobe axes, fill the rest)."""

@@ -38,6 +38,7 @@ KEPT = (16, 32, 64, 128, 256)
 OPTIONS = {"haar_coefficients": (KEPT, 64, "haar: the cube-map Haar coefficients kept (the largest; 6 of them the "
                                             "faces' means)")}
 FACE = 32
+GLSL_IRRADIANCE = "haarIrradiance"      # glsl()'s irradiance function
 LEVELS = 5            # log2 FACE
 SPLIT = 4
 

@@ -52,6 +52,7 @@ OPTIONS = {"sg_lobes": (LOBES, 9, "sg: spherical Gaussian lobes (fixed Fibonacci
            "sg_fit": (FITS, "least_squares", "sg: the fit, exact least squares or non-negative least squares")}
 HILL_C0 = 0.36
 GLSL_COEFFS, GLSL_IRRADIANCE = "SG_AMPLITUDE", "sgIrradiance"     # glsl()'s names (the probes' sampler)
+GLSL_SPECULAR = "sgSpecularRadiance"
 SPECULAR = True        # specular_radiance, kernels/basis_sg.h basis_specular_radiance: `specular: sg`
 
 
@@ -209,6 +210,23 @@ vec3 sgIrradiance(vec3 n) {{
         float mdn = dot(SG_AXIS[k], n), x0 = {HILL_C0} * mdn;
         float y = abs(x0) <= x1 ? (x0 + x1) * (x0 + x1) / x : clamp(mdn, 0.0, 1.0);
         e += SG_AMPLITUDE[k] * ((scale * y + bias) * 6.28318530717959 / lam);
+    }}
+    return max(e, vec3(0.0));
+}}
+{common.GLSL_WARP}
+// specular = (F0 A + F90 B) (the split sum's DFG table at n.v, roughness) * sgSpecularRadiance(N, V, roughness):
+// the normalised SG-SG inner product of each lobe with the warped GGX lobe
+vec3 sgSpecularRadiance(vec3 n, vec3 v, float roughness) {{
+    float alpha = roughness * roughness;
+    vec3 d = basisLobeAxis(n, v, alpha);
+    float lamW = basisWarpSharpness(alpha, dot(n, v)), lam = SG_SHARPNESS;
+    float norm = lamW / (1.0 - exp(-2.0 * lamW));
+    vec3 e = vec3(0.0);
+    for (int k = 0; k < SG_LOBES; ++k) {{
+        float t = dot(SG_AXIS[k], d);
+        float dd = sqrt(max(lam * lam + lamW * lamW + 2.0 * lam * lamW * t, 1e-12));
+        float x = lam * (lam + 2.0 * lamW * t) / (dd + lamW) - lam;
+        e += SG_AMPLITUDE[k] * ((exp(x) - exp(-dd - lam - lamW)) / dd * norm);
     }}
     return max(e, vec3(0.0));
 }}
