@@ -222,6 +222,17 @@ def test_sg_nnls_on_a_sun_sky(k):
     assert kkt(sg.gram(k), b[:, 0], x)
 
 
+def test_ambient_dice_nnls_on_a_sun_sky():
+    """The same for ambient dice's NNLS fit (ad_fit: nnls): least squares rings negative around the
+    sun, NNLS keeps every value >= 0 and meets KKT on the lobes' Gram matrix."""
+    d = conventions.equirect_texel_dirs(128, 64)
+    img = (0.05 + 50 * np.exp(400 * (d @ np.array([0.3, 0.9, 0.3]) / np.linalg.norm([0.3, 0.9, 0.3]) - 1)))[..., None]
+    b = common.moments(img, ambient_dice.lobes)
+    x = ambient_dice.project(img, {"ad_fit": "nnls"})[:, 0]
+    assert (ambient_dice.project(img, {"ad_fit": "least_squares"}) < 0).any()
+    assert kkt(ambient_dice.gram(), b[:, 0], x)
+
+
 @pytest.mark.parametrize("k", sg.LOBES)
 def test_hill_fit_against_the_float64_cosine_integral(k):
     """The exact SG irradiance (Funk-Hecke) against a 2-D quadrature, then Hill's fit against it:
@@ -267,7 +278,7 @@ def test_validate(name, opts):
     for bad in (c[:-1], np.where(np.arange(len(c))[:, None] == 0, np.nan, c)):
         with pytest.raises(ValueError):
             m.validate(bad, opts)
-    if opts.get("sg_fit") == "nnls":
+    if "nnls" in (opts.get("sg_fit"), opts.get("ad_fit")):
         with pytest.raises(ValueError, match="negative"):
             m.validate(-np.abs(c) - 1, opts)
 

@@ -20,7 +20,8 @@ def sky():
 
 @pytest.mark.parametrize("name, args, opts", [("zh3", [], {}), ("sg", ["--sg-lobes", "12", "--sg-fit", "nnls"],
                                                                   {"sg_lobes": 12, "sg_fit": "nnls"}),
-                                               ("ambient_dice", [], {}), ("haar", ["--haar-coefficients", "32"],
+                                               ("ambient_dice", ["--ad-fit", "nnls"], {"ad_fit": "nnls"}),
+                                               ("haar", ["--haar-coefficients", "32"],
                                                                           {"haar_coefficients": 32})])
 def test_document_is_the_basis_projection(tmp_path, name, args, opts):
     """The JSON holds the basis's float64 projection (the renderer's `basis` bake and iblbake.basis

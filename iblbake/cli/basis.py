@@ -20,12 +20,14 @@ SUFFIXES = {"iblbake": (".json",), "glsl": (".glsl", ".frag", ".vert", ".h", ".t
 @click.argument("envs", metavar="ENV...", nargs=-1, required=True)
 @click.option("--basis", "name", type=click.Choice(NAMES), required=True,
               help="l1_geomerics (4 floats, Geomerics' non-linear L1), zh3 (5, L1 and a zonal L2), sg (spherical "
-                   "Gaussians: --sg-lobes, --sg-fit), ambient_dice (12, the RBF variant), haar (cube-face "
+                   "Gaussians: --sg-lobes, --sg-fit), ambient_dice (12, the RBF variant: --ad-fit), haar (cube-face "
                    "wavelets, the --haar-coefficients largest kept): docs/conventions.md 'Directional bases'.")
 @click.option("--sg-lobes", type=click.Choice(["5", "6", "9", "12"]), default="9", show_default=True,
               help="sg: the number of lobes (fixed Fibonacci axes, one sharpness).")
 @click.option("--sg-fit", type=click.Choice(["least_squares", "nnls"]), default="least_squares", show_default=True,
               help="sg: exact least squares, or non-negative least squares.")
+@click.option("--ad-fit", type=click.Choice(["least_squares", "nnls"]), default="least_squares", show_default=True,
+              help="ambient_dice: exact least squares, or non-negative least squares (no negative radiance).")
 @click.option("--haar-coefficients", type=click.Choice(["16", "32", "64", "128", "256"]), default="64",
               show_default=True, help="haar: the coefficients kept (the largest; 6 of them the faces' means).")
 @click.option("--output", "-o", type=click.Path(), default=None,
@@ -49,7 +51,7 @@ SUFFIXES = {"iblbake": (".json",), "glsl": (".glsl", ".frag", ".vert", ".h", ".t
 @depfile_option
 @input_options
 @common_options
-def basis_command(envs, name, sg_lobes, sg_fit, haar_coefficients, output, force, intensity, fmt, glsl,
+def basis_command(envs, name, sg_lobes, sg_fit, ad_fit, haar_coefficients, output, force, intensity, fmt, glsl,
                   specular_table, with_error, nonfinite, negative, transfer, primaries, input_layout, max_pixels,
                   depfile, quiet, as_json):
     """Project each panorama ENV onto a directional basis (exact texel integrals, float64; least
@@ -63,7 +65,7 @@ def basis_command(envs, name, sg_lobes, sg_fit, haar_coefficients, output, force
         if fmt != "iblbake" and fmt != "glsl":
             raise click.UsageError(f"--glsl is --format glsl: leave out --format {fmt}")
         fmt = "glsl"
-    options = {"sg": {"sg_lobes": int(sg_lobes), "sg_fit": sg_fit},
+    options = {"sg": {"sg_lobes": int(sg_lobes), "sg_fit": sg_fit}, "ambient_dice": {"ad_fit": ad_fit},
                "haar": {"haar_coefficients": int(haar_coefficients)}}.get(name, {})
     suffix = SUFFIXES[fmt][0]
     if len(envs) > 1:

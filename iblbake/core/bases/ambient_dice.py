@@ -9,8 +9,10 @@ Only the lobe on the positive side of each of the 6 axes is non-zero, and since 
 are a spherical 5-design, sum_i w_i(w) = 0.35 * 2 + 0.25 * 6/5 = 1 everywhere: a partition of
 unity, so a uniform sky is exact.
 
-Fit: exact least squares against the panorama (moments b_i = int L w_i dw, Gram int w_i w_j dw
-by Funk-Hecke, its Legendre series converged to float64 by l = 160).
+Fit (`ad_fit`): exact least squares against the panorama (moments b_i = int L w_i dw, Gram
+int w_i w_j dw by Funk-Hecke, its Legendre series converged to float64 by l = 160), or NNLS on the
+same normal equations (every value >= 0: least squares rings negative around a sun or a softbox,
+which the irradiance's cosine smooths away but the specular lobe reads as dark patches).
 Irradiance: the cosine convolution of w is exactly a Legendre series of degree 4 (the even
 moments of w vanish past l = 4 and the cosine's odd ones past l = 1):
 E_i(n) = sum_{l in 0,1,2,4} (2l+1)/(4 pi) w_l Ahat_l P_l(v_i . n), its constants derived here.
@@ -45,7 +47,9 @@ from iblbake.core.bases import common
 NAME = "ambient_dice"
 TITLE = "ambient dice"
 HEADER = "basis_ambient_dice.h"
-OPTIONS: dict = {}
+FITS = ("least_squares", "nnls")
+OPTIONS = {"ad_fit": (FITS, "least_squares", "ambient_dice: the fit, exact least squares or non-negative least "
+                                             "squares (no negative radiance: its specular has no dark rings)")}
 VERTICES = 12
 _T = (np.sqrt(5.0) - 1.0) / 2.0
 GLSL_COEFFS, GLSL_IRRADIANCE = "AD_VALUE", "ambientDiceIrradiance"     # glsl()'s names (the probes' sampler)
@@ -55,11 +59,11 @@ TABLE_LOG2_LO, TABLE_STEP, TABLE_ROWS, TABLE_COLS = -2.0, 0.25, 65, 129   # lamb
 
 
 def variants() -> list:
-    return [{}]
+    return [{"ad_fit": f} for f in FITS]
 
 
 def label(opts) -> str:
-    return "ambient dice"
+    return "ambient dice" + (" NNLS" if opts.get("ad_fit") == "nnls" else "")
 
 
 def floats(opts) -> int:
@@ -95,14 +99,24 @@ def irradiance_profile() -> np.ndarray:
     return common.funk_hecke(common.zonal_moments(lobe, 4), common.cosine_moments(4))
 
 
+def fit(b, opts) -> np.ndarray:
+    """Values (..., 12, C) from the moments b (..., 12, C): least squares, or NNLS on the same
+    normal equations (common.nnls_gram), one fit per leading index and channel."""
+    b = np.asarray(b, np.float64)
+    g = gram()
+    if opts.get("ad_fit", "least_squares") == "least_squares":
+        return np.linalg.solve(g, b.reshape(-1, *b.shape[-2:])).reshape(b.shape)
+    cols = np.moveaxis(b, -2, -1).reshape(-1, b.shape[-2])
+    return np.moveaxis(np.stack([common.nnls_gram(g, c) for c in cols]).reshape(*b.shape[:-2], b.shape[-1], -1), -1, -2)
+
+
 def project(image, opts) -> np.ndarray:
-    return np.linalg.solve(gram(), common.moments(image, lobes))
+    return fit(common.moments(image, lobes), opts)
 
 
 def project_rays(values, dirs, opts) -> np.ndarray:
     """The fit from probe rays (common.ray_moments): values (P, R, C) -> (P, 12, C)."""
-    b = common.ray_moments(values, dirs, lobes)
-    return np.linalg.solve(gram(), b.reshape(-1, *b.shape[-2:])).reshape(b.shape)
+    return fit(common.ray_moments(values, dirs, lobes), opts)
 
 
 def radiance(coeffs, dirs, opts) -> np.ndarray:
@@ -185,7 +199,8 @@ def specular_weights(r, lam_w, opts) -> np.ndarray:
 
 
 def validate(coeffs, opts) -> np.ndarray:
-    return common.check_coefficients(coeffs, VERTICES, "ambient dice values")
+    return common.check_coefficients(coeffs, VERTICES, "ambient dice values",
+                                     nonnegative=opts.get("ad_fit") == "nnls")
 
 
 def defines(opts) -> dict:
