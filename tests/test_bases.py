@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from iblbake.bake import sh as bake_sh
-from iblbake.core import conventions
+from iblbake.core import bases, conventions
 from iblbake.core import sh as core_sh
 from iblbake.core.bases import BASES, ambient_dice, common, l1_geomerics, sg, zh3
 
@@ -306,7 +306,7 @@ def test_bases_ladder_is_the_registry():
     from iblbake.scene.schema import SCHEMA
     from iblbake.study import ladder
 
-    rungs = ladder.bases_ladder(None, SimpleNamespace(diffuse="sh"))
+    rungs = ladder.bases_ladder(None, SimpleNamespace(diffuse="sh", specular="off"))
     labels = [BASES[n].label(o) for n, o in VARIANTS]
     assert [r.label for r in rungs] == labels and len(set(labels)) == len(labels)
     fields = SCHEMA.fields["effects"].fields
@@ -314,7 +314,15 @@ def test_bases_ladder_is_the_registry():
         vals = dict(r.values)
         assert r.term == "diffuse" and vals["effects.diffuse"] == name and name in fields["diffuse"].choices
         assert all(k.split(".", 1)[1] in fields for k in vals)
-    assert ladder.bases_ladder(None, SimpleNamespace(diffuse="off")) == []
+    assert ladder.bases_ladder(None, SimpleNamespace(diffuse="off", specular="off")) == []
+    # the specular term: the chain and every variant of each basis that carries a lobe
+    spec = ladder.bases_ladder(None, SimpleNamespace(diffuse="off", specular="prefiltered"))
+    want = [(n, o) for n, o in VARIANTS if n in bases.SPECULAR]
+    assert [r.label for r in spec] == ["prefiltered (distant)"] + [f"{BASES[n].label(o)} specular" for n, o in want]
+    for r in spec[1:]:
+        vals = dict(r.values)
+        assert r.term == "specular" and vals["effects.specular"] in fields["specular"].choices
+        assert all(k.split(".", 1)[1] in fields for k in vals)
 
 
 @pytest.mark.slow       # make test; make check keeps under 3 minutes

@@ -315,7 +315,8 @@ class Bakes:
 
         (levels, pm, cached), hit = self._recall(key, make)
         extra = {"levels": len(levels), "methods": [f["method"] for f in pm["files"]],
-                 "entry": str(self.root / pm["key"])}
+                 "entry": str(self.root / pm["key"]),
+                 "fp16_bytes": int(sum(3 * 2 * lv.shape[0] * lv.shape[1] for lv in levels))}   # an engine's copy
         if "verify" in pm:            # what `mips --verify` measured and stored in the entry's manifest
             extra["verified_relative_rmse"] = pm["verify"]["relative_rmse"]
         return levels, cached or hit, extra

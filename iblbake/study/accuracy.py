@@ -299,7 +299,7 @@ class Study:
             "times_s": [round(x, 5) for x in lighting],
             "bake_s": round(sum(b["seconds"] for b in bakes if not b["cached"]), 4),
             "bakes": [{"name": b["name"], "seconds": b["seconds"], "cached": b["cached"]} for b in bakes],
-            "kernel_build_s": round(builds, 4),
+            "kernel_build_s": round(builds, 4), "bytes": lighting_bytes(sc, rung.term, bakes),
             **error_metrics(frame.hdr, ref["hdr"], mask, self.settings.flip),
             **self.region_metrics(frame.hdr, ref["hdr"], mask)}
         if rung.result["mode"] == "reference":
@@ -327,6 +327,32 @@ class Study:
             mask &= self.metric_mask(t, fr.hdr)
         ref[..., 3] = 1
         return {"label": "configured frame", **error_metrics(fr.hdr, ref, mask, self.settings.flip)}
+
+
+def lighting_bytes(sc, term: str, bakes: list) -> int | None:
+    """The bytes an engine stores for the term's light, in fp16 (core/bases probe_bytes): per probe
+    for probe modes (the irradiance only: the distance moments are every representation's alike),
+    the coefficients for SH and a distant basis, every level of the prefiltered chain for the split
+    sum and lobe (the DFG table aside); None for the rest (importance reads the radiance chain,
+    the reference the panorama)."""
+    from iblbake.core import bases
+    fx = sc.data["effects"]
+    mode = fx[term]
+    if term == "diffuse" and mode == "sh":
+        return fx["sh_bands"] ** 2 * 3 * 2
+    if mode in bases.BASES and mode != "sh":
+        return bases.probe_bytes(mode, bases.options_of(mode, fx), 2)
+    if mode == "probes":
+        p = sc.data["probes"]
+        rep = p["irradiance"]
+        if rep == "octahedral":
+            return p["irradiance_texels"] ** 2 * 3 * 2
+        if rep == "sh":
+            return 9 * 3 * 2
+        return bases.probe_bytes(rep, {k: p[k] for k in bases.BASES[rep].OPTIONS}, 2)
+    if mode in ("prefiltered", "lobe"):
+        return next((b.get("fp16_bytes") for b in bakes if b["name"] == "prefiltered"), None)
+    return None
 
 
 def display(sc, hdr, like) -> np.ndarray:

@@ -151,15 +151,30 @@ def realtime_ladder(sc, fx) -> list:
     return rungs
 
 
-def bases_ladder(sc, fx) -> list:
-    """Every registered directional basis and size of the panorama's diffuse light (`--ladder
-    bases`; core/bases, the shoot-out of docs/benchmarks.md), AO off: a basis against the other."""
-    from iblbake.core.bases import BASES
-    if fx.diffuse == "off":
+def distant_specular_rungs(sc, fx) -> list:
+    """The split sum's chain and each basis that carries a specular lobe (core/bases SPECULAR), of
+    the panorama, every variant: the specular term, AO, SSR and reflection probes off."""
+    from iblbake.core.bases import BASES, SPECULAR
+    if fx.specular == "off":
         return []
-    return [Rung("diffuse", m.label(opts), [("effects.diffuse", name), *((f"effects.{k}", v) for k, v in opts.items()),
-                                            ("effects.ao", "off")])
-            for name, m in BASES.items() for opts in m.variants()]
+    off = [("effects.ao", "off"), ("effects.ssr", "off"), ("effects.reflection_probes", False)]
+    return [Rung("specular", "prefiltered (distant)", [("effects.specular", "prefiltered")] + off)] + [
+        Rung("specular", f"{BASES[name].label(opts)} specular",
+             [("effects.specular", name), *((f"effects.{k}", v) for k, v in opts.items())] + off)
+        for name in SPECULAR for opts in BASES[name].variants()]
+
+
+def bases_ladder(sc, fx) -> list:
+    """Every registered directional basis and size of the panorama (`--ladder bases`; core/bases,
+    the shoot-out of docs/benchmarks.md): the diffuse term of each, AO off, and the specular term
+    of those that carry a lobe beside the split sum's chain."""
+    from iblbake.core.bases import BASES
+    rungs = []
+    if fx.diffuse != "off":
+        rungs = [Rung("diffuse", m.label(opts), [("effects.diffuse", name),
+                                                 *((f"effects.{k}", v) for k, v in opts.items()), ("effects.ao", "off")])
+                 for name, m in BASES.items() for opts in m.variants()]
+    return rungs + distant_specular_rungs(sc, fx)
 
 
 def probe_bases_ladder(sc, fx) -> list:
@@ -179,10 +194,7 @@ def probe_bases_ladder(sc, fx) -> list:
             for name in PROBES for opts in BASES[name].variants()]
     if fx.specular != "off":
         off = [("effects.ao", "off"), ("effects.ssr", "off"), ("effects.reflection_probes", False)]
-        rungs += [Rung("specular", "prefiltered (distant)", [("effects.specular", "prefiltered")] + off)] + [
-            Rung("specular", f"{BASES[name].label(opts)} specular",
-                 [("effects.specular", name), *((f"effects.{k}", v) for k, v in opts.items())] + off)
-            for name in SPECULAR for opts in BASES[name].variants()]
+        rungs += distant_specular_rungs(sc, fx)
         if sc.data["objects"]:          # the same bases in the probes: the room's light along the lobe
             rungs += [Rung("specular", f"probes, {BASES[name].label(opts)} specular",
                            [("effects.specular", "probes"), ("probes.irradiance", name),

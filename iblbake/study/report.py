@@ -14,6 +14,7 @@ from iblbake.study import sweep
 from iblbake.study.ladder import TERMS
 
 COLUMNS = (("term", "term"), ("label", "setting"), ("time_ms", "time ms"), ("bake_s", "bake s"),
+           ("bytes", "bytes fp16"),
            ("relative_rmse", "rel. RMSE"), ("mean_relative_error", "mean rel."), ("max_relative_error", "max rel."),
            ("worst_region_error", "worst object mean"), ("flip", "HDR-FLIP"), ("pareto", "frontier"))
 
@@ -22,6 +23,7 @@ def table_rows(rows, front) -> list:
     out = []
     for r in rows:
         out.append({"term": r["term"], "label": r["label"], "time_ms": r["time_s"] * 1000, "bake_s": r["bake_s"],
+                    "bytes": r.get("bytes"),
                     "relative_rmse": r["relative_rmse"], "mean_relative_error": r["mean_relative_error"],
                     "max_relative_error": r["max_relative_error"], "flip": r["flip"],
                     "worst_region_error": r.get("worst_region_error"),
