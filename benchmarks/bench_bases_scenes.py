@@ -91,22 +91,28 @@ def plot(results, path) -> None:
             if row["bytes"] is None:
                 continue
             panels.setdefault((res["scene"], row["term"]), {}).setdefault(row["label"], []).append(row)
-    fig, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels), 4.2), squeeze=False)
-    for ax, ((scene, term), by_label) in zip(axes[0], panels.items()):
+    cols = 2
+    rows = (len(panels) + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(6.4 * cols, 4.8 * rows), squeeze=False)
+    for ax in axes.ravel()[len(panels):]:
+        ax.set_visible(False)
+    for ax, ((scene, term), by_label) in zip(axes.ravel(), panels.items()):
         curves = {}
         for label, rows in by_label.items():
             err = statistics.mean(r["relative_rmse"] for r in rows)
             curves.setdefault(family(label), []).append((rows[0]["bytes"], 100 * err, label))
-        for fam, pts in sorted(curves.items()):
+        colours = plt.cm.tab20.colors
+        for i, (fam, pts) in enumerate(sorted(curves.items())):
             pts.sort()
-            ax.plot([p[0] for p in pts], [p[1] for p in pts], "o-", label=fam, markersize=4)
+            ax.plot([p[0] for p in pts], [p[1] for p in pts], "os^D"[i // 20 % 4] + "-", label=fam, markersize=4,
+                    color=colours[i % 20])
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_xlabel("bytes (fp16)" + (" per probe" if scene == "metal_box" else ""))
         ax.set_ylabel(f"{term} relative RMSE %, mean over panoramas")
         ax.set_title(f"{scene}: {term}")
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=6, ncol=2)
+        ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
 
