@@ -113,6 +113,7 @@ def metal_scene(folder, sky, name, opts, rough=0.5):
         "effects": {"diffuse": "off", "specular": "probes", "ao": "off"}})
 
 
+@pytest.mark.slow           # over 3 s on the 2-core CPU: make test, not make check
 @pytest.mark.parametrize("name, opts", CASES, ids=IDS)
 def test_metal_sphere_frame_matches_the_twin(tmp_path, rt, lobed_sky, name, opts):
     """End to end (schema, plan, the probes, prefiltered and dfg bakes, the source, SPECULAR_PROBES
