@@ -132,6 +132,7 @@ def _legendre(t, lmax: int) -> np.ndarray:
     return common._legendre_all(t, lmax)
 
 
+@functools.lru_cache(maxsize=8)
 def lobe_legendre(lmax: int) -> np.ndarray:
     """w_l, l = 0..lmax: w(t) = sum_l w_l P_l(t) (exact: w is 0 on [-1, 0] and a polynomial on [0, 1])."""
     x, wq = np.polynomial.legendre.leggauss(lmax // 2 + 8)
