@@ -439,3 +439,16 @@ def test_cached_coefficients_are_checked_when_read(tmp_path, monkeypatch):
     monkeypatch.setattr(cache, "get_or_build", lambda root, key, _build, **kw: real(root, key, build, **kw))
     with pytest.raises(IblbakeError, match=r"coefficients\.json: .*negative"):
         bake_bases.bake(img, info, tmp_path / "other", {}, "sg", opts)
+
+
+def test_gauss_legendre_is_numpys_and_exact_at_high_order():
+    """common.gauss_legendre (Newton, O(n^2)) against numpy's leggauss (eigenvalues) to 1e-13, and
+    at n = 1000 (beyond where leggauss is cheap) exact for P_999 P_999 (degree 1998 <= 2n - 1: its
+    integral 2/1999)."""
+    for n in (1, 5, 50, 200):
+        x, w = common.gauss_legendre(n)
+        xx, ww = np.polynomial.legendre.leggauss(n)
+        assert np.abs(x - xx).max() < 1e-13 and np.abs(w - ww).max() < 1e-13
+    x, w = common.gauss_legendre(1000)
+    p = common._legendre_all(x, 999)[-1]
+    assert abs((w * p * p).sum() - 2 / 1999) < 1e-13 and abs(w.sum() - 2) < 1e-13

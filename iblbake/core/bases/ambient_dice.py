@@ -135,7 +135,7 @@ def _legendre(t, lmax: int) -> np.ndarray:
 @functools.lru_cache(maxsize=8)
 def lobe_legendre(lmax: int) -> np.ndarray:
     """w_l, l = 0..lmax: w(t) = sum_l w_l P_l(t) (exact: w is 0 on [-1, 0] and a polynomial on [0, 1])."""
-    x, wq = np.polynomial.legendre.leggauss(lmax // 2 + 8)
+    x, wq = common.gauss_legendre(lmax // 2 + 8)
     t, wq = 0.5 * (x + 1.0), 0.5 * wq
     return (2 * np.arange(lmax + 1) + 1) / 2 * (_legendre(t, lmax) @ (lobe(t) * wq))
 
