@@ -194,11 +194,13 @@ inline float4 probe_irradiance(float3 p, float3 n, float3 v, PROBE_PARAMS)
 /* The diffuse irradiance at p with the probes (their irradiance holds the panorama's intensity
  * already: their rays read it scaled): blended by the volume's weight with `sky` (the panorama's SH,
  * scaled) outside it, and `sky` too where no active probe is near; probe_stats counts the samples
- * that fell back ([0] to the nearest active probes, [1] to the sky). */
+ * that fell back ([0] to the nearest active probes, [1] to the sky) and [4] those that lie outside
+ * the volume or on its fading edge. */
 inline float3 probes_diffuse(float3 p, float3 n, float3 v, float3 sky, PROBE_PARAMS, __global int *probe_stats)
 {
     const float wv = probe_volume_weight(p, probe_origin, probe_spacing, probe_nx, probe_ny, probe_nz);
     float3 e = (1.0f - wv) * sky;
+    if (wv < 1.0f) atomic_inc(&probe_stats[4]);       /* outside the volume, or on its fading edge */
     if (wv > 0.0f) {
         const float4 pe = probe_irradiance(p, n, v, PROBE_ARGS);
         if (pe.w == PROBE_SOURCE_NEAREST) atomic_inc(&probe_stats[0]);

@@ -637,3 +637,23 @@ def test_a_solid_made_by_hand_is_named_in_the_advice():
     assert len(said) == 1 and "'box' (objects.0) is solid: true" in said[0] and "objects.0.solid: auto" in said[0]
     auto = {"objects": [{"name": "box", "solid": "auto", "mesh": {"path": "box.obj"}}]}
     assert "set objects.N.solid: false" in probes.warnings(rep, auto, vol)[0]
+
+
+def test_surfaces_outside_the_volume_are_counted_and_said(tmp_path, rt, sky):
+    """A sphere inside the probes' box: no sample outside the volume, nothing said; the same sphere
+    with the box over its left half only (x <= -0.1: the right half fades to the panorama's SH
+    over one spacing): the samples outside or on the fading edge counted (probe_outside_volume),
+    a one-line warning with their share of the frame (over 10%) naming probes.min/max."""
+    said = []
+    sc = sphere_scene(tmp_path, sky, "probes")
+    frame = render(sc, runtime=rt, cache_root=tmp_path / "cache", warn=said.append)
+    shade = next(p for p in frame.report["passes"] if p["name"] == "shade")
+    assert shade["probe_outside_volume"] == 0 and not said
+    doc = yaml.safe_load(Path(sc.source).read_text())
+    doc["probes"].update(min=[-1, -1, -1], max=[-0.1, 1, 1], counts=[2, 2, 2])
+    half = load_scene(tmp_path, "sphere_half_probes", doc)
+    frame = render(half, runtime=rt, cache_root=tmp_path / "cache", warn=said.append)
+    shade = next(p for p in frame.report["passes"] if p["name"] == "shade")
+    hit = int((frame.hdr[..., 3] > 0.999).sum())
+    assert 0.3 * hit < shade["probe_outside_volume"] < hit
+    assert len(said) == 1 and "outside the probe volume" in said[0] and "probes.min/max" in said[0]

@@ -11,6 +11,9 @@ from iblbake.render.passes.base import Buffer, Pass, mode_defines
 from iblbake.render.sources import SOURCES
 
 
+OUTSIDE_SAID = 0.1       # the share of a frame's samples outside the probe volume that is said
+
+
 class Shade(Pass):
     name = "shade"
     kernel = "shade.cl"
@@ -58,18 +61,23 @@ class Shade(Pass):
         fx = ctx.plan.effects
         probes_in = "probes" in (fx.diffuse, fx.specular)
         if probes_in:
-            ctx.rt.cl.enqueue_fill_buffer(ctx.rt.queue, ctx.table["probe_stats"], np.int32(0), 0, 16)
+            ctx.rt.cl.enqueue_fill_buffer(ctx.rt.queue, ctx.table["probe_stats"], np.int32(0), 0, 20)
         s = self.launch_samples(ctx)
         lobe = ctx.plan.effects.specular == "lobe"
         k = ctx.args[self.name]["lobe_samples"] if lobe else 1
         extra = {"samples": k} if lobe else {}
         if probes_in:                 # the samples whose cell's probes were all off, summed over tiles
-            counts = ctx.rt.read(ctx.table["probe_stats"], (4,), np.int32).tolist()
-            tot = ctx.__dict__.setdefault("probe_fallback", [0, 0, 0, 0])
+            counts = ctx.rt.read(ctx.table["probe_stats"], (5,), np.int32).tolist()
+            tot = ctx.__dict__.setdefault("probe_fallback", [0, 0, 0, 0, 0, 0])
             for i, c in enumerate(counts):
                 tot[i] += c
+            tot[5] += n
             if fx.diffuse == "probes":
-                extra.update(probe_fallback_nearest=tot[0], probe_fallback_sky=tot[1])
+                extra.update(probe_fallback_nearest=tot[0], probe_fallback_sky=tot[1], probe_outside_volume=tot[4])
+                if ctx.tile_index == ctx.tile_count - 1 and tot[4] > OUTSIDE_SAID * tot[5]:
+                    ctx.warn(f"probes: {100 * tot[4] / tot[5]:.0f}% of the frame's samples lie outside the probe "
+                             "volume or on its fading edge and take the panorama's SH there; widen probes.min/max "
+                             "(or the scene's bounds) to cover what the camera sees")
             if fx.specular == "probes":
                 extra.update(probe_specular_fallback_nearest=tot[2], probe_specular_fallback_sky=tot[3])
         return {"mpixel_samples_per_s": round(n * k / max(s, 1e-9) / 1e6, 2), **extra}
