@@ -176,3 +176,19 @@ def test_a_renderer_sees_a_panorama_rewritten_in_place(tmp_path):
     again = renderer.render(iblbake.load_scene(scene)).hdr
     fresh = iblbake.render(iblbake.load_scene(scene), cache=tmp_path / "cache").hdr
     assert not np.allclose(again, first) and np.array_equal(again, fresh)
+
+
+def test_dir_and_help_show_the_api_alone():
+    """dir(iblbake) listed the package's machinery (sys, types, the errors submodule) and
+    help(iblbake) listed __dir__ and __getattr__ as its first FUNCTIONS."""
+    code = ("import iblbake, iblbake.errors, iblbake.render.frame\n"
+            "print(sorted(n for n in dir(iblbake) if not n.startswith('__')))\n"
+            "help(iblbake)")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                       env={"PAGER": "cat", "TERM": "dumb", "PATH": ""})
+    assert p.returncode == 0, p.stderr
+    listed, help_text = p.stdout.split("\n", 1)
+    assert eval(listed) == sorted(iblbake.__all__), listed
+    functions = help_text.split("\nFUNCTIONS\n", 1)[1].split("\nDATA\n", 1)[0]
+    assert "__getattr__" not in functions and "__dir__" not in functions, functions[:300]
+    assert iblbake.errors.InputError is iblbake.InputError       # the submodule is still reachable
