@@ -40,3 +40,16 @@ def test_a_scene_mapping_takes_numpy_values(sky, tmp_path):
                 {"perspective": {"fov_y": np.bool_(True)}}):
         with pytest.raises(iblbake.InputError, match="camera"):
             iblbake.load_scene(scene_of(sky, camera=bad))
+
+
+def test_scene_value_errors_of_the_bakes_are_input_errors(sky, tmp_path):
+    """`probes: {counts: 1}` and a cache folder that is a file raised the bare iblbake.Error, not
+    the documented InputError."""
+    scene = scene_of(sky, objects=[{"sphere": {"radius": 1}, "material": "m"},
+                                   {"plane": {"point": [0, -1, 0], "size": 4}, "material": "m"}])
+    with pytest.raises(iblbake.InputError, match="probes.counts 1"):
+        iblbake.bake_probes({**scene, "probes": {"counts": 1}}, cache=tmp_path / "cache")
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    with pytest.raises(iblbake.InputError, match="cannot create the cache folder"):
+        iblbake.render(scene_of(sky), cache=afile)
