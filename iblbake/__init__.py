@@ -4,9 +4,9 @@ The public API is iblbake.api, re-exported here (docs/api.md): `import iblbake` 
 file and iblbake.errors; the API module and what it calls (numpy, OpenImageIO, pyopencl) load on
 first use of a name, so a build script or the command line pays for what it calls."""
 
-import sys
+import sys as _sys
 
-if sys.argv[:1] == ["-m"]:
+if _sys.argv[:1] == ["-m"]:
     # `python -m iblbake.cli`: runpy imports this package (in a fresh clone, compiling it) before
     # the entry point can say how Ctrl-C is handled, so its quiet exit (iblbake.entry) is set here
     # first, with the builtin _signal (the signal module's enums take a millisecond to import).
@@ -14,10 +14,10 @@ if sys.argv[:1] == ["-m"]:
     # import never takes this branch.
     import _signal
 
-    _signal.signal(_signal.SIGINT, lambda signum, frame: (sys.stderr.write("iblbake: interrupted\n"),
+    _signal.signal(_signal.SIGINT, lambda signum, frame: (_sys.stderr.write("iblbake: interrupted\n"),
                                                           __import__("os")._exit(130)))
 
-import types
+import types as _types
 
 from iblbake.errors import DeviceError, Error, InputError, UsageError
 
@@ -32,29 +32,30 @@ __all__ = [
 _LAZY = frozenset(__all__) - {"DeviceError", "Error", "InputError", "UsageError"}
 
 
-def __getattr__(name):
-    if name in _LAZY:
-        from iblbake import api
-        value = getattr(api, name)
-        globals()[name] = value          # once: later lookups are plain attribute reads
-        return value
-    raise AttributeError(f"module 'iblbake' has no attribute {name!r}")
+class _Package(_types.ModuleType):
+    """The package's module type. Its public names load on first use (__getattr__: `import
+    iblbake` does not load the API module or what it imports); dir() lists what __all__ does, not
+    the package's machinery or the submodules loaded meanwhile; and the public function
+    iblbake.render keeps its name though a subpackage shares it: the import system binds a
+    subpackage on its parent once it loads, which would put the subpackage where the function is
+    (code that wants the subpackage imports from it: `from iblbake.render import frame`). As
+    methods here, not module functions, these stay out of help(iblbake)."""
 
+    def __getattr__(self, name):
+        if name in _LAZY:
+            from iblbake import api
+            value = getattr(api, name)
+            self.__dict__[name] = value          # once: later lookups are plain attribute reads
+            return value
+        raise AttributeError(f"module 'iblbake' has no attribute {name!r}")
 
-def __dir__():
-    return sorted(set(globals()) | _LAZY)
-
-
-class _Package(types.ModuleType):
-    """The public function iblbake.render shares its name with the subpackage iblbake.render.
-    The import system binds a subpackage on its parent once it loads, which would put the
-    subpackage where the function is; the function keeps the name (code that wants the
-    subpackage imports from it: `from iblbake.render import frame`)."""
+    def __dir__(self):
+        return sorted(set(__all__) | {n for n in self.__dict__ if n.startswith("__")})
 
     def __setattr__(self, name, value):
-        if name in _LAZY and isinstance(value, types.ModuleType):
+        if name in _LAZY and isinstance(value, _types.ModuleType):
             return
         super().__setattr__(name, value)
 
 
-sys.modules[__name__].__class__ = _Package
+_sys.modules[__name__].__class__ = _Package

@@ -1,7 +1,7 @@
 """iblbake's public API (docs/api.md): bake image-based lighting from Python and get numpy arrays.
 
 Every function returns arrays or the small dataclasses below, prints nothing and raises
-iblbake.Error subclasses (iblbake.errors) with the one-line messages the command line prints;
+iblbake.Error subclasses (iblbake.errors) with one-line messages (the command line prints them);
 warnings are returned (a `warnings` list) or passed to a `warn(message)` callback. The command
 line (iblbake.cli) is a layer over this module: what a command bakes, this module bakes.
 
@@ -11,6 +11,10 @@ the file's units (W m^-2 sr^-1 for a physical one); roughness is perceptual (alp
 
 Imports are lazy (numpy, OpenImageIO and pyopencl load inside the functions): `import iblbake`
 stays cheap and each call pays for what it uses.
+
+Arguments are checked before any work: a wrong kind or value is an InputError naming the argument
+and what it takes. Messages call the arguments by their names here; the functions the command
+line calls take `names`, a mapping of argument names to what its messages call them (its flags).
 """
 
 from __future__ import annotations
@@ -29,12 +33,33 @@ if TYPE_CHECKING:                 # loaded on first use (import iblbake stays li
 _RUNTIMES: dict = {}
 
 
-def _runtime(device: str | None):
+def _runtime(device: str | None, names: dict | None = None):
+    _device(device)
     key = device or ""
     if key not in _RUNTIMES:
         from iblbake.device.runtime import Runtime
-        _RUNTIMES[key] = Runtime(device)
+        _RUNTIMES[key] = Runtime(device, _name(names, "device"))
     return _RUNTIMES[key]
+
+
+# ------------------------------------------------------------------------- argument checks
+
+def _names(names: dict | None) -> dict:
+    """A function's `names`: what its messages call its arguments, where not their own names."""
+    if names is not None and not isinstance(names, dict):
+        raise InputError(f"names: give a mapping of argument names to what messages call them, or None, "
+                         f"not {_kind(names)}")
+    return names or {}
+
+
+def _name(names: dict | None, key: str, default: str | None = None) -> str:
+    """What messages call argument `key`: names[key] where the caller says (the command line's
+    flag), else `default`, else the argument's own name."""
+    return _names(names).get(key, default or key)
+
+
+def _kind(value) -> str:
+    return type(value).__name__
 
 
 def _whole(value) -> bool:
@@ -43,9 +68,94 @@ def _whole(value) -> bool:
     return isinstance(value, numbers.Integral) and not isinstance(value, bool)
 
 
+def _count(name: str, value, least: int = 1, most: int | None = None) -> int:
+    """A whole number in [least, most] (numpy integers too; not a bool, nor a float such as 9.0)."""
+    if not (_whole(value) and value >= least and (most is None or value <= most)):
+        raise InputError(f"{name} {value!r}: " + (f"use {least} to {most}" if most is not None
+                                                   else f"give a whole number >= {least}"))
+    return int(value)
+
+
+def _real(name: str, value, least: float | None = None) -> float:
+    """A finite real number (numpy's too; not a bool or a string), at least `least`."""
+    import math
+    import numbers
+    if not (isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
+            and (least is None or value >= least)):
+        raise InputError(f"{name} {value!r}: give a finite number" + ("" if least is None else f" >= {least:g}"))
+    return float(value)
+
+
+def _flag(name: str, value) -> bool:
+    """True or False (a numpy bool too): not 'no', 1 or None, which would read as one."""
+    if isinstance(value, bool) or (type(value).__module__ == "numpy" and _kind(value) in ("bool", "bool_")):
+        return bool(value)
+    raise InputError(f"{name} {value!r}: give True or False")
+
+
 def _choice(name: str, value, choices) -> None:
-    if value not in choices:
+    if not (isinstance(value, str) and value in choices):
         raise InputError(f"{name} {value!r}: use one of {', '.join(map(str, choices))}")
+
+
+def _callback(name: str, value):
+    if value is not None and not callable(value):
+        raise InputError(f"{name}: give a function (or None), not {_kind(value)} {value!r}")
+    return value
+
+
+def _device(value) -> None:
+    if value is not None and not isinstance(value, str):
+        raise InputError(f"device: give an OpenCL device spec ('gpu', 'cpu', 'gpu:N', 'P:D' or part of a "
+                         f"device's name) or None, not {_kind(value)} {value!r}")
+
+
+def _is_path(value) -> bool:
+    import os
+    return isinstance(value, (str, os.PathLike))
+
+
+def _path(name: str, value, what: str):
+    if not _is_path(value):
+        raise InputError(f"{name}: give {what} path (a str or pathlib.Path), not {_kind(value)}")
+    return value
+
+
+def _cache(cache):
+    """The bake cache folder: None (the default) or a folder's path (made where missing; one that
+    cannot be, a file say, is an InputError where the first bake needs it)."""
+    return cache if cache is None else _path("cache", cache, "the bake cache folder's")
+
+
+def _overrides(overrides) -> list:
+    """'KEY.PATH=VALUE' strings: one string (one override), a list of them, or None."""
+    if overrides is None:
+        return []
+    if isinstance(overrides, str):
+        return [overrides]
+    if not (isinstance(overrides, (list, tuple)) and all(isinstance(o, str) for o in overrides)):
+        raise InputError(f"overrides: give 'KEY.PATH=VALUE' strings (one, or a list of them), not {overrides!r}")
+    return list(overrides)
+
+
+def _panorama(panorama) -> None:
+    if not isinstance(panorama, Panorama):
+        raise InputError(f"panorama: give an iblbake.Panorama (iblbake.load_panorama(path), or "
+                         f"iblbake.Panorama.from_pixels(array)), not {_kind(panorama)}")
+
+
+def _vectors(name: str, value):
+    """An array (..., 3) of finite numbers, float64."""
+    import numpy as np
+    try:
+        a = np.asarray(value, np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"{name}: give unit vectors, an array (..., 3) of numbers, not {_kind(value)}") from None
+    if a.ndim == 0 or a.shape[-1] != 3:
+        raise InputError(f"{name}: give unit vectors, an array (..., 3) of numbers, not shape {a.shape}")
+    if not np.isfinite(a).all():
+        raise InputError(f"{name}: holds non-finite values; give finite unit vectors")
+    return a
 
 
 # ----------------------------------------------------------------------------------- panoramas
@@ -96,7 +206,17 @@ class Panorama:
 
         from iblbake.io import images
 
-        rgb = np.ascontiguousarray(pixels, dtype=np.float32)
+        _choice("nonfinite", nonfinite, ("error", "zero", "clamp"))
+        _choice("negative", negative, ("keep", "clamp", "error"))
+        if not isinstance(name, str):
+            raise InputError(f"name: give a string (what messages call the panorama), not {_kind(name)}")
+        if _is_path(pixels):
+            raise InputError("pixels: give an array (H, W, 3) of linear RGB radiance, not a path "
+                             "(iblbake.load_panorama(path) reads a file)")
+        try:
+            rgb = np.ascontiguousarray(pixels, dtype=np.float32)
+        except (TypeError, ValueError):
+            raise InputError(f"pixels: give an array (H, W, 3) of linear RGB radiance, not {_kind(pixels)}") from None
         if rgb.ndim != 3 or rgb.shape[2] != 3 or 0 in rgb.shape:
             raise InputError(f"{name}: a panorama is an array (H, W, 3), not {rgb.shape}")
         info = images.ImageInfo(path=name, width=rgb.shape[1], height=rgb.shape[0], channels_in=("R", "G", "B"),
@@ -135,21 +255,29 @@ def load_panorama(path, primaries: str = "auto", *, layout: str = "auto", nonfin
     nonfinite: NaN/Inf texels 'error' (the default), 'zero' or 'clamp'.
     negative: negative texels 'keep' (counted), 'clamp' to 0, or 'error'.
     transfer: how 8/16-bit texels decode: 'auto', 'srgb' or 'linear'.
-    max_pixels: refuse larger images before decoding (default $IBLBAKE_MAX_PIXELS or 8192^2).
-    names: what error messages call each policy (the command line passes its flags).
+    max_pixels: refuse larger images before decoding (a whole number >= 1; default
+        $IBLBAKE_MAX_PIXELS or 8192^2).
+    names: what error messages call each argument (by default its name; the command line passes
+        its flags).
 
     Raises InputError naming the file and what to do.
     """
     from iblbake.bake import inputs
 
+    _path("path", path, "a panorama file's")
     _choice("layout", layout, inputs.LAYOUTS)
     _choice("primaries", primaries, ("auto", "keep", "convert"))
     _choice("nonfinite", nonfinite, ("error", "zero", "clamp"))
     _choice("negative", negative, ("keep", "clamp", "error"))
     _choice("transfer", transfer, ("auto", "srgb", "linear"))
+    if max_pixels is not None:
+        max_pixels = _count("max_pixels", max_pixels)
+    said = {k: _name(names, k) for k in ("max_pixels", "nonfinite", "negative", "transfer", "primaries", "layout")}
     t0 = time.perf_counter()
     pixels, info = inputs.read_environment(path, layout=layout, max_pixels=max_pixels, nonfinite=nonfinite,
-                                           negative=negative, transfer=transfer, primaries=primaries, names=names)
+                                           negative=negative, transfer=transfer, primaries=primaries, names=said,
+                                           layout_name=said["layout"],
+                                           layout_hint=_name(names, "layout_hint", said["layout"]))
     return Panorama(pixels, info.layout, _colour_space(info, primaries), str(path), info,
                     _policies(nonfinite, negative, transfer, primaries, layout),
                     time.perf_counter() - t0)
@@ -183,22 +311,38 @@ class SH:
     error: dict | None
     document: dict
 
+    def _nine(self, what: str) -> None:
+        """The engines' formats hold at most 3 bands (9 coefficients)."""
+        if self.bands > 3:
+            raise InputError(f"{what} holds at most 3 bands (9 coefficients), this SH has {self.bands}; "
+                             f"bake it with iblbake.sh(panorama, bands=3) or fewer")
+
     def to_filament(self):
         """(9, 3) Filament IndirectLight irradiance (cmgen's sh.txt): E_k times Filament's basis
-        constants / pi; its shader's polynomial gives E(n) / pi. At most 3 bands."""
+        constants / pi; its shader's polynomial gives E(n) / pi. Fewer bands padded with zeros
+        (Filament's irradiance(bands, sh) reads the first bands^2 rows). At most 3 bands."""
+        import numpy as np
+
         from iblbake.bake import sh as shbake
-        return shbake.filament_coefficients(self.document)
+        self._nine("to_filament: Filament's irradiance")
+        e = shbake.filament_coefficients(self.document)
+        out = np.zeros((9, 3))
+        out[:len(e)] = e
+        return out
 
     def to_threejs(self):
         """(9, 3) three.js SphericalHarmonics3 (a LightProbe's sh): the radiance coefficients
         L_k, fewer bands padded with zeros. At most 3 bands."""
         from iblbake.bake import sh as shbake
+        self._nine("to_threejs: three.js's SphericalHarmonics3")
         return shbake.threejs_coefficients(self.document)
 
     def to_gltf(self):
         """(9, 3) EXT_lights_image_based irradianceCoefficients as Babylon.js reads them: E_k
-        with the Condon-Shortley signs and the loader's x mirror. At most 3 bands."""
+        with the Condon-Shortley signs and the loader's x mirror, fewer bands padded with zeros.
+        At most 3 bands."""
         from iblbake.bake import sh as shbake
+        self._nine("to_gltf: EXT_lights_image_based")
         return shbake.gltf_coefficients(self.document)
 
     def to_glsl(self) -> str:
@@ -211,11 +355,14 @@ class SH:
         threejs, gltf or glsl (docs/manual.md 'SH for engines')."""
         from iblbake.bake import sh as shbake
         _choice("format", fmt, shbake.FORMATS)
+        if fmt in ("filament", "threejs", "gltf"):
+            self._nine(f"format {fmt}")
         return shbake.export(self.document, fmt)
 
 
 def sh(panorama: Panorama, bands: int = 3, window: str | None = None, *, rotate_y: float = 0.0,
-       intensity: float = 1.0, backend: str = "auto", device: str | None = None, error: bool = True) -> SH:
+       intensity: float = 1.0, backend: str = "auto", device: str | None = None, error: bool = True,
+       names: dict | None = None) -> SH:
     """Project a panorama onto spherical harmonics (exact texel integrals, float64) and bake the
     irradiance coefficients.
 
@@ -227,29 +374,31 @@ def sh(panorama: Panorama, bands: int = 3, window: str | None = None, *, rotate_
         (numpy where that is quicker than starting OpenCL).
     device: an OpenCL device spec ('gpu', 'cpu', 'gpu:N', 'P:D' or part of a name).
     error: measure the SH irradiance against the exact irradiance (SH.error).
+    names: what error messages call each argument (by default its name; the command line passes
+        its flags).
 
     Returns an SH (the coefficients in the convention its docstring gives, with converters
     to the engine formats).
     """
-    import math
-
     import numpy as np
 
     from iblbake.bake import sh as shbake
     from iblbake.core import sh as core_sh
 
-    window = window or "none"
-    bands = int(bands) if _whole(bands) else bands
-    if not (_whole(bands) and 1 <= bands <= core_sh.MAX_BANDS):
-        raise InputError(f"bands {bands!r}: use 1 to {core_sh.MAX_BANDS}")
+    _names(names)
+    _panorama(panorama)
+    bands = _count("bands", bands, 1, core_sh.MAX_BANDS)
+    window = "none" if window is None else window
     _choice("window", window, core_sh.WINDOWS)
     _choice("backend", backend, ("auto", *shbake.BACKENDS))
-    if not (math.isfinite(rotate_y) and math.isfinite(intensity) and intensity >= 0):
-        raise InputError(f"rotate_y {rotate_y}, intensity {intensity}: give finite numbers, intensity >= 0")
+    rotate_y = _real("rotate_y", rotate_y)
+    intensity = _real("intensity", intensity, 0)
+    error = _flag("error", error)
+    _device(device)
     t_start = time.perf_counter()
     info = panorama.info
     backend = shbake.choose_backend(backend, panorama.width, panorama.height, bands)
-    rt = _runtime(device) if backend == "opencl" else None
+    rt = _runtime(device, names) if backend == "opencl" else None
     device_label = rt.device_label if rt else "numpy (float64, host)"
     coeffs, project_s = shbake.project(panorama.pixels, bands, backend, rt, rotate_y)
     coeffs = coeffs * intensity
@@ -298,10 +447,8 @@ class Basis:
 
     def irradiance(self, normals):
         """E(n) = int L max(0, n.w) dw at unit normals (..., 3): (..., 3), clamped at 0."""
-        import numpy as np
-
         from iblbake.core import bases
-        return bases.BASES[self.name].irradiance(self.coefficients, np.asarray(normals, np.float64), self.options)
+        return bases.BASES[self.name].irradiance(self.coefficients, _vectors("normals", normals), self.options)
 
     def specular_radiance(self, normals, views, roughness):
         """The radiance along the warped GGX lobe (the split sum's first factor from the basis:
@@ -314,8 +461,19 @@ class Basis:
         from iblbake.core.bases import common
         if not self.specular:
             raise InputError(f"basis {self.name} carries no specular lobe: use one of {', '.join(bases.SPECULAR)}")
-        n, v = np.asarray(normals, np.float64), np.asarray(views, np.float64)
-        alpha = np.broadcast_to(np.asarray(roughness, np.float64) ** 2, n.shape[:-1])
+        n, v = _vectors("normals", normals), _vectors("views", views)
+        if n.shape != v.shape:
+            raise InputError(f"views: shape {v.shape}, normals {n.shape}: give one view a normal")
+        try:
+            if isinstance(roughness, str):
+                raise TypeError
+            r = np.asarray(roughness, np.float64)
+            alpha = np.broadcast_to(r ** 2, n.shape[:-1])
+        except (TypeError, ValueError):
+            raise InputError(f"roughness: give a number or an array {n.shape[:-1]} of numbers 0 to 1, "
+                             f"not {roughness!r}"[:300]) from None
+        if not ((r >= 0) & (r <= 1)).all():
+            raise InputError("roughness: give perceptual roughness 0 to 1")
         nov = np.clip((n * v).sum(-1), 0.0, 1.0)
         return bases.specular_radiance(self.name, self.coefficients, common.lobe_axis(n, v, alpha),
                                        common.warp_sharpness(alpha, nov), self.options)
@@ -342,11 +500,10 @@ def basis(panorama: Panorama, name: str, *, intensity: float = 1.0, error: bool 
         haar_coefficients 16 | 32 | 64 | 128 | 256); the schema's defaults where left out.
     intensity: a scale of the radiance (>= 0). error: measure the irradiance (Basis.error).
     """
-    import math
-
     from iblbake.bake import bases as bakebases
     from iblbake.core import bases
 
+    _panorama(panorama)
     names = tuple(n for n in bases.BASES if n != "sh")
     if name == "sh":
         raise InputError("basis sh: spherical harmonics are iblbake.sh (bands, window)")
@@ -359,11 +516,13 @@ def basis(panorama: Panorama, name: str, *, intensity: float = 1.0, error: bool 
     opts = {}
     for k, (choices, default, _doc) in m.OPTIONS.items():
         value = options.get(k, default)
-        if value not in choices or isinstance(value, bool):
+        # a count is a whole number (9, not 9.0, which would label the basis "SG9.0"), a fit a string
+        fits = _whole(value) if all(_whole(c) for c in choices) else isinstance(value, str)
+        if not (fits and value in choices):
             raise InputError(f"{k} {value!r}: use one of {', '.join(map(str, choices))}")
         opts[k] = int(value) if _whole(value) else value
-    if not (math.isfinite(intensity) and intensity >= 0):
-        raise InputError(f"intensity {intensity}: give a finite number >= 0")
+    intensity = _real("intensity", intensity, 0)
+    error = _flag("error", error)
     t0 = time.perf_counter()
     coeffs = m.project(panorama.pixels[..., :3], opts)
     coeffs[:, :3] *= intensity
@@ -416,14 +575,14 @@ def prefilter(panorama: Panorama, size: int | None = None, levels: int | None = 
     from iblbake.bake import layouts
     from iblbake.bake import mips as mipsbake
 
+    _panorama(panorama)
     _choice("layout", layout, tuple(layouts.LAYOUT_IDS))
     _choice("method", method, ("auto", "spectral", "convolve", "fis"))
     _choice("backend", backend, ("opencl", "numpy"))
-    for name, v, least in (("size", size, 1), ("levels", levels, 1), ("min_size", min_size, 1),
-                           ("samples", samples, 1)):
-        if v is not None and not (_whole(v) and v >= least):
-            raise InputError(f"{name} {v!r}: give a whole number >= {least}")
-    size, levels, min_size, samples = (None if v is None else int(v) for v in (size, levels, min_size, samples))
+    size, levels = (None if v is None else _count(name, v) for name, v in (("size", size), ("levels", levels)))
+    min_size, samples = _count("min_size", min_size), _count("samples", samples)
+    _device(device)
+    _callback("progress", progress)
     baker = mipsbake.Baker(backend, rt=_runtime(device) if backend == "opencl" else None)
 
     def options(s):
@@ -446,33 +605,55 @@ def dfg(size: int = 128, *, samples: int = 4096, multiscatter: bool = False, bac
     from iblbake.bake import mips as mipsbake
 
     _choice("backend", backend, ("opencl", "numpy"))
-    if not (_whole(size) and 2 <= size <= 4096):
-        raise InputError(f"size {size!r}: use 2 to 4096")
-    if not (_whole(samples) and samples >= 1):
-        raise InputError(f"samples {samples!r}: give a whole number >= 1")
+    size, samples = _count("size", size, 2, 4096), _count("samples", samples)
+    multiscatter = _flag("multiscatter", multiscatter)
+    _device(device)
     baker = mipsbake.Baker(backend, rt=_runtime(device) if backend == "opencl" else None)
-    return mipsbake.dfg_table(baker, int(size), int(samples), bool(multiscatter))
+    return mipsbake.dfg_table(baker, size, samples, multiscatter)
 
 
 # ------------------------------------------------------------------------------ scenes, frames
 
-def load_scene(path_or_dict, overrides=(), *, folder=".", outputs=None):
+def load_scene(path_or_dict, overrides=(), *, folder=".", outputs=None, names: dict | None = None):
     """A validated scene (iblbake.Scene: .data, the scene with every default filled and every path
     absolute; `iblbake render --help-schema` lists the keys).
 
-    path_or_dict: a scene YAML file, or a mapping of what one holds (its relative paths resolve
-        in `folder`).
+    path_or_dict: a scene YAML file, a mapping of what one holds (its relative paths resolve in
+        `folder`; numpy numbers and arrays, tuples and path objects read as the numbers, lists and
+        strings a file holds), or a Scene (validated again with the overrides and outputs given).
     overrides: 'key.path=value' strings applied before validation (values parse as YAML), as
-        `iblbake render --set`.
-    outputs: frame paths that replace output.frame (as `render -o`).
+        `iblbake render --set`: a list of them, or one string.
+    outputs: frame paths that replace output.frame (as `render -o`): a list, or one path.
+    names: what error messages call each argument (by default its name; the command line passes
+        its flags).
 
     Raises InputError naming the file, line and dotted key (the closest valid key for a typo).
     """
+    import os
+    from collections.abc import Mapping
+
     from iblbake.scene import load as scene_load
 
-    if isinstance(path_or_dict, dict):
-        return scene_load.load_data(path_or_dict, folder, overrides, outputs)
-    return scene_load.load(path_or_dict, overrides, outputs)
+    _names(names)
+    overrides = _overrides(overrides)
+    if outputs is not None:
+        if _is_path(outputs):
+            outputs = [outputs]
+        if not (isinstance(outputs, (list, tuple)) and all(_is_path(o) for o in outputs)):
+            raise InputError(f"outputs: give frame paths (.png or .exr; one, or a list of them), not {outputs!r}")
+        outputs = [os.fspath(o) for o in outputs]
+    said = _name(names, "overrides")
+    if isinstance(path_or_dict, scene_load.Scene):
+        if not overrides and outputs is None:
+            return path_or_dict
+        return scene_load.load_any(path_or_dict, overrides, outputs, override_name=said)
+    if isinstance(path_or_dict, Mapping):
+        _path("folder", folder, "a folder's")
+        return scene_load.load_data(dict(path_or_dict), folder, overrides, outputs, override_name=said)
+    if not _is_path(path_or_dict):
+        raise InputError(f"scene: give a scene file's path, a mapping of what one holds, or an iblbake.Scene, "
+                         f"not {_kind(path_or_dict)}")
+    return scene_load.load(path_or_dict, overrides, outputs, override_name=said)
 
 
 class Renderer:
@@ -483,12 +664,18 @@ class Renderer:
     device: an OpenCL device spec (default $IBLBAKE_DEVICE, else the first working GPU, else
         CPU). cache: the bake cache folder (default $IBLBAKE_CACHE, else the per-user cache).
     reuse: keep the last frame on the device for the next (a series of frames of one size).
+    names: what error messages call each argument (by default its name; the command line passes
+        its flags).
     """
 
-    def __init__(self, device: str | None = None, cache=None, reuse: bool = True):
+    def __init__(self, device: str | None = None, cache=None, reuse: bool = True, *, names: dict | None = None):
         from iblbake.render import Bakes, Reuse
 
-        self.runtime = _runtime(device)
+        _device(device)
+        cache = _cache(cache)
+        reuse = _flag("reuse", reuse)
+        self._names = _names(names)
+        self.runtime = _runtime(device, names)
         self.bakes = Bakes(cache)
         self.bakes.runtime = self.runtime
         self._reuse = Reuse() if reuse else None
@@ -503,19 +690,21 @@ class Renderer:
         (path tracing, probe rays) done."""
         from iblbake.render import frame as render_frame
 
-        return render_frame.render(_scene(scene), runtime=self.runtime, cache=self.bakes, reuse=self._reuse,
-                                   warn=warn, progress=progress)
+        _callback("warn", warn)
+        _callback("progress", progress)
+        return render_frame.render(load_scene(scene, names=self._names), runtime=self.runtime, cache=self.bakes,
+                                   reuse=self._reuse, warn=warn, progress=progress)
 
 
-def _scene(scene):
-    from iblbake.scene.load import Scene
-    return scene if isinstance(scene, Scene) else load_scene(scene)
-
-
-def render(scene, device: str | None = None, *, cache=None, warn=None, progress=None) -> Frame:
+def render(scene, device: str | None = None, *, cache=None, warn=None, progress=None,
+           names: dict | None = None) -> Frame:
     """Render a scene once (a Scene, a scene file or a mapping; see load_scene) on `device` into a
-    Frame (HDR array, tone-mapped array, report). A series of frames: use a Renderer."""
-    return Renderer(device, cache, reuse=False).render(scene, warn=warn, progress=progress)
+    Frame (HDR array, tone-mapped array, report). A series of frames: use a Renderer. names: what
+    error messages call each argument (by default its name; the command line passes its flags)."""
+    _callback("warn", warn)
+    _callback("progress", progress)
+    sc = load_scene(scene, names=names)            # a bad scene is said before the device starts
+    return Renderer(device, cache, reuse=False, names=names).render(sc, warn=warn, progress=progress)
 
 
 # ----------------------------------------------------------------------------------- probes
@@ -524,9 +713,10 @@ def render(scene, device: str | None = None, *, cache=None, warn=None, progress=
 class ProbeVolume:
     """A scene's irradiance probe volume (DDGI, RTXGI's layouts; docs/manual.md 'iblbake probes').
 
-    irradiance: float32, the octahedral atlas (rows, columns, 3) or, for probes.irradiance: sh,
-        (probes, 9, 3) SH irradiance coefficients (SH's convention), or for a directional basis
-        (probes, floats, 3) its radiance coefficients (manifest['basis'] says its layout).
+    irradiance: float32 (what the volume's files hold), the octahedral atlas (rows, columns, 3)
+        or, for probes.irradiance: sh, (probes, 9, 3) SH irradiance coefficients (SH's
+        convention), or for a directional basis (probes, floats, 3) its radiance coefficients
+        (manifest['basis'] says its layout).
     distance: float32 atlas of the ray distances' moments (R: mean distance, G: its square).
     data: float32 (probes, 4): each probe's offset from its grid position in world units, and
         its state (0 active, 1 inactive).
@@ -557,22 +747,33 @@ class ProbeVolume:
         return probes.glsl(self.volume, self.manifest)
 
 
-def bake_probes(scene, device: str | None = None, *, cache=None, warn=None, progress=None) -> ProbeVolume:
-    """Bake a scene's irradiance probe volume (its `probes:` section) by tracing paths from every
-    probe, and each reflection probe's capture; cached by content in `cache` (as render)."""
+def bake_probes(scene, device: str | None = None, *, cache=None, warn=None, progress=None,
+                names: dict | None = None) -> ProbeVolume:
+    """Bake a scene's irradiance probe volume (its `probes:` section; a scene without one gets
+    the section's defaults: 8 probes along the longest axis of an automatic grid over the scene's
+    bounds, 1024 rays each, octahedral irradiance) by tracing paths from every probe, and each
+    reflection probe's capture; cached by content in `cache` (as render). names: what error
+    messages call each argument (by default its name; the command line passes its flags)."""
+    import copy
+    import dataclasses
+
+    import numpy as np
+
     from iblbake.render import Bakes, probes
     from iblbake.render.frame import scene_context
     from iblbake.render.plan import plan
 
-    import copy
-    import dataclasses
-
-    sc = _scene(scene)
+    _names(names)
+    _device(device)
+    cache = _cache(cache)
+    _callback("warn", warn)
+    _callback("progress", progress)
+    sc = load_scene(scene, names=names)
     sc = dataclasses.replace(sc, data=copy.deepcopy(sc.data))       # the caller's scene is left as it was
     sc.data["effects"]["diffuse"] = "probes"            # what the volume is for: its plan reads the panorama
     if not sc.data["objects"]:
         raise InputError(f"{sc.source}: the scene has no objects; probes light objects (add some)")
-    rt = _runtime(device)
+    rt = _runtime(device, names)
     bakes = Bakes(cache)
     bakes.runtime = rt
     ctx = scene_context(sc, plan(sc), rt, bakes, warn, progress)
@@ -585,8 +786,9 @@ def bake_probes(scene, device: str | None = None, *, cache=None, warn=None, prog
                                            "radiance of the scene, A the share of the texel the scene covers (the "
                                            "rest is the distant panorama along the reflected ray)"}
                                 for k, c in enumerate(reflections)]
-    return ProbeVolume(vol["irradiance"], vol["distance"], vol["data"], man["grid"], man["states"],
-                       man["representation"], man, list(reflections), cached, extra["entry"], rt.device_label, vol)
+    f32 = [np.asarray(vol[k], np.float32) for k in ("irradiance", "distance", "data")]     # as the files hold them
+    return ProbeVolume(*f32, man["grid"], man["states"], man["representation"], man, list(reflections), cached,
+                       extra["entry"], rt.device_label, vol)
 
 
 # --------------------------------------------------------------------------------- accuracy
@@ -620,57 +822,97 @@ class Accuracy:
 def accuracy(scene, ladder=None, *, overrides=(), max_side: int = 320, repeats: int = 3,
              target_noise: float = 0.003, max_samples: int = 4096, visibility: bool = True, bounces=None,
              flip: bool = True, cache=None, device: str | None = None, jobs: int = 1, devices=None, warn=None,
-             progress=None, before_run=None) -> Accuracy:
+             progress=None, before_run=None, names: dict | None = None) -> Accuracy:
     """Render a scene's converged reference per lighting term (diffuse, specular: visibility and
     every bounce, two seeds, its noise measured), then a ladder of approximations of each term,
     each timed (median of `repeats` renders) and measured over the object pixels.
 
-    scene: a scene file (the study loads it at `max_side` with each rung's values).
+    scene: a scene file, a mapping or a Scene, as load_scene takes (the study loads it at
+        `max_side` with each rung's values); overrides: as load_scene's.
     ladder: None (the default ladder for the scene and device), 'realtime' (the real-time modes
-        as shipped) or a ladder file ({rungs: [AXIS, ...]} in the sweep syntax).
+        as shipped), 'bases', 'probe_bases' or a ladder file ({rungs: [AXIS, ...]} in the sweep
+        syntax).
+    max_side: 8 to 8192. repeats: 1 to 100.
     bounces: the reference's bounces: 'unbounded' or a count (1: the direct light alone). None is
         unbounded; a value given, other than 1, is warned about where no light passes between
         the scene's surfaces (the reference is then the direct light).
-    target_noise, max_samples: the reference's stopping rule per seed.
+    target_noise (>= 0), max_samples (1 to 2^20): the reference's stopping rule per seed.
     jobs, devices: render the reference seeds in `jobs` worker processes, one device spec each
         in turn (a list), into the cache.
     warn(message): what the study says (a reference stopped short, rungs left out).
     progress(): called as each reference seed and rung is done.
     before_run(study, rungs, reads): called once every rung's scene has validated and before
         anything renders; reads are (what, path) of every file the study reads.
+    names: what messages call each argument (by default its name; the command line passes its
+        flags).
     """
+    import os
+
     from iblbake.render import Bakes
     from iblbake.scene import load as scene_load
+    from iblbake.scene.schema import MAX_BOUNCES
     from iblbake.study import accuracy as acc, ladder as ladders
+
+    # every argument is checked before the scene loads and anything renders
+    _names(names)
+    if not (ladder is None or _is_path(ladder)):
+        raise InputError(f"ladder: give None, one of {', '.join(ladders.LADDERS)} or a ladder file's path, "
+                         f"not {_kind(ladder)}")
+    overrides = _overrides(overrides)
+    max_side, repeats = _count("max_side", max_side, 8, 8192), _count("repeats", repeats, 1, 100)
+    target_noise = _real("target_noise", target_noise, 0)
+    max_samples = _count("max_samples", max_samples, 1, 1 << 20)
+    visibility, flip = _flag("visibility", visibility), _flag("flip", flip)
+    if not (bounces is None or bounces == "unbounded" or (_whole(bounces) and 1 <= bounces <= MAX_BOUNCES)):
+        raise InputError(f"bounces {bounces!r}: use None or 'unbounded', or a count from 1 to {MAX_BOUNCES}")
+    bounces = int(bounces) if _whole(bounces) else bounces
+    cache = _cache(cache)
+    _device(device)
+    jobs = _count("jobs", jobs)
+    if not (devices is None or (isinstance(devices, (list, tuple)) and all(isinstance(d, str) for d in devices))):
+        raise InputError(f"devices: give a list of OpenCL device specs (one a worker, in turn), or None, "
+                         f"not {devices!r}")
+    for name, f in (("warn", warn), ("progress", progress), ("before_run", before_run)):
+        _callback(name, f)
+    said = {k: _name(names, k) for k in ("bounces", "max_samples", "max_side", "overrides", "ladder")}
+    no_visibility = _name(names, "visibility", "visibility False")
 
     say = warn or (lambda _m: None)
     given = bounces is not None
     bounces = "unbounded" if bounces is None else bounces
     settings = acc.Settings(max_side=max_side, repeats=repeats, target_noise=target_noise, max_samples=max_samples,
                             flip=flip, visibility=visibility, bounces=bounces)
-    rt = _runtime(device)
-    study = acc.Study(str(scene), overrides, settings, runtime=rt, bakes=Bakes(cache), warn=warn)
+    # a file is loaded by the study itself (each rung's values over the file's); a mapping or a
+    # Scene is validated here with the overrides, and the study validates it again with each
+    # rung's values. The overrides are checked here either way, said as this function names them.
+    sc = load_scene(scene, overrides, names=names)
+    from_file = _is_path(scene)
+    rt = _runtime(device, names)
+    study = acc.Study(str(scene) if from_file else sc, overrides if from_file else (), settings, runtime=rt,
+                      bakes=Bakes(cache), warn=warn, names={k: said[k] for k in ("max_side", "overrides")})
     if given and bounces != 1 and not study.paths:
-        why = ("with --no-visibility every object is lit as if alone, so no light passes between them"
+        why = (f"with {no_visibility} every object is lit as if alone, so no light passes between them"
                if not visibility else "no light passes between this scene's surfaces")
-        say(f"--bounces {bounces}: {why}; the reference is the direct light (bounces 1)")
+        say(f"{said['bounces']} {bounces}: {why}; the reference is the direct light (bounces 1)")
     ladder_file = None
     if ladder in ladders.LADDERS:
         rungs = ladders.LADDERS[ladder](study.scene, study.fx)
     elif ladder:
-        ladder_file = str(ladder)
-        rungs = ladders.ladder_from_file(ladder_file, study.scene, study.fx)
+        ladder_file = os.fspath(ladder)
+        rungs = ladders.ladder_from_file(ladder_file, study.scene, study.fx, flag=said["ladder"])
     else:
         rungs = ladders.default_ladder(study.scene, study.fx, rt.info.kind, paths=study.paths)
         over = [r for r in rungs if dict(r.values).get("effects.reference.max_samples", 0) > max_samples]
         if over:                     # measured against a reference of fewer samples: their error is its noise
-            say(f"left out {len(over)} rungs with more samples than the reference's --max-samples "
+            say(f"left out {len(over)} rungs with more samples than the reference's {said['max_samples']} "
                 f"{max_samples}: {', '.join(r.label for r in over)}")
             rungs = [r for r in rungs if r not in over]
     rungs = [ladders.configured_rung(study.scene, t) for t in study.terms] + rungs
     reads = scene_load.named_input_files(study.scene) + ([("the ladder", ladder_file)] if ladder_file else [])
     for r in rungs:                  # every rung's scene validates before anything renders
         reads += scene_load.named_input_files(study.load(study.rung_values(r), origin=f"ladder rung {r.label!r}"))
+    if not os.path.isfile(sc.source):    # a mapping: no scene file is read
+        reads = [(what, path) for what, path in reads if what != "the scene file"]
     if before_run:
         before_run(study, rungs, reads)
     spread = None
@@ -687,17 +929,17 @@ def accuracy(scene, ladder=None, *, overrides=(), max_side: int = 320, repeats: 
                 f"{100 * r['noise']:.2f}% (target {100 * target_noise:g}% per seed): errors below about twice "
                 f"that are its noise. Slow convergence on a path-traced reference is light reaching a "
                 f"surface by a mirror or a glossy lobe from a small bright source (a caustic), which "
-                f"only BSDF sampling finds: raise --max-samples, or --bounces 1 for the direct light")
+                f"only BSDF sampling finds: raise {said['max_samples']}, or {said['bounces']} 1 for the direct light")
     configured = study.configured_frame()
     front = acc.frontiers(rows)
     high = acc.above_reference(rows)
     if high:
         say(f"{len(high)} {'rungs have' if len(high) > 1 else 'rung has'} more samples than the reference reached "
             f"({', '.join(r['label'] for r in high)}): their error is the reference's noise; kept off "
-            f"the frontier (raise --max-samples above theirs to measure them)")
+            f"the frontier (raise {said['max_samples']} above theirs to measure them)")
     records = [{**r, "pareto": r["label"] in front.get(r["term"], [])} for r in rows]
     summary = {
-        "scene": str(scene), "device": rt.device_label,
+        "scene": str(scene) if from_file else sc.source, "device": rt.device_label,
         "resolution": acc.study_resolution(study.scene, max_side), "repeats": repeats,
         "reference": {t: {k: v for k, v in refs[t].items() if k not in ("hdr", "mask")} | {
             "stopping_rule": f"each seed: relative standard error <= {target_noise} or {max_samples} samples",

@@ -176,3 +176,39 @@ def test_a_renderer_sees_a_panorama_rewritten_in_place(tmp_path):
     again = renderer.render(iblbake.load_scene(scene)).hdr
     fresh = iblbake.render(iblbake.load_scene(scene), cache=tmp_path / "cache").hdr
     assert not np.allclose(again, first) and np.array_equal(again, fresh)
+
+
+def test_dir_and_help_show_the_api_alone():
+    """dir(iblbake) listed the package's machinery (sys, types, the errors submodule) and
+    help(iblbake) listed __dir__ and __getattr__ as its first FUNCTIONS."""
+    code = ("import iblbake, iblbake.errors, iblbake.render.frame\n"
+            "print(sorted(n for n in dir(iblbake) if not n.startswith('__')))\n"
+            "help(iblbake)")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                       env={"PAGER": "cat", "TERM": "dumb", "PATH": ""})
+    assert p.returncode == 0, p.stderr
+    listed, help_text = p.stdout.split("\n", 1)
+    assert eval(listed) == sorted(iblbake.__all__), listed
+    functions = help_text.split("\nFUNCTIONS\n", 1)[1].split("\nDATA\n", 1)[0]
+    assert "__getattr__" not in functions and "__dir__" not in functions, functions[:300]
+    assert iblbake.errors.InputError is iblbake.InputError       # the submodule is still reachable
+
+
+def test_the_command_line_says_its_flags_and_the_api_its_arguments(tmp_path):
+    """One message, two wordings: the command line passes its flags as `names` (its messages as
+    they were), the API says its arguments' names (it said --max-pixels, --input-layout, --set)."""
+    env = write_exr(tmp_path / "env.exr", np.ones((8, 16, 3)))
+    scene = tmp_path / "scene.yaml"
+    scene.write_text(f"camera: {{resolution: [8, 8]}}\nenvironment: {{path: {env}}}\n")
+    for argv, call, flag, argument in (
+            (["sh", env, "--max-pixels", "10"], lambda: iblbake.load_panorama(env, max_pixels=10),
+             "raise it with --max-pixels or", "raise it with max_pixels or"),
+            (["sh", env, "--input-layout", "hcross"], lambda: iblbake.load_panorama(env, layout="hcross"),
+             "give --input-layout (environment.layout) for what it is", "give layout for what it is"),
+            (["deps", scene, "--set", "effects"], lambda: iblbake.load_scene(scene, "effects"),
+             "--set 'effects': expected KEY.PATH=VALUE", "overrides 'effects': expected KEY.PATH=VALUE")):
+        with pytest.raises(iblbake.InputError) as e:
+            call()
+        p = run_cli(*argv)
+        assert p.returncode == e.value.exit_code and flag in p.stderr, p.stderr
+        assert str(e.value) == p.stderr.strip().removeprefix("Error: ").replace(flag, argument), (str(e.value), p.stderr)

@@ -46,3 +46,22 @@ def test_every_public_function_has_an_example():
     shown = {name for _, code in EXAMPLES for name in re.findall(r"iblbake\.(\w+)\b", code)}
     functions = {n for n in iblbake.__all__ if n[0].islower()}
     assert functions <= shown, f"no example in docs/api.md calls {sorted(functions - shown)}"
+
+
+@pytest.mark.parametrize("code", [pytest.param(code, id=f"{i}-{_title(code)}")
+                                  for i, (tag, code) in enumerate(EXAMPLES)
+                                  if tag != "slow" and re.search(r"print\(.*#", code)])
+def test_what_an_example_says_it_prints_is_what_it_prints(code, tmp_path, monkeypatch):
+    """A `print(...)  # TEXT` comment shows what the line prints ('...' where it leaves some out):
+    load_scene's showed `did you mean diffuse?` where the message says `did you mean 'diffuse'?`."""
+    monkeypatch.chdir(tmp_path)
+    namespace = {"__name__": "__docs__"}
+    out = io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()):
+        exec(compile(SETUP, "docs/api.md setup", "exec"), namespace)
+    with contextlib.redirect_stdout(out):
+        exec(compile(code, f"docs/api.md {_title(code)} example", "exec"), namespace)
+    shown = [m.group(1) for m in re.finditer(r"print\(.*#\s*(.*)$", code, re.M)]
+    for comment in shown:
+        for part in filter(None, (p.strip() for p in comment.split("..."))):
+            assert part in out.getvalue(), f"the docs say {comment!r}; it printed {out.getvalue()!r}"

@@ -104,7 +104,7 @@ def get_or_build(root: Path, key: str, build: Callable[[Path], dict], *,
     try:
         root.mkdir(parents=True, exist_ok=True)
     except OSError as e:
-        raise IblbakeError(f"{root}: cannot create the cache folder ({e.strerror})") from None
+        raise InputError(f"{root}: cannot create the cache folder ({e.strerror})") from None
     entry = root / key
     manifest = verify(entry)
     if manifest is not None:

@@ -26,6 +26,9 @@ from iblbake.io import images, ktx2, reads
 
 LAYOUTS = ("auto", "equirect", "hcross", "vcross", "hstrip", "vstrip", "faces", "ktx2")
 FACE_NAMES = ("px", "nx", "py", "ny", "pz", "nz")
+# what messages call the layout setting where the caller does not say: the commands' flag, and
+# in the hint to set it, the scene key too (both set it)
+LAYOUT_NAME, LAYOUT_HINT = "--input-layout", "--input-layout (environment.layout)"
 # (column, row) of each face in a cross, in face-size units; vcross's -Z is turned 180 degrees
 CROSS = {"hcross": [(2, 1), (0, 1), (1, 0), (1, 2), (1, 1), (3, 1)],
          "vcross": [(2, 1), (0, 1), (1, 0), (1, 2), (1, 1), (1, 3)]}
@@ -49,13 +52,13 @@ def detect(path: str, w: int, h: int) -> str:
     return "equirect"
 
 
-def faces_of(image: np.ndarray, layout: str, path: str) -> np.ndarray:
+def faces_of(image: np.ndarray, layout: str, path: str, layout_hint: str = LAYOUT_HINT) -> np.ndarray:
     """The six faces (6, s, s, 3) of a cross or strip image."""
     h, w = image.shape[:2]
     cols, rows = {"hcross": (4, 3), "vcross": (3, 4), "hstrip": (6, 1), "vstrip": (1, 6)}[layout]
     if w % cols or h % rows or w // cols != h // rows or w == 0:
         raise InputError(f"{path}: {w}x{h} is not a {layout} of square faces ({cols} x {rows} of them); "
-                         f"give --input-layout (environment.layout) for what it is")
+                         f"give {layout_hint} for what it is")
     s = w // cols
     if layout in CROSS:
         out = [image[r * s:(r + 1) * s, c * s:(c + 1) * s] for c, r in CROSS[layout]]
@@ -68,17 +71,20 @@ def faces_of(image: np.ndarray, layout: str, path: str) -> np.ndarray:
     return np.stack(out).astype(np.float32)
 
 
-def read_environment(path, *, layout: str = "auto", names: dict | None = None, runtime=None, **policies):
+def read_environment(path, *, layout: str = "auto", names: dict | None = None, runtime=None,
+                     layout_name: str = LAYOUT_NAME, layout_hint: str = LAYOUT_HINT, **policies):
     """(equirect image float32 (H, W, 3), ImageInfo) of an environment in any of LAYOUTS. The
     read policies (transfer, primaries, nonfinite, negative, max_pixels) apply to what the file
     holds, before resampling; the info describes the file, its warnings say what was resampled.
-    A cube map resamples on `runtime`'s device where one is given, else by the numpy twin."""
+    A cube map resamples on `runtime`'s device where one is given, else by the numpy twin.
+    Messages call the policies as `names` says (images.POLICY_NAMES), the layout `layout_name`
+    (`layout_hint` where they say to give it)."""
     path = str(path)
     if layout == "auto":
         layout = _named_layout(path) or "auto"
     if layout == "faces":
         if "{face}" not in path:
-            raise InputError(f"{path}: --input-layout faces needs a path with {{face}} (read as {', '.join(FACE_NAMES)})")
+            raise InputError(f"{path}: {layout_name} faces needs a path with {{face}} (read as {', '.join(FACE_NAMES)})")
         faces, info = [], None
         for face_path in files_of(path):
             img, inf = images.read_panorama(face_path, names=names, **policies)
@@ -94,7 +100,8 @@ def read_environment(path, *, layout: str = "auto", names: dict | None = None, r
         return _resampled(np.stack(faces), info, "six face files", runtime)
     if layout == "ktx2":
         limit = policies.get("max_pixels") or images.max_pixels_default()
-        faces = ktx2.read_cube(path, reads.image_bytes(limit))
+        pixels_name = {**images.POLICY_NAMES, **(names or {})}["max_pixels"]
+        faces = ktx2.read_cube(path, reads.image_bytes(limit), f" ({pixels_name} or IBLBAKE_MAX_PIXELS raises it)")
         info = images.ImageInfo(path=path, width=faces.shape[2], height=faces.shape[1] * 6, channels_in=("R", "G", "B"),
                                 format="ktx2", sha256=images.file_sha256(path), nonfinite_policy=policies.get(
                                     "nonfinite", "error"), negative_policy=policies.get("negative", "keep"))
@@ -110,7 +117,7 @@ def read_environment(path, *, layout: str = "auto", names: dict | None = None, r
             info.warnings.append(f"{path}: {info.width}x{info.height} is not 2:1 (nor 4:3, 3:4, 6:1, 1:6 of a cube "
                                  f"map); treated as a full latitude-longitude panorama")
         return img, info
-    return _resampled(faces_of(img, layout, path), info, f"a {layout} cube map", runtime)
+    return _resampled(faces_of(img, layout, path, layout_hint), info, f"a {layout} cube map", runtime)
 
 
 def files_of(path: str) -> list:

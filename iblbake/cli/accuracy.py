@@ -10,7 +10,7 @@ from pathlib import Path
 
 import click
 
-from iblbake.cli.options import (Console, common_options, device_option, force_option, max_pixels_option,
+from iblbake.cli.options import (API_FLAGS, Console, common_options, device_option, force_option, max_pixels_option,
                                   max_texture_pixels_option, non_negative, refuse_foreign)
 from iblbake.errors import IblbakeError
 
@@ -113,7 +113,8 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
                               target_noise=target_noise, max_samples=max_samples, visibility=visibility,
                               bounces=bounces if given else None, flip=flip, cache=cache_dir, device=device,
                               jobs=jobs, devices=[d.strip() for d in devices.split(",")] if devices else None,
-                              warn=con.warn, progress=lambda: progress[0](), before_run=before_run)
+                              warn=con.warn, progress=lambda: progress[0](), before_run=before_run,
+                              names=API_FLAGS)
     study, rungs, rows, front, refs = result.study, result.rungs, result.records, result.frontier, result.reference
     configured, summary = result.configured, result.summary
     title = f"{Path(scene_path).name}: error against time ({summary['device']})"

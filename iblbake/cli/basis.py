@@ -6,7 +6,7 @@ import os
 
 import click
 
-from iblbake.cli.options import (POLICY_FLAGS, Console, check_inputs_exist, check_suffix, common_options,
+from iblbake.cli.options import (API_FLAGS, Console, check_inputs_exist, check_suffix, common_options,
                                   depfile_option, input_files_of, input_options, non_negative, panorama_reads,
                                   refuse_foreign)
 from iblbake.errors import IblbakeError
@@ -129,7 +129,7 @@ def _project_one(env, name, options, intensity, fmt, with_error, nonfinite, nega
 
     with con.stages(["reading", "projecting"], label="basis") as stage:
         pano = api.load_panorama(env, primaries, layout=input_layout, nonfinite=nonfinite, negative=negative,
-                                 transfer=transfer, max_pixels=max_pixels, names=POLICY_FLAGS)
+                                 transfer=transfer, max_pixels=max_pixels, names=API_FLAGS)
         stage()
         result = api.basis(pano, name, intensity=intensity, error=with_error, **options)
         stage()

@@ -154,6 +154,11 @@ def input_options(f):
 # the read policies as this command line names them (the library's messages quote these)
 POLICY_FLAGS = {"max_pixels": "--max-pixels", "nonfinite": "--nonfinite", "negative": "--negative",
                 "transfer": "--input-transfer", "primaries": "--primaries", "layout": "--input-layout"}
+# the API's arguments as this command line names them: its `names=` (the API's messages say the
+# arguments' own names by default)
+API_FLAGS = {**POLICY_FLAGS, "layout_hint": "--input-layout (environment.layout)", "device": "--device",
+             "overrides": "--set", "max_side": "--max-side", "max_samples": "--max-samples", "bounces": "--bounces",
+             "visibility": "--no-visibility", "ladder": "--ladder"}
 
 
 def finite(ctx, param, value):

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from iblbake.cli.options import (Console, common_options, device_option, force_option, max_pixels_option,
+from iblbake.cli.options import (API_FLAGS, Console, common_options, device_option, force_option, max_pixels_option,
                                   max_texture_pixels_option, refuse_foreign)
 
 
@@ -38,7 +38,7 @@ def probes_command(scene_path, out_dir, overrides, cache_dir, force, device, qui
     from iblbake.scene import load as scene
 
     con = Console(quiet, as_json)
-    sc = api.load_scene(scene_path, overrides, outputs=[])
+    sc = api.load_scene(scene_path, overrides, outputs=[], names=API_FLAGS)
     if not sc.data["objects"]:       # a usage error here, before the folder's checks (the library says it too)
         raise click.UsageError(f"{scene_path}: the scene has no objects; probes light objects (add some)")
     out = Path(out_dir)
@@ -51,7 +51,7 @@ def probes_command(scene_path, out_dir, overrides, cache_dir, force, device, qui
         atomic.check_writable(out / n)
     refuse_foreign(writes, force)
     with con.fraction("probes", "probe rays") as progress:
-        vol = api.bake_probes(sc, device, cache=cache_dir, warn=con.warn, progress=progress)
+        vol = api.bake_probes(sc, device, cache=cache_dir, warn=con.warn, progress=progress, names=API_FLAGS)
     man, cached = vol.manifest, vol.cached
     entry = Path(vol.entry)
     from iblbake.io import images, reads

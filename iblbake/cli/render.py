@@ -6,7 +6,7 @@ import contextlib
 
 import click
 
-from iblbake.cli.options import (Console, common_options, depfile_option, device_option, force_option,
+from iblbake.cli.options import (API_FLAGS, Console, common_options, depfile_option, device_option, force_option,
                                   max_pixels_option, max_texture_pixels_option, refuse_foreign)
 
 
@@ -49,7 +49,7 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, depfi
     if scene_path is None:
         raise click.UsageError("missing SCENE (a scene YAML file; see --help-schema)")
     con = Console(quiet, as_json)
-    sc = api.load_scene(scene_path, overrides, outputs=outputs)
+    sc = api.load_scene(scene_path, overrides, outputs=outputs, names=API_FLAGS)
     from iblbake.io.atomic import check_writable
     from iblbake.io.guard import refuse_overlaps
     writes = sc.writes + ([("--depfile", depfile)] if depfile else [])
@@ -61,7 +61,7 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, depfi
     # paths (the reference, probe rays, reflection captures): a bar on a terminal
     long_work = "reference" in pl.pass_names or {"probes", "reflection_probes"} & set(pl.bakes)
     with con.fraction("render", "paths") if long_work else contextlib.nullcontext(None) as progress:
-        frame = api.render(sc, device, cache=cache_dir, warn=con.warn, progress=progress)
+        frame = api.render(sc, device, cache=cache_dir, warn=con.warn, progress=progress, names=API_FLAGS)
     written = write_outputs(frame, sc)
     if depfile:
         from iblbake.io import depfile as dep
@@ -117,6 +117,6 @@ def deps_command(scene_path, overrides, outputs):
     from iblbake.render import output_paths
     from iblbake.scene import load as scene
 
-    sc = api.load_scene(scene_path, overrides, outputs=outputs or None)
+    sc = api.load_scene(scene_path, overrides, outputs=outputs or None, names=API_FLAGS)
     targets = output_paths(sc) or [str(scene_path)]
     click.echo(rule(targets, scene.input_files(sc)), nl=False)

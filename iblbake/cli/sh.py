@@ -7,7 +7,7 @@ import os
 
 import click
 
-from iblbake.cli.options import (POLICY_FLAGS, Console, check_inputs_exist, check_suffix, common_options,
+from iblbake.cli.options import (API_FLAGS, Console, check_inputs_exist, check_suffix, common_options,
                                   depfile_option, device_option, finite, input_files_of, input_options,
                                   non_negative, panorama_reads, refuse_foreign)
 from iblbake.io.guard import refuse_overlaps
@@ -123,10 +123,10 @@ def _project_one(env, bands, window, backend, rotate_y, intensity, fmt, with_err
 
     with con.stages(["reading", "projecting"], label="sh") as stage:
         pano = api.load_panorama(env, primaries, layout=input_layout, nonfinite=nonfinite, negative=negative,
-                                 transfer=transfer, max_pixels=max_pixels, names=POLICY_FLAGS)
+                                 transfer=transfer, max_pixels=max_pixels, names=API_FLAGS)
         stage()
         result = api.sh(pano, bands, window, rotate_y=rotate_y, intensity=intensity, backend=backend, device=device,
-                        error=with_error)
+                        error=with_error, names=API_FLAGS)
         stage()
     for w in pano.warnings:
         con.warn(w)

@@ -275,11 +275,12 @@ def _save_verdicts(verdicts: dict) -> None:
         pass
 
 
-def select_device(spec: str | None = None) -> DeviceInfo:
+def select_device(spec: str | None = None, name: str = "--device") -> DeviceInfo:
     """The device to use: `spec` (--device), else $IBLBAKE_DEVICE, else the first working GPU,
     else the first working CPU. Probes candidates in that order and stops at the first that works;
     a device whose driver passed the probe before (verdicts kept per platform, device and driver
-    version beside the kernel cache) is not probed again. `iblbake devices` always probes."""
+    version beside the kernel cache) is not probed again. `iblbake devices` always probes. `name`
+    is what a message calls the spec's setting (a flag, an argument)."""
     spec = spec or os.environ.get("IBLBAKE_DEVICE") or None
     devices, errors = enumerate_devices()
     nth = re.fullmatch(r"(gpu|cpu):(\d+)", spec.strip().lower()) if spec else None
@@ -290,7 +291,7 @@ def select_device(spec: str | None = None) -> DeviceInfo:
         candidates = [d for d in devices if spec is None or _matches(d, spec)]
     if spec and not candidates:
         listed = ", ".join(d.label for d in devices) or "none"
-        raise DeviceError(f"no OpenCL device matches --device/IBLBAKE_DEVICE {spec!r}; devices: {listed}")
+        raise DeviceError(f"no OpenCL device matches {name}/IBLBAKE_DEVICE {spec!r}; devices: {listed}")
     tried = []
     verdicts = _load_verdicts()
     for info in sorted(candidates, key=_preference):
@@ -339,9 +340,9 @@ def _cache_dir() -> str:
 class Runtime:
     """One device: its context, queue and built programs (cached per source, defines, device)."""
 
-    def __init__(self, device: str | None = None):
+    def __init__(self, device: str | None = None, name: str = "--device"):
         self.cl = _import_cl()
-        self.info = select_device(device)
+        self.info = select_device(device, name)
         self.ctx = self.cl.Context([self.info.device])
         self.queue = self.cl.CommandQueue(self.ctx)
         self._programs: dict = {}

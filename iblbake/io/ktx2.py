@@ -194,15 +194,14 @@ def cube_bytes(levels: list, fmt: str = "rgba16f", metadata: dict | None = None,
     return header + index + level_index + dfd + kvd + body
 
 
-def read_cube(path, limit: int) -> np.ndarray:
+def read_cube(path, limit: int, hint: str = " (--max-pixels or IBLBAKE_MAX_PIXELS raises it)") -> np.ndarray:
     """Level 0 of a KTX2 cube map in one of FORMATS (what iblbake and most HDR bakers write),
-    float32 (6, s, s, 3), faces +X -X +Y -Y +Z -Z, from a regular file of at most `limit` bytes.
-    Every header field, the level index and the data's bounds are checked first; anything else
-    is a one-line error naming the file."""
+    float32 (6, s, s, 3), faces +X -X +Y -Y +Z -Z, from a regular file of at most `limit` bytes
+    (`hint` says how to raise it). Every header field, the level index and the data's bounds are
+    checked first; anything else is a one-line error naming the file."""
     from iblbake.io import reads
     path = str(path)
-    return parse_cube(reads.read_bytes(path, limit, "a KTX2 cube map",
-                                       " (--max-pixels or IBLBAKE_MAX_PIXELS raises it)"), path)
+    return parse_cube(reads.read_bytes(path, limit, "a KTX2 cube map", hint), path)
 
 
 def parse_cube(data: bytes, path: str) -> np.ndarray:

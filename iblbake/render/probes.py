@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from iblbake.core import bases, sh
-from iblbake.errors import IblbakeError
+from iblbake.errors import IblbakeError, InputError
 from iblbake.render.twin import probes as twin
 
 FORMAT = "iblbake-probes"
@@ -96,24 +96,24 @@ def grid_of(settings: dict, arrays) -> Grid:
     half a cell, so that every surface has probes on both of its sides: the outer probes of a
     wall or floor on the bounds see its outer face (RTXGI's volumes enclose the scene)."""
     if (settings["min"] is None) != (settings["max"] is None):
-        raise IblbakeError("probes: give both min and max, or neither (auto: the scene's bounds)")
+        raise InputError("probes: give both min and max, or neither (auto: the scene's bounds)")
     counts = settings["counts"]
     if settings["min"] is not None:
         lo, hi = np.asarray(settings["min"], np.float64), np.asarray(settings["max"], np.float64)
         if np.any(hi < lo):
-            raise IblbakeError(f"probes.max {settings['max']} is below probes.min {settings['min']} on some axis; "
+            raise InputError(f"probes.max {settings['max']} is below probes.min {settings['min']} on some axis; "
                                "give max >= min")
         extent = hi - lo
         if isinstance(counts, list):
             n = np.asarray(counts, int)
             short = [k for k in range(3) if extent[k] > 0 and n[k] < 2]
             if short:
-                raise IblbakeError(f"probes.counts {counts}: probes.min and probes.max differ along "
+                raise InputError(f"probes.counts {counts}: probes.min and probes.max differ along "
                                    f"{'xyz'[short[0]]}, so a probe at each takes 2; give at least 2 there, or the "
                                    f"same min and max")
         else:
             if counts is not None and counts < 2 and extent.max() > 0:
-                raise IblbakeError(f"probes.counts {counts}: probes at min and at max take 2 along the longest axis; "
+                raise InputError(f"probes.counts {counts}: probes at min and at max take 2 along the longest axis; "
                                    f"give at least 2")
             step = settings["spacing"] or max(float(extent.max()), 1e-6) / max((counts or DEFAULT_LONGEST) - 1, 1)
             n = np.round(extent / step).astype(int) + 1
@@ -123,7 +123,7 @@ def grid_of(settings: dict, arrays) -> Grid:
     else:
         b = scene_bounds(arrays)
         if b is None:
-            raise IblbakeError("probes: the scene has no bounded geometry for an automatic grid; "
+            raise InputError("probes: the scene has no bounded geometry for an automatic grid; "
                                "give probes.min and probes.max")
         lo, hi = b
         extent = hi - lo
@@ -132,14 +132,14 @@ def grid_of(settings: dict, arrays) -> Grid:
         # counts given per axis put probes on both sides of the scene along each (>= 2)
         if isinstance(counts, list):               # each axis its own spacing
             if min(counts) < 2:
-                raise IblbakeError(f"probes.counts {counts}: an automatic grid puts probes on both sides of the "
+                raise InputError(f"probes.counts {counts}: an automatic grid puts probes on both sides of the "
                                    f"scene along each axis; give at least 2 per axis, or probes.min and probes.max")
             n = np.asarray(counts, int)
             step = np.where(extent > 0, extent / np.maximum(n - 2, 0.5), max(float(extent.max()), 1e-6))
         else:
             longest = counts or DEFAULT_LONGEST
             if longest < 3:
-                raise IblbakeError(f"probes.counts {longest}: an automatic grid overhangs the scene by half a cell on "
+                raise InputError(f"probes.counts {longest}: an automatic grid overhangs the scene by half a cell on "
                                    f"every side, so it needs at least 3 probes along its longest axis; give 3 or "
                                    f"more, or probes.min and probes.max")
             step = np.full(3, settings["spacing"] or max(float(extent.max()), 1e-6) / (longest - 2))
@@ -147,7 +147,7 @@ def grid_of(settings: dict, arrays) -> Grid:
         spacing = step
         origin = (lo + hi) / 2 - (n - 1) * step / 2         # centred: at least half a cell over each face
     if n.prod() > 1 << 20:
-        raise IblbakeError(f"probes: {int(n.prod())} probes ({' x '.join(map(str, n))}); "
+        raise InputError(f"probes: {int(n.prod())} probes ({' x '.join(map(str, n))}); "
                            "give fewer counts or a larger spacing (at most 1048576)")
     return Grid(tuple(float(x) for x in origin), tuple(float(x) for x in spacing), tuple(int(c) for c in n))
 
@@ -424,7 +424,7 @@ def bake(ctx, settings: dict, progress=None) -> dict:
     try:
         grid = grid_of(settings, arrays)
     except IblbakeError as e:             # said as the scene's other errors are: naming its file
-        raise IblbakeError(f"{ctx.scene.source}: {e}") from None
+        raise type(e)(f"{ctx.scene.source}: {e}") from None
     tracer = Tracer(ctx, settings)
     if settings["relocation"]:
         offset, at_grid = relocate(tracer, grid, settings, progress)

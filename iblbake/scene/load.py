@@ -29,13 +29,16 @@ class Scene:
     """A validated scene: data holds every key of docs/scene.md (defaults filled, paths
     absolute); source is the scene file (or what a mapping was called), folder where its
     relative paths resolve, lines the line of each dotted key, writes (what names it, path) of
-    every output."""
+    every output; raw what was validated (the file's or mapping's data, its overrides and values
+    applied) and overridden where each overridden key came from: load_any validates it again."""
 
     data: dict                     # validated, defaults filled, paths absolute
     source: str                    # the scene file
     folder: Path
     lines: dict = field(default_factory=dict)
     writes: list = field(default_factory=list)     # (what names it, path) of every output
+    raw: dict | None = field(default=None, repr=False, compare=False)
+    overridden: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __getitem__(self, k):
         return self.data[k]
@@ -111,18 +114,21 @@ class _Validator:
         return out
 
 
-def _apply_override(data: dict, assignment: str) -> str:
+def _apply_override(data: dict, assignment: str, name: str = "--set") -> str:
+    """Apply one KEY.PATH=VALUE; `name` is what errors call the overrides (a flag, an argument)."""
+    if not isinstance(assignment, str):
+        raise UsageError(f"{name} {assignment!r}: expected a 'KEY.PATH=VALUE' string, e.g. effects.samples=40")
     key, sep, raw = assignment.partition("=")
     key = key.strip()
     if not sep or not key:
-        raise UsageError(f"--set {assignment!r}: expected KEY.PATH=VALUE, e.g. effects.samples=40")
+        raise UsageError(f"{name} {assignment!r}: expected KEY.PATH=VALUE, e.g. effects.samples=40")
     if not raw.strip():
-        raise UsageError(f"--set {assignment!r}: no value after '='; give one (null takes the default)")
+        raise UsageError(f"{name} {assignment!r}: no value after '='; give one (null takes the default)")
     try:
-        value = load_with_lines(raw, f"--set {key}")[0]
+        value = load_with_lines(raw, f"{name} {key}")[0]
     except InputError as e:              # a value that does not parse is a usage error (exit 2)
         raise UsageError(str(e)) from None
-    set_path(data, key, value, f"--set {key}")
+    set_path(data, key, value, f"{name} {key}")
     return key
 
 
@@ -176,33 +182,70 @@ def _must_be_file(v, key: str, path: str, what: str, folder: Path, limit: int, h
         v.fail(key, str(e))
 
 
-def load(path, overrides=(), outputs=None, values=(), origin: str = "--set") -> Scene:
-    """Read, override, validate. `overrides` are KEY.PATH=VALUE strings (--set), `values` typed
-    (key path, value) pairs applied after them (a sweep cell's), `origin` what errors call the
-    place the latter came from. `outputs` (from -o) replace output.frame."""
+def load(path, overrides=(), outputs=None, values=(), origin: str = "--set", override_name: str = "--set") -> Scene:
+    """Read, override, validate. `overrides` are KEY.PATH=VALUE strings (--set; errors call them
+    `override_name`), `values` typed (key path, value) pairs applied after them (a sweep cell's),
+    `origin` what errors call the place the latter came from. `outputs` (from -o) replace
+    output.frame."""
     path = Path(path)
     data, lines = _read(path)
-    return _validated(data, lines, str(path), path.resolve().parent, overrides, outputs, values, origin)
+    return _validated(data, lines, str(path), path.resolve().parent, overrides, outputs, values, origin,
+                      override_name)
 
 
 def load_data(data: dict, folder=".", overrides=(), outputs=None, values=(), origin: str = "--set",
-              source: str = "<scene>") -> Scene:
+              source: str = "<scene>", override_name: str = "--set") -> Scene:
     """load() of a scene given as a mapping (what a scene file's YAML holds) instead of a file:
-    relative paths resolve in `folder`, errors name `source` (no line numbers)."""
-    import copy
+    relative paths resolve in `folder`, errors name `source` (no line numbers). A mapping made in
+    Python may hold numpy scalars and arrays, tuples and path objects: they are read as the
+    numbers, lists and strings a scene file would hold (plain_values)."""
     if not isinstance(data, dict):
         raise InputError(f"{source}: a scene is a mapping of sections (camera, environment, "
                          f"materials, objects, effects, output), not {type(data).__name__}")
-    return _validated(copy.deepcopy(data), {}, source, Path(folder).resolve(), overrides, outputs, values, origin)
+    return _validated(plain_values(data), {}, source, Path(folder).resolve(), overrides, outputs, values, origin,
+                      override_name)
 
 
-def _validated(data, lines, source, folder, overrides, outputs, values, origin) -> Scene:
-    overridden = {}
+def load_any(scene, overrides=(), outputs=None, values=(), origin: str = "--set",
+             override_name: str = "--set") -> Scene:
+    """load() of a scene file, or a Scene validated again from what it was validated from (its
+    raw data and lines) with more overrides, outputs and values (a study's rungs of a scene given
+    as a mapping or a Scene)."""
+    if not isinstance(scene, Scene):
+        return load(scene, overrides, outputs, values, origin, override_name)
+    if scene.raw is None:
+        raise InputError(f"{scene.source}: this Scene was not made by the scene loader (it has no data to "
+                         f"validate again); load it with iblbake.load_scene (a file or a mapping)")
+    import copy
+    return _validated(copy.deepcopy(scene.raw), scene.lines, scene.source, scene.folder, overrides, outputs, values,
+                      origin, override_name, dict(scene.overridden))
+
+
+def plain_values(value):
+    """A copy of a mapping made in Python with what a scene file holds in place of its Python
+    and numpy kinds: numpy scalars as numbers (a numpy bool a bool, refused where a number is
+    expected, as True is), numpy arrays and tuples as lists, path objects as strings."""
+    if isinstance(value, dict):
+        return {k: plain_values(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [plain_values(v) for v in value]
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    if type(value).__module__ == "numpy" and hasattr(value, "tolist"):     # numpy is not imported for it
+        return plain_values(value.tolist())
+    return value
+
+
+def _validated(data, lines, source, folder, overrides, outputs, values, origin, override_name="--set",
+               overridden=None) -> Scene:
+    import copy
+    overridden = overridden or {}
     for a in overrides:
-        overridden[_apply_override(data, a)] = "--set"
+        overridden[_apply_override(data, a, override_name)] = override_name
     for key, value in values:
         set_path(data, key, value, origin)
         overridden[key] = origin
+    raw = copy.deepcopy(data)
     v = _Validator(source, lines, overridden)
     out = v.section(SCHEMA, data, "")
     _resolve_camera(v, out["camera"])
@@ -212,7 +255,7 @@ def _validated(data, lines, source, folder, overrides, outputs, values, origin) 
     _resolve_probes(v, out["probes"])
     _resolve_basis_specular(v, out["effects"], out["probes"])
     writes = _resolve_outputs(v, out["output"], folder, outputs)
-    return Scene(out, source, folder, lines, writes)
+    return Scene(out, source, folder, lines, writes, raw, overridden)
 
 
 def _read(path: Path):

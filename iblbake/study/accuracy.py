@@ -85,19 +85,25 @@ def pareto(points) -> list:
 class Study:
     """One scene's study: the rungs' scenes, the reference per term, every rung's times and errors."""
 
-    def __init__(self, scene_path, overrides, settings: Settings, *, runtime, bakes, warn=None, progress=None):
+    def __init__(self, scene_path, overrides, settings: Settings, *, runtime, bakes, warn=None, progress=None,
+                 names=None):
+        """scene_path: a scene file, or a Scene (iblbake.scene.load: validated again with each
+        rung's values). names: what messages call the settings they suggest (max_side,
+        overrides): the command line's flags unless given."""
         from iblbake.render.plan import effect_modes, interreflects
 
         self.path, self.overrides, self.settings = scene_path, tuple(overrides), settings
+        self.name = scene_path.source if isinstance(scene_path, scene_load.Scene) else scene_path
+        self.names = {"max_side": "--max-side", "overrides": "--set", **(names or {})}
         self.rt, self.bakes = runtime, bakes
         self.warn = warn or (lambda _m: None)
         self.progress = progress or (lambda *_: None)
-        self.scene = scene_load.load(scene_path, overrides, ["study.png"])
+        self.scene = scene_load.load_any(scene_path, overrides, ["study.png"])
         self.base = base_values(self.scene, settings)
         self.fx = effect_modes(self.scene)
         self.terms = [t for t in TERMS if getattr(self.fx, t) != "off"]
         if not self.terms:
-            raise InputError(f"{scene_path}: the scene lights nothing (no objects, or diffuse and specular "
+            raise InputError(f"{self.name}: the scene lights nothing (no objects, or diffuse and specular "
                              f"both off): there is no approximation to study")
         self.reference: dict = {}          # term -> {"hdr", "noise", ...}
         # whether the reference traces paths here (else it is the direct light, and a "direct
@@ -108,7 +114,7 @@ class Study:
         self.times = {"reference_s": 0.0, "rungs_s": 0.0, "bakes_s": 0.0}
 
     def load(self, values, origin="ladder"):
-        return scene_load.load(self.path, self.overrides, ["study.png"], values=self.base + values, origin=origin)
+        return scene_load.load_any(self.path, self.overrides, ["study.png"], values=self.base + values, origin=origin)
 
     def ref_batch(self) -> int:
         if self.settings.batch:
@@ -176,13 +182,13 @@ class Study:
         mask = object_mask(frames[0]) & object_mask(frames[1])
         if not mask.any():
             w, h = study_resolution(self.scene, self.settings.max_side)
-            raise InputError(f"{self.path}: at {w}x{h} no pixel is fully covered by an object; raise --max-side "
-                             f"or move the camera closer")
+            raise InputError(f"{self.name}: at {w}x{h} no pixel is fully covered by an object; raise "
+                             f"{self.names['max_side']} or move the camera closer")
         if not np.any(frames[0][..., :3][mask]) and not np.any(frames[1][..., :3][mask]):
             # every relative error divides by the reference (a new user's closed room printed 1.5e301%)
-            raise InputError(f"{self.path}: the {term} term's reference is black on every object pixel (no light "
+            raise InputError(f"{self.name}: the {term} term's reference is black on every object pixel (no light "
                              f"reaches what the camera sees), so its relative errors are undefined; light the scene, "
-                             f"or leave the term out (--set effects.{term}=off)")
+                             f"or leave the term out ({self.names['overrides']} effects.{term}=off)")
         from iblbake.core.metrics import relative_rmse
         between = relative_rmse(frames[0][..., :3][mask], frames[1][..., :3][mask])
         mean = frames[0].copy()

@@ -216,10 +216,11 @@ def probe_rungs() -> list:
     return [(label, [(f"probes.{k}", v) for k, v in {**base, **own}.items()]) for label, own in steps]
 
 
-def ladder_from_file(path, sc, fx) -> list:
+def ladder_from_file(path, sc, fx, flag: str = "--ladder") -> list:
     """rungs: a list of axes in the sweep syntax ({key, values}, {key, range}, {steps}), each
     with an optional `term:` (default: diffuse where it sets effects.diffuse or effects.sh_*, else
-    specular) and `with:` ({KEY.PATH: value} set on each of its rungs)."""
+    specular) and `with:` ({KEY.PATH: value} set on each of its rungs). `flag`: what a message
+    naming a built-in ladder calls the setting."""
     from iblbake.io import reads
     from iblbake.scene.yaml_lines import MAX_SCENE_BYTES, load_with_lines
 
@@ -227,7 +228,7 @@ def ladder_from_file(path, sc, fx) -> list:
     if not Path(path).exists():
         import difflib
         near = difflib.get_close_matches(str(path), list(LADDERS), 1, 0.6)
-        hint = f"; did you mean --ladder {near[0]}?" if near else f"; or name a built-in one: {', '.join(LADDERS)}"
+        hint = f"; did you mean {flag} {near[0]}?" if near else f"; or name a built-in one: {', '.join(LADDERS)}"
         raise InputError(f"{where}: cannot read the ladder (no such file){hint}")
     try:       # as a scene is read: bounded, safe, numbers as a user writes them
         doc = load_with_lines(reads.read_text(path, MAX_SCENE_BYTES, "a ladder"), where)[0]
