@@ -40,13 +40,18 @@ def _textures_code_hash() -> str:
 
 def _probes_code_hash() -> str:
     """The probe bakers' and their tracing kernel's source: cached volumes and captures are rebaked
-    when they change."""
+    when they change (every module of the render/probes package)."""
+    import importlib
+    import pkgutil
+
     from iblbake.core import bases
     from iblbake.core.bases import common
     from iblbake.device.runtime import source_hash
     from iblbake.render import probes, reflection_probes
+    package = [importlib.import_module(f"{probes.__name__}.{m.name}")
+               for m in sorted(pkgutil.iter_modules(probes.__path__), key=lambda m: m.name)]
     # the probe bases' fits too (core/bases project_rays)
-    return _code_hash((probes, reflection_probes, common, *(bases.BASES[n] for n in bases.PROBES)),
+    return _code_hash((probes, *package, reflection_probes, common, *(bases.BASES[n] for n in bases.PROBES)),
                       source_hash("probe_trace.cl"))
 
 
@@ -340,7 +345,7 @@ class Bakes:
         return dist, hit, {}
 
     def _probes(self, ctx):
-        """The scene's irradiance probe volume (render/probes.py), baked by tracing the scene on
+        """The scene's irradiance probe volume (render/probes), baked by tracing the scene on
         ctx's device, keyed by everything its rays see: the geometry and materials (their files'
         content), the lights, the panorama's content and frame, the bake settings and the code."""
         from iblbake.render import probes
