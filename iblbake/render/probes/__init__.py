@@ -3,7 +3,8 @@ RTXGI-DDGI 1.x), baked once, offline, to its mean over every ray (no hysteresis:
 temporal here). One module per idea:
 
   grid.py        where the probes stand (Grid; an automatic grid from the scene's bounds)
-  rays.py        the rays' directions and the Tracer (kernels/probe_trace.cl: the reference's paths)
+  rays.py        the rays' directions and the Tracer (kernels/probe_trace.cl: the reference's paths
+                 against the scene on the device)
   relocation.py  RTXGI's relocation and classification, probes inside geometry or outside the
                  camera's room
   project.py     the rays' projection into RTXGI's atlases (octahedral irradiance or L2 SH, the
@@ -12,9 +13,9 @@ temporal here). One module per idea:
   files.py       probes.json and the atlases: written, read back and validated
   glsl.py        probes.glsl, sampling the files as kernels/probes.h does
 
-and here bake() (what render/bakes.py's probes bake builds) with the warnings its report gives.
-Every name of those modules a caller uses is importable from here. Sampling: kernels/probes.h,
-twin/probes.py. Conventions: docs/conventions.md "Irradiance probes"."""
+and here bake() (what the probes unit of render/units.py builds) with the warnings its report
+gives. Every name of those modules a caller uses is importable from here. Sampling:
+kernels/probes.h, twin/probes.py. Conventions: docs/conventions.md "Irradiance probes"."""
 
 from __future__ import annotations
 
@@ -41,16 +42,16 @@ __all__ = ["ACTIVE", "BACKFACE_BLEND_LIMIT", "DEFAULT_LONGEST", "FILES", "FIXED_
            "spherical_fibonacci", "trace_defines", "volume_dict", "warnings", "with_borders"]
 
 
-def bake(ctx, settings: dict, progress=None) -> dict:
-    """The volume of ctx's scene (a render Context with its scene tables uploaded): a dict of the
-    arrays (as load() returns) and a report."""
+def bake(job, settings: dict, progress=None) -> dict:
+    """The volume of a job's scene (render/units.py Job: the scene, a runtime and the bake store;
+    the probes unit asks for it): a dict of the arrays (as load() returns) and a report."""
     t0 = time.perf_counter()
-    arrays = ctx.arrays if ctx.arrays is not None else ctx.bakes.geometry(ctx.scene)
+    arrays = job.arrays
     try:
         grid = grid_of(settings, arrays)
     except IblbakeError as e:             # said as the scene's other errors are: naming its file
-        raise IblbakeError(f"{ctx.scene.source}: {e}") from None
-    tracer = Tracer(ctx, settings)
+        raise IblbakeError(f"{job.scene.source}: {e}") from None
+    tracer = Tracer(job, settings)
     if settings["relocation"]:
         offset, at_grid = relocate(tracer, grid, settings, progress)
     else:
@@ -60,7 +61,7 @@ def bake(ctx, settings: dict, progress=None) -> dict:
     radiance, t, obj = tracer.trace(grid.positions() + offset, dirs, True, progress, base, 1.0 - base)
     states = classify(t, dirs, grid, settings) if settings["classification"] else np.zeros(grid.count, int)
     from iblbake.scene import pack
-    outside = outside_camera_rooms(grid.positions() + offset, arrays, pack.camera_vectors(ctx.scene.data["camera"])[0])
+    outside = outside_camera_rooms(grid.positions() + offset, arrays, pack.camera_vectors(job.scene.data["camera"])[0])
     states = np.where(outside, INACTIVE, states)
     irr, dist = project(radiance, t, dirs, grid, settings)
     data = np.concatenate([offset, states[:, None].astype(np.float64)], 1)

@@ -1,11 +1,14 @@
 """Probe rays (render/probes): their directions (RTXGI's spherical Fibonacci set, randomly rotated
 per bake) and the Tracer, which traces them (kernels/probe_trace.cl: the reference's paths)
-against the scene's tables with its panorama, lights and radiance chain. The reflection captures
-(render/reflection_probes.py) trace their texels' rays with it too."""
+against the scene put on the device once (render/device_scene.py DeviceScene) with its panorama,
+lights and radiance chain. The reflection captures (render/reflection_probes.py) trace their
+texels' rays with it too."""
 
 from __future__ import annotations
 
 import numpy as np
+
+from iblbake.render.device_scene import environment_frame, geometry_defines, has_lights, panorama_args, scene_lights
 
 
 def spherical_fibonacci(n: int) -> np.ndarray:
@@ -31,35 +34,36 @@ def ray_directions(n: int, seed: int) -> np.ndarray:
 
 
 def trace_defines(scene, bounces) -> dict:
-    from iblbake.render.passes.base import geometry_defines
-    from iblbake.render.passes.lights import Lights
-    from iblbake.render.plan import effect_modes
-
+    """probe_trace.cl's defines: the scene's primitives and material features, the paths' bounces,
+    and PATH_LIGHTS where the scene has lights (they light what the probes see, not the probes)."""
     d = {**geometry_defines(scene), "BOUNCES": 0 if bounces == "unbounded" else bounces + 1}
-    if Lights().runs(scene, effect_modes(scene)):
-        d["PATH_LIGHTS"] = 1              # the lights light what the probes see (not the probes)
+    if has_lights(scene):
+        d["PATH_LIGHTS"] = 1
     return d
 
 
 class Tracer:
-    """Probe rays on the frame context's device, with its scene tables and panorama."""
+    """Probe rays on a job's device (render/units.py Job: a scene, a runtime, the bake store), against
+    the scene on the device (job.device_scene), its panorama (with its importance-sampling tables,
+    the env_cdf bake), the radiance chain an escaping ray reads (the radiance bake) and its lights."""
 
-    def __init__(self, ctx, settings: dict, back_faces_black: bool = True, skip_objects=()):
-        from iblbake.render.passes.lights import frame_lights
-        from iblbake.render.passes.reference import environment_args
+    def __init__(self, job, settings: dict, back_faces_black: bool = True, skip_objects=()):
         from iblbake.scene import pack
 
-        rt = self.rt = ctx.rt
-        self.ctx, self.settings, self.back_faces_black = ctx, settings, back_faces_black
-        dist = ctx.bakes.load("env_cdf", ctx)[0]
-        chain = ctx.bakes.load("radiance", ctx)[0]     # what an escaping probe ray reads (probe_trace.cl)
-        self.defines = trace_defines(ctx.scene, settings["bounces"])
+        rt = self.rt = job.rt
+        scene, bakes = job.scene, job.bakes
+        self.job, self.settings, self.back_faces_black = job, settings, back_faces_black
+        dist = job.read("env_cdf")
+        chain = job.read("radiance")       # what an escaping probe ray reads (probe_trace.cl)
+        image, _info = job.panorama()
+        self.defines = trace_defines(scene, settings["bounces"])
         recs = np.zeros((0, 4), np.float32)
         if "PATH_LIGHTS" in self.defines:
-            recs = pack.light_records(frame_lights(ctx.scene, ctx.bakes.sun(ctx.scene.data["environment"])))
-        skip = np.zeros(max(len(ctx.scene.data["objects"]), 1), np.int32)
+            recs = pack.light_records(scene_lights(scene, bakes.sun(scene.data["environment"])))
+        skip = np.zeros(max(len(scene.data["objects"]), 1), np.int32)
         skip[list(skip_objects)] = 1
-        self.args = {**environment_args(ctx, dist), "nlights": len(recs), **ctx.chain(chain),
+        self.table = {**job.device_scene.table, **environment_frame(scene.data["environment"])}
+        self.args = {**panorama_args(rt, bakes, image, dist), "nlights": len(recs), **bakes.chain(rt, chain),
                      "lights": rt.to_device(recs.reshape(-1, 4) if len(recs) else np.zeros((4, 4), np.float32)),
                      "skip_obj": rt.to_device(skip), "skip": int(bool(len(skip_objects)))}
         self.rays_traced = 0
@@ -80,7 +84,7 @@ class Tracer:
         obj_buf = rt.empty(4 * min(n, per_launch) * nrays)
         for first in range(0, n, per_launch):
             count = min(per_launch, n - first)
-            rt.launch("probe_trace.cl", "probe_trace", self.defines, (count * nrays,), self.ctx.table, **self.args,
+            rt.launch("probe_trace.cl", "probe_trace", self.defines, (count * nrays,), self.table, **self.args,
                       probe_pos=pos, ray_dirs=dir_buf, nrays=nrays, first=probe0 + first, count=count, ray0=ray0,
                       ray_solid_angle=4 * np.pi / nrays,
                       seed=self.settings["seed"], shade=int(shade), back_faces_black=int(self.back_faces_black),
@@ -91,3 +95,4 @@ class Tracer:
                 progress(done + share * (first + count) / n)
         self.rays_traced += n * nrays
         return out[..., :3].astype(np.float64), out[..., 3].astype(np.float64), obj
+
