@@ -104,7 +104,7 @@ def quad_scene(tmp_path, sky, name, colour):
         "materials": {"m": {"base_color": colour, "roughness": 0.5}},
         "objects": [{"mesh": {"path": str(quad)}, "material": "m"},
                     {"sphere": {"center": [0, 0, 0.5], "radius": 0.3}, "material": "m"}],
-        "effects": {"diffuse": "sh", "specular": "prefiltered"}})
+        "effects": {"diffuse": "sh", "specular": "off"}})
 
 
 def test_the_scene_goes_to_the_device_once_per_content(tmp_path, rt, sky):
