@@ -109,9 +109,9 @@ def quad_scene(tmp_path, sky, name, colour):
 
 def test_the_scene_goes_to_the_device_once_per_content(tmp_path, rt, sky):
     """Frames of one scene on one runtime share its DeviceScene (the tables go up once); a scene
-    with another material gets its own, sharing the triangles and BVH on the device; a frame after
-    the other scene's is the first frame's, pixel for pixel (no stale table), and each frame is the
-    one a fresh store renders."""
+    with another material gets its own, sharing the triangles and BVH (one copy on the host and
+    one on the device); a frame after the other scene's is the first frame's, pixel for pixel (no
+    stale table), and each frame is the one a fresh store renders."""
     bakes = Bakes(tmp_path / "cache")
     grey, red = quad_scene(tmp_path, sky, "grey", [0.5, 0.5, 0.5]), quad_scene(tmp_path, sky, "red", [0.8, 0.1, 0.1])
     a = render(grey, runtime=rt, cache=bakes)
@@ -122,6 +122,7 @@ def test_the_scene_goes_to_the_device_once_per_content(tmp_path, rt, sky):
         return [k for k in bakes._memo if isinstance(k, tuple) and k[0] == kind]
     assert len(held("device-scene")) == 2 and len(held("device-geometry")) == 1
     assert bakes.device_scene(rt, grey) is bakes.device_scene(rt, grey)
+    assert bakes.device_scene(rt, red).arrays.tris is bakes.device_scene(rt, grey).arrays.tris     # one copy
     assert np.array_equal(a.hdr, a2.hdr) and np.abs(a.hdr - b.hdr).max() > 0.05
     assert np.array_equal(b.hdr, render(red, runtime=rt, cache_root=tmp_path / "cache").hdr)
 

@@ -6,6 +6,7 @@ many frames (a sheet) reads and uploads nothing twice."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 from pathlib import Path
@@ -98,7 +99,6 @@ class Bakes:
                 env["primaries"], env["layout"])
 
     def _extract(self, image, info):
-        import dataclasses
         import hashlib
 
         from iblbake.bake import sun as sunbake
@@ -214,7 +214,8 @@ class Bakes:
         DeviceScene), made once per runtime and content: the same tables for every frame of a
         series and for the bakes that trace the scene. `arrays` (geometry()) and `textures`
         (textures()' arrays and slots) where the caller has them. The triangles, BVH and attributes
-        go up once per runtime and geometry, shared by scenes that differ in their materials."""
+        go up once per runtime and geometry, shared (on the host too) by scenes that differ in their
+        materials: a sheet's cells keep one copy of a large mesh."""
         from iblbake.render import device_scene as dscene
         from iblbake.scene import materials, textures as scene_textures
 
@@ -235,14 +236,17 @@ class Bakes:
         key = dscene.digest(arrays.spheres, arrays.planes, arrays.materials, mat_maps, head=f"{gkey}|{tex_ids}")
 
         def make():
-            geometry = self._get(("device-geometry", id(rt), gkey), lambda: dscene.geometry_tables(rt, arrays))
+            # the first scene's triangles, BVH and attributes (the same bytes) and their buffers
+            held, geometry = self._get(("device-geometry", id(rt), gkey),
+                                       lambda: (arrays, dscene.geometry_tables(rt, arrays)))
             if slots:
                 devtex = self.device_textures(rt, tex)
             else:
                 devtex = (rt.to_device(np.zeros((1, 4), np.float32)), rt.to_device(np.zeros((1, 4), np.int32)),
                           rt.to_device(np.zeros((1, 4), np.int32)))
             table = dscene.tables(rt, arrays, mat_maps, geometry, devtex, len(tex[2]) if slots else 0)
-            return dscene.DeviceScene(arrays, table, key)
+            shared = dataclasses.replace(arrays, tris=held.tris, bvh=held.bvh, tri_attr=held.tri_attr)
+            return dscene.DeviceScene(shared, table, key)
         return self._get(("device-scene", id(rt), key), make)
 
     def load(self, name: str, job) -> tuple:
