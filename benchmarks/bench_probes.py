@@ -24,10 +24,8 @@ sys.path.insert(0, str(ROOT))
 
 from iblbake.render import render  # noqa: E402
 from iblbake.device.runtime import Runtime  # noqa: E402
-from iblbake.render import probes  # noqa: E402
 from iblbake.render.bakes import Bakes  # noqa: E402
-from iblbake.render.frame import scene_context  # noqa: E402
-from iblbake.render.plan import plan  # noqa: E402
+from iblbake.render.units import Job  # noqa: E402
 from iblbake.scene import load as scene  # noqa: E402
 
 SCENES = {"open box": ROOT / "examples" / "sheets" / "bounces.yaml", "knot": ROOT / "examples" / "scenes" / "mesh.yaml",
@@ -37,12 +35,14 @@ FRAME = ["camera.resolution=[320, 200]", "effects.specular=off", "environment.ba
 
 
 def bake_once(rt, path, extra, root):
-    sc = scene.load(path, ["effects.diffuse=probes", *GRID, *extra], [])
+    sc = scene.load(path, [*GRID, *extra], [])         # the probes unit, whatever the effects say
     bakes = Bakes(root)
     bakes.runtime = rt
-    ctx = scene_context(sc, plan(sc), rt, bakes)
+    job = Job(sc, rt, bakes)
+    job.panorama()                      # read, and the scene put on the device, before the timing
+    assert job.device_scene is not None
     t0 = time.perf_counter()
-    vol, _cached, _extra = bakes.load("probes", ctx)
+    vol, _cached, _extra = bakes.load("probes", job)
     return time.perf_counter() - t0, vol
 
 

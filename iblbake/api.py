@@ -754,31 +754,28 @@ def bake_probes(scene, device: str | None = None, *, cache=None, warn=None, prog
     bounds, 1024 rays each, octahedral irradiance) by tracing paths from every probe, and each
     reflection probe's capture; cached by content in `cache` (as render). names: what error
     messages call each argument (by default its name; the command line passes its flags)."""
-    import copy
-    import dataclasses
 
     import numpy as np
 
     from iblbake.render import Bakes, probes
-    from iblbake.render.frame import scene_context
-    from iblbake.render.plan import plan
+    from iblbake.render.units import Job
 
     _names(names)
     _device(device)
     cache = _cache(cache)
     _callback("warn", warn)
     _callback("progress", progress)
-    sc = load_scene(scene, names=names)
-    sc = dataclasses.replace(sc, data=copy.deepcopy(sc.data))       # the caller's scene is left as it was
-    sc.data["effects"]["diffuse"] = "probes"            # what the volume is for: its plan reads the panorama
+    sc = load_scene(scene, names=names)     # the probes unit is asked for by name: the scene is left as it is
     if not sc.data["objects"]:
         raise InputError(f"{sc.source}: the scene has no objects; probes light objects (add some)")
     rt = _runtime(device, names)
     bakes = Bakes(cache)
     bakes.runtime = rt
-    ctx = scene_context(sc, plan(sc), rt, bakes, warn, progress)
-    vol, cached, extra = bakes.load("probes", ctx)
-    reflections = bakes.load("reflection_probes", ctx)[0] if sc.data["reflection_probes"] else []
+    job = Job(sc, rt, bakes, warn or (lambda _m: None), progress)
+    for w in bakes.environment(sc.data["environment"])[1].warnings:     # as a frame says them
+        job.warn(w)
+    vol, cached, extra = bakes.load("probes", job)
+    reflections = bakes.load("reflection_probes", job)[0] if sc.data["reflection_probes"] else []
     vol = probes.sampled(vol, sc.data["probes"])
     man = probes.manifest(vol)
     man["reflection_probes"] = [{"file": f"reflection_{k}.exr", **c["settings"],

@@ -21,7 +21,7 @@
  * Work item (probe first + i, ray r): out[i nrays + r]; the ray's random stream is its probe and
  * ray number ray0 + r, so a bake is the same however it is split into launches. The reflection
  * probes' captures (iblbake/render/reflection_probes.py) trace their texels' rays here too.
- * numpy twin of what the probes make of these rays: iblbake/render/probes.py (project). */
+ * numpy twin of what the probes make of these rays: iblbake/render/probes/project.py. */
 #include "common.h"
 #include "envmap.h"
 #include "scene.h"

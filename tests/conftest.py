@@ -237,8 +237,8 @@ def mounted_tmpfs(path, options: str):
 
 
 class BakeContext:
-    """What Bakes' traced bakes (`_reflection_probes`, `_probes`) read of a frame's context: the
-    scene, the runtime, the bakes' store (the geometry comes from it), no warnings, no progress."""
+    """What Bakes.load reads of a frame's context (render/units.py Job.of): the scene, the runtime,
+    the bakes' store (the geometry comes from it), no warnings, no progress."""
 
     def __init__(self, sc, rt, bakes):
         self.scene, self.rt, self.bakes = sc, rt, bakes

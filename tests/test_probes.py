@@ -19,7 +19,7 @@ from iblbake.render import Reuse, plan, render
 from iblbake.core import sh
 from iblbake.errors import IblbakeError, InputError
 from iblbake.io import images
-from iblbake.render import probes
+from iblbake.render import probes, units
 from iblbake.render.bakes import Bakes
 from iblbake.render.sources.probes import probe_args, probe_defines
 from iblbake.render.twin import probes as twin
@@ -193,14 +193,17 @@ def sphere_scene(folder, sky, diffuse, rep="octahedral"):
 
 
 class Given(Bakes):
-    """A bake store whose probe volume is a given one (the far-sphere scene's, for another scene)."""
+    """A bake store whose probe volume is a given one (the far-sphere scene's, for another scene):
+    its probes unit (render/units.py) loads that volume."""
 
     def __init__(self, root, volume):
         super().__init__(root)
         self.volume = volume
 
-    def _probes(self, ctx):
-        return self.volume, False, {}
+        class GivenProbes(units.Probes):
+            def load(self, job):
+                return volume, False, {}
+        self.units = {**self.units, "probes": GivenProbes()}
 
 
 @pytest.mark.parametrize("rep", ["octahedral", "sh"])

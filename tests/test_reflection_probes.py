@@ -162,7 +162,7 @@ def test_frame_matches_the_twin(tmp_path, rt):
     distant = next(v[0] for k, v in bakes._memo.items() if isinstance(k, tuple) and k[0] == "prefiltered"
                    and k[1] == env_sha)
     table = next(v[0] for k, v in bakes._memo.items() if isinstance(k, tuple) and k[0] == "dfg")
-    captured = bakes._reflection_probes(BakeContext(sc, rt, bakes))[0]
+    captured = bakes.load("reflection_probes", BakeContext(sc, rt, bakes))[0]
     arrays = pack.scene_arrays(sc)
     gb = rr.primary(sc["camera"], arrays)
     want = rr.shade(gb, arrays, sc["effects"], sc["environment"], prefiltered=distant, dfg=table,

@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from iblbake.render import plan, render
+from iblbake.render import render
 from iblbake.io import images
 from iblbake.render import probes
 from iblbake.render.bakes import Bakes
@@ -272,7 +272,7 @@ def test_probe_rays_pass_single_sided_backs_and_meet_solids_insides(tmp_path, rt
     the paths' and the captures' do: the light behind it reaches the probe); the same quad
     double-sided is a front face; a probe inside a closed single-sided cube meets its inside, a
     back face (the probe is inside geometry)."""
-    from iblbake.render.frame import scene_context
+    from iblbake.render.units import Job
     quad = tmp_path / "q.obj"
     quad.write_text("v -2 -2 0\nv 2 -2 0\nv 2 2 0\nv -2 2 0\nf 1 2 3\nf 1 3 4\n")      # faces +z
     cube = write_cube(tmp_path, "c", centre=(0, 0, -3), half=0.5)
@@ -284,9 +284,7 @@ def test_probe_rays_pass_single_sided_backs_and_meet_solids_insides(tmp_path, rt
             "materials": {"m": {"double_sided": sided}},
             "objects": [{"mesh": {"path": str(path)}, "material": "m"}],
             "effects": {"diffuse": "probes", "specular": "off"}})
-        ctx = scene_context(sc, plan(sc), rt, Bakes(tmp_path / "c"))
-        ctx.bakes.load("radiance", ctx)
-        tracer = probes.Tracer(ctx, {"bounces": 1, "seed": 1})
+        tracer = probes.Tracer(Job(sc, rt, Bakes(tmp_path / "c")), {"bounces": 1, "seed": 1})
         return tracer.trace(np.array([origin]), np.array([[0, 0, 1.0], [0, 0, -1.0]]), True)
 
     _rad, t, obj = trace(quad, False, [0, 0, -0.5])

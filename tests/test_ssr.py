@@ -230,7 +230,7 @@ def test_more_frames_match_the_twin(tmp_path, rt, case):
     env_sha = bakes.environment(sc.data["environment"])[1].sha256
     pre = next(v[0] for k, v in memo.items() if k[0] == "prefiltered" and k[1] == env_sha)
     table = next(v[0] for k, v in memo.items() if k[0] == "dfg")
-    captured = bakes._reflection_probes(BakeContext(sc, rt, bakes))[0] if kw.get("probe") else None
+    captured = bakes.load("reflection_probes", BakeContext(sc, rt, bakes))[0] if kw.get("probe") else None
     arrays = pack.scene_arrays(sc)
     gb = rr.primary(sc["camera"], arrays)
     out = {}

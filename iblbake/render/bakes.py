@@ -1,19 +1,19 @@
-"""What the passes read, loaded once: the panorama and its bakes (sh, radiance, prefiltered, dfg,
-env_cdf), through the content-addressed cache, and kept in memory by content so that a caller
-rendering many frames (a sheet) reads and uploads nothing twice."""
+"""The bake store: what the passes read, loaded once: the panorama, the scene's geometry and
+textures, the scene on the device (render/device_scene.py) and every bake (the units of
+render/units.py: sh, basis, radiance, prefiltered, dfg, env_cdf, probes, reflection_probes),
+through the content-addressed cache, and kept in memory by content so that a caller rendering
+many frames (a sheet) reads and uploads nothing twice."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 from pathlib import Path
 
 import numpy as np
 
-from iblbake.bake import cache, layouts
-from iblbake.bake import mips as mipsbake
-from iblbake.bake import sh as bake_sh
-from iblbake.core import sampling
+from iblbake.bake import cache
 from iblbake.errors import IblbakeError
 from iblbake.io import images
 
@@ -38,40 +38,6 @@ def _textures_code_hash() -> str:
     return _code_hash((gltf, materials, textures))
 
 
-def _probes_code_hash() -> str:
-    """The probe bakers' and their tracing kernel's source: cached volumes and captures are rebaked
-    when they change."""
-    from iblbake.core import bases
-    from iblbake.core.bases import common
-    from iblbake.device.runtime import source_hash
-    from iblbake.render import probes, reflection_probes
-    # the probe bases' fits too (core/bases project_rays)
-    return _code_hash((probes, reflection_probes, common, *(bases.BASES[n] for n in bases.PROBES)),
-                      source_hash("probe_trace.cl"))
-
-
-def _external(path) -> list:
-    from iblbake.scene import gltf as gltf_file
-    try:
-        return gltf_file.external_files(path)
-    except (OSError, IblbakeError):
-        return []
-
-
-def _map_refs(materials: dict) -> list:
-    """The texture references (mappings with a path) anywhere in the scene's materials."""
-    out = []
-
-    def walk(v):
-        if isinstance(v, dict):
-            if isinstance(v.get("path"), str):
-                out.append(v)
-            for x in v.values():
-                walk(x)
-    walk(materials)
-    return out
-
-
 POLICY_KEYS = {"nonfinite": "environment.nonfinite:", "negative": "environment.negative:",
                "transfer": "environment.transfer:", "primaries": "environment.primaries:",
                "layout": "environment.layout:"}
@@ -84,6 +50,9 @@ class Bakes:
         self.root = Path(root) if root else cache.default_root()
         self._memo: dict = {}
         self.runtime = None          # the device a cube-map environment resamples on (render sets it)
+        from iblbake.render.units import UNITS
+        self.units: dict = UNITS     # name -> the bake's unit (render/units.py)
+        self._meshes: dict = {}      # id(BVH array) -> (mesh entry key, BVH, triangle attributes) read back
 
     def _get(self, key, make):
         for attempt in range(3):
@@ -130,7 +99,6 @@ class Bakes:
                 env["primaries"], env["layout"])
 
     def _extract(self, image, info):
-        import dataclasses
         import hashlib
 
         from iblbake.bake import sun as sunbake
@@ -187,6 +155,7 @@ class Bakes:
             arrays = (np.load(entry / "triangles.npy"), np.load(entry / "bvh.npy"),
                       {**manifest["report"], "cached": cached}, np.load(entry / "attributes.npy"),
                       np.load(entry / "closed.npy"))
+            self._meshes[id(arrays[1])] = (key, arrays[1], arrays[3])
             return arrays
 
         meshes_arrays = self._get(("geometry", key), make)
@@ -240,218 +209,61 @@ class Bakes:
         """The device tables of a chain of levels (chain_table), uploaded once per runtime."""
         return self._get(("chain", id(rt), tuple(id(lv) for lv in levels)), lambda: chain_table(rt, levels))
 
-    def load(self, name: str, ctx) -> tuple:
-        """(value, cached, report fields) of bake `name` for the context's scene."""
-        return getattr(self, f"_{name}")(ctx)
+    def device_scene(self, rt, sc, warn=None, arrays=None, textures=None):
+        """The scene's geometry, materials and textures on rt's device (render/device_scene.py
+        DeviceScene), made once per runtime and content: the same tables for every frame of a
+        series and for the bakes that trace the scene. `arrays` (geometry()) and `textures`
+        (textures()' arrays and slots) where the caller has them. The triangles, BVH and attributes
+        go up once per runtime and geometry, shared (on the host too) by scenes that differ in their
+        materials: a sheet's cells keep one copy of a large mesh."""
+        from iblbake.render import device_scene as dscene
+        from iblbake.scene import materials, textures as scene_textures
 
-    def _policies(self, env):
-        return images.read_policies(env["nonfinite"], env["negative"], env["transfer"], env["primaries"], env["layout"])
-
-    def _sh(self, ctx):
-        fx, env = ctx.scene.data["effects"], ctx.scene.data["environment"]
-        image, info = self.environment(env)
-        bands, window = fx["sh_bands"], fx["sh_window"]
-        key = ("sh", info.sha256, bands, window, env["nonfinite"], env["negative"])
-        (coeffs, manifest, cached), hit = self._recall(key, lambda: bake_sh.bake_irradiance(
-            ctx.rt, image, info, self.root, self._policies(env), bands, window, warn=ctx.warn))
-        return coeffs, cached or hit, {"bands": bands, "entry": str(self.root / manifest["key"])}
-
-    def _basis(self, ctx):
-        """The panorama projected onto the scene's directional basis (bake/bases.py)."""
-        from iblbake.bake import bases as bake_bases
-        from iblbake.core import bases
-
-        fx, env = ctx.scene.data["effects"], ctx.scene.data["environment"]
-        image, info = self.environment(env)
-        name = bases.frame_basis(fx)              # the diffuse basis, else the specular one
-        opts = bases.options_of(name, fx)
-        key = ("basis", info.sha256, name, tuple(sorted(opts.items())), env["nonfinite"], env["negative"])
-        (coeffs, manifest, cached), hit = self._recall(key, lambda: bake_bases.bake(
-            image, info, self.root, self._policies(env), name, opts, warn=ctx.warn))
-        return coeffs, cached or hit, {"basis": name, **opts, "floats": bases.BASES[name].floats(opts),
-                                       "entry": str(self.root / manifest["key"])}
-
-    def _baker(self, ctx):
-        return self._get(("baker", id(ctx.rt)), lambda: mipsbake.Baker("opencl", rt=ctx.rt))
-
-    def _radiance(self, ctx):
-        env = ctx.scene.data["environment"]
-        image, info = self.environment(env)
-        key = ("radiance", info.sha256, env["nonfinite"], env["negative"])
+        arrays = arrays if arrays is not None else self.geometry(sc, warn)
+        records = arrays.records
+        if textures is None and any(r["maps"] for r in records):
+            textures = self.textures(sc, records, warn)[:2]
+        tex, slots = textures if textures is not None else (None, {})
+        sizes = scene_textures.sizes(tex[1], tex[2]) if slots else {}
+        _mats, mat_maps = materials.device_arrays(records, slots, sizes)
+        mesh = self._meshes.get(id(arrays.bvh))
+        if mesh is not None and mesh[1] is arrays.bvh and mesh[2] is arrays.tri_attr:
+            gkey = dscene.digest(arrays.tris, head=mesh[0])      # the BVH and attributes: the entry's
+        else:
+            gkey = dscene.digest(arrays.tris, arrays.bvh, arrays.tri_attr)
+        # the texture arrays are this store's (textures()), held by its memo: their ids stay theirs
+        tex_ids = f"{[id(a) for a in tex]}:{len(tex[2])}" if slots else "none"
+        key = dscene.digest(arrays.spheres, arrays.planes, arrays.materials, mat_maps, head=f"{gkey}|{tex_ids}")
 
         def make():
-            manifest, cached, levels = mipsbake.bake_radiance(self._baker(ctx), image, info, self.root,
-                                                              self._policies(env), warn=ctx.warn)
-            return (levels if levels is not None else mipsbake.load_chain(self.root, manifest)), manifest, cached
+            # the first scene's triangles, BVH and attributes (the same bytes) and their buffers
+            held, geometry = self._get(("device-geometry", id(rt), gkey),
+                                       lambda: (arrays, dscene.geometry_tables(rt, arrays)))
+            if slots:
+                devtex = self.device_textures(rt, tex)
+            else:
+                devtex = (rt.to_device(np.zeros((1, 4), np.float32)), rt.to_device(np.zeros((1, 4), np.int32)),
+                          rt.to_device(np.zeros((1, 4), np.int32)))
+            table = dscene.tables(rt, arrays, mat_maps, geometry, devtex, len(tex[2]) if slots else 0)
+            shared = dataclasses.replace(arrays, tris=held.tris, bvh=held.bvh, tri_attr=held.tri_attr)
+            return dscene.DeviceScene(shared, table, key)
+        return self._get(("device-scene", id(rt), key), make)
 
-        (chain, manifest, cached), hit = self._recall(key, make)
-        return chain, cached or hit, {"levels": len(chain), "entry": str(self.root / manifest["key"])}
-
-    def _prefiltered(self, ctx):
-        p, env = ctx.scene.data["effects"]["prefilter"], ctx.scene.data["environment"]
-        image, info = self.environment(env)
-        rkey = ("radiance", info.sha256, env["nonfinite"], env["negative"])
-        baker = self._baker(ctx)
-        # the radiance chain in memory only: no radiance entry of its own
-        return self.prefilter(ctx, image, info, p["size"] or layouts.default_base_size("equirect", info.height),
-                              lambda: self._memo[rkey][0] if rkey in self._memo else baker.radiance_chain(image))
-
-    def prefilter(self, ctx, image, info, base: int, chain_levels):
-        """(levels, cached, report fields) of a panorama's prefiltered chain as the scene's
-        effects.prefilter asks, `base` rows at level 0; chain_levels() its radiance chain."""
-        p, env = ctx.scene.data["effects"]["prefilter"], ctx.scene.data["environment"]
-        opts = mipsbake.PrefilterOptions("equirect", base, p["levels"], p["min_size"], p["method"], p["samples"],
-                                         p["lod_bias"], True, level_sizes=p["level_sizes"]).resolved(info.height)
-        opts["method_name"] = "effects.prefilter.method:"
-        key = ("prefiltered", info.sha256, env["nonfinite"], env["negative"],
-               tuple(sorted((k, str(v)) for k, v in opts.items())))
-        baker = self._baker(ctx)
-
-        def make():
-            pm, cached = mipsbake.bake_prefiltered(baker, chain_levels, info, self.root, self._policies(env),
-                                                   opts, warn=ctx.warn)
-            levels = mipsbake.load_chain(self.root, pm)
-            return levels, pm, cached
-
-        (levels, pm, cached), hit = self._recall(key, make)
-        extra = {"levels": len(levels), "methods": [f["method"] for f in pm["files"]],
-                 "entry": str(self.root / pm["key"]),
-                 "fp16_bytes": int(sum(3 * 2 * lv.shape[0] * lv.shape[1] for lv in levels))}   # an engine's copy
-        if "verify" in pm:            # what `mips --verify` measured and stored in the entry's manifest
-            extra["verified_relative_rmse"] = pm["verify"]["relative_rmse"]
-        return levels, cached or hit, extra
-
-    def _dfg(self, ctx):
-        p = ctx.scene.data["effects"]["prefilter"]
-        key = ("dfg", p["dfg_size"], p["dfg_samples"])
-
-        def make():
-            dm, cached = mipsbake.bake_dfg(self._baker(ctx), self.root, p["dfg_size"], p["dfg_samples"], False,
-                                           warn=ctx.warn)
-            return images.read_exr(self.root / dm["key"] / "dfg.exr")[..., :2], dm, cached
-
-        (table, dm, cached), hit = self._recall(key, make)
-        return table, cached or hit, {"size": p["dfg_size"], "entry": str(self.root / dm["key"])}
-
-    def _env_cdf(self, ctx):
-        env = ctx.scene.data["environment"]
-        image, info = self.environment(env)
-        key = ("env_cdf", info.sha256, env["nonfinite"], env["negative"])
-        dist, hit = self._recall(key, lambda: sampling.EnvironmentDistribution(image))
-        return dist, hit, {}
-
-    def _probes(self, ctx):
-        """The scene's irradiance probe volume (render/probes.py), baked by tracing the scene on
-        ctx's device, keyed by everything its rays see: the geometry and materials (their files'
-        content), the lights, the panorama's content and frame, the bake settings and the code."""
-        from iblbake.render import probes
-
-        settings = ctx.scene.data["probes"]
-        key = "probes-" + cache.content_key({"kind": "probes", "v": probes.VERSION, **self._light_transport(ctx),
-                                             "settings": probes.bake_settings(settings),
-                                             "code": _probes_code_hash()})
-
-        def make():
-            def build(tmp: Path):
-                vol = probes.bake(ctx, settings, progress=ctx.progress)
-                names = probes.save(vol, tmp)
-                man = probes.manifest(probes.sampled(vol, settings))
-                return {"kind": "probes", "files": [{"name": n} for n in names], "probes": man}
-
-            manifest, cached = cache.get_or_build(self.root, key, build, warn=ctx.warn)
-            entry = self.root / manifest["key"]
-            return probes.load(entry, manifest.get("probes"), cache.MANIFEST), manifest, cached
-
-        (vol, manifest, cached), hit = self._recall(key, make)
-        rep = manifest["probes"]["report"]
-        for w in probes.warnings(rep, ctx.scene.data, vol):    # said for a cached volume too
-            ctx.warn(w)
-        return vol, cached or hit, {"probes": rep["probes"], "rays_traced": rep["rays_traced"],
-                                    "bake_s": rep["seconds"], "inactive": rep["inactive"],
-                                    "relocated": rep["relocated"], "inside_geometry": rep.get("inside_geometry", 0),
-                                    "outside_camera_room": rep.get("outside_camera_room", 0),
-                                    "entry": str(self.root / manifest["key"])}
-
-    def _reflection_probes(self, ctx):
-        """Each reflection probe's capture (render/reflection_probes.py: the scene traced from its
-        position, cached by content as the irradiance probes are) and its prefiltered chain."""
-        import hashlib
-
-        from iblbake.io.images import ImageInfo
-        from iblbake.render import reflection_probes as rp
-
-        transport = self._light_transport(ctx)
-        out, cached_all, rays = [], True, 0
-        for k, settings in enumerate(ctx.scene.data["reflection_probes"]):
-            key = "reflection-" + cache.content_key({"kind": "reflection", "v": 2, "index": k, **transport,
-                                                     "settings": settings, "code": _probes_code_hash()})
-
-            def make(settings=settings, k=k, key=key):
-                def build(tmp: Path):
-                    image, report = rp.capture(rp.tracer(ctx, settings), k, settings, ctx.progress)
-                    images.write_exr(tmp / "capture.exr", image, channels=("R", "G", "B", "A"))
-                    return {"kind": "reflection", "files": [{"name": "capture.exr"}], "probe": settings,
-                            "report": report}
-
-                manifest, cached = cache.get_or_build(self.root, key, build, warn=ctx.warn)
-                report = manifest.get("report")
-                if not isinstance(report, dict) or not isinstance(report.get("inside"), dict):
-                    raise IblbakeError(f"{self.root / manifest['key']}: a reflection capture without its report; "
-                                       "delete the cache entry to bake it again")
-                path = self.root / manifest["key"] / "capture.exr"
-                image = images.read_exr(path)
-                size = settings["size"]
-                if image.shape != (size, 2 * size, 4) or not np.isfinite(image).all() or (image < 0).any() \
-                        or (image[..., 3] > 1).any():
-                    raise IblbakeError(f"{path}: not a {2 * size}x{size} RGBA capture of finite, non-negative "
-                                       f"radiance and coverage; delete the cache entry to bake it again")
-                return np.ascontiguousarray(image, np.float32), cached, report
-
-            image, cached, report = self._get(("reflection", key), make)
-            for w in rp.warnings(k, report, ctx.scene.data):     # said for a cached capture too
-                ctx.warn(w)
-            traced = not cached
-            baker = self._baker(ctx)
-            chains = []
-            for part, img in (("radiance", image[..., :3]), ("coverage", np.repeat(image[..., 3:], 3, -1))):
-                img = np.ascontiguousarray(img)
-                info = ImageInfo(f"reflection probe {k} {part}", img.shape[1], img.shape[0], ("R", "G", "B"),
-                                 "float32", hashlib.sha256(img.tobytes()).hexdigest())
-                levels, pre_cached, _extra = self.prefilter(ctx, img, info, img.shape[0],
-                                                            lambda img=img: baker.radiance_chain(img))
-                chains.append(levels)
-                cached = cached and pre_cached
-            levels, coverage = chains
-            out.append({"settings": settings, "levels": levels, "coverage": coverage, "capture": image})
-            cached_all = cached_all and cached
-            rays += 2 * settings["size"] ** 2 * settings["samples"] if traced else 0
-        return out, cached_all, {"probes": len(out), "rays_traced": rays}
-
-    def _light_transport(self, ctx) -> dict:
-        """What light leaving the panorama meets before it reaches a probe: the objects,
-        materials, lights and every file they read (by content), the panorama (by content) and its
-        frame, and which surfaces bound solids (`solid: auto` decides by the camera's position)."""
-        from iblbake.scene import pack
-
-        sc = ctx.scene
-        d = sc.data
-        env = d["environment"]
-        _image, info = self.environment(env)
-        files = [self.file_sha256(f) for o in d["objects"] if "mesh" in o
-                 for f in (o["mesh"]["path"], *_external(o["mesh"]["path"]))]
-        files += [self.file_sha256(m["path"]) for m in _map_refs(d["materials"])]
-        return {"environment": info.sha256, "frame": {k: env[k] for k in ("rotation_y", "intensity", "sun", "nonfinite",
-                                                                         "negative")},
-                "objects": d["objects"], "materials": d["materials"], "lights": d["lights"], "files": files,
-                "solids": pack.solids_digest(ctx.arrays if ctx.arrays is not None else self.geometry(sc, ctx.warn))}
+    def load(self, name: str, job) -> tuple:
+        """(value, cached, report fields) of bake `name` (its unit) for a Job (render/units.py),
+        or for anything holding a scene and a runtime (a frame's context)."""
+        from iblbake.render.units import Job
+        return self.units[name].load(Job.of(job, self))
 
 
 def load_all(ctx, names) -> dict:
-    """Every named bake into ctx.loaded, in order (a later bake may read an earlier one), timed
-    into the context's report."""
+    """Every named bake into ctx.loaded, in order (units.order: a bake after those it reads),
+    timed into the context's report."""
+    from iblbake.render.units import Job
+    job = Job.of(ctx)
     for name in names:
         t0 = time.perf_counter()
-        value, cached, extra = ctx.bakes.load(name, ctx)
+        value, cached, extra = ctx.bakes.load(name, job)
         ctx.report.bake(name, time.perf_counter() - t0, cached, **extra)
         ctx.loaded[name] = value
     return ctx.loaded

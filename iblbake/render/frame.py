@@ -18,6 +18,8 @@ import numpy as np
 from iblbake.device.runtime import host_bytes_available
 from iblbake.errors import InputError
 from iblbake.render.bakes import Bakes, load_all
+from iblbake.render.device_scene import TABLE as DEVICE_SCENE_TABLE
+from iblbake.render.device_scene import environment_frame
 from iblbake.render.passes.base import DISPLAY_KEYS
 from iblbake.render.plan import Plan, plan
 from iblbake.scene import pack
@@ -28,9 +30,7 @@ FRAME_HOST_PIXEL_BYTES = 16 + 4 + 40      # the host's frame: hdr, png and AOVs
 PLACEHOLDER_BYTES = 16                    # a buffer no running pass needs, bound for its parameter
 TABLE_TILE = ("n", "npix", "pixel0")      # per tile: samples, pixels, the first pixel's index
 # per frame: the camera, the geometry (scene/pack.py), materials and textures, the panorama's frame
-TABLE_SCENE = ("cam", "width", "height", "spp", "jitter", "spheres", "nspheres", "planes", "nplanes", "bvh", "tris",
-               "ntris", "materials", "tri_attr", "mat_maps", "texels", "tex_levels", "tex_info", "texture_count",
-               "env_rot", "env_scale")
+TABLE_SCENE = ("cam", "width", "height", "spp", "jitter", *DEVICE_SCENE_TABLE, "env_rot", "env_scale")
 
 
 class Report:
@@ -138,6 +138,7 @@ class Context:
         self.loaded: dict = {}
         self.image = None
         self.background_image = None
+        self.device_scene = None      # the scene's tables on the device (render/device_scene.py)
         self.arrays = None            # the scene's device records (scene/pack.py SceneArrays)
 
     def launch(self, p, global_size, function=None, **args):
@@ -219,9 +220,9 @@ def tile_rows(rt, scene: Scene, pl: Plan, device_budget: int | None = None) -> i
 
 
 def scene_context(scene: Scene, pl: Plan, rt, bakes: Bakes, warn=None, progress=None) -> Context:
-    """A frame's context with the scene on the device: its geometry, materials and textures in the
-    table, the panorama read where a bake or pass reads it (ctx.image). The bakes are not loaded
-    (load_all), so that a bake that traces the scene (the probes) finds the table."""
+    """A frame's context with the scene on the device (Bakes.device_scene: its geometry, materials
+    and textures, made once per runtime and content) and the camera in the table, the panorama
+    read where a bake or pass reads it (ctx.image). The bakes are loaded by load_all."""
     d = scene.data
     cam = d["camera"]
     width, height = cam["resolution"]
@@ -243,45 +244,24 @@ def scene_context(scene: Scene, pl: Plan, rt, bakes: Bakes, warn=None, progress=
             ctx.warn(w)
         rep.bake("read_environment", time.perf_counter() - t0, False, path=info.path,
                  size=[info.width, info.height])
-    env = d["environment"]
-    rot = np.radians(env["rotation_y"])
     pos, fwd, right, up, ortho = pack.camera_vectors(cam)
     cam4 = np.zeros((4, 4), np.float32)
     cam4[0, :3], cam4[0, 3] = pos, 1.0 if ortho else 0.0
     cam4[1, :3], cam4[2, :3], cam4[3, :3] = fwd, right, up
 
-    def padded(a, shape):
-        return a if a is not None and len(a) else np.zeros(shape, np.float32)
-
-    from iblbake.scene import materials as scene_materials
-    from iblbake.scene import textures as scene_textures
-    from iblbake.scene.layout import FLOAT4S
-    records = arrays.records
-    if any(r["maps"] for r in records):
+    textures = None
+    if any(r["maps"] for r in arrays.records):
         t0 = time.perf_counter()
-        (texels, tex_levels, tex_info), slots, trep = bakes.textures(scene, records, ctx.warn)
+        tex, slots, trep = bakes.textures(scene, arrays.records, ctx.warn)
         rep.bake("textures", time.perf_counter() - t0, trep.pop("cached"), **trep)
-    else:
-        slots = {}
-        texels, tex_levels, tex_info = (np.zeros((1, 4), np.float32), np.zeros((1, 4), np.int32),
-                                        np.zeros((1, 4), np.int32))
-    sizes = scene_textures.sizes(tex_levels, tex_info) if slots else {}
-    _mats, mat_maps = scene_materials.device_arrays(records, slots, sizes)
-
+        textures = (tex, slots)
+    ctx.device_scene = bakes.device_scene(rt, scene, ctx.warn, arrays=arrays, textures=textures)
     ctx.table.update({
         "cam": rt.to_device(cam4), "width": width, "height": height, "spp": cam["spp"],
         "jitter": rt.to_device(pack.pixel_jitter(cam["spp"]).astype(np.float32)),
-        "spheres": rt.to_device(padded(arrays.spheres, (1, 2, 4))), "nspheres": len(arrays.spheres),
-        "planes": rt.to_device(padded(arrays.planes, (1, FLOAT4S["PLANE"], 4))), "nplanes": len(arrays.planes),
-        "bvh": rt.to_device(padded(arrays.bvh, (1, 8))), "tris": rt.to_device(padded(arrays.tris, (1, 6, 4))),
-        "ntris": len(arrays.tris), "materials": rt.to_device(arrays.materials.reshape(-1, 4)),
-        "tri_attr": rt.to_device(padded(arrays.tri_attr, (1, FLOAT4S["TRIANGLE_ATTR"], 4))),
-        "mat_maps": rt.to_device(mat_maps.reshape(-1, 4)),
-        **dict(zip(("texels", "tex_levels", "tex_info"), bakes.device_textures(rt, (texels, tex_levels, tex_info)))),
-        "texture_count": len(tex_info) if slots else 0,
-        "env_rot": np.array([np.cos(rot), np.sin(rot)], np.float32), "env_scale": env["intensity"],
+        **ctx.device_scene.table, **environment_frame(d["environment"]),
     })
-    ctx.arrays = arrays
+    ctx.arrays = ctx.device_scene.arrays
     return ctx
 
 

@@ -118,7 +118,7 @@ def interreflects(scene: Scene) -> bool:
 class Plan:
     effects: Effects
     passes: list              # the pass objects that run, in order
-    bakes: list               # what they read, in order (sh, radiance, prefiltered, dfg, env_cdf)
+    bakes: list               # what they read, in the order of the bakes' reads (render/units.py order)
     defines: dict             # pass name -> its kernel defines
     notes: list
     # one program for every pass: a frame with no series after it (each program costs a load,
@@ -167,11 +167,9 @@ def lighting_passes(pl: Plan) -> list:
     return [p.name for p in pl.passes if p.name in names]
 
 
-BAKE_ORDER = ("sh", "basis", "radiance", "prefiltered", "dfg", "env_cdf", "probes", "reflection_probes")
-
-
 def plan(scene: Scene, one_program: bool = False) -> Plan:
     from iblbake.render.passes import PASSES
+    from iblbake.render.units import order
 
     fx = effect_modes(scene)
     running = [p for p in PASSES if p.runs(scene, fx)]
@@ -180,5 +178,5 @@ def plan(scene: Scene, one_program: bool = False) -> Plan:
     out = scene.data["output"]
     if not out["frame"] and not any(out[a] for a in AOVS):
         notes.append("no output requested (output.frame or -o): rendering without writing")
-    return Plan(fx, running, [b for b in BAKE_ORDER if b in wanted],
+    return Plan(fx, running, order(wanted),
                 {p.name: p.defines(scene, fx) for p in running if p.kernel}, notes, one_program)

@@ -2,17 +2,17 @@
 parallax-corrected cubemaps"; Unity's reflection probes, Unreal's box and sphere captures): the
 radiance arriving at a point of the scene from every direction, captured by the reference's path
 tracer (kernels/probe_trace.cl) into an equirect panorama, then prefiltered by the same code as
-the distant panorama's chain (render/bakes.py). `specular: prefiltered` reads it inside the
-probe's influence, along the reflected ray corrected to where it leaves the probe's box or sphere
-(kernels/reflection_probes.h; twin: render/twin/reflection_probes.py). Conventions:
-docs/conventions.md "Reflection probes"."""
+the distant panorama's chain (render/units.py: the reflection_probes unit, prefilter()).
+`specular: prefiltered` reads it inside the probe's influence, along the reflected ray corrected
+to where it leaves the probe's box or sphere (kernels/reflection_probes.h; twin:
+render/twin/reflection_probes.py). Conventions: docs/conventions.md "Reflection probes"."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from iblbake.core import conventions, sampling
-from iblbake.render import probes
+from iblbake.render.probes.rays import Tracer
 
 CHUNK_RAYS = 1 << 20          # capture rays per launch (a 512-row capture at 64 samples is 33M)
 
@@ -85,8 +85,9 @@ def excluded(scene_data: dict, settings: dict) -> list:
                   {i for i, o in enumerate(scene_data["objects"]) if not o["reflection_captures"]})
 
 
-def tracer(ctx, settings: dict):
-    """Capture rays meet what camera rays meet, from either side of a double-sided surface (the
-    irradiance probes' rays see back faces: a probe inside geometry), but the excluded objects."""
-    return probes.Tracer(ctx, {"bounces": settings["bounces"], "seed": settings["seed"]}, back_faces_black=False,
-                         skip_objects=excluded(ctx.scene.data, settings))
+def tracer(job, settings: dict):
+    """The probe tracer (render/probes/rays.py) on a job (render/units.py Job) for a capture: its
+    rays meet what camera rays meet, from either side of a double-sided surface (the irradiance
+    probes' rays see back faces: a probe inside geometry), but the excluded objects."""
+    return Tracer(job, {"bounces": settings["bounces"], "seed": settings["seed"]}, back_faces_black=False,
+                  skip_objects=excluded(job.scene.data, settings))

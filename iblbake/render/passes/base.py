@@ -11,6 +11,8 @@ import functools
 import time
 
 from iblbake.render.buffers import ELEMENT_BYTES, Buffer  # noqa: F401 (the pass contract's record)
+# what the scene's tables hold, shared with the bakes that trace the scene
+from iblbake.render.device_scene import geometry_defines, material_defines  # noqa: F401
 from iblbake.render.plan import Effects
 from iblbake.scene.load import Scene
 
@@ -96,26 +98,10 @@ def _access(kernel, functions) -> tuple:
     return tuple(r for r in reads if r not in writes), tuple(writes)
 
 
-def geometry_defines(scene: Scene) -> dict:
-    """HAS_SPHERES / HAS_PLANES / HAS_TRIANGLES for the primitives the scene has: tracing
-    kernels compile only those intersection loops; and the materials' defines, as cut-outs and
-    single-sided surfaces change what a ray meets."""
-    kinds = {k for o in scene.data["objects"] for k in ("sphere", "plane", "mesh") if k in o}
-    return {**{name: 1 for k, name in (("sphere", "HAS_SPHERES"), ("plane", "HAS_PLANES"),
-                                       ("mesh", "HAS_TRIANGLES")) if k in kinds}, **material_defines(scene)}
-
-
 def surface_cuts(scene: Scene) -> dict:
     """What of the scene's materials changes where rays hit: alpha masks and sides."""
     return {n: {k: m[k] for k in ("alpha", "alpha_mode", "alpha_cutoff", "double_sided", "base_color_map")}
             for n, m in scene.data["materials"].items()}
-
-
-def material_defines(scene: Scene) -> dict:
-    """HAS_TEXTURES with a HAS_<KIND>_MAP per map kind in use, HAS_ALPHA_MASK, HAS_SINGLE_SIDED
-    (iblbake.scene.materials.defines over the materials some object is shaded with)."""
-    from iblbake.scene import materials
-    return materials.defines(materials.used(scene))
 
 
 def mode_defines(fx: Effects) -> dict:

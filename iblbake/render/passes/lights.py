@@ -8,27 +8,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from iblbake.render.device_scene import scene_lights as frame_lights
 from iblbake.render.passes.base import Buffer, Pass, geometry_defines
 from iblbake.scene import pack
 
 
 def exact(fx) -> bool:
     return all(m == "reference" for m in (fx.diffuse, fx.specular) if m != "off")
-
-
-def frame_lights(scene, sun) -> list:
-    """The scene's lights, and the panorama's extracted sun (bake/sun.py) as a directional light
-    in world space, scaled like the panorama."""
-    out = list(scene.data["lights"])
-    if sun is not None:
-        from iblbake.core import conventions
-        env = scene.data["environment"]
-        d = conventions.rotate_y(sun.direction, env["rotation_y"])
-        out.append({"directional": {"direction": [-x for x in d], "color": sun.color,
-                                    "illuminance": sun.illuminance * env["intensity"],
-                                    "angular_diameter": sun.angular_diameter},
-                    "shadows": env["sun_shadows"], "shadow_samples": 16})
-    return out
 
 
 def shadow_rays_per_sample(scene, fx, lights) -> int:

@@ -9,8 +9,8 @@ import math
 
 import numpy as np
 
-from iblbake.bake.radiance import to_rgba
 from iblbake.core.metrics import luminance
+from iblbake.render.device_scene import panorama_args
 from iblbake.render.passes.base import Buffer, Pass, geometry_defines, mode_defines
 from iblbake.render.passes.lights import Lights, frame_lights
 from iblbake.scene import pack
@@ -45,16 +45,9 @@ def sample_slices(rt, n: int, batch: int) -> int:
 
 
 def environment_args(ctx, dist) -> dict:
-    """The panorama's texels and importance-sampling tables (dist: sampling.EnvironmentDistribution)
-    as the named arguments of the kernels that sample it (reference.cl, probe_trace.cl), uploaded
-    once per runtime and panorama (a study's references, a volume's and its captures' rays)."""
-    rt = ctx.rt
-
-    def upload():
-        return {"img": rt.to_device(to_rgba(ctx.image)), "marginal": rt.to_device(dist.marginal),
-                "conditional": rt.to_device(dist.conditional), "pdf_table": rt.to_device(dist.pdf)}
-    return {**ctx.bakes.on_device(rt, (ctx.image, dist.marginal, dist.conditional, dist.pdf), upload),
-            "w": dist.width, "h": dist.height}
+    """The frame's panorama and its importance-sampling tables (dist) as reference.cl's arguments,
+    uploaded once per runtime and panorama (render/device_scene.py panorama_args)."""
+    return panorama_args(ctx.rt, ctx.bakes, ctx.image, dist)
 
 
 class Reference(Pass):

@@ -23,9 +23,9 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
     only; misses are 0); `ao` the ambient occlusion of every sample (ambient_occlusion) where
     effects.ao is on. The importance estimate is summed with Fresnel inside, which the kernels
     split around f0: the same sum, to float rounding. `probes`: the sampled probe volume
-    (render/probes.py sampled) where effects.diffuse is probes, sh_coeffs then the panorama's SH
+    (render/probes sampled) where effects.diffuse is probes, sh_coeffs then the panorama's SH
     that takes over outside it. `basis_coeffs`: the `basis` bake where diffuse is a directional basis. `reflection_probes`: the captured probes [{settings, levels}]
-    (Bakes._reflection_probes) where specular is prefiltered. `ssr_out` (a dict) receives the
+    (the reflection_probes bake) where specular is prefiltered. `ssr_out` (a dict) receives the
     reflected environment's weight and radiance per hit sample ("w", "li"), as HAS_SSR writes
     ssr_env for the ssr pass (twin/ssr.py)."""
     hit = gb["hit"]

@@ -275,7 +275,7 @@ def ssr(gb, arrays, effects: dict, cam: dict, src, ssr_w, ssr_li, captured=None)
     """Twin of the ssr pass: the frame's radiance per sample (src, the lit frame) with the
     reflected environment (weight ssr_w, radiance ssr_li per hit sample) replaced by the resolved
     reflection of the sample's pixel, where the sample lies on that pixel's first sample's surface.
-    `captured`: the reflection probes (Bakes._reflection_probes) where they are read."""
+    `captured`: the reflection probes (the reflection_probes bake) where they are read."""
     s = {**effects["ssr_settings"], **march_lengths(effects["ssr_settings"], arrays, cam)}
     spp = cam["spp"]
     pix = gather(cam, gb, arrays, src)

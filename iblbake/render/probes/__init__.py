@@ -1,0 +1,120 @@
+"""The irradiance probe volume (DDGI: Majercik et al. 2019, JCGT 8(2); 2021, JCGT 10(2); NVIDIA's
+RTXGI-DDGI 1.x), baked once, offline, to its mean over every ray (no hysteresis: nothing is
+temporal here). One module per idea:
+
+  grid.py        where the probes stand (Grid; an automatic grid from the scene's bounds)
+  rays.py        the rays' directions and the Tracer (kernels/probe_trace.cl: the reference's paths
+                 against the scene on the device)
+  relocation.py  RTXGI's relocation and classification, probes inside geometry or outside the
+                 camera's room
+  project.py     the rays' projection into RTXGI's atlases (octahedral irradiance or L2 SH, the
+                 distance moments) or a directional basis's coefficients
+  volume.py      a baked volume as a value: bake settings, sampling settings, a basis's options
+  files.py       probes.json and the atlases: written, read back and validated
+  glsl.py        probes.glsl, sampling the files as kernels/probes.h does
+
+and here bake() (what the probes unit of render/units.py builds) with the warnings its report
+gives. Every name of those modules a caller uses is importable from here. Sampling:
+kernels/probes.h, twin/probes.py. Conventions: docs/conventions.md "Irradiance probes"."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from iblbake.errors import IblbakeError
+from iblbake.render.probes.files import (FILES, FORMAT, VERSION, basis_manifest, data_texture, load, manifest,
+                                         read_manifest, save)
+from iblbake.render.probes.glsl import SH_GLSL, basis_glsl, glsl
+from iblbake.render.probes.grid import DEFAULT_LONGEST, Grid, grid_of, scene_bounds
+from iblbake.render.probes.project import BACKFACE_BLEND_LIMIT, MAX_DISTANCE, atlas, project, with_borders
+from iblbake.render.probes.rays import Tracer, random_rotation, ray_directions, spherical_fibonacci, trace_defines
+from iblbake.render.probes.relocation import (ACTIVE, FIXED_RAYS, INACTIVE, MAX_OFFSET, RELOCATION_PASSES, classify,
+                                              inside_geometry, outside_camera_rooms, relocate)
+from iblbake.render.probes.volume import SAMPLING_KEYS, bake_settings, basis_options, sampled, volume_dict
+
+__all__ = ["ACTIVE", "BACKFACE_BLEND_LIMIT", "DEFAULT_LONGEST", "FILES", "FIXED_RAYS", "FORMAT", "Grid", "INACTIVE",
+           "INSIDE_WARN", "MAX_ATLAS_SIDE", "MAX_DISTANCE", "MAX_OFFSET", "RELOCATION_PASSES", "SAMPLING_KEYS", "SH_GLSL",
+           "Tracer", "VERSION", "atlas", "bake", "bake_settings", "basis_glsl", "basis_manifest", "basis_options",
+           "classify", "data_texture", "glsl", "grid_of", "inside_geometry", "load", "manifest", "outside_camera_rooms",
+           "project", "random_rotation", "ray_directions", "read_manifest", "relocate", "sampled", "save", "scene_bounds",
+           "spherical_fibonacci", "trace_defines", "volume_dict", "warnings", "with_borders"]
+
+
+def bake(job, settings: dict, progress=None) -> dict:
+    """The volume of a job's scene (render/units.py Job: the scene, a runtime and the bake store;
+    the probes unit asks for it): a dict of the arrays (as load() returns) and a report."""
+    t0 = time.perf_counter()
+    arrays = job.arrays
+    try:
+        grid = grid_of(settings, arrays)
+    except IblbakeError as e:             # said as the scene's other errors are: naming its file
+        raise type(e)(f"{job.scene.source}: {e}") from None
+    tracer = Tracer(job, settings)
+    if settings["relocation"]:
+        offset, at_grid = relocate(tracer, grid, settings, progress)
+    else:
+        offset, at_grid = np.zeros((grid.count, 3)), None
+    dirs = ray_directions(settings["rays"], settings["seed"])
+    base = 0.2 if settings["relocation"] else 0.0
+    radiance, t, obj = tracer.trace(grid.positions() + offset, dirs, True, progress, base, 1.0 - base)
+    states = classify(t, dirs, grid, settings) if settings["classification"] else np.zeros(grid.count, int)
+    from iblbake.scene import pack
+    outside = outside_camera_rooms(grid.positions() + offset, arrays, pack.camera_vectors(job.scene.data["camera"])[0])
+    states = np.where(outside, INACTIVE, states)
+    irr, dist = project(radiance, t, dirs, grid, settings)
+    data = np.concatenate([offset, states[:, None].astype(np.float64)], 1)
+    inside, who = inside_geometry(t, obj, settings["backface_threshold"])
+    if at_grid is not None:                       # inside at their grid positions: moved out, or not
+        who = np.where(at_grid[0], at_grid[1], who)
+        inside = inside | at_grid[0]
+    objects = {}
+    for o in who[inside]:
+        objects[int(o)] = objects.get(int(o), 0) + 1
+    report = {"probes": grid.count, "rays_per_probe": settings["rays"], "rays_traced": tracer.rays_traced,
+              "inactive": int((states == INACTIVE).sum()), "relocated": int((np.abs(offset).sum(1) > 0).sum()),
+              "inside_geometry": int(inside.sum()), "outside_camera_room": int(outside.sum()),
+              "inside_objects": {str(k): v for k, v in sorted(objects.items(), key=lambda kv: -kv[1])},
+              "seconds": round(time.perf_counter() - t0, 4)}
+    return volume_dict(grid, settings, irr, dist, data, report)
+
+
+INSIDE_WARN = 0.25      # the share of probes inside geometry (at their grid positions or after) that is said
+
+
+MAX_ATLAS_SIDE = 16384       # texels: the largest 2D texture most GPUs take (Vulkan's and D3D12's limit)
+
+
+def warnings(report: dict, scene_data: dict, volume: dict | None = None) -> list:
+    """What a bake's report says a user should know: more than INSIDE_WARN of the probes were inside
+    geometry (relocated out of it, or switched off), with the objects whose back faces they saw; an
+    atlas wider or taller than MAX_ATLAS_SIDE (an engine cannot load it as one texture)."""
+    from iblbake.scene.load import object_label
+
+    out = []
+    if volume is not None:
+        nx, ny, nz = volume["counts"]
+        for what, texels in (("irradiance", volume["irradiance_texels"]), ("distance", volume["distance_texels"])):
+            if what == "irradiance" and volume["representation"] != "octahedral":
+                continue
+            w, h = (texels + 2) * nx * ny, (texels + 2) * nz
+            if max(w, h) > MAX_ATLAS_SIDE:
+                out.append(f"probes: the {what} atlas is {w} x {h} texels, over the {MAX_ATLAS_SIDE} most GPUs take "
+                           f"in one texture; give fewer probes (probes.counts, probes.spacing) or texels")
+    n, inside = report["probes"], report.get("inside_geometry", 0)
+    if not n or inside <= INSIDE_WARN * n:
+        return out
+    objs = report.get("inside_objects", {})
+    named = ", ".join(f"{object_label(scene_data, int(o))}: {c}" for o, c in list(objs.items())[:3]
+                      if int(o) < len(scene_data["objects"]))
+    forced = [int(o) for o in objs if int(o) < len(scene_data["objects"]) and scene_data["objects"][int(o)]["solid"] is True]
+    if forced:       # the user made it a solid: the advice is to undo that, not to add solid: false
+        advice = (f"{object_label(scene_data, forced[0])} is solid: true (an open mesh bounds a solid by its winding "
+                  f"then); set objects.{forced[0]}.solid: auto where probes should see it from either side, or move "
+                  "the grid (probes.min, probes.max)")
+    else:
+        advice = ("a double-sided surface is a front face to probes on either side: set objects.N.solid: false on a "
+                  "closed shell they should see from within, or move the grid (probes.min, probes.max)")
+    return out + [f"probes: {inside} of {n} probes ({100 * inside / n:.0f}%) are inside geometry (their rays meet the back "
+                  f"faces of {named}{', ...' if len(objs) > 3 else ''}); {report['inactive']} probes are off; {advice}"]

@@ -1,0 +1,161 @@
+"""probes.glsl (render/probes): a GLSL function that samples a volume's files as kernels/probes.h
+does, the grid and settings baked in (a directional basis through its own GLSL, core/bases glsl)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from iblbake.core import bases
+from iblbake.render.probes.volume import basis_options
+
+
+SH_GLSL = ("0.28209479177387814", "0.4886025119029199 * d.y", "0.4886025119029199 * d.z", "0.4886025119029199 * d.x",
+           "1.0925484305920792 * d.x * d.y", "1.0925484305920792 * d.y * d.z",
+           "0.31539156525252005 * (3.0 * d.z * d.z - 1.0)", "1.0925484305920792 * d.x * d.z",
+           "0.5462742152960396 * (d.x * d.x - d.y * d.y)")     # sh.h's basis at l <= 2, term by term
+
+
+def basis_glsl(name: str, opts: dict) -> tuple:
+    """(the basis's own GLSL function (core/bases glsl) with its coefficient array a variable
+    instead of a constant, the lines of probeOwnIrradiance that fill it from the probe's row of the
+    file and call it): one formula, the basis module's."""
+    import re
+    m = bases.BASES[name]
+    k = m.floats(opts)
+    src = m.glsl(np.zeros((k, 3)), opts)
+    src, found = re.subn(rf"const vec3 {m.GLSL_COEFFS}\[{k}\] = vec3\[{k}\]\(.*?\n\);",
+                         f"vec3 {m.GLSL_COEFFS}[{k}];     // the probe's coefficients (probeOwnIrradiance)", src,
+                         flags=re.S)
+    assert found == 1, name
+    own = (f"    for (int k = 0; k < {k}; ++k) {m.GLSL_COEFFS}[k] = texelFetch(probeIrradianceAtlas, ivec2(k, index), "
+           f"0).rgb;\n    return {m.GLSL_IRRADIANCE}(d);")
+    return src, own
+
+
+def glsl(volume: dict, man: dict) -> str:
+    """A GLSL function sampling the written files as kernels/probes.h does (the hardware's bilinear
+    filter in place of its reads), the volume's grid and settings baked in."""
+    def vec(v):
+        return "vec3(" + ", ".join(f"{x:.9g}" for x in v) + ")"
+
+    nx, ny, nz = volume["counts"]
+    rep = volume["representation"]
+    sh_rep = rep == "sh"
+    basis = "\n".join(f"    Y[{k}] = {e};" for k, e in enumerate(SH_GLSL))
+    basis_src, own = "", ""
+    if rep in bases.PROBES:
+        basis_src, own = basis_glsl(rep, basis_options(volume["settings"]))
+    return f"""// iblbake irradiance probes: {nx} x {ny} x {nz}, {volume['representation']} irradiance, RTXGI-DDGI layout
+// (probes.json holds the conventions). Bind the files as 2D float textures, each with its first
+// (top) row at t = 0, clamped to the edge:
+//   probeIrradianceAtlas  {man['files']['irradiance']} ({'linear' if rep == 'octahedral' else 'nearest'} filtering)
+//   probeDistanceAtlas    distance.exr (linear filtering)
+//   probeDataTexture      probe_data.exr (nearest)
+// diffuse = albedo / PI * mix(skyIrradiance(N), probeIrradiance(P, N, V), probeVolumeWeight(P)):
+// world position, unit shading normal, unit vector towards the viewer; the sky's irradiance (say
+// `iblbake sh --glsl`'s shIrradiance) takes over outside the volume.
+#define PROBES_SH {int(sh_rep)}
+#define PROBES_BASIS {int(bool(basis_src))}
+#define PROBE_VISIBILITY {int(volume['visibility'])}
+#define PROBE_CLASSIFICATION {int(volume['classification'])}
+const ivec3 PROBE_COUNTS = ivec3({nx}, {ny}, {nz});
+const vec3 PROBE_ORIGIN = {vec(volume['origin'])};
+const vec3 PROBE_SPACING = {vec(volume['spacing'])};
+const float PROBE_NORMAL_BIAS = {volume['normal_bias']:.9g};
+const float PROBE_VIEW_BIAS = {volume['view_bias']:.9g};
+const int PROBE_IRRADIANCE_TEXELS = {volume['irradiance_texels']};
+const int PROBE_DISTANCE_TEXELS = {volume['distance_texels']};
+
+uniform sampler2D probeIrradianceAtlas;
+uniform sampler2D probeDistanceAtlas;
+uniform sampler2D probeDataTexture;
+{basis_src}
+vec2 probeOctahedral(vec3 d) {{
+    vec2 uv = d.xy / (abs(d.x) + abs(d.y) + abs(d.z));
+    if (d.z < 0.0) uv = (1.0 - abs(uv.yx)) * vec2(uv.x >= 0.0 ? 1.0 : -1.0, uv.y >= 0.0 ? 1.0 : -1.0);
+    return uv;
+}}
+
+vec2 probeUV(int index, vec2 oct, int n) {{
+    int tile = n + 2;
+    int col = index % PROBE_COUNTS.x + (index / (PROBE_COUNTS.x * PROBE_COUNTS.z)) * PROBE_COUNTS.x;
+    int row = (index / PROBE_COUNTS.x) % PROBE_COUNTS.z;
+    vec2 texel = vec2(float(col * tile), float(row * tile)) + 0.5 * float(tile) + oct * (0.5 * float(n));
+    return texel / vec2(float(tile * PROBE_COUNTS.x * PROBE_COUNTS.y), float(tile * PROBE_COUNTS.z));
+}}
+
+vec3 probeOwnIrradiance(int index, vec3 d) {{
+#if PROBES_SH
+    float Y[9];
+{basis}
+    vec3 e = vec3(0.0);
+    for (int k = 0; k < 9; ++k) e += texelFetch(probeIrradianceAtlas, ivec2(k, index), 0).rgb * Y[k];
+    return max(e, vec3(0.0));
+#elif PROBES_BASIS
+{own}
+#else
+    return max(textureLod(probeIrradianceAtlas, probeUV(index, probeOctahedral(d), PROBE_IRRADIANCE_TEXELS), 0.0).rgb,
+               vec3(0.0));
+#endif
+}}
+
+float probeVolumeWeight(vec3 p) {{
+    vec3 halfExtent = 0.5 * PROBE_SPACING * vec3(PROBE_COUNTS - 1);
+    vec3 delta = abs(p - (PROBE_ORIGIN + halfExtent)) - halfExtent;
+    vec3 w = 1.0 - clamp(delta / PROBE_SPACING, 0.0, 1.0);
+    return w.x * w.y * w.z;
+}}
+
+vec3 probeIrradiance(vec3 p, vec3 n, vec3 v) {{
+    vec3 biased = p + n * PROBE_NORMAL_BIAS + v * PROBE_VIEW_BIAS;
+    vec3 g = (biased - PROBE_ORIGIN) / PROBE_SPACING;
+    ivec3 base = clamp(ivec3(floor(g)), ivec3(0), PROBE_COUNTS - 1);
+    vec3 alpha = clamp(g - vec3(base), 0.0, 1.0);
+    vec3 sum = vec3(0.0);
+    float wsum = 0.0;
+    for (int i = 0; i < 8; ++i) {{
+        ivec3 off = ivec3(i & 1, (i >> 1) & 1, (i >> 2) & 1);
+        ivec3 c = clamp(base + off, ivec3(0), PROBE_COUNTS - 1);
+        int index = c.y * PROBE_COUNTS.x * PROBE_COUNTS.z + c.z * PROBE_COUNTS.x + c.x;
+        int planeWidth = PROBE_COUNTS.x * PROBE_COUNTS.y;
+        vec4 data = texelFetch(probeDataTexture, ivec2(index % planeWidth, index / planeWidth), 0);
+#if PROBE_CLASSIFICATION
+        if (data.w != 0.0) continue;
+#endif
+        vec3 tri3 = mix(1.0 - alpha, alpha, vec3(off));
+        vec3 e = probeOwnIrradiance(index, n);
+#if PROBE_VISIBILITY
+        vec3 pp = PROBE_ORIGIN + vec3(c) * PROBE_SPACING + data.xyz * PROBE_SPACING;
+        vec3 tri = max(tri3, vec3(0.001));
+        float wrap = 0.5 * (dot(normalize(pp - p), n) + 1.0);
+        float w = wrap * wrap + 0.2;
+        vec3 toProbe = pp - biased;
+        float dist = length(toProbe);
+        vec2 m = textureLod(probeDistanceAtlas, probeUV(index, probeOctahedral(-toProbe / dist), PROBE_DISTANCE_TEXELS),
+                            0.0).rg;
+        float cheb = 1.0;
+        if (dist > m.x) {{
+            float variance = abs(m.x * m.x - m.y), dv = dist - m.x;
+            cheb = variance / (variance + dv * dv);
+            cheb = cheb * cheb * cheb;
+        }}
+        w *= max(0.05, cheb);
+        w = max(1e-6, w);
+        if (w < 0.2) w *= w * w * (1.0 / (0.2 * 0.2));
+        w *= tri.x * tri.y * tri.z;
+        sum += w * sqrt(e);
+#else
+        float w = tri3.x * tri3.y * tri3.z;
+        sum += w * e;
+#endif
+        wsum += w;
+    }}
+    if (!(wsum > 0.0)) return vec3(0.0);
+#if PROBE_VISIBILITY
+    vec3 s = sum / wsum;
+    return s * s;
+#else
+    return sum / wsum;
+#endif
+}}
+"""

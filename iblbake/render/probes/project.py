@@ -1,0 +1,87 @@
+"""The rays' projection (render/probes): each probe's traced rays into RTXGI's atlases (octahedral
+irradiance tiles with their 1-texel borders, the distance moments), or into L2 SH irradiance, or
+into a directional basis's radiance coefficients (core/bases PROBES project_rays)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from iblbake.core import bases, sh
+from iblbake.render.probes.grid import Grid
+from iblbake.render.probes.volume import basis_options
+from iblbake.render.twin import probes as twin
+
+BACKFACE_BLEND_LIMIT = 0.1       # a probe with this share of back-face rays blends no irradiance
+MAX_DISTANCE = 1.5               # probeMaxRayDistance: 1.5 |spacing|, what a miss counts as
+
+
+def with_borders(tiles: np.ndarray) -> np.ndarray:
+    """Tiles (probes, n, n, c) with RTXGI's 1-texel octahedral border (ProbeBorderUpdateCS): each
+    edge row and column the neighbouring interior one reversed, each corner the opposite interior
+    corner, so that bilinear reads wrap across the octahedron's folds."""
+    p, n = tiles.shape[:2]
+    out = np.zeros((p, n + 2, n + 2, tiles.shape[3]), tiles.dtype)
+    out[:, 1:-1, 1:-1] = tiles
+    out[:, 0, 1:-1] = tiles[:, 0, ::-1]
+    out[:, -1, 1:-1] = tiles[:, -1, ::-1]
+    out[:, 1:-1, 0] = tiles[:, ::-1, 0]
+    out[:, 1:-1, -1] = tiles[:, ::-1, -1]
+    out[:, 0, 0], out[:, 0, -1] = tiles[:, -1, -1], tiles[:, -1, 0]
+    out[:, -1, 0], out[:, -1, -1] = tiles[:, 0, -1], tiles[:, 0, 0]
+    return out
+
+
+def atlas(tiles: np.ndarray, counts) -> np.ndarray:
+    """Bordered tiles (probes, t, t, c) laid out as RTXGI's atlas (DDGIGetProbeUV, y up)."""
+    nx, ny, nz = counts
+    t, c = tiles.shape[1], tiles.shape[3]
+    # probe index gy nx nz + gz nx + gx: tiles as (gy, gz, gx); atlas rows gz, columns gy nx + gx
+    return np.ascontiguousarray(tiles.reshape(ny, nz, nx, t, t, c).transpose(1, 3, 0, 2, 4, 5)
+                                .reshape(nz * t, ny * nx * t, c))
+
+
+def project(radiance, t, dirs, grid: Grid, settings: dict):
+    """(irradiance, distance atlas) of every probe from its rays (DDGIProbeBlendingCS, to the mean
+    over all rays). Irradiance at a texel's direction: pi times the cosine-weighted mean radiance
+    of the rays that met no back face (RTXGI stores that over 2 pi and multiplies it back when
+    sampling); a probe with BACKFACE_BLEND_LIMIT of back faces blends none. SH: the least-squares
+    L2 fit of those rays' radiance (a field in the span, a uniform sky, is exact), convolved with
+    the clamped cosine. Distance moments: weights cos^distance_exponent, the mean of min(|t|,
+    1.5 |spacing|) and of its square over every ray (RTXGI halves both; the moments here are the
+    means the Chebyshev test reads). A directional basis (core/bases PROBES): its own project_rays
+    on the same rays, back-face rays black: (probes, floats, 3) radiance coefficients."""
+    p, r = t.shape
+    front = (t >= 0).astype(np.float64)
+    blends = (1 - front).mean(1) < BACKFACE_BLEND_LIMIT
+    lit = radiance * front[..., None]
+    lit_rows = lit.transpose(0, 2, 1).reshape(p * 3, r)            # one GEMM for every probe and colour
+    if settings["irradiance"] == "sh":
+        y = sh.sh_basis(dirs, 3)                                    # (rays, 9)
+        a = np.einsum("pr,rk,rj->pkj", front, y, y, optimize=True)
+        b = (lit_rows @ y).reshape(p, 3, 9).transpose(0, 2, 1)
+        a[~blends] = np.eye(9)
+        coeffs = np.linalg.solve(a, b) * sh.ahat(3)[None, :, None]
+        irr = np.where(blends[:, None, None], coeffs, 0.0)
+    elif settings["irradiance"] in bases.PROBES:
+        # the basis's own fit on the rays (an equal-area set: moments 4 pi / N sum L B), back faces black
+        coeffs = bases.BASES[settings["irradiance"]].project_rays(lit, dirs, basis_options(settings))
+        irr = np.where(blends[:, None, None], coeffs, 0.0)
+    else:
+        n = settings["irradiance_texels"]
+        w = np.maximum(0.0, twin.texel_directions(n) @ dirs.T)      # (texels, rays)
+        num = (lit_rows @ w.T).reshape(p, 3, n * n).transpose(0, 2, 1)
+        den = front @ w.T
+        with np.errstate(invalid="ignore", divide="ignore"):
+            e = np.where(den[..., None] > 0, np.pi * num / np.where(den > 0, den, 1)[..., None], 0.0)
+        e[~blends] = 0.0
+        # irradiance is >= 0: the panorama's tiny negative texels (environment.negative: keep) reach a
+        # few rays, and read back a negative texel would fail the volume's check
+        irr = atlas(with_borders(np.maximum(e, 0.0).reshape(p, n, n, 3)), grid.counts)
+    nd = settings["distance_texels"]
+    wd = np.maximum(0.0, twin.texel_directions(nd) @ dirs.T) ** settings["distance_exponent"]
+    d = np.minimum(np.abs(t), MAX_DISTANCE * float(np.linalg.norm(grid.spacing)))
+    wsum = wd.sum(1)
+    moments = np.stack([d @ wd.T, (d * d) @ wd.T], -1) / np.where(wsum > 0, wsum, 1)[None, :, None]
+    dist = atlas(with_borders(moments.reshape(p, nd, nd, 2)), grid.counts)
+    return irr, dist
+

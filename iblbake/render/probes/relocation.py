@@ -1,0 +1,120 @@
+"""Where the probes end up and which of them count (render/probes): RTXGI's relocation (a probe
+moved out of geometry, or off a surface it nearly touches, within 45% of its cell) and
+classification (a probe inside geometry or with no surface in its cells switched off), which
+probes are inside geometry (for the bake's warnings), and the probes outside a closed room the
+camera is in."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from iblbake.render.probes.grid import Grid
+from iblbake.render.probes.rays import Tracer, spherical_fibonacci
+
+ACTIVE, INACTIVE = 0, 1          # RTXGI_DDGI_PROBE_STATE_ACTIVE / _INACTIVE
+FIXED_RAYS = 32                  # RTXGI_DDGI_NUM_FIXED_RAYS: the unrotated rays relocation reads
+RELOCATION_PASSES = 4            # RTXGI moves probes a step a frame; a bake takes a few steps at once
+MAX_OFFSET = 0.45                # of a cell, per axis (RTXGI: the ellipsoid x^2/s^2 + ... < 0.45^2)
+
+
+def inside_geometry(t, obj, threshold: float):
+    """(whether each probe is inside geometry: its rays meet back faces more often than the
+    threshold; the object most of them meet, -1 for a probe that is not)."""
+    back = t < 0
+    inside = back.mean(1) > threshold
+    who = np.full(len(t), -1)
+    for p in np.nonzero(inside)[0]:
+        ids, counts = np.unique(obj[p][back[p]], return_counts=True)
+        who[p] = ids[counts.argmax()]
+    return inside, who
+
+
+def relocate(tracer: Tracer, grid: Grid, settings: dict, progress=None):
+    """Probe offsets (world units) after RELOCATION_PASSES of RTXGI's ProbeRelocationCS on the
+    FIXED_RAYS unrotated rays: a probe whose rays meet back faces more often than the threshold is
+    inside geometry and moves out past the nearest one; one nearer a front face than
+    min_frontface_distance moves towards the farthest (RTXGI steps one world unit there; here
+    min(min_frontface_distance, half that distance)); one far from everything moves back
+    towards its grid position. A move that would leave 45% of the cell is not made. Returns the
+    offsets and inside_geometry() at the grid positions."""
+    dirs = spherical_fibonacci(FIXED_RAYS)
+    base = grid.positions()
+    spacing = np.asarray(grid.spacing)
+    min_front = settings["min_frontface_distance"] * grid.unit
+    offset = np.zeros_like(base)
+    at_grid = None
+    for k in range(RELOCATION_PASSES):
+        _, t, obj = tracer.trace(base + offset, dirs, False, progress, 0.2 * k / RELOCATION_PASSES,
+                                 0.2 / RELOCATION_PASSES)
+        if at_grid is None:
+            at_grid = inside_geometry(t, obj, settings["backface_threshold"])
+        back = t < 0
+        n_back = back.sum(1)
+        tb = np.where(back, -t, np.inf)
+        tf = np.where(back, np.inf, t)
+        tfar = np.where(back, -1.0, t)
+        ib, i_near = tb.argmin(1), tf.argmin(1)
+        rows = np.arange(len(t))
+        near = tf[rows, i_near]
+        # the farthest front face (a miss counts as farthest, as RTXGI's 1e27); among equals (every
+        # miss) the one most opposite the nearest face
+        farthest = tfar.max(1, keepdims=True)
+        opposite = dirs @ dirs.T                                  # (rays, rays): cosines between rays
+        i_far = np.where(tfar >= farthest, -opposite[i_near], -np.inf).argmax(1)
+        far = tfar[rows, i_far]
+        full = offset.copy()
+        inside = (n_back > 0) & (n_back / FIXED_RAYS > settings["backface_threshold"])
+        full[inside] += dirs[ib[inside]] * (tb[rows, ib][inside] + 0.5 * min_front)[:, None]
+        close = ~inside & (near < min_front) & ((dirs[i_near] * dirs[i_far]).sum(1) <= 0)
+        step = np.minimum(min_front, 0.5 * np.where(np.isfinite(far), far, np.inf))
+        full[close] += dirs[i_far[close]] * step[close, None]
+        free = ~inside & (near > min_front)
+        length = np.linalg.norm(offset, axis=1)
+        back_by = np.minimum(near - min_front, length)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            home = np.where(length[:, None] > 0, -offset / np.where(length > 0, length, 1)[:, None], 0.0)
+        full[free] += home[free] * back_by[free, None]
+        ok = ((full / spacing) ** 2).sum(1) < MAX_OFFSET ** 2
+        new = np.where(ok[:, None], full, offset)
+        if np.array_equal(new, offset):
+            break
+        offset = new
+    return offset, at_grid
+
+
+def classify(t, dirs, grid: Grid, settings: dict) -> np.ndarray:
+    """Probe states (RTXGI's ProbeClassificationCS on every ray): inactive inside geometry (back
+    faces above the threshold) or where no ray meets a front face within the cells around it
+    (no surface there samples it)."""
+    back = t < 0
+    inside = back.mean(1) > settings["backface_threshold"]
+    with np.errstate(invalid="ignore"):
+        reach = np.abs(dirs[None, :, :] * np.where(back | ~np.isfinite(t), np.inf, t)[..., None])
+    near = (reach <= np.asarray(grid.spacing)).all(-1).any(1)
+    return np.where(inside | ~near, INACTIVE, ACTIVE)
+
+
+def outside_camera_rooms(positions, arrays, camera) -> np.ndarray:
+    """The probes outside a closed part that encloses the camera (a room or a dome seen from
+    within, docs/conventions.md "Sides"): no light they see reaches what the camera sees, and at
+    the room's walls, surfaces of no thickness, they would leak the outside in (a new user's trial:
+    a closed room lit at its edges, mean 0.035 where the reference is black, 0.44 with 3 probes)."""
+    from iblbake.scene import geometry
+
+    pos = np.asarray(positions, np.float64)
+    out = np.zeros(len(pos), bool)
+    cam = np.asarray(camera, np.float64)
+    for s in arrays.spheres:
+        c, r = s[0, :3].astype(np.float64), float(s[0, 3])
+        if np.linalg.norm(cam - c) < r:
+            out |= np.linalg.norm(pos - c, axis=1) >= r
+    if arrays.tri_closed is not None and len(arrays.tris):
+        v = arrays.tris[:, :3, :3].astype(np.float64)
+        comp, sign = arrays.tri_closed[:, 0], arrays.tri_closed[:, 1]
+        rooms = geometry.inside_closed(cam, v[:, 0], v[:, 1], v[:, 2], comp, sign)
+        for c in rooms:
+            sel = comp == c
+            args = (v[sel, 0], v[sel, 1], v[sel, 2], comp[sel], sign[sel])
+            out |= np.array([c not in geometry.inside_closed(q, *args) for q in pos])
+    return out
+

@@ -1,0 +1,42 @@
+"""A baked volume as a value (render/probes): the dict bake() and load() return (volume_dict), which
+of a scene's `probes` keys the bake depends on (bake_settings) and which are read when shading
+(sampled), and the options of a probes' directional basis."""
+
+from __future__ import annotations
+
+from iblbake.core import bases
+from iblbake.render.probes.grid import Grid
+
+
+def basis_options(settings: dict) -> dict:
+    """The options of the probes' basis: the probes section's keys of the same names as the
+    basis's effects keys (probes.sg_lobes, probes.sg_fit), so a probe basis is set apart from the
+    distant one."""
+    return {k: settings[k] for k in bases.BASES[settings["irradiance"]].OPTIONS}
+
+
+SAMPLING_KEYS = ("visibility", "normal_bias", "view_bias")   # read when shading, not baked
+
+
+def bake_settings(settings: dict) -> dict:
+    """What of a scene's `probes` section the bake depends on (the sampling keys are not)."""
+    return {k: v for k, v in settings.items() if k not in SAMPLING_KEYS}
+
+
+def volume_dict(grid: Grid, settings: dict, irr, dist, data, report: dict) -> dict:
+    """A baked volume: its grid, bake settings, arrays (irradiance: the octahedral atlas or (probes,
+    9, 3) SH coefficients; distance: the moments' atlas; data: (probes, 4) offset in world units and
+    state) and report."""
+    return {"grid": grid, "counts": grid.counts, "origin": grid.origin, "spacing": grid.spacing,
+            "representation": settings["irradiance"], "irradiance_texels": settings["irradiance_texels"],
+            "distance_texels": settings["distance_texels"], "classification": settings["classification"],
+            "settings": bake_settings(settings), "irradiance": irr, "distance": dist, "data": data, "report": report}
+
+
+def sampled(volume: dict, settings: dict) -> dict:
+    """The volume with a scene's sampling settings (visibility, biases in world units): what
+    twin.irradiance and the shade pass read."""
+    u = volume["grid"].unit
+    return {**volume, "visibility": settings["visibility"], "normal_bias": settings["normal_bias"] * u,
+            "view_bias": settings["view_bias"] * u}
+
