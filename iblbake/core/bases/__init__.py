@@ -16,7 +16,7 @@ BASES = {m.NAME: m for m in (sh, l1_geomerics, zh3, sg, ambient_dice, haar)}
 # the ones evaluated by the generic source and kernels/bases.h (sh has its own)
 DIFFUSE = tuple(n for n, m in BASES.items() if m.HEADER)
 # the ones an irradiance probe can store: those that fit from a probe's rays (project_rays; the
-# probes' own sh and octahedral maps aside, render/probes.py)
+# probes' own sh and octahedral maps aside, render/probes/)
 PROBES = tuple(n for n, m in BASES.items() if m.HEADER and hasattr(m, "project_rays"))
 # the ones that carry a specular lobe (specular_weights, kernels/bases.h basis_specular_radiance):
 # `effects.specular: <name>` for the panorama, `specular: probes` for probes that store one

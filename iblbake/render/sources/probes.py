@@ -1,4 +1,4 @@
-"""Irradiance probes (`diffuse: probes`): the DDGI volume baked by render/probes.py, sampled as
+"""Irradiance probes (`diffuse: probes`): the DDGI volume baked by render/probes/, sampled as
 RTXGI does, with its fallbacks counted in probe_stats. Kernel: kernels/probes.h probes_diffuse."""
 
 from __future__ import annotations
@@ -55,7 +55,7 @@ def probe_defines(settings: dict) -> dict:
 
 
 def probe_args(rt, vol, bakes=None) -> dict:
-    """PROBE_PARAMS of a sampled volume (render/probes.py sampled), placeholders without one. With
+    """PROBE_PARAMS of a sampled volume (render/probes/volume.py sampled), placeholders without one. With
     `bakes` (render.Bakes) its atlases go up once per runtime (a series of frames, a study's rungs)."""
     if vol is None:
         z = rt.to_device(np.zeros((1, 4), np.float32))

@@ -40,7 +40,7 @@ class ReflectionProbes(Source):
 
 
 def rprobe_args(rt, captured, bakes=None) -> dict:
-    """RPROBE_PARAMS of the reflection probes' chains (Bakes._reflection_probes), placeholders
+    """RPROBE_PARAMS of the reflection probes' chains (the reflection_probes unit, render/units.py), placeholders
     without them. Every probe's chain has the same level sizes (one capture size and prefilter)."""
     zf, zi = rt.to_device(np.zeros(4, np.float32)), rt.to_device(np.zeros(4, np.int32))
     if not captured:
