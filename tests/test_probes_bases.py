@@ -143,7 +143,9 @@ def test_ray_moments_are_the_texel_moments_for_a_polynomial_sky():
 def test_cli_writes_the_basis_manifest_and_glsl(tmp_path, sky, name):
     """`iblbake probes` writes basis_<name>.exr (row = probe, columns the basis's coefficients),
     probes.json naming the basis, its options and layout, and probes.glsl with the basis's own
-    GLSL function reading the probe's row; the files read back; glslangValidator compiles it."""
+    GLSL functions reading the probe's row (irradiance, and the specular sampler
+    probeSpecularRadiance of these bases that carry a lobe; ambient dice's table written beside);
+    the files read back; glslangValidator compiles it."""
     sc = with_basis(far_sphere_scene(tmp_path, sky, "octahedral"), name, bases.BASES[name].variants()[0])
     out = tmp_path / "vol"
     set_args = [a for k, v in sc.data["probes"].items() if k in ("irradiance", *bases.BASES[name].OPTIONS)
@@ -163,6 +165,14 @@ def test_cli_writes_the_basis_manifest_and_glsl(tmp_path, sky, name):
     src = (out / "probes.glsl").read_text()
     assert "#define PROBES_BASIS 1" in src and f"return {m.GLSL_IRRADIANCE}(d);" in src
     assert f"vec3 {m.GLSL_COEFFS}[{m.floats(opts)}];" in src
+    # the specular sampler (both bases carry a lobe), and ambient dice's table beside the atlases
+    assert "#define PROBES_SPECULAR 1" in src and f"return {m.GLSL_SPECULAR}(n, v, roughness);" in src
+    if name == "ambient_dice":
+        assert man["files"]["specular_table"] == "ambient_dice_specular.exr"
+        table = images.read_exr(out / "ambient_dice_specular.exr")[..., 0]
+        assert np.abs(table - m.specular_table({})).max() < 1e-6
+    else:
+        assert "specular_table" not in man["files"] and not (out / "ambient_dice_specular.exr").exists()
     # a damaged file is refused
     bad = coeffs.copy()
     bad[0, 0, 0] = np.nan
@@ -173,8 +183,8 @@ def test_cli_writes_the_basis_manifest_and_glsl(tmp_path, sky, name):
         pytest.skip("glslangValidator not installed (Debian's glslang-tools; make readers installs it)")
     shader = tmp_path / "probes.frag"
     shader.write_text("#version 330 core\n" + src + "\nin vec3 P;\nin vec3 N;\nin vec3 V;\nout vec4 color;\n"
-                      "void main() { color = vec4(probeIrradiance(P, normalize(N), normalize(V)) * "
-                      "probeVolumeWeight(P), 1.0); }\n")
+                      "void main() { color = vec4((probeIrradiance(P, normalize(N), normalize(V)) + "
+                      "probeSpecularRadiance(P, normalize(N), normalize(V), 0.4)) * probeVolumeWeight(P), 1.0); }\n")
     p = subprocess.run(["glslangValidator", str(shader)], capture_output=True, text=True, timeout=60)
     assert p.returncode == 0, p.stdout + p.stderr
 

@@ -44,7 +44,9 @@ def probes_command(scene_path, out_dir, overrides, cache_dir, force, device, qui
     out = Path(out_dir)
     rep_name = probes.FILES[sc.data["probes"]["irradiance"]]
     captures = [f"reflection_{k}.exr" for k in range(len(sc.data["reflection_probes"]))]
-    names = ["probes.json", rep_name, "distance.exr", "probe_data.exr", "probes.glsl", *captures]
+    irradiance = sc.data["probes"]["irradiance"]
+    table = [probes.SPECULAR_TABLE] if irradiance == "ambient_dice" else []     # probes.glsl's specular reads it
+    names = ["probes.json", rep_name, "distance.exr", "probe_data.exr", "probes.glsl", *table, *captures]
     writes = [("--output", out / n) for n in names]
     refuse_overlaps(writes, scene.named_input_files(sc))
     for n in names:                  # the folder is made when the files are written, not before
@@ -60,6 +62,10 @@ def probes_command(scene_path, out_dir, overrides, cache_dir, force, device, qui
             images.write_exr(out / name, c["capture"], channels=("R", "G", "B", "A"), batch=batch)
         for n in names[1:4]:         # the cache entry's atlases (verified against their manifest)
             batch.write_bytes(out / n, reads.read_bytes(entry / n, 1 << 40, "a cached atlas"))
+        if table:
+            from iblbake.core import bases
+            images.write_exr(out / table[0], bases.BASES[irradiance].specular_table({}).astype("float32"),
+                             channels=("R",), batch=batch)
         batch.write_json(out / "probes.json", man)
         batch.write_text(out / "probes.glsl", vol.glsl())
     r = man["report"]

@@ -26,7 +26,7 @@ import numpy as np
 from iblbake.errors import IblbakeError
 from iblbake.render.probes.files import (FILES, FORMAT, VERSION, basis_manifest, data_texture, load, manifest,
                                          read_manifest, save)
-from iblbake.render.probes.glsl import SH_GLSL, basis_glsl, glsl
+from iblbake.render.probes.glsl import SH_GLSL, SPECULAR_TABLE, basis_glsl, glsl
 from iblbake.render.probes.grid import DEFAULT_LONGEST, Grid, grid_of, scene_bounds
 from iblbake.render.probes.project import BACKFACE_BLEND_LIMIT, MAX_DISTANCE, atlas, project, with_borders
 from iblbake.render.probes.rays import Tracer, random_rotation, ray_directions, spherical_fibonacci, trace_defines
@@ -35,7 +35,7 @@ from iblbake.render.probes.relocation import (ACTIVE, FIXED_RAYS, INACTIVE, MAX_
 from iblbake.render.probes.volume import SAMPLING_KEYS, bake_settings, basis_options, sampled, volume_dict
 
 __all__ = ["ACTIVE", "BACKFACE_BLEND_LIMIT", "DEFAULT_LONGEST", "FILES", "FIXED_RAYS", "FORMAT", "Grid", "INACTIVE",
-           "INSIDE_WARN", "MAX_ATLAS_SIDE", "MAX_DISTANCE", "MAX_OFFSET", "RELOCATION_PASSES", "SAMPLING_KEYS", "SH_GLSL",
+           "INSIDE_WARN", "MAX_ATLAS_SIDE", "MAX_DISTANCE", "MAX_OFFSET", "RELOCATION_PASSES", "SAMPLING_KEYS", "SH_GLSL", "SPECULAR_TABLE",
            "Tracer", "VERSION", "atlas", "bake", "bake_settings", "basis_glsl", "basis_manifest", "basis_options",
            "classify", "data_texture", "glsl", "grid_of", "inside_geometry", "load", "manifest", "outside_camera_rooms",
            "project", "random_rotation", "ray_directions", "read_manifest", "relocate", "sampled", "save", "scene_bounds",

@@ -33,7 +33,10 @@ def manifest(volume: dict) -> dict:
                  "probe_position": "origin + (gx, gy, gz) * spacing + offset"},
         "representation": volume["representation"],
         "files": {"irradiance": FILES[volume["representation"]], "distance": "distance.exr",
-                  "probe_data": "probe_data.exr"},
+                  "probe_data": "probe_data.exr",
+                  # the table probes.glsl's ambient-dice specular reads (kernels: basis_table)
+                  **({"specular_table": "ambient_dice_specular.exr"} if volume["representation"] == "ambient_dice"
+                     else {})},
         "irradiance_texels": volume["irradiance_texels"], "distance_texels": volume["distance_texels"],
         "normal_bias": volume["normal_bias"], "view_bias": volume["view_bias"],
         "visibility": volume["visibility"], "classification": volume["classification"],

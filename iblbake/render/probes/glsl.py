@@ -16,9 +16,10 @@ SH_GLSL = ("0.28209479177387814", "0.4886025119029199 * d.y", "0.488602511902919
 
 
 def basis_glsl(name: str, opts: dict) -> tuple:
-    """(the basis's own GLSL function (core/bases glsl) with its coefficient array a variable
+    """(the basis's own GLSL functions (core/bases glsl) with its coefficient array a variable
     instead of a constant, the lines of probeOwnIrradiance that fill it from the probe's row of the
-    file and call it): one formula, the basis module's."""
+    file and call its irradiance function, the same of probeOwnSpecular calling its specular one
+    where the basis carries a lobe, else ""): one formula, the basis module's."""
     import re
     m = bases.BASES[name]
     k = m.floats(opts)
@@ -27,9 +28,18 @@ def basis_glsl(name: str, opts: dict) -> tuple:
                          f"vec3 {m.GLSL_COEFFS}[{k}];     // the probe's coefficients (probeOwnIrradiance)", src,
                          flags=re.S)
     assert found == 1, name
-    own = (f"    for (int k = 0; k < {k}; ++k) {m.GLSL_COEFFS}[k] = texelFetch(probeIrradianceAtlas, ivec2(k, index), "
-           f"0).rgb;\n    return {m.GLSL_IRRADIANCE}(d);")
-    return src, own
+    fill = f"    for (int k = 0; k < {k}; ++k) {m.GLSL_COEFFS}[k] = texelFetch(probeIrradianceAtlas, ivec2(k, index), 0).rgb;\n"
+    own = fill + f"    return {m.GLSL_IRRADIANCE}(d);"
+    spec = fill + f"    return {m.GLSL_SPECULAR}(n, v, roughness);" if name in bases.SPECULAR else ""
+    return src, own, spec
+
+
+SPECULAR_TABLE = "ambient_dice_specular.exr"      # ambient dice's table, beside the atlases (iblbake probes)
+SPECULAR_HELP = """
+// specular (the basis carries a lobe; effects.specular: probes) = (F0 A + F90 B) (the split sum's DFG
+// table at n.v, roughness) * mix(skySpecular, probeSpecularRadiance(P, N, V, roughness), probeVolumeWeight(P)):
+// each probe's radiance along the warped GGX lobe, blended by the irradiance's weights (linearly); the
+// distant prefiltered chain takes over outside the volume."""
 
 
 def glsl(volume: dict, man: dict) -> str:
@@ -42,20 +52,23 @@ def glsl(volume: dict, man: dict) -> str:
     rep = volume["representation"]
     sh_rep = rep == "sh"
     basis = "\n".join(f"    Y[{k}] = {e};" for k, e in enumerate(SH_GLSL))
-    basis_src, own = "", ""
+    basis_src, own, spec = "", "", ""
     if rep in bases.PROBES:
-        basis_src, own = basis_glsl(rep, basis_options(volume["settings"]))
+        basis_src, own, spec = basis_glsl(rep, basis_options(volume["settings"]))
+    table = (f"\n//   ambientDiceSpecularTable  {SPECULAR_TABLE} (unfiltered: the specular functions read it "
+             f"bilinearly)" if rep == "ambient_dice" else "")
     return f"""// iblbake irradiance probes: {nx} x {ny} x {nz}, {volume['representation']} irradiance, RTXGI-DDGI layout
 // (probes.json holds the conventions). Bind the files as 2D float textures, each with its first
 // (top) row at t = 0, clamped to the edge:
 //   probeIrradianceAtlas  {man['files']['irradiance']} ({'linear' if rep == 'octahedral' else 'nearest'} filtering)
 //   probeDistanceAtlas    distance.exr (linear filtering)
-//   probeDataTexture      probe_data.exr (nearest)
+//   probeDataTexture      probe_data.exr (nearest){table}
 // diffuse = albedo / PI * mix(skyIrradiance(N), probeIrradiance(P, N, V), probeVolumeWeight(P)):
 // world position, unit shading normal, unit vector towards the viewer; the sky's irradiance (say
-// `iblbake sh --glsl`'s shIrradiance) takes over outside the volume.
+// `iblbake sh --glsl`'s shIrradiance) takes over outside the volume.{SPECULAR_HELP if spec else ""}
 #define PROBES_SH {int(sh_rep)}
 #define PROBES_BASIS {int(bool(basis_src))}
+#define PROBES_SPECULAR {int(bool(spec))}
 #define PROBE_VISIBILITY {int(volume['visibility'])}
 #define PROBE_CLASSIFICATION {int(volume['classification'])}
 const ivec3 PROBE_COUNTS = ivec3({nx}, {ny}, {nz});
@@ -99,6 +112,12 @@ vec3 probeOwnIrradiance(int index, vec3 d) {{
 #endif
 }}
 
+#if PROBES_SPECULAR
+vec3 probeOwnSpecular(int index, vec3 n, vec3 v, float roughness) {{
+{spec}
+}}
+#endif
+
 float probeVolumeWeight(vec3 p) {{
     vec3 halfExtent = 0.5 * PROBE_SPACING * vec3(PROBE_COUNTS - 1);
     vec3 delta = abs(p - (PROBE_ORIGIN + halfExtent)) - halfExtent;
@@ -106,7 +125,9 @@ float probeVolumeWeight(vec3 p) {{
     return w.x * w.y * w.z;
 }}
 
-vec3 probeIrradiance(vec3 p, vec3 n, vec3 v) {{
+// the probes around p blended as kernels/probes.h probe_blend: the irradiance at n (sqrt-blended with
+// visibility), or (specular) each probe's radiance along the warped GGX lobe, blended linearly
+vec3 probeBlend(vec3 p, vec3 n, vec3 v, float roughness, bool specular) {{
     vec3 biased = p + n * PROBE_NORMAL_BIAS + v * PROBE_VIEW_BIAS;
     vec3 g = (biased - PROBE_ORIGIN) / PROBE_SPACING;
     ivec3 base = clamp(ivec3(floor(g)), ivec3(0), PROBE_COUNTS - 1);
@@ -123,7 +144,11 @@ vec3 probeIrradiance(vec3 p, vec3 n, vec3 v) {{
         if (data.w != 0.0) continue;
 #endif
         vec3 tri3 = mix(1.0 - alpha, alpha, vec3(off));
+#if PROBES_SPECULAR
+        vec3 e = specular ? probeOwnSpecular(index, n, v, roughness) : probeOwnIrradiance(index, n);
+#else
         vec3 e = probeOwnIrradiance(index, n);
+#endif
 #if PROBE_VISIBILITY
         vec3 pp = PROBE_ORIGIN + vec3(c) * PROBE_SPACING + data.xyz * PROBE_SPACING;
         vec3 tri = max(tri3, vec3(0.001));
@@ -143,7 +168,7 @@ vec3 probeIrradiance(vec3 p, vec3 n, vec3 v) {{
         w = max(1e-6, w);
         if (w < 0.2) w *= w * w * (1.0 / (0.2 * 0.2));
         w *= tri.x * tri.y * tri.z;
-        sum += w * sqrt(e);
+        sum += w * (specular ? e : sqrt(e));
 #else
         float w = tri3.x * tri3.y * tri3.z;
         sum += w * e;
@@ -151,11 +176,20 @@ vec3 probeIrradiance(vec3 p, vec3 n, vec3 v) {{
         wsum += w;
     }}
     if (!(wsum > 0.0)) return vec3(0.0);
-#if PROBE_VISIBILITY
     vec3 s = sum / wsum;
-    return s * s;
-#else
-    return sum / wsum;
+#if PROBE_VISIBILITY
+    if (!specular) return s * s;
 #endif
+    return s;
 }}
+
+vec3 probeIrradiance(vec3 p, vec3 n, vec3 v) {{
+    return probeBlend(p, n, v, 0.0, false);
+}}
+
+#if PROBES_SPECULAR
+vec3 probeSpecularRadiance(vec3 p, vec3 n, vec3 v, float roughness) {{
+    return probeBlend(p, n, v, roughness, true);
+}}
+#endif
 """
