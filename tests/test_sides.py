@@ -195,7 +195,9 @@ def test_probes_inside_a_solid_are_said_with_its_name(tmp_path, rt, lobed_sky):
                               "resolution": [8, 8]}}
     bakes = Bakes(tmp_path / "cache")
     render(load_scene(tmp_path, "room", room), runtime=rt, cache=bakes, warn=warned.append)
-    assert baked(bakes)["report"]["inside_geometry"] == 0 and not warned
+    assert baked(bakes)["report"]["inside_geometry"] == 0 and not [w for w in warned if "inside geometry" in w]
+    # (the room's walls at +-1 lie on the volume's fading edge (min -0.9): that is said, apart)
+    assert [w for w in warned if "outside the probe volume" in w]
 
 
 def test_a_closed_room_is_dark_and_its_outside_probes_are_off(tmp_path, rt, lobed_sky):
