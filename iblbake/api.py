@@ -155,6 +155,10 @@ def _vectors(name: str, value):
         raise InputError(f"{name}: give unit vectors, an array (..., 3) of numbers, not shape {a.shape}")
     if not np.isfinite(a).all():
         raise InputError(f"{name}: holds non-finite values; give finite unit vectors")
+    length = np.linalg.norm(a, axis=-1)
+    if a.size and np.abs(length - 1.0).max() > 1e-3:       # the formulas take directions, not any vector
+        raise InputError(f"{name}: holds vectors of length {float(length.flat[np.abs(length - 1).argmax()]):.4g}; "
+                         "give unit vectors (normalise them)")
     return a
 
 

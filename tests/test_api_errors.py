@@ -76,6 +76,8 @@ BAD = {
     "Basis": [
         ("normals", lambda c: iblbake.basis(c["pano"], "zh3", error=False).irradiance([1, 0])),
         ("normals", lambda c: iblbake.basis(c["pano"], "zh3", error=False).irradiance("up")),
+        ("normals", lambda c: iblbake.basis(c["pano"], "zh3", error=False).irradiance([0, 2, 0])),     # not unit
+        ("normals", lambda c: iblbake.basis(c["pano"], "zh3", error=False).irradiance([0, 0, 0])),
         ("views", lambda c: iblbake.basis(c["pano"], "sg", error=False).specular_radiance(
             [[0, 1, 0]], [[0, 1, 0], [1, 0, 0]], 0.5)),
         ("roughness", lambda c: iblbake.basis(c["pano"], "sg", error=False).specular_radiance(

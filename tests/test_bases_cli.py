@@ -96,3 +96,35 @@ def test_refusals(tmp_path):
         iblbake.basis(iblbake.load_panorama(env), "zh3", lobes=3)
     with pytest.raises(iblbake.InputError, match="iblbake.sh"):
         iblbake.basis(iblbake.load_panorama(env), "sh")
+
+
+def test_options_of_another_basis_are_refused_or_said(tmp_path):
+    """`--sg-lobes` with `--basis zh3` is refused (iblbake.basis refuses it too); --json beside
+    GLSL on stdout is refused (both printed there made invalid JSON); the depfile and the summary
+    name ambient dice's table. In a scene, a basis option no basis of the frame reads is a note:
+    effects.sg_lobes beside diffuse zh3, or beside probes storing SG (they read probes.sg_lobes),
+    probes.ad_fit beside probes storing SG."""
+    from iblbake.render.plan import plan
+    from tests.conftest import load_scene
+    env = write_exr(tmp_path / "sky.exr", sky())
+    r = run_cli("basis", env, "--basis", "zh3", "--sg-lobes", "12")
+    assert r.returncode == 2 and "--sg-lobes is an option of --basis sg, not of zh3" in r.stderr
+    r = run_cli("basis", env, "--basis", "sg", "--glsl", "--json")
+    assert r.returncode == 2 and "give -o FILE" in r.stderr and not r.stdout
+    r = run_cli("basis", env, "--basis", "ambient_dice", "-o", tmp_path / "d.json", "--specular-table",
+                tmp_path / "t.exr", "--depfile", tmp_path / "d.d", "--json", "-q")
+    assert r.returncode == 0 and json.loads(r.stdout)["specular_table"] == str(tmp_path / "t.exr")
+    assert str(tmp_path / "t.exr") in (tmp_path / "d.d").read_text().split(":")[0]
+    doc = {"camera": {"resolution": [8, 8]}, "environment": {"path": str(env)},
+           "materials": {"m": {"roughness": 0.5}}, "objects": [{"sphere": {"radius": 1}, "material": "m"}],
+           "effects": {"diffuse": "zh3", "specular": "off", "sg_lobes": 12}}
+    notes = plan(load_scene(tmp_path, "a", doc)).notes
+    assert any("effects.sg_lobes is not read" in n for n in notes)
+    doc["effects"] = {"diffuse": "probes", "specular": "off", "sg_lobes": 12}
+    doc["probes"] = {"irradiance": "sg", "ad_fit": "nnls"}
+    notes = plan(load_scene(tmp_path, "b", doc)).notes
+    assert any("effects.sg_lobes is not read" in n and "probes.sg_lobes" in n for n in notes)
+    assert any("probes.ad_fit is not read" in n for n in notes)
+    doc["effects"] = {"diffuse": "probes", "specular": "off"}
+    doc["probes"] = {"irradiance": "sg", "sg_lobes": 12}
+    assert not [n for n in plan(load_scene(tmp_path, "c", doc)).notes if "is not read" in n]

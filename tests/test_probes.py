@@ -660,3 +660,35 @@ def test_surfaces_outside_the_volume_are_counted_and_said(tmp_path, rt, sky):
     hit = int((frame.hdr[..., 3] > 0.999).sum())
     assert 0.3 * hit < shade["probe_outside_volume"] < hit
     assert len(said) == 1 and "outside the probe volume" in said[0] and "probes.min/max" in said[0]
+
+
+def test_a_cached_volume_that_does_not_read_back_is_baked_again(tmp_path, rt, sky):
+    """A cache entry whose files match its manifest (hashes, sizes, times) but not what a volume
+    must hold (a NaN written into its irradiance atlas, the manifest mended to match: another
+    version's entry, or a hand's): said in one warning naming it, removed and baked again, and the
+    frame renders from the new one (the advice to rebake with `iblbake probes` did not help: it read
+    the same entry)."""
+    import hashlib
+    import os
+    from iblbake.bake import cache
+
+    bakes = Bakes(tmp_path / "cache")
+    render(far_sphere_scene(tmp_path, sky, "octahedral"), runtime=rt, cache=bakes)
+    entry = next(p for p in (tmp_path / "cache").iterdir() if p.name.startswith("probes-"))
+    man = json.loads((entry / cache.MANIFEST).read_text())
+    name = man["probes"]["files"]["irradiance"]
+    atlas = images.read_exr(entry / name)
+    atlas[3, 2, 0] = np.nan
+    images.write_exr(entry / name, atlas)
+    for f in man["files"]:
+        if f["name"] == name:
+            f.update(sha256=hashlib.sha256((entry / name).read_bytes()).hexdigest(),
+                     bytes=os.path.getsize(entry / name), mtime_ns=os.stat(entry / name).st_mtime_ns)
+    (entry / cache.MANIFEST).write_text(json.dumps(man))
+    said = []
+    frame = render(far_sphere_scene(tmp_path, sky, "octahedral"), runtime=rt, cache=Bakes(tmp_path / "cache"),
+                   warn=said.append)
+    again = [w for w in said if "baking it again" in w]
+    assert len(again) == 1 and "not finite" in again[0] and entry.name in again[0]
+    assert np.isfinite(images.read_exr(entry / name)).all() and np.isfinite(frame.hdr).all()
+    assert frame.report["bakes"][-1]["name"] == "probes" and not frame.report["bakes"][-1]["cached"]

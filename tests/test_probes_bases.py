@@ -194,3 +194,22 @@ def sky(tmp_path_factory):
     p = tmp_path_factory.mktemp("sky") / "sky.exr"
     images.write_exr(p, np.full((32, 64, 3), 0.75, np.float32))
     return p
+
+
+def test_another_representation_leaves_no_stale_files(tmp_path, sky):
+    """`iblbake probes` of ambient dice, then of ZH3 into the same folder: the first bake's
+    basis_ambient_dice.exr and ambient_dice_specular.exr, which iblbake wrote, are removed (an
+    engine globbing the folder found both volumes' files); a file of the same kind of name that
+    iblbake did not write is left."""
+    sc = far_sphere_scene(tmp_path, sky, "octahedral")
+    out = tmp_path / "vol"
+    for rep in ("ambient_dice", "zh3"):
+        r = run_cli("probes", sc.source, "-o", out, "--cache", tmp_path / "cache", "-q", "--json",
+                    "--set", f"probes.irradiance={rep}")
+        assert r.returncode == 0, r.stderr
+        if rep == "ambient_dice":
+            assert (out / "basis_ambient_dice.exr").exists() and (out / "ambient_dice_specular.exr").exists()
+            (out / "basis_sg.exr").write_bytes(b"mine")
+    assert json.loads(r.stdout)["removed"] == ["ambient_dice_specular.exr", "basis_ambient_dice.exr"]
+    assert sorted(p.name for p in out.iterdir()) == ["basis_sg.exr", "basis_zh3.exr", "distance.exr",
+                                                     "probe_data.exr", "probes.glsl", "probes.json"]

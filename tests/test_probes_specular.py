@@ -152,7 +152,8 @@ def test_metal_sphere_frame_matches_the_twin(tmp_path, rt, lobed_sky, name, opts
 
 
 def test_load_checks(tmp_path, lobed_sky):
-    with pytest.raises(InputError, match="probes.irradiance.*octahedral stores no specular lobe"):
+    with pytest.raises(InputError, match="effects.specular: probes reads .* probes.irradiance octahedral stores no "
+                                         "specular lobe"):
         metal_scene(tmp_path, lobed_sky, "octahedral", {})
     doc = _doc(metal_scene(tmp_path, lobed_sky, "sg", {"sg_lobes": 9}))
     with pytest.raises(InputError, match="probes beside effects.diffuse: zh3"):

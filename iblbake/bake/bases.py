@@ -45,13 +45,15 @@ def bake(image, info, root, policies: dict, name: str, opts: dict, warn=None):
         return {"kind": "basis", "files": [{"name": "coefficients.json"}], "parameters": {"basis": name, **opts,
                 **policies}, "input": info.to_json(), "project_s": round(time.perf_counter() - t0, 4)}
 
-    manifest, cached = cache.get_or_build(root, key, build, warn=warn)
-    path = root / manifest["key"] / "coefficients.json"
-    doc = json.loads(reads.read_text(path, reads.JSON_BYTES, "a cached basis document"))
-    try:
-        coeffs = m.validate(doc.get("coefficients"), opts)
-    except (ValueError, TypeError) as e:
-        raise IblbakeError(f"{path}: {e}; delete the cache entry to bake it again") from None
+    def read(manifest):
+        path = root / manifest["key"] / "coefficients.json"
+        doc = json.loads(reads.read_text(path, reads.JSON_BYTES, "a cached basis document"))
+        try:
+            return m.validate(doc.get("coefficients"), opts)
+        except (ValueError, TypeError) as e:
+            raise IblbakeError(f"{path}: {e}") from None
+
+    coeffs, manifest, cached = cache.get_checked(root, key, build, read, warn=warn)
     return coeffs, manifest, cached
 
 

@@ -94,6 +94,25 @@ def _remove(path: Path):
         shutil.rmtree(trash, ignore_errors=True)
 
 
+def get_checked(root: Path, key: str, build: Callable[[Path], dict], read: Callable[[dict], object], *,
+                warn: Callable[[str], None] | None = None) -> tuple:
+    """(read(manifest), manifest, cached): get_or_build, then the entry read back and checked by
+    `read` (an IblbakeError where it does not hold what its kind must). A cached entry that fails
+    (files that match their manifest but not their kind: written by another version, or by hand) is
+    said, removed and built again once; a fresh one that fails is the error."""
+    manifest, cached = get_or_build(root, key, build, warn=warn)
+    try:
+        return read(manifest), manifest, cached
+    except IblbakeError as e:
+        if not cached:
+            raise
+        if warn:
+            warn(f"{Path(root) / key}: {e}; baking it again")
+        _remove(Path(root) / key)
+    manifest, cached = get_or_build(root, key, build, warn=warn)
+    return read(manifest), manifest, cached
+
+
 def get_or_build(root: Path, key: str, build: Callable[[Path], dict], *,
                  warn: Callable[[str], None] | None = None) -> tuple[dict, bool]:
     """(manifest, cached). `build(tmpdir)` writes the files and returns the manifest body, whose

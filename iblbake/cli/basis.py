@@ -40,7 +40,7 @@ SUFFIXES = {"iblbake": (".json",), "glsl": (".glsl", ".frag", ".vert", ".h", ".t
 @click.option("--format", "fmt", type=click.Choice(["iblbake", "glsl"]), default="iblbake", show_default=True,
               help="What -o holds (or stdout without -o): iblbake's JSON document (the coefficients, their "
                    "layout, the bytes a probe of them takes, the error), or the basis's GLSL (its coefficients "
-                   "and its irradiance function; sg adds its specular one).")
+                   "and its irradiance function; sg and ambient_dice add their specular ones).")
 @click.option("--glsl", is_flag=True, help="Print the basis's GLSL (--format glsl).")
 @click.option("--specular-table", type=click.Path(dir_okay=False), default=None, metavar="FILE.exr",
               help="ambient_dice: also write the table its GLSL specular function reads (each lobe averaged over "
@@ -65,6 +65,15 @@ def basis_command(envs, name, sg_lobes, sg_fit, ad_fit, haar_coefficients, outpu
         if fmt != "iblbake" and fmt != "glsl":
             raise click.UsageError(f"--glsl is --format glsl: leave out --format {fmt}")
         fmt = "glsl"
+    owners = {"sg_lobes": "sg", "sg_fit": "sg", "ad_fit": "ambient_dice", "haar_coefficients": "haar"}
+    ctx = click.get_current_context()
+    for param, owner in owners.items():
+        if owner != name and ctx.get_parameter_source(param) == click.core.ParameterSource.COMMANDLINE:
+            raise click.UsageError(f"--{param.replace('_', '-')} is an option of --basis {owner}, not of {name}: "
+                                   "leave it out")
+    if as_json and fmt == "glsl" and not output:
+        raise click.UsageError("--json prints the summary on stdout, where --format glsl prints the GLSL: give -o FILE "
+                               "for the GLSL")
     options = {"sg": {"sg_lobes": int(sg_lobes), "sg_fit": sg_fit}, "ambient_dice": {"ad_fit": ad_fit},
                "haar": {"haar_coefficients": int(haar_coefficients)}}.get(name, {})
     suffix = SUFFIXES[fmt][0]
@@ -110,8 +119,12 @@ def basis_command(envs, name, sg_lobes, sg_fit, ad_fit, haar_coefficients, outpu
             click.echo(text, nl=False)
     if depfile:
         from iblbake.io import depfile as dep
-        dep.write(depfile, [([out], [os.path.abspath(f) for f in input_files_of(env)])
-                            for env, out in zip(envs, outputs) if out])
+        dep.write(depfile, [([o for o in (out, specular_table) if o],
+                             [os.path.abspath(f) for f in input_files_of(env)])
+                            for env, out in zip(envs, outputs) if out or specular_table])
+    if specular_table:
+        for summary, _, _ in results:
+            summary["specular_table"] = specular_table
     if len(results) == 1:
         summary, human, _ = results[0]
         if fmt != "iblbake" and not output and not as_json:

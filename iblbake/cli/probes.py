@@ -68,13 +68,32 @@ def probes_command(scene_path, out_dir, overrides, cache_dir, force, device, qui
                              channels=("R",), batch=batch)
         batch.write_json(out / "probes.json", man)
         batch.write_text(out / "probes.glsl", vol.glsl())
+    removed = _remove_stale(out, names)
     r = man["report"]
     summary = {"scene": sc.source, "output": str(out), "files": names, "cached": cached, "device": vol.device,
                "grid": man["grid"], "representation": man["representation"], "states": man["states"],
                "rays_traced": r["rays_traced"], "bake_s": r["seconds"], "relocated": r["relocated"],
                "inside_geometry": r.get("inside_geometry", 0), "outside_camera_room": r.get("outside_camera_room", 0)}
+    if removed:
+        summary["removed"] = removed
     nx, ny, nz = man["grid"]["counts"]
     con.result(summary, f"wrote {out}/ ({nx}x{ny}x{nz} probes, {man['representation']}, "
                         f"{man['states']['inactive']} inactive, {r['relocated']} relocated; "
                         f"{r['rays_traced']} rays in {r['seconds']:.2f} s{' (cached)' if cached else ''} "
                         f"on {vol.device})")
+
+
+def _remove_stale(out: Path, names: list) -> list:
+    """The files an earlier bake of another representation (or with more reflection probes) left in
+    the folder, which iblbake wrote: removed, so that an engine that reads the folder finds this
+    volume's files alone (a user's own files are left)."""
+    from iblbake.io.guard import written_by_iblbake
+    from iblbake.render import probes
+    stale = {*probes.FILES.values(), probes.SPECULAR_TABLE, *(p.name for p in out.glob("reflection_*.exr"))} - set(names)
+    removed = []
+    for n in sorted(stale):
+        f = out / n
+        if f.is_file() and not f.is_symlink() and written_by_iblbake(f):
+            f.unlink()
+            removed.append(n)
+    return removed

@@ -69,6 +69,9 @@ def sh_command(envs, output, force, bands, window, backend, rotate_y, intensity,
         if fmt not in ("iblbake", "glsl"):
             raise click.UsageError(f"--glsl is --format glsl: leave out --format {fmt}")
         fmt = "glsl"
+    if as_json and fmt != "iblbake" and not output:
+        raise click.UsageError(f"--json prints the summary on stdout, where --format {fmt} prints its text: give -o "
+                               "FILE for the text")
     if fmt in ("filament", "threejs", "gltf") and bands > 3:
         raise click.UsageError(f"--format {fmt} holds at most 3 bands (9 coefficients): give --bands 3 or fewer")
     if len(envs) > 1:

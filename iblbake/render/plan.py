@@ -62,6 +62,7 @@ def effect_modes(scene: Scene) -> Effects:
         if d["reflection_probes"] and fx["reflection_probes"]:
             notes.append(f"reflection_probes: {len(d['reflection_probes'])} not read with specular {specular}: the "
                          "split sum reads them (effects.specular: prefiltered)")
+    notes += unread_basis_options(scene, diffuse, specular)
     bg = env["background"]
     if isinstance(bg, list):
         background = "color"
@@ -71,6 +72,32 @@ def effect_modes(scene: Scene) -> Effects:
         background = "hide"
     emissive = any(max(m["emissive"]) > 0 for m in mats)     # an emissive map multiplies the factor
     return Effects(diffuse, specular, background, emissive, notes, reference_bounces(scene, diffuse, specular, notes))
+
+
+def unread_basis_options(scene: Scene, diffuse: str, specular: str) -> list:
+    """Notes for basis options the scene sets that no basis of its frame reads: effects.sg_lobes
+    beside diffuse zh3, or beside probes that store SG (their lobes are probes.sg_lobes), and
+    probes.ad_fit beside probes storing SG."""
+    raw = scene.raw or {}
+    notes = []
+    fx = scene.data["effects"]
+    distant = bases.frame_basis({**fx, "diffuse": diffuse, "specular": specular})
+    reads = set(bases.BASES[distant].OPTIONS) if distant else set()
+    for k in (raw.get("effects") or {}):
+        owner = next((n for n, m in bases.BASES.items() if k in m.OPTIONS), None)
+        if owner and k not in reads:
+            notes.append(f"effects.{k} is not read: it is an option of the panorama's {owner} basis, which this "
+                         f"frame does not use" + (f" (the probes' basis reads probes.{k})" if "probes" in
+                                                 (diffuse, specular) and scene.data["probes"]["irradiance"] == owner
+                                                 else ""))
+    probes_used = "probes" in (diffuse, specular)
+    rep = scene.data["probes"]["irradiance"]
+    own = set(bases.BASES[rep].OPTIONS) if rep in bases.BASES else set()
+    for k in (raw.get("probes") or {}):
+        owner = next((n for n, m in bases.BASES.items() if k in m.OPTIONS), None)
+        if owner and (k not in own or not probes_used) and probes_used:
+            notes.append(f"probes.{k} is not read: it is an option of the {owner} basis, and the probes store {rep}")
+    return notes
 
 
 def _light_passes(scene: Scene, diffuse: str, specular: str) -> bool:

@@ -356,9 +356,8 @@ class Probes(Unit):
             man = probes.manifest(probes.sampled(vol, settings))
             return {"kind": "probes", "files": [{"name": n} for n in names], "probes": man}
 
-        manifest, cached = cache.get_or_build(root, key, build, warn=job.warn)
-        entry = root / manifest["key"]
-        return probes.load(entry, manifest.get("probes"), cache.MANIFEST), manifest, cached
+        return cache.get_checked(root, key, build, lambda m: probes.load(root / m["key"], m.get("probes"),
+                                                                         cache.MANIFEST), warn=job.warn)
 
     def result(self, job, made, held):
         from iblbake.render import probes
@@ -399,19 +398,21 @@ class ReflectionProbes(Unit):
             images.write_exr(tmp / "capture.exr", image, channels=("R", "G", "B", "A"))
             return {"kind": "reflection", "files": [{"name": "capture.exr"}], "probe": settings, "report": report}
 
-        manifest, cached = cache.get_or_build(root, key, build, warn=job.warn)
-        report = manifest.get("report")
-        if not isinstance(report, dict) or not isinstance(report.get("inside"), dict):
-            raise IblbakeError(f"{root / manifest['key']}: a reflection capture without its report; "
-                               "delete the cache entry to bake it again")
-        path = root / manifest["key"] / "capture.exr"
-        image = images.read_exr(path)
-        size = settings["size"]
-        if image.shape != (size, 2 * size, 4) or not np.isfinite(image).all() or (image < 0).any() \
-                or (image[..., 3] > 1).any():
-            raise IblbakeError(f"{path}: not a {2 * size}x{size} RGBA capture of finite, non-negative "
-                               f"radiance and coverage; delete the cache entry to bake it again")
-        return np.ascontiguousarray(image, np.float32), cached, report
+        def read(manifest):
+            report = manifest.get("report")
+            if not isinstance(report, dict) or not isinstance(report.get("inside"), dict):
+                raise IblbakeError(f"{root / manifest['key']}: a reflection capture without its report")
+            path = root / manifest["key"] / "capture.exr"
+            image = images.read_exr(path)
+            size = settings["size"]
+            if image.shape != (size, 2 * size, 4) or not np.isfinite(image).all() or (image < 0).any() \
+                    or (image[..., 3] > 1).any():
+                raise IblbakeError(f"{path}: not a {2 * size}x{size} RGBA capture of finite, non-negative "
+                                   f"radiance and coverage")
+            return np.ascontiguousarray(image, np.float32), report
+
+        (image, report), _manifest, cached = cache.get_checked(root, key, build, read, warn=job.warn)
+        return image, cached, report
 
     def load(self, job):
         from iblbake.io.images import ImageInfo

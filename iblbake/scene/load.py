@@ -417,9 +417,10 @@ def _resolve_basis_specular(v: "_Validator", fx: dict, probes: dict) -> None:
         v.fail("effects.specular", f"{s} beside probes storing {probes['irradiance']}: a frame lights from one "
                                    f"directional basis; give probes.irradiance octahedral or sh, or another specular mode")
     if s == "probes" and probes["irradiance"] not in bases.SPECULAR:
-        v.fail("probes.irradiance", f"{probes['irradiance']} stores no specular lobe, which effects.specular: probes "
-                                    f"reads; give probes.irradiance {' or '.join(bases.SPECULAR)}, or another "
-                                    "specular mode")
+        v.fail("effects.specular", f"probes reads the radiance along the lobe from the probes' basis, and "
+                                   f"probes.irradiance {probes['irradiance']} stores no specular lobe: give "
+                                   f"probes.irradiance {' or '.join(bases.SPECULAR)} (a probes: section), or another "
+                                   "specular mode")
     if s == "probes" and d in bases.DIFFUSE:
         v.fail("effects.specular", f"probes beside effects.diffuse: {d}: a frame lights from one directional basis; "
                                    "give effects.diffuse probes (or sh), or another specular mode")

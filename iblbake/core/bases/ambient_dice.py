@@ -33,7 +33,8 @@ different approximation (a lerp between the mirror value and the diffuse fit, sc
 
 Axes (vertex 2j = +a_j, 2j+1 = -a_j, normalised; t = 1/golden ratio):
 a = (1, t, 0), (-1, t, 0), (0, 1, t), (0, 1, -t), (t, 0, 1), (-t, 0, 1).
-Layout: 12 rows (vertex order above) of per-channel values."""
+Layout: 12 rows of per-channel values, row 2j the vertex +a_j and row 2j+1 the vertex -a_j, a_j
+normalised (1, t, 0), (-1, t, 0), (0, 1, t), (0, 1, -t), (t, 0, 1), (-t, 0, 1), t = 1/golden ratio."""
 
 from __future__ import annotations
 

@@ -20,8 +20,8 @@ non-linear approximation, so each kept coefficient carries its index.
 
 Layout: K rows (R, G, B) of the kept coefficients, with K codes
 code = ((face * 6 + s) * 4 + kind) * 1024 + by * 32 + bx (kind 0 scaling, 1 H, 2 V, 3 D; block
-(by, bx) of size 2^s; s = 5 for the scaling terms): 16 bits would do (6144 positions), the kernel
-reads it as an exact float."""
+(by, bx) of size 2^s; s = 5 for the scaling terms): below 2^18, an exact float32 (the kernel reads
+it so); an engine's 16-bit index would renumber the 6 x 1024 positions."""
 
 from __future__ import annotations
 

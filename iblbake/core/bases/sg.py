@@ -33,7 +33,8 @@ BakingLab's SG5-12): G_k(w) = A_k exp(lambda (mu_k . w - 1)), so the fit is line
   and 1 (worst channel of 12 views, n.v 0.2-0.9; worst single view 12-53%): a rough reflection,
   not a glossy one.
 
-Layout: K rows (lobe k in lattice order) of per-channel amplitudes."""
+Layout: K rows of per-channel amplitudes, row k the lobe about the Fibonacci axis
+y_k = 1 - (2k + 1)/K, azimuth k pi (3 - sqrt 5) from +z towards +x, of the K's one sharpness."""
 
 from __future__ import annotations
 

@@ -43,7 +43,10 @@ def manifest(volume: dict) -> dict:
         "settings": {k: v for k, v in s.items()},
         "states": {"active": int((states == ACTIVE).sum()), "inactive": int((states == INACTIVE).sum())},
         "conventions": {
-            "units": "irradiance E (W m^-2 for radiance in W m^-2 sr^-1), linear, float32; diffuse = albedo / pi * E",
+            "units": ("irradiance E (W m^-2 for radiance in W m^-2 sr^-1), linear, float32; diffuse = albedo / pi * E"
+                      if volume["representation"] in ("octahedral", "sh") else
+                      "radiance coefficients of the basis (W m^-2 sr^-1 in radiance units), linear, float32; its "
+                      "irradiance function gives E, diffuse = albedo / pi * E"),
             "probe_index": "gy * nx * nz + gz * nx + gx (RTXGI, right-handed, y up)",
             "atlas": "probe tile (n + 2) texels square, 1-texel octahedral border; tile column gx + gy * nx, "
                      "row gz; the file's first row at the top (v = 0)",
@@ -65,8 +68,9 @@ def basis_manifest(volume: dict) -> dict:
     m = bases.BASES[rep]
     return {"name": rep, "title": m.TITLE, "options": basis_options(volume["settings"]), "floats": m.floats(
             basis_options(volume["settings"])),
-            "layout": f"{FILES[rep]}: row = probe index, column k = coefficient k of the basis (RGB radiance "
-                      f"coefficients, world frame; back-face rays black): " + m.__doc__.split("Layout:")[1].strip(),
+            "layout": f"{FILES[rep]}: row = probe index, column k = the basis's coefficient k (RGB radiance "
+                      f"coefficients, world frame; back-face rays black); the basis's own layout, its rows being "
+                      f"the columns here: " + " ".join(m.__doc__.split("Layout:")[1].split()),
             "irradiance": "docs/conventions.md 'Directional bases'; probes.glsl's probeOwnIrradiance evaluates it"}
 
 
@@ -96,7 +100,7 @@ def save(volume: dict, folder: Path) -> list:
 
 
 def _bad(path, what: str):
-    return IblbakeError(f"{path}: {what}; bake the probes again (iblbake probes, or delete the cache entry)")
+    return IblbakeError(f"{path}: {what}; bake the probes again (iblbake probes SCENE -o DIR/)")
 
 
 def load(folder: Path, man: dict, manifest_name: str = "probes.json") -> dict:

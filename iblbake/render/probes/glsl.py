@@ -125,71 +125,97 @@ float probeVolumeWeight(vec3 p) {{
     return w.x * w.y * w.z;
 }}
 
-// the probes around p blended as kernels/probes.h probe_blend: the irradiance at n (sqrt-blended with
-// visibility), or (specular) each probe's radiance along the warped GGX lobe, blended linearly
-vec3 probeBlend(vec3 p, vec3 n, vec3 v, float roughness, bool specular) {{
+// probe c's weight at the biased point (its factor falloff: trilinear, or the fallback's inverse square
+// distance) and its value (probeOwnIrradiance, sqrt with visibility; or the specular radiance, as it
+// is): 0 for an inactive probe (kernels/probes.h probe_contribution)
+float probeContribution(ivec3 c, vec3 p, vec3 biased, vec3 n, vec3 v, vec3 falloff, float roughness, bool specular,
+                        out vec3 value) {{
+    value = vec3(0.0);
+    int index = c.y * PROBE_COUNTS.x * PROBE_COUNTS.z + c.z * PROBE_COUNTS.x + c.x;
+    int planeWidth = PROBE_COUNTS.x * PROBE_COUNTS.y;
+    vec4 data = texelFetch(probeDataTexture, ivec2(index % planeWidth, index / planeWidth), 0);
+#if PROBE_CLASSIFICATION
+    if (data.w != 0.0) return 0.0;
+#endif
+#if PROBES_SPECULAR
+    vec3 e = specular ? probeOwnSpecular(index, n, v, roughness) : probeOwnIrradiance(index, n);
+#else
+    vec3 e = probeOwnIrradiance(index, n);
+#endif
+#if PROBE_VISIBILITY
+    vec3 pp = PROBE_ORIGIN + vec3(c) * PROBE_SPACING + data.xyz * PROBE_SPACING;
+    vec3 tri = max(falloff, vec3(0.001));
+    float wrap = 0.5 * (dot(normalize(pp - p), n) + 1.0);
+    float w = wrap * wrap + 0.2;
+    vec3 toProbe = pp - biased;
+    float dist = length(toProbe);
+    vec2 m = textureLod(probeDistanceAtlas, probeUV(index, probeOctahedral(-toProbe / dist), PROBE_DISTANCE_TEXELS),
+                        0.0).rg;
+    float cheb = 1.0;
+    if (dist > m.x) {{
+        float variance = abs(m.x * m.x - m.y), dv = dist - m.x;
+        cheb = variance / (variance + dv * dv);
+        cheb = cheb * cheb * cheb;
+    }}
+    w *= max(0.05, cheb);
+    w = max(1e-6, w);
+    if (w < 0.2) w *= w * w * (1.0 / (0.2 * 0.2));
+    value = specular ? e : sqrt(e);
+    return w * tri.x * tri.y * tri.z;
+#else
+    value = e;
+    return falloff.x * falloff.y * falloff.z;
+#endif
+}}
+
+// the probes around p blended as kernels/probes.h probe_blend: the eight of the cell, or where all eight
+// are off the active ones of the 4 x 4 x 4 around it by inverse square distance; the irradiance at n
+// (sqrt-blended with visibility), or (specular) each probe's radiance along the warped GGX lobe, blended
+// linearly; w 0 where no active probe is near (the renderer takes the sky's light there: do so too)
+vec4 probeBlend(vec3 p, vec3 n, vec3 v, float roughness, bool specular) {{
     vec3 biased = p + n * PROBE_NORMAL_BIAS + v * PROBE_VIEW_BIAS;
     vec3 g = (biased - PROBE_ORIGIN) / PROBE_SPACING;
-    ivec3 base = clamp(ivec3(floor(g)), ivec3(0), PROBE_COUNTS - 1);
+    ivec3 last = PROBE_COUNTS - 1;
+    ivec3 base = clamp(ivec3(floor(g)), ivec3(0), last);
     vec3 alpha = clamp(g - vec3(base), 0.0, 1.0);
-    vec3 sum = vec3(0.0);
+    vec3 sum = vec3(0.0), value;
     float wsum = 0.0;
     for (int i = 0; i < 8; ++i) {{
         ivec3 off = ivec3(i & 1, (i >> 1) & 1, (i >> 2) & 1);
-        ivec3 c = clamp(base + off, ivec3(0), PROBE_COUNTS - 1);
-        int index = c.y * PROBE_COUNTS.x * PROBE_COUNTS.z + c.z * PROBE_COUNTS.x + c.x;
-        int planeWidth = PROBE_COUNTS.x * PROBE_COUNTS.y;
-        vec4 data = texelFetch(probeDataTexture, ivec2(index % planeWidth, index / planeWidth), 0);
-#if PROBE_CLASSIFICATION
-        if (data.w != 0.0) continue;
-#endif
-        vec3 tri3 = mix(1.0 - alpha, alpha, vec3(off));
-#if PROBES_SPECULAR
-        vec3 e = specular ? probeOwnSpecular(index, n, v, roughness) : probeOwnIrradiance(index, n);
-#else
-        vec3 e = probeOwnIrradiance(index, n);
-#endif
-#if PROBE_VISIBILITY
-        vec3 pp = PROBE_ORIGIN + vec3(c) * PROBE_SPACING + data.xyz * PROBE_SPACING;
-        vec3 tri = max(tri3, vec3(0.001));
-        float wrap = 0.5 * (dot(normalize(pp - p), n) + 1.0);
-        float w = wrap * wrap + 0.2;
-        vec3 toProbe = pp - biased;
-        float dist = length(toProbe);
-        vec2 m = textureLod(probeDistanceAtlas, probeUV(index, probeOctahedral(-toProbe / dist), PROBE_DISTANCE_TEXELS),
-                            0.0).rg;
-        float cheb = 1.0;
-        if (dist > m.x) {{
-            float variance = abs(m.x * m.x - m.y), dv = dist - m.x;
-            cheb = variance / (variance + dv * dv);
-            cheb = cheb * cheb * cheb;
-        }}
-        w *= max(0.05, cheb);
-        w = max(1e-6, w);
-        if (w < 0.2) w *= w * w * (1.0 / (0.2 * 0.2));
-        w *= tri.x * tri.y * tri.z;
-        sum += w * (specular ? e : sqrt(e));
-#else
-        float w = tri3.x * tri3.y * tri3.z;
-        sum += w * e;
-#endif
+        float w = probeContribution(clamp(base + off, ivec3(0), last), p, biased, n, v,
+                                    mix(1.0 - alpha, alpha, vec3(off)), roughness, specular, value);
+        sum += w * value;
         wsum += w;
     }}
-    if (!(wsum > 0.0)) return vec3(0.0);
+    if (!(wsum > 0.0)) {{
+        ivec3 lo = max(base - 1, ivec3(0)), hi = min(base + 2, last);
+        for (int z = lo.z; z <= hi.z; ++z)
+            for (int y = lo.y; y <= hi.y; ++y)
+                for (int x = lo.x; x <= hi.x; ++x) {{
+                    vec3 dc = vec3(x, y, z) - g;
+                    float w = probeContribution(ivec3(x, y, z), p, biased, n, v,
+                                                vec3(1.0 / max(dot(dc, dc), 0.01), 1.0, 1.0), roughness, specular,
+                                                value);
+                    sum += w * value;
+                    wsum += w;
+                }}
+    }}
+    if (!(wsum > 0.0)) return vec4(0.0);
     vec3 s = sum / wsum;
 #if PROBE_VISIBILITY
-    if (!specular) return s * s;
+    if (!specular) return vec4(s * s, 1.0);
 #endif
-    return s;
+    return vec4(s, 1.0);
 }}
 
+// the irradiance at p (0 where no active probe is near: probeBlend's w says so)
 vec3 probeIrradiance(vec3 p, vec3 n, vec3 v) {{
-    return probeBlend(p, n, v, 0.0, false);
+    return probeBlend(p, n, v, 0.0, false).xyz;
 }}
 
 #if PROBES_SPECULAR
 vec3 probeSpecularRadiance(vec3 p, vec3 n, vec3 v, float roughness) {{
-    return probeBlend(p, n, v, roughness, true);
+    return probeBlend(p, n, v, roughness, true).xyz;
 }}
 #endif
 """

@@ -19,8 +19,12 @@ SAMPLING_KEYS = ("visibility", "normal_bias", "view_bias")   # read when shading
 
 
 def bake_settings(settings: dict) -> dict:
-    """What of a scene's `probes` section the bake depends on (the sampling keys are not)."""
-    return {k: v for k, v in settings.items() if k not in SAMPLING_KEYS}
+    """What of a scene's `probes` section the bake depends on: not the sampling keys, nor the
+    options of the bases it does not store (probes.sg_lobes beside irradiance: ambient_dice would
+    bake the same volume again under another key, and write a setting it did not read)."""
+    others = {k for n, m in bases.BASES.items() if n != settings["irradiance"] for k in m.OPTIONS}
+    own = set(bases.BASES[settings["irradiance"]].OPTIONS) if settings["irradiance"] in bases.BASES else set()
+    return {k: v for k, v in settings.items() if k not in SAMPLING_KEYS and (k not in others or k in own)}
 
 
 def volume_dict(grid: Grid, settings: dict, irr, dist, data, report: dict) -> dict:
