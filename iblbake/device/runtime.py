@@ -139,7 +139,16 @@ def _kind(cl, dev) -> str:
     return "other"
 
 
+@functools.lru_cache(maxsize=None)
+def register_drivers():
+    """Drivers that come as wheels (the intel-cpu extra: iblbake/device/icd.py) made known to the
+    ICD loader, once per process, before pyopencl loads it."""
+    from iblbake.device import icd
+    return icd.register()
+
+
 def _import_cl():
+    register_drivers()
     try:
         import pyopencl as cl
     except Exception as e:  # a missing or broken libOpenCL surfaces here
@@ -231,10 +240,19 @@ def _one_line(e: Exception) -> str:
     return (text[:240] + "...") if len(text) > 240 else (text or type(e).__name__)
 
 
+def _is_intel_cpu(info: DeviceInfo) -> bool:
+    from iblbake.device.icd import INTEL_PLATFORM
+    return info.kind == "CPU" and info.platform == INTEL_PLATFORM
+
+
 def _matches(info: DeviceInfo, spec: str) -> bool:
     s = spec.strip().lower()
     if s in ("gpu", "cpu"):
         return info.kind.lower() == s
+    if s == "intel-cpu":                     # Intel's CPU runtime (the intel-cpu extra), not PoCL on an Intel CPU
+        return _is_intel_cpu(info)
+    if s == "pocl":
+        return info.platform == "Portable Computing Language"
     if re.fullmatch(r"\d+:\d+", s):
         return info.index == s
     if re.fullmatch(r"\d+", s):
@@ -243,7 +261,11 @@ def _matches(info: DeviceInfo, spec: str) -> bool:
 
 
 def _preference(info: DeviceInfo) -> int:
-    return {"GPU": 0, "CPU": 1}.get(info.kind, 2)
+    """GPUs, then CPUs, Intel's CPU runtime after other CPU drivers (PoCL stays the default CPU
+    device where both are installed: it is faster on the BVH-heavy scenes, docs/benchmarks.md)."""
+    if _is_intel_cpu(info):
+        return 2
+    return {"GPU": 0, "CPU": 1}.get(info.kind, 3)
 
 
 def _verdict_path() -> str:
@@ -275,6 +297,15 @@ def _save_verdicts(verdicts: dict) -> None:
         pass
 
 
+def _candidates(devices: list[DeviceInfo], spec: str | None) -> list[DeviceInfo]:
+    """The devices `spec` names, in the order they are tried (_preference, then enumeration)."""
+    nth = re.fullmatch(r"(gpu|cpu):(\d+)", spec.strip().lower()) if spec else None
+    if nth:                          # the N-th device of a kind, in enumeration order (--devices gpu:0,gpu:1)
+        same = [d for d in devices if d.kind.lower() == nth[1]]
+        return same[int(nth[2]):int(nth[2]) + 1]
+    return sorted((d for d in devices if spec is None or _matches(d, spec)), key=_preference)
+
+
 def select_device(spec: str | None = None) -> DeviceInfo:
     """The device to use: `spec` (--device), else $IBLBAKE_DEVICE, else the first working GPU,
     else the first working CPU. Probes candidates in that order and stops at the first that works;
@@ -282,18 +313,13 @@ def select_device(spec: str | None = None) -> DeviceInfo:
     version beside the kernel cache) is not probed again. `iblbake devices` always probes."""
     spec = spec or os.environ.get("IBLBAKE_DEVICE") or None
     devices, errors = enumerate_devices()
-    nth = re.fullmatch(r"(gpu|cpu):(\d+)", spec.strip().lower()) if spec else None
-    if nth:                          # the N-th device of a kind, in enumeration order (--devices gpu:0,gpu:1)
-        same = [d for d in devices if d.kind.lower() == nth[1]]
-        candidates = same[int(nth[2]):int(nth[2]) + 1]
-    else:
-        candidates = [d for d in devices if spec is None or _matches(d, spec)]
-    if spec and not candidates:
+    candidates = _candidates(devices, spec)
+    if spec and not candidates and devices:
         listed = ", ".join(d.label for d in devices) or "none"
         raise DeviceError(f"no OpenCL device matches --device/IBLBAKE_DEVICE {spec!r}; devices: {listed}")
     tried = []
     verdicts = _load_verdicts()
-    for info in sorted(candidates, key=_preference):
+    for info in candidates:
         key = _verdict_key(info)
         known = verdicts.get(key)
         if known and known.get("ok"):     # this device and driver built and ran the probe before
@@ -317,14 +343,8 @@ def probe_all() -> tuple[list[DeviceInfo], list[str], DeviceInfo | None]:
         probe(d)
         verdicts[_verdict_key(d)] = {"ok": d.ok, "reason": d.reason}
     _save_verdicts(verdicts)
-    working = sorted((d for d in devices if d.ok), key=_preference)
-    chosen = None
-    spec = os.environ.get("IBLBAKE_DEVICE")
-    if spec:
-        working = [d for d in working if _matches(d, spec)]
-    if working:
-        chosen = working[0]
-    return devices, errors, chosen
+    working = [d for d in _candidates(devices, os.environ.get("IBLBAKE_DEVICE") or None) if d.ok]
+    return devices, errors, (working[0] if working else None)
 
 
 def _cache_dir() -> str:

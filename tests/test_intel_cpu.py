@@ -1,0 +1,135 @@
+"""Intel's OpenCL CPU runtime (the optional extra iblbake[intel-cpu]) as a device next to PoCL:
+- iblbake registers its ICD itself (iblbake/device/icd.py): a vendors folder holding the system's
+  ICD files and one naming the wheel's libintelocl.so; a user's OCL_ICD_VENDORS and the opt-out win;
+- `--device intel-cpu` / `pocl` name the runtimes, and PoCL stays the default CPU device;
+Tests that need the runtime itself skip where the extra is not installed (`make intel-cpu`)."""
+
+import json
+import os
+from pathlib import Path
+
+import pytest
+
+from iblbake.device import icd
+from iblbake.device import runtime as cl
+
+from .conftest import run_cli
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _info(platform, name="dev", kind="CPU", index="0:0"):
+    return cl.DeviceInfo(index, platform, name, kind)
+
+
+# --- registration ----------------------------------------------------------------------------------
+
+@pytest.fixture
+def fake_wheel(tmp_path, monkeypatch):
+    """A system vendors folder with PoCL's ICD file, an 'installed' libintelocl.so, and an
+    environment with no ICD variables."""
+    system = tmp_path / "etc-vendors"
+    system.mkdir()
+    (system / "pocl.icd").write_text("libpocl.so.2\n")
+    (system / "notes.txt").write_text("not an ICD file\n")
+    lib = tmp_path / "lib" / "libintelocl.so"
+    lib.parent.mkdir()
+    lib.write_bytes(b"\x7fELF")
+    monkeypatch.setattr(icd, "SYSTEM_VENDORS", str(system))
+    monkeypatch.setattr(icd, "intel_cpu_library", lambda: lib)
+    saved = {v: os.environ.pop(v, None) for v in ("OCL_ICD_VENDORS", icd.OPT_OUT, icd.REGISTERED)}
+    yield lib
+    for var, value in saved.items():          # register() sets them in os.environ itself
+        os.environ.pop(var, None)
+        if value is not None:
+            os.environ[var] = value
+
+
+def test_register_writes_a_vendors_folder_with_the_system_drivers_and_intels(tmp_path, fake_wheel):
+    note = icd.register(tmp_path / "cache")
+    folder = Path(os.environ["OCL_ICD_VENDORS"])
+    assert folder.parent == tmp_path / "cache" / "opencl-vendors" and os.environ[icd.REGISTERED] == str(folder)
+    files = {p.name: p.read_text() for p in folder.iterdir()}
+    # PoCL's file as it was; Intel's named last, so the system's platforms keep their indices
+    assert files == {"pocl.icd": "libpocl.so.2\n", "zz-iblbake-intel-cpu.icd": f"{fake_wheel}\n"}
+    assert sorted(files)[-1].startswith("zz-") and str(fake_wheel) in note
+    # the same contents: the same folder, not rewritten (processes agree without a lock)
+    os.environ.pop("OCL_ICD_VENDORS")
+    mtime = folder.stat().st_mtime_ns
+    icd.register(tmp_path / "cache")
+    assert os.environ["OCL_ICD_VENDORS"] == str(folder) and folder.stat().st_mtime_ns == mtime
+    # a child process inherits the folder and says so
+    assert "parent process" in icd.register(tmp_path / "cache")
+
+
+def test_register_leaves_a_users_choice_alone(tmp_path, fake_wheel, monkeypatch):
+    monkeypatch.setenv("OCL_ICD_VENDORS", str(tmp_path / "mine"))
+    assert icd.register(tmp_path / "cache") is None and os.environ["OCL_ICD_VENDORS"] == str(tmp_path / "mine")
+    monkeypatch.delenv("OCL_ICD_VENDORS")
+    monkeypatch.setenv(icd.OPT_OUT, "0")
+    assert "not registered" in icd.register(tmp_path / "cache") and "OCL_ICD_VENDORS" not in os.environ
+
+
+def test_register_without_the_extra_changes_nothing(tmp_path, fake_wheel, monkeypatch):
+    monkeypatch.setattr(icd, "intel_cpu_library", lambda: None)
+    assert icd.register(tmp_path / "cache") is None and "OCL_ICD_VENDORS" not in os.environ
+
+
+def test_intel_library_is_found_through_the_wheels_record(tmp_path, monkeypatch):
+    """The RECORD of a wheel installed with --prefix or into a venv names the library relative to
+    site-packages (../../libintelocl.so); a missing file is not a library."""
+    site = tmp_path / "prefix" / "lib" / "python3" / "site-packages"
+    info = site / "intel_opencl_rt-2026.2.0.dist-info"
+    info.mkdir(parents=True)
+    (info / "RECORD").write_text("../../libintelocl.so.2026,sha256=x,1\n../../libintelocl.so,sha256=y,2\n")
+    monkeypatch.setattr("sys.path", [str(tmp_path / "nowhere"), str(site)])
+    assert icd.intel_cpu_library() is None
+    (tmp_path / "prefix" / "lib" / "libintelocl.so").write_bytes(b"\x7fELF")
+    assert icd.intel_cpu_library() == tmp_path / "prefix" / "lib" / "libintelocl.so"
+
+
+# --- device specs ----------------------------------------------------------------------------------
+
+def test_device_specs_name_the_runtimes_and_pocl_stays_the_default():
+    pocl_on_intel = _info("Portable Computing Language", "pthread-haswell-Intel(R) Core(TM) i7", index="0:0")
+    intel = _info(icd.INTEL_PLATFORM, "Intel(R) Core(TM) i7", index="1:0")
+    intel_gpu = _info("Intel(R) OpenCL Graphics", "Intel(R) Arc", kind="GPU", index="2:0")
+    devs = [intel, pocl_on_intel, intel_gpu]
+    assert cl._candidates(devs, "intel-cpu") == [intel]            # not PoCL on an Intel CPU, not the GPU
+    assert cl._candidates(devs, "pocl") == [pocl_on_intel]
+    assert cl._candidates(devs, "cpu") == [pocl_on_intel, intel]     # PoCL first, whatever the order listed
+    assert cl._candidates(devs, None) == [intel_gpu, pocl_on_intel, intel]
+    assert cl._candidates(devs, "cpu:0") == [intel]                  # cpu:N stays enumeration order
+
+
+def test_a_device_spec_with_no_devices_at_all_says_what_to_install(tmp_path):
+    """--device/IBLBAKE_DEVICE with no OpenCL platform at all: the 'install a driver' message (what
+    `make test-intel` gives the empty-ICD tests), not 'no device matches' over an empty list."""
+    vendors = tmp_path / "vendors"
+    vendors.mkdir()
+    p = run_cli("devices", env={"OCL_ICD_VENDORS": str(vendors), "IBLBAKE_DEVICE": "intel-cpu"})
+    assert p.returncode != 0 and "pocl-opencl-icd" in p.stderr
+
+
+# --- the runtime itself ----------------------------------------------------------------------------
+
+def _intel_device():
+    devices, _ = cl.enumerate_devices()
+    return next((d for d in devices if cl._is_intel_cpu(d)), None)
+
+
+needs_intel = pytest.mark.skipif(icd.intel_cpu_library() is None,
+                                 reason="Intel's CPU runtime is not installed (make intel-cpu)")
+
+
+@needs_intel
+def test_devices_lists_intels_runtime_beside_the_default():
+    p = run_cli("devices", "--json", env={"IBLBAKE_DEVICE": ""})
+    doc = json.loads(p.stdout)
+    intel = [d for d in doc["devices"] if d["platform"] == icd.INTEL_PLATFORM]
+    assert p.returncode == 0 and len(intel) == 1 and intel[0]["works"] and intel[0]["type"] == "CPU", doc
+    assert "registered" in doc["drivers_registered"]
+    if any(d["platform"] == "Portable Computing Language" and d["works"] for d in doc["devices"]):
+        assert "Portable Computing Language" in doc["selected"]     # the default stays PoCL
+    p = run_cli("devices", "--json", env={"IBLBAKE_DEVICE": "intel-cpu"})
+    assert icd.INTEL_PLATFORM in json.loads(p.stdout)["selected"]
