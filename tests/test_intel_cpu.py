@@ -2,12 +2,17 @@
 - iblbake registers its ICD itself (iblbake/device/icd.py): a vendors folder holding the system's
   ICD files and one naming the wheel's libintelocl.so; a user's OCL_ICD_VENDORS and the opt-out win;
 - `--device intel-cpu` / `pocl` name the runtimes, and PoCL stays the default CPU device;
+- the float3 miscompile of Intel's vectoriser (an out-of-line call's float3 argument or return is
+  passed wrongly from a vectorised kernel) and what keeps every kernel clear of it: every function
+  of kernels/ is IBL_INLINE, always inlined on that runtime (kernels/inline.h).
 Tests that need the runtime itself skip where the extra is not installed (`make intel-cpu`)."""
 
 import json
 import os
+import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from iblbake.device import icd
@@ -100,6 +105,7 @@ def test_device_specs_name_the_runtimes_and_pocl_stays_the_default():
     assert cl._candidates(devs, "cpu") == [pocl_on_intel, intel]     # PoCL first, whatever the order listed
     assert cl._candidates(devs, None) == [intel_gpu, pocl_on_intel, intel]
     assert cl._candidates(devs, "cpu:0") == [intel]                  # cpu:N stays enumeration order
+    assert cl.device_options(intel) == ["-DIBL_ALWAYS_INLINE=1"] and cl.device_options(pocl_on_intel) == []
 
 
 def test_a_device_spec_with_no_devices_at_all_says_what_to_install(tmp_path):
@@ -133,3 +139,65 @@ def test_devices_lists_intels_runtime_beside_the_default():
         assert "Portable Computing Language" in doc["selected"]     # the default stays PoCL
     p = run_cli("devices", "--json", env={"IBLBAKE_DEVICE": "intel-cpu"})
     assert icd.INTEL_PLATFORM in json.loads(p.stdout)["selected"]
+
+
+FLOAT3_CALL = """
+ATTR float4 f(float3 n) { return (float4)(n, 0.0f); }
+__kernel void k(__global const float4 *n, __global float4 *out)
+{ const int i = get_global_id(0); out[i] = f(n[i].xyz); }
+"""
+
+
+def _float3_call(dev, attr, options=()):
+    """Work items of FLOAT3_CALL (a vectorisable kernel calling f with a float3) whose f(n.xyz) is
+    not n.xyz; f declared `attr`, after kernels/inline.h."""
+    import warnings
+
+    import pyopencl
+    ctx = pyopencl.Context([dev.device])
+    q = pyopencl.CommandQueue(ctx)
+    n = np.arange(64 * 4, dtype=np.float32).reshape(64, 4)
+    source = cl.kernel_source("inline.h") + FLOAT3_CALL
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", pyopencl.CompilerWarning)
+        prg = pyopencl.Program(ctx, source).build(options=[f"-DATTR={attr}", *options], cache_dir=False)
+    mf = pyopencl.mem_flags
+    src = pyopencl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=n)
+    dst = pyopencl.Buffer(ctx, mf.WRITE_ONLY, size=n.nbytes)
+    prg.k(q, (64,), None, src, dst)
+    got = np.empty_like(n)
+    pyopencl.enqueue_copy(q, got, dst)
+    return int((got[:, :3] != n[:, :3]).any(axis=1).sum())
+
+
+@needs_intel
+def test_intels_vectoriser_passes_out_of_line_float3_wrongly_and_inline_h_avoids_it():
+    """The minimal reproduction of what made the textured GLB's bounces differ on Intel's runtime
+    (tests/test_paths.py test_textured_glb_through_paths): a kernel the runtime vectorises 16 wide,
+    calling a function it keeps out of line with a float3 argument. Measured on intel-opencl-rt
+    2026.2: 60 of 64 work items get other items' components (each 16's first is right); inlined,
+    none. PoCL: none either way. kernels/inline.h's IBL_INLINE, with the runtime's own build options
+    for that device, gives the inlined form."""
+    dev = _intel_device()
+    assert dev is not None and cl.probe(dev).ok
+    out_of_line = _float3_call(dev, "__attribute__((noinline))")
+    print(f"Intel's runtime, float3 through an out-of-line call: {out_of_line} of 64 work items wrong")
+    assert _float3_call(dev, "IBL_INLINE", cl.device_options(dev)) == 0
+    if out_of_line == 0:
+        pytest.skip("this Intel runtime passes out-of-line float3 arguments correctly: kernels/inline.h's "
+                    "always_inline may no longer be needed there")
+
+
+def test_every_kernel_function_is_ibl_inline():
+    """No function of kernels/ is declared plain `inline`: each is IBL_INLINE (kernels/inline.h),
+    which the runtime makes always_inline on Intel's CPU runtime, and each file that declares one
+    reaches inline.h through its includes."""
+    from iblbake.device.runtime import kernel_source
+    plain, unreached = [], []
+    for path in sorted((ROOT / "kernels").glob("*.[ch]*")):
+        text = path.read_text()
+        plain += [f"{path.name}: {ln.strip()}" for ln in text.splitlines() if re.match(r"\s*(static\s+)?inline\b", ln)]
+        if "IBL_INLINE " in text and path.name != "inline.h" and \
+                "#define IBL_INLINE" not in kernel_source(path.name):
+            unreached.append(path.name)
+    assert not plain and not unreached, (plain[:5], unreached)

@@ -356,6 +356,12 @@ def _cache_dir() -> str:
     return path
 
 
+def device_options(info: DeviceInfo) -> list[str]:
+    """Build options one runtime needs. Intel's CPU runtime: every function inlined (kernels/inline.h:
+    it passes float3 arguments of out-of-line calls from vectorised kernels wrongly)."""
+    return ["-DIBL_ALWAYS_INLINE=1"] if _is_intel_cpu(info) else []
+
+
 class Runtime:
     """One device: its context, queue and built programs (cached per source, defines, device)."""
 
@@ -368,6 +374,7 @@ class Runtime:
         self._kernels: dict = {}
         self._host_arrays: list = []   # zero-copy host arrays of queued work (see to_device)
         self.builds: list[dict] = []  # what was built, with times, for reports
+        self.device_options = device_options(self.info)
 
     @property
     def device_label(self) -> str:
@@ -381,7 +388,7 @@ class Runtime:
         key = (hashlib.sha256(src.encode()).hexdigest(), tuple(defines.items()))
         if key in self._programs:
             return self._programs[key]
-        options = ["-cl-std=CL1.2"] + [f"-D{k}={v}" for k, v in defines.items()]
+        options = ["-cl-std=CL1.2", *self.device_options] + [f"-D{k}={v}" for k, v in defines.items()]
         t0 = time.perf_counter()
         try:
             with _quiet_build_log(self.cl):
