@@ -202,3 +202,17 @@ def test_every_kernel_function_is_ibl_inline():
                 "#define IBL_INLINE" not in kernel_source(path.name):
             unreached.append(path.name)
     assert not plain and not unreached, (plain[:5], unreached)
+
+
+@needs_intel
+def test_intels_runtime_hands_python_its_signal_handlers_back():
+    """Intel's runtime installs LLVM's crash handlers for 15 signals at its first context: SIGXFSZ
+    (a write past the file-size limit, which Python ignores so the write fails with EFBIG and a
+    one-line error) printed "PLEASE submit a bug report" first (test_nothing_lost.py
+    test_file_size_limit_fails_cleanly on that runtime). The runtime hands Python's handlers back."""
+    import subprocess
+    import sys
+    code = ("import os, signal; from iblbake.device.runtime import Runtime; rt = Runtime('intel-cpu'); "
+            "os.kill(os.getpid(), signal.SIGXFSZ); print('alive')")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0 and p.stdout.strip() == "alive" and "PLEASE" not in p.stderr, (p.stdout, p.stderr)

@@ -207,12 +207,32 @@ def _quiet_build_log(cl):
                 sys.stderr.write(rest)
 
 
+def _context(cl, info: DeviceInfo):
+    """An OpenCL context of one device. Intel's CPU runtime installs LLVM's crash handlers for 15
+    signals when its first context is made, over Python's own: SIGXFSZ, which Python ignores so
+    that a write past the file-size limit fails with EFBIG (a one-line error), then printed
+    "PLEASE submit a bug report to ..." first. Every signal Python handles or ignores is handed
+    back its handler; those left at their default keep LLVM's (a real crash's report)."""
+    ctx = cl.Context([info.device])
+    if _is_intel_cpu(info):
+        import signal
+        for sig in (signal.SIGHUP, signal.SIGINT, signal.SIGTERM, signal.SIGUSR1, signal.SIGUSR2,
+                    signal.SIGXFSZ, signal.SIGXCPU, signal.SIGQUIT):
+            try:
+                h = signal.getsignal(sig)
+                if h not in (signal.SIG_DFL, None):
+                    signal.signal(sig, h)
+            except (ValueError, OSError):     # not the main thread: its handlers are the main thread's
+                pass
+    return ctx
+
+
 def probe(info: DeviceInfo) -> DeviceInfo:
     """Build and run the probe kernel; fill info.ok / info.reason."""
     cl = _import_cl()
     t0 = time.perf_counter()
     try:
-        ctx = cl.Context([info.device])
+        ctx = _context(cl, info)
         queue = cl.CommandQueue(ctx)
         with _quiet_build_log(cl):
             prg = cl.Program(ctx, PROBE_SOURCE).build()
@@ -369,7 +389,7 @@ class Runtime:
     def __init__(self, device: str | None = None):
         self.cl = _import_cl()
         self.info = select_device(device)
-        self.ctx = self.cl.Context([self.info.device])
+        self.ctx = _context(self.cl, self.info)
         self.queue = self.cl.CommandQueue(self.ctx)
         self._programs: dict = {}
         self._kernels: dict = {}
