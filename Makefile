@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.iblbake-installed
 PANOS  := examples/panoramas
 OUT    := examples/out
 
-.PHONY: demo test check stress install opencl meshes assets testmodels readers peers bench docs clean
+.PHONY: demo test check stress install opencl intel-cpu test-intel check-intel meshes assets testmodels readers peers bench docs clean
 
 install: $(STAMP)
 # editable_mode=compat: the editable install is a plain path in a .pth file. setuptools' default
@@ -63,6 +63,24 @@ test: opencl assets testmodels readers peers
 # readers, browser, Dask or kill loops, nothing over 3 s (pytest markers: pyproject.toml)
 check: opencl meshes
 	$(BIN)/python -m pytest -q -m "not (slow or external or kill)" tests
+
+# Intel's OpenCL CPU runtime (the optional extra iblbake[intel-cpu], Intel's EULA: docs/libraries.md),
+# registered by iblbake itself; PoCL stays the default device, IBLBAKE_DEVICE=intel-cpu picks Intel's
+INTEL  := $(VENV)/.iblbake-intel-installed
+$(INTEL): $(STAMP)
+	$(BIN)/python -m pip install -q -e '.[test,intel-cpu]' --config-settings editable_mode=compat
+	IBLBAKE_DEVICE=intel-cpu $(BIN)/iblbake devices
+	touch $@
+
+intel-cpu: $(INTEL)
+
+# the suites on Intel's runtime: every test as `make test` and `make check` run them, each device the
+# tests ask for being Intel's CPU (tests that pick a device themselves: docs/testing.md)
+test-intel: $(INTEL) assets testmodels readers peers
+	IBLBAKE_DEVICE=intel-cpu $(BIN)/python -m pytest -q tests
+
+check-intel: $(INTEL) meshes
+	IBLBAKE_DEVICE=intel-cpu $(BIN)/python -m pytest -q -m "not (slow or external or kill)" tests
 
 # the stress and fuzz suite at full size (10x the fuzz inputs, 24 kill runs per command, every
 # writer of every command onto a full disk, every reader given special files); prints and saves

@@ -38,12 +38,14 @@ u = 0.5 - atan2(x, z) / 2 pi; its rectangle spans [-1, 1]^2 in its xy plane, nor
 
     .venv/bin/pip install mitsuba        # and Debian's libllvm19 for the CPU variant
     DRJIT_LIBLLVM_PATH=/usr/lib/x86_64-linux-gnu/libLLVM-19.so \
-        .venv/bin/python benchmarks/mitsuba_paths.py [--renders 16] [--spp 256] [--ref-spp 8192]
+        .venv/bin/python benchmarks/mitsuba_paths.py [--renders 16] [--spp 256] [--ref-spp 8192] \
+        [--devices pocl,intel-cpu]       # iblbake's rows on each runtime (IBLBAKE_DEVICE for one)
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import math
 import statistics
 import tempfile
@@ -318,6 +320,9 @@ def main():
     ap.add_argument("--target", type=float, default=0.01, help="relative RMSE the speed comparison times")
     ap.add_argument("--converged", type=int, default=16384, help="samples per pixel of the converged images")
     ap.add_argument("--speed-scale", type=int, default=1, help="the speed comparison's frames, times 64x48")
+    ap.add_argument("--devices", default=None,
+                    help="iblbake's OpenCL devices, comma-separated --device specs (pocl,intel-cpu): each its "
+                         "own rows; default the device iblbake picks")
     ap.add_argument("--per-bounce", action="store_true",
                     help="samples per second at each bounce count, both renderers, and where iblbake's time goes")
     args = ap.parse_args()
@@ -331,20 +336,24 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         pano, spread = panorama_pair(tmp)
-        rt, bakes = Runtime(), Bakes(tmp / "cache")
-        for name, (objects, mats) in scenes(tmp).items():
-            if (args.only and args.only not in name) or args.no_acceptance:
-                continue
-            res = acceptance(mi, tmp, pano, spread, objects, mats, args.renders, args.spp, args.ref_spp, rt, bakes)
-            print(f"| {name} | {res['channels']} | {100 * res['rate']:.2f}% ({'pass' if res['rate'] >= 0.9975 else 'FAIL'}) | "
-                  f"{np.round(res['ratio'], 4).tolist()} | {100 * res['deterministic']:.1f}% |", flush=True)
+        runtimes = [Runtime(d) for d in args.devices.split(",")] if args.devices else [Runtime()]
+        bakes = Bakes(tmp / "cache")
+        for rt in runtimes:
+            for name, (objects, mats) in scenes(tmp).items():
+                if (args.only and args.only not in name) or args.no_acceptance:
+                    continue
+                res = acceptance(mi, tmp, pano, spread, objects, mats, args.renders, args.spp, args.ref_spp, rt, bakes)
+                label = f"{name} ({rt.device_label})" if len(runtimes) > 1 else name
+                print(f"| {label} | {res['channels']} | {100 * res['rate']:.2f}% ({'pass' if res['rate'] >= 0.9975 else 'FAIL'}) | "
+                      f"{np.round(res['ratio'], 4).tolist()} | {100 * res['deterministic']:.1f}% |", flush=True)
         print(f"\niblbake: {args.renders} renders x {args.spp} samples per pixel (seeds 1-{args.renders}), reference "
               f"bounces unbounded; Mitsuba {mi.__version__} {args.variant} `path` max_depth 1024, {args.ref_spp} "
               f"samples per pixel centre; {RES[0]}x{RES[1]}")
         if args.per_bounce:
-            per_bounce(args, mi, tmp, pano, rt, bakes)
+            for rt in runtimes:
+                per_bounce(args, mi, tmp, pano, rt, bakes)
         if not args.no_speed:
-            speed(args, mi, tmp, pano, rt, bakes)
+            speed(args, mi, tmp, pano, runtimes, bakes)
 
 
 def rel_rmse(img: np.ndarray, converged: np.ndarray, mask: np.ndarray) -> float:
@@ -374,12 +383,13 @@ def time_to_error(render_at, converged, n_converged: int, mask, target, start=4)
     return None
 
 
-def speed(args, mi, tmp: Path, pano: Path, rt, bakes):
+def speed(args, mi, tmp: Path, pano: Path, runtimes, bakes):
+    """Time to 1% relative RMSE against each renderer's own converged image (another seed), warm,
+    the render call only (median of 3 at each sample count), iblbake's reference on each of
+    `runtimes` (its own converged image on each) against Mitsuba's `path` with each of its
+    stratified samplers; the ratio column is the first runtime's time over each row's."""
     global RES
     RES = (RES[0] * args.speed_scale, RES[1] * args.speed_scale)
-    """Time to 1% relative RMSE against each renderer's own converged image (another seed), warm,
-    the render call only (median of 3 at each sample count), iblbake's reference against Mitsuba's
-    `path` with each of its stratified samplers."""
     from iblbake.render import render
     from iblbake.scene import load
 
@@ -390,7 +400,7 @@ def speed(args, mi, tmp: Path, pano: Path, rt, bakes):
             continue
         p = tmp / "speed.yaml"
 
-        def ib_at(n, seed=1, repeats=3):
+        def ib_at(n, seed=1, repeats=3, rt=runtimes[0]):
             p.write_text(yaml.safe_dump(iblbake_doc(pano, objects, mats, n, seed, "unbounded", tmp / "depth.exr")))
             sc = load.load(p)
             times, f = [], None
@@ -400,10 +410,14 @@ def speed(args, mi, tmp: Path, pano: Path, rt, bakes):
                 times.append(time.perf_counter() - t0)
             return f.hdr[..., :3].astype(np.float64), statistics.median(times)
 
-        conv, _ = ib_at(args.converged, seed=999, repeats=1)
         p.write_text(yaml.safe_dump(iblbake_doc(pano, objects, mats, 2, 1, "unbounded", tmp / "depth.exr")))
-        mask = np.asarray(render(load.load(p), runtime=rt, cache=bakes).aovs["depth"]) > 0
-        rows = [("iblbake reference", time_to_error(ib_at, conv, args.converged, mask, args.target))]
+        mask = np.asarray(render(load.load(p), runtime=runtimes[0], cache=bakes).aovs["depth"]) > 0
+        rows = []
+        for rt in runtimes:
+            at = functools.partial(ib_at, rt=rt)
+            conv, _ = at(args.converged, seed=999, repeats=1)
+            who = f"iblbake reference, {rt.device_label}" if len(runtimes) > 1 else "iblbake reference"
+            rows.append((who, time_to_error(at, conv, args.converged, mask, args.target)))
         for sampler in ("multijitter", "ldsampler"):
             def mi_at(n, seed=1, sampler=sampler, repeats=3):
                 scene = mi.load_dict(mitsuba_dict(mi, pano, objects, mats, 1024, n, seed, sampler))
@@ -425,7 +439,8 @@ def speed(args, mi, tmp: Path, pano: Path, rt, bakes):
             ratio = f"{base[1] / r[1]:.2f}" if base else "-"
             print(f"| {name} | {who} | {r[0]:.0f} | {r[1]:.3f} | {RES[0] * RES[1] * r[0] / r[1] / 1e6:.2f} | "
                   f"{ratio} |", flush=True)
-    print(f"\n{RES[0]}x{RES[1]}; iblbake device: {rt.device_label}; Mitsuba {args.variant}; converged images: "
+    print(f"\n{RES[0]}x{RES[1]}; iblbake devices: {', '.join(rt.device_label for rt in runtimes)}; "
+          f"Mitsuba {args.variant}; converged images: "
           f"{args.converged} samples per pixel, seed 999; Msamples/s: pixels x spp / seconds")
 
 

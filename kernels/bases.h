@@ -11,6 +11,7 @@
  * sum_k s[k] c_k (linear in the coefficients, so the probes weigh it once a point, not a probe). */
 #ifndef IBLBAKE_BASES_H
 #define IBLBAKE_BASES_H
+#include "inline.h"
 
 /* where basis_irradiance reads its coefficients: the distant basis's are __constant; the probes'
  * (kernels/probes.h, PROBES_BASIS) one block per probe in a __global buffer */
@@ -26,20 +27,20 @@
 
 #ifdef HAS_BASIS_SPECULAR
 /* the warped lobe's sharpness at alpha = roughness^2 and n.v (core/bases/common.py warp_sharpness) */
-inline float basis_warp_sharpness(float alpha, float nov)
+IBL_INLINE float basis_warp_sharpness(float alpha, float nov)
 {
     return 2.0f / fmax(alpha * alpha, 1e-8f) / (4.0f * fmax(nov, 1e-4f));
 }
 
 /* sum_k s[k] c_k of one coefficient block, clamped at 0 (core/bases specular_radiance) */
-inline float3 basis_weighted(BASIS_SPACE const float4 *bc, const float *s)
+IBL_INLINE float3 basis_weighted(BASIS_SPACE const float4 *bc, const float *s)
 {
     float3 e = (float3)(0.0f);
     for (int k = 0; k < BASIS_SPECULAR_ROWS; ++k) e += bc[k].xyz * s[k];
     return fmax(e, (float3)(0.0f));
 }
 
-inline float3 basis_specular_radiance(BASIS_SPACE const float4 *bc, __global const float *basis_table, float3 r,
+IBL_INLINE float3 basis_specular_radiance(BASIS_SPACE const float4 *bc, __global const float *basis_table, float3 r,
                                       float lam_w)
 {
     float s[BASIS_SPECULAR_ROWS];

@@ -5,10 +5,11 @@
  * (ambient_dice.py specular_table: AD_TABLE_ROWS rows of log2 lambda, AD_TABLE_COLS of v_i . r). */
 #ifndef IBLBAKE_BASIS_AMBIENT_DICE_H
 #define IBLBAKE_BASIS_AMBIENT_DICE_H
+#include "inline.h"
 #ifdef BASIS_AMBIENT_DICE
 #define HAS_BASIS 1
 
-inline float3 basis_irradiance(BASIS_SPACE const float4 *bc, float3 n)
+IBL_INLINE float3 basis_irradiance(BASIS_SPACE const float4 *bc, float3 n)
 {
     const float4 c = bc[24];
     float3 e = (float3)(0.0f);
@@ -21,7 +22,7 @@ inline float3 basis_irradiance(BASIS_SPACE const float4 *bc, float3 n)
 
 #define HAS_BASIS_SPECULAR 1
 #define BASIS_SPECULAR_ROWS 12
-inline void basis_specular_weights(BASIS_SPACE const float4 *bc, __global const float *basis_table, float3 r,
+IBL_INLINE void basis_specular_weights(BASIS_SPACE const float4 *bc, __global const float *basis_table, float3 r,
                                    float lam_w, float *s)
 {
     const float x = clamp((log2(fmax(lam_w, 1e-30f)) - AD_TABLE_LOG2_LO) / AD_TABLE_STEP, 0.0f,

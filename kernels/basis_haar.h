@@ -5,18 +5,19 @@
  * formula on the square clipped to the normal's hemisphere. */
 #ifndef IBLBAKE_BASIS_HAAR_H
 #define IBLBAKE_BASIS_HAAR_H
+#include "inline.h"
 #ifdef BASIS_HAAR
 #define HAS_BASIS 1
 #define HAAR_FACE 32
 
-inline float haar_segment(float3 a, float3 b, float3 n)
+IBL_INLINE float haar_segment(float3 a, float3 b, float3 n)
 {
     const float3 c = cross(a, b);
     const float l = length(c);
     return l > 0.0f ? 0.5f * atan2(l, dot(a, b)) * dot(c, n) / l : 0.0f;
 }
 
-inline float3 haar_corner(int f, float s, float t)
+IBL_INLINE float3 haar_corner(int f, float s, float t)
 {
     const float a = 2.0f * s - 1.0f, b = 2.0f * t - 1.0f;
     switch (f) {
@@ -30,7 +31,7 @@ inline float3 haar_corner(int f, float s, float t)
 }
 
 /* int over the face square of max(0, n.w) dw */
-inline float haar_rect(int f, float s0, float t0, float s1, float t1, float3 n)
+IBL_INLINE float haar_rect(int f, float s0, float t0, float s1, float t1, float3 n)
 {
     float3 v[4] = {haar_corner(f, s0, t0), haar_corner(f, s0, t1), haar_corner(f, s1, t1), haar_corner(f, s1, t0)};
     if (dot(cross(v[1] - v[0], v[2] - v[0]), v[0]) < 0.0f) { const float3 w = v[1]; v[1] = v[3]; v[3] = w; }
@@ -49,7 +50,7 @@ inline float haar_rect(int f, float s0, float t0, float s1, float t1, float3 n)
     return (above && below) ? e + haar_segment(xo, xi, n) : e;
 }
 
-inline float3 basis_irradiance(BASIS_SPACE const float4 *bc, float3 n)
+IBL_INLINE float3 basis_irradiance(BASIS_SPACE const float4 *bc, float3 n)
 {
     float3 e = (float3)(0.0f);
     for (int k = 0; k < HAAR_TERMS; ++k) {

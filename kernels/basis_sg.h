@@ -3,10 +3,11 @@
  * SG_LOBES rows (amplitude rgb), then SG_LOBES rows (axis xyz, sharpness). */
 #ifndef IBLBAKE_BASIS_SG_H
 #define IBLBAKE_BASIS_SG_H
+#include "inline.h"
 #ifdef BASIS_SG
 #define HAS_BASIS 1
 
-inline float3 basis_irradiance(BASIS_SPACE const float4 *bc, float3 n)
+IBL_INLINE float3 basis_irradiance(BASIS_SPACE const float4 *bc, float3 n)
 {
     const float lam = bc[SG_LOBES].w;
     const float eml = exp(-lam), em2l = eml * eml;
@@ -27,7 +28,7 @@ inline float3 basis_irradiance(BASIS_SPACE const float4 *bc, float3 n)
  * sharpness lam_w (sg.py specular_weights; kernels/bases.h sums s[k] A_k) */
 #define HAS_BASIS_SPECULAR 1
 #define BASIS_SPECULAR_ROWS SG_LOBES
-inline void basis_specular_weights(BASIS_SPACE const float4 *bc, __global const float *basis_table, float3 r,
+IBL_INLINE void basis_specular_weights(BASIS_SPACE const float4 *bc, __global const float *basis_table, float3 r,
                                    float lam_w, float *s)
 {
     const float lam = bc[SG_LOBES].w;

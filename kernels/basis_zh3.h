@@ -4,10 +4,11 @@
  * the zonal coefficient, rgb. */
 #ifndef IBLBAKE_BASIS_ZH3_H
 #define IBLBAKE_BASIS_ZH3_H
+#include "inline.h"
 #ifdef BASIS_ZH3
 #define HAS_BASIS 1
 
-inline float3 basis_irradiance(BASIS_SPACE const float4 *bc, float3 n)
+IBL_INLINE float3 basis_irradiance(BASIS_SPACE const float4 *bc, float3 n)
 {
     const float3 lum = (float3)(0.2126f, 0.7152f, 0.0722f);
     const float3 v = (float3)(dot(bc[3].xyz, lum), dot(bc[1].xyz, lum), dot(bc[2].xyz, lum));

@@ -9,7 +9,7 @@
  * Viewer's; Filament's "Neubelt" unclamped). */
 #define SHEEN_ALPHA_MIN 1e-6f
 
-inline float d_charlie(float noh, float alpha)
+IBL_INLINE float d_charlie(float noh, float alpha)
 {
     const float a = fmax(alpha, SHEEN_ALPHA_MIN);
     noh = clamp(noh, 0.0f, 1.0f);
@@ -17,7 +17,7 @@ inline float d_charlie(float noh, float alpha)
     return (2.0f + 1.0f / a) * pow(sin2, 0.5f / a) * (0.5f / 3.14159265358979323846f);
 }
 
-inline float v_ashikhmin(float nov, float nol)
+IBL_INLINE float v_ashikhmin(float nov, float nol)
 {
     nov = clamp(nov, 0.0f, 1.0f);
     nol = clamp(nol, 0.0f, 1.0f);
@@ -25,21 +25,21 @@ inline float v_ashikhmin(float nov, float nol)
 }
 
 /* Schlick's Fresnel weight c = (1 - VoH)^5: F = f0 + (f90 - f0) c */
-inline float schlick_weight(float voh)
+IBL_INLINE float schlick_weight(float voh)
 {
     const float x = 1.0f - clamp(voh, 0.0f, 1.0f);
     const float x2 = x * x;
     return x2 * x2 * x;
 }
 
-inline float3 f_schlick(float voh, float3 f0, float3 f90)
+IBL_INLINE float3 f_schlick(float voh, float3 f0, float3 f90)
 {
     return f0 + (f90 - f0) * schlick_weight(voh);
 }
 
 /* Fdez-Aguera's roughness-dependent Fresnel for the diffuse weight, its grazing value
  * max(F90 - roughness, F0) (F90 = 1: the usual max(1 - roughness, F0)) */
-inline float3 f_schlick_roughness(float nov, float3 f0, float3 f90, float roughness)
+IBL_INLINE float3 f_schlick_roughness(float nov, float3 f0, float3 f90, float roughness)
 {
     float x = 1.0f - clamp(nov, 0.0f, 1.0f);
     float x2 = x * x;

@@ -3,6 +3,7 @@
  * v = 0 the top row; cube faces +X -X +Y -Y +Z -Z; octahedral with +y at the centre. */
 #ifndef IBLBAKE_COMMON_H
 #define IBLBAKE_COMMON_H
+#include "inline.h"
 
 #include "layout.h"
 
@@ -10,7 +11,7 @@
 
 /* Rec. 709 relative luminance of linear RGB (the weights: iblbake/core/metrics.py LUMINANCE,
  * through layout.h) */
-inline float luminance(float3 c)
+IBL_INLINE float luminance(float3 c)
 {
     return dot(c, (float3)(LUMINANCE_R, LUMINANCE_G, LUMINANCE_B));
 }
@@ -19,24 +20,24 @@ inline float luminance(float3 c)
  * PoCL's normalize guards against overflow and underflow and took as long as the rest of the
  * lights pass's shading (0.02 s a 1280x720 frame); rsqrt of the squared length is within an
  * ulp or two of it there. */
-inline float3 unit3(float3 x)
+IBL_INLINE float3 unit3(float3 x)
 {
     return x * rsqrt(dot(x, x));
 }
 
 /* x^e for x >= 0 as exp2(e log2 x), 0 for x = 0: PoCL's pow costs more than whole passes (the
  * tone map's encoding, GTAO's power, the specular occlusion) */
-inline float pow_fast(float x, float e)
+IBL_INLINE float pow_fast(float x, float e)
 {
     return x > 0.0f ? exp2(e * log2(x)) : 0.0f;
 }
 
-inline float3 pow_fast3(float3 x, float e)
+IBL_INLINE float3 pow_fast3(float3 x, float e)
 {
     return select(exp2(e * log2(x)), (float3)(0.0f), islessequal(x, (float3)(0.0f)));
 }
 
-inline float2 equirect_uv_from_dir(float3 d)
+IBL_INLINE float2 equirect_uv_from_dir(float3 d)
 {
     float u = 0.5f - atan2(d.x, d.z) * (0.5f / IBL_PI);
     u = u - floor(u);                     /* the seam (atan2 = -pi) wraps to 0 */
@@ -44,7 +45,7 @@ inline float2 equirect_uv_from_dir(float3 d)
     return (float2)(u, v);
 }
 
-inline float3 dir_from_equirect_uv(float2 uv)
+IBL_INLINE float3 dir_from_equirect_uv(float2 uv)
 {
     float theta = IBL_PI * uv.y, phi = 2.0f * IBL_PI * (0.5f - uv.x);
     float st = sin(theta);
@@ -54,14 +55,14 @@ inline float3 dir_from_equirect_uv(float2 uv)
 /* Exact solid angle of a texel in row j of a W x H equirect image:
  * (2 pi / W)(cos(pi j/H) - cos(pi (j+1)/H)) = (4 pi / W) sin(pi (j + 1/2)/H) sin(pi / (2H)),
  * with the first sine taken from the nearer pole so float32 keeps its relative precision. */
-inline float equirect_row_solid_angle(int j, int width, int height)
+IBL_INLINE float equirect_row_solid_angle(int j, int width, int height)
 {
     float c = fmin((float)j + 0.5f, (float)(height - j) - 0.5f);
     return (4.0f * IBL_PI / (float)width) * sin(IBL_PI * c / (float)height) * sin(0.5f * IBL_PI / (float)height);
 }
 
 /* Bilinear lookup in an RGB float image (3 floats a texel): wraps in u, clamps in v. */
-inline float3 bilinear_equirect(__global const float *img, int width, int height, float2 uv)
+IBL_INLINE float3 bilinear_equirect(__global const float *img, int width, int height, float2 uv)
 {
     float x = uv.x * (float)width - 0.5f;
     float y = clamp(uv.y * (float)height - 0.5f, 0.0f, (float)(height - 1));
@@ -76,7 +77,7 @@ inline float3 bilinear_equirect(__global const float *img, int width, int height
 }
 
 /* Face coordinates s, t in [0, 1] (t = 0 the top row) of face 0..5 -> unit direction. */
-inline float3 dir_from_cube(int face, float s, float t)
+IBL_INLINE float3 dir_from_cube(int face, float s, float t)
 {
     float a = 2.0f * s - 1.0f, b = 2.0f * t - 1.0f;
     float3 d;
@@ -93,7 +94,7 @@ inline float3 dir_from_cube(int face, float s, float t)
 
 /* The inverse of dir_from_cube: face by the major axis (Vulkan's cube-map face selection, ties
  * to x, then y) and its (s, t) in [0, 1]. */
-inline float2 cube_from_dir(float3 d, int *face)
+IBL_INLINE float2 cube_from_dir(float3 d, int *face)
 {
     const float ax = fabs(d.x), ay = fabs(d.y), az = fabs(d.z);
     float sc, tc, ma;
@@ -110,7 +111,7 @@ inline float2 cube_from_dir(float3 d, int *face)
     return (float2)(0.5f * (sc / ma + 1.0f), 0.5f * (tc / ma + 1.0f));
 }
 
-inline float3 dir_from_octahedral(float u, float v)
+IBL_INLINE float3 dir_from_octahedral(float u, float v)
 {
     float x = 2.0f * u - 1.0f, z = 2.0f * v - 1.0f;
     float y = 1.0f - fabs(x) - fabs(z);
@@ -123,7 +124,7 @@ inline float3 dir_from_octahedral(float u, float v)
 }
 
 /* Orthonormal t, b with cross(t, b) = n, finite for every unit n (Duff et al. 2017). */
-inline void tangent_frame(float3 n, float3 *t, float3 *b)
+IBL_INLINE void tangent_frame(float3 n, float3 *t, float3 *b)
 {
     float sign = copysign(1.0f, n.z);
     float a = -1.0f / (sign + n.z);

@@ -15,13 +15,13 @@
 /* Solid angle of a level-0 texel (w0 x h0) of the chain at direction l: (2 pi / w0)(pi / h0)
  * sin(theta), floored at the polar row's centre; continuous in latitude so that the level a
  * filtered lookup picks does not jump at row boundaries. Mirrors iblbake/bake/radiance.py: texel_solid_angle_at. */
-inline float texel_solid_angle(float3 l, int w0, int h0)
+IBL_INLINE float texel_solid_angle(float3 l, int w0, int h0)
 {
     const float st = fmax(sqrt(fmax(0.0f, 1.0f - l.y * l.y)), sin(0.5f * IBL_PI / h0));
     return (2.0f * IBL_PI / w0) * (IBL_PI / h0) * st;
 }
 
-inline float3 chain_lookup(CHAIN_PARAMS, float3 d, float lod)
+IBL_INLINE float3 chain_lookup(CHAIN_PARAMS, float3 d, float lod)
 {
     const float2 uv = equirect_uv_from_dir(d);
     /* +-inf clamp to the ends; NaN (the 0/0 pdf of a delta lobe) reads level 0 */
@@ -38,7 +38,7 @@ inline float3 chain_lookup(CHAIN_PARAMS, float3 d, float lod)
  * luminance x solid angle (tables built by iblbake/core/sampling.py: EnvironmentDistribution).
  * Row from the marginal CDF, column from the row's CDF, then uniform in (phi, cos theta) inside
  * the texel, so the pdf over solid angle is p_texel / Omega_texel (the pdf table). */
-inline int cdf_search(__global const float *cdf, int n, float u)
+IBL_INLINE int cdf_search(__global const float *cdf, int n, float u)
 {
     int lo = 0, hi = n - 1;                 /* cdf[0..n], cdf[0] = 0, cdf[n] = 1 */
     while (lo < hi) {
@@ -49,7 +49,7 @@ inline int cdf_search(__global const float *cdf, int n, float u)
 }
 
 /* Direction in the panorama's frame from four uniforms; *texel = j * w + i. */
-inline float3 sample_env(__global const float *marginal, __global const float *conditional, int w, int h,
+IBL_INLINE float3 sample_env(__global const float *marginal, __global const float *conditional, int w, int h,
                          float4 u, int *texel)
 {
     const int j = cdf_search(marginal, h, u.x);
@@ -63,13 +63,13 @@ inline float3 sample_env(__global const float *marginal, __global const float *c
 }
 
 /* The texel a direction (panorama frame) falls in, nearest: the pdf table's index for it. */
-inline int env_texel_index(float3 e, int w, int h)
+IBL_INLINE int env_texel_index(float3 e, int w, int h)
 {
     const float2 uv = equirect_uv_from_dir(e);
     return min((int)(uv.y * h), h - 1) * w + min((int)(uv.x * w), w - 1);
 }
 
-inline float pdf_env(__global const float *pdf_table, int texel)
+IBL_INLINE float pdf_env(__global const float *pdf_table, int texel)
 {
     return pdf_table[texel];
 }

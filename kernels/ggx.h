@@ -8,7 +8,7 @@
 
 #define ALPHA_MIN 1e-7f
 
-inline float d_ggx(float noh, float alpha)
+IBL_INLINE float d_ggx(float noh, float alpha)
 {
     float a2 = fmax(alpha * alpha, ALPHA_MIN * ALPHA_MIN);
     noh = clamp(noh, 0.0f, 1.0f);
@@ -20,7 +20,7 @@ inline float d_ggx(float noh, float alpha)
 
 /* D from sin^2 and cos^2 of the half-vector angle: sin^2 taken as |n x h|^2 keeps its relative
  * precision for near-mirror lobes, where 1 - noh^2 in float32 is only a multiple of 1.2e-7. */
-inline float d_ggx_sc(float sin2, float cos2, float alpha)
+IBL_INLINE float d_ggx_sc(float sin2, float cos2, float alpha)
 {
     float a2 = fmax(alpha * alpha, ALPHA_MIN * ALPHA_MIN);
     float d = sin2 + cos2 * a2;
@@ -28,7 +28,7 @@ inline float d_ggx_sc(float sin2, float cos2, float alpha)
 }
 
 /* Height-correlated Smith V = G / (4 NoV NoL) (Heitz 2014), as Filament's DFG code. */
-inline float v_smith_ggx_correlated(float nov, float nol, float alpha)
+IBL_INLINE float v_smith_ggx_correlated(float nov, float nol, float alpha)
 {
     float a2 = alpha * alpha;
     nov = clamp(nov, 0.0f, 1.0f);
@@ -39,7 +39,7 @@ inline float v_smith_ggx_correlated(float nov, float nol, float alpha)
 }
 
 /* Smith G1 for GGX, the masking of the view direction. */
-inline float g1_smith(float nov, float alpha)
+IBL_INLINE float g1_smith(float nov, float alpha)
 {
     const float a2 = alpha * alpha;
     return 2.0f * nov / (nov + sqrt(a2 + (1.0f - a2) * nov * nov));
@@ -47,7 +47,7 @@ inline float g1_smith(float nov, float alpha)
 
 /* GGX half-vector, local frame (z = normal). theta = atan2(alpha sqrt(u1), sqrt(1 - u1));
  * pdf over half-vectors = D(h) cos(theta_h). */
-inline float3 sample_ggx_half(float2 u, float alpha)
+IBL_INLINE float3 sample_ggx_half(float2 u, float alpha)
 {
     float phi = 2.0f * 3.14159265358979323846f * u.x;
     float theta = atan2(alpha * sqrt(u.y), sqrt(fmax(0.0f, 1.0f - u.y)));
@@ -57,7 +57,7 @@ inline float3 sample_ggx_half(float2 u, float alpha)
 
 /* The same warp without trigonometry, for per-pixel loops: the host uploads (cos phi, sin phi, u1)
  * per Hammersley point; cos theta = sqrt((1 - u1) / (1 - u1 + alpha^2 u1)) is the atan2 form's cosine. */
-inline float3 sample_ggx_half_cs(float4 pt, float alpha)
+IBL_INLINE float3 sample_ggx_half_cs(float4 pt, float alpha)
 {
     const float a2u = alpha * alpha * pt.z;
     const float den = (1.0f - pt.z) + a2u;
@@ -66,7 +66,7 @@ inline float3 sample_ggx_half_cs(float4 pt, float alpha)
     return (float3)(st * pt.x, st * pt.y, ct);
 }
 
-inline float pdf_ggx_half(float noh, float alpha)
+IBL_INLINE float pdf_ggx_half(float noh, float alpha)
 {
     return d_ggx(noh, alpha) * fmax(noh, 0.0f);
 }
@@ -74,7 +74,7 @@ inline float pdf_ggx_half(float noh, float alpha)
 /* Visible normals of GGX (Heitz 2018, "Sampling the GGX Distribution of Visible Normals"):
  * stretch the view vector, sample the projected hemisphere, unstretch. pdf over half-vectors
  * = G1(v) max(0, v.h) D(h) / NoV; over reflected directions that divided by 4 v.h. */
-inline float3 sample_ggx_vndf(float3 vl, float alpha, float2 u)
+IBL_INLINE float3 sample_ggx_vndf(float3 vl, float alpha, float2 u)
 {
     const float3 vh = normalize((float3)(alpha * vl.x, alpha * vl.y, vl.z));
     const float lensq = vh.x * vh.x + vh.y * vh.y;
@@ -89,7 +89,7 @@ inline float3 sample_ggx_vndf(float3 vl, float alpha, float2 u)
     return normalize((float3)(alpha * nh.x, alpha * nh.y, fmax(1e-7f, nh.z)));
 }
 
-inline float pdf_ggx_vndf_reflected(float nov, float noh, float alpha)
+IBL_INLINE float pdf_ggx_vndf_reflected(float nov, float noh, float alpha)
 {
     return g1_smith(nov, alpha) * d_ggx(noh, alpha) / (4.0f * nov);
 }

@@ -20,10 +20,10 @@
 /* GTAO_LEVELS (the pyramid's levels beyond the full frame) comes from the host:
  * iblbake/render/passes/ao.py GTAO_LEVELS, which the twin reads too */
 
-inline float fract1(float x) { return x - floor(x); }
+IBL_INLINE float fract1(float x) { return x - floor(x); }
 
 /* texels of the levels before level k (k >= 1) in gtao_levels */
-inline int level_offset(int k, int width, int height)
+IBL_INLINE int level_offset(int k, int width, int height)
 {
     int off = 0;
     for (int j = 1; j < k; ++j) off += ((width + (1 << j) - 1) >> j) * ((height + (1 << j) - 1) >> j);
@@ -48,21 +48,21 @@ __kernel void gtao_pyramid(__global const float4 *ao_pos, const int ao_stride, c
 
 /* interleaved gradient noise (Jimenez 2014): its 3x3 neighbourhoods hold well-spread values, so
  * the 3x3 denoise sees as many slice rotations */
-inline float gtao_noise(int x, int y)
+IBL_INLINE float gtao_noise(int x, int y)
 {
     return fract1(52.9829189f * fract1(0.06711056f * (float)x + 0.00583715f * (float)y));
 }
 
 /* world units one pixel spans at p: the camera's half-width over half the pixels, times the
  * depth for a pinhole camera */
-inline float pixel_footprint(__constant float4 *cam, int width, float3 p)
+IBL_INLINE float pixel_footprint(__constant float4 *cam, int width, float3 p)
 {
     const float s = 2.0f * length(cam[2].xyz) / (float)width;
     return cam[0].w > 0.5f ? s : s * dot(p - cam[0].xyz, cam[1].xyz);
 }
 
 /* acos to 7e-5 rad (Abramowitz and Stegun 4.4.45): the search's only inverse trigonometry */
-inline float acos_fast(float x)
+IBL_INLINE float acos_fast(float x)
 {
     const float a = fabs(x);
     const float r = sqrt(fmax(1.0f - a, 0.0f)) * (1.5707288f + a * (-0.2121144f + a * (0.0742610f - 0.0187293f * a)));
@@ -72,7 +72,7 @@ inline float acos_fast(float x)
 /* The paper's inner integral of one side of a slice, cos(h - n) |sin h| over [0, h] (eq. 7 and
  * 10), with the angles written through their cosines: h = acos(ch) on the side of sign sh (+1 or
  * -1), n given by (cos, sin). cos(2h - n) = cos 2h cos n + sin 2h sin n. */
-inline float gtao_arc(float ch, float sh, float cos_n, float sin_n, float ang_n)
+IBL_INLINE float gtao_arc(float ch, float sh, float cos_n, float sin_n, float ang_n)
 {
     const float h = sh * acos_fast(ch);
     const float sin_h = sh * sqrt(fmax(1.0f - ch * ch, 0.0f));
@@ -82,7 +82,7 @@ inline float gtao_arc(float ch, float sh, float cos_n, float sin_n, float ang_n)
 
 /* One depth sample of a side, read at level k: its horizon cosine pulled towards `low` as its
  * distance leaves the radius; off screen and background samples leave the horizon where it is. */
-inline float horizon(__global const float4 *ao_pos, int stride, __global const float4 *levels, int k,
+IBL_INLINE float horizon(__global const float4 *ao_pos, int stride, __global const float4 *levels, int k,
                      int width, int height, int qx, int qy, float3 p, float3 v, float low, float fall_mul,
                      float fall_add, float hc)
 {

@@ -5,7 +5,7 @@
 #define IBLBAKE_IMPORTANCE_H
 #include "surface.h"
 
-inline float3 importance_specular(__global const float4 *spec_sums, int gid, const Material mt)
+IBL_INLINE float3 importance_specular(__global const float4 *spec_sums, int gid, const Material mt)
 {
     return mt.f0 * spec_sums[2 * gid].xyz + mt.f90 * spec_sums[2 * gid + 1].xyz;
 }

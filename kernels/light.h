@@ -12,7 +12,7 @@
  * travel (*dist, to the sphere's surface; infinite for a directional light), the sine of the
  * angular radius it fills (*sin_max; 0 for a point), and the irradiance it gives a surface facing
  * it (range window and spot falloff applied). */
-inline float3 light_toward(__global const float4 *lights, int j, float3 p, float3 *wc, float *dist, float *sin_max)
+IBL_INLINE float3 light_toward(__global const float4 *lights, int j, float3 p, float3 *wc, float *dist, float *sin_max)
 {
     const float4 r0 = lights[LIGHT_FLOAT4S * j], r1 = lights[LIGHT_FLOAT4S * j + 1];
     const float4 r2 = lights[LIGHT_FLOAT4S * j + 2], r3 = lights[LIGHT_FLOAT4S * j + 3];
@@ -42,14 +42,14 @@ inline float3 light_toward(__global const float4 *lights, int j, float3 p, float
 }
 
 /* 1 - cos of the cone a light of angular radius asin(sin_max) fills, without cancellation */
-inline float light_omc(float sin_max)
+IBL_INLINE float light_omc(float sin_max)
 {
     return sin_max * sin_max / (1.0f + sqrt(fmax(0.0f, 1.0f - sin_max * sin_max)));
 }
 
 /* Uniform in the cone around axis a whose 1 - cos(half angle) is omc (kept apart: the sun's is
  * 1e-5, which 1 - cos in float32 would round); pdf 1 / (2 pi omc). */
-inline float3 cone_direction(float3 a, float omc, float2 u)
+IBL_INLINE float3 cone_direction(float3 a, float omc, float2 u)
 {
     const float x = u.x * omc;
     const float ct = 1.0f - x, st = sqrt(fmax(0.0f, x * (2.0f - x))), phi = 2.0f * IBL_PI * u.y;

@@ -26,7 +26,7 @@
  * highlight of a sphere light on a glossy plane seen at 17 degrees keeps 0.88-0.95 of the exact
  * integral's energy, its relative RMSE 0.20-0.31 where the centre's alone is 0.93-4.2
  * (tests/test_lights.py). *l becomes the direction, the energy is returned. */
-inline float representative_point(float3 n, float3 v, float3 *l, float sin_max, float alpha)
+IBL_INLINE float representative_point(float3 n, float3 v, float3 *l, float sin_max, float alpha)
 {
     const float3 r = 2.0f * dot(n, v) * n - v;
     const float3 c = dot(*l, r) * r - *l;            /* from the centre towards the mirror ray */
@@ -40,7 +40,7 @@ inline float representative_point(float3 n, float3 v, float3 *l, float sin_max, 
 
 /* f(v, l) NoL for a light of centre direction l; with sin_max > 0 the specular term at the
  * light's representative point */
-inline float3 light_brdf_cos(const Material mt, float3 n, float3 v, float nov, float3 l, float sin_max)
+IBL_INLINE float3 light_brdf_cos(const Material mt, float3 n, float3 v, float nov, float3 l, float sin_max)
 {
     float3 f = (float3)(0.0f);
 #ifdef LIGHT_DIFFUSE

@@ -19,7 +19,7 @@
  * f NoL / pdf = 4 F V NoV NoL / G1(NoV); their ratio times the DFG table's albedo F0 A + B keeps the
  * white furnace exact. K = 1: the split sum, read at one sample's direction and level. No sample
  * above the horizon: the split sum at R. The radiance is unscaled (times env_scale by the caller). */
-inline float3 lobe_specular(CHAIN_PARAMS, __global const float2 *dfg, const int dfg_size, LOBE_PARAMS,
+IBL_INLINE float3 lobe_specular(CHAIN_PARAMS, __global const float2 *dfg, const int dfg_size, LOBE_PARAMS,
                             const Material mt, float3 nrm, float3 v, float nov, float2 env_rot)
 {
     float3 t, b;

@@ -21,7 +21,7 @@ typedef struct {
 
 /* Material m at texture coordinates uv (u0, v0, u1, v1) and mip levels lods of its two sets (<= 0:
  * level 0), shading normal nrm with tangent frame tw; metallic, roughness and occlusion unclamped. */
-inline MaterialSample material_sample(__global const float4 *materials, __global const float4 *mat_maps,
+IBL_INLINE MaterialSample material_sample(__global const float4 *materials, __global const float4 *mat_maps,
                                       TEXTURE_PARAMS, int m, float4 uv, float2 lods, float3 nrm, float4 tw)
 {
     const float4 a = materials[MATERIAL_FLOAT4S * m], b = materials[MATERIAL_FLOAT4S * m + 1];

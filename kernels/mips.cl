@@ -42,7 +42,7 @@ __kernel void downsample(__global float *chain, const int src_off, const int sw,
     vstore3(acc / wsum, j * dw + i, dst);
 }
 
-inline float3 output_dir(int idx, int size)
+IBL_INLINE float3 output_dir(int idx, int size)
 {
 #if LAYOUT == 0
     const int w = 2 * size;
@@ -103,7 +103,7 @@ __kernel void resample(CHAIN_PARAMS, const int size, const int ntexels,
  *   A = mean G_vis (1 - Fc), B = mean G_vis Fc, Fc = (1 - VoH)^5; specular = F0 A + F90 B.
  * MULTISCATTER stores (B, A + B) instead (Filament's layout for energy compensation). */
 /* Texel (x, y) of an n x n table over NoV and roughness: NoV (>= 1e-4), alpha, and V. */
-inline float3 table_view(int x, int y, int n, float *nov, float *alpha)
+IBL_INLINE float3 table_view(int x, int y, int n, float *nov, float *alpha)
 {
     *nov = fmax((float)x / (float)(n - 1), 1e-4f);
     const float r = (float)y / (float)(n - 1);

@@ -23,7 +23,7 @@
 /* The probability of sampling the specular lobe at a vertex: its share of the two lobes' albedos,
  * estimated by Schlick's F at NoV and the diffuse weight, kept within [0.1, 0.9] where both lobes
  * exist (so neither is starved) and 0 or 1 where one does not (specular 0, metals). */
-inline float specular_probability(const Material mt, float nov, int diffuse, int specular)
+IBL_INLINE float specular_probability(const Material mt, float nov, int diffuse, int specular)
 {
     const float s = specular ? luminance(f_schlick(nov, mt.f0, mt.f90)) : 0.0f;
     const float d = diffuse ? luminance(diffuse_weight(mt, nov)) * IBL_PI : 0.0f;
@@ -35,7 +35,7 @@ inline float specular_probability(const Material mt, float nov, int diffuse, int
 /* The BSDF times NoL of the terms asked for at direction l, and its sampling pdf (the lobes mixed
  * by ps); a delta lobe (alpha < DELTA_ALPHA) adds nothing here, as no direction but its mirror
  * reaches it. */
-inline float3 bsdf_cos(const Material mt, float3 v, float3 n, float nov, float3 l, float ps, int diffuse,
+IBL_INLINE float3 bsdf_cos(const Material mt, float3 v, float3 n, float nov, float3 l, float ps, int diffuse,
                        int specular, float *pdf)
 {
     const float nol = dot(n, l);
@@ -60,7 +60,7 @@ inline float3 bsdf_cos(const Material mt, float3 v, float3 n, float nov, float3 
 /* A direction from the BSDF of the terms asked for: the specular lobe with probability ps (GGX
  * visible normals, or the mirror for a delta lobe), else the cosine hemisphere. Returns f NoL / pdf
  * (0 where the sample leaves the hemisphere); *pdf = INFINITY for a mirror. */
-inline float3 bsdf_sample(const Material mt, float3 v, float3 n, float3 t, float3 b, float nov, float ps,
+IBL_INLINE float3 bsdf_sample(const Material mt, float3 v, float3 n, float3 t, float3 b, float nov, float ps,
                           int diffuse, int specular, float u_lobe, float2 u, float3 *l, float *pdf)
 {
     if (u_lobe < ps && mt.alpha < DELTA_ALPHA) {
@@ -84,7 +84,7 @@ inline float3 bsdf_sample(const Material mt, float3 v, float3 n, float3 t, float
 /* Where a path meets a surface: the point, the shading normal bent towards the incoming ray's
  * origin, and the full material, its maps read at level 0 (a later vertex's ray cone is not
  * tracked; docs/conventions.md "Paths"). */
-inline void path_vertex(float3 o, float3 d, Hit h, __global const float4 *materials, SCENE_PARAMS,
+IBL_INLINE void path_vertex(float3 o, float3 d, Hit h, __global const float4 *materials, SCENE_PARAMS,
                        float3 *p, float3 *n, Material *mt)
 {
     *p = o + h.t * d;
@@ -110,7 +110,7 @@ inline void path_vertex(float3 o, float3 d, Hit h, __global const float4 *materi
 /* The light a path brings back to the first vertex from direction l (after BSDF weight beta):
  * env_part the environment's radiance found on the way (times env_scale later), the return value
  * the emission met. The ray o + t l has already been traced to hit h. */
-inline float3 follow_path(float3 o, float3 l, Hit h, float3 beta, Sampler *sp, __global const float4 *materials,
+IBL_INLINE float3 follow_path(float3 o, float3 l, Hit h, float3 beta, Sampler *sp, __global const float4 *materials,
                           const float2 env_rot, __global const float4 *img, const int w, const int h_env,
                           __global const float *marginal, __global const float *conditional,
                           __global const float *pdf_table, SCENE_PARAMS, float3 *env_part,

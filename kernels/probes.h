@@ -30,7 +30,7 @@
 #define PROBE_SOURCE_NONE 0.0f
 
 /* DDGIGetOctahedralCoordinates: [-1, 1]^2, +z at the centre, -z at the corners */
-inline float2 probe_octahedral(float3 d)
+IBL_INLINE float2 probe_octahedral(float3 d)
 {
     float2 uv = d.xy / (fabs(d.x) + fabs(d.y) + fabs(d.z));
     if (d.z < 0.0f) {
@@ -43,7 +43,7 @@ inline float2 probe_octahedral(float3 d)
 /* A bilinear read of probe `index`'s tile (n interior texels, border 1) at octahedral coordinates
  * oct, in an atlas of nx ny tiles across (DDGIGetProbeUV, then the hardware's bilinear filter:
  * texel centres at half-integers). */
-inline float4 probe_atlas_read(__global const float4 *atlas, int index, float2 oct, int n, int nx, int ny, int nz)
+IBL_INLINE float4 probe_atlas_read(__global const float4 *atlas, int index, float2 oct, int n, int nx, int ny, int nz)
 {
     const int tile = n + 2, width = tile * nx * ny;
     const int col = index % nx + (index / (nx * nz)) * nx, row = (index / nx) % nz;
@@ -58,7 +58,7 @@ inline float4 probe_atlas_read(__global const float4 *atlas, int index, float2 o
 }
 
 /* One probe's irradiance at normal n (>= 0: an SH fit rings) */
-inline float3 probe_irradiance_at(__global const float4 *probe_irr, int index, float3 n, int texels, int nx, int ny,
+IBL_INLINE float3 probe_irradiance_at(__global const float4 *probe_irr, int index, float3 n, int texels, int nx, int ny,
                                   int nz)
 {
 #ifdef PROBES_SH
@@ -77,7 +77,7 @@ inline float3 probe_irradiance_at(__global const float4 *probe_irr, int index, f
 /* How much of the probes' irradiance a point takes (RTXGI's DDGIGetVolumeBlendWeight): 1 inside
  * the box the probes span, falling linearly to 0 one spacing outside it along each axis (the rest
  * from what lies outside every volume: the panorama's SH). */
-inline float probe_volume_weight(float3 p, const float4 probe_origin, const float4 probe_spacing, const int probe_nx,
+IBL_INLINE float probe_volume_weight(float3 p, const float4 probe_origin, const float4 probe_spacing, const int probe_nx,
                                  const int probe_ny, const int probe_nz)
 {
     const float3 half_extent = 0.5f * probe_spacing.xyz * (float3)(probe_nx - 1, probe_ny - 1, probe_nz - 1);
@@ -88,7 +88,7 @@ inline float probe_volume_weight(float3 p, const float4 probe_origin, const floa
 
 /* One probe's value: its irradiance at n, or given the warped specular lobe's weights `spec`
  * (kernels/bases.h basis_specular_weights; a basis that carries one) its radiance along the lobe */
-inline float3 probe_value(__global const float4 *probe_irr, int index, float3 n, const float *spec, int texels,
+IBL_INLINE float3 probe_value(__global const float4 *probe_irr, int index, float3 n, const float *spec, int texels,
                           int nx, int ny, int nz)
 {
 #if defined(PROBES_BASIS) && defined(HAS_BASIS_SPECULAR)
@@ -100,7 +100,7 @@ inline float3 probe_value(__global const float4 *probe_irr, int index, float3 n,
 /* Probe c's weight at the biased point (its factor `falloff`: the trilinear one, or the fallback's
  * inverse square distance) and its value (probe_value; the irradiance as sqrt E with visibility,
  * E without; the specular radiance as it is): 0 for an inactive probe. */
-inline float probe_contribution(int3 c, float3 p, float3 biased, float3 n, float3 falloff, const float *spec,
+IBL_INLINE float probe_contribution(int3 c, float3 p, float3 biased, float3 n, float3 falloff, const float *spec,
                                 float3 *value, PROBE_PARAMS)
 {
     const float3 origin = probe_origin.xyz, spacing = probe_spacing.xyz;
@@ -147,7 +147,7 @@ inline float probe_contribution(int3 c, float3 p, float3 biased, float3 n, float
  * (0, 0, 0); .w the normal bias; probe_spacing.xyz the cell; .w the view bias (world units).
  * Given `spec` (the warped lobe's weights) the radiance along the lobe instead, the same weights
  * blending it linearly. */
-inline float4 probe_blend(float3 p, float3 n, float3 v, const float *spec, PROBE_PARAMS)
+IBL_INLINE float4 probe_blend(float3 p, float3 n, float3 v, const float *spec, PROBE_PARAMS)
 {
     const float3 origin = probe_origin.xyz, spacing = probe_spacing.xyz;
     const int3 last = (int3)(probe_nx - 1, probe_ny - 1, probe_nz - 1);
@@ -186,7 +186,7 @@ inline float4 probe_blend(float3 p, float3 n, float3 v, const float *spec, PROBE
     return (float4)(s, source);
 }
 
-inline float4 probe_irradiance(float3 p, float3 n, float3 v, PROBE_PARAMS)
+IBL_INLINE float4 probe_irradiance(float3 p, float3 n, float3 v, PROBE_PARAMS)
 {
     return probe_blend(p, n, v, (const float *)0, PROBE_ARGS);
 }
@@ -196,7 +196,7 @@ inline float4 probe_irradiance(float3 p, float3 n, float3 v, PROBE_PARAMS)
  * scaled) outside it, and `sky` too where no active probe is near; probe_stats counts the samples
  * that fell back ([0] to the nearest active probes, [1] to the sky) and [4] those that lie outside
  * the volume or on its fading edge. */
-inline float3 probes_diffuse(float3 p, float3 n, float3 v, float3 sky, PROBE_PARAMS, __global int *probe_stats)
+IBL_INLINE float3 probes_diffuse(float3 p, float3 n, float3 v, float3 sky, PROBE_PARAMS, __global int *probe_stats)
 {
     const float wv = probe_volume_weight(p, probe_origin, probe_spacing, probe_nx, probe_ny, probe_nz);
     float3 e = (1.0f - wv) * sky;
@@ -215,7 +215,7 @@ inline float3 probes_diffuse(float3 p, float3 n, float3 v, float3 sky, PROBE_PAR
  * whose basis carries a specular lobe (`specular: probes`), blended by the volume's weight with
  * `sky` (the distant split sum's radiance) outside it, and `sky` where no active probe is near;
  * probe_stats[2], [3] count those samples as [0], [1] do the irradiance's. */
-inline float3 probes_specular(float3 p, float3 n, float3 v, float3 d, float lam_w, float3 sky,
+IBL_INLINE float3 probes_specular(float3 p, float3 n, float3 v, float3 d, float lam_w, float3 sky,
                               __global const float *basis_table, PROBE_PARAMS, __global int *probe_stats)
 {
     const float wv = probe_volume_weight(p, probe_origin, probe_spacing, probe_nx, probe_ny, probe_nz);

@@ -52,6 +52,13 @@
  * ref_batch[s n + gid] = (sum of its estimates, sum of its odd-numbered samples' luminance).
  * Samples are numbered globally (first + k), so the frame is the same whatever the batching and
  * wherever the run stops. */
+/* Intel's CPU runtime vectorises this kernel 16 work items wide where paths meet triangles, and
+ * each lane's BVH traversal diverges: the knot's reference ran 2.9x slower than one work item per
+ * lane (benchmarks/bench_devices.py). IBL_SCALAR_BVH (runtime.device_options, that runtime only)
+ * asks for one (cl_intel_vec_len_hint). */
+#if defined(IBL_SCALAR_BVH) && defined(HAS_TRIANGLES)
+__attribute__((intel_vec_len_hint(1)))
+#endif
 __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int n,
                         const float2 env_rot, const float env_scale,
                         __global const float4 *img, const int w, const int h,

@@ -19,7 +19,7 @@
 /* How much of probe k's capture a point takes: 1 inside its box or sphere (a room-sized box
  * covers the room's own walls and floor), falling to 0 over `blend` of each half extent (a box)
  * or of the radius (a sphere) beyond it; blend 0: 1 inside, 0 outside. */
-inline float rprobe_weight(float3 p, float4 a, float4 b, float4 c)
+IBL_INLINE float rprobe_weight(float3 p, float4 a, float4 b, float4 c)
 {
     float over;
     if (a.w < 0.5f) {
@@ -35,7 +35,7 @@ inline float rprobe_weight(float3 p, float4 a, float4 b, float4 c)
 
 /* Where the ray p + t r (p inside the proxy) leaves the box (the slabs' nearest exit) or the
  * sphere (the far root). */
-inline float3 rprobe_exit(float3 p, float3 r, float4 a, float4 b, float4 c)
+IBL_INLINE float3 rprobe_exit(float3 p, float3 r, float4 a, float4 b, float4 c)
 {
     float t;
     if (a.w < 0.5f) {
@@ -51,7 +51,7 @@ inline float3 rprobe_exit(float3 p, float3 r, float4 a, float4 b, float4 c)
 }
 
 /* The capture's direction for the ray p + t r: towards its exit, seen from the probe's position. */
-inline float3 rprobe_direction(float3 p, float3 r, float4 a, float4 b, float4 c)
+IBL_INLINE float3 rprobe_direction(float3 p, float3 r, float4 a, float4 b, float4 c)
 {
     return normalize(rprobe_exit(p, r, a, b, c) - a.xyz);
 }
@@ -62,7 +62,7 @@ inline float3 rprobe_direction(float3 p, float3 r, float4 a, float4 b, float4 c)
  * parallax, shows that very point), to the capture's resolution (a lobe narrower than its texel,
  * a mirror's, sees more of the frame than of it). Screen-space reflections defer to them there and
  * add what lies off every proxy. */
-inline float reflection_probes_hold(float3 p, float3 r, float3 x, float alpha, __global const float4 *rp_info,
+IBL_INLINE float reflection_probes_hold(float3 p, float3 r, float3 x, float alpha, __global const float4 *rp_info,
                                     const int rp_count)
 {
     float held = 0.0f, wsum = 0.0f;
@@ -80,7 +80,7 @@ inline float reflection_probes_hold(float3 p, float3 r, float3 x, float alpha, _
 }
 
 /* Trilinear read of chain c (chain_lookup's, on the probes' tables) */
-inline float3 rprobe_lookup(RPROBE_PARAMS, int c, float3 d, float lod)
+IBL_INLINE float3 rprobe_lookup(RPROBE_PARAMS, int c, float3 d, float lod)
 {
     const float2 uv = equirect_uv_from_dir(d);
     lod = isnan(lod) ? 0.0f : clamp(lod, 0.0f, (float)(rp_nlev - 1));
@@ -94,7 +94,7 @@ inline float3 rprobe_lookup(RPROBE_PARAMS, int c, float3 d, float lod)
 /* The prefiltered radiance at point p along r (world frame) at chain level lod: the probes whose
  * influence holds p, weighted (their weights normalised where they sum past 1), and `distant`
  * (the panorama's chain, scaled) for the rest. Captures hold the panorama's intensity and frame. */
-inline float3 reflection_probes(float3 p, float3 r, float lod, float3 distant, RPROBE_PARAMS)
+IBL_INLINE float3 reflection_probes(float3 p, float3 r, float lod, float3 distant, RPROBE_PARAMS)
 {
     float3 acc = (float3)(0.0f);
     float wsum = 0.0f;

@@ -3,8 +3,9 @@
  * sample in order. Mirrors iblbake/core/sampling.py. */
 #ifndef IBLBAKE_SAMPLER_H
 #define IBLBAKE_SAMPLER_H
+#include "inline.h"
 
-inline uint reverse_bits32(uint x)
+IBL_INLINE uint reverse_bits32(uint x)
 {
     x = (x << 16) | (x >> 16);
     x = ((x & 0x00FF00FFu) << 8) | ((x & 0xFF00FF00u) >> 8);
@@ -14,33 +15,33 @@ inline uint reverse_bits32(uint x)
 }
 
 /* Van der Corput's radical inverse in base 2: the index's bits mirrored about the point */
-inline float radical_inverse_vdc(uint b)
+IBL_INLINE float radical_inverse_vdc(uint b)
 {
     return (float)reverse_bits32(b) * 2.3283064365386963e-10f;
 }
 
-inline float2 hammersley(uint i, uint n)
+IBL_INLINE float2 hammersley(uint i, uint n)
 {
     return (float2)((float)i / (float)n, radical_inverse_vdc(i));
 }
 
 /* PCG hash (Jarzynski and Olano 2020, "Hash Functions for GPU Rendering"): one 32-bit state step
  * of PCG plus its output permutation. */
-inline uint pcg_hash(uint x)
+IBL_INLINE uint pcg_hash(uint x)
 {
     uint state = x * 747796405u + 2891336453u;
     uint word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
     return (word >> 22u) ^ word;
 }
 
-inline float hash_uniform(uint x)
+IBL_INLINE float hash_uniform(uint x)
 {
     return (float)(pcg_hash(x) >> 8) * (1.0f / 16777216.0f);
 }
 
 /* Radical inverse of j in base b: Halton points, a quasi-random sequence that stays uniform at
  * every prefix, so a frame converges faster than with independent random numbers. */
-inline float radical_inverse(uint j, uint b)
+IBL_INLINE float radical_inverse(uint j, uint b)
 {
     const float inv_b = 1.0f / (float)b;
     float f = inv_b, r = 0.0f;
@@ -58,7 +59,7 @@ inline float radical_inverse(uint j, uint b)
  * give an honest error estimate (their difference); a variance of QMC samples would not. */
 __constant uint HALTON_BASES[8] = {2u, 3u, 5u, 7u, 11u, 13u, 17u, 19u};
 
-inline float qmc(uint seed, uint gid, uint k, int d)
+IBL_INLINE float qmc(uint seed, uint gid, uint k, int d)
 {
     const uint rep = k & 1u, j = k >> 1;
     const float shift = hash_uniform(seed ^ pcg_hash(gid * 16u + rep * 8u + (uint)d));
@@ -76,7 +77,7 @@ typedef struct {
     int dim;
 } Sampler;
 
-inline Sampler sampler_start(uint seed, uint gid, uint k)
+IBL_INLINE Sampler sampler_start(uint seed, uint gid, uint k)
 {
     Sampler s;
     s.seed = seed; s.gid = gid; s.k = k; s.dim = 0;
@@ -88,7 +89,7 @@ inline Sampler sampler_start(uint seed, uint gid, uint k)
  * Hash-based Owen Scrambling", JCGT 9(4)): stratified in every pair at every sample count, each
  * pair independent of the others. */
 
-inline uint laine_karras_permutation(uint x, uint seed)
+IBL_INLINE uint laine_karras_permutation(uint x, uint seed)
 {
     x += seed;
     x ^= x * 0x6c50b47cu;
@@ -98,14 +99,14 @@ inline uint laine_karras_permutation(uint x, uint seed)
     return x;
 }
 
-inline uint nested_uniform_scramble(uint x, uint seed)
+IBL_INLINE uint nested_uniform_scramble(uint x, uint seed)
 {
     return reverse_bits32(laine_karras_permutation(reverse_bits32(x), seed));
 }
 
 /* Sobol's second dimension (direction numbers v0 = 2^31, v_k = v_{k-1} ^ (v_{k-1} >> 1)); its
  * first is the van der Corput sequence, reverse_bits32(i) */
-inline uint sobol_dim1(uint i)
+IBL_INLINE uint sobol_dim1(uint i)
 {
     uint r = 0u, v = 0x80000000u;
     for (; i != 0u; i >>= 1, v ^= v >> 1)
@@ -115,7 +116,7 @@ inline uint sobol_dim1(uint i)
 
 /* Coordinate c (0, 1) of pair p of sample j of one stream (seed: the sample's stream, G-buffer
  * sample and replicate hashed) */
-inline float owen_sobol(uint j, uint seed, int p, int c)
+IBL_INLINE float owen_sobol(uint j, uint seed, int p, int c)
 {
     const uint s = pcg_hash(seed ^ pcg_hash((uint)p + 0x51ED27u));
     const uint i = nested_uniform_scramble(j, s);
@@ -123,7 +124,7 @@ inline float owen_sobol(uint j, uint seed, int p, int c)
     return (float)(nested_uniform_scramble(x, pcg_hash(s + (uint)c + 1u)) >> 8) * (1.0f / 16777216.0f);
 }
 
-inline float sampler_1d(Sampler *s)
+IBL_INLINE float sampler_1d(Sampler *s)
 {
     const int d = s->dim++;
     if (d < 8) return qmc(s->seed, s->gid, s->k, d);
@@ -132,7 +133,7 @@ inline float sampler_1d(Sampler *s)
     return owen_sobol(s->k >> 1, stream, (d - 8) >> 1, (d - 8) & 1);
 }
 
-inline float2 sampler_2d(Sampler *s)
+IBL_INLINE float2 sampler_2d(Sampler *s)
 {
     const float a = sampler_1d(s);
     return (float2)(a, sampler_1d(s));

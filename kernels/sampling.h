@@ -12,27 +12,27 @@
 
 /* Cosine-weighted hemisphere (Malley's method: a uniform disk point lifted to the hemisphere);
  * pdf = cos(theta) / pi. */
-inline float3 sample_cosine_hemisphere(float2 u)
+IBL_INLINE float3 sample_cosine_hemisphere(float2 u)
 {
     const float r = sqrt(u.x), phi = 2.0f * IBL_PI * u.y;
     return (float3)(r * cos(phi), r * sin(phi), sqrt(fmax(0.0f, 1.0f - u.x)));
 }
 
-inline float pdf_cosine_hemisphere(float cos_theta)
+IBL_INLINE float pdf_cosine_hemisphere(float cos_theta)
 {
     return fmax(cos_theta, 0.0f) * (1.0f / IBL_PI);
 }
 
 /* Uniform in the cone cos(theta) >= cos_max (a sphere light or the sun seen from a point):
  * cos(theta) = 1 - u (1 - cos_max); pdf = 1 / (2 pi (1 - cos_max)). */
-inline float3 sample_uniform_cone(float2 u, float cos_max)
+IBL_INLINE float3 sample_uniform_cone(float2 u, float cos_max)
 {
     const float ct = 1.0f - u.x * (1.0f - cos_max);
     const float st = sqrt(fmax(0.0f, 1.0f - ct * ct)), phi = 2.0f * IBL_PI * u.y;
     return (float3)(st * cos(phi), st * sin(phi), ct);
 }
 
-inline float pdf_uniform_cone(float cos_max)
+IBL_INLINE float pdf_uniform_cone(float cos_max)
 {
     return 1.0f / (2.0f * IBL_PI * (1.0f - cos_max));
 }
@@ -41,7 +41,7 @@ inline float pdf_uniform_cone(float cos_max)
 
 /* Power heuristic a^2 / (a^2 + b^2) (Veach 1997), written so that an infinite or huge pdf (a
  * near-mirror lobe) gives 1 or 0 instead of inf / inf. */
-inline float power_heuristic(float a, float b)
+IBL_INLINE float power_heuristic(float a, float b)
 {
     if (!(a > 0.0f)) return 0.0f;
     const float r = b / a;

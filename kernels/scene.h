@@ -20,7 +20,7 @@
 
 /* cam[0] origin (w: 1 orthographic, 0 perspective), cam[1] forward, cam[2] right and cam[3] up,
  * scaled to half the view's width and height (at distance 1 for perspective). */
-inline void camera_ray(__constant float4 *cam, int width, int height, int px, int py, float2 jitter,
+IBL_INLINE void camera_ray(__constant float4 *cam, int width, int height, int px, int py, float2 jitter,
                        float3 *o, float3 *d)
 {
     const float sx = 2.0f * ((float)px + jitter.x) / (float)width - 1.0f;
@@ -38,7 +38,7 @@ inline void camera_ray(__constant float4 *cam, int width, int height, int px, in
 
 /* Nearest t > tmin of a ray with a sphere; the numerically stable quadratic (Haines et al.,
  * Ray Tracing Gems ch. 7): the discriminant from the perpendicular distance, no cancellation. */
-inline float hit_sphere(float3 o, float3 d, float4 s, float tmin, float tmax)
+IBL_INLINE float hit_sphere(float3 o, float3 d, float4 s, float tmin, float tmax)
 {
     const float3 f = o - s.xyz;
     const float b = -dot(f, d);
@@ -55,7 +55,7 @@ inline float hit_sphere(float3 o, float3 d, float4 s, float tmin, float tmax)
 }
 
 /* plane: point.xyz, normal.xyz, tangent.xyz (w: half width), bitangent.xyz (w: half depth), flags */
-inline float hit_plane(float3 o, float3 d, __global const float4 *pl, float tmin, float tmax)
+IBL_INLINE float hit_plane(float3 o, float3 d, __global const float4 *pl, float tmin, float tmax)
 {
     const float3 n = pl[1].xyz;
     const float den = dot(d, n);
@@ -67,13 +67,13 @@ inline float hit_plane(float3 o, float3 d, __global const float4 *pl, float tmin
     return t;
 }
 
-inline float component(float3 v, int k) { return k == 0 ? v.x : (k == 1 ? v.y : v.z); }
+IBL_INLINE float component(float3 v, int k) { return k == 0 ? v.x : (k == 1 ? v.y : v.z); }
 
 /* Per-ray setup of the watertight ray-triangle test (Woop, Benthin and Wald 2013): the axis
  * where the direction is largest becomes z, and a shear maps the ray onto +z. */
 typedef struct { int kx, ky, kz; float sx, sy, sz; } RayShear;
 
-inline RayShear ray_shear(float3 d)
+IBL_INLINE RayShear ray_shear(float3 d)
 {
     const float3 a = fabs(d);
     RayShear r;
@@ -94,7 +94,7 @@ inline RayShear ray_shear(float3 d)
  * per-triangle edge vectors let a few rays through). FP_CONTRACT OFF keeps a*b - c*d unfused,
  * which that exact antisymmetry needs. Returns t and the barycentrics of v1 and v2. */
 #pragma OPENCL FP_CONTRACT OFF
-inline float hit_triangle(float3 o, RayShear rs, float3 v0, float3 v1, float3 v2, float tmin, float tmax,
+IBL_INLINE float hit_triangle(float3 o, RayShear rs, float3 v0, float3 v1, float3 v2, float tmin, float tmax,
                           float *b1, float *b2)
 {
     const float3 A = v0 - o, B = v1 - o, C = v2 - o;
@@ -112,7 +112,7 @@ inline float hit_triangle(float3 o, RayShear rs, float3 v0, float3 v1, float3 v2
     return t;
 }
 
-inline int box_hit(float3 o, float3 inv_d, float3 bmin, float3 bmax, float tmax, float *tnear)
+IBL_INLINE int box_hit(float3 o, float3 inv_d, float3 bmin, float3 bmax, float tmax, float *tnear)
 {
     const float3 t0 = (bmin - o) * inv_d, t1 = (bmax - o) * inv_d;
     const float3 lo = fmin(t0, t1), hi = fmax(t0, t1);
@@ -134,7 +134,7 @@ typedef struct {
 
 /* A hit's material and geometric normal (unit; a triangle's by its winding, counter-clockwise in
  * front), before any turning towards the viewer. */
-inline int hit_material(int kind, int index, float3 p, float3 *ng, SCENE_PARAMS)
+IBL_INLINE int hit_material(int kind, int index, float3 p, float3 *ng, SCENE_PARAMS)
 {
     if (kind == PRIM_SPHERE) {
         const float4 sp = spheres[SPHERE_FLOAT4S * index];
@@ -151,7 +151,7 @@ inline int hit_material(int kind, int index, float3 p, float3 *ng, SCENE_PARAMS)
 }
 
 /* The object a hit belongs to (objects.N of the scene) */
-inline int hit_object(int kind, int index, SCENE_PARAMS)
+IBL_INLINE int hit_object(int kind, int index, SCENE_PARAMS)
 {
     if (kind == PRIM_SPHERE) return as_int(spheres[SPHERE_FLOAT4S * index + 1].y);
     if (kind == PRIM_PLANE) return as_int(planes[PLANE_FLOAT4S * index + 1].w);
@@ -161,7 +161,7 @@ inline int hit_object(int kind, int index, SCENE_PARAMS)
 /* A hit's geometric normal (unit; a triangle's by its winding) and shading normal (a triangle's
  * interpolated from its corners, on the geometric normal's side), before any turning towards the
  * viewer; its material and object. The G-buffer's primary hits and the reference's path vertices. */
-inline void hit_normals(int kind, int index, float3 p, float b1, float b2, float3 *ng, float3 *ns, int *mat,
+IBL_INLINE void hit_normals(int kind, int index, float3 p, float b1, float b2, float3 *ng, float3 *ns, int *mat,
                         int *obj, SCENE_PARAMS)
 {
     if (kind == PRIM_SPHERE) {
@@ -195,7 +195,7 @@ inline void hit_normals(int kind, int index, float3 p, float b1, float b2, float
  * u = 0.5 - atan2(x, z) / 2 pi, v = acos(y) / pi); a plane's across its width (tangent) and up its
  * depth (bitangent), [0, 1] over a finite plane, one per unit on an infinite one. Both sets alike
  * on spheres and planes. */
-inline float4 hit_texcoords(int kind, int index, float3 p, float b1, float b2, SCENE_PARAMS)
+IBL_INLINE float4 hit_texcoords(int kind, int index, float3 p, float b1, float b2, SCENE_PARAMS)
 {
     if (kind == PRIM_SPHERE) {
         const float4 sp = spheres[SPHERE_FLOAT4S * index];
@@ -219,7 +219,7 @@ inline float4 hit_texcoords(int kind, int index, float3 p, float b1, float b2, S
 /* The hit's tangent (the direction of increasing u in the plane of the shading normal ns, before
  * any turning towards the viewer) and w, the bitangent's side (bitangent = w cross(n, t) points up
  * the image); and 0.5 log2 of each set's UV area per world area there. */
-inline float4 hit_tangent(int kind, int index, float3 p, float3 ns, float b1, float b2, float2 *density, SCENE_PARAMS)
+IBL_INLINE float4 hit_tangent(int kind, int index, float3 p, float3 ns, float b1, float b2, float2 *density, SCENE_PARAMS)
 {
     float3 t;
     float w;
@@ -260,7 +260,7 @@ inline float4 hit_tangent(int kind, int index, float3 p, float3 ns, float b1, fl
 
 /* A primitive's SURFACE_FLAGS (layout.h): what its material asks of every hit, and whether it
  * bounds a solid */
-inline int surface_flags(int kind, int index, SCENE_PARAMS)
+IBL_INLINE int surface_flags(int kind, int index, SCENE_PARAMS)
 {
     if (kind == PRIM_SPHERE) return as_int(spheres[SPHERE_FLOAT4S * index + 1].z);
     if (kind == PRIM_PLANE) return as_int(planes[PLANE_FLOAT4S * index + 4].x);
@@ -273,7 +273,7 @@ inline int surface_flags(int kind, int index, SCENE_PARAMS)
  * wound inwards; by its winding where single-sided). An open surface is a front face from either
  * side where double-sided, and not there from behind where single-sided (the ray passes, as every
  * ray does). */
-inline int probe_back_face(int kind, int index, float3 ng, float3 d, SCENE_PARAMS)
+IBL_INLINE int probe_back_face(int kind, int index, float3 ng, float3 d, SCENE_PARAMS)
 {
     const int f = surface_flags(kind, index, SCENE_ARGS);
     const float s = dot(ng, d);
@@ -286,7 +286,7 @@ inline int probe_back_face(int kind, int index, float3 ng, float3 d, SCENE_PARAM
  * every ray of the renderer; cull 2: an irradiance probe's, which sees a solid's back faces), nor
  * where a masked material's alpha (its factor times the base map's alpha at level 0, as an any-hit
  * shader reads it) is below its cutoff. */
-inline int surface_present(int kind, int index, float3 o, float3 d, float t, float b1, float b2, int cull,
+IBL_INLINE int surface_present(int kind, int index, float3 o, float3 d, float t, float b1, float b2, int cull,
                            SCENE_PARAMS)
 {
     const float3 p = o + t * d;
@@ -324,7 +324,7 @@ inline int surface_present(int kind, int index, float3 o, float3 d, float t, flo
  * more): h.kind = PRIM_NONE where there is none. cull 1: single-sided surfaces are not there from
  * behind (every ray of the renderer); 2: but for solids' (an irradiance probe meets a closed
  * single-sided mesh's inside); 0: they are. */
-inline Hit trace_range(float3 o, float3 d, float tmin, float tmax, int any_hit, int cull, SCENE_PARAMS)
+IBL_INLINE Hit trace_range(float3 o, float3 d, float tmin, float tmax, int any_hit, int cull, SCENE_PARAMS)
 {
     Hit h;
     h.t = tmax; h.kind = PRIM_NONE; h.index = -1; h.b1 = 0.0f; h.b2 = 0.0f;
@@ -394,20 +394,20 @@ inline Hit trace_range(float3 o, float3 d, float tmin, float tmax, int any_hit, 
     return h;
 }
 
-inline Hit trace(float3 o, float3 d, SCENE_PARAMS)
+IBL_INLINE Hit trace(float3 o, float3 d, SCENE_PARAMS)
 {
     return trace_range(o, d, 0.0f, INFINITY, 0, 1, SCENE_ARGS);
 }
 
 /* Any hit along o + t d, t > 0: the shadow ray of a lighting sample. The origin is the shaded
  * point moved off the surface by ray_offset, so the surface does not shadow itself. */
-inline int occluded(float3 o, float3 d, SCENE_PARAMS)
+IBL_INLINE int occluded(float3 o, float3 d, SCENE_PARAMS)
 {
     return trace_range(o, d, 0.0f, INFINITY, 1, 1, SCENE_ARGS).kind != PRIM_NONE;
 }
 
 /* Any hit along o + t d, 0 < t < tmax: a shadow ray towards a light at distance tmax. */
-inline int occluded_to(float3 o, float3 d, float tmax, SCENE_PARAMS)
+IBL_INLINE int occluded_to(float3 o, float3 d, float tmax, SCENE_PARAMS)
 {
     return trace_range(o, d, 0.0f, tmax, 1, 1, SCENE_ARGS).kind != PRIM_NONE;
 }
@@ -416,7 +416,7 @@ inline int occluded_to(float3 o, float3 d, float tmax, SCENE_PARAMS)
  * towards the viewer's side of the surface, along the shading normal n (bent to face the viewer)
  * and back along d, by a distance relative to the float32 error of p (which grows with |p| and t),
  * so the offset is the same fraction of the scene whatever its units. */
-inline float3 ray_offset(float3 p, float3 n, float3 d, float t)
+IBL_INLINE float3 ray_offset(float3 p, float3 n, float3 d, float t)
 {
     const float3 a = fabs(p);
     const float eps = 1e-5f * (fmax(a.x, fmax(a.y, a.z)) + t);

@@ -4,13 +4,14 @@
  * (as Filament's computeShBasis), so no trigonometric call is needed. */
 #ifndef IBLBAKE_SH_H
 #define IBLBAKE_SH_H
+#include "inline.h"
 
 #ifndef SH_BANDS
 #define SH_BANDS 3
 #endif
 #define SH_COEFFS (SH_BANDS * SH_BANDS)
 
-inline void sh_eval(float3 d, float *Y)
+IBL_INLINE void sh_eval(float3 d, float *Y)
 {
     /* K_l^m kept per l, stepped in m: K_l^m = K_l^{m-1} / sqrt((l+m)(l-m+1)). */
     float K[SH_BANDS];
@@ -44,7 +45,7 @@ inline void sh_eval(float3 d, float *Y)
 
 /* Irradiance at normal n from SH_COEFFS irradiance coefficients (E_lm = Ahat_l L_lm; docs/conventions.md),
  * clamped at 0: a band-limited fit rings below zero behind a bright sun. */
-inline float3 sh_irradiance(__constant float4 *coeffs, float3 n)
+IBL_INLINE float3 sh_irradiance(__constant float4 *coeffs, float3 n)
 {
     float Y[SH_COEFFS];
     sh_eval(n, Y);

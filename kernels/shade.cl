@@ -32,14 +32,14 @@
 
 /* Specular occlusion from ambient occlusion (Lagarde and de Rousiers 2014, "Moving Frostbite to
  * PBR", computeSpecOcclusion): saturate((NoV + ao)^(2^(-16 r - 1)) - 1 + ao). */
-inline float specular_occlusion(float nov, float ao, float roughness)
+IBL_INLINE float specular_occlusion(float nov, float ao, float roughness)
 {
     return clamp(pow_fast(nov + ao, exp2(-16.0f * roughness - 1.0f)) - 1.0f + ao, 0.0f, 1.0f);
 }
 
 /* Multi-bounce AO (Jimenez et al. 2016, "Practical Real-Time Strategies for Accurate Indirect
  * Occlusion", eq. 10): a cubic in the visibility fitted per albedo to ray-traced interreflection. */
-inline float3 ao_multibounce(float ao, float3 albedo)
+IBL_INLINE float3 ao_multibounce(float ao, float3 albedo)
 {
     const float3 a = 2.0404f * albedo - 0.3324f, b = -4.7951f * albedo + 0.6417f, c = 2.7552f * albedo + 0.6903f;
     return fmax((float3)(ao), ((ao * a + b) * ao + c) * ao);

@@ -10,7 +10,7 @@
 #include "surface.h"
 
 /* The DFG table (x: NoV, y: roughness, texel centres at the ends): bilinear. */
-inline float2 dfg_lookup(__global const float2 *dfg, const int dfg_size, float nov, float roughness)
+IBL_INLINE float2 dfg_lookup(__global const float2 *dfg, const int dfg_size, float nov, float roughness)
 {
     const float x = clamp(nov, 0.0f, 1.0f) * (dfg_size - 1), y = roughness * (dfg_size - 1);
     const int x0 = min((int)x, dfg_size - 2), y0 = min((int)y, dfg_size - 2);
@@ -20,7 +20,7 @@ inline float2 dfg_lookup(__global const float2 *dfg, const int dfg_size, float n
 }
 
 /* The directional albedo of the material's lobe at NoV, from the table: F0 A + F90 B */
-inline float3 split_sum_albedo(__global const float2 *dfg, const int dfg_size, const Material mt, float nov)
+IBL_INLINE float3 split_sum_albedo(__global const float2 *dfg, const int dfg_size, const Material mt, float nov)
 {
     const float2 ab = dfg_lookup(dfg, dfg_size, nov, mt.roughness);
     return mt.f0 * ab.x + mt.f90 * ab.y;
@@ -28,14 +28,14 @@ inline float3 split_sum_albedo(__global const float2 *dfg, const int dfg_size, c
 
 /* Where a rough lobe really points: between N and R (Lagarde and de Rousiers 2014, Frostbite,
  * getSpecularDominantDir with their alpha). The split sum reads its prefiltered chain there. */
-inline float3 dominant_direction(float3 n, float3 r, float a)
+IBL_INLINE float3 dominant_direction(float3 n, float3 r, float a)
 {
     const float s = clamp(1.0f - a, 0.0f, 1.0f);
     return normalize(mix(n, r, s * (sqrt(s) + a)));
 }
 
 /* The direction the split sum reads its chain along (world frame) */
-inline float3 split_sum_direction(float3 n, float3 v, float alpha)
+IBL_INLINE float3 split_sum_direction(float3 n, float3 v, float alpha)
 {
     const float3 r = 2.0f * dot(n, v) * n - v;
 #ifdef DOMINANT_DIRECTION
@@ -46,7 +46,7 @@ inline float3 split_sum_direction(float3 n, float3 v, float alpha)
 }
 
 /* The prefiltered chain's radiance along r (world frame), unscaled, at the material's roughness */
-inline float3 split_sum_radiance(CHAIN_PARAMS, float3 r, float2 env_rot, float roughness)
+IBL_INLINE float3 split_sum_radiance(CHAIN_PARAMS, float3 r, float2 env_rot, float roughness)
 {
     return chain_lookup(CHAIN_ARGS, to_env(r, env_rot), roughness * (float)(nlev - 1));
 }

@@ -33,7 +33,7 @@
                                      (a glossy pixel's few rays need neighbours; a mirror: none) */
 
 /* Continuous pixel coordinates (x right, y down; pixel centres at + 0.5) and view depth of x */
-inline float3 ssr_project(__constant float4 *cam, int width, int height, float3 x)
+IBL_INLINE float3 ssr_project(__constant float4 *cam, int width, int height, float3 x)
 {
     const float3 d = x - cam[0].xyz;
     const float z = dot(d, cam[1].xyz);
@@ -96,7 +96,7 @@ __kernel void ssr_reduce(__global float *ssr_hiz, const int src, const int sw, c
 }
 
 /* The depth along the screen segment s0 -> s1 at parameter t */
-inline float ssr_depth_at(float z0, float z1, float t, int ortho)
+IBL_INLINE float ssr_depth_at(float z0, float z1, float t, int ortho)
 {
     return ortho ? mix(z0, z1, t) : 1.0f / mix(1.0f / z0, 1.0f / z1, t);
 }
@@ -104,7 +104,7 @@ inline float ssr_depth_at(float z0, float z1, float t, int ortho)
 /* How plausible a hit on pixel c is for the ray p0 + t l: 0 where the pixel's surface faces away
  * from the ray, else by how far from the pixel's centre the ray crosses that surface's plane:
  * 1 within a pixel, falling to 0 at two. */
-inline float ssr_plausible(__global const float4 *ssr_pix, __constant float4 *cam, int width, int height, int c,
+IBL_INLINE float ssr_plausible(__global const float4 *ssr_pix, __constant float4 *cam, int width, int height, int c,
                            float3 p0, float3 l, float3 *x)
 {
     const float3 s = ssr_pix[3 * c].xyz, nc = ssr_pix[3 * c + 1].xyz;
@@ -120,7 +120,7 @@ inline float ssr_plausible(__global const float4 *ssr_pix, __constant float4 *ca
 
 /* How far the depth buffer's surface at pixel c spans in depth across a pixel: the largest step to
  * a neighbour (a floor seen at a grazing angle changes depth faster than any one thickness) */
-inline float ssr_depth_extent(__global const float *ssr_hiz, int c, int width, int height)
+IBL_INLINE float ssr_depth_extent(__global const float *ssr_hiz, int c, int width, int height)
 {
     const float z = ssr_hiz[c];
     const int x = c % width, y = c / width;
@@ -136,7 +136,7 @@ inline float ssr_depth_extent(__global const float *ssr_hiz, int c, int width, i
  * plausibility in *conf, where the ray meets the hit surface's plane in *x. A candidate (the depth
  * buffer's surface in front of the ray's depths across the pixel by at most `thickness` plus the
  * surface's own depth extent there) that is not plausible is passed by. */
-inline int ssr_march(float2 s0, float z0, float2 s1, float z1, int ortho, __global const float *ssr_hiz,
+IBL_INLINE int ssr_march(float2 s0, float z0, float2 s1, float z1, int ortho, __global const float *ssr_hiz,
                      __global const int *hiz_off, const int nlev, const int width, const int height, const int steps,
                      const float thickness, __global const float4 *ssr_pix, __constant float4 *cam, float3 p0,
                      float3 l, float *conf, float3 *x)
@@ -189,7 +189,7 @@ inline int ssr_march(float2 s0, float z0, float2 s1, float z1, int ortho, __glob
 }
 
 /* Rays of a pixel of roughness r: `rays` at max_roughness, fewer below (a mirror: one) */
-inline int ssr_ray_count(float r, float max_roughness, int rays)
+IBL_INLINE int ssr_ray_count(float r, float max_roughness, int rays)
 {
     return max(1, (int)ceil((float)rays * r / fmax(max_roughness, 1e-6f)));
 }
@@ -251,7 +251,7 @@ __kernel void ssr_trace(__global const float4 *ssr_pix, __constant float4 *cam, 
 
 /* A neighbour's weight in the resolve: a Gaussian in pixels, the same surface (normals within a
  * few degrees, depth within 2% along the view, roughness within 0.1) */
-inline float ssr_neighbour(float4 pz, float4 nr, float4 qz, float4 qr, float d2, float sigma2)
+IBL_INLINE float ssr_neighbour(float4 pz, float4 nr, float4 qz, float4 qr, float d2, float sigma2)
 {
     if (!isfinite(qz.w)) return 0.0f;
     const float cn = dot(nr.xyz, qr.xyz);

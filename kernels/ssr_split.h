@@ -4,8 +4,9 @@
  * numpy twin: iblbake/render/twin/shade.py (ssr_out). */
 #ifndef IBLBAKE_SSR_SPLIT_H
 #define IBLBAKE_SSR_SPLIT_H
+#include "inline.h"
 
-inline void ssr_split(__global float4 *ssr_env, int gid, float3 w, float3 li)
+IBL_INLINE void ssr_split(__global float4 *ssr_env, int gid, float3 w, float3 li)
 {
     ssr_env[2 * gid] = (float4)(w, 0.0f);
     ssr_env[2 * gid + 1] = (float4)(li, 0.0f);

@@ -26,7 +26,7 @@ typedef struct {
 /* materials: MATERIAL_FLOAT4S float4 each, (base_color, metallic), (emissive, roughness), (the
  * dielectric's F0 and F90: KHR_materials_specular, scene/materials.py dielectric_f0); gb_mat the
  * first two rows per sample. A metal's F0 is its base colour and its F90 1. */
-inline Material material_from(float4 a, float4 b, float4 c)
+IBL_INLINE Material material_from(float4 a, float4 b, float4 c)
 {
     Material mt;
     mt.base = a.xyz; mt.metallic = a.w; mt.emissive = b.xyz; mt.roughness = b.w;
@@ -37,7 +37,7 @@ inline Material material_from(float4 a, float4 b, float4 c)
     return mt;
 }
 
-inline Material material_at(__global const float4 *materials, int m)
+IBL_INLINE Material material_at(__global const float4 *materials, int m)
 {
     return material_from(materials[MATERIAL_FLOAT4S * m], materials[MATERIAL_FLOAT4S * m + 1],
                          materials[MATERIAL_FLOAT4S * m + 2]);
@@ -45,7 +45,7 @@ inline Material material_at(__global const float4 *materials, int m)
 
 /* A shading normal facing away from the viewer (interpolated normals at silhouettes) is bent
  * towards it until NoV = 1e-4: the BRDF terms stay finite and the surface stays lit. */
-inline float3 facing_normal(float3 n, float3 v)
+IBL_INLINE float3 facing_normal(float3 n, float3 v)
 {
     const float nov = dot(n, v);
     if (nov >= 1e-4f) return n;
@@ -59,7 +59,7 @@ inline float3 facing_normal(float3 n, float3 v)
 
 /* What the lighting passes read of a G-buffer sample: its material, the view vector, the
  * shading normal (normal-mapped with textures) bent towards the viewer, and NoV (floored at 1e-4). */
-inline float surface_at(SURFACE_PARAMS, int gid, Material *mt, float3 *v, float3 *nrm)
+IBL_INLINE float surface_at(SURFACE_PARAMS, int gid, Material *mt, float3 *v, float3 *nrm)
 {
     *v = -gb_dir[gid].xyz;
 #ifdef HAS_TEXTURES
@@ -77,17 +77,17 @@ inline float surface_at(SURFACE_PARAMS, int gid, Material *mt, float3 *v, float3
 }
 
 /* World direction -> the panorama's frame: the panorama is rotated by rotation_y about +y. */
-inline float3 to_env(float3 d, float2 rot)   /* rot = (cos, sin) of rotation_y */
+IBL_INLINE float3 to_env(float3 d, float2 rot)   /* rot = (cos, sin) of rotation_y */
 {
     return (float3)(rot.x * d.x - rot.y * d.z, d.y, rot.y * d.x + rot.x * d.z);
 }
 
-inline float3 from_env(float3 e, float2 rot)
+IBL_INLINE float3 from_env(float3 e, float2 rot)
 {
     return (float3)(rot.x * e.x + rot.y * e.z, e.y, -rot.y * e.x + rot.x * e.z);
 }
 
-inline float3 diffuse_weight(const Material mt, float nov)
+IBL_INLINE float3 diffuse_weight(const Material mt, float nov)
 {
     /* kD = (1 - F_r(NoV)) (1 - metallic) (docs/conventions.md), times albedo / pi */
     return (1.0f - f_schlick_roughness(nov, mt.f0, mt.f90, mt.roughness)) * (1.0f - mt.metallic) * mt.base

@@ -9,6 +9,7 @@
  * numpy twin: iblbake/scene/textures.py (sample), iblbake/render/twin/material.py. */
 #ifndef IBLBAKE_TEXTURE_H
 #define IBLBAKE_TEXTURE_H
+#include "inline.h"
 #include "layout.h"
 
 #define TEXTURE_PARAMS __global const float4 *texels, __global const int4 *tex_levels, __global const int4 *tex_info
@@ -20,7 +21,7 @@
 
 /* A texel index of one level from a coordinate of one period (wrap_coordinate): x is within
  * [-1, n] for repeat and [-1, 2n] for mirror, so a compare or two replaces a modulo. */
-inline int wrap_index(int i, int n, int mode)
+IBL_INLINE int wrap_index(int i, int n, int mode)
 {
     if (mode == WRAP_CLAMP) return clamp(i, 0, n - 1);
     if (mode == WRAP_MIRROR) {
@@ -33,7 +34,7 @@ inline int wrap_index(int i, int n, int mode)
 
 /* The same texels for any uv of one period (repeat: 1, mirror: 2), so that texel indices stay
  * small whatever the coordinates; clamp keeps [-1, 2], beyond which every lookup is an edge. */
-inline float wrap_coordinate(float u, int mode)
+IBL_INLINE float wrap_coordinate(float u, int mode)
 {
     if (mode == WRAP_CLAMP) return clamp(u, -1.0f, 2.0f);
     const float p = mode == WRAP_MIRROR ? 2.0f : 1.0f;
@@ -53,7 +54,7 @@ typedef struct {
 
 /* The four taps of one level (dimensions lv.yz) at uv: nearest, or bilinear between texel centres
  * ((i + 0.5) / w); each wrapped column and row index computed once. */
-inline void level_taps(int4 lv, float2 uv, int bilinear, int ws, int wt, float scale, int4 *off, float4 *w)
+IBL_INLINE void level_taps(int4 lv, float2 uv, int bilinear, int ws, int wt, float scale, int4 *off, float4 *w)
 {
     const float x = uv.x * (float)lv.y, y = uv.y * (float)lv.z;
     if (!bilinear) {
@@ -73,7 +74,7 @@ inline void level_taps(int4 lv, float2 uv, int bilinear, int ws, int wt, float s
 /* The footprint of texture t (its sizes and sampler) at uv for the mip level lod (log2 of the
  * footprint in level-0 texels): the magnification filter where lod <= 0 (or NaN), else the
  * minification filter. */
-inline Footprint texture_footprint(TEXTURE_PARAMS, int t, float2 uv, float lod)
+IBL_INLINE Footprint texture_footprint(TEXTURE_PARAMS, int t, float2 uv, float lod)
 {
     const int4 info = tex_info[t];
     const int bits = info.z;
@@ -103,7 +104,7 @@ inline Footprint texture_footprint(TEXTURE_PARAMS, int t, float2 uv, float lod)
 }
 
 /* Texture t read where fp says (any texture of the same sizes and sampler as the one it was made for). */
-inline float4 texture_read(TEXTURE_PARAMS, int t, Footprint fp)
+IBL_INLINE float4 texture_read(TEXTURE_PARAMS, int t, Footprint fp)
 {
     const int first = tex_info[t].x;
     __global const float4 *a = texels + tex_levels[first + fp.k0].x;
@@ -115,22 +116,22 @@ inline float4 texture_read(TEXTURE_PARAMS, int t, Footprint fp)
     return c;
 }
 
-inline float4 texture_sample(TEXTURE_PARAMS, int t, float2 uv, float lod)
+IBL_INLINE float4 texture_sample(TEXTURE_PARAMS, int t, float2 uv, float lod)
 {
     return texture_read(TEXTURE_ARGS, t, texture_footprint(TEXTURE_ARGS, t, uv, lod));
 }
 
 /* A material's map slot (MAP_* of kernels/layout.h): its three rows in mat_maps */
-inline __global const float4 *map_slot(__global const float4 *mat_maps, int material, int kind)
+IBL_INLINE __global const float4 *map_slot(__global const float4 *mat_maps, int material, int kind)
 {
     return mat_maps + MATERIAL_MAPS_FLOAT4S * material + 2 + 3 * kind;
 }
 
-inline int map_texture(__global const float4 *slot) { return as_int(slot[0].w); }
+IBL_INLINE int map_texture(__global const float4 *slot) { return as_int(slot[0].w); }
 
 /* The slot's coordinates: its TEXCOORD set (uv01 = (u0, v0, u1, v1)) through its
  * KHR_texture_transform, uv' = M (u, v, 1). */
-inline float2 map_uv(__global const float4 *slot, float4 uv01)
+IBL_INLINE float2 map_uv(__global const float4 *slot, float4 uv01)
 {
     const float2 uv = as_int(slot[1].w) == 1 ? uv01.zw : uv01.xy;
     return (float2)(slot[0].x * uv.x + slot[0].y * uv.y + slot[0].z, slot[1].x * uv.x + slot[1].y * uv.y + slot[1].z);
@@ -138,18 +139,18 @@ inline float2 map_uv(__global const float4 *slot, float4 uv01)
 
 /* The slot's mip level: the footprint's level for its set (lods: gb_lod) plus the slot's third
  * row's 0.5 log2 of the texture's texels per unit of UV area, w h |det M| (from the host). */
-inline float map_lod(__global const float4 *slot, float2 lods)
+IBL_INLINE float map_lod(__global const float4 *slot, float2 lods)
 {
     return (as_int(slot[1].w) == 1 ? lods.y : lods.x) + slot[2].x;
 }
 
 /* The slot of this material whose footprint this one shares (the first with the same texture
  * sizes, sampler, UV set and transform; itself where none: from the host) */
-inline int map_shares(__global const float4 *slot) { return as_int(slot[2].y); }
+IBL_INLINE int map_shares(__global const float4 *slot) { return as_int(slot[2].y); }
 
 /* A material's map kind read at a G-buffer sample, reusing the footprint of the last slot read
  * (*fp_slot, *fp) where this one shares it. */
-inline float4 map_sample(TEXTURE_PARAMS, __global const float4 *slot, float4 uv01, float2 lods, int *fp_slot,
+IBL_INLINE float4 map_sample(TEXTURE_PARAMS, __global const float4 *slot, float4 uv01, float2 lods, int *fp_slot,
                          Footprint *fp)
 {
     const int t = map_texture(slot);

@@ -15,20 +15,20 @@
 #define TONEMAP_INPUT_CAP 1e18f
 
 /* NaN -> 0 (fmax ignores NaN), negative -> 0, +Inf and huge -> cap. */
-inline float3 tonemap_sanitize(float3 x)
+IBL_INLINE float3 tonemap_sanitize(float3 x)
 {
     return fmin(fmax(x, (float3)(0.0f)), (float3)(TONEMAP_INPUT_CAP));
 }
 
 #if TONEMAP == 2
-inline float3 hable_curve(float3 x)
+IBL_INLINE float3 hable_curve(float3 x)
 {
     const float a = 0.15f, b = 0.50f, c = 0.10f, d = 0.20f, e = 0.02f, f = 0.30f;
     return (x * (a * x + c * b) + d * e) / (x * (a * x + b) + d * f) - e / f;
 }
 #endif
 
-inline float3 tonemap_operator(float3 x)
+IBL_INLINE float3 tonemap_operator(float3 x)
 {
 #if TONEMAP == 0
     return clamp((x * (2.51f * x + 0.03f)) / (x * (2.43f * x + 0.59f) + 0.14f), 0.0f, 1.0f);
@@ -51,7 +51,7 @@ inline float3 tonemap_operator(float3 x)
 #endif
 }
 
-inline float3 output_transfer(float3 y, float gamma)
+IBL_INLINE float3 output_transfer(float3 y, float gamma)
 {
     y = clamp(y, 0.0f, 1.0f);
 #if OUTPUT_SRGB
@@ -62,7 +62,7 @@ inline float3 output_transfer(float3 y, float gamma)
 }
 
 /* Exposure (x 2^EV, given as its scale), operator, transfer: display values in [0, 1]. */
-inline float3 tonemap_display(float3 hdr, float exposure_scale, float gamma)
+IBL_INLINE float3 tonemap_display(float3 hdr, float exposure_scale, float gamma)
 {
     float3 x = tonemap_sanitize(tonemap_sanitize(hdr) * exposure_scale);
     return output_transfer(tonemap_operator(x), gamma);

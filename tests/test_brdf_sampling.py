@@ -87,7 +87,7 @@ def test_opencl_brdf_and_sampling_match_numpy(rt):
     import pyopencl as pcl
     text = src.replace('#include "brdf.h"', icl.kernel_source("brdf.h")).replace(
         '#include "sampling.h"', icl.kernel_source("sampling.h"))
-    prg = pcl.Program(rt.ctx, text).build()
+    prg = pcl.Program(rt.ctx, text).build(options=rt.device_options)     # as Runtime.program builds
     rng = np.random.default_rng(3)
     inp = rng.random((1000, 4)).astype(np.float32)
     inp[:, 2] = np.maximum(inp[:, 2], 0.02)

@@ -267,6 +267,47 @@ def test_textured_glb_through_paths(tmp_path, white):
     assert frames["unbounded"].mean() > frames[1].mean() * 1.05
 
 
+def test_textured_gbuffer_in_a_program_with_paths_matches_the_twin(tmp_path, white):
+    """The material pass's normal-mapped normals (the normal AOV) of examples/meshes/tiles.glb in a
+    frame whose program also holds the reference's paths, which read the same material_sample at
+    every vertex, against the float64 twin (resolve_materials). Intel's CPU runtime left
+    material_sample out of line there and passed its float3 normal wrongly from the vectorised
+    material pass: normals off by up to 1.8 (unit vectors) and garbage, the bounces' light 1.6%
+    instead of 11% (kernels/inline.h). Measured 1.2e-6 at most on PoCL and Intel's runtime alike;
+    bound 2e-5."""
+    from iblbake.render import twin as rr
+    from iblbake.scene import pack
+    mesh = Path(__file__).resolve().parents[1] / "examples" / "meshes" / "tiles.glb"
+    sc = write(tmp_path, "tiles", {
+        "camera": {"perspective": {"position": [0, 1.2, 2.5], "look_at": [0, 0, 0], "fov_y": 50},
+                   "resolution": [32, 24]},
+        "environment": {"path": str(white), "background": "hide"},
+        "materials": {"floor": {"base_color": [0.7, 0.7, 0.7], **LAMBERT}},
+        "objects": [{"mesh": {"path": str(mesh), "rotate": [-90, 0, 0], "translate": [0, 0.05, 0]}},
+                    {"plane": {"point": [0, 0, 0], "size": 4}, "material": "floor"}],
+        "effects": {"diffuse": "reference", "specular": "reference",
+                    "reference": {"max_samples": 2, "target_noise": 0, "bounces": "unbounded"}}})
+    sc.data["output"]["normal"] = str(tmp_path / "normal.exr")
+    f = render(sc, cache_root=tmp_path / "cache")
+    assert "BOUNCES" in f.report["effects"]["defines"]["reference"]
+    arrays = pack.scene_arrays(sc)
+    tex = rr.textures(sc, arrays)
+    gb = rr.primary(sc["camera"], arrays, tex)
+    rr.gbuffer_coords(gb, arrays, sc["camera"])
+    rr.resolve_materials(gb, arrays, tex)
+    w, h = sc["camera"]["resolution"]
+    spp = sc["camera"]["spp"]
+    nrm = np.zeros((len(gb["hit"]), 3))
+    nrm[gb["hit"]] = gb["resolved"][4]
+    full = (f.hdr[..., 3] == 1) & gb["hit"].reshape(h, w, spp).all(2)
+    want = nrm.reshape(h, w, spp, 3).mean(2)[full]
+    err = np.abs(f.aovs["normal"][..., :3][full] - want).max(1)
+    on_mesh = full & (f.aovs["normal"][..., 1] < 0.999)                # the tiles, not the flat floor
+    print(f"gbuffer normals vs twin: max {err.max():.2e}, median {np.median(err):.2e} over {full.sum()} px "
+          f"({on_mesh.sum()} on the mesh)")
+    assert on_mesh.sum() > 100 and err.max() < 2e-5
+
+
 @pytest.mark.external
 @pytest.mark.slow
 def test_glossy_interreflection_passes_mitsubas_acceptance_test(tmp_path):

@@ -14,6 +14,8 @@ def devices(quiet, as_json):
     """List OpenCL devices, whether each builds and runs a probe kernel, and which is used."""
     from iblbake.device import runtime as cl
 
+    from iblbake.device import icd
+
     con = Console(quiet, as_json)
     devs, errors, chosen = cl.probe_all()
     summary = {
@@ -22,6 +24,7 @@ def devices(quiet, as_json):
                      "selected": chosen is d} for d in devs],
         "platform_errors": errors,
         "selected": chosen.label if chosen else None,
+        "drivers_registered": icd.note,
     }
     lines = []
     for d in devs:
@@ -29,6 +32,8 @@ def devices(quiet, as_json):
         lines.append(f"{mark} {d.index}  {d.kind:5s} {d.name} [{d.platform}]: "
                      f"{'works' if d.ok else 'FAILS'} ({d.reason})")
     lines += [f"  platform error: {e}" for e in errors]
+    if icd.note:
+        lines.append(f"  {icd.note}")
     lines.append(f"selected: {chosen.label}" if chosen else "selected: none")
     con.result(summary, "\n".join(lines))
     if chosen is None:

@@ -118,8 +118,10 @@ def common_options(f):
 
 def device_option(f):
     return click.option("--device", "-d", default=None, metavar="SPEC", show_default=False,
-                        help="OpenCL device: 'gpu', 'cpu', 'gpu:N' / 'cpu:N' (the N-th of that kind), "
-                             "'P:D' (platform:device index) or part of its name. Default: $IBLBAKE_DEVICE, else the first working GPU, else CPU.")(f)
+                        help="OpenCL device: 'gpu', 'cpu', 'gpu:N' / 'cpu:N' (the N-th of that kind), 'pocl', "
+                             "'intel-cpu' (Intel's CPU runtime: pip install 'iblbake[intel-cpu]'), "
+                             "'P:D' (platform:device index) or part of its name. Default: $IBLBAKE_DEVICE, else the "
+                             "first working GPU, else a CPU (PoCL before Intel's runtime).")(f)
 
 
 def input_options(f):

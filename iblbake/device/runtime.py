@@ -139,7 +139,16 @@ def _kind(cl, dev) -> str:
     return "other"
 
 
+@functools.lru_cache(maxsize=None)
+def register_drivers():
+    """Drivers that come as wheels (the intel-cpu extra: iblbake/device/icd.py) made known to the
+    ICD loader, once per process, before pyopencl loads it."""
+    from iblbake.device import icd
+    return icd.register()
+
+
 def _import_cl():
+    register_drivers()
     try:
         import pyopencl as cl
     except Exception as e:  # a missing or broken libOpenCL surfaces here
@@ -198,12 +207,32 @@ def _quiet_build_log(cl):
                 sys.stderr.write(rest)
 
 
+def _context(cl, info: DeviceInfo):
+    """An OpenCL context of one device. Intel's CPU runtime installs LLVM's crash handlers for 15
+    signals when its first context is made, over Python's own: SIGXFSZ, which Python ignores so
+    that a write past the file-size limit fails with EFBIG (a one-line error), then printed
+    "PLEASE submit a bug report to ..." first. Every signal Python handles or ignores is handed
+    back its handler; those left at their default keep LLVM's (a real crash's report)."""
+    ctx = cl.Context([info.device])
+    if _is_intel_cpu(info):
+        import signal
+        for sig in (signal.SIGHUP, signal.SIGINT, signal.SIGTERM, signal.SIGUSR1, signal.SIGUSR2,
+                    signal.SIGXFSZ, signal.SIGXCPU, signal.SIGQUIT):
+            try:
+                h = signal.getsignal(sig)
+                if h not in (signal.SIG_DFL, None):
+                    signal.signal(sig, h)
+            except (ValueError, OSError):     # not the main thread: its handlers are the main thread's
+                pass
+    return ctx
+
+
 def probe(info: DeviceInfo) -> DeviceInfo:
     """Build and run the probe kernel; fill info.ok / info.reason."""
     cl = _import_cl()
     t0 = time.perf_counter()
     try:
-        ctx = cl.Context([info.device])
+        ctx = _context(cl, info)
         queue = cl.CommandQueue(ctx)
         with _quiet_build_log(cl):
             prg = cl.Program(ctx, PROBE_SOURCE).build()
@@ -231,10 +260,19 @@ def _one_line(e: Exception) -> str:
     return (text[:240] + "...") if len(text) > 240 else (text or type(e).__name__)
 
 
+def _is_intel_cpu(info: DeviceInfo) -> bool:
+    from iblbake.device.icd import INTEL_PLATFORM
+    return info.kind == "CPU" and info.platform == INTEL_PLATFORM
+
+
 def _matches(info: DeviceInfo, spec: str) -> bool:
     s = spec.strip().lower()
     if s in ("gpu", "cpu"):
         return info.kind.lower() == s
+    if s == "intel-cpu":                     # Intel's CPU runtime (the intel-cpu extra), not PoCL on an Intel CPU
+        return _is_intel_cpu(info)
+    if s == "pocl":
+        return info.platform == "Portable Computing Language"
     if re.fullmatch(r"\d+:\d+", s):
         return info.index == s
     if re.fullmatch(r"\d+", s):
@@ -243,7 +281,11 @@ def _matches(info: DeviceInfo, spec: str) -> bool:
 
 
 def _preference(info: DeviceInfo) -> int:
-    return {"GPU": 0, "CPU": 1}.get(info.kind, 2)
+    """GPUs, then CPUs, Intel's CPU runtime after other CPU drivers (PoCL stays the default CPU
+    device where both are installed: it is faster on the BVH-heavy scenes, docs/benchmarks.md)."""
+    if _is_intel_cpu(info):
+        return 2
+    return {"GPU": 0, "CPU": 1}.get(info.kind, 3)
 
 
 def _verdict_path() -> str:
@@ -275,6 +317,15 @@ def _save_verdicts(verdicts: dict) -> None:
         pass
 
 
+def _candidates(devices: list[DeviceInfo], spec: str | None) -> list[DeviceInfo]:
+    """The devices `spec` names, in the order they are tried (_preference, then enumeration)."""
+    nth = re.fullmatch(r"(gpu|cpu):(\d+)", spec.strip().lower()) if spec else None
+    if nth:                          # the N-th device of a kind, in enumeration order (--devices gpu:0,gpu:1)
+        same = [d for d in devices if d.kind.lower() == nth[1]]
+        return same[int(nth[2]):int(nth[2]) + 1]
+    return sorted((d for d in devices if spec is None or _matches(d, spec)), key=_preference)
+
+
 def select_device(spec: str | None = None, name: str = "--device") -> DeviceInfo:
     """The device to use: `spec` (--device), else $IBLBAKE_DEVICE, else the first working GPU,
     else the first working CPU. Probes candidates in that order and stops at the first that works;
@@ -283,18 +334,13 @@ def select_device(spec: str | None = None, name: str = "--device") -> DeviceInfo
     is what a message calls the spec's setting (a flag, an argument)."""
     spec = spec or os.environ.get("IBLBAKE_DEVICE") or None
     devices, errors = enumerate_devices()
-    nth = re.fullmatch(r"(gpu|cpu):(\d+)", spec.strip().lower()) if spec else None
-    if nth:                          # the N-th device of a kind, in enumeration order (--devices gpu:0,gpu:1)
-        same = [d for d in devices if d.kind.lower() == nth[1]]
-        candidates = same[int(nth[2]):int(nth[2]) + 1]
-    else:
-        candidates = [d for d in devices if spec is None or _matches(d, spec)]
-    if spec and not candidates:
+    candidates = _candidates(devices, spec)
+    if spec and not candidates and devices:
         listed = ", ".join(d.label for d in devices) or "none"
         raise DeviceError(f"no OpenCL device matches {name}/IBLBAKE_DEVICE {spec!r}; devices: {listed}")
     tried = []
     verdicts = _load_verdicts()
-    for info in sorted(candidates, key=_preference):
+    for info in candidates:
         key = _verdict_key(info)
         known = verdicts.get(key)
         if known and known.get("ok"):     # this device and driver built and ran the probe before
@@ -318,14 +364,8 @@ def probe_all() -> tuple[list[DeviceInfo], list[str], DeviceInfo | None]:
         probe(d)
         verdicts[_verdict_key(d)] = {"ok": d.ok, "reason": d.reason}
     _save_verdicts(verdicts)
-    working = sorted((d for d in devices if d.ok), key=_preference)
-    chosen = None
-    spec = os.environ.get("IBLBAKE_DEVICE")
-    if spec:
-        working = [d for d in working if _matches(d, spec)]
-    if working:
-        chosen = working[0]
-    return devices, errors, chosen
+    working = [d for d in _candidates(devices, os.environ.get("IBLBAKE_DEVICE") or None) if d.ok]
+    return devices, errors, (working[0] if working else None)
 
 
 def _cache_dir() -> str:
@@ -337,18 +377,26 @@ def _cache_dir() -> str:
     return path
 
 
+def device_options(info: DeviceInfo) -> list[str]:
+    """Build options one runtime needs. Intel's CPU runtime: every function inlined (kernels/inline.h:
+    it passes float3 arguments of out-of-line calls from vectorised kernels wrongly), and the
+    reference kept scalar where it traces triangles (kernels/reference.cl: divergent BVH lanes)."""
+    return ["-DIBL_ALWAYS_INLINE=1", "-DIBL_SCALAR_BVH=1"] if _is_intel_cpu(info) else []
+
+
 class Runtime:
     """One device: its context, queue and built programs (cached per source, defines, device)."""
 
     def __init__(self, device: str | None = None, name: str = "--device"):
         self.cl = _import_cl()
         self.info = select_device(device, name)
-        self.ctx = self.cl.Context([self.info.device])
+        self.ctx = _context(self.cl, self.info)
         self.queue = self.cl.CommandQueue(self.ctx)
         self._programs: dict = {}
         self._kernels: dict = {}
         self._host_arrays: list = []   # zero-copy host arrays of queued work (see to_device)
         self.builds: list[dict] = []  # what was built, with times, for reports
+        self.device_options = device_options(self.info)
 
     @property
     def device_label(self) -> str:
@@ -362,7 +410,7 @@ class Runtime:
         key = (hashlib.sha256(src.encode()).hexdigest(), tuple(defines.items()))
         if key in self._programs:
             return self._programs[key]
-        options = ["-cl-std=CL1.2"] + [f"-D{k}={v}" for k, v in defines.items()]
+        options = ["-cl-std=CL1.2", *self.device_options] + [f"-D{k}={v}" for k, v in defines.items()]
         t0 = time.perf_counter()
         try:
             with _quiet_build_log(self.cl):
