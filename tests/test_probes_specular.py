@@ -21,7 +21,7 @@ from tests.conftest import load_scene
 from tests.test_probes import Given, far_sphere_scene, settings, synthetic, unit
 from tests.test_probes_bases import baked_volume, basis_volume, with_basis
 
-CASES = [("sg", {"sg_lobes": 9, "sg_fit": "least_squares"}), ("ambient_dice", {})]
+CASES = [("sg", {"sg_lobes": 9, "sg_fit": "least_squares"}), ("ambient_dice", {"ad_fit": "least_squares"})]
 IDS = ["sg9", "ambient_dice"]
 
 

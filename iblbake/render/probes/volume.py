@@ -12,7 +12,8 @@ def basis_options(settings: dict) -> dict:
     """The options of the probes' basis: the probes section's keys of the same names as the
     basis's effects keys (probes.sg_lobes, probes.sg_fit), so a probe basis is set apart from the
     distant one."""
-    return {k: settings[k] for k in bases.BASES[settings["irradiance"]].OPTIONS}
+    return {k: settings.get(k, default) for k, (_choices, default, _doc) in
+            bases.BASES[settings["irradiance"]].OPTIONS.items()}
 
 
 SAMPLING_KEYS = ("visibility", "normal_bias", "view_bias")   # read when shading, not baked
