@@ -297,6 +297,7 @@ def test_a_capture_shows_each_wall_where_it_is(tmp_path, rt, how):
     assert np.abs(got[clear, :3] - want[clear]).max() < 1e-6
 
 
+@pytest.mark.slow           # over 3 s on the 2-core CPU: make test, not make check
 def test_a_probe_inside_an_object_says_so(tmp_path, rt):
     """The same probe without the exclude list captures the sphere's inside all around: render
     says in one line that its position lies inside the named object and how to fix it."""
