@@ -31,3 +31,23 @@ def sample_slices(rt, n: int, batch: int) -> int:
     if rt.info.kind != "GPU":
         return 1
     return max(1, min(batch, -(-GPU_ITEMS // max(n, 1))))
+
+
+# Registers a path-tracing work item may hold on an NVIDIA GPU. Unbounded, NVIDIA's compiler gives
+# the reference kernel 141-155 of them (no spills): one 256-item work group per multiprocessor,
+# 8 of its 64 warps resident, too few to hide a path's memory latency. Capped at 64 it spills 0.6-1
+# KB a work item to L1 and keeps 3-4 times the warps: on an H200 the open box's reference (128x96,
+# 8192 spp) 0.50-0.53 s -> 0.35 s, the knot's 1.32 s -> 1.09-1.10 s (docs/benchmarks.md
+# "Registers on the H200"); 48 was within noise of 64, 32 slower on the knot.
+PATH_REGISTERS = 64
+PATH_PROGRAMS = ("reference.cl", "probe_trace.cl")
+
+
+def build_options(info, name) -> list:
+    """Build options a program needs on one device beyond its defines: the register cap for the
+    programs holding the paths on an NVIDIA GPU (name: a kernel file, or a tuple of those built
+    as one program)."""
+    files = name if isinstance(name, tuple) else (name,)
+    if PATH_REGISTERS and info.kind == "GPU" and "NVIDIA" in info.platform.upper() and set(files) & set(PATH_PROGRAMS):
+        return [f"-cl-nv-maxrregcount={PATH_REGISTERS}"]
+    return []
