@@ -407,11 +407,12 @@ IBL_INLINE Hit trace_range(float3 o, float3 d, float tmin, float tmax, int any_h
 
 #ifdef PROFILE_RAYS
 /* A ray of the path profile. prof_index holds 8 ints per work item: its first record in
- * prof_rays, the rays it has traced, the records it has room for, the bounce it is at, and the
- * bits of its first ray's origin (the first vertex's: every ray from there is bounce 1; each
- * closest hit ends a bounce). A record is 3 float4: (origin, tmax), (direction, any_hit | hit kind
- * << 1 | bounce << 4), (t, b1, b2, index). PROFILE_RAYS 1 traces and records; 2 answers from the
- * record, the traversal skipped (what remains is the kernel's shading). */
+ * prof_rays, the rays it has traced, the records it has room for, the path vertex it is at, and
+ * the bits of its first ray's origin (the first vertex's: every ray from there leaves vertex 1;
+ * each closest-hit ray moves the path on a vertex). A record is 3 float4: (origin, tmax),
+ * (direction, any_hit | hit kind << 1 | vertex << 4), (t, b1, b2, index). PROFILE_RAYS 1 traces
+ * and records; 2 answers from the record, the traversal skipped (what remains is the kernel's
+ * shading). */
 #define PROFILE_INDEX_INTS 8
 #define PROFILE_RAY_FLOAT4S 3
 IBL_INLINE Hit profiled_trace(float3 o, float3 d, float tmax, int any_hit, SCENE_PARAMS)
@@ -431,11 +432,11 @@ IBL_INLINE Hit profiled_trace(float3 o, float3 d, float tmax, int any_hit, SCENE
 #if PROFILE_RAYS == 1
     if (k == 0) { st[4] = as_int(o.x); st[5] = as_int(o.y); st[6] = as_int(o.z); }
     const int first_vertex = as_int(o.x) == st[4] && as_int(o.y) == st[5] && as_int(o.z) == st[6];
-    const int bounce = first_vertex ? 1 : st[3];
-    st[3] = any_hit ? bounce : bounce + 1;
+    const int vertex = first_vertex ? 1 : st[3];
+    st[3] = any_hit ? vertex : vertex + 1;
     if (k < st[2]) {
         r[0] = (float4)(o, tmax);
-        r[1] = (float4)(d, as_float(any_hit | (h.kind << 1) | (bounce << 4)));
+        r[1] = (float4)(d, as_float(any_hit | (h.kind << 1) | (vertex << 4)));
         r[2] = (float4)(h.t, h.b1, h.b2, as_float(h.index));
     }
 #endif
