@@ -42,7 +42,7 @@ RAY_FLOAT4S = 3               # kernels/scene.h PROFILE_RAY_FLOAT4S
 TRACE_KERNEL = "trace_rays.cl"
 
 
-def variants(defines: dict, depth: int = DEPTH) -> tuple:
+def variants(defines: dict, depth: int) -> tuple:
     """([(bounces, defines)] of the cumulative launches, one per bounce profiled; whether the
     whole launch holds bounces past them). The direct light alone has no BOUNCES (the scene's
     bounces: 1); bounces k >= 2 is BOUNCES = k; the scene's BOUNCES 0 is unbounded."""
@@ -117,13 +117,16 @@ class _Launches:
         return self.rt.read(self.out, (self.items, 4))
 
 
-def profile_reference(ctx, ref_pass, repeats: int = REPEATS, depth: int = DEPTH,
-                      record_bytes: int = RECORD_BYTES) -> dict:
+def profile_reference(ctx, ref_pass, repeats: int = REPEATS, depth: int | None = None,
+                      record_bytes: int | None = None) -> dict:
     """The reference pass's time on this tile split per bounce into shading, closest-hit traversal
     and shadow-ray traversal (the module's docstring says how). ctx: the frame's context after its
-    passes ran (the last tile's G-buffer in its table); ref_pass: the Reference pass. Returns the
-    `paths_profile` record of the frame's report; changes nothing of the frame."""
+    passes ran (the last tile's G-buffer in its table); ref_pass: the Reference pass; depth and
+    record_bytes: DEPTH and RECORD_BYTES where None. Returns the `paths_profile` record of the
+    frame's report; changes nothing of the frame."""
     t_start = time.perf_counter()
+    depth = DEPTH if depth is None else depth
+    record_bytes = RECORD_BYTES if record_bytes is None else record_bytes
     rt = ctx.rt
     builds_before = len(rt.builds)
     _, defines = ctx.plan.program(ref_pass)
@@ -230,6 +233,7 @@ def profile_reference(ctx, ref_pass, repeats: int = REPEATS, depth: int = DEPTH,
             "share": round(s / whole, 4) if whole > 0 else None,
             "traversal_closest_ms": round(tc * 1e3, 3), "traversal_shadow_ms": round(ts * 1e3, 3),
             "shading_ms": round((s - tc - ts) * 1e3, 3),
+            "closest_rays": count_of.get((k, "closest"), 0), "shadow_rays": count_of.get((k, "shadow"), 0),
             "closest_rays_per_sample": round(count_of.get((k, "closest"), 0) / samples, 4),
             "shadow_rays_per_sample": round(count_of.get((k, "shadow"), 0) / samples, 4),
             # the rate of a frame with this many bounces (wall time, as the pass's own)
