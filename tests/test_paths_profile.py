@@ -150,3 +150,10 @@ def test_profile_of_a_mesh_with_lights_and_sample_slices(tmp_path, lobed_sky, rt
     assert sliced["rays"] == pr["rays"] and sliced["replay_same_result"] is True
     assert [e["shadow_rays_per_sample"] for e in sliced["per_bounce"]] == \
         [e["shadow_rays_per_sample"] for e in pr["per_bounce"]]
+    # a tiled frame: the last tile's batch is profiled, and the frame is the untiled one's
+    monkeypatch.undo()
+    tiled = render(sc, runtime=rt, cache_root=tmp_path / "cache", profile_paths=1, device_budget=250_000)
+    tp = tiled.report["paths_profile"]
+    assert tiled.report["tiles"] > 1 and tp["tile"] == tp["tiles"] == tiled.report["tiles"]
+    assert tp["gbuffer_samples"] < pr["gbuffer_samples"] and tp["replay_same_result"] is True
+    assert np.array_equal(tiled.hdr, render(sc, runtime=rt, cache_root=tmp_path / "cache").hdr)
