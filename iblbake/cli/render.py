@@ -124,18 +124,21 @@ def profile_lines(pr: dict) -> list:
     shading = sum(e["shading_ms"] for e in pr["per_bounce"])
     closest = sum(e["traversal_closest_ms"] for e in pr["per_bounce"])
     shadow = sum(e["traversal_shadow_ms"] for e in pr["per_bounce"])
-    rays = sum(e["closest_rays_per_sample"] + e["shadow_rays_per_sample"] for e in pr["per_bounce"])
+    rays = pr["rays"] / pr["samples"]
     rate = "-" if pr["msamples_per_s"] is None else f"{pr['msamples_per_s']:.3f}"
     out.append(f"  {'whole':<7}{pr['whole_ms']:9.1f} {pr['whole_spread_ms']:6.1f} {'100%':>6} {shading:9.1f} "
                f"{closest:9.1f} {shadow:9.1f}  {rays:10.3f} all  {rate:>14}")
+    if pr["per_bounce_over_whole"] is None:         # a launch too short for the clock
+        return out
     check = f"  check: the bounces add up to {100 * pr['per_bounce_over_whole']:.1f}% of the whole"
-    if pr["replay_ms"] is not None:
+    if pr["replay_and_traversal_over_whole"] is not None:
         same = "its sums the same bit for bit" if pr["replay_same_result"] else "ITS SUMS DIFFER"
         check += (f"; shading replayed with every ray's answer recorded ({pr['replay_ms']:.1f}, {same}) + "
                   f"traversal alone ({pr['traversal_ms']:.1f}) = {100 * pr['replay_and_traversal_over_whole']:.1f}%")
     out.append(check)
+    built = f"{pr['programs_built']} program{'s' if pr['programs_built'] != 1 else ''}"
     out.append(f"  the whole launch {pr['whole_wall_ms']:.1f} ms of wall time; profiled in {pr['seconds']:.1f} s "
-               f"({pr['programs_built']} program{'s' if pr['programs_built'] != 1 else ''} built in {pr['build_s']:.1f} s)")
+               f"({built} built in {pr['build_s']:.1f} s)")
     return out
 
 

@@ -78,6 +78,7 @@ class _Launches:
         self.n = ctx.table["n"]
         self.items = self.n * min(slices, b)
         self.out = self.rt.empty(16 * self.items)
+        self.sink = self.rt.empty(4 * self.items)        # what the rays alone found (kept from the optimiser)
         self.size, self.args = ref_pass.batch_args(ctx, 0, b, slices, self.out)
         self.file, self.fn = ref_pass.kernel, ref_pass.function or ref_pass.name
         self.defines = defines                       # the scene's geometry, for the rays alone
@@ -159,7 +160,6 @@ def profile_reference(ctx, ref_pass, repeats: int = REPEATS, depth: int | None =
             la = _Launches(ctx, ref_pass, b, slices, defines)
             zeros = np.zeros(la.items, np.int32)
             counts = record(la, zeros, zeros, 0)[1]
-    la.sink = rt.empty(4 * la.items)
     total = int(counts.sum())
     first = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int32)
     room = counts.astype(np.int32)
@@ -256,7 +256,8 @@ def profile_reference(ctx, ref_pass, repeats: int = REPEATS, depth: int | None =
         "rays": total, "traversal_ms": round(traversal * 1e3, 3),
         "replay_ms": None if replay is None else round(replay * 1e3, 3),
         "replay_same_result": replay_same,
-        "replay_and_traversal_over_whole": None if replay is None or whole <= 0 else round((replay + traversal) / whole, 4),
+        "replay_and_traversal_over_whole":
+            None if replay is None or whole <= 0 else round((replay + traversal) / whole, 4),
         "launches_ms": {_name(key): [[round(t * 1e3, 3) for t in g[key]] for g in rounds] for key in rounds[0]},
         "programs_built": len(rt.builds) - builds_before,
         "build_s": round(sum(x["seconds"] for x in rt.builds[builds_before:]), 3),
