@@ -688,27 +688,47 @@ class Renderer:
     def device(self) -> str:
         return self.runtime.device_label
 
-    def render(self, scene, *, warn=None, progress=None) -> Frame:
+    def render(self, scene, *, warn=None, progress=None, profile_paths: bool = False) -> Frame:
         """Render a Scene (load_scene) into a Frame (iblbake.Frame: hdr, tonemapped, aovs,
         report). warn(message) gets the warnings; progress(fraction) the share of long work
-        (path tracing, probe rays) done."""
+        (path tracing, probe rays) done. profile_paths: after the frame, measure where the
+        reference pass's time goes (per bounce: shading, closest-hit and shadow-ray traversal),
+        the report's `paths_profile`; the frame is the same."""
         from iblbake.render import frame as render_frame
 
         _callback("warn", warn)
         _callback("progress", progress)
-        return render_frame.render(load_scene(scene, names=self._names), runtime=self.runtime, cache=self.bakes,
-                                   reuse=self._reuse, warn=warn, progress=progress)
+        profile_paths = _flag(_name(self._names, "profile_paths"), profile_paths)
+        sc = load_scene(scene, names=self._names)
+        if profile_paths:
+            _profiled(sc, self._names)
+        return render_frame.render(sc, runtime=self.runtime, cache=self.bakes, reuse=self._reuse, warn=warn,
+                                   progress=progress, profile_paths=profile_paths)
 
 
-def render(scene, device: str | None = None, *, cache=None, warn=None, progress=None,
+def _profiled(scene, names) -> None:
+    """A scene asked to profile its paths has the reference pass, or fails in one line."""
+    from iblbake.render import plan
+
+    if not any(p.profiles == "paths" for p in plan(scene).passes):
+        raise InputError(f"{_name(names, 'profile_paths')}: the scene has no reference pass to profile "
+                         f"(effects.diffuse or effects.specular: reference)")
+
+
+def render(scene, device: str | None = None, *, cache=None, warn=None, progress=None, profile_paths: bool = False,
            names: dict | None = None) -> Frame:
     """Render a scene once (a Scene, a scene file or a mapping; see load_scene) on `device` into a
-    Frame (HDR array, tone-mapped array, report). A series of frames: use a Renderer. names: what
+    Frame (HDR array, tone-mapped array, report). A series of frames: use a Renderer.
+    profile_paths: measure where the reference pass's time goes (Renderer.render). names: what
     error messages call each argument (by default its name; the command line passes its flags)."""
     _callback("warn", warn)
     _callback("progress", progress)
+    profile_paths = _flag(_name(names, "profile_paths"), profile_paths)
     sc = load_scene(scene, names=names)            # a bad scene is said before the device starts
-    return Renderer(device, cache, reuse=False, names=names).render(sc, warn=warn, progress=progress)
+    if profile_paths:
+        _profiled(sc, names)
+    return Renderer(device, cache, reuse=False, names=names).render(sc, warn=warn, progress=progress,
+                                                                    profile_paths=profile_paths)
 
 
 # ----------------------------------------------------------------------------------- probes

@@ -10,11 +10,22 @@
 /* The geometry buffers every tracing kernel takes, by name (the host binds them from its table).
  * tri_attr, mat_maps and the textures are read only where a material cuts out (HAS_ALPHA_MASK) or
  * has one side (HAS_SINGLE_SIDED); a scene without either binds placeholders. */
-#define SCENE_PARAMS __global const float4 *spheres, const int nspheres, \
-                     __global const float4 *planes, const int nplanes, \
-                     __global const float4 *bvh, __global const float4 *tris, const int ntris, \
-                     __global const float4 *tri_attr, __global const float4 *mat_maps, TEXTURE_PARAMS
-#define SCENE_ARGS spheres, nspheres, planes, nplanes, bvh, tris, ntris, tri_attr, mat_maps, TEXTURE_ARGS
+#define GEOMETRY_PARAMS __global const float4 *spheres, const int nspheres, \
+                        __global const float4 *planes, const int nplanes, \
+                        __global const float4 *bvh, __global const float4 *tris, const int ntris, \
+                        __global const float4 *tri_attr, __global const float4 *mat_maps, TEXTURE_PARAMS
+#define GEOMETRY_ARGS spheres, nspheres, planes, nplanes, bvh, tris, ntris, tri_attr, mat_maps, TEXTURE_ARGS
+/* PROFILE_RAYS (the reference's path profile only, iblbake/render/paths/profile.py): every ray
+ * traced is recorded (1) or answered from that record without traversal (2), through two more
+ * buffers that every function tracing rays passes on. The host reads the last definitions below
+ * (device/runtime.py kernel_params): kernels built without it have the signatures they always had. */
+#ifdef PROFILE_RAYS
+#define SCENE_PARAMS GEOMETRY_PARAMS, __global float4 *prof_rays, __global int *prof_index
+#define SCENE_ARGS GEOMETRY_ARGS, prof_rays, prof_index
+#else
+#define SCENE_PARAMS GEOMETRY_PARAMS
+#define SCENE_ARGS GEOMETRY_ARGS
+#endif
 
 /* ---------------------------------------------------------------------------- camera, rays */
 
@@ -394,22 +405,64 @@ IBL_INLINE Hit trace_range(float3 o, float3 d, float tmin, float tmax, int any_h
     return h;
 }
 
+#ifdef PROFILE_RAYS
+/* A ray of the path profile. prof_index holds 8 ints per work item: its first record in
+ * prof_rays, the rays it has traced, the records it has room for, the path vertex it is at, and
+ * the bits of its first ray's origin (the first vertex's: every ray from there leaves vertex 1;
+ * each closest-hit ray moves the path on a vertex). A record is 3 float4: (origin, tmax),
+ * (direction, any_hit | hit kind << 1 | vertex << 4), (t, b1, b2, index). PROFILE_RAYS 1 traces
+ * and records; 2 answers from the record, the traversal skipped (what remains is the kernel's
+ * shading). */
+#define PROFILE_INDEX_INTS 8
+#define PROFILE_RAY_FLOAT4S 3
+IBL_INLINE Hit profiled_trace(float3 o, float3 d, float tmax, int any_hit, SCENE_PARAMS)
+{
+    __global int *st = prof_index + PROFILE_INDEX_INTS * get_global_id(0);
+    const int k = st[1]++;
+    __global float4 *r = prof_rays + PROFILE_RAY_FLOAT4S * (st[0] + k);
+#if PROFILE_RAYS == 2
+    if (k < st[2]) {
+        const float4 b = r[2];
+        Hit h;
+        h.t = b.x; h.b1 = b.y; h.b2 = b.z; h.index = as_int(b.w); h.kind = (as_int(r[1].w) >> 1) & 7;
+        return h;
+    }
+#endif
+    const Hit h = trace_range(o, d, 0.0f, tmax, any_hit, 1, SCENE_ARGS);
+#if PROFILE_RAYS == 1
+    if (k == 0) { st[4] = as_int(o.x); st[5] = as_int(o.y); st[6] = as_int(o.z); }
+    const int first_vertex = as_int(o.x) == st[4] && as_int(o.y) == st[5] && as_int(o.z) == st[6];
+    const int vertex = first_vertex ? 1 : st[3];
+    st[3] = any_hit ? vertex : vertex + 1;
+    if (k < st[2]) {
+        r[0] = (float4)(o, tmax);
+        r[1] = (float4)(d, as_float(any_hit | (h.kind << 1) | (vertex << 4)));
+        r[2] = (float4)(h.t, h.b1, h.b2, as_float(h.index));
+    }
+#endif
+    return h;
+}
+#define TRACE_RANGE(o, d, tmax, any_hit) profiled_trace(o, d, tmax, any_hit, SCENE_ARGS)
+#else
+#define TRACE_RANGE(o, d, tmax, any_hit) trace_range(o, d, 0.0f, tmax, any_hit, 1, SCENE_ARGS)
+#endif
+
 IBL_INLINE Hit trace(float3 o, float3 d, SCENE_PARAMS)
 {
-    return trace_range(o, d, 0.0f, INFINITY, 0, 1, SCENE_ARGS);
+    return TRACE_RANGE(o, d, INFINITY, 0);
 }
 
 /* Any hit along o + t d, t > 0: the shadow ray of a lighting sample. The origin is the shaded
  * point moved off the surface by ray_offset, so the surface does not shadow itself. */
 IBL_INLINE int occluded(float3 o, float3 d, SCENE_PARAMS)
 {
-    return trace_range(o, d, 0.0f, INFINITY, 1, 1, SCENE_ARGS).kind != PRIM_NONE;
+    return TRACE_RANGE(o, d, INFINITY, 1).kind != PRIM_NONE;
 }
 
 /* Any hit along o + t d, 0 < t < tmax: a shadow ray towards a light at distance tmax. */
 IBL_INLINE int occluded_to(float3 o, float3 d, float tmax, SCENE_PARAMS)
 {
-    return trace_range(o, d, 0.0f, tmax, 1, 1, SCENE_ARGS).kind != PRIM_NONE;
+    return TRACE_RANGE(o, d, tmax, 1).kind != PRIM_NONE;
 }
 
 /* Where a secondary ray starts: the hit p of a primary ray of direction d that travelled t, moved

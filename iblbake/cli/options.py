@@ -160,7 +160,7 @@ POLICY_FLAGS = {"max_pixels": "--max-pixels", "nonfinite": "--nonfinite", "negat
 # arguments' own names by default)
 API_FLAGS = {**POLICY_FLAGS, "layout_hint": "--input-layout (environment.layout)", "device": "--device",
              "overrides": "--set", "max_side": "--max-side", "max_samples": "--max-samples", "bounces": "--bounces",
-             "visibility": "--no-visibility", "ladder": "--ladder"}
+             "visibility": "--no-visibility", "ladder": "--ladder", "profile_paths": "--profile-paths"}
 
 
 def finite(ctx, param, value):

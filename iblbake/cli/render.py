@@ -29,6 +29,10 @@ def _help_schema(ctx, param, value):
               help="Bake cache folder (shared with `iblbake mips`). Default: $IBLBAKE_CACHE, else the per-user cache folder.")
 @click.option("--report", "show_report", is_flag=True,
               help="Print the effect set, every bake and pass with its time and cache hit/miss, and the device.")
+@click.option("--profile-paths", is_flag=True,
+              help="After the frame, measure where the reference pass's time goes, per bounce: shading, "
+                   "closest-hit and shadow-ray traversal (more launches of its first batch, medians of 5 rounds; "
+                   "the frame is the same). Printed, and in --json as paths_profile. Needs the reference.")
 @click.option("--help-schema", is_flag=True, expose_value=False, is_eager=True, callback=_help_schema,
               help="Print every scene key with its type, range and default, and exit.")
 @depfile_option
@@ -37,7 +41,8 @@ def _help_schema(ctx, param, value):
 @max_pixels_option
 @max_texture_pixels_option
 @common_options
-def render_command(scene_path, outputs, overrides, cache_dir, show_report, depfile, force, device, quiet, as_json):
+def render_command(scene_path, outputs, overrides, cache_dir, show_report, profile_paths, depfile, force, device, quiet,
+                   as_json):
     """Render the scene file SCENE (YAML; see --help-schema and examples/scenes/) with OpenCL.
 
     Only the effects the scene calls for are baked, compiled and run; --report shows which.
@@ -61,7 +66,8 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, depfi
     # paths (the reference, probe rays, reflection captures): a bar on a terminal
     long_work = "reference" in pl.pass_names or {"probes", "reflection_probes"} & set(pl.bakes)
     with con.fraction("render", "paths") if long_work else contextlib.nullcontext(None) as progress:
-        frame = api.render(sc, device, cache=cache_dir, warn=con.warn, progress=progress, names=API_FLAGS)
+        frame = api.render(sc, device, cache=cache_dir, warn=con.warn, progress=progress, profile_paths=profile_paths,
+                           names=API_FLAGS)
     written = write_outputs(frame, sc)
     if depfile:
         from iblbake.io import depfile as dep
@@ -88,10 +94,52 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, depfi
             lines.append(f"pass  {p['name']:<16} {p['seconds']:8.3f} s        {extra}")
         for b in rep["kernel_builds"]:
             lines.append(f"build {b['kernel']:<16} {b['seconds']:8.3f} s")
+    if "paths_profile" in rep:
+        lines.extend(profile_lines(rep["paths_profile"]))
     w, h = rep["resolution"]
     lines.append(f"{'wrote ' + ', '.join(written) if written else 'rendered'} ({w}x{h}, {_samples(rep)}) "
                  f"in {rep['elapsed_s']:.3f} s on {rep['device']}")
     con.result(summary, "\n".join(lines))
+
+
+def profile_lines(pr: dict) -> list:
+    """The reference's paths profile (render/paths_profile.py) as a table: per bounce its time,
+    split into shading and the traversal of its closest-hit and shadow rays."""
+    unit = "CPU ms" if pr["clock"] == "cpu" else "ms"
+    tile = f", tile {pr['tile']} of {pr['tiles']}" if pr["tiles"] > 1 else ""
+    fewer = f" (of the frame's {pr['frame_batch']}: the rays' record)" if pr["batch"] != pr["frame_batch"] else ""
+    clock = "CPU time of this process (the device's threads)" if pr["clock"] == "cpu" else "wall time"
+    out = [f"paths profile: the reference's first batch{tile}, {pr['gbuffer_samples']} G-buffer samples x "
+           f"{pr['batch']}{fewer}, bounces {pr['bounces']}{'' if pr['visibility'] else ' (visibility off: no ray)'}; "
+           f"medians of {pr['repeats']} rounds after a warm-up, {clock}",
+           f"  {'':<7}{'':>9} {'':>6} {'':>6} {'':>9} {'traversal':^19}  {'rays/sample':^14}  {'Msamples/s':>14}",
+           f"  {'bounce':<7}{unit:>9} {'+-':>6} {'share':>6} {'shading':>9} {'closest':>9} {'shadow':>9}"
+           f"  {'closest':>7}{'shadow':>7}  {'up to it, wall':>14}"]
+    for e in pr["per_bounce"]:
+        share = "-" if e["share"] is None else f"{100 * e['share']:.1f}%"
+        rate = "-" if e["msamples_per_s"] is None else f"{e['msamples_per_s']:.3f}"
+        out.append(f"  {e['bounce']!s:<7}{e['ms']:9.1f} {e['spread_ms']:6.1f} {share:>6} {e['shading_ms']:9.1f} "
+                   f"{e['traversal_closest_ms']:9.1f} {e['traversal_shadow_ms']:9.1f}  "
+                   f"{e['closest_rays_per_sample']:7.3f}{e['shadow_rays_per_sample']:7.3f}  {rate:>14}")
+    shading = sum(e["shading_ms"] for e in pr["per_bounce"])
+    closest = sum(e["traversal_closest_ms"] for e in pr["per_bounce"])
+    shadow = sum(e["traversal_shadow_ms"] for e in pr["per_bounce"])
+    rays = pr["rays"] / pr["samples"]
+    rate = "-" if pr["msamples_per_s"] is None else f"{pr['msamples_per_s']:.3f}"
+    out.append(f"  {'whole':<7}{pr['whole_ms']:9.1f} {pr['whole_spread_ms']:6.1f} {'100%':>6} {shading:9.1f} "
+               f"{closest:9.1f} {shadow:9.1f}  {rays:10.3f} all  {rate:>14}")
+    if pr["per_bounce_over_whole"] is None:         # a launch too short for the clock
+        return out
+    check = f"  check: the bounces add up to {100 * pr['per_bounce_over_whole']:.1f}% of the whole"
+    if pr["replay_and_traversal_over_whole"] is not None:
+        same = "its sums the same bit for bit" if pr["replay_same_result"] else "ITS SUMS DIFFER"
+        check += (f"; shading replayed with every ray's answer recorded ({pr['replay_ms']:.1f}, {same}) + "
+                  f"traversal alone ({pr['traversal_ms']:.1f}) = {100 * pr['replay_and_traversal_over_whole']:.1f}%")
+    out.append(check)
+    built = f"{pr['programs_built']} program{'s' if pr['programs_built'] != 1 else ''}"
+    out.append(f"  the whole launch {pr['whole_wall_ms']:.1f} ms of wall time; profiled in {pr['seconds']:.1f} s "
+               f"({built} built in {pr['build_s']:.1f} s)")
+    return out
 
 
 def _samples(rep: dict) -> str:

@@ -267,16 +267,22 @@ def scene_context(scene: Scene, pl: Plan, rt, bakes: Bakes, warn=None, progress=
 
 def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reuse | None = None,
            device: str | None = None, cache_root: Path | None = None, warn=None, progress=None,
-           device_budget: int | None = None) -> Frame:
+           device_budget: int | None = None, profile_paths: int = 0) -> Frame:
     """Render `scene`. `runtime` (a device.runtime.Runtime) and `cache` (a Bakes) are reused when
     given; otherwise made for this frame (`device`, `cache_root`). With `reuse` (a Reuse kept
     across a series of frames), passes whose inputs did not change since the last frame are not
     run again. `device_budget` overrides the device bytes a frame's buffers may take (tests
-    force tiling with it)."""
+    force tiling with it). `profile_paths` (a number of repeats; True: the default's) measures
+    where the reference pass's time goes after the frame (render/paths_profile.py): the report's
+    `paths_profile`; a plan without the reference pass raises InputError."""
     from iblbake.device.runtime import Runtime
 
     t_start = time.perf_counter()
     pl = plan(scene, one_program=reuse is None)
+    profiled = next((p for p in pl.passes if p.profiles == "paths"), None)
+    if profile_paths and profiled is None:
+        raise InputError("profile_paths: this frame has no reference pass to profile (effects.diffuse or "
+                         "effects.specular: reference)")
     d = scene.data
     cam = d["camera"]
     rt = runtime or Runtime(device)
@@ -378,19 +384,29 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
             "buffers": {b: ctx.table[b] for b in (*names, *TABLE_TILE)}, "hdr": ctx.frame_hdr, "aovs": ctx.frame_aovs,
             "png": ctx.frame_png}
 
+    elapsed = time.perf_counter() - t_start
+    builds = [{"kernel": b["kernel"], "defines": b["defines"], "seconds": round(b["seconds"], 4)}
+              for b in rt.builds[builds_before:]]          # the frame's: the profile counts its own
+    paths_profile = None
+    if profile_paths:             # after the frame, which it does not touch: the last tile's G-buffer
+        if profiled.name not in ctx.args:             # reused from the last frame of a series
+            ctx.args[profiled.name] = profiled.setup(ctx)
+        paths_profile = profiled.profile(ctx, None if profile_paths is True else int(profile_paths))
+
     report = {
         "device": rt.device_label,
         "effects": pl.to_json(),
         "bakes": rep.bakes,
         "passes": list(rep.passes.values()),
-        "kernel_builds": [{"kernel": b["kernel"], "defines": b["defines"], "seconds": round(b["seconds"], 4)}
-                          for b in rt.builds[builds_before:]],
+        "kernel_builds": builds,
         "resolution": [width, height],
         "spp": spp,
         "tiles": len(row0s),
         "reused": [p.name for p in pl.passes if p.name not in run],
-        "elapsed_s": round(time.perf_counter() - t_start, 4),
+        "elapsed_s": round(elapsed, 4),
     }
+    if paths_profile is not None:
+        report["paths_profile"] = paths_profile
     png = ctx.frame_png[..., :3] if ctx.frame_png is not None else None     # RGBA as read back; RGB shown
     display = {**{k: d["effects"][k] for k in DISPLAY_KEYS}, "dither": d["output"]["dither"]}
     return Frame(ctx.frame_hdr, png, ctx.frame_aovs, report, display)

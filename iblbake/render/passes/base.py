@@ -30,6 +30,7 @@ class Pass:
     fills: tuple = ()        # what of the host's frame its run() reads back: hdr, aovs, png
     host_writes: tuple = ()  # buffers its run() writes from the host (no kernel parameter says so)
     params: tuple = ()       # kernel parameters its setup() and run() bind (the frame's table binds the rest)
+    profiles = None          # "paths": profile() measures where its time goes (render(profile_paths=...))
 
     def bound_params(self) -> tuple:
         """The kernel parameters this pass binds itself (tests/test_render_passes.py checks that
@@ -76,6 +77,11 @@ class Pass:
 
     def run(self, ctx) -> dict:
         """Do the work of one tile; returns report fields beyond the name and seconds."""
+        raise NotImplementedError
+
+    def profile(self, ctx, repeats: int | None) -> dict:
+        """After the frame: where this pass's time went on the last tile (`repeats` rounds, None:
+        the default), for the report; changes nothing of the frame."""
         raise NotImplementedError
 
     def launch_samples(self, ctx) -> float:

@@ -47,6 +47,7 @@ class Reference(Pass):
     buffers = (Buffer("radiance"), Buffer("ref_batch"))
     host_sample_bytes = 32
     host_writes = ("radiance",)      # the mean, added on the host
+    profiles = "paths"               # render/paths_profile.py
 
     def runs(self, scene, fx):
         return "reference" in (fx.diffuse, fx.specular)
@@ -77,6 +78,24 @@ class Reference(Pass):
                    nlights=len(recs))
         return out
 
+    def batching(self, ctx) -> tuple:
+        """(samples per G-buffer sample in a launch, work items per G-buffer sample) of this tile."""
+        ref = ctx.scene.data["effects"]["reference"]
+        batch = ref["batch"] or (256 if ctx.rt.info.kind == "GPU" else 32)
+        batch += batch & 1                            # even: both replicates advance together
+        return batch, sample_slices(ctx.rt, ctx.table["n"], batch)
+
+    def batch_args(self, ctx, first: int, b: int, slices: int, out) -> tuple:
+        """(global size, arguments) of the launch of samples first .. first + b - 1 (the path
+        profile launches the same batches: render/paths_profile.py)."""
+        n = ctx.table["n"]
+        return (n * min(slices, b),), {**ctx.args[self.name], "seed": ctx.scene.data["effects"]["reference"]["seed"],
+                                       "first": first, "batch": b, "slices": min(slices, b), "ref_batch": out}
+
+    def profile(self, ctx, repeats):
+        from iblbake.render.paths_profile import REPEATS, profile_reference
+        return profile_reference(ctx, self, repeats=REPEATS if repeats is None else repeats)
+
     def run(self, ctx):
         ref = ctx.scene.data["effects"]["reference"]
         rt, t = ctx.rt, ctx.table
@@ -86,14 +105,12 @@ class Reference(Pass):
         acc_odd = np.zeros(n)
         taken = 0
         noise = math.inf
-        batch = ref["batch"] or (256 if rt.info.kind == "GPU" else 32)
-        batch += batch & 1                            # even: both replicates advance together
-        slices = sample_slices(rt, n, batch)
+        batch, slices = self.batching(ctx)
         out = t["ref_batch"] if slices == 1 else rt.empty(16 * n * slices)      # a GPU: slices x n sums
         while taken < ref["max_samples"]:
             b = min(batch, ref["max_samples"] - taken)
-            ctx.launch(self, (n * min(slices, b),), **ctx.args[self.name], seed=ref["seed"], first=taken, batch=b,
-                       slices=min(slices, b), ref_batch=out)
+            size, args = self.batch_args(ctx, taken, b, slices, out)
+            ctx.launch(self, size, **args)
             r = rt.read(out, (n * min(slices, b), 4)).astype(np.float64).reshape(-1, n, 4).sum(0)
             acc += r[:, :3]
             acc_odd += r[:, 3]
