@@ -59,11 +59,8 @@
 #if defined(IBL_SCALAR_BVH) && defined(HAS_TRIANGLES)
 __attribute__((intel_vec_len_hint(1)))
 #endif
-__kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int n,
-                        const float2 env_rot, const float env_scale,
-                        __global const float4 *img, const int w, const int h,
-                        __global const float *marginal, __global const float *conditional,
-                        __global const float *pdf_table, SCENE_PARAMS, const int pixel0, const int spp,
+__kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int n, ENV_PARAMS,
+                        SCENE_PARAMS, const int pixel0, const int spp,
                         const uint seed, const int first, const int batch, const int slices,
                         __global float4 *ref_batch, __global const float4 *lights, const int nlights)
 {
@@ -177,8 +174,8 @@ __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int
             if (wgt.x > 0.0f || wgt.y > 0.0f || wgt.z > 0.0f) {
                 const Hit hh = trace(origin, l, SCENE_ARGS);
                 if (hh.kind != PRIM_NONE)
-                    emitted = follow_path(origin, l, hh, wgt, &sp, materials, env_rot, img, w, h, marginal,
-                                          conditional, pdf_table, SCENE_ARGS, &env_part, lights, nlights);
+                    emitted = follow_path(origin, l, hh, wgt, &sp, materials, ENV_ARGS, SCENE_ARGS, &env_part,
+                                          lights, nlights);
             }
             est = (est + env_part) * env_scale + emitted;
         }
