@@ -215,7 +215,7 @@ def test_lights_match_numpy(busy, effects):
     w = want[same]
     rel = np.abs(got - w) / np.maximum(np.abs(w), 1e-3)
     assert same.sum() > 800
-    print("lights against the twin: median", np.median(rel), "98%", np.quantile(rel, 0.98))
+    print("lights against the twin: median", np.median(rel), "98%", np.quantile(rel, 0.98), "max", rel.max())
     # measured: median 9e-8, 98th percentile 4e-6 (float32 against float64)
     assert np.median(rel) < 1e-6 and np.quantile(rel, 0.98) < 3e-5, (np.median(rel), np.quantile(rel, 0.98))
 
@@ -340,3 +340,4 @@ def test_sphere_light_highlight_at_its_representative_point(tmp_path, black_env,
     # measured: 0.198 (centre 4.18) and 0.310 (centre 0.93); energy 0.952 and 0.883
     assert rel(got) < 0.4 and rel(got) < rel(centre) / 2.5
     assert got.sum() / want.sum() == pytest.approx(1, abs=0.15)
+

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from iblbake.core import brdf
+from iblbake.core import bsdf
 from iblbake.core import conventions
 from iblbake.core import sampling
 from iblbake.scene.layout import LIGHT_KINDS
@@ -30,8 +31,8 @@ def representative_point(n, v, l, sin_max, alpha):
 
 
 def light_brdf_cos(base, metallic, rough, f0, f90, n, v, nov, l, diffuse: bool, specular: bool, sin_max=None):
-    """Twin of kernels/lights.cl light_brdf_cos: f(v, l) NoL, per hit and colour channel; with
-    sin_max the specular term at the representative point of a light that size."""
+    """Twin of kernels/lights.cl light_brdf_cos (the real-time mode's): f(v, l) NoL, per hit and
+    colour channel; with sin_max the specular term at the representative point of a light that size."""
     nol = (n * l).sum(-1)
     out = np.zeros(l.shape[:-1] + (3,))
     if diffuse:
@@ -69,7 +70,9 @@ def lights(gb, arrays, records, effects: dict, *, diffuse=True, specular=True, e
     sid = np.flatnonzero(hit)              # each G-buffer sample's random stream (one tile)
     seed = effects["reference"]["seed"]
     color = np.zeros((len(p), 3))
-    shade = lambda l: light_brdf_cos(base, metallic, rough, f0, f90, n, v, nov, l, diffuse, specular)   # noqa: E731
+    # the exact mode shades with the paths' BSDF (kernels/lights.cl exact_brdf_cos: core/bsdf.py)
+    mt = bsdf.Material(f0, f90, rough ** 2, diffuse_weight(base, metallic, rough, f0, f90, nov))
+    shade = lambda l: bsdf.evaluate(mt, v, n, nov, l, 0.5, diffuse, specular)[0]   # noqa: E731
     for j, r in enumerate(records.astype(np.float64)):
         kind, e = int(r[0, 3]), np.broadcast_to(r[1, :3], (len(p), 3)).copy()
         if kind == LIGHT_KINDS["directional"]:
@@ -110,7 +113,7 @@ def lights(gb, arrays, records, effects: dict, *, diffuse=True, specular=True, e
                       for k in range(ns)) / ns
         else:
             vis = np.ones(len(p))
-        color += vis[:, None] * e * light_brdf_cos(base, metallic, rough, f0, f90, n, v, nov, wc, diffuse, specular,
-                                                   sin_max if representative and not exact else None)
+        color += vis[:, None] * e * (shade(wc) if exact else light_brdf_cos(
+            base, metallic, rough, f0, f90, n, v, nov, wc, diffuse, specular, sin_max if representative else None))
     out[hit] = color
     return out
