@@ -7,7 +7,8 @@
  *   LIGHTS_EXACT                   the reference: a light of size > 0 is integrated over its
  *                                  disk (directional) or sphere by exact_samples seeded samples,
  *                                  each shaded with the paths' BSDF (kernels/bsdf.h) and, with
- *                                  VISIBILITY, traced
+ *                                  VISIBILITY, traced; a mirror adds the light where its one
+ *                                  direction meets it
  * Real time: the light's centre direction is shaded (a light with a size: its specular term at
  * the representative point); hard shadows trace one ray to the centre,
  * soft ones shadow_samples rays over the disk or sphere (the fraction that arrives).
@@ -75,7 +76,7 @@ IBL_INLINE float3 light_brdf_cos(const Material mt, float3 n, float3 v, float no
 #endif
 /* f(v, l) NoL of the terms the frame renders, in the exact mode: the BSDF of every path vertex
  * (kernels/bsdf.h; its pdf unused: the light's cone is sampled). A mirror's delta lobe is met by
- * no direction the cone gives, as at a path's vertices. */
+ * no direction the cone gives: the lights pass adds it from its one direction. */
 IBL_INLINE float3 exact_brdf_cos(const Material mt, float3 n, float3 v, float nov, float3 l)
 {
     float pdf;
@@ -124,6 +125,22 @@ __kernel void lights(__global const float4 *gb_pos, SURFACE_PARAMS,
                 acc += f;
             }
             color += le * (2.0f * IBL_PI * omc) * acc / (float)exact_samples;
+#ifdef LIGHT_SPECULAR
+            /* a mirror (alpha < DELTA_ALPHA): F(NoV) Le where its one direction falls in the cone,
+             * |l - wc|^2 = 2 omc at the edge (precise for the sun's omc of 1e-5) */
+            if (mt.alpha < DELTA_ALPHA) {
+                float3 t, b, l;
+                float pm;
+                tangent_frame(nrm, &t, &b);
+                const float3 fm = bsdf_sample(mt, v, nrm, t, b, nov, 1.0f, 0, 1, 0.0f, (float2)(0.0f), &l, &pm);
+                const float3 dl = l - wc;
+                int seen = dot(dl, dl) <= 2.0f * omc;
+#ifdef VISIBILITY
+                seen = seen && !occluded_to(origin, l, dist, SCENE_ARGS);
+#endif
+                if (seen) color += le * fm;
+            }
+#endif
             continue;
         }
         const float3 f = exact_brdf_cos(mt, nrm, v, nov, wc);

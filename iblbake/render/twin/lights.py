@@ -103,6 +103,13 @@ def lights(gb, arrays, records, effects: dict, *, diffuse=True, specular=True, e
                 ok = ~occluded(origin, l, arrays, dist) if visibility else np.ones(len(p), bool)
                 acc += np.where(ok[:, None], shade(l), 0.0)
             color += le * (2 * np.pi * omc)[:, None] * acc / ns
+            mirror = (mt.alpha < bsdf.DELTA_ALPHA) & (sin_max > 0) if specular else np.zeros(len(p), bool)
+            if mirror.any():        # F(NoV) Le where a mirror's one direction falls in the cone
+                wm, lm, _ = bsdf.sample(mt, v, n, nov, 1.0, False, True, 0.0, np.zeros((len(p), 2)))
+                mirror &= ((lm - wc) ** 2).sum(1) <= 2 * omc
+                if visibility:
+                    mirror &= ~occluded(origin, lm, arrays, dist)
+                color += np.where(mirror[:, None], le * wm, 0.0)
             continue
         if exact:
             vis = (~occluded(origin, wc, arrays, dist)).astype(float) if visibility else np.ones(len(p))
