@@ -42,7 +42,7 @@ def specular_probability(mt: Material, nov, diffuse: bool, specular: bool):
 
 
 def ggx_lobe(mt: Material, v, n, nov, l, nol, ps):
-    """kernels/bsdf.h ggx_lobe: (D V NoL, F(VoH) (N, 3), ps times the visible normals' pdf of l),
+    """kernels/bsdf.h ggx_lobe: (D V NoL, F(VoH) (..., 3), ps times the visible normals' pdf of l),
     h = normalize(v + l), D from |n x h|^2 and NoH^2 as the kernel's."""
     hv = v + l
     hv = hv / np.maximum(np.linalg.norm(hv, axis=-1, keepdims=True), 1e-300)
@@ -52,25 +52,26 @@ def ggx_lobe(mt: Material, v, n, nov, l, nol, ps):
     dd = brdf.d_ggx_sc((cx * cx).sum(-1), noh * noh, a)
     pdf = ps * sampling.g1_smith(nov, a) * dd / (4 * nov)
     return dd * brdf.v_smith_ggx_correlated(nov, np.maximum(nol, 0), a) * np.maximum(nol, 0), \
-        brdf.f_schlick(voh[:, None], mt.f0, mt.f90), pdf
+        brdf.f_schlick(voh[..., None], mt.f0, mt.f90), pdf
 
 
 def evaluate(mt: Material, v, n, nov, l, ps, diffuse: bool, specular: bool):
-    """kernels/bsdf.h bsdf_eval: (f NoL (N, 3), pdf (N,)) of the terms asked for at directions l;
-    a delta lobe (alpha < DELTA_ALPHA) adds nothing."""
+    """kernels/bsdf.h bsdf_eval: (f NoL (..., 3), pdf (...)) of the terms asked for at directions l;
+    a delta lobe (alpha < DELTA_ALPHA) adds nothing. Rows, or any shapes that broadcast (vertices
+    (c, 1) against directions (d,): the quadrature of twin/reference.py)."""
     nol = (n * l).sum(-1)
     ps = np.broadcast_to(np.asarray(ps, np.float64), nol.shape)
-    f, pdf = np.zeros(l.shape[:-1] + (3,)), np.zeros(nol.shape)
+    f, pdf = np.zeros(nol.shape + (3,)), np.zeros(nol.shape)
     up = nol > 0
     if diffuse:
-        f += mt.kd * np.maximum(nol, 0)[:, None]
+        f += mt.kd * np.maximum(nol, 0)[..., None]
         pdf += (1 - ps) * np.maximum(nol, 0) / np.pi
     if specular:
         lobe = up & (mt.alpha >= DELTA_ALPHA)
         dvn, fr, pg = ggx_lobe(mt, v, n, nov, l, nol, ps)
-        f += np.where(lobe[:, None], fr * dvn[:, None], 0.0)
+        f += np.where(lobe[..., None], fr * dvn[..., None], 0.0)
         pdf += np.where(lobe, pg, 0.0)
-    return np.where(up[:, None], f, 0.0), np.where(up, pdf, 0.0)
+    return np.where(up[..., None], f, 0.0), np.where(up, pdf, 0.0)
 
 
 def pdf(mt: Material, v, n, nov, l, ps, diffuse: bool, specular: bool):
