@@ -84,6 +84,7 @@ def test_reference_noise_below_half_a_percent(study):
         assert ref["object_pixels"] > 500
 
 
+@pytest.mark.slow           # over 3 s on the 2-core CPU (with its module's study): make test, not make check
 def test_error_falls_with_samples_and_bands(study):
     """Monotonic within twice the reference's noise."""
     s = study["summary"]
@@ -95,6 +96,7 @@ def test_error_falls_with_samples_and_bands(study):
         assert errs[-1] < errs[0] / 2, (term, errs)
 
 
+@pytest.mark.slow           # over 3 s on the 2-core CPU (with its module's study): make test, not make check
 def test_report_files(study):
     s, out = study["summary"], study["dir"] / "out"
     assert len(s["rungs"]) == 2 + 4 + 4 + 1                  # the configured setting of each term first
@@ -120,6 +122,7 @@ def test_report_files(study):
     assert set(front) == {"diffuse", "specular"} and all(front.values())
 
 
+@pytest.mark.slow           # over 3 s on the 2-core CPU (with its module's study): make test, not make check
 def test_reference_is_cached_and_max_error_guards(study):
     """A second study reuses the reference; --max-error above the configured frame's error
     passes, below it fails in one line."""
@@ -136,6 +139,7 @@ def test_reference_is_cached_and_max_error_guards(study):
     assert "--max-error" in r.stderr and len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
 
 
+@pytest.mark.slow           # over 3 s on the 2-core CPU (with its module's study): make test, not make check
 def test_bad_ladder_is_one_line(tmp_path, study):
     bad = tmp_path / "bad.yaml"
     bad.write_text(yaml.safe_dump({"rungs": [{"key": "effects.sampels", "values": [1]}]}))
@@ -163,6 +167,7 @@ def test_references_in_two_workers_equal_the_serial_ones(tmp_path, study):
     assert [x["relative_rmse"] for x in got["rungs"]] == [x["relative_rmse"] for x in s["rungs"]]
 
 
+@pytest.mark.slow           # over 3 s on the 2-core CPU (with its module's study): make test, not make check
 def test_plot_legend_hides_no_point_and_tick_labels_do_not_overlap(study):
     """plot.png kept its legend inside the upper right of each panel (over a point) and labelled
     the minor ticks of a log axis spanning less than a decade, one over another."""

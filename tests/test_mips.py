@@ -261,3 +261,18 @@ def test_spectral_lone_sun_over_black_stays_in_range_and_keeps_energy():
                 sun = cv.equirect_texel_dirs(128, 64)[20, 40]
                 at = np.unravel_index(np.argmax(lvl[..., 0]), lvl.shape[:2])
                 assert layouts.layout_dirs("equirect", 32)[at] @ sun > np.cos(np.pi / 32), r
+
+
+def test_spectral_projects_a_repeated_channel_once():
+    """A channel equal to an earlier one (a reflection capture's coverage is prefiltered as grey)
+    is projected and synthesised once and copied: channels (a, b, a) give a and b exactly as the
+    distinct channels (a, b, c) do, and a again in the third."""
+    from iblbake.bake import spectral
+    rng = np.random.default_rng(3)
+    a, b, c = rng.random((3, 16, 32))
+    dirs, rough = [layouts.layout_dirs("equirect", 8)] * 2, [0.5, 1.0]
+    twice = spectral.prefilter_levels(np.stack([a, b, a], -1), dirs, rough)
+    apart = spectral.prefilter_levels(np.stack([a, b, c], -1), dirs, rough)
+    for t, s in zip(twice, apart):
+        assert np.abs(t[..., :2] - s[..., :2]).max() <= 1e-12 * s.max()
+        assert np.array_equal(t[..., 2], t[..., 0]) and not np.array_equal(s[..., 2], s[..., 0])

@@ -416,6 +416,7 @@ def test_file_size_limit_fails_cleanly(tmp_path, stress, random_env, warm):
     stress.count("partial files found", len([x for x in left if not x.endswith(".lock")]))
 
 
+@pytest.mark.slow           # its warm-up builds over 3 s on the 2-core CPU: make test, not make check
 def test_full_disk_fails_cleanly(tmp_path, stress, random_env, warm):
     """A 256 KiB tmpfs: sh, render and mips fail in one line and leave nothing (no temp files
     either, since the writer removes its own)."""

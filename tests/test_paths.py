@@ -338,3 +338,19 @@ def test_glossy_interreflection_passes_mitsubas_acceptance_test(tmp_path):
                         Bakes(tmp_path / "cache"))
     assert res["rate"] >= 0.9975, res
     assert np.abs(res["ratio"] - 1).max() < 0.01, res
+
+
+def test_the_paths_register_cap_is_asked_for_on_nvidia_gpus_only():
+    """device/launch.py build_options: the programs holding the paths (alone or among a frame's
+    kernel files) get NVIDIA's register cap on an NVIDIA GPU; other programs and devices none."""
+    from iblbake.device import launch
+    from iblbake.device.runtime import DeviceInfo
+
+    nv = DeviceInfo("0:0", "NVIDIA CUDA", "NVIDIA H200", "GPU")
+    cap = [f"-cl-nv-maxrregcount={launch.PATH_REGISTERS}"]
+    assert launch.build_options(nv, ("gbuffer.cl", "reference.cl", "resolve.cl")) == cap
+    assert launch.build_options(nv, "probe_trace.cl") == cap
+    assert launch.build_options(nv, ("gbuffer.cl", "shade.cl")) == []
+    for other in (DeviceInfo("0:0", "Portable Computing Language", "cpu", "CPU"),
+                  DeviceInfo("0:0", "AMD Accelerated Parallel Processing", "gfx90a", "GPU")):
+        assert launch.build_options(other, ("gbuffer.cl", "reference.cl")) == []

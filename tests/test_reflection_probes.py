@@ -297,6 +297,7 @@ def test_a_capture_shows_each_wall_where_it_is(tmp_path, rt, how):
     assert np.abs(got[clear, :3] - want[clear]).max() < 1e-6
 
 
+@pytest.mark.slow           # over 3 s on the 2-core CPU: make test, not make check
 def test_a_probe_inside_an_object_says_so(tmp_path, rt):
     """The same probe without the exclude list captures the sphere's inside all around: render
     says in one line that its position lies inside the named object and how to fix it."""
@@ -304,3 +305,21 @@ def test_a_probe_inside_an_object_says_so(tmp_path, rt):
     render(glowing_room(tmp_path, "inside"), runtime=rt, cache_root=tmp_path / "cache", warn=warned.append)
     said = [w for w in warned if "lies inside" in w]
     assert len(said) == 1 and "'ball' (objects.6)" in said[0] and "exclude" in said[0] and "\n" not in said[0]
+
+
+@pytest.mark.slow           # over 3 s on the 2-core CPU: make test, not make check
+def test_a_capture_is_the_same_however_its_launches_split(tmp_path, rt, monkeypatch):
+    """The launch policy (device/launch.py) splits a capture into whole texels per launch; random
+    streams are numbered by ray, not launch, so a capture of paths of three bounces split into 128
+    launches equals the one in a single launch, bit for bit."""
+    from iblbake.device import launch
+
+    scene = glowing_room(tmp_path, "split", position=[-0.5, 1.0, -0.6], bounces=3)
+    got = []
+    for items in (1 << 16, 64):
+        monkeypatch.setattr(launch, "per_launch", lambda rt, items=items: items)
+        bakes = Bakes(tmp_path / f"cache{items}")
+        render(scene, runtime=rt, cache=bakes)
+        got.append(captures(bakes)[0][0])
+    assert got[0].shape == (16, 32, 4) and got[0][..., :3].max() > 0.1
+    assert np.array_equal(got[0], got[1])

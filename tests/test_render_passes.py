@@ -82,6 +82,7 @@ def test_reference_visibility_sphere_over_plane_closed_form(tmp_path, white, h):
     assert terr.max() < 0.01
 
 
+@pytest.mark.slow           # over 3 s on the 2-core CPU: make test, not make check
 def test_reference_without_visibility_is_the_unoccluded_integral(tmp_path, white):
     sc = sphere_over_plane(tmp_path, white, 2 * R, visibility=False)
     _, _, hit, on_plane, want = plane_closed_form(sc, visibility=False)

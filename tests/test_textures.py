@@ -536,7 +536,7 @@ def test_texture_limits_and_formats(tmp_path):
     mesh = quad_glb(tmp_path / "q.glb")
     p = scene_file(tmp_path, {"m": {"base_color_map": {"path": big}}}, [{"mesh": {"path": mesh}, "material": "m"}])
     r = run_cli("render", p, "-o", tmp_path / "x.png", "--max-texture-pixels", "100000")
-    assert r.returncode == 1 and "500x300" in r.stderr and "--max-texture-pixels" in r.stderr, r.stderr
+    assert r.returncode == 1 and "500x300" in r.stderr and "--max-texture-pixels" in r.stderr and "IBLBAKE_MAX_TEXTURE_PIXELS" in r.stderr, r.stderr
     codes = np.random.default_rng(2).integers(0, 65536, (5, 7, 3))
     odd = png(tmp_path / "odd16.png", codes, bits=16)
     wide = quad_glb(tmp_path / "wide.glb", vertices=QUAD_V * [1, 5 / 7, 1])

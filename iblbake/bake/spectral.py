@@ -172,6 +172,14 @@ def prefilter_levels(source, dirs_per_level, roughness, nthreads: int | None = N
         raise ValueError("spectral: a level is too sharp for MAX_LMAX (use convolve or fis)")
     ks = [zonal_coefficients(a, tolerance(ndf), ndf=ndf) for a in alphas]
     lmax = max(len(k) - 1 for k in ks)
+    # a channel equal to an earlier one (a reflection capture's coverage, stored as grey) is
+    # projected and synthesised once: the same values, a third of the work for grey
+    src = np.asarray(source)
+    same = [next(j for j in range(i + 1) if np.array_equal(src[..., j], src[..., i])) for i in range(src.shape[-1])]
+    distinct = sorted(set(same))
+    if len(distinct) < len(same):
+        cols = [distinct.index(j) for j in same]
+        return [lv[..., cols] for lv in prefilter_levels(src[..., distinct], dirs_per_level, roughness, nthreads, ndf)]
     alm = project_texels(source, lmax, nthreads)
     # the exact level is a mean of source texels with non-negative weights, so it lies within the
     # source's range per channel; the bands dropped below TOLERANCE ring by about that fraction

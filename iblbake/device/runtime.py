@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from iblbake.device.launch import build_options
 from iblbake.errors import DeviceError, IblbakeError
 
 FIX_HINT = (
@@ -410,7 +411,8 @@ class Runtime:
         key = (hashlib.sha256(src.encode()).hexdigest(), tuple(defines.items()))
         if key in self._programs:
             return self._programs[key]
-        options = ["-cl-std=CL1.2", *self.device_options] + [f"-D{k}={v}" for k, v in defines.items()]
+        options = ["-cl-std=CL1.2", *self.device_options, *build_options(self.info, name)] + \
+            [f"-D{k}={v}" for k, v in defines.items()]
         t0 = time.perf_counter()
         try:
             with _quiet_build_log(self.cl):

@@ -12,9 +12,8 @@ from __future__ import annotations
 import numpy as np
 
 from iblbake.core import conventions, sampling
+from iblbake.device.launch import whole_units
 from iblbake.render.probes.rays import Tracer
-
-CHUNK_RAYS = 1 << 20          # capture rays per launch (a 512-row capture at 64 samples is 33M)
 
 
 def capture_directions(size: int, samples: int) -> np.ndarray:
@@ -42,7 +41,7 @@ def capture(tracer, index: int, settings: dict, progress=None):
     size, n = settings["size"], settings["samples"]
     dirs = capture_directions(size, n)
     sums = np.zeros((len(dirs) // n, 4))
-    per = max(n, CHUNK_RAYS // n * n)              # whole texels per launch
+    per = whole_units(tracer.rt, n) * n            # whole texels per launch (device/launch.py)
     pos = np.asarray([settings["position"]], np.float64)
     inside = {}
     for r0 in range(0, len(dirs), per):

@@ -310,14 +310,14 @@ def _resolve_references(v: "_Validator", out: dict, folder: Path) -> None:
                 f"defined: {', '.join(out['materials']) or 'none'}"
             v.fail(f"objects.{i}.material", f"no material named {o['material']!r} ({hint})")
     from iblbake.io.images import max_pixels_default
-    from iblbake.scene.textures import max_texture_pixels
+    from iblbake.scene.textures import RAISE_TEXTURE_LIMIT, max_texture_pixels
 
     for name, m in out["materials"].items():
         for key in [k for k in m if k.endswith("_map") and m[k]]:
             given = os.path.normpath(folder / m[key]["path"])
             m[key]["path"] = str(Path(given).resolve())
             _must_be_file(v, f"materials.{name}.{key}.path", given, "an image", folder,
-                          reads.image_bytes(max_texture_pixels()), " (--max-texture-pixels raises it)")
+                          reads.image_bytes(max_texture_pixels()), f" ({RAISE_TEXTURE_LIMIT})")
     for i, lt in enumerate(out["lights"]):
         if "spot" in lt and lt["spot"]["inner_cone_angle"] > lt["spot"]["outer_cone_angle"]:
             v.fail(f"lights.{i}.spot.inner_cone_angle", f"{lt['spot']['inner_cone_angle']:g} is wider than "
@@ -326,7 +326,7 @@ def _resolve_references(v: "_Validator", out: dict, folder: Path) -> None:
     env["path"] = str((folder / env["path"]).resolve()) if not Path(env["path"]).is_absolute() else env["path"]
     limit = max_pixels_default()
     _must_be_file(v, "environment.path", env["path"], "an HDR panorama", folder, reads.image_bytes(limit),
-                  f" of at most {limit} pixels (--max-pixels or IBLBAKE_MAX_PIXELS raises it)")
+                  f" of at most {limit} pixels (IBLBAKE_MAX_PIXELS or --max-pixels raises it)")
 
 
 def _check_mesh_files(v: "_Validator", key: str, path: str) -> None:

@@ -159,7 +159,7 @@ def read_source(source, where: str) -> bytes:
         from iblbake.io import reads
         try:
             return reads.read_bytes(source[1], reads.image_bytes(textures.max_texture_pixels()), "a texture",
-                                    " (--max-texture-pixels raises it)")
+                                    f" ({textures.RAISE_TEXTURE_LIMIT})")
         except InputError as e:
             raise InputError(f"{where}: texture {e}") from None
     return gltf.read(source[1], where).image(source[2])[0]

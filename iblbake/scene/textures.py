@@ -33,6 +33,10 @@ MAG_FILTERS = {"nearest": 0, "linear": 1}
 MAX_TEXTURE_PIXELS = 8192 * 8192
 
 
+# how a scene's texture limit is raised: the environment for the API, the flag on the command line
+RAISE_TEXTURE_LIMIT = "IBLBAKE_MAX_TEXTURE_PIXELS or --max-texture-pixels raises it"
+
+
 def max_texture_pixels() -> int:
     v = os.environ.get("IBLBAKE_MAX_TEXTURE_PIXELS")
     return int(v) if v and v.isdigit() else MAX_TEXTURE_PIXELS
@@ -62,8 +66,8 @@ def decode(data: bytes, name: str, where: str, max_pixels: int | None = None) ->
             if w < 1 or h < 1 or c < 1:
                 raise InputError(f"{where}: image {name!r} is {w}x{h} with {c} channels")
             if w * h > limit:
-                raise InputError(f"{where}: image {name!r} is {w}x{h}, more than --max-texture-pixels "
-                                 f"({limit}); raise the limit or use a smaller texture")
+                raise InputError(f"{where}: image {name!r} is {w}x{h}, more than the texture limit of {limit} "
+                                 f"pixels ({RAISE_TEXTURE_LIMIT}); or use a smaller texture")
             px = inp.read_image(0, 0, 0, c, oiio.FLOAT)
         finally:
             inp.close()

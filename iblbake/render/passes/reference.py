@@ -10,6 +10,7 @@ import math
 import numpy as np
 
 from iblbake.core.metrics import luminance
+from iblbake.device.launch import sample_slices
 from iblbake.render.device_scene import panorama_args
 from iblbake.render.passes.base import Buffer, Pass, geometry_defines, mode_defines
 from iblbake.render.passes.lights import Lights, frame_lights
@@ -29,19 +30,6 @@ def reference_noise(lum_sum, odd_sum, taken: int) -> float:
     if mean <= 0:
         return 0.0
     return math.sqrt(np.mean((even - odd) ** 2) / 4.0) / mean
-
-
-# work items a GPU is given per launch at least, where the frame has fewer G-buffer samples (an
-# H200 holds 132 x 2048 resident threads)
-GPU_ITEMS = 1 << 18
-
-
-def sample_slices(rt, n: int, batch: int) -> int:
-    """Work items per G-buffer sample: on a GPU enough for GPU_ITEMS in all (at most one per
-    sample of the batch); 1 on a CPU, whose cores a frame's samples already fill."""
-    if rt.info.kind != "GPU":
-        return 1
-    return max(1, min(batch, -(-GPU_ITEMS // max(n, 1))))
 
 
 def environment_args(ctx, dist) -> dict:

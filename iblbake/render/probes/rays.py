@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from iblbake.device.launch import whole_units
 from iblbake.render.device_scene import environment_frame, geometry_defines, has_lights, panorama_args, scene_lights
 
 
@@ -77,13 +78,13 @@ class Tracer:
         pos = rt.to_device(np.pad(np.asarray(positions, np.float32), ((probe0, 0), (0, 1))))
         dirs = np.asarray(dirs, np.float32)
         dir_buf = rt.to_device(dirs if dirs.shape[1] == 4 else np.pad(dirs, ((0, 0), (0, 1))))
-        per_launch = max(1, (1 << (20 if rt.info.kind == "GPU" else 16)) // nrays)
+        per = whole_units(rt, nrays)           # whole probes per launch (device/launch.py)
         out = np.empty((n, nrays, 4), np.float32)
         obj = np.empty((n, nrays), np.int32)
-        buf = rt.empty(16 * min(n, per_launch) * nrays)
-        obj_buf = rt.empty(4 * min(n, per_launch) * nrays)
-        for first in range(0, n, per_launch):
-            count = min(per_launch, n - first)
+        buf = rt.empty(16 * min(n, per) * nrays)
+        obj_buf = rt.empty(4 * min(n, per) * nrays)
+        for first in range(0, n, per):
+            count = min(per, n - first)
             rt.launch("probe_trace.cl", "probe_trace", self.defines, (count * nrays,), self.table, **self.args,
                       probe_pos=pos, ray_dirs=dir_buf, nrays=nrays, first=probe0 + first, count=count, ray0=ray0,
                       ray_solid_angle=4 * np.pi / nrays,
