@@ -11,6 +11,16 @@
                      const int nlev
 #define CHAIN_ARGS chain, off, lw, lh, nlev
 
+/* The environment a path samples and meets, as kernel parameters and arguments (bound by name:
+ * the frame's env_rot and env_scale, render/device_scene.py environment_frame; the panorama's
+ * texels and its importance-sampling tables, panorama_args): its rotation about y as (cos, sin)
+ * and its intensity, the full-resolution panorama (w x h RGBA texels, read piecewise constant),
+ * the marginal CDF over rows, one CDF per row, and the pdf over solid angle per texel. */
+#define ENV_PARAMS const float2 env_rot, const float env_scale, __global const float4 *img, const int w, \
+                   const int h, __global const float *marginal, __global const float *conditional, \
+                   __global const float *pdf_table
+#define ENV_ARGS env_rot, env_scale, img, w, h, marginal, conditional, pdf_table
+
 /* Trilinear lookup in the radiance chain: bilinear in two levels, blended. */
 /* Solid angle of a level-0 texel (w0 x h0) of the chain at direction l: (2 pi / w0)(pi / h0)
  * sin(theta), floored at the polar row's centre; continuous in latitude so that the level a

@@ -6,13 +6,16 @@
  *   HAS_SHADOWS                    some light traces shadow rays (else none is traced)
  *   LIGHTS_EXACT                   the reference: a light of size > 0 is integrated over its
  *                                  disk (directional) or sphere by exact_samples seeded samples,
- *                                  each shaded and, with VISIBILITY, traced
+ *                                  each shaded with the paths' BSDF (kernels/bsdf.h) and, with
+ *                                  VISIBILITY, traced; a mirror adds the light where its one
+ *                                  direction meets it
  * Real time: the light's centre direction is shaded (a light with a size: its specular term at
  * the representative point); hard shadows trace one ray to the centre,
  * soft ones shadow_samples rays over the disk or sphere (the fraction that arrives).
  * numpy twin: iblbake/render/twin/lights.py lights(). */
 #include "common.h"
 #include "brdf.h"
+#include "bsdf.h"
 #include "sampling.h"
 #include "scene.h"
 #include "surface.h"
@@ -38,8 +41,8 @@ IBL_INLINE float representative_point(float3 n, float3 v, float3 *l, float sin_m
     return (a / wide) * (a / wide);
 }
 
-/* f(v, l) NoL for a light of centre direction l; with sin_max > 0 the specular term at the
- * light's representative point */
+/* The real-time mode's f(v, l) NoL for a light of centre direction l; with sin_max > 0 the
+ * specular term at the light's representative point (the exact mode: exact_brdf_cos) */
 IBL_INLINE float3 light_brdf_cos(const Material mt, float3 n, float3 v, float nov, float3 l, float sin_max)
 {
     float3 f = (float3)(0.0f);
@@ -59,6 +62,27 @@ IBL_INLINE float3 light_brdf_cos(const Material mt, float3 n, float3 v, float no
 #endif
     return f;
 }
+
+#ifdef LIGHTS_EXACT
+#ifdef LIGHT_DIFFUSE
+#define LIGHT_TERM_DIFFUSE 1
+#else
+#define LIGHT_TERM_DIFFUSE 0
+#endif
+#ifdef LIGHT_SPECULAR
+#define LIGHT_TERM_SPECULAR 1
+#else
+#define LIGHT_TERM_SPECULAR 0
+#endif
+/* f(v, l) NoL of the terms the frame renders, in the exact mode: the BSDF of every path vertex
+ * (kernels/bsdf.h; its pdf unused: the light's cone is sampled). A mirror's delta lobe is met by
+ * no direction the cone gives: the lights pass adds it from its one direction. */
+IBL_INLINE float3 exact_brdf_cos(const Material mt, float3 n, float3 v, float nov, float3 l)
+{
+    float pdf;
+    return bsdf_eval(mt, v, n, nov, l, 0.5f, LIGHT_TERM_DIFFUSE, LIGHT_TERM_SPECULAR, &pdf);
+}
+#endif
 
 __kernel void lights(__global const float4 *gb_pos, SURFACE_PARAMS,
                      const int n, __global const float4 *lights, const int nlights,
@@ -93,7 +117,7 @@ __kernel void lights(__global const float4 *gb_pos, SURFACE_PARAMS,
             for (int k = 0; k < exact_samples; ++k) {
                 Sampler sp = sampler_start(ls, sid, k);
                 const float3 l = cone_direction(wc, omc, sampler_2d(&sp));
-                const float3 f = light_brdf_cos(mt, nrm, v, nov, l, 0.0f);
+                const float3 f = exact_brdf_cos(mt, nrm, v, nov, l);
                 if (f.x + f.y + f.z <= 0.0f) continue;      /* below the horizon: no ray */
 #ifdef VISIBILITY
                 if (occluded_to(origin, l, dist, SCENE_ARGS)) continue;
@@ -101,9 +125,25 @@ __kernel void lights(__global const float4 *gb_pos, SURFACE_PARAMS,
                 acc += f;
             }
             color += le * (2.0f * IBL_PI * omc) * acc / (float)exact_samples;
+#ifdef LIGHT_SPECULAR
+            /* a mirror (alpha < DELTA_ALPHA): F(NoV) Le where its one direction falls in the cone,
+             * |l - wc|^2 = 2 omc at the edge (precise for the sun's omc of 1e-5) */
+            if (mt.alpha < DELTA_ALPHA) {
+                float3 t, b, l;
+                float pm;
+                tangent_frame(nrm, &t, &b);
+                const float3 fm = bsdf_sample(mt, v, nrm, t, b, nov, 1.0f, 0, 1, 0.0f, (float2)(0.0f), &l, &pm);
+                const float3 dl = l - wc;
+                int seen = dot(dl, dl) <= 2.0f * omc;
+#ifdef VISIBILITY
+                seen = seen && !occluded_to(origin, l, dist, SCENE_ARGS);
+#endif
+                if (seen) color += le * fm;
+            }
+#endif
             continue;
         }
-        const float3 f = light_brdf_cos(mt, nrm, v, nov, wc, 0.0f);
+        const float3 f = exact_brdf_cos(mt, nrm, v, nov, wc);
         if (f.x + f.y + f.z <= 0.0f) continue;
 #ifdef VISIBILITY
         if (occluded_to(origin, wc, dist, SCENE_ARGS)) continue;

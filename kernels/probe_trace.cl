@@ -32,11 +32,7 @@
 
 __kernel void probe_trace(__global const float4 *probe_pos, __global const float4 *ray_dirs, const int nrays,
                           const int first, const int count, const int ray0, const uint seed, const int shade,
-                          const int back_faces_black,
-                          const float2 env_rot, const float env_scale,
-                          __global const float4 *img, const int w, const int h,
-                          __global const float *marginal, __global const float *conditional,
-                          __global const float *pdf_table, CHAIN_PARAMS, const float ray_solid_angle,
+                          const int back_faces_black, ENV_PARAMS, CHAIN_PARAMS, const float ray_solid_angle,
                           __global const float4 *materials, SCENE_PARAMS,
                           __global const float4 *lights, const int nlights, __global const int *skip_obj,
                           const int skip, __global float4 *ray_out, __global int *ray_obj)
@@ -67,7 +63,7 @@ __kernel void probe_trace(__global const float4 *probe_pos, __global const float
     }
     Sampler sp = sampler_start(seed, (uint)probe, (uint)(ray0 + r));
     float3 env_part;
-    const float3 emitted = follow_path(o, d, hh, (float3)(1.0f), &sp, materials, env_rot, img, w, h, marginal,
-                                       conditional, pdf_table, SCENE_ARGS, &env_part, lights, nlights);
+    const float3 emitted = follow_path(o, d, hh, (float3)(1.0f), &sp, materials, ENV_ARGS, SCENE_ARGS, &env_part,
+                                       lights, nlights);
     ray_out[item] = (float4)(env_part * env_scale + emitted, back ? -hh.t : hh.t);
 }

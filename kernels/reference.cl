@@ -1,8 +1,9 @@
 /* Reference pass: progressive Monte Carlo of the exact integral of direct environment lighting,
  * the ground truth the approximations are measured against. Per G-buffer sample and sample k:
- * two strategies combined by MIS with the power heuristic (Veach 1997):
+ * two strategies for each term, combined by MIS with the power heuristic (Veach 1997):
  *   1. the environment, piecewise constant over the full-resolution panorama (sample_env);
- *   2. the BRDF: cosine hemisphere for diffuse, GGX visible normals for specular.
+ *   2. the term's BSDF: cosine hemisphere for diffuse, GGX visible normals for specular.
+ * The BSDF, here and at every later vertex, is kernels/bsdf.h's.
  * With VISIBILITY, every sample's light direction is traced for any hit (occluded(), from an
  * offset origin), so the integral is the occluded one: a sphere above a plane darkens the plane.
  *   DIFFUSE_MODE == DIFFUSE_REFERENCE, SPECULAR_MODE == SPECULAR_REFERENCE select the terms.
@@ -16,7 +17,7 @@
  * min(max throughput, 0.95), unbiased.
  * numpy twin (the same integral by quadrature over every texel): iblbake/render/twin/reference.py exact(). */
 #include "common.h"
-#include "brdf.h"
+#include "bsdf.h"
 #include "sampling.h"
 #include "envmap.h"
 #include "scene.h"
@@ -59,11 +60,8 @@
 #if defined(IBL_SCALAR_BVH) && defined(HAS_TRIANGLES)
 __attribute__((intel_vec_len_hint(1)))
 #endif
-__kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int n,
-                        const float2 env_rot, const float env_scale,
-                        __global const float4 *img, const int w, const int h,
-                        __global const float *marginal, __global const float *conditional,
-                        __global const float *pdf_table, SCENE_PARAMS, const int pixel0, const int spp,
+__kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int n, ENV_PARAMS,
+                        SCENE_PARAMS, const int pixel0, const int spp,
                         const uint seed, const int first, const int batch, const int slices,
                         __global float4 *ref_batch, __global const float4 *lights, const int nlights)
 {
@@ -82,13 +80,6 @@ __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int
 #endif
     float3 t, b;
     tangent_frame(nrm, &t, &b);
-    const float3 vl = (float3)(dot(v, t), dot(v, b), nov);
-#if SPECULAR_MODE == SPECULAR_REFERENCE
-    const int delta = mt.alpha < DELTA_ALPHA;
-#endif
-#if DIFFUSE_MODE == DIFFUSE_REFERENCE
-    const float3 kd = diffuse_weight(mt, nov);
-#endif
     float3 sum = (float3)(0.0f);
     float odd = 0.0f;
     for (int k = slice; k < batch; k += slices) {
@@ -100,65 +91,47 @@ __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int
         const float2 u_env = sampler_2d(&sp), u_ggx = sampler_2d(&sp), u_cos = sampler_2d(&sp),
                      u_texel = sampler_2d(&sp);
         float3 est = (float3)(0.0f);
-        /* strategy 1: the environment */
+        /* strategy 1: the environment, each term weighted against its own BSDF's sampling */
         {
             int texel;
             const float4 u = (float4)(u_env, u_texel);
             const float3 l = from_env(sample_env(marginal, conditional, w, h, u, &texel), env_rot);
             const float pe = pdf_env(pdf_table, texel);
-            const float nol = dot(nrm, l);
-            if (nol > 0.0f && pe > 0.0f && VISIBLE(l)) {
+            if (dot(nrm, l) > 0.0f && pe > 0.0f && VISIBLE(l)) {
                 const float3 li = img[texel].xyz;
+                float pb;
 #if DIFFUSE_MODE == DIFFUSE_REFERENCE
-                est += li * kd * (nol / pe) * power_heuristic(pe, pdf_cosine_hemisphere(nol));
+                const float3 fd = bsdf_eval(mt, v, nrm, nov, l, 0.0f, 1, 0, &pb);
+                est += li * fd * (power_heuristic(pe, pb) / pe);
 #endif
 #if SPECULAR_MODE == SPECULAR_REFERENCE
-                if (!delta) {
-                    const float3 hv = normalize(v + l);
-                    const float3 cx = cross(nrm, hv);
-                    const float noh = fmax(dot(nrm, hv), 0.0f), voh = fmax(dot(v, hv), 0.0f);
-                    const float dd = d_ggx_sc(dot(cx, cx), noh * noh, mt.alpha);
-                    const float pb = g1_smith(nov, mt.alpha) * dd / (4.0f * nov);
-                    est += li * f_schlick(voh, mt.f0, mt.f90) * (dd * v_smith_ggx_correlated(nov, nol, mt.alpha) * nol / pe)
-                           * power_heuristic(pe, pb);
-                }
+                const float3 fs = bsdf_eval(mt, v, nrm, nov, l, 1.0f, 0, 1, &pb);
+                est += li * fs * (power_heuristic(pe, pb) / pe);
 #endif
             }
         }
+        /* strategy 2: each term's BSDF (the cosine hemisphere; GGX visible normals, or for a lobe
+         * narrower than float32 resolves the mirror, weight F and no other strategy), weighted
+         * against the environment's sampling */
 #if DIFFUSE_MODE == DIFFUSE_REFERENCE
-        /* strategy 2a: cosine-weighted hemisphere */
         {
-            const float3 ll = sample_cosine_hemisphere(u_cos);
-            const float3 l = t * ll.x + b * ll.y + nrm * ll.z;
-            const int texel = env_texel_index(to_env(l, env_rot), w, h);
-            const float pc = pdf_cosine_hemisphere(ll.z);
-            if (pc > 0.0f && VISIBLE(l))
-                est += img[texel].xyz * kd * IBL_PI * power_heuristic(pc, pdf_env(pdf_table, texel));
+            float3 l;
+            float pb;
+            const float3 wgt = bsdf_sample(mt, v, nrm, t, b, nov, 0.0f, 1, 0, 1.0f, u_cos, &l, &pb);
+            if ((wgt.x > 0.0f || wgt.y > 0.0f || wgt.z > 0.0f) && VISIBLE(l)) {
+                const int texel = env_texel_index(to_env(l, env_rot), w, h);
+                est += img[texel].xyz * wgt * power_heuristic(pb, pdf_env(pdf_table, texel));
+            }
         }
 #endif
 #if SPECULAR_MODE == SPECULAR_REFERENCE
-        /* strategy 2b: GGX visible normals; f NoL / pdf = F G2 / G1(V). A lobe narrower than
-         * float32 can resolve (alpha < DELTA_ALPHA) is a mirror: this strategy alone, weight F. */
-        if (delta) {
-            const float3 l = 2.0f * nov * nrm - v;
-            if (VISIBLE(l))
-                est += img[env_texel_index(to_env(l, env_rot), w, h)].xyz * f_schlick(nov, mt.f0, mt.f90);
-        } else {
-            const float3 hl = sample_ggx_vndf(vl, mt.alpha, u_ggx);
-            const float3 hs = t * hl.x + b * hl.y + nrm * hl.z;
-            const float3 l = 2.0f * dot(v, hs) * hs - v;
-            const float nol = dot(nrm, l);
-            if (nol > 0.0f && dot(v, hs) > 0.0f && VISIBLE(l)) {
-                /* the pdf from h = normalize(v + l), computed exactly as strategy 1 does, so the
-                 * two MIS weights of any direction sum to 1 */
-                const float3 hv = normalize(v + l);
-                const float3 cx = cross(nrm, hv);
-                const float noh = fmax(dot(nrm, hv), 0.0f), voh = fmax(dot(v, hv), 0.0f);
+        {
+            float3 l;
+            float pb;
+            const float3 wgt = bsdf_sample(mt, v, nrm, t, b, nov, 1.0f, 0, 1, 0.0f, u_ggx, &l, &pb);
+            if ((wgt.x > 0.0f || wgt.y > 0.0f || wgt.z > 0.0f) && VISIBLE(l)) {
                 const int texel = env_texel_index(to_env(l, env_rot), w, h);
-                const float g1 = g1_smith(nov, mt.alpha);
-                const float pb = g1 * d_ggx_sc(dot(cx, cx), noh * noh, mt.alpha) / (4.0f * nov);
-                const float g2 = v_smith_ggx_correlated(nov, nol, mt.alpha) * 4.0f * nov * nol;
-                est += img[texel].xyz * f_schlick(voh, mt.f0, mt.f90) * (g2 / g1) * power_heuristic(pb, pdf_env(pdf_table, texel));
+                est += img[texel].xyz * wgt * (isinf(pb) ? 1.0f : power_heuristic(pb, pdf_env(pdf_table, texel)));
             }
         }
 #endif
@@ -177,8 +150,8 @@ __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int
             if (wgt.x > 0.0f || wgt.y > 0.0f || wgt.z > 0.0f) {
                 const Hit hh = trace(origin, l, SCENE_ARGS);
                 if (hh.kind != PRIM_NONE)
-                    emitted = follow_path(origin, l, hh, wgt, &sp, materials, env_rot, img, w, h, marginal,
-                                          conditional, pdf_table, SCENE_ARGS, &env_part, lights, nlights);
+                    emitted = follow_path(origin, l, hh, wgt, &sp, materials, ENV_ARGS, SCENE_ARGS, &env_part,
+                                          lights, nlights);
             }
             est = (est + env_part) * env_scale + emitted;
         }

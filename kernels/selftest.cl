@@ -5,6 +5,7 @@
 #include "bases.h"
 #include "envmap.h"
 #include "probes.h"
+#include "bsdf.h"
 
 __kernel void t_equirect_uv(__global const float *d, __global float *uv)
 {
@@ -86,6 +87,28 @@ __kernel void t_warp(const int kind, const float param, const float4 vl, __globa
         d = 2.0f * dot(vl.xyz, h) * h - vl.xyz;
     }
     out[i] = (float4)(d, 0.0f);
+}
+
+/* bsdf.h per vertex (tests/test_bsdf.py): material rows mat[3i..3i+2] as the material table's,
+ * vn[2i] = (v, ps), vn[2i + 1] = (n, 0), lu[2i] = (l, u_lobe), lu[2i + 1] = (u, 0, 0); out[4i] =
+ * (bsdf_eval, its pdf), out[4i + 1].x = bsdf_pdf, out[4i + 2] = (bsdf_sample's weight, its pdf),
+ * out[4i + 3] = (its direction, specular_probability) */
+__kernel void t_bsdf(__global const float4 *mat, __global const float4 *vn, __global const float4 *lu,
+                     const int diffuse, const int specular, __global float4 *out)
+{
+    const int i = get_global_id(0);
+    const Material mt = material_from(mat[3 * i], mat[3 * i + 1], mat[3 * i + 2]);
+    const float3 v = vn[2 * i].xyz, n = vn[2 * i + 1].xyz, l = lu[2 * i].xyz;
+    const float ps = vn[2 * i].w, nov = fmax(dot(n, v), 1e-4f);
+    float pdf;
+    const float3 f = bsdf_eval(mt, v, n, nov, l, ps, diffuse, specular, &pdf);
+    out[4 * i] = (float4)(f, pdf);
+    out[4 * i + 1] = (float4)(bsdf_pdf(mt, v, n, nov, l, ps, diffuse, specular), 0.0f, 0.0f, 0.0f);
+    float3 t, b, ls;
+    tangent_frame(n, &t, &b);
+    const float3 w = bsdf_sample(mt, v, n, t, b, nov, ps, diffuse, specular, lu[2 * i].w, lu[2 * i + 1].xy, &ls, &pdf);
+    out[4 * i + 2] = (float4)(w, pdf);
+    out[4 * i + 3] = (float4)(ls, specular_probability(mt, nov, diffuse, specular));
 }
 
 __kernel void t_env(__global const float *marginal, __global const float *conditional, const int w, const int h,

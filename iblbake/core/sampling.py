@@ -1,6 +1,8 @@
-"""Sample sets and warps, each warp a pair sample_x / pdf_x (pbrt-v4's habit), float64. Mirrors
-kernels/sampling.h; tests/test_sampling.py checks every warp on both sides with a chi-square test
-against its own pdf (as Mitsuba 3's ChiSquareTest)."""
+"""Sample sets and warps, each warp a pair sample_x / pdf_x (pbrt-v4's habit), float64, and the
+random numbers: the Sampler of kernels/sampler.h (Halton dimensions, then Owen-scrambled Sobol
+pairs) and the environment's importance sampling. Mirrors kernels/sampling.h, kernels/sampler.h
+and kernels/envmap.h; tests/test_sampling.py checks every warp on both sides with a chi-square
+test against its own pdf (as Mitsuba 3's ChiSquareTest)."""
 
 from __future__ import annotations
 
@@ -67,7 +69,7 @@ def to_world(local, n):
 
 def pcg_hash(x):
     """PCG hash of 32-bit integers (Jarzynski and Olano 2020): one PCG state step and its output
-    permutation; kernels/sampling.h pcg_hash."""
+    permutation; kernels/sampler.h pcg_hash."""
     s = (np.asarray(x, np.uint64) * 747796405 + 2891336453) & 0xFFFFFFFF
     word = (((s >> ((s >> 28) + 4)) ^ s) * 277803737) & 0xFFFFFFFF
     return ((word >> 22) ^ word).astype(np.uint32)
@@ -89,12 +91,12 @@ HALTON_BASES = (2, 3, 5, 7, 11, 13, 17, 19)
 
 
 def hash_uniform(x):
-    """kernels/sampling.h hash_uniform: the top 24 bits of pcg_hash, in [0, 1)."""
+    """kernels/sampler.h hash_uniform: the top 24 bits of pcg_hash, in [0, 1)."""
     return (pcg_hash(x) >> 8).astype(np.float64) * (1.0 / 16777216.0)
 
 
 def qmc(seed, gid, k, d: int):
-    """kernels/sampling.h qmc: sample k of dimension d of sample stream gid: Halton point k // 2
+    """kernels/sampler.h qmc: sample k of dimension d of sample stream gid: Halton point k // 2
     of base HALTON_BASES[d], Cranley-Patterson rotated per replicate (k & 1) and stream."""
     gid, k = np.asarray(gid, np.int64), np.asarray(k, np.int64)
     rep, j = k & 1, k >> 1
@@ -134,6 +136,36 @@ def owen_sobol(j, seed, p: int, c: int):
     x = reverse_bits32(i) if c == 0 else sobol_dim1(i)
     y = nested_uniform_scramble(x, pcg_hash(u32((s.astype(np.uint64) + c + 1) & M32)))
     return (y >> 8).astype(np.float64) * (1.0 / 16777216.0)
+
+
+def sampler_1d(seed, gid, k, d: int):
+    """kernels/sampler.h sampler_1d: dimension d of sample k of G-buffer sample (or stream) gid;
+    the first 8 are Halton's (qmc), a path's later ones pairs of Owen-scrambled Sobol points, one
+    stream per (seed, gid, replicate k & 1), sample k >> 1 of it."""
+    if d < 8:
+        return qmc(seed, gid, k, d)
+    gid = np.asarray(gid, np.uint64)
+    k = np.asarray(k, np.uint64)
+    stream_index = ((gid * 2 + (k & 1)) & M32).astype(np.uint32)       # G-buffer sample, replicate
+    stream = pcg_hash(np.uint32(seed) ^ pcg_hash(stream_index))
+    return owen_sobol(k >> 1, stream, (d - 8) >> 1, (d - 8) & 1)
+
+
+class Sampler:
+    """kernels/sampler.h's Sampler: the dimensions of sample number k of every G-buffer sample (or
+    stream) gid, handed out in the order a kernel asks for them (next_1d, next_2d as the kernel's
+    sampler_1d, sampler_2d); gid an array, k and seed one value or arrays of gid's shape."""
+
+    def __init__(self, seed, gid, k):
+        self.seed, self.gid, self.k, self.dim = seed, gid, k, 0
+
+    def next_1d(self):
+        self.dim += 1
+        return sampler_1d(self.seed, self.gid, self.k, self.dim - 1)
+
+    def next_2d(self):
+        a = self.next_1d()
+        return np.stack([a, self.next_1d()], -1)
 
 
 def halton_rotated(n: int, base: int, shift: float):
@@ -209,7 +241,7 @@ def pdf_ggx_vndf(nov, noh, voh, alpha):
 class EnvironmentDistribution:
     """Piecewise constant over a panorama's texels, p(texel) proportional to luminance x exact
     solid angle; inside a texel uniform in (phi, cos theta). Its tables (marginal CDF over rows,
-    one CDF per row, pdf over solid angle per texel) are what kernels/sampling.h sample_env reads."""
+    one CDF per row, pdf over solid angle per texel) are what kernels/envmap.h sample_env reads."""
 
     def __init__(self, image):
         self.marginal, self.conditional, self.pdf = env_sampling_tables(image)

@@ -7,6 +7,7 @@ tests/test_render_passes.py checks that the committed header is what this table 
 
 from __future__ import annotations
 
+from iblbake.core.bsdf import DELTA_ALPHA
 from iblbake.core.metrics import LUMINANCE
 
 DIFFUSE_MODES = {"off": 0, "sh": 1, "reference": 2, "probes": 3, "basis": 4}   # basis: core/bases DIFFUSE
@@ -18,10 +19,10 @@ LIGHT_KINDS = {"directional": 0, "point": 1, "spot": 2}
 SHADOW_MODES = {"none": 0, "hard": 1, "soft": 2}
 # what a ray hit (kernels/scene.h Hit.kind; the twin's gb["kind"])
 PRIM_KINDS = {"none": 0, "sphere": 1, "plane": 2, "triangle": 3}
-# GGX lobes narrower than this alpha (= roughness^2) are mirrors where a path samples them:
-# float32 cannot resolve the lobe (D overflows, the half-vector warp collapses), so the reference
-# takes the mirror direction with weight F (kernels/reference.cl, render/twin, study/accuracy)
-DELTA_ALPHA = 1e-4
+# DELTA_ALPHA (core/bsdf.py, where the BSDF's twin reads it): GGX lobes narrower than this alpha
+# (= roughness^2) are mirrors where a path samples them: float32 cannot resolve the lobe (D
+# overflows, the half-vector warp collapses), so the BSDF takes the mirror direction with weight F
+# (kernels/bsdf.h, render/twin, study/accuracy)
 # random streams: a seed ^ its stream, so that two uses of one seed draw independent numbers
 # (kernels/sampler.h; the reference's stream is the seed itself, each light's seed ^ pcg_hash(j + 1))
 RANDOM_STREAMS = {"ao": 0x5A0}

@@ -8,7 +8,6 @@ from iblbake.core import conventions
 from iblbake.core import sampling
 from iblbake.scene import layout
 from iblbake.render.twin.gbuffer import occluded, ray_offset
-from iblbake.render.twin.lights import _qmc2
 from iblbake.render.twin.surface import facing_normal
 
 
@@ -26,7 +25,7 @@ def ambient_occlusion(gb, arrays, effects: dict):
     k_n = effects["ao_samples"]
     open_ = np.zeros(len(sid))
     for k in range(k_n):
-        l = sampling.sample_cosine_hemisphere(_qmc2(seed, sid, k))
+        l = sampling.sample_cosine_hemisphere(sampling.Sampler(seed, sid, k).next_2d())
         d = t * l[:, 0:1] + b * l[:, 1:2] + n * l[:, 2:3]
         open_ += ~occluded(origin, d, arrays, effects["ao_radius"])
     out[hit] = open_ / k_n

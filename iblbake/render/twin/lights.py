@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from iblbake.core import brdf
+from iblbake.core import bsdf
 from iblbake.core import conventions
 from iblbake.core import sampling
 from iblbake.scene.layout import LIGHT_KINDS
@@ -30,8 +31,8 @@ def representative_point(n, v, l, sin_max, alpha):
 
 
 def light_brdf_cos(base, metallic, rough, f0, f90, n, v, nov, l, diffuse: bool, specular: bool, sin_max=None):
-    """Twin of kernels/lights.cl light_brdf_cos: f(v, l) NoL, per hit and colour channel; with
-    sin_max the specular term at the representative point of a light that size."""
+    """Twin of kernels/lights.cl light_brdf_cos (the real-time mode's): f(v, l) NoL, per hit and
+    colour channel; with sin_max the specular term at the representative point of a light that size."""
     nol = (n * l).sum(-1)
     out = np.zeros(l.shape[:-1] + (3,))
     if diffuse:
@@ -46,11 +47,6 @@ def light_brdf_cos(base, metallic, rough, f0, f90, n, v, nov, l, diffuse: bool, 
                 * energy * np.maximum(nols, 0))[:, None] * brdf.f_schlick((v * h).sum(-1)[:, None], f0, f90)
         out += np.where((nols > 0)[:, None], spec, 0)
     return out
-
-
-def _qmc2(seed, sid, k):
-    """Sample k of the 2D stream of each sample sid (kernels/sampling.h qmc, dimensions 0 and 1)."""
-    return np.stack([sampling.qmc(seed, sid, k, 0), sampling.qmc(seed, sid, k, 1)], -1)
 
 
 def _cone_direction(a, omc, u):
@@ -74,7 +70,9 @@ def lights(gb, arrays, records, effects: dict, *, diffuse=True, specular=True, e
     sid = np.flatnonzero(hit)              # each G-buffer sample's random stream (one tile)
     seed = effects["reference"]["seed"]
     color = np.zeros((len(p), 3))
-    shade = lambda l: light_brdf_cos(base, metallic, rough, f0, f90, n, v, nov, l, diffuse, specular)   # noqa: E731
+    # the exact mode shades with the paths' BSDF (kernels/lights.cl exact_brdf_cos: core/bsdf.py)
+    mt = bsdf.Material(f0, f90, rough ** 2, diffuse_weight(base, metallic, rough, f0, f90, nov))
+    shade = lambda l: bsdf.evaluate(mt, v, n, nov, l, 0.5, diffuse, specular)[0]   # noqa: E731
     for j, r in enumerate(records.astype(np.float64)):
         kind, e = int(r[0, 3]), np.broadcast_to(r[1, :3], (len(p), 3)).copy()
         if kind == LIGHT_KINDS["directional"]:
@@ -101,21 +99,28 @@ def lights(gb, arrays, records, effects: dict, *, diffuse=True, specular=True, e
             le = e / (np.pi * sin_max ** 2)[:, None]
             acc = np.zeros((len(p), 3))
             for k in range(ns):
-                l = _cone_direction(wc, omc, _qmc2(ls, sid, k))
+                l = _cone_direction(wc, omc, sampling.Sampler(ls, sid, k).next_2d())
                 ok = ~occluded(origin, l, arrays, dist) if visibility else np.ones(len(p), bool)
                 acc += np.where(ok[:, None], shade(l), 0.0)
             color += le * (2 * np.pi * omc)[:, None] * acc / ns
+            mirror = (mt.alpha < bsdf.DELTA_ALPHA) & (sin_max > 0) if specular else np.zeros(len(p), bool)
+            if mirror.any():        # F(NoV) Le where a mirror's one direction falls in the cone
+                wm, lm, _ = bsdf.sample(mt, v, n, nov, 1.0, False, True, 0.0, np.zeros((len(p), 2)))
+                mirror &= ((lm - wc) ** 2).sum(1) <= 2 * omc
+                if visibility:
+                    mirror &= ~occluded(origin, lm, arrays, dist)
+                color += np.where(mirror[:, None], le * wm, 0.0)
             continue
         if exact:
             vis = (~occluded(origin, wc, arrays, dist)).astype(float) if visibility else np.ones(len(p))
         elif mode == 1 or (mode == 2 and (sin_max <= 0).all()):
             vis = (~occluded(origin, wc, arrays, dist)).astype(float)
         elif mode == 2:             # soft: the share of ns rays over the disk or sphere that arrive
-            vis = sum(~occluded(origin, _cone_direction(wc, omc, _qmc2(ls, sid, k)), arrays, dist)
+            vis = sum(~occluded(origin, _cone_direction(wc, omc, sampling.Sampler(ls, sid, k).next_2d()), arrays, dist)
                       for k in range(ns)) / ns
         else:
             vis = np.ones(len(p))
-        color += vis[:, None] * e * light_brdf_cos(base, metallic, rough, f0, f90, n, v, nov, wc, diffuse, specular,
-                                                   sin_max if representative and not exact else None)
+        color += vis[:, None] * e * (shade(wc) if exact else light_brdf_cos(
+            base, metallic, rough, f0, f90, n, v, nov, wc, diffuse, specular, sin_max if representative else None))
     out[hit] = color
     return out

@@ -8,45 +8,15 @@ boundary, a roulette draw) one path differs; every other is the kernel's."""
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-from iblbake.core import brdf
+from iblbake.core import bsdf
 from iblbake.core import conventions
 from iblbake.core import sampling
-from iblbake.core.metrics import luminance
 from iblbake.render.twin.gbuffer import _plane_t, _sphere_roots, occluded, ray_offset
 from iblbake.render.twin.surface import _materials, diffuse_weight, facing_normal, surface, to_env
-from iblbake.scene.layout import DELTA_ALPHA
 
-RR_DEPTH, MAX_PATH = 3, 256           # kernels/reference.cl
-
-
-def dimension(seed, gid, k, d):
-    """kernels/sampler.h sampler_1d: dimension d of sample k of G-buffer sample gid."""
-    if d < 8:
-        return sampling.qmc(seed, gid, k, d)
-    gid = np.asarray(gid, np.uint64)
-    k = np.asarray(k, np.uint64)
-    stream_index = ((gid * 2 + (k & 1)) & sampling.M32).astype(np.uint32)       # G-buffer sample, replicate
-    stream = sampling.pcg_hash(np.uint32(seed) ^ sampling.pcg_hash(stream_index))
-    return sampling.owen_sobol(k >> 1, stream, (d - 8) >> 1, (d - 8) & 1)
-
-
-class Dims:
-    """The Sampler of one sample number k for every G-buffer sample gid: dimensions in order."""
-
-    def __init__(self, seed, gid, k):
-        self.seed, self.gid, self.k, self.d = seed, gid, k, 0
-
-    def next(self):
-        self.d += 1
-        return dimension(self.seed, self.gid, self.k, self.d - 1)
-
-    def next2(self):
-        a = self.next()
-        return np.stack([a, self.next()], -1)
+RR_DEPTH, MAX_PATH = 3, 256           # kernels/paths.h
 
 
 def closest(o, d, arrays):
@@ -78,64 +48,10 @@ def env_texel(l, rot, w, h):
     return np.minimum((v * h).astype(np.int64), h - 1) * w + np.minimum((u * w).astype(np.int64), w - 1)
 
 
-def specular_probability(f0, f90, kd_pi, nov, diffuse: bool, specular: bool):
-    s = luminance(brdf.f_schlick(nov[:, None], f0, f90)) if specular else np.zeros(len(nov))
-    d = luminance(kd_pi) if diffuse else np.zeros(len(nov))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ps = np.clip(s / (s + d), 0.1, 0.9)
-    return np.where(~(s > 0), 0.0, np.where(~(d > 0), 1.0, ps))
-
-
-def bsdf_cos(m, v, n, nov, l, ps, diffuse: bool, specular: bool):
-    """(f NoL, pdf) of the terms asked for (kernels/reference.cl bsdf_cos); m: the vertex's
-    material columns (base, metallic, emissive, rough, f0, f90, kd)."""
-    base, metallic, _, rough, f0, f90, kd = m
-    alpha = rough ** 2
-    nol = (n * l).sum(-1)
-    f, pdf = np.zeros_like(l), np.zeros(len(l))
-    up = nol > 0
-    if diffuse:
-        f += kd * np.maximum(nol, 0)[:, None]
-        pdf += (1 - ps) * np.maximum(nol, 0) / math.pi
-    if specular:
-        lobe = up & (alpha >= DELTA_ALPHA)
-        hv = v + l
-        hv /= np.maximum(np.linalg.norm(hv, axis=-1, keepdims=True), 1e-300)
-        noh, voh = np.maximum((n * hv).sum(-1), 0), np.maximum((v * hv).sum(-1), 0)
-        a = np.maximum(alpha, 1e-30)
-        dd = brdf.d_ggx(noh, a)
-        spec = (brdf.f_schlick(voh[:, None], f0, f90) * (dd * brdf.v_smith_ggx_correlated(nov, np.maximum(nol, 0), a)
-                                                         * np.maximum(nol, 0))[:, None])
-        f += np.where(lobe[:, None], spec, 0.0)
-        pdf += np.where(lobe, ps * sampling.g1_smith(nov, a) * dd / (4 * nov), 0.0)
-    return np.where(up[:, None], f, 0.0), np.where(up, pdf, 0.0)
-
-
-def bsdf_sample(m, v, n, nov, ps, diffuse, specular, u_lobe, u):
-    """(f NoL / pdf, direction, pdf (inf for a mirror)) (kernels/reference.cl bsdf_sample)."""
-    base, metallic, _, rough, f0, f90, kd = m
-    alpha = rough ** 2
-    t, b = conventions.tangent_frame(n)
-    spec = u_lobe < ps
-    mirror = spec & (alpha < DELTA_ALPHA)
-    vl = np.stack([(v * t).sum(1), (v * b).sum(1), nov], -1)
-    hl = sampling.sample_ggx_vndf(vl, np.maximum(alpha, 1e-30), u)
-    hs = t * hl[:, 0:1] + b * hl[:, 1:2] + n * hl[:, 2:3]
-    l_spec = 2 * (v * hs).sum(1, keepdims=True) * hs - v
-    ll = sampling.sample_cosine_hemisphere(u)
-    l_cos = t * ll[:, 0:1] + b * ll[:, 1:2] + n * ll[:, 2:3]
-    l = np.where(spec[:, None], l_spec, l_cos)
-    l = np.where(mirror[:, None], 2 * nov[:, None] * n - v, l)
-    f, pdf = bsdf_cos(m, v, n, nov, l, ps, diffuse, specular)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        w = np.where((pdf > 0)[:, None], f / np.where(pdf > 0, pdf, 1)[:, None], 0.0)
-        w_mirror = brdf.f_schlick(nov[:, None], f0, f90) / np.where(ps > 0, ps, 1)[:, None]
-    return np.where(mirror[:, None], w_mirror, w), l, np.where(mirror, np.inf, pdf)
-
-
-def _columns(arrays, mat, nov):
+def _vertex(arrays, mat, nov):
+    """(the BSDF's material (core/bsdf.py), emission) of the materials `mat` seen at NoV nov."""
     base, metallic, emissive, rough, f0, f90 = _materials(arrays, mat)
-    return base, metallic, emissive, rough, f0, f90, diffuse_weight(base, metallic, rough, f0, f90, nov)
+    return bsdf.Material(f0, f90, rough ** 2, diffuse_weight(base, metallic, rough, f0, f90, nov)), emissive
 
 
 def radiance(gb, arrays, effects: dict, env: dict, image, dist, samples: int, bounces=0):
@@ -150,59 +66,42 @@ def radiance(gb, arrays, effects: dict, env: dict, image, dist, samples: int, bo
     hgt, wid = image.shape[:2]
     pdf_table = dist.pdf.reshape(-1).astype(np.float64)
     v, n, nov, cols = surface(gb, arrays)
-    m1 = cols + (diffuse_weight(*cols[:2], cols[3], cols[4], cols[5], nov),)
-    kd = m1[6]
-    alpha = m1[3] ** 2
-    delta = alpha < DELTA_ALPHA
+    mt = bsdf.Material(cols[4], cols[5], cols[3] ** 2, diffuse_weight(*cols[:2], cols[3], cols[4], cols[5], nov))
     origin = ray_offset(gb["pos"][hit], n, gb["dir"][hit], gb["t"][hit])
-    t, b = conventions.tangent_frame(n)
-    vl = np.stack([(v * t).sum(1), (v * b).sum(1), nov], -1)
     total = np.zeros((len(gid), 3))
     for k in range(samples):
-        sp = Dims(seed, gid, k)
-        u_env, u_ggx, u_cos, u_texel = sp.next2(), sp.next2(), sp.next2(), sp.next2()
+        sp = sampling.Sampler(seed, gid, k)
+        u_env, u_ggx, u_cos, u_texel = sp.next_2d(), sp.next_2d(), sp.next_2d(), sp.next_2d()
         est = np.zeros((len(gid), 3))
-        # the direct estimate: the environment, then the BSDF (kernels/reference.cl, strategies 1, 2)
+        # the direct estimate, each term alone (kernels/reference.cl): the environment, MIS against
+        # the term's BSDF pdf, then the term's BSDF (the cosine hemisphere, GGX visible normals),
+        # MIS against the environment's
         de, texel = dist.sample(np.concatenate([u_env, u_texel], 1))
         l = conventions.rotate_y(de, rot)
         pe = pdf_table[texel]
         nol = (n * l).sum(1)
         ok = (nol > 0) & (pe > 0) & ~occluded(origin, l, arrays)
         li = img[texel]
-        if diffuse:
-            est += np.where(ok[:, None], li * kd * (nol / np.where(pe > 0, pe, 1))[:, None]
-                            * sampling.power_heuristic(pe, np.maximum(nol, 0) / math.pi)[:, None], 0.0)
-        if specular:
-            f, pb = bsdf_cos(m1, v, n, nov, l, np.ones(len(l)), False, True)
-            est += np.where((ok & ~delta)[:, None], li * f / np.where(pe > 0, pe, 1)[:, None]
-                            * sampling.power_heuristic(pe, pb)[:, None], 0.0)
-        if diffuse:
-            ll = sampling.sample_cosine_hemisphere(u_cos)
-            lc = t * ll[:, 0:1] + b * ll[:, 1:2] + n * ll[:, 2:3]
-            tx = env_texel(lc, rot, wid, hgt)
-            pc = np.maximum(ll[:, 2], 0) / math.pi
-            seen = (pc > 0) & ~occluded(origin, lc, arrays)
-            est += np.where(seen[:, None], img[tx] * kd * math.pi * sampling.power_heuristic(pc, pdf_table[tx])[:, None], 0.0)
-        if specular:
-            r = 2 * nov[:, None] * n - v
-            seen = ~occluded(origin, r, arrays)
-            est += np.where((delta & seen)[:, None], img[env_texel(r, rot, wid, hgt)]
-                            * brdf.f_schlick(nov[:, None], m1[4], m1[5]), 0.0)
-            hl = sampling.sample_ggx_vndf(vl, np.maximum(alpha, 1e-30), u_ggx)
-            hs = t * hl[:, 0:1] + b * hl[:, 1:2] + n * hl[:, 2:3]
-            vh = (v * hs).sum(1)
-            lg = 2 * vh[:, None] * hs - v
-            nl = (n * lg).sum(1)
-            good = ~delta & (nl > 0) & (vh > 0) & ~occluded(origin, lg, arrays)
-            f, pb = bsdf_cos(m1, v, n, nov, lg, np.ones(len(lg)), False, True)
-            tx = env_texel(lg, rot, wid, hgt)
+        for term, ps_term, u_term in ((diffuse, 0.0, u_cos), (specular, 1.0, u_ggx)):
+            if not term:
+                continue
+            f, pb = bsdf.evaluate(mt, v, n, nov, l, ps_term, not ps_term, bool(ps_term))
             with np.errstate(invalid="ignore", divide="ignore"):
-                wgt = f / np.where(pb > 0, pb, 1)[:, None]
-            est += np.where(good[:, None], img[tx] * wgt * sampling.power_heuristic(pb, pdf_table[tx])[:, None], 0.0)
+                mis_e = sampling.power_heuristic(pe, pb) / np.where(pe > 0, pe, 1)
+            est += np.where(ok[:, None], li * f * mis_e[:, None], 0.0)
+        for term, ps_term, u_term in ((diffuse, 0.0, u_cos), (specular, 1.0, u_ggx)):
+            if not term:
+                continue
+            wgt, lb, pb = bsdf.sample(mt, v, n, nov, ps_term, not ps_term, bool(ps_term), 1.0 - ps_term, u_term)
+            tx = env_texel(lb, rot, wid, hgt)
+            seen = (wgt > 0).any(1)
+            seen &= ~occluded(origin, lb, arrays) if seen.any() else seen
+            mis_b = np.where(np.isinf(pb), 1.0, sampling.power_heuristic(pb, pdf_table[tx]))
+            est += np.where(seen[:, None], img[tx] * wgt * mis_b[:, None], 0.0)
         # the path: the surface the first vertex sees, then every later vertex
-        u_lobe, u_dir = sp.next(), sp.next2()
-        ps = specular_probability(m1[4], m1[5], kd * math.pi, nov, diffuse, specular)
-        beta, l, _ = bsdf_sample(m1, v, n, nov, ps, diffuse, specular, u_lobe, u_dir)
+        u_lobe, u_dir = sp.next_1d(), sp.next_2d()
+        ps = bsdf.specular_probability(mt, nov, diffuse, specular)
+        beta, l, _ = bsdf.sample(mt, v, n, nov, ps, diffuse, specular, u_lobe, u_dir)
         alive = (beta > 0).any(1)
         env_part, emitted = np.zeros_like(est), np.zeros_like(est)
         o = origin.copy()
@@ -216,23 +115,23 @@ def radiance(gb, arrays, effects: dict, env: dict, image, dist, samples: int, bo
             vv = -l
             nn = facing_normal(ng, vv)
             nv = np.maximum((nn * vv).sum(1), 1e-4)
-            mv = _columns(arrays, np.where(alive, mat, 0), nv)
-            emitted += np.where(alive[:, None], beta * mv[2], 0.0)
+            mv, emission = _vertex(arrays, np.where(alive, mat, 0), nv)
+            emitted += np.where(alive[:, None], beta * emission, 0.0)
             if 0 < bounces < bounce:
                 break
             org = ray_offset(p, nn, l, np.where(alive, th, 0))
-            psv = specular_probability(mv[4], mv[5], mv[6] * math.pi, nv, True, True)
-            u_env, u_texel, u_d = sp.next2(), sp.next2(), sp.next2()
-            u_lb, u_rr = sp.next(), sp.next()
+            psv = bsdf.specular_probability(mv, nv, True, True)
+            u_env, u_texel, u_d = sp.next_2d(), sp.next_2d(), sp.next_2d()
+            u_lb, u_rr = sp.next_1d(), sp.next_1d()
             de, texel = dist.sample(np.concatenate([u_env, u_texel], 1))
             le = conventions.rotate_y(de, rot)
             pe = pdf_table[texel]
-            f, pb = bsdf_cos(mv, vv, nn, nv, le, psv, True, True)
+            f, pb = bsdf.evaluate(mv, vv, nn, nv, le, psv, True, True)
             ok = alive & (pe > 0) & (f > 0).any(1)
             ok &= ~occluded(org, le, arrays) if ok.any() else ok
             env_part += np.where(ok[:, None], beta * img[texel] * f
                                  * (sampling.power_heuristic(pe, pb) / np.where(pe > 0, pe, 1))[:, None], 0.0)
-            wgt, nl, pb = bsdf_sample(mv, vv, nn, nv, psv, True, True, u_lb, u_d)
+            wgt, nl, pb = bsdf.sample(mv, vv, nn, nv, psv, True, True, u_lb, u_d)
             alive &= (wgt > 0).any(1)
             beta = np.where(alive[:, None], beta * wgt, beta)
             if bounce >= RR_DEPTH:

@@ -211,7 +211,7 @@ def trace(pix, cam: dict, s: dict, captured=None):
     acc, csum = np.zeros((len(sel), 3)), np.zeros(len(sel))
     p0 = p + n * (1e-4 * (np.linalg.norm(p, axis=1) + np.linalg.norm(p - pos, axis=1)))[:, None]
     for k in range(int(count.max())):
-        u = np.stack([sampling.qmc(s["seed"], sel, k, d) for d in (0, 1)], -1)
+        u = sampling.Sampler(s["seed"], sel, k).next_2d()
         hl = np.where((alpha < DELTA_ALPHA)[:, None], [0.0, 0.0, 1.0], sampling.sample_ggx_vndf(vl, alpha, u))
         hv = t * hl[:, 0:1] + b * hl[:, 1:2] + n * hl[:, 2:3]
         l = 2 * (v * hv).sum(1, keepdims=True) * hv - v
