@@ -1,5 +1,5 @@
 """Where the reference's time goes (render(profile_paths=...), `render --profile-paths`;
-iblbake/render/paths_profile.py): per bounce by differential launches, the traversal of each
+iblbake/render/paths/profile.py): per bounce by differential launches, the traversal of each
 bounce's recorded rays alone, shading the rest, checked by a replay without traversal. The parts
 are positive and add up to the whole launch, there is one entry per bounce, the frame is the same
 bit for bit, --json carries the record, and a scene without the reference is refused in one line."""
@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from iblbake.errors import InputError
-from iblbake.render import paths_profile, render
+from iblbake.render import render
+from iblbake.render.paths import profile as paths_profile
 from tests.conftest import load_scene, run_cli
 
 # the differential parts against the whole launch: medians of a few rounds of launches of some

@@ -103,7 +103,7 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, profi
 
 
 def profile_lines(pr: dict) -> list:
-    """The reference's paths profile (render/paths_profile.py) as a table: per bounce its time,
+    """The reference's paths profile (render/paths/profile.py) as a table: per bounce its time,
     split into shading and the traversal of its closest-hit and shadow rays."""
     unit = "CPU ms" if pr["clock"] == "cpu" else "ms"
     tile = f", tile {pr['tile']} of {pr['tiles']}" if pr["tiles"] > 1 else ""

@@ -273,7 +273,7 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
     across a series of frames), passes whose inputs did not change since the last frame are not
     run again. `device_budget` overrides the device bytes a frame's buffers may take (tests
     force tiling with it). `profile_paths` (a number of repeats; True: the default's) measures
-    where the reference pass's time goes after the frame (render/paths_profile.py): the report's
+    where the reference pass's time goes after the frame (render/paths/profile.py): the report's
     `paths_profile`; a plan without the reference pass raises InputError."""
     from iblbake.device.runtime import Runtime
 

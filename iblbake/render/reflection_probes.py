@@ -13,7 +13,7 @@ import numpy as np
 
 from iblbake.core import conventions, sampling
 from iblbake.device.launch import whole_units
-from iblbake.render.probes.rays import Tracer
+from iblbake.render.paths.tracer import Tracer
 
 
 def capture_directions(size: int, samples: int) -> np.ndarray:
@@ -85,7 +85,7 @@ def excluded(scene_data: dict, settings: dict) -> list:
 
 
 def tracer(job, settings: dict):
-    """The probe tracer (render/probes/rays.py) on a job (render/units.py Job) for a capture: its
+    """The paths' tracer (render/paths/tracer.py) on a job (render/units.py Job) for a capture: its
     rays meet what camera rays meet, from either side of a double-sided surface (the irradiance
     probes' rays see back faces: a probe inside geometry), but the excluded objects."""
     return Tracer(job, {"bounces": settings["bounces"], "seed": settings["seed"]}, back_faces_black=False,

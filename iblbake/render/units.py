@@ -336,7 +336,7 @@ class Probes(Unit):
     device, keyed by everything its rays see: the geometry and materials (their files' content),
     the lights, the panorama's content and frame, the bake settings and the code."""
     name = "probes"
-    reads = ("env_cdf", "radiance")          # the tracer's (render/probes/rays.py)
+    reads = ("env_cdf", "radiance")          # the tracer's (render/paths/tracer.py)
 
     def key(self, job):
         from iblbake.bake import cache
@@ -377,7 +377,7 @@ class ReflectionProbes(Unit):
     position, cached by content as the irradiance probes are) and its prefiltered chain: one memo
     entry a capture, each chain the prefiltered unit's (prefilter())."""
     name = "reflection_probes"
-    reads = ("env_cdf", "radiance")          # the tracer's (render/probes/rays.py)
+    reads = ("env_cdf", "radiance")          # the tracer's (render/paths/tracer.py)
 
     def key(self, job) -> tuple:
         from iblbake.bake import cache

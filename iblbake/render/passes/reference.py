@@ -47,7 +47,7 @@ class Reference(Pass):
     buffers = (Buffer("radiance"), Buffer("ref_batch"))
     host_sample_bytes = 32
     host_writes = ("radiance",)      # the mean, added on the host
-    profiles = "paths"               # render/paths_profile.py
+    profiles = "paths"               # render/paths/profile.py
 
     def runs(self, scene, fx):
         return "reference" in (fx.diffuse, fx.specular)
@@ -87,13 +87,13 @@ class Reference(Pass):
 
     def batch_args(self, ctx, first: int, b: int, slices: int, out) -> tuple:
         """(global size, arguments) of the launch of samples first .. first + b - 1 (the path
-        profile launches the same batches: render/paths_profile.py)."""
+        profile launches the same batches: render/paths/profile.py)."""
         n = ctx.table["n"]
         return (n * min(slices, b),), {**ctx.args[self.name], "seed": ctx.scene.data["effects"]["reference"]["seed"],
                                        "first": first, "batch": b, "slices": min(slices, b), "ref_batch": out}
 
     def profile(self, ctx, repeats):
-        from iblbake.render.paths_profile import REPEATS, profile_reference
+        from iblbake.render.paths.profile import REPEATS, profile_reference
         return profile_reference(ctx, self, repeats=REPEATS if repeats is None else repeats)
 
     def run(self, ctx):

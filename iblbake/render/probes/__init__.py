@@ -3,8 +3,8 @@ RTXGI-DDGI 1.x), baked once, offline, to its mean over every ray (no hysteresis:
 temporal here). One module per idea:
 
   grid.py        where the probes stand (Grid; an automatic grid from the scene's bounds)
-  rays.py        the rays' directions and the Tracer (kernels/probe_trace.cl: the reference's paths
-                 against the scene on the device)
+  rays.py        the rays' directions (traced by the paths' Tracer, render/paths/tracer.py:
+                 kernels/probe_trace.cl, the reference's paths against the scene on the device)
   relocation.py  RTXGI's relocation and classification, probes inside geometry or outside the
                  camera's room
   project.py     the rays' projection into RTXGI's atlases (octahedral irradiance or L2 SH, the
@@ -29,7 +29,8 @@ from iblbake.render.probes.files import (FILES, FORMAT, VERSION, basis_manifest,
 from iblbake.render.probes.glsl import SH_GLSL, SPECULAR_TABLE, basis_glsl, glsl
 from iblbake.render.probes.grid import DEFAULT_LONGEST, Grid, grid_of, scene_bounds
 from iblbake.render.probes.project import BACKFACE_BLEND_LIMIT, MAX_DISTANCE, atlas, project, with_borders
-from iblbake.render.probes.rays import Tracer, random_rotation, ray_directions, spherical_fibonacci, trace_defines
+from iblbake.render.paths.tracer import Tracer, trace_defines
+from iblbake.render.probes.rays import random_rotation, ray_directions, spherical_fibonacci
 from iblbake.render.probes.relocation import (ACTIVE, FIXED_RAYS, INACTIVE, MAX_OFFSET, RELOCATION_PASSES, classify,
                                               inside_geometry, outside_camera_rooms, relocate)
 from iblbake.render.probes.volume import SAMPLING_KEYS, bake_settings, basis_options, sampled, volume_dict

@@ -9,7 +9,8 @@ from __future__ import annotations
 import numpy as np
 
 from iblbake.render.probes.grid import Grid
-from iblbake.render.probes.rays import Tracer, spherical_fibonacci
+from iblbake.render.paths.tracer import Tracer
+from iblbake.render.probes.rays import spherical_fibonacci
 
 ACTIVE, INACTIVE = 0, 1          # RTXGI_DDGI_PROBE_STATE_ACTIVE / _INACTIVE
 FIXED_RAYS = 32                  # RTXGI_DDGI_NUM_FIXED_RAYS: the unrotated rays relocation reads
