@@ -128,3 +128,14 @@ def test_options_of_another_basis_are_refused_or_said(tmp_path):
     doc["effects"] = {"diffuse": "probes", "specular": "off"}
     doc["probes"] = {"irradiance": "sg", "sg_lobes": 12}
     assert not [n for n in plan(load_scene(tmp_path, "c", doc)).notes if "is not read" in n]
+
+
+def test_sh_and_basis_say_what_they_wrote(tmp_path):
+    """Both commands write through one helper (cli/options.py write_texts), whose summary line
+    starts with the file it wrote, one line per panorama."""
+    env = write_exr(tmp_path / "sky.exr", sky())
+    for argv, out in ((["sh", env], tmp_path / "sh.json"), (["basis", env, "--basis", "sg"], tmp_path / "sg.json")):
+        p = run_cli(*argv, "-o", out)
+        assert p.returncode == 0 and out.exists(), p.stderr
+        said = (p.stdout + p.stderr).strip().splitlines()
+        assert said[-1].startswith(f"wrote {out}: "), said

@@ -8,7 +8,7 @@ import click
 
 from iblbake.cli.options import (API_FLAGS, Console, check_inputs_exist, check_suffix, common_options,
                                   depfile_option, input_files_of, input_options, non_negative, panorama_reads,
-                                  refuse_foreign)
+                                  refuse_foreign, report_results, write_texts)
 from iblbake.errors import IblbakeError
 from iblbake.io.guard import refuse_overlaps
 
@@ -104,36 +104,21 @@ def basis_command(envs, name, sg_lobes, sg_fit, ad_fit, haar_coefficients, outpu
     # every panorama is projected before any file is written: a bad one among several leaves nothing
     results = [_project_one(env, name, options, intensity, fmt, with_error, nonfinite, negative, transfer,
                             primaries, input_layout, max_pixels, con) for env in envs]
-    from iblbake.io.atomic import write_text
     if specular_table:
         from iblbake.core import bases
         from iblbake.io import images
         images.write_exr(specular_table, bases.BASES[name].specular_table(options).astype("float32"),
                          channels=("R",))
-    for (summary, human, text), out in zip(results, outputs):
-        summary["output"] = out
-        if out:
-            write_text(out, text)
-            human = f"wrote {out}: {human}"
-        elif fmt != "iblbake":
-            click.echo(text, nl=False)
+    results = write_texts(results, outputs, fmt)
     if depfile:
         from iblbake.io import depfile as dep
         dep.write(depfile, [([o for o in (out, specular_table) if o],
                              [os.path.abspath(f) for f in input_files_of(env)])
                             for env, out in zip(envs, outputs) if out or specular_table])
     if specular_table:
-        for summary, _, _ in results:
+        for summary, _ in results:
             summary["specular_table"] = specular_table
-    if len(results) == 1:
-        summary, human, _ = results[0]
-        if fmt != "iblbake" and not output and not as_json:
-            if not quiet:
-                click.echo(human, err=True)
-        else:
-            con.result(summary, human)
-    else:
-        con.result({"panoramas": [s for s, _, _ in results]}, "\n".join(h for _, h, _ in results))
+    report_results(con, results, fmt, not output, as_json, quiet)
 
 
 def _project_one(env, name, options, intensity, fmt, with_error, nonfinite, negative, transfer, primaries,

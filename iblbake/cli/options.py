@@ -211,6 +211,37 @@ def force_option(f):
                              "(iblbake's own earlier outputs are replaced without it).")(f)
 
 
+def write_texts(results, outputs, fmt: str) -> list:
+    """`sh` and `basis`: each panorama's result (summary, human line, text) written to its output
+    (atomically) or, without one, its text printed where the format is an engine's; returns
+    (summary, human line) with the line saying what was written."""
+    from iblbake.io.atomic import write_text
+    done = []
+    for (summary, human, text), out in zip(results, outputs):
+        summary["output"] = out
+        if out:
+            write_text(out, text)
+            human = f"wrote {out}: {human}"
+        elif fmt != "iblbake":
+            click.echo(text, nl=False)
+        done.append((summary, human))
+    return done
+
+
+def report_results(con, results, fmt: str, printed_text: bool, as_json: bool, quiet: bool) -> None:
+    """`sh` and `basis`: one panorama's summary, or every one's under "panoramas"; where an
+    engine's text went to stdout (printed_text), the human line goes to stderr instead."""
+    if len(results) == 1:
+        summary, human = results[0]
+        if fmt != "iblbake" and printed_text and not as_json:
+            if not quiet:
+                click.echo(human, err=True)
+        else:
+            con.result(summary, human)
+    else:
+        con.result({"panoramas": [s for s, _ in results]}, "\n".join(h for _, h in results))
+
+
 def refuse_foreign(writes, force: bool, first_lines=()) -> None:
     """Every output that exists and is not iblbake's is refused unless --force (before any work)."""
     from iblbake.io.guard import refuse_foreign as refuse

@@ -9,7 +9,7 @@ import click
 
 from iblbake.cli.options import (API_FLAGS, Console, check_inputs_exist, check_suffix, common_options,
                                   depfile_option, device_option, finite, input_files_of, input_options,
-                                  non_negative, panorama_reads, refuse_foreign)
+                                  non_negative, panorama_reads, refuse_foreign, report_results, write_texts)
 from iblbake.io.guard import refuse_overlaps
 from iblbake.errors import IblbakeError
 
@@ -97,27 +97,11 @@ def sh_command(envs, output, force, bands, window, backend, rotate_y, intensity,
     results = [_project_one(env, bands, window, backend, rotate_y, intensity, fmt, with_error,
                             nonfinite, negative, transfer, primaries, input_layout, max_pixels, device, con)
                for env in envs]
-    from iblbake.io.atomic import write_text
-    for (summary, human, text), out in zip(results, outputs):
-        summary["output"] = out
-        if out:
-            write_text(out, text)
-            human = f"wrote {out}: {human}"
-        elif fmt != "iblbake":
-            click.echo(text, nl=False)
-    results = [(summary, human) for summary, human, _ in results]
+    results = write_texts(results, outputs, fmt)
     if depfile:
         from iblbake.io import depfile as dep
         dep.write(depfile, [([out], [os.path.abspath(f) for f in input_files_of(env)]) for env, out in zip(envs, outputs) if out])
-    if len(results) == 1:
-        summary, human = results[0]
-        if fmt != "iblbake" and not output and not as_json:
-            if not quiet:
-                click.echo(human, err=True)
-        else:
-            con.result(summary, human)
-    else:
-        con.result({"panoramas": [s for s, _ in results]}, "\n".join(h for _, h in results))
+    report_results(con, results, fmt, not output, as_json, quiet)
 
 
 def _project_one(env, bands, window, backend, rotate_y, intensity, fmt, with_error, nonfinite, negative, transfer,
