@@ -103,6 +103,13 @@ def policies(env: dict) -> dict:
     return images.read_policies(env["nonfinite"], env["negative"], env["transfer"], env["primaries"], env["layout"])
 
 
+def source(job, info=None) -> tuple:
+    """What a bake of an image holds from it, for memo keys: the image's content (the panorama's,
+    or `info`'s) and the read policies that change its pixels."""
+    env = job.environment
+    return ((info or job.panorama()[1]).sha256, env["nonfinite"], env["negative"])
+
+
 def baker(job):
     """The mip baker on the job's runtime (one per runtime in a store)."""
     from iblbake.bake import mips as mipsbake
@@ -114,8 +121,8 @@ class SH(Unit):
     name = "sh"
 
     def key(self, job):
-        fx, env = job.scene.data["effects"], job.environment
-        return ("sh", job.panorama()[1].sha256, fx["sh_bands"], fx["sh_window"], env["nonfinite"], env["negative"])
+        fx = job.scene.data["effects"]
+        return ("sh", *source(job), fx["sh_bands"], fx["sh_window"])
 
     def build(self, job, key):
         from iblbake.bake import sh as bake_sh
@@ -142,9 +149,8 @@ class Basis(Unit):
         return name, bases.options_of(name, fx)
 
     def key(self, job):
-        env = job.environment
         name, opts = self._basis(job)
-        return ("basis", job.panorama()[1].sha256, name, tuple(sorted(opts.items())), env["nonfinite"], env["negative"])
+        return ("basis", *source(job), name, tuple(sorted(opts.items())))
 
     def build(self, job, key):
         from iblbake.bake import bases as bake_bases
@@ -165,8 +171,7 @@ class Radiance(Unit):
     name = "radiance"
 
     def key(self, job):
-        env = job.environment
-        return ("radiance", job.panorama()[1].sha256, env["nonfinite"], env["negative"])
+        return ("radiance", *source(job))
 
     def build(self, job, key):
         from iblbake.bake import mips as mipsbake
@@ -184,12 +189,11 @@ def prefilter_key(job, info, base: int) -> tuple:
     """(memo key, PrefilterOptions resolved) of a chain prefiltered as the scene's effects.prefilter
     asks, `base` rows at level 0, from the image `info` describes."""
     from iblbake.bake import mips as mipsbake
-    p, env = job.scene.data["effects"]["prefilter"], job.environment
+    p = job.scene.data["effects"]["prefilter"]
     opts = mipsbake.PrefilterOptions("equirect", base, p["levels"], p["min_size"], p["method"], p["samples"],
                                      p["lod_bias"], True, level_sizes=p["level_sizes"]).resolved(info.height)
     opts["method_name"] = "effects.prefilter.method:"
-    return ("prefiltered", info.sha256, env["nonfinite"], env["negative"],
-            tuple(sorted((k, str(v)) for k, v in opts.items()))), opts
+    return ("prefiltered", *source(job, info), tuple(sorted((k, str(v)) for k, v in opts.items()))), opts
 
 
 def prefilter(job, image, info, base: int, chain_levels) -> tuple:
@@ -261,8 +265,7 @@ class EnvCDF(Unit):
     name = "env_cdf"
 
     def key(self, job):
-        env = job.environment
-        return ("env_cdf", job.panorama()[1].sha256, env["nonfinite"], env["negative"])
+        return ("env_cdf", *source(job))
 
     def build(self, job, key):
         from iblbake.core import sampling
