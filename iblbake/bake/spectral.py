@@ -167,11 +167,6 @@ def synthesize(alm, lmax: int, dirs, nthreads: int | None = None):
 def prefilter_levels(source, dirs_per_level, roughness, nthreads: int | None = None, ndf: str = "ggx"):
     """Prefiltered values (float64, shaped like each dirs[..., 3] with the source's channels) of
     every level, all roughness > 0 and applicable(); one projection serves every level."""
-    alphas = [float(r) * float(r) for r in roughness]   # as the plan asks: the same cache entries
-    if not all(applicable(a, ndf) for a in alphas):
-        raise ValueError("spectral: a level is too sharp for MAX_LMAX (use convolve or fis)")
-    ks = [zonal_coefficients(a, tolerance(ndf), ndf=ndf) for a in alphas]
-    lmax = max(len(k) - 1 for k in ks)
     # a channel equal to an earlier one (a reflection capture's coverage, stored as grey) is
     # projected and synthesised once: the same values, a third of the work for grey
     src = np.asarray(source)
@@ -180,6 +175,11 @@ def prefilter_levels(source, dirs_per_level, roughness, nthreads: int | None = N
     if len(distinct) < len(same):
         cols = [distinct.index(j) for j in same]
         return [lv[..., cols] for lv in prefilter_levels(src[..., distinct], dirs_per_level, roughness, nthreads, ndf)]
+    alphas = [float(r) * float(r) for r in roughness]   # as the plan asks: the same cache entries
+    if not all(applicable(a, ndf) for a in alphas):
+        raise ValueError("spectral: a level is too sharp for MAX_LMAX (use convolve or fis)")
+    ks = [zonal_coefficients(a, tolerance(ndf), ndf=ndf) for a in alphas]
+    lmax = max(len(k) - 1 for k in ks)
     alm = project_texels(source, lmax, nthreads)
     # the exact level is a mean of source texels with non-negative weights, so it lies within the
     # source's range per channel; the bands dropped below TOLERANCE ring by about that fraction
