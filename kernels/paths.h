@@ -1,9 +1,12 @@
 /* Paths (BOUNCES defined: 0 unbounded, N at most N scattering events counted from the first vertex):
- * path_vertex, what a path meets, and follow_path, which carries a ray that has met a surface on
- * through every later bounce, each vertex shaded with the material's BSDF (kernels/bsdf.h) and lit
- * by the environment (ENV_PARAMS, kernels/envmap.h) and the lights. The one path of every ray
- * source: the reference's camera samples (kernels/reference.cl, from their first vertex), the
- * irradiance probes' rays and the reflection captures' texels (kernels/probe_trace.cl, from a point;
+ * what every vertex of a path does, the first included: vertex_dims (its sample dimensions, one
+ * order), env_direct (the environment sampled, MIS against the BSDF) and env_missed (the
+ * environment a BSDF-sampled ray finds, MIS against the panorama's sampling); path_vertex, what a
+ * path meets, and follow_path, which carries a ray that has met a surface on through every later
+ * bounce, each vertex shaded with the material's BSDF (kernels/bsdf.h) and lit by the environment
+ * (ENV_PARAMS, kernels/envmap.h) and the lights. The one path of every ray source: the
+ * reference's camera samples (kernels/reference.cl, from their first vertex), the irradiance
+ * probes' rays and the reflection captures' texels (kernels/probe_trace.cl, from a point;
  * iblbake/render/paths/).
  * numpy twin: iblbake/render/twin/paths.py. */
 #ifndef IBLBAKE_PATHS_H
@@ -16,6 +19,14 @@
 #include "surface.h"
 #include "material.h"
 #include "light.h"
+
+/* The environment a BSDF-sampled ray l (pdf pb; INFINITY for a mirror's, which no other strategy
+ * finds) meets when it leaves the scene, weighted against the panorama's sampling */
+IBL_INLINE float3 env_missed(float3 l, float pb, ENV_PARAMS)
+{
+    const int texel = env_texel_index(to_env(l, env_rot), w, h);
+    return img[texel].xyz * (isinf(pb) ? 1.0f : power_heuristic(pb, pdf_env(pdf_table, texel)));
+}
 
 #ifdef BOUNCES
 /* ---------------------------------------------------------------------------- paths */
@@ -49,6 +60,41 @@ IBL_INLINE void path_vertex(float3 o, float3 d, Hit h, __global const float4 *ma
     *n = facing_normal(ns, -d);
 }
 
+/* One vertex's sample dimensions, drawn in this order at every vertex, the first included (which
+ * leaves u_rr unused: no roulette before the RR_DEPTH-th bounce) */
+typedef struct {
+    float4 env;                 /* the environment's texel (its row and column) and the point in it */
+    float2 dir;                 /* the BSDF's direction */
+    float lobe, rr;             /* the BSDF's lobe, Russian roulette */
+} VertexDims;
+
+IBL_INLINE VertexDims vertex_dims(Sampler *sp)
+{
+    VertexDims u;
+    const float2 u_env = sampler_2d(sp), u_texel = sampler_2d(sp);
+    u.env = (float4)(u_env, u_texel);
+    u.dir = sampler_2d(sp);
+    u.lobe = sampler_1d(sp);
+    u.rr = sampler_1d(sp);
+    return u;
+}
+
+/* The environment's light at a vertex by sampling the panorama (u: vertex_dims' env), weighted
+ * against the BSDF's sampling of the terms asked for (power heuristic, Veach 1997): Le f NoL w / pe
+ * where the direction leaves the scene unoccluded from origin. */
+IBL_INLINE float3 env_direct(const Material mt, float3 v, float3 n, float nov, float3 origin, float ps, int diffuse,
+                             int specular, float4 u, ENV_PARAMS, SCENE_PARAMS)
+{
+    int texel;
+    const float3 l = from_env(sample_env(marginal, conditional, w, h, u, &texel), env_rot);
+    const float pe = pdf_env(pdf_table, texel);
+    float pb;
+    const float3 f = bsdf_eval(mt, v, n, nov, l, ps, diffuse, specular, &pb);
+    if (pe > 0.0f && (f.x > 0.0f || f.y > 0.0f || f.z > 0.0f) && !occluded(origin, l, SCENE_ARGS))
+        return img[texel].xyz * f * (power_heuristic(pe, pb) / pe);
+    return (float3)(0.0f);
+}
+
 /* The light a path brings back to the first vertex from direction l (after BSDF weight beta):
  * env_part the environment's radiance found on the way (times env_scale later), the return value
  * the emission met. The ray o + t l has already been traced to hit h. */
@@ -58,7 +104,7 @@ IBL_INLINE float3 follow_path(float3 o, float3 l, Hit hit, float3 beta, Sampler 
 {
     float3 emitted = (float3)(0.0f), env = (float3)(0.0f);
     for (int bounce = 2; bounce <= MAX_PATH; ++bounce) {
-        if (hit.kind == PRIM_NONE) break;               /* the first vertex's direct estimate counted the sky */
+        if (hit.kind == PRIM_NONE) break;               /* the vertex before counted the sky */
         float3 p, n;
         Material mt;
         path_vertex(o, l, hit, materials, SCENE_ARGS, &p, &n, &mt);
@@ -70,18 +116,8 @@ IBL_INLINE float3 follow_path(float3 o, float3 l, Hit hit, float3 beta, Sampler 
         float3 t, b;
         tangent_frame(n, &t, &b);
         const float ps = specular_probability(mt, nov, 1, 1);
-        const float2 u_env = sampler_2d(sp), u_texel = sampler_2d(sp), u_dir = sampler_2d(sp);
-        const float u_lobe = sampler_1d(sp), u_rr = sampler_1d(sp);
-        /* the environment, weighted against the BSDF's sampling */
-        {
-            int texel;
-            const float3 le = from_env(sample_env(marginal, conditional, w, h, (float4)(u_env, u_texel), &texel), env_rot);
-            const float pe = pdf_env(pdf_table, texel);
-            float pb;
-            const float3 f = bsdf_eval(mt, v, n, nov, le, ps, 1, 1, &pb);
-            if (pe > 0.0f && (f.x > 0.0f || f.y > 0.0f || f.z > 0.0f) && !occluded(origin, le, SCENE_ARGS))
-                env += beta * img[texel].xyz * f * (power_heuristic(pe, pb) / pe);
-        }
+        const VertexDims u = vertex_dims(sp);
+        env += beta * env_direct(mt, v, n, nov, origin, ps, 1, 1, u.env, ENV_ARGS, SCENE_ARGS);
 #ifdef PATH_LIGHTS
         /* every analytic light, one direction over its disk or sphere (uniform in the cone it
          * fills) or its centre; no ray finds a light, so this is its only strategy (no MIS) */
@@ -106,21 +142,18 @@ IBL_INLINE float3 follow_path(float3 o, float3 l, Hit hit, float3 beta, Sampler 
         /* scatter */
         float pb;
         float3 nl;
-        const float3 wgt = bsdf_sample(mt, v, n, t, b, nov, ps, 1, 1, u_lobe, u_dir, &nl, &pb);
+        const float3 wgt = bsdf_sample(mt, v, n, t, b, nov, ps, 1, 1, u.lobe, u.dir, &nl, &pb);
         if (!(wgt.x > 0.0f || wgt.y > 0.0f || wgt.z > 0.0f)) break;
         beta *= wgt;
         if (bounce >= RR_DEPTH) {
             const float q = fmin(fmax(beta.x, fmax(beta.y, beta.z)), 0.95f);
-            if (u_rr >= q) break;
+            if (u.rr >= q) break;
             beta /= q;
         }
         l = nl;
         o = origin;
         hit = trace(o, l, SCENE_ARGS);
-        if (hit.kind == PRIM_NONE) {
-            const int texel = env_texel_index(to_env(l, env_rot), w, h);
-            env += beta * img[texel].xyz * (isinf(pb) ? 1.0f : power_heuristic(pb, pdf_env(pdf_table, texel)));
-        }
+        if (hit.kind == PRIM_NONE) env += beta * env_missed(l, pb, ENV_ARGS);
     }
     *env_part = env;
     return emitted;
