@@ -86,7 +86,7 @@ IBL_INLINE float3 env_direct(const Material mt, float3 v, float3 n, float nov, f
                              int specular, float4 u, ENV_PARAMS, SCENE_PARAMS)
 {
     int texel;
-    const float3 l = from_env(sample_env(marginal, conditional, w, h, u, &texel), env_rot);
+    const float3 l = from_env(sample_env(marginal, conditional, guide, w, h, u, &texel), env_rot);
     const float pe = pdf_env(pdf_table, texel);
     float pb;
     const float3 f = bsdf_eval(mt, v, n, nov, l, ps, diffuse, specular, &pb);

@@ -41,7 +41,7 @@ def environment_args(ctx, dist) -> dict:
 class Reference(Pass):
     name = "reference"
     kernel = "reference.cl"
-    params = ("img", "w", "h", "marginal", "conditional", "pdf_table", "seed", "first", "batch", "slices", "lights",
+    params = ("img", "w", "h", "marginal", "conditional", "guide", "pdf_table", "seed", "first", "batch", "slices", "lights",
               "nlights")
     # radiance, and one batch's sums per sample read back (the host adds them up in float64)
     buffers = (Buffer("radiance"), Buffer("ref_batch"))
