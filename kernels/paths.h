@@ -49,6 +49,133 @@ IBL_INLINE void path_vertex(float3 o, float3 d, Hit h, __global const float4 *ma
     *n = facing_normal(ns, -d);
 }
 
+/* A path vertex's pieces, each once: the megakernel (follow_path, the reference's first vertex)
+ * and the wavefront's stages (kernels/wavefront.cl) call these, drawing the same dimensions in the
+ * same order, so the two estimators are one. */
+
+/* The dimensions a later vertex draws first, in this order (the lights' follow, one pair each) */
+typedef struct { float2 u_env, u_texel, u_dir; float u_lobe, u_rr; } VertexSamples;
+
+IBL_INLINE VertexSamples vertex_samples(Sampler *sp)
+{
+    VertexSamples u;
+    u.u_env = sampler_2d(sp); u.u_texel = sampler_2d(sp); u.u_dir = sampler_2d(sp);
+    u.u_lobe = sampler_1d(sp); u.u_rr = sampler_1d(sp);
+    return u;
+}
+
+/* A later vertex, shaded with its full material: where the ray o + t d met hit h, the view vector,
+ * the offset origin of its rays, its frame and the specular lobe's probability */
+typedef struct {
+    float3 p, n, v, origin, t, b;
+    float nov, ps;
+    Material mt;
+} PathVertex;
+
+/* The vertex the ray o + t d meets at h (path_vertex); returns whether it may scatter (BOUNCES
+ * caps the scattering events; its emission counts either way) */
+IBL_INLINE int vertex_start(float3 o, float3 d, Hit h, int bounce, __global const float4 *materials, SCENE_PARAMS,
+                            PathVertex *pv)
+{
+    path_vertex(o, d, h, materials, SCENE_ARGS, &pv->p, &pv->n, &pv->mt);
+    pv->v = -d;
+    pv->nov = fmax(dot(pv->n, pv->v), 1e-4f);
+    pv->origin = ray_offset(pv->p, pv->n, d, h.t);
+    tangent_frame(pv->n, &pv->t, &pv->b);
+    pv->ps = specular_probability(pv->mt, pv->nov, 1, 1);
+    return !(BOUNCES > 0 && bounce > BOUNCES);
+}
+
+/* The environment's NEE at a vertex (the terms asked for), weighted against the BSDF's sampling
+ * (power heuristic): *c = beta L f / pe towards *l, what an unoccluded shadow ray brings; returns
+ * whether there is a ray to trace */
+IBL_INLINE int env_nee(const Material mt, float3 v, float3 n, float nov, float ps, int diffuse, int specular,
+                       float2 u_env, float2 u_texel, float3 beta, ENV_PARAMS, float3 *l, float3 *c)
+{
+    int texel;
+    *l = from_env(sample_env(marginal, conditional, w, h, (float4)(u_env, u_texel), &texel), env_rot);
+    const float pe = pdf_env(pdf_table, texel);
+    float pb;
+    const float3 f = bsdf_eval(mt, v, n, nov, *l, ps, diffuse, specular, &pb);
+    *c = beta * img[texel].xyz * f * (power_heuristic(pe, pb) / pe);
+    return pe > 0.0f && (f.x > 0.0f || f.y > 0.0f || f.z > 0.0f);
+}
+
+/* What a BSDF-sampled ray (direction l, pdf pb, throughput beta) that meets nothing brings: the
+ * environment, weighted against its sampling (a mirror's delta: weight 1) */
+IBL_INLINE float3 env_missed(float3 l, float pb, float3 beta, ENV_PARAMS)
+{
+    const int texel = env_texel_index(to_env(l, env_rot), w, h);
+    return beta * img[texel].xyz * (isinf(pb) ? 1.0f : power_heuristic(pb, pdf_env(pdf_table, texel)));
+}
+
+#ifdef PATH_LIGHTS
+/* Analytic light j at a later vertex: one direction over its disk or sphere (uniform in the cone
+ * it fills) or its centre (*l, a shadow ray of length *dist), *c = beta E f what arrives unoccluded;
+ * no ray finds a light, so this is its only strategy (no MIS). Draws its pair of dimensions. */
+IBL_INLINE int light_nee(__global const float4 *lights, int j, Sampler *sp, const PathVertex pv, float3 beta,
+                         float3 *l, float *dist, float3 *c)
+{
+    float3 wc;
+    float sin_max;
+    const float3 e = light_toward(lights, j, pv.p, &wc, dist, &sin_max);
+    const float2 u_light = sampler_2d(sp);
+    *l = wc;
+    *c = (float3)(0.0f);
+    if (e.x + e.y + e.z <= 0.0f) return 0;
+    float3 le = e;
+    if (sin_max > 0.0f) {          /* radiance E / (pi sin^2) over the cone's solid angle 2 pi omc */
+        const float omc = light_omc(sin_max);
+        *l = cone_direction(wc, omc, u_light);
+        le = e * (2.0f * omc / (sin_max * sin_max));
+    }
+    float pl;
+    const float3 f = bsdf_eval(pv.mt, pv.v, pv.n, pv.nov, *l, pv.ps, 1, 1, &pl);
+    *c = beta * le * f;
+    return f.x > 0.0f || f.y > 0.0f || f.z > 0.0f;
+}
+#endif
+
+/* Scatter at a later vertex: a direction from its BSDF (*l, pdf *pb), the throughput times its
+ * weight, then Russian roulette from bounce RR_DEPTH on (survival min(max beta, 0.95), beta / q);
+ * returns whether the path goes on */
+IBL_INLINE int path_scatter(const PathVertex pv, const VertexSamples u, int bounce, float3 *beta, float3 *l,
+                            float *pb)
+{
+    const float3 wgt = bsdf_sample(pv.mt, pv.v, pv.n, pv.t, pv.b, pv.nov, pv.ps, 1, 1, u.u_lobe, u.u_dir, l, pb);
+    if (!(wgt.x > 0.0f || wgt.y > 0.0f || wgt.z > 0.0f)) return 0;
+    *beta *= wgt;
+    if (bounce >= RR_DEPTH) {
+        const float q = fmin(fmax(beta->x, fmax(beta->y, beta->z)), 0.95f);
+        if (u.u_rr >= q) return 0;
+        *beta /= q;
+    }
+    return 1;
+}
+
+/* The reference's first vertex (the G-buffer sample; the terms asked for, diffuse and specular):
+ * the environment's NEE (env_l, env_c, env_live: env_nee's, throughput 1) and one BSDF sample (l,
+ * its weight beta and pdf; live: a ray to trace), in the order of its dimensions */
+typedef struct {
+    float3 env_l, env_c, l, beta;
+    float pdf;
+    int env_live, live;
+} FirstVertex;
+
+IBL_INLINE FirstVertex first_vertex(const Material mt, float3 v, float3 n, float3 t, float3 b, float nov, int diffuse,
+                                    int specular, Sampler *sp, ENV_PARAMS)
+{
+    FirstVertex fv;
+    const float2 u_env = sampler_2d(sp), u_texel = sampler_2d(sp), u_dir = sampler_2d(sp);
+    const float u_lobe = sampler_1d(sp);
+    const float ps = specular_probability(mt, nov, diffuse, specular);
+    fv.env_live = env_nee(mt, v, n, nov, ps, diffuse, specular, u_env, u_texel, (float3)(1.0f), ENV_ARGS,
+                          &fv.env_l, &fv.env_c);
+    fv.beta = bsdf_sample(mt, v, n, t, b, nov, ps, diffuse, specular, u_lobe, u_dir, &fv.l, &fv.pdf);
+    fv.live = fv.beta.x > 0.0f || fv.beta.y > 0.0f || fv.beta.z > 0.0f;
+    return fv;
+}
+
 /* The light a path brings back to the first vertex from direction l (after BSDF weight beta):
  * env_part the environment's radiance found on the way (times env_scale later), the return value
  * the emission met. The ray o + t l has already been traced to hit h. */
@@ -59,68 +186,28 @@ IBL_INLINE float3 follow_path(float3 o, float3 l, Hit hit, float3 beta, Sampler 
     float3 emitted = (float3)(0.0f), env = (float3)(0.0f);
     for (int bounce = 2; bounce <= MAX_PATH; ++bounce) {
         if (hit.kind == PRIM_NONE) break;               /* the first vertex's direct estimate counted the sky */
-        float3 p, n;
-        Material mt;
-        path_vertex(o, l, hit, materials, SCENE_ARGS, &p, &n, &mt);
-        emitted += beta * mt.emissive;
-        if (BOUNCES > 0 && bounce > BOUNCES) break;
-        const float3 v = -l;
-        const float nov = fmax(dot(n, v), 1e-4f);
-        const float3 origin = ray_offset(p, n, l, hit.t);
-        float3 t, b;
-        tangent_frame(n, &t, &b);
-        const float ps = specular_probability(mt, nov, 1, 1);
-        const float2 u_env = sampler_2d(sp), u_texel = sampler_2d(sp), u_dir = sampler_2d(sp);
-        const float u_lobe = sampler_1d(sp), u_rr = sampler_1d(sp);
-        /* the environment, weighted against the BSDF's sampling */
-        {
-            int texel;
-            const float3 le = from_env(sample_env(marginal, conditional, w, h, (float4)(u_env, u_texel), &texel), env_rot);
-            const float pe = pdf_env(pdf_table, texel);
-            float pb;
-            const float3 f = bsdf_eval(mt, v, n, nov, le, ps, 1, 1, &pb);
-            if (pe > 0.0f && (f.x > 0.0f || f.y > 0.0f || f.z > 0.0f) && !occluded(origin, le, SCENE_ARGS))
-                env += beta * img[texel].xyz * f * (power_heuristic(pe, pb) / pe);
-        }
+        PathVertex pv;
+        const int scatters = vertex_start(o, l, hit, bounce, materials, SCENE_ARGS, &pv);
+        emitted += beta * pv.mt.emissive;
+        if (!scatters) break;
+        const VertexSamples u = vertex_samples(sp);
+        float3 le, c;
+        if (env_nee(pv.mt, pv.v, pv.n, pv.nov, pv.ps, 1, 1, u.u_env, u.u_texel, beta, ENV_ARGS, &le, &c)
+            && !occluded(pv.origin, le, SCENE_ARGS))
+            env += c;
 #ifdef PATH_LIGHTS
-        /* every analytic light, one direction over its disk or sphere (uniform in the cone it
-         * fills) or its centre; no ray finds a light, so this is its only strategy (no MIS) */
         for (int j = 0; j < nlights; ++j) {
-            float3 wc;
-            float dist, sin_max;
-            const float3 e = light_toward(lights, j, p, &wc, &dist, &sin_max);
-            const float2 u_light = sampler_2d(sp);
-            if (e.x + e.y + e.z <= 0.0f) continue;
-            float3 ll = wc, le = e;
-            if (sin_max > 0.0f) {          /* radiance E / (pi sin^2) over the cone's solid angle 2 pi omc */
-                const float omc = light_omc(sin_max);
-                ll = cone_direction(wc, omc, u_light);
-                le = e * (2.0f * omc / (sin_max * sin_max));
-            }
-            float pl;
-            const float3 f = bsdf_eval(mt, v, n, nov, ll, ps, 1, 1, &pl);
-            if ((f.x > 0.0f || f.y > 0.0f || f.z > 0.0f) && !occluded_to(origin, ll, dist, SCENE_ARGS))
-                emitted += beta * le * f;
+            float dist;
+            if (light_nee(lights, j, sp, pv, beta, &le, &dist, &c) && !occluded_to(pv.origin, le, dist, SCENE_ARGS))
+                emitted += c;
         }
 #endif
-        /* scatter */
         float pb;
-        float3 nl;
-        const float3 wgt = bsdf_sample(mt, v, n, t, b, nov, ps, 1, 1, u_lobe, u_dir, &nl, &pb);
-        if (!(wgt.x > 0.0f || wgt.y > 0.0f || wgt.z > 0.0f)) break;
-        beta *= wgt;
-        if (bounce >= RR_DEPTH) {
-            const float q = fmin(fmax(beta.x, fmax(beta.y, beta.z)), 0.95f);
-            if (u_rr >= q) break;
-            beta /= q;
-        }
-        l = nl;
-        o = origin;
+        if (!path_scatter(pv, u, bounce, &beta, &l, &pb)) break;
+        o = pv.origin;
         hit = trace(o, l, SCENE_ARGS);
-        if (hit.kind == PRIM_NONE) {
-            const int texel = env_texel_index(to_env(l, env_rot), w, h);
-            env += beta * img[texel].xyz * (isinf(pb) ? 1.0f : power_heuristic(pb, pdf_env(pdf_table, texel)));
-        }
+        if (hit.kind == PRIM_NONE)
+            env += env_missed(l, pb, beta, ENV_ARGS);
     }
     *env_part = env;
     return emitted;
