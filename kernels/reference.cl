@@ -88,9 +88,28 @@ __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int
          * environment's texel (its row and column), the GGX and the cosine warps, the point in
          * the texel */
         Sampler sp = sampler_start(seed, sid, sk);
+        float3 est = (float3)(0.0f);
+#ifdef BOUNCES
+        /* the first vertex as a path vertex: the environment's NEE against the BSDF of the terms
+         * asked for, and one BSDF sample whose ray brings the environment (MIS) where it misses and
+         * the light of the surface it meets where it hits (follow_path) */
+        {
+            const FirstVertex fv = first_vertex(mt, v, nrm, t, b, nov, FIRST_DIFFUSE, FIRST_SPECULAR, &sp, ENV_ARGS);
+            if (fv.env_live && VISIBLE(fv.env_l)) est += fv.env_c;
+            float3 env_part = (float3)(0.0f), emitted = (float3)(0.0f);
+            if (fv.live) {
+                const Hit hh = trace(origin, fv.l, SCENE_ARGS);
+                if (hh.kind == PRIM_NONE)
+                    est += env_missed(fv.l, fv.pdf, fv.beta, ENV_ARGS);
+                else
+                    emitted = follow_path(origin, fv.l, hh, fv.beta, &sp, materials, ENV_ARGS, SCENE_ARGS, &env_part,
+                                          lights, nlights);
+            }
+            est = (est + env_part) * env_scale + emitted;
+        }
+#else
         const float2 u_env = sampler_2d(&sp), u_ggx = sampler_2d(&sp), u_cos = sampler_2d(&sp),
                      u_texel = sampler_2d(&sp);
-        float3 est = (float3)(0.0f);
         /* strategy 1: the environment, each term weighted against its own BSDF's sampling */
         {
             int texel;
@@ -135,33 +154,15 @@ __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int
             }
         }
 #endif
-#ifdef BOUNCES
-        /* the light of the surface the first vertex sees: a BSDF-sampled ray of the terms asked
-         * for (the environment past it is in est already); the occlusion map, which approximates
-         * what this computes, is not applied */
-        {
-            const float u_lobe = sampler_1d(&sp);
-            const float2 u_dir = sampler_2d(&sp);
-            const float ps = specular_probability(mt, nov, FIRST_DIFFUSE, FIRST_SPECULAR);
-            float pb;
-            float3 l;
-            const float3 wgt = bsdf_sample(mt, v, nrm, t, b, nov, ps, FIRST_DIFFUSE, FIRST_SPECULAR, u_lobe, u_dir, &l, &pb);
-            float3 env_part = (float3)(0.0f), emitted = (float3)(0.0f);
-            if (wgt.x > 0.0f || wgt.y > 0.0f || wgt.z > 0.0f) {
-                const Hit hh = trace(origin, l, SCENE_ARGS);
-                if (hh.kind != PRIM_NONE)
-                    emitted = follow_path(origin, l, hh, wgt, &sp, materials, ENV_ARGS, SCENE_ARGS, &env_part,
-                                          lights, nlights);
-            }
-            est = (est + env_part) * env_scale + emitted;
-        }
-#elif defined(HAS_OCCLUSION_MAP)
+#if defined(HAS_OCCLUSION_MAP)
         est *= env_scale * mt.occlusion;     /* the material's occlusion map: image-based light only */
 #else
         est *= env_scale;
+#endif
 #endif
         sum += est;
         if (sk & 1u) odd += luminance(est);
     }
     ref_batch[item] = (float4)(sum, odd);
 }
+
