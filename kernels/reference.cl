@@ -166,3 +166,5 @@ __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int
     ref_batch[item] = (float4)(sum, odd);
 }
 
+
+#include "wavefront.cl"
