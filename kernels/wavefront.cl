@@ -85,6 +85,7 @@ __kernel void wf_generate(__global const float4 *gb_pos, SURFACE_PARAMS, const i
     }
 }
 
+SCALAR_BVH
 __kernel void wf_extend(const int count, const int npaths, __global float4 *wf_paths, __global int *wf_queue,
                         __global int *wf_count, ENV_PARAMS, SCENE_PARAMS)
 {
@@ -153,6 +154,7 @@ __kernel void wf_shade(const int count, const int npaths, __global float4 *wf_pa
     }
 }
 
+SCALAR_BVH
 __kernel void wf_shadow(const int count, const int npaths, __global float4 *wf_paths, __global const float4 *wf_shadow,
                         __global const int *wf_queue, const int nlights, SCENE_PARAMS)
 {
