@@ -16,6 +16,13 @@
  * vertex's shadow rays (the environment's, then each light's) stay one queue entry, added in that
  * order, so the sums are the megakernel's in its order: the frames agree to float32 rounding.
  * Only with BOUNCES (the direct light alone has no path): iblbake/render/passes/reference.py. */
+#include "common.h"
+#include "scene.h"
+#include "surface.h"
+#include "paths.h"
+
+/* part of reference.cl's program (its end includes this file): FIRST_DIFFUSE, FIRST_SPECULAR and
+ * SCALAR_BVH are its */
 #if defined(BOUNCES) && defined(WAVEFRONT)
 
 #define WF_EXTEND 0
