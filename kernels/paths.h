@@ -1,10 +1,15 @@
 /* Paths (BOUNCES defined: 0 unbounded, N at most N scattering events counted from the first vertex):
- * path_vertex, what a path meets, and follow_path, which carries a ray that has met a surface on
- * through every later bounce, each vertex shaded with the material's BSDF (kernels/bsdf.h) and lit
- * by the environment (ENV_PARAMS, kernels/envmap.h) and the lights. The one path of every ray
- * source: the reference's camera samples (kernels/reference.cl, from their first vertex), the
- * irradiance probes' rays and the reflection captures' texels (kernels/probe_trace.cl, from a point;
- * iblbake/render/paths/).
+ * what every vertex of a path does, the first included: vertex_dims (its sample dimensions, one
+ * order), env_direct (the environment sampled, MIS against the BSDF) and env_missed (the
+ * environment a BSDF-sampled ray finds, MIS against the panorama's sampling); path_vertex, what a
+ * path meets, and follow_path, which carries a ray that has met a surface on through every later
+ * bounce, each vertex shaded with the material's BSDF (kernels/bsdf.h) and lit by the environment
+ * (ENV_PARAMS, kernels/envmap.h) and the lights. The one path of every ray source: the
+ * reference's camera samples (kernels/reference.cl, from their first vertex), the irradiance
+ * probes' rays and the reflection captures' texels (kernels/probe_trace.cl, from a point;
+ * iblbake/render/paths/). Each vertex's pieces (first_vertex, vertex_start, env_sample,
+ * light_sample, path_scatter) are functions that the wavefront's stages (kernels/wavefront.cl) call
+ * too, where a ray is queued instead of traced.
  * numpy twin: iblbake/render/twin/paths.py. */
 #ifndef IBLBAKE_PATHS_H
 #define IBLBAKE_PATHS_H
@@ -16,6 +21,14 @@
 #include "surface.h"
 #include "material.h"
 #include "light.h"
+
+/* The environment a BSDF-sampled ray l (pdf pb; INFINITY for a mirror's, which no other strategy
+ * finds) meets when it leaves the scene, weighted against the panorama's sampling */
+IBL_INLINE float3 env_missed(float3 l, float pb, ENV_PARAMS)
+{
+    const int texel = env_texel_index(to_env(l, env_rot), w, h);
+    return img[texel].xyz * (isinf(pb) ? 1.0f : power_heuristic(pb, pdf_env(pdf_table, texel)));
+}
 
 #ifdef BOUNCES
 /* ---------------------------------------------------------------------------- paths */
@@ -49,31 +62,87 @@ IBL_INLINE void path_vertex(float3 o, float3 d, Hit h, __global const float4 *ma
     *n = facing_normal(ns, -d);
 }
 
-/* A path vertex's pieces, each once: the megakernel (follow_path, the reference's first vertex)
- * and the wavefront's stages (kernels/wavefront.cl) call these, drawing the same dimensions in the
- * same order, so the two estimators are one. */
+/* One vertex's sample dimensions, drawn in this order at every vertex, the first included (which
+ * leaves u_rr unused: no roulette before the RR_DEPTH-th bounce) */
+typedef struct {
+    float4 env;                 /* the environment's texel (its row and column) and the point in it */
+    float2 dir;                 /* the BSDF's direction */
+    float lobe, rr;             /* the BSDF's lobe, Russian roulette */
+} VertexDims;
 
-/* The dimensions a later vertex draws first, in this order (the lights' follow, one pair each) */
-typedef struct { float2 u_env, u_texel, u_dir; float u_lobe, u_rr; } VertexSamples;
-
-IBL_INLINE VertexSamples vertex_samples(Sampler *sp)
+IBL_INLINE VertexDims vertex_dims(Sampler *sp)
 {
-    VertexSamples u;
-    u.u_env = sampler_2d(sp); u.u_texel = sampler_2d(sp); u.u_dir = sampler_2d(sp);
-    u.u_lobe = sampler_1d(sp); u.u_rr = sampler_1d(sp);
+    VertexDims u;
+    const float2 u_env = sampler_2d(sp), u_texel = sampler_2d(sp);
+    u.env = (float4)(u_env, u_texel);
+    u.dir = sampler_2d(sp);
+    u.lobe = sampler_1d(sp);
+    u.rr = sampler_1d(sp);
     return u;
 }
 
-/* A later vertex, shaded with its full material: where the ray o + t d met hit h, the view vector,
- * the offset origin of its rays, its frame and the specular lobe's probability */
+/* The environment's light at a vertex by sampling the panorama (u: vertex_dims' env), weighted
+ * against the BSDF's sampling of the terms asked for (power heuristic, Veach 1997), before its
+ * shadow ray: the direction *l and *c = Le f NoL w / pe, what arrives where it leaves the scene
+ * unoccluded; returns whether there is a shadow ray to trace (the wavefront queues it). */
+IBL_INLINE int env_sample(const Material mt, float3 v, float3 n, float nov, float ps, int diffuse, int specular,
+                          float4 u, ENV_PARAMS, float3 *l, float3 *c)
+{
+    int texel;
+    *l = from_env(sample_env(marginal, conditional, w, h, u, &texel), env_rot);
+    const float pe = pdf_env(pdf_table, texel);
+    float pb;
+    const float3 f = bsdf_eval(mt, v, n, nov, *l, ps, diffuse, specular, &pb);
+    const int live = pe > 0.0f && (f.x > 0.0f || f.y > 0.0f || f.z > 0.0f);
+    *c = live ? img[texel].xyz * f * (power_heuristic(pe, pb) / pe) : (float3)(0.0f);
+    return live;
+}
+
+/* env_sample's light where its direction leaves the scene unoccluded from origin */
+IBL_INLINE float3 env_direct(const Material mt, float3 v, float3 n, float nov, float3 origin, float ps, int diffuse,
+                             int specular, float4 u, ENV_PARAMS, SCENE_PARAMS)
+{
+    float3 l, c;
+    if (env_sample(mt, v, n, nov, ps, diffuse, specular, u, ENV_ARGS, &l, &c) && !occluded(origin, l, SCENE_ARGS))
+        return c;
+    return (float3)(0.0f);
+}
+
+/* A path's vertices, each piece once: the megakernel (the reference's first vertex, follow_path)
+ * and the wavefront's stages (kernels/wavefront.cl; Laine, Karras and Aila 2013) call these, so
+ * the two draw the same dimensions in the same order and compute the same estimate. */
+
+/* The first vertex (the G-buffer sample; the terms asked for, diffuse and specular): its
+ * dimensions, the environment sampled (env_sample's, before the shadow ray) and one BSDF sample
+ * (l, its weight beta and pdf; live: a ray to trace) */
+typedef struct {
+    float3 env_l, env_c, l, beta;
+    float pdf;
+    int env_live, live;
+} FirstVertex;
+
+IBL_INLINE FirstVertex first_vertex(const Material mt, float3 v, float3 n, float3 t, float3 b, float nov, int diffuse,
+                                    int specular, Sampler *sp, ENV_PARAMS)
+{
+    FirstVertex fv;
+    const VertexDims u = vertex_dims(sp);
+    const float ps = specular_probability(mt, nov, diffuse, specular);
+    fv.env_live = env_sample(mt, v, n, nov, ps, diffuse, specular, u.env, ENV_ARGS, &fv.env_l, &fv.env_c);
+    fv.beta = bsdf_sample(mt, v, n, t, b, nov, ps, diffuse, specular, u.lobe, u.dir, &fv.l, &fv.pdf);
+    fv.live = fv.beta.x > 0.0f || fv.beta.y > 0.0f || fv.beta.z > 0.0f;
+    return fv;
+}
+
+/* A later vertex, shaded with its full material: where the ray o + t d met hit h (path_vertex),
+ * the view vector, the offset origin of its rays, its frame and the specular lobe's probability */
 typedef struct {
     float3 p, n, v, origin, t, b;
     float nov, ps;
     Material mt;
 } PathVertex;
 
-/* The vertex the ray o + t d meets at h (path_vertex); returns whether it may scatter (BOUNCES
- * caps the scattering events; its emission counts either way) */
+/* The vertex the ray o + t d meets at h; returns whether it may scatter (BOUNCES caps the
+ * scattering events; its emission counts either way) */
 IBL_INLINE int vertex_start(float3 o, float3 d, Hit h, int bounce, __global const float4 *materials, SCENE_PARAMS,
                             PathVertex *pv)
 {
@@ -86,35 +155,13 @@ IBL_INLINE int vertex_start(float3 o, float3 d, Hit h, int bounce, __global cons
     return !(BOUNCES > 0 && bounce > BOUNCES);
 }
 
-/* The environment's NEE at a vertex (the terms asked for), weighted against the BSDF's sampling
- * (power heuristic): *c = beta L f / pe towards *l, what an unoccluded shadow ray brings; returns
- * whether there is a ray to trace */
-IBL_INLINE int env_nee(const Material mt, float3 v, float3 n, float nov, float ps, int diffuse, int specular,
-                       float2 u_env, float2 u_texel, float3 beta, ENV_PARAMS, float3 *l, float3 *c)
-{
-    int texel;
-    *l = from_env(sample_env(marginal, conditional, w, h, (float4)(u_env, u_texel), &texel), env_rot);
-    const float pe = pdf_env(pdf_table, texel);
-    float pb;
-    const float3 f = bsdf_eval(mt, v, n, nov, *l, ps, diffuse, specular, &pb);
-    *c = beta * img[texel].xyz * f * (power_heuristic(pe, pb) / pe);
-    return pe > 0.0f && (f.x > 0.0f || f.y > 0.0f || f.z > 0.0f);
-}
-
-/* What a BSDF-sampled ray (direction l, pdf pb, throughput beta) that meets nothing brings: the
- * environment, weighted against its sampling (a mirror's delta: weight 1) */
-IBL_INLINE float3 env_missed(float3 l, float pb, float3 beta, ENV_PARAMS)
-{
-    const int texel = env_texel_index(to_env(l, env_rot), w, h);
-    return beta * img[texel].xyz * (isinf(pb) ? 1.0f : power_heuristic(pb, pdf_env(pdf_table, texel)));
-}
-
 #ifdef PATH_LIGHTS
 /* Analytic light j at a later vertex: one direction over its disk or sphere (uniform in the cone
  * it fills) or its centre (*l, a shadow ray of length *dist), *c = beta E f what arrives unoccluded;
- * no ray finds a light, so this is its only strategy (no MIS). Draws its pair of dimensions. */
-IBL_INLINE int light_nee(__global const float4 *lights, int j, Sampler *sp, const PathVertex pv, float3 beta,
-                         float3 *l, float *dist, float3 *c)
+ * no ray finds a light, so this is its only strategy (no MIS). Draws the light's pair of
+ * dimensions; returns whether there is a shadow ray to trace. */
+IBL_INLINE int light_sample(__global const float4 *lights, int j, Sampler *sp, const PathVertex pv, float3 beta,
+                            float3 *l, float *dist, float3 *c)
 {
     float3 wc;
     float sin_max;
@@ -139,41 +186,17 @@ IBL_INLINE int light_nee(__global const float4 *lights, int j, Sampler *sp, cons
 /* Scatter at a later vertex: a direction from its BSDF (*l, pdf *pb), the throughput times its
  * weight, then Russian roulette from bounce RR_DEPTH on (survival min(max beta, 0.95), beta / q);
  * returns whether the path goes on */
-IBL_INLINE int path_scatter(const PathVertex pv, const VertexSamples u, int bounce, float3 *beta, float3 *l,
-                            float *pb)
+IBL_INLINE int path_scatter(const PathVertex pv, const VertexDims u, int bounce, float3 *beta, float3 *l, float *pb)
 {
-    const float3 wgt = bsdf_sample(pv.mt, pv.v, pv.n, pv.t, pv.b, pv.nov, pv.ps, 1, 1, u.u_lobe, u.u_dir, l, pb);
+    const float3 wgt = bsdf_sample(pv.mt, pv.v, pv.n, pv.t, pv.b, pv.nov, pv.ps, 1, 1, u.lobe, u.dir, l, pb);
     if (!(wgt.x > 0.0f || wgt.y > 0.0f || wgt.z > 0.0f)) return 0;
     *beta *= wgt;
     if (bounce >= RR_DEPTH) {
         const float q = fmin(fmax(beta->x, fmax(beta->y, beta->z)), 0.95f);
-        if (u.u_rr >= q) return 0;
+        if (u.rr >= q) return 0;
         *beta /= q;
     }
     return 1;
-}
-
-/* The reference's first vertex (the G-buffer sample; the terms asked for, diffuse and specular):
- * the environment's NEE (env_l, env_c, env_live: env_nee's, throughput 1) and one BSDF sample (l,
- * its weight beta and pdf; live: a ray to trace), in the order of its dimensions */
-typedef struct {
-    float3 env_l, env_c, l, beta;
-    float pdf;
-    int env_live, live;
-} FirstVertex;
-
-IBL_INLINE FirstVertex first_vertex(const Material mt, float3 v, float3 n, float3 t, float3 b, float nov, int diffuse,
-                                    int specular, Sampler *sp, ENV_PARAMS)
-{
-    FirstVertex fv;
-    const float2 u_env = sampler_2d(sp), u_texel = sampler_2d(sp), u_dir = sampler_2d(sp);
-    const float u_lobe = sampler_1d(sp);
-    const float ps = specular_probability(mt, nov, diffuse, specular);
-    fv.env_live = env_nee(mt, v, n, nov, ps, diffuse, specular, u_env, u_texel, (float3)(1.0f), ENV_ARGS,
-                          &fv.env_l, &fv.env_c);
-    fv.beta = bsdf_sample(mt, v, n, t, b, nov, ps, diffuse, specular, u_lobe, u_dir, &fv.l, &fv.pdf);
-    fv.live = fv.beta.x > 0.0f || fv.beta.y > 0.0f || fv.beta.z > 0.0f;
-    return fv;
 }
 
 /* The light a path brings back to the first vertex from direction l (after BSDF weight beta):
@@ -185,20 +208,18 @@ IBL_INLINE float3 follow_path(float3 o, float3 l, Hit hit, float3 beta, Sampler 
 {
     float3 emitted = (float3)(0.0f), env = (float3)(0.0f);
     for (int bounce = 2; bounce <= MAX_PATH; ++bounce) {
-        if (hit.kind == PRIM_NONE) break;               /* the first vertex's direct estimate counted the sky */
+        if (hit.kind == PRIM_NONE) break;               /* the vertex before counted the sky */
         PathVertex pv;
         const int scatters = vertex_start(o, l, hit, bounce, materials, SCENE_ARGS, &pv);
         emitted += beta * pv.mt.emissive;
         if (!scatters) break;
-        const VertexSamples u = vertex_samples(sp);
-        float3 le, c;
-        if (env_nee(pv.mt, pv.v, pv.n, pv.nov, pv.ps, 1, 1, u.u_env, u.u_texel, beta, ENV_ARGS, &le, &c)
-            && !occluded(pv.origin, le, SCENE_ARGS))
-            env += c;
+        const VertexDims u = vertex_dims(sp);
+        env += beta * env_direct(pv.mt, pv.v, pv.n, pv.nov, pv.origin, pv.ps, 1, 1, u.env, ENV_ARGS, SCENE_ARGS);
 #ifdef PATH_LIGHTS
-        for (int j = 0; j < nlights; ++j) {
+        for (int j = 0; j < nlights; ++j) {         /* every analytic light */
+            float3 ll, c;
             float dist;
-            if (light_nee(lights, j, sp, pv, beta, &le, &dist, &c) && !occluded_to(pv.origin, le, dist, SCENE_ARGS))
+            if (light_sample(lights, j, sp, pv, beta, &ll, &dist, &c) && !occluded_to(pv.origin, ll, dist, SCENE_ARGS))
                 emitted += c;
         }
 #endif
@@ -206,8 +227,7 @@ IBL_INLINE float3 follow_path(float3 o, float3 l, Hit hit, float3 beta, Sampler 
         if (!path_scatter(pv, u, bounce, &beta, &l, &pb)) break;
         o = pv.origin;
         hit = trace(o, l, SCENE_ARGS);
-        if (hit.kind == PRIM_NONE)
-            env += env_missed(l, pb, beta, ENV_ARGS);
+        if (hit.kind == PRIM_NONE) env += beta * env_missed(l, pb, ENV_ARGS);
     }
     *env_part = env;
     return emitted;

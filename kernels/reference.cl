@@ -1,21 +1,22 @@
-/* Reference pass: progressive Monte Carlo of the exact integral of direct environment lighting,
- * the ground truth the approximations are measured against. Per G-buffer sample and sample k:
- * two strategies for each term, combined by MIS with the power heuristic (Veach 1997):
+/* Reference pass: progressive Monte Carlo of the exact integral of environment lighting, the
+ * ground truth the approximations are measured against. The BSDF, here and at every later vertex,
+ * is kernels/bsdf.h's; MIS weights are the power heuristic's (Veach 1997).
+ * With BOUNCES (0: unbounded, N: at most N scattering events; path tracing, Kajiya 1986; pbrt-v4's
+ * PathIntegrator, Mitsuba 3's `path`) the G-buffer sample is a path's first vertex like any other
+ * (kernels/paths.h): per sample the environment sampled from the panorama's tables, and one
+ * direction from the BSDF of the terms the frame asks for, whose ray brings the environment where
+ * it leaves the scene and continues the path where it meets a surface; every later vertex adds its
+ * emission, samples the environment and every analytic light (PATH_LIGHTS), scatters with its full
+ * material and continues, Russian roulette from the RR_DEPTH-th bounce on with survival
+ * min(max throughput, 0.95), unbiased.
+ * Without BOUNCES (the direct light, `bounces: 1`), two strategies for each term, each term alone:
  *   1. the environment, piecewise constant over the full-resolution panorama (sample_env);
  *   2. the term's BSDF: cosine hemisphere for diffuse, GGX visible normals for specular.
- * The BSDF, here and at every later vertex, is kernels/bsdf.h's.
  * With VISIBILITY, every sample's light direction is traced for any hit (occluded(), from an
  * offset origin), so the integral is the occluded one: a sphere above a plane darkens the plane.
  *   DIFFUSE_MODE == DIFFUSE_REFERENCE, SPECULAR_MODE == SPECULAR_REFERENCE select the terms.
- * With BOUNCES (0: unbounded, N: at most N scattering events; absent: 1, the direct integral above)
- * each sample also follows a path (path tracing, Kajiya 1986; pbrt-v4's PathIntegrator, Mitsuba 3's
- * `path`): from the first vertex a BSDF-sampled ray finds the surface whose light that vertex
- * receives (the direct estimate has counted the environment seen past it), and every later vertex
- * adds its emission, samples the environment (MIS against the BSDF) and every analytic light
- * (PATH_LIGHTS), scatters with its full
- * material and continues, Russian roulette from the RR_DEPTH-th bounce on with survival
- * min(max throughput, 0.95), unbiased.
- * numpy twin (the same integral by quadrature over every texel): iblbake/render/twin/reference.py exact(). */
+ * numpy twins: iblbake/render/twin/paths.py (the paths, sample for sample) and
+ * iblbake/render/twin/reference.py exact() (the direct integral by quadrature over every texel). */
 #include "common.h"
 #include "bsdf.h"
 #include "sampling.h"
@@ -87,32 +88,32 @@ __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int
     float odd = 0.0f;
     for (int k = slice; k < batch; k += slices) {
         const uint sk = (uint)(first + k);
+        Sampler sp = sampler_start(seed, sid, sk);
+#ifdef BOUNCES
+        /* the first vertex is a path vertex of the terms asked for: the environment sampled
+         * (MIS against the BSDF), and one BSDF-sampled ray that brings the environment where it
+         * leaves the scene (MIS against the environment's sampling) and the light of the surface
+         * it meets where it does not (follow_path); the occlusion map, which approximates what
+         * this computes, is not applied */
+        const FirstVertex fv = first_vertex(mt, v, nrm, t, b, nov, FIRST_DIFFUSE, FIRST_SPECULAR, &sp, ENV_ARGS);
+        float3 est = fv.env_live && !occluded(origin, fv.env_l, SCENE_ARGS) ? fv.env_c : (float3)(0.0f);
+        float3 env_part = (float3)(0.0f), emitted = (float3)(0.0f);
+        if (fv.live) {
+            const Hit hh = trace(origin, fv.l, SCENE_ARGS);
+            if (hh.kind == PRIM_NONE)
+                est += fv.beta * env_missed(fv.l, fv.pdf, ENV_ARGS);
+            else
+                emitted = follow_path(origin, fv.l, hh, fv.beta, &sp, materials, ENV_ARGS, SCENE_ARGS, &env_part,
+                                      lights, nlights);
+        }
+        est = (est + env_part) * env_scale + emitted;
+#else
         /* the sample's numbers, in the order of its dimensions: a direction in the
          * environment's texel (its row and column), the GGX and the cosine warps, the point in
          * the texel */
-        Sampler sp = sampler_start(seed, sid, sk);
-        float3 est = (float3)(0.0f);
-#ifdef BOUNCES
-        /* the first vertex as a path vertex: the environment's NEE against the BSDF of the terms
-         * asked for, and one BSDF sample whose ray brings the environment (MIS) where it misses and
-         * the light of the surface it meets where it hits (follow_path) */
-        {
-            const FirstVertex fv = first_vertex(mt, v, nrm, t, b, nov, FIRST_DIFFUSE, FIRST_SPECULAR, &sp, ENV_ARGS);
-            if (fv.env_live && VISIBLE(fv.env_l)) est += fv.env_c;
-            float3 env_part = (float3)(0.0f), emitted = (float3)(0.0f);
-            if (fv.live) {
-                const Hit hh = trace(origin, fv.l, SCENE_ARGS);
-                if (hh.kind == PRIM_NONE)
-                    est += env_missed(fv.l, fv.pdf, fv.beta, ENV_ARGS);
-                else
-                    emitted = follow_path(origin, fv.l, hh, fv.beta, &sp, materials, ENV_ARGS, SCENE_ARGS, &env_part,
-                                          lights, nlights);
-            }
-            est = (est + env_part) * env_scale + emitted;
-        }
-#else
         const float2 u_env = sampler_2d(&sp), u_ggx = sampler_2d(&sp), u_cos = sampler_2d(&sp),
                      u_texel = sampler_2d(&sp);
+        float3 est = (float3)(0.0f);
         /* strategy 1: the environment, each term weighted against its own BSDF's sampling */
         {
             int texel;
@@ -140,10 +141,8 @@ __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int
             float3 l;
             float pb;
             const float3 wgt = bsdf_sample(mt, v, nrm, t, b, nov, 0.0f, 1, 0, 1.0f, u_cos, &l, &pb);
-            if ((wgt.x > 0.0f || wgt.y > 0.0f || wgt.z > 0.0f) && VISIBLE(l)) {
-                const int texel = env_texel_index(to_env(l, env_rot), w, h);
-                est += img[texel].xyz * wgt * power_heuristic(pb, pdf_env(pdf_table, texel));
-            }
+            if ((wgt.x > 0.0f || wgt.y > 0.0f || wgt.z > 0.0f) && VISIBLE(l))
+                est += wgt * env_missed(l, pb, ENV_ARGS);
         }
 #endif
 #if SPECULAR_MODE == SPECULAR_REFERENCE
@@ -151,13 +150,11 @@ __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int
             float3 l;
             float pb;
             const float3 wgt = bsdf_sample(mt, v, nrm, t, b, nov, 1.0f, 0, 1, 0.0f, u_ggx, &l, &pb);
-            if ((wgt.x > 0.0f || wgt.y > 0.0f || wgt.z > 0.0f) && VISIBLE(l)) {
-                const int texel = env_texel_index(to_env(l, env_rot), w, h);
-                est += img[texel].xyz * wgt * (isinf(pb) ? 1.0f : power_heuristic(pb, pdf_env(pdf_table, texel)));
-            }
+            if ((wgt.x > 0.0f || wgt.y > 0.0f || wgt.z > 0.0f) && VISIBLE(l))
+                est += wgt * env_missed(l, pb, ENV_ARGS);
         }
 #endif
-#if defined(HAS_OCCLUSION_MAP)
+#ifdef HAS_OCCLUSION_MAP
         est *= env_scale * mt.occlusion;     /* the material's occlusion map: image-based light only */
 #else
         est *= env_scale;
@@ -168,6 +165,5 @@ __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int
     }
     ref_batch[item] = (float4)(sum, odd);
 }
-
 
 #include "wavefront.cl"

@@ -53,17 +53,26 @@ IBL_INLINE float radical_inverse(uint j, uint b)
     return fmin(r, 0x1.fffffep-1f);
 }
 
-/* Dimension d of sample j of replicate `rep` for G-buffer sample gid: Halton in base
- * HALTON_BASES[d], shifted by a random rotation per (seed, gid, replicate, dimension)
- * (Cranley-Patterson). Two replicates (even and odd sample numbers) with independent rotations
+/* Dimension d of sample j of replicate `rep` for G-buffer sample gid: Halton in base 2, 3, 5,
+ * 7, 11, 13, 17, 19 (the twin's HALTON_BASES), shifted by a random rotation per (seed, gid,
+ * replicate, dimension) (Cranley-Patterson). Two replicates (even and odd sample numbers) with independent rotations
  * give an honest error estimate (their difference); a variance of QMC samples would not. */
-__constant uint HALTON_BASES[8] = {2u, 3u, 5u, 7u, 11u, 13u, 17u, 19u};
-
 IBL_INLINE float qmc(uint seed, uint gid, uint k, int d)
 {
     const uint rep = k & 1u, j = k >> 1;
     const float shift = hash_uniform(seed ^ pcg_hash(gid * 16u + rep * 8u + (uint)d));
-    const float x = radical_inverse(j, HALTON_BASES[d]) + shift;
+    float r;
+    switch (d) {            /* each base a constant: its divisions become multiplications */
+    case 0: r = radical_inverse(j, 2u); break;
+    case 1: r = radical_inverse(j, 3u); break;
+    case 2: r = radical_inverse(j, 5u); break;
+    case 3: r = radical_inverse(j, 7u); break;
+    case 4: r = radical_inverse(j, 11u); break;
+    case 5: r = radical_inverse(j, 13u); break;
+    case 6: r = radical_inverse(j, 17u); break;
+    default: r = radical_inverse(j, 19u); break;
+    }
+    const float x = r + shift;
     return x >= 1.0f ? x - 1.0f : x;
 }
 
@@ -71,9 +80,10 @@ IBL_INLINE float qmc(uint seed, uint gid, uint k, int d)
  * (Get1D, Get2D) and Mitsuba 3's (next_1d, next_2d) do: no kernel numbers a dimension by hand.
  * `seed` already carries the stream (the reference's seed, AO's seed ^ STREAM_AO, a light's);
  * `gid` the G-buffer sample's number in the frame, `k` the sample's number. The first 8 dimensions
- * are Halton's (HALTON_BASES), a path's later ones Owen-scrambled Sobol pairs (owen_sobol). */
+ * are Halton's (HALTON_BASES), a path's later ones Owen-scrambled Sobol pairs (owen_sobol_pair). */
 typedef struct {
     uint seed, gid, k;
+    uint stream;            /* a path's own stream past the first 8: (seed, G-buffer sample, replicate) */
     int dim;
 } Sampler;
 
@@ -81,6 +91,7 @@ IBL_INLINE Sampler sampler_start(uint seed, uint gid, uint k)
 {
     Sampler s;
     s.seed = seed; s.gid = gid; s.k = k; s.dim = 0;
+    s.stream = pcg_hash(seed ^ pcg_hash(gid * 2u + (k & 1u)));
     return s;
 }
 
@@ -104,37 +115,52 @@ IBL_INLINE uint nested_uniform_scramble(uint x, uint seed)
     return reverse_bits32(laine_karras_permutation(reverse_bits32(x), seed));
 }
 
-/* Sobol's second dimension (direction numbers v0 = 2^31, v_k = v_{k-1} ^ (v_{k-1} >> 1)); its
- * first is the van der Corput sequence, reverse_bits32(i) */
-IBL_INLINE uint sobol_dim1(uint i)
+/* Sobol's second dimension (direction numbers v0 = 2^31, v_k = v_{k-1} ^ (v_{k-1} >> 1): row k of
+ * Pascal's triangle mod 2, whose bit q from the top is set where q is a subset of k's bits, by
+ * Lucas's theorem), bit-reversed: bit q of the result is the parity of i's bits k over every k
+ * whose bits hold q's, a superset-sum (zeta) transform over the 5 bits of a bit position, done on
+ * the word in 5 shift-and-xor steps instead of a loop over i's 32 bits. Its first dimension,
+ * bit-reversed, is i itself (van der Corput). */
+IBL_INLINE uint sobol_dim1_reversed(uint i)
 {
-    uint r = 0u, v = 0x80000000u;
-    for (; i != 0u; i >>= 1, v ^= v >> 1)
-        if (i & 1u) r ^= v;
-    return r;
+    i ^= (i >> 1) & 0x55555555u;
+    i ^= (i >> 2) & 0x33333333u;
+    i ^= (i >> 4) & 0x0F0F0F0Fu;
+    i ^= (i >> 8) & 0x00FF00FFu;
+    i ^= (i >> 16) & 0x0000FFFFu;
+    return i;
 }
 
-/* Coordinate c (0, 1) of pair p of sample j of one stream (seed: the sample's stream, G-buffer
- * sample and replicate hashed) */
-IBL_INLINE float owen_sobol(uint j, uint seed, int p, int c)
+/* Pair p of sample j of one stream (its seed: the sample's stream, G-buffer sample and replicate
+ * hashed): the index shuffled by the pair's own scramble, then each coordinate's Owen scramble.
+ * nested_uniform_scramble(x) = reverse(permutation(reverse(x))), and the two coordinates before
+ * it are reverse(i) and reverse(sobol_dim1_reversed(i)): the reversals cancel. */
+IBL_INLINE float2 owen_sobol_pair(uint j, uint stream, int p)
 {
-    const uint s = pcg_hash(seed ^ pcg_hash((uint)p + 0x51ED27u));
+    const uint s = pcg_hash(stream ^ pcg_hash((uint)p + 0x51ED27u));
     const uint i = nested_uniform_scramble(j, s);
-    const uint x = c == 0 ? reverse_bits32(i) : sobol_dim1(i);
-    return (float)(nested_uniform_scramble(x, pcg_hash(s + (uint)c + 1u)) >> 8) * (1.0f / 16777216.0f);
+    const uint x = reverse_bits32(laine_karras_permutation(i, pcg_hash(s + 1u)));
+    const uint y = reverse_bits32(laine_karras_permutation(sobol_dim1_reversed(i), pcg_hash(s + 2u)));
+    return (float2)((float)(x >> 8), (float)(y >> 8)) * (1.0f / 16777216.0f);
 }
 
 IBL_INLINE float sampler_1d(Sampler *s)
 {
     const int d = s->dim++;
     if (d < 8) return qmc(s->seed, s->gid, s->k, d);
-    /* a path's: its own stream per (seed, G-buffer sample, replicate), sample k >> 1 of it */
-    const uint stream = pcg_hash(s->seed ^ pcg_hash(s->gid * 2u + (s->k & 1u)));
-    return owen_sobol(s->k >> 1, stream, (d - 8) >> 1, (d - 8) & 1);
+    const float2 u = owen_sobol_pair(s->k >> 1, s->stream, (d - 8) >> 1);
+    return (d - 8) & 1 ? u.y : u.x;
 }
 
+/* Two dimensions; past the first 8 and starting a pair (a path vertex's draws all do), both
+ * coordinates of one scrambled index */
 IBL_INLINE float2 sampler_2d(Sampler *s)
 {
+    if (s->dim >= 8 && !((s->dim - 8) & 1)) {
+        const int d = s->dim;
+        s->dim += 2;
+        return owen_sobol_pair(s->k >> 1, s->stream, (d - 8) >> 1);
+    }
     const float a = sampler_1d(s);
     return (float2)(a, sampler_1d(s));
 }

@@ -42,11 +42,12 @@ IBL_INLINE void wf_save_sampler(__global float4 *ps, const Sampler sp)
     ps[3] = (float4)(as_float(sp.seed), as_float(sp.gid), as_float(sp.k), as_float(sp.dim));
 }
 
+/* the Sampler as sampler_start made it (what it derives from seed, gid, k: its stream), at dim */
 IBL_INLINE Sampler wf_load_sampler(__global const float4 *ps)
 {
     const float4 r = ps[3];
-    Sampler sp;
-    sp.seed = as_uint(r.x); sp.gid = as_uint(r.y); sp.k = as_uint(r.z); sp.dim = as_int(r.w);
+    Sampler sp = sampler_start(as_uint(r.x), as_uint(r.y), as_uint(r.z));
+    sp.dim = as_int(r.w);
     return sp;
 }
 
@@ -106,7 +107,7 @@ __kernel void wf_extend(const int count, const int npaths, __global float4 *wf_p
     if (hit.kind == PRIM_NONE) {
         /* the first vertex's ray brings the sky into its estimate, a later one into env_part */
         __global float4 *acc = ps + (bounce == 2 ? 4 : 5);
-        acc->xyz += env_missed(r1.xyz, r2.w, r2.xyz, ENV_ARGS);
+        acc->xyz += r2.xyz * env_missed(r1.xyz, r2.w, ENV_ARGS);
         return;
     }
     ps[4].w = as_float(hit.kind);
@@ -132,17 +133,16 @@ __kernel void wf_shade(const int count, const int npaths, __global float4 *wf_pa
     const int scatters = vertex_start(r0.xyz, r1.xyz, hit, bounce, materials, SCENE_ARGS, &pv);
     float3 emitted = ps[6].xyz + beta * pv.mt.emissive;
     if (!scatters) { ps[6].xyz = emitted; return; }
-    const VertexSamples u = vertex_samples(&sp);
-    float3 le;
-    float3 c;
-    const int env_live = env_nee(pv.mt, pv.v, pv.n, pv.nov, pv.ps, 1, 1, u.u_env, u.u_texel, beta, ENV_ARGS, &le, &c);
-    wf_shadow_ray(wf_shadow, slot, nlights, 0, pv.origin, le, INFINITY, WF_ENV, c, env_live);
+    const VertexDims u = vertex_dims(&sp);
+    float3 le, c;
+    const int env_live = env_sample(pv.mt, pv.v, pv.n, pv.nov, pv.ps, 1, 1, u.env, ENV_ARGS, &le, &c);
+    wf_shadow_ray(wf_shadow, slot, nlights, 0, pv.origin, le, INFINITY, WF_ENV, beta * c, env_live);
     int any = env_live;
 #ifdef PATH_LIGHTS
     for (int j = 0; j < nlights; ++j) {
         float3 ll;
         float dist;
-        const int live = light_nee(lights, j, &sp, pv, beta, &ll, &dist, &c);
+        const int live = light_sample(lights, j, &sp, pv, beta, &ll, &dist, &c);
         wf_shadow_ray(wf_shadow, slot, nlights, 1 + j, pv.origin, ll, dist, WF_EMITTED, c, live);
         any |= live;
     }

@@ -60,15 +60,21 @@ def furnace(folder, env, bounces, samples, paths="auto"):
 @pytest.mark.parametrize("paths", PATHS)
 def test_white_furnace_converges_to_one(tmp_path, white, paths):
     """Unbounded paths: every pixel of the sphere and the floor is 1 (at 1024 samples the mean
-    within 0.3%, measured 0.11%; each pixel within 7%, measured 4.2%, half of 256 samples': noise,
-    not bias); the direct light alone (bounces 1) misses what the sphere and the floor send each
-    other: 10% or more at the contact."""
+    within 0.3%, measured 0.007%; the RMS over the pixels within 1.5%, measured 0.75% (0.44-0.75%
+    over seeds 1-6; 0.74-0.95% before the first vertex was a path vertex); 99% of them within 4%,
+    measured 1.9%): noise, not bias. The worst pixel is not bounded: in an albedo-1 furnace a path
+    survives roulette with 0.95 a bounce and its throughput grows by 1 / 0.95 each time, so a rare
+    long path is a firefly (worst pixel 2.7-11.5% over seeds 1-6, 3.3-8.4% before). The direct
+    light alone (bounces 1) misses what the sphere and the floor send each other: 10% or more at
+    the contact."""
     sc = furnace(tmp_path, white, "unbounded", 1024, paths)
     f = render(sc, cache_root=tmp_path / "cache")
     hit = f.hdr[..., 3] > 0.999
     got = f.hdr[..., :3][hit]
-    print(f"furnace ({paths}): mean {got.mean():.5f}, worst {np.abs(got - 1).max():.4f} over {hit.sum()} px")
-    assert abs(got.mean() - 1) < 3e-3 and np.abs(got - 1).max() < 0.07
+    err = np.abs(got - 1)
+    rms, p99 = np.sqrt(np.mean(err ** 2)), np.quantile(err, 0.99)
+    print(f"furnace ({paths}): mean {got.mean():.5f}, rms {rms:.4f}, 99% {p99:.4f}, worst {err.max():.4f} over {hit.sum()} px")
+    assert abs(got.mean() - 1) < 3e-3 and rms < 0.015 and p99 < 0.04
     ref = ran(f, paths)
     assert ref["bounces"] == "unbounded" and "BOUNCES" in f.report["effects"]["defines"]["reference"]
     direct = render(furnace(tmp_path, white, 1, 256), cache_root=tmp_path / "cache").hdr[..., :3][hit]

@@ -49,9 +49,10 @@ def check_profile(pr, bounces):
         assert e["traversal_shadow_ms"] > 0 and e["shadow_rays_per_sample"] > 0, e
         assert (e["traversal_closest_ms"] > 0) == (e["closest_rays_per_sample"] > 0), e
         assert e["msamples_per_s"] > 0
-    assert pr["per_bounce"][0]["closest_rays_per_sample"] == 0          # the direct light: shadow rays alone
-    if bounces > 1:
-        assert pr["per_bounce"][1]["closest_rays_per_sample"] > 1          # the first vertex's and the second's
+    # the first vertex is a path vertex: at most one closest-hit ray a sample (its BSDF sample's), and
+    # a path reaches a vertex only through the one before (each bounce at most the previous one's rays)
+    per = [e["closest_rays_per_sample"] for e in pr["per_bounce"]]
+    assert 0 < per[0] <= 1 and all(b <= a for a, b in zip(per, per[1:])), per
     total = sum(e["shading_ms"] + e["traversal_closest_ms"] + e["traversal_shadow_ms"] for e in pr["per_bounce"])
     assert abs(total / pr["whole_ms"] - 1) < ADDS_UP
     assert abs(pr["per_bounce_over_whole"] - 1) < ADDS_UP

@@ -4,9 +4,8 @@ OpenCL has no portable clock inside a kernel, so every figure is a launch timed 
 frame's first batch of the reference (the same G-buffer, seeds and sample numbers), launched
 again after the frame into a buffer of its own (the frame is not touched).
 
-- Per bounce, by differential launches of the same batch: the reference built as the direct light
-  alone (bounce 1: no BOUNCES, the scene's `bounces: 1`), then with BOUNCES = 2, 3, ... up to the
-  scene's bounces or `depth`; bounce k costs the launch with k bounces less the one with k - 1.
+- Per bounce, by differential launches of the same batch: the reference built with BOUNCES = 1,
+  2, 3, ... up to the scene's bounces or `depth`; bounce k costs the launch with k bounces less the one with k - 1.
   Past `depth` (an unbounded or deeper scene) one entry, "k+", holds what the whole launch costs
   beyond.
 - Traversal: the reference built with PROFILE_RAYS 1 (kernels/scene.h) records every ray it
@@ -44,23 +43,15 @@ TRACE_KERNEL = "trace_rays.cl"
 
 def variants(defines: dict, depth: int) -> tuple:
     """([(bounces, defines)] of the cumulative launches, one per bounce profiled; whether the
-    whole launch holds bounces past them). The direct light alone has no BOUNCES (the scene's
-    bounces: 1); bounces k >= 2 is BOUNCES = k; the scene's BOUNCES 0 is unbounded."""
+    whole launch holds bounces past them). A path's bounce k is BOUNCES = k (its first vertex is a
+    path vertex: BOUNCES = 1 is that vertex alone, its closest-hit ray finding the emission it
+    sees); the scene's BOUNCES 0 is unbounded. The direct light (no BOUNCES, the scene's
+    `bounces: 1`) is one launch."""
     if "BOUNCES" not in defines:
         return [(1, dict(defines))], False
-    direct = {k: v for k, v in defines.items() if k not in ("BOUNCES", "PATH_LIGHTS")}
     n = int(defines["BOUNCES"])
     last = depth if n == 0 else min(n, depth)
-    out = [(1, direct)] + [(k, {**defines, "BOUNCES": k}) for k in range(2, last + 1)]
-    return out, n == 0 or n > depth
-
-
-def bounce_of(vertex: np.ndarray, closest: np.ndarray) -> np.ndarray:
-    """The bounce whose launch first traces each ray (the launch with k bounces less the one with
-    k - 1): a shadow ray from vertex k is bounce k's; so is a closest-hit ray from vertex k >= 2
-    (the light BSDF sampling finds at vertex k: the environment past it, the next vertex's
-    emission); the first vertex's closest-hit ray is traced only by paths, so bounce 2's."""
-    return np.where(closest & (vertex == 1), 2, vertex)
+    return [(k, {**defines, "BOUNCES": k}) for k in range(1, last + 1)], n == 0 or n > depth
 
 
 def _name(key) -> str:
@@ -172,7 +163,9 @@ def profile_reference(ctx, ref_pass, repeats: int = REPEATS, depth: int | None =
         recorded_sums = la.sums()
         flags = rt.read(rays, (total, RAY_FLOAT4S, 4))[:, 1, 3].view(np.int32)
         closest = (flags & 1) == 0
-        bounce = bounce_of(flags >> 4, closest)
+        # every ray from vertex k (its shadow rays, the closest-hit ray of its BSDF sample) is
+        # first traced by the launch with k bounces: bounce k's
+        bounce = flags >> 4
         if tail:
             bounce = np.minimum(bounce, steps[-1][0] + 1)
         item = np.repeat(np.arange(la.items), counts)

@@ -1,7 +1,7 @@
 """The reference pass's estimator with paths (kernels/reference.cl with BOUNCES), sample for sample:
 the same sample dimensions (Halton for the first 8, Owen-scrambled Sobol pairs after), the environment's sampling
-tables, the same strategies and MIS weights at the first vertex, the BSDF's lobe choice, Russian
-roulette and the environment sampled at every later vertex. numpy twin, float64, for untextured
+tables, the same strategies and MIS weights at every vertex (the first one's restricted to the
+terms the frame asks for), the BSDF's lobe choice and Russian roulette. numpy twin, float64, for untextured
 frames of spheres and planes without analytic lights (those the kernel's closed-form tests
 cover: tests/test_paths.py). Where float32 and float64 round a decision differently (a CDF
 boundary, a roulette draw) one path differs; every other is the kernel's."""
@@ -48,6 +48,32 @@ def env_texel(l, rot, w, h):
     return np.minimum((v * h).astype(np.int64), h - 1) * w + np.minimum((u * w).astype(np.int64), w - 1)
 
 
+def env_direct(mt, v, n, nov, origin, ps, diffuse, specular, u_env, u_texel, img, pdf_table, dist, rot, arrays,
+               alive=None):
+    """kernels/paths.h env_direct: the environment sampled at each vertex, MIS against the BSDF
+    of the terms asked for, where unoccluded (only the `alive` rows traced)."""
+    de, texel = dist.sample(np.concatenate([u_env, u_texel], 1))
+    l = conventions.rotate_y(de, rot)
+    pe = pdf_table[texel]
+    f, pb = bsdf.evaluate(mt, v, n, nov, l, ps, diffuse, specular)
+    ok = (pe > 0) & (f > 0).any(1)
+    if alive is not None:
+        ok &= alive
+    ok &= ~occluded(origin, l, arrays) if ok.any() else ok
+    with np.errstate(invalid="ignore", divide="ignore"):
+        w = sampling.power_heuristic(pe, pb) / np.where(pe > 0, pe, 1)
+    return np.where(ok[:, None], img[texel] * f * w[:, None], 0.0)
+
+
+def env_missed(l, pb, img, pdf_table, rot, w, h):
+    """kernels/paths.h env_missed: the environment a BSDF-sampled ray leaving the scene finds, MIS
+    against the panorama's sampling (1 for a mirror's ray, pdf inf)."""
+    tx = env_texel(l, rot, w, h)
+    with np.errstate(invalid="ignore"):
+        mis = np.where(np.isinf(pb), 1.0, sampling.power_heuristic(pb, pdf_table[tx]))
+    return img[tx] * mis[:, None]
+
+
 def _vertex(arrays, mat, nov):
     """(the BSDF's material (core/bsdf.py), emission) of the materials `mat` seen at NoV nov."""
     base, metallic, emissive, rough, f0, f90 = _materials(arrays, mat)
@@ -71,41 +97,21 @@ def radiance(gb, arrays, effects: dict, env: dict, image, dist, samples: int, bo
     total = np.zeros((len(gid), 3))
     for k in range(samples):
         sp = sampling.Sampler(seed, gid, k)
-        u_env, u_ggx, u_cos, u_texel = sp.next_2d(), sp.next_2d(), sp.next_2d(), sp.next_2d()
-        est = np.zeros((len(gid), 3))
-        # the direct estimate, each term alone (kernels/reference.cl): the environment, MIS against
-        # the term's BSDF pdf, then the term's BSDF (the cosine hemisphere, GGX visible normals),
-        # MIS against the environment's
-        de, texel = dist.sample(np.concatenate([u_env, u_texel], 1))
-        l = conventions.rotate_y(de, rot)
-        pe = pdf_table[texel]
-        nol = (n * l).sum(1)
-        ok = (nol > 0) & (pe > 0) & ~occluded(origin, l, arrays)
-        li = img[texel]
-        for term, ps_term, u_term in ((diffuse, 0.0, u_cos), (specular, 1.0, u_ggx)):
-            if not term:
-                continue
-            f, pb = bsdf.evaluate(mt, v, n, nov, l, ps_term, not ps_term, bool(ps_term))
-            with np.errstate(invalid="ignore", divide="ignore"):
-                mis_e = sampling.power_heuristic(pe, pb) / np.where(pe > 0, pe, 1)
-            est += np.where(ok[:, None], li * f * mis_e[:, None], 0.0)
-        for term, ps_term, u_term in ((diffuse, 0.0, u_cos), (specular, 1.0, u_ggx)):
-            if not term:
-                continue
-            wgt, lb, pb = bsdf.sample(mt, v, n, nov, ps_term, not ps_term, bool(ps_term), 1.0 - ps_term, u_term)
-            tx = env_texel(lb, rot, wid, hgt)
-            seen = (wgt > 0).any(1)
-            seen &= ~occluded(origin, lb, arrays) if seen.any() else seen
-            mis_b = np.where(np.isinf(pb), 1.0, sampling.power_heuristic(pb, pdf_table[tx]))
-            est += np.where(seen[:, None], img[tx] * wgt * mis_b[:, None], 0.0)
-        # the path: the surface the first vertex sees, then every later vertex
-        u_lobe, u_dir = sp.next_1d(), sp.next_2d()
+        # the first vertex is a path vertex of the terms asked for: the environment sampled (MIS
+        # against the BSDF), one BSDF-sampled ray bringing the environment where it leaves the
+        # scene (MIS against the panorama's sampling), the path where it meets a surface
+        u_env, u_texel, u_dir = sp.next_2d(), sp.next_2d(), sp.next_2d()
+        u_lobe, _ = sp.next_1d(), sp.next_1d()
         ps = bsdf.specular_probability(mt, nov, diffuse, specular)
-        beta, l, _ = bsdf.sample(mt, v, n, nov, ps, diffuse, specular, u_lobe, u_dir)
+        est = env_direct(mt, v, n, nov, origin, ps, diffuse, specular, u_env, u_texel, img, pdf_table, dist, rot,
+                         arrays)
+        beta, l, pb = bsdf.sample(mt, v, n, nov, ps, diffuse, specular, u_lobe, u_dir)
         alive = (beta > 0).any(1)
         env_part, emitted = np.zeros_like(est), np.zeros_like(est)
         o = origin.copy()
         th, mat, ng, found = closest(o, l, arrays)
+        miss = alive & ~found
+        est += np.where(miss[:, None], beta * env_missed(l, pb, img, pdf_table, rot, wid, hgt), 0.0)
         alive &= found
         for bounce in range(2, MAX_PATH + 1):
             if not alive.any():
@@ -123,14 +129,8 @@ def radiance(gb, arrays, effects: dict, env: dict, image, dist, samples: int, bo
             psv = bsdf.specular_probability(mv, nv, True, True)
             u_env, u_texel, u_d = sp.next_2d(), sp.next_2d(), sp.next_2d()
             u_lb, u_rr = sp.next_1d(), sp.next_1d()
-            de, texel = dist.sample(np.concatenate([u_env, u_texel], 1))
-            le = conventions.rotate_y(de, rot)
-            pe = pdf_table[texel]
-            f, pb = bsdf.evaluate(mv, vv, nn, nv, le, psv, True, True)
-            ok = alive & (pe > 0) & (f > 0).any(1)
-            ok &= ~occluded(org, le, arrays) if ok.any() else ok
-            env_part += np.where(ok[:, None], beta * img[texel] * f
-                                 * (sampling.power_heuristic(pe, pb) / np.where(pe > 0, pe, 1))[:, None], 0.0)
+            env_part += np.where(alive[:, None], beta * env_direct(mv, vv, nn, nv, org, psv, True, True, u_env, u_texel,
+                                                                    img, pdf_table, dist, rot, arrays, alive), 0.0)
             wgt, nl, pb = bsdf.sample(mv, vv, nn, nv, psv, True, True, u_lb, u_d)
             alive &= (wgt > 0).any(1)
             beta = np.where(alive[:, None], beta * wgt, beta)
@@ -141,9 +141,7 @@ def radiance(gb, arrays, effects: dict, env: dict, image, dist, samples: int, bo
             l, o = np.where(alive[:, None], nl, l), np.where(alive[:, None], org, o)
             th, mat, ng, found = closest(o, l, arrays)
             miss = alive & ~found
-            tx = env_texel(l, rot, wid, hgt)
-            mis = np.where(np.isinf(pb), 1.0, sampling.power_heuristic(pb, pdf_table[tx]))
-            env_part += np.where(miss[:, None], beta * img[tx] * mis[:, None], 0.0)
+            env_part += np.where(miss[:, None], beta * env_missed(l, pb, img, pdf_table, rot, wid, hgt), 0.0)
             alive &= found
         total += (est + env_part) * scale + emitted
     out = np.zeros((len(hit), 3))
