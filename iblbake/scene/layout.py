@@ -52,9 +52,10 @@ FLOAT4S = {
     # the wavefront's path state, one record per path (kernels/wavefront.cl; Laine, Karras and Aila
     # 2013): (the ray's origin | the vertex it will meet, int), (its direction | the G-buffer sample,
     # int), (throughput | the pdf of the BSDF sample that made the ray: MIS where it misses), the
-    # Sampler (seed, sample number in the frame, sample k, next dimension: uints), (the first vertex's
-    # estimate | the hit's kind, int), (the environment found past the first vertex | -), (the emission
-    # found | -), the closest hit (t, b1, b2 | primitive index, int)
+    # Sampler (seed, sample number in the frame, sample k, next dimension: uints; what sampler_start
+    # derives from them is derived again), (the first vertex's estimate | the hit's kind, int), (the
+    # environment found past the first vertex | -), (the emission found | -), the closest hit (t, b1,
+    # b2 | primitive index, int)
     "PATH": 8,
     # a queued shadow ray (the wavefront's): (origin | tmax), (direction | the accumulator it adds to:
     # 0 the first vertex's estimate, 1 the environment, 2 the emission), (the light it brings | -)
