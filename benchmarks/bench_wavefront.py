@@ -8,7 +8,7 @@ rate over the megakernel's (> 1: the wavefront is faster). docs/benchmarks.md "M
 wavefront" holds the table; AUTO_PATHS in iblbake/render/passes/reference.py follows it.
 
     .venv/bin/python benchmarks/bench_wavefront.py --devices pocl,intel-cpu --spp 128
-    .venv/bin/python benchmarks/bench_wavefront.py --devices nvidia --spp 1024 --scale 4    # a GPU
+    .venv/bin/python benchmarks/bench_wavefront.py --devices gpu --spp 1024 --scale 4        # a GPU (the H200)
 """
 
 from __future__ import annotations
