@@ -15,11 +15,12 @@
  * the frame's env_rot and env_scale, render/device_scene.py environment_frame; the panorama's
  * texels and its importance-sampling tables, panorama_args): its rotation about y as (cos, sin)
  * and its intensity, the full-resolution panorama (w x h RGBA texels, read piecewise constant),
- * the marginal CDF over rows, one CDF per row, and the pdf over solid angle per texel. */
+ * the marginal CDF over rows, one CDF per row with its guide table (ENV_GUIDE_BINS + 1 entries a
+ * row, core/sampling.py cdf_guides), and the pdf over solid angle per texel. */
 #define ENV_PARAMS const float2 env_rot, const float env_scale, __global const float4 *img, const int w, \
                    const int h, __global const float *marginal, __global const float *conditional, \
-                   __global const float *pdf_table
-#define ENV_ARGS env_rot, env_scale, img, w, h, marginal, conditional, pdf_table
+                   __global const int *guide, __global const float *pdf_table
+#define ENV_ARGS env_rot, env_scale, img, w, h, marginal, conditional, guide, pdf_table
 
 /* Trilinear lookup in the radiance chain: bilinear in two levels, blended. */
 /* Solid angle of a level-0 texel (w0 x h0) of the chain at direction l: (2 pi / w0)(pi / h0)
@@ -48,9 +49,9 @@ IBL_INLINE float3 chain_lookup(CHAIN_PARAMS, float3 d, float lod)
  * luminance x solid angle (tables built by iblbake/core/sampling.py: EnvironmentDistribution).
  * Row from the marginal CDF, column from the row's CDF, then uniform in (phi, cos theta) inside
  * the texel, so the pdf over solid angle is p_texel / Omega_texel (the pdf table). */
-IBL_INLINE int cdf_search(__global const float *cdf, int n, float u)
+/* The bin of u in a CDF: the smallest i in [lo, hi] with cdf[i + 1] > u, hi where none is */
+IBL_INLINE int cdf_search(__global const float *cdf, int lo, int hi, float u)
 {
-    int lo = 0, hi = n - 1;                 /* cdf[0..n], cdf[0] = 0, cdf[n] = 1 */
     while (lo < hi) {
         const int mid = (lo + hi) >> 1;
         if (cdf[mid + 1] <= u) lo = mid + 1; else hi = mid;
@@ -59,11 +60,16 @@ IBL_INLINE int cdf_search(__global const float *cdf, int n, float u)
 }
 
 /* Direction in the panorama's frame from four uniforms; *texel = j * w + i. */
-IBL_INLINE float3 sample_env(__global const float *marginal, __global const float *conditional, int w, int h,
-                         float4 u, int *texel)
+IBL_INLINE float3 sample_env(__global const float *marginal, __global const float *conditional,
+                             __global const int *guide, int w, int h, float4 u, int *texel)
 {
-    const int j = cdf_search(marginal, h, u.x);
-    const int i = cdf_search(conditional + j * (w + 1), w, u.y);
+    const int j = cdf_search(marginal, 0, h - 1, u.x);
+    /* a row's guide table (Chen and Asau 1974) brackets u's bin between the bins of the powers of
+     * two around it (exact in float32), so the search touches one or two cache lines of the row,
+     * not ~8 scattered ones: the same bin as a search of the whole row */
+    const int g = min((int)(u.y * ENV_GUIDE_BINS), ENV_GUIDE_BINS - 1);
+    __global const int *gr = guide + j * (ENV_GUIDE_BINS + 1);
+    const int i = cdf_search(conditional + j * (w + 1), gr[g], gr[g + 1], u.y);
     const float uu = ((float)i + u.z) / (float)w;
     const float c0 = cospi((float)j / h), c1 = cospi((float)(j + 1) / h);
     const float ct = mix(c0, c1, u.w);

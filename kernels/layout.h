@@ -64,6 +64,7 @@
 /* gb_mat: 3 per sample: (base colour, metallic), (emissive, roughness), (shading normal, occlusion) */
 #define MISS_T (-1.0f)
 #define DELTA_ALPHA 0.0001f
+#define ENV_GUIDE_BINS 256
 #define LUMINANCE_R 0.2126f
 #define LUMINANCE_G 0.7152f
 #define LUMINANCE_B 0.0722f

@@ -89,7 +89,7 @@ IBL_INLINE int env_sample(const Material mt, float3 v, float3 n, float nov, floa
                           float4 u, ENV_PARAMS, float3 *l, float3 *c)
 {
     int texel;
-    *l = from_env(sample_env(marginal, conditional, w, h, u, &texel), env_rot);
+    *l = from_env(sample_env(marginal, conditional, guide, w, h, u, &texel), env_rot);
     const float pe = pdf_env(pdf_table, texel);
     float pb;
     const float3 f = bsdf_eval(mt, v, n, nov, *l, ps, diffuse, specular, &pb);

@@ -118,7 +118,7 @@ __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int
         {
             int texel;
             const float4 u = (float4)(u_env, u_texel);
-            const float3 l = from_env(sample_env(marginal, conditional, w, h, u, &texel), env_rot);
+            const float3 l = from_env(sample_env(marginal, conditional, guide, w, h, u, &texel), env_rot);
             const float pe = pdf_env(pdf_table, texel);
             if (dot(nrm, l) > 0.0f && pe > 0.0f && VISIBLE(l)) {
                 const float3 li = img[texel].xyz;

@@ -111,12 +111,13 @@ __kernel void t_bsdf(__global const float4 *mat, __global const float4 *vn, __gl
     out[4 * i + 3] = (float4)(ls, specular_probability(mt, nov, diffuse, specular));
 }
 
-__kernel void t_env(__global const float *marginal, __global const float *conditional, const int w, const int h,
+__kernel void t_env(__global const float *marginal, __global const float *conditional, __global const int *guide,
+                    const int w, const int h,
                     __global const float4 *u, __global float4 *out)
 {
     const int i = get_global_id(0);
     int texel;
-    out[i] = (float4)(sample_env(marginal, conditional, w, h, u[i], &texel), (float)texel);
+    out[i] = (float4)(sample_env(marginal, conditional, guide, w, h, u[i], &texel), (float)texel);
 }
 
 /* probes.h at points p, normals n, view vectors v (float4 each); defines PROBES_SH,

@@ -88,6 +88,8 @@ def radical_inverse(j, base: int):
 
 
 HALTON_BASES = (2, 3, 5, 7, 11, 13, 17, 19)
+# entries of a panorama row's guide table, a power of two (cdf_guides; kernels/layout.h)
+ENV_GUIDE_BINS = 256
 
 
 def hash_uniform(x):
@@ -246,6 +248,7 @@ class EnvironmentDistribution:
     def __init__(self, image):
         self.marginal, self.conditional, self.pdf = env_sampling_tables(image)
         self.height, self.width = self.pdf.shape
+        self.guide = cdf_guides(self.conditional)
 
     def sample(self, u):
         """Directions in the panorama's frame from u in [0,1)^4 (rows of 4), and their texels."""
@@ -289,6 +292,20 @@ def env_sampling_tables(image):
     cond[:, -1] = 1.0
     pdf = weight / total / omega[:, None]
     return marginal.astype(np.float32), cond.astype(np.float32), pdf.astype(np.float32)
+
+
+def cdf_guides(cdfs, bins: int = ENV_GUIDE_BINS):
+    """Guide tables of CDFs (Chen and Asau 1974) as kernels/envmap.h sample_env reads them: per
+    row (cdfs: (H, W + 1) float32, cdf[0] = 0, cdf[W] = 1), for g = 0 .. bins, the bin of u =
+    g / bins (the smallest i with cdf[i + 1] > u, W - 1 where none is), int32 (H, bins + 1). A u
+    in [g, g + 1) / bins has its bin between entries g and g + 1; bins is a power of two, so u
+    times it is exact in float32 and g is the same on the device."""
+    cdfs = np.asarray(cdfs, np.float32)
+    w = cdfs.shape[1] - 1
+    t = np.arange(bins + 1, dtype=np.float32) / np.float32(bins)
+    out = np.stack([np.searchsorted(row[1:], t, side="right") for row in cdfs]) if len(cdfs) else \
+        np.zeros((0, bins + 1), np.int64)
+    return np.minimum(out, w - 1).astype(np.int32)
 
 
 def power_heuristic(a, b):

@@ -84,8 +84,9 @@ def panorama_args(rt, bakes, image, dist) -> dict:
 
     def upload():
         return {"img": rt.to_device(to_rgba(image)), "marginal": rt.to_device(dist.marginal),
-                "conditional": rt.to_device(dist.conditional), "pdf_table": rt.to_device(dist.pdf)}
-    return {**bakes.on_device(rt, (image, dist.marginal, dist.conditional, dist.pdf), upload),
+                "conditional": rt.to_device(dist.conditional), "guide": rt.to_device(dist.guide),
+                "pdf_table": rt.to_device(dist.pdf)}
+    return {**bakes.on_device(rt, (image, dist.marginal, dist.conditional, dist.guide, dist.pdf), upload),
             "w": dist.width, "h": dist.height}
 
 

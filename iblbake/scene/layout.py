@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from iblbake.core.bsdf import DELTA_ALPHA
 from iblbake.core.metrics import LUMINANCE
+from iblbake.core.sampling import ENV_GUIDE_BINS
 
 DIFFUSE_MODES = {"off": 0, "sh": 1, "reference": 2, "probes": 3, "basis": 4}   # basis: core/bases DIFFUSE
 SPECULAR_MODES = {"off": 0, "importance": 1, "prefiltered": 2, "reference": 3, "lobe": 4, "basis": 5,   # basis: core/bases SPECULAR
@@ -23,6 +24,7 @@ PRIM_KINDS = {"none": 0, "sphere": 1, "plane": 2, "triangle": 3}
 # (= roughness^2) are mirrors where a path samples them: float32 cannot resolve the lobe (D
 # overflows, the half-vector warp collapses), so the BSDF takes the mirror direction with weight F
 # (kernels/bsdf.h, render/twin, study/accuracy)
+# ENV_GUIDE_BINS (core/sampling.py cdf_guides): a panorama row's guide table, read by kernels/envmap.h
 # random streams: a seed ^ its stream, so that two uses of one seed draw independent numbers
 # (kernels/sampler.h; the reference's stream is the seed itself, each light's seed ^ pcg_hash(j + 1))
 RANDOM_STREAMS = {"ao": 0x5A0}
@@ -95,7 +97,7 @@ def header_text() -> str:
     rows += [f"#define SURFACE_{k.upper()} {v}" for k, v in SURFACE_FLAGS.items()] + [""]
     rows += [f"#define {k}_FLOAT4S {v}" for k, v in FLOAT4S.items()] + [""]
     rows += [f"/* {k}: {v} */" for k, v in GBUFFER.items()]
-    rows += [f"#define MISS_T ({MISS_T}f)", f"#define DELTA_ALPHA {DELTA_ALPHA!r}f"]
+    rows += [f"#define MISS_T ({MISS_T}f)", f"#define DELTA_ALPHA {DELTA_ALPHA!r}f", f"#define ENV_GUIDE_BINS {ENV_GUIDE_BINS}"]
     rows += [f"#define LUMINANCE_{c} {w!r}f" for c, w in zip("RGB", LUMINANCE.tolist())]
     rows += [f"#define STREAM_{k.upper()} {v:#x}u" for k, v in RANDOM_STREAMS.items()]
     rows += ["", "#endif", ""]
