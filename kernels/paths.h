@@ -7,7 +7,9 @@
  * (ENV_PARAMS, kernels/envmap.h) and the lights. The one path of every ray source: the
  * reference's camera samples (kernels/reference.cl, from their first vertex), the irradiance
  * probes' rays and the reflection captures' texels (kernels/probe_trace.cl, from a point;
- * iblbake/render/paths/).
+ * iblbake/render/paths/). Each vertex's pieces (first_vertex, vertex_start, env_sample,
+ * light_sample, path_scatter) are functions that the wavefront's stages (kernels/wavefront.cl) call
+ * too, where a ray is queued instead of traced.
  * numpy twin: iblbake/render/twin/paths.py. */
 #ifndef IBLBAKE_PATHS_H
 #define IBLBAKE_PATHS_H
@@ -80,19 +82,121 @@ IBL_INLINE VertexDims vertex_dims(Sampler *sp)
 }
 
 /* The environment's light at a vertex by sampling the panorama (u: vertex_dims' env), weighted
- * against the BSDF's sampling of the terms asked for (power heuristic, Veach 1997): Le f NoL w / pe
- * where the direction leaves the scene unoccluded from origin. */
+ * against the BSDF's sampling of the terms asked for (power heuristic, Veach 1997), before its
+ * shadow ray: the direction *l and *c = Le f NoL w / pe, what arrives where it leaves the scene
+ * unoccluded; returns whether there is a shadow ray to trace (the wavefront queues it). */
+IBL_INLINE int env_sample(const Material mt, float3 v, float3 n, float nov, float ps, int diffuse, int specular,
+                          float4 u, ENV_PARAMS, float3 *l, float3 *c)
+{
+    int texel;
+    *l = from_env(sample_env(marginal, conditional, guide, w, h, u, &texel), env_rot);
+    const float pe = pdf_env(pdf_table, texel);
+    float pb;
+    const float3 f = bsdf_eval(mt, v, n, nov, *l, ps, diffuse, specular, &pb);
+    const int live = pe > 0.0f && (f.x > 0.0f || f.y > 0.0f || f.z > 0.0f);
+    *c = live ? img[texel].xyz * f * (power_heuristic(pe, pb) / pe) : (float3)(0.0f);
+    return live;
+}
+
+/* env_sample's light where its direction leaves the scene unoccluded from origin */
 IBL_INLINE float3 env_direct(const Material mt, float3 v, float3 n, float nov, float3 origin, float ps, int diffuse,
                              int specular, float4 u, ENV_PARAMS, SCENE_PARAMS)
 {
-    int texel;
-    const float3 l = from_env(sample_env(marginal, conditional, guide, w, h, u, &texel), env_rot);
-    const float pe = pdf_env(pdf_table, texel);
-    float pb;
-    const float3 f = bsdf_eval(mt, v, n, nov, l, ps, diffuse, specular, &pb);
-    if (pe > 0.0f && (f.x > 0.0f || f.y > 0.0f || f.z > 0.0f) && !occluded(origin, l, SCENE_ARGS))
-        return img[texel].xyz * f * (power_heuristic(pe, pb) / pe);
+    float3 l, c;
+    if (env_sample(mt, v, n, nov, ps, diffuse, specular, u, ENV_ARGS, &l, &c) && !occluded(origin, l, SCENE_ARGS))
+        return c;
     return (float3)(0.0f);
+}
+
+/* A path's vertices, each piece once: the megakernel (the reference's first vertex, follow_path)
+ * and the wavefront's stages (kernels/wavefront.cl; Laine, Karras and Aila 2013) call these, so
+ * the two draw the same dimensions in the same order and compute the same estimate. */
+
+/* The first vertex (the G-buffer sample; the terms asked for, diffuse and specular): its
+ * dimensions, the environment sampled (env_sample's, before the shadow ray) and one BSDF sample
+ * (l, its weight beta and pdf; live: a ray to trace) */
+typedef struct {
+    float3 env_l, env_c, l, beta;
+    float pdf;
+    int env_live, live;
+} FirstVertex;
+
+IBL_INLINE FirstVertex first_vertex(const Material mt, float3 v, float3 n, float3 t, float3 b, float nov, int diffuse,
+                                    int specular, Sampler *sp, ENV_PARAMS)
+{
+    FirstVertex fv;
+    const VertexDims u = vertex_dims(sp);
+    const float ps = specular_probability(mt, nov, diffuse, specular);
+    fv.env_live = env_sample(mt, v, n, nov, ps, diffuse, specular, u.env, ENV_ARGS, &fv.env_l, &fv.env_c);
+    fv.beta = bsdf_sample(mt, v, n, t, b, nov, ps, diffuse, specular, u.lobe, u.dir, &fv.l, &fv.pdf);
+    fv.live = fv.beta.x > 0.0f || fv.beta.y > 0.0f || fv.beta.z > 0.0f;
+    return fv;
+}
+
+/* A later vertex, shaded with its full material: where the ray o + t d met hit h (path_vertex),
+ * the view vector, the offset origin of its rays, its frame and the specular lobe's probability */
+typedef struct {
+    float3 p, n, v, origin, t, b;
+    float nov, ps;
+    Material mt;
+} PathVertex;
+
+/* The vertex the ray o + t d meets at h; returns whether it may scatter (BOUNCES caps the
+ * scattering events; its emission counts either way) */
+IBL_INLINE int vertex_start(float3 o, float3 d, Hit h, int bounce, __global const float4 *materials, SCENE_PARAMS,
+                            PathVertex *pv)
+{
+    path_vertex(o, d, h, materials, SCENE_ARGS, &pv->p, &pv->n, &pv->mt);
+    pv->v = -d;
+    pv->nov = fmax(dot(pv->n, pv->v), 1e-4f);
+    pv->origin = ray_offset(pv->p, pv->n, d, h.t);
+    tangent_frame(pv->n, &pv->t, &pv->b);
+    pv->ps = specular_probability(pv->mt, pv->nov, 1, 1);
+    return !(BOUNCES > 0 && bounce > BOUNCES);
+}
+
+#ifdef PATH_LIGHTS
+/* Analytic light j at a later vertex: one direction over its disk or sphere (uniform in the cone
+ * it fills) or its centre (*l, a shadow ray of length *dist), *c = beta E f what arrives unoccluded;
+ * no ray finds a light, so this is its only strategy (no MIS). Draws the light's pair of
+ * dimensions; returns whether there is a shadow ray to trace. */
+IBL_INLINE int light_sample(__global const float4 *lights, int j, Sampler *sp, const PathVertex pv, float3 beta,
+                            float3 *l, float *dist, float3 *c)
+{
+    float3 wc;
+    float sin_max;
+    const float3 e = light_toward(lights, j, pv.p, &wc, dist, &sin_max);
+    const float2 u_light = sampler_2d(sp);
+    *l = wc;
+    *c = (float3)(0.0f);
+    if (e.x + e.y + e.z <= 0.0f) return 0;
+    float3 le = e;
+    if (sin_max > 0.0f) {          /* radiance E / (pi sin^2) over the cone's solid angle 2 pi omc */
+        const float omc = light_omc(sin_max);
+        *l = cone_direction(wc, omc, u_light);
+        le = e * (2.0f * omc / (sin_max * sin_max));
+    }
+    float pl;
+    const float3 f = bsdf_eval(pv.mt, pv.v, pv.n, pv.nov, *l, pv.ps, 1, 1, &pl);
+    *c = beta * le * f;
+    return f.x > 0.0f || f.y > 0.0f || f.z > 0.0f;
+}
+#endif
+
+/* Scatter at a later vertex: a direction from its BSDF (*l, pdf *pb), the throughput times its
+ * weight, then Russian roulette from bounce RR_DEPTH on (survival min(max beta, 0.95), beta / q);
+ * returns whether the path goes on */
+IBL_INLINE int path_scatter(const PathVertex pv, const VertexDims u, int bounce, float3 *beta, float3 *l, float *pb)
+{
+    const float3 wgt = bsdf_sample(pv.mt, pv.v, pv.n, pv.t, pv.b, pv.nov, pv.ps, 1, 1, u.lobe, u.dir, l, pb);
+    if (!(wgt.x > 0.0f || wgt.y > 0.0f || wgt.z > 0.0f)) return 0;
+    *beta *= wgt;
+    if (bounce >= RR_DEPTH) {
+        const float q = fmin(fmax(beta->x, fmax(beta->y, beta->z)), 0.95f);
+        if (u.rr >= q) return 0;
+        *beta /= q;
+    }
+    return 1;
 }
 
 /* The light a path brings back to the first vertex from direction l (after BSDF weight beta):
@@ -105,53 +209,23 @@ IBL_INLINE float3 follow_path(float3 o, float3 l, Hit hit, float3 beta, Sampler 
     float3 emitted = (float3)(0.0f), env = (float3)(0.0f);
     for (int bounce = 2; bounce <= MAX_PATH; ++bounce) {
         if (hit.kind == PRIM_NONE) break;               /* the vertex before counted the sky */
-        float3 p, n;
-        Material mt;
-        path_vertex(o, l, hit, materials, SCENE_ARGS, &p, &n, &mt);
-        emitted += beta * mt.emissive;
-        if (BOUNCES > 0 && bounce > BOUNCES) break;
-        const float3 v = -l;
-        const float nov = fmax(dot(n, v), 1e-4f);
-        const float3 origin = ray_offset(p, n, l, hit.t);
-        float3 t, b;
-        tangent_frame(n, &t, &b);
-        const float ps = specular_probability(mt, nov, 1, 1);
+        PathVertex pv;
+        const int scatters = vertex_start(o, l, hit, bounce, materials, SCENE_ARGS, &pv);
+        emitted += beta * pv.mt.emissive;
+        if (!scatters) break;
         const VertexDims u = vertex_dims(sp);
-        env += beta * env_direct(mt, v, n, nov, origin, ps, 1, 1, u.env, ENV_ARGS, SCENE_ARGS);
+        env += beta * env_direct(pv.mt, pv.v, pv.n, pv.nov, pv.origin, pv.ps, 1, 1, u.env, ENV_ARGS, SCENE_ARGS);
 #ifdef PATH_LIGHTS
-        /* every analytic light, one direction over its disk or sphere (uniform in the cone it
-         * fills) or its centre; no ray finds a light, so this is its only strategy (no MIS) */
-        for (int j = 0; j < nlights; ++j) {
-            float3 wc;
-            float dist, sin_max;
-            const float3 e = light_toward(lights, j, p, &wc, &dist, &sin_max);
-            const float2 u_light = sampler_2d(sp);
-            if (e.x + e.y + e.z <= 0.0f) continue;
-            float3 ll = wc, le = e;
-            if (sin_max > 0.0f) {          /* radiance E / (pi sin^2) over the cone's solid angle 2 pi omc */
-                const float omc = light_omc(sin_max);
-                ll = cone_direction(wc, omc, u_light);
-                le = e * (2.0f * omc / (sin_max * sin_max));
-            }
-            float pl;
-            const float3 f = bsdf_eval(mt, v, n, nov, ll, ps, 1, 1, &pl);
-            if ((f.x > 0.0f || f.y > 0.0f || f.z > 0.0f) && !occluded_to(origin, ll, dist, SCENE_ARGS))
-                emitted += beta * le * f;
+        for (int j = 0; j < nlights; ++j) {         /* every analytic light */
+            float3 ll, c;
+            float dist;
+            if (light_sample(lights, j, sp, pv, beta, &ll, &dist, &c) && !occluded_to(pv.origin, ll, dist, SCENE_ARGS))
+                emitted += c;
         }
 #endif
-        /* scatter */
         float pb;
-        float3 nl;
-        const float3 wgt = bsdf_sample(mt, v, n, t, b, nov, ps, 1, 1, u.lobe, u.dir, &nl, &pb);
-        if (!(wgt.x > 0.0f || wgt.y > 0.0f || wgt.z > 0.0f)) break;
-        beta *= wgt;
-        if (bounce >= RR_DEPTH) {
-            const float q = fmin(fmax(beta.x, fmax(beta.y, beta.z)), 0.95f);
-            if (u.rr >= q) break;
-            beta /= q;
-        }
-        l = nl;
-        o = origin;
+        if (!path_scatter(pv, u, bounce, &beta, &l, &pb)) break;
+        o = pv.origin;
         hit = trace(o, l, SCENE_ARGS);
         if (hit.kind == PRIM_NONE) env += beta * env_missed(l, pb, ENV_ARGS);
     }

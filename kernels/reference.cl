@@ -57,10 +57,13 @@
 /* Intel's CPU runtime vectorises this kernel 16 work items wide where paths meet triangles, and
  * each lane's BVH traversal diverges: the knot's reference ran 2.9x slower than one work item per
  * lane (benchmarks/bench_devices.py). IBL_SCALAR_BVH (runtime.device_options, that runtime only)
- * asks for one (cl_intel_vec_len_hint). */
+ * asks for one (cl_intel_vec_len_hint): SCALAR_BVH, on the wavefront's tracing stages too. */
 #if defined(IBL_SCALAR_BVH) && defined(HAS_TRIANGLES)
-__attribute__((intel_vec_len_hint(1)))
+#define SCALAR_BVH __attribute__((intel_vec_len_hint(1)))
+#else
+#define SCALAR_BVH
 #endif
+SCALAR_BVH
 __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int n, ENV_PARAMS,
                         SCENE_PARAMS, const int pixel0, const int spp,
                         const uint seed, const int first, const int batch, const int slices,
@@ -92,20 +95,15 @@ __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int
          * leaves the scene (MIS against the environment's sampling) and the light of the surface
          * it meets where it does not (follow_path); the occlusion map, which approximates what
          * this computes, is not applied */
-        const VertexDims u = vertex_dims(&sp);
-        const float ps = specular_probability(mt, nov, FIRST_DIFFUSE, FIRST_SPECULAR);
-        float3 est = env_direct(mt, v, nrm, nov, origin, ps, FIRST_DIFFUSE, FIRST_SPECULAR, u.env, ENV_ARGS,
-                                SCENE_ARGS);
-        float pb;
-        float3 l, env_part = (float3)(0.0f), emitted = (float3)(0.0f);
-        const float3 wgt = bsdf_sample(mt, v, nrm, t, b, nov, ps, FIRST_DIFFUSE, FIRST_SPECULAR, u.lobe, u.dir,
-                                       &l, &pb);
-        if (wgt.x > 0.0f || wgt.y > 0.0f || wgt.z > 0.0f) {
-            const Hit hh = trace(origin, l, SCENE_ARGS);
+        const FirstVertex fv = first_vertex(mt, v, nrm, t, b, nov, FIRST_DIFFUSE, FIRST_SPECULAR, &sp, ENV_ARGS);
+        float3 est = fv.env_live && !occluded(origin, fv.env_l, SCENE_ARGS) ? fv.env_c : (float3)(0.0f);
+        float3 env_part = (float3)(0.0f), emitted = (float3)(0.0f);
+        if (fv.live) {
+            const Hit hh = trace(origin, fv.l, SCENE_ARGS);
             if (hh.kind == PRIM_NONE)
-                est += wgt * env_missed(l, pb, ENV_ARGS);
+                est += fv.beta * env_missed(fv.l, fv.pdf, ENV_ARGS);
             else
-                emitted = follow_path(origin, l, hh, wgt, &sp, materials, ENV_ARGS, SCENE_ARGS, &env_part,
+                emitted = follow_path(origin, fv.l, hh, fv.beta, &sp, materials, ENV_ARGS, SCENE_ARGS, &env_part,
                                       lights, nlights);
         }
         est = (est + env_part) * env_scale + emitted;
@@ -167,3 +165,5 @@ __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int
     }
     ref_batch[item] = (float4)(sum, odd);
 }
+
+#include "wavefront.cl"

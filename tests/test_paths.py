@@ -1,7 +1,9 @@
 """The reference's paths (effects.reference.bounces) against closed forms: a white furnace of
 Lambert surfaces (every pixel converges to the environment's 1, however the objects shadow each
 other), an enclosure lit by its own emission (E / (1 - a), and E (1 + a + ... + a^k) with k
-bounces), what compiles a path and what does not, and bounces: 1 as the direct light of before."""
+bounces), what compiles a path and what does not, and bounces: 1 as the direct light of before.
+Each closed form runs through both ways of running the paths (effects.reference.paths: the
+megakernel and the wavefront of stages), and the two give the same frame to float32 rounding."""
 
 from pathlib import Path
 
@@ -28,25 +30,35 @@ def black(tmp_path_factory):
 
 
 LAMBERT = {"roughness": 1, "specular": 0}
+PATHS = ("megakernel", "wavefront")
+
+
+def ran(f, paths):
+    """The reference pass's report, checked to have run its paths the way asked for."""
+    ref = next(p for p in f.report["passes"] if p["name"] == "reference")
+    assert ref["paths"] == paths, ref
+    return ref
 
 
 write = load_scene
 
 
-def furnace(folder, env, bounces, samples):
+def furnace(folder, env, bounces, samples, paths="auto"):
     """A white Lambert sphere resting on a white Lambert floor (6 x 6) under L = 1."""
-    return write(folder, f"furnace_{bounces}", {
+    return write(folder, f"furnace_{bounces}_{paths}", {
         "camera": {"perspective": {"position": [0, 1.5, 3], "look_at": [0, 0.4, 0], "fov_y": 50}, "resolution": [24, 24]},
         "environment": {"path": str(env), "background": "hide"},
         "materials": {"white": {"base_color": [1, 1, 1], **LAMBERT}},
         "objects": [{"sphere": {"center": [0, 0.6, 0], "radius": 0.6}, "material": "white"},
                     {"plane": {"point": [0, 0, 0], "size": 6}, "material": "white"}],
         "effects": {"diffuse": "reference", "specular": "reference",
-                    "reference": {"max_samples": samples, "target_noise": 0, "batch": 64, "bounces": bounces}}})
+                    "reference": {"max_samples": samples, "target_noise": 0, "batch": 64, "bounces": bounces,
+                                  "paths": paths}}})
 
 
 @pytest.mark.slow
-def test_white_furnace_converges_to_one(tmp_path, white):
+@pytest.mark.parametrize("paths", PATHS)
+def test_white_furnace_converges_to_one(tmp_path, white, paths):
     """Unbounded paths: every pixel of the sphere and the floor is 1 (at 1024 samples the mean
     within 0.3%, measured 0.007%; the RMS over the pixels within 1.5%, measured 0.75% (0.44-0.75%
     over seeds 1-6; 0.74-0.95% before the first vertex was a path vertex); 99% of them within 4%,
@@ -55,40 +67,43 @@ def test_white_furnace_converges_to_one(tmp_path, white):
     long path is a firefly (worst pixel 2.7-11.5% over seeds 1-6, 3.3-8.4% before). The direct
     light alone (bounces 1) misses what the sphere and the floor send each other: 10% or more at
     the contact."""
-    sc = furnace(tmp_path, white, "unbounded", 1024)
+    sc = furnace(tmp_path, white, "unbounded", 1024, paths)
     f = render(sc, cache_root=tmp_path / "cache")
     hit = f.hdr[..., 3] > 0.999
     got = f.hdr[..., :3][hit]
     err = np.abs(got - 1)
     rms, p99 = np.sqrt(np.mean(err ** 2)), np.quantile(err, 0.99)
-    print(f"furnace: mean {got.mean():.5f}, rms {rms:.4f}, 99% {p99:.4f}, worst {err.max():.4f} over {hit.sum()} px")
+    print(f"furnace ({paths}): mean {got.mean():.5f}, rms {rms:.4f}, 99% {p99:.4f}, worst {err.max():.4f} over {hit.sum()} px")
     assert abs(got.mean() - 1) < 3e-3 and rms < 0.015 and p99 < 0.04
-    ref = next(p for p in f.report["passes"] if p["name"] == "reference")
+    ref = ran(f, paths)
     assert ref["bounces"] == "unbounded" and "BOUNCES" in f.report["effects"]["defines"]["reference"]
     direct = render(furnace(tmp_path, white, 1, 256), cache_root=tmp_path / "cache").hdr[..., :3][hit]
     print(f"direct only: mean {direct.mean():.4f}, min {direct.min():.4f}")
     assert direct.min() < 0.9 and direct.mean() < got.mean() - 0.02
 
 
-def enclosure(folder, env, a, e, bounces, samples=128):
+def enclosure(folder, env, a, e, bounces, samples=128, paths="auto"):
     """The camera inside a sphere of albedo a (Lambert) that emits e: L = e / (1 - a) everywhere."""
-    return write(folder, f"enclosure_{bounces}", {
+    return write(folder, f"enclosure_{bounces}_{paths}", {
         "camera": {"perspective": {"position": [0.3, -0.2, 0.5], "look_at": [0, 0, -1], "fov_y": 90},
                    "resolution": [16, 16]},
         "environment": {"path": str(env), "background": "hide"},
         "materials": {"wall": {"base_color": [a] * 3, "emissive": e, **LAMBERT}},
         "objects": [{"sphere": {"center": [0, 0, 0], "radius": 2}, "material": "wall"}],
         "effects": {"diffuse": "reference", "specular": "reference",
-                    "reference": {"max_samples": samples, "target_noise": 0, "batch": 64, "bounces": bounces}}})
+                    "reference": {"max_samples": samples, "target_noise": 0, "batch": 64, "bounces": bounces,
+                                  "paths": paths}}})
 
 
+@pytest.mark.parametrize("paths", PATHS)
 @pytest.mark.parametrize("bounces", [1, 2, 4, "unbounded"])
-def test_enclosure_is_emission_over_one_minus_albedo(tmp_path, black, bounces):
+def test_enclosure_is_emission_over_one_minus_albedo(tmp_path, black, bounces, paths):
     """Inside a sphere of albedo 0.5 emitting E: E (1 + a + ... + a^k) after k > 1 bounces, exact (1e-5)
     before Russian roulette starts (bounce 3): every path's estimate is the sum itself; from there
     on, and unbounded (E / (1 - a)), roulette's noise: mean within 0.5%, measured 0.16%."""
     a, e = 0.5, np.array([1.0, 0.5, 0.25])
-    f = render(enclosure(tmp_path, black, a, e.tolist(), bounces), cache_root=tmp_path / "cache")
+    f = render(enclosure(tmp_path, black, a, e.tolist(), bounces, paths=paths), cache_root=tmp_path / "cache")
+    ran(f, paths if bounces != 1 else "megakernel")       # the direct light alone has no path
     got = f.hdr[..., :3].reshape(-1, 3)
     # bounces 1 is the environment's direct light only: the walls' light reaches nothing
     want = e / (1 - a) if bounces == "unbounded" else e * sum(a ** j for j in range(bounces + 1 if bounces > 1 else 1))
@@ -100,36 +115,44 @@ def test_enclosure_is_emission_over_one_minus_albedo(tmp_path, black, bounces):
         assert rel.max() < 5e-3
 
 
-def test_no_path_where_light_cannot_pass(tmp_path, white):
+@pytest.mark.parametrize("paths", PATHS)
+def test_no_path_where_light_cannot_pass(tmp_path, white, paths):
     """A lone sphere seen from outside never sees itself, nor anything with visibility off: the
-    reference compiles no path code there, as bounces: 1 (the default)."""
+    reference compiles no path code there, as bounces: 1 (the default), whichever way the paths
+    are asked to run (the direct light is the megakernel's)."""
     base = {"camera": {"perspective": {"position": [0, 0, 3]}, "resolution": [8, 8]},
             "environment": {"path": str(white)}, "materials": {"m": {}},
             "effects": {"diffuse": "reference", "specular": "reference",
-                        "reference": {"max_samples": 2, "bounces": "unbounded"}}}
+                        "reference": {"max_samples": 2, "bounces": "unbounded", "paths": paths}}}
     lone = write(tmp_path, "lone", {**base, "objects": [{"sphere": {"radius": 1}, "material": "m"}]})
     two = [{"sphere": {"radius": 1}, "material": "m"}, {"plane": {"point": [0, -1, 0]}, "material": "m"}]
     unseen = write(tmp_path, "unseen", {**base, "objects": two,
                                         "effects": {**base["effects"], "reference": {"visibility": False,
-                                                                                     "bounces": "unbounded"}}})
+                                                                                     "bounces": "unbounded",
+                                                                                     "paths": paths}}})
     inside = write(tmp_path, "inside", {**base, "objects": [{"sphere": {"radius": 5}, "material": "m"}]})
-    for sc, paths in ((lone, False), (unseen, False), (inside, True)):
+    for sc, traced in ((lone, False), (unseen, False), (inside, True)):
         f = render(sc, cache_root=tmp_path / "cache")
-        assert ("BOUNCES" in f.report["effects"]["defines"]["reference"]) == paths, sc.source
+        defines = f.report["effects"]["defines"]["reference"]
+        assert ("BOUNCES" in defines) == traced, sc.source
+        assert ("WAVEFRONT" in defines) == (traced and paths == "wavefront"), sc.source
+        ran(f, paths if traced else "megakernel")
 
 
+@pytest.mark.parametrize("paths", PATHS)
 @pytest.mark.parametrize("bounces", [2, "unbounded"])
-def test_point_light_in_an_enclosure(tmp_path, black, bounces):
+def test_point_light_in_an_enclosure(tmp_path, black, bounces, paths):
     """A point light of I candela at the centre of a sphere of radius R and albedo a: the walls
     receive E = I / R^2 straight on and send L = (a E / pi)(1 + a + ... + a^(k-1)) after k bounces,
     (a E / pi) / (1 - a) unbounded. Paths sample the light at every later vertex (the lights pass
     lights the first): bounces 2 is exact (1e-5), unbounded roulette's noise (0.4%, measured 0.05%
     at 512 samples, 4e-6 at 1024)."""
     a, radius, intensity = 0.5, 2.0, 4.0
-    sc = enclosure(tmp_path, black, a, [0, 0, 0], bounces, samples=512)
+    sc = enclosure(tmp_path, black, a, [0, 0, 0], bounces, samples=512, paths=paths)
     sc.data["lights"] = [{"point": {"position": [0, 0, 0], "color": [1, 1, 1], "intensity": intensity,
                                     "radius": 0.0, "range": None}, "shadows": "hard", "shadow_samples": 16}]
     f = render(sc, cache_root=tmp_path / "cache")
+    ran(f, paths)
     assert "PATH_LIGHTS" in f.report["effects"]["defines"]["reference"]
     direct = a * intensity / radius ** 2 / np.pi
     got = f.hdr[..., :3].reshape(-1, 3)
@@ -141,7 +164,8 @@ def test_point_light_in_an_enclosure(tmp_path, black, bounces):
         assert rel < 4e-3
 
 
-def test_shadow_rays_lose_no_light_on_a_lone_sphere(tmp_path):
+@pytest.mark.parametrize("paths", PATHS)
+def test_shadow_rays_lose_no_light_on_a_lone_sphere(tmp_path, paths):
     """A sphere alone under small bright lamps (near the horizon, where the upper half sees them at
     grazing angles) cannot shadow itself: with visibility on, every shadow ray that leaves the
     surface arrives, so the frame equals the one with visibility off sample for sample (the same
@@ -156,15 +180,18 @@ def test_shadow_rays_lose_no_light_on_a_lone_sphere(tmp_path):
     images.write_exr(env, img)
     frames = []
     for visibility in (True, False):
-        sc = write(tmp_path, f"lone_{visibility}", {
+        sc = write(tmp_path, f"lone_{visibility}_{paths}", {
             "camera": {"orthographic": {"position": [0, 5, 7], "look_at": [0, 0, 0], "width": 1.4},
                        "resolution": [48, 48]},
             "environment": {"path": str(env), "background": "hide"},
             "materials": {"m": {"base_color": [0.6, 0.6, 0.6], "roughness": 0.4}},
             "objects": [{"sphere": {"center": [0, 0, 0], "radius": 0.6}, "material": "m"}],
             "effects": {"diffuse": "reference", "specular": "reference",
-                        "reference": {"max_samples": 64, "target_noise": 0, "visibility": visibility}}})
-        frames.append(render(sc, cache_root=tmp_path / "cache").hdr[..., :3])
+                        "reference": {"max_samples": 64, "target_noise": 0, "visibility": visibility,
+                                      "paths": paths}}})
+        f = render(sc, cache_root=tmp_path / "cache")
+        ran(f, "megakernel")              # a lone sphere: the direct light, no path to run either way
+        frames.append(f.hdr[..., :3])
     hit = frames[1].sum(-1) > 0
     rel = np.abs(frames[0][hit] / frames[1][hit] - 1)
     assert hit.sum() > 1000 and rel.max() < 1e-6, rel.max()
@@ -247,7 +274,8 @@ def test_path_dimensions_are_stratified_owen_sobol():
     assert abs(np.corrcoef(x0, x1)[0, 1]) < 0.2 and not np.allclose(x0, owen_sobol(j, np.full(256, 2), 0, 0))
 
 
-def test_textured_glb_through_paths(tmp_path, white):
+@pytest.mark.parametrize("paths", PATHS)
+def test_textured_glb_through_paths(tmp_path, white, paths):
     """A textured glTF (examples/meshes/tiles.glb: base colour, metallic-roughness and normal maps)
     on a floor: its maps are read at every path vertex (level 0), the frame is finite, and the
     light the tiles and the floor exchange makes it brighter than the direct light alone (measured
@@ -255,7 +283,7 @@ def test_textured_glb_through_paths(tmp_path, white):
     mesh = Path(__file__).resolve().parents[1] / "examples" / "meshes" / "tiles.glb"
     frames = {}
     for bounces in (1, "unbounded"):
-        sc = write(tmp_path, f"tiles_{bounces}", {
+        sc = write(tmp_path, f"tiles_{bounces}_{paths}", {
             "camera": {"perspective": {"position": [0, 1.2, 2.5], "look_at": [0, 0, 0], "fov_y": 50},
                        "resolution": [24, 16]},
             "environment": {"path": str(white), "background": "hide"},
@@ -263,8 +291,10 @@ def test_textured_glb_through_paths(tmp_path, white):
             "objects": [{"mesh": {"path": str(mesh), "rotate": [-90, 0, 0], "translate": [0, 0.05, 0]}},
                         {"plane": {"point": [0, 0, 0], "size": 4}, "material": "floor"}],
             "effects": {"diffuse": "reference", "specular": "reference",
-                        "reference": {"max_samples": 16, "target_noise": 0, "bounces": bounces}}})
+                        "reference": {"max_samples": 16, "target_noise": 0, "bounces": bounces,
+                                      "paths": paths}}})
         f = render(sc, cache_root=tmp_path / "cache")
+        ran(f, paths if bounces != 1 else "megakernel")
         frames[bounces] = f.hdr[..., :3]
         assert np.isfinite(f.hdr).all()
     defines = f.report["effects"]["defines"]["reference"]
@@ -360,3 +390,92 @@ def test_the_paths_register_cap_is_asked_for_on_nvidia_gpus_only():
     for other in (DeviceInfo("0:0", "Portable Computing Language", "cpu", "CPU"),
                   DeviceInfo("0:0", "AMD Accelerated Parallel Processing", "gfx90a", "GPU")):
         assert launch.build_options(other, ("gbuffer.cl", "reference.cl")) == []
+
+
+def lamp_panorama(folder):
+    """A sky brightening upwards with one bright lamp (the twin test's)."""
+    from iblbake.core import conventions
+    d = conventions.equirect_texel_dirs(64, 32)
+    img = (0.3 + 0.2 * d[..., 1:2] + np.zeros(3)).astype(np.float32)
+    img[(d @ np.array([0.6, 0.5, 0.62])) > 0.97] = [40.0, 30.0, 20.0]
+    env = folder / "lamp.exr"
+    images.write_exr(env, img)
+    return env
+
+
+MESHES = Path(__file__).resolve().parents[1] / "examples" / "meshes"
+EQUAL_SCENES = {
+    # rough gold, a mirror (a delta lobe) and a glossy floor
+    "spheres": ([{"sphere": {"center": [-0.5, 0.5, 0], "radius": 0.5}, "material": "gold"},
+                 {"sphere": {"center": [0.6, 0.4, 0.2], "radius": 0.4}, "material": "mirror"}], []),
+    # the 102,400-triangle knot (the BVH, interpolated normals) in rough metal
+    "knot": ([{"mesh": {"path": str(MESHES / "knot.ply"), "scale": 0.5, "translate": [0, 0.6, 0]},
+               "material": "gold"}], []),
+    # a textured glTF: base colour, metallic-roughness and normal maps at every vertex
+    "textured": ([{"mesh": {"path": str(MESHES / "tiles.glb"), "rotate": [-90, 0, 0], "translate": [0, 0.05, 0]}}], []),
+    # analytic lights at every later vertex (PATH_LIGHTS): a sun's disk, a sphere light, a spot
+    "lights": ([{"sphere": {"center": [-0.5, 0.5, 0], "radius": 0.5}, "material": "gold"},
+                {"sphere": {"center": [0.6, 0.4, 0.2], "radius": 0.4}, "material": "floor"}],
+               [{"directional": {"direction": [0.5, -1.0, -0.6], "illuminance": 3.0, "angular_diameter": 2.0},
+                 "shadows": "soft", "shadow_samples": 4},
+                {"point": {"position": [1.5, 1.5, 1.0], "color": [1.0, 0.8, 0.6], "intensity": 4.0, "radius": 0.1,
+                           "range": 10}, "shadows": "hard"},
+                {"spot": {"position": [-1.5, 2.0, 1.5], "direction": [0.6, -1.0, -0.3], "intensity": 12.0,
+                          "inner_cone_angle": 12, "outer_cone_angle": 22}, "shadows": "hard"}]),
+}
+
+
+@pytest.mark.parametrize("name", list(EQUAL_SCENES))
+def test_wavefront_frame_is_the_megakernels(tmp_path, name):
+    """The wavefront's stages (kernels/wavefront.cl) are the megakernel's estimator cut where rays
+    are traced, through the same functions (kernels/paths.h), dimensions and sums in the same order:
+    for one scene and seed the two frames agree to float32 rounding, pixel for pixel. Unbounded
+    paths, 16 samples in batches of 6 (the wavefront's waves forced to 4 samples, so a batch spans
+    waves); measured max relative difference 0 on PoCL and on Intel's runtime (every sum bit for
+    bit). Bound 1e-6: a GPU shares a sample's batch among work items (sample_slices), which reorders
+    the megakernel's float32 sums (3.6e-7, test_sample_slices_keep_the_frame), and a compiler may
+    fuse a multiply-add in one and not across the other's stages."""
+    from iblbake.render.passes import reference as ref_pass
+    env = lamp_panorama(tmp_path)
+    objects, lights = EQUAL_SCENES[name]
+    frames = {}
+    for paths in PATHS:
+        sc = write(tmp_path, f"{name}_{paths}", {
+            "camera": {"perspective": {"position": [0, 1.5, 3.5], "look_at": [0, 0.5, 0], "fov_y": 45},
+                       "resolution": [24, 18]},
+            "environment": {"path": str(env), "background": "hide", "rotation_y": 25},
+            "materials": {"gold": {"base_color": [1.0, 0.78, 0.34], "metallic": 1, "roughness": 0.4},
+                          "mirror": {"base_color": [0.9, 0.9, 0.9], "metallic": 1, "roughness": 0},
+                          "floor": {"base_color": [0.5, 0.45, 0.4], "roughness": 0.8}},
+            "objects": objects + [{"plane": {"point": [0, 0, 0], "size": 5}, "material": "floor"}],
+            "lights": lights,
+            "effects": {"diffuse": "reference", "specular": "reference",
+                        "reference": {"max_samples": 16, "target_noise": 0, "batch": 6, "bounces": "unbounded",
+                                      "seed": 7, "paths": paths}}})
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(ref_pass, "wave_paths", lambda rt: 4 * 24 * 18)
+            f = render(sc, cache_root=tmp_path / "cache")
+        ran(f, paths)
+        assert ("PATH_LIGHTS" in f.report["effects"]["defines"]["reference"]) == bool(lights)
+        frames[paths] = f.hdr[..., :3]
+    a, b = frames["megakernel"], frames["wavefront"]
+    hit = a.sum(-1) > 0
+    rel = np.abs(a[hit] - b[hit]) / np.maximum(np.abs(a[hit]), 1e-6)
+    print(f"{name}: wavefront against megakernel, max relative difference {rel.max():.2e} over {hit.sum()} px, "
+          f"means {a[hit].mean():.6f} / {b[hit].mean():.6f}")
+    assert hit.sum() > 200 and np.isfinite(b).all()
+    assert rel.max() < 1e-6
+
+
+def test_paths_key_takes_its_three_values_only(tmp_path, white):
+    """effects.reference.paths is auto, megakernel or wavefront; anything else is a one-line error
+    naming the key and the choices."""
+    from iblbake.errors import InputError
+    doc = {"environment": {"path": str(white)},
+           "effects": {"diffuse": "reference", "reference": {"paths": "gpu"}}}
+    with pytest.raises(InputError, match=r"effects\.reference\.paths: 'gpu' is not one of auto \| megakernel \| "
+                                         r"wavefront"):
+        write(tmp_path, "bad", doc)
+    for way in ("auto", *PATHS):
+        doc["effects"]["reference"]["paths"] = way
+        assert write(tmp_path, way, doc).data["effects"]["reference"]["paths"] == way

@@ -33,6 +33,13 @@ def sample_slices(rt, n: int, batch: int) -> int:
     return max(1, min(batch, -(-GPU_ITEMS // max(n, 1))))
 
 
+def wave_paths(rt) -> int:
+    """The most paths the reference's wavefront keeps in flight (effects.reference.paths: wavefront;
+    a PATH record of 128 bytes each and their queues): enough for a GPU's resident threads through
+    the queues' shrinking tails (Laine, Karras and Aila 2013 keep 2^20), fewer on a CPU."""
+    return 1 << (20 if rt.info.kind == "GPU" else 17)
+
+
 # Registers a path-tracing work item may hold on an NVIDIA GPU. Unbounded, NVIDIA's compiler gives
 # the reference kernel 141-155 of them (no spills): one 256-item work group per multiprocessor,
 # 8 of its 64 warps resident, too few to hide a path's memory latency. Capped at 64 it spills 0.6-1
@@ -40,7 +47,7 @@ def sample_slices(rt, n: int, batch: int) -> int:
 # 8192 spp) 0.50-0.53 s -> 0.35 s, the knot's 1.32 s -> 1.09-1.10 s (docs/benchmarks.md
 # "Registers on the H200"); 48 was within noise of 64, 32 slower on the knot.
 PATH_REGISTERS = 64
-PATH_PROGRAMS = ("reference.cl", "probe_trace.cl")
+PATH_PROGRAMS = ("reference.cl", "probe_trace.cl")     # reference.cl holds the wavefront's stages too
 
 
 def build_options(info, name) -> list:

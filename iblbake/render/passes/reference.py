@@ -10,12 +10,17 @@ import math
 import numpy as np
 
 from iblbake.core.metrics import luminance
-from iblbake.device.launch import sample_slices
+from iblbake.device.launch import sample_slices, wave_paths
 from iblbake.render.device_scene import panorama_args
 from iblbake.render.passes.base import Buffer, Pass, geometry_defines, mode_defines
 from iblbake.render.passes.lights import Lights, frame_lights
 from iblbake.scene import pack
+from iblbake.scene.layout import FLOAT4S
 
+# effects.reference.paths: auto's choice per device kind, measured (docs/benchmarks.md "Megakernel or
+# wavefront"); a kind not measured keeps the megakernel
+AUTO_PATHS = {"CPU": "megakernel"}
+_ZEROS = np.zeros(4, np.int32)
 
 
 def reference_noise(lum_sum, odd_sum, taken: int) -> float:
@@ -42,7 +47,9 @@ class Reference(Pass):
     name = "reference"
     kernel = "reference.cl"
     params = ("img", "w", "h", "marginal", "conditional", "guide", "pdf_table", "seed", "first", "batch", "slices", "lights",
-              "nlights")
+              "nlights", "wave", "npaths", "count", "add", "wf_paths", "wf_shadow", "wf_queue", "wf_count")
+    # the wavefront's stages (kernels/wavefront.cl, effects.reference.paths)
+    functions = ("wf_generate", "wf_extend", "wf_shade", "wf_shadow", "wf_accumulate")
     # radiance, and one batch's sums per sample read back (the host adds them up in float64)
     buffers = (Buffer("radiance"), Buffer("ref_batch"))
     host_sample_bytes = 32
@@ -66,7 +73,19 @@ class Reference(Pass):
             d["BOUNCES"] = fx.bounces     # paths, only where light can pass between surfaces (plan.py)
             if Lights().runs(scene, fx):
                 d["PATH_LIGHTS"] = 1      # the lights pass lights the first vertex, paths the others
+            way = scene.data["effects"]["reference"]["paths"]
+            if way == "wavefront" or (way == "auto" and "wavefront" in AUTO_PATHS.values()):
+                d["WAVEFRONT"] = 1        # its stages compiled beside the megakernel
         return d
+
+    def paths(self, ctx) -> str:
+        """How this frame's paths run: megakernel or wavefront (effects.reference.paths; auto by
+        the device's kind); the direct light alone (no BOUNCES) is the megakernel's."""
+        defines = ctx.plan.defines[self.name]
+        if "BOUNCES" not in defines or "WAVEFRONT" not in defines:
+            return "megakernel"
+        way = ctx.scene.data["effects"]["reference"]["paths"]
+        return AUTO_PATHS.get(ctx.rt.info.kind, "megakernel") if way == "auto" else way
 
     def setup(self, ctx) -> dict:
         rt = ctx.rt
@@ -106,11 +125,17 @@ class Reference(Pass):
         taken = 0
         noise = math.inf
         batch, slices = self.batching(ctx)
+        paths = self.paths(ctx)
+        if paths == "wavefront":
+            slices = 1                                # one sum per G-buffer sample (wf_accumulate)
         out = t["ref_batch"] if slices == 1 else rt.empty(16 * n * slices)      # a GPU: slices x n sums
         while taken < ref["max_samples"]:
             b = min(batch, ref["max_samples"] - taken)
-            size, args = self.batch_args(ctx, taken, b, slices, out)
-            ctx.launch(self, size, **args)
+            if paths == "wavefront":
+                self.wavefront(ctx, taken, b, out)
+            else:
+                size, args = self.batch_args(ctx, taken, b, slices, out)
+                ctx.launch(self, size, **args)
             r = rt.read(out, (n * min(slices, b), 4)).astype(np.float64).reshape(-1, n, 4).sum(0)
             acc += r[:, :3]
             acc_odd += r[:, 3]
@@ -132,4 +157,44 @@ class Reference(Pass):
                 "relative_noise": None if not math.isfinite(noise) else round(noise, 6),
                 "stopped": "target_noise" if noise <= ref["target_noise"] else "max_samples",
                 "visibility": bool(ref["visibility"]), "bounces": ctx.plan.effects.bounces or "unbounded",
-                "batch": batch, "work_items_per_sample": slices}
+                "batch": batch, "work_items_per_sample": slices, "paths": paths}
+
+    def wavefront(self, ctx, first: int, b: int, out):
+        """Samples first .. first + b - 1 of every G-buffer sample as a wavefront of stages
+        (kernels/wavefront.cl; Laine, Karras and Aila 2013), into out as the megakernel writes
+        ref_batch: waves of whole samples (k) over every G-buffer sample, at most wave_paths(rt)
+        paths each; per wave generate, then extend, shade and shadow over the compacted queues the
+        counters fill, until no path is alive, then the sums, added in the order of k."""
+        rt, n = ctx.rt, ctx.table["n"]
+        wave = max(1, min(b, wave_paths(rt) // max(n, 1)))
+        npaths = n * wave
+        nlights = ctx.args[self.name]["nlights"]
+        key = (npaths, nlights)
+        if getattr(ctx, "wf_buffers", (None,))[0] != key:
+            ctx.wf_buffers = (key, {"wf_paths": rt.empty(16 * FLOAT4S["PATH"] * npaths),
+                                    "wf_shadow": rt.empty(16 * FLOAT4S["SHADOW"] * (1 + nlights) * npaths),
+                                    "wf_queue": rt.empty(4 * 3 * npaths), "wf_count": rt.empty(16)})
+        bufs = ctx.wf_buffers[1]
+        counts = np.zeros(4, np.int32)
+        args = {**ctx.args[self.name], **bufs, "seed": ctx.scene.data["effects"]["reference"]["seed"],
+                "npaths": npaths}
+
+        def stage(fn, size, **extra):
+            rt.cl.enqueue_copy(rt.queue, bufs["wf_count"], _ZEROS, is_blocking=False)
+            if size:
+                ctx.launch(self, (size,), fn, **args, **extra)
+            rt.cl.enqueue_copy(rt.queue, counts, bufs["wf_count"])      # blocking: the queues' lengths
+            return counts.copy()
+
+        for k0 in range(0, b, wave):
+            kw = min(wave, b - k0)
+            c = stage("wf_generate", n * kw, first=first + k0, wave=kw)
+            while True:
+                if c[2]:
+                    ctx.launch(self, (int(c[2]),), "wf_shadow", **args, count=int(c[2]))
+                if not c[0]:
+                    break
+                c = stage("wf_extend", int(c[0]), count=int(c[0]))
+                c = stage("wf_shade", int(c[1]), count=int(c[1]))
+            ctx.launch(self, (n,), "wf_accumulate", **args, first=first + k0, wave=kw, add=int(k0 > 0),
+                       ref_batch=out)
