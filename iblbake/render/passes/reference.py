@@ -19,7 +19,7 @@ from iblbake.scene.layout import FLOAT4S
 
 # effects.reference.paths: auto's choice per device kind, measured (docs/benchmarks.md "Megakernel or
 # wavefront"); a kind not measured keeps the megakernel
-AUTO_PATHS = {"CPU": "megakernel"}
+AUTO_PATHS = {"CPU": "megakernel", "GPU": "megakernel"}
 _ZEROS = np.zeros(4, np.int32)
 
 
