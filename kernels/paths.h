@@ -76,8 +76,11 @@ IBL_INLINE VertexDims vertex_dims(Sampler *sp)
     const float2 u_env = sampler_2d(sp), u_texel = sampler_2d(sp);
     u.env = (float4)(u_env, u_texel);
     u.dir = sampler_2d(sp);
-    u.lobe = sampler_1d(sp);
-    u.rr = sampler_1d(sp);
+    /* lobe and roulette as one pair: past the first 8 dimensions both come from one scrambled
+     * index (two 1d draws computed it twice), the same numbers */
+    const float2 u_lr = sampler_2d(sp);
+    u.lobe = u_lr.x;
+    u.rr = u_lr.y;
     return u;
 }
 
