@@ -1,9 +1,9 @@
 /* The BSDF of the glTF metallic-roughness material (docs/conventions.md "Material model"), once:
  * Lambert's diffuse lobe weighted by kD, and GGX's specular lobe (height-correlated Smith V,
  * Schlick's F) sampled by its visible normals, the two mixed by the specular lobe's probability ps.
- * Every vertex of a path reads it: the reference's first vertex (kernels/reference.cl, a path
+ * Every vertex of a path reads it: the reference's first vertex (kernels/paths/reference.cl, a path
  * vertex of the terms the frame asks for; without paths its direct estimate, each term alone),
- * every later vertex (kernels/paths.h) and the lights' exact mode (kernels/lights.cl LIGHTS_EXACT).
+ * every later vertex (kernels/paths/paths.h) and the lights' exact mode (kernels/lights.cl LIGHTS_EXACT).
  *   bsdf_eval    f NoL of the terms asked for at direction l, and the pdf of sampling l
  *   bsdf_pdf     that pdf alone
  *   bsdf_sample  a direction from the BSDF and its weight f NoL / pdf

@@ -2,7 +2,7 @@
  * iblbake/scene/pack.py light_records) in the units of glTF's KHR_lights_punctual (lux for a
  * directional light, candela for point and spot lights, the spec's range window and spot
  * falloff), for the lights pass (kernels/lights.cl) and the reference's path vertices
- * (kernels/reference.cl). numpy twin: iblbake/render/twin/lights.py. */
+ * (kernels/paths/reference.cl). numpy twin: iblbake/render/twin/lights.py. */
 #ifndef IBLBAKE_LIGHT_H
 #define IBLBAKE_LIGHT_H
 #include "common.h"

@@ -1,6 +1,6 @@
 /* A hit's material from its material's factors and maps (glTF 2.0's metallic-roughness model), in
  * one place for the material pass (kernels/material.cl: each G-buffer sample at its footprint's
- * mip level) and the reference's paths (kernels/reference.cl: later vertices at level 0):
+ * mip level) and the reference's paths (kernels/paths/reference.cl: later vertices at level 0):
  *   base colour  factor x map (sRGB-decoded at upload), metallic x map.b, roughness x map.g
  *   normal       the map's tangent-space vector, x and y times the scale, through the hit's frame
  *                tw = (tangent, w), bitangent = w cross(n, tangent)

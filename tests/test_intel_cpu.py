@@ -195,12 +195,11 @@ def test_every_kernel_function_is_ibl_inline():
     reaches inline.h through its includes."""
     from iblbake.device.runtime import kernel_source
     plain, unreached = [], []
-    for path in sorted((ROOT / "kernels").glob("*.[ch]*")):
-        text = path.read_text()
-        plain += [f"{path.name}: {ln.strip()}" for ln in text.splitlines() if re.match(r"\s*(static\s+)?inline\b", ln)]
-        if "IBL_INLINE " in text and path.name != "inline.h" and \
-                "#define IBL_INLINE" not in kernel_source(path.name):
-            unreached.append(path.name)
+    for path in sorted((ROOT / "kernels").rglob("*.[ch]*")):
+        name, text = path.relative_to(ROOT / "kernels").as_posix(), path.read_text()
+        plain += [f"{name}: {ln.strip()}" for ln in text.splitlines() if re.match(r"\s*(static\s+)?inline\b", ln)]
+        if "IBL_INLINE " in text and name != "inline.h" and "#define IBL_INLINE" not in kernel_source(name):
+            unreached.append(name)
     assert not plain and not unreached, (plain[:5], unreached)
 
 

@@ -384,12 +384,12 @@ def test_the_paths_register_cap_is_asked_for_on_nvidia_gpus_only():
 
     nv = DeviceInfo("0:0", "NVIDIA CUDA", "NVIDIA H200", "GPU")
     cap = [f"-cl-nv-maxrregcount={launch.PATH_REGISTERS}"]
-    assert launch.build_options(nv, ("gbuffer.cl", "reference.cl", "resolve.cl")) == cap
-    assert launch.build_options(nv, "probe_trace.cl") == cap
+    assert launch.build_options(nv, ("gbuffer.cl", "paths/reference.cl", "resolve.cl")) == cap
+    assert launch.build_options(nv, "paths/probe_trace.cl") == cap
     assert launch.build_options(nv, ("gbuffer.cl", "shade.cl")) == []
     for other in (DeviceInfo("0:0", "Portable Computing Language", "cpu", "CPU"),
                   DeviceInfo("0:0", "AMD Accelerated Parallel Processing", "gfx90a", "GPU")):
-        assert launch.build_options(other, ("gbuffer.cl", "reference.cl")) == []
+        assert launch.build_options(other, ("gbuffer.cl", "paths/reference.cl")) == []
 
 
 def lamp_panorama(folder):
@@ -427,8 +427,8 @@ EQUAL_SCENES = {
 
 @pytest.mark.parametrize("name", list(EQUAL_SCENES))
 def test_wavefront_frame_is_the_megakernels(tmp_path, name):
-    """The wavefront's stages (kernels/wavefront.cl) are the megakernel's estimator cut where rays
-    are traced, through the same functions (kernels/paths.h), dimensions and sums in the same order:
+    """The wavefront's stages (kernels/paths/wavefront.cl) are the megakernel's estimator cut where rays
+    are traced, through the same functions (kernels/paths/paths.h), dimensions and sums in the same order:
     for one scene and seed the two frames agree to float32 rounding, pixel for pixel. Unbounded
     paths, 16 samples in batches of 6 (the wavefront's waves forced to 4 samples, so a batch spans
     waves); measured max relative difference 0 on PoCL and on Intel's runtime (every sum bit for

@@ -47,7 +47,7 @@ def wave_paths(rt) -> int:
 # 8192 spp) 0.50-0.53 s -> 0.35 s, the knot's 1.32 s -> 1.09-1.10 s (docs/benchmarks.md
 # "Registers on the H200"); 48 was within noise of 64, 32 slower on the knot.
 PATH_REGISTERS = 64
-PATH_PROGRAMS = ("reference.cl", "probe_trace.cl")     # reference.cl holds the wavefront's stages too
+PATH_PROGRAMS = ("paths/reference.cl", "paths/probe_trace.cl")     # reference.cl holds the wavefront's stages too
 
 
 def build_options(info, name) -> list:

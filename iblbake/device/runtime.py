@@ -381,7 +381,7 @@ def _cache_dir() -> str:
 def device_options(info: DeviceInfo) -> list[str]:
     """Build options one runtime needs. Intel's CPU runtime: every function inlined (kernels/inline.h:
     it passes float3 arguments of out-of-line calls from vectorised kernels wrongly), and the
-    reference kept scalar where it traces triangles (kernels/reference.cl: divergent BVH lanes)."""
+    reference kept scalar where it traces triangles (kernels/paths/reference.cl: divergent BVH lanes)."""
     return ["-DIBL_ALWAYS_INLINE=1", "-DIBL_SCALAR_BVH=1"] if _is_intel_cpu(info) else []
 
 

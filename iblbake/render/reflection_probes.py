@@ -1,7 +1,7 @@
 """Local reflection probes (Lagarde and Zanuttini 2012, "Local image-based lighting with
 parallax-corrected cubemaps"; Unity's reflection probes, Unreal's box and sphere captures): the
 radiance arriving at a point of the scene from every direction, captured by the reference's path
-tracer (kernels/probe_trace.cl) into an equirect panorama, then prefiltered by the same code as
+tracer (kernels/paths/probe_trace.cl) into an equirect panorama, then prefiltered by the same code as
 the distant panorama's chain (render/units.py: the reflection_probes unit, prefilter()).
 `specular: prefiltered` reads it inside the probe's influence, along the reflected ray corrected
 to where it leaves the probe's box or sphere (kernels/reflection_probes.h; twin:

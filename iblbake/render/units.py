@@ -290,7 +290,7 @@ def probes_code_hash() -> str:
     package = [importlib.import_module(f"{probes.__name__}.{m.name}")
                for m in sorted(pkgutil.iter_modules(probes.__path__), key=lambda m: m.name)]
     return _code_hash((probes, *package, reflection_probes, device_scene, common,
-                       *(bases.BASES[n] for n in bases.PROBES)), source_hash("probe_trace.cl"))
+                       *(bases.BASES[n] for n in bases.PROBES)), source_hash("paths/probe_trace.cl"))
 
 
 def _external(path) -> list:

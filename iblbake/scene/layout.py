@@ -51,7 +51,7 @@ FLOAT4S = {
     # then per map kind (MAP_KINDS order) three rows: the UV transform's rows (m00 m01 m02 | texture
     # index, -1 none) and (m10 m11 m12 | texcoord set), and (0.5 log2(w h |det M|) of its texture, -, -, -)
     "MATERIAL_MAPS": 17,
-    # the wavefront's path state, one record per path (kernels/wavefront.cl; Laine, Karras and Aila
+    # the wavefront's path state, one record per path (kernels/paths/wavefront.cl; Laine, Karras and Aila
     # 2013): (the ray's origin | the vertex it will meet, int), (its direction | the G-buffer sample,
     # int), (throughput | the pdf of the BSDF sample that made the ray: MIS where it misses), the
     # Sampler (seed, sample number in the frame, sample k, next dimension: uints; what sampler_start

@@ -142,7 +142,7 @@ class Study:
         return "reference-" + content_key({
             "kind": "reference", "v": 2, "scene": inputs, "seed": seed,
             "files": [self.bakes.file_sha256(f) for f in scene_load.input_files(sc)[1:]],
-            "kernels": source_hash(("gbuffer.cl", "reference.cl", "resolve.cl"))})
+            "kernels": source_hash(("gbuffer.cl", "paths/reference.cl", "resolve.cl"))})
 
     def reference_seed(self, term: str, seed: int):
         """(hdr, manifest, cached): one seed of the term's reference, rendered into the cache or

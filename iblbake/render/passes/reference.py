@@ -1,5 +1,5 @@
 """Reference: progressive Monte Carlo of the exact direct environment lighting, with visibility
-(kernels/reference.cl; twin: iblbake/render/twin/reference.py exact). Batches of samples per G-buffer
+(kernels/paths/reference.cl; twin: iblbake/render/twin/reference.py exact). Batches of samples per G-buffer
 sample until the frame's relative standard error, measured from two independent replicates, is
 below effects.reference.target_noise or max_samples are taken; the mean is added into `radiance`."""
 
@@ -45,10 +45,10 @@ def environment_args(ctx, dist) -> dict:
 
 class Reference(Pass):
     name = "reference"
-    kernel = "reference.cl"
+    kernel = "paths/reference.cl"
     params = ("img", "w", "h", "marginal", "conditional", "guide", "pdf_table", "seed", "first", "batch", "slices", "lights",
               "nlights", "wave", "npaths", "count", "add", "wf_paths", "wf_shadow", "wf_queue", "wf_count")
-    # the wavefront's stages (kernels/wavefront.cl, effects.reference.paths)
+    # the wavefront's stages (kernels/paths/wavefront.cl, effects.reference.paths)
     functions = ("wf_generate", "wf_extend", "wf_shade", "wf_shadow", "wf_accumulate")
     # radiance, and one batch's sums per sample read back (the host adds them up in float64)
     buffers = (Buffer("radiance"), Buffer("ref_batch"))
@@ -161,7 +161,7 @@ class Reference(Pass):
 
     def wavefront(self, ctx, first: int, b: int, out):
         """Samples first .. first + b - 1 of every G-buffer sample as a wavefront of stages
-        (kernels/wavefront.cl; Laine, Karras and Aila 2013), into out as the megakernel writes
+        (kernels/paths/wavefront.cl; Laine, Karras and Aila 2013), into out as the megakernel writes
         ref_batch: waves of whole samples (k) over every G-buffer sample, at most wave_paths(rt)
         paths each; per wave generate, then extend, shade and shadow over the compacted queues the
         counters fill, until no path is alive, then the sums, added in the order of k."""

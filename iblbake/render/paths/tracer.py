@@ -1,4 +1,4 @@
-"""The paths from a point (kernels/probe_trace.cl: kernels/paths.h's paths, the reference's): the
+"""The paths from a point (kernels/paths/probe_trace.cl: kernels/paths/paths.h's paths, the reference's): the
 Tracer traces rays from positions against the scene put on the device once (render/device_scene.py
 DeviceScene) with its panorama, lights and radiance chain. Its ray sources: the irradiance
 probes' rays (render/probes/) and the reflection captures' texels (render/reflection_probes.py);
@@ -63,7 +63,7 @@ class Tracer:
         obj_buf = rt.empty(4 * min(n, per) * nrays)
         for first in range(0, n, per):
             count = min(per, n - first)
-            rt.launch("probe_trace.cl", "probe_trace", self.defines, (count * nrays,), self.table, **self.args,
+            rt.launch("paths/probe_trace.cl", "probe_trace", self.defines, (count * nrays,), self.table, **self.args,
                       probe_pos=pos, ray_dirs=dir_buf, nrays=nrays, first=probe0 + first, count=count, ray0=ray0,
                       ray_solid_angle=4 * np.pi / nrays,
                       seed=self.settings["seed"], shade=int(shade), back_faces_black=int(self.back_faces_black),

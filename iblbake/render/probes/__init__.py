@@ -4,7 +4,7 @@ temporal here). One module per idea:
 
   grid.py        where the probes stand (Grid; an automatic grid from the scene's bounds)
   rays.py        the rays' directions (traced by the paths' Tracer, render/paths/tracer.py:
-                 kernels/probe_trace.cl, the reference's paths against the scene on the device)
+                 kernels/paths/probe_trace.cl, the reference's paths against the scene on the device)
   relocation.py  RTXGI's relocation and classification, probes inside geometry or outside the
                  camera's room
   project.py     the rays' projection into RTXGI's atlases (octahedral irradiance or L2 SH, the

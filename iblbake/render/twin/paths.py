@@ -1,4 +1,4 @@
-"""The reference pass's estimator with paths (kernels/reference.cl with BOUNCES), sample for sample:
+"""The reference pass's estimator with paths (kernels/paths/reference.cl with BOUNCES), sample for sample:
 the same sample dimensions (Halton for the first 8, Owen-scrambled Sobol pairs after), the environment's sampling
 tables, the same strategies and MIS weights at every vertex (the first one's restricted to the
 terms the frame asks for), the BSDF's lobe choice and Russian roulette. numpy twin, float64, for untextured
@@ -16,7 +16,7 @@ from iblbake.core import sampling
 from iblbake.render.twin.gbuffer import _plane_t, _sphere_roots, occluded, ray_offset
 from iblbake.render.twin.surface import _materials, diffuse_weight, facing_normal, surface, to_env
 
-RR_DEPTH, MAX_PATH = 3, 256           # kernels/paths.h
+RR_DEPTH, MAX_PATH = 3, 256           # kernels/paths/paths.h
 
 
 def closest(o, d, arrays):
@@ -50,7 +50,7 @@ def env_texel(l, rot, w, h):
 
 def env_direct(mt, v, n, nov, origin, ps, diffuse, specular, u_env, u_texel, img, pdf_table, dist, rot, arrays,
                alive=None):
-    """kernels/paths.h env_direct: the environment sampled at each vertex, MIS against the BSDF
+    """kernels/paths/paths.h env_direct: the environment sampled at each vertex, MIS against the BSDF
     of the terms asked for, where unoccluded (only the `alive` rows traced)."""
     de, texel = dist.sample(np.concatenate([u_env, u_texel], 1))
     l = conventions.rotate_y(de, rot)
@@ -66,7 +66,7 @@ def env_direct(mt, v, n, nov, origin, ps, diffuse, specular, u_env, u_texel, img
 
 
 def env_missed(l, pb, img, pdf_table, rot, w, h):
-    """kernels/paths.h env_missed: the environment a BSDF-sampled ray leaving the scene finds, MIS
+    """kernels/paths/paths.h env_missed: the environment a BSDF-sampled ray leaving the scene finds, MIS
     against the panorama's sampling (1 for a mirror's ray, pdf inf)."""
     tx = env_texel(l, rot, w, h)
     with np.errstate(invalid="ignore"):
@@ -82,7 +82,7 @@ def _vertex(arrays, mat, nov):
 
 def radiance(gb, arrays, effects: dict, env: dict, image, dist, samples: int, bounces=0):
     """The reference's mean over `samples` samples (numbers 0 .. samples - 1) per G-buffer sample
-    (hits only; misses are 0), as kernels/reference.cl computes it with BOUNCES = bounces (0:
+    (hits only; misses are 0), as kernels/paths/reference.cl computes it with BOUNCES = bounces (0:
     unbounded): image the panorama (H, W, 3+), dist its sampling tables (EnvironmentDistribution)."""
     diffuse, specular = effects["diffuse"] == "reference", effects["specular"] == "reference"
     seed, rot, scale = effects["reference"]["seed"], env["rotation_y"], env["intensity"]

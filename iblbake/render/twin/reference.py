@@ -1,4 +1,4 @@
-"""The reference pass's integral (kernels/reference.cl), by quadrature: every texel of the
+"""The reference pass's integral (kernels/paths/reference.cl), by quadrature: every texel of the
 panorama (piecewise constant), split into s x s parts with exact solid angles, each direction
 traced for occlusion unless visibility is off. numpy twin, float64."""
 

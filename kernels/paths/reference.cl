@@ -3,7 +3,7 @@
  * is kernels/bsdf.h's; MIS weights are the power heuristic's (Veach 1997).
  * With BOUNCES (0: unbounded, N: at most N scattering events; path tracing, Kajiya 1986; pbrt-v4's
  * PathIntegrator, Mitsuba 3's `path`) the G-buffer sample is a path's first vertex like any other
- * (kernels/paths.h): per sample the environment sampled from the panorama's tables, and one
+ * (kernels/paths/paths.h): per sample the environment sampled from the panorama's tables, and one
  * direction from the BSDF of the terms the frame asks for, whose ray brings the environment where
  * it leaves the scene and continues the path where it meets a surface; every later vertex adds its
  * emission, samples the environment and every analytic light (PATH_LIGHTS), scatters with its full
@@ -26,7 +26,7 @@
 /* unconditionally: a frame program places each header once, where it is first included */
 #include "material.h"
 #include "light.h"
-#include "paths.h"
+#include "paths/paths.h"
 
 
 #if DIFFUSE_MODE == DIFFUSE_REFERENCE
@@ -166,4 +166,4 @@ __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int
     ref_batch[item] = (float4)(sum, odd);
 }
 
-#include "wavefront.cl"
+#include "paths/wavefront.cl"

@@ -5,10 +5,10 @@
  * path meets, and follow_path, which carries a ray that has met a surface on through every later
  * bounce, each vertex shaded with the material's BSDF (kernels/bsdf.h) and lit by the environment
  * (ENV_PARAMS, kernels/envmap.h) and the lights. The one path of every ray source: the
- * reference's camera samples (kernels/reference.cl, from their first vertex), the irradiance
- * probes' rays and the reflection captures' texels (kernels/probe_trace.cl, from a point;
+ * reference's camera samples (kernels/paths/reference.cl, from their first vertex), the irradiance
+ * probes' rays and the reflection captures' texels (kernels/paths/probe_trace.cl, from a point;
  * iblbake/render/paths/). Each vertex's pieces (first_vertex, vertex_start, env_sample,
- * light_sample, path_scatter) are functions that the wavefront's stages (kernels/wavefront.cl) call
+ * light_sample, path_scatter) are functions that the wavefront's stages (kernels/paths/wavefront.cl) call
  * too, where a ray is queued instead of traced.
  * numpy twin: iblbake/render/twin/paths.py. */
 #ifndef IBLBAKE_PATHS_H
@@ -112,7 +112,7 @@ IBL_INLINE float3 env_direct(const Material mt, float3 v, float3 n, float nov, f
 }
 
 /* A path's vertices, each piece once: the megakernel (the reference's first vertex, follow_path)
- * and the wavefront's stages (kernels/wavefront.cl; Laine, Karras and Aila 2013) call these, so
+ * and the wavefront's stages (kernels/paths/wavefront.cl; Laine, Karras and Aila 2013) call these, so
  * the two draw the same dimensions in the same order and compute the same estimate. */
 
 /* The first vertex (the G-buffer sample; the terms asked for, diffuse and specular): its

@@ -1,6 +1,6 @@
 /* The reference's paths as a wavefront of stages (Laine, Karras and Aila 2013, "Megakernels
  * considered harmful: wavefront path tracing on GPUs"): the estimator of the megakernel
- * (kernels/reference.cl `reference`, kernels/paths.h follow_path), the same sample dimensions in
+ * (kernels/paths/reference.cl `reference`, kernels/paths/paths.h follow_path), the same sample dimensions in
  * the same order and the same functions, cut where a ray is traced so that each stage is a small
  * kernel run over a compacted queue of the paths that need it:
  *   wf_generate    the first vertex of each (G-buffer sample, sample k) of a wave: the environment's
@@ -19,7 +19,7 @@
 #include "common.h"
 #include "scene.h"
 #include "surface.h"
-#include "paths.h"
+#include "paths/paths.h"
 
 /* part of reference.cl's program (its end includes this file): FIRST_DIFFUSE, FIRST_SPECULAR and
  * SCALAR_BVH are its */

@@ -1,5 +1,5 @@
 /* Probe rays: the light arriving at each irradiance probe along each of its ray directions, by the
- * reference's path tracer (kernels/paths.h follow_path), and how far the ray went (the probes'
+ * reference's path tracer (kernels/paths/paths.h follow_path), and how far the ray went (the probes'
  * distance moments and their relocation and classification read it; DDGI, Majercik et al. 2019).
  *   a miss:       the panorama averaged over the ray's share of the sphere (ray_dirs[r].w, or where that
  *                 is 0 ray_solid_angle = 4 pi / rays)
@@ -28,7 +28,7 @@
 #include "surface.h"
 #include "material.h"
 #include "light.h"
-#include "paths.h"
+#include "paths/paths.h"
 
 __kernel void probe_trace(__global const float4 *probe_pos, __global const float4 *ray_dirs, const int nrays,
                           const int first, const int count, const int ray0, const uint seed, const int shade,
