@@ -392,6 +392,34 @@ def test_the_paths_register_cap_is_asked_for_on_nvidia_gpus_only():
         assert launch.build_options(other, ("gbuffer.cl", "paths/reference.cl")) == []
 
 
+def test_pocl_launches_are_split_into_many_groups(rt):
+    """device/launch.py cpu_group: a one-dimensional launch on PoCL is cut into at least
+    CPU_GROUPS_PER_CORE groups a core (PoCL's own choice made a 64x48 frame's 3072 paths one group
+    on one core), each a divisor of the launch, at most MAX_GROUP; and Runtime.run asks for it."""
+    from iblbake.device import launch
+    assert launch.cpu_group(3072, 2) == 24 and launch.cpu_group(49152, 2) == 384
+    assert launch.cpu_group(1 << 20, 2) == launch.MAX_GROUP and launch.cpu_group(97 * 61, 2) == 1
+    for items in (1, 7, 3072, 5917, 12288, 65536, 1 << 22):
+        for cores in (1, 2, 16):
+            g = launch.cpu_group(items, cores)
+            assert items % g == 0 and 1 <= g <= launch.MAX_GROUP
+            assert g == 1 or items // g >= launch.CPU_GROUPS_PER_CORE * cores or g == launch.MAX_GROUP
+    seen = []
+
+    class Kernel:
+        function_name = "k"
+
+        def __call__(self, queue, global_size, local_size, *args):
+            seen.append(local_size)
+
+    rt.run(Kernel(), (3072,), None)
+    rt.run(Kernel(), (64, 48), None)
+    rt.run(Kernel(), (3072,), (8,))
+    pocl = rt.info.kind == "CPU" and "Portable Computing Language" in rt.info.platform
+    cores = rt.info.device.max_compute_units
+    assert seen == [(launch.cpu_group(3072, cores),) if pocl else None, None, (8,)]
+
+
 def lamp_panorama(folder):
     """A sky brightening upwards with one bright lamp (the twin test's)."""
     from iblbake.core import conventions

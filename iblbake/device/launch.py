@@ -12,10 +12,27 @@ from __future__ import annotations
 
 GPU_ITEMS = 1 << 18
 
+# PoCL (3.1), given no local size, makes a launch as few work groups as it can (one of up to 4096
+# items), and its pthread device runs a group on one core: the reference's 3072 paths of a 64x48
+# frame ran on one of two cores. Paths differ in length (the sky's pixels end at once, a mirror's
+# go on), so a launch is split into many small groups that the cores take as they free (measured,
+# docs/benchmarks.md "Work groups on PoCL": the reference 1.8-2x faster at 64x48). Large
+# launches keep 4096-item groups.
+CPU_GROUPS_PER_CORE = 64
+MAX_GROUP = 4096
+
 
 def per_launch(rt) -> int:
     """The most work items one launch is given on the runtime's device."""
     return 1 << (20 if rt.info.kind == "GPU" else 16)
+
+
+def cpu_group(items: int, cores: int) -> int:
+    """The work-group size of a one-dimensional launch of `items` on a PoCL device of `cores`
+    cores: the largest divisor of items (OpenCL 1.2 needs one) that leaves CPU_GROUPS_PER_CORE
+    groups a core, at most MAX_GROUP."""
+    bound = max(1, min(MAX_GROUP, items // (CPU_GROUPS_PER_CORE * max(cores, 1))))
+    return next(d for d in range(bound, 0, -1) if items % d == 0)
 
 
 def whole_units(rt, unit: int) -> int:

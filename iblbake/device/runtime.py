@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from iblbake.device.launch import build_options
+from iblbake.device.launch import build_options, cpu_group
 from iblbake.errors import DeviceError, IblbakeError
 
 FIX_HINT = (
@@ -398,6 +398,9 @@ class Runtime:
         self._host_arrays: list = []   # zero-copy host arrays of queued work (see to_device)
         self.builds: list[dict] = []  # what was built, with times, for reports
         self.device_options = device_options(self.info)
+        # PoCL's own choice runs a small launch on one core (device/launch.py cpu_group)
+        self._split = self.info.kind == "CPU" and "Portable Computing Language" in self.info.platform
+        self._cores = self.info.device.max_compute_units if self._split else 1
 
     @property
     def device_label(self) -> str:
@@ -497,6 +500,8 @@ class Runtime:
         return out
 
     def run(self, kernel, global_size, local_size, *args):
+        if local_size is None and self._split and len(global_size) == 1:
+            local_size = (cpu_group(global_size[0], self._cores),)
         try:
             return kernel(self.queue, global_size, local_size, *args)
         except Exception as e:
