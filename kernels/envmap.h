@@ -16,11 +16,12 @@
  * texels and its importance-sampling tables, panorama_args): its rotation about y as (cos, sin)
  * and its intensity, the full-resolution panorama (w x h RGBA texels, read piecewise constant),
  * the marginal CDF over rows, one CDF per row with its guide table (ENV_GUIDE_BINS + 1 entries a
- * row, core/sampling.py cdf_guides), and the pdf over solid angle per texel. */
+ * row, core/sampling.py cdf_guides), and env_norm, what turns a texel's luminance into the pdf over
+ * solid angle of sampling it (pdf_env). */
 #define ENV_PARAMS const float2 env_rot, const float env_scale, __global const float4 *img, const int w, \
                    const int h, __global const float *marginal, __global const float *conditional, \
-                   __global const int *guide, __global const float *pdf_table
-#define ENV_ARGS env_rot, env_scale, img, w, h, marginal, conditional, guide, pdf_table
+                   __global const int *guide, const float env_norm
+#define ENV_ARGS env_rot, env_scale, img, w, h, marginal, conditional, guide, env_norm
 
 /* Trilinear lookup in the radiance chain: bilinear in two levels, blended. */
 /* Solid angle of a level-0 texel (w0 x h0) of the chain at direction l: (2 pi / w0)(pi / h0)
@@ -85,9 +86,15 @@ IBL_INLINE int env_texel_index(float3 e, int w, int h)
     return min((int)(uv.y * h), h - 1) * w + min((int)(uv.x * w), w - 1);
 }
 
-IBL_INLINE float pdf_env(__global const float *pdf_table, int texel)
+/* The pdf over solid angle of sampling the texel of radiance c: p(texel) / Omega(texel) with p
+ * proportional to luminance x Omega is the luminance over the panorama's total (env_norm =
+ * 1 / total: core/sampling.py EnvironmentDistribution.norm). Read from the radiance a path loads
+ * anyway, not from a table: on a CPU the tables of a 2048 x 1024 panorama (40 MB) miss the cache,
+ * and a table of pdfs was one miss more a sample (docs/benchmarks.md "The environment's tables
+ * in the cache"). */
+IBL_INLINE float pdf_env(float3 c, float env_norm)
 {
-    return pdf_table[texel];
+    return fmax(luminance(c), 0.0f) * env_norm;
 }
 
 #endif

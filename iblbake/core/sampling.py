@@ -246,8 +246,11 @@ class EnvironmentDistribution:
     one CDF per row, pdf over solid angle per texel) are what kernels/envmap.h sample_env reads."""
 
     def __init__(self, image):
-        self.marginal, self.conditional, self.pdf = env_sampling_tables(image)
+        self.marginal, self.conditional, self.pdf, total = env_sampling_tables(image)
         self.height, self.width = self.pdf.shape
+        # the kernels' pdf: a texel's luminance times norm (kernels/envmap.h pdf_env), the pdf
+        # table's value without the table (a black panorama's texels give 0: no light to sample)
+        self.norm = np.float32(1.0 / total)
         self.guide = cdf_guides(self.conditional)
 
     def sample(self, u):
@@ -273,7 +276,8 @@ class EnvironmentDistribution:
 def env_sampling_tables(image):
     """Piecewise-constant environment sampling over texels: p(texel) proportional to
     luminance x exact solid angle. Returns (marginal cdf (H+1), conditional cdfs (H, W+1),
-    pdf over solid angle per texel (H, W)), float32, built in float64."""
+    pdf over solid angle per texel (H, W)), float32, built in float64, and the total weight
+    (luminance x solid angle: the pdf is luminance / total)."""
     h, w = image.shape[:2]
     lum = np.maximum(image[..., :3].astype(np.float64) @ LUMINANCE, 0.0)
     omega = conventions.equirect_row_solid_angles(w, h)
@@ -291,7 +295,7 @@ def env_sampling_tables(image):
     cond[:, 1:] = np.where(row[:, None] > 0, c, (np.arange(1, w + 1) / w)[None, :])
     cond[:, -1] = 1.0
     pdf = weight / total / omega[:, None]
-    return marginal.astype(np.float32), cond.astype(np.float32), pdf.astype(np.float32)
+    return marginal.astype(np.float32), cond.astype(np.float32), pdf.astype(np.float32), total
 
 
 def cdf_guides(cdfs, bins: int = ENV_GUIDE_BINS):

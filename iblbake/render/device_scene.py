@@ -84,10 +84,9 @@ def panorama_args(rt, bakes, image, dist) -> dict:
 
     def upload():
         return {"img": rt.to_device(to_rgba(image)), "marginal": rt.to_device(dist.marginal),
-                "conditional": rt.to_device(dist.conditional), "guide": rt.to_device(dist.guide),
-                "pdf_table": rt.to_device(dist.pdf)}
-    return {**bakes.on_device(rt, (image, dist.marginal, dist.conditional, dist.guide, dist.pdf), upload),
-            "w": dist.width, "h": dist.height}
+                "conditional": rt.to_device(dist.conditional), "guide": rt.to_device(dist.guide)}
+    return {**bakes.on_device(rt, (image, dist.marginal, dist.conditional, dist.guide), upload),
+            "w": dist.width, "h": dist.height, "env_norm": dist.norm}
 
 
 def scene_lights(scene, sun) -> list:

@@ -26,8 +26,8 @@
  * finds) meets when it leaves the scene, weighted against the panorama's sampling */
 IBL_INLINE float3 env_missed(float3 l, float pb, ENV_PARAMS)
 {
-    const int texel = env_texel_index(to_env(l, env_rot), w, h);
-    return img[texel].xyz * (isinf(pb) ? 1.0f : power_heuristic(pb, pdf_env(pdf_table, texel)));
+    const float3 le = img[env_texel_index(to_env(l, env_rot), w, h)].xyz;
+    return le * (isinf(pb) ? 1.0f : power_heuristic(pb, pdf_env(le, env_norm)));
 }
 
 #ifdef BOUNCES
@@ -93,12 +93,15 @@ IBL_INLINE int env_sample(const Material mt, float3 v, float3 n, float nov, floa
 {
     int texel;
     *l = from_env(sample_env(marginal, conditional, guide, w, h, u, &texel), env_rot);
-    const float pe = pdf_env(pdf_table, texel);
     float pb;
     const float3 f = bsdf_eval(mt, v, n, nov, *l, ps, diffuse, specular, &pb);
-    const int live = pe > 0.0f && (f.x > 0.0f || f.y > 0.0f || f.z > 0.0f);
-    *c = live ? img[texel].xyz * f * (power_heuristic(pe, pb) / pe) : (float3)(0.0f);
-    return live;
+    *c = (float3)(0.0f);
+    if (!(f.x > 0.0f || f.y > 0.0f || f.z > 0.0f)) return 0;     /* no texel read below the horizon */
+    const float3 le = img[texel].xyz;
+    const float pe = pdf_env(le, env_norm);
+    if (!(pe > 0.0f)) return 0;
+    *c = le * f * (power_heuristic(pe, pb) / pe);
+    return 1;
 }
 
 /* env_sample's light where its direction leaves the scene unoccluded from origin */

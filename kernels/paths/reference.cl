@@ -119,9 +119,9 @@ __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int
             int texel;
             const float4 u = (float4)(u_env, u_texel);
             const float3 l = from_env(sample_env(marginal, conditional, guide, w, h, u, &texel), env_rot);
-            const float pe = pdf_env(pdf_table, texel);
+            const float3 li = dot(nrm, l) > 0.0f ? img[texel].xyz : (float3)(0.0f);
+            const float pe = pdf_env(li, env_norm);
             if (dot(nrm, l) > 0.0f && pe > 0.0f && VISIBLE(l)) {
-                const float3 li = img[texel].xyz;
                 float pb;
 #if DIFFUSE_MODE == DIFFUSE_REFERENCE
                 const float3 fd = bsdf_eval(mt, v, nrm, nov, l, 0.0f, 1, 0, &pb);

@@ -46,7 +46,7 @@ def environment_args(ctx, dist) -> dict:
 class Reference(Pass):
     name = "reference"
     kernel = "paths/reference.cl"
-    params = ("img", "w", "h", "marginal", "conditional", "guide", "pdf_table", "seed", "first", "batch", "slices", "lights",
+    params = ("img", "w", "h", "marginal", "conditional", "guide", "env_norm", "seed", "first", "batch", "slices", "lights",
               "nlights", "wave", "npaths", "count", "add", "wf_paths", "wf_shadow", "wf_queue", "wf_count")
     # the wavefront's stages (kernels/paths/wavefront.cl, effects.reference.paths)
     functions = ("wf_generate", "wf_extend", "wf_shade", "wf_shadow", "wf_accumulate")
