@@ -395,7 +395,8 @@ def test_the_paths_register_cap_is_asked_for_on_nvidia_gpus_only():
 def test_pocl_launches_are_split_into_many_groups(rt):
     """device/launch.py cpu_group: a one-dimensional launch on PoCL is cut into at least
     CPU_GROUPS_PER_CORE groups a core (PoCL's own choice made a 64x48 frame's 3072 paths one group
-    on one core), each a divisor of the launch, at most MAX_GROUP; and Runtime.run asks for it."""
+    on one core), each a divisor of the launch, at most MAX_GROUP; and Runtime.run asks for it for
+    the path kernels (SPLIT_KERNELS) alone."""
     from iblbake.device import launch
     assert launch.cpu_group(3072, 2) == 24 and launch.cpu_group(49152, 2) == 384
     assert launch.cpu_group(1 << 20, 2) == launch.MAX_GROUP and launch.cpu_group(97 * 61, 2) == 1
@@ -407,7 +408,7 @@ def test_pocl_launches_are_split_into_many_groups(rt):
     seen = []
 
     class Kernel:
-        function_name = "k"
+        function_name = "reference"
 
         def __call__(self, queue, global_size, local_size, *args):
             seen.append(local_size)
@@ -415,9 +416,12 @@ def test_pocl_launches_are_split_into_many_groups(rt):
     rt.run(Kernel(), (3072,), None)
     rt.run(Kernel(), (64, 48), None)
     rt.run(Kernel(), (3072,), (8,))
+    other = Kernel()
+    other.function_name = "shade"
+    rt.run(other, (3072,), None)
     pocl = rt.info.kind == "CPU" and "Portable Computing Language" in rt.info.platform
     cores = rt.info.device.max_compute_units
-    assert seen == [(launch.cpu_group(3072, cores),) if pocl else None, None, (8,)]
+    assert seen == [(launch.cpu_group(3072, cores),) if pocl else None, None, (8,), None]
 
 
 def lamp_panorama(folder):

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from iblbake.device.launch import build_options, cpu_group
+from iblbake.device.launch import SPLIT_KERNELS, build_options, cpu_group
 from iblbake.errors import DeviceError, IblbakeError
 
 FIX_HINT = (
@@ -500,7 +500,7 @@ class Runtime:
         return out
 
     def run(self, kernel, global_size, local_size, *args):
-        if local_size is None and self._split and len(global_size) == 1:
+        if local_size is None and self._split and len(global_size) == 1 and kernel.function_name in SPLIT_KERNELS:
             local_size = (cpu_group(global_size[0], self._cores),)
         try:
             return kernel(self.queue, global_size, local_size, *args)
