@@ -120,6 +120,13 @@ __kernel void t_env(__global const float *marginal, __global const float *condit
     out[i] = (float4)(sample_env(marginal, conditional, guide, w, h, u[i], &texel), (float)texel);
 }
 
+/* envmap.h pdf_env of every texel's radiance c (float4: RGB) */
+__kernel void t_pdf_env(__global const float4 *c, const float env_norm, __global float *out)
+{
+    const int i = get_global_id(0);
+    out[i] = pdf_env(c[i].xyz, env_norm);
+}
+
 /* probes.h at points p, normals n, view vectors v (float4 each); defines PROBES_SH,
  * PROBE_VISIBILITY, PROBE_CLASSIFICATION as the shade pass sets them */
 __kernel void t_probes(__global const float4 *p, __global const float4 *n, __global const float4 *v, PROBE_PARAMS,
