@@ -399,7 +399,7 @@ class Runtime:
         self.builds: list[dict] = []  # what was built, with times, for reports
         self.device_options = device_options(self.info)
         # PoCL's own choice runs a small launch on one core (device/launch.py cpu_group)
-        self._split = self.info.kind == "CPU" and "Portable Computing Language" in self.info.platform
+        self._split = self.info.kind == "CPU" and _matches(self.info, "pocl")
         self._cores = self.info.device.max_compute_units if self._split else 1
 
     @property
