@@ -15,8 +15,8 @@
  * the frame's env_rot and env_scale, render/device_scene.py environment_frame; the panorama's
  * texels and its importance-sampling tables, panorama_args): its rotation about y as (cos, sin)
  * and its intensity, the full-resolution panorama (w x h RGBA texels, read piecewise constant),
- * the marginal CDF over rows, one CDF per row with its guide table (ENV_GUIDE_BINS + 1 entries a
- * row, core/sampling.py cdf_guides), and env_norm, what turns a texel's luminance into the pdf over
+ * the marginal CDF over rows, one CDF per row, the guide tables (ENV_GUIDE_BINS + 1 entries each,
+ * core/sampling.py cdf_guides: the h rows', then the marginal's), and env_norm, what turns a texel's luminance into the pdf over
  * solid angle of sampling it (pdf_env). */
 #define ENV_PARAMS const float2 env_rot, const float env_scale, __global const float4 *img, const int w, \
                    const int h, __global const float *marginal, __global const float *conditional, \
@@ -64,10 +64,13 @@ IBL_INLINE int cdf_search(__global const float *cdf, int lo, int hi, float u)
 IBL_INLINE float3 sample_env(__global const float *marginal, __global const float *conditional,
                              __global const int *guide, int w, int h, float4 u, int *texel)
 {
-    const int j = cdf_search(marginal, 0, h - 1, u.x);
-    /* a row's guide table (Chen and Asau 1974) brackets u's bin between the bins of the powers of
-     * two around it (exact in float32), so the search touches one or two cache lines of the row,
-     * not ~8 scattered ones: the same bin as a search of the whole row */
+    /* a guide table (Chen and Asau 1974) brackets u's bin between the bins of the multiples of
+     * 1 / ENV_GUIDE_BINS around it (exact in float32): the same bin as a search of the whole CDF
+     * in one or two cache lines, not ~11 dependent loads and mispredicted branches (the marginal's
+     * whole search cost 160 ns a sample on PoCL, docs/benchmarks.md) */
+    const int gm = min((int)(u.x * ENV_GUIDE_BINS), ENV_GUIDE_BINS - 1);
+    __global const int *gmr = guide + h * (ENV_GUIDE_BINS + 1);
+    const int j = cdf_search(marginal, gmr[gm], gmr[gm + 1], u.x);
     const int g = min((int)(u.y * ENV_GUIDE_BINS), ENV_GUIDE_BINS - 1);
     __global const int *gr = guide + j * (ENV_GUIDE_BINS + 1);
     const int i = cdf_search(conditional + j * (w + 1), gr[g], gr[g + 1], u.y);

@@ -156,10 +156,11 @@ def test_environment_sampler_opencl_chi2(rt, city_small):
 
 
 def test_guide_tables_pick_the_whole_rows_bin(rt):
-    """sample_env searches a row between two entries of its guide table (core/sampling.py
-    cdf_guides): for every u the texel is the one a search of the whole row finds (the twin's
-    searchsorted), on a panorama with a sun (four texels hold most of the CDF), a black row (its
-    uniform CDF) and black columns (flat runs), at random u and at u on the guide's own steps."""
+    """sample_env searches the marginal and a row between two entries of their guide tables
+    (core/sampling.py cdf_guides): for every u the texel is the one a search of the whole CDFs
+    finds (the twin's searchsorted), on a panorama with a sun (four texels hold most of the CDF),
+    a black row (its uniform CDF) and black columns (flat runs), at random u and at u on the
+    guides' own steps."""
     rng = np.random.default_rng(3)
     img = rng.gamma(0.3, size=(64, 96, 3)).astype(np.float32)
     img[10:12, 40:42] = 5e4
@@ -167,11 +168,15 @@ def test_guide_tables_pick_the_whole_rows_bin(rt):
     img[:, 60:80] = 0.0
     dist = sampling.EnvironmentDistribution(img)
     u = uniforms(n=20_000, dims=4, seed=9).astype(np.float32)
-    u[:1024, 1] = np.arange(1024, dtype=np.float32) / 1024          # every step of the guide and between
-    g = np.minimum((u[:, 1] * sampling.ENV_GUIDE_BINS).astype(np.int64), sampling.ENV_GUIDE_BINS - 1)
+    u[:1024, 1] = np.arange(1024, dtype=np.float32) / 1024          # every step of the guides and between
+    u[1024:2048, 0] = np.arange(1024, dtype=np.float32) / 1024
+    g = np.minimum((u[:, :2] * sampling.ENV_GUIDE_BINS).astype(np.int64), sampling.ENV_GUIDE_BINS - 1)
     _, texels = dist.sample(u.astype(np.float64))
     rows, cols = texels // dist.width, texels % dist.width
-    assert ((dist.guide[rows, g] <= cols) & (cols <= dist.guide[rows, g + 1])).all()
+    assert dist.guide.shape == (dist.height + 1, sampling.ENV_GUIDE_BINS + 1)
+    assert ((dist.guide[rows, g[:, 1]] <= cols) & (cols <= dist.guide[rows, g[:, 1] + 1])).all()
+    marginal = dist.guide[dist.height]
+    assert ((marginal[g[:, 0]] <= rows) & (rows <= marginal[g[:, 0] + 1])).all()
     out = rt.empty(len(u) * 16)
     rt.launch("selftest.cl", "t_env", {"SH_BANDS": 3}, (len(u),), {}, marginal=rt.to_device(dist.marginal),
               conditional=rt.to_device(dist.conditional), guide=rt.to_device(dist.guide), w=dist.width,

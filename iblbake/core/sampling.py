@@ -88,7 +88,7 @@ def radical_inverse(j, base: int):
 
 
 HALTON_BASES = (2, 3, 5, 7, 11, 13, 17, 19)
-# entries of a panorama row's guide table, a power of two (cdf_guides; kernels/layout.h)
+# bins of a guide table (the marginal's and each panorama row's), a power of two (cdf_guides; kernels/layout.h)
 ENV_GUIDE_BINS = 256
 
 
@@ -243,7 +243,8 @@ def pdf_ggx_vndf(nov, noh, voh, alpha):
 class EnvironmentDistribution:
     """Piecewise constant over a panorama's texels, p(texel) proportional to luminance x exact
     solid angle; inside a texel uniform in (phi, cos theta). Its tables (marginal CDF over rows,
-    one CDF per row, pdf over solid angle per texel) are what kernels/envmap.h sample_env reads."""
+    one CDF per row, their guide tables) are what kernels/envmap.h sample_env reads; the pdf over
+    solid angle per texel is the twin's."""
 
     def __init__(self, image):
         self.marginal, self.conditional, self.pdf, total = env_sampling_tables(image)
@@ -251,7 +252,8 @@ class EnvironmentDistribution:
         # the kernels' pdf: a texel's luminance times norm (kernels/envmap.h pdf_env), the pdf
         # table's value without the table (a black panorama's texels give 0: no light to sample)
         self.norm = np.float32(1.0 / total)
-        self.guide = cdf_guides(self.conditional)
+        # the rows' guide tables, then the marginal's (kernels/envmap.h sample_env): (H + 1, bins + 1)
+        self.guide = np.concatenate([cdf_guides(self.conditional), cdf_guides(self.marginal[None, :])])
 
     def sample(self, u):
         """Directions in the panorama's frame from u in [0,1)^4 (rows of 4), and their texels."""

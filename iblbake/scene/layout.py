@@ -24,7 +24,8 @@ PRIM_KINDS = {"none": 0, "sphere": 1, "plane": 2, "triangle": 3}
 # (= roughness^2) are mirrors where a path samples them: float32 cannot resolve the lobe (D
 # overflows, the half-vector warp collapses), so the BSDF takes the mirror direction with weight F
 # (kernels/bsdf.h, render/twin, study/accuracy)
-# ENV_GUIDE_BINS (core/sampling.py cdf_guides): a panorama row's guide table, read by kernels/envmap.h
+# ENV_GUIDE_BINS (core/sampling.py cdf_guides): the bins of the guide tables of the panorama's marginal
+# CDF and of each row's, read by kernels/envmap.h
 # random streams: a seed ^ its stream, so that two uses of one seed draw independent numbers
 # (kernels/sampler.h; the reference's stream is the seed itself, each light's seed ^ pcg_hash(j + 1))
 RANDOM_STREAMS = {"ao": 0x5A0}
