@@ -37,19 +37,29 @@ IBL_INLINE float3 pow_fast3(float3 x, float e)
     return select(exp2(e * log2(x)), (float3)(0.0f), islessequal(x, (float3)(0.0f)));
 }
 
+/* atan2pi and acospi: the angles in units of pi, as u and v want them, 3x cheaper than atan2 and
+ * acos on PoCL and on Intel's runtime (benchmarks/bench_trig.py) */
 IBL_INLINE float2 equirect_uv_from_dir(float3 d)
 {
-    float u = 0.5f - atan2(d.x, d.z) * (0.5f / IBL_PI);
+    float u = 0.5f - 0.5f * atan2pi(d.x, d.z);
     u = u - floor(u);                     /* the seam (atan2 = -pi) wraps to 0 */
-    float v = acos(clamp(d.y, -1.0f, 1.0f)) * (1.0f / IBL_PI);
+    const float v = acospi(clamp(d.y, -1.0f, 1.0f));
     return (float2)(u, v);
+}
+
+/* (cos, sin) of 2 pi t. PoCL's sin and cos reduce the argument the long way (34 ns a pair on this
+ * CPU, a few percent of a path's time); cospi and sinpi reduce it exactly (7 ns, and no rounding
+ * of 2 pi t: benchmarks/bench_trig.py, docs/benchmarks.md) */
+IBL_INLINE float2 cossin_2pi(float t)
+{
+    return (float2)(cospi(2.0f * t), sinpi(2.0f * t));
 }
 
 IBL_INLINE float3 dir_from_equirect_uv(float2 uv)
 {
-    float theta = IBL_PI * uv.y, phi = 2.0f * IBL_PI * (0.5f - uv.x);
-    float st = sin(theta);
-    return (float3)(st * sin(phi), cos(theta), st * cos(phi));
+    const float2 cs = cossin_2pi(0.5f - uv.x);          /* phi = 2 pi (0.5 - u), theta = pi v */
+    const float st = sinpi(uv.y);
+    return (float3)(st * cs.y, cospi(uv.y), st * cs.x);
 }
 
 /* Exact solid angle of a texel in row j of a W x H equirect image:

@@ -77,9 +77,10 @@ IBL_INLINE float3 sample_env(__global const float *marginal, __global const floa
     const float uu = ((float)i + u.z) / (float)w;
     const float c0 = cospi((float)j / h), c1 = cospi((float)(j + 1) / h);
     const float ct = mix(c0, c1, u.w);
-    const float stt = sqrt(fmax(0.0f, 1.0f - ct * ct)), phi = 2.0f * IBL_PI * (0.5f - uu);
+    const float stt = sqrt(fmax(0.0f, 1.0f - ct * ct));
+    const float2 cs = cossin_2pi(0.5f - uu);              /* phi = 2 pi (0.5 - u) */
     *texel = j * w + i;
-    return (float3)(stt * sin(phi), ct, stt * cos(phi));
+    return (float3)(stt * cs.y, ct, stt * cs.x);
 }
 
 /* The texel a direction (panorama frame) falls in, nearest: the pdf table's index for it. */

@@ -49,10 +49,10 @@ IBL_INLINE float g1_smith(float nov, float alpha)
  * pdf over half-vectors = D(h) cos(theta_h). */
 IBL_INLINE float3 sample_ggx_half(float2 u, float alpha)
 {
-    float phi = 2.0f * 3.14159265358979323846f * u.x;
+    const float2 cs = cossin_2pi(u.x);
     float theta = atan2(alpha * sqrt(u.y), sqrt(fmax(0.0f, 1.0f - u.y)));
     float st = sin(theta);
-    return (float3)(st * cos(phi), st * sin(phi), cos(theta));
+    return (float3)(st * cs.x, st * cs.y, cos(theta));
 }
 
 /* The same warp without trigonometry, for per-pixel loops: the host uploads (cos phi, sin phi, u1)
@@ -80,9 +80,10 @@ IBL_INLINE float3 sample_ggx_vndf(float3 vl, float alpha, float2 u)
     const float lensq = vh.x * vh.x + vh.y * vh.y;
     const float3 t1 = lensq > 0.0f ? (float3)(-vh.y, vh.x, 0.0f) * rsqrt(lensq) : (float3)(1.0f, 0.0f, 0.0f);
     const float3 t2 = cross(vh, t1);
-    const float r = sqrt(u.x), phi = 2.0f * IBL_PI * u.y;
-    const float p1 = r * cos(phi);
-    float p2 = r * sin(phi);
+    const float r = sqrt(u.x);
+    const float2 cs = cossin_2pi(u.y);
+    const float p1 = r * cs.x;
+    float p2 = r * cs.y;
     const float s = 0.5f * (1.0f + vh.z);
     p2 = (1.0f - s) * sqrt(fmax(0.0f, 1.0f - p1 * p1)) + s * p2;
     const float3 nh = p1 * t1 + p2 * t2 + sqrt(fmax(0.0f, 1.0f - p1 * p1 - p2 * p2)) * vh;

@@ -52,10 +52,11 @@ IBL_INLINE float light_omc(float sin_max)
 IBL_INLINE float3 cone_direction(float3 a, float omc, float2 u)
 {
     const float x = u.x * omc;
-    const float ct = 1.0f - x, st = sqrt(fmax(0.0f, x * (2.0f - x))), phi = 2.0f * IBL_PI * u.y;
+    const float ct = 1.0f - x, st = sqrt(fmax(0.0f, x * (2.0f - x)));
+    const float2 cs = cossin_2pi(u.y);
     float3 t, b;
     tangent_frame(a, &t, &b);
-    return normalize(t * (st * cos(phi)) + b * (st * sin(phi)) + a * ct);
+    return normalize(t * (st * cs.x) + b * (st * cs.y) + a * ct);
 }
 
 #endif

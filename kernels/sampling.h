@@ -14,8 +14,9 @@
  * pdf = cos(theta) / pi. */
 IBL_INLINE float3 sample_cosine_hemisphere(float2 u)
 {
-    const float r = sqrt(u.x), phi = 2.0f * IBL_PI * u.y;
-    return (float3)(r * cos(phi), r * sin(phi), sqrt(fmax(0.0f, 1.0f - u.x)));
+    const float r = sqrt(u.x);
+    const float2 cs = cossin_2pi(u.y);
+    return (float3)(r * cs.x, r * cs.y, sqrt(fmax(0.0f, 1.0f - u.x)));
 }
 
 IBL_INLINE float pdf_cosine_hemisphere(float cos_theta)
@@ -28,8 +29,9 @@ IBL_INLINE float pdf_cosine_hemisphere(float cos_theta)
 IBL_INLINE float3 sample_uniform_cone(float2 u, float cos_max)
 {
     const float ct = 1.0f - u.x * (1.0f - cos_max);
-    const float st = sqrt(fmax(0.0f, 1.0f - ct * ct)), phi = 2.0f * IBL_PI * u.y;
-    return (float3)(st * cos(phi), st * sin(phi), ct);
+    const float st = sqrt(fmax(0.0f, 1.0f - ct * ct));
+    const float2 cs = cossin_2pi(u.y);
+    return (float3)(st * cs.x, st * cs.y, ct);
 }
 
 IBL_INLINE float pdf_uniform_cone(float cos_max)
