@@ -16,8 +16,8 @@
  * texels and its importance-sampling tables, panorama_args): its rotation about y as (cos, sin)
  * and its intensity, the full-resolution panorama (w x h RGBA texels, read piecewise constant),
  * the marginal CDF over rows, one CDF per row, the guide tables (ENV_GUIDE_BINS + 1 entries each,
- * core/sampling.py cdf_guides: the h rows', then the marginal's), and env_norm, what turns a texel's luminance into the pdf over
- * solid angle of sampling it (pdf_env). */
+ * core/sampling.py cdf_guides: the h rows', then the marginal's), and env_norm, what turns a
+ * texel's luminance into the pdf over solid angle of sampling it (pdf_env). */
 #define ENV_PARAMS const float2 env_rot, const float env_scale, __global const float4 *img, const int w, \
                    const int h, __global const float *marginal, __global const float *conditional, \
                    __global const int *guide, const float env_norm
@@ -66,8 +66,8 @@ IBL_INLINE float3 sample_env(__global const float *marginal, __global const floa
 {
     /* a guide table (Chen and Asau 1974) brackets u's bin between the bins of the multiples of
      * 1 / ENV_GUIDE_BINS around it (exact in float32): the same bin as a search of the whole CDF
-     * in one or two cache lines, not ~11 dependent loads and mispredicted branches (the marginal's
-     * whole search cost 160 ns a sample on PoCL, docs/benchmarks.md) */
+     * in one or two cache lines, not ~11 dependent loads and mispredicted branches (on PoCL the
+     * marginal's whole search was a fifth of a draw: benchmarks/bench_env_sampling.py) */
     const int gm = min((int)(u.x * ENV_GUIDE_BINS), ENV_GUIDE_BINS - 1);
     __global const int *gmr = guide + h * (ENV_GUIDE_BINS + 1);
     const int j = cdf_search(marginal, gmr[gm], gmr[gm + 1], u.x);
