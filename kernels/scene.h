@@ -211,8 +211,8 @@ IBL_INLINE float4 hit_texcoords(int kind, int index, float3 p, float b1, float b
     if (kind == PRIM_SPHERE) {
         const float4 sp = spheres[SPHERE_FLOAT4S * index];
         const float3 n = (p - sp.xyz) / sp.w;
-        const float u = 0.5f - atan2(n.x, n.z) * (0.5f / IBL_PI), v = acos(clamp(n.y, -1.0f, 1.0f)) / IBL_PI;
-        return (float4)(u, v, u, v);
+        const float2 uv = equirect_uv_from_dir(n);
+        return (float4)(uv, uv);
     }
     if (kind == PRIM_PLANE) {
         __global const float4 *pl = planes + PLANE_FLOAT4S * index;

@@ -198,8 +198,7 @@ def hit_texcoords(kind, index, p, bary, arrays):
     if kind == SPHERE:
         sp = arrays.spheres[index].astype(np.float64)
         nl = (p - sp[0, :3]) / sp[0, 3]
-        u = 0.5 - np.arctan2(nl[:, 0], nl[:, 2]) / (2 * np.pi)
-        v = np.arccos(np.clip(nl[:, 1], -1, 1)) / np.pi
+        u, v = conventions.equirect_uv_from_dir(nl)
         return np.stack([u, v, u, v], 1)
     if kind == PLANE:
         pl = arrays.planes[index].astype(np.float64)
