@@ -1,10 +1,11 @@
-"""The environment's importance sampling on a device: nanoseconds a sample of kernels/envmap.h
+"""The environment's importance sampling on a device: nanoseconds a draw of kernels/envmap.h
 sample_env (the guide tables of the marginal and of each row, Chen and Asau 1974) with the
-sampled texel's radiance and pdf read, as a path's light sample does, against the same draw by
-whole binary searches of the marginal and the row (what sample_env did before the guides), on
-the panoramas the path tracer is timed on: benchmarks/mitsuba_paths.py's courtyard (2048 x 1024)
-and a panorama of random rows with a sun. Each variant is timed after a warm-up launch, alternating,
-median of --repeats; the random numbers' own cost (a kernel that draws them only) is subtracted.
+sampled texel's radiance and pdf read, as a path's light sample does, against the same source
+with the marginal's search made whole (sample_env before the marginal's guide) and with both
+searches whole (before any guide): the same texels, on the panoramas the path tracer is timed
+on, benchmarks/mitsuba_paths.py's courtyard (2048 x 1024), and a panorama of random rows with a
+sun. Each variant is timed after a warm-up launch, alternating, median of --repeats; the random
+numbers' own cost (a kernel that draws them only) is subtracted.
 docs/benchmarks.md "The environment's tables in the cache" quotes it.
 
     .venv/bin/python benchmarks/bench_env_sampling.py                 # the default device (PoCL)
@@ -55,7 +56,8 @@ __kernel void draw(BENCH_PARAMS)
 """
 # sample_env as it is, and with its guided searches replaced by whole ones (the same code otherwise)
 MARGINAL = ("cdf_search(marginal, gmr[gm], gmr[gm + 1], u.x)", "cdf_search(marginal, 0, h - 1, u.x)")
-ROW = ("cdf_search(conditional + j * (w + 1), gr[g], gr[g + 1], u.y)", "cdf_search(conditional + j * (w + 1), 0, w - 1, u.y)")
+ROW = ("cdf_search(conditional + j * (w + 1), gr[g], gr[g + 1], u.y)",
+       "cdf_search(conditional + j * (w + 1), 0, w - 1, u.y)")
 VARIANTS = {"guides": (), "row guide only": (MARGINAL,), "whole searches": (MARGINAL, ROW)}
 
 
@@ -66,7 +68,8 @@ def panoramas(tmp: Path) -> dict:
     rng = np.random.default_rng(1)
     rows = rng.gamma(0.3, size=court.shape).astype(np.float32)
     rows[300:302, 900:904] = 5e4
-    return {f"courtyard {court.shape[1]}x{court.shape[0]}": court, f"random rows + sun {rows.shape[1]}x{rows.shape[0]}": rows}
+    h, w = court.shape[:2]
+    return {f"courtyard {w}x{h}": court, f"random rows + sun {w}x{h}": rows}
 
 
 def main():
@@ -111,6 +114,7 @@ def main():
             ns = {v: (med[v] - med["uniforms"]) / (items * per_item) * 1e9 for v in VARIANTS}
             cols = "  ".join(f"{v} {ns[v]:5.1f} ns ({ns[v] / ns['guides']:.2f}x)" for v in VARIANTS)
             print(f"{rt.device_label[:24]:24s} {name:30s} {cols}  (a sample's wall time, all cores)", flush=True)
+
 
 if __name__ == "__main__":
     main()

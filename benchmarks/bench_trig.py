@@ -29,7 +29,10 @@ __kernel void uniforms(const int n, __global float *out)
 __kernel void cossin_pi(const int n, __global float *out)
 {
     float acc = 0.0f;
-    for (int s = 0; s < n; ++s) { const float2 cs = cossin_2pi(uniform(get_global_id(0) * n + s)); acc += cs.x + 1.3f * cs.y; }
+    for (int s = 0; s < n; ++s) {
+        const float2 cs = cossin_2pi(uniform(get_global_id(0) * n + s));
+        acc += cs.x + 1.3f * cs.y;
+    }
     out[get_global_id(0)] = acc;
 }
 __kernel void uv_pi(const int n, __global float *out)
