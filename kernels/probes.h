@@ -99,7 +99,9 @@ IBL_INLINE float3 probe_value(__global const float4 *probe_irr, int index, float
 
 /* Probe c's weight at the biased point (its factor `falloff`: the trilinear one, or the fallback's
  * inverse square distance) and its value (probe_value; the irradiance as sqrt E with visibility,
- * E without; the specular radiance as it is): 0 for an inactive probe. */
+ * E without; the specular radiance as it is): 0 and 0 for an inactive probe. The value is always
+ * written: probe_blend adds weight x value, and an unwritten value (whatever the stack held: a
+ * NaN now and then, as a pointer's bits) times a zero weight was a NaN pixel. */
 IBL_INLINE float probe_contribution(int3 c, float3 p, float3 biased, float3 n, float3 falloff, const float *spec,
                                 float3 *value, PROBE_PARAMS)
 {
@@ -107,7 +109,10 @@ IBL_INLINE float probe_contribution(int3 c, float3 p, float3 biased, float3 n, f
     const int index = c.y * probe_nx * probe_nz + c.z * probe_nx + c.x;
     const float4 data = probe_data[index];
 #ifdef PROBE_CLASSIFICATION
-    if (data.w != 0.0f) return 0.0f;
+    if (data.w != 0.0f) {
+        *value = (float3)(0.0f);
+        return 0.0f;
+    }
 #endif
     const float3 e = probe_value(probe_irr, index, n, spec, probe_irr_texels, probe_nx, probe_ny, probe_nz);
 #ifdef PROBE_VISIBILITY

@@ -150,6 +150,19 @@ __kernel void t_probe_specular(__global const float4 *p, __global const float4 *
 }
 #endif
 
+/* probes.h probe_contribution of probe index c[i].xyz at p, n, v: (weight, value) with the value
+ * set to NaN before the call, so that an unwritten value shows (tests/test_probes.py) */
+__kernel void t_probe_contribution(__global const int4 *c, __global const float4 *p, __global const float4 *n,
+                                   __global const float4 *v, PROBE_PARAMS, __global float4 *out)
+{
+    const int i = get_global_id(0);
+    float3 value = (float3)(NAN);
+    const float3 biased = p[i].xyz + n[i].xyz * probe_origin.w + v[i].xyz * probe_spacing.w;
+    const float w = probe_contribution(c[i].xyz, p[i].xyz, biased, n[i].xyz, (float3)(1.0f), (const float *)0, &value,
+                                       PROBE_ARGS);
+    out[i] = (float4)(value, w);
+}
+
 __kernel void t_probe_octahedral(__global const float4 *d, __global float2 *uv)
 {
     const int i = get_global_id(0);

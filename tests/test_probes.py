@@ -169,6 +169,34 @@ def test_kernel_matches_twin_with_visibility_and_states(rt, rep):
     assert np.abs(got - want).max() / want.max() < 5e-5
 
 
+@pytest.mark.parametrize("visibility", [False, True])
+def test_an_inactive_probe_contributes_zero_weight_and_zero_value(rt, visibility):
+    """probe_contribution (kernels/probes.h) of an inactive probe writes its value as 0 with its 0
+    weight: probe_blend adds weight x value, and an unwritten value (whatever the stack held,
+    now and then a NaN) made a NaN pixel in a closed room whose outside probes are off
+    (tests/test_sides.py; about one first frame in 60 under other PoCL work-group sizes). The
+    kernel's value starts as NaN (selftest.cl t_probe_contribution); an active probe's weight
+    and value stay finite and positive."""
+    states = np.zeros(2 * 2 * 2)
+    states[[0, 5]] = probes.INACTIVE
+    vol = probes.sampled(synthetic((2, 2, 2), (1.0, 1.0, 1.0), (0, 0, 0), "octahedral", value=lambda q: (1.0, 2.0, 3.0),
+                                   states=states), settings(visibility=visibility))
+    cells = np.array([[x, y, z, 0] for z in (0, 1) for y in (0, 1) for x in (0, 1)], np.int32)
+    p = np.tile([0.5, 0.5, 0.5, 0.0], (8, 1)).astype(np.float32)
+    n = np.tile([0.0, 1.0, 0.0, 0.0], (8, 1)).astype(np.float32)
+    defines = {"SH_BANDS": 3, **probe_defines({**vol.get("settings", {}), "irradiance": vol["representation"],
+                                              "visibility": visibility, "classification": True})}
+    out = rt.empty(16 * 8)
+    rt.launch("selftest.cl", "t_probe_contribution", defines, (8,), {}, c=rt.to_device(cells), p=rt.to_device(p),
+              n=rt.to_device(n), v=rt.to_device(n), out=out, **probe_args(rt, vol))
+    got = rt.read(out, (8, 4))
+    index = cells[:, 1] * 2 * 2 + cells[:, 2] * 2 + cells[:, 0]        # probes.h: y, then z, then x
+    off = vol["data"][index, 3] == probes.INACTIVE
+    assert off.sum() == 2 and (~off).sum() == 6
+    assert np.array_equal(got[off], np.zeros((2, 4), np.float32)), got[off]
+    assert np.isfinite(got[~off]).all() and (got[~off, 3] > 0).all() and (got[~off, :3] > 0.5).all()
+
+
 def far_sphere_scene(folder, sky, rep):
     """Probes around the origin; the only object a small sphere far away (no probe ray meets it)."""
     return write(folder, f"far_{rep}", {
