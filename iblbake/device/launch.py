@@ -17,8 +17,8 @@ GPU_ITEMS = 1 << 18
 # frame ran on one of two cores. Paths differ in length (the sky's pixels end at once, a mirror's
 # go on), so a path kernel's launch is split into many small groups that the cores take as they
 # free (measured, docs/benchmarks.md "Work groups on PoCL": the reference 1.8-2x faster at 64x48).
-# Large launches keep 4096-item groups. Only the path kernels: split alike, the shade pass gave a
-# NaN pixel in about one first frame of a process in 60 (a closed room's test), not found yet.
+# Large launches keep 4096-item groups. Only the path kernels, where it was measured (split alike,
+# the shade pass once showed a NaN pixel: an unwritten probe value, kernels/probes.h, since fixed).
 CPU_GROUPS_PER_CORE = 64
 MAX_GROUP = 4096
 SPLIT_KERNELS = ("reference", "probe_trace")
