@@ -198,7 +198,8 @@ def test_kernel_pdf_from_luminance_is_the_tables(rt):
     img[32, :10] = [2.0, -0.5, 0.1]
     dist = sampling.EnvironmentDistribution(img)
     out = rt.empty(img[..., 0].size * 4)
-    rgba = np.concatenate([img, np.zeros_like(img[..., :1])], -1).reshape(-1, 4)
+    from iblbake.bake.radiance import to_rgba
+    rgba = to_rgba(img).reshape(-1, 4)
     rt.launch("selftest.cl", "t_pdf_env", {"SH_BANDS": 3}, (len(rgba),), {}, c=rt.to_device(rgba),
               env_norm=dist.norm, out=out)
     got = rt.read(out, (len(rgba),)).astype(np.float64)
