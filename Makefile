@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.iblbake-installed
 PANOS  := examples/panoramas
 OUT    := examples/out
 
-.PHONY: demo test check stress install opencl intel-cpu test-intel check-intel meshes assets testmodels readers peers bench docs clean
+.PHONY: demo test check check-locals stress install opencl intel-cpu test-intel check-intel meshes assets testmodels readers peers bench docs clean
 
 install: $(STAMP)
 # editable_mode=compat: the editable install is a plain path in a .pth file. setuptools' default
@@ -58,11 +58,17 @@ peers: $(STAMP)
 
 test: opencl assets testmodels readers peers
 	$(BIN)/python -m pytest -q tests
+	$(MAKE) --no-print-directory check-locals
 
 # the developer loop (at most 3 minutes on a 2-core CPU): no network, synthetic panoramas, no
 # readers, browser, Dask or kill loops, nothing over 3 s (pytest markers: pyproject.toml)
 check: opencl meshes
 	$(BIN)/python -m pytest -q -m "not (slow or external or kill)" tests
+
+# the developer loop's tests with every kernel's uninitialised locals poisoned (NaN: tests/poison_locals.py),
+# so a kernel that reads a value it never wrote fails every time instead of now and then
+check-locals: opencl meshes
+	IBLBAKE_POISON_LOCALS=1 $(BIN)/python -m pytest -q -m "not (slow or external or kill)" tests
 
 # Intel's OpenCL CPU runtime (the optional extra iblbake[intel-cpu], Intel's EULA: docs/libraries.md),
 # registered by iblbake itself; PoCL stays the default device, IBLBAKE_DEVICE=intel-cpu picks Intel's

@@ -42,6 +42,11 @@ def _tree_state():
 
 _TREE_BEFORE = _tree_state()
 
+# `make check-locals`: every kernel built in-process with its uninitialised locals poisoned (NaN)
+if os.environ.get("IBLBAKE_POISON_LOCALS"):
+    from tests import poison_locals
+    poison_locals.install()
+
 
 def pytest_sessionfinish(session, exitstatus):
     """`make test` leaves the working tree as it found it: nothing generated, nothing changed
