@@ -40,6 +40,7 @@ u = 0.5 - atan2(x, z) / 2 pi; its rectangle spans [-1, 1]^2 in its xy plane, nor
     DRJIT_LIBLLVM_PATH=/usr/lib/x86_64-linux-gnu/libLLVM-19.so \
         .venv/bin/python benchmarks/mitsuba_paths.py [--renders 16] [--spp 256] [--ref-spp 8192] \
         [--devices pocl,intel-cpu]       # iblbake's rows on each runtime (IBLBAKE_DEVICE for one)
+    ... --no-acceptance --no-speed --variance   # the samples each renderer needs, timing aside
 """
 
 from __future__ import annotations
@@ -323,6 +324,8 @@ def main():
     ap.add_argument("--devices", default=None,
                     help="iblbake's OpenCL devices, comma-separated --device specs (pocl,intel-cpu): each its "
                          "own rows; default the device iblbake picks")
+    ap.add_argument("--variance", action="store_true",
+                    help="the variance at --spp of both renderers (8 seeds): the samples each needs, timing aside")
     ap.add_argument("--per-bounce", action="store_true",
                     help="samples per second at each bounce count, both renderers, and where iblbake's time goes")
     args = ap.parse_args()
@@ -352,6 +355,8 @@ def main():
         if args.per_bounce:
             for rt in runtimes:
                 per_bounce(args, mi, tmp, pano, rt, bakes)
+        if args.variance:
+            variance(args, mi, tmp, pano, runtimes[0], bakes)
         if not args.no_speed:
             speed(args, mi, tmp, pano, runtimes, bakes)
 
@@ -490,6 +495,51 @@ def per_bounce(args, mi, tmp: Path, pano: Path, rt, bakes):
             print(row, flush=True)
     print(f"\n{RES[0]}x{RES[1]}, {args.spp} samples per pixel; iblbake device: {rt.device_label}; "
           f"Mitsuba {args.variant} `path` with multijitter")
+
+
+def variance(args, mi, tmp: Path, pano: Path, rt, bakes, seeds: int = 8):
+    """Samples needed, timing aside: per scene the relative variance of the frame at --spp samples
+    per pixel times spp (the mean over surface pixels of each pixel's luminance variance across
+    `seeds` seeds, over the squared mean luminance; the spp to 1% relative RMSE is it / 1e-4),
+    iblbake's reference with one sequence per G-buffer sample (target_noise 0) and with the two
+    replicates a noise target keeps, against Mitsuba's `path` with each of its samplers. Mitsuba
+    box-filters random points over the pixel; iblbake traces its centre (camera.spp 1): Mitsuba's
+    figure holds the pixel's own variance too, which is small away from edges."""
+    from iblbake.core.metrics import luminance
+    from iblbake.render import render
+    from iblbake.scene import load
+
+    print(f"\n| scene | iblbake, one sequence | iblbake, two replicates | Mitsuba multijitter | ldsampler | independent |")
+    print("|---|---|---|---|---|---|")
+    for name, (objects, mats) in scenes(tmp).items():
+        if args.only and args.only not in name:
+            continue
+        p, mask = tmp / "variance.yaml", None
+
+        def rel(frames):
+            a = np.array(frames)
+            return a.var(0, ddof=1).mean() / a.mean() ** 2 * args.spp
+
+        row = []
+        for target in (0.0, 1e-9):                       # 1e-9: replicates kept, never reached
+            frames = []
+            for seed in range(1, seeds + 1):
+                doc = iblbake_doc(pano, objects, mats, args.spp, seed, "unbounded", tmp / "depth.exr")
+                doc["effects"]["reference"]["target_noise"] = target
+                p.write_text(yaml.safe_dump(doc))
+                f = render(load.load(p), runtime=rt, cache=bakes)
+                mask = np.asarray(f.aovs["depth"]) > 0
+                frames.append(luminance(f.hdr[..., :3].astype(np.float64))[mask])
+            row.append(rel(frames))
+        for sampler in ("multijitter", "ldsampler", "independent"):
+            frames = []
+            for seed in range(1, seeds + 1):
+                scene = mi.load_dict(mitsuba_dict(mi, pano, objects, mats, 1024, args.spp, seed, sampler))
+                frames.append(luminance(np.array(mi.render(scene, spp=args.spp))[..., :3].astype(np.float64))[mask])
+            row.append(rel(frames))
+        print(f"| {name} | " + " | ".join(f"{v:.3f}" for v in row) + " |", flush=True)
+    print(f"\n{RES[0]}x{RES[1]}, {args.spp} samples per pixel, {seeds} seeds; relative variance x spp "
+          f"(lower needs fewer samples); iblbake device: {rt.device_label}; Mitsuba {args.variant} `path`")
 
 
 def neighbour_range(img: np.ndarray) -> np.ndarray:

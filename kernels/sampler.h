@@ -1,6 +1,6 @@
-/* Random and quasi-random numbers: Hammersley sets, the PCG hash, Halton points with
- * Cranley-Patterson rotations (qmc), and the Sampler that hands a kernel the dimensions of one
- * sample in order. Mirrors iblbake/core/sampling.py. */
+/* Random and quasi-random numbers: Hammersley sets, the PCG hash, Owen-scrambled Sobol pairs, and
+ * the Sampler that hands a kernel the dimensions of one sample in order. Mirrors
+ * iblbake/core/sampling.py. */
 #ifndef IBLBAKE_SAMPLER_H
 #define IBLBAKE_SAMPLER_H
 #include "inline.h"
@@ -34,56 +34,18 @@ IBL_INLINE uint pcg_hash(uint x)
     return (word >> 22u) ^ word;
 }
 
-IBL_INLINE float hash_uniform(uint x)
-{
-    return (float)(pcg_hash(x) >> 8) * (1.0f / 16777216.0f);
-}
-
-/* Radical inverse of j in base b: Halton points, a quasi-random sequence that stays uniform at
- * every prefix, so a frame converges faster than with independent random numbers. */
-IBL_INLINE float radical_inverse(uint j, uint b)
-{
-    const float inv_b = 1.0f / (float)b;
-    float f = inv_b, r = 0.0f;
-    while (j > 0u) {
-        r += f * (float)(j % b);
-        j /= b;
-        f *= inv_b;
-    }
-    return fmin(r, 0x1.fffffep-1f);
-}
-
-/* Dimension d of sample j of replicate `rep` for G-buffer sample gid: Halton in base 2, 3, 5,
- * 7, 11, 13, 17, 19 (the twin's HALTON_BASES), shifted by a random rotation per (seed, gid,
- * replicate, dimension) (Cranley-Patterson). Two replicates (even and odd sample numbers) with independent rotations
- * give an honest error estimate (their difference); a variance of QMC samples would not. */
-IBL_INLINE float qmc(uint seed, uint gid, uint k, int d)
-{
-    const uint rep = k & 1u, j = k >> 1;
-    const float shift = hash_uniform(seed ^ pcg_hash(gid * 16u + rep * 8u + (uint)d));
-    float r;
-    switch (d) {            /* each base a constant: its divisions become multiplications */
-    case 0: r = radical_inverse(j, 2u); break;
-    case 1: r = radical_inverse(j, 3u); break;
-    case 2: r = radical_inverse(j, 5u); break;
-    case 3: r = radical_inverse(j, 7u); break;
-    case 4: r = radical_inverse(j, 11u); break;
-    case 5: r = radical_inverse(j, 13u); break;
-    case 6: r = radical_inverse(j, 17u); break;
-    default: r = radical_inverse(j, 19u); break;
-    }
-    const float x = r + shift;
-    return x >= 1.0f ? x - 1.0f : x;
-}
-
 /* One sample's dimensions, handed out in the order a kernel asks for them, as pbrt-v4's Sampler
  * (Get1D, Get2D) and Mitsuba 3's (next_1d, next_2d) do: no kernel numbers a dimension by hand.
  * `seed` already carries the stream (the reference's seed, AO's seed ^ STREAM_AO, a light's);
- * `gid` the G-buffer sample's number in the frame, `k` the sample's number. The first 8 dimensions
- * are Halton's (HALTON_BASES), a path's later ones Owen-scrambled Sobol pairs (owen_sobol_pair). */
+ * `gid` the G-buffer sample's number in the frame, `k` the sample's number. Every dimension pair
+ * is a pair of Owen-scrambled Sobol points (owen_sobol_pair), one sequence per (seed, gid) with
+ * each pair's own scramble, as pbrt-v4's PaddedSobolSampler: the first k samples of a G-buffer
+ * sample are stratified in every pair for every k. (The first 8 were Halton points with a
+ * Cranley-Patterson rotation: 1.04-1.4x the variance at 256 samples on the five Mitsuba scenes,
+ * docs/benchmarks.md "One sequence per G-buffer sample".) */
 typedef struct {
     uint seed, gid, k;
-    uint stream;            /* a path's own stream past the first 8: (seed, G-buffer sample, replicate) */
+    uint stream;            /* the sequence's own scramble: (seed, G-buffer sample) hashed */
     int dim;
 } Sampler;
 
@@ -91,11 +53,22 @@ IBL_INLINE Sampler sampler_start(uint seed, uint gid, uint k)
 {
     Sampler s;
     s.seed = seed; s.gid = gid; s.k = k; s.dim = 0;
-    s.stream = pcg_hash(seed ^ pcg_hash(gid * 2u + (k & 1u)));
+    s.stream = pcg_hash(seed ^ pcg_hash(gid));
     return s;
 }
 
-/* A path's dimensions past the first 8: pairs of Owen-scrambled Sobol points, each pair's
+/* Sample k of an estimate that keeps `replicates` (1 or 2) independent sequences: with 2, even
+ * and odd k are samples k / 2 of two streams, whose means' difference is an honest error estimate
+ * (render/passes/reference.py reference_noise); a scrambled net's error falls faster than
+ * 1 / sqrt(n), so two of n / 2 samples err more than one of n (1.2-1.3x the variance measured),
+ * which is why only a frame that stops at a noise target splits them. */
+IBL_INLINE Sampler sampler_replicate(uint seed, uint gid, uint k, int replicates)
+{
+    if (replicates < 2) return sampler_start(seed, gid, k);
+    return sampler_start(seed ^ pcg_hash(0x2545F491u + (k & 1u)), gid, k >> 1);
+}
+
+/* The dimensions: pairs of Owen-scrambled Sobol points, each pair's
  * sequence shuffled by its own nested uniform scramble of the index (Burley 2020, "Practical
  * Hash-based Owen Scrambling", JCGT 9(4)): stratified in every pair at every sample count, each
  * pair independent of the others. */
@@ -147,19 +120,18 @@ IBL_INLINE float2 owen_sobol_pair(uint j, uint stream, int p)
 IBL_INLINE float sampler_1d(Sampler *s)
 {
     const int d = s->dim++;
-    if (d < 8) return qmc(s->seed, s->gid, s->k, d);
-    const float2 u = owen_sobol_pair(s->k >> 1, s->stream, (d - 8) >> 1);
-    return (d - 8) & 1 ? u.y : u.x;
+    const float2 u = owen_sobol_pair(s->k, s->stream, d >> 1);
+    return d & 1 ? u.y : u.x;
 }
 
-/* Two dimensions; past the first 8 and starting a pair (a path vertex's draws all do), both
- * coordinates of one scrambled index */
+/* Two dimensions; starting a pair (every kernel's draws do), both coordinates of one scrambled
+ * index */
 IBL_INLINE float2 sampler_2d(Sampler *s)
 {
-    if (s->dim >= 8 && !((s->dim - 8) & 1)) {
+    if (!(s->dim & 1)) {
         const int d = s->dim;
         s->dim += 2;
-        return owen_sobol_pair(s->k >> 1, s->stream, (d - 8) >> 1);
+        return owen_sobol_pair(s->k, s->stream, d >> 1);
     }
     const float a = sampler_1d(s);
     return (float2)(a, sampler_1d(s));

@@ -163,6 +163,16 @@ __kernel void t_probe_contribution(__global const int4 *c, __global const float4
     out[i] = (float4)(value, w);
 }
 
+/* sampler.h: dimensions 0 .. ndim - 1 of sample k[i] of G-buffer sample gid[i] as
+ * sampler_replicate hands them out in pairs (tests/test_sampling.py, against the twin) */
+__kernel void t_sampler(const uint seed, __global const uint *gid, __global const uint *k, const int replicates,
+                        const int ndim, __global float *out)
+{
+    const int i = get_global_id(0);
+    Sampler sp = sampler_replicate(seed, gid[i], k[i], replicates);
+    for (int d = 0; d + 1 < ndim; d += 2) vstore2(sampler_2d(&sp), 0, out + i * ndim + d);
+}
+
 __kernel void t_probe_octahedral(__global const float4 *d, __global float2 *uv)
 {
     const int i = get_global_id(0);

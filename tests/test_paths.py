@@ -256,22 +256,40 @@ def test_sample_slices_keep_the_frame(tmp_path, white, monkeypatch):
     assert rel.max() < 2e-6
 
 
-def test_path_dimensions_are_stratified_owen_sobol():
-    """A path's dimensions past the first 8 (kernels/sampler.h owen_sobol, its twin): in every
-    pair, the first 2^m samples of a stream put exactly one point in each 1/2^m of each axis and
+def test_every_sample_dimension_is_stratified_owen_sobol():
+    """Every dimension pair of a sample (kernels/sampler.h, its twin: the first vertex's too): the
+    first 2^m samples of a G-buffer sample put exactly one point in each 1/2^m of each axis and
     one in each cell of a 2^a x 2^(m-a) grid (a (0, m, 2)-net: what Owen-scrambled Sobol keeps),
-    streams and pairs differ, and every value is in [0, 1)."""
-    from iblbake.core.sampling import owen_sobol
-    j = np.arange(256)
-    for stream in (1, 77, 2 ** 31 + 5):
-        for p in (0, 3, 11):
-            x, y = owen_sobol(j, np.full(256, stream), p, 0), owen_sobol(j, np.full(256, stream), p, 1)
-            assert ((x >= 0) & (x < 1) & (y >= 0) & (y < 1)).all()
-            for a in (0, 2, 4, 8):
-                cells = (np.floor(x * 2 ** a) * 2 ** (8 - a) + np.floor(y * 2 ** (8 - a))).astype(int)
-                assert len(np.unique(cells)) == 256, (stream, p, a)
-    x0, x1 = owen_sobol(j, np.full(256, 1), 0, 0), owen_sobol(j, np.full(256, 1), 1, 0)
-    assert abs(np.corrcoef(x0, x1)[0, 1]) < 0.2 and not np.allclose(x0, owen_sobol(j, np.full(256, 2), 0, 0))
+    also at a count that is not a power of two at most one point a cell; G-buffer samples and
+    pairs differ, and every value is in [0, 1). With two replicates (a noise target), each of
+    the even and odd samples is such a sequence of its own."""
+    from iblbake.core.sampling import Sampler
+    k = np.arange(256)
+
+    def pairs(gid, replicates=1, kk=k):
+        sp = Sampler.replicate(1, np.full(len(kk), gid), kk, replicates)
+        return [sp.next_2d() for _ in range(6)]
+
+    def net(u, m):
+        x, y = u[:, 0], u[:, 1]
+        assert ((x >= 0) & (x < 1) & (y >= 0) & (y < 1)).all()
+        for a in range(m + 1):
+            cells = (np.floor(x * 2 ** a) * 2 ** (m - a) + np.floor(y * 2 ** (m - a))).astype(int)
+            assert len(np.unique(cells)) == 2 ** m, a
+
+    for gid in (0, 77, 2 ** 31 + 5):
+        ps = pairs(gid)
+        for u in ps:
+            net(u, 8)
+            cells = (np.floor(u[:96, 0] * 8) * 16 + np.floor(u[:96, 1] * 16)).astype(int)
+            assert np.bincount(cells).max() == 1                    # 96 samples, 128 cells
+        assert abs(np.corrcoef(ps[0][:, 0], ps[1][:, 0])[0, 1]) < 0.2
+    assert not np.allclose(pairs(0)[0], pairs(1)[0])
+    two = pairs(5, replicates=2, kk=np.arange(512))
+    for u in two:
+        net(u[0::2], 8)
+        net(u[1::2], 8)
+    assert not np.allclose(two[0][0::2], two[0][1::2])
 
 
 @pytest.mark.parametrize("paths", PATHS)

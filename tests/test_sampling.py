@@ -224,6 +224,17 @@ def test_power_heuristic_weights_sum_to_one():
     assert sampling.power_heuristic(np.inf, 1.0) == 1.0 and sampling.power_heuristic(0.0, 1.0) == 0.0
 
 
-def test_halton_rotation_stays_uniform():
-    x = sampling.halton_rotated(4096, 3, 0.37)
-    assert stats.kstest(x, "uniform").pvalue > 0.01
+@pytest.mark.parametrize("replicates", [1, 2])
+def test_sampler_kernel_matches_twin(rt, replicates):
+    """kernels/sampler.h sampler_replicate and sampler_2d against core/sampling.Sampler: the
+    same 24-bit values, bit for bit, for 12 dimensions of samples of several G-buffer samples."""
+    rng = np.random.default_rng(3)
+    gid = rng.integers(0, 2 ** 32, 500, dtype=np.uint64).astype(np.uint32)
+    k = rng.integers(0, 2 ** 20, 500).astype(np.uint32)
+    out = rt.empty(4 * 500 * 12)
+    rt.launch("selftest.cl", "t_sampler", {}, (500,), {}, seed=np.uint32(12345), gid=rt.to_device(gid),
+              k=rt.to_device(k), replicates=np.int32(replicates), ndim=np.int32(12), out=out)
+    got = rt.read(out, (500, 12))
+    sp = sampling.Sampler.replicate(12345, gid, k, replicates)
+    want = np.concatenate([sp.next_2d() for _ in range(6)], -1)
+    assert np.array_equal(got.astype(np.float64), want)

@@ -75,38 +75,11 @@ def pcg_hash(x):
     return ((word >> 22) ^ word).astype(np.uint32)
 
 
-def radical_inverse(j, base: int):
-    """Radical inverse of integers j in `base` (Halton's dimension of that prime)."""
-    j = np.asarray(j, np.int64).copy()
-    r = np.zeros(j.shape)
-    f = 1.0 / base
-    while (j > 0).any():
-        r += f * (j % base)
-        j //= base
-        f /= base
-    return r
-
-
-HALTON_BASES = (2, 3, 5, 7, 11, 13, 17, 19)
 # bins of a guide table (the marginal's and each panorama row's), a power of two (cdf_guides; kernels/layout.h)
 ENV_GUIDE_BINS = 256
 
 
-def hash_uniform(x):
-    """kernels/sampler.h hash_uniform: the top 24 bits of pcg_hash, in [0, 1)."""
-    return (pcg_hash(x) >> 8).astype(np.float64) * (1.0 / 16777216.0)
-
-
-def qmc(seed, gid, k, d: int):
-    """kernels/sampler.h qmc: sample k of dimension d of sample stream gid: Halton point k // 2
-    of base HALTON_BASES[d], Cranley-Patterson rotated per replicate (k & 1) and stream."""
-    gid, k = np.asarray(gid, np.int64), np.asarray(k, np.int64)
-    rep, j = k & 1, k >> 1
-    shift = hash_uniform(np.uint32(seed) ^ pcg_hash((gid * 16 + rep * 8 + d) & 0xFFFFFFFF))
-    return np.mod(radical_inverse(j, HALTON_BASES[d]) + shift, 1.0)
-
-
-# A path's dimensions past the first 8 (kernels/sampler.h): pairs of Owen-scrambled Sobol points
+# Every sample's dimensions (kernels/sampler.h): pairs of Owen-scrambled Sobol points
 def laine_karras_permutation(x, seed):
     x = (np.asarray(x, np.uint64) + np.asarray(seed, np.uint64)) & M32
     for m in (0x6c50b47c, 0xb82f1e52, 0xc7afe638, 0x8d22f6e6):
@@ -141,16 +114,17 @@ def owen_sobol(j, seed, p: int, c: int):
 
 
 def sampler_1d(seed, gid, k, d: int):
-    """kernels/sampler.h sampler_1d: dimension d of sample k of G-buffer sample (or stream) gid;
-    the first 8 are Halton's (qmc), a path's later ones pairs of Owen-scrambled Sobol points, one
-    stream per (seed, gid, replicate k & 1), sample k >> 1 of it."""
-    if d < 8:
-        return qmc(seed, gid, k, d)
-    gid = np.asarray(gid, np.uint64)
-    k = np.asarray(k, np.uint64)
-    stream_index = ((gid * 2 + (k & 1)) & M32).astype(np.uint32)       # G-buffer sample, replicate
-    stream = pcg_hash(np.uint32(seed) ^ pcg_hash(stream_index))
-    return owen_sobol(k >> 1, stream, (d - 8) >> 1, (d - 8) & 1)
+    """kernels/sampler.h sampler_1d: dimension d of sample k of G-buffer sample (or stream) gid:
+    coordinate d & 1 of pair d >> 1 of Owen-scrambled Sobol points, one sequence per (seed, gid)."""
+    stream = pcg_hash(np.uint32(seed) ^ pcg_hash(np.asarray(gid, np.uint64).astype(np.uint32)))
+    return owen_sobol(k, stream, d >> 1, d & 1)
+
+
+def reference_replicates(target_noise: float) -> int:
+    """Independent sequences the reference's samples of a G-buffer sample form (kernels/sampler.h
+    sampler_replicate): two where the frame stops at a noise target (their means' difference is
+    its error estimate: render/passes/reference.py), else one, which errs less at equal samples."""
+    return 2 if target_noise > 0 else 1
 
 
 class Sampler:
@@ -161,6 +135,16 @@ class Sampler:
     def __init__(self, seed, gid, k):
         self.seed, self.gid, self.k, self.dim = seed, gid, k, 0
 
+    @classmethod
+    def replicate(cls, seed, gid, k, replicates: int):
+        """kernels/sampler.h sampler_replicate: with 2 replicates, even and odd k are samples k // 2
+        of two independent sequences."""
+        if replicates < 2:
+            return cls(seed, gid, k)
+        k = np.asarray(k, np.uint64)
+        seed = np.uint32(seed) ^ pcg_hash(((0x2545F491 + (k & 1)) & M32).astype(np.uint32))
+        return cls(seed, gid, k >> 1)
+
     def next_1d(self):
         self.dim += 1
         return sampler_1d(self.seed, self.gid, self.k, self.dim - 1)
@@ -168,11 +152,6 @@ class Sampler:
     def next_2d(self):
         a = self.next_1d()
         return np.stack([a, self.next_1d()], -1)
-
-
-def halton_rotated(n: int, base: int, shift: float):
-    """The first n Halton points of `base`, rotated by `shift` modulo 1 (Cranley-Patterson)."""
-    return np.mod(radical_inverse(np.arange(n), base) + shift, 1.0)
 
 
 # --- warps: local frame z = normal ------------------------------------------------------------------

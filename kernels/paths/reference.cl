@@ -66,8 +66,9 @@
 SCALAR_BVH
 __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int n, ENV_PARAMS,
                         SCENE_PARAMS, const int pixel0, const int spp,
-                        const uint seed, const int first, const int batch, const int slices,
-                        __global float4 *ref_batch, __global const float4 *lights, const int nlights)
+                        const uint seed, const int replicates, const int first, const int batch,
+                        const int slices, __global float4 *ref_batch, __global const float4 *lights,
+                        const int nlights)
 {
     const int item = get_global_id(0);
     if (item >= n * slices) return;
@@ -88,7 +89,7 @@ __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int
     float odd = 0.0f;
     for (int k = slice; k < batch; k += slices) {
         const uint sk = (uint)(first + k);
-        Sampler sp = sampler_start(seed, sid, sk);
+        Sampler sp = sampler_replicate(seed, sid, sk, replicates);
 #ifdef BOUNCES
         /* the first vertex is a path vertex of the terms asked for: the environment sampled
          * (MIS against the BSDF), and one BSDF-sampled ray that brings the environment where it

@@ -62,7 +62,8 @@ IBL_INLINE void wf_shadow_ray(__global float4 *wf_shadow, int slot, int nlights,
 }
 
 __kernel void wf_generate(__global const float4 *gb_pos, SURFACE_PARAMS, const int n, ENV_PARAMS, SCENE_PARAMS,
-                          const int pixel0, const int spp, const uint seed, const int first, const int wave,
+                          const int pixel0, const int spp, const uint seed, const int replicates, const int first,
+                          const int wave,
                           const int npaths, __global float4 *wf_paths, __global float4 *wf_shadow,
                           __global int *wf_queue, __global int *wf_count, const int nlights)
 {
@@ -79,7 +80,7 @@ __kernel void wf_generate(__global const float4 *gb_pos, SURFACE_PARAMS, const i
     const float3 origin = ray_offset(hitp.xyz, nrm, gb_dir[gid].xyz, hitp.w);
     float3 t, b;
     tangent_frame(nrm, &t, &b);
-    Sampler sp = sampler_start(seed, (uint)(pixel0 * spp + gid), (uint)(first + kk));
+    Sampler sp = sampler_replicate(seed, (uint)(pixel0 * spp + gid), (uint)(first + kk), replicates);
     const FirstVertex fv = first_vertex(mt, v, nrm, t, b, nov, FIRST_DIFFUSE, FIRST_SPECULAR, &sp, ENV_ARGS);
     for (int j = 0; j <= nlights; ++j)
         wf_shadow_ray(wf_shadow, slot, nlights, j, origin, fv.env_l, INFINITY, WF_FIRST, fv.env_c, j == 0 && fv.env_live);

@@ -95,8 +95,9 @@ def radiance(gb, arrays, effects: dict, env: dict, image, dist, samples: int, bo
     mt = bsdf.Material(cols[4], cols[5], cols[3] ** 2, diffuse_weight(*cols[:2], cols[3], cols[4], cols[5], nov))
     origin = ray_offset(gb["pos"][hit], n, gb["dir"][hit], gb["t"][hit])
     total = np.zeros((len(gid), 3))
+    replicates = sampling.reference_replicates(effects["reference"]["target_noise"])
     for k in range(samples):
-        sp = sampling.Sampler(seed, gid, k)
+        sp = sampling.Sampler.replicate(seed, gid, k, replicates)
         # the first vertex is a path vertex of the terms asked for: the environment sampled (MIS
         # against the BSDF), one BSDF-sampled ray bringing the environment where it leaves the
         # scene (MIS against the panorama's sampling), the path where it meets a surface
