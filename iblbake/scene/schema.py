@@ -526,7 +526,7 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
             "seed": Num(1, 0, 2**31 - 1, integer=True, doc="random seed (renders are reproducible)"),
             "visibility": Bool(True, doc="trace a shadow ray for every sample: the occluded integral (false: "
                                          "every object lit as if alone)"),
-            "bounces": bounces_field("how many times a path may scatter: unbounded (Russian roulette from bounce 3, "
+            "bounces": bounces_field("how many times a path may scatter: unbounded (Russian roulette from bounce 4, "
                                  "unbiased: the converged answer), N, or 1, the environment's direct light (no "
                                  "interreflection, no light from emissive surfaces); with visibility false, 1"),
             "paths": Enum(("auto", "megakernel", "wavefront"), "auto",
