@@ -40,9 +40,8 @@ IBL_INLINE uint pcg_hash(uint x)
  * `gid` the G-buffer sample's number in the frame, `k` the sample's number. Every dimension pair
  * is a pair of Owen-scrambled Sobol points (owen_sobol_pair), one sequence per (seed, gid) with
  * each pair's own scramble, as pbrt-v4's PaddedSobolSampler: the first k samples of a G-buffer
- * sample are stratified in every pair for every k. (The first 8 were Halton points with a
- * Cranley-Patterson rotation: 1.04-1.4x the variance at 256 samples on the five Mitsuba scenes,
- * docs/benchmarks.md "One sequence per G-buffer sample".) */
+ * sample are stratified in every pair for every k (docs/benchmarks.md "Fewer samples: one
+ * sequence per G-buffer sample"). */
 typedef struct {
     uint seed, gid, k;
     uint stream;            /* the sequence's own scramble: (seed, G-buffer sample) hashed */
@@ -60,8 +59,8 @@ IBL_INLINE Sampler sampler_start(uint seed, uint gid, uint k)
 /* Sample k of an estimate that keeps `replicates` (1 or 2) independent sequences: with 2, even
  * and odd k are samples k / 2 of two streams, whose means' difference is an honest error estimate
  * (render/passes/reference.py reference_noise); a scrambled net's error falls faster than
- * 1 / sqrt(n), so two of n / 2 samples err more than one of n (1.2-1.3x the variance measured),
- * which is why only a frame that stops at a noise target splits them. */
+ * 1 / sqrt(n), so two of n / 2 samples err more than one of n (1.07-1.23x the variance on the
+ * Mitsuba scenes at 256), which is why only a frame that stops at a noise target splits them. */
 IBL_INLINE Sampler sampler_replicate(uint seed, uint gid, uint k, int replicates)
 {
     if (replicates < 2) return sampler_start(seed, gid, k);
