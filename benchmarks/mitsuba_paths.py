@@ -509,7 +509,8 @@ def variance(args, mi, tmp: Path, pano: Path, rt, bakes, seeds: int = 8):
     from iblbake.render import render
     from iblbake.scene import load
 
-    print(f"\n| scene | iblbake, one sequence | iblbake, two replicates | Mitsuba multijitter | ldsampler | independent |")
+    print("\n| scene | iblbake, one sequence | iblbake, two replicates | Mitsuba multijitter | ldsampler | "
+          "independent |")
     print("|---|---|---|---|---|---|")
     for name, (objects, mats) in scenes(tmp).items():
         if args.only and args.only not in name:

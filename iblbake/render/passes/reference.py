@@ -99,7 +99,8 @@ class Reference(Pass):
         if "PATH_LIGHTS" in ctx.plan.defines[self.name]:
             recs = pack.light_records(frame_lights(ctx.scene, ctx.bakes.sun(ctx.scene.data["environment"])))
         out.update(lights=rt.to_device(recs.reshape(-1, 4) if len(recs) else np.zeros((4, 4), np.float32)),
-                   nlights=len(recs), replicates=sampling.reference_replicates(ctx.scene.data["effects"]["reference"]["target_noise"]))
+                   nlights=len(recs),
+                   replicates=sampling.reference_replicates(ctx.scene.data["effects"]["reference"]["target_noise"]))
         return out
 
     def batching(self, ctx) -> tuple:
