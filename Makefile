@@ -62,13 +62,14 @@ test: opencl assets testmodels readers peers
 
 # the developer loop (at most 3 minutes on a 2-core CPU): no network, synthetic panoramas, no
 # readers, browser, Dask or kill loops, nothing over 3 s (pytest markers: pyproject.toml)
+FAST   := -m "not (slow or external or kill)"
 check: opencl meshes
-	$(BIN)/python -m pytest -q -m "not (slow or external or kill)" tests
+	$(BIN)/python -m pytest -q $(FAST) tests
 
 # the developer loop's tests with every kernel's uninitialised locals poisoned (NaN: tests/poison_locals.py),
 # so a kernel that reads a value it never wrote fails every time instead of now and then
 check-locals: opencl meshes
-	IBLBAKE_POISON_LOCALS=1 $(BIN)/python -m pytest -q -m "not (slow or external or kill)" tests
+	IBLBAKE_POISON_LOCALS=1 $(BIN)/python -m pytest -q $(FAST) tests
 
 # Intel's OpenCL CPU runtime (the optional extra iblbake[intel-cpu], Intel's EULA: docs/libraries.md),
 # registered by iblbake itself; PoCL stays the default device, IBLBAKE_DEVICE=intel-cpu picks Intel's
@@ -86,7 +87,7 @@ test-intel: $(INTEL) assets testmodels readers peers
 	IBLBAKE_DEVICE=intel-cpu $(BIN)/python -m pytest -q tests
 
 check-intel: $(INTEL) meshes
-	IBLBAKE_DEVICE=intel-cpu $(BIN)/python -m pytest -q -m "not (slow or external or kill)" tests
+	IBLBAKE_DEVICE=intel-cpu $(BIN)/python -m pytest -q $(FAST) tests
 
 # the stress and fuzz suite at full size (10x the fuzz inputs, 24 kill runs per command, every
 # writer of every command onto a full disk, every reader given special files); prints and saves

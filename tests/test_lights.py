@@ -154,7 +154,8 @@ def test_soft_penumbra_widens_with_the_light(tmp_path, black_env):
 
 def test_exact_disk_integral_facing_the_light(tmp_path, black_env):
     """The reference integrates a 10-degree disk: on a surface facing it, E = Le pi sin^2 is the
-    stated illuminance (1e-4; measured 1.5e-5, the Halton points' quadrature error)."""
+    stated illuminance (5e-6; measured 1.07e-6 on PoCL and Intel's runtime with Owen-scrambled
+    Sobol points, float32's rounding; 1.5e-5 with the Halton points before)."""
     sc = top_view_scene(tmp_path, black_env, [{"directional": {"direction": [0, -1, 0], "illuminance": 2.0,
                                                                "angular_diameter": 10.0}}],
                         effects={"diffuse": "reference", "specular": "off",
@@ -162,7 +163,7 @@ def test_exact_disk_integral_facing_the_light(tmp_path, black_env):
     fr = render(sc, cache_root=tmp_path / "cache")
     assert "LIGHTS_EXACT" in next(b["defines"] for b in fr.report["kernel_builds"] if "lights.cl" in b["kernel"])
     print("exact disk: worst relative error", np.abs(fr.hdr[..., :3] / lambert(2.0) - 1).max())
-    assert np.abs(fr.hdr[..., :3] / lambert(2.0) - 1).max() < 1e-4
+    assert np.abs(fr.hdr[..., :3] / lambert(2.0) - 1).max() < 5e-6
 
 
 @pytest.fixture(scope="module")

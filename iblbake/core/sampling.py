@@ -1,6 +1,5 @@
 """Sample sets and warps, each warp a pair sample_x / pdf_x (pbrt-v4's habit), float64, and the
-random numbers: the Sampler of kernels/sampler.h (Halton dimensions, then Owen-scrambled Sobol
-pairs) and the environment's importance sampling. Mirrors kernels/sampling.h, kernels/sampler.h
+random numbers: the Sampler of kernels/sampler.h (pairs of Owen-scrambled Sobol points) and the environment's importance sampling. Mirrors kernels/sampling.h, kernels/sampler.h
 and kernels/envmap.h; tests/test_sampling.py checks every warp on both sides with a chi-square
 test against its own pdf (as Mitsuba 3's ChiSquareTest)."""
 
@@ -32,7 +31,7 @@ def radical_inverse_vdc(i):
 
 
 def hammersley(n: int):
-    """The N-point Hammersley set (i/N, radical_inverse(i)), shape (N, 2)."""
+    """The N-point Hammersley set (i/N, radical_inverse_vdc(i)), shape (N, 2)."""
     i = np.arange(n)
     return np.stack([i / n, radical_inverse_vdc(i)], axis=-1)
 

@@ -1,5 +1,5 @@
 """The reference pass's estimator with paths (kernels/paths/reference.cl with BOUNCES), sample for sample:
-the same sample dimensions (Halton for the first 8, Owen-scrambled Sobol pairs after), the environment's sampling
+the same sample dimensions (Owen-scrambled Sobol pairs, sampling.Sampler.replicate), the environment's sampling
 tables, the same strategies and MIS weights at every vertex (the first one's restricted to the
 terms the frame asks for), the BSDF's lobe choice and Russian roulette. numpy twin, float64, for untextured
 frames of spheres and planes without analytic lights (those the kernel's closed-form tests
