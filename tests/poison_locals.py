@@ -34,7 +34,9 @@ class _PoisonedSource:
         self.cl, self.ctx, self.source = cl, ctx, source
 
     def build(self, options=(), cache_dir=None):
-        opts = [o for o in options if o.startswith(("-D", "-cl-"))]
+        # the subnormal flush is a load option (PoCL sets the threads' FTZ and DAZ from it);
+        # clang -cc1 spells it otherwise and the bitcode does not need it
+        opts = [o for o in options if o.startswith(("-D", "-cl-")) and o != runtime.DENORMS]
         folder = os.path.join(runtime._cache_dir(), "poisoned-spir")
         os.makedirs(folder, exist_ok=True)
         h = hashlib.sha256((self.source + "\0" + " ".join(opts)).encode()).hexdigest()[:24]
@@ -55,7 +57,7 @@ class _PoisonedSource:
         with open(bc, "rb") as f:
             binary = f.read()
         return self.cl.Program(self.ctx, list(self.ctx.devices), [binary] * len(self.ctx.devices)).build(
-            options="-x spir -spir-std=1.2")
+            options=" ".join(["-x spir -spir-std=1.2", *(o for o in options if o == runtime.DENORMS)]))
 
 
 class _PoisonedCL:

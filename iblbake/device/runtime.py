@@ -378,6 +378,15 @@ def _cache_dir() -> str:
     return path
 
 
+# Subnormal floats flushed to zero, in and out (FTZ and DAZ on a CPU, .ftz on a GPU). The packed
+# records keep integers in the w lane of float4s (a plane's material and object, a BVH node's first
+# child and count; kernels/layout.h) whose bit patterns are subnormal floats, and a compiler does a
+# float3's arithmetic on all four lanes: on CPUs that handle a subnormal operand by a microcode assist
+# (100+ cycles) every ray-plane and ray-box test paid one, and the reference ran 1.2-3.5x slower
+# (docs/benchmarks.md "Subnormal floats"). Embree asks its users for FTZ and DAZ for the same reason.
+DENORMS = "-cl-denorms-are-zero"
+
+
 def device_options(info: DeviceInfo) -> list[str]:
     """Build options one runtime needs. Intel's CPU runtime: every function inlined (kernels/inline.h:
     it passes float3 arguments of out-of-line calls from vectorised kernels wrongly), and the
@@ -414,7 +423,7 @@ class Runtime:
         key = (hashlib.sha256(src.encode()).hexdigest(), tuple(defines.items()))
         if key in self._programs:
             return self._programs[key]
-        options = ["-cl-std=CL1.2", *self.device_options, *build_options(self.info, name)] + \
+        options = ["-cl-std=CL1.2", DENORMS, *self.device_options, *build_options(self.info, name)] + \
             [f"-D{k}={v}" for k, v in defines.items()]
         t0 = time.perf_counter()
         try:
