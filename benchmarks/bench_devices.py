@@ -6,9 +6,11 @@ Per scene, the reference pass (bounces unbounded unless --bounces) at --spp samp
 alternating within each round (so a busy spell of a shared machine falls on both); the pass's own
 seconds (the frame report's) and the whole render call's, median and range. The frames of the
 devices are compared (mean luminance, relative). With --build-log, the vectorisation remarks of
-Intel's build log per kernel (a fresh kernel cache, so the programs are built from source).
+Intel's build log per kernel (a fresh kernel cache, so the programs are built from source). With
+--subnormals, each device twice: as iblbake builds (subnormal floats flushed, runtime.DENORMS) and
+with subnormals kept, alternating, and whether the two frames are equal bit for bit.
 
-    .venv/bin/python benchmarks/bench_devices.py [--devices pocl,intel-cpu] [--repeats 5]
+    .venv/bin/python benchmarks/bench_devices.py [--devices pocl,intel-cpu] [--repeats 5] [--subnormals]
 """
 
 from __future__ import annotations
@@ -36,18 +38,32 @@ def main():
     ap.add_argument("--bounces", default="unbounded")
     ap.add_argument("--only", default=None, help="scenes whose name contains this")
     ap.add_argument("--build-log", action="store_true", help="print Intel's vectorisation remarks per kernel")
+    ap.add_argument("--subnormals", action="store_true",
+                    help="each device also with subnormal floats kept (built without -cl-denorms-are-zero)")
     args = ap.parse_args()
     w, h = map(int, args.resolution.split("x"))
     tmp = Path(tempfile.mkdtemp(prefix="bench-devices-"))
     os.environ["IBLBAKE_KERNEL_CACHE"] = str(tmp / "kernels")      # cold builds: their logs are there
 
     import iblbake
+    from iblbake.device import runtime
     from iblbake.device.runtime import Runtime
     from iblbake.render import Bakes, render
     from iblbake.scene.load import AOVS
 
-    specs = args.devices.split(",")
-    runtimes = {s: Runtime(s) for s in specs}
+    flush = runtime.DENORMS
+    specs = [s + kept for s in args.devices.split(",") for kept in (("", " (subnormals kept)") if args.subnormals
+                                                                     else ("",))]
+    runtimes = {s: Runtime(s.split(" (")[0]) for s in specs}
+    kept = {s for s in specs if s.endswith("(subnormals kept)")}
+
+    def build_as(s):            # the option is read when a runtime builds a program (its first render)
+        runtime.DENORMS = "" if s in kept else flush
+
+    def bits(a, b):
+        return "equal bit for bit" if np.array_equal(a.view(np.uint32), b.view(np.uint32)) else \
+            f"differs (max {np.abs(a.astype(np.float64) - b).max():.2g})"
+
     bakes = Bakes(tmp / "cache")
     bounces = args.bounces if args.bounces == "unbounded" else int(args.bounces)
     print(f"{w}x{h}, {args.spp} spp, bounces {bounces}; warm, median (min-max) of {args.repeats} rounds, "
@@ -55,8 +71,9 @@ def main():
     for s, rt in runtimes.items():
         print(f"  {s}: {rt.device_label}")
     logs = []
-    print("\n| scene | device | reference pass s | render call s | mean luminance vs first device |")
-    print("|---|---|---|---|---|")
+    print("\n| scene | device | reference pass s | render call s | mean luminance vs first device | "
+          "frame as flushed |")
+    print("|---|---|---|---|---|---|")
     for name, path in SCENES.items():
         if args.only and args.only not in name:
             continue
@@ -71,6 +88,7 @@ def main():
         built = {s: set(rt._programs) for s, rt in runtimes.items()}
         for r in range(args.repeats + 1):
             for s, rt in runtimes.items():
+                build_as(s)
                 t0 = time.perf_counter()
                 f = render(sc, runtime=rt, cache=bakes)
                 total = time.perf_counter() - t0
@@ -78,13 +96,14 @@ def main():
                 if r:
                     times[s][0].append(ref)
                     times[s][1].append(total)
-                frames[s] = f.hdr[..., :3].astype(np.float64)
-        first = frames[specs[0]].mean()
+                frames[s] = f.hdr[..., :3].copy()
+        first = frames[specs[0]].astype(np.float64).mean()
         for s in specs:
             ref, total = times[s]
             print(f"| {name} | {s} | {statistics.median(ref):.2f} ({min(ref):.2f}-{max(ref):.2f}) | "
                   f"{statistics.median(total):.2f} ({min(total):.2f}-{max(total):.2f}) | "
-                  f"{frames[s].mean() / first - 1:+.2%} |", flush=True)
+                  f"{frames[s].astype(np.float64).mean() / first - 1:+.2%} | "
+                  f"{bits(frames[s], frames[s.split(' (')[0]]) if s in kept else '-'} |", flush=True)
         if args.build_log:
             logs.append((name, build_log(runtimes, built)))
     for name, lines in logs:
