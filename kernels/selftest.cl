@@ -127,6 +127,14 @@ __kernel void t_pdf_env(__global const float4 *c, const float env_norm, __global
     out[i] = pdf_env(c[i].xyz, env_norm);
 }
 
+/* a * b element by element: whether the program flushes subnormal operands and results
+ * (docs/conventions.md amendment 15) */
+__kernel void t_product(__global const float *a, __global const float *b, __global float *out)
+{
+    const int i = get_global_id(0);
+    out[i] = a[i] * b[i];
+}
+
 /* probes.h at points p, normals n, view vectors v (float4 each); defines PROBES_SH,
  * PROBE_VISIBILITY, PROBE_CLASSIFICATION as the shade pass sets them */
 __kernel void t_probes(__global const float4 *p, __global const float4 *n, __global const float4 *v, PROBE_PARAMS,
