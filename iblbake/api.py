@@ -823,8 +823,9 @@ class Accuracy:
         mode, time_s (median lighting-pass seconds), frame_s, bake_s, kernel_build_s,
         relative_rmse, mean and max relative error, flip (HDR-FLIP, where measured), pareto.
     frontier: term -> the labels on its Pareto frontier of (time, relative RMSE), by time.
-    reference: term -> the reference's noise (two seeds), samples per pixel, what stopped it,
-        seconds; hdr and mask are the float32 (H, W, 4) frame and its measured pixels.
+    reference: term -> the reference's noise (two seeds; noise_bulk the same over the 99% of
+        pixels where they agree best), samples per pixel, what stopped it, seconds; hdr and mask
+        are the float32 (H, W, 4) frame and its measured pixels.
     configured: the scene as configured (both terms) against the sum of the references.
     summary: the JSON document `iblbake accuracy --json` prints (accuracy.json).
     study: the study (its scene, settings and each rung's frame, for plots and error maps).

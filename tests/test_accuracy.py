@@ -81,7 +81,21 @@ def test_reference_noise_below_half_a_percent(study):
     for term in ("diffuse", "specular"):
         ref = study["summary"]["reference"][term]
         assert ref["noise"] < 0.005, ref
+        assert 0 < ref["noise_bulk"] <= ref["noise"], ref
         assert ref["object_pixels"] > 500
+
+
+def test_bulk_noise_leaves_out_the_worst_percent():
+    """The study's noise_bulk (core/metrics.bulk_relative_rmse): the relative RMSE over the 99% of
+    pixels that differ least, over the RMS of all. One pixel of 100 off by 10 is the whole
+    relative RMSE (1) and none of the bulk's; a difference spread evenly is the same in both."""
+    from iblbake.core.metrics import bulk_relative_rmse, relative_rmse
+    b = np.ones((100, 3))
+    a = b.copy()
+    a[7] += 10
+    assert relative_rmse(a, b) == pytest.approx(1.0) and bulk_relative_rmse(a, b) == 0.0
+    assert bulk_relative_rmse(b + 0.1, b) == pytest.approx(0.1) == pytest.approx(relative_rmse(b + 0.1, b))
+    assert bulk_relative_rmse(a[:0], b[:0]) == 0.0
 
 
 @pytest.mark.slow           # over 3 s on the 2-core CPU (with its module's study): make test, not make check

@@ -132,7 +132,8 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
                              json.dumps({"generator": mark(), **summary}, indent=2, allow_nan=False) + "\n")
     summary["elapsed_s"] = round(time.perf_counter() - t_start, 3)
     split = ", ".join(f"{k[:-2]} {v:.1f} s" for k, v in summary["time_split_s"].items())
-    noise = ", ".join(f"{t} {100 * refs[t]['noise']:.2f}%" for t in study.terms)
+    noise = ", ".join(f"{t} {100 * refs[t]['noise']:.2f}% (99% of pixels {100 * refs[t]['noise_bulk']:.2f}%)"
+                      for t in study.terms)
     con.result(summary, report.text_table(rows, front)
                + f"\nreference: bounces {bounces if study.paths else '1 (no light passes between surfaces)'}, "
                  f"noise (two seeds) {noise}; configured frame: relative RMSE "

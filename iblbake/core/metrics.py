@@ -22,6 +22,18 @@ def relative_rmse(a, b):
     return float(math.sqrt(np.mean((a - b) ** 2)) / max(math.sqrt(np.mean(b ** 2)), 1e-300))
 
 
+def bulk_relative_rmse(a, b, keep: float = 0.99):
+    """relative_rmse over the fraction `keep` of rows (pixels) where a and b differ least, still
+    over the RMS of all of b: at most relative_rmse, and far below it where a few pixels make most
+    of the difference (a caustic's rare bright paths in a Monte Carlo frame)."""
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    if not len(a):
+        return 0.0
+    d2 = ((a - b) ** 2).reshape(len(a), -1).sum(1)
+    kept = d2[d2 <= np.quantile(d2, keep)]
+    return float(math.sqrt(kept.sum() / (len(kept) * (a.size // len(a)))) / max(math.sqrt(np.mean(b ** 2)), 1e-300))
+
+
 def object_mask(hdr) -> np.ndarray:
     """Pixels fully covered by objects (coverage 1 in every sample of the G-buffer)."""
     return hdr[..., 3] >= 1.0
