@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+KEPT = " (subnormals kept)"           # --subnormals: a device's second entry, built without the flush
 SCENES = {"open box (examples/sheets/bounces.yaml)": ROOT / "examples" / "sheets" / "bounces.yaml",
           "knot, 102k triangles (examples/scenes/mesh.yaml)": ROOT / "examples" / "scenes" / "mesh.yaml"}
 
@@ -52,10 +53,9 @@ def main():
     from iblbake.scene.load import AOVS
 
     flush = runtime.DENORMS
-    specs = [s + kept for s in args.devices.split(",") for kept in (("", " (subnormals kept)") if args.subnormals
-                                                                     else ("",))]
-    runtimes = {s: Runtime(s.split(" (")[0]) for s in specs}
-    kept = {s for s in specs if s.endswith("(subnormals kept)")}
+    specs = [s + k for s in args.devices.split(",") for k in (("", KEPT) if args.subnormals else ("",))]
+    runtimes = {s: Runtime(s.removesuffix(KEPT)) for s in specs}
+    kept = {s for s in specs if s.endswith(KEPT)}
 
     def build_as(s):            # the option is read when a runtime builds a program (its first render)
         runtime.DENORMS = "" if s in kept else flush
@@ -103,7 +103,7 @@ def main():
             print(f"| {name} | {s} | {statistics.median(ref):.2f} ({min(ref):.2f}-{max(ref):.2f}) | "
                   f"{statistics.median(total):.2f} ({min(total):.2f}-{max(total):.2f}) | "
                   f"{frames[s].astype(np.float64).mean() / first - 1:+.2%} | "
-                  f"{bits(frames[s], frames[s.split(' (')[0]]) if s in kept else '-'} |", flush=True)
+                  f"{bits(frames[s], frames[s.removesuffix(KEPT)]) if s in kept else '-'} |", flush=True)
         if args.build_log:
             logs.append((name, build_log(runtimes, built)))
     for name, lines in logs:

@@ -1,6 +1,6 @@
 /* Ambient occlusion pass (effects.ao: raytraced): per G-buffer sample the cosine-weighted
- * fraction of ao_samples rays (Owen-scrambled Sobol points, a sequence per sample) that leave without a hit closer
- * than ao_radius: the visibility the IBL's diffuse term assumes is 1. Written to `ao`; the shade
+ * fraction of ao_samples rays (Owen-scrambled Sobol points, a sequence per sample) that leave
+ * without a hit closer than ao_radius: the visibility the IBL's diffuse term assumes is 1. Written to `ao`; the shade
  * pass multiplies its diffuse term by it, and its specular term by Lagarde's specular occlusion.
  * numpy twin: iblbake/render/twin/ao.py ambient_occlusion(). */
 #include "common.h"

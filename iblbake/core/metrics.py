@@ -17,9 +17,14 @@ def luminance(rgb) -> np.ndarray:
     return np.asarray(rgb, np.float64)[..., :3] @ LUMINANCE
 
 
+def _rms(b) -> float:
+    """The RMS a relative RMSE divides by (floored: an all-black reference gives no division by zero)."""
+    return max(math.sqrt(np.mean(b ** 2)), 1e-300)
+
+
 def relative_rmse(a, b):
     a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
-    return float(math.sqrt(np.mean((a - b) ** 2)) / max(math.sqrt(np.mean(b ** 2)), 1e-300))
+    return float(math.sqrt(np.mean((a - b) ** 2)) / _rms(b))
 
 
 def bulk_relative_rmse(a, b, keep: float = 0.99):
@@ -31,7 +36,7 @@ def bulk_relative_rmse(a, b, keep: float = 0.99):
         return 0.0
     d2 = ((a - b) ** 2).reshape(len(a), -1).sum(1)
     kept = d2[d2 <= np.quantile(d2, keep)]
-    return float(math.sqrt(kept.sum() / (len(kept) * (a.size // len(a)))) / max(math.sqrt(np.mean(b ** 2)), 1e-300))
+    return float(math.sqrt(kept.sum() / (len(kept) * (a.size // len(a)))) / _rms(b))
 
 
 def object_mask(hdr) -> np.ndarray:

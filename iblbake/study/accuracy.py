@@ -190,13 +190,14 @@ class Study:
                              f"reaches what the camera sees), so its relative errors are undefined; light the scene, "
                              f"or leave the term out ({self.names['overrides']} effects.{term}=off)")
         from iblbake.core.metrics import bulk_relative_rmse, relative_rmse
-        between = relative_rmse(frames[0][..., :3][mask], frames[1][..., :3][mask])
+        seed_a, seed_b = frames[0][..., :3][mask], frames[1][..., :3][mask]
+        between = relative_rmse(seed_a, seed_b)
         mean = frames[0].copy()
         mean[..., :3] = 0.5 * (frames[0][..., :3] + frames[1][..., :3])
         out = {"hdr": mean, "mask": mask, "noise": between / 2, "noise_each": between / math.sqrt(2),
                # the same over the 99% of pixels where the seeds agree best: a caustic's rare bright
                # paths can make most of the two-seed difference (docs/manual.md "Reference")
-               "noise_bulk": bulk_relative_rmse(frames[0][..., :3][mask], frames[1][..., :3][mask]) / 2,
+               "noise_bulk": bulk_relative_rmse(seed_a, seed_b) / 2,
                "seeds": list(self.settings.seeds), "cached": cached,
                "samples_per_pixel": [m["pass"]["samples_per_pixel"] for m in reports],
                "stopped": [m["pass"]["stopped"] for m in reports],
