@@ -361,43 +361,70 @@ IBL_INLINE Hit trace_range(float3 o, float3 d, float tmin, float tmax, int any_h
         const float3 inv_d = (float3)(1.0f / (d.x != 0.0f ? d.x : 1e-30f), 1.0f / (d.y != 0.0f ? d.y : 1e-30f),
                                       1.0f / (d.z != 0.0f ? d.z : 1e-30f));
         const RayShear rs = ray_shear(d);
-        /* A node is pushed only when the ray meets its box, with its entry distance: a shadow ray
-         * pops without a second box test (its tmax never shrinks), a closest-hit ray only checks
-         * that entry against the nearest hit found since (the same test, as box_hit's near bound
-         * is the entry and its far bound the widened min of the slabs' and tmax). */
-        int stack[64];
-        float near[64];
-        int sp = 0;
-        float tn;
-        if (box_hit(o, inv_d, bvh[0].xyz, bvh[1].xyz, h.t, &tn)) { stack[0] = 0; near[0] = tn; sp = 1; }
+        /* A wide node (scene/bvh.py widen) holds four children's boxes a lane each: one float4
+         * slab test meets all four (the near plane per axis chosen by the ray's sign, as Embree
+         * does: an empty child's (+inf, -inf) box is then missed on every axis). A child is
+         * pushed only when the ray meets its box, with its entry distance, nearest last so it is
+         * popped first: a shadow ray pops without a second box test (its tmax never shrinks), a
+         * closest-hit ray only checks that entry against the nearest hit found since. The far
+         * bound is widened by 2 gamma(3) (Ize 2013): rounding never drops a box a ray grazes. */
+        const int nx = inv_d.x >= 0.0f ? 0 : 3, ny = inv_d.y >= 0.0f ? 1 : 4, nz = inv_d.z >= 0.0f ? 2 : 5;
+        const int kx = rs.kx, ky = rs.ky, kz = rs.kz;
+        const float okx = component(o, kx), oky = component(o, ky), okz = component(o, kz);
+        int stack[BVH_STACK];
+        float near[BVH_STACK];
+        stack[0] = 0; near[0] = 0.0f;
+        int sp = 1;
         while (sp > 0) {
             --sp;
             if (!any_hit && near[sp] > h.t * 1.0000004f) continue;
-            const int ni = stack[sp];
-            const float4 a = bvh[2 * ni], b = bvh[2 * ni + 1];
-            const int count = as_int(b.w), first = as_int(a.w);
-            if (count > 0) {
-                for (int k = first; k < first + count; ++k) {
-                    float b1, b2;
-                    const float t = hit_triangle(o, rs, tris[6 * k].xyz, tris[6 * k + 1].xyz, tris[6 * k + 2].xyz,
-                                                 tmin, h.t, &b1, &b2);
-                    if (t < h.t && PRESENT(PRIM_TRIANGLE, k, t, b1, b2)) {
-                        h.t = t; h.kind = PRIM_TRIANGLE; h.index = k; h.b1 = b1; h.b2 = b2;
+            const int code = stack[sp];
+            if (code < 0) {
+                /* a leaf: its triangles' watertight tests (hit_triangle's, the same operations in
+                 * the same order, so the same bits) a lane each, then taken in order as there */
+                __global const float4 *lf = bvh + (-1 - code);
+                const float4 az = lf[kz] - okz, bz = lf[3 + kz] - okz, cz = lf[6 + kz] - okz;
+                const float4 ax = (lf[kx] - okx) - rs.sx * az, ay = (lf[ky] - oky) - rs.sy * az;
+                const float4 bx = (lf[3 + kx] - okx) - rs.sx * bz, by = (lf[3 + ky] - oky) - rs.sy * bz;
+                const float4 cx = (lf[6 + kx] - okx) - rs.sx * cz, cy = (lf[6 + ky] - oky) - rs.sy * cz;
+                const float4 u = cx * by - cy * bx, v = ax * cy - ay * cx, w = bx * ay - by * ax;
+                const float4 det = u + v + w;
+                const float4 t4 = rs.sz * (u * az + v * bz + w * cz) / det;
+                const int4 in = ((u >= 0.0f & v >= 0.0f & w >= 0.0f) | (u <= 0.0f & v <= 0.0f & w <= 0.0f))
+                                & det != 0.0f & t4 > tmin & t4 < h.t;
+                if (!any(in)) continue;
+                float tl[4], b1l[4], b2l[4];
+                int inl[4];
+                vstore4(t4, 0, tl); vstore4(v / det, 0, b1l); vstore4(w / det, 0, b2l); vstore4(in, 0, inl);
+                const int first = as_int(lf[9].x), count = as_int(lf[9].y);
+                for (int j = 0; j < count; ++j) {
+                    if (inl[j] && tl[j] < h.t && PRESENT(PRIM_TRIANGLE, first + j, tl[j], b1l[j], b2l[j])) {
+                        h.t = tl[j]; h.kind = PRIM_TRIANGLE; h.index = first + j; h.b1 = b1l[j]; h.b2 = b2l[j];
                         if (any_hit) return h;
                     }
                 }
-            } else if (sp < 62) {
-                /* nearer child last so it is popped first */
-                const float4 la = bvh[2 * first], lb = bvh[2 * first + 1];
-                const float4 ra = bvh[2 * first + 2], rb = bvh[2 * first + 3];
-                float tl, tr;
-                const int hl = box_hit(o, inv_d, la.xyz, lb.xyz, h.t, &tl);
-                const int hr = box_hit(o, inv_d, ra.xyz, rb.xyz, h.t, &tr);
-                if (hl && hr) {
-                    if (tl <= tr) { stack[sp] = first + 1; near[sp++] = tr; stack[sp] = first; near[sp++] = tl; }
-                    else { stack[sp] = first; near[sp++] = tl; stack[sp] = first + 1; near[sp++] = tr; }
-                } else if (hl) { stack[sp] = first; near[sp++] = tl; }
-                else if (hr) { stack[sp] = first + 1; near[sp++] = tr; }
+                continue;
+            }
+            __global const float4 *node = bvh + BVH_NODE_FLOAT4S * code;
+            const float4 t0 = fmax(fmax((node[nx] - o.x) * inv_d.x, (node[ny] - o.y) * inv_d.y),
+                                   fmax((node[nz] - o.z) * inv_d.z, (float4)(0.0f)));
+            const float4 t1 = fmin(fmin((node[3 - nx] - o.x) * inv_d.x, (node[5 - ny] - o.y) * inv_d.y),
+                                   fmin((node[7 - nz] - o.z) * inv_d.z, (float4)(h.t))) * 1.0000004f;
+            const int4 met = t0 <= t1;
+            int mask = (met.x & 1) | (met.y & 2) | (met.z & 4) | (met.w & 8);
+            if (!mask) continue;
+            float tn[4];
+            int child[4];
+            vstore4(t0, 0, tn);
+            vstore4(as_int4(node[6]), 0, child);
+            /* insertion: the entries pushed here stay sorted, farthest deepest */
+            const int base = sp;
+            for (int j = 0; j < 4; ++j) {
+                if (!((mask >> j) & 1)) continue;
+                const float tj = tn[j];
+                int i = sp++;
+                while (i > base && near[i - 1] < tj) { stack[i] = stack[i - 1]; near[i] = near[i - 1]; --i; }
+                stack[i] = child[j]; near[i] = tj;
             }
         }
     }

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from iblbake.scene import bvh as bvh_module
-from iblbake.scene.bvh import LEAF_SIZE, SAH_DEPTH, build_bvh
+from iblbake.scene.bvh import LEAF_SIZE, SAH_DEPTH, WIDTH, build_bvh, device_tree
+from iblbake.scene.layout import BVH_STACK, FLOAT4S
 
 
 def _check_tree(bvh, lo, hi, leaf_size):
@@ -52,7 +53,8 @@ def test_root_splits_between_clusters_not_at_the_median():
 
 def test_past_sah_depth_the_median_bounds_the_depth(monkeypatch):
     """Past SAH_DEPTH levels every node splits at its object median, so the depth is at most
-    SAH_DEPTH + log2(n / leaf size) + 1 whatever the SAH did above (the kernels' stack holds 62)."""
+    SAH_DEPTH + log2(n / leaf size) + 1 whatever the SAH did above (62 at most: the wide tree's
+    31 levels fit the kernels' stack, test below)."""
     n = 5000
     rng = np.random.default_rng(5)
     lo = rng.random((n, 3)) ** 8 * 100          # crowded near 0, sparse far out: uneven SAH cuts
@@ -63,3 +65,70 @@ def test_past_sah_depth_the_median_bounds_the_depth(monkeypatch):
         bvh = build_bvh(lo, hi)
         assert bvh.depth <= depth + int(np.ceil(np.log2(n / LEAF_SIZE))) + 1
         _check_tree(bvh, lo, hi, LEAF_SIZE)
+
+
+def _check_device_tree(bvh, v0, v1, v2):
+    """The records the kernels traverse (device_tree): from the root every primitive is reached
+    exactly once, each child's box holds everything under it, each leaf's lanes are its triangles'
+    corners (zero past its count), and the depth fits the traversal stack."""
+    rec = device_tree(bvh, v0[bvh.order], v1[bvh.order], v2[bvh.order])
+    ints = rec.view(np.int32)
+    n_nodes = len(bvh.wide)
+    assert rec.shape == (n_nodes * FLOAT4S["BVH_NODE"] + len(bvh.leaves) * FLOAT4S["BVH_LEAF"], 4)
+    lo, hi = np.minimum(np.minimum(v0, v1), v2), np.maximum(np.maximum(v0, v1), v2)
+    seen = np.zeros(len(v0), int)
+    depth = 0
+
+    def visit(code, box_lo, box_hi, level):
+        nonlocal depth
+        depth = max(depth, level)
+        if code < 0:
+            off = -1 - code
+            assert off >= n_nodes * FLOAT4S["BVH_NODE"] and (off - n_nodes * FLOAT4S["BVH_NODE"]) % FLOAT4S["BVH_LEAF"] == 0
+            first, count = ints[off + 9, 0], ints[off + 9, 1]
+            assert 1 <= count <= WIDTH
+            prims = bvh.order[first:first + count]
+            seen[prims] += 1
+            assert (lo[prims].astype(np.float32) >= box_lo).all() and (hi[prims].astype(np.float32) <= box_hi).all()
+            for c, v in enumerate((v0, v1, v2)):
+                lanes = rec[off + 3 * c:off + 3 * c + 3].T          # (lane, xyz)
+                np.testing.assert_array_equal(lanes[:count], v[prims].astype(np.float32))
+                assert (lanes[count:] == 0).all()
+            return
+        base = FLOAT4S["BVH_NODE"] * code
+        for j in range(WIDTH):
+            clo, chi = rec[base:base + 3, j], rec[base + 3:base + 6, j]
+            if np.isinf(clo).all() and (clo > 0).all():
+                assert (chi < 0).all() and np.isinf(chi).all()        # an empty child: a box no ray meets
+                continue
+            assert (clo >= box_lo).all() and (chi <= box_hi).all()
+            visit(int(ints[base + 6, j]), clo, chi, level + 1)
+
+    visit(0, np.full(3, -np.inf, np.float32), np.full(3, np.inf, np.float32), 0)
+    assert (seen == 1).all()
+    assert depth == bvh.wide_depth and (WIDTH - 1) * depth + 1 <= BVH_STACK
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 5, 37, 1000])
+def test_the_kernels_wide_tree_holds_every_triangle_once(n):
+    rng = np.random.default_rng(10 + n)
+    v0 = rng.normal(size=(n, 3)) * [10, 1, 0.1]
+    v1, v2 = v0 + rng.random((n, 3)), v0 + rng.random((n, 3))
+    bvh = build_bvh(np.minimum(np.minimum(v0, v1), v2), np.maximum(np.maximum(v0, v1), v2))
+    _check_device_tree(bvh, v0, v1, v2)
+
+
+def test_the_wide_tree_of_the_deepest_binary_tree_fits_the_stack(monkeypatch):
+    """The binary tree's depth bound (SAH_DEPTH + log2(2^31 / leaf size) + 1 levels) halves in
+    the wide tree (each of its levels two of the binary's from the root), whose traversal stack
+    then holds a node's four children at every level."""
+    binary = SAH_DEPTH + int(np.ceil(np.log2(2 ** 31 / LEAF_SIZE))) + 1
+    assert (WIDTH - 1) * (binary // 2) + 1 <= BVH_STACK
+    n = 3000
+    rng = np.random.default_rng(7)
+    v0 = rng.random((n, 3)) ** 8 * 100
+    v1, v2 = v0 + 0.001, v0 + [0.001, 0, 0.002]
+    monkeypatch.setattr(bvh_module, "SAH_DEPTH", 2)
+    bvh = build_bvh(np.minimum(np.minimum(v0, v1), v2), np.maximum(np.maximum(v0, v1), v2))
+    assert bvh.wide_depth == max(1, bvh.depth // 2)
+    _check_device_tree(bvh, v0, v1, v2)

@@ -379,12 +379,12 @@ def _cache_dir() -> str:
 
 
 # Subnormal floats flushed to zero, in and out (FTZ and DAZ on a CPU, .ftz on a GPU). The packed
-# records keep integers in the w lane of float4s (a plane's and a triangle's material and object, a
-# BVH node's first child and count; kernels/layout.h) whose bit patterns are subnormal floats, and a
-# compiler does a float3's arithmetic on all four lanes: on CPUs that handle a subnormal operand by a
-# microcode assist (100+ cycles) every ray-plane and ray-box test paid one, and the reference ran
-# 1.2-3.7x slower (docs/benchmarks.md "Subnormal floats"). Embree asks its users for FTZ and DAZ for
-# the same reason. tests/test_conventions.py checks that a kernel flushes.
+# records keep integers in the w lane of float4s (a plane's and a triangle's material and object;
+# kernels/layout.h) whose bit patterns are subnormal floats, and a compiler does a float3's
+# arithmetic on all four lanes: on CPUs that handle a subnormal operand by a microcode assist (100+
+# cycles) every ray-plane test (and ray-box test, when the BVH's nodes had them too) paid one, and
+# the reference ran 1.2-3.7x slower (docs/benchmarks.md "Subnormal floats"). Embree asks its users
+# for FTZ and DAZ for the same reason. tests/test_conventions.py checks that a kernel flushes.
 DENORMS = "-cl-denorms-are-zero"
 
 

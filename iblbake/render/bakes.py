@@ -27,8 +27,8 @@ def _code_hash(modules, extra: str = "") -> str:
 
 def _geometry_code_hash() -> str:
     """The mesh loader's and BVH builder's source: a cached BVH is rebuilt when they change."""
-    from iblbake.scene import geometry, gltf, pack, tangents
-    return _code_hash((geometry, gltf, pack, tangents))
+    from iblbake.scene import bvh, geometry, gltf, pack, tangents
+    return _code_hash((bvh, geometry, gltf, pack, tangents))
 
 
 def _textures_code_hash() -> str:
@@ -124,9 +124,7 @@ class Bakes:
         objs = sc.data["objects"]
         meshes = [(oid, o) for oid, o in enumerate(objs) if "mesh" in o]
         if not meshes:
-            return pack.scene_arrays(sc, (np.zeros((0, 6, 4), np.float32), np.zeros((0, 8), np.float32),
-                                          {"meshes": [], "triangles": 0, "load_s": 0.0},
-                                          np.zeros((0, 7, 4), np.float32), np.zeros((0, 2), np.int32)))
+            return pack.scene_arrays(sc, pack.no_meshes())
         try:
             _records, offsets = materials.table(sc)
             parts = [{"object": oid, "sha256": self.file_sha256(o["mesh"]["path"]),
@@ -136,7 +134,7 @@ class Bakes:
                      for oid, o in meshes]
         except (OSError, IblbakeError):   # a missing or unreadable mesh: the loader says so, in one line
             return pack.scene_arrays(sc)
-        key = "geometry-" + cache.content_key({"kind": "geometry", "v": 3, "meshes": parts,
+        key = "geometry-" + cache.content_key({"kind": "geometry", "v": 4, "meshes": parts,
                                                "attributes": pack.needs_attributes(sc), "code": _geometry_code_hash()})
 
         def make():

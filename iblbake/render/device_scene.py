@@ -55,7 +55,7 @@ def digest(*arrays, head: str = "") -> str:
 def geometry_tables(rt, arrays) -> dict:
     """The triangles, BVH and triangle attributes on the device (the large part of a mesh scene)."""
     from iblbake.scene.layout import FLOAT4S
-    return {"bvh": rt.to_device(_padded(arrays.bvh, (1, 8))), "tris": rt.to_device(_padded(arrays.tris, (1, 6, 4))),
+    return {"bvh": rt.to_device(_padded(arrays.bvh, (1, 4))), "tris": rt.to_device(_padded(arrays.tris, (1, 6, 4))),
             "tri_attr": rt.to_device(_padded(arrays.tri_attr, (1, FLOAT4S["TRIANGLE_ATTR"], 4)))}
 
 

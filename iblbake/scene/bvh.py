@@ -9,6 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from iblbake.scene.layout import BVH_STACK, FLOAT4S
+
 LEAF_SIZE = 4
 # levels split by the surface area heuristic; deeper ones at the object median, so a tree's depth
 # stays within the kernels' traversal stack (64) whatever the mesh
@@ -23,6 +25,9 @@ class BVH:
     order: np.ndarray      # primitive permutation (leaves hold contiguous runs of it)
     build_s: float
     depth: int
+    wide: np.ndarray       # (wide nodes, 8, 4) float32: the tree the kernels traverse (widen)
+    leaves: np.ndarray     # (leaves, 2) int64: each wide leaf's first primitive and count
+    wide_depth: int
 
     @property
     def node_count(self):
@@ -149,4 +154,78 @@ def build_bvh(lo: np.ndarray, hi: np.ndarray, leaf_size: int = LEAF_SIZE) -> BVH
     interior = left >= 0
     ints[:, 3] = np.where(interior, left, st)
     ints[:, 7] = np.where(interior, 0, ct)
-    return BVH(nodes, order, time.perf_counter() - t0, depth + 1)
+    wide, leaves, wide_depth = widen(nodes)
+    return BVH(nodes, order, time.perf_counter() - t0, depth + 1, wide, leaves, wide_depth)
+
+
+# children of a node of the traversed tree: the binary tree's grandchildren, four boxes tested at
+# once as float4 lanes (a "QBVH": Dammertz, Hanika and Keller 2008; Embree's BVH4), and the
+# triangles of a leaf, up to four, tested at once the same way
+WIDTH = 4
+
+
+def widen(nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    """The binary tree `nodes` (build_bvh's, children adjacent) collapsed two levels into one:
+    each node of the wide tree holds up to four children (a binary node's grandchildren, or its
+    child where that is a leaf), in records of 8 float4 (kernels/layout.h BVH_NODE): the four
+    children's min x, min y, min z, max x, max y, max z (one float4 each, a lane per child), their
+    codes (int bits: a node's index, or -1 - the float4 offset of a leaf's record, which follow the
+    nodes: device_tree), and padding to 128 bytes (two cache lines). An empty child's box is
+    (+inf, -inf), which no ray meets. Built one level at a time, breadth first; returns the node
+    records, the leaves' (first primitive, count) in the order of their records, and the depth."""
+    ints = nodes.view(np.int32)
+    first, count = ints[:, 3].astype(np.int64), ints[:, 7].astype(np.int64)
+    inner = count == 0
+    if count.max() > WIDTH:
+        raise ValueError(f"a leaf of more than {WIDTH} primitives does not fit a wide leaf's record")
+
+    def expand(n):      # (N, WIDTH) binary nodes under each of n: grandchildren, or a leaf child
+        c0 = first[n]
+        cols = []
+        for c in (c0, c0 + 1):
+            cols += [np.where(inner[c], first[c], c), np.where(inner[c], first[c] + 1, -1)]
+        return np.stack(cols, axis=1)
+
+    levels = [expand(np.array([0])) if inner[0] else np.array([[0, -1, -1, -1]])]
+    while True:
+        s = levels[-1].reshape(-1)
+        nxt = s[(s >= 0) & inner[np.maximum(s, 0)]]
+        if not len(nxt):
+            break
+        levels.append(expand(nxt))
+    slots = np.concatenate(levels)
+    total = len(slots)
+    if (WIDTH - 1) * len(levels) + 1 > BVH_STACK:     # a node pushes at most WIDTH entries and pops one
+        raise ValueError(f"BVH of {len(levels)} wide levels exceeds the traversal stack ({BVH_STACK})")
+    # the nodes are numbered in the order their slots appear (breadth first), the leaves likewise
+    flat = slots.reshape(-1)
+    present = flat >= 0
+    is_node = present & inner[np.maximum(flat, 0)]
+    leaf = present & ~is_node
+    code = np.full(len(flat), -1, np.int64)
+    code[is_node] = 1 + np.arange(int(is_node.sum()))
+    code[leaf] = -1 - (total * FLOAT4S["BVH_NODE"] + FLOAT4S["BVH_LEAF"] * np.arange(int(leaf.sum())))
+    lo = np.where(present[:, None], nodes[np.maximum(flat, 0), 0:3], np.inf).reshape(total, WIDTH, 3)
+    hi = np.where(present[:, None], nodes[np.maximum(flat, 0), 4:7], -np.inf).reshape(total, WIDTH, 3)
+    out = np.zeros((total, FLOAT4S["BVH_NODE"], 4), np.float32)
+    out[:, 0:3] = lo.transpose(0, 2, 1)
+    out[:, 3:6] = hi.transpose(0, 2, 1)
+    out.view(np.int32)[:, 6] = code.reshape(total, WIDTH)
+    return out, np.stack([first[flat[leaf]], count[flat[leaf]]], axis=1), len(levels)
+
+
+def device_tree(bvh: BVH, v0: np.ndarray, v1: np.ndarray, v2: np.ndarray) -> np.ndarray:
+    """The (m, 4) float32 records kernels/scene.h traverses: the wide nodes, then per leaf (in
+    bvh.leaves' order) its triangles' corners by coordinate, a lane per triangle (kernels/layout.h
+    BVH_LEAF: v0 x, y, z, v1 x, y, z, v2 x, y, z; a missing triangle's lanes all zero, a degenerate
+    triangle no ray meets) and (first, count, -, -) as int bits. v0, v1, v2: the corners in the
+    BVH's primitive order (bvh.order applied)."""
+    first, count = bvh.leaves[:, 0], bvh.leaves[:, 1]
+    lanes = np.arange(WIDTH)
+    k = np.minimum(first[:, None] + lanes, len(v0) - 1)
+    here = lanes < count[:, None]
+    leaf = np.zeros((len(first), FLOAT4S["BVH_LEAF"], 4), np.float32)
+    for c, v in enumerate((v0, v1, v2)):
+        leaf[:, 3 * c:3 * c + 3] = np.where(here[..., None], v[k], 0).transpose(0, 2, 1)
+    leaf.view(np.int32)[:, 9, 0], leaf.view(np.int32)[:, 9, 1] = first, count
+    return np.concatenate([bvh.wide.reshape(-1, 4), leaf.reshape(-1, 4)])

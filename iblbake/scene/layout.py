@@ -40,7 +40,12 @@ FLOAT4S = {
     "PLANE": 5,      # (point, material), (normal, object), (tangent, half width), (bitangent, half depth),
                      # (surface flags, -, -, -)
     "TRIANGLE": 6,   # v0|material, v1|object, v2|surface flags, n0, n1, n2
-    "BVH_NODE": 2,   # (min, first), (max, count)
+    # four children's min x, min y, min z, max x, max y, max z (a lane each), their codes (int: a
+    # node's index, or -1 - a leaf's float4 offset in the same buffer), padding (scene/bvh.py widen)
+    "BVH_NODE": 8,
+    # a leaf's up to four triangles: v0 x, y, z, v1 x, y, z, v2 x, y, z (a lane each), (first, count |
+    # int) (scene/bvh.py device_tree)
+    "BVH_LEAF": 10,
     # (position, or the unit direction towards a directional light | kind), (colour x intensity or
     # illuminance | shadow mode), (spot axis, the way light travels | radius, or a directional
     # light's angular radius in radians), (spot scale, spot offset, range (0: none), shadow samples)
@@ -81,6 +86,9 @@ GBUFFER = {
     "gb_mat": "3 per sample: (base colour, metallic), (emissive, roughness), (shading normal, occlusion)",
 }
 MISS_T = -1.0
+# entries of the kernels' BVH traversal stack (kernels/scene.h trace_range): a wide node pushes at
+# most 4 and pops one, so a tree of d levels needs 3 d + 1 (scene/bvh.py widen checks)
+BVH_STACK = 96
 
 
 def _modes(prefix: str, table: dict) -> list[str]:
@@ -98,7 +106,8 @@ def header_text() -> str:
     rows += [f"#define SURFACE_{k.upper()} {v}" for k, v in SURFACE_FLAGS.items()] + [""]
     rows += [f"#define {k}_FLOAT4S {v}" for k, v in FLOAT4S.items()] + [""]
     rows += [f"/* {k}: {v} */" for k, v in GBUFFER.items()]
-    rows += [f"#define MISS_T ({MISS_T}f)", f"#define DELTA_ALPHA {DELTA_ALPHA!r}f", f"#define ENV_GUIDE_BINS {ENV_GUIDE_BINS}"]
+    rows += [f"#define MISS_T ({MISS_T}f)", f"#define DELTA_ALPHA {DELTA_ALPHA!r}f", f"#define ENV_GUIDE_BINS {ENV_GUIDE_BINS}",
+             f"#define BVH_STACK {BVH_STACK}"]
     rows += [f"#define LUMINANCE_{c} {w!r}f" for c, w in zip("RGB", LUMINANCE.tolist())]
     rows += [f"#define STREAM_{k.upper()} {v:#x}u" for k, v in RANDOM_STREAMS.items()]
     rows += ["", "#endif", ""]

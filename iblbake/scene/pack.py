@@ -14,7 +14,7 @@ from iblbake.core import sampling
 from iblbake.errors import InputError
 from iblbake.scene.layout import FLOAT4S, SURFACE_FLAGS
 from iblbake.scene import geometry
-from iblbake.scene.bvh import build_bvh
+from iblbake.scene.bvh import build_bvh, device_tree
 from iblbake.scene.load import Scene
 
 
@@ -53,7 +53,7 @@ class SceneArrays:
     spheres: np.ndarray       # (s, 2, 4) float32
     planes: np.ndarray        # (p, 5, 4) float32
     tris: np.ndarray          # (t, 6, 4) float32, BVH order: v0|material, v1|object, v2, 3 normals
-    bvh: np.ndarray           # (nodes, 8) float32
+    bvh: np.ndarray           # (records, 4) float32: the wide nodes and leaves (scene/bvh.py device_tree)
     geometry_report: dict
     tri_attr: np.ndarray | None = None      # (t, TRIANGLE_ATTR, 4) float32, BVH order (uv, tangents, density)
     records: list | None = None             # the material table (iblbake.scene.materials)
@@ -164,7 +164,7 @@ def solid_flags(scene: Scene, arr, closed, tri_flags) -> np.ndarray:
 
 
 def mesh_arrays(scene: Scene):
-    """(triangles (t, 6, 4) float32 in BVH order, BVH nodes (n, 8) float32, report, triangle
+    """(triangles (t, 6, 4) float32 in BVH order, BVH records (n, 4) float32 (bvh.device_tree), report, triangle
     attributes (t, TRIANGLE_ATTR, 4) float32 in BVH order, closed parts (t, 2) int32 in BVH order:
     component and solid, geometry.closed_components) of every mesh object of the scene, in world
     space."""
@@ -189,8 +189,8 @@ def mesh_arrays(scene: Scene):
         arr[:, 1, :3], arr[:, 1, 3] = tris.v1[o], _int_bits(tris.object_id[o])
         arr[:, 2, :3] = tris.v2[o]
         arr[:, 3:6, :3] = tris.normals[o]
-        nodes = bvh.nodes
-        report.update({"bvh_build_s": round(bvh.build_s, 4), "bvh_nodes": bvh.node_count, "bvh_depth": bvh.depth})
+        nodes = device_tree(bvh, arr[:, 0, :3], arr[:, 1, :3], arr[:, 2, :3])
+        report.update({"bvh_build_s": round(bvh.build_s, 4), "bvh_nodes": len(bvh.wide), "bvh_depth": bvh.wide_depth})
         attr = np.zeros((len(tris) if attributes else 0, FLOAT4S["TRIANGLE_ATTR"], 4), np.float32)
         if attributes:
             attr[:, 0:3] = np.nan_to_num(tris.uv[o])
@@ -198,11 +198,15 @@ def mesh_arrays(scene: Scene):
             attr[:, 6, :2] = tris.uv_density[o]
         closed = np.stack([tris.component[o], tris.solid[o]], 1).astype(np.int32)
     else:
-        arr = np.zeros((0, 6, 4), np.float32)
-        nodes = np.zeros((0, 8), np.float32)
-        attr = np.zeros((0, FLOAT4S["TRIANGLE_ATTR"], 4), np.float32)
-        closed = np.zeros((0, 2), np.int32)
+        arr, nodes, _report, attr, closed = no_meshes()
     return arr, nodes, report, attr, closed
+
+
+def no_meshes():
+    """mesh_arrays() of a scene without a triangle"""
+    return (np.zeros((0, FLOAT4S["TRIANGLE"], 4), np.float32), np.zeros((0, 4), np.float32),
+            {"meshes": [], "triangles": 0, "load_s": 0.0}, np.zeros((0, FLOAT4S["TRIANGLE_ATTR"], 4), np.float32),
+            np.zeros((0, 2), np.int32))
 
 
 def needs_attributes(scene: Scene) -> bool:
