@@ -392,7 +392,8 @@ def device_options(info: DeviceInfo) -> list[str]:
     """Build options one runtime needs. Intel's CPU runtime: every function inlined (kernels/inline.h:
     it passes float3 arguments of out-of-line calls from vectorised kernels wrongly), and the
     reference kept scalar where it traces triangles (kernels/paths/reference.cl: divergent BVH lanes)."""
-    return ["-DIBL_ALWAYS_INLINE=1", "-DIBL_SCALAR_BVH=1"] if _is_intel_cpu(info) else []
+    prefetch = ["-DIBL_PREFETCH=1"] if info.kind == "CPU" else []
+    return prefetch + (["-DIBL_ALWAYS_INLINE=1", "-DIBL_SCALAR_BVH=1"] if _is_intel_cpu(info) else [])
 
 
 class Runtime:

@@ -22,6 +22,17 @@
 #include "material.h"
 #include "light.h"
 
+/* A texel of the panorama fetched into the cache ahead of its use (IBL_PREFETCH: CPUs,
+ * iblbake/device/runtime.py device_options), where other work can hide the miss: a path's
+ * lookups in the full-resolution panorama (the environment sample's texel, the escaped ray's)
+ * miss a CPU's cache, and one work item has no other path to run meanwhile. */
+IBL_INLINE void env_prefetch(int texel, __global const float4 *img)
+{
+#ifdef IBL_PREFETCH
+    __builtin_prefetch(img + texel);
+#endif
+}
+
 /* The environment a BSDF-sampled ray l (pdf pb; INFINITY for a mirror's, which no other strategy
  * finds) meets when it leaves the scene, weighted against the panorama's sampling */
 IBL_INLINE float3 env_missed(float3 l, float pb, ENV_PARAMS)
@@ -94,6 +105,7 @@ IBL_INLINE int env_sample(const Material mt, float3 v, float3 n, float nov, floa
 {
     int texel;
     *l = from_env(sample_env(marginal, conditional, guide, w, h, u, &texel), env_rot);
+    env_prefetch(texel, img);
     float pb;
     const float3 f = bsdf_eval(mt, v, n, nov, *l, ps, diffuse, specular, &pb);
     *c = (float3)(0.0f);
@@ -134,9 +146,12 @@ IBL_INLINE FirstVertex first_vertex(const Material mt, float3 v, float3 n, float
     FirstVertex fv;
     const VertexDims u = vertex_dims(sp);
     const float ps = specular_probability(mt, nov, diffuse, specular);
-    fv.env_live = env_sample(mt, v, n, nov, ps, diffuse, specular, u.env, ENV_ARGS, &fv.env_l, &fv.env_c);
+    /* the BSDF's ray first, so the texel it reads if it escapes is fetched while the environment
+     * is sampled and its shadow ray traced (the numbers do not depend on the order) */
     fv.beta = bsdf_sample(mt, v, n, t, b, nov, ps, diffuse, specular, u.lobe, u.dir, &fv.l, &fv.pdf);
     fv.live = fv.beta.x > 0.0f || fv.beta.y > 0.0f || fv.beta.z > 0.0f;
+    if (fv.live) env_prefetch(env_texel_index(to_env(fv.l, env_rot), w, h), img);
+    fv.env_live = env_sample(mt, v, n, nov, ps, diffuse, specular, u.env, ENV_ARGS, &fv.env_l, &fv.env_c);
     return fv;
 }
 
@@ -221,6 +236,12 @@ IBL_INLINE float3 follow_path(float3 o, float3 l, Hit hit, float3 beta, Sampler 
         emitted += beta * pv.mt.emissive;
         if (!scatters) break;
         const VertexDims u = vertex_dims(sp);
+        /* the next ray first, its texel fetched while this vertex's lights are sampled (as
+         * first_vertex does; the numbers do not depend on the order) */
+        float3 beta_next = beta, l_next;
+        float pb;
+        const int next = path_scatter(pv, u, bounce, &beta_next, &l_next, &pb);
+        if (next) env_prefetch(env_texel_index(to_env(l_next, env_rot), w, h), img);
         env += beta * env_direct(pv.mt, pv.v, pv.n, pv.nov, pv.origin, pv.ps, 1, 1, u.env, ENV_ARGS, SCENE_ARGS);
 #ifdef PATH_LIGHTS
         for (int j = 0; j < nlights; ++j) {         /* every analytic light */
@@ -230,8 +251,9 @@ IBL_INLINE float3 follow_path(float3 o, float3 l, Hit hit, float3 beta, Sampler 
                 emitted += c;
         }
 #endif
-        float pb;
-        if (!path_scatter(pv, u, bounce, &beta, &l, &pb)) break;
+        if (!next) break;
+        beta = beta_next;
+        l = l_next;
         o = pv.origin;
         hit = trace(o, l, SCENE_ARGS);
         if (hit.kind == PRIM_NONE) env += beta * env_missed(l, pb, ENV_ARGS);
