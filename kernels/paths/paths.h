@@ -98,31 +98,50 @@ IBL_INLINE VertexDims vertex_dims(Sampler *sp)
 
 /* The environment's light at a vertex by sampling the panorama (u: vertex_dims' env), weighted
  * against the BSDF's sampling of the terms asked for (power heuristic, Veach 1997), before its
- * shadow ray: the direction *l and *c = Le f NoL w / pe, what arrives where it leaves the scene
- * unoccluded; returns whether there is a shadow ray to trace (the wavefront queues it). */
-IBL_INLINE int env_sample(const Material mt, float3 v, float3 n, float nov, float ps, int diffuse, int specular,
-                          float4 u, ENV_PARAMS, float3 *l, float3 *c)
-{
+ * shadow ray, in two steps so that other work hides the texel's miss between them: env_draw, the
+ * direction in the panorama and its texel (fetched meanwhile); env_weigh, the direction *l and
+ * *c = Le f NoL w / pe, what arrives where it leaves the scene unoccluded; returns whether there
+ * is a shadow ray to trace (the wavefront queues it). env_sample: the two at once. */
+typedef struct {
+    float3 l;
     int texel;
-    *l = from_env(sample_env(marginal, conditional, guide, w, h, u, &texel), env_rot);
-    env_prefetch(texel, img);
+} EnvDraw;
+
+IBL_INLINE EnvDraw env_draw(float4 u, ENV_PARAMS)
+{
+    EnvDraw e;
+    e.l = from_env(sample_env(marginal, conditional, guide, w, h, u, &e.texel), env_rot);
+    env_prefetch(e.texel, img);
+    return e;
+}
+
+IBL_INLINE int env_weigh(const EnvDraw e, const Material mt, float3 v, float3 n, float nov, float ps, int diffuse,
+                         int specular, ENV_PARAMS, float3 *l, float3 *c)
+{
+    *l = e.l;
     float pb;
-    const float3 f = bsdf_eval(mt, v, n, nov, *l, ps, diffuse, specular, &pb);
+    const float3 f = bsdf_eval(mt, v, n, nov, e.l, ps, diffuse, specular, &pb);
     *c = (float3)(0.0f);
     if (!(f.x > 0.0f || f.y > 0.0f || f.z > 0.0f)) return 0;     /* no texel read below the horizon */
-    const float3 le = img[texel].xyz;
+    const float3 le = img[e.texel].xyz;
     const float pe = pdf_env(le, env_norm);
     if (!(pe > 0.0f)) return 0;
     *c = le * f * (power_heuristic(pe, pb) / pe);
     return 1;
 }
 
-/* env_sample's light where its direction leaves the scene unoccluded from origin */
-IBL_INLINE float3 env_direct(const Material mt, float3 v, float3 n, float nov, float3 origin, float ps, int diffuse,
-                             int specular, float4 u, ENV_PARAMS, SCENE_PARAMS)
+IBL_INLINE int env_sample(const Material mt, float3 v, float3 n, float nov, float ps, int diffuse, int specular,
+                          float4 u, ENV_PARAMS, float3 *l, float3 *c)
+{
+    return env_weigh(env_draw(u, ENV_ARGS), mt, v, n, nov, ps, diffuse, specular, ENV_ARGS, l, c);
+}
+
+/* env_weigh's light where its direction leaves the scene unoccluded from origin */
+IBL_INLINE float3 env_direct(const EnvDraw e, const Material mt, float3 v, float3 n, float nov, float3 origin, float ps,
+                             int diffuse, int specular, ENV_PARAMS, SCENE_PARAMS)
 {
     float3 l, c;
-    if (env_sample(mt, v, n, nov, ps, diffuse, specular, u, ENV_ARGS, &l, &c) && !occluded(origin, l, SCENE_ARGS))
+    if (env_weigh(e, mt, v, n, nov, ps, diffuse, specular, ENV_ARGS, &l, &c) && !occluded(origin, l, SCENE_ARGS))
         return c;
     return (float3)(0.0f);
 }
@@ -146,12 +165,14 @@ IBL_INLINE FirstVertex first_vertex(const Material mt, float3 v, float3 n, float
     FirstVertex fv;
     const VertexDims u = vertex_dims(sp);
     const float ps = specular_probability(mt, nov, diffuse, specular);
-    /* the BSDF's ray first, so the texel it reads if it escapes is fetched while the environment
-     * is sampled and its shadow ray traced (the numbers do not depend on the order) */
+    /* the environment's texel is fetched while the BSDF is sampled, and the texel the BSDF's ray
+     * reads if it escapes while the environment's sample is weighed and its shadow ray traced
+     * (the numbers do not depend on the order) */
+    const EnvDraw e = env_draw(u.env, ENV_ARGS);
     fv.beta = bsdf_sample(mt, v, n, t, b, nov, ps, diffuse, specular, u.lobe, u.dir, &fv.l, &fv.pdf);
     fv.live = fv.beta.x > 0.0f || fv.beta.y > 0.0f || fv.beta.z > 0.0f;
     if (fv.live) env_prefetch(env_texel_index(to_env(fv.l, env_rot), w, h), img);
-    fv.env_live = env_sample(mt, v, n, nov, ps, diffuse, specular, u.env, ENV_ARGS, &fv.env_l, &fv.env_c);
+    fv.env_live = env_weigh(e, mt, v, n, nov, ps, diffuse, specular, ENV_ARGS, &fv.env_l, &fv.env_c);
     return fv;
 }
 
@@ -236,13 +257,14 @@ IBL_INLINE float3 follow_path(float3 o, float3 l, Hit hit, float3 beta, Sampler 
         emitted += beta * pv.mt.emissive;
         if (!scatters) break;
         const VertexDims u = vertex_dims(sp);
-        /* the next ray first, its texel fetched while this vertex's lights are sampled (as
-         * first_vertex does; the numbers do not depend on the order) */
+        /* in first_vertex's order: the panorama's texels fetched ahead (the numbers do not
+         * depend on the order) */
+        const EnvDraw e = env_draw(u.env, ENV_ARGS);
         float3 beta_next = beta, l_next;
         float pb;
         const int next = path_scatter(pv, u, bounce, &beta_next, &l_next, &pb);
         if (next) env_prefetch(env_texel_index(to_env(l_next, env_rot), w, h), img);
-        env += beta * env_direct(pv.mt, pv.v, pv.n, pv.nov, pv.origin, pv.ps, 1, 1, u.env, ENV_ARGS, SCENE_ARGS);
+        env += beta * env_direct(e, pv.mt, pv.v, pv.n, pv.nov, pv.origin, pv.ps, 1, 1, ENV_ARGS, SCENE_ARGS);
 #ifdef PATH_LIGHTS
         for (int j = 0; j < nlights; ++j) {         /* every analytic light */
             float3 ll, c;
