@@ -477,6 +477,32 @@ EQUAL_SCENES = {
 }
 
 
+def equal_scene_frame(folder, name, paths, rt=None):
+    """EQUAL_SCENES[name] under the lamp, unbounded paths, 16 samples in batches of 6 (the
+    wavefront's waves forced to 4 samples, so a batch spans waves): the frame and its report."""
+    from iblbake.render.passes import reference as ref_pass
+    env = lamp_panorama(folder)
+    objects, lights = EQUAL_SCENES[name]
+    sc = write(folder, f"{name}_{paths}", {
+        "camera": {"perspective": {"position": [0, 1.5, 3.5], "look_at": [0, 0.5, 0], "fov_y": 45},
+                   "resolution": [24, 18]},
+        "environment": {"path": str(env), "background": "hide", "rotation_y": 25},
+        "materials": {"gold": {"base_color": [1.0, 0.78, 0.34], "metallic": 1, "roughness": 0.4},
+                      "mirror": {"base_color": [0.9, 0.9, 0.9], "metallic": 1, "roughness": 0},
+                      "floor": {"base_color": [0.5, 0.45, 0.4], "roughness": 0.8}},
+        "objects": objects + [{"plane": {"point": [0, 0, 0], "size": 5}, "material": "floor"}],
+        "lights": lights,
+        "effects": {"diffuse": "reference", "specular": "reference",
+                    "reference": {"max_samples": 16, "target_noise": 0, "batch": 6, "bounces": "unbounded",
+                                  "seed": 7, "paths": paths}}})
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(ref_pass, "wave_paths", lambda rt: 4 * 24 * 18)
+        f = render(sc, cache_root=folder / "cache", runtime=rt)
+    ran(f, paths)
+    assert ("PATH_LIGHTS" in f.report["effects"]["defines"]["reference"]) == bool(lights)
+    return f
+
+
 @pytest.mark.parametrize("name", list(EQUAL_SCENES))
 def test_wavefront_frame_is_the_megakernels(tmp_path, name):
     """The wavefront's stages (kernels/paths/wavefront.cl) are the megakernel's estimator cut where rays
@@ -487,29 +513,7 @@ def test_wavefront_frame_is_the_megakernels(tmp_path, name):
     bit). Bound 1e-6: a GPU shares a sample's batch among work items (sample_slices), which reorders
     the megakernel's float32 sums (3.6e-7, test_sample_slices_keep_the_frame), and a compiler may
     fuse a multiply-add in one and not across the other's stages."""
-    from iblbake.render.passes import reference as ref_pass
-    env = lamp_panorama(tmp_path)
-    objects, lights = EQUAL_SCENES[name]
-    frames = {}
-    for paths in PATHS:
-        sc = write(tmp_path, f"{name}_{paths}", {
-            "camera": {"perspective": {"position": [0, 1.5, 3.5], "look_at": [0, 0.5, 0], "fov_y": 45},
-                       "resolution": [24, 18]},
-            "environment": {"path": str(env), "background": "hide", "rotation_y": 25},
-            "materials": {"gold": {"base_color": [1.0, 0.78, 0.34], "metallic": 1, "roughness": 0.4},
-                          "mirror": {"base_color": [0.9, 0.9, 0.9], "metallic": 1, "roughness": 0},
-                          "floor": {"base_color": [0.5, 0.45, 0.4], "roughness": 0.8}},
-            "objects": objects + [{"plane": {"point": [0, 0, 0], "size": 5}, "material": "floor"}],
-            "lights": lights,
-            "effects": {"diffuse": "reference", "specular": "reference",
-                        "reference": {"max_samples": 16, "target_noise": 0, "batch": 6, "bounces": "unbounded",
-                                      "seed": 7, "paths": paths}}})
-        with pytest.MonkeyPatch.context() as mp:
-            mp.setattr(ref_pass, "wave_paths", lambda rt: 4 * 24 * 18)
-            f = render(sc, cache_root=tmp_path / "cache")
-        ran(f, paths)
-        assert ("PATH_LIGHTS" in f.report["effects"]["defines"]["reference"]) == bool(lights)
-        frames[paths] = f.hdr[..., :3]
+    frames = {paths: equal_scene_frame(tmp_path, name, paths).hdr[..., :3] for paths in PATHS}
     a, b = frames["megakernel"], frames["wavefront"]
     hit = a.sum(-1) > 0
     rel = np.abs(a[hit] - b[hit]) / np.maximum(np.abs(a[hit]), 1e-6)
@@ -517,6 +521,22 @@ def test_wavefront_frame_is_the_megakernels(tmp_path, name):
           f"means {a[hit].mean():.6f} / {b[hit].mean():.6f}")
     assert hit.sum() > 200 and np.isfinite(b).all()
     assert rel.max() < 1e-6
+
+
+def test_prefetching_changes_no_bit(tmp_path, monkeypatch):
+    """A CPU's kernels prefetch the panorama's texels (device/runtime.py device_options,
+    IBL_PREFETCH); a GPU's are built without: the knot's frame (escaped rays and environment
+    samples at every vertex) is the same bit for bit either way."""
+    from iblbake.device import runtime
+    rt = runtime.Runtime()
+    assert "-DIBL_PREFETCH=1" in rt.device_options
+    with_it = equal_scene_frame(tmp_path, "knot", "megakernel", rt)
+    options = runtime.device_options
+    monkeypatch.setattr(runtime, "device_options", lambda info: [o for o in options(info) if "PREFETCH" not in o])
+    rt = runtime.Runtime()
+    assert "-DIBL_PREFETCH=1" not in rt.device_options
+    without = equal_scene_frame(tmp_path, "knot", "megakernel", rt)
+    np.testing.assert_array_equal(with_it.hdr, without.hdr)
 
 
 def test_paths_key_takes_its_three_values_only(tmp_path, white):

@@ -389,9 +389,12 @@ DENORMS = "-cl-denorms-are-zero"
 
 
 def device_options(info: DeviceInfo) -> list[str]:
-    """Build options one runtime needs. Intel's CPU runtime: every function inlined (kernels/inline.h:
-    it passes float3 arguments of out-of-line calls from vectorised kernels wrongly), and the
-    reference kept scalar where it traces triangles (kernels/paths/reference.cl: divergent BVH lanes)."""
+    """Build options one runtime needs. Every CPU: the panorama's texels prefetched ahead of their
+    use (kernels/paths/paths.h env_prefetch: a work item there has no other path to run while a
+    load misses; a GPU hides the miss with other warps). Intel's CPU runtime: every function inlined
+    (kernels/inline.h: it passes float3 arguments of out-of-line calls from vectorised kernels
+    wrongly), and the reference kept scalar where it traces triangles (kernels/paths/reference.cl:
+    divergent BVH lanes)."""
     prefetch = ["-DIBL_PREFETCH=1"] if info.kind == "CPU" else []
     return prefetch + (["-DIBL_ALWAYS_INLINE=1", "-DIBL_SCALAR_BVH=1"] if _is_intel_cpu(info) else [])
 
