@@ -99,39 +99,30 @@ IBL_INLINE RayShear ray_shear(float3 d)
     return r;
 }
 
-/* Watertight test on the corners themselves: each edge function depends only on its two
- * corners (bit-identical in the triangles that share them) and flips sign exactly between the
- * two, so a ray through a shared edge hits at least one of the triangles (Moller-Trumbore on
- * per-triangle edge vectors let a few rays through). FP_CONTRACT OFF keeps a*b - c*d unfused,
- * which that exact antisymmetry needs. Returns t and the barycentrics of v1 and v2. */
+/* Watertight test on the corners themselves, of a BVH leaf's up to four triangles at once (lf:
+ * its record, kernels/layout.h BVH_LEAF, the corners by coordinate, a lane a triangle; okx, oky,
+ * okz: the ray's origin on the sheared axes): each edge function depends only on its two corners
+ * (bit-identical in the triangles that share them) and flips sign exactly between the two, so a
+ * ray through a shared edge hits at least one of the triangles (Moller-Trumbore on per-triangle
+ * edge vectors let a few rays through). FP_CONTRACT OFF keeps a*b - c*d unfused, which that
+ * exact antisymmetry needs. Returns each lane's t (*in: whether it hits in (tmin, tmax)) and the
+ * barycentrics of v1 and v2. A missing triangle's lanes are zero: det 0, no hit. */
 #pragma OPENCL FP_CONTRACT OFF
-IBL_INLINE float hit_triangle(float3 o, RayShear rs, float3 v0, float3 v1, float3 v2, float tmin, float tmax,
-                          float *b1, float *b2)
+IBL_INLINE float4 hit_leaf(__global const float4 *lf, RayShear rs, float okx, float oky, float okz, float tmin,
+                           float tmax, float4 *b1, float4 *b2, int4 *in)
 {
-    const float3 A = v0 - o, B = v1 - o, C = v2 - o;
-    const float az = component(A, rs.kz), bz = component(B, rs.kz), cz = component(C, rs.kz);
-    const float ax = component(A, rs.kx) - rs.sx * az, ay = component(A, rs.ky) - rs.sy * az;
-    const float bx = component(B, rs.kx) - rs.sx * bz, by = component(B, rs.ky) - rs.sy * bz;
-    const float cx = component(C, rs.kx) - rs.sx * cz, cy = component(C, rs.ky) - rs.sy * cz;
-    const float u = cx * by - cy * bx, v = ax * cy - ay * cx, w = bx * ay - by * ax;
-    if ((u < 0.0f || v < 0.0f || w < 0.0f) && (u > 0.0f || v > 0.0f || w > 0.0f)) return tmax;
-    const float det = u + v + w;
-    if (det == 0.0f) return tmax;
-    const float t = rs.sz * (u * az + v * bz + w * cz) / det;
-    if (!(t > tmin && t < tmax)) return tmax;
-    *b1 = v / det; *b2 = w / det;
+    const float4 az = lf[rs.kz] - okz, bz = lf[3 + rs.kz] - okz, cz = lf[6 + rs.kz] - okz;
+    const float4 ax = (lf[rs.kx] - okx) - rs.sx * az, ay = (lf[rs.ky] - oky) - rs.sy * az;
+    const float4 bx = (lf[3 + rs.kx] - okx) - rs.sx * bz, by = (lf[3 + rs.ky] - oky) - rs.sy * bz;
+    const float4 cx = (lf[6 + rs.kx] - okx) - rs.sx * cz, cy = (lf[6 + rs.ky] - oky) - rs.sy * cz;
+    const float4 u = cx * by - cy * bx, v = ax * cy - ay * cx, w = bx * ay - by * ax;
+    const float4 det = u + v + w;
+    const float4 t = rs.sz * (u * az + v * bz + w * cz) / det;
+    *in = ((u >= 0.0f & v >= 0.0f & w >= 0.0f) | (u <= 0.0f & v <= 0.0f & w <= 0.0f)) & det != 0.0f & t > tmin
+          & t < tmax;
+    *b1 = v / det;
+    *b2 = w / det;
     return t;
-}
-
-IBL_INLINE int box_hit(float3 o, float3 inv_d, float3 bmin, float3 bmax, float tmax, float *tnear)
-{
-    const float3 t0 = (bmin - o) * inv_d, t1 = (bmax - o) * inv_d;
-    const float3 lo = fmin(t0, t1), hi = fmax(t0, t1);
-    const float a = fmax(fmax(lo.x, lo.y), fmax(lo.z, 0.0f));
-    /* far bound widened by 2 gamma(3) (Ize 2013): rounding never drops a box a ray grazes */
-    const float b = fmin(fmin(hi.x, hi.y), fmin(hi.z, tmax)) * 1.0000004f;
-    *tnear = a;
-    return a <= b;
 }
 
 typedef struct {
@@ -367,10 +358,10 @@ IBL_INLINE Hit trace_range(float3 o, float3 d, float tmin, float tmax, int any_h
          * pushed only when the ray meets its box, with its entry distance, nearest last so it is
          * popped first: a shadow ray pops without a second box test (its tmax never shrinks), a
          * closest-hit ray only checks that entry against the nearest hit found since. The far
-         * bound is widened by 2 gamma(3) (Ize 2013): rounding never drops a box a ray grazes. */
+         * bound is widened by 2 gamma(3) (Ize 2013): rounding never drops a box a ray grazes.
+         * The stack holds every tree the builder makes (scene/bvh.py widen bounds its depth). */
         const int nx = inv_d.x >= 0.0f ? 0 : 3, ny = inv_d.y >= 0.0f ? 1 : 4, nz = inv_d.z >= 0.0f ? 2 : 5;
-        const int kx = rs.kx, ky = rs.ky, kz = rs.kz;
-        const float okx = component(o, kx), oky = component(o, ky), okz = component(o, kz);
+        const float okx = component(o, rs.kx), oky = component(o, rs.ky), okz = component(o, rs.kz);
         int stack[BVH_STACK];
         float near[BVH_STACK];
         stack[0] = 0; near[0] = 0.0f;
@@ -380,22 +371,15 @@ IBL_INLINE Hit trace_range(float3 o, float3 d, float tmin, float tmax, int any_h
             if (!any_hit && near[sp] > h.t * 1.0000004f) continue;
             const int code = stack[sp];
             if (code < 0) {
-                /* a leaf: its triangles' watertight tests (hit_triangle's, the same operations in
-                 * the same order, so the same bits) a lane each, then taken in order as there */
+                /* a leaf: its triangles tested a lane each, then taken in order */
                 __global const float4 *lf = bvh + (-1 - code);
-                const float4 az = lf[kz] - okz, bz = lf[3 + kz] - okz, cz = lf[6 + kz] - okz;
-                const float4 ax = (lf[kx] - okx) - rs.sx * az, ay = (lf[ky] - oky) - rs.sy * az;
-                const float4 bx = (lf[3 + kx] - okx) - rs.sx * bz, by = (lf[3 + ky] - oky) - rs.sy * bz;
-                const float4 cx = (lf[6 + kx] - okx) - rs.sx * cz, cy = (lf[6 + ky] - oky) - rs.sy * cz;
-                const float4 u = cx * by - cy * bx, v = ax * cy - ay * cx, w = bx * ay - by * ax;
-                const float4 det = u + v + w;
-                const float4 t4 = rs.sz * (u * az + v * bz + w * cz) / det;
-                const int4 in = ((u >= 0.0f & v >= 0.0f & w >= 0.0f) | (u <= 0.0f & v <= 0.0f & w <= 0.0f))
-                                & det != 0.0f & t4 > tmin & t4 < h.t;
+                float4 b1, b2;
+                int4 in;
+                const float4 t = hit_leaf(lf, rs, okx, oky, okz, tmin, h.t, &b1, &b2, &in);
                 if (!any(in)) continue;
                 float tl[4], b1l[4], b2l[4];
                 int inl[4];
-                vstore4(t4, 0, tl); vstore4(v / det, 0, b1l); vstore4(w / det, 0, b2l); vstore4(in, 0, inl);
+                vstore4(t, 0, tl); vstore4(b1, 0, b1l); vstore4(b2, 0, b2l); vstore4(in, 0, inl);
                 const int first = as_int(lf[9].x), count = as_int(lf[9].y);
                 for (int j = 0; j < count; ++j) {
                     if (inl[j] && tl[j] < h.t && PRESENT(PRIM_TRIANGLE, first + j, tl[j], b1l[j], b2l[j])) {
@@ -411,7 +395,7 @@ IBL_INLINE Hit trace_range(float3 o, float3 d, float tmin, float tmax, int any_h
             const float4 t1 = fmin(fmin((node[3 - nx] - o.x) * inv_d.x, (node[5 - ny] - o.y) * inv_d.y),
                                    fmin((node[7 - nz] - o.z) * inv_d.z, (float4)(h.t))) * 1.0000004f;
             const int4 met = t0 <= t1;
-            int mask = (met.x & 1) | (met.y & 2) | (met.z & 4) | (met.w & 8);
+            const int mask = (met.x & 1) | (met.y & 2) | (met.z & 4) | (met.w & 8);
             if (!mask) continue;
             float tn[4];
             int child[4];
