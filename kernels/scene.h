@@ -99,15 +99,20 @@ IBL_INLINE RayShear ray_shear(float3 d)
     return r;
 }
 
+/* The triangles' and the boxes' tests of the two BVH layouts (scene/bvh.py): the 4-wide tree on a
+ * CPU, whose float4 lanes are SIMD there, the binary tree on a GPU, where the wide one's private
+ * arrays and lanes cost more than its fewer nodes save (IBL_WIDE_BVH: iblbake/device/runtime.py
+ * device_options; docs/benchmarks.md "A 4-wide BVH"). FP_CONTRACT OFF keeps a*b - c*d unfused,
+ * which the watertight test's exact antisymmetry needs. */
+#pragma OPENCL FP_CONTRACT OFF
+#ifdef IBL_WIDE_BVH
 /* Watertight test on the corners themselves, of a BVH leaf's up to four triangles at once (lf:
  * its record, kernels/layout.h BVH_LEAF, the corners by coordinate, a lane a triangle; okx, oky,
  * okz: the ray's origin on the sheared axes): each edge function depends only on its two corners
  * (bit-identical in the triangles that share them) and flips sign exactly between the two, so a
  * ray through a shared edge hits at least one of the triangles (Moller-Trumbore on per-triangle
- * edge vectors let a few rays through). FP_CONTRACT OFF keeps a*b - c*d unfused, which that
- * exact antisymmetry needs. Returns each lane's t (*in: whether it hits in (tmin, tmax)) and the
+ * edge vectors let a few rays through). Returns each lane's t (*in: whether it hits in (tmin, tmax)) and the
  * barycentrics of v1 and v2. A missing triangle's lanes are zero: det 0, no hit. */
-#pragma OPENCL FP_CONTRACT OFF
 IBL_INLINE float4 hit_leaf(__global const float4 *lf, RayShear rs, float okx, float oky, float okz, float tmin,
                            float tmax, float4 *b1, float4 *b2, int4 *in)
 {
@@ -124,6 +129,39 @@ IBL_INLINE float4 hit_leaf(__global const float4 *lf, RayShear rs, float okx, fl
     *b2 = w / det;
     return t;
 }
+#else
+/* The same watertight test of one triangle (the binary tree's leaves), the same operations in the
+ * same order: the two layouts meet the same triangles at the same t, bit for bit. Returns t and
+ * the barycentrics of v1 and v2. */
+IBL_INLINE float hit_triangle(float3 o, RayShear rs, float3 v0, float3 v1, float3 v2, float tmin, float tmax,
+                          float *b1, float *b2)
+{
+    const float3 A = v0 - o, B = v1 - o, C = v2 - o;
+    const float az = component(A, rs.kz), bz = component(B, rs.kz), cz = component(C, rs.kz);
+    const float ax = component(A, rs.kx) - rs.sx * az, ay = component(A, rs.ky) - rs.sy * az;
+    const float bx = component(B, rs.kx) - rs.sx * bz, by = component(B, rs.ky) - rs.sy * bz;
+    const float cx = component(C, rs.kx) - rs.sx * cz, cy = component(C, rs.ky) - rs.sy * cz;
+    const float u = cx * by - cy * bx, v = ax * cy - ay * cx, w = bx * ay - by * ax;
+    if ((u < 0.0f || v < 0.0f || w < 0.0f) && (u > 0.0f || v > 0.0f || w > 0.0f)) return tmax;
+    const float det = u + v + w;
+    if (det == 0.0f) return tmax;
+    const float t = rs.sz * (u * az + v * bz + w * cz) / det;
+    if (!(t > tmin && t < tmax)) return tmax;
+    *b1 = v / det; *b2 = w / det;
+    return t;
+}
+
+IBL_INLINE int box_hit(float3 o, float3 inv_d, float3 bmin, float3 bmax, float tmax, float *tnear)
+{
+    const float3 t0 = (bmin - o) * inv_d, t1 = (bmax - o) * inv_d;
+    const float3 lo = fmin(t0, t1), hi = fmax(t0, t1);
+    const float a = fmax(fmax(lo.x, lo.y), fmax(lo.z, 0.0f));
+    /* far bound widened by 2 gamma(3) (Ize 2013): rounding never drops a box a ray grazes */
+    const float b = fmin(fmin(hi.x, hi.y), fmin(hi.z, tmax)) * 1.0000004f;
+    *tnear = a;
+    return a <= b;
+}
+#endif
 
 typedef struct {
     float t;
@@ -352,6 +390,7 @@ IBL_INLINE Hit trace_range(float3 o, float3 d, float tmin, float tmax, int any_h
         const float3 inv_d = (float3)(1.0f / (d.x != 0.0f ? d.x : 1e-30f), 1.0f / (d.y != 0.0f ? d.y : 1e-30f),
                                       1.0f / (d.z != 0.0f ? d.z : 1e-30f));
         const RayShear rs = ray_shear(d);
+#ifdef IBL_WIDE_BVH
         /* A wide node (scene/bvh.py widen) holds four children's boxes a lane each: one float4
          * slab test meets all four (the near plane per axis chosen by the ray's sign, as Embree
          * does: an empty child's (+inf, -inf) box is then missed on every axis). A child is
@@ -389,7 +428,7 @@ IBL_INLINE Hit trace_range(float3 o, float3 d, float tmin, float tmax, int any_h
                 }
                 continue;
             }
-            __global const float4 *node = bvh + BVH_NODE_FLOAT4S * code;
+            __global const float4 *node = bvh + BVH4_NODE_FLOAT4S * code;
             const float4 t0 = fmax(fmax((node[nx] - o.x) * inv_d.x, (node[ny] - o.y) * inv_d.y),
                                    fmax((node[nz] - o.z) * inv_d.z, (float4)(0.0f)));
             const float4 t1 = fmin(fmin((node[3 - nx] - o.x) * inv_d.x, (node[5 - ny] - o.y) * inv_d.y),
@@ -411,6 +450,47 @@ IBL_INLINE Hit trace_range(float3 o, float3 d, float tmin, float tmax, int any_h
                 stack[i] = child[j]; near[i] = tj;
             }
         }
+#else
+        /* A node is pushed only when the ray meets its box, with its entry distance: a shadow ray
+         * pops without a second box test (its tmax never shrinks), a closest-hit ray only checks
+         * that entry against the nearest hit found since (the same test, as box_hit's near bound
+         * is the entry and its far bound the widened min of the slabs' and tmax). */
+        int stack[64];
+        float near[64];
+        int sp = 0;
+        float tn;
+        if (box_hit(o, inv_d, bvh[0].xyz, bvh[1].xyz, h.t, &tn)) { stack[0] = 0; near[0] = tn; sp = 1; }
+        while (sp > 0) {
+            --sp;
+            if (!any_hit && near[sp] > h.t * 1.0000004f) continue;
+            const int ni = stack[sp];
+            const float4 a = bvh[2 * ni], b = bvh[2 * ni + 1];
+            const int count = as_int(b.w), first = as_int(a.w);
+            if (count > 0) {
+                for (int k = first; k < first + count; ++k) {
+                    float b1, b2;
+                    const float t = hit_triangle(o, rs, tris[6 * k].xyz, tris[6 * k + 1].xyz, tris[6 * k + 2].xyz,
+                                                 tmin, h.t, &b1, &b2);
+                    if (t < h.t && PRESENT(PRIM_TRIANGLE, k, t, b1, b2)) {
+                        h.t = t; h.kind = PRIM_TRIANGLE; h.index = k; h.b1 = b1; h.b2 = b2;
+                        if (any_hit) return h;
+                    }
+                }
+            } else if (sp < 62) {
+                /* nearer child last so it is popped first */
+                const float4 la = bvh[2 * first], lb = bvh[2 * first + 1];
+                const float4 ra = bvh[2 * first + 2], rb = bvh[2 * first + 3];
+                float tl, tr;
+                const int hl = box_hit(o, inv_d, la.xyz, lb.xyz, h.t, &tl);
+                const int hr = box_hit(o, inv_d, ra.xyz, rb.xyz, h.t, &tr);
+                if (hl && hr) {
+                    if (tl <= tr) { stack[sp] = first + 1; near[sp++] = tr; stack[sp] = first; near[sp++] = tl; }
+                    else { stack[sp] = first; near[sp++] = tl; stack[sp] = first + 1; near[sp++] = tr; }
+                } else if (hl) { stack[sp] = first; near[sp++] = tl; }
+                else if (hr) { stack[sp] = first + 1; near[sp++] = tr; }
+            }
+        }
+#endif
     }
 #endif
     return h;

@@ -74,7 +74,7 @@ def _check_device_tree(bvh, v0, v1, v2):
     rec = device_tree(bvh, v0[bvh.order], v1[bvh.order], v2[bvh.order])
     ints = rec.view(np.int32)
     n_nodes = len(bvh.wide)
-    assert rec.shape == (n_nodes * FLOAT4S["BVH_NODE"] + len(bvh.leaves) * FLOAT4S["BVH_LEAF"], 4)
+    assert rec.shape == (n_nodes * FLOAT4S["BVH4_NODE"] + len(bvh.leaves) * FLOAT4S["BVH4_LEAF"], 4)
     lo, hi = np.minimum(np.minimum(v0, v1), v2), np.maximum(np.maximum(v0, v1), v2)
     seen = np.zeros(len(v0), int)
     depth = 0
@@ -84,7 +84,7 @@ def _check_device_tree(bvh, v0, v1, v2):
         depth = max(depth, level)
         if code < 0:
             off = -1 - code
-            assert off >= n_nodes * FLOAT4S["BVH_NODE"] and (off - n_nodes * FLOAT4S["BVH_NODE"]) % FLOAT4S["BVH_LEAF"] == 0
+            assert off >= n_nodes * FLOAT4S["BVH4_NODE"] and (off - n_nodes * FLOAT4S["BVH4_NODE"]) % FLOAT4S["BVH4_LEAF"] == 0
             first, count = ints[off + 9, 0], ints[off + 9, 1]
             assert 1 <= count <= WIDTH
             prims = bvh.order[first:first + count]
@@ -95,7 +95,7 @@ def _check_device_tree(bvh, v0, v1, v2):
                 np.testing.assert_array_equal(lanes[:count], v[prims].astype(np.float32))
                 assert (lanes[count:] == 0).all()
             return
-        base = FLOAT4S["BVH_NODE"] * code
+        base = FLOAT4S["BVH4_NODE"] * code
         for j in range(WIDTH):
             clo, chi = rec[base:base + 3, j], rec[base + 3:base + 6, j]
             if np.isinf(clo).all() and (clo > 0).all():

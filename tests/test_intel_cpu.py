@@ -105,8 +105,9 @@ def test_device_specs_name_the_runtimes_and_pocl_stays_the_default():
     assert cl._candidates(devs, "cpu") == [pocl_on_intel, intel]     # PoCL first, whatever the order listed
     assert cl._candidates(devs, None) == [intel_gpu, pocl_on_intel, intel]
     assert cl._candidates(devs, "cpu:0") == [intel]                  # cpu:N stays enumeration order
-    assert cl.device_options(intel) == ["-DIBL_PREFETCH=1", "-DIBL_ALWAYS_INLINE=1", "-DIBL_SCALAR_BVH=1"]
-    assert cl.device_options(pocl_on_intel) == ["-DIBL_PREFETCH=1"]               # every CPU
+    cpu = ["-DIBL_WIDE_BVH=1", "-DIBL_PREFETCH=1"]                    # every CPU
+    assert cl.device_options(intel) == cpu + ["-DIBL_ALWAYS_INLINE=1", "-DIBL_SCALAR_BVH=1"]
+    assert cl.device_options(pocl_on_intel) == cpu
     assert cl.device_options(intel_gpu) == []
 
 

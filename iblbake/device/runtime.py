@@ -387,16 +387,22 @@ def _cache_dir() -> str:
 # for FTZ and DAZ for the same reason. tests/test_conventions.py checks that a kernel flushes.
 DENORMS = "-cl-denorms-are-zero"
 
+# The BVH a device's kernels traverse (kernels/scene.h, scene/bvh.py): the 4-wide tree on a CPU,
+# where its float4 box and triangle tests run as SIMD (the knot's reference 1.2-1.35x faster),
+# the binary tree on a GPU, where the wide one was 1.2-1.4x slower (an H100; docs/benchmarks.md
+# "A 4-wide BVH"). device_scene.geometry_tables uploads the one named here.
+WIDE_BVH = "-DIBL_WIDE_BVH=1"
+
 
 def device_options(info: DeviceInfo) -> list[str]:
-    """Build options one runtime needs. Every CPU: the panorama's texels prefetched ahead of their
-    use (kernels/paths/paths.h env_prefetch: a work item there has no other path to run while a
-    load misses; a GPU hides the miss with other warps). Intel's CPU runtime: every function inlined
+    """Build options one runtime needs. Every CPU: the 4-wide BVH (WIDE_BVH), and the panorama's
+    texels prefetched ahead of their use (kernels/paths/paths.h env_prefetch: a work item there has
+    no other path to run while a load misses; a GPU hides the miss with other warps). Intel's CPU runtime: every function inlined
     (kernels/inline.h: it passes float3 arguments of out-of-line calls from vectorised kernels
     wrongly), and the reference kept scalar where it traces triangles (kernels/paths/reference.cl:
     divergent BVH lanes)."""
-    prefetch = ["-DIBL_PREFETCH=1"] if info.kind == "CPU" else []
-    return prefetch + (["-DIBL_ALWAYS_INLINE=1", "-DIBL_SCALAR_BVH=1"] if _is_intel_cpu(info) else [])
+    cpu = [WIDE_BVH, "-DIBL_PREFETCH=1"] if info.kind == "CPU" else []
+    return cpu + (["-DIBL_ALWAYS_INLINE=1", "-DIBL_SCALAR_BVH=1"] if _is_intel_cpu(info) else [])
 
 
 class Runtime:

@@ -139,21 +139,22 @@ class Bakes:
 
         def make():
             def build(tmp: Path):
-                arr, nodes, report, attr, closed = pack.mesh_arrays(sc)
+                arr, nodes, wide, report, attr, closed = pack.mesh_arrays(sc)
                 np.save(tmp / "triangles.npy", arr)
                 np.save(tmp / "bvh.npy", nodes)
+                np.save(tmp / "bvh4.npy", wide)
                 np.save(tmp / "attributes.npy", attr)
                 np.save(tmp / "closed.npy", closed)
-                return {"kind": "geometry", "files": [{"name": n} for n in ("triangles.npy", "bvh.npy",
+                return {"kind": "geometry", "files": [{"name": n} for n in ("triangles.npy", "bvh.npy", "bvh4.npy",
                                                                           "attributes.npy", "closed.npy")],
                         "report": report}
 
             manifest, cached = cache.get_or_build(self.root, key, build, warn=warn)
             entry = self.root / manifest["key"]
-            arrays = (np.load(entry / "triangles.npy"), np.load(entry / "bvh.npy"),
+            arrays = (np.load(entry / "triangles.npy"), np.load(entry / "bvh.npy"), np.load(entry / "bvh4.npy"),
                       {**manifest["report"], "cached": cached}, np.load(entry / "attributes.npy"),
                       np.load(entry / "closed.npy"))
-            self._meshes[id(arrays[1])] = (key, arrays[1], arrays[3])
+            self._meshes[id(arrays[1])] = (key, arrays[1], arrays[4])
             return arrays
 
         meshes_arrays = self._get(("geometry", key), make)
@@ -243,7 +244,8 @@ class Bakes:
                 devtex = (rt.to_device(np.zeros((1, 4), np.float32)), rt.to_device(np.zeros((1, 4), np.int32)),
                           rt.to_device(np.zeros((1, 4), np.int32)))
             table = dscene.tables(rt, arrays, mat_maps, geometry, devtex, len(tex[2]) if slots else 0)
-            shared = dataclasses.replace(arrays, tris=held.tris, bvh=held.bvh, tri_attr=held.tri_attr)
+            shared = dataclasses.replace(arrays, tris=held.tris, bvh=held.bvh, bvh_wide=held.bvh_wide,
+                                         tri_attr=held.tri_attr)
             return dscene.DeviceScene(shared, table, key)
         return self._get(("device-scene", id(rt), key), make)
 

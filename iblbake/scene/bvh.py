@@ -167,7 +167,7 @@ WIDTH = 4
 def widen(nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
     """The binary tree `nodes` (build_bvh's, children adjacent) collapsed two levels into one:
     each node of the wide tree holds up to four children (a binary node's grandchildren, or its
-    child where that is a leaf), in records of 8 float4 (kernels/layout.h BVH_NODE): the four
+    child where that is a leaf), in records of 8 float4 (kernels/layout.h BVH4_NODE): the four
     children's min x, min y, min z, max x, max y, max z (one float4 each, a lane per child), their
     codes (int bits: a node's index, or -1 - the float4 offset of a leaf's record, which follow the
     nodes: device_tree), and padding to 128 bytes (two cache lines). An empty child's box is
@@ -204,10 +204,10 @@ def widen(nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
     leaf = present & ~is_node
     code = np.full(len(flat), -1, np.int64)
     code[is_node] = 1 + np.arange(int(is_node.sum()))
-    code[leaf] = -1 - (total * FLOAT4S["BVH_NODE"] + FLOAT4S["BVH_LEAF"] * np.arange(int(leaf.sum())))
+    code[leaf] = -1 - (total * FLOAT4S["BVH4_NODE"] + FLOAT4S["BVH4_LEAF"] * np.arange(int(leaf.sum())))
     lo = np.where(present[:, None], nodes[np.maximum(flat, 0), 0:3], np.inf).reshape(total, WIDTH, 3)
     hi = np.where(present[:, None], nodes[np.maximum(flat, 0), 4:7], -np.inf).reshape(total, WIDTH, 3)
-    out = np.zeros((total, FLOAT4S["BVH_NODE"], 4), np.float32)
+    out = np.zeros((total, FLOAT4S["BVH4_NODE"], 4), np.float32)
     out[:, 0:3] = lo.transpose(0, 2, 1)
     out[:, 3:6] = hi.transpose(0, 2, 1)
     out.view(np.int32)[:, 6] = code.reshape(total, WIDTH)
@@ -217,14 +217,14 @@ def widen(nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
 def device_tree(bvh: BVH, v0: np.ndarray, v1: np.ndarray, v2: np.ndarray) -> np.ndarray:
     """The (m, 4) float32 records kernels/scene.h traverses: the wide nodes, then per leaf (in
     bvh.leaves' order) its triangles' corners by coordinate, a lane per triangle (kernels/layout.h
-    BVH_LEAF: v0 x, y, z, v1 x, y, z, v2 x, y, z; a missing triangle's lanes all zero, a degenerate
+    BVH4_LEAF: v0 x, y, z, v1 x, y, z, v2 x, y, z; a missing triangle's lanes all zero, a degenerate
     triangle no ray meets) and (first, count, -, -) as int bits. v0, v1, v2: the corners in the
     BVH's primitive order (bvh.order applied)."""
     first, count = bvh.leaves[:, 0], bvh.leaves[:, 1]
     lanes = np.arange(WIDTH)
     k = np.minimum(first[:, None] + lanes, len(v0) - 1)
     here = lanes < count[:, None]
-    leaf = np.zeros((len(first), FLOAT4S["BVH_LEAF"], 4), np.float32)
+    leaf = np.zeros((len(first), FLOAT4S["BVH4_LEAF"], 4), np.float32)
     for c, v in enumerate((v0, v1, v2)):
         leaf[:, 3 * c:3 * c + 3] = np.where(here[..., None], v[k], 0).transpose(0, 2, 1)
     leaf.view(np.int32)[:, 9, 0], leaf.view(np.int32)[:, 9, 1] = first, count

@@ -40,12 +40,14 @@ FLOAT4S = {
     "PLANE": 5,      # (point, material), (normal, object), (tangent, half width), (bitangent, half depth),
                      # (surface flags, -, -, -)
     "TRIANGLE": 6,   # v0|material, v1|object, v2|surface flags, n0, n1, n2
-    # four children's min x, min y, min z, max x, max y, max z (a lane each), their codes (int: a
-    # node's index, or -1 - a leaf's float4 offset in the same buffer), padding (scene/bvh.py widen)
-    "BVH_NODE": 8,
+    "BVH_NODE": 2,   # the binary tree's (GPUs): (min, first), (max, count)
+    # the 4-wide tree's (CPUs): four children's min x, min y, min z, max x, max y, max z (a lane
+    # each), their codes (int: a node's index, or -1 - a leaf's float4 offset in the same buffer),
+    # padding (scene/bvh.py widen)
+    "BVH4_NODE": 8,
     # a leaf's up to four triangles: v0 x, y, z, v1 x, y, z, v2 x, y, z (a lane each), (first, count |
     # int) (scene/bvh.py device_tree)
-    "BVH_LEAF": 10,
+    "BVH4_LEAF": 10,
     # (position, or the unit direction towards a directional light | kind), (colour x intensity or
     # illuminance | shadow mode), (spot axis, the way light travels | radius, or a directional
     # light's angular radius in radians), (spot scale, spot offset, range (0: none), shadow samples)
@@ -86,8 +88,8 @@ GBUFFER = {
     "gb_mat": "3 per sample: (base colour, metallic), (emissive, roughness), (shading normal, occlusion)",
 }
 MISS_T = -1.0
-# entries of the kernels' BVH traversal stack (kernels/scene.h trace_range): a wide node pushes at
-# most 4 and pops one, so a tree of d levels needs 3 d + 1 (scene/bvh.py widen checks)
+# entries of the kernels' traversal stack of the 4-wide BVH (kernels/scene.h trace_range): a node
+# pushes at most 4 and pops one, so a tree of d levels needs 3 d + 1 (scene/bvh.py widen checks)
 BVH_STACK = 96
 
 

@@ -53,11 +53,12 @@ class SceneArrays:
     spheres: np.ndarray       # (s, 2, 4) float32
     planes: np.ndarray        # (p, 5, 4) float32
     tris: np.ndarray          # (t, 6, 4) float32, BVH order: v0|material, v1|object, v2, 3 normals
-    bvh: np.ndarray           # (records, 4) float32: the wide nodes and leaves (scene/bvh.py device_tree)
+    bvh: np.ndarray           # (nodes, 8) float32: the binary tree (scene/bvh.py build_bvh), a GPU's
     geometry_report: dict
     tri_attr: np.ndarray | None = None      # (t, TRIANGLE_ATTR, 4) float32, BVH order (uv, tangents, density)
     records: list | None = None             # the material table (iblbake.scene.materials)
     tri_closed: np.ndarray | None = None    # (t, 2) int32, BVH order: component, its solid (geometry.closed_components)
+    bvh_wide: np.ndarray | None = None      # (records, 4) float32: the 4-wide tree, a CPU's (scene/bvh.py device_tree)
 
 
 def _int_bits(x):
@@ -65,8 +66,8 @@ def _int_bits(x):
 
 
 def scene_arrays(scene: Scene, meshes=None) -> SceneArrays:
-    """Every record the device reads but the textures. `meshes`, the (triangles, BVH nodes,
-    report, triangle attributes, closed parts) of mesh_arrays(), may come from a cache (they are the costly
+    """Every record the device reads but the textures. `meshes`, the (triangles, BVH nodes, 4-wide
+    BVH records, report, triangle attributes, closed parts) of mesh_arrays(), may come from a cache (they are the costly
     part: a 1.3M-triangle PLY takes seconds to load and split)."""
     from iblbake.scene import materials
 
@@ -97,7 +98,7 @@ def scene_arrays(scene: Scene, meshes=None) -> SceneArrays:
             a[3, :3], a[3, 3] = b, hd
             a[4, 0] = _int_bits(flags[index[o["material"]]])
             planes.append(a)
-    arr, nodes, report, attr, closed = meshes if meshes is not None else mesh_arrays(scene)
+    arr, nodes, wide, report, attr, closed = meshes if meshes is not None else mesh_arrays(scene)
     if len(arr):                     # the flags of the triangles' materials now (the cache keeps none)
         arr = arr.copy()
         tri_flags = flags[arr[:, 0, 3].view(np.int32)]
@@ -109,7 +110,7 @@ def scene_arrays(scene: Scene, meshes=None) -> SceneArrays:
         if solid_object(d["objects"][oid], True, _camera_inside_sphere(scene, s[0])):
             s[1, 2] = _int_bits(f | SURFACE_FLAGS["solid"])
     return SceneArrays(mats, names, spheres, np.array(planes, np.float32).reshape(-1, FLOAT4S["PLANE"], 4), arr, nodes,
-                       report, attr, records, closed)
+                       report, attr, records, closed, wide)
 
 
 def solids_digest(arrays: SceneArrays) -> str:
@@ -164,10 +165,10 @@ def solid_flags(scene: Scene, arr, closed, tri_flags) -> np.ndarray:
 
 
 def mesh_arrays(scene: Scene):
-    """(triangles (t, 6, 4) float32 in BVH order, BVH records (n, 4) float32 (bvh.device_tree), report, triangle
-    attributes (t, TRIANGLE_ATTR, 4) float32 in BVH order, closed parts (t, 2) int32 in BVH order:
-    component and solid, geometry.closed_components) of every mesh object of the scene, in world
-    space."""
+    """(triangles (t, 6, 4) float32 in BVH order, the binary BVH's nodes (n, 8) float32, the 4-wide
+    BVH's records (m, 4) float32 (bvh.device_tree), report, triangle attributes (t, TRIANGLE_ATTR, 4)
+    float32 in BVH order, closed parts (t, 2) int32 in BVH order: component and solid,
+    geometry.closed_components) of every mesh object of the scene, in world space."""
     from iblbake.scene import materials
 
     d = scene.data
@@ -189,8 +190,9 @@ def mesh_arrays(scene: Scene):
         arr[:, 1, :3], arr[:, 1, 3] = tris.v1[o], _int_bits(tris.object_id[o])
         arr[:, 2, :3] = tris.v2[o]
         arr[:, 3:6, :3] = tris.normals[o]
-        nodes = device_tree(bvh, arr[:, 0, :3], arr[:, 1, :3], arr[:, 2, :3])
-        report.update({"bvh_build_s": round(bvh.build_s, 4), "bvh_nodes": len(bvh.wide), "bvh_depth": bvh.wide_depth})
+        nodes, wide = bvh.nodes, device_tree(bvh, arr[:, 0, :3], arr[:, 1, :3], arr[:, 2, :3])
+        report.update({"bvh_build_s": round(bvh.build_s, 4), "bvh_nodes": bvh.node_count, "bvh_depth": bvh.depth,
+                       "bvh4_nodes": len(bvh.wide), "bvh4_depth": bvh.wide_depth})
         attr = np.zeros((len(tris) if attributes else 0, FLOAT4S["TRIANGLE_ATTR"], 4), np.float32)
         if attributes:
             attr[:, 0:3] = np.nan_to_num(tris.uv[o])
@@ -198,14 +200,14 @@ def mesh_arrays(scene: Scene):
             attr[:, 6, :2] = tris.uv_density[o]
         closed = np.stack([tris.component[o], tris.solid[o]], 1).astype(np.int32)
     else:
-        arr, nodes, _report, attr, closed = no_meshes()
-    return arr, nodes, report, attr, closed
+        arr, nodes, wide, _report, attr, closed = no_meshes()
+    return arr, nodes, wide, report, attr, closed
 
 
 def no_meshes():
     """mesh_arrays() of a scene without a triangle"""
-    return (np.zeros((0, FLOAT4S["TRIANGLE"], 4), np.float32), np.zeros((0, 4), np.float32),
-            {"meshes": [], "triangles": 0, "load_s": 0.0}, np.zeros((0, FLOAT4S["TRIANGLE_ATTR"], 4), np.float32),
+    return (np.zeros((0, FLOAT4S["TRIANGLE"], 4), np.float32), np.zeros((0, 8), np.float32),
+            np.zeros((0, 4), np.float32), {"meshes": [], "triangles": 0, "load_s": 0.0}, np.zeros((0, FLOAT4S["TRIANGLE_ATTR"], 4), np.float32),
             np.zeros((0, 2), np.int32))
 
 
