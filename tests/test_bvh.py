@@ -84,7 +84,8 @@ def _check_device_tree(bvh, v0, v1, v2):
         depth = max(depth, level)
         if code < 0:
             off = -1 - code
-            assert off >= n_nodes * FLOAT4S["BVH4_NODE"] and (off - n_nodes * FLOAT4S["BVH4_NODE"]) % FLOAT4S["BVH4_LEAF"] == 0
+            leaves_at = n_nodes * FLOAT4S["BVH4_NODE"]
+            assert off >= leaves_at and (off - leaves_at) % FLOAT4S["BVH4_LEAF"] == 0
             first, count = ints[off + 9, 0], ints[off + 9, 1]
             assert 1 <= count <= WIDTH
             prims = bvh.order[first:first + count]

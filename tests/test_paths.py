@@ -530,13 +530,13 @@ def test_a_gpus_build_gives_the_cpus_frame(tmp_path, monkeypatch):
     is the same bit for bit either way. The GPU's build runs here on the CPU."""
     from iblbake.device import runtime
     rt = runtime.Runtime()
-    assert {runtime.WIDE_BVH, "-DIBL_PREFETCH=1"} <= set(rt.device_options)
+    assert {runtime.WIDE_BVH, runtime.PREFETCH} <= set(rt.device_options)
     cpu = equal_scene_frame(tmp_path, "knot", "megakernel", rt)
     options = runtime.device_options
     monkeypatch.setattr(runtime, "device_options",
-                        lambda info: [o for o in options(info) if o not in (runtime.WIDE_BVH, "-DIBL_PREFETCH=1")])
+                        lambda info: [o for o in options(info) if o not in (runtime.WIDE_BVH, runtime.PREFETCH)])
     rt = runtime.Runtime()
-    assert not {runtime.WIDE_BVH, "-DIBL_PREFETCH=1"} & set(rt.device_options)
+    assert not {runtime.WIDE_BVH, runtime.PREFETCH} & set(rt.device_options)
     gpu = equal_scene_frame(tmp_path, "knot", "megakernel", rt)
     np.testing.assert_array_equal(cpu.hdr, gpu.hdr)
 

@@ -392,16 +392,18 @@ DENORMS = "-cl-denorms-are-zero"
 # the binary tree on a GPU, where the wide one was 1.2-1.4x slower (an H100; docs/benchmarks.md
 # "A 4-wide BVH"). device_scene.geometry_tables uploads the one named here.
 WIDE_BVH = "-DIBL_WIDE_BVH=1"
+# The panorama's texels prefetched ahead of their use, on a CPU (kernels/paths/paths.h env_prefetch)
+PREFETCH = "-DIBL_PREFETCH=1"
 
 
 def device_options(info: DeviceInfo) -> list[str]:
     """Build options one runtime needs. Every CPU: the 4-wide BVH (WIDE_BVH), and the panorama's
-    texels prefetched ahead of their use (kernels/paths/paths.h env_prefetch: a work item there has
-    no other path to run while a load misses; a GPU hides the miss with other warps). Intel's CPU runtime: every function inlined
-    (kernels/inline.h: it passes float3 arguments of out-of-line calls from vectorised kernels
-    wrongly), and the reference kept scalar where it traces triangles (kernels/paths/reference.cl:
-    divergent BVH lanes)."""
-    cpu = [WIDE_BVH, "-DIBL_PREFETCH=1"] if info.kind == "CPU" else []
+    texels prefetched ahead of their use (PREFETCH: a work item there has no other path to run
+    while a load misses; a GPU hides the miss with other warps). Intel's CPU
+    runtime: every function inlined (kernels/inline.h: it passes float3 arguments of out-of-line
+    calls from vectorised kernels wrongly), and the reference kept scalar where it traces triangles
+    (kernels/paths/reference.cl: divergent BVH lanes)."""
+    cpu = [WIDE_BVH, PREFETCH] if info.kind == "CPU" else []
     return cpu + (["-DIBL_ALWAYS_INLINE=1", "-DIBL_SCALAR_BVH=1"] if _is_intel_cpu(info) else [])
 
 

@@ -25,7 +25,7 @@ class BVH:
     order: np.ndarray      # primitive permutation (leaves hold contiguous runs of it)
     build_s: float
     depth: int
-    wide: np.ndarray       # (wide nodes, 8, 4) float32: the tree the kernels traverse (widen)
+    wide: np.ndarray       # (wide nodes, 8, 4) float32: the tree a CPU's kernels traverse (widen)
     leaves: np.ndarray     # (leaves, 2) int64: each wide leaf's first primitive and count
     wide_depth: int
 

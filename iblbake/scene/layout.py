@@ -108,8 +108,8 @@ def header_text() -> str:
     rows += [f"#define SURFACE_{k.upper()} {v}" for k, v in SURFACE_FLAGS.items()] + [""]
     rows += [f"#define {k}_FLOAT4S {v}" for k, v in FLOAT4S.items()] + [""]
     rows += [f"/* {k}: {v} */" for k, v in GBUFFER.items()]
-    rows += [f"#define MISS_T ({MISS_T}f)", f"#define DELTA_ALPHA {DELTA_ALPHA!r}f", f"#define ENV_GUIDE_BINS {ENV_GUIDE_BINS}",
-             f"#define BVH_STACK {BVH_STACK}"]
+    rows += [f"#define MISS_T ({MISS_T}f)", f"#define DELTA_ALPHA {DELTA_ALPHA!r}f",
+             f"#define ENV_GUIDE_BINS {ENV_GUIDE_BINS}", f"#define BVH_STACK {BVH_STACK}"]
     rows += [f"#define LUMINANCE_{c} {w!r}f" for c, w in zip("RGB", LUMINANCE.tolist())]
     rows += [f"#define STREAM_{k.upper()} {v:#x}u" for k, v in RANDOM_STREAMS.items()]
     rows += ["", "#endif", ""]

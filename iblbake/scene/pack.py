@@ -67,8 +67,8 @@ def _int_bits(x):
 
 def scene_arrays(scene: Scene, meshes=None) -> SceneArrays:
     """Every record the device reads but the textures. `meshes`, the (triangles, BVH nodes, 4-wide
-    BVH records, report, triangle attributes, closed parts) of mesh_arrays(), may come from a cache (they are the costly
-    part: a 1.3M-triangle PLY takes seconds to load and split)."""
+    BVH records, report, triangle attributes, closed parts) of mesh_arrays(), may come from a cache
+    (they are the costly part: a 1.3M-triangle PLY takes seconds to load and split)."""
     from iblbake.scene import materials
 
     d = scene.data
@@ -207,8 +207,8 @@ def mesh_arrays(scene: Scene):
 def no_meshes():
     """mesh_arrays() of a scene without a triangle"""
     return (np.zeros((0, FLOAT4S["TRIANGLE"], 4), np.float32), np.zeros((0, 8), np.float32),
-            np.zeros((0, 4), np.float32), {"meshes": [], "triangles": 0, "load_s": 0.0}, np.zeros((0, FLOAT4S["TRIANGLE_ATTR"], 4), np.float32),
-            np.zeros((0, 2), np.int32))
+            np.zeros((0, 4), np.float32), {"meshes": [], "triangles": 0, "load_s": 0.0},
+            np.zeros((0, FLOAT4S["TRIANGLE_ATTR"], 4), np.float32), np.zeros((0, 2), np.int32))
 
 
 def needs_attributes(scene: Scene) -> bool:

@@ -33,6 +33,14 @@ IBL_INLINE void env_prefetch(int texel, __global const float4 *img)
 #endif
 }
 
+/* the texel env_missed reads where a ray of direction l escapes (no work where nothing is fetched) */
+IBL_INLINE void env_prefetch_dir(float3 l, ENV_PARAMS)
+{
+#ifdef IBL_PREFETCH
+    env_prefetch(env_texel_index(to_env(l, env_rot), w, h), img);
+#endif
+}
+
 /* The environment a BSDF-sampled ray l (pdf pb; INFINITY for a mirror's, which no other strategy
  * finds) meets when it leaves the scene, weighted against the panorama's sampling */
 IBL_INLINE float3 env_missed(float3 l, float pb, ENV_PARAMS)
@@ -171,7 +179,7 @@ IBL_INLINE FirstVertex first_vertex(const Material mt, float3 v, float3 n, float
     const EnvDraw e = env_draw(u.env, ENV_ARGS);
     fv.beta = bsdf_sample(mt, v, n, t, b, nov, ps, diffuse, specular, u.lobe, u.dir, &fv.l, &fv.pdf);
     fv.live = fv.beta.x > 0.0f || fv.beta.y > 0.0f || fv.beta.z > 0.0f;
-    if (fv.live) env_prefetch(env_texel_index(to_env(fv.l, env_rot), w, h), img);
+    if (fv.live) env_prefetch_dir(fv.l, ENV_ARGS);
     fv.env_live = env_weigh(e, mt, v, n, nov, ps, diffuse, specular, ENV_ARGS, &fv.env_l, &fv.env_c);
     return fv;
 }
@@ -263,7 +271,7 @@ IBL_INLINE float3 follow_path(float3 o, float3 l, Hit hit, float3 beta, Sampler 
         float3 beta_next = beta, l_next;
         float pb;
         const int next = path_scatter(pv, u, bounce, &beta_next, &l_next, &pb);
-        if (next) env_prefetch(env_texel_index(to_env(l_next, env_rot), w, h), img);
+        if (next) env_prefetch_dir(l_next, ENV_ARGS);
         env += beta * env_direct(e, pv.mt, pv.v, pv.n, pv.nov, pv.origin, pv.ps, 1, 1, ENV_ARGS, SCENE_ARGS);
 #ifdef PATH_LIGHTS
         for (int j = 0; j < nlights; ++j) {         /* every analytic light */
