@@ -1,7 +1,8 @@
 """Sample sets and warps, each warp a pair sample_x / pdf_x (pbrt-v4's habit), float64, and the
 random numbers: the Sampler of kernels/sampler.h (pairs of Owen-scrambled Sobol points) and the
-environment's importance sampling. Mirrors kernels/sampling.h, kernels/sampler.h and kernels/envmap.h; tests/test_sampling.py checks every warp on both sides with a chi-square
-test against its own pdf (as Mitsuba 3's ChiSquareTest)."""
+environment's importance sampling. Mirrors kernels/sampling.h, kernels/sampler.h and
+kernels/envmap.h; tests/test_sampling.py checks every warp on both sides with a chi-square test
+against its own pdf (as Mitsuba 3's ChiSquareTest)."""
 
 from __future__ import annotations
 

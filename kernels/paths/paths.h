@@ -7,9 +7,9 @@
  * (ENV_PARAMS, kernels/envmap.h) and the lights. The one path of every ray source: the
  * reference's camera samples (kernels/paths/reference.cl, from their first vertex), the irradiance
  * probes' rays and the reflection captures' texels (kernels/paths/probe_trace.cl, from a point;
- * iblbake/render/paths/). Each vertex's pieces (first_vertex, vertex_start, env_sample,
- * light_sample, path_scatter) are functions that the wavefront's stages (kernels/paths/wavefront.cl) call
- * too, where a ray is queued instead of traced.
+ * iblbake/render/paths/). Each vertex's pieces (first_vertex, vertex_start, env_draw and env_weigh
+ * or the two at once, env_sample, light_sample, path_scatter) are functions that the wavefront's
+ * stages (kernels/paths/wavefront.cl) call too, where a ray is queued instead of traced.
  * numpy twin: iblbake/render/twin/paths.py. */
 #ifndef IBLBAKE_PATHS_H
 #define IBLBAKE_PATHS_H
