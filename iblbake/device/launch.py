@@ -64,8 +64,10 @@ def wave_paths(rt) -> int:
 # 8 of its 64 warps resident, too few to hide a path's memory latency. Capped at 64 it spills 0.6-1
 # KB a work item to L1 and keeps 3-4 times the warps: on an H200 the open box's reference (128x96,
 # 8192 spp) 0.50-0.53 s -> 0.35 s, the knot's 1.32 s -> 1.09-1.10 s (docs/benchmarks.md
-# "Registers on the H200"); 48 was within noise of 64, 32 slower on the knot.
-PATH_REGISTERS = 64
+# "Registers on the H200"); 48 was within noise of 64, 32 slower on the knot. With the while-while
+# traversal (kernels/scene.h) 48 beats 64 on the meshes: the knot's reference 1.01-1.12x, the
+# textured torus's 1.05-1.06x (docs/benchmarks.md "While-while on the GPU").
+PATH_REGISTERS = 48
 PATH_PROGRAMS = ("paths/reference.cl", "paths/probe_trace.cl")     # reference.cl holds the wavefront's stages too
 
 
