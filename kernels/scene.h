@@ -472,7 +472,8 @@ IBL_INLINE Hit trace_range(float3 o, float3 d, float tmin, float tmax, int any_h
          * (node, bits of its entry distance), one 8-byte store. Inner nodes are stepped through
          * in a loop of their own, then a leaf's triangles tested ("while-while", Aila and Laine
          * 2009): a warp's threads walk inner nodes together instead of each turn serialising one
-         * thread's node and another's leaf; 1.09-1.11x on an H200 (docs/benchmarks.md). */
+         * thread's node and another's leaf: on an H200 the knot 1.10x, the textured torus 1.14x
+         * faster (docs/benchmarks.md "While-while on the GPU"). */
         int2 stack[64];
         int sp = 0;
         float tn;

@@ -66,7 +66,7 @@ def wave_paths(rt) -> int:
 # 8192 spp) 0.50-0.53 s -> 0.35 s, the knot's 1.32 s -> 1.09-1.10 s (docs/benchmarks.md
 # "Registers on the H200"); 48 was within noise of 64, 32 slower on the knot. With the while-while
 # traversal (kernels/scene.h) 48 beats 64 on the meshes: the knot's reference 1.01-1.12x, the
-# textured torus's 1.05-1.06x (docs/benchmarks.md "While-while on the GPU").
+# textured torus's 1.05-1.06x with leaves of 2 (docs/benchmarks.md "While-while on the GPU").
 PATH_REGISTERS = 48
 PATH_PROGRAMS = ("paths/reference.cl", "paths/probe_trace.cl")     # reference.cl holds the wavefront's stages too
 
