@@ -34,7 +34,7 @@ IBL_INLINE float4 u4(uint i)
                     pcg_hash(4u * i + 3u) >> 8) * (1.0f / 16777216.0f);
 }
 #define BENCH_PARAMS __global const float4 *img, const int w, const int h, __global const float *marginal, \
-    __global const float *conditional, __global const int *guide, const float env_norm, const int n, \
+    __global const float *conditional, __global const int *guide, const float2 env_norm, const int n, \
     __global float *out
 __kernel void uniforms(BENCH_PARAMS)
 {

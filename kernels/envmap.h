@@ -17,10 +17,10 @@
  * and its intensity, the full-resolution panorama (w x h RGBA texels, read piecewise constant),
  * the marginal CDF over rows, one CDF per row, the guide tables (ENV_GUIDE_BINS + 1 entries each,
  * core/sampling.py cdf_guides: the h rows', then the marginal's), and env_norm, what turns a
- * texel's luminance into the pdf over solid angle of sampling it (pdf_env). */
+ * texel's luminance into the pdf over solid angle of sampling it (pdf_env: 1 / total, the offset). */
 #define ENV_PARAMS const float2 env_rot, const float env_scale, __global const float4 *img, const int w, \
                    const int h, __global const float *marginal, __global const float *conditional, \
-                   __global const int *guide, const float env_norm
+                   __global const int *guide, const float2 env_norm
 #define ENV_ARGS env_rot, env_scale, img, w, h, marginal, conditional, guide, env_norm
 
 /* Trilinear lookup in the radiance chain: bilinear in two levels, blended. */
@@ -47,7 +47,8 @@ IBL_INLINE float3 chain_lookup(CHAIN_PARAMS, float3 d, float lod)
 }
 
 /* Importance sampling: piecewise constant over the panorama's texels, p(texel) proportional to
- * luminance x solid angle (tables built by iblbake/core/sampling.py: EnvironmentDistribution).
+ * (luminance - the panorama's mean, floored at 0) x solid angle (MIS compensation; tables built
+ * by iblbake/core/sampling.py env_sampling_tables).
  * Row from the marginal CDF, column from the row's CDF, then uniform in (phi, cos theta) inside
  * the texel, so the pdf over solid angle is p_texel / Omega_texel (the pdf table). */
 /* The bin of u in a CDF: the smallest i in [lo, hi] with cdf[i + 1] > u, hi where none is */
@@ -91,14 +92,14 @@ IBL_INLINE int env_texel_index(float3 e, int w, int h)
 }
 
 /* The pdf over solid angle of sampling the texel of radiance c: p(texel) / Omega(texel) with p
- * proportional to luminance x Omega is the luminance over the panorama's total (env_norm =
- * 1 / total: core/sampling.py EnvironmentDistribution.norm). Read from the radiance a path loads
- * anyway, not from a table: on a CPU the tables of a 2048 x 1024 panorama (40 MB) miss the cache,
- * and a table of pdfs was one miss more a sample (docs/benchmarks.md "The environment's tables
- * in the cache"). */
-IBL_INLINE float pdf_env(float3 c, float env_norm)
+ * proportional to (luminance - the panorama's mean, floored at 0) x Omega (MIS compensation:
+ * core/sampling.py env_sampling_tables) is (luminance - env_norm.y) x env_norm.x (1 / total:
+ * core/sampling.py EnvironmentDistribution.norm). Read from the radiance a path loads anyway, not
+ * from a table: on a CPU the tables of a 2048 x 1024 panorama (40 MB) miss the cache, and a table
+ * of pdfs was one miss more a sample (docs/benchmarks.md "The environment's tables in the cache"). */
+IBL_INLINE float pdf_env(float3 c, float2 env_norm)
 {
-    return fmax(luminance(c), 0.0f) * env_norm;
+    return fmax(luminance(c) - env_norm.y, 0.0f) * env_norm.x;
 }
 
 #endif

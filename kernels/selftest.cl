@@ -121,7 +121,7 @@ __kernel void t_env(__global const float *marginal, __global const float *condit
 }
 
 /* envmap.h pdf_env of every texel's radiance c (float4: RGB) */
-__kernel void t_pdf_env(__global const float4 *c, const float env_norm, __global float *out)
+__kernel void t_pdf_env(__global const float4 *c, const float2 env_norm, __global float *out)
 {
     const int i = get_global_id(0);
     out[i] = pdf_env(c[i].xyz, env_norm);

@@ -220,17 +220,19 @@ def pdf_ggx_vndf(nov, noh, voh, alpha):
 # --- the environment -----------------------------------------------------------------------------
 
 class EnvironmentDistribution:
-    """Piecewise constant over a panorama's texels, p(texel) proportional to luminance x exact
-    solid angle; inside a texel uniform in (phi, cos theta). Its tables (marginal CDF over rows,
-    one CDF per row, their guide tables) are what kernels/envmap.h sample_env reads; the pdf over
-    solid angle per texel is the twin's."""
+    """Piecewise constant over a panorama's texels, p(texel) proportional to the texel's luminance
+    above the panorama's mean, x exact solid angle (MIS compensation: env_sampling_tables); inside a
+    texel uniform in (phi, cos theta). Its tables (marginal CDF over rows, one CDF per row, their
+    guide tables) are what kernels/envmap.h sample_env reads; the pdf over solid angle per texel is
+    the twin's."""
 
     def __init__(self, image):
-        self.marginal, self.conditional, self.pdf, total = env_sampling_tables(image)
+        self.marginal, self.conditional, self.pdf, total, self.offset = env_sampling_tables(image)
         self.height, self.width = self.pdf.shape
-        # the kernels' pdf: a texel's luminance times norm (kernels/envmap.h pdf_env), the pdf
-        # table's value without the table (a black panorama's texels give 0: no light to sample)
-        self.norm = np.float32(1.0 / total)
+        # the kernels' pdf: (a texel's luminance - offset, floored at 0) times 1 / total
+        # (kernels/envmap.h pdf_env), the pdf table's value without the table (a black panorama's
+        # texels give 0: no light to sample)
+        self.norm = np.array([1.0 / total, self.offset], np.float32)
         # the rows' guide tables, then the marginal's (kernels/envmap.h sample_env): (H + 1, bins + 1)
         self.guide = np.concatenate([cdf_guides(self.conditional), cdf_guides(self.marginal[None, :])])
 
@@ -255,14 +257,22 @@ class EnvironmentDistribution:
 
 
 def env_sampling_tables(image):
-    """Piecewise-constant environment sampling over texels: p(texel) proportional to
-    luminance x exact solid angle. Returns (marginal cdf (H+1), conditional cdfs (H, W+1),
-    pdf over solid angle per texel (H, W)), float32, built in float64, and the total weight
-    (luminance x solid angle: the pdf is luminance / total)."""
+    """Piecewise-constant environment sampling over texels: p(texel) proportional to max(luminance -
+    offset, 0) x exact solid angle, offset the panorama's mean luminance over the sphere ("MIS
+    compensation", Karlik et al. 2019, as pbrt-v4's image light samples for its path tracer): every
+    path samples the panorama beside a BSDF and weighs the two by MIS, the BSDF's samples cover what
+    is about as bright as the mean, and the panorama's go where it stands out. Offset 0 where
+    nothing stands out (a constant panorama). Returns (marginal cdf (H+1), conditional cdfs
+    (H, W+1), pdf over solid angle per texel (H, W)), float32, built in float64, the total weight
+    (the pdf is (luminance - offset) / total) and the offset (float32, as the kernels subtract it)."""
     h, w = image.shape[:2]
     lum = np.maximum(image[..., :3].astype(np.float64) @ LUMINANCE, 0.0)
     omega = conventions.equirect_row_solid_angles(w, h)
-    weight = lum * omega[:, None]
+    offset = np.float32((lum * omega[:, None]).sum() / (omega.sum() * w))
+    weight = np.maximum(lum - np.float64(offset), 0.0) * omega[:, None]
+    if not weight.sum() > 0:              # nothing above the mean: luminance alone
+        offset = np.float32(0.0)
+        weight = lum * omega[:, None]
     total = weight.sum()
     if not total > 0:                     # a black panorama: sample by solid angle
         weight = np.broadcast_to(omega[:, None], (h, w)).copy()
@@ -276,7 +286,7 @@ def env_sampling_tables(image):
     cond[:, 1:] = np.where(row[:, None] > 0, c, (np.arange(1, w + 1) / w)[None, :])
     cond[:, -1] = 1.0
     pdf = weight / total / omega[:, None]
-    return marginal.astype(np.float32), cond.astype(np.float32), pdf.astype(np.float32), total
+    return marginal.astype(np.float32), cond.astype(np.float32), pdf.astype(np.float32), total, offset
 
 
 def cdf_guides(cdfs, bins: int = ENV_GUIDE_BINS):
