@@ -270,7 +270,10 @@ def env_sampling_tables(image):
     omega = conventions.equirect_row_solid_angles(w, h)
     offset = np.float32((lum * omega[:, None]).sum() / (omega.sum() * w))
     weight = np.maximum(lum - np.float64(offset), 0.0) * omega[:, None]
-    if not weight.sum() > 0:              # nothing above the mean: luminance alone
+    # Nothing (or a rounding's worth) above the mean, a constant panorama: luminance alone. The
+    # kernels subtract in float32 (pdf_env), off by ~1e-7 of the luminance, and that error is
+    # divided by the compensated total: under 1e-3 of the luminance's total it could outweigh it
+    if not weight.sum() >= 1e-3 * (lum * omega[:, None]).sum():
         offset = np.float32(0.0)
         weight = lum * omega[:, None]
     total = weight.sum()
