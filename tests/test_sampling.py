@@ -202,13 +202,13 @@ def test_a_constant_panorama_is_not_compensated(rt):
     is sampled by luminance (offset 0): the kernels' pdf (a float32 difference, off by ~1e-7 of the
     luminance) divided by a compensated total of rounding errors would be off by orders of
     magnitude. Where a tenth of the light stands above the mean it is compensated."""
+    from iblbake.bake.radiance import to_rgba
     rng = np.random.default_rng(2)
     base = np.full((32, 64, 3), 0.5, np.float32)
     for img in (base, base + rng.normal(0, 1e-6, base.shape).astype(np.float32)):
         dist = sampling.EnvironmentDistribution(img)
         assert dist.offset == 0
         out = rt.empty(img[..., 0].size * 4)
-        from iblbake.bake.radiance import to_rgba
         rt.launch("selftest.cl", "t_pdf_env", {"SH_BANDS": 3}, (img[..., 0].size,), {},
                   c=rt.to_device(to_rgba(img).reshape(-1, 4)), env_norm=dist.norm, out=out)
         got = rt.read(out, (img[..., 0].size,)).astype(np.float64)
