@@ -101,7 +101,7 @@ def main():
         for name, img in panos.items():
             d = EnvironmentDistribution(img)
             args = [rt.to_device(to_rgba(img)), np.int32(d.width), np.int32(d.height), rt.to_device(d.marginal),
-                    rt.to_device(d.conditional), rt.to_device(d.guide), np.float32(d.norm), np.int32(per_item), out]
+                    rt.to_device(d.conditional), rt.to_device(d.guide), d.norm, np.int32(per_item), out]
             times = {k: [] for k in ks}
             for rep in range(a.repeats + 1):
                 for k, kern in ks.items():

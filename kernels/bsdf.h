@@ -23,9 +23,13 @@
 
 /* The probability of sampling the specular lobe at a vertex: its share of the two lobes' albedos,
  * estimated by Schlick's F at NoV and the diffuse weight, kept within [0.1, 0.9] where both lobes
- * exist (so neither is starved) and 0 or 1 where one does not (specular 0, metals). */
+ * exist (so neither is starved) and 0 or 1 where one does not (specular 0, metals). The specular
+ * term asked for alone is always sampled: F(NoV) is 0 for F0 = 0 seen head-on, where F(VoH) off
+ * the mirror direction is not, and the panorama's compensated sampling leaves the dimmer texels
+ * to the BSDF's samples (core/sampling.py env_sampling_tables). */
 IBL_INLINE float specular_probability(const Material mt, float nov, int diffuse, int specular)
 {
+    if (!diffuse) return specular ? 1.0f : 0.0f;
     const float s = specular ? luminance(f_schlick(nov, mt.f0, mt.f90)) : 0.0f;
     const float d = diffuse ? luminance(diffuse_weight(mt, nov)) * IBL_PI : 0.0f;
     if (!(s > 0.0f)) return 0.0f;

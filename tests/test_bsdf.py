@@ -109,6 +109,35 @@ def test_kernel_bsdf_is_the_twins(rt, terms):
     assert e_f < 2e-5 and e_p < 6e-5 and e_l < 3e-5 and e_w < 2e-4 and e_sp < 2e-3 and e_sp_grazing < 5e-2
 
 
+@pytest.mark.parametrize("terms", [(1, 1), (1, 0), (0, 1)])
+def test_the_bsdfs_sampling_covers_its_value(rt, terms):
+    """Wherever the terms asked for reflect light (f NoL > 0, a delta lobe aside) the BSDF's own
+    sampling has a positive pdf, in the kernel and the twin: the panorama's compensated sampling
+    draws no texel at or below its mean (core/sampling.py env_sampling_tables) and leaves those to
+    the BSDF, so a direction neither strategy can draw would be light lost. The random vertices,
+    and a black metal (F0 = 0, F90 = 1) and a dielectric with specular colour 0 seen head-on (NoV
+    = 1: F(NoV) = 0, which once gave the specular term alone no sampling of its own)."""
+    diffuse, specular = terms
+    mat, v, n, l, u = vertices(7, 1024)
+    k = 64
+    mat[:k] = 0.0
+    mat[:k, 0, 3] = np.where(np.arange(k) < k // 2, 1.0, 0.0)          # metallic: black metal, or
+    mat[k // 2:k, 2, 3] = 1.0                                             # specular 1, colour 0
+    mat[:k, 1, 3] = np.linspace(0.2, 1.0, k)                              # roughness
+    n[:k] = v[:k] = [0.0, 1.0, 0.0]
+    mt, nov = material(mat, v, n)
+    assert (nov[:k] == 1).all() and (bsdf.specular_probability(mt, nov, True, True)[:k] == 0).all()
+    ps = bsdf.specular_probability(mt, nov, diffuse, specular)
+    got = kernel(rt, mat, v, n, l, u, ps, diffuse, specular)
+    f, pdf = bsdf.evaluate(mt, v, n, nov, l, ps, diffuse, specular)
+    lit = f.max(1) > 0
+    assert lit[:k].sum() > k // 4 if specular else True
+    assert (pdf[lit] > 0).all(), np.flatnonzero(lit & ~(pdf > 0))[:8]
+    lit_k = got[:, 0, :3].max(1) > 0
+    assert (got[lit_k, 0, 3] > 0).all(), np.flatnonzero(lit_k & ~(got[:, 0, 3] > 0))[:8]
+    assert np.abs(got[:, 3, 3] - ps).max() < 1e-6
+
+
 def test_lambert_is_its_closed_form():
     """The diffuse term alone (ps 0): f NoL = kD NoL, pdf NoL / pi, every sample's weight kD pi."""
     mat, v, n, l, u = vertices(5, 512)

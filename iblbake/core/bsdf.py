@@ -32,8 +32,11 @@ class Material(NamedTuple):
 
 def specular_probability(mt: Material, nov, diffuse: bool, specular: bool):
     """kernels/bsdf.h specular_probability: the specular lobe's share of the lobes' albedos
-    (Schlick's F at NoV against kD pi), within [0.1, 0.9] where both exist, else 0 or 1."""
+    (Schlick's F at NoV against kD pi), within [0.1, 0.9] where both exist, else 0 or 1; 1 for
+    the specular term alone (F(NoV) is 0 for F0 = 0 head-on, F(VoH) elsewhere is not)."""
     nov = np.asarray(nov, np.float64)
+    if not diffuse:
+        return np.full(len(nov), 1.0 if specular else 0.0)
     s = luminance(brdf.f_schlick(nov[:, None], mt.f0, mt.f90)) if specular else np.zeros(len(nov))
     d = luminance(mt.kd * np.pi) if diffuse else np.zeros(len(nov))
     with np.errstate(invalid="ignore", divide="ignore"):

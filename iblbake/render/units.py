@@ -278,18 +278,19 @@ class EnvCDF(Unit):
 def probes_code_hash() -> str:
     """The probe bakers' and their tracing kernel's source: cached volumes and captures are rebaked
     when they change. Every module of render/probes, the captures', the device scene's (the
-    tracer's defines, lights and panorama) and the probe bases' fits (core/bases project_rays)."""
+    tracer's defines, lights and panorama), the panorama's sampling tables' (core/sampling) and
+    the probe bases' fits (core/bases project_rays)."""
     import importlib
     import pkgutil
 
-    from iblbake.core import bases
+    from iblbake.core import bases, sampling
     from iblbake.core.bases import common
     from iblbake.device.runtime import source_hash
     from iblbake.render import device_scene, probes, reflection_probes
     from iblbake.render.bakes import _code_hash
     package = [importlib.import_module(f"{probes.__name__}.{m.name}")
                for m in sorted(pkgutil.iter_modules(probes.__path__), key=lambda m: m.name)]
-    return _code_hash((probes, *package, reflection_probes, device_scene, common,
+    return _code_hash((probes, *package, reflection_probes, device_scene, sampling, common,
                        *(bases.BASES[n] for n in bases.PROBES)), source_hash("paths/probe_trace.cl"))
 
 

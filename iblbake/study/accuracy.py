@@ -134,7 +134,9 @@ class Study:
 
     def _reference_key(self, sc, seed) -> str:
         from iblbake.bake.cache import content_key
+        from iblbake.core import sampling
         from iblbake.device.runtime import source_hash
+        from iblbake.render.bakes import _code_hash
         from iblbake.render.passes.base import lighting_inputs
 
         # the reference reads neither kind of probe: their settings do not key it
@@ -142,7 +144,8 @@ class Study:
         return "reference-" + content_key({
             "kind": "reference", "v": 2, "scene": inputs, "seed": seed,
             "files": [self.bakes.file_sha256(f) for f in scene_load.input_files(sc)[1:]],
-            "kernels": source_hash(("gbuffer.cl", "paths/reference.cl", "resolve.cl"))})
+            "kernels": source_hash(("gbuffer.cl", "paths/reference.cl", "resolve.cl")),
+            "host": _code_hash((sampling,))})      # the panorama's sampling tables the kernels read
 
     def reference_seed(self, term: str, seed: int):
         """(hdr, manifest, cached): one seed of the term's reference, rendered into the cache or
