@@ -197,21 +197,27 @@ def test_guide_tables_pick_the_whole_rows_bin(rt):
     assert np.array_equal(got, texels), (got != texels).sum()
 
 
+def kernel_pdf_env(rt, img, dist):
+    """kernels/envmap.h pdf_env of every texel of img (kernels/selftest.cl t_pdf_env), float64."""
+    from iblbake.bake.radiance import to_rgba
+    rgba = to_rgba(img).reshape(-1, 4)
+    out = rt.empty(len(rgba) * 4)
+    rt.launch("selftest.cl", "t_pdf_env", {"SH_BANDS": 3}, (len(rgba),), {}, c=rt.to_device(rgba),
+              env_norm=dist.norm, out=out)
+    return rt.read(out, (len(rgba),)).astype(np.float64)
+
+
 def test_a_constant_panorama_is_not_compensated(rt):
     """A panorama with nothing above its mean but float32 rounding (constant, or constant to 1e-6)
     is sampled by luminance (offset 0): the kernels' pdf (a float32 difference, off by ~1e-7 of the
     luminance) divided by a compensated total of rounding errors would be off by orders of
     magnitude. Where a tenth of the light stands above the mean it is compensated."""
-    from iblbake.bake.radiance import to_rgba
     rng = np.random.default_rng(2)
     base = np.full((32, 64, 3), 0.5, np.float32)
     for img in (base, base + rng.normal(0, 1e-6, base.shape).astype(np.float32)):
         dist = sampling.EnvironmentDistribution(img)
         assert dist.offset == 0
-        out = rt.empty(img[..., 0].size * 4)
-        rt.launch("selftest.cl", "t_pdf_env", {"SH_BANDS": 3}, (img[..., 0].size,), {},
-                  c=rt.to_device(to_rgba(img).reshape(-1, 4)), env_norm=dist.norm, out=out)
-        got = rt.read(out, (img[..., 0].size,)).astype(np.float64)
+        got = kernel_pdf_env(rt, img, dist)
         np.testing.assert_allclose(got, dist.pdf.reshape(-1), rtol=1e-6)
         np.testing.assert_allclose(got, 1 / (4 * np.pi), rtol=1e-5)
     lit = base.copy()
@@ -234,12 +240,7 @@ def test_kernel_pdf_from_luminance_is_the_tables(rt, sun):
     img[31, :10] = -1.0
     img[32, :10] = [2.0, -0.5, 0.1]
     dist = sampling.EnvironmentDistribution(img)
-    out = rt.empty(img[..., 0].size * 4)
-    from iblbake.bake.radiance import to_rgba
-    rgba = to_rgba(img).reshape(-1, 4)
-    rt.launch("selftest.cl", "t_pdf_env", {"SH_BANDS": 3}, (len(rgba),), {}, c=rt.to_device(rgba),
-              env_norm=dist.norm, out=out)
-    got = rt.read(out, (len(rgba),)).astype(np.float64)
+    got = kernel_pdf_env(rt, img, dist)
     want = dist.pdf.reshape(-1).astype(np.float64)
     lum = np.maximum(img.reshape(-1, 3).astype(np.float64) @ LUMINANCE, 0.0)
     above = (want > 0).mean()

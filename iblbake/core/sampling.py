@@ -268,14 +268,14 @@ def env_sampling_tables(image):
     h, w = image.shape[:2]
     lum = np.maximum(image[..., :3].astype(np.float64) @ LUMINANCE, 0.0)
     omega = conventions.equirect_row_solid_angles(w, h)
-    offset = np.float32((lum * omega[:, None]).sum() / (omega.sum() * w))
+    plain = lum * omega[:, None]              # luminance x solid angle, uncompensated
+    offset = np.float32(plain.sum() / (omega.sum() * w))
     weight = np.maximum(lum - np.float64(offset), 0.0) * omega[:, None]
     # Nothing (or a rounding's worth) above the mean, a constant panorama: luminance alone. The
     # kernels subtract in float32 (pdf_env), off by ~1e-7 of the luminance, and that error is
     # divided by the compensated total: under 1e-3 of the luminance's total it could outweigh it
-    if not weight.sum() >= 1e-3 * (lum * omega[:, None]).sum():
-        offset = np.float32(0.0)
-        weight = lum * omega[:, None]
+    if not weight.sum() >= 1e-3 * plain.sum():
+        offset, weight = np.float32(0.0), plain
     total = weight.sum()
     if not total > 0:                     # a black panorama: sample by solid angle
         weight = np.broadcast_to(omega[:, None], (h, w)).copy()
