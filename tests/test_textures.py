@@ -144,6 +144,67 @@ def test_constant_texture_equals_the_factor(tmp_path):
     assert fa.hdr[..., 3].min() == 1 and rel.max() < 1e-6, rel.max()
 
 
+def test_cached_textures_follow_their_material_wherever_it_stands(tmp_path):
+    """The textures' cache entry is keyed by the maps' content, not by the index of the material
+    that holds them: a plain material put before the textured one (another scene, the same maps)
+    reuses the entry and gets the same frame as a fresh cache (it failed with a KeyError, and could
+    have given a map to the wrong material)."""
+    tex = png(tmp_path / "c.png", np.broadcast_to([200, 40, 30, 255], (8, 8, 4)))
+    mesh = quad_glb(tmp_path / "q.glb")
+    quad = {"mesh": {"path": mesh}, "material": "t"}
+    ball = {"sphere": {"center": [0.6, 0.6, 0.5], "radius": 0.3}, "material": "p"}
+    textured = {"base_color": [1, 1, 1], "roughness": 0.6, "base_color_map": {"path": tex}}
+    plain = {"base_color": [0.2, 0.8, 0.3], "roughness": 0.6}
+    fx = {"diffuse": "sh", "specular": "prefiltered"}
+    (tmp_path / "a").mkdir(), (tmp_path / "b").mkdir()
+    first = scene_file(tmp_path / "a", {"t": textured}, [quad], effects=fx, res=(32, 32))
+    then = scene_file(tmp_path / "b", {"p": plain, "t": textured}, [ball, quad], effects=fx, res=(32, 32))
+    _, fa = render_scene(first, tmp_path / "cache")
+    _, fb = render_scene(then, tmp_path / "cache")
+    _, fresh = render_scene(then, tmp_path / "fresh")
+    assert np.array_equal(fb.hdr, fresh.hdr)
+    corner = fb.hdr[4, 4, :3]                    # the quad alone: the map's red, as in the first scene
+    assert corner[0] > 3 * corner[1] and np.array_equal(corner, fa.hdr[4, 4, :3]), corner
+    tex_report = [b for b in fb.report["bakes"] if b["name"] == "textures"]
+    assert not tex_report or tex_report[0]["cached"]
+
+
+@pytest.mark.parametrize("mend", ["slot out of range", "slots missing", "level past the texels", "texels of ints"])
+def test_a_cached_textures_entry_that_does_not_read_back_is_baked_again(tmp_path, mend):
+    """A textures entry whose files match its manifest but not what the kernels will index (another
+    version's, or a hand's): said in one warning naming it, baked again, and the frame is the
+    fresh cache's (before, a slot out of range was read as a texture)."""
+    import hashlib
+    import json
+    import os
+    from iblbake.bake import cache
+
+    tex = png(tmp_path / "c.png", np.broadcast_to([200, 40, 30, 255], (8, 8, 4)))
+    p = scene_file(tmp_path, {"t": {"base_color": [1, 1, 1], "base_color_map": {"path": tex}}},
+                   [{"mesh": {"path": quad_glb(tmp_path / "q.glb")}, "material": "t"}], res=(16, 16))
+    _, want = render_scene(p, tmp_path / "cache")
+    entry = next(e for e in (tmp_path / "cache").iterdir() if e.name.startswith("textures-"))
+    man = json.loads((entry / cache.MANIFEST).read_text())
+    if mend == "slot out of range":
+        man["slots"] = [7]
+    elif mend == "slots missing":
+        del man["slots"]
+    else:
+        name = "tex_levels.npy" if mend == "level past the texels" else "texels.npy"
+        a = np.load(entry / name)
+        np.save(entry / name, a + [[0, 0, 1000, 0]] if mend == "level past the texels" else a.astype(np.int32))
+        for f in man["files"]:
+            if f["name"] == name:
+                f.update(sha256=hashlib.sha256((entry / name).read_bytes()).hexdigest(),
+                         bytes=os.path.getsize(entry / name), mtime_ns=os.stat(entry / name).st_mtime_ns)
+    (entry / cache.MANIFEST).write_text(json.dumps(man))
+    said = []
+    got = render.render(scene.load(p), cache_root=tmp_path / "cache", warn=said.append)
+    again = [w for w in said if "baking it again" in w]
+    assert len(again) == 1 and entry.name in again[0], said
+    assert np.array_equal(got.hdr, want.hdr)
+
+
 def test_srgb_decode_is_the_formula(tmp_path):
     """Every 8-bit code of a base colour map, read back as the albedo AOV (nearest texel,
     magnified): IEC 61966-2-1's decode to 1e-6 (measured 1.6e-7, float32)."""

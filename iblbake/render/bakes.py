@@ -43,6 +43,31 @@ POLICY_KEYS = {"nonfinite": "environment.nonfinite:", "negative": "environment.n
                "layout": "environment.layout:"}
 
 
+def read_textures(entry: Path, order, maps: int) -> tuple:
+    """A textures entry's arrays (texels, tex_levels, tex_info), checked as the kernels will index
+    them: every map's slot a texture, every texture's levels listed, every level's texels held.
+    An IblbakeError where the entry does not (cache.get_checked then bakes it again)."""
+    try:
+        texels, levels, info = (np.load(entry / f"{n}.npy") for n in ("texels", "tex_levels", "tex_info"))
+    except (OSError, ValueError, EOFError) as e:
+        raise IblbakeError(f"{entry}: unreadable texture arrays ({e})") from None
+    shapes_ok = (texels.dtype == np.float32 and texels.ndim == 2 and texels.shape[1] == 4
+                 and levels.dtype == np.int32 and levels.ndim == 2 and levels.shape[1] == 4
+                 and info.dtype == np.int32 and info.ndim == 2 and info.shape[1] == 4)
+    if not shapes_ok:
+        raise IblbakeError(f"{entry}: texture arrays of the wrong type or shape")
+    if not (isinstance(order, list) and len(order) == maps
+            and all(type(t) is int and 0 <= t < len(info) for t in order)):
+        raise IblbakeError(f"{entry}: its map slots do not match the scene's {maps} maps")
+    first, n = info[:, 0].astype(np.int64), info[:, 1].astype(np.int64)
+    off, w, h = (levels[:, i].astype(np.int64) for i in range(3))
+    if order and ((first < 0) | (n < 1) | (first + n > len(levels))).any():
+        raise IblbakeError(f"{entry}: a texture's levels outside its level table")
+    if order and ((off < 0) | (w < 1) | (h < 1) | (off + w * h > len(texels))).any():
+        raise IblbakeError(f"{entry}: a level's texels outside the texel array")
+    return texels, levels, info
+
+
 class Bakes:
     """The bake cache folder plus an in-memory memo of loaded bakes, keyed by content."""
 
@@ -168,9 +193,18 @@ class Bakes:
 
         refs = [(ri, kind, materials.texture_key(ref, kind), self._source_sha(ref["source"]))
                 for ri, r in enumerate(records) for kind, ref in r["maps"].items()]
-        key = "textures-" + cache.content_key({"kind": "textures", "v": 1, "refs": [x[1:] for x in refs],
+        # the entry is keyed by the maps' content in order, not by which record holds them (a
+        # plain material put before a textured one moves its index): its slots are listed in the
+        # maps' order and given their records' indices here
+        key = "textures-" + cache.content_key({"kind": "textures", "v": 2, "refs": [x[1:] for x in refs],
                                                "limit": scene_textures.max_texture_pixels(),
                                                "code": _textures_code_hash()})
+
+        def read(manifest):
+            order, report = manifest.get("slots"), manifest.get("report")
+            if not isinstance(report, dict):
+                raise IblbakeError(f"{self.root / manifest['key']}: a textures entry without its report")
+            return read_textures(self.root / manifest["key"], order, len(refs)), order, report
 
         def make():
             def build(tmp: Path):
@@ -178,17 +212,15 @@ class Bakes:
                 for name, a in zip(("texels", "tex_levels", "tex_info"), ts.arrays()):
                     np.save(tmp / f"{name}.npy", a)
                 return {"kind": "textures", "files": [{"name": f"{n}.npy"} for n in ("texels", "tex_levels", "tex_info")],
-                        "slots": [[ri, kind, slots[(ri, kind)]] for ri, kind, *_ in refs],
+                        "slots": [slots[(ri, kind)] for ri, kind, *_ in refs],
                         "report": {"textures": len(ts.textures), "texels": ts.texel_count(),
                                    "decode_and_mips_s": round(ts.upload_s, 4)}}
 
-            manifest, cached = cache.get_or_build(self.root, key, build, warn=warn)
-            entry = self.root / manifest["key"]
-            arrays = tuple(np.load(entry / f"{n}.npy") for n in ("texels", "tex_levels", "tex_info"))
-            slots = {(ri, kind): t for ri, kind, t in manifest["slots"]}
-            return arrays, slots, {**manifest["report"], "cached": cached, "device_bytes": int(arrays[0].nbytes)}
+            (arrays, order, report), _manifest, cached = cache.get_checked(self.root, key, build, read, warn=warn)
+            return arrays, order, {**report, "cached": cached, "device_bytes": int(arrays[0].nbytes)}
 
-        (arrays, slots, report), held = self._recall(key, make)
+        (arrays, order, report), held = self._recall(key, make)
+        slots = {(ri, kind): t for (ri, kind, *_), t in zip(refs, order)}
         return arrays, slots, {**report, "cached": report["cached"] or held}
 
     def device_textures(self, rt, arrays) -> tuple:
