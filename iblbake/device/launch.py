@@ -21,6 +21,13 @@ GPU_ITEMS = 1 << 18
 # the shade pass once showed a NaN pixel: an unwritten probe value, kernels/probes.h, since fixed).
 CPU_GROUPS_PER_CORE = 64
 MAX_GROUP = 4096
+
+# The wavefront's queues change length at every stage. Launched at each exact length, PoCL chose a
+# work-group size dividing it and built the program's work-group function again for each new size
+# (it specialises a kernel per local size): a first wavefront frame on PoCL spent 20-80 s building
+# (docs/benchmarks.md "Megakernel or wavefront"). Its launches are rounded up to whole groups of
+# QUEUE_GROUP items instead (the kernels return past their count), so each stage is built once.
+QUEUE_GROUP = 64
 SPLIT_KERNELS = ("reference", "probe_trace")
 
 
@@ -35,6 +42,12 @@ def cpu_group(items: int, cores: int) -> int:
     groups a core, at most MAX_GROUP."""
     bound = max(1, min(MAX_GROUP, items // (CPU_GROUPS_PER_CORE * max(cores, 1))))
     return next(d for d in range(bound, 0, -1) if items % d == 0)
+
+
+def queue_launch(count: int) -> tuple:
+    """(global size, local size) of a launch over `count` items of a queue (or any length that
+    varies from launch to launch): whole groups of QUEUE_GROUP."""
+    return (-(-count // QUEUE_GROUP) * QUEUE_GROUP,), (QUEUE_GROUP,)
 
 
 def whole_units(rt, unit: int) -> int:

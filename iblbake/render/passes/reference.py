@@ -14,7 +14,7 @@ import numpy as np
 
 from iblbake.core import sampling
 from iblbake.core.metrics import luminance
-from iblbake.device.launch import sample_slices, wave_paths
+from iblbake.device.launch import queue_launch, sample_slices, wave_paths
 from iblbake.render.device_scene import panorama_args
 from iblbake.render.passes.base import Buffer, Pass, geometry_defines, mode_defines
 from iblbake.render.passes.lights import Lights, frame_lights
@@ -185,10 +185,14 @@ class Reference(Pass):
         args = {**ctx.args[self.name], **bufs, "seed": ctx.scene.data["effects"]["reference"]["seed"],
                 "npaths": npaths}
 
+        def queued(fn, size, **extra):
+            global_size, local_size = queue_launch(size)
+            ctx.launch(self, global_size, fn, local_size=local_size, **args, **extra)
+
         def stage(fn, size, **extra):
             rt.cl.enqueue_copy(rt.queue, bufs["wf_count"], _ZEROS, is_blocking=False)
             if size:
-                ctx.launch(self, (size,), fn, **args, **extra)
+                queued(fn, size, **extra)
             rt.cl.enqueue_copy(rt.queue, counts, bufs["wf_count"])      # blocking: the queues' lengths
             return counts.copy()
 
@@ -197,10 +201,9 @@ class Reference(Pass):
             c = stage("wf_generate", n * kw, first=first + k0, wave=kw)
             while True:
                 if c[2]:
-                    ctx.launch(self, (int(c[2]),), "wf_shadow", **args, count=int(c[2]))
+                    queued("wf_shadow", int(c[2]), count=int(c[2]))
                 if not c[0]:
                     break
                 c = stage("wf_extend", int(c[0]), count=int(c[0]))
                 c = stage("wf_shade", int(c[1]), count=int(c[1]))
-            ctx.launch(self, (n,), "wf_accumulate", **args, first=first + k0, wave=kw, add=int(k0 > 0),
-                       ref_batch=out)
+            queued("wf_accumulate", n, first=first + k0, wave=kw, add=int(k0 > 0), ref_batch=out)
