@@ -575,3 +575,25 @@ def test_paths_key_takes_its_three_values_only(tmp_path, white):
     for way in ("auto", *PATHS):
         doc["effects"]["reference"]["paths"] = way
         assert write(tmp_path, way, doc).data["effects"]["reference"]["paths"] == way
+
+
+def test_a_wavefront_asked_for_and_not_run_is_said(tmp_path, white):
+    """effects.reference.paths: wavefront where the frame traces no paths (no reference term, or
+    the reference's direct light alone) is a note, not silence; auto and a running wavefront none."""
+    from iblbake.render.plan import plan
+    floor = {"plane": {"point": [0, 0, 0], "size": 4}, "material": "m"}
+    ball = {"sphere": {"center": [0, 0.5, 0], "radius": 0.5}, "material": "m"}
+
+    def notes(name, diffuse, bounces, paths, objects):
+        doc = {"camera": {"perspective": {"position": [0, 1, 3], "look_at": [0, 0.5, 0], "fov_y": 40},
+                          "resolution": [8, 6]},
+               "environment": {"path": str(white)}, "materials": {"m": {"roughness": 0.5}}, "objects": objects,
+               "effects": {"diffuse": diffuse, "reference": {"paths": paths, "bounces": bounces}}}
+        return [n for n in plan(write(tmp_path, name, doc)).notes if "effects.reference.paths" in n]
+
+    assert notes("a", "sh", "unbounded", "wavefront", [floor, ball]) == [
+        "effects.reference.paths: wavefront not used: no term of this frame is the reference"]
+    assert "bounces 1" in notes("b", "reference", 1, "wavefront", [floor, ball])[0]
+    assert "bounces 1" in notes("c", "reference", "unbounded", "wavefront", [floor])[0]   # a lone plane
+    assert notes("d", "reference", "unbounded", "wavefront", [floor, ball]) == []
+    assert notes("e", "sh", "unbounded", "auto", [floor, ball]) == []

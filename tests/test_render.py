@@ -11,6 +11,7 @@ import pytest
 from iblbake.core import conventions
 from iblbake.io import images
 from iblbake.bake import dfg
+from iblbake.errors import InputError
 from iblbake.core import metrics
 from iblbake.bake import radiance
 from iblbake.render import render
@@ -540,6 +541,15 @@ def test_set_overrides(tmp_path, constant_env):
     assert r.returncode != 0 and "--set: materials.gold.roughness: 2 is out of range" in r.stderr
     r = run_cli("render", p, "--set", "objects.5.sphere.radius=2")
     assert r.returncode != 0 and "no item 5" in r.stderr
+    # a misspelt section made by --set is the flag's, not the line of the file's section above it
+    with pytest.raises(InputError, match=r"scene\.yaml: --set: effects\.referance: unknown key \(did you mean 'reference'\?\)"):
+        scene.load(p, ["effects.referance.max_samples=10"])
+    # a value of neither kind says what it may be, once
+    with pytest.raises(InputError, match=r"--set: effects\.reference\.bounces: 0 is neither unbounded nor integer "
+                                         r"\(1 <= x <= 65536\)$"):
+        scene.load(p, ["effects.reference.bounces=0"])
+    with pytest.raises(InputError, match=r"'unbouded' is neither .* \(did you mean 'unbounded'\?\)$"):
+        scene.load(p, ["effects.reference.bounces=unbouded"])
 
 
 def test_mesh_errors(tmp_path, constant_env):

@@ -71,7 +71,13 @@ def effect_modes(scene: Scene) -> Effects:
     else:
         background = "hide"
     emissive = any(max(m["emissive"]) > 0 for m in mats)     # an emissive map multiplies the factor
-    return Effects(diffuse, specular, background, emissive, notes, reference_bounces(scene, diffuse, specular, notes))
+    bounces = reference_bounces(scene, diffuse, specular, notes)
+    asked = (((scene.raw or {}).get("effects") or {}).get("reference") or {}).get("paths")
+    if asked == "wavefront" and ("reference" not in (diffuse, specular) or bounces == 1):
+        notes.append("effects.reference.paths: wavefront not used: " + (
+            "no term of this frame is the reference" if "reference" not in (diffuse, specular) else
+            "the reference traces no paths here (bounces 1), its direct light is one kernel"))
+    return Effects(diffuse, specular, background, emissive, notes, bounces)
 
 
 def unread_basis_options(scene: Scene, diffuse: str, specular: str) -> list:

@@ -54,6 +54,10 @@ class _Validator:
             if p in self.overridden:
                 return f"{self.source}: {self.overridden[p]}"
             p = p.rpartition(".")[0]
+        if path and path not in self.lines:   # a section an override made (a misspelt one, say)
+            made = [o for k, o in self.overridden.items() if k.startswith(path + ".")]
+            if made:
+                return f"{self.source}: {made[0]}"
         p = path
         while p and p not in self.lines:
             p = p.rpartition(".")[0]

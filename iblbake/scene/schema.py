@@ -151,7 +151,12 @@ class OneOf:
                 return alt.check(v)
             except _Bad as e:
                 reasons.append(str(e))
-        raise _Bad(" and ".join(dict.fromkeys(reasons)))
+        # what it may be, not each alternative's complaint ("0 is not one of unbounded and 0 is out
+        # of range"); a spelling hint kept
+        kinds = [a.describe() for a in self.alternatives]
+        said = f"neither {kinds[0]} nor {kinds[1]}" if len(kinds) == 2 else f"none of {', '.join(kinds[:-1])} or {kinds[-1]}"
+        hint = next((r[r.index(" (did you mean"):] for r in reasons if " (did you mean" in r), "")
+        raise _Bad(f"{v!r} is {said}{hint}")
 
     def describe(self):
         return " or ".join(a.describe() for a in self.alternatives)
