@@ -315,7 +315,7 @@ def main():
     ap.add_argument("--spp", type=int, default=256, help="samples per pixel of each iblbake render")
     ap.add_argument("--ref-spp", type=int, default=8192, help="Mitsuba's samples per pixel (the reference)")
     ap.add_argument("--variant", default="llvm_ad_rgb", help="llvm_ad_rgb (needs DRJIT_LIBLLVM_PATH) or cuda_ad_rgb")
-    ap.add_argument("--only", default=None)
+    ap.add_argument("--only", default=None, help="only the scenes whose name contains this (e.g. knot, box)")
     ap.add_argument("--no-speed", action="store_true", help="the acceptance test only")
     ap.add_argument("--no-acceptance", action="store_true", help="the speed comparison only")
     ap.add_argument("--target", type=float, default=0.01, help="relative RMSE the speed comparison times")
@@ -334,24 +334,28 @@ def main():
     from iblbake.render import Bakes
     from iblbake.device.runtime import Runtime
 
-    print("| scene | pixel channels | z-test pass rate | iblbake / Mitsuba (mean) | deterministic channels (lookup range allowed) |")
-    print("|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         pano, spread = panorama_pair(tmp)
         runtimes = [Runtime(d) for d in args.devices.split(",")] if args.devices else [Runtime()]
         bakes = Bakes(tmp / "cache")
-        for rt in runtimes:
-            for name, (objects, mats) in scenes(tmp).items():
-                if (args.only and args.only not in name) or args.no_acceptance:
-                    continue
-                res = acceptance(mi, tmp, pano, spread, objects, mats, args.renders, args.spp, args.ref_spp, rt, bakes)
-                label = f"{name} ({rt.device_label})" if len(runtimes) > 1 else name
-                print(f"| {label} | {res['channels']} | {100 * res['rate']:.2f}% ({'pass' if res['rate'] >= 0.9975 else 'FAIL'}) | "
-                      f"{np.round(res['ratio'], 4).tolist()} | {100 * res['deterministic']:.1f}% |", flush=True)
-        print(f"\niblbake: {args.renders} renders x {args.spp} samples per pixel (seeds 1-{args.renders}), reference "
-              f"bounces unbounded; Mitsuba {mi.__version__} {args.variant} `path` max_depth 1024, {args.ref_spp} "
-              f"samples per pixel centre; {RES[0]}x{RES[1]}")
+        if not args.no_acceptance:
+            print("| scene | pixel channels | z-test pass rate | iblbake / Mitsuba (mean) | "
+                  "deterministic channels (lookup range allowed) |")
+            print("|---|---|---|---|---|")
+            for rt in runtimes:
+                for name, (objects, mats) in scenes(tmp).items():
+                    if args.only and args.only not in name:
+                        continue
+                    res = acceptance(mi, tmp, pano, spread, objects, mats, args.renders, args.spp, args.ref_spp, rt,
+                                     bakes)
+                    label = f"{name} ({rt.device_label})" if len(runtimes) > 1 else name
+                    print(f"| {label} | {res['channels']} | {100 * res['rate']:.2f}% "
+                          f"({'pass' if res['rate'] >= 0.9975 else 'FAIL'}) | "
+                          f"{np.round(res['ratio'], 4).tolist()} | {100 * res['deterministic']:.1f}% |", flush=True)
+            print(f"\niblbake: {args.renders} renders x {args.spp} samples per pixel (seeds 1-{args.renders}), "
+                  f"reference bounces unbounded; Mitsuba {mi.__version__} {args.variant} `path` max_depth 1024, "
+                  f"{args.ref_spp} samples per pixel centre; {RES[0]}x{RES[1]}")
         if args.per_bounce:
             for rt in runtimes:
                 per_bounce(args, mi, tmp, pano, rt, bakes)
@@ -368,24 +372,33 @@ def rel_rmse(img: np.ndarray, converged: np.ndarray, mask: np.ndarray) -> float:
     return float(np.sqrt(np.mean((a - b) ** 2)) / b.mean())
 
 
-def time_to_error(render_at, converged, n_converged: int, mask, target, start=4):
+def time_to_error(render_at, converged, n_converged: int, mask, target, start=4, taken=lambda n: n):
     """(samples per pixel, seconds) at which the relative RMSE against the truth reaches target:
     renders at doubling sample counts (render_at(n) -> (image, seconds)), the two that bracket the
     target interpolated in log-log (error and time both power laws of n). The converged image has
     noise of its own, n / n_converged of the test image's variance where both fall as 1 / n, so
-    the RMSE against it is divided by sqrt(1 + n / n_converged)."""
+    the RMSE against it is divided by sqrt(1 + n / n_converged). taken(n): the samples a render
+    asked for n takes (Mitsuba's multijitter rounds 32 up to 35, a grid of 5 x 7)."""
     prev, n = None, start
     while n <= n_converged:                     # beyond, the converged image is no longer the truth
         img, sec = render_at(n)
-        e = rel_rmse(img, converged, mask) / math.sqrt(1 + n / n_converged)
+        k = taken(n)
+        e = rel_rmse(img, converged, mask) / math.sqrt(1 + k / taken(n_converged))
         if e <= target:
             if prev is None:
-                return n, sec
-            n0, s0, e0 = prev
+                return k, sec
+            k0, s0, e0 = prev
             t = (math.log(e0) - math.log(target)) / (math.log(e0) - math.log(e))
-            return n0 * (n / n0) ** t, s0 * (sec / s0) ** t
-        prev, n = (n, sec, e), n * 2
+            return k0 * (k / k0) ** t, s0 * (sec / s0) ** t
+        prev, n = (k, sec, e), n * 2
     return None
+
+
+def mitsuba_samples(mi, sampler: str, n: int) -> int:
+    """The samples per pixel Mitsuba's `sampler` takes when asked for n (its own rounding)."""
+    s = mi.load_dict({"type": sampler, "sample_count": n})
+    s.set_sample_count(n)
+    return int(s.sample_count())
 
 
 def speed(args, mi, tmp: Path, pano: Path, runtimes, bakes):
@@ -435,7 +448,9 @@ def speed(args, mi, tmp: Path, pano: Path, runtimes, bakes):
                     times.append(time.perf_counter() - t0)
                 return img[..., :3].astype(np.float64), statistics.median(times)
             mconv, _ = mi_at(args.converged, seed=999, repeats=1)
-            rows.append((f"Mitsuba path, {sampler}", time_to_error(mi_at, mconv, args.converged, mask, args.target)))
+            taken = functools.partial(mitsuba_samples, mi, sampler)
+            rows.append((f"Mitsuba path, {sampler}",
+                         time_to_error(mi_at, mconv, args.converged, mask, args.target, taken=taken)))
         base = rows[0][1]
         for who, r in rows:
             if r is None:
@@ -489,7 +504,8 @@ def per_bounce(args, mi, tmp: Path, pano: Path, rt, bakes):
                     np.array(mi.render(scene, spp=args.spp))
                     mt.append(time.perf_counter() - t0)
                 m = statistics.median(mt)
-                row += f" {depth} | {1e3 * m:.1f} | {n / m / 1e6:.2f} |"
+                taken = RES[0] * RES[1] * mitsuba_samples(mi, "multijitter", args.spp)
+                row += f" {depth} | {1e3 * m:.1f} | {taken / m / 1e6:.2f} |"
             else:
                 row += " | | |"
             print(row, flush=True)
@@ -517,9 +533,9 @@ def variance(args, mi, tmp: Path, pano: Path, rt, bakes, seeds: int = 8):
             continue
         p, mask = tmp / "variance.yaml", None
 
-        def rel(frames):
+        def rel(frames, spp=args.spp):
             a = np.array(frames)
-            return a.var(0, ddof=1).mean() / a.mean() ** 2 * args.spp
+            return a.var(0, ddof=1).mean() / a.mean() ** 2 * spp
 
         row = []
         for target in (0.0, 1e-9):                       # 1e-9: replicates kept, never reached
@@ -537,7 +553,7 @@ def variance(args, mi, tmp: Path, pano: Path, rt, bakes, seeds: int = 8):
             for seed in range(1, seeds + 1):
                 scene = mi.load_dict(mitsuba_dict(mi, pano, objects, mats, 1024, args.spp, seed, sampler))
                 frames.append(luminance(np.array(mi.render(scene, spp=args.spp))[..., :3].astype(np.float64))[mask])
-            row.append(rel(frames))
+            row.append(rel(frames, mitsuba_samples(mi, sampler, args.spp)))   # what it took (ldsampler: 128 -> 256)
         print(f"| {name} | " + " | ".join(f"{v:.3f}" for v in row) + " |", flush=True)
     print(f"\n{RES[0]}x{RES[1]}, {args.spp} samples per pixel, {seeds} seeds; relative variance x spp "
           f"(lower needs fewer samples); iblbake device: {rt.device_label}; Mitsuba {args.variant} `path`")
