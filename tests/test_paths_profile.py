@@ -17,6 +17,11 @@ from tests.conftest import load_scene, run_cli
 # the differential parts against the whole launch: medians of a few rounds of launches of some
 # milliseconds on a shared 2-core machine (measured 0.98-1.03 on these scenes)
 ADDS_UP = 0.25
+# the replay (shading with every ray answered from the record) plus the rays traced alone, against
+# the whole launch: the parts run apart re-read what the whole launch shares between shading and
+# traversal (the BVH, the record), so they come to more: measured 1.15-1.18 on the mesh with
+# lights on a quiet machine, 1.26 with another job on the second core
+REPLAY_ADDS_UP = 0.45
 
 
 def box(folder, env, bounces, *, size=(32, 24), samples=16, lights=None, name="box"):
@@ -57,7 +62,7 @@ def check_profile(pr, bounces):
     assert abs(total / pr["whole_ms"] - 1) < ADDS_UP
     assert abs(pr["per_bounce_over_whole"] - 1) < ADDS_UP
     assert pr["replay_same_result"] is True
-    assert abs(pr["replay_and_traversal_over_whole"] - 1) < ADDS_UP
+    assert abs(pr["replay_and_traversal_over_whole"] - 1) < REPLAY_ADDS_UP
     assert pr["rays"] == sum(e["closest_rays"] + e["shadow_rays"] for e in pr["per_bounce"])
 
 
