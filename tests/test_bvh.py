@@ -133,3 +133,46 @@ def test_the_wide_tree_of_the_deepest_binary_tree_fits_the_stack(monkeypatch):
     bvh = build_bvh(np.minimum(np.minimum(v0, v1), v2), np.maximum(np.maximum(v0, v1), v2))
     assert bvh.wide_depth == max(1, bvh.depth // 2)
     _check_device_tree(bvh, v0, v1, v2)
+
+
+@pytest.mark.parametrize("mend", ["child past the nodes", "leaf past the triangles", "wide leaf record",
+                                  "closed of another mesh", "report without the wide count"])
+def test_a_cached_geometry_entry_that_does_not_read_back_is_built_again(tmp_path, mend):
+    """A geometry entry whose files match its manifest but would send a traversal outside its
+    arrays (render/bakes.py read_geometry_entry, scene/bvh.py check_trees): said in one warning
+    naming it, built again, and the frame is the fresh cache's."""
+    from iblbake.render import render
+    from iblbake.scene import load as scene_load
+    from tests.conftest import mend_cache_entry, scene_file, write_exr
+    import trimesh
+    trimesh.creation.icosphere(subdivisions=3).export(tmp_path / "ball.ply")
+    env = write_exr(tmp_path / "sky.exr", np.full((8, 16, 3), 0.5, np.float32))
+    p = scene_file(tmp_path, env, materials={"m": {"roughness": 0.5}},
+                   objects=[{"mesh": {"path": str(tmp_path / "ball.ply")}, "material": "m"}],
+                   camera={"perspective": {"position": [0, 0, 4], "look_at": [0, 0, 0], "fov_y": 40},
+                           "resolution": [16, 16]},
+                   effects={"diffuse": "reference", "specular": "reference",
+                            "reference": {"max_samples": 4, "target_noise": 0}})
+    want = render(scene_load.load(p), cache_root=tmp_path / "cache")
+    entry = next(e for e in (tmp_path / "cache").iterdir() if e.name.startswith("geometry-"))
+    if mend == "child past the nodes":
+        nodes = np.load(entry / "bvh.npy")
+        nodes.view(np.int32)[0, 3] = len(nodes)              # the root's children past the end
+        mend_cache_entry(entry, bvh=nodes)
+    elif mend == "leaf past the triangles":
+        nodes = np.load(entry / "bvh.npy")
+        leaf = np.flatnonzero(nodes.view(np.int32)[:, 7] > 0)[0]
+        nodes.view(np.int32)[leaf, 3] = 10 ** 6
+        mend_cache_entry(entry, bvh=nodes)
+    elif mend == "wide leaf record":
+        wide = np.load(entry / "bvh4.npy")
+        mend_cache_entry(entry, bvh4=wide[:-3])               # a leaf's record cut short
+    elif mend == "closed of another mesh":
+        mend_cache_entry(entry, closed=np.load(entry / "closed.npy")[:-1])
+    else:
+        mend_cache_entry(entry, lambda m: m["report"].pop("bvh4_nodes"))
+    said = []
+    got = render(scene_load.load(p), cache_root=tmp_path / "cache", warn=said.append)
+    again = [w for w in said if "baking it again" in w]
+    assert len(again) == 1 and entry.name in again[0], said
+    assert np.array_equal(got.hdr, want.hdr)

@@ -27,7 +27,7 @@ from iblbake.render import twin as rr
 from iblbake.scene import load as scene
 from iblbake.scene import pack
 
-from .conftest import run_cli, write_exr
+from .conftest import mend_cache_entry, run_cli, write_exr
 from .conftest import scene_file as write_scene_file
 
 QUAD_V = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], float)
@@ -174,30 +174,21 @@ def test_a_cached_textures_entry_that_does_not_read_back_is_baked_again(tmp_path
     """A textures entry whose files match its manifest but not what the kernels will index (another
     version's, or a hand's): said in one warning naming it, baked again, and the frame is the
     fresh cache's (before, a slot out of range was read as a texture)."""
-    import hashlib
-    import json
-    import os
-    from iblbake.bake import cache
-
     tex = png(tmp_path / "c.png", np.broadcast_to([200, 40, 30, 255], (8, 8, 4)))
     p = scene_file(tmp_path, {"t": {"base_color": [1, 1, 1], "base_color_map": {"path": tex}}},
                    [{"mesh": {"path": quad_glb(tmp_path / "q.glb")}, "material": "t"}], res=(16, 16))
     _, want = render_scene(p, tmp_path / "cache")
     entry = next(e for e in (tmp_path / "cache").iterdir() if e.name.startswith("textures-"))
-    man = json.loads((entry / cache.MANIFEST).read_text())
     if mend == "slot out of range":
-        man["slots"] = [7]
+        mend_cache_entry(entry, lambda m: m.update(slots=[7]))
     elif mend == "slots missing":
-        del man["slots"]
+        mend_cache_entry(entry, lambda m: m.pop("slots"))
+    elif mend == "level past the texels":
+        levels = np.load(entry / "tex_levels.npy")
+        levels[:, 2] += 1000
+        mend_cache_entry(entry, tex_levels=levels)
     else:
-        name = "tex_levels.npy" if mend == "level past the texels" else "texels.npy"
-        a = np.load(entry / name)
-        np.save(entry / name, a + [[0, 0, 1000, 0]] if mend == "level past the texels" else a.astype(np.int32))
-        for f in man["files"]:
-            if f["name"] == name:
-                f.update(sha256=hashlib.sha256((entry / name).read_bytes()).hexdigest(),
-                         bytes=os.path.getsize(entry / name), mtime_ns=os.stat(entry / name).st_mtime_ns)
-    (entry / cache.MANIFEST).write_text(json.dumps(man))
+        mend_cache_entry(entry, texels=np.load(entry / "texels.npy").astype(np.int32))
     said = []
     got = render.render(scene.load(p), cache_root=tmp_path / "cache", warn=said.append)
     again = [w for w in said if "baking it again" in w]

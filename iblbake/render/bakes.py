@@ -43,6 +43,32 @@ POLICY_KEYS = {"nonfinite": "environment.nonfinite:", "negative": "environment.n
                "layout": "environment.layout:"}
 
 
+def read_geometry_entry(entry: Path, report) -> tuple:
+    """A geometry entry's (triangles, bvh, bvh4, attributes, closed), checked as the kernels will
+    index them (scene/bvh.py check_trees: no child, leaf or triangle out of range; every per-triangle
+    array one row a triangle). An IblbakeError where the entry does not (cache.get_checked then
+    builds it again)."""
+    from iblbake.scene import bvh
+    from iblbake.scene.layout import FLOAT4S
+
+    names = ("triangles", "bvh", "bvh4", "attributes", "closed")
+    try:
+        tris, nodes, wide, attr, closed = (np.load(entry / f"{n}.npy") for n in names)
+    except (OSError, ValueError, EOFError) as e:
+        raise IblbakeError(f"{entry}: unreadable geometry arrays ({e})") from None
+    t = len(tris)
+    per_triangle = (tris.dtype == np.float32 and tris.shape[1:] == (FLOAT4S["TRIANGLE"], 4)
+                    and attr.dtype == np.float32 and attr.shape[1:] == (FLOAT4S["TRIANGLE_ATTR"], 4)
+                    and len(attr) in (0, t) and closed.dtype == np.int32 and closed.shape == (t, 2))
+    if tris.ndim != 3 or attr.ndim != 3 or not per_triangle or not isinstance(report, dict):
+        raise IblbakeError(f"{entry}: geometry arrays of the wrong type or shape")
+    try:
+        bvh.check_trees(nodes, wide, t, int(report.get("bvh4_nodes", 0)) if t else 0)
+    except (ValueError, TypeError) as e:
+        raise IblbakeError(f"{entry}: {e}") from None
+    return tris, nodes, wide, attr, closed
+
+
 def read_textures(entry: Path, order, maps: int) -> tuple:
     """A textures entry's arrays (texels, tex_levels, tex_info), checked as the kernels will index
     them: every map's slot a texture, every texture's levels listed, every level's texels held.
@@ -174,11 +200,9 @@ class Bakes:
                                                                           "attributes.npy", "closed.npy")],
                         "report": report}
 
-            manifest, cached = cache.get_or_build(self.root, key, build, warn=warn)
-            entry = self.root / manifest["key"]
-            arrays = (np.load(entry / "triangles.npy"), np.load(entry / "bvh.npy"), np.load(entry / "bvh4.npy"),
-                      {**manifest["report"], "cached": cached}, np.load(entry / "attributes.npy"),
-                      np.load(entry / "closed.npy"))
+            arrays, manifest, cached = cache.get_checked(
+                self.root, key, build, lambda m: read_geometry_entry(self.root / m["key"], m.get("report")), warn=warn)
+            arrays = (*arrays[:3], {**manifest["report"], "cached": cached}, *arrays[3:])
             self._meshes[id(arrays[1])] = (key, arrays[1], arrays[4])
             return arrays
 

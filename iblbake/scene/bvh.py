@@ -214,6 +214,37 @@ def widen(nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
     return out, np.stack([first[flat[leaf]], count[flat[leaf]]], axis=1), len(levels)
 
 
+def check_trees(nodes: np.ndarray, wide: np.ndarray, triangles: int, wide_nodes: int) -> None:
+    """A ValueError where trees read back (build_bvh's nodes, device_tree's records of `wide_nodes`
+    wide nodes over `triangles` triangles) would send a traversal outside its arrays: a child, a
+    leaf's record or a leaf's run of triangles out of range. Boxes are not checked (a wrong box
+    gives a wrong picture, not a wild read)."""
+    if not (nodes.dtype == np.float32 and nodes.ndim == 2 and nodes.shape[1] == 8
+            and wide.dtype == np.float32 and wide.ndim == 2 and wide.shape[1] == 4):
+        raise ValueError("BVH arrays of the wrong type or shape")
+    if triangles == 0:
+        return
+    ints = nodes.view(np.int32)
+    a, c = ints[:, 3].astype(np.int64), ints[:, 7].astype(np.int64)
+    inner = c == 0                     # children a and a + 1; a leaf's triangles a .. a + c - 1
+    if (not len(nodes) or (inner & ((a < 1) | (a + 1 >= len(nodes)))).any()
+            or (~inner & ((c < 0) | (c > WIDTH) | (a < 0) | (a + c > triangles))).any()):
+        raise ValueError("a binary BVH node's child or triangles out of range")
+    node_rows, leaf_rows = FLOAT4S["BVH4_NODE"], FLOAT4S["BVH4_LEAF"]
+    rows = wide_nodes * node_rows
+    if wide_nodes < 1 or len(wide) < rows or (len(wide) - rows) % leaf_rows:
+        raise ValueError("a wide BVH whose records do not match its node count")
+    codes = wide[:rows].reshape(wide_nodes, node_rows, 4).view(np.int32)[:, 6].astype(np.int64).ravel()
+    off = -1 - codes                   # a leaf's record (codes < -1); -1 an empty child
+    bad_node = (codes >= 0) & ((codes < 1) | (codes >= wide_nodes))
+    bad_leaf = (codes < -1) & ((off < rows) | ((off - rows) % leaf_rows != 0) | (off + leaf_rows > len(wide)))
+    if bad_node.any() or bad_leaf.any():
+        raise ValueError("a wide BVH node's child out of range")
+    runs = wide[rows:].reshape(-1, leaf_rows, 4).view(np.int32)[:, 9, :2].astype(np.int64)
+    if ((runs[:, 0] < 0) | (runs[:, 1] < 1) | (runs[:, 1] > WIDTH) | (runs.sum(1) > triangles)).any():
+        raise ValueError("a wide BVH leaf's triangles out of range")
+
+
 def device_tree(bvh: BVH, v0: np.ndarray, v1: np.ndarray, v2: np.ndarray) -> np.ndarray:
     """The (m, 4) float32 records kernels/scene.h traverses: the wide nodes, then per leaf (in
     bvh.leaves' order) its triangles' corners by coordinate, a lane per triangle (kernels/layout.h
