@@ -176,3 +176,60 @@ def test_a_cached_geometry_entry_that_does_not_read_back_is_built_again(tmp_path
     again = [w for w in said if "baking it again" in w]
     assert len(again) == 1 and entry.name in again[0], said
     assert np.array_equal(got.hdr, want.hdr)
+
+
+def small_trees():
+    """(nodes, wide records, triangles, wide nodes) of random triangle soups of 1 to 1000 triangles
+    (a root that is a leaf, one level, several)."""
+    for n in (1, 2, 5, 17, 1000):
+        v = np.random.default_rng(n).random((n, 3, 3)).astype(np.float32)
+        b = build_bvh(v.min(1), v.max(1))
+        o = b.order
+        yield b.nodes.copy(), device_tree(b, v[o, 0], v[o, 1], v[o, 2]), n, len(b.wide)
+
+
+DAMAGES = {"binary loop": "binary BVH node's child numbered before it",
+           "binary child past the end": "binary BVH node's child numbered before it or past the nodes",
+           "binary leaf past the triangles": "binary BVH leaf's triangles out of range",
+           "wide loop": "wide BVH node's child numbered before it",
+           "wide leaf record misaligned": "wide BVH leaf code off its records",
+           "wide leaf past the triangles": "wide BVH leaf's triangles out of range",
+           "open box on an empty lane": "empty wide BVH lane with a box a ray could meet",
+           "deeper than the stack": "wide BVH deeper than the traversal's stack"}
+
+
+@pytest.mark.parametrize("damage", ["none", *DAMAGES])
+def test_check_trees_refuses_what_would_read_outside_or_loop(damage, monkeypatch):
+    """scene/bvh.py check_trees passes every tree the builders make and refuses each damage a
+    traversal would follow outside its arrays or round forever (one damage at a time)."""
+    from iblbake.scene.bvh import check_trees
+    for nodes, wide, n, wn in list(small_trees()):     # built before the stack is shrunk
+        if n < 17 and damage != "none":
+            continue                                   # the damages below need inner nodes
+        ints, rows = nodes.view(np.int32), wn * FLOAT4S["BVH4_NODE"]
+        codes = wide[:rows].reshape(wn, FLOAT4S["BVH4_NODE"], 4).view(np.int32)[:, 6]
+        inner = np.flatnonzero(ints[:, 7] == 0)
+        leaf_lane = np.argwhere(codes < -1)[0]
+        if damage == "binary loop":
+            ints[inner[-1], 3] = inner[-1] - 1          # a child numbered before its parent
+        elif damage == "binary child past the end":
+            ints[inner[0], 3] = len(nodes) - 1
+        elif damage == "binary leaf past the triangles":
+            ints[np.flatnonzero(ints[:, 7] > 0)[-1], 3] = n
+        elif damage == "wide loop":
+            codes[1, np.argmax(codes[1] >= 0) if (codes[1] >= 0).any() else 0] = 1
+        elif damage == "wide leaf record misaligned":
+            codes[tuple(leaf_lane)] -= 1
+        elif damage == "wide leaf past the triangles":
+            wide[rows:].reshape(-1, FLOAT4S["BVH4_LEAF"], 4).view(np.int32)[-1, 9, 0] = n
+        elif damage == "open box on an empty lane":
+            empty = np.argwhere(codes == -1)[0]
+            lanes = wide[:rows].reshape(wn, FLOAT4S["BVH4_NODE"], 4)
+            lanes[empty[0], 0:3, empty[1]], lanes[empty[0], 3:6, empty[1]] = -1e9, 1e9
+        elif damage == "deeper than the stack":
+            monkeypatch.setattr(bvh_module, "BVH_STACK", 3 * 1 + 1)   # one level fits, two do not
+        if damage == "none":
+            check_trees(nodes, wide, n, wn)
+        else:
+            with pytest.raises(ValueError, match=DAMAGES[damage]):
+                check_trees(nodes, wide, n, wn)

@@ -43,11 +43,11 @@ POLICY_KEYS = {"nonfinite": "environment.nonfinite:", "negative": "environment.n
                "layout": "environment.layout:"}
 
 
-def read_geometry_entry(entry: Path, report) -> tuple:
+def read_geometry_entry(entry: Path, report, attributes: bool) -> tuple:
     """A geometry entry's (triangles, bvh, bvh4, attributes, closed), checked as the kernels will
-    index them (scene/bvh.py check_trees: no child, leaf or triangle out of range; every per-triangle
-    array one row a triangle). An IblbakeError where the entry does not (cache.get_checked then
-    builds it again)."""
+    index them (scene/bvh.py check_trees: no child, leaf or triangle out of range, no loop; every
+    per-triangle array one row a triangle, the attributes' only where the kernels read them). An
+    IblbakeError where the entry does not (cache.get_checked then builds it again)."""
     from iblbake.scene import bvh
     from iblbake.scene.layout import FLOAT4S
 
@@ -56,11 +56,11 @@ def read_geometry_entry(entry: Path, report) -> tuple:
         tris, nodes, wide, attr, closed = (np.load(entry / f"{n}.npy") for n in names)
     except (OSError, ValueError, EOFError) as e:
         raise IblbakeError(f"{entry}: unreadable geometry arrays ({e})") from None
-    t = len(tris)
+    t = len(tris) if tris.ndim == 3 else -1
     per_triangle = (tris.dtype == np.float32 and tris.shape[1:] == (FLOAT4S["TRIANGLE"], 4)
-                    and attr.dtype == np.float32 and attr.shape[1:] == (FLOAT4S["TRIANGLE_ATTR"], 4)
-                    and len(attr) in (0, t) and closed.dtype == np.int32 and closed.shape == (t, 2))
-    if tris.ndim != 3 or attr.ndim != 3 or not per_triangle or not isinstance(report, dict):
+                    and attr.dtype == np.float32 and attr.shape == (t if attributes else 0, FLOAT4S["TRIANGLE_ATTR"], 4)
+                    and closed.dtype == np.int32 and closed.shape == (t, 2))
+    if t < 0 or not per_triangle or not isinstance(report, dict):
         raise IblbakeError(f"{entry}: geometry arrays of the wrong type or shape")
     try:
         bvh.check_trees(nodes, wide, t, int(report.get("bvh4_nodes", 0)) if t else 0)
@@ -185,8 +185,9 @@ class Bakes:
                      for oid, o in meshes]
         except (OSError, IblbakeError):   # a missing or unreadable mesh: the loader says so, in one line
             return pack.scene_arrays(sc)
+        attributes = pack.needs_attributes(sc)
         key = "geometry-" + cache.content_key({"kind": "geometry", "v": 4, "meshes": parts,
-                                               "attributes": pack.needs_attributes(sc), "code": _geometry_code_hash()})
+                                               "attributes": attributes, "code": _geometry_code_hash()})
 
         def make():
             def build(tmp: Path):
@@ -201,7 +202,8 @@ class Bakes:
                         "report": report}
 
             arrays, manifest, cached = cache.get_checked(
-                self.root, key, build, lambda m: read_geometry_entry(self.root / m["key"], m.get("report")), warn=warn)
+                self.root, key, build, lambda m: read_geometry_entry(self.root / m["key"], m.get("report"), attributes),
+                warn=warn)
             arrays = (*arrays[:3], {**manifest["report"], "cached": cached}, *arrays[3:])
             self._meshes[id(arrays[1])] = (key, arrays[1], arrays[4])
             return arrays

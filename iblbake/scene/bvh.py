@@ -216,9 +216,11 @@ def widen(nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
 
 def check_trees(nodes: np.ndarray, wide: np.ndarray, triangles: int, wide_nodes: int) -> None:
     """A ValueError where trees read back (build_bvh's nodes, device_tree's records of `wide_nodes`
-    wide nodes over `triangles` triangles) would send a traversal outside its arrays: a child, a
-    leaf's record or a leaf's run of triangles out of range. Boxes are not checked (a wrong box
-    gives a wrong picture, not a wild read)."""
+    wide nodes over `triangles` triangles) would send a traversal outside its arrays or round a
+    loop: a child not numbered after its parent (both builders number breadth first, so a loop
+    cannot pass), a leaf's record or run of triangles out of range, an empty wide lane whose box a
+    ray could meet (its code would be read as a leaf), or a wide tree deeper than the traversal's
+    stack. Other boxes are not checked: a wrong box gives a wrong picture, not a wild read."""
     if not (nodes.dtype == np.float32 and nodes.ndim == 2 and nodes.shape[1] == 8
             and wide.dtype == np.float32 and wide.ndim == 2 and wide.shape[1] == 4):
         raise ValueError("BVH arrays of the wrong type or shape")
@@ -227,22 +229,38 @@ def check_trees(nodes: np.ndarray, wide: np.ndarray, triangles: int, wide_nodes:
     ints = nodes.view(np.int32)
     a, c = ints[:, 3].astype(np.int64), ints[:, 7].astype(np.int64)
     inner = c == 0                     # children a and a + 1; a leaf's triangles a .. a + c - 1
-    if (not len(nodes) or (inner & ((a < 1) | (a + 1 >= len(nodes)))).any()
-            or (~inner & ((c < 0) | (c > WIDTH) | (a < 0) | (a + c > triangles))).any()):
-        raise ValueError("a binary BVH node's child or triangles out of range")
+    own = np.arange(len(nodes))
+    if not len(nodes) or (inner & ((a <= own) | (a + 1 >= len(nodes)))).any():
+        raise ValueError("a binary BVH node's child numbered before it or past the nodes")
+    if (~inner & ((c < 0) | (c > WIDTH) | (a < 0) | (a + c > triangles))).any():
+        raise ValueError("a binary BVH leaf's triangles out of range")
     node_rows, leaf_rows = FLOAT4S["BVH4_NODE"], FLOAT4S["BVH4_LEAF"]
     rows = wide_nodes * node_rows
     if wide_nodes < 1 or len(wide) < rows or (len(wide) - rows) % leaf_rows:
         raise ValueError("a wide BVH whose records do not match its node count")
-    codes = wide[:rows].reshape(wide_nodes, node_rows, 4).view(np.int32)[:, 6].astype(np.int64).ravel()
-    off = -1 - codes                   # a leaf's record (codes < -1); -1 an empty child
-    bad_node = (codes >= 0) & ((codes < 1) | (codes >= wide_nodes))
+    records = wide[:rows].reshape(wide_nodes, node_rows, 4)
+    codes = records.view(np.int32)[:, 6].astype(np.int64)              # (node, lane)
+    off = -1 - codes                   # a leaf's record (codes < -1); -1 an empty lane
+    parent = np.arange(wide_nodes)[:, None]
+    bad_node = (codes >= 0) & ((codes <= parent) | (codes >= wide_nodes))
     bad_leaf = (codes < -1) & ((off < rows) | ((off - rows) % leaf_rows != 0) | (off + leaf_rows > len(wide)))
-    if bad_node.any() or bad_leaf.any():
-        raise ValueError("a wide BVH node's child out of range")
+    empty = codes == -1
+    open_box = ~((records[:, 0:3] == np.inf).all(1) & (records[:, 3:6] == -np.inf).all(1))   # per lane
+    if bad_node.any():
+        raise ValueError("a wide BVH node's child numbered before it or past the nodes")
+    if bad_leaf.any():
+        raise ValueError("a wide BVH leaf code off its records")
+    if (empty & open_box).any():
+        raise ValueError("an empty wide BVH lane with a box a ray could meet")
     runs = wide[rows:].reshape(-1, leaf_rows, 4).view(np.int32)[:, 9, :2].astype(np.int64)
     if ((runs[:, 0] < 0) | (runs[:, 1] < 1) | (runs[:, 1] > WIDTH) | (runs.sum(1) > triangles)).any():
         raise ValueError("a wide BVH leaf's triangles out of range")
+    level, depth = np.array([0]), 0    # the wide traversal's stack holds (WIDTH - 1) a level + 1
+    while len(level):
+        depth += 1
+        if (WIDTH - 1) * depth + 1 > BVH_STACK:
+            raise ValueError(f"a wide BVH deeper than the traversal's stack ({BVH_STACK})")
+        level = codes[level][codes[level] >= 0]
 
 
 def device_tree(bvh: BVH, v0: np.ndarray, v1: np.ndarray, v2: np.ndarray) -> np.ndarray:
