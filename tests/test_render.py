@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from iblbake.core import conventions
 from iblbake.io import images
@@ -544,12 +545,21 @@ def test_set_overrides(tmp_path, constant_env):
     # a misspelt section made by --set is the flag's, not the line of the file's section above it
     with pytest.raises(InputError, match=r"scene\.yaml: --set: effects\.referance: unknown key \(did you mean 'reference'\?\)"):
         scene.load(p, ["effects.referance.max_samples=10"])
-    # a value of neither kind says what it may be, once
-    with pytest.raises(InputError, match=r"--set: effects\.reference\.bounces: 0 is neither unbounded nor integer "
-                                         r"\(1 <= x <= 65536\)$"):
+    # a value of one alternative's kind gets that alternative's complaint alone; of none, what it may be
+    with pytest.raises(InputError, match=r"--set: effects\.reference\.bounces: 0 is out of range; give a value >= 1 "
+                                         r"and <= 65536$"):
         scene.load(p, ["effects.reference.bounces=0"])
-    with pytest.raises(InputError, match=r"'unbouded' is neither .* \(did you mean 'unbounded'\?\)$"):
+    with pytest.raises(InputError, match=r"'unbouded' is not one of unbounded \(did you mean 'unbounded'\?\)$"):
         scene.load(p, ["effects.reference.bounces=unbouded"])
+    with pytest.raises(InputError, match=r"\{'a': 1\} is neither unbounded nor integer \(1 <= x <= 65536\)$"):
+        scene.load(p, ["effects.reference.bounces={a: 1}"])
+    with pytest.raises(InputError, match=r"environment\.background: \[1, 2\] is not a list of 3 numbers$"):
+        scene.load(p, ["environment.background=[1, 2]"])
+    # a misspelt section the scene itself holds is the scene's, though --set writes inside it
+    doc = yaml.safe_load(p.read_text())
+    doc["effects"]["referance"] = {"max_samples": 3}
+    with pytest.raises(InputError, match=r"^<scene>: effects\.referance: unknown key"):
+        scene.load_data(doc, tmp_path, overrides=["effects.referance.max_samples=10"])
 
 
 def test_mesh_errors(tmp_path, constant_env):

@@ -54,10 +54,6 @@ class _Validator:
             if p in self.overridden:
                 return f"{self.source}: {self.overridden[p]}"
             p = p.rpartition(".")[0]
-        if path and path not in self.lines:   # a section an override made (a misspelt one, say)
-            made = [o for k, o in self.overridden.items() if k.startswith(path + ".")]
-            if made:
-                return f"{self.source}: {made[0]}"
         p = path
         while p and p not in self.lines:
             p = p.rpartition(".")[0]
@@ -118,8 +114,9 @@ class _Validator:
         return out
 
 
-def _apply_override(data: dict, assignment: str, name: str = "--set") -> str:
-    """Apply one KEY.PATH=VALUE; `name` is what errors call the overrides (a flag, an argument)."""
+def _apply_override(data: dict, assignment: str, name: str = "--set") -> tuple:
+    """Apply one KEY.PATH=VALUE; `name` is what errors call the overrides (a flag, an argument).
+    (key, the sections it made)."""
     if not isinstance(assignment, str):
         raise UsageError(f"{name} {assignment!r}: expected a 'KEY.PATH=VALUE' string, e.g. effects.samples=40")
     key, sep, raw = assignment.partition("=")
@@ -132,15 +129,15 @@ def _apply_override(data: dict, assignment: str, name: str = "--set") -> str:
         value = load_with_lines(raw, f"{name} {key}")[0]
     except InputError as e:              # a value that does not parse is a usage error (exit 2)
         raise UsageError(str(e)) from None
-    set_path(data, key, value, f"{name} {key}")
-    return key
+    return key, set_path(data, key, value, f"{name} {key}")
 
 
-def set_path(data: dict, key: str, value, origin: str) -> None:
+def set_path(data: dict, key: str, value, origin: str) -> list:
     """data[key.path] = value, creating sections on the way; `origin` names where the assignment
-    came from in errors (a --set flag, a sweep axis)."""
+    came from in errors (a --set flag, a sweep axis). The key paths of the sections it made (an
+    error in one, a misspelt name say, is the assignment's, not the file's)."""
     parts = key.split(".")
-    node = data
+    node, made = data, []
     for i, p in enumerate(parts[:-1]):
         if isinstance(node, list):
             if not p.isdigit() or int(p) >= len(node):
@@ -149,6 +146,7 @@ def set_path(data: dict, key: str, value, origin: str) -> None:
         elif isinstance(node, dict):
             if node.get(p) is None:
                 node[p] = {}
+                made.append(".".join(parts[:i + 1]))
             node = node[p]
         else:
             raise InputError(f"{origin}: {'.'.join(parts[:i])} is a value, not a section")
@@ -161,6 +159,7 @@ def set_path(data: dict, key: str, value, origin: str) -> None:
         node[last] = value
     else:
         raise InputError(f"{origin}: {'.'.join(parts[:-1])} is a value, not a section")
+    return made
 
 
 def _resolve_inside(folder: Path, rel: str, what: str, where: str) -> Path:
@@ -245,10 +244,11 @@ def _validated(data, lines, source, folder, overrides, outputs, values, origin, 
     import copy
     overridden = overridden or {}
     for a in overrides:
-        overridden[_apply_override(data, a, override_name)] = override_name
+        key, made = _apply_override(data, a, override_name)
+        overridden.update({**dict.fromkeys(made, override_name), key: override_name})
     for key, value in values:
-        set_path(data, key, value, origin)
-        overridden[key] = origin
+        made = set_path(data, key, value, origin)
+        overridden.update({**dict.fromkeys(made, origin), key: origin})
     raw = copy.deepcopy(data)
     v = _Validator(source, lines, overridden)
     out = v.section(SCHEMA, data, "")

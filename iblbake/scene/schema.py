@@ -151,15 +151,29 @@ class OneOf:
                 return alt.check(v)
             except _Bad as e:
                 reasons.append(str(e))
-        # what it may be, not each alternative's complaint ("0 is not one of unbounded and 0 is out
-        # of range"); a spelling hint kept
+        # the complaint of the one alternative of the value's kind (a number's range, a list's
+        # length), else what the value may be; not every alternative's complaint joined ("0 is not
+        # one of unbounded and 0 is out of range")
+        own = [r for alt, r in zip(self.alternatives, reasons) if _of_its_kind(alt, v)]
+        if len(own) == 1:
+            raise _Bad(own[0])
         kinds = [a.describe() for a in self.alternatives]
         said = f"neither {kinds[0]} nor {kinds[1]}" if len(kinds) == 2 else f"none of {', '.join(kinds[:-1])} or {kinds[-1]}"
-        hint = next((r[r.index(" (did you mean"):] for r in reasons if " (did you mean" in r), "")
-        raise _Bad(f"{v!r} is {said}{hint}")
+        raise _Bad(f"{v!r} is {said}")
 
     def describe(self):
         return " or ".join(a.describe() for a in self.alternatives)
+
+
+def _of_its_kind(alt, v) -> bool:
+    """Whether v is of the Python type alternative `alt` reads (a number for Num, a list for Vec,
+    a string for Enum, ...), whatever its value."""
+    if isinstance(alt, Enum):
+        return isinstance(v, str) or (isinstance(v, bool) and bool({"on", "off"} & set(alt.choices)))
+    kinds = {Num: (int, float), Vec: (list, tuple), Bool: (bool,), Str: (str,), ColorKey: (dict,)}.get(type(alt))
+    if kinds is None:
+        return False
+    return (bool in kinds) if isinstance(v, bool) else isinstance(v, kinds)
 
 
 @dataclass
