@@ -23,6 +23,7 @@ from iblbake.render import probes, units
 from iblbake.render.bakes import Bakes
 from iblbake.render.sources.probes import probe_args, probe_defines
 from iblbake.render.twin import probes as twin
+from iblbake.render.probes.relocation import SEALED_RAYS
 from tests.conftest import load_scene, run_cli
 
 
@@ -286,7 +287,7 @@ def rooms(folder, sky, visibility, diffuse="probes", **probe_keys):
 
 
 @pytest.mark.slow
-def test_visibility_stops_light_leaking_through_a_thin_wall(tmp_path, rt, sky):
+def test_visibility_stops_light_leaking_through_a_thin_wall(tmp_path, rt, sky, monkeypatch):
     """The closed room receives no light at all (the reference: 0; the panorama's SH, which knows no
     walls: 0.6); without visibility the probes beside the wall and above the roof (the automatic
     grid: 8 along the longest axis, cells of 0.67, overhanging the bounds by half a cell) bleed the
@@ -297,7 +298,10 @@ def test_visibility_stops_light_leaking_through_a_thin_wall(tmp_path, rt, sky):
     grid lights the rooms' floors half by the unoccluded SH (measured 89% of the leak), so grids
     overhang the scene, and its probes above the closed room's roof see the sky; the 1.9% left is
     the roof seen at grazing angles from just above it, where the distance moments' variance lets
-    Chebyshev's bound through."""
+    Chebyshev's bound through. The closed room seals the camera in, so the rule that switches off
+    the probes that see the sky from such a room (test_a_room_sealed_by_planes_keeps_the_sky_out)
+    would take the leak away with or without visibility: it is off here, to measure visibility alone."""
+    monkeypatch.setattr(probes, "outside_sealed_room", lambda tracer, camera, obj: np.zeros(len(obj), bool))
     cache = Bakes(tmp_path / "cache")
     lit = lambda f: f.hdr[..., :3][f.hdr[..., 3] > 0.999].mean()      # noqa: E731
     without = lit(render(rooms(tmp_path, sky, False), runtime=rt, cache=cache))
@@ -306,6 +310,25 @@ def test_visibility_stops_light_leaking_through_a_thin_wall(tmp_path, rt, sky):
     assert ref == 0.0
     assert without > 0.1
     assert with_vis <= 0.06 * without
+
+
+@pytest.mark.slow
+def test_a_room_sealed_by_planes_keeps_the_sky_out(tmp_path, rt, sky):
+    """The closed room of `rooms` is six planes of no thickness meeting at their edges (no closed
+    mesh for outside_camera_rooms to find): none of the camera's rays escapes, so every probe with a
+    ray that does is outside its room and off (relocation.outside_sealed_room). With or without
+    DDGI's visibility the room then gets no sky, black as the reference (before the rule: 0.16 over
+    the view without visibility, 0.0030 with it, test_visibility_stops_light_leaking_through_a_thin_wall).
+    A camera that sees the sky switches no probe off by it."""
+    def probe_report(frame):
+        return next(b for b in frame.report["bakes"] if b["name"] == "probes")
+
+    for visibility in (False, True):
+        frame = render(rooms(tmp_path, sky, visibility), runtime=rt, cache=Bakes(tmp_path / f"cache{visibility}"))
+        assert frame.hdr[..., :3][frame.hdr[..., 3] > 0.999].max() == 0.0
+        assert probe_report(frame)["outside_camera_room"] > 100            # of 200: the open room's and the roof's
+    open_sky = render(sphere_scene(tmp_path, sky, "probes"), runtime=rt, cache=Bakes(tmp_path / "open"))
+    assert probe_report(open_sky)["outside_camera_room"] == 0
 
 
 def test_probes_are_baked_and_compiled_only_where_asked(tmp_path, sky):
@@ -347,7 +370,7 @@ def test_cli_writes_the_volume_and_reads_refuse_damage(tmp_path, sky):
     p = run_cli("probes", sc.source, "-o", out, "--cache", tmp_path / "cache", "--json", "-q")
     assert p.returncode == 0, p.stderr
     doc = json.loads(p.stdout)
-    assert doc["states"] == {"active": 8, "inactive": 0} and doc["rays_traced"] == 8 * (64 + probes.FIXED_RAYS)
+    assert doc["states"] == {"active": 8, "inactive": 0} and doc["rays_traced"] == 8 * (64 + probes.FIXED_RAYS) + SEALED_RAYS
     man = json.loads((out / "probes.json").read_text())
     vol = probes.load(out, man)
     assert vol["irradiance"].shape == (16, 32, 3) and np.abs(vol["irradiance"] - 0.75 * math.pi).max() < 2e-6
@@ -552,6 +575,8 @@ def test_a_series_reruns_the_shade_pass_when_only_the_probes_change(tmp_path, rt
     reuse = Reuse()
     bakes = Bakes(tmp_path / "cache")
     doc = yaml.safe_load(Path(rooms(tmp_path, sky, True).source).read_text())
+    # the camera in the room open to the sky (the closed one is black whatever its probes)
+    doc["camera"]["perspective"].update(position=[-1.6, 1.6, 0.6], look_at=[-0.3, 0, 0])
     frames = []
     for i, keys in enumerate(({}, {"counts": 4}, {"counts": 4, "normal_bias": 0.4})):
         d = json.loads(json.dumps(doc))

@@ -32,13 +32,13 @@ from iblbake.render.probes.project import BACKFACE_BLEND_LIMIT, MAX_DISTANCE, at
 from iblbake.render.paths.tracer import Tracer, trace_defines
 from iblbake.render.probes.rays import random_rotation, ray_directions, spherical_fibonacci
 from iblbake.render.probes.relocation import (ACTIVE, FIXED_RAYS, INACTIVE, MAX_OFFSET, RELOCATION_PASSES, classify,
-                                              inside_geometry, outside_camera_rooms, relocate)
+                                              inside_geometry, outside_camera_rooms, outside_sealed_room, relocate)
 from iblbake.render.probes.volume import SAMPLING_KEYS, bake_settings, basis_options, sampled, volume_dict
 
 __all__ = ["ACTIVE", "BACKFACE_BLEND_LIMIT", "DEFAULT_LONGEST", "FILES", "FIXED_RAYS", "FORMAT", "Grid", "INACTIVE",
            "INSIDE_WARN", "MAX_ATLAS_SIDE", "MAX_DISTANCE", "MAX_OFFSET", "RELOCATION_PASSES", "SAMPLING_KEYS", "SH_GLSL", "SPECULAR_TABLE",
            "Tracer", "VERSION", "atlas", "bake", "bake_settings", "basis_glsl", "basis_manifest", "basis_options",
-           "classify", "data_texture", "glsl", "grid_of", "inside_geometry", "load", "manifest", "outside_camera_rooms",
+           "classify", "data_texture", "glsl", "grid_of", "inside_geometry", "load", "manifest", "outside_camera_rooms", "outside_sealed_room",
            "project", "random_rotation", "ray_directions", "read_manifest", "relocate", "sampled", "save", "scene_bounds",
            "spherical_fibonacci", "trace_defines", "volume_dict", "warnings", "with_borders"]
 
@@ -62,7 +62,8 @@ def bake(job, settings: dict, progress=None) -> dict:
     radiance, t, obj = tracer.trace(grid.positions() + offset, dirs, True, progress, base, 1.0 - base)
     states = classify(t, dirs, grid, settings) if settings["classification"] else np.zeros(grid.count, int)
     from iblbake.scene import pack
-    outside = outside_camera_rooms(grid.positions() + offset, arrays, pack.camera_vectors(job.scene.data["camera"])[0])
+    camera = pack.camera_vectors(job.scene.data["camera"])[0]
+    outside = outside_camera_rooms(grid.positions() + offset, arrays, camera) | outside_sealed_room(tracer, camera, obj)
     states = np.where(outside, INACTIVE, states)
     irr, dist = project(radiance, t, dirs, grid, settings)
     data = np.concatenate([offset, states[:, None].astype(np.float64)], 1)

@@ -95,6 +95,24 @@ def classify(t, dirs, grid: Grid, settings: dict) -> np.ndarray:
     return np.where(inside | ~near, INACTIVE, ACTIVE)
 
 
+SEALED_RAYS = 4096              # rays from the camera that must all meet a surface for its room to be sealed
+
+
+def outside_sealed_room(tracer: Tracer, camera, obj) -> np.ndarray:
+    """The probes outside a room that seals the camera in, whatever it is built of (planes of no
+    thickness meeting at their edges, overlapping walls, meshes that are not closed): where none of
+    SEALED_RAYS rays from the camera escapes to the panorama, no light from outside reaches what it
+    sees, and a probe any of whose rays (obj: the object each met, -1 none) escapes is outside
+    (a new user's trial: six planes around a point light, the sky outside leaking onto the back
+    wall at +24% of the reference, bright seams at the edges). A window smaller than the rays'
+    spacing seen from the camera (4 pi / SEALED_RAYS sr) may be missed, its probes then off."""
+    escaped = (np.asarray(obj) < 0).any(1)
+    if not escaped.any():                 # no probe sees the sky: nothing to ask the camera
+        return escaped
+    _, _, seen = tracer.trace(np.asarray(camera, np.float64)[None], spherical_fibonacci(SEALED_RAYS), False)
+    return escaped if (seen >= 0).all() else np.zeros(len(obj), bool)
+
+
 def outside_camera_rooms(positions, arrays, camera) -> np.ndarray:
     """The probes outside a closed part that encloses the camera (a room or a dome seen from
     within, docs/conventions.md "Sides"): no light they see reaches what the camera sees, and at
