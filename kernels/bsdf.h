@@ -31,7 +31,7 @@ IBL_INLINE float specular_probability(const Material mt, float nov, int diffuse,
 {
     if (!diffuse) return specular ? 1.0f : 0.0f;
     const float s = specular ? luminance(f_schlick(nov, mt.f0, mt.f90)) : 0.0f;
-    const float d = diffuse ? luminance(diffuse_weight(mt, nov)) * IBL_PI : 0.0f;
+    const float d = luminance(diffuse_weight(mt, nov)) * IBL_PI;
     if (!(s > 0.0f)) return 0.0f;
     if (!(d > 0.0f)) return 1.0f;
     return clamp(s / (s + d), 0.1f, 0.9f);

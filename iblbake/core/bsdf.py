@@ -38,7 +38,7 @@ def specular_probability(mt: Material, nov, diffuse: bool, specular: bool):
     if not diffuse:
         return np.full(len(nov), 1.0 if specular else 0.0)
     s = luminance(brdf.f_schlick(nov[:, None], mt.f0, mt.f90)) if specular else np.zeros(len(nov))
-    d = luminance(mt.kd * np.pi) if diffuse else np.zeros(len(nov))
+    d = luminance(mt.kd * np.pi)
     with np.errstate(invalid="ignore", divide="ignore"):
         ps = np.clip(s / (s + d), 0.1, 0.9)
     return np.where(~(s > 0), 0.0, np.where(~(d > 0), 1.0, ps))
