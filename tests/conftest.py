@@ -157,7 +157,8 @@ def load_scene(folder, name, doc):
 def mend_cache_entry(entry, edit_manifest=None, **arrays):
     """Rewrite a cache entry as another version or a hand might: each name=array saved as NAME.npy
     over the entry's file, edit_manifest(manifest) applied, and the manifest's sizes, times and
-    hashes made to match, so that the files pass its check and only what they hold is wrong."""
+    hashes made to match every file (one the caller rewrote itself, an EXR say, too), so that the
+    files pass its check and only what they hold is wrong."""
     import hashlib
     import json
     from iblbake.bake import cache

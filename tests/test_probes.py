@@ -24,7 +24,7 @@ from iblbake.render.bakes import Bakes
 from iblbake.render.sources.probes import probe_args, probe_defines
 from iblbake.render.twin import probes as twin
 from iblbake.render.probes.relocation import SEALED_RAYS
-from tests.conftest import load_scene, run_cli
+from tests.conftest import load_scene, mend_cache_entry, run_cli
 
 
 write = load_scene
@@ -721,8 +721,6 @@ def test_a_cached_volume_that_does_not_read_back_is_baked_again(tmp_path, rt, sk
     version's entry, or a hand's): said in one warning naming it, removed and baked again, and the
     frame renders from the new one (the advice to rebake with `iblbake probes` did not help: it read
     the same entry)."""
-    import hashlib
-    import os
     from iblbake.bake import cache
 
     bakes = Bakes(tmp_path / "cache")
@@ -733,11 +731,7 @@ def test_a_cached_volume_that_does_not_read_back_is_baked_again(tmp_path, rt, sk
     atlas = images.read_exr(entry / name)
     atlas[3, 2, 0] = np.nan
     images.write_exr(entry / name, atlas)
-    for f in man["files"]:
-        if f["name"] == name:
-            f.update(sha256=hashlib.sha256((entry / name).read_bytes()).hexdigest(),
-                     bytes=os.path.getsize(entry / name), mtime_ns=os.stat(entry / name).st_mtime_ns)
-    (entry / cache.MANIFEST).write_text(json.dumps(man))
+    mend_cache_entry(entry)
     said = []
     frame = render(far_sphere_scene(tmp_path, sky, "octahedral"), runtime=rt, cache=Bakes(tmp_path / "cache"),
                    warn=said.append)

@@ -43,6 +43,15 @@ POLICY_KEYS = {"nonfinite": "environment.nonfinite:", "negative": "environment.n
                "layout": "environment.layout:"}
 
 
+def load_entry_arrays(entry: Path, names, what: str) -> tuple:
+    """An entry's NAME.npy arrays, or an IblbakeError naming the entry (cache.get_checked then
+    bakes it again)."""
+    try:
+        return tuple(np.load(entry / f"{n}.npy") for n in names)
+    except (OSError, ValueError, EOFError) as e:
+        raise IblbakeError(f"{entry}: unreadable {what} arrays ({e})") from None
+
+
 def read_geometry_entry(entry: Path, report, attributes: bool) -> tuple:
     """A geometry entry's (triangles, bvh, bvh4, attributes, closed), checked as the kernels will
     index them (scene/bvh.py check_trees: no child, leaf or triangle out of range, no loop; every
@@ -51,11 +60,8 @@ def read_geometry_entry(entry: Path, report, attributes: bool) -> tuple:
     from iblbake.scene import bvh
     from iblbake.scene.layout import FLOAT4S
 
-    names = ("triangles", "bvh", "bvh4", "attributes", "closed")
-    try:
-        tris, nodes, wide, attr, closed = (np.load(entry / f"{n}.npy") for n in names)
-    except (OSError, ValueError, EOFError) as e:
-        raise IblbakeError(f"{entry}: unreadable geometry arrays ({e})") from None
+    tris, nodes, wide, attr, closed = load_entry_arrays(entry, ("triangles", "bvh", "bvh4", "attributes", "closed"),
+                                                        "geometry")
     t = len(tris) if tris.ndim == 3 else -1
     per_triangle = (tris.dtype == np.float32 and tris.shape[1:] == (FLOAT4S["TRIANGLE"], 4)
                     and attr.dtype == np.float32 and attr.shape == (t if attributes else 0, FLOAT4S["TRIANGLE_ATTR"], 4)
@@ -73,10 +79,7 @@ def read_textures(entry: Path, order, maps: int) -> tuple:
     """A textures entry's arrays (texels, tex_levels, tex_info), checked as the kernels will index
     them: every map's slot a texture, every texture's levels listed, every level's texels held.
     An IblbakeError where the entry does not (cache.get_checked then bakes it again)."""
-    try:
-        texels, levels, info = (np.load(entry / f"{n}.npy") for n in ("texels", "tex_levels", "tex_info"))
-    except (OSError, ValueError, EOFError) as e:
-        raise IblbakeError(f"{entry}: unreadable texture arrays ({e})") from None
+    texels, levels, info = load_entry_arrays(entry, ("texels", "tex_levels", "tex_info"), "texture")
     shapes_ok = (texels.dtype == np.float32 and texels.ndim == 2 and texels.shape[1] == 4
                  and levels.dtype == np.int32 and levels.ndim == 2 and levels.shape[1] == 4
                  and info.dtype == np.int32 and info.ndim == 2 and info.shape[1] == 4)
