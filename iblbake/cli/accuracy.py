@@ -10,8 +10,8 @@ from pathlib import Path
 
 import click
 
-from iblbake.cli.options import (API_FLAGS, Console, common_options, device_option, force_option, max_pixels_option,
-                                  max_texture_pixels_option, non_negative, refuse_foreign)
+from iblbake.cli.options import (API_FLAGS, Console, allow_outside_option, common_options, device_option, force_option,
+                                  max_pixels_option, max_texture_pixels_option, non_negative, refuse_foreign)
 from iblbake.errors import IblbakeError
 
 FILES = {"table.md": "Markdown table", "table.csv": "CSV", "accuracy.json": "JSON", "plot.png": "error-time plot",
@@ -72,6 +72,7 @@ def bounces_value(v: str):
 @force_option
 @device_option
 @max_pixels_option
+@allow_outside_option
 @max_texture_pixels_option
 @common_options
 def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repeats, target_noise, max_samples,

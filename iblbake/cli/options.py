@@ -197,6 +197,20 @@ def max_pixels_option(f):
                              "or 8192*8192.")(f)
 
 
+def _set_allow_outside(ctx, param, value):
+    if value:     # the library (and worker processes) read it from the environment
+        os.environ["IBLBAKE_ALLOW_OUTSIDE"] = "1"
+    return value
+
+
+def allow_outside_option(f):
+    """--allow-outside for the commands that read a scene (iblbake/io/confine.py)."""
+    return click.option("--allow-outside", is_flag=True, expose_value=False, callback=_set_allow_outside,
+                        help="Let the scene write its outputs outside its folder, and its glTF files read "
+                             "buffers and images outside theirs (absolute paths, .., links). Default: "
+                             "$IBLBAKE_ALLOW_OUTSIDE, else refused.")(f)
+
+
 def max_texture_pixels_option(f):
     return click.option("--max-texture-pixels", type=click.IntRange(min=1), default=None, expose_value=False,
                         callback=_set_max_texture_pixels,

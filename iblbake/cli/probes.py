@@ -7,8 +7,8 @@ from pathlib import Path
 
 import click
 
-from iblbake.cli.options import (API_FLAGS, Console, common_options, device_option, force_option, max_pixels_option,
-                                  max_texture_pixels_option, refuse_foreign)
+from iblbake.cli.options import (API_FLAGS, Console, allow_outside_option, common_options, device_option, force_option,
+                                  max_pixels_option, max_texture_pixels_option, refuse_foreign)
 
 
 @click.command("probes")
@@ -23,6 +23,7 @@ from iblbake.cli.options import (API_FLAGS, Console, common_options, device_opti
 @force_option
 @device_option
 @max_pixels_option
+@allow_outside_option
 @max_texture_pixels_option
 @common_options
 def probes_command(scene_path, out_dir, overrides, cache_dir, force, device, quiet, as_json):

@@ -6,8 +6,8 @@ import contextlib
 
 import click
 
-from iblbake.cli.options import (API_FLAGS, Console, common_options, depfile_option, device_option, force_option,
-                                  max_pixels_option, max_texture_pixels_option, refuse_foreign)
+from iblbake.cli.options import (API_FLAGS, Console, allow_outside_option, common_options, depfile_option, device_option,
+                                  force_option, max_pixels_option, max_texture_pixels_option, refuse_foreign)
 
 
 def _help_schema(ctx, param, value):
@@ -39,6 +39,7 @@ def _help_schema(ctx, param, value):
 @force_option
 @device_option
 @max_pixels_option
+@allow_outside_option
 @max_texture_pixels_option
 @common_options
 def render_command(scene_path, outputs, overrides, cache_dir, show_report, profile_paths, depfile, force, device, quiet,
@@ -157,6 +158,7 @@ def _samples(rep: dict) -> str:
 @click.option("--set", "overrides", multiple=True, metavar="KEY.PATH=VALUE", help="As render --set.")
 @click.option("--output", "-o", "outputs", multiple=True, type=click.Path(dir_okay=False),
               help="The targets (as render -o). Default: the scene's output.frame and AOVs.")
+@allow_outside_option
 def deps_command(scene_path, overrides, outputs):
     """Print the Make rule that `render --depfile` writes: SCENE's outputs depend on the scene file,
     its panorama and its meshes."""

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import click
 
-from iblbake.cli.options import (Console, common_options, depfile_option, device_option, force_option,
-                                  max_pixels_option, max_texture_pixels_option, refuse_foreign)
+from iblbake.cli.options import (Console, allow_outside_option, common_options, depfile_option, device_option,
+                                  force_option, max_pixels_option, max_texture_pixels_option, refuse_foreign)
 from iblbake.errors import IblbakeError
 
 
@@ -123,6 +123,7 @@ def _shard(ctx, param, value):
 @force_option
 @device_option
 @max_pixels_option
+@allow_outside_option
 @max_texture_pixels_option
 @common_options
 def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, label_format, caption, repeat, title,

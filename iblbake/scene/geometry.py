@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -75,7 +76,7 @@ def load_mesh(spec: dict, where: str) -> MeshData:
     """A mesh file, checked: glTF/GLB through iblbake.scene.gltf (materials, both texture
     coordinate sets, tangents), the rest through trimesh (geometry and TEXCOORD_0)."""
     path = Path(spec["path"])
-    if not path.exists():
+    if not os.path.exists(path):          # not Path.exists: a name too long raised OSError
         raise InputError(f"{where}: mesh {path} not found")
     if path.suffix.lower() in (".gltf", ".glb"):
         parts = _gltf_parts(path, where)
@@ -144,8 +145,10 @@ def _trimesh_parts(path: Path, where: str) -> list:
     try:
         with warnings.catch_warnings(), np.errstate(all="ignore"):   # NaN vertices are reported by load_mesh
             warnings.simplefilter("ignore")
-            # not force="mesh": that concatenation drops the normals stored in the file
-            loaded = trimesh.load(str(path), process=False)
+            # not force="mesh": that concatenation drops the normals stored in the file. No other
+            # file is read: an OBJ's material library and a PLY's texture (the scene's materials
+            # shade these meshes) could name anything (docs/manual.md, paths a scene may name)
+            loaded = trimesh.load(str(path), process=False, skip_materials=True)
     except MemoryError:
         raise InputError(f"{where}: mesh {path} claims more data than fits in memory; the file is "
                          f"corrupt or far too large") from None

@@ -23,7 +23,7 @@ import numpy as np
 
 from iblbake.errors import InputError
 from iblbake.io.gltf import split_glb
-from iblbake.io import reads
+from iblbake.io import confine, reads
 
 COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 NORMALIZE = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0}
@@ -102,8 +102,11 @@ class Document:
                 return base64.b64decode(payload, validate=True)
             except ValueError:
                 _fail(self.where, self.path, f"{what}: its data uri is not valid base64")
-        f = (self.path.parent / unquote(uri))
-        if not f.exists():
+        try:
+            f = confine.asset_file(self.path, uri)
+        except ValueError as e:
+            raise InputError(f"{self.where}: mesh {self.path}: {what} {uri!r} {e}") from None
+        if not os.path.exists(f):          # not Path.exists: a name too long raised OSError
             raise InputError(f"{self.where}: mesh {self.path}: {what} {uri!r} cannot be read "
                              f"(no such file); it must be where the URI says, beside the file")
         try:
@@ -374,20 +377,26 @@ def read(path, where: str) -> Document:
     return Document(path, where, doc, binary)
 
 
-def relative_uris(text) -> list:
-    """The files a .gltf document (its JSON text) names by URI, buffers and images, unquoted and
-    relative to it; [] for text that cannot be parsed (the loader reports it)."""
+def _file_uris(text) -> list:
+    """The URIs naming files (not data:) in a .gltf document (its JSON text), buffers and images,
+    as written; [] for text that cannot be parsed (the loader reports it)."""
     try:
         doc = json.loads(text)
         uris = [x.get("uri") for key in ("buffers", "images") for x in doc.get(key, []) if isinstance(x, dict)]
     except (ValueError, AttributeError, TypeError, RecursionError):
         return []
-    return [unquote(u) for u in uris if isinstance(u, str) and u and not u.startswith("data:")]
+    return [u for u in uris if isinstance(u, str) and u and not u.startswith("data:")]
 
 
-def external_files(path) -> list:
-    """The files a .gltf reads beside itself (buffers and images by relative URI), for depfiles
-    and cache keys; [] for a .glb, or a file that cannot be read or parsed (the loader reports it)."""
+def relative_uris(text) -> list:
+    """The files a .gltf document (its JSON text) names by URI, buffers and images, unquoted and
+    relative to it; [] for text that cannot be parsed (the loader reports it)."""
+    return [unquote(u) for u in _file_uris(text)]
+
+
+def _named_files(path) -> list:
+    """(uri, the file it names or None, why io/confine.py refuses it or None) of every file URI of
+    the .gltf at `path`; [] for a .glb, or a file that cannot be read or parsed (the loader says so)."""
     path = Path(path)
     if path.suffix.lower() != ".gltf":
         return []
@@ -395,7 +404,24 @@ def external_files(path) -> list:
         text = reads.read_text(path, reads.mesh_bytes(), "a mesh")
     except (InputError, ValueError):
         return []
-    return [os.path.normpath(path.parent / u) for u in relative_uris(text)]     # a link named as given
+    out = []
+    for u in _file_uris(text):
+        try:
+            out.append((u, confine.asset_file(path, u), None))
+        except ValueError as e:
+            out.append((u, None, str(e)))
+    return out
+
+
+def external_files(path) -> list:
+    """The files a .gltf reads beside itself (buffers and images by relative URI), for depfiles
+    and cache keys: none that io/confine.py refuses (nothing reads those; the loader names them)."""
+    return [os.path.normpath(f) for _, f, _ in _named_files(path) if f is not None]    # a link named as given
+
+
+def refused_uri(path) -> str | None:
+    """`'URI' why` of the first URI of the .gltf at `path` that io/confine.py refuses, or None."""
+    return next((f"{u!r} {why}" for u, _, why in _named_files(path) if why), None)
 
 
 def uv_transform(offset, rotation: float, scale) -> np.ndarray:

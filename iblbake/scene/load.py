@@ -17,7 +17,7 @@ from pathlib import Path
 
 from iblbake.errors import InputError, UsageError
 from iblbake.scene.schema import SCHEMA, ListOf, MapOf, Section, _Bad
-from iblbake.io import reads
+from iblbake.io import confine, reads
 from iblbake.scene.yaml_lines import MAX_SCENE_BYTES, load_with_lines
 
 FRAME_SUFFIXES = (".png", ".exr")
@@ -163,19 +163,19 @@ def set_path(data: dict, key: str, value, origin: str) -> list:
 
 
 def _resolve_inside(folder: Path, rel: str, what: str, where: str) -> Path:
-    """Scene output paths stay inside the scene's folder: `../../x` is refused."""
-    p = Path(rel)
-    full = (folder / p).resolve() if not p.is_absolute() else p.resolve()
-    if not p.is_absolute() and folder.resolve() not in (full, *full.parents):
-        raise InputError(f"{where}: {what}: {rel!r} leaves the scene's folder; write outputs "
-                         f"inside it or pass -o on the command line")
+    """Scene output paths stay inside the scene's folder (io/confine.py): `../../x`, `/etc/x` and
+    a link out are refused."""
+    full, why = confine.output_path(folder, rel)
+    if full is None:
+        raise InputError(f"{where}: {what}: {rel!r} {why}; write outputs inside it, pass -o on the "
+                         f"command line, or {confine.HINT}")
     return full
 
 
 def _must_be_file(v, key: str, path: str, what: str, folder: Path, limit: int, hint: str = "") -> None:
     """A regular file within its kind's size limit (checked before anything opens it: a device
     or a FIFO would be read forever or block)."""
-    if Path(path).is_dir():
+    if os.path.isdir(path):          # not Path.is_dir: a name too long raised OSError
         v.fail(key, f"{path} is a folder; give the path of {what} file")
     if not os.path.exists(path):
         v.fail(key, f"{path} not found; give the path of {what} (relative to {folder})")
@@ -336,17 +336,20 @@ def _resolve_references(v: "_Validator", out: dict, folder: Path) -> None:
 def _check_mesh_files(v: "_Validator", key: str, path: str) -> None:
     """A mesh (and the buffers and images a .gltf names beside it) is a regular file within the
     mesh limit; a missing one is the mesh loader's to report, with its own words."""
-    from iblbake.scene.gltf import external_files
+    from iblbake.scene.gltf import external_files, refused_uri
 
     if not os.path.exists(path):
         return
     try:
         reads.check_file(path, reads.mesh_bytes(), "a mesh", reads.MESH_HINT)
+        refused = refused_uri(path)
         for f in external_files(path):
             if os.path.exists(f):
                 reads.check_file(f, reads.mesh_bytes(), "a glTF buffer or image", reads.MESH_HINT)
     except InputError as e:
         v.fail(key, str(e))
+    if refused:
+        v.fail(key, f"{path}: the URI {refused}")
 
 
 def _resolve_names(v: "_Validator", out: dict) -> None:

@@ -127,10 +127,13 @@ class Bool:
 class Str:
     default: Any = None
     doc: str = ""
+    path: bool = False           # a file's path: no NUL (no file is named so; the OS refuses it)
 
     def check(self, v):
         if not isinstance(v, str) or not v:
             raise _Bad(f"{v!r} is not a non-empty string")
+        if self.path and "\0" in v:
+            raise _Bad(f"{v!r} holds a NUL character, which no path can")
         return v
 
     def describe(self):
@@ -236,11 +239,12 @@ class StrList:
     empty: bool = False          # [] allowed (none: `exclude: []`)
 
     def check(self, v):
-        if isinstance(v, str) and v:
-            return [v]
-        if isinstance(v, list) and (v or self.empty) and all(isinstance(x, str) and x for x in v):
-            return list(v)
-        raise _Bad(f"{v!r} is not a {self.what} or a list of {self.what}s")
+        items = [v] if isinstance(v, str) and v else v
+        if not (isinstance(items, list) and (items or self.empty) and all(isinstance(x, str) and x for x in items)):
+            raise _Bad(f"{v!r} is not a {self.what} or a list of {self.what}s")
+        if self.what == "path" and any("\0" in x for x in items):
+            raise _Bad(f"{next(x for x in items if chr(0) in x)!r} holds a NUL character, which no path can")
+        return list(items)
 
     def describe(self):
         return f"{self.what} or [{self.what}s]"
@@ -263,7 +267,7 @@ CAMERA_COMMON = {
 def _map_section(doc: str, **extra) -> Section:
     """A material's texture: an image and how it is read (KHR_texture_transform, a glTF sampler)."""
     return Section(required=("path",), doc=doc, optional=True, fields={
-        "path": Str(doc="PNG or JPEG (8 or 16 bits, any size); relative to the scene file"),
+        "path": Str(path=True, doc="PNG or JPEG (8 or 16 bits, any size); relative to the scene file"),
         "texcoord": Num(0, 0, 1, integer=True, doc="the mesh's TEXCOORD set (spheres: the panorama mapping "
                                                    "u = 0.5 - atan2(x, z)/(2 pi), v = acos(y)/pi; planes: across "
                                                    "their width and depth, 1 per unit if infinite)"),
@@ -297,7 +301,7 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "spp": Num(1, 1, 1024, integer=True, doc="primary samples per pixel (anti-aliasing)"),
     }),
     "environment": Section(required=("path",), doc="the HDR panorama lighting the scene", fields={
-        "path": Str(doc="equirectangular panorama (EXR, HDR, any format iblbake reads); relative to the scene file"),
+        "path": Str(path=True, doc="equirectangular panorama (EXR, HDR, any format iblbake reads); relative to the scene file"),
         "intensity": Num(1.0, 0.0, doc="radiance scale"),
         "rotation_y": Num(0.0, doc="rotate the panorama about +y, degrees (+x towards -z)"),
         "background": OneOf((Enum(("show", "hide")), Vec(n=3, lo=0.0), ColorKey()), default="show",
@@ -360,7 +364,7 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
             }),
             "mesh": Section(required=("path",), doc="triangle mesh: glTF/GLB (with its materials and textures), "
                                                     "OBJ, PLY, STL (geometry and UVs, through trimesh)", fields={
-                "path": Str(doc="GLB, glTF, OBJ, PLY or STL; relative to the scene file"),
+                "path": Str(path=True, doc="GLB, glTF, OBJ, PLY or STL; relative to the scene file"),
                 "translate": Vec(**VEC3, default=[0.0, 0.0, 0.0], doc="translation"),
                 "rotate": Vec(**VEC3, default=[0.0, 0.0, 0.0], doc="rotation about x, then y, then z, degrees"),
                 "scale": OneOf((Num(None, 0.0, lo_open=True), Vec(n=3, positive=True)), default=1.0,
@@ -621,10 +625,10 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
     }),
     "output": Section(doc="what is written (relative to the scene file; render overwrites its outputs)", fields={
         "frame": StrList(doc="frame path(s): .png (tone-mapped 8-bit), .exr (linear RGBA)"),
-        "normal": Str(doc="AOV: world-space shading normal, EXR"),
-        "albedo": Str(doc="AOV: base colour, EXR"),
-        "depth": Str(doc="AOV: distance along the camera ray (0 where nothing is hit), EXR"),
-        "object": Str(doc="AOV: the object (its index N in objects) each pixel's first sample hit, -1 where none, EXR"),
+        "normal": Str(path=True, doc="AOV: world-space shading normal, EXR"),
+        "albedo": Str(path=True, doc="AOV: base colour, EXR"),
+        "depth": Str(path=True, doc="AOV: distance along the camera ray (0 where nothing is hit), EXR"),
+        "object": Str(path=True, doc="AOV: the object (its index N in objects) each pixel's first sample hit, -1 where none, EXR"),
         "dither": Bool(False, doc="add +-0.5 LSB triangular dither before 8-bit quantisation"),
     }),
 })
