@@ -268,6 +268,7 @@ def test_render_writes_outside_only_when_allowed(world, tmp_path):
     assert p.returncode == 0 and (world.out / "y.png").is_file(), p.stderr
 
 
+@pytest.mark.slow          # two command lines: 3.1 s on the 2-core CPU
 def test_cli_refuses_a_gltf_reading_outside(world):
     """The command line's one line (exit 1) for a buffer outside, and --allow-outside on deps."""
     write_gltf(world.scene / "m.gltf", str(world.out / "canary.bin"))

@@ -394,7 +394,7 @@ def relative_uris(text) -> list:
     return [unquote(u) for u in _file_uris(text)]
 
 
-def _named_files(path) -> list:
+def named_files(path) -> list:
     """(uri, the file it names or None, why io/confine.py refuses it or None) of every file URI of
     the .gltf at `path`; [] for a .glb, or a file that cannot be read or parsed (the loader says so)."""
     path = Path(path)
@@ -416,12 +416,7 @@ def _named_files(path) -> list:
 def external_files(path) -> list:
     """The files a .gltf reads beside itself (buffers and images by relative URI), for depfiles
     and cache keys: none that io/confine.py refuses (nothing reads those; the loader names them)."""
-    return [os.path.normpath(f) for _, f, _ in _named_files(path) if f is not None]    # a link named as given
-
-
-def refused_uri(path) -> str | None:
-    """`'URI' why` of the first URI of the .gltf at `path` that io/confine.py refuses, or None."""
-    return next((f"{u!r} {why}" for u, _, why in _named_files(path) if why), None)
+    return [os.path.normpath(f) for _, f, _ in named_files(path) if f is not None]    # a link named as given
 
 
 def uv_transform(offset, rotation: float, scale) -> np.ndarray:

@@ -336,20 +336,21 @@ def _resolve_references(v: "_Validator", out: dict, folder: Path) -> None:
 def _check_mesh_files(v: "_Validator", key: str, path: str) -> None:
     """A mesh (and the buffers and images a .gltf names beside it) is a regular file within the
     mesh limit; a missing one is the mesh loader's to report, with its own words."""
-    from iblbake.scene.gltf import external_files, refused_uri
+    from iblbake.scene.gltf import named_files
 
     if not os.path.exists(path):
         return
     try:
         reads.check_file(path, reads.mesh_bytes(), "a mesh", reads.MESH_HINT)
-        refused = refused_uri(path)
-        for f in external_files(path):
-            if os.path.exists(f):
+        named = named_files(path)
+        for _, f, _ in named:
+            if f is not None and os.path.exists(f):
                 reads.check_file(f, reads.mesh_bytes(), "a glTF buffer or image", reads.MESH_HINT)
     except InputError as e:
         v.fail(key, str(e))
-    if refused:
-        v.fail(key, f"{path}: the URI {refused}")
+    for uri, _, why in named:      # one out of the glTF's folder (io/confine.py): nothing has read it
+        if why:
+            v.fail(key, f"{path}: the URI {uri!r} {why}")
 
 
 def _resolve_names(v: "_Validator", out: dict) -> None:
