@@ -39,7 +39,7 @@ def study(path, runtime, cache, max_side=40):
 @pytest.mark.slow
 @pytest.mark.parametrize("path", CORPUS, ids=[p.stem for p in CORPUS])
 def test_each_mode_is_no_worse_than_what_it_replaces(path, runtime, tmp_path, panoramas):
-    if not (ROOT / "examples" / "corpus" / "meshes" / "garden.glb").exists():
+    if not (ROOT / "examples" / "corpus" / "meshes" / "skylight_room.obj").exists():
         pytest.fail("the corpus meshes are missing: run `make meshes`")
     st, rows = study(path, runtime, tmp_path / "cache")
     pairs = []
