@@ -106,11 +106,11 @@ def specular_table(results) -> str:
         p, d = rows.get("reflection probes"), rows.get("distant")
         if not p or "part_absolute" not in p:
             continue
-        parts = p["part_absolute"]
+        parts, noise = p["part_absolute"], res["reference_noise"]["specular"]
         over = sum(e["absolute"] > BOUND_PART for e in parts.values())
         out.append(f"| {res['scene']} | {res['panorama']} | {worst(parts)} | {over} of {len(parts)} | "
                    f"{ratios(parts)} | {worst(d['part_absolute']) if d and 'part_absolute' in d else ''} | "
-                   f"{frame(p, res['reference_noise']['specular'])} | {100 * res['reference_noise']['specular']:.1f}% |")
+                   f"{frame(p, noise)} | {100 * noise:.1f}% |")
     return "\n".join(out) + "\n"
 
 

@@ -104,8 +104,10 @@ def holed(o, u, v, a, b, hole):
 X, Y, Z = np.eye(3)
 # a corridor 1.2 wide, 1.6 high and 8 long (z from 0 to -8), open at z = 0, wound inwards
 for half, z0 in (("near", 0), ("far", -4)):      # its floor, ceiling and side walls in two halves
-    obj(f"corridor_{half}.obj", [panel((-0.6, 0, z0), X, -Z, 0, 1.2, 0, 4), panel((-0.6, 1.6, z0), -Z, X, 0, 4, 0, 1.2),
-                                 panel((-0.6, 0, z0), -Z, Y, 0, 4, 0, 1.6), panel((0.6, 0, z0 - 4), Z, Y, 0, 4, 0, 1.6)])
+    obj(f"corridor_{half}.obj", [panel((-0.6, 0, z0), X, -Z, 0, 1.2, 0, 4),
+                                 panel((-0.6, 1.6, z0), -Z, X, 0, 4, 0, 1.2),
+                                 panel((-0.6, 0, z0), -Z, Y, 0, 4, 0, 1.6),
+                                 panel((0.6, 0, z0 - 4), Z, Y, 0, 4, 0, 1.6)])
 obj("corridor_end.obj", [panel((-0.6, 0, -8), X, Y, 0, 1.2, 0, 1.6)])
 
 # two storeys of 4 x 2 x 4 (x, z in [-2, 2]) split at y = 2 by one quad; the lower one closed but

@@ -3,7 +3,8 @@ built for"): scene by scene, the study's real-time rungs against the converged r
 no worse than SH with GTAO on the diffuse term, the reflection probes (with and without SSR) no
 worse than the distant chain on the specular term, each within twice the reference's own noise (a
 difference the reference cannot tell), or the scene's documented, measured exception. And the
-issue's gold sphere, region by region."""
+issue's gold sphere, region by region. Issue 59: the ordinary interiors held to the truth in
+absolute terms (every region, the frame, each half of the gold sphere)."""
 
 from pathlib import Path
 
