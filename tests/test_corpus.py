@@ -167,12 +167,13 @@ def test_default_probes_hold_each_interior_to_the_truth(name, panorama, runtime,
 @pytest.mark.external
 @pytest.mark.slow
 @pytest.mark.parametrize("panorama", ["studio", "city"])
-@pytest.mark.parametrize("name", ["quad_room", "resting"])
-def test_the_reflection_probe_holds_each_half_of_the_metal_object(name, panorama, runtime, tmp_path, panoramas):
-    """The reflection probe at the gold sphere's centre excluding it, the specular term on each
-    half of the sphere (core/metrics halves: +x, -x, +y, ...) within PART_BOUND of the converged
-    reference: in quad_room the half facing the window too, in resting the lower half, which
-    mirrors the floor, its shadow and the light the sphere throws on it."""
+def test_the_reflection_probe_holds_each_half_of_the_metal_object(panorama, runtime, tmp_path, panoramas):
+    """quad_room's reflection probe at the gold sphere's centre excluding it: the specular term on
+    each half of the sphere (core/metrics halves: +x, -x, +y, ...) within PART_BOUND of the
+    converged reference, the half facing the window too (on the code of issue 47, 2.2-2.4x too
+    bright under studio; within 7% under city). resting's gold sphere is not here: within 10% on
+    every half at 48 and 64 px, with references of 256 to 8192 samples (docs/benchmarks.md)."""
+    name = "quad_room"
     if not (ROOT / "examples" / "corpus" / "meshes" / "skylight_room.obj").exists():
         pytest.fail("the corpus meshes are missing: run `make meshes`")
     st, row = absolute_study(name, panorama, panoramas, runtime, tmp_path / "cache", "specular", "reflection probes")
