@@ -24,7 +24,7 @@ opencl: $(STAMP)
 meshes: $(STAMP)
 	test -f examples/meshes/knot.ply || $(BIN)/python examples/make_mesh.py examples/meshes/knot.ply
 	test -f examples/meshes/tiles.glb -a -f examples/textures/roughness_stripes.png || $(BIN)/python examples/make_textured.py examples
-	test -f examples/corpus/meshes/garden.glb || $(BIN)/python examples/make_corpus.py examples/corpus
+	test -f examples/corpus/meshes/garden.glb -a -f examples/corpus/meshes/skylight_room.obj || $(BIN)/python examples/make_corpus.py examples/corpus
 
 assets: meshes
 	sh examples/fetch_panoramas.sh $(PANOS)

@@ -98,6 +98,33 @@ def test_bulk_noise_leaves_out_the_worst_percent():
     assert bulk_relative_rmse(a[:0], b[:0]) == 0.0
 
 
+def test_absolute_region_errors_read_brightness_and_colour():
+    """core/metrics region_absolute (issue 59): a region 15x too bright reads ratio 15 (14 off),
+    a region of the right brightness but turned blue reads ratio about 1 and its worst channel
+    off, a region black in both (a metal's diffuse term) is left out, one of too few pixels too;
+    halves splits a region by the side its normal faces."""
+    from iblbake.core.metrics import halves, region_absolute
+    ref = np.ones((4, 4, 4))
+    got = ref.copy()
+    regions = np.zeros((4, 4), int)
+    regions[:, 2] = 1
+    regions[:, 3] = 2
+    got[:, :2, :3] *= 15                                   # region 0: 15x too bright
+    got[:, 2, :3] = [0.8, 1.0, 3.3]                        # region 1: about as bright, bluer
+    ref[:, 3, :3] = got[:, 3, :3] = 0                      # region 2: black in both
+    mask = np.ones((4, 4), bool)
+    e = region_absolute(got, ref, mask, regions)
+    assert set(e) == {0, 1} and e[0]["pixels"] == 8 and e[1]["pixels"] == 4
+    assert e[0]["ratio"] == pytest.approx(15) and e[0]["absolute"] == pytest.approx(14)
+    assert e[1]["ratio"] == pytest.approx(0.2126 * 0.8 + 0.7152 + 0.0722 * 3.3)
+    assert e[1]["channel"] == pytest.approx(2.3) == e[1]["absolute"]
+    assert region_absolute(got, ref, mask, regions, min_pixels=5).keys() == {0}
+    normals = np.zeros((4, 4, 3))
+    normals[:2, :, 1], normals[2:, :, 1] = 1, -1           # upper rows face up, lower rows down
+    parts = halves(normals, regions == 0, min_pixels=2)
+    assert set(parts) == {"+y", "-y"} and parts["+y"].sum() == 4 and not (parts["+y"] & parts["-y"]).any()
+
+
 @pytest.mark.slow           # over 3 s on the 2-core CPU (with its module's study): make test, not make check
 def test_error_falls_with_samples_and_bands(study):
     """Monotonic within twice the reference's noise."""

@@ -3,7 +3,8 @@ built for"): scene by scene, the study's real-time rungs against the converged r
 no worse than SH with GTAO on the diffuse term, the reflection probes (with and without SSR) no
 worse than the distant chain on the specular term, each within twice the reference's own noise (a
 difference the reference cannot tell), or the scene's documented, measured exception. And the
-issue's gold sphere, region by region."""
+issue's gold sphere, region by region. Issue 59: the ordinary interiors held to the truth in
+absolute terms (every region, the frame, each half of the gold sphere)."""
 
 from pathlib import Path
 
@@ -39,7 +40,7 @@ def study(path, runtime, cache, max_side=40):
 @pytest.mark.slow
 @pytest.mark.parametrize("path", CORPUS, ids=[p.stem for p in CORPUS])
 def test_each_mode_is_no_worse_than_what_it_replaces(path, runtime, tmp_path, panoramas):
-    if not (ROOT / "examples" / "corpus" / "meshes" / "garden.glb").exists():
+    if not (ROOT / "examples" / "corpus" / "meshes" / "skylight_room.obj").exists():
         pytest.fail("the corpus meshes are missing: run `make meshes`")
     st, rows = study(path, runtime, tmp_path / "cache")
     pairs = []
@@ -109,3 +110,73 @@ def test_the_gold_sphere_mirrors_the_floor(tmp_path, runtime, panoramas, panoram
     assert err(probe) <= 0.5 * err(distant), (err(probe), err(distant))
     assert err(both) <= err(probe) + 0.005, (err(both), err(probe))
     assert noise(both) <= noise(ref), (noise(both), noise(ref))
+
+
+# Issue 59: ordinary interiors held to the truth in absolute terms, not only against what the probes
+# replace. A region (an object the camera sees in full-coverage pixels, at least MIN_PIXELS of them:
+# a sliver's mean is its reference's noise) is within the bound when its mean luminance is within
+# it of the truth's and its worst channel's |mean difference| within it of the truth's mean
+# (core/metrics mean_errors); the frame's relative RMSE of the term, less the reference's own
+# noise (in quadrature), is what seams along wall edges and blotches raise while region means
+# hide them.
+INTERIORS = ("corridor", "two_storey", "quad_room", "l_room", "probe_box_walls")
+REGION_BOUND = 0.30        # default irradiance probes on every region (the issue's bound)
+FRAME_BOUND = 0.30         # the diffuse term's relative RMSE over the frame
+PART_BOUND = 0.10          # a reflection probe at a metal object's centre, each half of the object
+MIN_PIXELS = 10
+
+
+def absolute_study(name, panorama, panoramas, runtime, cache, term, label):
+    """The term's converged reference (40 px; two seeds, each to 3% or 256 samples: the region
+    means' noise is well under a percent) and the real-time rung `label` against it."""
+    from iblbake.study import accuracy as acc, ladder
+    other = {"diffuse": "specular", "specular": "diffuse"}[term]
+    settings = acc.Settings(max_side=40, repeats=1, target_noise=0.03, max_samples=256, flip=False)
+    st = acc.Study(ROOT / "examples" / "corpus" / f"{name}.yaml",
+                   [f"environment.path={panoramas[panorama]}", f"effects.{other}=off"], settings,
+                   runtime=runtime, bakes=Bakes(cache))
+    st.render_reference(term)
+    rung = next(r for r in ladder.realtime_ladder(st.scene, st.fx) if r.label == label)
+    return st, st.run_rung(rung)
+
+
+def outside(errors: dict, bound: float) -> dict:
+    return {n: f"x{e['ratio']:.2f}, worst channel {100 * e['channel']:.0f}%" for n, e in errors.items()
+            if e["pixels"] >= MIN_PIXELS and e["absolute"] > bound}
+
+
+@pytest.mark.external
+@pytest.mark.slow
+@pytest.mark.parametrize("panorama", ["studio", "city"])
+@pytest.mark.parametrize("name", INTERIORS)
+def test_default_probes_hold_each_interior_to_the_truth(name, panorama, runtime, tmp_path, panoramas):
+    """Default `probes: {}` (the probe box on the walls in probe_box_walls) within REGION_BOUND
+    of the converged reference on every region, and the frame within FRAME_BOUND (docs/benchmarks.md
+    "Ordinary interiors in absolute terms" has the figures: on the code of issue 47 the corridor's
+    far end is 10-20x too bright, and every interior is outside one bound or the other)."""
+    if not (ROOT / "examples" / "corpus" / "meshes" / "skylight_room.obj").exists():
+        pytest.fail("the corpus meshes are missing: run `make meshes`")
+    st, row = absolute_study(name, panorama, panoramas, runtime, tmp_path / "cache", "diffuse", "probes")
+    noise = st.reference["diffuse"]["noise"]
+    frame = max(row["relative_rmse"] ** 2 - noise ** 2, 0.0) ** 0.5
+    bad = outside(row["region_absolute"], REGION_BOUND)
+    assert not bad and frame <= FRAME_BOUND, \
+        f"{name} under {panorama}: regions over {REGION_BOUND:.0%}: {bad}; frame {frame:.1%} (bound {FRAME_BOUND:.0%})"
+
+
+@pytest.mark.external
+@pytest.mark.slow
+@pytest.mark.parametrize("panorama", ["studio", "city"])
+def test_the_reflection_probe_holds_each_half_of_the_metal_object(panorama, runtime, tmp_path, panoramas):
+    """quad_room's reflection probe at the gold sphere's centre excluding it: the specular term on
+    each half of the sphere (core/metrics halves: +x, -x, +y, ...) within PART_BOUND of the
+    converged reference, the half facing the window too (on the code of issue 47, 2.2-2.4x too
+    bright under studio; within 7% under city). resting's gold sphere is not here: within 10% on
+    every half at 48 and 64 px, with references of 256 to 8192 samples (docs/benchmarks.md)."""
+    name = "quad_room"
+    if not (ROOT / "examples" / "corpus" / "meshes" / "skylight_room.obj").exists():
+        pytest.fail("the corpus meshes are missing: run `make meshes`")
+    st, row = absolute_study(name, panorama, panoramas, runtime, tmp_path / "cache", "specular", "reflection probes")
+    assert row.get("part_absolute"), "the study judges the metal object's halves"
+    bad = outside(row["part_absolute"], PART_BOUND)
+    assert not bad, f"{name} under {panorama}: halves over {PART_BOUND:.0%}: {bad}"

@@ -75,6 +75,45 @@ def region_errors(got, ref, mask, regions) -> dict:
     return out
 
 
+def mean_errors(got_mean, ref_mean) -> dict:
+    """How far a region's mean colour is from the truth's, in absolute terms (issue 59): `ratio`
+    of their luminances (15 is 15x too bright), `channel` the worst channel's |difference| over
+    the truth's mean channel (a colour shift, a red wall turned blue), `absolute` the larger of
+    |ratio - 1| and channel: what a bound on a region reads."""
+    g, r = np.asarray(got_mean, np.float64), np.asarray(ref_mean, np.float64)
+    ratio = float(luminance(g) / max(luminance(r), 1e-30))
+    channel = float(np.abs(g - r).max() / max(r.mean(), 1e-30))
+    return {"ratio": ratio, "channel": channel, "absolute": max(abs(ratio - 1.0), channel)}
+
+
+def region_absolute(got, ref, mask, regions, min_pixels: int = 1) -> dict:
+    """{region id: mean_errors of the region's mean colour and its pixel count} over the mask's
+    pixels of each region id (-1: none; or {name: boolean mask}, each its own region), regions of
+    fewer than min_pixels left out, and those black in both (a metal's diffuse term)."""
+    out = {}
+    parts = regions if isinstance(regions, dict) else \
+        {int(k): regions == k for k in np.unique(regions[mask]) if k >= 0}
+    for k, where in parts.items():
+        sel = mask & where
+        if sel.sum() >= max(min_pixels, 1) and (ref[..., :3][sel].any() or got[..., :3][sel].any()):
+            out[k] = {**mean_errors(got[..., :3][sel].astype(np.float64).mean(0),
+                                    ref[..., :3][sel].astype(np.float64).mean(0)), "pixels": int(sel.sum())}
+    return out
+
+
+def halves(normals, where, min_pixels: int = 4) -> dict:
+    """The halves of a region by the side its surface faces (its shading normal's sign along each
+    world axis: '+x', '-y', ...): a sphere's six hemispheres, a box's faces grouped. Halves of
+    fewer than min_pixels are left out."""
+    out = {}
+    for i, axis in enumerate("xyz"):
+        for sign, name in ((1, "+"), (-1, "-")):
+            sel = where & (sign * normals[..., i] > 0)
+            if sel.sum() >= min_pixels:
+                out[name + axis] = sel
+    return out
+
+
 def hdr_flip(got, ref, mask) -> float:
     import flip_evaluator
 

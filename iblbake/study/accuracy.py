@@ -28,7 +28,7 @@ import numpy as np
 from iblbake.errors import InputError
 from iblbake.scene import load as scene_load
 from iblbake.scene.layout import DELTA_ALPHA
-from iblbake.core.metrics import error_metrics, object_mask, region_errors
+from iblbake.core.metrics import error_metrics, halves, object_mask, region_absolute, region_errors
 from iblbake.study.ladder import TERMS, Rung
 
 # A term alone: the other term off
@@ -111,6 +111,7 @@ class Study:
         self.paths = settings.visibility and settings.bounces != 1 and interreflects(self.scene)
         self._mirrors = None
         self._objects = None
+        self._normals = None
         self.times = {"reference_s": 0.0, "rungs_s": 0.0, "bakes_s": 0.0}
 
     def load(self, values, origin="ladder"):
@@ -231,14 +232,40 @@ class Study:
             vals = [("effects.diffuse", "off"), *NO_SPECULAR, ("output.object", "study-object.exr")]
             fr = render(self.load(vals, origin="accuracy"), runtime=self.rt, cache=self.bakes, warn=self.warn)
             self._objects = np.rint(fr.aovs["object"]).astype(int)
+            self._normals = fr.aovs["normal"][..., :3]
         return self._objects
 
-    def region_metrics(self, hdr, ref, mask) -> dict:
-        """The rung's error per object region (metrics.region_errors: its mean colour's relative
-        error), keyed by what messages call the object, and the worst of them."""
-        errs = region_errors(hdr, ref, mask, self.object_regions())
-        named = {scene_load.object_label(self.scene.data, k): round(v, 5) for k, v in errs.items()}
-        return {"region_errors": named, "worst_region_error": max(errs.values(), default=0.0)}
+    def metal_objects(self) -> list:
+        """Indices of the objects of a metallic material (metallic >= 0.5): those whose parts the
+        specular term is judged on."""
+        mats = self.scene.data["materials"]
+        return [i for i, o in enumerate(self.scene.data["objects"])
+                if o.get("material") in mats and mats[o["material"]]["metallic"] >= 0.5]
+
+    def region_metrics(self, hdr, ref, mask, term: str = "diffuse") -> dict:
+        """The rung's error per object region, keyed by what messages call the object: its mean
+        colour's relative error (metrics.region_errors) and the worst of them; the same in absolute
+        terms (metrics.mean_errors: the ratio of mean luminances, the worst channel) and the worst
+        |ratio - 1| or channel error. For the specular term, each half of each metal object
+        (metrics.halves: the side it faces) in absolute terms too."""
+        regions = self.object_regions()
+
+        def label(k):
+            return scene_load.object_label(self.scene.data, k)
+        errs = region_errors(hdr, ref, mask, regions)
+        absolute = {label(k): rounded(e) for k, e in region_absolute(hdr, ref, mask, regions).items()}
+        out = {"region_errors": {label(k): round(v, 5) for k, v in errs.items()},
+               "worst_region_error": max(errs.values(), default=0.0), "region_absolute": absolute,
+               "worst_region_absolute": max((e["absolute"] for e in absolute.values()), default=0.0)}
+        if term == "specular":
+            parts = {}
+            for k in self.metal_objects():
+                for side, e in region_absolute(hdr, ref, mask, halves(self._normals, regions == k)).items():
+                    parts[f"{label(k)} {side}"] = rounded(e)
+            if parts:
+                out["part_absolute"] = parts
+                out["worst_part_absolute"] = max(e["absolute"] for e in parts.values())
+        return out
 
     def metric_mask(self, term: str, hdr) -> np.ndarray:
         mask = self.reference[term]["mask"] & object_mask(hdr)
@@ -314,7 +341,7 @@ class Study:
             "bakes": [{"name": b["name"], "seconds": b["seconds"], "cached": b["cached"]} for b in bakes],
             "kernel_build_s": round(builds, 4), "bytes": lighting_bytes(sc, rung.term, bakes),
             **error_metrics(frame.hdr, ref["hdr"], mask, self.settings.flip),
-            **self.region_metrics(frame.hdr, ref["hdr"], mask)}
+            **self.region_metrics(frame.hdr, ref["hdr"], mask, rung.term)}
         if rung.result["mode"] == "reference":
             # more samples than the reference it is measured against: its error is the reference's
             # own noise, not its own, so it is kept off the frontier (and the study says so)
@@ -340,6 +367,10 @@ class Study:
             mask &= self.metric_mask(t, fr.hdr)
         ref[..., 3] = 1
         return {"label": "configured frame", **error_metrics(fr.hdr, ref, mask, self.settings.flip)}
+
+
+def rounded(d: dict) -> dict:
+    return {k: round(v, 5) if isinstance(v, float) else v for k, v in d.items()}
 
 
 def lighting_bytes(sc, term: str, bakes: list) -> int | None:

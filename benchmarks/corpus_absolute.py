@@ -1,0 +1,162 @@
+"""The real-time GI corpus (examples/corpus/*.yaml) judged in absolute terms against the converged
+reference (issue 59): every scene under each panorama, the irradiance probes' diffuse term (and
+SH + GTAO's beside it) per object region, as the ratio of its mean luminance to the truth's and
+the worst channel's |mean difference| over the truth's mean, and the term's relative RMSE over
+the frame (what seams along wall edges and blotches raise while region means hide them); the
+specular term of the reflection probes (and the distant chain's) on each half of each metal
+object (study/accuracy.py Study.region_metrics); the specular term only where the scene has
+reflection probes. Prints the Markdown tables docs/benchmarks.md
+holds; --json writes every figure.
+
+Run it from the source tree to measure, or name one with --tree (its iblbake and its corpus);
+the references are cached by content in --cache, so a second tree whose reference kernels are
+the same reuses them:
+
+    .venv/bin/python benchmarks/corpus_absolute.py [--tree DIR] [--panoramas studio,city]
+        [--max-side 64] [--max-samples 4096] [--target-noise 0.01] [--scenes corridor,l_room]
+        [--cache DIR] [--json out.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+DIFFUSE = ("probes", "SH + GTAO")
+SPECULAR = ("reflection probes", "distant")
+BOUND_REGION = 0.30        # issue 59: default probes within 30% on every region
+BOUND_PART = 0.10          # a reflection probe within 10% on every part of the metal object
+
+
+def study_scene(path, panorama, args, rt, bakes, root) -> dict:
+    from iblbake.study import accuracy as acc, ladder
+
+    settings = acc.Settings(max_side=args.max_side, repeats=1, target_noise=args.target_noise,
+                            max_samples=args.max_samples, flip=False)
+    pano = root / "examples" / "panoramas" / f"{panorama}.exr"
+    sets = [f"environment.path={pano}"]
+
+    def make(extra):
+        return acc.Study(path, sets + extra, settings, runtime=rt, bakes=bakes,
+                         warn=lambda m: print(f"  warning: {m}", file=sys.stderr))
+    study = make([])
+    if not study.scene.data["reflection_probes"] and "specular" in study.terms:
+        study = make(["effects.specular=off"])     # no reflection probe to judge: no specular reference
+    rungs = [r for r in ladder.realtime_ladder(study.scene, study.fx) if r.label in DIFFUSE + SPECULAR]
+    refs = {t: study.render_reference(t) for t in study.terms}
+    keep = ("term", "label", "relative_rmse", "region_absolute", "worst_region_absolute", "part_absolute",
+            "worst_part_absolute", "time_s")
+    return {"scene": Path(path).stem, "panorama": panorama,
+            "reference_noise": {t: refs[t]["noise"] for t in study.terms},
+            "reference_spp": {t: refs[t]["samples_per_pixel"] for t in study.terms},
+            "rungs": [{k: r[k] for k in keep if k in r} for r in (study.run_rung(g) for g in rungs)]}
+
+
+def short(label: str) -> str:
+    """'far end' (objects.1) -> far end; 'gold' (objects.7) +x -> gold +x."""
+    name, _, rest = label.partition(" (objects.")
+    return f"{name.strip(chr(39))} {rest.partition(')')[2].strip()}".strip()
+
+
+def worst(errors: dict) -> str:
+    """The worst entry of {name: mean_errors} as 'name x ratio (channel c%)'."""
+    name, e = max(errors.items(), key=lambda kv: kv[1]["absolute"])
+    return f"{short(name)} x{e['ratio']:.2f} ({100 * e['absolute']:.0f}%)"
+
+
+def ratios(errors: dict) -> str:
+    return ", ".join(f"{short(n)} x{e['ratio']:.2f}" for n, e in errors.items())
+
+
+def frame(rung, noise) -> str:
+    """The term's relative RMSE over the frame, and the same less the reference's own noise (in
+    quadrature: what the tests bound)."""
+    r = rung["relative_rmse"]
+    return f"{100 * r:.1f}% ({100 * max(r * r - noise * noise, 0.0) ** 0.5:.1f}%)"
+
+
+def diffuse_table(results) -> str:
+    out = ["| scene | panorama | probes: worst region | probes: regions over 30% | probes: frame rel. RMSE "
+           "(less noise) | probes: each region's luminance ratio | SH + GTAO: worst region | SH + GTAO: frame "
+           "rel. RMSE (less noise) | "
+           "reference noise |", "|---|---|---|---|---|---|---|---|---|"]
+    for res in results:
+        rows = {r["label"]: r for r in res["rungs"] if r["term"] == "diffuse"}
+        if "probes" not in rows:
+            continue
+        p, s = rows["probes"], rows.get("SH + GTAO")
+        noise = res["reference_noise"]["diffuse"]
+        over = sum(e["absolute"] > BOUND_REGION for e in p["region_absolute"].values())
+        out.append(f"| {res['scene']} | {res['panorama']} | {worst(p['region_absolute'])} | "
+                   f"{over} of {len(p['region_absolute'])} | {frame(p, noise)} | {ratios(p['region_absolute'])} | "
+                   + (f"{worst(s['region_absolute'])} | {frame(s, noise)} | " if s else "| | ")
+                   + f"{100 * res['reference_noise']['diffuse']:.1f}% |")
+    return "\n".join(out) + "\n"
+
+
+def specular_table(results) -> str:
+    out = ["| scene | panorama | reflection probe: worst half of the metal object | halves over 10% | "
+           "each half's luminance ratio | distant: worst half | reflection probe: frame rel. RMSE (less noise) | "
+           "reference noise |", "|---|---|---|---|---|---|---|---|"]
+    for res in results:
+        rows = {r["label"]: r for r in res["rungs"] if r["term"] == "specular"}
+        p, d = rows.get("reflection probes"), rows.get("distant")
+        if not p or "part_absolute" not in p:
+            continue
+        parts, noise = p["part_absolute"], res["reference_noise"]["specular"]
+        over = sum(e["absolute"] > BOUND_PART for e in parts.values())
+        out.append(f"| {res['scene']} | {res['panorama']} | {worst(parts)} | {over} of {len(parts)} | "
+                   f"{ratios(parts)} | {worst(d['part_absolute']) if d and 'part_absolute' in d else ''} | "
+                   f"{frame(p, noise)} | {100 * noise:.1f}% |")
+    return "\n".join(out) + "\n"
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--tree", default=None, help="the source tree to measure (default: this script's)")
+    ap.add_argument("--panoramas", default="studio,city")
+    ap.add_argument("--scenes", default=None, help="comma-separated names (default: every corpus scene)")
+    ap.add_argument("--max-side", type=int, default=64)
+    ap.add_argument("--max-samples", type=int, default=4096)
+    ap.add_argument("--target-noise", type=float, default=0.01)
+    ap.add_argument("--device", default=None)
+    ap.add_argument("--cache", default=None)
+    ap.add_argument("--json", default=None)
+    ap.add_argument("--from-json", default=None, help="print the tables of an earlier run's --json, rendering nothing")
+    args = ap.parse_args()
+    if args.from_json:
+        doc = json.loads(Path(args.from_json).read_text())
+        print(diffuse_table(doc["results"]))
+        print(specular_table(doc["results"]))
+        return
+    root = Path(args.tree or Path(__file__).resolve().parents[1]).resolve()
+    sys.path.insert(0, str(root))
+
+    from iblbake.device.runtime import Runtime
+    from iblbake.render import Bakes
+
+    rt = Runtime(args.device)
+    bakes = Bakes(args.cache)
+    names = args.scenes.split(",") if args.scenes else None
+    corpus = root / "examples" / "corpus"
+    paths = [corpus / f"{n}.yaml" for n in names] if names else sorted(corpus.glob("*.yaml"))
+    results = []
+    for path in paths:
+        for pano in args.panoramas.split(","):
+            t0 = time.perf_counter()
+            results.append(study_scene(path, pano, args, rt, bakes, root))
+            print(f"{path.stem} under {pano}: {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
+            if args.json:                 # after every study: a run cut short keeps what it measured
+                Path(args.json).write_text(json.dumps({"device": rt.device_label, "tree": str(root),
+                                                       "args": vars(args), "results": results}, indent=1) + "\n")
+    print(f"device: {rt.device_label}; tree {root}; {args.max_side} px on the longer side; reference: two seeds "
+          f"to {args.target_noise} or {args.max_samples} samples per pixel\n")
+    print(diffuse_table(results))
+    print(specular_table(results))
+
+
+if __name__ == "__main__":
+    main()
