@@ -183,3 +183,13 @@ def test_a_cold_kernel_build_prints_nothing(tmp_path):
     r = run_cli("sh", env, "-q", "-o", tmp_path / "sh.json", "--backend", "opencl",
                 env={"POCL_CACHE_DIR": str(tmp_path / "pocl"), "IBLBAKE_KERNEL_CACHE": str(tmp_path / "kernels")})
     assert r.returncode == 0 and r.stderr == "" and r.stdout == "", (r.stdout, r.stderr)
+
+
+def test_a_panorama_and_output_named_in_no_encoding(tmp_path):
+    """A panorama whose file name is not UTF-8 (b'\\xff.exr' on Linux) is read; an output name of
+    255 bytes is written (its temporary file was longer than the longest name)."""
+    env = write_exr(tmp_path / "\udcff.exr", np.full((16, 32, 3), 0.5, np.float32))
+    out = tmp_path / ("o" * 250 + ".json")
+    p = run_cli("sh", env, "-o", out)
+    assert p.returncode == 0, p.stderr
+    assert np.allclose(json.loads(out.read_text())["radiance"][0], [0.5 * math.sqrt(4 * math.pi)] * 3, rtol=1e-6)
