@@ -38,9 +38,15 @@ def _render(w: dict, sc, c, resume, repeat: int = 0) -> dict:
         r = sheet.render_cell(sc, c, w["rt"], w["bakes"], w["reuse"], None, True, resume, w["rt"].info.kind,
                               repeat)
     except Exception as e:               # anything else: one line back to the parent
-        return {"error": f"{type(e).__name__}: {e}", "seconds": 0.0, "key": None, "rendered": False}
+        return {"error": _error_text(e), "seconds": 0.0, "key": None, "rendered": False}
     return {"error": r.error, "seconds": r.seconds, "key": r.key, "frame": r.frame,
             "rendered": r.frame is not None and not r.frame.report.get("cell_cached")}
+
+
+def _error_text(e: Exception) -> str:
+    """A worker's error as the parent prints it: the user's error as its one line, anything else
+    with its kind."""
+    return str(e) if isinstance(e, IblbakeError) else f"{type(e).__name__}: {e}"
 
 
 def _summary(results, workers: dict, retried: int, **extra) -> dict:
@@ -295,8 +301,7 @@ def render_cells_dask(scenes, cells, client, *, devices, bakes, resources=None, 
             results[i].error = str(sc)
             continue
         files = {}
-        for path in scene_load.input_files(sc)[1:]:
-            sha = bakes.file_sha256(path)
+        for path, sha in bakes.input_hashes(sc).items():
             if sha not in shared:
                 # on every worker (data held by one alone is lost with it, and every task needing it
                 # is cancelled: "lost dependencies"), under a key of its own (a content hash would
@@ -313,7 +318,7 @@ def render_cells_dask(scenes, cells, client, *, devices, bakes, resources=None, 
             try:
                 out = f.result()
             except Exception as e:           # KilledWorker: the task outlived too many workers
-                out = {"error": f"{type(e).__name__}: {e}", "seconds": 0.0, "key": None, "rendered": False}
+                out = {"error": _error_text(e), "seconds": 0.0, "key": None, "rendered": False}
             for n, i in enumerate(futures[f]):
                 _collect(results[i], out if n == 0 else {**out, "rendered": False}, workers, bakes, keep_going)
                 if progress:
