@@ -940,7 +940,7 @@ def accuracy(scene, ladder=None, *, overrides=(), max_side: int = 320, repeats: 
     spread = None
     if jobs > 1:
         from iblbake.study import workers
-        spread = workers.render_references_parallel(study, jobs, list(devices or [device]))
+        spread = workers.render_references_parallel(study, jobs, list(devices or [device]), warn=say)
     study.progress = progress or (lambda *_: None)
     refs = {t: study.render_reference(t) for t in study.terms}
     rows = [study.run_rung(r) for r in rungs]
