@@ -183,9 +183,7 @@ def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, labe
             from iblbake.study import workers
             n, capped = jobs if jobs > 1 else (os.cpu_count() or 1), None
             if scheduler == "local":         # its workers are processes here, as --jobs's are
-                n, capped = workers.worker_count(n, len(todo))
-                if capped and jobs > 1:
-                    con.warn(f"--jobs {jobs}: {n} worker process{'es' if n != 1 else ''} ({capped})")
+                n, capped = workers.worker_count(n, len(todo), warn=con.warn if jobs > 1 else None)
             client, cluster = workers.connect(scheduler, n, resources)
             try:
                 results, spread = workers.render_cells_dask(

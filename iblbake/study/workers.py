@@ -18,9 +18,10 @@ from iblbake.study import sheet
 
 DASK_HINT = "pip install 'iblbake[distributed]' (Dask's distributed scheduler)"
 RETRIES = 2            # how often a pool whose worker died is started again for its unfinished cells
-# A worker process's peak resident memory, measured (tests/test_workers.py keeps it): 384 MiB for the
-# --jobs 2 worker that built the bakes of the gallery's spheres sheet (city, 2048 x 1024; 128 x 128
-# cells), 208 MiB for the other, 157 MiB for the parent. --jobs 1000 started 1000 of them.
+# A worker process's peak resident memory, measured (each worker's peak_mib in --json; tests/test_workers.py
+# checks it): 384 MiB for the --jobs 2 worker that built the bakes of the gallery's spheres sheet (city,
+# 2048 x 1024; 128 x 128 cells), 208 MiB for the other, 157 MiB for the parent. Uncapped, --jobs 1000
+# on 25 cells started 25 workers (4.0 GB) of one PoCL thread each.
 WORKER_BYTES = 400 << 20
 
 _STATE: dict = {}      # this worker process: one runtime, bake store and reuse state per (device, cache)
@@ -100,10 +101,10 @@ def split_cores(jobs: int) -> dict:
     return {key: os.environ.get(key) or str(max(1, (os.cpu_count() or 1) // jobs))}
 
 
-def worker_count(asked: int, tasks: int, what: str = "cell") -> tuple[int, str | None]:
+def worker_count(asked: int, tasks: int, what: str = "cell", warn=None) -> tuple[int, str | None]:
     """How many worker processes to start when `asked` for `tasks` pieces of work (`what`s): at
     most one a task, one a core, and as many as the available memory holds at WORKER_BYTES each.
-    (count, why fewer than asked, for a note and --json; None when it is what was asked)."""
+    (count, why fewer than asked, for --json; None when it is what was asked); `warn` is told."""
     from iblbake.device.runtime import host_bytes_available
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     caps = [(max(1, tasks), f"one a {what}: {tasks} to render"), (cores, f"one a core: {cores} cores")]
@@ -112,7 +113,11 @@ def worker_count(asked: int, tasks: int, what: str = "cell") -> tuple[int, str |
         caps.append((max(1, free // WORKER_BYTES), f"the memory: {free / (1 << 30):.1f} GiB available, "
                                                   f"{WORKER_BYTES >> 20} MiB a worker"))
     n, why = min(caps, key=lambda c: c[0])
-    return (asked, None) if asked <= n else (n, why)
+    if asked <= n:
+        return asked, None
+    if warn:
+        warn(f"--jobs {asked}: {n} worker process{'es' if n != 1 else ''} ({why})")
+    return n, why
 
 
 def _pool_init(devices, cache_root, env):
@@ -168,9 +173,7 @@ def render_cells_parallel(scenes, cells, jobs: int, *, devices, bakes, progress=
         else:
             todo.append(i)
     asked = jobs
-    jobs, capped = worker_count(asked, len(todo))
-    if capped and warn:
-        warn(f"--jobs {asked}: {jobs} worker process{'es' if jobs != 1 else ''} ({capped})")
+    jobs, capped = worker_count(asked, len(todo), warn=warn)
     workers, retried = {}, 0
     for attempt in range(RETRIES + 1):
         broken = []
@@ -225,9 +228,7 @@ def render_references_parallel(study, jobs: int, devices, progress=None, warn=No
     done: Counter = Counter()
     tasks = [(t, s) for t in study.terms for s in study.settings.seeds]
     asked = jobs
-    jobs, capped = worker_count(asked, len(tasks), "reference")
-    if capped and warn:
-        warn(f"--jobs {asked}: {jobs} worker process{'es' if jobs != 1 else ''} ({capped})")
+    jobs, capped = worker_count(asked, len(tasks), "reference", warn)
     with _pool(jobs, devices, root) as pool:
         futures = [pool.submit(_pool_reference, study.path, study.overrides, study.settings, t, s, root)
                    for t, s in tasks]
@@ -242,8 +243,7 @@ def render_references_parallel(study, jobs: int, devices, progress=None, warn=No
                 f.cancel()
             raise
     return {"jobs": jobs, "jobs_asked": asked, "jobs_capped_by": capped, "devices": list(devices),
-            "workers": [{"worker": k, "references": n}
-                                                               for k, n in sorted(done.items())]}
+            "workers": [{"worker": k, "references": n} for k, n in sorted(done.items())]}
 
 
 # --- Dask (--scheduler) ---------------------------------------------------------------------------
