@@ -1,5 +1,6 @@
 """What a new user met at the command line's edges (issue 60): `deps` without a target and its
---json, the exit codes the manual lists."""
+--json, every command's --json, the exit codes the manual lists, a missing mesh named by sheet and
+accuracy as render names it, and the gallery's Makefile making the meshes its sheets read."""
 
 import json
 import re
