@@ -387,7 +387,7 @@ def sh(panorama: Panorama, bands: int = 3, window: str | None = None, *, rotate_
     import numpy as np
 
     from iblbake.bake import sh as shbake
-    from iblbake.core import sh as core_sh
+    from iblbake.core import conventions, sh as core_sh
 
     _names(names)
     _panorama(panorama)
@@ -395,7 +395,7 @@ def sh(panorama: Panorama, bands: int = 3, window: str | None = None, *, rotate_
     window = "none" if window is None else window
     _choice("window", window, core_sh.WINDOWS)
     _choice("backend", backend, ("auto", *shbake.BACKENDS))
-    rotate_y = _real("rotate_y", rotate_y)
+    rotate_y = conventions.wrap_degrees(_real("rotate_y", rotate_y))
     intensity = _real("intensity", intensity, 0)
     error = _flag("error", error)
     _device(device)
@@ -940,7 +940,7 @@ def accuracy(scene, ladder=None, *, overrides=(), max_side: int = 320, repeats: 
     spread = None
     if jobs > 1:
         from iblbake.study import workers
-        spread = workers.render_references_parallel(study, jobs, list(devices or [device]))
+        spread = workers.render_references_parallel(study, jobs, list(devices or [device]), warn=say)
     study.progress = progress or (lambda *_: None)
     refs = {t: study.render_reference(t) for t in study.terms}
     rows = [study.run_rung(r) for r in rungs]

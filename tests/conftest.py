@@ -107,8 +107,9 @@ def run_cli(*args, cwd=None, env=None):
     full_env.pop("IBLBAKE_DEBUG", None)
     if env:
         full_env.update(env)
+    # a file name that is not UTF-8 is printed as its bytes: read back as Python names it
     return subprocess.run([sys.executable, "-m", "iblbake.cli", *map(str, args)], capture_output=True,
-                          text=True, cwd=cwd, env=full_env, timeout=600)
+                          text=True, errors="surrogateescape", cwd=cwd, env=full_env, timeout=600)
 
 
 def scene_file(folder, env, *, name="scene.yaml", **sections):

@@ -183,3 +183,32 @@ def test_a_cold_kernel_build_prints_nothing(tmp_path):
     r = run_cli("sh", env, "-q", "-o", tmp_path / "sh.json", "--backend", "opencl",
                 env={"POCL_CACHE_DIR": str(tmp_path / "pocl"), "IBLBAKE_KERNEL_CACHE": str(tmp_path / "kernels")})
     assert r.returncode == 0 and r.stderr == "" and r.stdout == "", (r.stdout, r.stderr)
+
+
+def test_a_panorama_and_output_named_in_no_encoding(tmp_path):
+    """A panorama whose file name is not UTF-8 (b'\\xff.exr' on Linux) is read; an output name of
+    255 bytes is written (its temporary file was longer than the longest name)."""
+    env = write_exr(tmp_path / "\udcff.exr", np.full((16, 32, 3), 0.5, np.float32))
+    out = tmp_path / ("o" * 250 + ".json")
+    p = run_cli("sh", env, "-o", out)
+    assert p.returncode == 0, p.stderr
+    assert np.allclose(json.loads(out.read_text())["radiance"][0], [0.5 * math.sqrt(4 * math.pi)] * 3, rtol=1e-6)
+
+
+def test_a_huge_rotation_is_the_same_turn_mod_360(tmp_path):
+    """--rotate-y 1.2345e300 is exactly 352 degrees mod 360: the same coefficients and error as
+    --rotate-y 352, and a clean stderr (the angle in radians summed with pi lost every digit: the
+    error block said 985% and numpy's cast warnings with their source lines reached stderr)."""
+    v = np.linspace(0, 1, 32)[:, None, None]
+    u = np.linspace(0, 1, 64)[None, :, None]
+    env = write_exr(tmp_path / "e.exr", np.repeat(1 + np.cos(6 * u) * v, 3, axis=-1).astype(np.float32))
+    docs = []
+    for deg in ("1.2345e300", "352", "-5e30", "-304"):
+        p = run_cli("sh", env, "--rotate-y", deg, "--json")
+        assert p.returncode == 0 and p.stderr == "", p.stderr
+        docs.append(json.loads(p.stdout))
+    for a, b in (docs[:2], docs[2:]):
+        assert np.allclose(a["irradiance"], b["irradiance"], rtol=1e-12, atol=1e-12)
+        assert a["error"]["relative_rmse"] == pytest.approx(b["error"]["relative_rmse"], rel=1e-9)
+    assert docs[0]["error"]["relative_rmse"] < 0.2
+    assert not np.allclose(docs[0]["irradiance"], docs[2]["irradiance"], rtol=1e-3)    # 352 and -304 differ

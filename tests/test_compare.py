@@ -60,3 +60,16 @@ def test_rmse_of_exr_and_bad_pairs(tmp_path):
         assert p.returncode == 1 and words in p.stderr and len(p.stderr.strip().splitlines()) == 1, p.stderr
     p = run_cli("compare", REF_PNG, REF_PNG, "--layout", tmp_path / "missing.json")
     assert p.returncode == 1 and "missing.json" in p.stderr
+
+
+def test_frames_named_in_no_encoding_are_compared(tmp_path):
+    """PNGs whose names are not UTF-8 (b'\\xfe.png'): read through a link, not `TypeError: open()`."""
+    a = np.full((8, 8, 3), 100, np.uint8)
+    b = a.copy()
+    b[:4] = 200
+    images.write_png(tmp_path / "\udcfe.png", a)
+    images.write_png(tmp_path / "\udcfd.png", b)
+    p = run_cli("compare", tmp_path / "\udcfe.png", tmp_path / "\udcfd.png", "--metric", "rmse",
+                "--tolerance", "1", "--json")
+    assert p.returncode == 0, p.stderr
+    assert json.loads(p.stdout)["errors"][0]["error"] == pytest.approx(0.5 ** 0.5, rel=1e-6)    # half the pixels off by 100%

@@ -106,3 +106,32 @@ def test_atomic_writes_get_normal_permissions(tmp_path):
     for name in ("a.json", "a.png", "a.exr"):
         assert (tmp_path / name).stat().st_mode & 0o777 == 0o644, name
     assert (tmp_path / "b.txt").stat().st_mode & 0o777 == 0o600
+
+
+# a file name that is not UTF-8 (any bytes are legal on Linux): Python reads it as a str with a surrogate
+NOT_UTF8 = "\udcff"
+
+
+def test_names_that_are_not_utf8_are_read_and_written(tmp_path):
+    """OpenImageIO's binding takes only UTF-8 names (it raised `TypeError: open(): incompatible
+    function arguments`): such a name is read and written through a link, the same pixels."""
+    img = np.random.default_rng(1).random((4, 8, 3)).astype(np.float32)
+    folder = tmp_path / f"{NOT_UTF8}dir"
+    images.write_exr(folder / f"{NOT_UTF8}.exr", img)
+    assert np.array_equal(images.read_exr(folder / f"{NOT_UTF8}.exr"), img)
+    pano, info = images.read_panorama(folder / f"{NOT_UTF8}.exr")
+    assert np.array_equal(pano, img) and info.width == 8
+    assert sorted(p.name for p in folder.iterdir()) == [f"{NOT_UTF8}.exr"]     # no link or temp file left
+
+
+def test_the_longest_legal_output_name_is_written(tmp_path):
+    """A name of 255 bytes is legal on ext4: the temporary file beside it (18 bytes longer before)
+    must fit too."""
+    from iblbake.io import atomic
+    img = np.ones((2, 3, 3), np.float32)
+    for name in ("e" * 251 + ".exr", "j" * 250 + ".json", "é" * 125 + "x.png", "n" * 255):
+        assert len(name.encode()) == 255
+        images.write_exr(tmp_path / name, img) if name.endswith(".exr") else atomic.write_text(tmp_path / name, "x")
+        assert (tmp_path / name).exists()
+    assert np.array_equal(images.read_exr(tmp_path / ("e" * 251 + ".exr")), img)
+    assert len(list(tmp_path.iterdir())) == 4

@@ -580,3 +580,24 @@ def test_mesh_errors(tmp_path, constant_env):
     sc = scene.load(p)
     geo = pack.scene_arrays(sc).geometry_report
     assert geo["triangles"] == 1 and geo["meshes"][0]["dropped_degenerate"] == 2
+
+
+def test_huge_angles_are_the_same_turn_mod_360(tmp_path, lobed_sky):
+    """environment.rotation_y 1.2345e300 is exactly 352 degrees mod 360: the same frame (in
+    radians it reached the kernels as float32 inf: another frame), and every angle key of a scene
+    is reduced the same way."""
+    import iblbake
+    frames = []
+    for r in (1.2345e300, 352.0):
+        sc = scene.load(scene_file(tmp_path, lobed_sky, environment={"rotation_y": r},
+                                   camera={"perspective": {"position": [0, 0, 3]}, "resolution": [16, 16]},
+                                   materials={"base_color": [0.9, 0.9, 0.9], "metallic": 1, "roughness": 0.2}))
+        assert sc.data["environment"]["rotation_y"] == 352.0
+        frames.append(iblbake.render(sc).hdr)
+    assert np.array_equal(frames[0], frames[1])
+    images.write_png(tmp_path / "t.png", np.full((2, 2, 3), 128, np.uint8))
+    sc = scene.load(scene_file(tmp_path, lobed_sky, objects=[{"mesh": {
+        "path": str(Path(__file__).parents[1] / "examples" / "meshes" / "knot.ply"), "rotate": [7e21, -5e30, 90]},
+        "material": "m"}], materials={"base_color": [1, 1, 1], "base_color_map": {"path": "t.png", "uv_rotation": -5e30}}))
+    assert sc.data["objects"][0]["mesh"]["rotate"] == [160.0, -304.0, 90.0]
+    assert sc.data["materials"]["m"]["base_color_map"]["uv_rotation"] == -304.0

@@ -55,6 +55,34 @@ def test_scientific_notation_in_a_scene_and_in_set(tmp_path, sky):
         "start": 1.0, "stop": 100.0, "count": 3, "geometric": True}
 
 
+def test_yaml_merge_keys_share_settings(tmp_path, sky):
+    """`<<: *base` (YAML's merge key) was "could not determine a constructor for the tag": merged
+    keys come in, a key written beside it wins, the first of a list of bases wins, and errors keep
+    their lines."""
+    text = (f"environment: {{path: {sky.name}}}\n"
+            "materials:\n"
+            "  gold: &metal {metallic: 1, roughness: 0.2, base_color: [1, 0.8, 0.3]}\n"
+            "  rough: {<<: *metal, roughness: 0.6}\n"
+            "  both:\n"
+            "    <<: [{roughness: 0.9}, *metal]\n"
+            "    metallic: 0\n"
+            "objects: [{sphere: {radius: 1}, material: rough}]\n")
+    (tmp_path / "s.yaml").write_text(text)
+    mats = scene_load.load(tmp_path / "s.yaml").data["materials"]
+    assert mats["rough"]["metallic"] == 1 and mats["rough"]["roughness"] == 0.6
+    assert mats["rough"]["base_color"] == [1, 0.8, 0.3]
+    assert mats["both"]["roughness"] == 0.9 and mats["both"]["metallic"] == 0
+    assert load_with_lines(text, "s.yaml")[1]["materials.both.roughness"] == 6
+    bad = text.replace("rough: {<<: *metal, roughness: 0.6}", "rough: {<<: *metal, roughness: 7}")
+    (tmp_path / "s.yaml").write_text(bad)
+    with pytest.raises(InputError, match=r"s\.yaml:4: materials\.rough\.roughness"):
+        scene_load.load(tmp_path / "s.yaml")
+    for wrong, words in (("a: {<<: 3}", "t.yaml:1: a: the merge key << takes a mapping"),
+                         ("a: &a {<<: *a}", "t.yaml:1: a: nested deeper than 32 levels")):
+        with pytest.raises(InputError, match=words):
+            load_with_lines(wrong, "t.yaml")
+
+
 # --- list-valued sweeps ---------------------------------------------------------------------------
 
 def test_a_list_valued_key_sweeps_from_the_command_line(tmp_path, sky):

@@ -159,14 +159,21 @@ def _samples(rep: dict) -> str:
 @click.option("--output", "-o", "outputs", multiple=True, type=click.Path(dir_okay=False),
               help="The targets (as render -o). Default: the scene's output.frame and AOVs.")
 @allow_outside_option
-def deps_command(scene_path, overrides, outputs):
+@common_options
+def deps_command(scene_path, overrides, outputs, quiet, as_json):
     """Print the Make rule that `render --depfile` writes: SCENE's outputs depend on the scene file,
     its panorama and its meshes."""
     from iblbake import api
+    from iblbake.errors import UsageError
     from iblbake.io.depfile import rule
     from iblbake.render import output_paths
     from iblbake.scene import load as scene
 
     sc = api.load_scene(scene_path, overrides, outputs=outputs or None, names=API_FLAGS)
-    targets = output_paths(sc) or [str(scene_path)]
-    click.echo(rule(targets, scene.input_files(sc)), nl=False)
+    targets = output_paths(sc)
+    if not targets:          # the scene itself is no target: make would "remake" the scene file
+        raise UsageError(f"{scene_path}: the scene names no output (output.frame) and no -o was given; "
+                         f"name the rule's target with -o FRAME.png, as render -o would write it")
+    inputs = scene.input_files(sc)
+    text = rule(targets, inputs)
+    Console(quiet, as_json).result({"targets": targets, "prerequisites": inputs, "rule": text}, text[:-1])

@@ -182,11 +182,16 @@ def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, labe
     with con.stages([c.label or "cell" for c in todo], label="sheet") as step:
         if scheduler:
             from iblbake.study import workers
-            client, cluster = workers.connect(scheduler, jobs if jobs > 1 else (os.cpu_count() or 1), resources)
+            n, capped = jobs if jobs > 1 else (os.cpu_count() or 1), None
+            if scheduler == "local":         # its workers are processes here, as --jobs's are
+                n, capped = workers.worker_count(n, len(todo), warn=con.warn if jobs > 1 else None)
+            client, cluster = workers.connect(scheduler, n, resources)
             try:
                 results, spread = workers.render_cells_dask(
                     scenes, cells, client, devices=devices or [device], bakes=bakes,
                     resources=resources, progress=step, keep_going=keep_going, resume=resume, repeat=repeat)
+                if scheduler == "local":
+                    spread.update(jobs=n, jobs_asked=jobs, jobs_capped_by=capped)
             finally:
                 client.close()
                 if cluster is not None:

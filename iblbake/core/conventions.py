@@ -10,10 +10,19 @@ Mirrors kernels/common.h; tests/test_conventions.py checks the two against each 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 PI = np.pi
 LAYOUTS = ("equirect", "cubemap", "octahedral")
+
+
+def wrap_degrees(degrees: float) -> float:
+    """An angle reduced into (-360, 360), exactly (math.fmod is exact in floating point), before
+    anything turns it into radians: 1e300 degrees summed with pi lost every digit (`sh --rotate-y
+    1e300` reported an error of 985% and numpy's cast warnings), and a float32 kernel reads inf."""
+    return math.fmod(float(degrees), 360.0)
 
 
 # --- equirect --------------------------------------------------------------------------

@@ -127,14 +127,35 @@ def _new_file_beside(final: Path, folder: Path) -> str:
     (whose import, with shutil's and random's, costs sh 7 ms of start-up); the extension kept
     last, since OpenImageIO picks the format from it."""
     flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+    stem, suffix = _temp_parts(final, folder)
     for _ in range(100):
-        tmp = folder / f".{final.stem}.tmp-{os.urandom(6).hex()}{final.suffix}"
+        tmp = folder / f".{stem}.tmp-{os.urandom(6).hex()}{suffix}"
         try:
             os.close(os.open(tmp, flags, 0o600))
         except FileExistsError:
             continue
         return str(tmp)
     raise FileExistsError(17, "no free temporary name")
+
+
+_TEMP_EXTRA = len(".") + len(".tmp-") + 12      # what a temporary name adds to the stem and suffix
+
+
+def _temp_parts(final: Path, folder: Path) -> tuple[str, str]:
+    """The stem and suffix a temporary name beside `final` carries: the stem cut, on a character
+    boundary, so that the whole name stays within the folder's longest name (255 bytes on most
+    file systems: an output named with 240 bytes is legal, its temporary file 18 bytes longer was
+    not), a suffix of more than 16 bytes dropped."""
+    try:
+        limit = os.pathconf(folder, "PC_NAME_MAX")
+    except (OSError, ValueError):
+        limit = 255
+    suffix = final.suffix if len(os.fsencode(final.suffix)) <= 16 else ""
+    stem = final.name[:len(final.name) - len(suffix)] if suffix else final.name
+    room = limit - _TEMP_EXTRA - len(os.fsencode(suffix))
+    while len(os.fsencode(stem)) > room:
+        stem = stem[:-1]
+    return stem, suffix
 
 
 def _umask() -> int:

@@ -14,6 +14,7 @@ adaptation (convert).
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 from dataclasses import dataclass, field
@@ -105,6 +106,35 @@ def _oiio():
     return oiio
 
 
+@contextlib.contextmanager
+def oiio_name(path):
+    """`path` as OpenImageIO's Python binding takes it: UTF-8 text only, where a file name on
+    Linux is any bytes (b'\\xff.exr' reaches Python as a str with a surrogate). Such a name is
+    given to OpenImageIO as a link of a plain name, in a private temporary folder, to the file
+    (its extension kept: OpenImageIO picks the format from it); read or write, the file is the same."""
+    p = os.fspath(path)
+    try:
+        p.encode("utf-8")
+    except UnicodeEncodeError:
+        pass
+    else:
+        yield p
+        return
+    import tempfile
+    ext = os.path.splitext(p)[1]
+    ext = ext if ext.isascii() and ext.isprintable() else ""
+    folder = tempfile.mkdtemp(prefix="iblbake-name-")
+    link = os.path.join(folder, "image" + ext)
+    try:
+        os.symlink(os.path.abspath(p), link)
+        yield link
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(link)
+        with contextlib.suppress(OSError):
+            os.rmdir(folder)
+
+
 def _first_position(mask) -> str:
     j, i = np.argwhere(mask.any(axis=-1))[0]
     return f"x={i}, y={j}"
@@ -176,30 +206,31 @@ def read_panorama(path, *, max_pixels: int | None = None, nonfinite: str = "erro
     from iblbake.io import reads          # before OpenImageIO opens it: a FIFO blocks, a device never ends
     reads.check_file(path, reads.image_bytes(limit), "a panorama",
                      f" of at most {limit} pixels ({name['max_pixels']} or IBLBAKE_MAX_PIXELS raises it)")
-    inp = oiio.ImageInput.open(path)
-    if inp is None:
-        msg = " ".join(oiio.geterror().split()) or "unknown format"
-        raise InputError(f"{path}: cannot read as an image ({msg[:200]}); expected EXR, HDR, PFM or float TIFF")
-    try:
-        spec = inp.spec()
-        w, h, nc = spec.width, spec.height, spec.nchannels
-        if w < 1 or h < 1 or nc < 1:
-            raise InputError(f"{path}: empty image ({w}x{h}, {nc} channels)")
-        if w * h > limit:
-            raise InputError(
-                f"{path}: {w}x{h} is {w * h} pixels, over the limit of {limit}; "
-                f"raise it with {name['max_pixels']} or IBLBAKE_MAX_PIXELS if this is intended")
-        names = tuple(spec.channelnames)
-        chroma = spec.getattribute("chromaticities")
-        data = inp.read_image(0, 0, 0, nc, oiio.FLOAT)
-        if data is None or not isinstance(data, np.ndarray):
-            msg = " ".join(inp.geterror().split()) or "pixel data unreadable"
-            raise InputError(f"{path}: corrupt or truncated image ({msg[:200]})")
-        fmt = str(spec.format)
-        warnings = []
-        data = _decode_transfer(np.asarray(data, dtype=np.float32), spec, transfer, path, warnings, name)
-    finally:
-        inp.close()
+    with oiio_name(path) as shown:        # the link a name that is not UTF-8 needs
+        inp = oiio.ImageInput.open(shown)
+        if inp is None:
+            msg = " ".join(oiio.geterror().split()) or "unknown format"
+            raise InputError(f"{path}: cannot read as an image ({msg[:200]}); expected EXR, HDR, PFM or float TIFF")
+        try:
+            spec = inp.spec()
+            w, h, nc = spec.width, spec.height, spec.nchannels
+            if w < 1 or h < 1 or nc < 1:
+                raise InputError(f"{path}: empty image ({w}x{h}, {nc} channels)")
+            if w * h > limit:
+                raise InputError(
+                    f"{path}: {w}x{h} is {w * h} pixels, over the limit of {limit}; "
+                    f"raise it with {name['max_pixels']} or IBLBAKE_MAX_PIXELS if this is intended")
+            names = tuple(spec.channelnames)
+            chroma = spec.getattribute("chromaticities")
+            data = inp.read_image(0, 0, 0, nc, oiio.FLOAT)
+            if data is None or not isinstance(data, np.ndarray):
+                msg = " ".join(inp.geterror().split()) or "pixel data unreadable"
+                raise InputError(f"{path}: corrupt or truncated image ({msg[:200]})")
+            fmt = str(spec.format)
+            warnings = []
+            data = _decode_transfer(np.asarray(data, dtype=np.float32), spec, transfer, path, warnings, name)
+        finally:
+            inp.close()
     # OIIO may report partial-read errors without failing read_image.
     err = oiio.geterror()
     if err and ("corrupt" in err.lower() or "truncat" in err.lower() or "error" in err.lower()):
@@ -302,11 +333,11 @@ def write_exr(path, image, *, half: bool = False, channels=("R", "G", "B"), attr
     spec.attribute("Software", mark())
     for k, v in (attributes or {}).items():
         spec.attribute(k, v)
-    with atomic_path(path, batch) as tmp:
-        out = oiio.ImageOutput.create(tmp)
+    with atomic_path(path, batch) as tmp, oiio_name(tmp) as name:
+        out = oiio.ImageOutput.create(name)
         if out is None:
             raise IblbakeError(f"{path}: no writer for this format ({oiio.geterror()})")
-        ok = out.open(tmp, spec) and out.write_image(image)
+        ok = out.open(name, spec) and out.write_image(image)
         closed = out.close()            # the last tiles and the offset table are written here
         err = out.geterror() or oiio.geterror()
         if not (ok and closed) or err:
@@ -391,7 +422,8 @@ def read_exrs_back_to_back(paths) -> list:
 
 def _open_exr(path):
     oiio = _oiio()
-    inp = oiio.ImageInput.open(str(path))
+    with oiio_name(path) as name:       # an open EXR input keeps its file: the link may go
+        inp = oiio.ImageInput.open(name)
     if inp is None:
         raise InputError(f"{path}: cannot read ({' '.join(oiio.geterror().split())[:200]})")
     return inp

@@ -127,6 +127,19 @@ class Bakes:
         st = os.stat(path)
         return self._get(("sha256", str(path), st.st_size, st.st_mtime_ns), lambda: images.file_sha256(path))
 
+    def input_hashes(self, sc) -> dict:
+        """{path: content hash} of every file the scene reads but the scene file itself (what keys
+        a sheet's cells and a study's reference). A missing or unreadable one (a mesh not made
+        yet) is reported by the loaders, in render's words naming the key and the file; it was
+        `internal error: FileNotFoundError`."""
+        from iblbake.errors import InputError
+        from iblbake.scene import load as scene_load, pack
+        try:
+            return {f: self.file_sha256(f) for f in scene_load.input_files(sc)[1:]}
+        except OSError as e:
+            pack.scene_arrays(sc)        # the mesh loaders' one-line error, where they have one
+            raise InputError(f"{sc.source}: {e.filename}: cannot read ({e.strerror or e})") from None
+
     def _recall(self, key, make):
         """(value, whether this store already held it): a bake counts as cached when it was."""
         held = key in self._memo

@@ -258,6 +258,7 @@ def _validated(data, lines, source, folder, overrides, outputs, values, origin, 
     _resolve_reflection_probes(v, out["reflection_probes"])
     _resolve_probes(v, out["probes"])
     _resolve_basis_specular(v, out["effects"], out["probes"])
+    _resolve_specular_fits(out, raw)
     writes = _resolve_outputs(v, out["output"], folder, outputs)
     return Scene(out, source, folder, lines, writes, raw, overridden)
 
@@ -432,6 +433,21 @@ def _resolve_basis_specular(v: "_Validator", fx: dict, probes: dict) -> None:
     if s == "probes" and d in bases.DIFFUSE:
         v.fail("effects.specular", f"probes beside effects.diffuse: {d}: a frame lights from one directional basis; "
                                    "give effects.diffuse probes (or sh), or another specular mode")
+
+
+def _resolve_specular_fits(out: dict, raw: dict) -> None:
+    """A basis whose lobes serve the specular term (`specular: sg | ambient_dice`, or `specular:
+    probes` from probes storing one) takes its SPECULAR_DEFAULTS (NNLS) for the options the scene
+    leaves out: least squares rings negative around a sun, and the lobe clamped at 0 showed black
+    patches beside white ones on metals (the sphere grid under city: 3.2% (sg) and 12% (ambient
+    dice) of the metal spheres' pixels black; none with NNLS)."""
+    from iblbake.core import bases
+    s = out["effects"]["specular"]
+    for section, name in (("effects", s), ("probes", out["probes"]["irradiance"] if s == "probes" else None)):
+        given = raw.get(section) if isinstance(raw.get(section), dict) else {}
+        for k, value in getattr(bases.BASES.get(name), "SPECULAR_DEFAULTS", {}).items():
+            if k not in given:
+                out[section][k] = value
 
 
 def _resolve_probes(v: "_Validator", p: dict) -> None:

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from iblbake.core import bases
+from iblbake.core.conventions import wrap_degrees
 
 # Field types. Each checks one value and returns it normalised, or raises _Bad with the reason.
 
@@ -28,6 +29,7 @@ class Num:
     lo_open: bool = False      # lo excluded (fov 0 is an error, radius must be > 0)
     integer: bool = False
     doc: str = ""
+    angle: bool = False        # degrees: reduced into (-360, 360) exactly (conventions.wrap_degrees)
 
     def check(self, v):
         if isinstance(v, bool) or not isinstance(v, (int, float)):
@@ -42,7 +44,7 @@ class Num:
         if self.hi is not None and v > self.hi:
             raise _Bad(f"{v!r} is out of range; give a value <= {self.hi:g}"
                        + (f" and {'>' if self.lo_open else '>='} {self.lo:g}" if self.lo is not None else ""))
-        return int(v) if self.integer else float(v)
+        return int(v) if self.integer else wrap_degrees(v) if self.angle else float(v)
 
     def describe(self):
         rng = ""
@@ -63,6 +65,7 @@ class Vec:
     integer: bool = False
     positive: bool = False
     doc: str = ""
+    angle: bool = False        # degrees: each reduced into (-360, 360) exactly
 
     def check(self, v):
         if not isinstance(v, (list, tuple)) or len(v) != self.n:
@@ -79,7 +82,7 @@ class Vec:
                 raise _Bad(f"{v!r} holds {x!r}; each value must be <= {self.hi:g}")
             if self.positive and x <= 0:
                 raise _Bad(f"{v!r} holds {x!r}; each value must be > 0")
-            out.append(int(x) if self.integer else float(x))
+            out.append(int(x) if self.integer else wrap_degrees(x) if self.angle else float(x))
         if self.nonzero and all(x == 0 for x in out):
             raise _Bad(f"{v!r} is the zero vector; give a direction")
         return out
@@ -273,7 +276,7 @@ def _map_section(doc: str, **extra) -> Section:
                                                    "their width and depth, 1 per unit if infinite)"),
         "uv_offset": Vec(n=2, default=[0.0, 0.0], doc="KHR_texture_transform offset"),
         "uv_scale": Vec(n=2, default=[1.0, 1.0], doc="KHR_texture_transform scale"),
-        "uv_rotation": Num(0.0, doc="KHR_texture_transform rotation, degrees (counter-clockwise in UV)"),
+        "uv_rotation": Num(0.0, angle=True, doc="KHR_texture_transform rotation, degrees (counter-clockwise in UV)"),
         "wrap": Enum(("repeat", "clamp", "mirror"), "repeat", doc="outside [0, 1]"),
         "filter": Enum(("linear", "nearest"), "linear", doc="linear: bilinear and trilinear mipmaps; nearest: "
                                                            "nearest texel and mip level"),
@@ -303,7 +306,7 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
     "environment": Section(required=("path",), doc="the HDR panorama lighting the scene", fields={
         "path": Str(path=True, doc="equirectangular panorama (EXR, HDR, any format iblbake reads); relative to the scene file"),
         "intensity": Num(1.0, 0.0, doc="radiance scale"),
-        "rotation_y": Num(0.0, doc="rotate the panorama about +y, degrees (+x towards -z)"),
+        "rotation_y": Num(0.0, angle=True, doc="rotate the panorama about +y, degrees (+x towards -z)"),
         "background": OneOf((Enum(("show", "hide")), Vec(n=3, lo=0.0), ColorKey()), default="show",
                             doc="show the panorama, hide it (black), or a constant [r, g, b]"),
         "blur": Num(0.0, 0.0, 1.0, doc="show the background through the prefiltered level of this roughness (0: sharp)"),
@@ -366,7 +369,7 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                                                     "OBJ, PLY, STL (geometry and UVs, through trimesh)", fields={
                 "path": Str(path=True, doc="GLB, glTF, OBJ, PLY or STL; relative to the scene file"),
                 "translate": Vec(**VEC3, default=[0.0, 0.0, 0.0], doc="translation"),
-                "rotate": Vec(**VEC3, default=[0.0, 0.0, 0.0], doc="rotation about x, then y, then z, degrees"),
+                "rotate": Vec(**VEC3, default=[0.0, 0.0, 0.0], angle=True, doc="rotation about x, then y, then z, degrees"),
                 "scale": OneOf((Num(None, 0.0, lo_open=True), Vec(n=3, positive=True)), default=1.0,
                                doc="uniform scale or [sx, sy, sz] (> 0)"),
                 "smooth": Enum(("auto", "on", "off"), "auto",

@@ -1,5 +1,5 @@
-"""YAML with line numbers: safe YAML (the standard tags only, so no object construction), the
-line of every dotted key for error messages, and budgets on size, values and depth that stop
+"""YAML with line numbers: safe YAML (the standard tags only, so no object construction; merge
+keys `<<: *base` too), the line of every dotted key for error messages, and budgets on size, values and depth that stop
 alias bombs and recursive aliases before they cost memory."""
 
 from __future__ import annotations
@@ -73,8 +73,12 @@ def load_with_lines(text: str, source: str):
                              f"{MAX_SCENE_DEPTH} levels (a recursive YAML alias?)")
         lines.setdefault(path, n.start_mark.line + 1)
         if isinstance(n, yaml.MappingNode):
+            own, bases = _merge_keys(n, source, path)
+            base = {}
+            for b in reversed(bases):      # `<<: [*a, *b]`: the first one given wins (its lines too)
+                base.update(walk(b, path, depth + 1))
             out = {}
-            for k, v in n.value:
+            for k, v in own:
                 key = scalar(k, path) if isinstance(k, yaml.ScalarNode) else k
                 if not isinstance(key, (str, int, float)) or isinstance(key, bool):
                     what = "a collection" if isinstance(key, yaml.Node) else repr(key)
@@ -85,13 +89,29 @@ def load_with_lines(text: str, source: str):
                 if key in out:
                     raise InputError(f"{source}:{k.start_mark.line + 1}: {sub}: key given twice")
                 out[key] = walk(v, sub, depth + 1)
-            return out
+            return {**base, **out}     # a key written beside the merge key wins over a merged one
         if isinstance(n, yaml.SequenceNode):
             return [walk(v, f"{path}.{i}" if path else str(i), depth + 1) for i, v in enumerate(n.value)]
         return scalar(n, path)
 
     data = walk(node, "", 0) if node is not None else None
     return data, lines
+
+
+def _merge_keys(n, source: str, path: str):
+    """A mapping's own (key, value) nodes, and the mappings its merge keys bring in (YAML's `<<:`,
+    one alias or a list of them), in the order given."""
+    own, bases = [], []
+    for k, v in n.value:
+        if k.tag != "tag:yaml.org,2002:merge":
+            own.append((k, v))
+            continue
+        for b in v.value if isinstance(v, yaml.SequenceNode) else [v]:
+            if not isinstance(b, yaml.MappingNode):
+                raise InputError(f"{source}:{k.start_mark.line + 1}: {path or 'document'}: the merge key << takes "
+                                 f"a mapping or a list of them (<<: *name, where &name marks a mapping)")
+            bases.append(b)
+    return own, bases
 
 
 def parse_value(text: str, source: str):

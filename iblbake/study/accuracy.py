@@ -144,7 +144,7 @@ class Study:
         inputs = {k: v for k, v in lighting_inputs(sc).items() if k not in ("probes", "reflection_probes")}
         return "reference-" + content_key({
             "kind": "reference", "v": 2, "scene": inputs, "seed": seed,
-            "files": [self.bakes.file_sha256(f) for f in scene_load.input_files(sc)[1:]],
+            "files": list(self.bakes.input_hashes(sc).values()),
             "kernels": source_hash(("gbuffer.cl", "paths/reference.cl", "resolve.cl")),
             "host": _code_hash((sampling,))})      # the panorama's sampling tables the kernels read
 

@@ -63,17 +63,18 @@ def read(path) -> tuple[np.ndarray, bool]:
                          " (IBLBAKE_MAX_PIXELS raises it)")
         # ImageInput, not ImageBuf: a broken file's ImageBuf printed OpenImageIO's pending-error dump
         # on stdout (breaking --json), an assertion on stderr and its message over and over
-        inp = oiio.ImageInput.open(p)
-        if inp is None:
-            msg = " ".join(dict.fromkeys(oiio.geterror().split("\n")))
-            raise InputError(f"{p}: cannot read as a PNG ({' '.join(msg.split())[:160] or 'unknown format'})")
-        try:
-            spec = inp.spec()
-            with _native_stderr_held():      # libpng prints its own line before OIIO reports it
-                px = inp.read_image(0, 0, 0, spec.nchannels, oiio.FLOAT)
-            err = inp.geterror()
-        finally:
-            inp.close()
+        with images.oiio_name(p) as name:
+            inp = oiio.ImageInput.open(name)
+            if inp is None:
+                msg = " ".join(dict.fromkeys(oiio.geterror().split("\n")))
+                raise InputError(f"{p}: cannot read as a PNG ({' '.join(msg.split())[:160] or 'unknown format'})")
+            try:
+                spec = inp.spec()
+                with _native_stderr_held():      # libpng prints its own line before OIIO reports it
+                    px = inp.read_image(0, 0, 0, spec.nchannels, oiio.FLOAT)
+                err = inp.geterror()
+            finally:
+                inp.close()
         if not isinstance(px, np.ndarray) or err:
             raise InputError(f"{p}: corrupt or truncated PNG ({' '.join(err.split())[:160] or 'no pixels'})")
         px = np.asarray(px, np.float32).reshape(spec.height, spec.width, spec.nchannels)

@@ -97,7 +97,7 @@ def cell_identity(sc, bakes) -> str:
     lie in different folders share one cache of cells."""
     from iblbake.bake.cache import content_key
 
-    hashes = {f: "sha256:" + bakes.file_sha256(f) for f in scene_load.input_files(sc)[1:]}
+    hashes = {f: "sha256:" + h for f, h in bakes.input_hashes(sc).items()}
     data = scene_load.replace_strings({k: v for k, v in sc.data.items() if k not in ("output", "sweep")}, hashes)
     return content_key({"kind": "cell", "v": 2, "scene": data, "kernels": _kernels_hash()})
 

@@ -7,6 +7,7 @@ rendering is rendered again and comes out the same, and the sheet is the serial 
 from __future__ import annotations
 
 import os
+import sys
 import time
 from collections import Counter
 from pathlib import Path
@@ -17,6 +18,11 @@ from iblbake.study import sheet
 
 DASK_HINT = "pip install 'iblbake[distributed]' (Dask's distributed scheduler)"
 RETRIES = 2            # how often a pool whose worker died is started again for its unfinished cells
+# A worker process's peak resident memory, measured (each worker's peak_mib in --json; tests/test_workers.py
+# checks it): 384 MiB for the --jobs 2 worker that built the bakes of the gallery's spheres sheet (city,
+# 2048 x 1024; 128 x 128 cells), 208 MiB for the other, 157 MiB for the parent. Uncapped, --jobs 1000
+# on 25 cells started 25 workers (4.0 GB) of one PoCL thread each.
+WORKER_BYTES = 400 << 20
 
 _STATE: dict = {}      # this worker process: one runtime, bake store and reuse state per (device, cache)
 
@@ -38,9 +44,15 @@ def _render(w: dict, sc, c, resume, repeat: int = 0) -> dict:
         r = sheet.render_cell(sc, c, w["rt"], w["bakes"], w["reuse"], None, True, resume, w["rt"].info.kind,
                               repeat)
     except Exception as e:               # anything else: one line back to the parent
-        return {"error": f"{type(e).__name__}: {e}", "seconds": 0.0, "key": None, "rendered": False}
+        return {"error": _error_text(e), "seconds": 0.0, "key": None, "rendered": False}
     return {"error": r.error, "seconds": r.seconds, "key": r.key, "frame": r.frame,
             "rendered": r.frame is not None and not r.frame.report.get("cell_cached")}
+
+
+def _error_text(e: Exception) -> str:
+    """A worker's error as the parent prints it: the user's error as its one line, anything else
+    with its kind."""
+    return str(e) if isinstance(e, IblbakeError) else f"{type(e).__name__}: {e}"
 
 
 def _summary(results, workers: dict, retried: int, **extra) -> dict:
@@ -57,6 +69,8 @@ def _collect(r: sheet.CellResult, out: dict, workers: dict, bakes, keep_going: b
     w["cells"] += 1
     w["rendered"] += bool(out["rendered"])
     w["seconds"] = round(w["seconds"] + out["seconds"], 4)
+    if out.get("peak_mib"):
+        w["peak_mib"] = max(w.get("peak_mib", 0), out["peak_mib"])
     r.seconds, r.key = out["seconds"], out["key"]
     if out["error"]:
         if not keep_going:
@@ -87,6 +101,25 @@ def split_cores(jobs: int) -> dict:
     return {key: os.environ.get(key) or str(max(1, (os.cpu_count() or 1) // jobs))}
 
 
+def worker_count(asked: int, tasks: int, what: str = "cell", warn=None) -> tuple[int, str | None]:
+    """How many worker processes to start when `asked` for `tasks` pieces of work (`what`s): at
+    most one a task, one a core, and as many as the available memory holds at WORKER_BYTES each.
+    (count, why fewer than asked, for --json; None when it is what was asked); `warn` is told."""
+    from iblbake.device.runtime import host_bytes_available
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    caps = [(max(1, tasks), f"one a {what}: {tasks} to render"), (cores, f"one a core: {cores} cores")]
+    free = host_bytes_available()
+    if free is not None:
+        caps.append((max(1, free // WORKER_BYTES), f"the memory: {free / (1 << 30):.1f} GiB available, "
+                                                  f"{WORKER_BYTES >> 20} MiB a worker"))
+    n, why = min(caps, key=lambda c: c[0])
+    if asked <= n:
+        return asked, None
+    if warn:
+        warn(f"--jobs {asked}: {n} worker process{'es' if n != 1 else ''} ({why})")
+    return n, why
+
+
 def _pool_init(devices, cache_root, env):
     os.environ.update(env)               # before this process loads its OpenCL platforms
     _DEVICE[:] = [devices.get()]
@@ -97,7 +130,17 @@ def _pool_cell(sc, c, resume, cache_root, repeat=0):
     w = _worker(_DEVICE[0], cache_root)
     out = _render(w, sc, c, resume, repeat)
     out.pop("frame", None)               # the parent reads it from the shared cache
-    return {**out, "worker": w["label"]}
+    return {**out, "worker": w["label"], "peak_mib": _peak_mib()}
+
+
+def _peak_mib() -> int | None:
+    """This process's peak resident memory so far (what WORKER_BYTES stands for), MiB."""
+    try:
+        import resource
+    except ImportError:
+        return None
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return peak >> 20 if sys.platform == "darwin" else peak >> 10      # bytes on macOS, KiB on Linux
 
 
 def _pool(jobs: int, devices, cache_root: str):
@@ -129,6 +172,8 @@ def render_cells_parallel(scenes, cells, jobs: int, *, devices, bakes, progress=
             results[i].error = str(sc)
         else:
             todo.append(i)
+    asked = jobs
+    jobs, capped = worker_count(asked, len(todo), warn=warn)
     workers, retried = {}, 0
     for attempt in range(RETRIES + 1):
         broken = []
@@ -159,7 +204,8 @@ def render_cells_parallel(scenes, cells, jobs: int, *, devices, bakes, progress=
                                f"{bakes.root}: run again with --resume")
         if warn:
             warn(f"a worker process died; rendering its {len(todo)} unfinished cells again")
-    return results, _summary(results, workers, retried, jobs=jobs, devices=list(devices))
+    return results, _summary(results, workers, retried, jobs=jobs, jobs_asked=asked, jobs_capped_by=capped,
+                             devices=list(devices))
 
 
 def _pool_reference(scene_path, overrides, settings, term, seed, cache_root):
@@ -170,7 +216,7 @@ def _pool_reference(scene_path, overrides, settings, term, seed, cache_root):
     return w["label"]
 
 
-def render_references_parallel(study, jobs: int, devices, progress=None) -> dict:
+def render_references_parallel(study, jobs: int, devices, progress=None, warn=None) -> dict:
     """Every reference seed of the study's terms rendered into its cache by `jobs` local workers
     (the study then reads them back). Only the references: the rungs are timed afterwards, alone,
     since rungs timed side by side on shared cores would measure each other. A reference's
@@ -180,9 +226,12 @@ def render_references_parallel(study, jobs: int, devices, progress=None) -> dict
 
     root = str(study.bakes.root)
     done: Counter = Counter()
+    tasks = [(t, s) for t in study.terms for s in study.settings.seeds]
+    asked = jobs
+    jobs, capped = worker_count(asked, len(tasks), "reference", warn)
     with _pool(jobs, devices, root) as pool:
         futures = [pool.submit(_pool_reference, study.path, study.overrides, study.settings, t, s, root)
-                   for t in study.terms for s in study.settings.seeds]
+                   for t, s in tasks]
         try:
             for f in as_completed(futures):
                 done[f.result()] += 1
@@ -193,8 +242,8 @@ def render_references_parallel(study, jobs: int, devices, progress=None) -> dict
             for f in futures:
                 f.cancel()
             raise
-    return {"jobs": jobs, "devices": list(devices), "workers": [{"worker": k, "references": n}
-                                                               for k, n in sorted(done.items())]}
+    return {"jobs": jobs, "jobs_asked": asked, "jobs_capped_by": capped, "devices": list(devices),
+            "workers": [{"worker": k, "references": n} for k, n in sorted(done.items())]}
 
 
 # --- Dask (--scheduler) ---------------------------------------------------------------------------
@@ -295,8 +344,7 @@ def render_cells_dask(scenes, cells, client, *, devices, bakes, resources=None, 
             results[i].error = str(sc)
             continue
         files = {}
-        for path in scene_load.input_files(sc)[1:]:
-            sha = bakes.file_sha256(path)
+        for path, sha in bakes.input_hashes(sc).items():
             if sha not in shared:
                 # on every worker (data held by one alone is lost with it, and every task needing it
                 # is cancelled: "lost dependencies"), under a key of its own (a content hash would
@@ -313,7 +361,7 @@ def render_cells_dask(scenes, cells, client, *, devices, bakes, resources=None, 
             try:
                 out = f.result()
             except Exception as e:           # KilledWorker: the task outlived too many workers
-                out = {"error": f"{type(e).__name__}: {e}", "seconds": 0.0, "key": None, "rendered": False}
+                out = {"error": _error_text(e), "seconds": 0.0, "key": None, "rendered": False}
             for n, i in enumerate(futures[f]):
                 _collect(results[i], out if n == 0 else {**out, "rendered": False}, workers, bakes, keep_going)
                 if progress:

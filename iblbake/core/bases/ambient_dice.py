@@ -50,7 +50,9 @@ TITLE = "ambient dice"
 HEADER = "basis_ambient_dice.h"
 FITS = ("least_squares", "nnls")
 OPTIONS = {"ad_fit": (FITS, "least_squares", "ambient_dice: the fit, exact least squares or non-negative least "
-                                             "squares (no negative radiance: its specular has no dark rings)")}
+                                             "squares (no negative radiance: its specular has no dark rings; nnls "
+                                             "where the lobes serve the specular term, unless given)")}
+SPECULAR_DEFAULTS = {"ad_fit": "nnls"}      # as sg's (sg.py SPECULAR_DEFAULTS)
 VERTICES = 12
 _T = (np.sqrt(5.0) - 1.0) / 2.0
 GLSL_COEFFS, GLSL_IRRADIANCE = "AD_VALUE", "ambientDiceIrradiance"     # glsl()'s names (the probes' sampler)

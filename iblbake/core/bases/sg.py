@@ -50,7 +50,12 @@ HEADER = "basis_sg.h"
 LOBES = (5, 6, 9, 12)
 FITS = ("least_squares", "nnls")
 OPTIONS = {"sg_lobes": (LOBES, 9, "sg: spherical Gaussian lobes (fixed Fibonacci axes, one sharpness)"),
-           "sg_fit": (FITS, "least_squares", "sg: the fit, exact least squares or non-negative least squares")}
+           "sg_fit": (FITS, "least_squares", "sg: the fit, exact least squares or non-negative least squares "
+                                             "(nnls where the lobes serve the specular term, unless given)")}
+# where the lobes serve the specular term (specular: sg, or probes storing sg), these defaults:
+# least squares rings negative around a sun, and the lobe, clamped at 0, shows black patches
+# beside white ones on metals (scene/load.py _resolve_specular_fits)
+SPECULAR_DEFAULTS = {"sg_fit": "nnls"}
 HILL_C0 = 0.36
 GLSL_COEFFS, GLSL_IRRADIANCE = "SG_AMPLITUDE", "sgIrradiance"     # glsl()'s names (the probes' sampler)
 GLSL_SPECULAR = "sgSpecularRadiance"
