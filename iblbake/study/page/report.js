@@ -71,9 +71,8 @@ function script(key, file) {
 function load(i) {                   // -> {rgb: Float32Array, mask: Uint8Array (0/1)}
   if (cache.has(i)) { const v = cache.get(i); cache.delete(i); cache.set(i, v); return v; }
   const p = script(String(i), D.entries[i].file).then(inflate).then((bytes) => {
-    const n = D.width * D.height, half = new Uint16Array(bytes.buffer, 0, 3 * n);
-    const rgb = new Float32Array(3 * n), mask = new Uint8Array(n);
-    for (let k = 0; k < 3 * n; k++) rgb[k] = F16[half[k]];
+    const n = D.width * D.height, rgb = new Float32Array(3 * n), mask = new Uint8Array(n);
+    for (let k = 0; k < 3 * n; k++) rgb[k] = F16[bytes[k] | (bytes[3 * n + k] << 8)];   // low, high bytes
     for (let k = 0; k < n; k++) mask[k] = (bytes[6 * n + (k >> 3)] >> (7 - (k & 7))) & 1;
     return {rgb, mask};
   });
@@ -288,6 +287,7 @@ function cell(key, v) {
   if (['relative_rmse', 'mean_relative_error', 'max_relative_error', 'worst_region_error'].includes(key)) return `${(100 * v).toFixed(2)}%`;
   if (key === 'flip') return v.toFixed(4);
   if (key === 'bake_s') return v.toFixed(3);
+  if (key === 'bytes' || key === 'samples') return String(v);
   if (typeof v === 'number') return v.toPrecision(3);
   return String(v);
 }
