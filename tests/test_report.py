@@ -67,6 +67,8 @@ def test_data_files_hold_the_float16_frames_and_masks(tmp_path):
         rgb, mask = decode(path, e.hdr.shape[:2])
         np.testing.assert_array_equal(rgb, e.hdr.astype(np.float16))
         np.testing.assert_array_equal(mask, e.mask)
+    from iblbake.io.guard import written_by_iblbake          # the overwrite rule knows them
+    assert written_by_iblbake(tmp_path / "index.html") and written_by_iblbake(tmp_path / "report" / "0002.js")
     index = (tmp_path / "index.html").read_text()
     assert index.split("\n", 1)[0].startswith("<!DOCTYPE html><!-- iblbake ")
     assert "</script><b>" not in index and "<\\/script><b>title" in index      # the title cannot end the script
