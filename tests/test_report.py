@@ -186,7 +186,8 @@ def test_flip_and_exposure_show_what_render_writes(tmp_path, browser):
 @pytest.mark.external
 def test_plot_points_and_table_select_rungs(tmp_path, browser):
     """Clicking a plot point shows that rung (pane A's caption, the table's row); shift-click
-    makes it B; the table sorts by a column on a click of its header."""
+    makes it B; the table sorts by a column on a click of its header; hovering a point shows its
+    rung until the cursor leaves it."""
     page = synthetic_page(tmp_path, n=6)
     out = browser(tmp_path / "index.html",
                   [{"eval": "document.querySelectorAll('#plot circle').length"},
@@ -197,13 +198,19 @@ def test_plot_points_and_table_select_rungs(tmp_path, browser):
                    {"eval": "[IBL.state.a, IBL.state.b]"},
                    {"click": "#table th[data-key='relative_rmse']"},
                    {"eval": "[...document.querySelectorAll('#table tbody tr')].map((r) => +r.dataset.entry)"},
-                   {"key": "ArrowDown"}, {"eval": "IBL.state.a"}], tmp_path)
+                   {"key": "ArrowDown"}, {"eval": "IBL.state.a"},
+                   {"move": True, "selector": "#plot circle[data-entry='1']", "fx": 0.5, "fy": 0.5},
+                   {"eval": "[IBL.state.a, document.getElementById('capA').textContent]"},
+                   {"move": True, "selector": "#table", "fx": 0.5, "fy": 0.5},
+                   {"eval": "document.getElementById('capA').textContent"}], tmp_path)
     res = out["results"]
     assert res[0] == 5                               # every rung, not the reference
     assert res[2] == [4, f"A: diffuse: {page.entries[4].label}", "4"]
     assert res[4] == [4, 2]
     assert res[6] == [5, 4, 3, 2, 1]                 # by increasing error
     assert res[8] == 3                               # the next row in the table's order
+    assert res[10] == [3, "A: diffuse: rung 0"]      # hovering a point shows it, selecting nothing
+    assert res[12] == "A: diffuse: rung 2"           # and leaving it shows the selected rung again
 
 
 @pytest.mark.external
@@ -246,3 +253,62 @@ def manifest_of(index) -> dict:
     """The page's inline data (what html.manifest wrote)."""
     text = Path(index).read_text()
     return json.loads(text.split("window.IBL_DATA = ", 1)[1].split(";</script>", 1)[0].replace("<\\/", "</"))
+
+
+@pytest.mark.external
+def test_error_map_and_split(tmp_path, browser):
+    """The error pane is errors.png's error image (metrics.error_image: magma over |dL| / L to
+    50%) of the page's float16 data, and the absolute map (`e`) |dL| over half the reference's
+    mean luminance; the split shows A left of its line and B right of it."""
+    from matplotlib import colormaps
+
+    from iblbake.core.metrics import error_image, luminance
+    page = synthetic_page(tmp_path, n=3)
+    a, b = (page.entries[i].hdr.astype(np.float16).astype(np.float64) for i in (1, 0))
+    mask = page.entries[1].mask
+    ys, xs = np.nonzero(mask)
+    px = [(int(x), int(y)) for x, y in zip(xs[::13], ys[::13])]
+    read = {"eval": f"{json.dumps(px)}.map(([x, y]) => IBL.displayed('paneE', x, y))"}
+    row = np.nonzero(mask[12])[0]                    # the disk's middle row: either side of the line
+    split = [(int(row[1]), 12), (int(row[-2]), 12)]
+    out = browser(tmp_path / "index.html",
+                  [read, {"key": "e"}, read, {"key": "s"},
+                   {"eval": f"{json.dumps(split)}.map(([x, y]) => IBL.displayed('paneA', x, y))"}], tmp_path)
+    at = tuple(np.array(px).T[::-1])
+    np.testing.assert_array_equal(np.array(out["results"][0]), error_image(a, b, mask)[at])
+    la, lb = luminance(a), luminance(b)
+    top = 0.5 * lb[mask].mean()
+    j = np.minimum(np.floor(np.clip(np.abs(la - lb) / top, 0, 1) * 256), 255).astype(int)
+    lut = (colormaps["magma"](np.linspace(0, 1, 256))[:, :3] * 255 + 0.5).astype(int)
+    np.testing.assert_array_equal(np.array(out["results"][2]), lut[j][at])
+    (lx, ly), (rx, ry) = split
+    left, right = out["results"][4]
+    assert np.abs(np.array(left) - shown(page, 1)[ly, lx]).max() <= 1
+    assert np.abs(np.array(right) - shown(page, 0)[ry, rx]).max() <= 1
+    assert np.abs(shown(page, 1)[ly, lx] - shown(page, 0)[ly, lx]).max() > 1 or \
+        np.abs(shown(page, 1)[ry, rx] - shown(page, 0)[ry, rx]).max() > 1      # A and B differ there
+
+
+@pytest.mark.external
+def test_zoom_is_shared_and_nearest_neighbour(tmp_path, browser):
+    """Wheel turns over pane A zoom every pane about the cursor: the image pixel under it stays,
+    pane B and the error pane show the same pixel at the same place, each image pixel a block of
+    one colour (nearest neighbour)."""
+    page = synthetic_page(tmp_path, n=3)
+    at = {"selector": "#paneA", "fx": 0.43, "fy": 0.52}
+    where = "document.getElementById('roA').textContent.split(')')[0]"
+    block = ("['paneA', 'paneB'].map((id) => { const c = document.getElementById(id); "
+             "const d = c.getContext('2d').getImageData(Math.round(0.43 * c.width) - 5, Math.round(0.52 * c.height) - 5, "
+             "11, 11).data; return [...new Set(Array.from({length: 121}, (_, k) => d.slice(4 * k, 4 * k + 3).join()))]; })")
+    out = browser(tmp_path / "index.html",
+                  [{"move": True, **at}, {"eval": where}, {"wheel": 8, "deltaY": -100, **at},
+                   {"move": True, **{**at, "fx": 0.4301}}, {"eval": where}, {"eval": "IBL.state.zoom"},
+                   {"eval": block}], tmp_path)
+    res = out["results"]
+    assert res[1] == res[4]                          # the pixel under the cursor stays under it
+    assert res[5] == pytest.approx(1.25 ** 8)
+    x, y = (int(v) for v in res[1].strip("(").split(","))
+    (a_colours, b_colours) = res[6]
+    assert len(a_colours) == 1 and len(b_colours) == 1           # one colour a pixel, no filtering
+    assert np.abs(np.array(a_colours[0].split(","), int) - shown(page, 1)[y, x]).max() <= 1
+    assert np.abs(np.array(b_colours[0].split(","), int) - shown(page, 0)[y, x]).max() <= 1

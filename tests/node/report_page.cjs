@@ -1,6 +1,8 @@
 // Drives an iblbake report page (iblbake/study/html.py) in headless Chromium and prints JSON:
 // {open_ms, errors, results: [one per step]}. Usage: node report_page.cjs DIR/index.html STEPS.json
-// STEPS: [{"eval": "JS expression (awaited)"}, {"click": "CSS selector", "shift": false}, {"key": " "}]
+// STEPS: [{"eval": "JS expression (awaited)"}, {"click": "CSS selector", "shift": false}, {"key": " "},
+//         {"move": true, "selector": "#paneA", "fx": 0.5, "fy": 0.5}, {"wheel": 5, "deltaY": -100, ...as move},
+//         {"screenshot": "FILE.png", "clip": {...}}]
 const fs = require('node:fs');
 const path = require('node:path');
 const puppeteer = require('puppeteer-core');
@@ -31,6 +33,11 @@ const puppeteer = require('puppeteer-core');
         if (s.shift) await page.keyboard.down('Shift');
         await page.click(s.click);
         if (s.shift) await page.keyboard.up('Shift');
+        results.push(await page.evaluate('window.IBL.render().then(() => true)'));
+      } else if (s.move || s.wheel) {       // at a fraction (fx, fy) of an element's box; then wheel turns
+        const box = await (await page.$(s.selector)).boundingBox();
+        await page.mouse.move(box.x + s.fx * box.width, box.y + s.fy * box.height);
+        for (let k = 0; k < (s.wheel || 0); k++) await page.mouse.wheel({deltaY: s.deltaY});
         results.push(await page.evaluate('window.IBL.render().then(() => true)'));
       } else if (s.key) {
         await page.keyboard.press(s.key);
