@@ -67,6 +67,11 @@ def test_data_files_hold_the_float16_frames_and_masks(tmp_path):
         rgb, mask = decode(path, e.hdr.shape[:2])
         np.testing.assert_array_equal(rgb, e.hdr.astype(np.float16))
         np.testing.assert_array_equal(mask, e.mask)
+    # a sun's pixel above float16's range is its largest value, not infinity; NaN is black
+    hdr = np.array([[[1e6, np.nan, 0.5]]], np.float32)
+    raw = zlib.decompress(html.pack(hdr, None))
+    np.testing.assert_array_equal(np.frombuffer(raw[:6], np.uint8).reshape(2, -1).T.copy().view("<f2").ravel(),
+                                  np.array([65504, 0, 0.5], np.float16))
     from iblbake.io.guard import written_by_iblbake          # the overwrite rule knows them
     assert written_by_iblbake(tmp_path / "index.html") and written_by_iblbake(tmp_path / "report" / "0002.js")
     index = (tmp_path / "index.html").read_text()
@@ -115,14 +120,14 @@ def browser():
             or not Path(CHROMIUM).exists()):
         pytest.skip("puppeteer-core and Chromium are not set up: run `make readers` (make test does)")
 
-    def drive(index, steps, tmp):
+    def drive(index, steps, tmp, errors=False):
         spec = Path(tmp) / f"steps-{time.monotonic_ns()}.json"
         spec.write_text(json.dumps(steps))
         p = subprocess.run(["node", str(NODE / "report_page.cjs"), str(index), str(spec)],
                            capture_output=True, text=True, timeout=120)
         assert p.returncode == 0, p.stderr
         out = json.loads(p.stdout)
-        assert out["errors"] == []                  # no console error, no failed load
+        assert errors or out["errors"] == []        # no console error, no failed load
         return out
     return drive
 
@@ -312,3 +317,18 @@ def test_zoom_is_shared_and_nearest_neighbour(tmp_path, browser):
     assert len(a_colours) == 1 and len(b_colours) == 1           # one colour a pixel, no filtering
     assert np.abs(np.array(a_colours[0].split(","), int) - shown(page, 1)[y, x]).max() <= 1
     assert np.abs(np.array(b_colours[0].split(","), int) - shown(page, 0)[y, x]).max() <= 1
+
+
+@pytest.mark.external
+def test_a_missing_data_file_is_said_on_the_page(tmp_path, browser):
+    """The folder copied without report/: the page says which file it misses instead of failing
+    silently, and shows the images it has."""
+    synthetic_page(tmp_path, n=3)
+    (tmp_path / "report" / "0002.js").unlink()
+    out = browser(tmp_path / "index.html",
+                  [{"eval": "IBL.select(2).then(() => document.getElementById('status').textContent)"},
+                   {"eval": "IBL.select(1).then(() => document.getElementById('status').textContent)"}],
+                  tmp_path, errors=True)
+    assert out["results"][0] == "report/0002.js: missing (the report's data files sit beside index.html)"
+    assert out["results"][1] == "3 images, 40 x 24"
+    assert any("0002.js" in e for e in out["errors"])

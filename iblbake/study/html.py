@@ -2,9 +2,10 @@
 inline: iblbake/study/page/) and DIR/report/*.js, one per image, loaded by the page only when shown.
 
 Each image is its linear HDR RGB as float16 (rows top to bottom; the low bytes of all values,
-then the high bytes) followed by its metric mask (np.packbits, one bit a pixel), deflated (zlib) and base64-encoded inside a script
-that hands it to the page: a script, not a fetch(), because browsers refuse fetch() on file://
-URLs and the folder has to open offline from the file system. The page decodes the float16
+then the high bytes; clamped to float16's largest, 65504) followed by its metric mask
+(np.packbits, one bit a pixel), deflated (zlib) and base64-encoded inside a script that hands it
+to the page: a script, not a fetch(), because browsers refuse fetch() on file:// URLs and the
+folder has to open offline from the file system. The page decodes the float16
 itself and applies the exposure and tone mapping of iblbake/core/tonemap.py (the same operator
 and numbers), so what it shows is what `render` writes for the same HDR value.
 """
@@ -19,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from iblbake.scene.load import object_label
 from iblbake.study import report
 
 PAGE = Path(__file__).with_name("page")
@@ -59,7 +61,9 @@ def pack(hdr, mask) -> bytes:
     """float16 RGB, its low bytes then its high bytes (deflate finds the repeats of the high
     bytes, sign and exponent, once they sit together: a fifth smaller), then the packed mask,
     deflated."""
-    rgb = np.ascontiguousarray(np.nan_to_num(np.asarray(hdr)[..., :3], nan=0.0, posinf=65504.0), dtype="<f2")
+    f16 = float(np.finfo(np.float16).max)
+    rgb = np.ascontiguousarray(np.clip(np.nan_to_num(np.asarray(hdr, np.float32)[..., :3], nan=0.0), -f16, f16),
+                               dtype="<f2")
     split = rgb.view(np.uint8).reshape(-1, 2).T
     bits = np.packbits(np.ones(hdr.shape[:2], bool) if mask is None else np.asarray(mask, bool), axis=None)
     return zlib.compress(split.tobytes() + bits.tobytes(), 6)
@@ -156,14 +160,10 @@ def study_page(study, rungs, rows, front, title: str) -> Page:
         row = table.get((r.term, r.label), {})
         entries.append(Entry(r.label, r.frame.hdr, study.metric_mask(r.term, r.frame.hdr), r.term, ref_of[r.term],
                              False, row, r.result.get("region_errors", {})))
-    objects = study._objects
-    names = [] if objects is None else [scene_object_label(study, i) for i in range(len(study.scene.data["objects"]))]
+    # the object AOV every rung's region errors read (rendered once with the first rung: no cost here)
+    objects = study.object_regions() if len(entries) > len(ref_of) else None
+    names = [object_label(study.scene.data, i) for i in range(len(study.scene.data["objects"]))]
     return Page(title, entries, study.scene.data["effects"], "accuracy", report.COLUMNS, objects, names)
-
-
-def scene_object_label(study, oid: int) -> str:
-    from iblbake.scene.load import object_label
-    return object_label(study.scene.data, oid)
 
 
 SHEET_COLUMNS = (("label", "cell"), ("row", "row"), ("column", "column"), ("time_ms", "time ms"))

@@ -166,7 +166,14 @@ function drawPane(canvas, img, img2) {
 let token = 0, current = null;
 async function render() {
   const mine = ++token, a = shownA(), b = S.b;
-  const [da, db] = await Promise.all([load(a), load(b)]);
+  let da, db;
+  try {
+    [da, db] = await Promise.all([load(a), load(b)]);
+  } catch (e) {                     // a data file missing or damaged: said on the page
+    cache.delete(a); cache.delete(b);
+    $('status').textContent = e.message;
+    return;
+  }
   if (mine !== token) return;
   const ta = toned(a, da), tb = toned(b, db), em = errorMap(da, db);
   const [x, y] = S.flipped ? [tb, ta] : [ta, tb];
@@ -391,7 +398,6 @@ function controls() {
   $('operator').value = S.op;
   $('operator').onchange = () => { S.op = $('operator').value; render(); };
   $('errMode').onchange = () => setErr($('errMode').value);
-  $('errTop').value = S.top;
   $('errTop').onchange = () => { const v = +$('errTop').value; if (v > 0) { S.top = S.err === 'relative' ? v / 100 : v; render(); } };
   $('errTop').value = 100 * S.top;
   $('fit').onclick = fit;
