@@ -104,9 +104,10 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
         if out is not None:
             from iblbake.io.guard import refuse_overlaps
             from iblbake.study import html
-            names = list(FILES) + html.data_names(len(study.terms) + len(rungs), objects=True)
-            refuse_overlaps([("-o", str(out / name)) for name in names], reads)
-            refuse_foreign([("-o", str(out / name)) for name in names], force, report.header_lines())
+            writes = [("-o", str(out / name))
+                      for name in list(FILES) + html.data_names(len(study.terms) + len(rungs), objects=True)]
+            refuse_overlaps(writes, reads)
+            refuse_foreign(writes, force, report.header_lines())
         names = [f"reference {t} seed {s}" for t in study.terms for s in study.settings.seeds] + [r.label for r in rungs]
         progress[0] = stack.enter_context(con.stages(names, label="accuracy"))
 
