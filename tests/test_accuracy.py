@@ -322,3 +322,27 @@ def test_a_black_reference_is_said_not_divided_by(tmp_path):
     assert r.returncode == 1 and "Traceback" not in r.stderr
     line = [x for x in r.stderr.splitlines() if x.startswith("Error")]
     assert len(line) == 1 and "diffuse term's reference is black" in line[0] and "effects.diffuse=off" in line[0], r.stderr
+
+
+@pytest.mark.slow           # over 3 s on the 2-core CPU (with its module's study): make test, not make check
+def test_report_page_holds_every_rung(study):
+    """index.html (iblbake/study/html.py): each term's reference and every rung, each image the
+    frame and mask its metrics read: the relative RMSE recomputed from the page's float16 data is
+    the table's (float16 rounding moves it by about 1e-4 of itself)."""
+    from iblbake.core.metrics import relative_rmse
+    from .test_report import decode, manifest_of
+
+    s, out = study["summary"], study["dir"] / "out"
+    m = manifest_of(out / "index.html")
+    refs = [e for e in m["entries"] if e["is_reference"]]
+    assert [e["label"] for e in refs] == ["reference diffuse", "reference specular"]
+    rungs_shown = [e for e in m["entries"] if not e["is_reference"]]
+    assert [(e["term"], e["label"]) for e in rungs_shown] == [(r["term"], r["label"]) for r in s["rungs"]]
+    images_ = [decode(out / e["file"], (m["height"], m["width"])) for e in m["entries"]]
+    for e, r, (rgb, mask) in zip(rungs_shown, s["rungs"], images_[len(refs):]):
+        ref = images_[e["reference"]][0]
+        assert m["entries"][e["reference"]]["term"] == r["term"]
+        got = relative_rmse(rgb[mask].astype(float), ref[mask].astype(float))
+        assert got == pytest.approx(r["relative_rmse"], rel=5e-4, abs=5e-5), r["label"]
+        assert e["row"]["relative_rmse"] == pytest.approx(r["relative_rmse"])
+        assert e["regions"] == r["region_errors"]

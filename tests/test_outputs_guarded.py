@@ -29,7 +29,8 @@ WRITES = {("sh", "output"), ("sh", "depfile"), ("basis", "output"), ("basis", "d
           ("mips", "ktx2_path"), ("mips", "ktx2_irradiance"),
           ("mips", "ktx2_sheen"), ("mips", "depfile"), ("export-gltf", "output"), ("export-gltf", "depfile"),
           ("render", "outputs"), ("render", "depfile"), ("sheet", "outputs"), ("sheet", "layout_path"),
-          ("sheet", "depfile"), ("sheet", "frames_dir"), ("accuracy", "out_dir"), ("probes", "out_dir")}
+          ("sheet", "depfile"), ("sheet", "frames_dir"), ("sheet", "html_dir"), ("accuracy", "out_dir"),
+          ("probes", "out_dir")}
 
 
 def _path_options():
@@ -91,7 +92,10 @@ CASES = [
     ("sheet", "depfile", "env", lambda f, p: ["sheet", f["scene"], "-o", f["dir"] / "s.png", "--depfile", p], ".d"),
     ("sheet", "frames_dir", "env", lambda f, p: ["sheet", f["scene"], "-o", f["dir"] / "s.png", "--frames", p.parent,
                                                  "--frames-exr"], "frames/r00_c00.exr"),
+    ("sheet", "html_dir", "scene", lambda f, p: ["sheet", f["scene"], "-o", f["dir"] / "s.png", "--html", p.parent],
+     "page/index.html"),
     ("accuracy", "out_dir", "scene", lambda f, p: ["accuracy", f["scene"], "-o", p.parent], "acc/table.md"),
+    ("accuracy", "out_dir", "env", lambda f, p: ["accuracy", f["scene"], "-o", p.parent.parent], "acc/report/0001.js"),
     ("probes", "out_dir", "env", lambda f, p: ["probes", f["scene"], "-o", p.parent], "vol/distance.exr"),
 ]
 
@@ -315,7 +319,8 @@ def test_progress_time_left_skips_the_cold_first_stage_and_warnings_clear_the_ba
 
 FOREIGN = {".png": None, ".exr": None, ".json": b'{"mine": true}\n', ".ktx2": b"\xabKTX 20\xbb\r\n\x1a\nnot ours",
            ".d": b"all:\n\techo mine\n", ".md": b"# my notes\n", ".csv": b"a,b\n1,2\n", ".glsl": b"// my shader\n",
-           ".gltf": b'{"asset": {"version": "2.0", "generator": "Blender"}}'}
+           ".gltf": b'{"asset": {"version": "2.0", "generator": "Blender"}}',
+           ".html": b"<!DOCTYPE html><html><body>my page</body></html>\n", ".js": b"// my script\n"}
 
 
 def _foreign(path: Path) -> bytes:
@@ -383,7 +388,10 @@ OVERWRITES = [
     ("sheet", "depfile", lambda f, p: ["sheet", f["scene"], "-o", f["dir"] / "s.png", "--depfile", p], "x.d"),
     ("sheet", "frames_dir", lambda f, p: ["sheet", f["scene"], "-o", f["dir"] / "s.png", "--frames", p.parent],
      "frames/r00_c00.png"),
+    ("sheet", "html_dir", lambda f, p: ["sheet", f["scene"], "-o", f["dir"] / "s.png", "--html", p.parent],
+     "page/index.html"),
     ("accuracy", "out_dir", lambda f, p: ["accuracy", f["scene"], "-o", p.parent], "study/table.md"),
+    ("accuracy", "out_dir", lambda f, p: ["accuracy", f["scene"], "-o", p.parent], "study/index.html"),
     ("probes", "out_dir", lambda f, p: ["probes", f["scene"], "-o", p.parent], "vol/probes.glsl"),
     ("probes", "out_dir", lambda f, p: ["probes", f["scene"], "-o", p.parent], "vol/probes.json"),
 ]

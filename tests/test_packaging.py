@@ -34,6 +34,8 @@ def test_wheel_contains_the_kernels(tmp_path):
     names = set(zipfile.ZipFile(wheel).namelist())
     for k in KERNELS:
         assert f"iblbake/kernels/{k}" in names, k
+    for page in ("report.html", "report.js", "report.css"):     # the report's page (study/html.py)
+        assert f"iblbake/study/page/{page}" in names, page
     # every module of the source tree is in the wheel (a package missing from pyproject's list
     # imports in a checkout and fails only once installed)
     for py in (ROOT / "iblbake").rglob("*.py"):

@@ -15,7 +15,7 @@ from iblbake.cli.options import (API_FLAGS, Console, allow_outside_option, commo
 from iblbake.errors import IblbakeError
 
 FILES = {"table.md": "Markdown table", "table.csv": "CSV", "accuracy.json": "JSON", "plot.png": "error-time plot",
-         "errors.png": "best and worst rungs with error maps"}
+         "errors.png": "best and worst rungs with error maps", "index.html": "the interactive report"}
 
 
 def bounces_value(v: str):
@@ -31,7 +31,8 @@ def bounces_value(v: str):
 @click.argument("scene_path", metavar="SCENE")
 @click.option("--output", "-o", "out_dir", type=click.Path(file_okay=False), default=None, metavar="DIR",
               help="Write table.md, table.csv, accuracy.json, plot.png (error against time, the Pareto "
-                   "frontier marked) and errors.png (best and worst rungs beside their error maps) here.")
+                   "frontier marked), errors.png (best and worst rungs beside their error maps) and "
+                   "index.html (every rung against the reference, interactive; its images in report/) here.")
 @click.option("--ladder", "ladder_path", type=click.Path(dir_okay=False), default=None, metavar="FILE|realtime|bases|probe_bases",
               help="The rungs to run instead of the default ladder: `realtime` (the real-time modes as shipped: "
                    "SH, GTAO, probes; importance, the split sum, lobe, SSR, reflection probes), `bases` (every "
@@ -103,8 +104,11 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
     def before_run(study, rungs, reads):
         if out is not None:
             from iblbake.io.guard import refuse_overlaps
-            refuse_overlaps([("-o", str(out / name)) for name in FILES], reads)
-            refuse_foreign([("-o", str(out / name)) for name in FILES], force, report.header_lines())
+            from iblbake.study import html
+            writes = [("-o", str(out / name))
+                      for name in list(FILES) + html.data_names(len(study.terms) + len(rungs), objects=True)]
+            refuse_overlaps(writes, reads)
+            refuse_foreign(writes, force, report.header_lines())
         names = [f"reference {t} seed {s}" for t in study.terms for s in study.settings.seeds] + [r.label for r in rungs]
         progress[0] = stack.enter_context(con.stages(names, label="accuracy"))
 
@@ -121,12 +125,16 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
     title = f"{Path(scene_path).name}: error against time ({summary['device']})"
     if out is not None:
         from iblbake.io.guard import mark
-        with atomic.Batch() as batch:    # the five files replaced together, or none (a full disk)
+        from iblbake.study import html
+        with atomic.Batch() as batch:    # the files replaced together, or none (a full disk)
             batch.write_text(out / "table.md", report.markdown(rows, front))
             batch.write_text(out / "table.csv", report.csv_text(rows, front))
             report.plot(rows, front, out / "plot.png", title, batch)
             images.write_png(out / "errors.png",
                              report.error_sheet(study, rungs, f"{Path(scene_path).name}: best and worst"), batch)
+            t_page = time.perf_counter()
+            html.write(out, html.study_page(study, rungs, rows, front, title), batch)
+            summary["time_split_s"]["report_s"] = round(time.perf_counter() - t_page, 4)
             summary["outputs"] = [str(out / n) for n in FILES]
             summary["elapsed_s"] = round(time.perf_counter() - t_start, 3)
             batch.write_text(out / "accuracy.json",

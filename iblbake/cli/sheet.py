@@ -92,6 +92,9 @@ def _shard(ctx, param, value):
 @click.option("--layout", "layout_path", type=click.Path(dir_okay=False), default=None, metavar="FILE",
               help="Also write the --json summary here, with each cell's box in the sheet (what "
                    "`iblbake compare --layout` reads to compare sheets cell by cell).")
+@click.option("--html", "html_dir", type=click.Path(file_okay=False), default=None, metavar="DIR",
+              help="Also write DIR/index.html: every cell interactive, offline (A/B flip, split, error map, "
+                   "exposure and the scene's tone mapping, pixel values, zoom), its images in DIR/report/.")
 @click.option("--keep-going", is_flag=True,
               help="Render the other cells when one fails, and mark it in the sheet (exit status still 1).")
 @click.option("--resume", is_flag=True,
@@ -127,7 +130,7 @@ def _shard(ctx, param, value):
 @max_texture_pixels_option
 @common_options
 def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, label_format, caption, repeat, title,
-                  frames_dir, frames_exr, layout_path, keep_going, resume, shard, assemble, jobs, devices, scheduler,
+                  frames_dir, frames_exr, layout_path, html_dir, keep_going, resume, shard, assemble, jobs, devices, scheduler,
                   resources, cache_dir, depfile, force, device, quiet, as_json):
     """Render every cell of the sweep of SCENE (its sweep: section, or --rows / --columns) in one
     process and assemble a contact sheet. Cells share the runtime, every bake, and the passes whose
@@ -169,6 +172,9 @@ def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, labe
                                                                        ("--depfile", depfile)) if p]
     if frames_dir:
         writes += [("--frames", p) for c in cells for p in sheet.frame_paths(c, frames_dir, frames_exr)]
+    if html_dir:
+        from iblbake.study import html
+        writes += [("--html", str(Path(html_dir) / n)) for n in ["index.html"] + html.data_names(len(cells), False)]
     refuse_overlaps(writes, [("the scene file", str(Path(scene_path).resolve()))] + [
         named for s in scenes if not isinstance(s, Exception) for named in scene_load.named_input_files(s)])
     for _, p in writes[len(outputs):]:
@@ -230,6 +236,11 @@ def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, labe
                                  batch=batch)
         if frames_dir:
             sheet.write_frames(results, Path(frames_dir), frames_exr, batch)
+        if html_dir:
+            page, left_out = html.sheet_page(results, scenes, rows_axis, cols_axis, title)
+            if left_out:
+                con.warn(f"--html {html_dir}: {left_out} cells differ in size from the first and are left out of the page")
+            html.write(html_dir, page, batch)
         if depfile:                  # every file any cell read (a cell may sweep the panorama or a mesh)
             from iblbake.io import depfile as dep
             read = [f for s in scenes if not isinstance(s, Exception) for f in scene_load.input_files(s)]
