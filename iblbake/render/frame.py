@@ -17,6 +17,7 @@ import numpy as np
 
 from iblbake.device.runtime import host_bytes_available
 from iblbake.errors import InputError
+from iblbake.render import enclosure
 from iblbake.render.bakes import Bakes, load_all
 from iblbake.render.device_scene import TABLE as DEVICE_SCENE_TABLE
 from iblbake.render.device_scene import environment_frame
@@ -290,6 +291,8 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
     bakes.runtime = bakes.runtime or rt
     builds_before = len(rt.builds)
     ctx = scene_context(scene, pl, rt, bakes, warn, progress)
+    for w in enclosure.warnings(scene, pl.effects, ctx.arrays):       # the sky mirrored inside a room
+        ctx.warn(w)
     rep = ctx.report
     load_all(ctx, pl.bakes)
     width, height = cam["resolution"]

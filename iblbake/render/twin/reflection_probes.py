@@ -37,7 +37,7 @@ def exit_point(st: dict, p, r):
     return p + np.maximum(t, 0.0)[:, None] * r
 
 
-NEAR, FAR = 0.1, 0.4      # kernels/reflection_probes.h RPROBE_NEAR, RPROBE_FAR
+NEAR, FAR, FINEST = 0.1, 0.4, 2.0      # kernels/reflection_probes.h RPROBE_NEAR, RPROBE_FAR, RPROBE_FINEST
 
 
 def sky(c: dict, r, lod, open_, off, distant):
@@ -64,7 +64,8 @@ def blend(captured: list, p, r, lod, distant):
             x = exit_point(st, p, r)
             from_probe = np.maximum(np.linalg.norm(x - pos, axis=-1), 1e-6)
             d = (x - pos) / from_probe[:, None]
-            near_lod = lod * np.clip(np.linalg.norm(x - p, axis=-1) / from_probe, 0.0, 1.0)
+            near_lod = np.maximum(lod * np.clip(np.linalg.norm(x - p, axis=-1) / from_probe, 0.0, 1.0),
+                                  np.minimum(lod, FINEST))
             off = np.clip((np.linalg.norm(p - pos, axis=-1) / from_probe - NEAR) / (FAR - NEAR), 0.0, 1.0)[:, None]
         open_ = 1 - radiance.chain_lookup_twin(c["coverage"], d, near_lod)[:, :1]
         acc += w[:, None] * (radiance.chain_lookup_twin(c["levels"], d, near_lod)
