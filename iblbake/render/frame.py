@@ -291,8 +291,6 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
     bakes.runtime = bakes.runtime or rt
     builds_before = len(rt.builds)
     ctx = scene_context(scene, pl, rt, bakes, warn, progress)
-    for w in enclosure.warnings(scene, pl.effects, ctx.arrays):       # the sky mirrored inside a room
-        ctx.warn(w)
     rep = ctx.report
     load_all(ctx, pl.bakes)
     width, height = cam["resolution"]
@@ -387,6 +385,9 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
             "buffers": {b: ctx.table[b] for b in (*names, *TABLE_TILE)}, "hdr": ctx.frame_hdr, "aovs": ctx.frame_aovs,
             "png": ctx.frame_png}
 
+    if prev is None:                  # said once a series, after the frame (an error stays one line)
+        for w in enclosure.warnings(scene, pl.effects, ctx.arrays):       # the sky mirrored inside a room
+            ctx.warn(w)
     elapsed = time.perf_counter() - t_start
     builds = [{"kernel": b["kernel"], "defines": b["defines"], "seconds": round(b["seconds"], 4)}
               for b in rt.builds[builds_before:]]          # the frame's: the profile counts its own
