@@ -2,9 +2,10 @@
  * probe's influence along the reflected ray corrected to where it leaves the probe's proxy (its
  * box or sphere), blended by each influence's fade, the distant chain taking what is left.
  * rp_info, 4 float4 per probe: (position, shape: 0 box, 1 sphere), (min, blend), (max, radius),
- * (parallax, the capture's texel in radians, 0, 0). Each probe has two chains, its capture's radiance of the scene (chain 2k)
- * and the coverage of its texels by the scene (chain 2k + 1, grey): the sky past the scene is the
- * distant chain's, read along the reflected ray itself (infinitely far: no parallax moves it).
+ * (parallax, the capture's texel in radians, 0, 0). Each probe has three chains: its capture's radiance
+ * of the scene (chain 3k), the coverage of its texels by the scene (chain 3k + 1, grey) and the sky
+ * its escaping rays saw (chain 3k + 2: the panorama through the scene's openings, 0 where covered).
+ * The sky is infinitely far: no parallax moves it (rprobe_sky).
  * The chains lie back to back in rp_chain, level l of chain c at rp_off[c rp_nlev + l] texels,
  * every level rp_lw x rp_lh.
  * numpy twin: iblbake/render/twin/reflection_probes.py. */
@@ -50,12 +51,6 @@ IBL_INLINE float3 rprobe_exit(float3 p, float3 r, float4 a, float4 b, float4 c)
     return p + fmax(t, 0.0f) * r;
 }
 
-/* The capture's direction for the ray p + t r: towards its exit, seen from the probe's position. */
-IBL_INLINE float3 rprobe_direction(float3 p, float3 r, float4 a, float4 b, float4 c)
-{
-    return normalize(rprobe_exit(p, r, a, b, c) - a.xyz);
-}
-
 /* How much of the reflection along p + t r that meets the scene at x the probes at p already hold,
  * for a lobe of GGX alpha: the influence-weighted share of parallax probes whose proxy the ray
  * leaves within 3% of its travel from x (a wall or floor on the proxy: the capture, read with
@@ -91,9 +86,38 @@ IBL_INLINE float3 rprobe_lookup(RPROBE_PARAMS, int c, float3 d, float lod)
     return mix(x, bilinear_equirect(rp_chain + 3 * (size_t)rp_off[c * rp_nlev + l1], rp_lw[l1], rp_lh[l1], uv), f);
 }
 
+/* The sky behind probe k's openings as the point p sees them, for the lobe about r at lod: the sky
+ * its escaping rays saw (chain 3k + 2) read along r itself (the sky is at infinity: the panorama's
+ * directions that the lobe meets through a window, not all of them), times the share of the lobe
+ * left open as p sees it (`open`, the coverage read with parallax) over that the probe saw about r,
+ * where p sees less of the opening. Where p sees more (a window the probe does not see about r),
+ * the distant chain fills the difference, in proportion to `off` (how far p is off the probe: near
+ * it the probe's own view holds, the capture's lobe being wider than p's). */
+IBL_INLINE float3 rprobe_sky(RPROBE_PARAMS, int k, float3 r, float lod, float open, float off, float3 distant)
+{
+    const float seen = fmax(1.0f - rprobe_lookup(RPROBE_ARGS, 3 * k + 1, r, lod).x, 0.0f);
+    const float3 sky = rprobe_lookup(RPROBE_ARGS, 3 * k + 2, r, lod);
+    return sky * (fmin(open, seen) / fmax(seen, 1e-6f)) + off * fmax(open - seen, 0.0f) * distant;
+}
+
+/* How far p is off the probe, as a share of the way from the probe to x (where p's ray leaves the
+ * proxy), mapped to the share of an opening only p sees that the distant chain fills: none below
+ * RPROBE_NEAR, all past RPROBE_FAR (measured on the window rooms and the resting sphere,
+ * docs/benchmarks.md "Reflection probes at the truth"). */
+#define RPROBE_NEAR 0.1f
+#define RPROBE_FAR 0.4f
+/* The finest level a lobe narrowed by distance reads: below it the capture's own noise shows (its
+ * paths, `samples` a texel; the resting sphere's lower half: pixel noise 0.23 at level 0, 0.065 at
+ * 2, the reference's 0.105 at 2048 samples a pixel) */
+#define RPROBE_FINEST 2.0f
+
 /* The prefiltered radiance at point p along r (world frame) at chain level lod: the probes whose
  * influence holds p, weighted (their weights normalised where they sum past 1), and `distant`
- * (the panorama's chain, scaled) for the rest. Captures hold the panorama's intensity and frame. */
+ * (the panorama's chain, scaled) for the rest. Each probe's scene is read along the direction
+ * corrected to where p's ray leaves its proxy, at a level narrowed by p's distance to that point
+ * over the probe's (Lagarde and Zanuttini 2012's distance-based roughness: the lobe's footprint
+ * there, seen from the probe), down to RPROBE_FINEST; the sky it saw fills the rest (rprobe_sky).
+ * Captures hold the panorama's intensity and frame. */
 IBL_INLINE float3 reflection_probes(float3 p, float3 r, float lod, float3 distant, RPROBE_PARAMS)
 {
     float3 acc = (float3)(0.0f);
@@ -102,9 +126,18 @@ IBL_INLINE float3 reflection_probes(float3 p, float3 r, float lod, float3 distan
         const float4 a = rp_info[4 * k], b = rp_info[4 * k + 1], c = rp_info[4 * k + 2], e = rp_info[4 * k + 3];
         const float w = rprobe_weight(p, a, b, c);
         if (w <= 0.0f) continue;
-        const float3 d = e.x > 0.5f ? rprobe_direction(p, r, a, b, c) : r;
-        const float cover = rprobe_lookup(RPROBE_ARGS, 2 * k + 1, d, lod).x;
-        acc += w * (rprobe_lookup(RPROBE_ARGS, 2 * k, d, lod) + (1.0f - cover) * distant);
+        float3 d = r;
+        float near_lod = lod, off = 0.0f;
+        if (e.x > 0.5f) {
+            const float3 x = rprobe_exit(p, r, a, b, c);
+            const float from_probe = fmax(distance(x, a.xyz), 1e-6f);
+            d = (x - a.xyz) / from_probe;
+            near_lod = fmax(lod * clamp(distance(x, p) / from_probe, 0.0f, 1.0f), fmin(lod, RPROBE_FINEST));
+            off = clamp((distance(p, a.xyz) / from_probe - RPROBE_NEAR) / (RPROBE_FAR - RPROBE_NEAR), 0.0f, 1.0f);
+        }
+        const float open = 1.0f - rprobe_lookup(RPROBE_ARGS, 3 * k + 1, d, near_lod).x;
+        acc += w * (rprobe_lookup(RPROBE_ARGS, 3 * k, d, near_lod)
+                    + rprobe_sky(RPROBE_ARGS, k, r, lod, open, off, distant));
         wsum += w;
     }
     if (wsum > 1.0f) return acc / wsum;

@@ -1,8 +1,9 @@
 """Local reflection probes (`reflection_probes:`, read by `specular: prefiltered`): a capture of
-an unoccluded sky is the panorama, and a probe without parallax then reproduces `prefiltered`;
+an unoccluded sky holds it as its sky, and the probe then reproduces `prefiltered`;
 with a box proxy a mirror floor shows a marked point of a wall where the closed-form ray-box
 intersection puts it; the frame against the shade pass's twin; what runs where probes are not
-read; one-line errors."""
+read; one-line errors; a probe at a gold sphere's centre in a window room and on a floor, half by
+half against the reference; the note where a room's specular mirrors the distant sky."""
 
 from pathlib import Path
 
@@ -13,7 +14,7 @@ import yaml
 from iblbake.render import plan, render
 from iblbake.io import images
 from iblbake.render.bakes import Bakes
-from iblbake.scene import pack
+from iblbake.scene import load, pack
 from tests.conftest import BakeContext, load_scene, run_cli
 
 
@@ -44,10 +45,12 @@ def captures(bakes):
 
 
 @pytest.mark.slow       # make test; make check keeps under 3 minutes
-def test_a_capture_of_the_open_sky_leaves_it_to_the_distant_chain(tmp_path, rt, sky):
-    """A capture that sees only the sky holds no radiance and no coverage (the sky past the scene
-    is the distant chain's, read along the reflected ray); with or without parallax, a box or a
-    sphere proxy, the probe then shades the plate exactly as `prefiltered` does (measured 0)."""
+def test_a_capture_of_the_open_sky_holds_the_sky_alone(tmp_path, rt, sky):
+    """A capture that sees only the sky holds no scene radiance and no coverage, and the sky past
+    the scene in its sky channels (read along the reflected ray itself); at the panorama's own
+    resolution and one ray a texel, through its centre, that is the panorama texel for texel, so
+    with or without parallax, a box or a sphere proxy, the probe shades the plate exactly as
+    `prefiltered` does (measured 0)."""
     bakes = Bakes(tmp_path / "cache")
     distant = render(window(tmp_path, sky, [], "plain"), runtime=rt, cache=bakes)
     hit = distant.hdr[..., 3] > 0.999
@@ -56,7 +59,8 @@ def test_a_capture_of_the_open_sky_leaves_it_to_the_distant_chain(tmp_path, rt, 
                  **({"min": [-2, -2, -2], "max": [2, 2, 2]} if shape == "box" else {"radius": 3})}
         with_probe = render(window(tmp_path, sky, [probe], f"w{shape}{parallax}"), runtime=rt, cache=bakes)
         for image, _cached in captures(bakes):
-            assert image.shape == (32, 64, 4) and not image.any()
+            assert image.shape == (32, 64, 7) and not image[..., :4].any()
+            assert np.array_equal(image[..., 4:], images.read_exr(sky)[..., :3])
         a, b = with_probe.hdr[hit][:, :3], distant.hdr[hit][:, :3]
         assert hit.sum() > 200 and np.abs(a - b).max() / b.max() < 1e-6
 
@@ -291,8 +295,8 @@ def test_a_capture_shows_each_wall_where_it_is(tmp_path, rt, how):
     d = conventions.dir_from_equirect_uv(u, v).reshape(-1, 3)
     names, margin = wall_seen(np.array([0.7, 1.2, 0.4]), d)
     clear = margin > 0.5                        # the texel's rays meet one wall (a texel spans ~0.4 there)
-    got = image.reshape(-1, 4)
-    assert clear.sum() > 200 and (got[:, 3] == 1).all()
+    got = image.reshape(-1, 7)
+    assert clear.sum() > 200 and (got[:, 3] == 1).all() and not got[:, 4:].any()      # no sky in a closed room
     want = np.array([WALL_COLOURS[n] for n in names])
     assert np.abs(got[clear, :3] - want[clear]).max() < 1e-6
 
@@ -321,5 +325,120 @@ def test_a_capture_is_the_same_however_its_launches_split(tmp_path, rt, monkeypa
         bakes = Bakes(tmp_path / f"cache{items}")
         render(scene, runtime=rt, cache=bakes)
         got.append(captures(bakes)[0][0])
-    assert got[0].shape == (16, 32, 4) and got[0][..., :3].max() > 0.1
+    assert got[0].shape == (16, 32, 7) and got[0][..., :3].max() > 0.1
     assert np.array_equal(got[0], got[1])
+
+
+def window_room(folder, panorama, rotation):
+    """A closed room [-2, 2] x [0, 3] x [-2, 2] of zero-thickness quads (an OBJ, double-sided), lit
+    through a window (z in [-0.9, 0.9], y in [1, 2.2]) in its -x wall; a rough gold sphere (0.35) and
+    a white one on the floor, a reflection probe at the gold sphere's centre excluding it, the
+    camera in front of it (its -x half, which faces the window, on the left)."""
+    quads = [[(-2, 0, -2), (2, 0, -2), (2, 0, 2), (-2, 0, 2)], [(-2, 3, -2), (-2, 3, 2), (2, 3, 2), (2, 3, -2)],
+             [(2, 0, -2), (2, 3, -2), (2, 3, 2), (2, 0, 2)], [(-2, 0, 2), (2, 0, 2), (2, 3, 2), (-2, 3, 2)],
+             [(-2, 0, -2), (-2, 3, -2), (2, 3, -2), (2, 0, -2)],
+             [(-2, 0, -2), (-2, 0, 2), (-2, 1, 2), (-2, 1, -2)], [(-2, 2.2, -2), (-2, 2.2, 2), (-2, 3, 2), (-2, 3, -2)],
+             [(-2, 1, -2), (-2, 1, -0.9), (-2, 2.2, -0.9), (-2, 2.2, -2)],
+             [(-2, 1, 0.9), (-2, 1, 2), (-2, 2.2, 2), (-2, 2.2, 0.9)]]
+    obj = Path(folder) / "room.obj"
+    obj.write_text("".join(f"v {x} {y} {z}\n" for q in quads for x, y, z in q)
+                   + "".join(f"f {4 * k + 1} {4 * k + 2} {4 * k + 3} {4 * k + 4}\n" for k in range(len(quads))))
+    return {"camera": {"perspective": {"position": [0.2, 1.3, 1.8], "look_at": [-0.4, 0.5, -0.6], "fov_y": 35},
+                       "resolution": [64, 48]},
+            "environment": {"path": str(panorama), "rotation_y": rotation, "background": "hide"},
+            "materials": {"gold": {"base_color": [1.0, 0.78, 0.34], "metallic": 1, "roughness": 0.35},
+                          "white": {"base_color": [0.8, 0.8, 0.8], "roughness": 0.6},
+                          "plaster": {"base_color": [0.8, 0.8, 0.8], "specular": 0}},
+            "objects": [{"mesh": {"path": str(obj)}, "material": "plaster", "name": "room"},
+                        {"sphere": {"center": [-0.4, 0.5, -0.6], "radius": 0.5}, "material": "gold", "name": "gold"},
+                        {"sphere": {"center": [0.9, 0.4, 0.3], "radius": 0.4}, "material": "white", "name": "white"}],
+            "probes": {},
+            "reflection_probes": [{"position": [-0.4, 0.5, -0.6], "min": [-2, 0, -2], "max": [2, 3, 2],
+                                   "exclude": ["gold"], "size": 64, "samples": 64}],
+            "effects": {"diffuse": "off", "specular": "prefiltered"}}
+
+
+REFERENCE = ["effects.specular=reference", "effects.reference.max_samples=512", "effects.reference.target_noise=0"]
+
+
+def halves_error(scene, reference, rt, bakes, sphere: int, split) -> dict:
+    """Each half of sphere number `sphere` (split(points): the first half), whole pixels of it
+    only: the error of `scene`'s specular term's mean colour with the reflection probe (the
+    channels' absolute differences summed, over the reference's sum, as tests/test_corpus.py's
+    gold sphere measures it) against `reference`'s converged one."""
+    from scipy.ndimage import binary_erosion
+
+    from iblbake.render import twin as rr
+
+    w, h = scene["camera"]["resolution"]
+    ref = render(reference, runtime=rt, cache=bakes).hdr[..., :3]
+    got = render(scene, runtime=rt, cache=bakes).hdr[..., :3]
+    gb = rr.primary(scene["camera"], pack.scene_arrays(scene))
+    on = gb["hit"] & (gb["kind"] == 1) & (gb["index"] == sphere)
+    out = {}
+    for name, side in (("first", split(gb["pos"])), ("second", ~split(gb["pos"]))):
+        m = binary_erosion((on & side).reshape(h, w), np.ones((3, 3), bool))
+        a, b = got[m].mean(0), ref[m].mean(0)
+        out[name] = float(np.abs(a - b).sum() / b.sum())
+    return out
+
+
+@pytest.mark.slow           # over a minute on the 2-core CPU: make test, not make check
+@pytest.mark.parametrize("panorama, rotation, bound", [("city", 0, 0.10), ("studio", 180, 0.30)])
+def test_a_probe_at_a_sphere_in_a_window_room_sees_the_sky_through_the_window(tmp_path, rt, panoramas, panorama,
+                                                                               rotation, bound):
+    """The issue's window room (zero-thickness quads, a window in one wall) with a rough gold sphere
+    at the reflection probe: the sky through the window is the capture's own (its escaping rays'),
+    read along the reflected ray, not the distant chain's lobe over the whole panorama, nor a sky
+    pinned on the probe's box. The half of the sphere facing the window, against the reference at
+    512 samples a pixel: 3.9% off under city (the distant chain filling the capture's uncovered
+    share, before: 23.2%), 14.4% under the studio turned 180 degrees (its key lights outside the
+    window; before: 218%); the other half 0.3% and 1.1%."""
+    sc = load_scene(tmp_path, "room", window_room(tmp_path, panoramas[panorama], rotation))
+    err = halves_error(sc, load.load(sc.source, REFERENCE), rt, Bakes(tmp_path / "cache"), 0,
+                       lambda p: p[:, 0] < -0.4)
+    assert err["first"] < bound and err["second"] < 0.03, err
+
+
+@pytest.mark.slow           # over a minute on the 2-core CPU: make test, not make check
+def test_a_probe_at_a_resting_sphere_sees_the_floor_it_lights(tmp_path, rt, panoramas):
+    """The issue's rough gold sphere resting on a floor (examples/corpus/resting.yaml, roughness
+    0.35, city), a reflection probe at its centre excluding it: its lower half mirrors the floor
+    close by, which the capture sees from a metre off; read at the level the lobe's footprint on
+    the floor spans from the probe (Lagarde and Zanuttini's distance-based roughness), the lower
+    half is 2.0% off against the reference at 512 samples a pixel (the capture read at the lobe's
+    own level, before: 11.2%, where the reference at bounces: 2 lands); the upper half 1.6%."""
+    path = Path(__file__).resolve().parents[1] / "examples" / "corpus" / "resting.yaml"
+    sets = [f"environment.path={panoramas['city']}", "camera.resolution=[64,64]", "environment.background=hide",
+            "materials.gold.roughness=0.35", "effects.diffuse=off"]
+    err = halves_error(load.load(path, sets), load.load(path, sets + REFERENCE), rt, Bakes(tmp_path / "cache"), 0,
+                       lambda p: p[:, 1] < 1.0)
+    assert err["first"] < 0.05 and err["second"] < 0.05, err
+
+
+def test_a_room_whose_specular_mirrors_the_distant_sky_says_so(tmp_path, rt, panoramas):
+    """Inside a room (98% of 256 directions from the camera meet its walls; the window the rest)
+    a specular term that reads the distant panorama alone mirrors the sky, not the room: the frame
+    says so, naming the share and the remedy. Not with the reflection probe read, nor in the open
+    (the resting sphere's floor: 5%), nor where no material has a specular lobe."""
+    from iblbake.render import enclosure
+
+    doc = window_room(tmp_path, panoramas["city"], 0)
+    doc["camera"]["resolution"] = [8, 6]
+    warned = []
+    render(load_scene(tmp_path, "bare", {**doc, "reflection_probes": []}), runtime=rt, cache=Bakes(tmp_path / "c"),
+           warn=warned.append)
+    said = [w for w in warned if "reflects the distant panorama" in w]
+    assert len(said) == 1 and "98% of the directions" in said[0] and "reflection_probes:" in said[0], warned
+
+    def note(sc):
+        return enclosure.warnings(sc, plan(sc).effects, pack.scene_arrays(sc))
+
+    probed = load_scene(tmp_path, "probed", doc)
+    assert note(probed) == [] and len(note(load.load(probed.source, ["effects.reflection_probes=false"]))) == 1
+    assert note(load.load(probed.source, ["effects.specular=reference"])) == []
+    matte = {**doc, "reflection_probes": [], "materials": {k: {**m, "metallic": 0, "specular": 0}
+                                                            for k, m in doc["materials"].items()}}
+    assert note(load_scene(tmp_path, "matte", matte)) == []
+    resting = Path(__file__).resolve().parents[1] / "examples" / "corpus" / "resting.yaml"
+    assert note(load.load(resting, ["effects.reflection_probes=false"])) == []

@@ -17,6 +17,7 @@ import numpy as np
 
 from iblbake.device.runtime import host_bytes_available
 from iblbake.errors import InputError
+from iblbake.render import enclosure
 from iblbake.render.bakes import Bakes, load_all
 from iblbake.render.device_scene import TABLE as DEVICE_SCENE_TABLE
 from iblbake.render.device_scene import environment_frame
@@ -384,6 +385,9 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
             "buffers": {b: ctx.table[b] for b in (*names, *TABLE_TILE)}, "hdr": ctx.frame_hdr, "aovs": ctx.frame_aovs,
             "png": ctx.frame_png}
 
+    if prev is None:                  # said once a series, after the frame (an error stays one line)
+        for w in enclosure.warnings(scene, pl.effects, ctx.arrays):       # the sky mirrored inside a room
+            ctx.warn(w)
     elapsed = time.perf_counter() - t_start
     builds = [{"kernel": b["kernel"], "defines": b["defines"], "seconds": round(b["seconds"], 4)}
               for b in rt.builds[builds_before:]]          # the frame's: the profile counts its own

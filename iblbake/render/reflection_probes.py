@@ -1,7 +1,8 @@
 """Local reflection probes (Lagarde and Zanuttini 2012, "Local image-based lighting with
 parallax-corrected cubemaps"; Unity's reflection probes, Unreal's box and sphere captures): the
 radiance arriving at a point of the scene from every direction, captured by the reference's path
-tracer (kernels/paths/probe_trace.cl) into an equirect panorama, then prefiltered by the same code as
+tracer (kernels/paths/probe_trace.cl) into an equirect panorama (the scene's part and the sky's
+part apart: the sky is read without parallax), then prefiltered by the same code as
 the distant panorama's chain (render/units.py: the reflection_probes unit, prefilter()).
 `specular: prefiltered` reads it inside the probe's influence, along the reflected ray corrected
 to where it leaves the probe's box or sphere (kernels/reflection_probes.h; twin:
@@ -32,23 +33,28 @@ def capture_directions(size: int, samples: int) -> np.ndarray:
     return np.concatenate([d, share[..., None]], -1).reshape(-1, 4)
 
 
+# a capture's channels: the scene's radiance (RGB), its coverage (A) and the sky seen past it
+CHANNELS = ("R", "G", "B", "A", "sky.R", "sky.G", "sky.B")
+
+
 def capture(tracer, index: int, settings: dict, progress=None):
-    """((size, 2 size, 4) float32: per texel the mean radiance of its paths from the probe's
-    position that met the scene (RGB) and the share of them that did (A, the coverage); report:
-    {"inside": {object: share of the solid angle whose rays met its inside}}). The sky seen past
-    the scene is left to the distant chain, read along the reflected ray itself (it is infinitely
-    far: no parallax moves it). Probe number `index`: its random streams."""
+    """((size, 2 size, 7) float32: per texel the mean over its paths from the probe's position of
+    the radiance of those that met the scene (RGB), the share of them that did (A, the coverage)
+    and the radiance of those that escaped (the panorama through the scene's openings: sky RGB);
+    report: {"inside": {object: share of the solid angle whose rays met its inside}}). The sky is
+    read along the reflected ray itself (it is infinitely far: no parallax moves it;
+    kernels/reflection_probes.h rprobe_sky). Probe number `index`: its random streams."""
     size, n = settings["size"], settings["samples"]
     dirs = capture_directions(size, n)
-    sums = np.zeros((len(dirs) // n, 4))
+    sums = np.zeros((len(dirs) // n, 7))
     per = whole_units(tracer.rt, n) * n            # whole texels per launch (device/launch.py)
     pos = np.asarray([settings["position"]], np.float64)
     inside = {}
     for r0 in range(0, len(dirs), per):
         rad, t, obj = tracer.trace(pos, dirs[r0:r0 + per], True, probe0=index, ray0=r0)
         met = np.isfinite(np.abs(t[0]))[:, None]
-        rows = np.concatenate([np.where(met, rad[0], 0.0), met.astype(np.float64)], 1)
-        sums[r0 // n:(r0 + len(rad[0])) // n] = rows.reshape(-1, n, 4).mean(1)
+        rows = np.concatenate([np.where(met, rad[0], 0.0), met.astype(np.float64), np.where(met, 0.0, rad[0])], 1)
+        sums[r0 // n:(r0 + len(rad[0])) // n] = rows.reshape(-1, n, 7).mean(1)
         back = t[0] < 0                            # the inside of a solid (scene.h probe_back_face)
         share = dirs[r0:r0 + per, 3]
         for o in np.unique(obj[0][back]):
@@ -58,7 +64,8 @@ def capture(tracer, index: int, settings: dict, progress=None):
     # radiance is >= 0; the panorama's tiny negative texels (environment.negative: keep) reach a few
     # paths, and read back a negative value would fail the capture's check
     sums[:, :3] = np.maximum(sums[:, :3], 0.0)
-    return sums.reshape(size, 2 * size, 4).astype(np.float32), {"inside": {str(k): round(v, 4)
+    sums[:, 4:] = np.maximum(sums[:, 4:], 0.0)
+    return sums.reshape(size, 2 * size, 7).astype(np.float32), {"inside": {str(k): round(v, 4)
                                                                            for k, v in inside.items()}}
 
 

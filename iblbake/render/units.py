@@ -386,7 +386,7 @@ class ReflectionProbes(Unit):
     def key(self, job) -> tuple:
         from iblbake.bake import cache
         transport = light_transport(job)
-        return tuple("reflection-" + cache.content_key({"kind": "reflection", "v": 2, "index": k, **transport,
+        return tuple("reflection-" + cache.content_key({"kind": "reflection", "v": 3, "index": k, **transport,
                                                         "settings": settings, "code": probes_code_hash()})
                      for k, settings in enumerate(job.scene.data["reflection_probes"]))
 
@@ -399,7 +399,7 @@ class ReflectionProbes(Unit):
 
         def build(tmp: Path):
             image, report = rp.capture(rp.tracer(job, settings), k, settings, job.progress)
-            images.write_exr(tmp / "capture.exr", image, channels=("R", "G", "B", "A"))
+            images.write_exr(tmp / "capture.exr", image, channels=rp.CHANNELS)
             return {"kind": "reflection", "files": [{"name": "capture.exr"}], "probe": settings, "report": report}
 
         def read(manifest):
@@ -409,10 +409,10 @@ class ReflectionProbes(Unit):
             path = root / manifest["key"] / "capture.exr"
             image = images.read_exr(path)
             size = settings["size"]
-            if image.shape != (size, 2 * size, 4) or not np.isfinite(image).all() or (image < 0).any() \
-                    or (image[..., 3] > 1).any():
-                raise IblbakeError(f"{path}: not a {2 * size}x{size} RGBA capture of finite, non-negative "
-                                   f"radiance and coverage")
+            if image.shape != (size, 2 * size, len(rp.CHANNELS)) or not np.isfinite(image).all() \
+                    or (image < 0).any() or (image[..., 3] > 1).any():
+                raise IblbakeError(f"{path}: not a {2 * size}x{size} capture of finite, non-negative radiance, "
+                                   f"coverage and sky ({', '.join(rp.CHANNELS)})")
             return np.ascontiguousarray(image, np.float32), report
 
         (image, report), _manifest, cached = cache.get_checked(root, key, build, read, warn=job.warn)
@@ -431,7 +431,8 @@ class ReflectionProbes(Unit):
             traced = not cached
             bk = baker(job)
             chains = []
-            for part, img in (("radiance", image[..., :3]), ("coverage", np.repeat(image[..., 3:], 3, -1))):
+            for part, img in (("radiance", image[..., :3]), ("coverage", np.repeat(image[..., 3:4], 3, -1)),
+                              ("sky", image[..., 4:])):
                 img = np.ascontiguousarray(img)
                 info = ImageInfo(f"reflection probe {k} {part}", img.shape[1], img.shape[0], ("R", "G", "B"),
                                  "float32", hashlib.sha256(img.tobytes()).hexdigest())
@@ -439,8 +440,9 @@ class ReflectionProbes(Unit):
                                                        lambda img=img: bk.radiance_chain(img))
                 chains.append(levels)
                 cached = cached and pre_cached
-            levels, coverage = chains
-            out.append({"settings": settings, "levels": levels, "coverage": coverage, "capture": image})
+            levels, coverage, sky = chains
+            out.append({"settings": settings, "levels": levels, "coverage": coverage, "sky": sky,
+                        "capture": image[..., :4]})
             cached_all = cached_all and cached
             rays += 2 * settings["size"] ** 2 * settings["samples"] if traced else 0
         return out, cached_all, {"probes": len(out), "rays_traced": rays}

@@ -491,7 +491,9 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                                  "surfaces it sees, lit directly)"),
         "seed": Num(1, 0, 2**31 - 1, integer=True, doc="random seed of the capture's paths"),
         "exclude": StrList(what="name", empty=True, doc="objects (their names, or objects.N) this probe's capture looks through: a probe at "
-                               "a reflective object's centre excludes that object to capture its surroundings"),
+                               "a reflective object's centre excludes that object to capture its surroundings. Only "
+                               "the capture's own view (each texel's first ray) passes through them: the paths behind "
+                               "it still meet them, so a floor keeps their shadow and the light they throw"),
     })),
     "effects": Section(doc="what the renderer simulates; nothing else is baked, compiled or run", fields={
         "diffuse": Enum(("sh",) + bases.DIFFUSE + ("probes", "reference", "off"), "sh",

@@ -52,8 +52,8 @@ def rprobe_args(rt, captured, bakes=None) -> dict:
 
     def upload():
         flat = np.concatenate([np.asarray(lv[..., :3], np.float32).reshape(-1) for c in captured
-                               for chain in (c["levels"], c["coverage"]) for lv in chain])
-        counts = [h * w for h, w in sizes[0]] * (2 * len(captured))      # each probe: radiance, coverage
+                               for chain in (c["levels"], c["coverage"], c["sky"]) for lv in chain])
+        counts = [h * w for h, w in sizes[0]] * (3 * len(captured))      # each probe: radiance, coverage, sky
         off = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int32)
         info = np.zeros((len(captured), 4, 4), np.float32)
         for k, c in enumerate(captured):
@@ -66,8 +66,7 @@ def rprobe_args(rt, captured, bakes=None) -> dict:
             info[k, 3, 1] = np.pi / st["size"]          # the capture's texel, in radians (its rows)
         return (rt.to_device(flat), rt.to_device(off), rt.to_device(np.array([w for _h, w in sizes[0]], np.int32)),
                 rt.to_device(np.array([h for h, _w in sizes[0]], np.int32)), rt.to_device(info.reshape(-1, 4)))
-    chain, off, lw, lh, info = bakes.on_device(rt, tuple(lv for c in captured for lv in c["levels"] + c["coverage"]),
-                                               upload) \
-        if bakes is not None else upload()
+    chains = tuple(lv for c in captured for lv in c["levels"] + c["coverage"] + c["sky"])
+    chain, off, lw, lh, info = bakes.on_device(rt, chains, upload) if bakes is not None else upload()
     return {"rp_chain": chain, "rp_off": off, "rp_lw": lw, "rp_lh": lh, "rp_nlev": len(sizes[0]),
             "rp_count": len(captured), "rp_info": info}

@@ -1,5 +1,5 @@
 """Local reflection probes (kernels/reflection_probes.h): each probe's fade, the parallax-corrected
-direction and the blend with the distant chain. numpy twin, float64."""
+direction, the sky it saw and the blend with the distant chain. numpy twin, float64."""
 
 from __future__ import annotations
 
@@ -20,12 +20,6 @@ def weight(st: dict, p):
     return np.where(over <= 0, 1.0, fade)
 
 
-def direction(st: dict, p, r):
-    """Twin of rprobe_direction: towards where p + t r leaves the proxy, from the probe."""
-    d = exit_point(st, p, r) - np.asarray(st["position"], np.float64)
-    return d / np.linalg.norm(d, axis=-1, keepdims=True)
-
-
 def exit_point(st: dict, p, r):
     """Twin of rprobe_exit: where p + t r leaves the probe's box or sphere."""
     pos = np.asarray(st["position"], np.float64)
@@ -43,17 +37,39 @@ def exit_point(st: dict, p, r):
     return p + np.maximum(t, 0.0)[:, None] * r
 
 
+NEAR, FAR, FINEST = 0.1, 0.4, 2.0      # kernels/reflection_probes.h RPROBE_NEAR, RPROBE_FAR, RPROBE_FINEST
+
+
+def sky(c: dict, r, lod, open_, off, distant):
+    """Twin of rprobe_sky: the sky capture c saw about r, times the share `open_` of the lobe p sees
+    open over the share the probe saw, where that is less; the distant chain fills `off` of the
+    rest."""
+    seen = np.maximum(1 - radiance.chain_lookup_twin(c["coverage"], r, lod)[:, :1], 0.0)
+    got = radiance.chain_lookup_twin(c["sky"], r, lod)
+    return got * (np.minimum(open_, seen) / np.maximum(seen, 1e-6)) + off * np.maximum(open_ - seen, 0.0) * distant
+
+
 def blend(captured: list, p, r, lod, distant):
-    """Twin of reflection_probes: captured [{settings, levels, coverage}], distant the scaled
-    distant chain's radiance at (p, r) (m, 3), which also fills each capture's uncovered share."""
+    """Twin of reflection_probes: captured [{settings, levels, coverage, sky}], distant the scaled
+    distant chain's radiance at (p, r) (m, 3), which takes the share no probe's influence holds."""
     acc = np.zeros_like(distant)
     wsum = np.zeros(len(p))
+    lod = np.broadcast_to(np.asarray(lod, np.float64), (len(p),))
     for c in captured:
         st = c["settings"]
         w = weight(st, p)
-        d = direction(st, p, r) if st["parallax"] else r
-        cover = radiance.chain_lookup_twin(c["coverage"], d, lod)[:, :1]
-        acc += w[:, None] * (radiance.chain_lookup_twin(c["levels"], d, lod) + (1 - cover) * distant)
+        d, near_lod, off = r, lod, np.zeros((len(p), 1))
+        if st["parallax"]:
+            pos = np.asarray(st["position"], np.float64)
+            x = exit_point(st, p, r)
+            from_probe = np.maximum(np.linalg.norm(x - pos, axis=-1), 1e-6)
+            d = (x - pos) / from_probe[:, None]
+            near_lod = np.maximum(lod * np.clip(np.linalg.norm(x - p, axis=-1) / from_probe, 0.0, 1.0),
+                                  np.minimum(lod, FINEST))
+            off = np.clip((np.linalg.norm(p - pos, axis=-1) / from_probe - NEAR) / (FAR - NEAR), 0.0, 1.0)[:, None]
+        open_ = 1 - radiance.chain_lookup_twin(c["coverage"], d, near_lod)[:, :1]
+        acc += w[:, None] * (radiance.chain_lookup_twin(c["levels"], d, near_lod)
+                             + sky(c, r, lod, open_, off, distant))
         wsum += w
     over = wsum > 1
     out = acc + (1 - wsum)[:, None] * distant

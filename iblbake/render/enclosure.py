@@ -1,0 +1,71 @@
+"""The note a frame's specular term earns inside a room: a split sum (or any mode) that reads the
+distant panorama mirrors the sky there, not the room around it (a new user's trial: +42% on a red
+wall of a closed room). Measured from the camera: the share of ENCLOSED_RAYS directions (a
+spherical Fibonacci set) whose rays meet the scene; at ENCLOSED_SHARE or more, and with no
+reflection probe read, the frame says so (docs/conventions.md "Reflection probes")."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from iblbake.render.probes.rays import spherical_fibonacci
+from iblbake.render.twin.gbuffer import _plane_t, _sphere_t
+
+ENCLOSED_RAYS = 256
+ENCLOSED_SHARE = 0.9        # a room with a window or a door still counts; a floor alone, half, does not
+DISTANT_READERS = ("importance", "prefiltered", "lobe")      # and the specular bases (core/bases.py)
+
+
+def met_share(arrays, point, rays: int = ENCLOSED_RAYS) -> float:
+    """The share of `rays` directions from `point` whose rays meet a sphere, plane or triangle of
+    the scene (either side; float64)."""
+    o = np.asarray(point, np.float64)
+    d = spherical_fibonacci(rays).astype(np.float64)[:, :3]
+    met = np.zeros(len(d), bool)
+    for sp in arrays.spheres.astype(np.float64):
+        met |= np.isfinite(_sphere_t(o, d, sp))
+    for pl in arrays.planes.astype(np.float64):
+        met |= np.isfinite(_plane_t(o, d, pl))
+    for k in range(0, len(arrays.tris), 2048):      # triangles against every ray at once, in chunks
+        met |= _meets_triangles(o, d, arrays.tris[k:k + 2048, :3, :3].astype(np.float64))
+    return float(met.mean())
+
+
+def _meets_triangles(o, d, v) -> np.ndarray:
+    """Whether each ray o + t d (t > 0) meets any of the triangles v (n, 3, 3) (Moller-Trumbore)."""
+    e1, e2 = v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
+    p = np.cross(d[:, None], e2[None])                       # (rays, tris, 3)
+    det = (p * e1[None]).sum(-1)
+    sv = o - v[:, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / det
+        u = (sv[None] * p).sum(-1) * inv
+        q = np.cross(sv, e1)
+        w = (d @ q.T) * inv
+        t = (q * e2).sum(-1)[None] * inv
+    return ((det != 0) & (u >= 0) & (u <= 1) & (w >= 0) & (u + w <= 1) & (t > 0)).any(1)
+
+
+def reads_distant_sky(scene, fx) -> bool:
+    """Whether the frame's specular term (fx: render/plan.py Effects) reads the distant panorama
+    alone, no reflection probe read, on some material with a specular lobe."""
+    from iblbake.core import bases
+    from iblbake.render.sources.reflection_probes import reflects_locally
+    from iblbake.scene import materials
+
+    if fx.specular not in DISTANT_READERS + tuple(bases.SPECULAR) or reflects_locally(scene, fx):
+        return False
+    return any(m["metallic"] > 0 or m["specular"] > 0 for m in materials.used(scene))
+
+
+def warnings(scene, fx, arrays) -> list:
+    """The frame's note where its specular term mirrors the distant sky from inside a room."""
+    if not reads_distant_sky(scene, fx):
+        return []
+    cam = scene.data["camera"]
+    share = met_share(arrays, cam[cam["projection"]]["position"])
+    if share < ENCLOSED_SHARE:
+        return []
+    return [f"effects.specular: {fx.specular} reflects the distant panorama, but {100 * share:.0f}% of the "
+            f"directions from the camera meet the scene (a room): its reflections show the sky, not the room; add a "
+            f"reflection probe (reflection_probes:, docs/scene.md) or use effects.specular: reference"]
