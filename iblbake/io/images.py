@@ -81,13 +81,22 @@ class ImageInfo:
 
 
 def max_pixels_default() -> int:
-    env = os.environ.get("IBLBAKE_MAX_PIXELS")
-    if env:
-        try:
-            return int(env)
-        except ValueError:
-            raise InputError(f"IBLBAKE_MAX_PIXELS={env!r} is not an integer") from None
-    return DEFAULT_MAX_PIXELS
+    return env_pixels("IBLBAKE_MAX_PIXELS", DEFAULT_MAX_PIXELS)
+
+
+def env_pixels(name: str, default: int) -> int:
+    """A pixel limit from the environment variable `name` (unset or empty: `default`); anything
+    but a whole number >= 1 is an InputError naming the variable (-5 is no limit to go by)."""
+    env = os.environ.get(name)
+    if not env:
+        return default
+    try:
+        value = int(env)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise InputError(f"{name}={env!r}: give a whole number of pixels >= 1 (or unset it for {default})")
+    return value
 
 
 def file_sha256(path) -> str:
