@@ -19,6 +19,7 @@ line calls take `names`, a mapping of argument names to what its messages call t
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from dataclasses import dataclass, field
@@ -129,7 +130,6 @@ def _count(name: str, value, least: int = 1, most: int | None = None) -> int:
 
 def _real(name: str, value, least: float | None = None) -> float:
     """A finite real number (numpy's too; not a bool or a string), at least `least`."""
-    import math
     import numbers
     if not (isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
             and (least is None or value >= least)):
@@ -193,6 +193,18 @@ def _panorama(panorama) -> None:
     if not isinstance(panorama, Panorama):
         raise InputError(f"panorama: give an iblbake.Panorama (iblbake.load_panorama(path), or "
                          f"iblbake.Panorama.from_pixels(array)), not {_kind(panorama)}")
+
+
+def _intensity(panorama, value) -> float:
+    """A scale of the panorama's radiance: finite, >= 0, and keeping its brightest texel within
+    what a texel may hold (images.MAX_ABS_VALUE; beyond it the sums overflow)."""
+    from iblbake.io.images import MAX_ABS_VALUE
+    value = _real("intensity", value, 0)
+    top = float(abs(panorama.pixels).max())
+    if value * top > MAX_ABS_VALUE:
+        raise InputError(f"intensity {value:g}: scales the panorama's brightest texel ({top:g}) past {MAX_ABS_VALUE:g}; "
+                         f"give at most {MAX_ABS_VALUE / top:.3g}")
+    return value
 
 
 def _vectors(name: str, value):
@@ -437,7 +449,8 @@ def sh(panorama: Panorama, bands: int = 3, window: str | None = None, *, rotate_
     bands: 1 to 16 (l = 0..bands-1; 3 gives the classic 9 coefficients).
     window: None (or 'none'), 'hann' w_l = (1 + cos(pi l / bands)) / 2 or 'lanczos'
         w_l = sinc(l / bands), applied per band against ringing around bright suns.
-    rotate_y: degrees about +y (+x towards -z). intensity: a scale of the radiance (>= 0).
+    rotate_y: degrees about +y (+x towards -z; taken mod 360). intensity: a scale of the
+        radiance (>= 0, keeping the brightest texel within 1e30).
     backend: 'numpy' (host, float64), 'opencl' (the reduction kernel on `device`) or 'auto'
         (numpy where that is quicker than starting OpenCL).
     device: an OpenCL device spec ('gpu', 'cpu', 'gpu:N', 'P:D' or part of a name).
@@ -459,8 +472,8 @@ def sh(panorama: Panorama, bands: int = 3, window: str | None = None, *, rotate_
     window = "none" if window is None else window
     _choice("window", window, core_sh.WINDOWS)
     _choice("backend", backend, ("auto", *shbake.BACKENDS))
-    rotate_y = _real("rotate_y", rotate_y)
-    intensity = _real("intensity", intensity, 0)
+    rotate_y = math.fmod(_real("rotate_y", rotate_y), 360.0)     # 1e300 degrees is an angle too
+    intensity = _intensity(panorama, intensity)
     error = _flag("error", error)
     _device(device)
     t_start = time.perf_counter()
@@ -596,7 +609,7 @@ def basis(panorama: Panorama, name: str, *, intensity: float = 1.0, error: bool 
         if not (fits and value in choices):
             raise InputError(f"{k} {_shown(value)}: use one of {', '.join(map(str, choices))}")
         opts[k] = int(value) if _whole(value) else value
-    intensity = _real("intensity", intensity, 0)
+    intensity = _intensity(panorama, intensity)
     error = _flag("error", error)
     _fits(f"basis {name} of a {panorama.width}x{panorama.height} panorama",
           (BASIS_BYTES_PER_TEXEL + ERROR_BYTES_PER_TEXEL * error) * panorama.width * panorama.height + TABLE_BYTES,

@@ -11,6 +11,7 @@ EXR, which must go down to 1x1 in one 2D layout); the manifest lists sizes and r
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -74,7 +75,7 @@ DEVICE_BYTES_PER_TEXEL = 16
 
 def chain_bytes(layout: str, sizes) -> tuple[int, int]:
     """(host bytes, largest device buffer) of baking a prefiltered chain of these level sizes."""
-    texels = [int(np.prod(layouts.layout_shape(layout, s))) for s in sizes]
+    texels = [math.prod(layouts.layout_shape(layout, s)) for s in sizes]
     return (CHAIN_BYTES_PER_TEXEL * sum(texels) + WORK_BYTES_PER_TEXEL * max(texels),
             DEVICE_BYTES_PER_TEXEL * max(texels))
 
@@ -158,7 +159,7 @@ def prefilter_host_bytes(src_size, opts: dict, methods, backend: str) -> int:
     n0 = src_size[0] * src_size[1]
     work = 0
     for s, r, how in zip(opts["sizes"], opts["roughness"], methods):
-        n = int(np.prod(layouts.layout_shape(opts["layout"], s)))
+        n = math.prod(layouts.layout_shape(opts["layout"], s))
         if how == "spectral":
             lmax = len(spectral.zonal_coefficients(r * r)) - 1
             work = max(work, SPECTRAL_BYTES_PER_TEXEL * (n0 + n) + 4 * 48 * (lmax + 1) * (lmax + 2) // 2)
