@@ -60,6 +60,7 @@ BAD = {
         ("intensity", lambda c: iblbake.sh(c["pano"], intensity="2")),
         ("intensity", lambda c: iblbake.sh(c["pano"], intensity=True)),
         ("intensity", lambda c: iblbake.sh(c["pano"], intensity=-1.0)),
+        ("intensity 1e+300: scales the panorama's brightest texel", lambda c: iblbake.sh(c["pano"], intensity=1e300)),
         ("error", lambda c: iblbake.sh(c["pano"], error="no")),
         ("error", lambda c: iblbake.sh(c["pano"], error=1)),
         ("device", lambda c: iblbake.sh(c["pano"], backend="opencl", device=5)),
@@ -96,6 +97,9 @@ BAD = {
         ("panorama", lambda c: iblbake.prefilter(c["sky"])),
         ("progress", lambda c: iblbake.prefilter(c["pano"], size=8, levels=2, backend="numpy", progress="x")),
         ("size", lambda c: iblbake.prefilter(c["pano"], size=0, backend="numpy")),
+        # issue 60's fuzzing: the texel count of a 2^40 cube map wrapped in int64 and passed the check
+        ("size 1099511627776: the cubemap chain needs", lambda c: iblbake.prefilter(
+            c["pano"], 2 ** 40, 3, "cubemap", min_size=2 ** 40, backend="numpy")),
         ("device", lambda c: iblbake.prefilter(c["pano"], device=5)),
         # issue 60: no bound on levels (40 asked 23 GB) nor on samples
         ("levels 33: use 1 to 32", lambda c: iblbake.prefilter(c["pano"], 8, 33, method="fis", samples=4,

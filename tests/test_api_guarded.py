@@ -223,3 +223,21 @@ def test_a_cache_folder_from_the_environment_is_named_by_it(sky, tmp_path, monke
     with pytest.raises(iblbake.InputError) as e:
         iblbake.render(scene_of(sky))
     assert str(e.value).startswith(f"IBLBAKE_CACHE={afile / 'bakes'}: cannot create the cache folder"), str(e.value)
+
+
+def test_huge_angles_and_scales_say_no_warning(sky):
+    """rotate_y=1e300 and intensity=1e300 (the API fuzz's finds): numpy's overflow and cast
+    warnings reached stderr. The angle is taken mod 360; the scale is refused where it puts the
+    brightest texel past 1e30, and accepted up to it."""
+    import warnings
+    pano = iblbake.load_panorama(sky)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        huge = iblbake.sh(pano, rotate_y=1e300)
+        assert np.allclose(huge.irradiance, iblbake.sh(pano, rotate_y=float(np.fmod(1e300, 360))).irradiance,
+                           rtol=0, atol=1e-12)
+        assert huge.document["options"]["rotate_y_deg"] == float(np.fmod(1e300, 360))
+        top = float(pano.pixels.max())
+        assert np.isfinite(iblbake.sh(pano, intensity=0.99e30 / top).irradiance).all()
+        with pytest.raises(iblbake.InputError, match=r"^intensity 1e\+300: .* give at most 1e\+30$"):
+            iblbake.basis(pano, "zh3", intensity=1e300)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from .conftest import STRESS, stress_scale
 
-WORKER = Path(__file__).with_name("fuzz_api.py")
+WORKER = Path(__file__).resolve().with_name("fuzz_api.py")
 LIMIT = 3 << 30
 
 
@@ -24,7 +24,7 @@ def run_fuzz(folder: Path, seed: int, cases: int) -> list:
         resource.setrlimit(resource.RLIMIT_AS, (LIMIT, LIMIT))
 
     p = subprocess.run([sys.executable, str(WORKER), str(folder), str(seed), str(cases)], capture_output=True,
-                       text=True, timeout=3000, preexec_fn=limit)
+                       text=True, timeout=3000, preexec_fn=limit, cwd=folder)     # relative paths land there
     results, started = [], None
     for line in p.stdout.splitlines():
         rec = json.loads(line)
