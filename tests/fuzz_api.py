@@ -131,7 +131,8 @@ def calls(rng, ctx):
     yield "load_scene", shown(lambda: iblbake.load_scene(**kw7), kw7)
     sc = iblbake.load_scene(doc)
     kw8 = c({"scene": [sc, doc], "device": dev, "cache": [ctx["cache"]], "warn": [None, lambda _m: None],
-             "progress": [None], "profile_paths": [False]}, {"scene": [mutate_scene(rng, doc)]})
+             "progress": [None], "profile_paths": [False]},
+            {"scene": [mutate_scene(rng, doc), iblbake.load_scene(doc, ["camera.resolution=[16384, 16384]"])]})
     yield "render", shown(lambda: iblbake.render(**kw8), kw8)
     kw9 = c({"device": dev, "cache": [ctx["cache"]], "reuse": [True, False]}, {"cache": [folder / "sky.exr"]})
     yield "Renderer", shown(lambda: iblbake.Renderer(**kw9).render(doc), kw9)
