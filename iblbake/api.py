@@ -124,7 +124,7 @@ def _count(name: str, value, least: int = 1, most: int | None = None) -> int:
     """A whole number in [least, most] (numpy integers too; not a bool, nor a float such as 9.0)."""
     if not (_whole(value) and value >= least and (most is None or value <= most)):
         raise InputError(f"{name} {_shown(value)}: " + (f"use {least} to {most}" if most is not None
-                                                   else f"give a whole number >= {least}"))
+                                                         else f"give a whole number >= {least}"))
     return int(value)
 
 
@@ -202,8 +202,8 @@ def _intensity(panorama, value) -> float:
     value = _real("intensity", value, 0)
     top = float(abs(panorama.pixels).max())
     if value * top > MAX_ABS_VALUE:
-        raise InputError(f"intensity {value:g}: scales the panorama's brightest texel ({top:g}) past {MAX_ABS_VALUE:g}; "
-                         f"give at most {MAX_ABS_VALUE / top:.3g}")
+        raise InputError(f"intensity {value:g}: scales the panorama's brightest texel ({top:g}) past "
+                         f"{MAX_ABS_VALUE:g}; give at most {MAX_ABS_VALUE / top:.3g}")
     return value
 
 
@@ -814,12 +814,13 @@ class Renderer:
         sc = load_scene(scene, names=self._names)
         if profile_paths:
             _profiled(sc, self._names)
-        for note in effect_modes(sc).notes:     # what the scene asks that this frame does not do
+        with _on_device(self.runtime):          # one frame at a time on the runtime (and this Renderer)
+            frame = render_frame.render(sc, runtime=self.runtime, cache=self.bakes, reuse=self._reuse, warn=warn,
+                                        progress=progress, profile_paths=profile_paths)
+        for note in effect_modes(sc).notes:     # what the scene asks that the frame did not do
             if warn:
                 warn(note)
-        with _on_device(self.runtime):          # one frame at a time on the runtime (and this Renderer)
-            return render_frame.render(sc, runtime=self.runtime, cache=self.bakes, reuse=self._reuse, warn=warn,
-                                       progress=progress, profile_paths=profile_paths)
+        return frame
 
 
 def _profiled(scene, names) -> None:

@@ -114,7 +114,8 @@ def calls(rng, ctx):
             "haar": {"haar_coefficients": rng.choice([16, 256, 15, 2 ** 40])}}.get(bname, {})
     opts = rng.choice([opts, opts, {}, {"bogus": 1}])
     kw4 = c({"intensity": [1.0], "error": [True, False]}, {"intensity": [1e300]})
-    yield "basis", shown(lambda: _basis_methods(rng, iblbake.basis(pano, bname, **kw4, **opts)), {"name": bname, **kw4, **opts})
+    yield "basis", shown(lambda: _basis_methods(rng, iblbake.basis(pano, bname, **kw4, **opts)),
+                         {"name": bname, **kw4, **opts})
     kw5 = c({"panorama": [pano], "size": [None, 4, 8], "levels": [None, 2, 3], "layout": ["equirect", "cubemap",
              "octahedral"], "min_size": [1, 8], "method": ["auto", "fis", "spectral", "convolve"],
              "samples": [16, 64], "backend": ["numpy"], "device": dev, "progress": [None, lambda _n: None]},
@@ -125,7 +126,8 @@ def calls(rng, ctx):
              "device": dev}, {"size": [4097, 1, 2 ** 40], "samples": [2 ** 21, 2 ** 40], "backend": ["opencl"]})
     yield "dfg", shown(lambda: iblbake.dfg(**kw6), kw6)
     doc = scene_doc(sky)
-    kw7 = c({"path_or_dict": [doc, mutate_scene(rng, doc), mutate_scene(rng, doc)], "overrides": [(), "effects.sh_bands=2"],
+    kw7 = c({"path_or_dict": [doc, mutate_scene(rng, doc), mutate_scene(rng, doc)],
+             "overrides": [(), "effects.sh_bands=2"],
              "folder": [folder], "outputs": [None, folder / "x.png"], "names": names_ok},
             {"overrides": [["camera.resolution=[100000, 100000]"], ["x"], ["effects.sh_bands=1e300"]]})
     yield "load_scene", shown(lambda: iblbake.load_scene(**kw7), kw7)

@@ -210,8 +210,8 @@ def load_data(data: dict, folder=".", overrides=(), outputs=None, values=(), ori
     if not isinstance(data, dict):
         raise InputError(f"{source}: a scene is a mapping of sections (camera, environment, "
                          f"materials, objects, effects, output), not {type(data).__name__}")
-    return _validated(plain_values(data, source), {}, source, Path(folder).resolve(), overrides, outputs, values, origin,
-                      override_name)
+    return _validated(plain_values(data, source), {}, source, Path(folder).resolve(), overrides, outputs, values,
+                      origin, override_name)
 
 
 def load_any(scene, overrides=(), outputs=None, values=(), origin: str = "--set",
