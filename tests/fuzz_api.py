@@ -38,10 +38,11 @@ def _gen():
     return (i for i in range(3))
 
 
-# wrong values for any argument: every kind a caller might pass by mistake
+# wrong values for any argument: every kind a caller might pass by mistake (no function: one
+# given as a callback is called, and what it raises is the caller's)
 WRONG = [None, True, False, -1, 0, 1, 2 ** 40, -2 ** 63, 10 ** 30, 1.5, -0.0, math.nan, math.inf, -math.inf, "", "x",
          "3", b"x", [], [1], [1, 2, 3], (), {}, {"a": 1}, np.int64(3), np.float32(2.5), np.bool_(True),
-         np.array([1, 2]), np.zeros((2, 2, 3)), object(), Path("/nonexistent/x"), len, _gen]
+         np.array([1, 2]), np.zeros((2, 2, 3)), object(), Path("/nonexistent/x"), _gen]
 
 
 def wrong(rng):

@@ -100,6 +100,8 @@ BAD = {
         # issue 60's fuzzing: the texel count of a 2^40 cube map wrapped in int64 and passed the check
         ("size 1099511627776: the cubemap chain needs", lambda c: iblbake.prefilter(
             c["pano"], 2 ** 40, 3, "cubemap", min_size=2 ** 40, backend="numpy")),
+        ("size 1000000000000000000000000000000: the equirect chain needs", lambda c: iblbake.prefilter(
+            c["pano"], 10 ** 30, backend="numpy")),          # the bisect's len() overflowed
         ("device", lambda c: iblbake.prefilter(c["pano"], device=5)),
         # issue 60: no bound on levels (40 asked 23 GB) nor on samples
         ("levels 33: use 1 to 32", lambda c: iblbake.prefilter(c["pano"], 8, 33, method="fis", samples=4,

@@ -101,7 +101,8 @@ def check_chain_fits(layout: str, size: int, sizes_of, rt, flag: str, candidates
     if why is None:
         return
     allowed = candidates if candidates is not None else range(1, size + 1)
-    lo, hi = 0, len(allowed) - 1      # bisect for the last allowed size that fits
+    # bisect for the last allowed size that fits (a range's length, not len(): 10^30 sizes overflow it)
+    lo, hi = 0, (size if candidates is None else len(allowed)) - 1
     while lo < hi:
         mid = (lo + hi + 1) // 2
         lo, hi = (mid, hi) if need(allowed[mid]) is None else (lo, mid - 1)
