@@ -36,11 +36,11 @@ def scene_of(sky, **sections):
     return {**doc, **sections}
 
 
-def run_limited(code: str, *args) -> list:
+def run_limited(code: str, *args, limit_bytes: int = LIMIT) -> list:
     """Run `code` in a child under the LIMIT address space: its JSON lines. A raw exception (a
     MemoryError among them) is a traceback and a failure here."""
     def limit():
-        resource.setrlimit(resource.RLIMIT_AS, (LIMIT, LIMIT))
+        resource.setrlimit(resource.RLIMIT_AS, (limit_bytes, limit_bytes))
     p = subprocess.run([sys.executable, "-c", code, *map(str, args)], capture_output=True, text=True, timeout=600,
                        preexec_fn=limit, cwd=ROOT)
     assert p.returncode == 0, p.stderr[-3000:]
@@ -241,3 +241,22 @@ def test_huge_angles_and_scales_say_no_warning(sky):
         assert np.isfinite(iblbake.sh(pano, intensity=0.99e30 / top).irradiance).all()
         with pytest.raises(iblbake.InputError, match=r"^intensity 1e\+300: .* give at most 1e\+30$"):
             iblbake.basis(pano, "zh3", intensity=1e300)
+
+
+def test_a_panorama_too_large_for_memory_is_refused_from_its_header(tmp_path):
+    """An 8192 x 4096 EXR (within max_pixels; 212 KB of half zeros) under a 1 GiB limit: a raw
+    MemoryError from numpy after decoding began. Its memory is estimated from the header (the
+    estimate, 1.75 GiB, is 1.4 times the measured peak of reading it)."""
+    from iblbake.io import images
+    big = tmp_path / "big.exr"
+    images.write_exr(big, np.zeros((4096, 8192, 3), np.float32), half=True)
+    code = """
+import json, sys, iblbake
+try:
+    iblbake.load_panorama(sys.argv[1])
+    print(json.dumps({"error": None}))
+except iblbake.InputError as e:
+    print(json.dumps({"error": str(e)}))
+"""
+    (said,) = run_limited(code, big, limit_bytes=1 << 30)
+    assert said["error"].startswith(f"{big}: 8192x4096 with 3 channels needs about 1.75 GiB to read"), said
