@@ -94,7 +94,7 @@ check-intel: $(INTEL) meshes
 # the table of case, bound, measured, result
 stress: opencl assets testmodels
 	IBLBAKE_STRESS=1 IBLBAKE_STRESS_REPORT=docs/stress-table.md $(BIN)/python -m pytest -q -rs \
-	    tests/test_stress.py tests/test_stress_render.py tests/test_fuzz.py tests/test_nothing_lost.py \
+	    tests/test_stress.py tests/test_stress_render.py tests/test_fuzz.py tests/test_fuzz_api.py tests/test_nothing_lost.py \
 	    tests/test_outputs_guarded.py tests/test_full_disk.py tests/test_bounded_reads.py tests/test_trust.py
 
 bench: opencl assets

@@ -19,6 +19,8 @@ line calls take `names`, a mapping of argument names to what its messages call t
 
 from __future__ import annotations
 
+import math
+import threading
 import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
@@ -29,18 +31,44 @@ if TYPE_CHECKING:                 # loaded on first use (import iblbake stays li
     from iblbake.render.frame import Frame
 
 # one OpenCL runtime per device spec for the process: sh, prefilter and dfg reuse it (building
-# the kernels and probing the device is the start-up cost of a bake)
+# the kernels and probing the device is the start-up cost of a bake). A runtime's queue, programs
+# and buffers are not for two threads at once (eight threads on one Renderer gave wrong frames):
+# every call that runs on a runtime holds its lock (_on_device), so threads take turns on a device.
 _RUNTIMES: dict = {}
+_LOCKS: dict = {}                 # id(runtime) -> its lock
+_MADE = threading.Lock()          # two threads asking for a new runtime make one
 
 
 def _runtime(device: str | None, names: dict | None = None):
     _device(device)
     key = device or ""
-    if key not in _RUNTIMES:
-        from iblbake.device.runtime import Runtime
-        _RUNTIMES[key] = Runtime(device, _name(names, "device"))
+    with _MADE:
+        if key not in _RUNTIMES:
+            from iblbake.device.runtime import Runtime
+            rt = Runtime(device, _name(names, "device"))
+            _LOCKS[id(rt)] = threading.RLock()
+            _RUNTIMES[key] = rt
     return _RUNTIMES[key]
 
+
+def _on_device(rt):
+    """The lock of runtime `rt` (held while a call runs on it), or no lock for the host (None)."""
+    import contextlib
+    return contextlib.nullcontext() if rt is None else _LOCKS[id(rt)]
+
+
+# the most samples a texel of prefilter (fis) and dfg takes: the scene keys' bound (docs/scene.md)
+MAX_SAMPLES = 1 << 20
+
+# Host memory of the panorama bakes, measured with tracemalloc (64x32 to 1024x512 panoramas, every
+# basis and option; the constants hold the largest per texel, the fixed tables aside): the float64
+# copy of the texels and the exact irradiance the `error` blocks sum, per texel; sh's host
+# projection adds its (bands^2, rows x azimuth terms) contraction; a basis's fit its design rows.
+SH_BYTES_PER_TEXEL = {"numpy": 64, "opencl": 16}
+ERROR_BYTES_PER_TEXEL = 64
+BASIS_BYTES_PER_TEXEL = 160
+TABLE_BYTES = 64 << 20
+VECTOR_BYTES = 1024
 
 # ------------------------------------------------------------------------- argument checks
 
@@ -62,6 +90,30 @@ def _kind(value) -> str:
     return type(value).__name__
 
 
+def _shown(value) -> str:
+    """A value as a message quotes it: repr on one line, cut to 60 characters (an array's repr
+    spans lines, a long list's pages)."""
+    try:
+        text = " ".join(repr(value).split())
+    except Exception:                              # noqa: BLE001 - a repr that fails is still a value
+        text = f"<{_kind(value)}>"
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _gib(nbytes: float) -> str:
+    return f"{nbytes / 2**30:.3g} GiB"
+
+
+def _fits(what: str, nbytes: float, hint: str) -> None:
+    """Before the work: an InputError saying how much memory `what` needs where that is more than
+    this process may still allocate (its address-space limit, or the system's available memory)."""
+    from iblbake.device.runtime import host_bytes_available
+    free = host_bytes_available()
+    if free is not None and nbytes > free:
+        raise InputError(f"{what}: needs about {_gib(nbytes)} of memory, more than the {_gib(max(free, 0))} "
+                         f"this process may still allocate; {hint}")
+
+
 def _whole(value) -> bool:
     """A whole number (a numpy integer too), not a bool."""
     import numbers
@@ -71,18 +123,17 @@ def _whole(value) -> bool:
 def _count(name: str, value, least: int = 1, most: int | None = None) -> int:
     """A whole number in [least, most] (numpy integers too; not a bool, nor a float such as 9.0)."""
     if not (_whole(value) and value >= least and (most is None or value <= most)):
-        raise InputError(f"{name} {value!r}: " + (f"use {least} to {most}" if most is not None
-                                                   else f"give a whole number >= {least}"))
+        raise InputError(f"{name} {_shown(value)}: " + (f"use {least} to {most}" if most is not None
+                                                         else f"give a whole number >= {least}"))
     return int(value)
 
 
 def _real(name: str, value, least: float | None = None) -> float:
     """A finite real number (numpy's too; not a bool or a string), at least `least`."""
-    import math
     import numbers
     if not (isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
             and (least is None or value >= least)):
-        raise InputError(f"{name} {value!r}: give a finite number" + ("" if least is None else f" >= {least:g}"))
+        raise InputError(f"{name} {_shown(value)}: give a finite number" + ("" if least is None else f" >= {least:g}"))
     return float(value)
 
 
@@ -90,24 +141,24 @@ def _flag(name: str, value) -> bool:
     """True or False (a numpy bool too): not 'no', 1 or None, which would read as one."""
     if isinstance(value, bool) or (type(value).__module__ == "numpy" and _kind(value) in ("bool", "bool_")):
         return bool(value)
-    raise InputError(f"{name} {value!r}: give True or False")
+    raise InputError(f"{name} {_shown(value)}: give True or False")
 
 
 def _choice(name: str, value, choices) -> None:
     if not (isinstance(value, str) and value in choices):
-        raise InputError(f"{name} {value!r}: use one of {', '.join(map(str, choices))}")
+        raise InputError(f"{name} {_shown(value)}: use one of {', '.join(map(str, choices))}")
 
 
 def _callback(name: str, value):
     if value is not None and not callable(value):
-        raise InputError(f"{name}: give a function (or None), not {_kind(value)} {value!r}")
+        raise InputError(f"{name}: give a function (or None), not {_kind(value)} {_shown(value)}")
     return value
 
 
 def _device(value) -> None:
     if value is not None and not isinstance(value, str):
         raise InputError(f"device: give an OpenCL device spec ('gpu', 'cpu', 'gpu:N', 'P:D' or part of a "
-                         f"device's name) or None, not {_kind(value)} {value!r}")
+                         f"device's name) or None, not {_kind(value)} {_shown(value)}")
 
 
 def _is_path(value) -> bool:
@@ -134,7 +185,7 @@ def _overrides(overrides) -> list:
     if isinstance(overrides, str):
         return [overrides]
     if not (isinstance(overrides, (list, tuple)) and all(isinstance(o, str) for o in overrides)):
-        raise InputError(f"overrides: give 'KEY.PATH=VALUE' strings (one, or a list of them), not {overrides!r}")
+        raise InputError(f"overrides: give 'KEY.PATH=VALUE' strings (one, or a list of them), not {_shown(overrides)}")
     return list(overrides)
 
 
@@ -142,6 +193,18 @@ def _panorama(panorama) -> None:
     if not isinstance(panorama, Panorama):
         raise InputError(f"panorama: give an iblbake.Panorama (iblbake.load_panorama(path), or "
                          f"iblbake.Panorama.from_pixels(array)), not {_kind(panorama)}")
+
+
+def _intensity(panorama, value) -> float:
+    """A scale of the panorama's radiance: finite, >= 0, and keeping its brightest texel within
+    what a texel may hold (images.MAX_ABS_VALUE; beyond it the sums overflow)."""
+    from iblbake.io.images import MAX_ABS_VALUE
+    value = _real("intensity", value, 0)
+    top = float(abs(panorama.pixels).max())
+    if value * top > MAX_ABS_VALUE:
+        raise InputError(f"intensity {value:g}: scales the panorama's brightest texel ({top:g}) past "
+                         f"{MAX_ABS_VALUE:g}; give at most {MAX_ABS_VALUE / top:.3g}")
+    return value
 
 
 def _vectors(name: str, value):
@@ -153,6 +216,8 @@ def _vectors(name: str, value):
         raise InputError(f"{name}: give unit vectors, an array (..., 3) of numbers, not {_kind(value)}") from None
     if a.ndim == 0 or a.shape[-1] != 3:
         raise InputError(f"{name}: give unit vectors, an array (..., 3) of numbers, not shape {a.shape}")
+    # a basis's evaluation: measured at most 850 bytes a vector (ambient dice's specular lobe)
+    _fits(f"{name} {a.shape}", VECTOR_BYTES * (a.size // 3), "give fewer vectors a call")
     if not np.isfinite(a).all():
         raise InputError(f"{name}: holds non-finite values; give finite unit vectors")
     length = np.linalg.norm(a, axis=-1)
@@ -202,8 +267,10 @@ class Panorama:
 
     @classmethod
     def from_pixels(cls, pixels, name: str = "<array>", nonfinite: str = "error", negative: str = "keep") -> Panorama:
-        """A panorama from an array (H, W, 3) of linear Rec.709 RGB radiance, equirectangular;
-        the nonfinite and negative policies apply as for a file (load_panorama)."""
+        """A panorama from an array (H, W, 3) of linear Rec.709 RGB radiance (real numbers),
+        equirectangular; the nonfinite and negative policies apply as for a file (load_panorama).
+        The pixels are copied (float32): the policies repair the copy, never `pixels`, and later
+        edits of `pixels` leave the Panorama (and its sha256) as it was."""
         import hashlib
 
         import numpy as np
@@ -218,11 +285,20 @@ class Panorama:
             raise InputError("pixels: give an array (H, W, 3) of linear RGB radiance, not a path "
                              "(iblbake.load_panorama(path) reads a file)")
         try:
-            rgb = np.ascontiguousarray(pixels, dtype=np.float32)
+            given = np.asarray(pixels)
         except (TypeError, ValueError):
             raise InputError(f"pixels: give an array (H, W, 3) of linear RGB radiance, not {_kind(pixels)}") from None
-        if rgb.ndim != 3 or rgb.shape[2] != 3 or 0 in rgb.shape:
-            raise InputError(f"{name}: a panorama is an array (H, W, 3), not {rgb.shape}")
+        if given.dtype.kind not in "iuf":
+            raise InputError(f"pixels: give an array (H, W, 3) of real numbers (linear RGB radiance), not "
+                             f"{_kind(pixels)} of {given.dtype}")
+        if given.ndim != 3 or given.shape[2] != 3 or 0 in given.shape:
+            raise InputError(f"{name}: a panorama is an array (H, W, 3), not {given.shape}")
+        # the copy, and validate_texels's masks and magnitudes beside it (a broadcast view holds
+        # none of this yet)
+        _fits(f"pixels {given.shape}", given.size * (4 + 4 + 2), "give a smaller array")
+        # a copy, always: the policies repair the Panorama's texels, never the caller's array, and
+        # the caller's later edits do not reach the Panorama (nor make its sha256 wrong)
+        rgb = np.array(given, dtype=np.float32, order="C", copy=True)
         info = images.ImageInfo(path=name, width=rgb.shape[1], height=rgb.shape[0], channels_in=("R", "G", "B"),
                                 format="array", sha256=hashlib.sha256(rgb.tobytes()).hexdigest(),
                                 nonfinite_policy=nonfinite, negative_policy=negative)
@@ -373,7 +449,8 @@ def sh(panorama: Panorama, bands: int = 3, window: str | None = None, *, rotate_
     bands: 1 to 16 (l = 0..bands-1; 3 gives the classic 9 coefficients).
     window: None (or 'none'), 'hann' w_l = (1 + cos(pi l / bands)) / 2 or 'lanczos'
         w_l = sinc(l / bands), applied per band against ringing around bright suns.
-    rotate_y: degrees about +y (+x towards -z). intensity: a scale of the radiance (>= 0).
+    rotate_y: degrees about +y (+x towards -z; taken mod 360). intensity: a scale of the
+        radiance (>= 0, keeping the brightest texel within 1e30).
     backend: 'numpy' (host, float64), 'opencl' (the reduction kernel on `device`) or 'auto'
         (numpy where that is quicker than starting OpenCL).
     device: an OpenCL device spec ('gpu', 'cpu', 'gpu:N', 'P:D' or part of a name).
@@ -396,15 +473,22 @@ def sh(panorama: Panorama, bands: int = 3, window: str | None = None, *, rotate_
     _choice("window", window, core_sh.WINDOWS)
     _choice("backend", backend, ("auto", *shbake.BACKENDS))
     rotate_y = conventions.wrap_degrees(_real("rotate_y", rotate_y))
-    intensity = _real("intensity", intensity, 0)
+    intensity = _intensity(panorama, intensity)
     error = _flag("error", error)
     _device(device)
     t_start = time.perf_counter()
     info = panorama.info
     backend = shbake.choose_backend(backend, panorama.width, panorama.height, bands)
+    texels = panorama.width * panorama.height
+    table = 96 * bands * bands * panorama.height * (2 * bands - 1) if backend == "numpy" else 0
+    _fits(f"sh bands {bands} of a {panorama.width}x{panorama.height} panorama",
+          (SH_BYTES_PER_TEXEL[backend] + ERROR_BYTES_PER_TEXEL * error) * texels + table + TABLE_BYTES,
+          "use a smaller panorama, fewer bands" + (", backend 'opencl'" if backend == "numpy" else "")
+          + (" or error=False" if error else ""))
     rt = _runtime(device, names) if backend == "opencl" else None
     device_label = rt.device_label if rt else "numpy (float64, host)"
-    coeffs, project_s = shbake.project(panorama.pixels, bands, backend, rt, rotate_y)
+    with _on_device(rt):
+        coeffs, project_s = shbake.project(panorama.pixels, bands, backend, rt, rotate_y)
     coeffs = coeffs * intensity
     options = {"bands": bands, "window": window, "backend": backend, "rotate_y_deg": rotate_y,
                "intensity": intensity, **{k: v for k, v in panorama.policies.items() if k != "layout"},
@@ -475,7 +559,7 @@ class Basis:
             alpha = np.broadcast_to(r ** 2, n.shape[:-1])
         except (TypeError, ValueError):
             raise InputError(f"roughness: give a number or an array {n.shape[:-1]} of numbers 0 to 1, "
-                             f"not {roughness!r}"[:300]) from None
+                             f"not {_shown(roughness)}") from None
         if not ((r >= 0) & (r <= 1)).all():
             raise InputError("roughness: give perceptual roughness 0 to 1")
         nov = np.clip((n * v).sum(-1), 0.0, 1.0)
@@ -523,10 +607,13 @@ def basis(panorama: Panorama, name: str, *, intensity: float = 1.0, error: bool 
         # a count is a whole number (9, not 9.0, which would label the basis "SG9.0"), a fit a string
         fits = _whole(value) if all(_whole(c) for c in choices) else isinstance(value, str)
         if not (fits and value in choices):
-            raise InputError(f"{k} {value!r}: use one of {', '.join(map(str, choices))}")
+            raise InputError(f"{k} {_shown(value)}: use one of {', '.join(map(str, choices))}")
         opts[k] = int(value) if _whole(value) else value
-    intensity = _real("intensity", intensity, 0)
+    intensity = _intensity(panorama, intensity)
     error = _flag("error", error)
+    _fits(f"basis {name} of a {panorama.width}x{panorama.height} panorama",
+          (BASIS_BYTES_PER_TEXEL + ERROR_BYTES_PER_TEXEL * error) * panorama.width * panorama.height + TABLE_BYTES,
+          "use a smaller panorama" + (" or error=False" if error else ""))
     t0 = time.perf_counter()
     coeffs = m.project(panorama.pixels[..., :3], opts)
     coeffs[:, :3] *= intensity
@@ -569,11 +656,14 @@ def prefilter(panorama: Panorama, size: int | None = None, levels: int | None = 
     command `iblbake mips` bakes the same levels into its cache).
 
     size: the base size (equirect height, cube face or octahedral side; default: the panorama's
-        height, half of it for a cube map). levels: K (default: one per halving down to
+        height, half of it for a cube map). levels: K, 1 to 32 (default: one per halving down to
         min_size). layout: 'equirect', 'cubemap' or 'octahedral'.
     method: 'spectral' (exact, in the SH domain), 'convolve' (exact sum over texels), 'fis'
-        (filtered importance sampling with `samples` samples a texel) or 'auto'.
+        (filtered importance sampling with `samples` samples a texel, 1 to 2^20) or 'auto'.
     backend: 'opencl' (on `device`) or 'numpy' (the float64 twins: small sizes only).
+    The memory the chain needs is estimated first: more than the process may allocate is an
+    InputError saying how much (numpy's auto bakes a sharp level by fis where convolve's
+    sub-texel grid would not fit).
     progress: called with 1 as each level is done.
     """
     from iblbake.bake import layouts
@@ -583,8 +673,9 @@ def prefilter(panorama: Panorama, size: int | None = None, levels: int | None = 
     _choice("layout", layout, tuple(layouts.LAYOUT_IDS))
     _choice("method", method, ("auto", "spectral", "convolve", "fis"))
     _choice("backend", backend, ("opencl", "numpy"))
-    size, levels = (None if v is None else _count(name, v) for name, v in (("size", size), ("levels", levels)))
-    min_size, samples = _count("min_size", min_size), _count("samples", samples)
+    size = None if size is None else _count("size", size)
+    levels = None if levels is None else _count("levels", levels, 1, layouts.MAX_LEVELS)
+    min_size, samples = _count("min_size", min_size), _count("samples", samples, 1, MAX_SAMPLES)
     _device(device)
     _callback("progress", progress)
     baker = mipsbake.Baker(backend, rt=_runtime(device) if backend == "opencl" else None)
@@ -594,8 +685,14 @@ def prefilter(panorama: Panorama, size: int | None = None, levels: int | None = 
 
     opts = options(size).resolved(panorama.height)
     mipsbake.check_chain_fits(layout, opts["base_size"], lambda s: options(s).resolved(0)["sizes"], baker.rt, "size")
-    chain = baker.radiance_chain(panorama.pixels)
-    out, methods = baker.prefilter(chain, opts, progress=progress)
+    src = (panorama.width, panorama.height)
+    methods = baker.plan(layouts.radiance_chain_sizes(*src), opts)      # before work: a level too sharp is said
+    _fits(f"prefilter size {opts['base_size']}, {len(methods)} levels, backend {backend}",
+          mipsbake.prefilter_host_bytes(src, opts, methods, backend),
+          "use fewer levels, a smaller size" + (", backend 'opencl' or method 'fis'" if backend == "numpy" else ""))
+    with _on_device(baker.rt):
+        chain = baker.radiance_chain(panorama.pixels)
+        out, methods = baker.prefilter(chain, opts, progress=progress)
     return Chain(layout, out, list(opts["roughness"]), list(opts["sizes"]), list(methods))
 
 
@@ -604,16 +701,20 @@ def dfg(size: int = 128, *, samples: int = 4096, multiscatter: bool = False, bac
     """The split sum's DFG table: float32 (size, size, 2), column i NoV = i / (size - 1) (at least
     1e-4), row j perceptual roughness r = j / (size - 1); channels (A, B) with
     specular = prefiltered * (F0 A + F90 B), or with multiscatter (B, A + B), Filament's energy
-    compensation. GGX, height-correlated Smith; `samples` GGX samples per texel. Baked once a
+    compensation. GGX, height-correlated Smith; `samples` GGX samples per texel (1 to 2^20). Baked once a
     process per device and arguments."""
     from iblbake.bake import mips as mipsbake
 
     _choice("backend", backend, ("opencl", "numpy"))
-    size, samples = _count("size", size, 2, 4096), _count("samples", samples)
+    size, samples = _count("size", size, 2, 4096), _count("samples", samples, 1, MAX_SAMPLES)
     multiscatter = _flag("multiscatter", multiscatter)
     _device(device)
+    if backend == "numpy":          # the twin's float64 (size, size) sums and temporaries, its sample points
+        _fits(f"dfg size {size}, samples {samples}, backend numpy", 120 * size * size + 16 * samples,
+              "use backend 'opencl' or a smaller size")
     baker = mipsbake.Baker(backend, rt=_runtime(device) if backend == "opencl" else None)
-    return mipsbake.dfg_table(baker, size, samples, multiscatter)
+    with _on_device(baker.rt):
+        return mipsbake.dfg_table(baker, size, samples, multiscatter)
 
 
 # ------------------------------------------------------------------------------ scenes, frames
@@ -625,6 +726,8 @@ def load_scene(path_or_dict, overrides=(), *, folder=".", outputs=None, names: d
     path_or_dict: a scene YAML file, a mapping of what one holds (its relative paths resolve in
         `folder`; numpy numbers and arrays, tuples and path objects read as the numbers, lists and
         strings a file holds), or a Scene (validated again with the overrides and outputs given).
+        A Scene is read-only: one whose data was edited after loading is an InputError naming
+        the key edited (here, and so in render, bake_probes and accuracy).
     overrides: 'key.path=value' strings applied before validation (values parse as YAML), as
         `iblbake render --set`: a list of them, or one string.
     outputs: frame paths that replace output.frame (as `render -o`): a list, or one path.
@@ -644,10 +747,16 @@ def load_scene(path_or_dict, overrides=(), *, folder=".", outputs=None, names: d
         if _is_path(outputs):
             outputs = [outputs]
         if not (isinstance(outputs, (list, tuple)) and all(_is_path(o) for o in outputs)):
-            raise InputError(f"outputs: give frame paths (.png or .exr; one, or a list of them), not {outputs!r}")
+            raise InputError(f"outputs: give frame paths (.png or .exr; one, or a list of them), not {_shown(outputs)}")
         outputs = [os.fspath(o) for o in outputs]
     said = _name(names, "overrides")
     if isinstance(path_or_dict, scene_load.Scene):
+        edited = scene_load.edited_key(path_or_dict)
+        if edited is not None:
+            key = edited or "KEY"
+            raise InputError(f"{path_or_dict.source}: Scene.data{'.' + edited if edited else ''} was changed after "
+                             f"load_scene; a Scene is read-only: give the change as an override "
+                             f"(iblbake.load_scene(scene, ['{key}=VALUE'])), or edit the mapping and load it again")
         if not overrides and outputs is None:
             return path_or_dict
         return scene_load.load_any(path_or_dict, overrides, outputs, override_name=said)
@@ -690,8 +799,9 @@ class Renderer:
 
     def render(self, scene, *, warn=None, progress=None, profile_paths: bool = False) -> Frame:
         """Render a Scene (load_scene) into a Frame (iblbake.Frame: hdr, tonemapped, aovs,
-        report). warn(message) gets the warnings; progress(fraction) the share of long work
-        (path tracing, probe rays) done. profile_paths: after the frame, measure where the
+        report). warn(message) gets the warnings, and the notes on what the scene asks that the
+        frame does not do (a key not read, a term skipped); progress(fraction) the share of long
+        work (path tracing, probe rays) done. profile_paths: after the frame, measure where the
         reference pass's time goes (per bounce: shading, closest-hit and shadow-ray traversal),
         the report's `paths_profile`; the frame is the same."""
         from iblbake.render import frame as render_frame
@@ -699,11 +809,18 @@ class Renderer:
         _callback("warn", warn)
         _callback("progress", progress)
         profile_paths = _flag(_name(self._names, "profile_paths"), profile_paths)
+        from iblbake.render.plan import effect_modes
+
         sc = load_scene(scene, names=self._names)
         if profile_paths:
             _profiled(sc, self._names)
-        return render_frame.render(sc, runtime=self.runtime, cache=self.bakes, reuse=self._reuse, warn=warn,
-                                   progress=progress, profile_paths=profile_paths)
+        with _on_device(self.runtime):          # one frame at a time on the runtime (and this Renderer)
+            frame = render_frame.render(sc, runtime=self.runtime, cache=self.bakes, reuse=self._reuse, warn=warn,
+                                        progress=progress, profile_paths=profile_paths)
+        for note in effect_modes(sc).notes:     # what the scene asks that the frame did not do
+            if warn:
+                warn(note)
+        return frame
 
 
 def _profiled(scene, names) -> None:
@@ -798,8 +915,9 @@ def bake_probes(scene, device: str | None = None, *, cache=None, warn=None, prog
     job = Job(sc, rt, bakes, warn or (lambda _m: None), progress)
     for w in bakes.environment(sc.data["environment"])[1].warnings:     # as a frame says them
         job.warn(w)
-    vol, cached, extra = bakes.load("probes", job)
-    reflections = bakes.load("reflection_probes", job)[0] if sc.data["reflection_probes"] else []
+    with _on_device(rt):
+        vol, cached, extra = bakes.load("probes", job)
+        reflections = bakes.load("reflection_probes", job)[0] if sc.data["reflection_probes"] else []
     vol = probes.sampled(vol, sc.data["probes"])
     man = probes.manifest(vol)
     man["reflection_probes"] = [{"file": f"reflection_{k}.exr", **c["settings"],
@@ -886,14 +1004,14 @@ def accuracy(scene, ladder=None, *, overrides=(), max_side: int = 320, repeats: 
     max_samples = _count("max_samples", max_samples, 1, 1 << 20)
     visibility, flip = _flag("visibility", visibility), _flag("flip", flip)
     if not (bounces is None or bounces == "unbounded" or (_whole(bounces) and 1 <= bounces <= MAX_BOUNCES)):
-        raise InputError(f"bounces {bounces!r}: use None or 'unbounded', or a count from 1 to {MAX_BOUNCES}")
+        raise InputError(f"bounces {_shown(bounces)}: use None or 'unbounded', or a count from 1 to {MAX_BOUNCES}")
     bounces = int(bounces) if _whole(bounces) else bounces
     cache = _cache(cache)
     _device(device)
     jobs = _count("jobs", jobs)
     if not (devices is None or (isinstance(devices, (list, tuple)) and all(isinstance(d, str) for d in devices))):
         raise InputError(f"devices: give a list of OpenCL device specs (one a worker, in turn), or None, "
-                         f"not {devices!r}")
+                         f"not {_shown(devices)}")
     for name, f in (("warn", warn), ("progress", progress), ("before_run", before_run)):
         _callback(name, f)
     said = {k: _name(names, k) for k in ("bounces", "max_samples", "max_side", "overrides", "ladder")}
@@ -910,70 +1028,72 @@ def accuracy(scene, ladder=None, *, overrides=(), max_side: int = 320, repeats: 
     sc = load_scene(scene, overrides, names=names)
     from_file = _is_path(scene)
     rt = _runtime(device, names)
-    study = acc.Study(str(scene) if from_file else sc, overrides if from_file else (), settings, runtime=rt,
-                      bakes=Bakes(cache), warn=warn, names={k: said[k] for k in ("max_side", "overrides")})
-    if given and bounces != 1 and not study.paths:
-        why = (f"with {no_visibility} every object is lit as if alone, so no light passes between them"
-               if not visibility else "no light passes between this scene's surfaces")
-        say(f"{said['bounces']} {bounces}: {why}; the reference is the direct light (bounces 1)")
-    ladder_file = None
-    if ladder in ladders.LADDERS:
-        rungs = ladders.LADDERS[ladder](study.scene, study.fx)
-    elif ladder:
-        ladder_file = os.fspath(ladder)
-        rungs = ladders.ladder_from_file(ladder_file, study.scene, study.fx, flag=said["ladder"])
-    else:
-        rungs = ladders.default_ladder(study.scene, study.fx, rt.info.kind, paths=study.paths)
-        over = [r for r in rungs if dict(r.values).get("effects.reference.max_samples", 0) > max_samples]
-        if over:                     # measured against a reference of fewer samples: their error is its noise
-            say(f"left out {len(over)} rungs with more samples than the reference's {said['max_samples']} "
-                f"{max_samples}: {', '.join(r.label for r in over)}")
-            rungs = [r for r in rungs if r not in over]
-    rungs = [ladders.configured_rung(study.scene, t) for t in study.terms] + rungs
-    reads = scene_load.named_input_files(study.scene) + ([("the ladder", ladder_file)] if ladder_file else [])
-    for r in rungs:                  # every rung's scene validates before anything renders
-        reads += scene_load.named_input_files(study.load(study.rung_values(r), origin=f"ladder rung {r.label!r}"))
-    if not os.path.isfile(sc.source):    # a mapping: no scene file is read
-        reads = [(what, path) for what, path in reads if what != "the scene file"]
-    if before_run:
-        before_run(study, rungs, reads)
-    spread = None
-    if jobs > 1:
-        from iblbake.study import workers
-        spread = workers.render_references_parallel(study, jobs, list(devices or [device]), warn=say)
-    study.progress = progress or (lambda *_: None)
-    refs = {t: study.render_reference(t) for t in study.terms}
-    rows = [study.run_rung(r) for r in rungs]
-    for t in study.terms:
-        r = refs[t]
-        if "max_samples" in r["stopped"] and r["noise_each"] > 2 * target_noise:
-            say(f"the {t} reference stopped at {max_samples} samples per pixel with noise "
-                f"{100 * r['noise']:.2f}% (target {100 * target_noise:g}% per seed): errors below about twice "
-                f"that are its noise. Slow convergence on a path-traced reference is light reaching a "
-                f"surface by a mirror or a glossy lobe from a small bright source (a caustic), which "
-                f"only BSDF sampling finds: raise {said['max_samples']}, or {said['bounces']} 1 for the direct light")
-    configured = study.configured_frame()
-    front = acc.frontiers(rows)
-    high = acc.above_reference(rows)
-    if high:
-        say(f"{len(high)} {'rungs have' if len(high) > 1 else 'rung has'} more samples than the reference reached "
-            f"({', '.join(r['label'] for r in high)}): their error is the reference's noise; kept off "
-            f"the frontier (raise {said['max_samples']} above theirs to measure them)")
-    records = [{**r, "pareto": r["label"] in front.get(r["term"], [])} for r in rows]
-    summary = {
-        "scene": str(scene) if from_file else sc.source, "device": rt.device_label,
-        "resolution": acc.study_resolution(study.scene, max_side), "repeats": repeats,
-        "reference": {t: {k: v for k, v in refs[t].items() if k not in ("hdr", "mask")} | {
-            "stopping_rule": f"each seed: relative standard error <= {target_noise} or {max_samples} samples",
-            "bounces": bounces if study.paths else 1,
-            "object_pixels": int(refs[t]["mask"].sum()),
-            "measured_pixels": int(study.metric_mask(t, refs[t]["hdr"]).sum())} for t in study.terms},
-        "rungs": records, "frontier": front, "configured": configured,
-        "time_split_s": {k: round(v, 3) for k, v in study.times.items()},
-    }
-    if spread:
-        summary["reference_workers"] = spread
-    return Accuracy(records, front, refs, configured, summary, study, rungs)
+    with _on_device(rt):             # the study's frames on the runtime, one thread at a time
+        study = acc.Study(str(scene) if from_file else sc, overrides if from_file else (), settings, runtime=rt,
+                          bakes=Bakes(cache), warn=warn, names={k: said[k] for k in ("max_side", "overrides")})
+        if given and bounces != 1 and not study.paths:
+            why = (f"with {no_visibility} every object is lit as if alone, so no light passes between them"
+                   if not visibility else "no light passes between this scene's surfaces")
+            say(f"{said['bounces']} {bounces}: {why}; the reference is the direct light (bounces 1)")
+        ladder_file = None
+        if ladder in ladders.LADDERS:
+            rungs = ladders.LADDERS[ladder](study.scene, study.fx)
+        elif ladder:
+            ladder_file = os.fspath(ladder)
+            rungs = ladders.ladder_from_file(ladder_file, study.scene, study.fx, flag=said["ladder"])
+        else:
+            rungs = ladders.default_ladder(study.scene, study.fx, rt.info.kind, paths=study.paths)
+            over = [r for r in rungs if dict(r.values).get("effects.reference.max_samples", 0) > max_samples]
+            if over:                     # measured against a reference of fewer samples: their error is its noise
+                say(f"left out {len(over)} rungs with more samples than the reference's {said['max_samples']} "
+                    f"{max_samples}: {', '.join(r.label for r in over)}")
+                rungs = [r for r in rungs if r not in over]
+        rungs = [ladders.configured_rung(study.scene, t) for t in study.terms] + rungs
+        reads = scene_load.named_input_files(study.scene) + ([("the ladder", ladder_file)] if ladder_file else [])
+        for r in rungs:                  # every rung's scene validates before anything renders
+            reads += scene_load.named_input_files(study.load(study.rung_values(r), origin=f"ladder rung {r.label!r}"))
+        if not os.path.isfile(sc.source):    # a mapping: no scene file is read
+            reads = [(what, path) for what, path in reads if what != "the scene file"]
+        if before_run:
+            before_run(study, rungs, reads)
+        spread = None
+        if jobs > 1:
+            from iblbake.study import workers
+            spread = workers.render_references_parallel(study, jobs, list(devices or [device]), warn=say)
+        study.progress = progress or (lambda *_: None)
+        refs = {t: study.render_reference(t) for t in study.terms}
+        rows = [study.run_rung(r) for r in rungs]
+        for t in study.terms:
+            r = refs[t]
+            if "max_samples" in r["stopped"] and r["noise_each"] > 2 * target_noise:
+                say(f"the {t} reference stopped at {max_samples} samples per pixel with noise "
+                    f"{100 * r['noise']:.2f}% (target {100 * target_noise:g}% per seed): errors below about twice "
+                    f"that are its noise. Slow convergence on a path-traced reference is light reaching a "
+                    f"surface by a mirror or a glossy lobe from a small bright source (a caustic), which "
+                    f"only BSDF sampling finds: raise {said['max_samples']}, or {said['bounces']} 1 for the "
+                    f"direct light")
+        configured = study.configured_frame()
+        front = acc.frontiers(rows)
+        high = acc.above_reference(rows)
+        if high:
+            say(f"{len(high)} {'rungs have' if len(high) > 1 else 'rung has'} more samples than the reference reached "
+                f"({', '.join(r['label'] for r in high)}): their error is the reference's noise; kept off "
+                f"the frontier (raise {said['max_samples']} above theirs to measure them)")
+        records = [{**r, "pareto": r["label"] in front.get(r["term"], [])} for r in rows]
+        summary = {
+            "scene": str(scene) if from_file else sc.source, "device": rt.device_label,
+            "resolution": acc.study_resolution(study.scene, max_side), "repeats": repeats,
+            "reference": {t: {k: v for k, v in refs[t].items() if k not in ("hdr", "mask")} | {
+                "stopping_rule": f"each seed: relative standard error <= {target_noise} or {max_samples} samples",
+                "bounces": bounces if study.paths else 1,
+                "object_pixels": int(refs[t]["mask"].sum()),
+                "measured_pixels": int(study.metric_mask(t, refs[t]["hdr"]).sum())} for t in study.terms},
+            "rungs": records, "frontier": front, "configured": configured,
+            "time_split_s": {k: round(v, 3) for k, v in study.times.items()},
+        }
+        if spread:
+            summary["reference_workers"] = spread
+        return Accuracy(records, front, refs, configured, summary, study, rungs)
 
 
 def __getattr__(name):

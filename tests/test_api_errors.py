@@ -32,6 +32,13 @@ def scene_of(sky, **sections):
     return {**doc, **sections}
 
 
+def _in_itself(doc):
+    doc = dict(doc)
+    doc["materials"] = {"m": {"base_color": [1, 1, 1]}}
+    doc["materials"]["m"]["extra"] = doc["materials"]
+    return doc
+
+
 class Stop(Exception):
     """Raised from before_run: the study stops before anything renders."""
 
@@ -53,6 +60,7 @@ BAD = {
         ("intensity", lambda c: iblbake.sh(c["pano"], intensity="2")),
         ("intensity", lambda c: iblbake.sh(c["pano"], intensity=True)),
         ("intensity", lambda c: iblbake.sh(c["pano"], intensity=-1.0)),
+        ("intensity 1e+300: scales the panorama's brightest texel", lambda c: iblbake.sh(c["pano"], intensity=1e300)),
         ("error", lambda c: iblbake.sh(c["pano"], error="no")),
         ("error", lambda c: iblbake.sh(c["pano"], error=1)),
         ("device", lambda c: iblbake.sh(c["pano"], backend="opencl", device=5)),
@@ -89,12 +97,22 @@ BAD = {
         ("panorama", lambda c: iblbake.prefilter(c["sky"])),
         ("progress", lambda c: iblbake.prefilter(c["pano"], size=8, levels=2, backend="numpy", progress="x")),
         ("size", lambda c: iblbake.prefilter(c["pano"], size=0, backend="numpy")),
+        # issue 60's fuzzing: the texel count of a 2^40 cube map wrapped in int64 and passed the check
+        ("size 1099511627776: the cubemap chain needs", lambda c: iblbake.prefilter(
+            c["pano"], 2 ** 40, 3, "cubemap", min_size=2 ** 40, backend="numpy")),
+        ("size 1000000000000000000000000000000: the equirect chain needs", lambda c: iblbake.prefilter(
+            c["pano"], 10 ** 30, backend="numpy")),          # the bisect's len() overflowed
         ("device", lambda c: iblbake.prefilter(c["pano"], device=5)),
+        # issue 60: no bound on levels (40 asked 23 GB) nor on samples
+        ("levels 33: use 1 to 32", lambda c: iblbake.prefilter(c["pano"], 8, 33, method="fis", samples=4,
+                                                             backend="numpy")),
+        ("samples", lambda c: iblbake.prefilter(c["pano"], 8, 2, method="fis", samples=2 ** 40, backend="numpy")),
     ],
     "dfg": [
         ("multiscatter", lambda c: iblbake.dfg(4, samples=4, multiscatter="yes", backend="numpy")),
         ("size", lambda c: iblbake.dfg(4.0, backend="numpy")),
         ("device", lambda c: iblbake.dfg(4, device=5)),
+        ("samples 1099511627776: use 1 to 1048576", lambda c: iblbake.dfg(4, samples=2 ** 40, backend="numpy")),
     ],
     "load_panorama": [
         ("path", lambda c: iblbake.load_panorama(None)),
@@ -111,6 +129,9 @@ BAD = {
         ("nonfinite", lambda c: iblbake.Panorama.from_pixels(np.ones((4, 8, 3)), nonfinite="bogus")),
         ("negative", lambda c: iblbake.Panorama.from_pixels(np.ones((4, 8, 3)), negative=None)),
         ("name", lambda c: iblbake.Panorama.from_pixels(np.ones((4, 8, 3)), name=5)),
+        # issue 60: an array's repr spanned lines; a complex array lost its imaginary part with a warning
+        ("nonfinite array(", lambda c: iblbake.Panorama.from_pixels(np.ones((4, 8, 3)), nonfinite=np.zeros((4, 8, 3)))),
+        ("pixels", lambda c: iblbake.Panorama.from_pixels(np.ones((4, 8, 3), complex))),
     ],
     "load_scene": [
         ("scene", lambda c: iblbake.load_scene(123)),
@@ -119,6 +140,12 @@ BAD = {
         ("outputs", lambda c: iblbake.load_scene(c["scene"], outputs=5)),
         ("folder", lambda c: iblbake.load_scene(c["scene"], folder=None)),
         ("names", lambda c: iblbake.load_scene(c["scene"], names="--set")),
+        # issue 60: raw TypeError (an int key, a generator) and RecursionError (a mapping in itself)
+        ("materials: key 5", lambda c: iblbake.load_scene({**c["scene"], "materials": {5: {}}})),
+        ("objects: generator", lambda c: iblbake.load_scene({**c["scene"], "objects": (o for o in [])})),
+        ("camera.perspective.position: generator", lambda c: iblbake.load_scene(
+            {**c["scene"], "camera": {"perspective": {"position": (x for x in (0, 0, 3))}}})),
+        ("contains itself", lambda c: iblbake.load_scene(_in_itself(c["scene"]))),
     ],
     "render": [
         ("scene", lambda c: iblbake.render(None)),

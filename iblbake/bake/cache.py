@@ -49,6 +49,13 @@ def default_root() -> Path:
     return Path(platformdirs.user_cache_dir("iblbake")) / "bakes"
 
 
+def said(root) -> str:
+    """How a message names the cache folder `root`: by the variable where it is $IBLBAKE_CACHE
+    (the user set it somewhere else: the message says what to change)."""
+    env = os.environ.get("IBLBAKE_CACHE")
+    return f"IBLBAKE_CACHE={env}" if env and Path(env) == Path(root) else str(root)
+
+
 def _touch(entry: Path) -> None:
     """Mark an entry used now (its manifest's mtime): what prune's least-recently-used order reads."""
     try:
@@ -123,7 +130,8 @@ def get_or_build(root: Path, key: str, build: Callable[[Path], dict], *,
     try:
         root.mkdir(parents=True, exist_ok=True)
     except OSError as e:
-        raise InputError(f"{root}: cannot create the cache folder ({e.strerror})") from None
+        raise InputError(f"{said(root)}: cannot create the cache folder ({e.strerror}); give a folder "
+                         f"that can be made and written") from None
     entry = root / key
     manifest = verify(entry)
     if manifest is not None:
@@ -152,7 +160,7 @@ def get_or_build(root: Path, key: str, build: Callable[[Path], dict], *,
                 shutil.rmtree(tmp, ignore_errors=True)
                 raise
     except OSError as e:   # read-only folder, disk full, no permission: nothing was left behind
-        raise IblbakeError(f"{root}: cannot write the cache entry {key} ({e.strerror or e}); "
+        raise IblbakeError(f"{said(root)}: cannot write the cache entry {key} ({e.strerror or e}); "
                            f"free space or use a writable cache folder") from None
     return body, False
 

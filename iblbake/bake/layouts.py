@@ -21,6 +21,7 @@ LAYOUT_IDS = {"equirect": 0, "cubemap": 1, "octahedral": 2}
 
 
 MIN_LEVEL_SIZE = 8
+MAX_LEVELS = 32          # a chain of at most this many levels (the command line's --levels too)
 
 
 def radiance_chain_sizes(width: int, height: int):

@@ -11,6 +11,7 @@ EXR, which must go down to 1x1 in one 2D layout); the manifest lists sizes and r
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -74,7 +75,7 @@ DEVICE_BYTES_PER_TEXEL = 16
 
 def chain_bytes(layout: str, sizes) -> tuple[int, int]:
     """(host bytes, largest device buffer) of baking a prefiltered chain of these level sizes."""
-    texels = [int(np.prod(layouts.layout_shape(layout, s))) for s in sizes]
+    texels = [math.prod(layouts.layout_shape(layout, s)) for s in sizes]
     return (CHAIN_BYTES_PER_TEXEL * sum(texels) + WORK_BYTES_PER_TEXEL * max(texels),
             DEVICE_BYTES_PER_TEXEL * max(texels))
 
@@ -100,7 +101,8 @@ def check_chain_fits(layout: str, size: int, sizes_of, rt, flag: str, candidates
     if why is None:
         return
     allowed = candidates if candidates is not None else range(1, size + 1)
-    lo, hi = 0, len(allowed) - 1      # bisect for the last allowed size that fits
+    # bisect for the last allowed size that fits (a range's length, not len(): 10^30 sizes overflow it)
+    lo, hi = 0, (size if candidates is None else len(allowed)) - 1
     while lo < hi:
         mid = (lo + hi + 1) // 2
         lo, hi = (mid, hi) if need(allowed[mid]) is None else (lo, mid - 1)
@@ -136,6 +138,39 @@ def plan_methods(chain_sizes, opts: dict, method_name: str = "method") -> list[s
                     if prefilter.convolve_cost(chain_sizes, n, r * r, t) <= opts["convolve_budget"]]
             out.append(f"convolve@{fits[0]:g}" if fits else "fis")
     return out
+
+
+# A prefilter's host memory besides the output chain (chain_bytes): the source's radiance chain
+# (on the numpy backend float64, its float32 copy and the float64 copy the twins read, 4/3 of the
+# texels each; on OpenCL the float32 copy read back), and the largest level's work: the spectral
+# method's projection of the source and its RGB coefficients (complex128, up to
+# spectral.MAX_LMAX, a few copies; on either backend), and on the numpy backend FIS's float64
+# directions, frames and sums per output texel or convolve_twin's sub-texel grid
+# (prefilter.convolve_twin_bytes). Measured with tracemalloc on 64x32 and 256x128 sources and
+# every method: the estimate is 1.0 to 2 times the peak.
+SOURCE_BYTES_PER_TEXEL = {"numpy": 80, "opencl": 16}
+TWIN_FIS_BYTES_PER_TEXEL = 400
+SPECTRAL_BYTES_PER_TEXEL = 200
+
+
+def prefilter_host_bytes(src_size, opts: dict, methods, backend: str) -> int:
+    """Host bytes of a prefilter of a source (w, h) with these options and methods
+    (Baker.plan) on `backend`, all told."""
+    chain_sizes = layouts.radiance_chain_sizes(*src_size)
+    n0 = src_size[0] * src_size[1]
+    work = 0
+    for s, r, how in zip(opts["sizes"], opts["roughness"], methods):
+        n = math.prod(layouts.layout_shape(opts["layout"], s))
+        if how == "spectral":
+            lmax = len(spectral.zonal_coefficients(r * r)) - 1
+            work = max(work, SPECTRAL_BYTES_PER_TEXEL * (n0 + n) + 4 * 48 * (lmax + 1) * (lmax + 2) // 2)
+        elif backend != "numpy":
+            continue
+        elif how.startswith("convolve"):
+            work = max(work, prefilter.convolve_twin_bytes(chain_sizes, r * r, float(how.split("@")[1])))
+        else:
+            work = max(work, TWIN_FIS_BYTES_PER_TEXEL * n + 64 * opts["samples"])
+    return SOURCE_BYTES_PER_TEXEL[backend] * n0 + chain_bytes(opts["layout"], opts["sizes"])[0] + work
 
 
 class OpenCLBaker:
@@ -248,11 +283,22 @@ class Baker:
         kind = self.rt.info.kind if self.rt else "CPU"
         return CONVOLVE_BUDGET.get(kind, DEFAULT_CONVOLVE_BUDGET)
 
+    def plan(self, chain_sizes, opts: dict) -> list[str]:
+        """plan_methods on this baker: the numpy backend's auto bakes a level by FIS where
+        convolve_twin's sub-texel grid would not fit the host's memory (the kernel needs no grid)."""
+        methods = plan_methods(chain_sizes, {**opts, "convolve_budget": self.convolve_budget(opts)},
+                               opts.get("method_name", "method"))
+        if self.gpu or opts["method"] != "auto":
+            return methods
+        free = cl.host_bytes_available()
+        return ["fis" if how.startswith("convolve") and free is not None
+                and prefilter.convolve_twin_bytes(chain_sizes, r * r, float(how.split("@")[1])) > free / 2 else how
+                for how, r in zip(methods, opts["roughness"])]
+
     def prefilter(self, chain, opts: dict, progress=None):
         """Levels of the prefiltered chain (float32 images) and the method used for each."""
         sizes = [(c.shape[1], c.shape[0]) for c in chain]
-        methods = plan_methods(sizes, {**opts, "convolve_budget": self.convolve_budget(opts)},
-                               opts.get("method_name", "method"))
+        methods = self.plan(sizes, opts)
         layout = opts["layout"]
         # every spectral level from one projection of the source (host, float64, either backend)
         todo = [(s, r) for s, r, how in zip(opts["sizes"], opts["roughness"], methods) if how == "spectral"]

@@ -157,8 +157,30 @@ def convolve_twin(chain, dirs, roughness: float, texels_per_lobe: float = TEXELS
     cut = lobe_cutoff(alpha)
     flat = np.asarray(dirs, np.float64).reshape(-1, 3)
     out = np.empty((len(flat), vals.shape[-1]))
-    for i0 in range(0, len(flat), 128):
-        c = flat[i0:i0 + 128] @ src.T
+    rows = twin_chunk(len(om))
+    for i0 in range(0, len(flat), rows):
+        c = flat[i0:i0 + rows] @ src.T
         wgt = np.where(c > cut, brdf.d_ggx(np.sqrt(0.5 * (1 + np.maximum(c, -1))), alpha) * c, 0.0) * om
-        out[i0:i0 + 128] = (wgt @ vals) / wgt.sum(1, keepdims=True)
+        out[i0:i0 + rows] = (wgt @ vals) / wgt.sum(1, keepdims=True)
     return out.reshape(np.shape(dirs)[:-1] + (-1,))
+
+
+# convolve_twin's host memory: per source cell its direction, solid angle and value (and
+# texel_subsamples's copies of them while they are made), and per cell of a chunk of output
+# texels the few float64 temporaries of the weights; the chunk is sized to TWIN_CHUNK_BYTES
+TWIN_BYTES_PER_CELL = 136
+TWIN_CHUNK_TEMPORARIES = 6
+TWIN_CHUNK_BYTES = 1 << 27
+
+
+def twin_chunk(cells: int) -> int:
+    """Output texels a step of convolve_twin weighs at once: at most 128, at least 1."""
+    return int(max(1, min(128, TWIN_CHUNK_BYTES // (8 * TWIN_CHUNK_TEMPORARIES * max(cells, 1)))))
+
+
+def convolve_twin_bytes(chain_sizes, alpha: float, texels_per_lobe: float = TEXELS_PER_LOBE) -> int:
+    """Host bytes convolve_twin takes for one level (the sub-texel grid sharp lobes need)."""
+    k, sub = convolve_level_choice(chain_sizes, alpha, texels_per_lobe)
+    w, h = chain_sizes[k]
+    cells = w * h * sub * sub
+    return TWIN_BYTES_PER_CELL * cells + 8 * TWIN_CHUNK_TEMPORARIES * cells * twin_chunk(cells)

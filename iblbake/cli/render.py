@@ -74,8 +74,6 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, profi
         from iblbake.io import depfile as dep
         dep.write(depfile, [(written, scene.input_files(sc))])
     rep = frame.report
-    for note in rep["effects"]["notes"]:
-        con.note(f"iblbake: {note}")
     summary = {**rep, "scene": sc.source, "outputs": written}
     lines = []
     if show_report:

@@ -82,13 +82,22 @@ class ImageInfo:
 
 
 def max_pixels_default() -> int:
-    env = os.environ.get("IBLBAKE_MAX_PIXELS")
-    if env:
-        try:
-            return int(env)
-        except ValueError:
-            raise InputError(f"IBLBAKE_MAX_PIXELS={env!r} is not an integer") from None
-    return DEFAULT_MAX_PIXELS
+    return env_pixels("IBLBAKE_MAX_PIXELS", DEFAULT_MAX_PIXELS)
+
+
+def env_pixels(name: str, default: int) -> int:
+    """A pixel limit from the environment variable `name` (unset or empty: `default`); anything
+    but a whole number >= 1 is an InputError naming the variable (-5 is no limit to go by)."""
+    env = os.environ.get(name)
+    if not env:
+        return default
+    try:
+        value = int(env)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise InputError(f"{name}={env!r}: give a whole number of pixels >= 1 (or unset it for {default})")
+    return value
 
 
 def file_sha256(path) -> str:
@@ -190,6 +199,22 @@ def _decode_transfer(data, spec, transfer: str, path: str, warnings: list, name:
     return data
 
 
+# host bytes of reading a panorama, per pixel: the decoded float channels and their float32
+# view (8 bytes a channel), the RGB image and the copy the policies repair, with their masks
+DECODE_BYTES_PER_CHANNEL, DECODE_BYTES_PER_PIXEL = 8, 32
+
+
+def _check_decode_fits(path, w: int, h: int, nc: int) -> None:
+    """From the header, before decoding: an InputError saying how much memory the image needs
+    where that is more than the process may still allocate (a limit under max_pixels' too)."""
+    from iblbake.device.runtime import host_bytes_available
+    need = w * h * (DECODE_BYTES_PER_CHANNEL * nc + DECODE_BYTES_PER_PIXEL)
+    free = host_bytes_available()
+    if free is not None and need > free:
+        raise InputError(f"{path}: {w}x{h} with {nc} channels needs about {need / 2**30:.3g} GiB to read, more than "
+                         f"the {max(free, 0) / 2**30:.3g} GiB this process may still allocate; give a smaller image")
+
+
 def read_panorama(path, *, max_pixels: int | None = None, nonfinite: str = "error", negative: str = "keep",
                   transfer: str = "auto", primaries: str = "auto",
                   names: dict | None = None) -> tuple[np.ndarray, ImageInfo]:
@@ -220,6 +245,7 @@ def read_panorama(path, *, max_pixels: int | None = None, nonfinite: str = "erro
                 raise InputError(
                     f"{path}: {w}x{h} is {w * h} pixels, over the limit of {limit}; "
                     f"raise it with {name['max_pixels']} or IBLBAKE_MAX_PIXELS if this is intended")
+            _check_decode_fits(path, w, h, nc)
             names = tuple(spec.channelnames)
             chroma = spec.getattribute("chromaticities")
             data = inp.read_image(0, 0, 0, nc, oiio.FLOAT)

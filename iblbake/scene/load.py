@@ -39,6 +39,8 @@ class Scene:
     writes: list = field(default_factory=list)     # (what names it, path) of every output
     raw: dict | None = field(default=None, repr=False, compare=False)
     overridden: dict = field(default_factory=dict, repr=False, compare=False)
+    # a copy of data as validated: data is read-only, and edited_key finds an edit made since
+    validated: dict | None = field(default=None, repr=False, compare=False)
 
     def __getitem__(self, k):
         return self.data[k]
@@ -96,6 +98,9 @@ class _Validator:
                 m = value.get(k) or {}
                 if not isinstance(m, dict):
                     self.fail(sub, f"expected a mapping of names to {f.section.doc}s")
+                for name in m:
+                    if not isinstance(name, str):
+                        self.fail(f"{sub}.{name}", f"a name is a string, not {type(name).__name__} (quote it)")
                 out[k] = {name: self.section(f.section, v, f"{sub}.{name}") for name, v in m.items()}
             elif isinstance(f, ListOf):
                 seq = value.get(k) or []
@@ -205,8 +210,8 @@ def load_data(data: dict, folder=".", overrides=(), outputs=None, values=(), ori
     if not isinstance(data, dict):
         raise InputError(f"{source}: a scene is a mapping of sections (camera, environment, "
                          f"materials, objects, effects, output), not {type(data).__name__}")
-    return _validated(plain_values(data), {}, source, Path(folder).resolve(), overrides, outputs, values, origin,
-                      override_name)
+    return _validated(plain_values(data, source), {}, source, Path(folder).resolve(), overrides, outputs, values,
+                      origin, override_name)
 
 
 def load_any(scene, overrides=(), outputs=None, values=(), origin: str = "--set",
@@ -224,19 +229,38 @@ def load_any(scene, overrides=(), outputs=None, values=(), origin: str = "--set"
                       origin, override_name, dict(scene.overridden))
 
 
-def plain_values(value):
+MAX_DEPTH = 64      # sections, lists and values nest a few levels deep in any scene
+
+
+def plain_values(value, source: str = "<scene>", path: str = "", within: tuple = ()):
     """A copy of a mapping made in Python with what a scene file holds in place of its Python
     and numpy kinds: numpy scalars as numbers (a numpy bool a bool, refused where a number is
-    expected, as True is), numpy arrays and tuples as lists, path objects as strings."""
-    if isinstance(value, dict):
-        return {k: plain_values(v) for k, v in value.items()}
+    expected, as True is), numpy arrays and tuples as lists, path objects as strings. What no
+    scene file holds is an InputError naming `source` and the key: a key that is not a string,
+    a generator or another object, a mapping or list that contains itself."""
+    from collections.abc import Mapping
+
+    def fail(msg):
+        raise InputError(f"{source}: {path or 'scene'}: {msg}")
+
+    if any(value is v for v in within):
+        fail("contains itself (a mapping or list inside itself); give each section once")
+    if len(within) > MAX_DEPTH:
+        fail(f"nested deeper than {MAX_DEPTH} levels; a scene's sections are a few levels deep")
+    if isinstance(value, Mapping):
+        for k in value:
+            if not isinstance(k, str):
+                fail(f"key {k!r} is not a string (keys and names are strings)")
+        return {k: plain_values(v, source, f"{path}.{k}".lstrip("."), within + (value,)) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [plain_values(v) for v in value]
+        return [plain_values(v, source, f"{path}.{i}".lstrip("."), within + (value,)) for i, v in enumerate(value)]
     if isinstance(value, os.PathLike):
         return os.fspath(value)
     if type(value).__module__ == "numpy" and hasattr(value, "tolist"):     # numpy is not imported for it
-        return plain_values(value.tolist())
-    return value
+        return plain_values(value.tolist(), source, path, within)
+    if value is None or isinstance(value, (str, int, float)):
+        return value
+    fail(f"{type(value).__name__} is not a value a scene holds; give a mapping, a list, a string or a number")
 
 
 def _validated(data, lines, source, folder, overrides, outputs, values, origin, override_name="--set",
@@ -260,7 +284,37 @@ def _validated(data, lines, source, folder, overrides, outputs, values, origin, 
     _resolve_basis_specular(v, out["effects"], out["probes"])
     _resolve_specular_fits(out, raw)
     writes = _resolve_outputs(v, out["output"], folder, outputs)
-    return Scene(out, source, folder, lines, writes, raw, overridden)
+    return Scene(out, source, folder, lines, writes, raw, overridden, copy.deepcopy(out))
+
+
+def edited_key(scene: Scene) -> str | None:
+    """The first dotted key of scene.data that differs from what was validated (an edit made to
+    the read-only data since), '' for the whole mapping, or None where it is as validated (or the
+    Scene was not made by the loader)."""
+    def first(a, b, path):
+        if type(a) is not type(b):
+            return path
+        if isinstance(a, dict):
+            for k in list(a) + [k for k in b if k not in a]:
+                if k not in a or k not in b:
+                    return f"{path}.{k}".lstrip(".")
+                found = first(a[k], b[k], f"{path}.{k}")
+                if found is not None:
+                    return found.lstrip(".")
+            return None
+        if isinstance(a, list):
+            if len(a) != len(b):
+                return path
+            return next((f for f in (first(x, y, f"{path}.{i}") for i, (x, y) in enumerate(zip(a, b)))
+                         if f is not None), None)
+        return None if a == b else path
+    if scene.validated is None:
+        return None
+    try:
+        found = first(scene.data, scene.validated, "")
+    except RecursionError:                  # data made to contain itself
+        found = ""
+    return None if found is None else found.lstrip(".")
 
 
 def _read(path: Path):

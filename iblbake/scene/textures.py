@@ -38,8 +38,8 @@ RAISE_TEXTURE_LIMIT = "IBLBAKE_MAX_TEXTURE_PIXELS or --max-texture-pixels raises
 
 
 def max_texture_pixels() -> int:
-    v = os.environ.get("IBLBAKE_MAX_TEXTURE_PIXELS")
-    return int(v) if v and v.isdigit() else MAX_TEXTURE_PIXELS
+    from iblbake.io.images import env_pixels
+    return env_pixels("IBLBAKE_MAX_TEXTURE_PIXELS", MAX_TEXTURE_PIXELS)
 
 
 def decode(data: bytes, name: str, where: str, max_pixels: int | None = None) -> np.ndarray:
