@@ -419,14 +419,18 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         })),
     "probes": Section(doc="the irradiance probe volume (DDGI) that `effects.diffuse: probes` reads and `iblbake probes` "
                           "bakes; lengths in units of the probe spacing are of its smallest axis", fields={
-        "min": Vec(**VEC3, doc="the first corner probe's position (with max: the box the probes span; omitted: auto, "
-                               "cubic cells whose probes overhang the scene's bounds by at most half a cell)"),
-        "max": Vec(**VEC3, doc="the opposite corner probe's position"),
+        "min": Vec(**VEC3, doc="the probe box's lower corner (with max: the box cut into cells, a probe at each "
+                               "cell's centre, half a cell in from its faces; omitted: auto, cubic cells whose probes "
+                               "overhang the scene's bounds by at least half a cell)"),
+        "max": Vec(**VEC3, doc="the probe box's upper corner"),
         "counts": OneOf((Num(None, 1, 256, integer=True), Vec(**VEC3, integer=True, lo=1, hi=256)), default=None,
                         doc="probes along x, y, z, or N: N along the longest axis and as many as keep the "
-                            "cells near cubes along the others (omitted: from spacing, else 8); an automatic grid "
-                            "takes N >= 3 (or >= 2 per axis), min and max >= 2 along an axis they differ on"),
-        "spacing": Num(None, 0.0, lo_open=True, doc="the distance between probes, where counts is omitted"),
+                            "cells near cubes along the others (omitted: from spacing, else the scene's interior "
+                            "scale, docs/conventions.md 'Irradiance probes'); an automatic grid takes N >= 3 (or "
+                            ">= 2 per axis), min and max >= 2 along an axis they differ on; at most 1048576 probes"),
+        "spacing": Num(None, 0.0, lo_open=True, doc="the distance between probes, where counts is omitted (omitted too: "
+                                                    "half the typical free distance of rays in the scene's enclosed "
+                                                    "spaces, at most 16384 probes, coarser above and said)"),
         "rays": Num(1024, 16, 1 << 16, integer=True,
                     doc="rays per probe, one path each (a spherical Fibonacci set, randomly rotated; DDGI traces "
                         "256 a frame and accumulates frames, a bake takes them at once: an unextracted sun's "
