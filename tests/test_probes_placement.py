@@ -14,7 +14,7 @@ import iblbake
 from iblbake.core.metrics import region_errors
 from iblbake.errors import InputError
 from iblbake.render import probes, render
-from iblbake.render.probes import grid as grid_mod
+from iblbake.render.twin import probes as twin
 from tests.conftest import load_scene
 from tests.test_probes import settings
 
@@ -58,6 +58,12 @@ def test_a_box_drawn_on_the_walls_puts_no_probe_on_them():
     assert g.counts == (3, 3, 3) and np.allclose(g.spacing, 2 / 3)
     inset = np.minimum(p - [-1, 0, -1], [1, 2, 1] - p).min()
     assert abs(inset - 1 / 3) < 1e-9
+    # the volume's full weight reaches the box's faces (the walls), not only its outer probes: at
+    # the outer probes' box the walls took half the panorama's SH, 8x too bright
+    vol = {"origin": g.origin, "spacing": g.spacing, "counts": g.counts}
+    faces = np.array([[-1, 1, 0], [1, 1, 0], [0, 0, 0], [0, 2, 0], [0, 1, -1], [0, 1, 1], [1, 2, 1.0]])
+    assert np.allclose(twin.volume_weight(vol, faces), 1.0)
+    assert np.allclose(twin.volume_weight(vol, np.array([[0, 1, 1 + 1 / 3]])), 0.5)
     g = probes.grid_of(settings(min=[0, 0, 0], max=[4, 1, 0], spacing=0.5), sphere_arrays())
     assert g.counts == (8, 2, 1) and np.allclose(g.positions()[:, 2], 0) and np.allclose(g.positions()[0], [0.25, 0.25, 0])
 
@@ -83,6 +89,8 @@ def test_probes_beyond_an_interiors_bounds_are_off_only_with_the_camera_inside()
     pos = np.array([[0.0, 1, 0], [-1.2, 1, 0], [0, 3, 0]])
     bounds = (np.array([-1.0, 0, -16]), np.array([1.0, 2.5, 0]))
     assert probes.beyond_bounds(pos, bounds, [0, 1.2, -1]).tolist() == [False, True, True]
+    # a camera outside the bounds along one axis only (before the corridor's open end) may see
+    # outer faces: nothing is off
     assert not probes.beyond_bounds(pos, bounds, [0, 1.2, 5]).any()
 
 

@@ -33,11 +33,11 @@ from iblbake.render.probes.grid import (AUTO_MAX_PROBES, DEFAULT_LONGEST, MAX_PR
 from iblbake.render.probes.project import BACKFACE_BLEND_LIMIT, MAX_DISTANCE, atlas, project, with_borders
 from iblbake.render.paths.tracer import Tracer, trace_defines
 from iblbake.render.probes.rays import random_rotation, ray_directions, spherical_fibonacci
-from iblbake.render.probes.relocation import (ACTIVE, beyond_bounds, FIXED_RAYS, INACTIVE, MAX_OFFSET, RELOCATION_PASSES, classify,
+from iblbake.render.probes.relocation import (ACTIVE, SURFACE_RAYS, beyond_bounds, off_surfaces, FIXED_RAYS, INACTIVE, MAX_OFFSET, RELOCATION_PASSES, classify,
                                               inside_geometry, outside_camera_rooms, outside_sealed_room, relocate)
 from iblbake.render.probes.volume import SAMPLING_KEYS, bake_settings, basis_options, sampled, volume_dict
 
-__all__ = ["switch_off", "OFF_SAID", "placement_warnings", "beyond_bounds", "AUTO_MAX_PROBES", "MAX_PROBES", "SCALE_RAYS", "auto_step", "probe_bytes", "scaled_grid", "ACTIVE", "BACKFACE_BLEND_LIMIT", "DEFAULT_LONGEST", "FILES", "FIXED_RAYS", "FORMAT", "Grid", "INACTIVE",
+__all__ = ["SURFACE_RAYS", "off_surfaces", "switch_off", "OFF_SAID", "placement_warnings", "beyond_bounds", "AUTO_MAX_PROBES", "MAX_PROBES", "SCALE_RAYS", "auto_step", "probe_bytes", "scaled_grid", "ACTIVE", "BACKFACE_BLEND_LIMIT", "DEFAULT_LONGEST", "FILES", "FIXED_RAYS", "FORMAT", "Grid", "INACTIVE",
            "INSIDE_WARN", "MAX_ATLAS_SIDE", "MAX_DISTANCE", "MAX_OFFSET", "RELOCATION_PASSES", "SAMPLING_KEYS", "SH_GLSL", "SPECULAR_TABLE",
            "Tracer", "VERSION", "atlas", "bake", "bake_settings", "basis_glsl", "basis_manifest", "basis_options",
            "classify", "data_texture", "glsl", "grid_of", "inside_geometry", "load", "manifest", "outside_camera_rooms", "outside_sealed_room",

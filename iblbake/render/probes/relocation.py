@@ -32,6 +32,7 @@ def inside_geometry(t, obj, threshold: float):
 
 ON_SURFACE = 1e-3               # of a cell: a probe nearer a surface than this along an axis stands on it
 OFF_SURFACE = 0.25              # of a cell: how far such a probe is moved off it (at most half the free way)
+SURFACE_RAYS = 12               # off_surfaces' rays a probe: two from either side along each axis
 
 
 def off_surfaces(tracer: Tracer, positions, spacing) -> np.ndarray:
@@ -148,7 +149,9 @@ def beyond_bounds(positions, bounds, camera) -> np.ndarray:
     bounds, a surface of no thickness, they see the sky through it and leak it in at the edges where
     walls meet (the moments cannot tell a point a hair inside the wall from the wall). A new
     user's corridor, open at one end: its closed far end 11-15x too bright, bright seams along every
-    edge. None where the camera is outside the bounds (what it sees may face outwards there)."""
+    edge. None where the camera is outside the bounds (what it sees may face outwards there; a
+    camera merely within the bounds along one axis still sees, say, a sphere's underside, which
+    the probes below it light)."""
     pos = np.asarray(positions, np.float64)
     if bounds is None:
         return np.zeros(len(pos), bool)
