@@ -185,3 +185,4 @@ def test_probes_on_a_slab_of_no_thickness_are_moved_off_it(tmp_path, panoramas):
         on = np.abs(c.positions()[:, 1]) < 1e-9
         assert on.sum() == 9
         assert (np.abs(vol.data[on, 1]) >= 0.24 * 2 / 3).all(), vol.data[on]
+        assert vol.manifest["report"]["on_surface"] == 9

@@ -11,7 +11,7 @@ from iblbake.render.passes.base import Buffer, Pass, mode_defines
 from iblbake.render.sources import SOURCES
 
 
-SKY_SAID = 0.1           # the share of a frame's samples that fell back to the panorama's SH (no active probe near) said
+SKY_SAID = 0.1           # the share of a frame's samples with no active probe near (the panorama's SH) said
 OUTSIDE_SAID = 0.1       # the share of a frame's samples outside the probe volume that is said
 
 

@@ -29,20 +29,24 @@ from iblbake.render.probes.files import (FILES, FORMAT, VERSION, basis_manifest,
                                          read_manifest, save)
 from iblbake.render.probes.glsl import SH_GLSL, SPECULAR_TABLE, basis_glsl, glsl
 from iblbake.render.probes.grid import (AUTO_MAX_PROBES, DEFAULT_LONGEST, MAX_PROBES, SCALE_RAYS, Grid, auto_step,
-                                        grid_of, axis_counts, probe_bytes, scene_bounds)
+                                        axis_counts, grid_of, probe_bytes, scene_bounds)
 from iblbake.render.probes.project import BACKFACE_BLEND_LIMIT, MAX_DISTANCE, atlas, project, with_borders
 from iblbake.render.paths.tracer import Tracer, trace_defines
 from iblbake.render.probes.rays import random_rotation, ray_directions, spherical_fibonacci
-from iblbake.render.probes.relocation import (ACTIVE, SURFACE_RAYS, beyond_bounds, off_surfaces, FIXED_RAYS, INACTIVE, MAX_OFFSET, RELOCATION_PASSES, classify,
-                                              inside_geometry, outside_camera_rooms, outside_sealed_room, relocate)
+from iblbake.render.probes.relocation import (ACTIVE, FIXED_RAYS, INACTIVE, MAX_OFFSET, RELOCATION_PASSES, SURFACE_RAYS,
+                                              beyond_bounds, classify, inside_geometry, off_surfaces,
+                                              outside_camera_rooms, outside_sealed_room, relocate)
 from iblbake.render.probes.volume import SAMPLING_KEYS, bake_settings, basis_options, sampled, volume_dict
 
-__all__ = ["SURFACE_RAYS", "off_surfaces", "switch_off", "OFF_SAID", "placement_warnings", "beyond_bounds", "AUTO_MAX_PROBES", "MAX_PROBES", "SCALE_RAYS", "auto_step", "probe_bytes", "scaled_grid", "ACTIVE", "BACKFACE_BLEND_LIMIT", "DEFAULT_LONGEST", "FILES", "FIXED_RAYS", "FORMAT", "Grid", "INACTIVE",
-           "INSIDE_WARN", "MAX_ATLAS_SIDE", "MAX_DISTANCE", "MAX_OFFSET", "RELOCATION_PASSES", "SAMPLING_KEYS", "SH_GLSL", "SPECULAR_TABLE",
-           "Tracer", "VERSION", "atlas", "bake", "bake_settings", "basis_glsl", "basis_manifest", "basis_options",
-           "classify", "data_texture", "glsl", "grid_of", "inside_geometry", "load", "manifest", "outside_camera_rooms", "outside_sealed_room",
-           "project", "random_rotation", "ray_directions", "read_manifest", "relocate", "sampled", "save", "scene_bounds",
-           "spherical_fibonacci", "trace_defines", "volume_dict", "warnings", "with_borders"]
+__all__ = ["ACTIVE", "AUTO_MAX_PROBES", "BACKFACE_BLEND_LIMIT", "DEFAULT_LONGEST", "FILES", "FIXED_RAYS", "FORMAT",
+           "INACTIVE", "INSIDE_WARN", "MAX_ATLAS_SIDE", "MAX_DISTANCE", "MAX_OFFSET", "MAX_PROBES", "OFF_SAID",
+           "RELOCATION_PASSES", "SAMPLING_KEYS", "SCALE_RAYS", "SH_GLSL", "SPECULAR_TABLE", "SURFACE_RAYS", "VERSION",
+           "Grid", "Tracer", "atlas", "auto_step", "bake", "bake_settings", "basis_glsl", "basis_manifest",
+           "basis_options", "beyond_bounds", "classify", "data_texture", "glsl", "grid_of", "inside_geometry", "load",
+           "manifest", "off_surfaces", "outside_camera_rooms", "outside_sealed_room", "placement_warnings",
+           "probe_bytes", "project", "random_rotation", "ray_directions", "read_manifest", "relocate", "sampled",
+           "save", "scaled_grid", "scene_bounds", "spherical_fibonacci", "switch_off", "trace_defines", "volume_dict",
+           "warnings", "with_borders"]
 
 
 def scaled_grid(tracer, coarse: Grid, settings: dict, arrays, camera):
@@ -93,7 +97,9 @@ def bake(job, settings: dict, progress=None) -> dict:
     if settings["min"] is None and settings["counts"] is None and settings["spacing"] is None:
         grid, placement = scaled_grid(tracer, grid, settings, arrays, camera)      # within the cap: no error
     if settings["relocation"]:
-        offset, at_grid = relocate(tracer, grid, settings, progress)
+        start = off_surfaces(tracer, grid.positions(), grid.spacing)
+        placement["on_surface"] = int(start.any(1).sum())        # moved off a surface they stood on
+        offset, at_grid = relocate(tracer, grid, settings, progress, start)
     else:
         offset, at_grid = np.zeros((grid.count, 3)), None
     dirs = ray_directions(settings["rays"], settings["seed"])

@@ -60,19 +60,20 @@ def off_surfaces(tracer: Tracer, positions, spacing) -> np.ndarray:
     return offset
 
 
-def relocate(tracer: Tracer, grid: Grid, settings: dict, progress=None):
+def relocate(tracer: Tracer, grid: Grid, settings: dict, progress=None, start=None):
     """Probe offsets (world units) after RELOCATION_PASSES of RTXGI's ProbeRelocationCS on the
     FIXED_RAYS unrotated rays: a probe whose rays meet back faces more often than the threshold is
     inside geometry and moves out past the nearest one; one nearer a front face than
     min_frontface_distance moves towards the farthest (RTXGI steps one world unit there; here
     min(min_frontface_distance, half that distance)); one far from everything moves back
-    towards its grid position. First, a probe standing on a surface is moved off it (off_surfaces). A move that would leave 45% of the cell is not made. Returns the
+    towards its grid position. First, a probe standing on a surface is moved off it (off_surfaces,
+    or `start`: those offsets, found already). A move that would leave 45% of the cell is not made. Returns the
     offsets and inside_geometry() at the grid positions."""
     dirs = spherical_fibonacci(FIXED_RAYS)
     base = grid.positions()
     spacing = np.asarray(grid.spacing)
     min_front = settings["min_frontface_distance"] * grid.unit
-    offset = off_surfaces(tracer, base, spacing)
+    offset = off_surfaces(tracer, base, spacing) if start is None else np.array(start, np.float64)
     at_grid = None
     for k in range(RELOCATION_PASSES):
         _, t, obj = tracer.trace(base + offset, dirs, False, progress, 0.2 * k / RELOCATION_PASSES,
