@@ -186,3 +186,32 @@ def test_probes_on_a_slab_of_no_thickness_are_moved_off_it(tmp_path, panoramas):
         assert on.sum() == 9
         assert (np.abs(vol.data[on, 1]) >= 0.24 * 2 / 3).all(), vol.data[on]
         assert vol.manifest["report"]["on_surface"] == 9
+
+
+def l_room_obj(path):
+    """An L-shaped room 2.4 high of quads of no thickness: a leg along x (4 long, 1.6 wide) open at
+    its end (x = 4), a closed leg along z; the camera in the z leg cannot see the opening."""
+    quads = [[(0, 0), (0, 4)], [(0, 0), (4, 0)], [(0, 4), (1.6, 4)], [(1.6, 1.6), (1.6, 4)], [(1.6, 1.6), (4, 1.6)]]
+    v, f = [], []
+    for (x0, z0), (x1, z1) in quads:                                # walls
+        v += [(x0, 0, z0), (x1, 0, z1), (x1, 2.4, z1), (x0, 2.4, z0)]
+    for y in (0, 2.4):                                              # floor and ceiling, two quads each
+        for (x0, z0), (x1, z1) in [((0, 0), (4, 1.6)), ((0, 1.6), (1.6, 4))]:
+            v += [(x0, y, z0), (x1, y, z0), (x1, y, z1), (x0, y, z1)]
+    for q in range(len(v) // 4):
+        f += [(4 * q + 1, 4 * q + 2, 4 * q + 3), (4 * q + 1, 4 * q + 3, 4 * q + 4)]
+    path.write_text("".join(f"v {a} {b} {c}\n" for a, b, c in v) + "".join(f"f {a} {b} {c}\n" for a, b, c in f))
+    return path
+
+
+def test_a_room_lit_round_a_corner_is_not_taken_for_sealed(tmp_path, panoramas):
+    """The corpus' L-shaped room (issue 59): none of the camera's rays escape (the opening is round
+    the corner), so every probe that saw the sky was taken for outside a sealed room and switched
+    off, those by the opening too; the frame fell back to the panorama's SH, 4-6x too bright. The
+    points the camera sees are asked too: several see the sky, the room is open, none is off."""
+    doc = {"camera": {"perspective": {"position": [0.8, 1.5, 3.6], "look_at": [1.2, 0.8, 0.8]}, "resolution": [8, 8]},
+           "environment": {"path": str(panoramas["studio"])}, "materials": {"m": {"specular": 0}},
+           "objects": [{"mesh": {"path": str(l_room_obj(tmp_path / "l.obj"))}, "material": "m"}],
+           "probes": {"rays": 64}}
+    vol = iblbake.bake_probes(load_scene(tmp_path, "l_room", doc), cache=tmp_path / "cache")
+    assert vol.manifest["report"]["outside_camera_room"] == 0

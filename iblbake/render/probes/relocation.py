@@ -127,21 +127,34 @@ def classify(t, dirs, grid: Grid, settings: dict) -> np.ndarray:
 
 
 SEALED_RAYS = 4096              # rays from the camera that must all meet a surface for its room to be sealed
+SEALED_POINTS = 256             # of the points they meet, those asked again, each with...
+SEALED_POINT_RAYS = 256         # ...this many rays
+SEALED_OPEN = 4                 # how many of those points must see the sky for the room to be open (a
+                                # crack where planes meet may let a ray from one or two through)
 
 
 def outside_sealed_room(tracer: Tracer, camera, obj) -> np.ndarray:
     """The probes outside a room that seals the camera in, whatever it is built of (planes of no
     thickness meeting at their edges, overlapping walls, meshes that are not closed): where none of
-    SEALED_RAYS rays from the camera escapes to the panorama, no light from outside reaches what it
-    sees, and a probe any of whose rays (obj: the object each met, -1 none) escapes is outside
-    (a new user's trial: six planes around a point light, the sky outside leaking onto the back
-    wall at +24% of the reference, bright seams at the edges). A window smaller than the rays'
-    spacing seen from the camera (4 pi / SEALED_RAYS sr) may be missed, its probes then off."""
+    SEALED_RAYS rays from the camera escapes to the panorama, and fewer than SEALED_OPEN of
+    SEALED_POINTS of the points they meet see it (a window round a corner, which the camera does not
+    see: an L-shaped room lit at the end of its other leg had every probe near the window off, the
+    frame on the panorama's SH, 4-6x too bright), no light from outside reaches what it sees, and a
+    probe any of whose rays (obj: the object each met, -1 none) escapes is outside (a new user's
+    trial: six planes around a point light, the sky outside leaking onto the back wall at +24% of
+    the reference, bright seams at the edges)."""
     escaped = (np.asarray(obj) < 0).any(1)
     if not escaped.any():                 # no probe sees the sky: nothing to ask the camera
         return escaped
-    _, _, seen = tracer.trace(np.asarray(camera, np.float64)[None], spherical_fibonacci(SEALED_RAYS), False)
-    return escaped if (seen >= 0).all() else np.zeros(len(obj), bool)
+    cam = np.asarray(camera, np.float64)
+    dirs = spherical_fibonacci(SEALED_RAYS)
+    _, t, seen = tracer.trace(cam[None], dirs, False)
+    if not (seen >= 0).all():
+        return np.zeros(len(obj), bool)
+    step = SEALED_RAYS // SEALED_POINTS
+    points = cam + dirs[::step] * (0.999 * np.abs(t[0, ::step]))[:, None]     # just before what they met
+    _, _, again = tracer.trace(points, spherical_fibonacci(SEALED_POINT_RAYS), False)
+    return escaped if (again < 0).any(1).sum() < SEALED_OPEN else np.zeros(len(obj), bool)
 
 
 def beyond_bounds(positions, bounds, camera) -> np.ndarray:
