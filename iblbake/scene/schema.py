@@ -453,7 +453,8 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "distance_exponent": Num(50.0, 1.0, 1000.0, doc="sharpness of the distance moments' cosine weights (RTXGI: 50)"),
         "visibility": Bool(True, doc="DDGI's weights: wrap shading and the Chebyshev test on the distance moments, "
                                      "so light does not leak through walls (false: trilinear interpolation alone)"),
-        "normal_bias": Num(0.1, 0.0, 1.0, doc="visibility: the sample point moved along the normal (spacing units)"),
+        "normal_bias": Num(0.25, 0.0, 1.0, doc="visibility: the sample point moved along the normal (spacing units; "
+                                                "0.1 let a slab of no thickness leak the storey above onto its underside)"),
         "view_bias": Num(0.1, 0.0, 1.0, doc="visibility: the sample point moved towards the viewer (spacing units)"),
         "relocation": Bool(True, doc="move a probe out of geometry or away from a surface it nearly touches, at most "
                                      "45% of a cell (RTXGI's relocation)"),
