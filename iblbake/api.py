@@ -891,8 +891,8 @@ class ProbeVolume:
 def bake_probes(scene, device: str | None = None, *, cache=None, warn=None, progress=None,
                 names: dict | None = None) -> ProbeVolume:
     """Bake a scene's irradiance probe volume (its `probes:` section; a scene without one gets
-    the section's defaults: 8 probes along the longest axis of an automatic grid over the scene's
-    bounds, 1024 rays each, octahedral irradiance) by tracing paths from every probe, and each
+    the section's defaults: an automatic grid over the scene's bounds, its spacing from the scene's
+    interior, 1024 rays each, octahedral irradiance) by tracing paths from every probe, and each
     reflection probe's capture; cached by content in `cache` (as render). names: what error
     messages call each argument (by default its name; the command line passes its flags)."""
 

@@ -75,13 +75,16 @@ IBL_INLINE float3 probe_irradiance_at(__global const float4 *probe_irr, int inde
 }
 
 /* How much of the probes' irradiance a point takes (RTXGI's DDGIGetVolumeBlendWeight): 1 inside
- * the box the probes span, falling linearly to 0 one spacing outside it along each axis (the rest
- * from what lies outside every volume: the panorama's SH). */
+ * the box of the probes' cells (half a cell beyond the outer probes along an axis with more than
+ * one: a probes.min/max box's faces, whose probes stand half a cell in), falling linearly to 0 one
+ * spacing outside it along each axis (the rest from what lies outside every volume: the
+ * panorama's SH). */
 IBL_INLINE float probe_volume_weight(float3 p, const float4 probe_origin, const float4 probe_spacing, const int probe_nx,
                                  const int probe_ny, const int probe_nz)
 {
-    const float3 half_extent = 0.5f * probe_spacing.xyz * (float3)(probe_nx - 1, probe_ny - 1, probe_nz - 1);
-    const float3 delta = fabs(p - (probe_origin.xyz + half_extent)) - half_extent;
+    const float3 n = (float3)(probe_nx, probe_ny, probe_nz);
+    const float3 half_extent = 0.5f * probe_spacing.xyz * select(n, (float3)(0.0f), isequal(n, (float3)(1.0f)));
+    const float3 delta = fabs(p - (probe_origin.xyz + 0.5f * probe_spacing.xyz * (n - 1.0f))) - half_extent;
     const float3 w = 1.0f - clamp(delta / probe_spacing.xyz, 0.0f, 1.0f);
     return w.x * w.y * w.z;
 }

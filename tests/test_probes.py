@@ -217,7 +217,7 @@ def sphere_scene(folder, sky, diffuse, rep="octahedral"):
         "environment": {"path": str(sky)},
         "materials": {"m": {"base_color": [0.8, 0.6, 0.4], "roughness": 1, "specular": 0}},
         "objects": [{"sphere": {"center": [0, 0, 0], "radius": 0.8}, "material": "m"}],
-        "probes": {"min": [-1, -1, -1], "max": [1, 1, 1], "counts": [2, 2, 2], "irradiance": rep},
+        "probes": {"min": [-2, -2, -2], "max": [2, 2, 2], "counts": [2, 2, 2], "irradiance": rep},   # probes at +-1
         "effects": {"diffuse": diffuse, "specular": "off"}})
 
 
@@ -350,7 +350,7 @@ def test_relocation_and_classification(tmp_path, rt, sky):
         "environment": {"path": str(sky)},
         "materials": {"m": {"base_color": [0.5, 0.5, 0.5]}},
         "objects": [{"sphere": {"center": [0.15, 0, 0], "radius": 0.3}, "material": "m"}],
-        "probes": {"min": [-2, -2, -2], "max": [6, 2, 2], "counts": [5, 3, 3], "rays": 128},
+        "probes": {"min": [-3, -3, -3], "max": [7, 3, 3], "counts": [5, 3, 3], "rays": 128},
         "effects": {"diffuse": "probes", "specular": "off"}})
     bakes = Bakes(tmp_path / "cache")
     render(sc, runtime=rt, cache=bakes)
@@ -370,7 +370,7 @@ def test_cli_writes_the_volume_and_reads_refuse_damage(tmp_path, sky):
     p = run_cli("probes", sc.source, "-o", out, "--cache", tmp_path / "cache", "--json", "-q")
     assert p.returncode == 0, p.stderr
     doc = json.loads(p.stdout)
-    assert doc["states"] == {"active": 8, "inactive": 0} and doc["rays_traced"] == 8 * (64 + probes.FIXED_RAYS) + SEALED_RAYS
+    assert doc["states"] == {"active": 8, "inactive": 0} and doc["rays_traced"] == 8 * (64 + probes.FIXED_RAYS + probes.SURFACE_RAYS) + SEALED_RAYS
     man = json.loads((out / "probes.json").read_text())
     vol = probes.load(out, man)
     assert vol["irradiance"].shape == (16, 32, 3) and np.abs(vol["irradiance"] - 0.75 * math.pi).max() < 2e-6
@@ -706,7 +706,7 @@ def test_surfaces_outside_the_volume_are_counted_and_said(tmp_path, rt, sky):
     shade = next(p for p in frame.report["passes"] if p["name"] == "shade")
     assert shade["probe_outside_volume"] == 0 and not said
     doc = yaml.safe_load(Path(sc.source).read_text())
-    doc["probes"].update(min=[-1, -1, -1], max=[-0.1, 1, 1], counts=[2, 2, 2])
+    doc["probes"].update(min=[-1.9, -2, -2], max=[-0.1, 2, 2], counts=[2, 2, 2])   # probes outside the sphere
     half = load_scene(tmp_path, "sphere_half_probes", doc)
     frame = render(half, runtime=rt, cache_root=tmp_path / "cache", warn=said.append)
     shade = next(p for p in frame.report["passes"] if p["name"] == "shade")

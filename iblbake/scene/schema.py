@@ -426,14 +426,18 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         })),
     "probes": Section(doc="the irradiance probe volume (DDGI) that `effects.diffuse: probes` reads and `iblbake probes` "
                           "bakes; lengths in units of the probe spacing are of its smallest axis", fields={
-        "min": Vec(**VEC3, doc="the first corner probe's position (with max: the box the probes span; omitted: auto, "
-                               "cubic cells whose probes overhang the scene's bounds by at most half a cell)"),
-        "max": Vec(**VEC3, doc="the opposite corner probe's position"),
+        "min": Vec(**VEC3, doc="the probe box's lower corner (with max: the box cut into cells, a probe at each "
+                               "cell's centre, half a cell in from its faces; omitted: auto, cubic cells whose probes "
+                               "overhang the scene's bounds by at least half a cell)"),
+        "max": Vec(**VEC3, doc="the probe box's upper corner"),
         "counts": OneOf((Num(None, 1, 256, integer=True), Vec(**VEC3, integer=True, lo=1, hi=256)), default=None,
                         doc="probes along x, y, z, or N: N along the longest axis and as many as keep the "
-                            "cells near cubes along the others (omitted: from spacing, else 8); an automatic grid "
-                            "takes N >= 3 (or >= 2 per axis), min and max >= 2 along an axis they differ on"),
-        "spacing": Num(None, 0.0, lo_open=True, doc="the distance between probes, where counts is omitted"),
+                            "cells near cubes along the others (omitted: from spacing, else the scene's interior "
+                            "scale, docs/conventions.md 'Irradiance probes'); an automatic grid takes N >= 3 (or "
+                            ">= 2 per axis), min and max >= 2 along an axis they differ on; at most 1048576 probes"),
+        "spacing": Num(None, 0.0, lo_open=True, doc="the distance between probes, where counts is omitted (omitted too: "
+                                                    "half the typical free distance of rays in the scene's enclosed "
+                                                    "spaces, at most 16384 probes, coarser above and said)"),
         "rays": Num(1024, 16, 1 << 16, integer=True,
                     doc="rays per probe, one path each (a spherical Fibonacci set, randomly rotated; DDGI traces "
                         "256 a frame and accumulates frames, a bake takes them at once: an unextracted sun's "
@@ -456,7 +460,8 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "distance_exponent": Num(50.0, 1.0, 1000.0, doc="sharpness of the distance moments' cosine weights (RTXGI: 50)"),
         "visibility": Bool(True, doc="DDGI's weights: wrap shading and the Chebyshev test on the distance moments, "
                                      "so light does not leak through walls (false: trilinear interpolation alone)"),
-        "normal_bias": Num(0.1, 0.0, 1.0, doc="visibility: the sample point moved along the normal (spacing units)"),
+        "normal_bias": Num(0.25, 0.0, 1.0, doc="visibility: the sample point moved along the normal (spacing units; "
+                                                "0.1 let a slab of no thickness leak the storey above onto its underside)"),
         "view_bias": Num(0.1, 0.0, 1.0, doc="visibility: the sample point moved towards the viewer (spacing units)"),
         "relocation": Bool(True, doc="move a probe out of geometry or away from a surface it nearly touches, at most "
                                      "45% of a cell (RTXGI's relocation)"),

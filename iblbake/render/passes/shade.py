@@ -11,6 +11,7 @@ from iblbake.render.passes.base import Buffer, Pass, mode_defines
 from iblbake.render.sources import SOURCES
 
 
+SKY_SAID = 0.1           # the share of a frame's samples with no active probe near (the panorama's SH) said
 OUTSIDE_SAID = 0.1       # the share of a frame's samples outside the probe volume that is said
 
 
@@ -74,6 +75,10 @@ class Shade(Pass):
             tot[5] += n
             if fx.diffuse == "probes":
                 extra.update(probe_fallback_nearest=tot[0], probe_fallback_sky=tot[1], probe_outside_volume=tot[4])
+                if ctx.tile_index == ctx.tile_count - 1 and tot[1] > SKY_SAID * tot[5]:
+                    ctx.warn(f"probes: {100 * tot[1] / tot[5]:.0f}% of the frame's samples found no active probe "
+                             "near them and took the panorama's SH (no light between surfaces there); see the "
+                             "bake's report (--report: probes off, by which rule) or give more probes.rays")
                 if ctx.tile_index == ctx.tile_count - 1 and tot[4] > OUTSIDE_SAID * tot[5]:
                     ctx.warn(f"probes: {100 * tot[4] / tot[5]:.0f}% of the frame's samples lie outside the probe "
                              "volume or on its fading edge and take the panorama's SH there; widen probes.min/max "

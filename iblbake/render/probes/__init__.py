@@ -19,6 +19,7 @@ kernels/probes.h, twin/probes.py. Conventions: docs/conventions.md "Irradiance p
 
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -27,20 +28,57 @@ from iblbake.errors import IblbakeError
 from iblbake.render.probes.files import (FILES, FORMAT, VERSION, basis_manifest, data_texture, load, manifest,
                                          read_manifest, save)
 from iblbake.render.probes.glsl import SH_GLSL, SPECULAR_TABLE, basis_glsl, glsl
-from iblbake.render.probes.grid import DEFAULT_LONGEST, Grid, grid_of, scene_bounds
+from iblbake.render.probes.grid import (AUTO_MAX_PROBES, DEFAULT_LONGEST, MAX_PROBES, SCALE_RAYS, Grid, auto_step,
+                                        axis_counts, grid_of, probe_bytes, scene_bounds)
 from iblbake.render.probes.project import BACKFACE_BLEND_LIMIT, MAX_DISTANCE, atlas, project, with_borders
 from iblbake.render.paths.tracer import Tracer, trace_defines
 from iblbake.render.probes.rays import random_rotation, ray_directions, spherical_fibonacci
-from iblbake.render.probes.relocation import (ACTIVE, FIXED_RAYS, INACTIVE, MAX_OFFSET, RELOCATION_PASSES, classify,
-                                              inside_geometry, outside_camera_rooms, outside_sealed_room, relocate)
+from iblbake.render.probes.relocation import (ACTIVE, FIXED_RAYS, INACTIVE, MAX_OFFSET, RELOCATION_PASSES, SURFACE_RAYS,
+                                              beyond_bounds, classify, inside_geometry, off_surfaces,
+                                              outside_camera_rooms, outside_sealed_room, relocate)
 from iblbake.render.probes.volume import SAMPLING_KEYS, bake_settings, basis_options, sampled, volume_dict
 
-__all__ = ["ACTIVE", "BACKFACE_BLEND_LIMIT", "DEFAULT_LONGEST", "FILES", "FIXED_RAYS", "FORMAT", "Grid", "INACTIVE",
-           "INSIDE_WARN", "MAX_ATLAS_SIDE", "MAX_DISTANCE", "MAX_OFFSET", "RELOCATION_PASSES", "SAMPLING_KEYS", "SH_GLSL", "SPECULAR_TABLE",
-           "Tracer", "VERSION", "atlas", "bake", "bake_settings", "basis_glsl", "basis_manifest", "basis_options",
-           "classify", "data_texture", "glsl", "grid_of", "inside_geometry", "load", "manifest", "outside_camera_rooms", "outside_sealed_room",
-           "project", "random_rotation", "ray_directions", "read_manifest", "relocate", "sampled", "save", "scene_bounds",
-           "spherical_fibonacci", "trace_defines", "volume_dict", "warnings", "with_borders"]
+__all__ = ["ACTIVE", "AUTO_MAX_PROBES", "BACKFACE_BLEND_LIMIT", "DEFAULT_LONGEST", "FILES", "FIXED_RAYS", "FORMAT",
+           "INACTIVE", "INSIDE_WARN", "MAX_ATLAS_SIDE", "MAX_DISTANCE", "MAX_OFFSET", "MAX_PROBES", "OFF_SAID",
+           "RELOCATION_PASSES", "SAMPLING_KEYS", "SCALE_RAYS", "SH_GLSL", "SPECULAR_TABLE", "SURFACE_RAYS", "VERSION",
+           "Grid", "Tracer", "atlas", "auto_step", "bake", "bake_settings", "basis_glsl", "basis_manifest",
+           "basis_options", "beyond_bounds", "classify", "data_texture", "glsl", "grid_of", "inside_geometry", "load",
+           "manifest", "off_surfaces", "outside_camera_rooms", "outside_sealed_room", "placement_warnings",
+           "probe_bytes", "project", "random_rotation", "ray_directions", "read_manifest", "relocate", "sampled",
+           "save", "scaled_grid", "scene_bounds", "spherical_fibonacci", "switch_off", "trace_defines", "volume_dict",
+           "warnings", "with_borders"]
+
+
+def scaled_grid(tracer, coarse: Grid, settings: dict, arrays, camera):
+    """An automatic grid whose spacing is the scene's interior scale (grid.auto_step, from
+    SCALE_RAYS rays from the coarse grid's probes and the camera), capped at AUTO_MAX_PROBES; and
+    what the report says of it (the step the interior asked for, whether the cap coarsened it)."""
+    points = np.concatenate([coarse.positions(), np.asarray(camera, np.float64)[None]])
+    _, t, _ = tracer.trace(points, spherical_fibonacci(SCALE_RAYS), False)
+    hint = auto_step(t)
+    grid = grid_of(settings, arrays, hint)
+    info = {"interior_step": None if hint is None else round(hint, 6)}
+    if hint is not None and grid.unit > min(hint, coarse.unit) * 1.0001:
+        lo, hi = scene_bounds(arrays)
+        info["capped"] = {"step": round(min(hint, coarse.unit), 6),
+                          "probes": math.prod(axis_counts(hi - lo, min(hint, coarse.unit), 2))}
+    return grid, info
+
+
+def switch_off(tracer, grid: Grid, offset, t, dirs, obj, settings: dict, camera):
+    """(each probe's state, how many each rule switched off, the probes outside the camera's room):
+    classification (inside geometry; no surface within its cells), outside the camera's closed or
+    sealed room, beyond the scene's bounds with the camera within them (relocation.beyond_bounds)."""
+    arrays = tracer.job.arrays
+    states = classify(t, dirs, grid, settings) if settings["classification"] else np.zeros(grid.count, int)
+    inside = (states == INACTIVE) & ((t < 0).mean(1) > settings["backface_threshold"])
+    empty = (states == INACTIVE) & ~inside
+    pos = grid.positions() + offset
+    outside = outside_camera_rooms(pos, arrays, camera) | outside_sealed_room(tracer, camera, obj)
+    beyond = beyond_bounds(grid.positions(), scene_bounds(arrays), camera) & ~outside & (states != INACTIVE)
+    off_by = {"inside_geometry": int(inside.sum()), "no_surface_near": int(empty.sum()),
+              "outside_camera_room": int((outside & (states != INACTIVE)).sum()), "beyond_bounds": int(beyond.sum())}
+    return np.where(outside | beyond, INACTIVE, states), off_by, outside
 
 
 def bake(job, settings: dict, progress=None) -> dict:
@@ -48,23 +86,26 @@ def bake(job, settings: dict, progress=None) -> dict:
     the probes unit asks for it): a dict of the arrays (as load() returns) and a report."""
     t0 = time.perf_counter()
     arrays = job.arrays
+    from iblbake.scene import pack
+    camera = pack.camera_vectors(job.scene.data["camera"])[0]
     try:
         grid = grid_of(settings, arrays)
     except IblbakeError as e:             # said as the scene's other errors are: naming its file
         raise type(e)(f"{job.scene.source}: {e}") from None
     tracer = Tracer(job, settings)
+    placement = {}
+    if settings["min"] is None and settings["counts"] is None and settings["spacing"] is None:
+        grid, placement = scaled_grid(tracer, grid, settings, arrays, camera)      # within the cap: no error
     if settings["relocation"]:
-        offset, at_grid = relocate(tracer, grid, settings, progress)
+        start = off_surfaces(tracer, grid.positions(), grid.spacing)
+        placement["on_surface"] = int(start.any(1).sum())        # moved off a surface they stood on
+        offset, at_grid = relocate(tracer, grid, settings, progress, start)
     else:
         offset, at_grid = np.zeros((grid.count, 3)), None
     dirs = ray_directions(settings["rays"], settings["seed"])
     base = 0.2 if settings["relocation"] else 0.0
     radiance, t, obj = tracer.trace(grid.positions() + offset, dirs, True, progress, base, 1.0 - base)
-    states = classify(t, dirs, grid, settings) if settings["classification"] else np.zeros(grid.count, int)
-    from iblbake.scene import pack
-    camera = pack.camera_vectors(job.scene.data["camera"])[0]
-    outside = outside_camera_rooms(grid.positions() + offset, arrays, camera) | outside_sealed_room(tracer, camera, obj)
-    states = np.where(outside, INACTIVE, states)
+    states, off_by, outside = switch_off(tracer, grid, offset, t, dirs, obj, settings, camera)
     irr, dist = project(radiance, t, dirs, grid, settings)
     data = np.concatenate([offset, states[:, None].astype(np.float64)], 1)
     inside, who = inside_geometry(t, obj, settings["backface_threshold"])
@@ -74,8 +115,10 @@ def bake(job, settings: dict, progress=None) -> dict:
     objects = {}
     for o in who[inside]:
         objects[int(o)] = objects.get(int(o), 0) + 1
-    report = {"probes": grid.count, "rays_per_probe": settings["rays"], "rays_traced": tracer.rays_traced,
-              "inactive": int((states == INACTIVE).sum()), "relocated": int((np.abs(offset).sum(1) > 0).sum()),
+    report = {"probes": grid.count, **placement, "bytes": grid.count * probe_bytes(settings),
+              "rays_per_probe": settings["rays"], "rays_traced": tracer.rays_traced,
+              "inactive": int((states == INACTIVE).sum()), "off_by": off_by,
+              "relocated": int((np.abs(offset).sum(1) > 0).sum()),
               "inside_geometry": int(inside.sum()), "outside_camera_room": int(outside.sum()),
               "inside_objects": {str(k): v for k, v in sorted(objects.items(), key=lambda kv: -kv[1])},
               "seconds": round(time.perf_counter() - t0, 4)}
@@ -86,6 +129,38 @@ INSIDE_WARN = 0.25      # the share of probes inside geometry (at their grid pos
 
 
 MAX_ATLAS_SIDE = 16384       # texels: the largest 2D texture most GPUs take (Vulkan's and D3D12's limit)
+
+
+OFF_SAID = 0.75         # the share of probes off (by any rule) that is said, with each rule's count
+RULES = {"inside_geometry": "inside geometry", "no_surface_near": "no surface within their cells (classification)",
+         "outside_camera_room": "outside the camera's closed room",
+         "beyond_bounds": "beyond the scene's bounds, the camera within them"}
+
+
+def placement_warnings(report: dict) -> list:
+    """The grid's placement said: an automatic grid the AUTO_MAX_PROBES cap made coarser than the
+    scene's interior asks (the count and bytes it would have taken), and more than OFF_SAID of the
+    probes within the scene's bounds off, by which rule (those beyond the bounds, off around an
+    interior the camera is in, are counted in the report, not said)."""
+    out = []
+    cap = report.get("capped")
+    if cap:
+        out.append(f"probes: the scene's interior asks a spacing of {cap['step']:.4g} ({cap['probes']} probes, "
+                   f"{cap['probes'] * report['bytes'] // max(report['probes'], 1) / 2**20:.0f} MiB); the automatic "
+                   f"grid is capped at {AUTO_MAX_PROBES} probes, so {report['probes']} probes "
+                   f"({report['bytes'] / 2**20:.0f} MiB) stand coarser; give probes.spacing (or probes.min/max "
+                   "around the part the camera sees) for the finer grid")
+    by = report.get("off_by", {})
+    beyond = by.get("beyond_bounds", 0)        # the shell around an interior: off by design, not said
+    n, off = report["probes"] - beyond, report.get("inactive", 0) - beyond
+    if n > 0 and off > OFF_SAID * n:
+        why = ", ".join(f"{c} {RULES[k]}" for k, c in by.items() if c and k != "beyond_bounds")
+        out.append(f"probes: {off} of the {n} probes within the scene's bounds ({100 * off / n:.0f}%) are off "
+                   f"({why or 'classification'}); "
+                   "the frame falls back to the nearest active probes, else the panorama's SH"
+                   + ("; give more probes.rays (classification needs rays that meet a surface near the probe)"
+                      if report.get("off_by", {}).get("no_surface_near", 0) > off / 2 else ""))
+    return out
 
 
 def warnings(report: dict, scene_data: dict, volume: dict | None = None) -> list:
@@ -104,6 +179,7 @@ def warnings(report: dict, scene_data: dict, volume: dict | None = None) -> list
             if max(w, h) > MAX_ATLAS_SIDE:
                 out.append(f"probes: the {what} atlas is {w} x {h} texels, over the {MAX_ATLAS_SIDE} most GPUs take "
                            f"in one texture; give fewer probes (probes.counts, probes.spacing) or texels")
+    out += placement_warnings(report)
     n, inside = report["probes"], report.get("inside_geometry", 0)
     if not n or inside <= INSIDE_WARN * n:
         return out

@@ -119,8 +119,9 @@ vec3 probeOwnSpecular(int index, vec3 n, vec3 v, float roughness) {{
 #endif
 
 float probeVolumeWeight(vec3 p) {{
-    vec3 halfExtent = 0.5 * PROBE_SPACING * vec3(PROBE_COUNTS - 1);
-    vec3 delta = abs(p - (PROBE_ORIGIN + halfExtent)) - halfExtent;
+    vec3 n = vec3(PROBE_COUNTS);
+    vec3 halfExtent = 0.5 * PROBE_SPACING * n * vec3(notEqual(n, vec3(1.0)));   // the cells' box
+    vec3 delta = abs(p - (PROBE_ORIGIN + 0.5 * PROBE_SPACING * (n - 1.0))) - halfExtent;
     vec3 w = 1.0 - clamp(delta / PROBE_SPACING, 0.0, 1.0);
     return w.x * w.y * w.z;
 }}

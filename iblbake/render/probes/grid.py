@@ -23,7 +23,7 @@ class Grid:
 
     @property
     def count(self) -> int:
-        return int(np.prod(self.counts))
+        return math.prod(self.counts)
 
     @property
     def unit(self) -> float:
@@ -64,12 +64,64 @@ def scene_bounds(arrays) -> tuple | None:
     return lo, hi
 
 
-def grid_of(settings: dict, arrays) -> Grid:
-    """The probe grid a scene's `probes` section asks for (docs/scene.md): probes at min and at max
-    (counts along each axis, or one spacing apart), or automatically cubic cells (N along the
-    longest axis, or `spacing`) whose probes overhang the scene's bounds on every side by at least
-    half a cell, so that every surface has probes on both of its sides: the outer probes of a
-    wall or floor on the bounds see its outer face (RTXGI's volumes enclose the scene)."""
+MAX_PROBES = 1 << 20             # any grid: the buffers and atlases a device takes
+AUTO_MAX_PROBES = 1 << 14        # an automatic grid's cap (~80 MiB of atlases at the default texels): coarser above
+SCALE_RAYS = 64                  # rays from each coarse probe and the camera that measure the interior's scale
+ENCLOSED = 0.5                   # the share of those rays meeting a front face that makes a point enclosed
+INTERIOR_FRACTION = 0.5          # the automatic spacing: this share of the enclosed points' median free distance
+
+
+def probe_bytes(settings: dict) -> int:
+    """Bytes a probe takes in the volume's float4 buffers (irradiance and distance tiles with their
+    borders, its data row): what a grid's count costs, said up front."""
+    irr = (settings["irradiance_texels"] + 2) ** 2 if settings["irradiance"] == "octahedral" else 16
+    return 16 * (irr + (settings["distance_texels"] + 2) ** 2 + 1)
+
+
+def axis_counts(extent, step, plus: int) -> list:
+    """Probes along each axis, Python ints (a tiny spacing gives a count no int64 holds, and a
+    wrapped count passed the size check once): ceil(extent / step) + plus, or None where that is
+    not finite (more probes than any grid holds)."""
+    out = []
+    for e, s in zip(np.broadcast_to(extent, 3), np.broadcast_to(step, 3)):
+        q = float(e) / float(s)
+        out.append(math.ceil(q - 1e-9) + plus if math.isfinite(q) else None)
+    return out
+
+
+def check_count(n: list, settings: dict | None = None) -> None:
+    """Refuses a grid over MAX_PROBES with its true count (Python ints: no wrap)."""
+    if any(c is None for c in n) or math.prod(n) > MAX_PROBES:
+        total = "more than 10^308" if any(c is None for c in n) else str(math.prod(n))
+        shape = " x ".join("inf" if c is None else str(c) for c in n)
+        raise InputError(f"probes: {total} probes ({shape}); give fewer counts or a larger probes.spacing "
+                         f"(at most {MAX_PROBES})")
+
+
+def auto_step(t) -> float | None:
+    """The spacing the interior's scale asks for, from SCALE_RAYS rays' signed distances t (points,
+    rays; +inf a miss, < 0 a back face) traced from the coarse grid's probes and the camera: of the
+    points enclosed (ENCLOSED of their rays meet a front face), INTERIOR_FRACTION of the median over
+    them of their median ray length (a miss the longest). A corridor 2 wide gets cells of ~0.65, a
+    few across its width (a grid by the longest axis had none); None where no point is enclosed (an
+    open scene keeps the coarse grid)."""
+    t = np.asarray(t, np.float64)
+    front = (t >= 0) & np.isfinite(t)
+    enclosed = (front.mean(1) >= ENCLOSED) & ((t < 0).mean(1) < 0.25)
+    if not enclosed.any():
+        return None
+    free = np.median(np.where(t[enclosed] < 0, np.inf, t[enclosed]), axis=1)
+    return INTERIOR_FRACTION * float(np.median(free))
+
+
+def grid_of(settings: dict, arrays, step_hint: float | None = None) -> Grid:
+    """The probe grid a scene's `probes` section asks for (docs/scene.md). With min and max: the box
+    cut into cells (counts along each axis, or cells about one spacing wide), a probe at each cell's
+    centre, so that none stands on the box's faces (a box drawn on a room's walls left probes on the
+    walls, seeing the sky through them). Automatic: cubic cells (N along the longest axis, or
+    `spacing`, or step_hint: the scene's interior scale, auto_step) whose probes overhang the
+    scene's bounds on every side by at least half a cell, so that every surface has probes on both
+    of its sides (RTXGI's volumes enclose the scene), at most AUTO_MAX_PROBES (coarser above)."""
     if (settings["min"] is None) != (settings["max"] is None):
         raise InputError("probes: give both min and max, or neither (auto: the scene's bounds)")
     counts = settings["counts"]
@@ -80,48 +132,57 @@ def grid_of(settings: dict, arrays) -> Grid:
                                "give max >= min")
         extent = hi - lo
         if isinstance(counts, list):
-            n = np.asarray(counts, int)
-            short = [k for k in range(3) if extent[k] > 0 and n[k] < 2]
+            short = [k for k in range(3) if extent[k] > 0 and counts[k] < 2]
             if short:
                 raise InputError(f"probes.counts {counts}: probes.min and probes.max differ along "
-                                   f"{'xyz'[short[0]]}, so a probe at each takes 2; give at least 2 there, or the "
+                                   f"{'xyz'[short[0]]}, so the box takes 2 cells there; give at least 2 there, or the "
                                    f"same min and max")
+            n = [int(c) if extent[k] > 0 else 1 for k, c in enumerate(counts)]
         else:
             if counts is not None and counts < 2 and extent.max() > 0:
-                raise InputError(f"probes.counts {counts}: probes at min and at max take 2 along the longest axis; "
+                raise InputError(f"probes.counts {counts}: the box takes 2 cells along its longest axis; "
                                    f"give at least 2")
-            step = settings["spacing"] or max(float(extent.max()), 1e-6) / max((counts or DEFAULT_LONGEST) - 1, 1)
-            n = np.round(extent / step).astype(int) + 1
-        n = np.where(extent > 0, np.maximum(n, 2), 1)
-        spacing = np.where(n > 1, extent / np.maximum(n - 1, 1), 1.0)
-        origin = lo
+            step = settings["spacing"] or max(float(extent.max()), 1e-6) / (counts or DEFAULT_LONGEST)
+            n = [max(c, 2) if e > 0 and c is not None else (1 if e <= 0 else c)
+                 for c, e in zip(axis_counts(extent, step, 0), extent)]
+        check_count(n)
+        cells = np.asarray(n, np.float64)
+        spacing = np.where(extent > 0, extent / cells, 1.0)
+        origin = lo + np.where(extent > 0, 0.5 * spacing, 0.0)      # cell centres: inset half a cell
+        return Grid(tuple(float(x) for x in origin), tuple(float(x) for x in spacing), tuple(n))
+    b = scene_bounds(arrays)
+    if b is None:
+        raise InputError("probes: the scene has no bounded geometry for an automatic grid; "
+                           "give probes.min and probes.max")
+    lo, hi = b
+    extent = hi - lo
+    # an automatic grid overhangs the bounds on every side: its probes are N along the longest
+    # axis (N - 2 cells over the bounds, half a cell beyond each end), so N >= 3 there, and
+    # counts given per axis put probes on both sides of the scene along each (>= 2)
+    if isinstance(counts, list):               # each axis its own spacing
+        if min(counts) < 2:
+            raise InputError(f"probes.counts {counts}: an automatic grid puts probes on both sides of the "
+                               f"scene along each axis; give at least 2 per axis, or probes.min and probes.max")
+        n = [int(c) for c in counts]
+        step = np.where(extent > 0, extent / np.maximum(np.asarray(n) - 2, 0.5), max(float(extent.max()), 1e-6))
     else:
-        b = scene_bounds(arrays)
-        if b is None:
-            raise InputError("probes: the scene has no bounded geometry for an automatic grid; "
-                               "give probes.min and probes.max")
-        lo, hi = b
-        extent = hi - lo
-        # an automatic grid overhangs the bounds on every side: its probes are N along the longest
-        # axis (N - 2 cells over the bounds, half a cell beyond each end), so N >= 3 there, and
-        # counts given per axis put probes on both sides of the scene along each (>= 2)
-        if isinstance(counts, list):               # each axis its own spacing
-            if min(counts) < 2:
-                raise InputError(f"probes.counts {counts}: an automatic grid puts probes on both sides of the "
-                                   f"scene along each axis; give at least 2 per axis, or probes.min and probes.max")
-            n = np.asarray(counts, int)
-            step = np.where(extent > 0, extent / np.maximum(n - 2, 0.5), max(float(extent.max()), 1e-6))
+        longest = counts or DEFAULT_LONGEST
+        if longest < 3:
+            raise InputError(f"probes.counts {longest}: an automatic grid overhangs the scene by half a cell on "
+                               f"every side, so it needs at least 3 probes along its longest axis; give 3 or "
+                               f"more, or probes.min and probes.max")
+        coarse = max(float(extent.max()), 1e-6) / (longest - 2)
+        if settings["spacing"]:
+            s = float(settings["spacing"])
+        elif counts is None and step_hint is not None:
+            s = min(coarse, step_hint)
+            while math.prod(axis_counts(extent, s, 2)) > AUTO_MAX_PROBES:     # the cap: coarser cells
+                s *= 1.05
         else:
-            longest = counts or DEFAULT_LONGEST
-            if longest < 3:
-                raise InputError(f"probes.counts {longest}: an automatic grid overhangs the scene by half a cell on "
-                                   f"every side, so it needs at least 3 probes along its longest axis; give 3 or "
-                                   f"more, or probes.min and probes.max")
-            step = np.full(3, settings["spacing"] or max(float(extent.max()), 1e-6) / (longest - 2))
-            n = np.ceil(extent / step - 1e-9).astype(int) + 2
-        spacing = step
-        origin = (lo + hi) / 2 - (n - 1) * step / 2         # centred: at least half a cell over each face
-    if n.prod() > 1 << 20:
-        raise InputError(f"probes: {int(n.prod())} probes ({' x '.join(map(str, n))}); "
-                           "give fewer counts or a larger spacing (at most 1048576)")
+            s = coarse
+        step = np.full(3, s)
+        n = axis_counts(extent, step, 2)
+    check_count(n)
+    spacing = step
+    origin = (lo + hi) / 2 - (np.asarray(n) - 1) * step / 2         # centred: at least half a cell over each face
     return Grid(tuple(float(x) for x in origin), tuple(float(x) for x in spacing), tuple(int(c) for c in n))

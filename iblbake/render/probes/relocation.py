@@ -30,19 +30,50 @@ def inside_geometry(t, obj, threshold: float):
     return inside, who
 
 
-def relocate(tracer: Tracer, grid: Grid, settings: dict, progress=None):
+ON_SURFACE = 1e-3               # of a cell: a probe nearer a surface than this along an axis stands on it
+OFF_SURFACE = 0.25              # of a cell: how far such a probe is moved off it (at most half the free way)
+SURFACE_RAYS = 12               # off_surfaces' rays a probe: two from either side along each axis
+
+
+def off_surfaces(tracer: Tracer, positions, spacing) -> np.ndarray:
+    """Offsets that move the probes standing on a surface off it, along the axis it crosses, to its
+    freer side: OFF_SURFACE of a cell, at most half the way to the next surface. A probe on a
+    surface of no thickness sees through it where its rays leave at a hair's angle, or not, as
+    rounding falls (both sides of a wall or a slab, whichever its winding; relocation reads no
+    back face there). Found by two rays along each axis from just behind the probe (a surface
+    within ON_SURFACE of a cell of it, a plane tilted up to 60 degrees from the axis's normal too)."""
+    pos = np.asarray(positions, np.float64)
+    offset = np.zeros_like(pos)
+    for k in range(3):
+        eps = ON_SURFACE * float(spacing[k])
+        d = np.eye(3)[k]
+        hits, free = [], []
+        for sign in (1.0, -1.0):
+            _, t, _ = tracer.trace(pos - sign * eps * d, (sign * d)[None], False)
+            hits.append(np.abs(t[:, 0]) < 2 * eps)
+            _, t, _ = tracer.trace(pos + sign * eps * d, (sign * d)[None], False)
+            free.append(np.abs(t[:, 0]))
+        on = hits[0] & hits[1] & ~offset.any(1)
+        sign = np.where(free[0] >= free[1], 1.0, -1.0)
+        step = np.minimum(OFF_SURFACE * float(spacing[k]), 0.5 * np.maximum(free[0], free[1]))
+        offset[on, k] = (sign * step)[on]
+    return offset
+
+
+def relocate(tracer: Tracer, grid: Grid, settings: dict, progress=None, start=None):
     """Probe offsets (world units) after RELOCATION_PASSES of RTXGI's ProbeRelocationCS on the
     FIXED_RAYS unrotated rays: a probe whose rays meet back faces more often than the threshold is
     inside geometry and moves out past the nearest one; one nearer a front face than
     min_frontface_distance moves towards the farthest (RTXGI steps one world unit there; here
     min(min_frontface_distance, half that distance)); one far from everything moves back
-    towards its grid position. A move that would leave 45% of the cell is not made. Returns the
+    towards its grid position. First, a probe standing on a surface is moved off it (off_surfaces,
+    or `start`: those offsets, found already). A move that would leave 45% of the cell is not made. Returns the
     offsets and inside_geometry() at the grid positions."""
     dirs = spherical_fibonacci(FIXED_RAYS)
     base = grid.positions()
     spacing = np.asarray(grid.spacing)
     min_front = settings["min_frontface_distance"] * grid.unit
-    offset = np.zeros_like(base)
+    offset = off_surfaces(tracer, base, spacing) if start is None else np.array(start, np.float64)
     at_grid = None
     for k in range(RELOCATION_PASSES):
         _, t, obj = tracer.trace(base + offset, dirs, False, progress, 0.2 * k / RELOCATION_PASSES,
@@ -96,21 +127,54 @@ def classify(t, dirs, grid: Grid, settings: dict) -> np.ndarray:
 
 
 SEALED_RAYS = 4096              # rays from the camera that must all meet a surface for its room to be sealed
+SEALED_POINTS = 256             # of the points they meet, those asked again, each with...
+SEALED_POINT_RAYS = 256         # ...this many rays
+SEALED_OPEN = 4                 # how many of those points must see the sky for the room to be open (a
+                                # crack where planes meet may let a ray from one or two through)
 
 
 def outside_sealed_room(tracer: Tracer, camera, obj) -> np.ndarray:
     """The probes outside a room that seals the camera in, whatever it is built of (planes of no
     thickness meeting at their edges, overlapping walls, meshes that are not closed): where none of
-    SEALED_RAYS rays from the camera escapes to the panorama, no light from outside reaches what it
-    sees, and a probe any of whose rays (obj: the object each met, -1 none) escapes is outside
-    (a new user's trial: six planes around a point light, the sky outside leaking onto the back
-    wall at +24% of the reference, bright seams at the edges). A window smaller than the rays'
-    spacing seen from the camera (4 pi / SEALED_RAYS sr) may be missed, its probes then off."""
+    SEALED_RAYS rays from the camera escapes to the panorama, and fewer than SEALED_OPEN of
+    SEALED_POINTS of the points they meet see it (a window round a corner, which the camera does not
+    see: an L-shaped room lit at the end of its other leg had every probe near the window off, the
+    frame on the panorama's SH, 4-6x too bright), no light from outside reaches what it sees, and a
+    probe any of whose rays (obj: the object each met, -1 none) escapes is outside (a new user's
+    trial: six planes around a point light, the sky outside leaking onto the back wall at +24% of
+    the reference, bright seams at the edges)."""
     escaped = (np.asarray(obj) < 0).any(1)
     if not escaped.any():                 # no probe sees the sky: nothing to ask the camera
         return escaped
-    _, _, seen = tracer.trace(np.asarray(camera, np.float64)[None], spherical_fibonacci(SEALED_RAYS), False)
-    return escaped if (seen >= 0).all() else np.zeros(len(obj), bool)
+    cam = np.asarray(camera, np.float64)
+    dirs = spherical_fibonacci(SEALED_RAYS)
+    _, t, seen = tracer.trace(cam[None], dirs, False)
+    if not (seen >= 0).all():
+        return np.zeros(len(obj), bool)
+    step = SEALED_RAYS // SEALED_POINTS
+    points = cam + dirs[::step] * (0.999 * np.abs(t[0, ::step]))[:, None]     # just before what they met
+    _, _, again = tracer.trace(points, spherical_fibonacci(SEALED_POINT_RAYS), False)
+    return escaped if (again < 0).any(1).sum() < SEALED_OPEN else np.zeros(len(obj), bool)
+
+
+def beyond_bounds(positions, bounds, camera) -> np.ndarray:
+    """The probes beyond the scene's bounds (grid.scene_bounds) where the camera is within them: what
+    the camera sees faces inwards there, so they light nothing it sees, but beside a wall on the
+    bounds, a surface of no thickness, they see the sky through it and leak it in at the edges where
+    walls meet (the moments cannot tell a point a hair inside the wall from the wall). A new
+    user's corridor, open at one end: its closed far end 11-15x too bright, bright seams along every
+    edge. None where the camera is outside the bounds (what it sees may face outwards there; a
+    camera merely within the bounds along one axis still sees, say, a sphere's underside, which
+    the probes below it light)."""
+    pos = np.asarray(positions, np.float64)
+    if bounds is None:
+        return np.zeros(len(pos), bool)
+    lo, hi = (np.asarray(b, np.float64) for b in bounds)
+    tol = 1e-6 * max(float((hi - lo).max()), 1e-9)
+    cam = np.asarray(camera, np.float64)
+    if np.any(cam < lo - tol) or np.any(cam > hi + tol):
+        return np.zeros(len(pos), bool)
+    return ((pos < lo - tol) | (pos > hi + tol)).any(1)
 
 
 def outside_camera_rooms(positions, arrays, camera) -> np.ndarray:

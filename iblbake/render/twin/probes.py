@@ -91,10 +91,12 @@ def irradiance_at(volume, index, n):
 
 
 def volume_weight(volume, p):
-    """Twin of probe_volume_weight (RTXGI's DDGIGetVolumeBlendWeight)."""
+    """Twin of probe_volume_weight (RTXGI's DDGIGetVolumeBlendWeight): 1 inside the box of the
+    probes' cells (half a cell beyond the outer probes along an axis with more than one)."""
     spacing = np.asarray(volume["spacing"], np.float64)
-    half = 0.5 * spacing * (np.asarray(volume["counts"]) - 1)
-    delta = np.abs(p - (np.asarray(volume["origin"]) + half)) - half
+    n = np.asarray(volume["counts"], np.float64)
+    half = 0.5 * spacing * np.where(n > 1, n, 0.0)
+    delta = np.abs(p - (np.asarray(volume["origin"]) + 0.5 * spacing * (n - 1))) - half
     return (1 - np.clip(delta / spacing, 0, 1)).prod(-1)
 
 
