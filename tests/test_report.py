@@ -232,6 +232,11 @@ def test_sheet_page_reads_out_the_exr_values(tmp_path, sky, browser):
                   [{"eval": f"{json.dumps(px)}.map(([x, y]) => (IBL.readout(x, y), "
                             "[document.getElementById('roA').textContent, document.getElementById('roB').textContent]))"}],
                   tmp_path)
+    heads = manifest_of(tmp_path / "page" / "index.html")["columns"]
+    assert ["column", "column: effects.sh_bands"] in heads     # the table names the swept key
+    keys = browser(tmp_path / "page" / "index.html", [{"eval": "document.getElementById('keys').textContent"}],
+                   tmp_path)["results"][0]
+    assert "next cell" in keys and "plot" not in keys and "reference" not in keys
     cells = [images.read_exr(tmp_path / "fr" / f"r00_c{c:02d}.exr") for c in (0, 1)]
     for (x, y), lines in zip(px, out["results"][0]):
         for line, exr in zip(lines, cells):

@@ -186,4 +186,6 @@ def sheet_page(results, scenes, rows_axis, cols_axis, title: str) -> tuple:
                "column": cols_axis.steps[c.column].label if cols_axis.steps else "", "time_ms": 1000 * r.pass_seconds}
         entries.append(Entry(row["label"], r.frame.hdr, None, "", None, False, row, effects=sc.data["effects"]))
     effects = entries[0].effects if entries else {}
-    return Page(title, entries, effects, "sheet", SHEET_COLUMNS), left_out
+    columns = (SHEET_COLUMNS[0], ("row", f"row: {rows_axis.title}" if rows_axis.steps else "row"),
+               ("column", f"column: {cols_axis.title}" if cols_axis.steps else "column"), SHEET_COLUMNS[3])
+    return Page(title, entries, effects, "sheet", columns), left_out

@@ -386,6 +386,9 @@ function regions() {
 
 // ---- controls and keys ----
 function controls() {
+  if (D.kind === 'sheet')          // a sheet has no references and no plot
+    $('keys').textContent = 'keys: up/down or j/k the previous/next cell, space flips A and B, s split, ' +
+      'e error mode, [ and ] exposure, 0 fit; click a table row to show it (shift: as B).';
   for (const id of ['selA', 'selB']) {
     for (let i = 0; i < N; i++) { const o = document.createElement('option'); o.value = i; o.textContent = label(i); $(id).append(o); }
   }
