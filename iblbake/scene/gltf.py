@@ -391,7 +391,7 @@ def _file_uris(text) -> list:
 def relative_uris(text) -> list:
     """The files a .gltf document (its JSON text) names by URI, buffers and images, unquoted and
     relative to it; [] for text that cannot be parsed (the loader reports it)."""
-    return [unquote(u) for u in _file_uris(text)]
+    return [unquote(u, errors="surrogateescape") for u in _file_uris(text)]
 
 
 def named_files(path) -> list:
