@@ -3,6 +3,7 @@
 accuracy as render names it, and the gallery's Makefile making the meshes its sheets read."""
 
 import json
+import os
 import re
 from pathlib import Path
 
@@ -106,3 +107,19 @@ def test_the_gallery_makes_the_meshes_its_sheets_read(tmp_path):
                 assert maker in made, (yaml_file, f, r.stdout)
                 checked += 1
     assert checked >= 13, r.stdout          # mesh, ao, textured (6 files), roughness_map, probe_bases (5)
+
+
+def test_a_depfile_names_a_non_utf8_file_by_its_bytes(tmp_path):
+    """A scene or output named by bytes that are not UTF-8 crashed --depfile (UnicodeEncodeError in
+    the write); the rule is written with the raw bytes, as `deps` prints it."""
+    sky = write_exr(tmp_path / "sky.exr", np.full((8, 16, 3), 0.5, np.float32))
+    scene = scene_file(tmp_path, sky, name=os.fsdecode(b"\xfd.yaml"),
+                       camera={"perspective": {"position": [0, 0, 3], "fov_y": 45}, "resolution": [8, 8]})
+    out = os.fsdecode(b"\xfc.png")
+    p = run_cli("render", scene.name, "-o", out, "--depfile", "x.d", "-q", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert (tmp_path / "x.d").read_bytes() == b"\xfc.png: \\\n  \xfd.yaml \\\n  sky.exr\n\n\xfd.yaml:\nsky.exr:\n"
+    p = run_cli("sh", "sky.exr", "-o", out.replace(".png", ".json"), "--depfile", os.fsdecode(b"\xff.d"),
+                "--backend", "numpy", "-q", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert (tmp_path / os.fsdecode(b"\xff.d")).read_bytes().startswith(b"\xfc.json: \\\n  sky.exr\n")

@@ -282,3 +282,26 @@ def test_bad_input_is_one_line(lit, tmp_path):
         assert p.returncode == 1 and "--force" in p.stderr and victim.read_bytes() == before, p.stderr
     p = run_cli("export-gltf", lit["env"], "-o", model, "--size", "16", "--force", "-q")
     assert p.returncode == 0 and gltf.written_by_iblbake(model)
+
+
+def test_image_uris_are_percent_encoded_and_read_back(tmp_path):
+    """The .gltf named its PNGs by the raw file name: '#' started a fragment, '%41' decoded to 'A',
+    a non-UTF-8 byte became a lone surrogate. Now the name's bytes are percent-encoded, and each
+    URI resolves (io/confine.py) to the PNG written."""
+    import os
+
+    from iblbake.io import confine
+    from iblbake.scene import gltf as scene_gltf
+    pngs = [[b"png%d" % f for f in range(6)]]
+    for name, first in (("my light é#1.gltf", "my%20light%20%C3%A9%231_specular_0_px.png"),
+                        ("a%41.gltf", "a%2541_specular_0_px.png"),
+                        (os.fsdecode(b"\xfe.gltf"), "%FE_specular_0_px.png"),
+                        ("plain-name.gltf", "plain-name_specular_0_px.png")):
+        path = tmp_path / name
+        gltf.write(path, np.zeros((9, 3)), pngs, 4)
+        text = path.read_text(errors="surrogateescape")
+        uris = [im["uri"] for im in json.loads(text)["images"]]
+        assert uris[0] == first and len(uris) == 6
+        for uri, want in zip(uris, gltf.sidecars(path, 1)):
+            assert confine.asset_file(path, uri) == want and want.exists()
+        assert scene_gltf.relative_uris(text) == [p.name for p in gltf.sidecars(path, 1)]

@@ -14,6 +14,7 @@ import contextlib
 import json
 import os
 import random
+import re
 import sys
 import traceback
 import types
@@ -155,6 +156,25 @@ def test_a_glb_naming_a_buffer_outside_is_refused(world):
         with pytest.raises(InputError, match=r"buffer 0 '\.\./outside/canary\.bin' is a path that leaves the glTF's"):
             geometry.load_mesh({"path": str(glb)}, "here")
     assert canaries_opened(world, seen) == []
+
+
+def test_a_glb_s_uris_are_checked_at_load_and_listed_as_inputs(world):
+    """A .glb's external URIs were neither checked by the scene loader (deps exited 0; render
+    refused later under objects.0.mesh, no line) nor listed by deps: now as a .gltf's."""
+    from iblbake.io.gltf import glb_bytes
+    for uri in ("../outside/canary.bin", "buf.bin"):
+        doc = json.loads(write_gltf(world.scene / "m.gltf", uri, "tex.png").read_text())
+        (world.scene / "m.glb").write_bytes(glb_bytes(doc, b""))
+        scene = mesh_scene(world, "m.glb")
+        if uri != "buf.bin":
+            with watching_opens() as seen, pytest.raises(InputError) as e:
+                scene_load.load(scene)
+            assert re.match(r".*scene\.yaml:\d+: objects\.0\.mesh\.path: .*m\.glb: the URI '\.\./outside/canary\.bin' "
+                            r"is a path that leaves the glTF's folder", str(e.value)), str(e.value)
+            assert canaries_opened(world, seen) == []
+            continue
+        names = [os.path.basename(f) for f in scene_load.input_files(scene_load.load(scene))]
+        assert names == ["scene.yaml", "sky.exr", "m.glb", "buf.bin", "tex.png"], names
 
 
 def test_gltf_uris_inside_their_folder_and_data_uris_are_read(world):

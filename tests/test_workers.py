@@ -218,6 +218,18 @@ def test_a_gltf_goes_to_a_worker_with_the_files_it_names(tmp_path):
                      str((src / "tex" / "a b.png").resolve()): str((folder / "tex" / "a b.png").resolve())}
 
 
+def test_a_glb_goes_to_a_worker_with_the_files_it_names(tmp_path):
+    """A .glb may name buffers and images by URI too (its JSON chunk): they were left behind."""
+    from iblbake.io.gltf import glb_bytes
+    doc = {"asset": {"version": "2.0"}, "buffers": [{"uri": "m%20x.bin", "byteLength": 4}]}
+    glb = str(tmp_path / "c" / "m.glb")
+    files = {glb: ("s0", glb_bytes(doc, b"")), str((tmp_path / "c" / "m x.bin").resolve()): ("s1", b"BIN!")}
+    folder = tmp_path / "worker" / "s0"
+    moved = workers._place_gltf(glb, "s0", files[glb][1], files, folder)
+    assert (folder / "m x.bin").read_bytes() == b"BIN!" and (folder / "m.glb").read_bytes() == files[glb][1]
+    assert moved[str((tmp_path / "c" / "m x.bin").resolve())] == str((folder / "m x.bin").resolve())
+
+
 def test_worker_count_caps_at_the_tasks_the_cores_and_the_memory(monkeypatch):
     """--jobs 1000 started a worker a cell (~160-400 MiB each) with a thousandth of the cores each:
     the count is capped at the cells, the cores and the available memory, and says which."""

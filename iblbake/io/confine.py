@@ -52,7 +52,7 @@ def asset_file(asset, uri: str) -> Path:
     if _SCHEME.match(uri):
         raise ValueError("is a URI with a scheme; iblbake reads files beside the glTF (a relative URI) "
                          "and data: URIs")
-    name = unquote(uri)
+    name = unquote(uri, errors="surrogateescape")     # %FE: the byte 0xFE, as os.fsencode wrote it
     if not name or "\0" in name:
         raise ValueError("names no file")
     folder = Path(asset).parent

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import os
 
-from iblbake.io.atomic import write_text
+from iblbake.io.atomic import write_bytes
 
 
 def _name(path) -> str:
@@ -37,5 +37,6 @@ def write_rules(rules) -> str:
 
 def write(path, rules, batch=None) -> None:
     """rules: [(targets, prerequisites), ...]; the phony rules for the inputs once (written with
-    `batch`'s other outputs, atomic.Batch, where given)."""
-    write_text(path, write_rules(rules), batch)
+    `batch`'s other outputs, atomic.Batch, where given). A name that is not UTF-8 is written as
+    its raw bytes (os.fsencode), as make and `iblbake deps` name it."""
+    write_bytes(path, os.fsencode(write_rules(rules)), batch)

@@ -22,8 +22,10 @@ colours, and OpenImageIO's PNG writer declares sRGB, so pillow writes them.
 from __future__ import annotations
 
 import json
+import os
 import struct
 from pathlib import Path
+from urllib.parse import quote
 
 import numpy as np
 
@@ -105,6 +107,12 @@ def sidecars(path, levels: int) -> list:
         if path.suffix.lower() == ".gltf" else []
 
 
+def file_uri(name: str) -> str:
+    """The relative URI of a file beside the document: its name's bytes percent-encoded (RFC 3986;
+    a '#', '%', space or non-UTF-8 byte would otherwise be misread), plain names unchanged."""
+    return quote(os.fsencode(name), safe="")
+
+
 def light_document(coefficients, size: int, levels: int, intensity: float, name: str, extras: dict) -> dict:
     """The glTF document of one scene lit by one image-based light; images filled in by write()."""
     coefficients = np.asarray(coefficients, np.float64)
@@ -146,7 +154,7 @@ def write(path, coefficients, pngs, size: int, intensity: float = 1.0, name: str
             for png, data in zip(sidecars(path, len(pngs)), flat):
                 batch.write_bytes(png, data)
                 written.append(png)
-                doc["images"].append({"uri": png.name, "mimeType": "image/png"})
+                doc["images"].append({"uri": file_uri(png.name), "mimeType": "image/png"})
             batch.write_text(path, json.dumps(doc, indent=1, allow_nan=False) + "\n")
         return written + [path]
     views, offset = [], 0

@@ -377,35 +377,38 @@ def read(path, where: str) -> Document:
     return Document(path, where, doc, binary)
 
 
-def _file_uris(text) -> list:
-    """The URIs naming files (not data:) in a .gltf document (its JSON text), buffers and images,
-    as written; [] for text that cannot be parsed (the loader reports it)."""
+def _file_uris(data) -> list:
+    """The URIs naming files (not data:) in a .gltf document (its JSON text) or a .glb (its bytes:
+    the JSON chunk), buffers and images, as written; [] for data that cannot be parsed (the loader
+    reports it)."""
     try:
-        doc = json.loads(text)
+        if isinstance(data, bytes) and data[:4] == b"glTF":
+            data = split_glb(data)[0]
+        doc = json.loads(data)
         uris = [x.get("uri") for key in ("buffers", "images") for x in doc.get(key, []) if isinstance(x, dict)]
     except (ValueError, AttributeError, TypeError, RecursionError):
         return []
     return [u for u in uris if isinstance(u, str) and u and not u.startswith("data:")]
 
 
-def relative_uris(text) -> list:
-    """The files a .gltf document (its JSON text) names by URI, buffers and images, unquoted and
-    relative to it; [] for text that cannot be parsed (the loader reports it)."""
-    return [unquote(u) for u in _file_uris(text)]
+def relative_uris(data) -> list:
+    """The files a .gltf or .glb (its text or bytes) names by URI, buffers and images, unquoted and
+    relative to it; [] for data that cannot be parsed (the loader reports it)."""
+    return [unquote(u, errors="surrogateescape") for u in _file_uris(data)]
 
 
 def named_files(path) -> list:
     """(uri, the file it names or None, why io/confine.py refuses it or None) of every file URI of
-    the .gltf at `path`; [] for a .glb, or a file that cannot be read or parsed (the loader says so)."""
+    the .gltf or .glb at `path`; [] for a file that cannot be read or parsed (the loader says so)."""
     path = Path(path)
-    if path.suffix.lower() != ".gltf":
+    if path.suffix.lower() not in (".gltf", ".glb"):
         return []
     try:
-        text = reads.read_text(path, reads.mesh_bytes(), "a mesh")
+        data = reads.read_bytes(path, reads.mesh_bytes(), "a mesh")
     except (InputError, ValueError):
         return []
     out = []
-    for u in _file_uris(text):
+    for u in _file_uris(data):
         try:
             out.append((u, confine.asset_file(path, u), None))
         except ValueError as e:
@@ -414,7 +417,7 @@ def named_files(path) -> list:
 
 
 def external_files(path) -> list:
-    """The files a .gltf reads beside itself (buffers and images by relative URI), for depfiles
+    """The files a .gltf or .glb reads beside itself (buffers and images by relative URI), for depfiles
     and cache keys: none that io/confine.py refuses (nothing reads those; the loader names them)."""
     return [os.path.normpath(f) for _, f, _ in named_files(path) if f is not None]    # a link named as given
 

@@ -389,7 +389,7 @@ def _resolve_references(v: "_Validator", out: dict, folder: Path) -> None:
 
 
 def _check_mesh_files(v: "_Validator", key: str, path: str) -> None:
-    """A mesh (and the buffers and images a .gltf names beside it) is a regular file within the
+    """A mesh (and the buffers and images a .gltf or .glb names beside it) is a regular file within the
     mesh limit; a missing one is the mesh loader's to report, with its own words."""
     from iblbake.scene.gltf import named_files
 

@@ -264,8 +264,8 @@ def _dask_cell(sc, c, devices, cache_root, resume, files, repeat=0):
     for path, (sha, data) in files.items():
         if path in moved or (os.path.isfile(path) and w["bakes"].file_sha256(path) == sha):
             continue
-        if path.lower().endswith(".gltf"):
-            # a .gltf reads its buffers and images by relative URI: they go beside it, as they were
+        if path.lower().endswith((".gltf", ".glb")):
+            # a .gltf or .glb reads its buffers and images by relative URI: they go beside it, as they were
             moved.update(_place_gltf(path, sha, data, files, inputs / sha))
             continue
         local = inputs / f"{sha}{Path(path).suffix}"
@@ -283,7 +283,7 @@ def _write_once(local: Path, data) -> None:
 
 
 def _place_gltf(path, sha, data, files, folder: Path) -> dict:
-    """Write a .gltf and the files its URIs name (from `files`, the client's scattered bytes) into
+    """Write a .gltf or .glb and the files its URIs name (from `files`, the client's scattered bytes) into
     `folder` at the same relative places; the moves made."""
     from iblbake.scene.gltf import relative_uris
 
