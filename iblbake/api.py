@@ -229,7 +229,7 @@ def _vectors(name: str, value):
 
 # ----------------------------------------------------------------------------------- panoramas
 
-@dataclass
+@dataclass(frozen=True)
 class Panorama:
     """An environment as the bakes read it.
 
@@ -242,6 +242,9 @@ class Panorama:
         read policies and counts of repaired texels).
     policies: how it was read: nonfinite, negative, transfer, primaries, layout (as given).
     read_s: seconds spent reading and validating.
+
+    A Panorama is frozen and its pixels read-only (its sha256 names them): copy the array
+    (np.array(p.pixels)) to edit it and make a new one with from_pixels.
     """
 
     pixels: object
@@ -251,6 +254,10 @@ class Panorama:
     info: object
     policies: dict = field(default_factory=dict)
     read_s: float = 0.0
+
+    def __post_init__(self):
+        # frozen with read-only pixels: info.sha256 names these texels, so no edit may change them
+        self.pixels.setflags(write=False)
 
     @property
     def width(self) -> int:
