@@ -266,6 +266,7 @@ def plain_values(value, source: str = "<scene>", path: str = "", within: tuple =
 def _validated(data, lines, source, folder, overrides, outputs, values, origin, override_name="--set",
                overridden=None) -> Scene:
     import copy
+    confine.allowed()             # a bad IBLBAKE_ALLOW_OUTSIDE is refused on every load, not when a path meets the rule
     overridden = overridden or {}
     for a in overrides:
         key, made = _apply_override(data, a, override_name)
