@@ -107,12 +107,19 @@ BAD = {
         ("levels 33: use 1 to 32", lambda c: iblbake.prefilter(c["pano"], 8, 33, method="fis", samples=4,
                                                              backend="numpy")),
         ("samples", lambda c: iblbake.prefilter(c["pano"], 8, 2, method="fis", samples=2 ** 40, backend="numpy")),
+        # the trial: a float count said only the range; an unknown keyword was a raw TypeError
+        ("samples 64.0: give a whole number 1 to 1048576", lambda c: iblbake.prefilter(c["pano"], 8, 3, samples=64.0)),
+        ("bogus: not an argument of prefilter (its arguments: panorama, size,",
+         lambda c: iblbake.prefilter(c["pano"], 8, 3, bogus=1)),
+        ("prefilter: missing a required argument: 'panorama'", lambda c: iblbake.prefilter(size=8)),
     ],
     "dfg": [
         ("multiscatter", lambda c: iblbake.dfg(4, samples=4, multiscatter="yes", backend="numpy")),
         ("size", lambda c: iblbake.dfg(4.0, backend="numpy")),
         ("device", lambda c: iblbake.dfg(4, device=5)),
         ("samples 1099511627776: use 1 to 1048576", lambda c: iblbake.dfg(4, samples=2 ** 40, backend="numpy")),
+        ("size np.float64(16.0): give a whole number 2 to 4096", lambda c: iblbake.dfg(np.float64(16))),
+        ("bogus: not an argument of dfg", lambda c: iblbake.dfg(8, bogus=1)),
     ],
     "load_panorama": [
         ("path", lambda c: iblbake.load_panorama(None)),
@@ -129,12 +136,15 @@ BAD = {
         ("nonfinite", lambda c: iblbake.Panorama.from_pixels(np.ones((4, 8, 3)), nonfinite="bogus")),
         ("negative", lambda c: iblbake.Panorama.from_pixels(np.ones((4, 8, 3)), negative=None)),
         ("name", lambda c: iblbake.Panorama.from_pixels(np.ones((4, 8, 3)), name=5)),
+        ("bogus: not an argument of Panorama.from_pixels (its arguments: pixels,",
+         lambda c: iblbake.Panorama.from_pixels(np.ones((4, 8, 3)), bogus=1)),
         # issue 60: an array's repr spanned lines; a complex array lost its imaginary part with a warning
         ("nonfinite array(", lambda c: iblbake.Panorama.from_pixels(np.ones((4, 8, 3)), nonfinite=np.zeros((4, 8, 3)))),
         ("pixels", lambda c: iblbake.Panorama.from_pixels(np.ones((4, 8, 3), complex))),
     ],
     "load_scene": [
         ("scene", lambda c: iblbake.load_scene(123)),
+        ("folders: not an argument of load_scene", lambda c: iblbake.load_scene(c["scene"], folders=".")),
         ("overrides", lambda c: iblbake.load_scene(c["scene"], [5])),
         ("overrides", lambda c: iblbake.load_scene(c["scene"], 5)),
         ("outputs", lambda c: iblbake.load_scene(c["scene"], outputs=5)),
@@ -153,11 +163,14 @@ BAD = {
         ("warn", lambda c: iblbake.render(c["scene"], warn="x")),
         ("progress", lambda c: iblbake.render(c["scene"], progress="x")),
         ("device", lambda c: iblbake.render(c["scene"], 5)),
+        ("profile: not an argument of render", lambda c: iblbake.render(c["scene"], profile=True)),
     ],
     "Renderer": [
         ("reuse", lambda c: iblbake.Renderer(reuse="no")),
         ("cache", lambda c: iblbake.Renderer(cache=123)),
         ("device", lambda c: iblbake.Renderer(device=0)),
+        ("cache_dir: not an argument of Renderer (its arguments: device, cache,", lambda c: iblbake.Renderer(cache_dir=1)),
+        ("scenes: not an argument of Renderer.render", lambda c: iblbake.Renderer().render(scenes=c["scene"])),
     ],
     "bake_probes": [
         ("scene", lambda c: iblbake.bake_probes(["scene.yaml"])),
