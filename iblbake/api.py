@@ -192,7 +192,17 @@ def _is_path(value) -> bool:
 def _path(name: str, value, what: str):
     if not _is_path(value):
         raise InputError(f"{name}: give {what} path (a str or pathlib.Path), not {_kind(value)}")
-    return value
+    return _no_nul(name, value)
+
+
+def _no_nul(name: str, path):
+    """`path`, refused where it holds a NUL (no file can be named so: it read as a missing file,
+    the NUL raw in the message), as a scene's path keys are."""
+    import os
+    text = os.fspath(path)
+    if ("\0" if isinstance(text, str) else b"\0") in text:
+        raise InputError(f"{name} {_shown(text)}: holds a NUL character, which no path can")
+    return path
 
 
 def _cache(cache):
@@ -785,7 +795,7 @@ def load_scene(path_or_dict, overrides=(), *, folder=".", outputs=None, names: d
             outputs = [outputs]
         if not (isinstance(outputs, (list, tuple)) and all(_is_path(o) for o in outputs)):
             raise InputError(f"outputs: give frame paths (.png or .exr; one, or a list of them), not {_shown(outputs)}")
-        outputs = [os.fspath(o) for o in outputs]
+        outputs = [os.fspath(_no_nul("outputs", o)) for o in outputs]
     said = _name(names, "overrides")
     if isinstance(path_or_dict, scene_load.Scene):
         edited = scene_load.edited_key(path_or_dict)
@@ -803,7 +813,7 @@ def load_scene(path_or_dict, overrides=(), *, folder=".", outputs=None, names: d
     if not _is_path(path_or_dict):
         raise InputError(f"scene: give a scene file's path, a mapping of what one holds, or an iblbake.Scene, "
                          f"not {_kind(path_or_dict)}")
-    return scene_load.load(path_or_dict, overrides, outputs, override_name=said)
+    return scene_load.load(_no_nul("scene", path_or_dict), overrides, outputs, override_name=said)
 
 
 class Renderer:
@@ -1040,6 +1050,8 @@ def accuracy(scene, ladder=None, *, overrides=(), max_side: int = 320, repeats: 
     if not (ladder is None or _is_path(ladder)):
         raise InputError(f"ladder: give None, one of {', '.join(ladders.LADDERS)} or a ladder file's path, "
                          f"not {_kind(ladder)}")
+    if ladder is not None:
+        _no_nul("ladder", ladder)
     overrides = _overrides(overrides)
     max_side, repeats = _count("max_side", max_side, 8, 8192), _count("repeats", repeats, 1, 100)
     target_noise = _real("target_noise", target_noise, 0)

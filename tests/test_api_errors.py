@@ -129,6 +129,8 @@ BAD = {
         ("max_pixels", lambda c: iblbake.load_panorama(c["sky"], max_pixels=0)),
         ("max_pixels", lambda c: iblbake.load_panorama(c["sky"], max_pixels=True)),
         ("names", lambda c: iblbake.load_panorama(c["sky"], names="--flags")),
+        # the trial: a NUL read as a missing file, raw in the message ('city\0.exr: no such file')
+        (r"path 'city\x00.exr': holds a NUL character", lambda c: iblbake.load_panorama("city\0.exr")),
     ],
     "Panorama.from_pixels": [
         ("pixels", lambda c: iblbake.Panorama.from_pixels(c["sky"])),
@@ -145,6 +147,9 @@ BAD = {
     "load_scene": [
         ("scene", lambda c: iblbake.load_scene(123)),
         ("folders: not an argument of load_scene", lambda c: iblbake.load_scene(c["scene"], folders=".")),
+        (r"scene 's\x00.yaml': holds a NUL character", lambda c: iblbake.load_scene("s\0.yaml")),
+        (r"folder 'a\x00': holds a NUL character", lambda c: iblbake.load_scene(c["scene"], folder="a\0")),
+        (r"outputs 'f\x00.png': holds a NUL character", lambda c: iblbake.load_scene(c["scene"], outputs="f\0.png")),
         ("overrides", lambda c: iblbake.load_scene(c["scene"], [5])),
         ("overrides", lambda c: iblbake.load_scene(c["scene"], 5)),
         ("outputs", lambda c: iblbake.load_scene(c["scene"], outputs=5)),
@@ -169,6 +174,7 @@ BAD = {
         ("reuse", lambda c: iblbake.Renderer(reuse="no")),
         ("cache", lambda c: iblbake.Renderer(cache=123)),
         ("device", lambda c: iblbake.Renderer(device=0)),
+        (r"cache 'c\x00': holds a NUL character", lambda c: iblbake.Renderer(cache="c\0")),
         ("cache_dir: not an argument of Renderer (its arguments: device, cache,", lambda c: iblbake.Renderer(cache_dir=1)),
         ("scenes: not an argument of Renderer.render", lambda c: iblbake.Renderer().render(scenes=c["scene"])),
     ],
@@ -180,6 +186,7 @@ BAD = {
     "accuracy": [
         ("scene", lambda c: iblbake.accuracy(123)),
         ("repeats", lambda c: iblbake.accuracy(c["scene"], repeats=0)),
+        (r"ladder 'l\x00.yaml': holds a NUL character", lambda c: iblbake.accuracy(c["scene"], ladder="l\0.yaml")),
         ("repeats", lambda c: iblbake.accuracy(c["scene"], repeats=-2)),
         ("max_side", lambda c: iblbake.accuracy(c["scene"], max_side=-1)),
         ("max_side", lambda c: iblbake.accuracy(c["scene"], max_side=0)),
