@@ -809,7 +809,8 @@ def load_scene(path_or_dict, overrides=(), *, folder=".", outputs=None, names: d
         return scene_load.load_any(path_or_dict, overrides, outputs, override_name=said)
     if isinstance(path_or_dict, Mapping):
         _path("folder", folder, "a folder's")
-        return scene_load.load_data(dict(path_or_dict), folder, overrides, outputs, override_name=said)
+        # the mapping itself, not a copy: a section holding the scene then names itself (materials.m.self)
+        return scene_load.load_data(path_or_dict, folder, overrides, outputs, override_name=said)
     if not _is_path(path_or_dict):
         raise InputError(f"scene: give a scene file's path, a mapping of what one holds, or an iblbake.Scene, "
                          f"not {_kind(path_or_dict)}")

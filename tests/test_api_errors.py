@@ -39,6 +39,13 @@ def _in_itself(doc):
     return doc
 
 
+def _scene_in_itself(doc):
+    doc = dict(doc)
+    doc["materials"] = {"m": {"base_color": [1, 1, 1]}}
+    doc["materials"]["m"]["self"] = doc
+    return doc
+
+
 class Stop(Exception):
     """Raised from before_run: the study stops before anything renders."""
 
@@ -160,7 +167,9 @@ BAD = {
         ("objects: generator", lambda c: iblbake.load_scene({**c["scene"], "objects": (o for o in [])})),
         ("camera.perspective.position: generator", lambda c: iblbake.load_scene(
             {**c["scene"], "camera": {"perspective": {"position": (x for x in (0, 0, 3))}}})),
-        ("contains itself", lambda c: iblbake.load_scene(_in_itself(c["scene"]))),
+        ("<scene>: materials.m.extra: contains itself", lambda c: iblbake.load_scene(_in_itself(c["scene"]))),
+        # the trial: the scene inside one of its sections named the key below it (materials.m.self.materials)
+        ("<scene>: materials.m.self: contains itself", lambda c: iblbake.load_scene(_scene_in_itself(c["scene"]))),
     ],
     "render": [
         ("scene", lambda c: iblbake.render(None)),
