@@ -123,9 +123,32 @@ def _whole(value) -> bool:
 def _count(name: str, value, least: int = 1, most: int | None = None) -> int:
     """A whole number in [least, most] (numpy integers too; not a bool, nor a float such as 9.0)."""
     if not (_whole(value) and value >= least and (most is None or value <= most)):
-        raise InputError(f"{name} {_shown(value)}: " + (f"use {least} to {most}" if most is not None
-                                                         else f"give a whole number >= {least}"))
+        bounds = f">= {least}" if most is None else f"{least} to {most}"
+        raise InputError(f"{name} {_shown(value)}: " + (f"use {bounds}" if _whole(value) and most is not None
+                                                         else f"give a whole number {bounds}"))
     return int(value)
+
+
+def _arguments(fn):
+    """`fn` with its arguments checked as the others are: an unknown keyword or a missing argument
+    is an InputError naming it (Python's own TypeError otherwise), as basis's options are."""
+    import functools
+
+    @functools.wraps(fn)
+    def call(*args, **kwargs):
+        import inspect
+        sig = inspect.signature(fn)
+        try:
+            sig.bind(*args, **kwargs)
+        except TypeError as e:
+            what = fn.__qualname__.removesuffix(".__init__")
+            takes = f"(its arguments: {', '.join(p for p in sig.parameters if p not in ('cls', 'self'))})"
+            unknown = [k for k in kwargs if k not in sig.parameters]
+            if unknown:
+                raise InputError(f"{unknown[0]}: not an argument of {what} {takes}") from None
+            raise InputError(f"{what}: {e} {takes}") from None
+        return fn(*args, **kwargs)
+    return call
 
 
 def _real(name: str, value, least: float | None = None) -> float:
@@ -169,7 +192,17 @@ def _is_path(value) -> bool:
 def _path(name: str, value, what: str):
     if not _is_path(value):
         raise InputError(f"{name}: give {what} path (a str or pathlib.Path), not {_kind(value)}")
-    return value
+    return _no_nul(name, value)
+
+
+def _no_nul(name: str, path):
+    """`path`, refused where it holds a NUL (no file can be named so: it read as a missing file,
+    the NUL raw in the message), as a scene's path keys are."""
+    import os
+    text = os.fspath(path)
+    if ("\0" if isinstance(text, str) else b"\0") in text:
+        raise InputError(f"{name} {_shown(text)}: holds a NUL character, which no path can")
+    return path
 
 
 def _cache(cache):
@@ -229,7 +262,7 @@ def _vectors(name: str, value):
 
 # ----------------------------------------------------------------------------------- panoramas
 
-@dataclass
+@dataclass(frozen=True)
 class Panorama:
     """An environment as the bakes read it.
 
@@ -242,6 +275,9 @@ class Panorama:
         read policies and counts of repaired texels).
     policies: how it was read: nonfinite, negative, transfer, primaries, layout (as given).
     read_s: seconds spent reading and validating.
+
+    A Panorama is frozen and its pixels read-only (its sha256 names them): copy the array
+    (np.array(p.pixels)) to edit it and make a new one with from_pixels.
     """
 
     pixels: object
@@ -251,6 +287,10 @@ class Panorama:
     info: object
     policies: dict = field(default_factory=dict)
     read_s: float = 0.0
+
+    def __post_init__(self):
+        # frozen with read-only pixels: info.sha256 names these texels, so no edit may change them
+        self.pixels.setflags(write=False)
 
     @property
     def width(self) -> int:
@@ -266,6 +306,7 @@ class Panorama:
         return self.info.warnings
 
     @classmethod
+    @_arguments
     def from_pixels(cls, pixels, name: str = "<array>", nonfinite: str = "error", negative: str = "keep") -> Panorama:
         """A panorama from an array (H, W, 3) of linear Rec.709 RGB radiance (real numbers),
         equirectangular; the nonfinite and negative policies apply as for a file (load_panorama).
@@ -320,6 +361,7 @@ def _colour_space(info, primaries: str) -> str:
     return "linear, in the file's declared chromaticities, kept as stored (primaries='convert' converts them)"
 
 
+@_arguments
 def load_panorama(path, primaries: str = "auto", *, layout: str = "auto", nonfinite: str = "error",
                   negative: str = "keep", transfer: str = "auto", max_pixels: int | None = None,
                   names: dict | None = None) -> Panorama:
@@ -440,6 +482,7 @@ class SH:
         return shbake.export(self.document, fmt)
 
 
+@_arguments
 def sh(panorama: Panorama, bands: int = 3, window: str | None = None, *, rotate_y: float = 0.0,
        intensity: float = 1.0, backend: str = "auto", device: str | None = None, error: bool = True,
        names: dict | None = None) -> SH:
@@ -579,6 +622,7 @@ class Basis:
         return self.to_glsl() if fmt == "glsl" else json.dumps(self.document, indent=1) + "\n"
 
 
+@_arguments
 def basis(panorama: Panorama, name: str, *, intensity: float = 1.0, error: bool = True, **options) -> Basis:
     """Project a panorama onto a directional basis (float64, exact texel integrals; least squares
     where the basis's lobes are not orthogonal).
@@ -649,6 +693,7 @@ class Chain:
     methods: list
 
 
+@_arguments
 def prefilter(panorama: Panorama, size: int | None = None, levels: int | None = None, layout: str = "equirect", *,
               min_size: int = 8, method: str = "auto", samples: int = 256, backend: str = "opencl",
               device: str | None = None, progress=None) -> Chain:
@@ -696,6 +741,7 @@ def prefilter(panorama: Panorama, size: int | None = None, levels: int | None = 
     return Chain(layout, out, list(opts["roughness"]), list(opts["sizes"]), list(methods))
 
 
+@_arguments
 def dfg(size: int = 128, *, samples: int = 4096, multiscatter: bool = False, backend: str = "opencl",
         device: str | None = None):
     """The split sum's DFG table: float32 (size, size, 2), column i NoV = i / (size - 1) (at least
@@ -719,6 +765,7 @@ def dfg(size: int = 128, *, samples: int = 4096, multiscatter: bool = False, bac
 
 # ------------------------------------------------------------------------------ scenes, frames
 
+@_arguments
 def load_scene(path_or_dict, overrides=(), *, folder=".", outputs=None, names: dict | None = None):
     """A validated scene (iblbake.Scene: .data, the scene with every default filled and every path
     absolute; `iblbake render --help-schema` lists the keys).
@@ -748,7 +795,7 @@ def load_scene(path_or_dict, overrides=(), *, folder=".", outputs=None, names: d
             outputs = [outputs]
         if not (isinstance(outputs, (list, tuple)) and all(_is_path(o) for o in outputs)):
             raise InputError(f"outputs: give frame paths (.png or .exr; one, or a list of them), not {_shown(outputs)}")
-        outputs = [os.fspath(o) for o in outputs]
+        outputs = [os.fspath(_no_nul("outputs", o)) for o in outputs]
     said = _name(names, "overrides")
     if isinstance(path_or_dict, scene_load.Scene):
         edited = scene_load.edited_key(path_or_dict)
@@ -762,11 +809,12 @@ def load_scene(path_or_dict, overrides=(), *, folder=".", outputs=None, names: d
         return scene_load.load_any(path_or_dict, overrides, outputs, override_name=said)
     if isinstance(path_or_dict, Mapping):
         _path("folder", folder, "a folder's")
-        return scene_load.load_data(dict(path_or_dict), folder, overrides, outputs, override_name=said)
+        # the mapping itself, not a copy: a section holding the scene then names itself (materials.m.self)
+        return scene_load.load_data(path_or_dict, folder, overrides, outputs, override_name=said)
     if not _is_path(path_or_dict):
         raise InputError(f"scene: give a scene file's path, a mapping of what one holds, or an iblbake.Scene, "
                          f"not {_kind(path_or_dict)}")
-    return scene_load.load(path_or_dict, overrides, outputs, override_name=said)
+    return scene_load.load(_no_nul("scene", path_or_dict), overrides, outputs, override_name=said)
 
 
 class Renderer:
@@ -781,6 +829,7 @@ class Renderer:
         its flags).
     """
 
+    @_arguments
     def __init__(self, device: str | None = None, cache=None, reuse: bool = True, *, names: dict | None = None):
         from iblbake.render import Bakes, Reuse
 
@@ -797,6 +846,7 @@ class Renderer:
     def device(self) -> str:
         return self.runtime.device_label
 
+    @_arguments
     def render(self, scene, *, warn=None, progress=None, profile_paths: bool = False) -> Frame:
         """Render a Scene (load_scene) into a Frame (iblbake.Frame: hdr, tonemapped, aovs,
         report). warn(message) gets the warnings, and the notes on what the scene asks that the
@@ -832,6 +882,7 @@ def _profiled(scene, names) -> None:
                          f"(effects.diffuse or effects.specular: reference)")
 
 
+@_arguments
 def render(scene, device: str | None = None, *, cache=None, warn=None, progress=None, profile_paths: bool = False,
            names: dict | None = None) -> Frame:
     """Render a scene once (a Scene, a scene file or a mapping; see load_scene) on `device` into a
@@ -888,6 +939,7 @@ class ProbeVolume:
         return probes.glsl(self.volume, self.manifest)
 
 
+@_arguments
 def bake_probes(scene, device: str | None = None, *, cache=None, warn=None, progress=None,
                 names: dict | None = None) -> ProbeVolume:
     """Bake a scene's irradiance probe volume (its `probes:` section; a scene without one gets
@@ -959,6 +1011,7 @@ class Accuracy:
     rungs: list = field(repr=False, default_factory=list)
 
 
+@_arguments
 def accuracy(scene, ladder=None, *, overrides=(), max_side: int = 320, repeats: int = 3,
              target_noise: float = 0.003, max_samples: int = 4096, visibility: bool = True, bounces=None,
              flip: bool = True, cache=None, device: str | None = None, jobs: int = 1, devices=None, warn=None,
@@ -998,6 +1051,8 @@ def accuracy(scene, ladder=None, *, overrides=(), max_side: int = 320, repeats: 
     if not (ladder is None or _is_path(ladder)):
         raise InputError(f"ladder: give None, one of {', '.join(ladders.LADDERS)} or a ladder file's path, "
                          f"not {_kind(ladder)}")
+    if ladder is not None:
+        _no_nul("ladder", ladder)
     overrides = _overrides(overrides)
     max_side, repeats = _count("max_side", max_side, 8, 8192), _count("repeats", repeats, 1, 100)
     target_noise = _real("target_noise", target_noise, 0)

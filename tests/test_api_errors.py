@@ -39,6 +39,13 @@ def _in_itself(doc):
     return doc
 
 
+def _scene_in_itself(doc):
+    doc = dict(doc)
+    doc["materials"] = {"m": {"base_color": [1, 1, 1]}}
+    doc["materials"]["m"]["self"] = doc
+    return doc
+
+
 class Stop(Exception):
     """Raised from before_run: the study stops before anything renders."""
 
@@ -107,12 +114,19 @@ BAD = {
         ("levels 33: use 1 to 32", lambda c: iblbake.prefilter(c["pano"], 8, 33, method="fis", samples=4,
                                                              backend="numpy")),
         ("samples", lambda c: iblbake.prefilter(c["pano"], 8, 2, method="fis", samples=2 ** 40, backend="numpy")),
+        # the trial: a float count said only the range; an unknown keyword was a raw TypeError
+        ("samples 64.0: give a whole number 1 to 1048576", lambda c: iblbake.prefilter(c["pano"], 8, 3, samples=64.0)),
+        ("bogus: not an argument of prefilter (its arguments: panorama, size,",
+         lambda c: iblbake.prefilter(c["pano"], 8, 3, bogus=1)),
+        ("prefilter: missing a required argument: 'panorama'", lambda c: iblbake.prefilter(size=8)),
     ],
     "dfg": [
         ("multiscatter", lambda c: iblbake.dfg(4, samples=4, multiscatter="yes", backend="numpy")),
         ("size", lambda c: iblbake.dfg(4.0, backend="numpy")),
         ("device", lambda c: iblbake.dfg(4, device=5)),
         ("samples 1099511627776: use 1 to 1048576", lambda c: iblbake.dfg(4, samples=2 ** 40, backend="numpy")),
+        ("size np.float64(16.0): give a whole number 2 to 4096", lambda c: iblbake.dfg(np.float64(16))),
+        ("bogus: not an argument of dfg", lambda c: iblbake.dfg(8, bogus=1)),
     ],
     "load_panorama": [
         ("path", lambda c: iblbake.load_panorama(None)),
@@ -122,6 +136,8 @@ BAD = {
         ("max_pixels", lambda c: iblbake.load_panorama(c["sky"], max_pixels=0)),
         ("max_pixels", lambda c: iblbake.load_panorama(c["sky"], max_pixels=True)),
         ("names", lambda c: iblbake.load_panorama(c["sky"], names="--flags")),
+        # the trial: a NUL read as a missing file, raw in the message ('city\0.exr: no such file')
+        (r"path 'city\x00.exr': holds a NUL character", lambda c: iblbake.load_panorama("city\0.exr")),
     ],
     "Panorama.from_pixels": [
         ("pixels", lambda c: iblbake.Panorama.from_pixels(c["sky"])),
@@ -129,12 +145,18 @@ BAD = {
         ("nonfinite", lambda c: iblbake.Panorama.from_pixels(np.ones((4, 8, 3)), nonfinite="bogus")),
         ("negative", lambda c: iblbake.Panorama.from_pixels(np.ones((4, 8, 3)), negative=None)),
         ("name", lambda c: iblbake.Panorama.from_pixels(np.ones((4, 8, 3)), name=5)),
+        ("bogus: not an argument of Panorama.from_pixels (its arguments: pixels,",
+         lambda c: iblbake.Panorama.from_pixels(np.ones((4, 8, 3)), bogus=1)),
         # issue 60: an array's repr spanned lines; a complex array lost its imaginary part with a warning
         ("nonfinite array(", lambda c: iblbake.Panorama.from_pixels(np.ones((4, 8, 3)), nonfinite=np.zeros((4, 8, 3)))),
         ("pixels", lambda c: iblbake.Panorama.from_pixels(np.ones((4, 8, 3), complex))),
     ],
     "load_scene": [
         ("scene", lambda c: iblbake.load_scene(123)),
+        ("folders: not an argument of load_scene", lambda c: iblbake.load_scene(c["scene"], folders=".")),
+        (r"scene 's\x00.yaml': holds a NUL character", lambda c: iblbake.load_scene("s\0.yaml")),
+        (r"folder 'a\x00': holds a NUL character", lambda c: iblbake.load_scene(c["scene"], folder="a\0")),
+        (r"outputs 'f\x00.png': holds a NUL character", lambda c: iblbake.load_scene(c["scene"], outputs="f\0.png")),
         ("overrides", lambda c: iblbake.load_scene(c["scene"], [5])),
         ("overrides", lambda c: iblbake.load_scene(c["scene"], 5)),
         ("outputs", lambda c: iblbake.load_scene(c["scene"], outputs=5)),
@@ -145,7 +167,9 @@ BAD = {
         ("objects: generator", lambda c: iblbake.load_scene({**c["scene"], "objects": (o for o in [])})),
         ("camera.perspective.position: generator", lambda c: iblbake.load_scene(
             {**c["scene"], "camera": {"perspective": {"position": (x for x in (0, 0, 3))}}})),
-        ("contains itself", lambda c: iblbake.load_scene(_in_itself(c["scene"]))),
+        ("<scene>: materials.m.extra: contains itself", lambda c: iblbake.load_scene(_in_itself(c["scene"]))),
+        # the trial: the scene inside one of its sections named the key below it (materials.m.self.materials)
+        ("<scene>: materials.m.self: contains itself", lambda c: iblbake.load_scene(_scene_in_itself(c["scene"]))),
     ],
     "render": [
         ("scene", lambda c: iblbake.render(None)),
@@ -153,11 +177,15 @@ BAD = {
         ("warn", lambda c: iblbake.render(c["scene"], warn="x")),
         ("progress", lambda c: iblbake.render(c["scene"], progress="x")),
         ("device", lambda c: iblbake.render(c["scene"], 5)),
+        ("profile: not an argument of render", lambda c: iblbake.render(c["scene"], profile=True)),
     ],
     "Renderer": [
         ("reuse", lambda c: iblbake.Renderer(reuse="no")),
         ("cache", lambda c: iblbake.Renderer(cache=123)),
         ("device", lambda c: iblbake.Renderer(device=0)),
+        (r"cache 'c\x00': holds a NUL character", lambda c: iblbake.Renderer(cache="c\0")),
+        ("cache_dir: not an argument of Renderer (its arguments: device, cache,", lambda c: iblbake.Renderer(cache_dir=1)),
+        ("scenes: not an argument of Renderer.render", lambda c: iblbake.Renderer().render(scenes=c["scene"])),
     ],
     "bake_probes": [
         ("scene", lambda c: iblbake.bake_probes(["scene.yaml"])),
@@ -167,6 +195,7 @@ BAD = {
     "accuracy": [
         ("scene", lambda c: iblbake.accuracy(123)),
         ("repeats", lambda c: iblbake.accuracy(c["scene"], repeats=0)),
+        (r"ladder 'l\x00.yaml': holds a NUL character", lambda c: iblbake.accuracy(c["scene"], ladder="l\0.yaml")),
         ("repeats", lambda c: iblbake.accuracy(c["scene"], repeats=-2)),
         ("max_side", lambda c: iblbake.accuracy(c["scene"], max_side=-1)),
         ("max_side", lambda c: iblbake.accuracy(c["scene"], max_side=0)),

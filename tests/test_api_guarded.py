@@ -186,6 +186,22 @@ def test_from_pixels_copies_what_it_takes():
     assert pano.info.sha256 == hashlib.sha256(given.tobytes()).hexdigest()     # what was given
 
 
+def test_panorama_is_frozen(sky):
+    """p.pixels[:] = 5 and p.pixels = ... changed a Panorama after creation while sh(p)'s input
+    sha256 still named the old pixels: the pixels are read-only and the object frozen."""
+    import dataclasses
+    for pano in (iblbake.Panorama.from_pixels(np.ones((16, 32, 3))), iblbake.load_panorama(sky)):
+        before = pano.pixels.copy()
+        with pytest.raises(ValueError, match="read-only"):
+            pano.pixels[:] = 5.0
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            pano.pixels = np.full((16, 32, 3), 5.0, np.float32)
+        assert np.array_equal(pano.pixels, before)
+    # the bakes read a read-only array
+    assert np.allclose(iblbake.sh(pano, backend="numpy").radiance, iblbake.sh(pano, backend="opencl").radiance, rtol=1e-4)
+    assert np.isfinite(iblbake.basis(pano, "zh3").coefficients).all() and len(iblbake.prefilter(pano, 8, 2).levels) == 2
+
+
 def test_warn_gets_the_notes(sky, tmp_path):
     """The notes on what a scene asks that the frame does not do (here effects.ssr with the
     specular term off) reached the command line's stderr, never the API's warn callback."""

@@ -35,7 +35,7 @@ def test_a_spacing_too_fine_is_refused_with_its_true_count(keys, axes):
     with pytest.raises(InputError) as e:
         probes.grid_of(settings(**keys), sphere_arrays())
     msg = str(e.value)
-    assert f"probes: {true} probes" in msg and "-" not in msg.split("probes (")[1] and "at most 1048576" in msg, msg
+    assert msg.startswith(f"probes.spacing: asks {true} probes") and "-" not in msg.split("probes (")[1] and "at most 1048576" in msg, msg
     with pytest.raises(InputError, match="more than 10"):          # a count no float holds
         probes.grid_of(settings(spacing=1e-320), sphere_arrays())
 
@@ -48,6 +48,9 @@ def test_a_spacing_too_fine_is_one_line_through_the_api(tmp_path, panoramas):
         iblbake.bake_probes(load_scene(tmp_path, "fine", doc), cache=tmp_path / "cache")
     true = (math.ceil(16 / 1e-9 - 1e-9) + 2) ** 3           # 4096000001536000000192000000008
     assert "fine.yaml" in str(e.value) and f"{true} probes" in str(e.value) and "\n" not in str(e.value), str(e.value)
+    # the trial: `fine.yaml: probes: ...` had no line and did not name probes.spacing
+    line = (tmp_path / "fine.yaml").read_text().splitlines().index("  spacing: 1.0e-09") + 1
+    assert str(e.value).startswith(f"{tmp_path / 'fine.yaml'}:{line}: probes.spacing: asks {true} probes"), str(e.value)
 
 
 def test_a_box_drawn_on_the_walls_puts_no_probe_on_them():

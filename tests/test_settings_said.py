@@ -78,9 +78,14 @@ def test_yaml_merge_keys_share_settings(tmp_path, sky):
     with pytest.raises(InputError, match=r"s\.yaml:4: materials\.rough\.roughness"):
         scene_load.load(tmp_path / "s.yaml")
     for wrong, words in (("a: {<<: 3}", "t.yaml:1: a: the merge key << takes a mapping"),
-                         ("a: &a {<<: *a}", "t.yaml:1: a: nested deeper than 32 levels")):
+                         ("a: &a {<<: *a}", "t.yaml:1: a: nested deeper than 32 levels"),
+                         # the trial: a second merge key loaded silently (the first won)
+                         ("a: &a {x: 1}\nb: &b {x: 2}\nd: {<<: *a, <<: *b}",
+                          r"t.yaml:3: d.<<: key given twice; merge several mappings with one list \(<<: \[\*a, \*b\]\)"),
+                         ("<<: {x: 1}\n<<: {y: 2}", "t.yaml:2: <<: key given twice")):
         with pytest.raises(InputError, match=words):
             load_with_lines(wrong, "t.yaml")
+    assert load_with_lines("a: &a {x: 1}\nb: &b {x: 2}\nd: {<<: [*a, *b]}", "t.yaml")[0]["d"] == {"x": 1}
 
 
 # --- list-valued sweeps ---------------------------------------------------------------------------

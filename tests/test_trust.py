@@ -208,6 +208,21 @@ def test_allow_outside_lets_a_gltf_read_outside(world, monkeypatch):
         scene_load.load(mesh_scene(world))
 
 
+def test_a_bad_allow_outside_is_refused_on_every_load(world, monkeypatch):
+    """IBLBAKE_ALLOW_OUTSIDE=2 was checked only when a path met the rule (a plain scene loaded,
+    render exited 0) and then pinned on that key (`objects.0.mesh.path: IBLBAKE_ALLOW_OUTSIDE=...`):
+    it is checked on every load, the message naming the variable alone."""
+    write_gltf(world.scene / "m.gltf", "../outside/canary.bin")
+    monkeypatch.setenv(ALLOW, "2")
+    for scene in (scene_file(world.scene, world.sky, name="plain.yaml"), mesh_scene(world)):
+        with pytest.raises(InputError) as e:
+            scene_load.load(scene)
+        assert str(e.value) == "IBLBAKE_ALLOW_OUTSIDE='2': give 1 (scenes and assets may name files outside " \
+                               "their folder) or 0", str(e.value)
+    p = run_cli("deps", world.scene / "plain.yaml", env={ALLOW: "2"})
+    assert p.returncode == 1 and p.stderr.count("\n") == 1 and "IBLBAKE_ALLOW_OUTSIDE='2'" in p.stderr, p.stderr
+
+
 def test_meshes_read_no_file_beside_them(world):
     """trimesh read an OBJ's material library and a PLY's texture (anything they named, a FIFO
     beside them blocked the render); the scene's materials shade these meshes: no other file is

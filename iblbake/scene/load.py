@@ -207,7 +207,8 @@ def load_data(data: dict, folder=".", overrides=(), outputs=None, values=(), ori
     relative paths resolve in `folder`, errors name `source` (no line numbers). A mapping made in
     Python may hold numpy scalars and arrays, tuples and path objects: they are read as the
     numbers, lists and strings a scene file would hold (plain_values)."""
-    if not isinstance(data, dict):
+    from collections.abc import Mapping
+    if not isinstance(data, Mapping):
         raise InputError(f"{source}: a scene is a mapping of sections (camera, environment, "
                          f"materials, objects, effects, output), not {type(data).__name__}")
     return _validated(plain_values(data, source), {}, source, Path(folder).resolve(), overrides, outputs, values,
@@ -266,6 +267,7 @@ def plain_values(value, source: str = "<scene>", path: str = "", within: tuple =
 def _validated(data, lines, source, folder, overrides, outputs, values, origin, override_name="--set",
                overridden=None) -> Scene:
     import copy
+    confine.allowed()             # a bad IBLBAKE_ALLOW_OUTSIDE is refused on every load, not when a path meets the rule
     overridden = overridden or {}
     for a in overrides:
         key, made = _apply_override(data, a, override_name)

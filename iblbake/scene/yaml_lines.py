@@ -101,11 +101,15 @@ def load_with_lines(text: str, source: str):
 def _merge_keys(n, source: str, path: str):
     """A mapping's own (key, value) nodes, and the mappings its merge keys bring in (YAML's `<<:`,
     one alias or a list of them), in the order given."""
-    own, bases = [], []
+    own, bases, merged = [], [], False
     for k, v in n.value:
         if k.tag != "tag:yaml.org,2002:merge":
             own.append((k, v))
             continue
+        if merged:                 # as any other key given twice (the first would win silently)
+            raise InputError(f"{source}:{k.start_mark.line + 1}: {path + '.' if path else ''}<<: key given twice; "
+                             f"merge several mappings with one list (<<: [*a, *b])")
+        merged = True
         for b in v.value if isinstance(v, yaml.SequenceNode) else [v]:
             if not isinstance(b, yaml.MappingNode):
                 raise InputError(f"{source}:{k.start_mark.line + 1}: {path or 'document'}: the merge key << takes "

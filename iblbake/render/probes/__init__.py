@@ -20,6 +20,7 @@ kernels/probes.h, twin/probes.py. Conventions: docs/conventions.md "Irradiance p
 from __future__ import annotations
 
 import math
+import re
 import time
 
 import numpy as np
@@ -90,8 +91,10 @@ def bake(job, settings: dict, progress=None) -> dict:
     camera = pack.camera_vectors(job.scene.data["camera"])[0]
     try:
         grid = grid_of(settings, arrays)
-    except IblbakeError as e:             # said as the scene's other errors are: naming its file
-        raise type(e)(f"{job.scene.source}: {e}") from None
+    except IblbakeError as e:             # said as the scene's other errors are: its file and the key's line
+        key = re.match(r"probes(\.\w+)?", str(e))
+        line = job.scene.lines.get(key.group(0)) if key else None
+        raise type(e)(f"{job.scene.source}:{line}: {e}" if line else f"{job.scene.source}: {e}") from None
     tracer = Tracer(job, settings)
     placement = {}
     if settings["min"] is None and settings["counts"] is None and settings["spacing"] is None:

@@ -89,13 +89,15 @@ def axis_counts(extent, step, plus: int) -> list:
     return out
 
 
-def check_count(n: list, settings: dict | None = None) -> None:
-    """Refuses a grid over MAX_PROBES with its true count (Python ints: no wrap)."""
+def check_count(n: list, settings: dict) -> None:
+    """Refuses a grid over MAX_PROBES with its true count (Python ints: no wrap), naming the key
+    that asked for it (spacing, else counts)."""
     if any(c is None for c in n) or math.prod(n) > MAX_PROBES:
         total = "more than 10^308" if any(c is None for c in n) else str(math.prod(n))
         shape = " x ".join("inf" if c is None else str(c) for c in n)
-        raise InputError(f"probes: {total} probes ({shape}); give fewer counts or a larger probes.spacing "
-                         f"(at most {MAX_PROBES})")
+        key = next((f"probes.{k}" for k in ("spacing", "counts") if settings[k] is not None), "probes")
+        raise InputError(f"{key}: asks {total} probes ({shape}); give fewer probes.counts or a larger "
+                         f"probes.spacing (at most {MAX_PROBES} probes)")
 
 
 def auto_step(t) -> float | None:
@@ -145,7 +147,7 @@ def grid_of(settings: dict, arrays, step_hint: float | None = None) -> Grid:
             step = settings["spacing"] or max(float(extent.max()), 1e-6) / (counts or DEFAULT_LONGEST)
             n = [max(c, 2) if e > 0 and c is not None else (1 if e <= 0 else c)
                  for c, e in zip(axis_counts(extent, step, 0), extent)]
-        check_count(n)
+        check_count(n, settings)
         cells = np.asarray(n, np.float64)
         spacing = np.where(extent > 0, extent / cells, 1.0)
         origin = lo + np.where(extent > 0, 0.5 * spacing, 0.0)      # cell centres: inset half a cell
@@ -182,7 +184,7 @@ def grid_of(settings: dict, arrays, step_hint: float | None = None) -> Grid:
             s = coarse
         step = np.full(3, s)
         n = axis_counts(extent, step, 2)
-    check_count(n)
+    check_count(n, settings)
     spacing = step
     origin = (lo + hi) / 2 - (np.asarray(n) - 1) * step / 2         # centred: at least half a cell over each face
     return Grid(tuple(float(x) for x in origin), tuple(float(x) for x in spacing), tuple(int(c) for c in n))
