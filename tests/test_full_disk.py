@@ -92,7 +92,7 @@ WRITERS = [
                           "--cache", "{cache}"]),
     ("render -o png exr + AOVs + depfile", ["render", "{scene}", "-o", "{out}/keep.png", "-o", "{out}/keep.exr",
                                              "--set", "output.normal={out}/n.exr", "--depfile", "{out}/f.d",
-                                             "--cache", "{cache}"]),
+                                             "--allow-outside", "--cache", "{cache}"]),    # the AOV: another disk
     ("sheet -o png exr, --frames, --layout, depfile, --html",
      ["sheet", "{scene}", "-o", "{out}/x.png", "-o", "{out}/x.exr", "--frames", "{out}/frames", "--frames-exr",
       "--html", "{out}/page",
