@@ -78,6 +78,9 @@ def test_auto_step_reads_the_enclosed_points_only():
     t = np.array([[1.0, 2.0, 3.0, inf], [2.0, 2.0, 2.0, 2.0], [inf, inf, inf, 1.0]])
     assert probes.auto_step(t) == pytest.approx(0.5 * np.median([2.5, 2.0]))
     assert probes.auto_step(np.full((4, 8), inf)) is None
+    # a floor under an open sky: every point meets it with half its rays (the median a miss): open,
+    # not an interior of infinite scale (whose inf reached the probes' manifest, unwritable JSON)
+    assert probes.auto_step(np.array([[1.0, 2.0, inf, inf]] * 3)) is None
 
 
 def test_the_cap_coarsens_an_automatic_grid_and_is_said():

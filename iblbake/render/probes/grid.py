@@ -113,7 +113,10 @@ def auto_step(t) -> float | None:
     if not enclosed.any():
         return None
     free = np.median(np.where(t[enclosed] < 0, np.inf, t[enclosed]), axis=1)
-    return INTERIOR_FRACTION * float(np.median(free))
+    step = INTERIOR_FRACTION * float(np.median(free))
+    # points that meet a surface with only half their rays (a floor below an open sky) have a
+    # median ray that is a miss: where they are most of the enclosed points the scene is open
+    return step if math.isfinite(step) else None
 
 
 def grid_of(settings: dict, arrays, step_hint: float | None = None) -> Grid:
