@@ -107,7 +107,7 @@ def _gib(nbytes: float) -> str:
 def _fits(what: str, nbytes: float, hint: str) -> None:
     """Before the work: an InputError saying how much memory `what` needs where that is more than
     this process may still allocate (its address-space limit, or the system's available memory)."""
-    from iblbake.device.runtime import host_bytes_available
+    from iblbake.io.memory import host_bytes_available
     free = host_bytes_available()
     if free is not None and nbytes > free:
         raise InputError(f"{what}: needs about {_gib(nbytes)} of memory, more than the {_gib(max(free, 0))} "

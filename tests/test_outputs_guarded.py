@@ -173,9 +173,9 @@ def test_bake_sizes_over_memory_are_refused_before_any_work(files, stress, argv,
 def test_the_largest_size_that_fits_is_the_boundary(monkeypatch):
     """check_chain_fits bisects to the exact boundary of its own memory model."""
     from iblbake.bake import mips
-    from iblbake.device import runtime
+    from iblbake.io import memory
     host = 3 << 30
-    monkeypatch.setattr(runtime, "host_bytes_available", lambda: host)
+    monkeypatch.setattr(memory, "host_bytes_available", lambda: host)
     sizes_of = lambda s: mips.PrefilterOptions("equirect", s).resolved(0)["sizes"]   # noqa: E731
     with pytest.raises(Exception) as e:
         mips.check_chain_fits("equirect", 50000, sizes_of, None, "--size")

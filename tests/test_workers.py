@@ -233,19 +233,19 @@ def test_a_glb_goes_to_a_worker_with_the_files_it_names(tmp_path):
 def test_worker_count_caps_at_the_tasks_the_cores_and_the_memory(monkeypatch):
     """--jobs 1000 started a worker a cell (~160-400 MiB each) with a thousandth of the cores each:
     the count is capped at the cells, the cores and the available memory, and says which."""
-    from iblbake.device import runtime
+    from iblbake.io import memory
     monkeypatch.setattr(os, "sched_getaffinity", lambda _pid: set(range(8)), raising=False)
     monkeypatch.setattr(os, "cpu_count", lambda: 8)
-    monkeypatch.setattr(runtime, "host_bytes_available", lambda: 100 * workers.WORKER_BYTES)
+    monkeypatch.setattr(memory, "host_bytes_available", lambda: 100 * workers.WORKER_BYTES)
     assert workers.worker_count(4, 25) == (4, None)
     assert workers.worker_count(1000, 5) == (5, "one a cell: 5 to render")
     assert workers.worker_count(1000, 25) == (8, "one a core: 8 cores")
-    monkeypatch.setattr(runtime, "host_bytes_available", lambda: 3 * workers.WORKER_BYTES + 1)
+    monkeypatch.setattr(memory, "host_bytes_available", lambda: 3 * workers.WORKER_BYTES + 1)
     n, why = workers.worker_count(1000, 25, "reference")
     assert n == 3 and why.startswith("the memory: ") and "400 MiB a worker" in why
-    monkeypatch.setattr(runtime, "host_bytes_available", lambda: 1 << 20)
+    monkeypatch.setattr(memory, "host_bytes_available", lambda: 1 << 20)
     assert workers.worker_count(6, 25)[0] == 1            # always one
-    monkeypatch.setattr(runtime, "host_bytes_available", lambda: None)
+    monkeypatch.setattr(memory, "host_bytes_available", lambda: None)
     assert workers.worker_count(1000, 25)[0] == 8
 
 
@@ -254,7 +254,7 @@ def test_jobs_beyond_the_cores_are_capped_and_said(tmp_path, small_panoramas):
     """`sheet --jobs 1000` on 4 cells: no more workers than the cores (and the cells, and the
     memory), a note on stderr, the count asked and why in --json; each worker's measured peak
     memory within the WORKER_BYTES the memory cap assumes."""
-    from iblbake.device.runtime import host_bytes_available
+    from iblbake.io.memory import host_bytes_available
     scene = sheet_scene(tmp_path, small_panoramas["city"], {"columns": {
         "key": "materials.gold.roughness", "values": [0.2, 0.4, 0.6, 0.8]}}, res=(16, 12))
     p = run_cli("sheet", scene, "--cache", tmp_path / "c", "--json", "-o", tmp_path / "s.png", "--jobs", "1000")

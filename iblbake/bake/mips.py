@@ -20,7 +20,7 @@ import numpy as np
 
 from iblbake.bake import cache
 from iblbake.device import runtime as cl
-from iblbake.io import images
+from iblbake.io import images, memory
 from iblbake.bake import dfg
 from iblbake.bake import layouts
 from iblbake.bake import mips
@@ -85,7 +85,7 @@ def check_chain_fits(layout: str, size: int, sizes_of, rt, flag: str, candidates
     base `size` (level sizes `sizes_of(size)`) needs more host memory than is available or a
     larger buffer than the device `rt` allocates (rt None: the numpy backend, host only).
     `candidates`: the sizes the option allows, ascending (default every size up to `size`)."""
-    host = cl.host_bytes_available()
+    host = memory.host_bytes_available()
     max_alloc = rt.info.device.max_mem_alloc_size if rt is not None else None
 
     def need(s):
@@ -290,7 +290,7 @@ class Baker:
                                opts.get("method_name", "method"))
         if self.gpu or opts["method"] != "auto":
             return methods
-        free = cl.host_bytes_available()
+        free = memory.host_bytes_available()
         return ["fis" if how.startswith("convolve") and free is not None
                 and prefilter.convolve_twin_bytes(chain_sizes, r * r, float(how.split("@")[1])) > free / 2 else how
                 for how, r in zip(methods, opts["roughness"])]

@@ -207,7 +207,7 @@ DECODE_BYTES_PER_CHANNEL, DECODE_BYTES_PER_PIXEL = 8, 32
 def _check_decode_fits(path, w: int, h: int, nc: int) -> None:
     """From the header, before decoding: an InputError saying how much memory the image needs
     where that is more than the process may still allocate (a limit under max_pixels' too)."""
-    from iblbake.device.runtime import host_bytes_available
+    from iblbake.io.memory import host_bytes_available
     need = w * h * (DECODE_BYTES_PER_CHANNEL * nc + DECODE_BYTES_PER_PIXEL)
     free = host_bytes_available()
     if free is not None and need > free:

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from iblbake.device.runtime import host_bytes_available
+from iblbake.io.memory import host_bytes_available
 from iblbake.errors import InputError
 from iblbake.render import enclosure
 from iblbake.render.bakes import Bakes, load_all

@@ -105,7 +105,7 @@ def worker_count(asked: int, tasks: int, what: str = "cell", warn=None) -> tuple
     """How many worker processes to start when `asked` for `tasks` pieces of work (`what`s): at
     most one a task, one a core, and as many as the available memory holds at WORKER_BYTES each.
     (count, why fewer than asked, for --json; None when it is what was asked); `warn` is told."""
-    from iblbake.device.runtime import host_bytes_available
+    from iblbake.io.memory import host_bytes_available
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     caps = [(max(1, tasks), f"one a {what}: {tasks} to render"), (cores, f"one a core: {cores} cores")]
     free = host_bytes_available()
