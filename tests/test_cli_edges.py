@@ -123,3 +123,12 @@ def test_a_depfile_names_a_non_utf8_file_by_its_bytes(tmp_path):
                 "--backend", "numpy", "-q", cwd=tmp_path)
     assert p.returncode == 0, p.stderr
     assert (tmp_path / os.fsdecode(b"\xff.d")).read_bytes().startswith(b"\xfc.json: \\\n  sky.exr\n")
+
+
+def test_usage_errors_are_one_line(tmp_path):
+    """click's own usage errors (a value out of an option's range, an unknown command or option, a
+    missing argument) took three lines (Usage, Try, Error): one line, naming the command's help."""
+    one_line_error(run_cli("sh", tmp_path / "x.exr", "--bands", "0"), 2, "--bands", "iblbake sh --help")
+    one_line_error(run_cli("shh"), 2, "shh", "iblbake --help")
+    one_line_error(run_cli("sheet", tmp_path / "s.yaml", "-o", tmp_path / "x.png", "--jobs", "0"), 2, "--jobs")
+    one_line_error(run_cli("render", "--no-such-option"), 2, "--no-such-option")

@@ -101,6 +101,10 @@ def _run() -> int:
     except IblbakeError as e:
         click.echo(f"Error: {e}", err=True)
         return e.exit_code
+    except click.UsageError as e:     # one line, as every other error (click's own takes three)
+        where = e.ctx.command_path if e.ctx else "iblbake"
+        click.echo(f"Error: {e.format_message()} (try '{where} --help')", err=True)
+        return e.exit_code
     except click.ClickException as e:
         e.show()
         return e.exit_code
