@@ -94,6 +94,8 @@ def _shown(value) -> str:
     """A value as a message quotes it: repr on one line, cut to 60 characters (an array's repr
     spans lines, a long list's pages)."""
     try:
+        if type(value).__module__ == "numpy" and getattr(value, "ndim", None) == 0:
+            value = value.item()          # numpy's repr of a scalar depends on its print options
         text = " ".join(repr(value).split())
     except Exception:                              # noqa: BLE001 - a repr that fails is still a value
         text = f"<{_kind(value)}>"

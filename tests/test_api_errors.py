@@ -125,7 +125,7 @@ BAD = {
         ("size", lambda c: iblbake.dfg(4.0, backend="numpy")),
         ("device", lambda c: iblbake.dfg(4, device=5)),
         ("samples 1099511627776: use 1 to 1048576", lambda c: iblbake.dfg(4, samples=2 ** 40, backend="numpy")),
-        ("size np.float64(16.0): give a whole number 2 to 4096", lambda c: iblbake.dfg(np.float64(16))),
+        ("size 16.0: give a whole number 2 to 4096", lambda c: iblbake.dfg(np.float64(16))),
         ("bogus: not an argument of dfg", lambda c: iblbake.dfg(8, bogus=1)),
     ],
     "load_panorama": [
