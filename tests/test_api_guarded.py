@@ -118,6 +118,7 @@ for call in calls:
     assert normals["error"].startswith("normals (268435456, 3): needs about 256 GiB"), normals
 
 
+@pytest.mark.slow         # 6.9 s: 24 frames
 def test_threads_sharing_a_renderer_get_the_serial_frames(sky, tmp_path):
     """Eight threads sharing one Renderer: 11 to 19 of 24 frames were wrong, with no exception
     (the runtime's queue, programs and buffers raced). Calls on a runtime now take turns."""

@@ -8,6 +8,7 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from .conftest import ROOT, run_cli, scene_file, write_exr
 
@@ -109,6 +110,7 @@ def test_the_gallery_makes_the_meshes_its_sheets_read(tmp_path):
     assert checked >= 13, r.stdout          # mesh, ao, textured (6 files), roughness_map, probe_bases (5)
 
 
+@pytest.mark.slow         # 7.6 s: three renders and bakes in subprocesses
 def test_a_depfile_names_a_non_utf8_file_by_its_bytes(tmp_path):
     """A scene or output named by bytes that are not UTF-8 crashed --depfile (UnicodeEncodeError in
     the write); the rule is written with the raw bytes, as `deps` prints it."""
