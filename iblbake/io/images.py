@@ -86,18 +86,9 @@ def max_pixels_default() -> int:
 
 
 def env_pixels(name: str, default: int) -> int:
-    """A pixel limit from the environment variable `name` (unset or empty: `default`); anything
-    but a whole number >= 1 is an InputError naming the variable (-5 is no limit to go by)."""
-    env = os.environ.get(name)
-    if not env:
-        return default
-    try:
-        value = int(env)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise InputError(f"{name}={env!r}: give a whole number of pixels >= 1 (or unset it for {default})")
-    return value
+    """A pixel limit from the environment variable `name` (io/reads.py env_count)."""
+    from iblbake.io import reads
+    return reads.env_count(name, default, "pixels")
 
 
 def file_sha256(path) -> str:

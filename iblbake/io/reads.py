@@ -32,21 +32,23 @@ def size_text(n: int) -> str:
     return f"{n} bytes"
 
 
-def _env_bytes(name: str, default: int) -> int:
-    v = os.environ.get(name)
-    if not v:
+def env_count(name: str, default: int, unit: str) -> int:
+    """A limit from the environment variable `name` (unset or empty: `default`); anything but a
+    whole number >= 1 is an InputError naming the variable (-5 is no limit to go by)."""
+    env = os.environ.get(name)
+    if not env:
         return default
     try:
-        n = int(v)
+        value = int(env)
     except ValueError:
-        raise InputError(f"{name}={v!r} is not a whole number of bytes") from None
-    if n < 1:
-        raise InputError(f"{name}={v!r}: give a number of bytes above 0")
-    return n
+        value = 0
+    if value < 1:
+        raise InputError(f"{name}={env!r}: give a whole number of {unit} >= 1 (or unset it for {default})")
+    return value
 
 
 def mesh_bytes() -> int:
-    return _env_bytes("IBLBAKE_MAX_MESH_BYTES", MESH_BYTES)
+    return env_count("IBLBAKE_MAX_MESH_BYTES", MESH_BYTES, "bytes")
 
 
 MESH_HINT = "; IBLBAKE_MAX_MESH_BYTES raises it"
