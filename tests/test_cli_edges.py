@@ -127,6 +127,20 @@ def test_a_depfile_names_a_non_utf8_file_by_its_bytes(tmp_path):
     assert (tmp_path / os.fsdecode(b"\xff.d")).read_bytes().startswith(b"\xfc.json: \\\n  sky.exr\n")
 
 
+def test_json_names_a_non_utf8_file_in_valid_unicode(tmp_path):
+    """A name that is not UTF-8 reached --json as a lone surrogate ('\\udcfd' escapes: strict readers
+    refuse it, jq shows U+FFFD): its bytes are written as Python's backslashreplace shows them."""
+    sky = write_exr(tmp_path / "sky.exr", np.full((8, 16, 3), 0.5, np.float32))
+    scene = scene_file(tmp_path, sky, name=os.fsdecode(b"\xfd.yaml"),
+                       camera={"perspective": {"position": [0, 0, 3], "fov_y": 45}, "resolution": [8, 8]})
+    p = run_cli("deps", scene.name, "-o", os.fsdecode(b"\xfc.png"), "--json", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert "\\udc" not in p.stdout
+    doc = json.loads(p.stdout)
+    assert doc["targets"] == [f"{tmp_path}/\\xfc.png"], doc
+    assert f"{tmp_path}/\\xfd.yaml" in doc["prerequisites"], doc
+
+
 def test_usage_errors_are_one_line(tmp_path):
     """click's own usage errors (a value out of an option's range, an unknown command or option, a
     missing argument) took three lines (Usage, Try, Error): one line, naming the command's help."""

@@ -4,14 +4,13 @@ is from the converged reference (iblbake/study/accuracy.py)."""
 from __future__ import annotations
 
 import contextlib
-import json
 import time
 from pathlib import Path
 
 import click
 
 from iblbake.cli.options import (API_FLAGS, Console, allow_outside_option, common_options, device_option, force_option,
-                                  max_pixels_option, max_texture_pixels_option, non_negative, refuse_foreign)
+                                  json_text, max_pixels_option, max_texture_pixels_option, non_negative, refuse_foreign)
 from iblbake.errors import IblbakeError
 
 FILES = {"table.md": "Markdown table", "table.csv": "CSV", "accuracy.json": "JSON", "plot.png": "error-time plot",
@@ -138,7 +137,7 @@ def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repe
             summary["outputs"] = [str(out / n) for n in FILES]
             summary["elapsed_s"] = round(time.perf_counter() - t_start, 3)
             batch.write_text(out / "accuracy.json",
-                             json.dumps({"generator": mark(), **summary}, indent=2, allow_nan=False) + "\n")
+                             json_text({"generator": mark(), **summary}) + "\n")
     summary["elapsed_s"] = round(time.perf_counter() - t_start, 3)
     split = ", ".join(f"{k[:-2]} {v:.1f} s" for k, v in summary["time_split_s"].items())
     noise = ", ".join(f"{t} {100 * refs[t]['noise']:.2f}% (99% of pixels {100 * refs[t]['noise_bulk']:.2f}%)"

@@ -97,9 +97,28 @@ class Console:
 
     def result(self, summary: dict, human: str):
         if self.as_json:
-            click.echo(json.dumps(summary, indent=2, allow_nan=False))
+            click.echo(json_text(summary))
         elif not self.quiet:
             click.echo(human)
+
+
+def _shown(value):
+    """value with every str made valid Unicode: a file name that is not UTF-8 reaches Python with
+    lone surrogates (os.fsdecode), which json.dumps writes as '\\udcff' escapes that strict
+    readers refuse and jq shows as U+FFFD; its undecodable bytes are written as '\\xff' instead,
+    as Python's own backslashreplace shows them."""
+    if isinstance(value, str):
+        return value.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+    if isinstance(value, dict):
+        return {_shown(k): _shown(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_shown(v) for v in value]
+    return value
+
+
+def json_text(summary: dict, indent: int = 2) -> str:
+    """A command's --json document: strict JSON (no NaN) of valid Unicode."""
+    return json.dumps(_shown(summary), indent=indent, allow_nan=False)
 
 
 def _duration(seconds: float) -> str:
