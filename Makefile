@@ -61,15 +61,17 @@ test: opencl assets testmodels readers peers
 	$(MAKE) --no-print-directory check-locals
 
 # the developer loop (at most 3 minutes on a 2-core CPU): no network, synthetic panoramas, no
-# readers, browser, Dask or kill loops, nothing over 3 s (pytest markers: pyproject.toml)
+# readers, browser, Dask or kill loops, nothing over about 5 s (pytest markers: pyproject.toml), on
+# every core up to four (pytest-xdist; a worker builds its own kernels, about 0.4 GiB each)
 FAST   := -m "not (slow or external or kill)"
+CORES  := $(shell n=$$(nproc 2>/dev/null || echo 1); [ $$n -gt 4 ] && n=4; echo $$n)
 check: opencl meshes
-	$(BIN)/python -m pytest -q $(FAST) tests
+	$(BIN)/python -m pytest -q -n $(CORES) $(FAST) tests
 
 # the developer loop's tests with every kernel's uninitialised locals poisoned (NaN: tests/poison_locals.py),
 # so a kernel that reads a value it never wrote fails every time instead of now and then
 check-locals: opencl meshes
-	IBLBAKE_POISON_LOCALS=1 $(BIN)/python -m pytest -q $(FAST) tests
+	IBLBAKE_POISON_LOCALS=1 $(BIN)/python -m pytest -q -n $(CORES) $(FAST) tests
 
 # Intel's OpenCL CPU runtime (the optional extra iblbake[intel-cpu], Intel's EULA: docs/libraries.md),
 # registered by iblbake itself; PoCL stays the default device, IBLBAKE_DEVICE=intel-cpu picks Intel's

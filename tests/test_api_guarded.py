@@ -145,6 +145,7 @@ def test_threads_sharing_a_renderer_get_the_serial_frames(sky, tmp_path):
     assert not errors and not wrong, (errors, f"{len(wrong)} of 24 frames differ from the serial ones", wrong[:4])
 
 
+@pytest.mark.slow         # over 5 s: make test runs it, make check is the fast loop
 def test_an_edited_scene_is_refused_naming_the_key(sky, tmp_path):
     """Editing Scene.data after load_scene rendered pixels of 5e31, NaN frames or raw errors: a
     Scene is read-only, and one edited since it was validated is an InputError naming the key

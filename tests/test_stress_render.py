@@ -310,6 +310,7 @@ def test_tangent_frames_along_the_axes(rt, stress):
     stress.check("tangent frames for normals along +-y, +-z (and 1e-8 off): orthonormality", worst, 1e-5, "abs")
 
 
+@pytest.mark.slow         # over 5 s: make test runs it, make check is the fast loop
 def test_importance_mip_selection_pdf_extremes(tmp_path, stress, one_env, dfg_fine):
     """Roughness 0 (pdf -> infinity, the 0/0 of a delta) and 1 (pdf -> 0 at the horizon), sample
     counts 1, 3, 7 and 100 (not powers of two): finite frames; the furnace holds where the sample
@@ -371,6 +372,7 @@ def test_sun_panorama_through_every_mode(tmp_path, stress, value):
 
 # --- watertight meshes ------------------------------------------------------------------------------
 
+@pytest.mark.slow         # over 5 s: make test runs it, make check is the fast loop
 def test_no_rays_slip_through_shared_edges(stress):
     """The 102k-triangle knot at 1280x720 (examples/scenes/mesh.yaml): a primary ray through a
     shared edge must hit one of its triangles. A ray that slips through hits the far side of the

@@ -381,6 +381,7 @@ def test_mip_level_is_the_footprint(tmp_path):
 
 # --- coordinates ---------------------------------------------------------------------------------
 
+@pytest.mark.slow         # over 5 s: make test runs it, make check is the fast loop
 def test_texture_transform_wrap_and_texcoord1_hand_computed(tmp_path):
     """An 8 x 8 texture of distinct texels, magnified with nearest filtering, on the quad (pixel
     (i, j) at uv ((i + 0.5) / 64, (j + 0.5) / 64)): each pixel equals the texel a hand-computed
@@ -599,6 +600,7 @@ def test_texture_limits_and_formats(tmp_path):
     assert np.abs(centre - srgb_decode(codes / 65535.0)).max() < 1e-6
 
 
+@pytest.mark.slow         # over 5 s: make test runs it, make check is the fast loop
 def test_textured_material_without_uvs_and_blend(tmp_path):
     import trimesh
     box = tmp_path / "box.stl"
