@@ -330,17 +330,18 @@ class Bakes:
         return self.units[name].load(Job.of(job, self))
 
 
-def load_all(ctx, names) -> dict:
-    """Every named bake into ctx.loaded, in order (units.order: a bake after those it reads),
-    timed into the context's report."""
-    from iblbake.render.units import Job
-    job = Job.of(ctx)
+def load_all(job, names, report) -> dict:
+    """Every named unit into job.loaded, in the order given (units.order: a unit after those it
+    reads), each timed into its row of the frame's report (Unit.row; the sun and the device scene
+    have none): the one place a frame's units and bakes are loaded and reported."""
     for name in names:
         t0 = time.perf_counter()
-        value, cached, extra = ctx.bakes.load(name, job)
-        ctx.report.bake(name, time.perf_counter() - t0, cached, **extra)
-        ctx.loaded[name] = value
-    return ctx.loaded
+        value, cached, extra = job.bakes.load(name, job)
+        row = job.bakes.units[name].row
+        if row is not None:
+            report.bake(row, time.perf_counter() - t0, cached, **extra)
+        job.loaded[name] = value
+    return job.loaded
 
 
 def chain_table(rt, levels) -> dict:
