@@ -160,6 +160,7 @@ class Context:
     tile_index: int = 0
     row0: int = 0                   # the tile's first row and its number of rows
     tile_rows: int = 0
+    gathering: bool = False         # a whole-frame pass's first sweep: the passes' counts are the second's
 
     def __post_init__(self):
         for p in self.plan.passes:
@@ -187,8 +188,8 @@ class Context:
         """The scene's device records (scene/pack.py SceneArrays)."""
         return self.loaded["device_scene"].arrays
 
-    def start_tile(self, index: int, row0: int, rows: int):
-        self.tile_index, self.row0, self.tile_rows = index, row0, rows
+    def start_tile(self, index: int, row0: int, rows: int, gathering: bool = False):
+        self.tile_index, self.row0, self.tile_rows, self.gathering = index, row0, rows, gathering
 
     def launch(self, p, global_size, function=None, **args):
         """Run pass p's kernel (or another `function` of its program) over global_size."""
@@ -398,13 +399,13 @@ def host_frame(width: int, height: int, planned: dict) -> tuple:
     return hdr, png, aovs
 
 
-def start_tile(ctx: Context, sweep: Sweep, index: int, row0: int):
+def start_tile(ctx: Context, sweep: Sweep, index: int, row0: int, gathering: bool = False):
     """Tile `index` in the table: its buffers (re)allocated where the size this tile and plan need
     differs from what the table holds (a series of frames reusing buffers may switch AO or AOVs
     on: their buffers grow, and the passes writing them run, being new or redefined), its counts,
     and the radiance the lighting passes add into cleared."""
     width, height = ctx.table["width"], ctx.table["height"]
-    ctx.start_tile(index, row0, min(sweep.rows, height - row0))
+    ctx.start_tile(index, row0, min(sweep.rows, height - row0), gathering)
     npix = ctx.tile_rows * width
     n = npix * ctx.table["spp"]
     count = {"sample": n, "pixel": npix, "frame": 1}
@@ -440,11 +441,12 @@ def sweep_whole(ctx: Context, sweep: Sweep, whole):
     """A whole-frame pass (SSR: its rays read any pixel) in a tiled frame: a first sweep runs the
     passes before it over every tile and gathers what it reads of each into frame-sized buffers;
     it then works on the whole frame, and the second sweep (sweep_frame) runs every pass again (the
-    per-sample buffers of a tile do not outlive it) with that pass applying what it found."""
+    per-sample buffers of a tile do not outlive it) with that pass applying what it found. The
+    passes count (Pass.count) in the second sweep only: each sample once."""
     before = ctx.plan.passes[:ctx.plan.passes.index(whole)]
     gather_s = 0.0
     for index, row0 in enumerate(sweep.row0s):
-        start_tile(ctx, sweep, index, row0)
+        start_tile(ctx, sweep, index, row0, gathering=True)
         for p in before:
             if p.name in sweep.run:
                 p.run(ctx)

@@ -107,10 +107,11 @@ class Pass:
         return ctx.kept[self.name]
 
     def count(self, ctx, **add) -> dict:
-        """Adds to this frame's counters; their totals so far."""
+        """Adds to this frame's counters; their totals so far. A whole-frame pass's first sweep
+        (ctx.gathering) adds nothing: its tiles are swept again."""
         totals = ctx.counters[self.name]
         for name, n in add.items():
-            totals[name] += n
+            totals[name] += 0 if ctx.gathering else n
         return totals
 
     def counted(self, ctx) -> dict:
