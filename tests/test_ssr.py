@@ -309,6 +309,7 @@ def test_a_glossy_floor_keeps_its_fireflies_down(tmp_path, rt, sky):
     assert abs(mean) < 0.01
 
 
+@pytest.mark.slow
 def test_a_tiled_ssr_frame_counts_each_sample_once(tmp_path, rt, sky):
     """SSR in a tiled frame sweeps the tiles twice (the first gathers the frame its rays read): the
     shade pass's probe counters and the warning they raise are the untiled frame's, each sample
