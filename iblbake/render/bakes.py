@@ -1,6 +1,6 @@
-"""The bake store: what the passes read, loaded once: the panorama, the scene's geometry and
-textures, the scene on the device (render/device_scene.py) and every bake (the units of
-render/units.py: sh, basis, radiance, prefiltered, dfg, env_cdf, probes, reflection_probes),
+"""The bake store: what the passes read, loaded once, each a unit of render/units.py: the
+scene's (its geometry, panorama, sun and textures, the scene on the device: render/device_scene.py)
+and every bake (sh, basis, radiance, prefiltered, dfg, env_cdf, probes, reflection_probes),
 through the content-addressed cache, and kept in memory by content so that a caller rendering
 many frames (a sheet) reads and uploads nothing twice."""
 

@@ -180,13 +180,13 @@ class Context:
 
     @property
     def device_scene(self):
-        """The scene's tables on the device (render/device_scene.py)."""
-        return self.loaded["device_scene"]
+        """The scene's tables on the device (render/device_scene.py), once placed."""
+        return self.loaded.get("device_scene")
 
     @property
     def arrays(self):
         """The scene's device records (scene/pack.py SceneArrays)."""
-        return self.loaded["device_scene"].arrays
+        return self.device_scene.arrays
 
     def start_tile(self, index: int, row0: int, rows: int, gathering: bool = False):
         self.tile_index, self.row0, self.tile_rows, self.gathering = index, row0, rows, gathering
@@ -311,10 +311,7 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
     ctx, sweep = allocate(job, pl, rep, table, reuse, device_budget)
     sweep_frame(ctx, sweep)
     if reuse is not None:
-        reuse.state = None if sweep.tiled else {
-            "runtime": rt, "shape": (*scene.data["camera"]["resolution"], scene.data["camera"]["spp"]),
-            "keys": sweep.keys, "buffers": {b: ctx.table[b] for b in (*sweep.names, *TABLE_TILE)},
-            "hdr": ctx.frame_hdr, "aovs": ctx.frame_aovs, "png": ctx.frame_png}
+        keep_for_series(reuse, ctx, sweep)
     return finish(ctx, sweep, builds_before, t_start, profile_paths)
 
 
@@ -457,6 +454,16 @@ def sweep_whole(ctx: Context, sweep: Sweep, whole):
     whole.frame_run(ctx)
     ctx.rt.finish()
     ctx.report.run(whole.name, gather_s + time.perf_counter() - t0, sweeps=2)
+
+
+def keep_for_series(reuse: Reuse, ctx: Context, sweep: Sweep):
+    """What the next frame of a series may reuse: the buffers, host frame and pass keys of an
+    untiled frame."""
+    cam = ctx.scene.data["camera"]
+    reuse.state = None if sweep.tiled else {
+        "runtime": ctx.rt, "shape": (*cam["resolution"], cam["spp"]), "keys": sweep.keys,
+        "buffers": {b: ctx.table[b] for b in (*sweep.names, *TABLE_TILE)},
+        "hdr": ctx.frame_hdr, "aovs": ctx.frame_aovs, "png": ctx.frame_png}
 
 
 def finish(ctx: Context, sweep: Sweep, builds_before: int, t_start: float, profile_paths) -> Frame:
