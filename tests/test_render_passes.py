@@ -3,7 +3,9 @@ closed form of a sphere over a plane, tiled frames against untiled ones, the lay
 kernels share, frames too large for the machine, and the package's import layers."""
 
 import ast
+import dataclasses
 import os
+import re
 import resource
 import subprocess
 import sys
@@ -198,6 +200,32 @@ def test_the_frame_names_no_pass():
     from iblbake.render.passes import PASSES
     src = (ROOT / "iblbake" / "render" / "frame.py").read_text()
     assert not [p.name for p in PASSES if f'"{p.name}"' in src or f"'{p.name}'" in src]
+
+
+def test_the_frame_is_a_sequence_of_short_steps():
+    """render/frame.py's render() reads as its named steps (plan, place the scene, load the bakes,
+    allocate, sweep, report): no function in the module over 60 lines (render() was 145)."""
+    tree = ast.parse((ROOT / "iblbake" / "render" / "frame.py").read_text())
+    long = {n.name: n.end_lineno - n.lineno + 1 for n in ast.walk(tree)
+            if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef)) and n.end_lineno - n.lineno + 1 > 60}
+    assert not long, long
+
+
+def test_passes_set_nothing_on_the_frame_context():
+    """The frame's context is a declared record: a pass keeps its state in its own declared
+    record and counters (Pass.keeps, Pass.counters), never on the context (`grep -rn "ctx[.][a-z_]* = "
+    iblbake/render/passes` finds nothing), and every attribute a pass, a source or the paths'
+    profile reads of it is a declared field, property or method; one it lacks cannot be set."""
+    passes = ROOT / "iblbake" / "render" / "passes"
+    sets = [f"{f.name}:{i}" for f in sorted(passes.glob("*.py"))
+            for i, line in enumerate(f.read_text().splitlines(), 1) if re.search(r"ctx\.[a-z_]* = ", line)]
+    assert not sets, sets
+    readers = [*passes.glob("*.py"), *(ROOT / "iblbake" / "render" / "sources").glob("*.py"),
+               ROOT / "iblbake" / "render" / "paths" / "profile.py"]
+    used = {m for f in readers for m in re.findall(r"\bctx\.([a-z_0-9]+)", f.read_text())}
+    declared = {f.name for f in dataclasses.fields(frame.Context)} | set(dir(frame.Context))
+    assert used and used <= declared, used - declared
+    assert "__dict__" not in dir(frame.Context) and frame.Context.__slots__      # nothing undeclared can be set
 
 
 def test_buffers_follow_the_declarations(tmp_path, lobed_sky):

@@ -307,3 +307,32 @@ def test_a_glossy_floor_keeps_its_fireflies_down(tmp_path, rt, sky):
     print(f"worst {worst:.4f} of the brightest, floor mean {mean:+.5f}")
     assert worst < 0.45, worst
     assert abs(mean) < 0.01
+
+
+@pytest.mark.slow
+def test_a_tiled_ssr_frame_counts_each_sample_once(tmp_path, rt, sky):
+    """SSR in a tiled frame sweeps the tiles twice (the first gathers the frame its rays read): the
+    shade pass's probe counters and the warning they raise are the untiled frame's, each sample
+    counted once (they were doubled, and the warning said twice). A volume whose probes are all
+    off: every sample of the sphere takes the panorama's SH."""
+    from iblbake.render import frame
+    from tests.test_probes import Given, sphere_scene
+    from tests.test_sides import baked
+    sc = sphere_scene(tmp_path, sky, "probes")
+    sc.data["effects"].update(specular="prefiltered", ssr="on")
+    bakes = Bakes(tmp_path / "cache")
+    render(sc, runtime=rt, cache=bakes)
+    vol = baked(bakes)
+    vol = {**vol, "data": np.concatenate([vol["data"][:, :3], np.ones((len(vol["data"]), 1))], 1)}
+    said = {"whole": [], "tiled": []}
+    whole = render(sc, runtime=rt, cache=Given(tmp_path / "cache", vol), warn=said["whole"].append)
+    budget = frame.frame_bytes(sc, plan(sc), 8, tiled=True)
+    tiled = render(sc, runtime=rt, cache=Given(tmp_path / "cache", vol), warn=said["tiled"].append,
+                   device_budget=budget)
+    assert tiled.report["tiles"] == 4 and whole.report["tiles"] == 1
+    shade = {f: next(p for p in r.report["passes"] if p["name"] == "shade") for f, r in (("whole", whole),
+                                                                                       ("tiled", tiled))}
+    hit = int((whole.hdr[..., 3] > 0).sum())
+    assert hit > 100 and shade["whole"]["probe_fallback_sky"] == shade["tiled"]["probe_fallback_sky"] == hit
+    probes_said = {f: [w for w in said[f] if "no active probe" in w] for f in said}
+    assert len(probes_said["whole"]) == 1 and probes_said["tiled"] == probes_said["whole"]

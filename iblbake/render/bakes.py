@@ -1,6 +1,6 @@
-"""The bake store: what the passes read, loaded once: the panorama, the scene's geometry and
-textures, the scene on the device (render/device_scene.py) and every bake (the units of
-render/units.py: sh, basis, radiance, prefiltered, dfg, env_cdf, probes, reflection_probes),
+"""The bake store: what the passes read, loaded once, each a unit of render/units.py: the
+scene's (its geometry, panorama, sun and textures, the scene on the device: render/device_scene.py)
+and every bake (sh, basis, radiance, prefiltered, dfg, env_cdf, probes, reflection_probes),
 through the content-addressed cache, and kept in memory by content so that a caller rendering
 many frames (a sheet) reads and uploads nothing twice."""
 
@@ -330,17 +330,18 @@ class Bakes:
         return self.units[name].load(Job.of(job, self))
 
 
-def load_all(ctx, names) -> dict:
-    """Every named bake into ctx.loaded, in order (units.order: a bake after those it reads),
-    timed into the context's report."""
-    from iblbake.render.units import Job
-    job = Job.of(ctx)
+def load_all(job, names, report) -> dict:
+    """Every named unit into job.loaded, in the order given (units.order: a unit after those it
+    reads), each timed into its row of the frame's report (Unit.row; the sun and the device scene
+    have none): the one place a frame's units and bakes are loaded and reported."""
     for name in names:
         t0 = time.perf_counter()
-        value, cached, extra = ctx.bakes.load(name, job)
-        ctx.report.bake(name, time.perf_counter() - t0, cached, **extra)
-        ctx.loaded[name] = value
-    return ctx.loaded
+        value, cached, extra = job.bakes.load(name, job)
+        row = job.bakes.units[name].row
+        if row is not None:
+            report.bake(row, time.perf_counter() - t0, cached, **extra)
+        job.loaded[name] = value
+    return job.loaded
 
 
 def chain_table(rt, levels) -> dict:

@@ -1,10 +1,14 @@
 """`iblbake render`: plan the effect set of a scene, load what it reads, run the passes.
 
-render() carries a plan out against one context (a runtime, the named buffers of the pass
-contract, the loaded bakes) and returns the frame and a report of every bake and pass with its
-time, cache hit or miss, and the device. A caller that renders many frames passes its runtime and
-Bakes, so nothing is probed, compiled, read or baked twice. A frame whose buffers do not fit the
-device renders in tiles of rows (the same pixels), and one that cannot fit fails in one line.
+render() is a sequence of named steps: plan (plan_frame: the effect set and its passes), place
+the scene (place_scene: its units, render/units.py, and the camera's table), load the bakes the
+passes read (bakes.load_all, the one place a report's bake rows come from), allocate (the tiles,
+the passes a series reuses, the host's frame, each pass set up: one Context, a declared record),
+sweep (every pass over every tile, a whole-frame pass's first sweep before) and report (finish).
+It returns the frame and a report of every unit and pass with its time, cache hit or miss, and
+the device. A caller that renders many frames passes its runtime and Bakes, so nothing is probed,
+compiled, read or baked twice. A frame whose buffers do not fit the device renders in tiles of
+rows (the same pixels), and one that cannot fit fails in one line.
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ from iblbake.render.device_scene import TABLE as DEVICE_SCENE_TABLE
 from iblbake.render.device_scene import environment_frame
 from iblbake.render.passes.base import DISPLAY_KEYS
 from iblbake.render.plan import Plan, plan
+from iblbake.render.units import Job
 from iblbake.scene import pack
 from iblbake.scene.load import AOVS, Scene
 
@@ -127,20 +132,64 @@ def passes_to_run(pl: Plan, keys: dict, previous: dict | None) -> set:
     return run
 
 
+@dataclass(eq=False, slots=True)
 class Context:
-    """One frame's work: the runtime, scene, plan, loaded bakes, and the table of named buffers
-    and values that kernel parameters are bound from (Runtime.launch)."""
+    """One frame's state, declared: the runtime, scene, plan, bake store and report; the table of
+    named buffers and values that kernel parameters are bound from (Runtime.launch); each pass's
+    setup() arguments; every unit the frame loaded (units.py: the scene's and the bakes, by name);
+    the host's frame the passes read back into; what each pass keeps across the tiles and its
+    counters (Pass.keeps, Pass.counters); the tile being swept (start_tile). Made once the frame is
+    planned, placed and allocated (render() below); passes read it and fill its tables, never set it."""
 
-    def __init__(self, rt, scene: Scene, pl: Plan, bakes: Bakes, report: Report, warn, progress):
-        self.rt, self.scene, self.plan, self.bakes, self.report = rt, scene, pl, bakes, report
-        self.warn, self.progress = warn, progress
-        self.table: dict = {}
-        self.args: dict = {}
-        self.loaded: dict = {}
-        self.image = None
-        self.background_image = None
-        self.device_scene = None      # the scene's tables on the device (render/device_scene.py)
-        self.arrays = None            # the scene's device records (scene/pack.py SceneArrays)
+    rt: object
+    scene: Scene
+    plan: Plan
+    bakes: Bakes
+    report: Report
+    warn: object
+    progress: object
+    table: dict                     # named buffers and values (the scene's, then each tile's)
+    loaded: dict                    # unit name -> value (render/units.py)
+    frame_hdr: np.ndarray           # the host's frame: hdr, the tone-mapped PNG, the AOVs
+    frame_png: np.ndarray | None
+    frame_aovs: dict
+    tile_count: int
+    args: dict = field(default_factory=dict)         # pass name -> its setup() arguments
+    kept: dict = field(default_factory=dict)         # pass name -> its `keeps` record
+    counters: dict = field(default_factory=dict)     # pass name -> {counter: total over the tiles}
+    tile_index: int = 0
+    row0: int = 0                   # the tile's first row and its number of rows
+    tile_rows: int = 0
+    gathering: bool = False         # a whole-frame pass's first sweep: the passes' counts are the second's
+
+    def __post_init__(self):
+        for p in self.plan.passes:
+            if p.keeps is not None:
+                self.kept[p.name] = p.keeps()
+            self.counters[p.name] = {c.name: 0 for c in p.counters}
+
+    @property
+    def image(self):
+        """The panorama as read (the `panorama` unit), where a bake or pass reads it, else None."""
+        return self.loaded.get("panorama", (None, None))[0]
+
+    @property
+    def background_image(self):
+        """The panorama as the background shows it (an extracted sun stays visible in it)."""
+        return self.loaded.get("panorama", (None, None))[1]
+
+    @property
+    def device_scene(self):
+        """The scene's tables on the device (render/device_scene.py), once placed."""
+        return self.loaded.get("device_scene")
+
+    @property
+    def arrays(self):
+        """The scene's device records (scene/pack.py SceneArrays)."""
+        return self.device_scene.arrays
+
+    def start_tile(self, index: int, row0: int, rows: int, gathering: bool = False):
+        self.tile_index, self.row0, self.tile_rows, self.gathering = index, row0, rows, gathering
 
     def launch(self, p, global_size, function=None, **args):
         """Run pass p's kernel (or another `function` of its program) over global_size."""
@@ -220,50 +269,21 @@ def tile_rows(rt, scene: Scene, pl: Plan, device_budget: int | None = None) -> i
     return int(rows)
 
 
-def scene_context(scene: Scene, pl: Plan, rt, bakes: Bakes, warn=None, progress=None) -> Context:
-    """A frame's context with the scene on the device (Bakes.device_scene: its geometry, materials
-    and textures, made once per runtime and content) and the camera in the table, the panorama
-    read where a bake or pass reads it (ctx.image). The bakes are loaded by load_all."""
-    d = scene.data
-    cam = d["camera"]
-    width, height = cam["resolution"]
-    rep = Report(rt.device_label)
-    ctx = Context(rt, scene, pl, bakes, rep, warn or (lambda _m: None), progress)
+@dataclass
+class Sweep:
+    """How the frame is swept: the passes that run (the others reused from the last frame of a
+    series), their input keys, the last frame's state where it is reused, and the tiles."""
+    run: set
+    keys: dict
+    prev: dict | None
+    rows: int                       # rows per tile
+    row0s: list                     # each tile's first row
+    names: tuple                    # every buffer name of the table (buffer_names)
+    planned: dict                   # the buffers the running passes need at full size
 
-    t0 = time.perf_counter()
-    arrays = bakes.geometry(scene, ctx.warn)
-    geo = dict(arrays.geometry_report)
-    rep.bake("geometry", time.perf_counter() - t0, geo.pop("cached", False), **geo)
-    needs_env = bool(pl.bakes) or any(p.reads_environment(scene, pl.effects) for p in pl.passes)
-    if needs_env:                     # read only when some bake or pass reads it
-        t0 = time.perf_counter()
-        ctx.image, info = bakes.environment(d["environment"])
-        # the background shows the sky as it is (an extracted sun stays visible in it)
-        ctx.background_image = bakes.environment({**d["environment"], "sun": "none"})[0] \
-            if d["environment"]["sun"] == "extract" else ctx.image
-        for w in info.warnings:
-            ctx.warn(w)
-        rep.bake("read_environment", time.perf_counter() - t0, False, path=info.path,
-                 size=[info.width, info.height])
-    pos, fwd, right, up, ortho = pack.camera_vectors(cam)
-    cam4 = np.zeros((4, 4), np.float32)
-    cam4[0, :3], cam4[0, 3] = pos, 1.0 if ortho else 0.0
-    cam4[1, :3], cam4[2, :3], cam4[3, :3] = fwd, right, up
-
-    textures = None
-    if any(r["maps"] for r in arrays.records):
-        t0 = time.perf_counter()
-        tex, slots, trep = bakes.textures(scene, arrays.records, ctx.warn)
-        rep.bake("textures", time.perf_counter() - t0, trep.pop("cached"), **trep)
-        textures = (tex, slots)
-    ctx.device_scene = bakes.device_scene(rt, scene, ctx.warn, arrays=arrays, textures=textures)
-    ctx.table.update({
-        "cam": rt.to_device(cam4), "width": width, "height": height, "spp": cam["spp"],
-        "jitter": rt.to_device(pack.pixel_jitter(cam["spp"]).astype(np.float32)),
-        **ctx.device_scene.table, **environment_frame(d["environment"]),
-    })
-    ctx.arrays = ctx.device_scene.arrays
-    return ctx
+    @property
+    def tiled(self) -> bool:
+        return len(self.row0s) > 1
 
 
 def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reuse | None = None,
@@ -279,50 +299,82 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
     from iblbake.device.runtime import Runtime
 
     t_start = time.perf_counter()
-    pl = plan(scene, one_program=reuse is None)
-    profiled = next((p for p in pl.passes if p.profiles == "paths"), None)
-    if profile_paths and profiled is None:
-        raise InputError("profile_paths: this frame has no reference pass to profile (effects.diffuse or "
-                         "effects.specular: reference)")
-    d = scene.data
-    cam = d["camera"]
+    pl = plan_frame(scene, reuse, profile_paths)
     rt = runtime or Runtime(device)
     bakes = cache or Bakes(cache_root)
     bakes.runtime = bakes.runtime or rt
     builds_before = len(rt.builds)
-    ctx = scene_context(scene, pl, rt, bakes, warn, progress)
-    rep = ctx.report
-    load_all(ctx, pl.bakes)
+    rep = Report(rt.device_label)
+    job = Job(scene, rt, bakes, warn or (lambda _m: None), progress)
+    table = place_scene(job, pl, rep)
+    load_all(job, pl.bakes, rep)                  # the bakes the passes read
+    ctx, sweep = allocate(job, pl, rep, table, reuse, device_budget)
+    sweep_frame(ctx, sweep)
+    if reuse is not None:
+        keep_for_series(reuse, ctx, sweep)
+    return finish(ctx, sweep, builds_before, t_start, profile_paths)
+
+
+def plan_frame(scene: Scene, reuse: Reuse | None, profile_paths) -> Plan:
+    """The effect set and its passes (render/plan.py); one program unless a series reuses passes."""
+    pl = plan(scene, one_program=reuse is None)
+    if profile_paths and not any(p.profiles == "paths" for p in pl.passes):
+        raise InputError("profile_paths: this frame has no reference pass to profile (effects.diffuse or "
+                         "effects.specular: reference)")
+    return pl
+
+
+def scene_units(scene: Scene, pl: Plan, arrays=None) -> list:
+    """The scene's units a frame places: its geometry, the panorama and its sun where some bake or
+    pass reads them, its textures where a material has maps, and the scene on the device."""
+    names = ["geometry"]
+    if bool(pl.bakes) or any(p.reads_environment(scene, pl.effects) for p in pl.passes):
+        names += ["panorama", "sun"]
+    if arrays is not None and any(r["maps"] for r in arrays.records):
+        names.append("textures")
+    return names + ["device_scene"]
+
+
+def place_scene(job: Job, pl: Plan, rep: Report) -> dict:
+    """The scene's units into job.loaded (render/units.py; a row each in the report) and the
+    frame's table of the scene: the camera, the scene's device tables, the panorama's frame."""
+    load_all(job, ["geometry"], rep)
+    load_all(job, scene_units(job.scene, pl, job.loaded["geometry"])[1:], rep)
+    d = job.scene.data
+    cam = d["camera"]
+    pos, fwd, right, up, ortho = pack.camera_vectors(cam)
+    cam4 = np.zeros((4, 4), np.float32)
+    cam4[0, :3], cam4[0, 3] = pos, 1.0 if ortho else 0.0
+    cam4[1, :3], cam4[2, :3], cam4[3, :3] = fwd, right, up
     width, height = cam["resolution"]
-    spp = cam["spp"]
+    rt = job.rt
+    return {"cam": rt.to_device(cam4), "width": width, "height": height, "spp": cam["spp"],
+            "jitter": rt.to_device(pack.pixel_jitter(cam["spp"]).astype(np.float32)),
+            **job.loaded["device_scene"].table, **environment_frame(d["environment"])}
+
+
+def allocate(job: Job, pl: Plan, rep: Report, table: dict, reuse: Reuse | None, device_budget) -> tuple:
+    """(context, sweep): the tiles, the passes to run (a series' last frame's buffers and host
+    frame for the others), the host's frame, and every running pass set up."""
+    scene, rt = job.scene, job.rt
+    width, height = scene.data["camera"]["resolution"]
+    spp = scene.data["camera"]["spp"]
     rows = tile_rows(rt, scene, pl, device_budget)
-    ctx.width = width
-    ctx.frame_hdr = np.empty((height, width, 4), np.float32)
-    # the host's frame: what the buffers the passes fill are read back into
-    planned = planned_buffers(pl, False)
-    ctx.frame_png = np.empty((height, width, 4), np.uint8) if "png_u8" in planned else None
-    ctx.frame_aovs = {"normal": np.empty((height, width, 4), np.float32),
-                      "albedo": np.empty((height, width, 4), np.float32),
-                      "depth": np.empty((height, width), np.float32),
-                      "object": np.empty((height, width), np.float32)} if "aov_normal" in planned else {}
-    keys = pass_keys(pl, scene, ctx.loaded)
+    hdr, png, aovs = host_frame(width, height, planned_buffers(pl, False))
+    keys = pass_keys(pl, scene, job.loaded)
     prev = reuse.state if reuse is not None else None
     if prev is not None and not (prev["runtime"] is rt and prev["shape"] == (width, height, spp) and rows == height):
         prev = None
     run = passes_to_run(pl, keys, prev["keys"] if prev else None)
     if prev is not None:              # the last frame's buffers hold what the skipped passes wrote
-        ctx.table.update(prev["buffers"])
+        table.update(prev["buffers"])
         kept = {f for p in pl.passes if p.name not in run for f in p.fills}   # and its host frame
-        if "hdr" in kept:
-            ctx.frame_hdr = prev["hdr"].copy()
-        if "aovs" in kept:
-            ctx.frame_aovs = {a: v.copy() for a, v in prev["aovs"].items()}
-        if "png" in kept and prev["png"] is not None:
-            ctx.frame_png = prev["png"].copy()
+        hdr = prev["hdr"].copy() if "hdr" in kept else hdr
+        aovs = {a: v.copy() for a, v in prev["aovs"].items()} if "aovs" in kept else aovs
+        png = prev["png"].copy() if "png" in kept and prev["png"] is not None else png
     row0s = list(range(0, height, rows))
-    ctx.tile_count = len(row0s)
-    names, planned = buffer_names(), planned_buffers(pl, len(row0s) > 1)
-    writers = [p.name for p in pl.passes if "radiance" in p.writes]
+    ctx = Context(rt, scene, pl, job.bakes, rep, job.warn, job.progress, table, job.loaded, hdr, png, aovs,
+                  len(row0s))
     for p in pl.passes:
         if p.name not in run:
             continue
@@ -330,83 +382,116 @@ def render(scene: Scene, *, runtime=None, cache: Bakes | None = None, reuse: Reu
             files, defines = pl.program(p)
             rt.kernel(files, p.function or p.name, defines)
         ctx.args[p.name] = p.setup(ctx)
+    return ctx, Sweep(run, keys, prev, rows, row0s, buffer_names(), planned_buffers(pl, len(row0s) > 1))
 
-    def start_tile(index, row0):
-        ctx.tile_index, ctx.row0 = index, row0
-        ctx.tile_rows = min(rows, height - ctx.row0)
-        npix = ctx.tile_rows * width
-        n = npix * spp
-        # (re)allocate each buffer whose size this tile and plan need differs from what the table
-        # holds (a series of frames reusing buffers may switch AO or AOVs on: their buffers grow,
-        # and the passes writing them run, being new or redefined)
-        count = {"sample": n, "pixel": npix, "frame": 1}
-        for name in names:
-            b = planned.get(name)
-            nbytes = b.element_bytes(d) * count[b.per] if b else PLACEHOLDER_BYTES
-            if name not in ctx.table or ctx.table[name].size != nbytes:
-                ctx.table[name] = rt.empty(nbytes)
-        ctx.table.update({"n": n, "npix": npix, "pixel0": ctx.row0 * width})
-        if not writers or any(w in run for w in writers):        # none: resolve reads zeros
-            rt.cl.enqueue_fill_buffer(rt.queue, ctx.table["radiance"], np.float32(0), 0, n * 16)
 
-    # A whole-frame pass (SSR: its rays read any pixel) in a tiled frame: a first sweep runs the
-    # passes before it over every tile and gathers what it reads of each into frame-sized buffers;
-    # it then works on the whole frame, and the second sweep runs every pass again (the per-sample
-    # buffers of a tile do not outlive it) with that pass applying what it found.
-    whole = next((p for p in pl.passes if getattr(p, "whole_frame", False) and p.name in run), None)
-    if whole is not None and len(row0s) > 1:
-        before = pl.passes[:pl.passes.index(whole)]
-        gather_s = 0.0
-        for index, row0 in enumerate(row0s):
-            start_tile(index, row0)
-            for p in before:
-                if p.name in run:
-                    p.run(ctx)
-            t0 = time.perf_counter()
-            whole.gather(ctx)
-            gather_s += time.perf_counter() - t0
-        t0 = time.perf_counter()
-        whole.frame_run(ctx)
-        rt.finish()
-        rep.run(whole.name, gather_s + time.perf_counter() - t0, sweeps=2)
+def host_frame(width: int, height: int, planned: dict) -> tuple:
+    """(hdr, png, aovs): the host's frame the buffers the passes fill are read back into."""
+    hdr = np.empty((height, width, 4), np.float32)
+    png = np.empty((height, width, 4), np.uint8) if "png_u8" in planned else None
+    aovs = {"normal": np.empty((height, width, 4), np.float32),
+            "albedo": np.empty((height, width, 4), np.float32),
+            "depth": np.empty((height, width), np.float32),
+            "object": np.empty((height, width), np.float32)} if "aov_normal" in planned else {}
+    return hdr, png, aovs
 
-    for index, row0 in enumerate(row0s):
-        start_tile(index, row0)
-        for p in pl.passes:
-            if p.name not in run:
-                rep.run(p.name, 0.0, reused=True)
+
+def start_tile(ctx: Context, sweep: Sweep, index: int, row0: int, gathering: bool = False):
+    """Tile `index` in the table: its buffers (re)allocated where the size this tile and plan need
+    differs from what the table holds (a series of frames reusing buffers may switch AO or AOVs
+    on: their buffers grow, and the passes writing them run, being new or redefined), its counts,
+    and the radiance the lighting passes add into cleared."""
+    width, height = ctx.table["width"], ctx.table["height"]
+    ctx.start_tile(index, row0, min(sweep.rows, height - row0), gathering)
+    npix = ctx.tile_rows * width
+    n = npix * ctx.table["spp"]
+    count = {"sample": n, "pixel": npix, "frame": 1}
+    for name in sweep.names:
+        b = sweep.planned.get(name)
+        nbytes = b.element_bytes(ctx.scene.data) * count[b.per] if b else PLACEHOLDER_BYTES
+        if name not in ctx.table or ctx.table[name].size != nbytes:
+            ctx.table[name] = ctx.rt.empty(nbytes)
+    ctx.table.update({"n": n, "npix": npix, "pixel0": row0 * width})
+    writers = [p.name for p in ctx.plan.passes if "radiance" in p.writes]
+    if not writers or any(w in sweep.run for w in writers):        # none: resolve reads zeros
+        ctx.rt.cl.enqueue_fill_buffer(ctx.rt.queue, ctx.table["radiance"], np.float32(0), 0, n * 16)
+
+
+def sweep_frame(ctx: Context, sweep: Sweep):
+    """Every running pass over every tile, each timed into its report row (with its counters);
+    a whole-frame pass in a tiled frame is first swept over the whole frame (sweep_whole)."""
+    whole = next((p for p in ctx.plan.passes if p.whole_frame and p.name in sweep.run), None)
+    if whole is not None and sweep.tiled:
+        sweep_whole(ctx, sweep, whole)
+    for index, row0 in enumerate(sweep.row0s):
+        start_tile(ctx, sweep, index, row0)
+        for p in ctx.plan.passes:
+            if p.name not in sweep.run:
+                ctx.report.run(p.name, 0.0, reused=True)
                 continue
             t0 = time.perf_counter()
             extra = p.run(ctx)
-            rep.run(p.name, time.perf_counter() - t0, **extra)
-    if reuse is not None:
-        reuse.state = None if len(row0s) > 1 else {
-            "runtime": rt, "shape": (width, height, spp), "keys": keys,
-            "buffers": {b: ctx.table[b] for b in (*names, *TABLE_TILE)}, "hdr": ctx.frame_hdr, "aovs": ctx.frame_aovs,
-            "png": ctx.frame_png}
+            ctx.report.run(p.name, time.perf_counter() - t0, **extra, **p.counted(ctx))
 
-    if prev is None:                  # said once a series, after the frame (an error stays one line)
-        for w in enclosure.warnings(scene, pl.effects, ctx.arrays):       # the sky mirrored inside a room
+
+def sweep_whole(ctx: Context, sweep: Sweep, whole):
+    """A whole-frame pass (SSR: its rays read any pixel) in a tiled frame: a first sweep runs the
+    passes before it over every tile and gathers what it reads of each into frame-sized buffers;
+    it then works on the whole frame, and the second sweep (sweep_frame) runs every pass again (the
+    per-sample buffers of a tile do not outlive it) with that pass applying what it found. The
+    passes count (Pass.count) in the second sweep only: each sample once."""
+    before = ctx.plan.passes[:ctx.plan.passes.index(whole)]
+    gather_s = 0.0
+    for index, row0 in enumerate(sweep.row0s):
+        start_tile(ctx, sweep, index, row0, gathering=True)
+        for p in before:
+            if p.name in sweep.run:
+                p.run(ctx)
+        t0 = time.perf_counter()
+        whole.gather(ctx)
+        gather_s += time.perf_counter() - t0
+    t0 = time.perf_counter()
+    whole.frame_run(ctx)
+    ctx.rt.finish()
+    ctx.report.run(whole.name, gather_s + time.perf_counter() - t0, sweeps=2)
+
+
+def keep_for_series(reuse: Reuse, ctx: Context, sweep: Sweep):
+    """What the next frame of a series may reuse: the buffers, host frame and pass keys of an
+    untiled frame."""
+    cam = ctx.scene.data["camera"]
+    reuse.state = None if sweep.tiled else {
+        "runtime": ctx.rt, "shape": (*cam["resolution"], cam["spp"]), "keys": sweep.keys,
+        "buffers": {b: ctx.table[b] for b in (*sweep.names, *TABLE_TILE)},
+        "hdr": ctx.frame_hdr, "aovs": ctx.frame_aovs, "png": ctx.frame_png}
+
+
+def finish(ctx: Context, sweep: Sweep, builds_before: int, t_start: float, profile_paths) -> Frame:
+    """The frame and its report, after the enclosure's warnings (once a series) and the paths'
+    profile where asked for."""
+    rt, pl, d = ctx.rt, ctx.plan, ctx.scene.data
+    if sweep.prev is None:            # said once a series, after the frame (an error stays one line)
+        for w in enclosure.warnings(ctx.scene, pl.effects, ctx.arrays):       # the sky mirrored inside a room
             ctx.warn(w)
     elapsed = time.perf_counter() - t_start
     builds = [{"kernel": b["kernel"], "defines": b["defines"], "seconds": round(b["seconds"], 4)}
               for b in rt.builds[builds_before:]]          # the frame's: the profile counts its own
     paths_profile = None
     if profile_paths:             # after the frame, which it does not touch: the last tile's G-buffer
+        profiled = next(p for p in pl.passes if p.profiles == "paths")
         if profiled.name not in ctx.args:             # reused from the last frame of a series
             ctx.args[profiled.name] = profiled.setup(ctx)
         paths_profile = profiled.profile(ctx, None if profile_paths is True else int(profile_paths))
-
     report = {
         "device": rt.device_label,
         "effects": pl.to_json(),
-        "bakes": rep.bakes,
-        "passes": list(rep.passes.values()),
+        "bakes": ctx.report.bakes,
+        "passes": list(ctx.report.passes.values()),
         "kernel_builds": builds,
-        "resolution": [width, height],
-        "spp": spp,
-        "tiles": len(row0s),
-        "reused": [p.name for p in pl.passes if p.name not in run],
+        "resolution": list(d["camera"]["resolution"]),
+        "spp": d["camera"]["spp"],
+        "tiles": len(sweep.row0s),
+        "reused": [p.name for p in pl.passes if p.name not in sweep.run],
         "elapsed_s": round(elapsed, 4),
     }
     if paths_profile is not None:

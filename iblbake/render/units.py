@@ -1,10 +1,12 @@
-"""The bakes, each a declared unit: its name, the bakes it reads, its cache-key inputs (key: the
-bake store's memo key, which holds every input the value depends on; the content-addressed cache
-entry is keyed by the same inputs), how it is built (baked, or read back from the cache) and how
-its value is loaded with its report fields.
+"""The bakes, each a declared unit, and the scene's own units that a frame places before them (its
+geometry, panorama, sun, textures and the scene on the device): its name, the units it reads, its
+cache-key inputs (key: the bake store's memo key, which holds every input the value depends on;
+the content-addressed cache entry is keyed by the same inputs), how it is built (baked, or read
+back from the cache) and how its value is loaded with its report fields (a frame's report has a
+row for each unit it loads, but the sun and the device scene).
 
 A unit is asked for its value with a Job: a scene, a runtime, the bake store, warn and progress,
-and the scene on the device (render/device_scene.py) where the caller has put it there (a frame);
+the values it has loaded (a frame's: the scene on the device among them, render/device_scene.py);
 nothing of a frame is needed, so a bake that traces the scene (the irradiance probes, the
 reflection captures) runs from the scene alone. The order bakes are loaded in follows from what
 they read: order() is a topological order of the declared reads, ties in UNITS' order. A unit
@@ -15,7 +17,7 @@ loads nothing it was made from.
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -29,8 +31,10 @@ def _nothing(_message):
 
 @dataclass(eq=False)
 class Job:
-    """What a unit is asked with. `scene_on_device`: the scene's DeviceScene where the caller has
-    it (a frame's), else made on first use (Bakes.device_scene: once per runtime and content)."""
+    """What a unit is asked with. `loaded`: the values this job has loaded, by unit name (a frame
+    loads its scene's units and bakes into one: render/frame.py); a unit's reads come from it first.
+    `scene_on_device`: the scene's DeviceScene where the caller has it (loaded as `device_scene`),
+    else made on first use (Bakes.device_scene: once per runtime and content)."""
 
     scene: object
     rt: object
@@ -38,31 +42,37 @@ class Job:
     warn: object = _nothing
     progress: object = None
     scene_on_device: object = None
+    loaded: dict = field(default_factory=dict)
 
     @classmethod
     def of(cls, ctx, bakes=None) -> "Job":
         """The job of anything holding a scene and a runtime (a frame's Context, a test's)."""
         if isinstance(ctx, Job):
             return ctx
+        loaded = getattr(ctx, "loaded", None)
         return cls(ctx.scene, ctx.rt, bakes if bakes is not None else ctx.bakes, getattr(ctx, "warn", None) or _nothing,
-                   getattr(ctx, "progress", None), getattr(ctx, "device_scene", None))
+                   getattr(ctx, "progress", None), getattr(ctx, "device_scene", None), {} if loaded is None else loaded)
 
     def read(self, name: str):
-        """The value of bake `name` (a unit's declared read), through the store's memo."""
+        """The value of unit `name` (a unit's declared read): this job's, else through the store's memo."""
+        if name in self.loaded:
+            return self.loaded[name]
         return self.bakes.load(name, self)[0]
 
     @property
     def device_scene(self):
         if self.scene_on_device is None:
-            self.scene_on_device = self.bakes.device_scene(self.rt, self.scene, self.warn)
+            self.scene_on_device = self.loaded.get("device_scene") or self.bakes.device_scene(
+                self.rt, self.scene, self.warn)
         return self.scene_on_device
 
     @property
     def arrays(self):
         """The scene's host records (scene/pack.py): the device scene's, else the geometry alone
         (nothing goes up to the device for a key)."""
-        if self.scene_on_device is not None:
-            return self.scene_on_device.arrays
+        on_device = self.scene_on_device or self.loaded.get("device_scene")
+        if on_device is not None:
+            return on_device.arrays
         return self.bakes.geometry(self.scene, self.warn)
 
     @property
@@ -76,10 +86,15 @@ class Job:
 
 class Unit:
     """A bake: `name`, the bakes it `reads`; key(job) the memo key holding its inputs, build(job,
-    key) what it makes (once per key in a store), result() its (value, cached, report fields)."""
+    key) what it makes (once per key in a store), result() its (value, cached, report fields).
+    `row`: the name of its row in a frame's report (None: it has none)."""
 
     name = ""
     reads: tuple = ()
+
+    @property
+    def row(self) -> str | None:
+        return self.name
 
     def key(self, job):
         raise NotImplementedError
@@ -96,6 +111,69 @@ class Unit:
         key = self.key(job)
         made, held = job.bakes._recall(key, lambda: self.build(job, key))
         return self.result(job, made, held)
+
+
+# The scene's units: what every frame places before its bakes. Each keeps its own memo in the
+# bake store (render/bakes.py: geometry by mesh content, the panorama by file content and
+# policies, textures by map content, the device scene by runtime and content).
+
+class Geometry(Unit):
+    """The scene's device records, its meshes' triangles and BVH from the cache (Bakes.geometry)."""
+    name = "geometry"
+
+    def load(self, job):
+        arrays = job.bakes.geometry(job.scene, job.warn)
+        extra = dict(arrays.geometry_report)
+        return arrays, extra.pop("cached", False), extra
+
+
+class Panorama(Unit):
+    """(image, background image) of the scene's panorama (Bakes.environment): the background shows
+    the sky as it is, an extracted sun visible in it. Its read warnings are said here."""
+    name = "panorama"
+    row = "read_environment"
+
+    def load(self, job):
+        env = job.environment
+        image, info = job.bakes.environment(env)
+        background = job.bakes.environment({**env, "sun": "none"})[0] if env["sun"] == "extract" else image
+        for w in info.warnings:
+            job.warn(w)
+        return (image, background), False, {"path": info.path, "size": [info.width, info.height]}
+
+
+class Sun(Unit):
+    """The sun extracted from the panorama (environment.sun: extract; bake/sun.py), or None."""
+    name = "sun"
+    reads = ("panorama",)
+    row = None
+
+    def load(self, job):
+        return job.bakes.sun(job.environment), False, {}
+
+
+class Textures(Unit):
+    """((texels, levels, info) arrays, {(record, map kind): texture}) of the scene's material maps
+    (Bakes.textures)."""
+    name = "textures"
+    reads = ("geometry",)
+
+    def load(self, job):
+        tex, slots, extra = job.bakes.textures(job.scene, job.read("geometry").records, job.warn)
+        extra = dict(extra)
+        return (tex, slots), extra.pop("cached"), extra
+
+
+class DeviceScene(Unit):
+    """The scene's geometry, materials and textures on the job's device (Bakes.device_scene)."""
+    name = "device_scene"
+    reads = ("geometry", "textures")
+    row = None
+
+    def load(self, job):
+        arrays = job.read("geometry")
+        textures = job.read("textures") if any(r["maps"] for r in arrays.records) else None
+        return job.bakes.device_scene(job.rt, job.scene, job.warn, arrays=arrays, textures=textures), False, {}
 
 
 def policies(env: dict) -> dict:
@@ -449,9 +527,11 @@ class ReflectionProbes(Unit):
         return out, cached_all, {"probes": len(out), "rays_traced": rays}
 
 
-# every bake, in the order that breaks ties between bakes that do not read one another (the
-# radiance chain before the prefiltered one, which reuses it where both are planned)
-UNITS = {u.name: u for u in (SH(), Basis(), Radiance(), Prefiltered(), DFG(), EnvCDF(), Probes(), ReflectionProbes())}
+# every unit, in the order that breaks ties between units that do not read one another (the
+# scene's first, as a frame places them; the radiance chain before the prefiltered one, which
+# reuses it where both are planned)
+UNITS = {u.name: u for u in (Geometry(), Panorama(), Sun(), Textures(), DeviceScene(), SH(), Basis(), Radiance(),
+                             Prefiltered(), DFG(), EnvCDF(), Probes(), ReflectionProbes())}
 
 
 def order(names, units: dict | None = None) -> list:

@@ -3,18 +3,31 @@ modes), the bakes it reads, the kernel defines it adds and the buffers it needs 
 (`Buffer`: element type and count, per sample, per pixel or per frame); which named buffers it
 reads and writes follow from its kernels' parameters (`const` or not). setup() prepares its
 per-frame arguments, run() carries out one tile. Lighting passes only add into `radiance`.
-render/frame.py allocates, budgets and reuses buffers from these declarations alone."""
+render/frame.py allocates, budgets and reuses buffers from these declarations alone. What a pass
+keeps across the tiles of a frame is declared too: a record of its own (`keeps`: per-wave buffers,
+what it found of the whole frame) and its counters summed over the tiles (`counters`, each a field
+of its report row); the frame's context makes both, and a pass sets nothing on the context."""
 
 from __future__ import annotations
 
 import functools
 import time
+from dataclasses import dataclass
+from typing import Callable
 
 from iblbake.render.buffers import ELEMENT_BYTES, Buffer  # noqa: F401 (the pass contract's record)
 # what the scene's tables hold, shared with the bakes that trace the scene
 from iblbake.render.device_scene import geometry_defines, material_defines  # noqa: F401
 from iblbake.render.plan import Effects
 from iblbake.scene.load import Scene
+
+
+@dataclass(frozen=True)
+class Counter:
+    """A count a pass sums over a frame's tiles (Pass.count), shown in its report row as `name`
+    where `shown(effects)` holds."""
+    name: str
+    shown: Callable = lambda _fx: True
 
 
 class Pass:
@@ -31,6 +44,11 @@ class Pass:
     host_writes: tuple = ()  # buffers its run() writes from the host (no kernel parameter says so)
     params: tuple = ()       # kernel parameters its setup() and run() bind (the frame's table binds the rest)
     profiles = None          # "paths": profile() measures where its time goes (render(profile_paths=...))
+    # its kernels read any pixel of the frame (SSR's rays): a tiled frame runs gather() on every
+    # tile, then frame_run() once, before the tiles are run again (render/frame.py sweep)
+    whole_frame = False
+    keeps = None             # a dataclass of what it keeps across a frame's tiles, made with the frame (kept())
+    counters: tuple = ()     # its Counters, summed over a frame's tiles (count()), added to its report row
 
     def bound_params(self) -> tuple:
         """The kernel parameters this pass binds itself (tests/test_render_passes.py checks that
@@ -83,6 +101,22 @@ class Pass:
         """After the frame: where this pass's time went on the last tile (`repeats` rounds, None:
         the default), for the report; changes nothing of the frame."""
         raise NotImplementedError
+
+    def kept(self, ctx):
+        """This frame's record of what the pass keeps (its `keeps`)."""
+        return ctx.kept[self.name]
+
+    def count(self, ctx, **add) -> dict:
+        """Adds to this frame's counters; their totals so far. A whole-frame pass's first sweep
+        (ctx.gathering) adds nothing: its tiles are swept again."""
+        totals = ctx.counters[self.name]
+        for name, n in add.items():
+            totals[name] += 0 if ctx.gathering else n
+        return totals
+
+    def counted(self, ctx) -> dict:
+        """The report fields of its counters (those shown under the frame's effects)."""
+        return {c.name: ctx.counters[self.name][c.name] for c in self.counters if c.shown(ctx.plan.effects)}
 
     def launch_samples(self, ctx) -> float:
         """Run this pass's kernel over every G-buffer sample of the tile with its setup()

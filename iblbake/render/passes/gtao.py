@@ -4,6 +4,8 @@ into `ao_buf`, one value per G-buffer sample, which the shade pass applies to th
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 from iblbake.render.passes.base import Buffer, Pass
 
 
@@ -25,6 +27,16 @@ def _blocks(d: dict) -> int:
     return -(-w // step) * -(-h // step)
 
 
+@dataclass
+class DepthBuffer:
+    """The depth buffer gtao searches, chosen at the frame's first tile (its kernels' arguments):
+    the G-buffer's first samples (a stride of spp) or a tiled frame's whole-frame prepass (1)."""
+    ao_pos: object = None
+    ao_nrm: object = None
+    ao_dir: object = None
+    ao_stride: int = 0
+
+
 class GroundTruthAO(Pass):
     """effects.ao: gtao. Per frame (at its first tile) the raw value of every pixel from the
     depth buffer, then per tile each sample's denoised value. The depth buffer is the G-buffer
@@ -36,6 +48,7 @@ class GroundTruthAO(Pass):
     params = ("ao_stride", "ao_radius", "gtao_slices", "gtao_steps", "gtao_radius_scale", "gtao_falloff", "gtao_power",
               "gtao_step", "gtao_denoise_radius")
     functions = ("gtao_pyramid", "gtao_denoise")
+    keeps = DepthBuffer
     buffers = (Buffer("ao_buf", "float"),
                # the raw value of every block of pixels, and the position pyramid
                Buffer("gtao_raw", "float", per="frame", count=lambda d: _blocks(d)),
@@ -64,20 +77,22 @@ class GroundTruthAO(Pass):
 
     def run(self, ctx):
         args, t = ctx.args[self.name], ctx.table
+        depth = self.kept(ctx)
         w, h = t["width"], t["height"]
         if ctx.tile_index == 0:
             if ctx.tile_count > 1:      # the whole frame's first samples, as the G-buffer traces them
                 from iblbake.render.passes.gbuffer import GBuffer
                 ctx.launch(GBuffer(), (w * h,), spp=1, pixel0=0, n=w * h, gb_pos=t["ao_pos"],
                            gb_nrm=t["ao_nrm"], gb_dir=t["ao_dir"])
-                args.update(ao_pos=t["ao_pos"], ao_nrm=t["ao_nrm"], ao_dir=t["ao_dir"], ao_stride=1)
+                depth.ao_pos, depth.ao_nrm, depth.ao_dir, depth.ao_stride = t["ao_pos"], t["ao_nrm"], t["ao_dir"], 1
             else:
-                args.update(ao_pos=t["gb_pos"], ao_nrm=t["gb_nrm"], ao_dir=t["gb_dir"], ao_stride=t["spp"])
+                depth.ao_pos, depth.ao_nrm, depth.ao_dir, depth.ao_stride = (t["gb_pos"], t["gb_nrm"], t["gb_dir"],
+                                                                             t["spp"])
             step = args["gtao_step"]
             ctx.launch(self, (pyramid_texels(w, h),), function="gtao_pyramid", width=w, height=h,
-                       ao_pos=args["ao_pos"], ao_stride=args["ao_stride"])
-            ctx.launch(self, (-(-w // step) * -(-h // step),), **args)
-        ctx.launch(self, (t["n"],), function="gtao_denoise", **args)
+                       ao_pos=depth.ao_pos, ao_stride=depth.ao_stride)
+            ctx.launch(self, (-(-w // step) * -(-h // step),), **args, **vars(depth))
+        ctx.launch(self, (t["n"],), function="gtao_denoise", **args, **vars(depth))
         ctx.rt.finish()
         g = ctx.scene.data["effects"]["gtao"]
         return {"slices": g["slices"], "steps": g["steps"], "denoise": g["denoise"], "resolution": g["resolution"],

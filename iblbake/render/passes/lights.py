@@ -64,7 +64,7 @@ class Lights(Pass):
         """The light records (the scene's lights, and the panorama's sun where it is extracted),
         and for run() the lights and the sun themselves (not kernel arguments)."""
         sc = ctx.scene
-        sun = ctx.bakes.sun(sc.data["environment"])
+        sun = ctx.loaded.get("sun")          # placed with the panorama (environment.sun: extract reads it)
         lights = frame_lights(sc, sun)
         recs = pack.light_records(lights)
         ref = sc.data["effects"]["reference"]

@@ -9,6 +9,7 @@ are one sequence instead of two replicates: 1.07-1.23x less variance at equal sa
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -47,6 +48,13 @@ def environment_args(ctx, dist) -> dict:
     return panorama_args(ctx.rt, ctx.bakes, ctx.image, dist)
 
 
+@dataclass
+class WaveBuffers:
+    """The wavefront's per-wave buffers, kept across a frame's tiles while their size (key) holds."""
+    key: tuple | None = None
+    buffers: dict | None = None
+
+
 class Reference(Pass):
     name = "reference"
     kernel = "paths/reference.cl"
@@ -60,6 +68,7 @@ class Reference(Pass):
     host_sample_bytes = 32
     host_writes = ("radiance",)      # the mean, added on the host
     profiles = "paths"               # render/paths/profile.py
+    keeps = WaveBuffers
 
     def runs(self, scene, fx):
         return "reference" in (fx.diffuse, fx.specular)
@@ -176,11 +185,12 @@ class Reference(Pass):
         npaths = n * wave
         nlights = ctx.args[self.name]["nlights"]
         key = (npaths, nlights)
-        if getattr(ctx, "wf_buffers", (None,))[0] != key:
-            ctx.wf_buffers = (key, {"wf_paths": rt.empty(16 * FLOAT4S["PATH"] * npaths),
-                                    "wf_shadow": rt.empty(16 * FLOAT4S["SHADOW"] * (1 + nlights) * npaths),
-                                    "wf_queue": rt.empty(4 * 3 * npaths), "wf_count": rt.empty(16)})
-        bufs = ctx.wf_buffers[1]
+        kept = self.kept(ctx)
+        if kept.key != key:
+            kept.key, kept.buffers = key, {"wf_paths": rt.empty(16 * FLOAT4S["PATH"] * npaths),
+                                           "wf_shadow": rt.empty(16 * FLOAT4S["SHADOW"] * (1 + nlights) * npaths),
+                                           "wf_queue": rt.empty(4 * 3 * npaths), "wf_count": rt.empty(16)}
+        bufs = kept.buffers
         counts = np.zeros(4, np.int32)
         args = {**ctx.args[self.name], **bufs, "seed": ctx.scene.data["effects"]["reference"]["seed"],
                 "npaths": npaths}

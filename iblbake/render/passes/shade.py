@@ -7,12 +7,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from iblbake.render.passes.base import Buffer, Pass, mode_defines
+from iblbake.render.passes.base import Buffer, Counter, Pass, mode_defines
 from iblbake.render.sources import SOURCES
 
 
 SKY_SAID = 0.1           # the share of a frame's samples with no active probe near (the panorama's SH) said
 OUTSIDE_SAID = 0.1       # the share of a frame's samples outside the probe volume that is said
+# kernels/shade.cl's probe_stats, in its order: the samples whose cell's probes were all off (the
+# nearest probe's or the panorama's light instead), diffuse then specular, and those outside the volume
+PROBE_STATS = ("probe_fallback_nearest", "probe_fallback_sky", "probe_specular_fallback_nearest",
+               "probe_specular_fallback_sky", "probe_outside_volume")
 
 
 class Shade(Pass):
@@ -21,6 +25,13 @@ class Shade(Pass):
     # every lighting pass adds into radiance; each source's own buffers
     buffers = (Buffer("radiance"),) + tuple(b for s in SOURCES for b in s.buffers)
     host_writes = ("probe_stats",)
+    # probe_stats summed over the tiles, and the samples they are out of
+    counters = (Counter("probe_fallback_nearest", lambda fx: fx.diffuse == "probes"),
+                Counter("probe_fallback_sky", lambda fx: fx.diffuse == "probes"),
+                Counter("probe_outside_volume", lambda fx: fx.diffuse == "probes"),
+                Counter("probe_specular_fallback_nearest", lambda fx: fx.specular == "probes"),
+                Counter("probe_specular_fallback_sky", lambda fx: fx.specular == "probes"),
+                Counter("probe_samples", lambda _fx: False))
 
     def runs(self, scene, fx):
         return fx.any_approximate or fx.emissive
@@ -69,20 +80,16 @@ class Shade(Pass):
         extra = {"samples": k} if lobe else {}
         if probes_in:                 # the samples whose cell's probes were all off, summed over tiles
             counts = ctx.rt.read(ctx.table["probe_stats"], (5,), np.int32).tolist()
-            tot = ctx.__dict__.setdefault("probe_fallback", [0, 0, 0, 0, 0, 0])
-            for i, c in enumerate(counts):
-                tot[i] += c
-            tot[5] += n
+            tot = self.count(ctx, **dict(zip(PROBE_STATS, counts)), probe_samples=n)
+            last = ctx.tile_index == ctx.tile_count - 1
             if fx.diffuse == "probes":
-                extra.update(probe_fallback_nearest=tot[0], probe_fallback_sky=tot[1], probe_outside_volume=tot[4])
-                if ctx.tile_index == ctx.tile_count - 1 and tot[1] > SKY_SAID * tot[5]:
-                    ctx.warn(f"probes: {100 * tot[1] / tot[5]:.0f}% of the frame's samples found no active probe "
+                sky, outside, samples = tot["probe_fallback_sky"], tot["probe_outside_volume"], tot["probe_samples"]
+                if last and sky > SKY_SAID * samples:
+                    ctx.warn(f"probes: {100 * sky / samples:.0f}% of the frame's samples found no active probe "
                              "near them and took the panorama's SH (no light between surfaces there); see the "
                              "bake's report (--report: probes off, by which rule) or give more probes.rays")
-                if ctx.tile_index == ctx.tile_count - 1 and tot[4] > OUTSIDE_SAID * tot[5]:
-                    ctx.warn(f"probes: {100 * tot[4] / tot[5]:.0f}% of the frame's samples lie outside the probe "
+                if last and outside > OUTSIDE_SAID * samples:
+                    ctx.warn(f"probes: {100 * outside / samples:.0f}% of the frame's samples lie outside the probe "
                              "volume or on its fading edge and take the panorama's SH there; widen probes.min/max "
                              "(or the scene's bounds) to cover what the camera sees")
-            if fx.specular == "probes":
-                extra.update(probe_specular_fallback_nearest=tot[2], probe_specular_fallback_sky=tot[3])
         return {"mpixel_samples_per_s": round(n * k / max(s, 1e-9) / 1e6, 2), **extra}

@@ -6,6 +6,7 @@ gathered before any ray is marched, and a tiled frame gives the pixels an untile
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -36,6 +37,13 @@ def _hiz_floats(d) -> int:
     return last[2] + last[0] * last[1]
 
 
+@dataclass
+class Traced:
+    """What SSR keeps across a frame's tiles: whether the whole frame is traced, its pyramid's levels."""
+    gathered: bool = False
+    levels: int = 0
+
+
 class ScreenSpaceReflections(Pass):
     name = "ssr"
     kernel = "ssr.cl"
@@ -44,6 +52,7 @@ class ScreenSpaceReflections(Pass):
               "src", "sw", "sh", "dst", "dw", "dh")
     functions = ("ssr_gather", "ssr_depth", "ssr_reduce", "ssr_trace", "ssr_resolve")
     whole_frame = True
+    keeps = Traced
     # per pixel of the whole frame: its first sample's position and depth, normal and roughness, lit
     # radiance (3 float4); the depth pyramid; each pixel's traced and resolved reflection
     buffers = (Buffer("radiance"), Buffer("ssr_pix", per="frame", count=lambda d: 3 * _pixels(d)),
@@ -61,7 +70,6 @@ class ScreenSpaceReflections(Pass):
 
     def setup(self, ctx) -> dict:
         s = ctx.scene.data["effects"]["ssr_settings"]
-        ctx.ssr_gathered = False
         rp = rprobe_args(ctx.rt, ctx.loaded.get("reflection_probes"), ctx.bakes)
         lengths = march_lengths(s, ctx.arrays, ctx.scene.data["camera"])
         return {"max_roughness": s["max_roughness"], "thickness": lengths["thickness"], "steps": s["steps"],
@@ -85,16 +93,17 @@ class ScreenSpaceReflections(Pass):
             "max_roughness", "thickness", "steps", "rays", "ray_length", "seed", "rp_info", "rp_count",
             "defer_to_probes")})
         ctx.launch(self, (w * h,), "ssr_resolve", max_roughness=a["max_roughness"])
-        ctx.ssr_gathered = True
-        ctx.ssr_levels = len(levels)
+        traced = self.kept(ctx)
+        traced.gathered, traced.levels = True, len(levels)
 
     def run(self, ctx):
         t0 = time.perf_counter()
-        if not ctx.ssr_gathered:          # one tile: the frame is this tile
+        traced = self.kept(ctx)
+        if not traced.gathered:           # one tile: the frame is this tile
             self.gather(ctx)
             self.frame_run(ctx)
         ctx.launch(self, (ctx.table["n"],))
         ctx.rt.finish()
         w, h = ctx.scene.data["camera"]["resolution"]
-        return {"levels": ctx.ssr_levels, "rays_at_max_roughness": ctx.args[self.name]["rays"],
+        return {"levels": traced.levels, "rays_at_max_roughness": ctx.args[self.name]["rays"],
                 "mpixels_per_s": round(w * h / max(time.perf_counter() - t0, 1e-9) / 1e6, 2)}
