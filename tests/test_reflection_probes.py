@@ -214,9 +214,11 @@ def test_bad_reflection_probes_are_one_line_errors(tmp_path, sky, probe, words):
 
 @pytest.mark.slow           # over 3 s on the 2-core CPU: make test, not make check
 def test_iblbake_probes_writes_the_captures_for_engines(tmp_path, sky):
-    """`iblbake probes` writes each reflection probe's capture beside the irradiance volume (RGB
-    the scene's radiance, A its coverage), listed in probes.json; `iblbake mips` prefilters it
-    into a KTX2 cube map as it does any panorama."""
+    """`iblbake probes` writes each reflection probe's capture beside the irradiance volume with
+    what the renderer reads of it (RGB the scene's radiance, A its coverage, sky.RGB the sky seen
+    past the scene: before, RGBA alone, an engine could not tell the window's sky from the distant
+    panorama's), its channels listed in probes.json; `iblbake mips` prefilters its RGB into a KTX2
+    cube map as it does any panorama."""
     probe = {"position": [0, 0, -1], "min": [-2, -2, -2], "max": [2, 2, 2], "size": 32, "samples": 1}
     sc = window(tmp_path, sky, [probe], "engines")
     out = tmp_path / "vol"
@@ -224,8 +226,10 @@ def test_iblbake_probes_writes_the_captures_for_engines(tmp_path, sky):
     assert r.returncode == 0, r.stderr
     man = yaml.safe_load((out / "probes.json").read_text())
     assert [p["file"] for p in man["reflection_probes"]] == ["reflection_0.exr"]
+    assert man["reflection_probes"][0]["channels"] == ["R", "G", "B", "A", "sky.R", "sky.G", "sky.B"]
     cap = images.read_exr(out / "reflection_0.exr")
-    assert cap.shape == (32, 64, 4) and not cap.any()          # the open sky: nothing of the scene
+    assert cap.shape == (32, 64, 7) and not cap[..., :4].any()      # the open sky: nothing of the scene
+    assert np.array_equal(cap[..., 4:], images.read_exr(sky)[..., :3])   # but the sky, texel for texel
     r = run_cli("mips", out / "reflection_0.exr", "--layout", "cubemap", "--size", "16", "--ktx2", tmp_path / "r0.ktx2",
                 "--cache", tmp_path / "cache", "-q")
     assert r.returncode == 0 and (tmp_path / "r0.ktx2").stat().st_size > 1000, r.stderr
