@@ -918,7 +918,8 @@ class ProbeVolume:
         origin + (gx, gy, gz) * spacing + offset, index gy * nx * nz + gz * nx + gx.
     states: the count of active and inactive probes.
     manifest: probes.json as `iblbake probes` writes it (every convention spelled out).
-    reflections: each reflection probe's capture: {'capture': float32 (h, 2h, 4), 'settings'}.
+    reflections: each reflection probe's capture: {'capture': float32 (h, 2h, 7): R, G, B, A, sky.R,
+        sky.G, sky.B (render/reflection_probes.py CHANNELS), 'settings', and its prefiltered chains}.
     cached: whether the bake came from the cache. entry: the cache folder holding the atlases.
     """
 
