@@ -918,7 +918,8 @@ class ProbeVolume:
         origin + (gx, gy, gz) * spacing + offset, index gy * nx * nz + gz * nx + gx.
     states: the count of active and inactive probes.
     manifest: probes.json as `iblbake probes` writes it (every convention spelled out).
-    reflections: each reflection probe's capture: {'capture': float32 (h, 2h, 4), 'settings'}.
+    reflections: each reflection probe's capture: {'capture': float32 (h, 2h, 7): R, G, B, A, sky.R,
+        sky.G, sky.B (render/reflection_probes.py CHANNELS), 'settings', and its prefiltered chains}.
     cached: whether the bake came from the cache. entry: the cache folder holding the atlases.
     """
 
@@ -974,10 +975,14 @@ def bake_probes(scene, device: str | None = None, *, cache=None, warn=None, prog
         reflections = bakes.load("reflection_probes", job)[0] if sc.data["reflection_probes"] else []
     vol = probes.sampled(vol, sc.data["probes"])
     man = probes.manifest(vol)
+    from iblbake.render.reflection_probes import CHANNELS as rp_channels
     man["reflection_probes"] = [{"file": f"reflection_{k}.exr", **c["settings"],
-                                 "layout": "equirect in the world frame (the panoramas' mapping); RGB the linear "
-                                           "radiance of the scene, A the share of the texel the scene covers (the "
-                                           "rest is the distant panorama along the reflected ray)"}
+                                 "channels": list(rp_channels),
+                                 "layout": "equirect in the world frame (the panoramas' mapping); R, G, B the linear "
+                                           "radiance of the paths that met the scene, A the share of them that did "
+                                           "(the coverage), sky.R, sky.G, sky.B the radiance of those that escaped "
+                                           "(the sky through the openings, read without parallax); "
+                                           "docs/conventions.md 'Reflection probes' has the reading"}
                                 for k, c in enumerate(reflections)]
     f32 = [np.asarray(vol[k], np.float32) for k in ("irradiance", "distance", "data")]     # as the files hold them
     return ProbeVolume(*f32, man["grid"], man["states"], man["representation"], man, list(reflections), cached,

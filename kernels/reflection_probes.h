@@ -86,18 +86,45 @@ IBL_INLINE float3 rprobe_lookup(RPROBE_PARAMS, int c, float3 d, float lod)
     return mix(x, bilinear_equirect(rp_chain + 3 * (size_t)rp_off[c * rp_nlev + l1], rp_lw[l1], rp_lh[l1], uv), f);
 }
 
+/* The sky radiance behind the openings probe k saw about r, per unit of open share: its sky over
+ * its open share at the finest of the lobe's level and three wider ones (a quarter, half and all of
+ * the chain further) where it saw RPROBE_SKY_SEEN of the lobe open; `distant` where it saw none. */
+#define RPROBE_SKY_SEEN 0.05f
+IBL_INLINE float3 rprobe_open_sky(RPROBE_PARAMS, int k, float3 r, float lod, float3 distant)
+{
+    const float top = (float)(rp_nlev - 1);
+    const float widen[4] = {0.0f, 0.25f, 0.5f, 1.0f};
+    for (int i = 0; i < 4; ++i) {
+        const float l = fmin(lod + widen[i] * top, top);
+        const float seen = 1.0f - rprobe_lookup(RPROBE_ARGS, 3 * k + 1, r, l).x;
+        if (seen > RPROBE_SKY_SEEN) return rprobe_lookup(RPROBE_ARGS, 3 * k + 2, r, l) / seen;
+    }
+    return distant;
+}
+
 /* The sky behind probe k's openings as the point p sees them, for the lobe about r at lod: the sky
  * its escaping rays saw (chain 3k + 2) read along r itself (the sky is at infinity: the panorama's
  * directions that the lobe meets through a window, not all of them), times the share of the lobe
  * left open as p sees it (`open`, the coverage read with parallax) over that the probe saw about r,
- * where p sees less of the opening. Where p sees more (a window the probe does not see about r),
- * the distant chain fills the difference, in proportion to `off` (how far p is off the probe: near
- * it the probe's own view holds, the capture's lobe being wider than p's). */
-IBL_INLINE float3 rprobe_sky(RPROBE_PARAMS, int k, float3 r, float lod, float open, float off, float3 distant)
+ * where p sees less of the opening. Where p sees more (an opening's edge the probe does not see
+ * about r), that share is filled in proportion to `off` (how far p is off the probe: near it the
+ * probe's own view holds, the capture's lobe being wider than p's) with the sky the probe saw
+ * through its openings about r (rprobe_open_sky) while the opening's shift as p sees it (`shift`,
+ * |p - probe| / |x - probe| radians) is within the lobe's width (2 alpha), the distant chain's
+ * lobe once it is twice that: a studio's key light behind the wall beside a window is in the
+ * distant chain's lobe but not in what p sees through the window (quad_room under studio: the
+ * window half x1.25 with the distant chain alone, x0.98 now). */
+IBL_INLINE float3 rprobe_sky(RPROBE_PARAMS, int k, float3 r, float lod, float open, float off, float shift,
+                             float3 distant)
 {
     const float seen = fmax(1.0f - rprobe_lookup(RPROBE_ARGS, 3 * k + 1, r, lod).x, 0.0f);
     const float3 sky = rprobe_lookup(RPROBE_ARGS, 3 * k + 2, r, lod);
-    return sky * (fmin(open, seen) / fmax(seen, 1e-6f)) + off * fmax(open - seen, 0.0f) * distant;
+    const float fill = off * fmax(open - seen, 0.0f);
+    if (fill <= 0.0f) return sky * (fmin(open, seen) / fmax(seen, 1e-6f));
+    const float rough = lod / fmax((float)(rp_nlev - 1), 1.0f);
+    const float near = clamp(2.0f - shift / fmax(2.0f * rough * rough, 1e-6f), 0.0f, 1.0f);
+    const float3 through = near > 0.0f ? rprobe_open_sky(RPROBE_ARGS, k, r, lod, distant) : distant;
+    return sky * (fmin(open, seen) / fmax(seen, 1e-6f)) + fill * mix(distant, through, near);
 }
 
 /* How far p is off the probe, as a share of the way from the probe to x (where p's ray leaves the
@@ -127,17 +154,18 @@ IBL_INLINE float3 reflection_probes(float3 p, float3 r, float lod, float3 distan
         const float w = rprobe_weight(p, a, b, c);
         if (w <= 0.0f) continue;
         float3 d = r;
-        float near_lod = lod, off = 0.0f;
+        float near_lod = lod, off = 0.0f, shift = 0.0f;
         if (e.x > 0.5f) {
             const float3 x = rprobe_exit(p, r, a, b, c);
             const float from_probe = fmax(distance(x, a.xyz), 1e-6f);
             d = (x - a.xyz) / from_probe;
             near_lod = fmax(lod * clamp(distance(x, p) / from_probe, 0.0f, 1.0f), fmin(lod, RPROBE_FINEST));
-            off = clamp((distance(p, a.xyz) / from_probe - RPROBE_NEAR) / (RPROBE_FAR - RPROBE_NEAR), 0.0f, 1.0f);
+            shift = distance(p, a.xyz) / from_probe;
+            off = clamp((shift - RPROBE_NEAR) / (RPROBE_FAR - RPROBE_NEAR), 0.0f, 1.0f);
         }
         const float open = 1.0f - rprobe_lookup(RPROBE_ARGS, 3 * k + 1, d, near_lod).x;
         acc += w * (rprobe_lookup(RPROBE_ARGS, 3 * k, d, near_lod)
-                    + rprobe_sky(RPROBE_ARGS, k, r, lod, open, off, distant));
+                    + rprobe_sky(RPROBE_ARGS, k, r, lod, open, off, shift, distant));
         wsum += w;
     }
     if (wsum > 1.0f) return acc / wsum;

@@ -214,9 +214,11 @@ def test_bad_reflection_probes_are_one_line_errors(tmp_path, sky, probe, words):
 
 @pytest.mark.slow           # over 3 s on the 2-core CPU: make test, not make check
 def test_iblbake_probes_writes_the_captures_for_engines(tmp_path, sky):
-    """`iblbake probes` writes each reflection probe's capture beside the irradiance volume (RGB
-    the scene's radiance, A its coverage), listed in probes.json; `iblbake mips` prefilters it
-    into a KTX2 cube map as it does any panorama."""
+    """`iblbake probes` writes each reflection probe's capture beside the irradiance volume with
+    what the renderer reads of it (RGB the scene's radiance, A its coverage, sky.RGB the sky seen
+    past the scene: before, RGBA alone, an engine could not tell the window's sky from the distant
+    panorama's), its channels listed in probes.json; `iblbake mips` prefilters its RGB into a KTX2
+    cube map as it does any panorama."""
     probe = {"position": [0, 0, -1], "min": [-2, -2, -2], "max": [2, 2, 2], "size": 32, "samples": 1}
     sc = window(tmp_path, sky, [probe], "engines")
     out = tmp_path / "vol"
@@ -224,8 +226,10 @@ def test_iblbake_probes_writes_the_captures_for_engines(tmp_path, sky):
     assert r.returncode == 0, r.stderr
     man = yaml.safe_load((out / "probes.json").read_text())
     assert [p["file"] for p in man["reflection_probes"]] == ["reflection_0.exr"]
+    assert man["reflection_probes"][0]["channels"] == ["R", "G", "B", "A", "sky.R", "sky.G", "sky.B"]
     cap = images.read_exr(out / "reflection_0.exr")
-    assert cap.shape == (32, 64, 4) and not cap.any()          # the open sky: nothing of the scene
+    assert cap.shape == (32, 64, 7) and not cap[..., :4].any()      # the open sky: nothing of the scene
+    assert np.array_equal(cap[..., 4:], images.read_exr(sky)[..., :3])   # but the sky, texel for texel
     r = run_cli("mips", out / "reflection_0.exr", "--layout", "cubemap", "--size", "16", "--ktx2", tmp_path / "r0.ktx2",
                 "--cache", tmp_path / "cache", "-q")
     assert r.returncode == 0 and (tmp_path / "r0.ktx2").stat().st_size > 1000, r.stderr
@@ -442,3 +446,34 @@ def test_a_room_whose_specular_mirrors_the_distant_sky_says_so(tmp_path, rt, pan
     assert note(load_scene(tmp_path, "matte", matte)) == []
     resting = Path(__file__).resolve().parents[1] / "examples" / "corpus" / "resting.yaml"
     assert note(load.load(resting, ["effects.reflection_probes=false"])) == []
+
+
+def test_an_opening_the_point_sees_is_filled_with_the_sky_through_it_not_the_distant_lobe():
+    """A probe at the origin of a box room [-2, 2]^3 whose capture sees the sky (radiance 1) through
+    a window of the +x wall (the texels whose direction has x > 0.7; every level the same image);
+    the distant chain's lobe about r holds a key light (50) that the wall hides. A point 0.6 off the
+    probe sees more of the window about r than the probe does (open 1.0 against 0.63): the share
+    only it sees is the window's sky, so its reflection stays under the sky's 1 (before: the
+    distant chain's 50 filled it, 10x too bright: quad_room's gold sphere under studio, x1.25 on
+    its window half). A point whose opening shifts by more than twice the lobe's width (a probe
+    across the room, a narrow lobe) keeps the distant chain there: the probe's view says nothing
+    of the sky it sees."""
+    from iblbake.bake import radiance
+    from iblbake.core import conventions
+    from iblbake.render.twin import reflection_probes as rpt
+
+    j, i = np.meshgrid(np.arange(8), np.arange(16), indexing="ij")
+    window = (conventions.dir_from_equirect_uv((i + 0.5) / 16, (j + 0.5) / 8)[..., 0] > 0.7)[..., None]
+    cov, sky = np.repeat(1.0 - window, 3, -1), np.repeat(1.0 * window, 3, -1)
+    c = {"settings": {"shape": "box", "position": [0, 0, 0], "min": [-2, -2, -2], "max": [2, 2, 2], "blend": 0.1,
+                      "parallax": True}, "levels": [np.zeros_like(cov)] * 5, "coverage": [cov] * 5, "sky": [sky] * 5}
+    r = np.array([[1.0, 0.0, 0.9]]) / np.hypot(1.0, 0.9)
+    for pz, rough, fill_radiance in ((-0.6, 0.6, 1.0), (-1.0, 0.2, 50.0)):
+        p = np.array([[0.0, 0.0, pz]])
+        x = rpt.exit_point(c["settings"], p, r)
+        seen = 1 - radiance.chain_lookup_twin(c["coverage"], r, 4 * rough)[0, 0]
+        opened = 1 - radiance.chain_lookup_twin(c["coverage"], x / np.linalg.norm(x), 4 * rough)[0, 0]
+        off = np.clip((np.linalg.norm(p) / np.linalg.norm(x) - rpt.NEAR) / (rpt.FAR - rpt.NEAR), 0, 1)
+        got = rpt.blend([c], p, r, 4 * rough, np.full((1, 3), 50.0))[0, 0]
+        assert opened - seen > 0.3 and seen > 0.5 and off > 0.5, (opened, seen, off)
+        assert got == pytest.approx(seen + off * (opened - seen) * fill_radiance, rel=1e-9), (pz, got)

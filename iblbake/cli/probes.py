@@ -30,7 +30,8 @@ def probes_command(scene_path, out_dir, overrides, cache_dir, force, device, qui
     """Bake the irradiance probes of SCENE (its `probes:` section; see render --help-schema) by
     tracing paths from every probe, and write them as RTXGI-layout EXR atlases with a JSON
     manifest and a GLSL function that samples them, and each reflection probe's capture
-    (reflection_K.exr: `iblbake mips` prefilters it). `render` bakes the same volume on demand
+    (reflection_K.exr: the scene's radiance, its coverage and the sky seen past it, docs/conventions.md
+    "Reflection probes"; `iblbake mips` prefilters its RGB). `render` bakes the same volume on demand
     (cached by content) where a scene sets effects.diffuse: probes."""
     from iblbake import api
     from iblbake.io import atomic
@@ -58,9 +59,10 @@ def probes_command(scene_path, out_dir, overrides, cache_dir, force, device, qui
     man, cached = vol.manifest, vol.cached
     entry = Path(vol.entry)
     from iblbake.io import images, reads
+    from iblbake.render import reflection_probes
     with atomic.Batch() as batch:    # every file of the folder replaced together, or none
         for name, c in zip(captures, vol.reflections):     # an engine prefilters them (iblbake mips --ktx2)
-            images.write_exr(out / name, c["capture"], channels=("R", "G", "B", "A"), batch=batch)
+            images.write_exr(out / name, c["capture"], channels=reflection_probes.CHANNELS, batch=batch)
         for n in names[1:4]:         # the cache entry's atlases (verified against their manifest)
             batch.write_bytes(out / n, reads.read_bytes(entry / n, 1 << 40, "a cached atlas"))
         if table:

@@ -521,7 +521,7 @@ class ReflectionProbes(Unit):
                 cached = cached and pre_cached
             levels, coverage, sky = chains
             out.append({"settings": settings, "levels": levels, "coverage": coverage, "sky": sky,
-                        "capture": image[..., :4]})
+                        "capture": image})
             cached_all = cached_all and cached
             rays += 2 * settings["size"] ** 2 * settings["samples"] if traced else 0
         return out, cached_all, {"probes": len(out), "rays_traced": rays}

@@ -40,13 +40,36 @@ def exit_point(st: dict, p, r):
 NEAR, FAR, FINEST = 0.1, 0.4, 2.0      # kernels/reflection_probes.h RPROBE_NEAR, RPROBE_FAR, RPROBE_FINEST
 
 
-def sky(c: dict, r, lod, open_, off, distant):
+SKY_SEEN = 0.05       # kernels/reflection_probes.h RPROBE_SKY_SEEN
+
+
+def open_sky(c: dict, r, lod, distant):
+    """Twin of rprobe_open_sky: the sky capture c saw through its openings about r per unit of open
+    share, at the finest of the lobe's level and three wider ones where it saw SKY_SEEN open;
+    `distant` where it saw none."""
+    top = len(c["coverage"]) - 1
+    out, done = distant.copy(), np.zeros(len(r), bool)
+    for widen in (0.0, 0.25, 0.5, 1.0):
+        level = np.minimum(lod + widen * top, top)
+        seen = 1 - radiance.chain_lookup_twin(c["coverage"], r, level)[:, 0]
+        take = ~done & (seen > SKY_SEEN)
+        out[take] = (radiance.chain_lookup_twin(c["sky"], r, level) / np.maximum(seen, 1e-30)[:, None])[take]
+        done |= take
+    return out
+
+
+def sky(c: dict, r, lod, open_, off, shift, distant):
     """Twin of rprobe_sky: the sky capture c saw about r, times the share `open_` of the lobe p sees
-    open over the share the probe saw, where that is less; the distant chain fills `off` of the
-    rest."""
+    open over the share the probe saw, where that is less; `off` of the rest is filled with the sky
+    the probe saw through its openings (open_sky) while the opening's shift as p sees it is within
+    the lobe's width, the distant chain once it is twice that."""
     seen = np.maximum(1 - radiance.chain_lookup_twin(c["coverage"], r, lod)[:, :1], 0.0)
     got = radiance.chain_lookup_twin(c["sky"], r, lod)
-    return got * (np.minimum(open_, seen) / np.maximum(seen, 1e-6)) + off * np.maximum(open_ - seen, 0.0) * distant
+    rough = lod / max(len(c["coverage"]) - 1, 1)
+    near = np.clip(2 - shift / np.maximum(2 * rough * rough, 1e-6), 0.0, 1.0)[:, None]
+    fill = off * np.maximum(open_ - seen, 0.0)
+    through = open_sky(c, r, lod, distant) if (near > 0).any() and (fill > 0).any() else distant
+    return got * (np.minimum(open_, seen) / np.maximum(seen, 1e-6)) + fill * (near * through + (1 - near) * distant)
 
 
 def blend(captured: list, p, r, lod, distant):
@@ -58,7 +81,7 @@ def blend(captured: list, p, r, lod, distant):
     for c in captured:
         st = c["settings"]
         w = weight(st, p)
-        d, near_lod, off = r, lod, np.zeros((len(p), 1))
+        d, near_lod, off, shift = r, lod, np.zeros((len(p), 1)), np.zeros(len(p))
         if st["parallax"]:
             pos = np.asarray(st["position"], np.float64)
             x = exit_point(st, p, r)
@@ -66,10 +89,11 @@ def blend(captured: list, p, r, lod, distant):
             d = (x - pos) / from_probe[:, None]
             near_lod = np.maximum(lod * np.clip(np.linalg.norm(x - p, axis=-1) / from_probe, 0.0, 1.0),
                                   np.minimum(lod, FINEST))
-            off = np.clip((np.linalg.norm(p - pos, axis=-1) / from_probe - NEAR) / (FAR - NEAR), 0.0, 1.0)[:, None]
+            shift = np.linalg.norm(p - pos, axis=-1) / from_probe
+            off = np.clip((shift - NEAR) / (FAR - NEAR), 0.0, 1.0)[:, None]
         open_ = 1 - radiance.chain_lookup_twin(c["coverage"], d, near_lod)[:, :1]
         acc += w[:, None] * (radiance.chain_lookup_twin(c["levels"], d, near_lod)
-                             + sky(c, r, lod, open_, off, distant))
+                             + sky(c, r, lod, open_, off, shift, distant))
         wsum += w
     over = wsum > 1
     out = acc + (1 - wsum)[:, None] * distant
