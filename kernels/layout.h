@@ -68,6 +68,8 @@
 #define DELTA_ALPHA 0.0001f
 #define ENV_GUIDE_BINS 256
 #define BVH_STACK 96
+#define RR_DEPTH 4
+#define MAX_PATH 256
 #define LUMINANCE_R 0.2126f
 #define LUMINANCE_G 0.7152f
 #define LUMINANCE_B 0.0722f

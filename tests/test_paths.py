@@ -597,3 +597,18 @@ def test_a_wavefront_asked_for_and_not_run_is_said(tmp_path, white):
     assert "bounces 1" in notes("c", "reference", "unbounded", "wavefront", [floor])[0]   # a lone plane
     assert notes("d", "reference", "unbounded", "wavefront", [floor, ball]) == []
     assert notes("e", "sh", "unbounded", "auto", [floor, ball]) == []
+
+
+def test_the_paths_constants_have_one_definition():
+    """RR_DEPTH and MAX_PATH are scene/layout.py's, emitted to kernels/layout.h (which every path
+    program includes) and read by the twin: no kernel defines them again."""
+    from iblbake.render.twin import paths as twin
+    from iblbake.scene import layout
+
+    kernels = Path(__file__).resolve().parents[1] / "kernels"
+    header = (kernels / "layout.h").read_text()
+    assert f"#define RR_DEPTH {layout.RR_DEPTH}\n" in header and f"#define MAX_PATH {layout.MAX_PATH}\n" in header
+    assert (twin.RR_DEPTH, twin.MAX_PATH) == (layout.RR_DEPTH, layout.MAX_PATH) == (4, 256)
+    again = [f.name for f in kernels.rglob("*.[ch]*") if f.name != "layout.h"
+             and any(f"#define {k} " in f.read_text() for k in ("RR_DEPTH", "MAX_PATH"))]
+    assert again == []

@@ -91,6 +91,11 @@ MISS_T = -1.0
 # entries of the kernels' traversal stack of the 4-wide BVH (kernels/scene.h trace_range): a node
 # pushes at most 4 and pops one, so a tree of d levels needs 3 d + 1 (scene/bvh.py widen checks)
 BVH_STACK = 96
+# the paths (kernels/paths/paths.h and its twin render/twin/paths.py): bounces before Russian roulette
+# (pbrt-v4: 1, Mitsuba 3: 5; of 3, 4 and 5 the least time to 1% on the Mitsuba scenes, docs/benchmarks.md),
+# and a float-safety cap on unbounded paths (survival <= 0.95 per bounce)
+RR_DEPTH = 4
+MAX_PATH = 256
 
 
 def _modes(prefix: str, table: dict) -> list[str]:
@@ -109,7 +114,8 @@ def header_text() -> str:
     rows += [f"#define {k}_FLOAT4S {v}" for k, v in FLOAT4S.items()] + [""]
     rows += [f"/* {k}: {v} */" for k, v in GBUFFER.items()]
     rows += [f"#define MISS_T ({MISS_T}f)", f"#define DELTA_ALPHA {DELTA_ALPHA!r}f",
-             f"#define ENV_GUIDE_BINS {ENV_GUIDE_BINS}", f"#define BVH_STACK {BVH_STACK}"]
+             f"#define ENV_GUIDE_BINS {ENV_GUIDE_BINS}", f"#define BVH_STACK {BVH_STACK}",
+             f"#define RR_DEPTH {RR_DEPTH}", f"#define MAX_PATH {MAX_PATH}"]
     rows += [f"#define LUMINANCE_{c} {w!r}f" for c, w in zip("RGB", LUMINANCE.tolist())]
     rows += [f"#define STREAM_{k.upper()} {v:#x}u" for k, v in RANDOM_STREAMS.items()]
     rows += ["", "#endif", ""]

@@ -52,9 +52,8 @@ IBL_INLINE float3 env_missed(float3 l, float pb, ENV_PARAMS)
 #ifdef BOUNCES
 /* ---------------------------------------------------------------------------- paths */
 
-#define RR_DEPTH 4              /* bounces before Russian roulette (pbrt-v4: 1, Mitsuba 3: 5): of 3, 4 and 5 the
-                                 * least time to 1% on the Mitsuba scenes (docs/benchmarks.md) */
-#define MAX_PATH 256            /* a float-safety cap on unbounded paths: survival <= 0.95 per bounce */
+/* RR_DEPTH (bounces before Russian roulette) and MAX_PATH (the cap on unbounded paths): kernels/layout.h,
+ * from iblbake/scene/layout.py, where the twin reads them too */
 
 /* Where a path meets a surface: the point, the shading normal bent towards the incoming ray's
  * origin, and the full material, its maps read at level 0 (a later vertex's ray cone is not
