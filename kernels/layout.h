@@ -54,8 +54,6 @@
 #define LIGHT_FLOAT4S 4
 #define TRIANGLE_ATTR_FLOAT4S 7
 #define MATERIAL_MAPS_FLOAT4S 17
-#define PATH_FLOAT4S 8
-#define SHADOW_FLOAT4S 3
 
 /* gb_pos: hit position, w: distance along the ray (MISS_T where nothing is hit) */
 /* gb_nrm: shading normal facing the viewer, w: material index */

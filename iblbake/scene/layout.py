@@ -59,17 +59,6 @@ FLOAT4S = {
     # then per map kind (MAP_KINDS order) three rows: the UV transform's rows (m00 m01 m02 | texture
     # index, -1 none) and (m10 m11 m12 | texcoord set), and (0.5 log2(w h |det M|) of its texture, -, -, -)
     "MATERIAL_MAPS": 17,
-    # the wavefront's path state, one record per path (kernels/paths/wavefront.cl; Laine, Karras and Aila
-    # 2013): (the ray's origin | the vertex it will meet, int), (its direction | the G-buffer sample,
-    # int), (throughput | the pdf of the BSDF sample that made the ray: MIS where it misses), the
-    # Sampler (seed, sample number in the frame, sample k, next dimension: uints; what sampler_start
-    # derives from them is derived again), (the first vertex's estimate | the hit's kind, int), (the
-    # environment found past the first vertex | -), (the emission found | -), the closest hit (t, b1,
-    # b2 | primitive index, int)
-    "PATH": 8,
-    # a queued shadow ray (the wavefront's): (origin | tmax), (direction | the accumulator it adds to:
-    # 0 the first vertex's estimate, 1 the environment, 2 the emission), (the light it brings | -)
-    "SHADOW": 3,
 }
 MAP_KINDS = ("base_color", "metallic_roughness", "normal", "occlusion", "emissive")
 # a primitive's surface flags: its material asks for a test at every hit (single-sided, alpha-masked);

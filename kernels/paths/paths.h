@@ -7,9 +7,9 @@
  * (ENV_PARAMS, kernels/envmap.h) and the lights. The one path of every ray source: the
  * reference's camera samples (kernels/paths/reference.cl, from their first vertex), the irradiance
  * probes' rays and the reflection captures' texels (kernels/paths/probe_trace.cl, from a point;
- * iblbake/render/paths/). Each vertex's pieces (first_vertex, vertex_start, env_draw and env_weigh
- * or the two at once, env_sample, light_sample, path_scatter) are functions that the wavefront's
- * stages (kernels/paths/wavefront.cl) call too, where a ray is queued instead of traced.
+ * iblbake/render/paths/ trace()). Each vertex's pieces (first_vertex, vertex_start, env_draw and env_weigh
+ * or the two at once, env_sample, light_sample, path_scatter) are functions of their own: an engine
+ * that queues a ray instead of tracing it (a wavefront) calls them as the megakernel does.
  * numpy twin: iblbake/render/twin/paths.py. */
 #ifndef IBLBAKE_PATHS_H
 #define IBLBAKE_PATHS_H
@@ -108,7 +108,7 @@ IBL_INLINE VertexDims vertex_dims(Sampler *sp)
  * shadow ray, in two steps so that other work hides the texel's miss between them: env_draw, the
  * direction in the panorama and its texel (fetched meanwhile); env_weigh, the direction *l and
  * *c = Le f NoL w / pe, what arrives where it leaves the scene unoccluded; returns whether there
- * is a shadow ray to trace (the wavefront queues it). env_sample: the two at once. */
+ * is a shadow ray to trace. env_sample: the two at once. */
 typedef struct {
     float3 l;
     int texel;
