@@ -153,9 +153,9 @@ IBL_INLINE float3 env_direct(const EnvDraw e, const Material mt, float3 v, float
     return (float3)(0.0f);
 }
 
-/* A path's vertices, each piece once: the megakernel (the reference's first vertex, follow_path)
- * and the wavefront's stages (kernels/paths/wavefront.cl; Laine, Karras and Aila 2013) call these, so
- * the two draw the same dimensions in the same order and compute the same estimate. */
+/* A path's vertices, each piece once: the reference's first vertex and follow_path call these, and
+ * an engine that cuts a path where a ray is traced would too, drawing the same dimensions in the
+ * same order and computing the same estimate. */
 
 /* The first vertex (the G-buffer sample; the terms asked for, diffuse and specular): its
  * dimensions, the environment sampled (env_sample's, before the shadow ray) and one BSDF sample

@@ -14,7 +14,9 @@ mean kept as TexelRays keeps it.
 The engine turns a launch into device work. One is left: the megakernel, a work item following its
 path to its end. The wavefront of stages (Laine, Karras and Aila 2013; kernels/paths/wavefront.cl)
 gave the same frames but ran 0.64-0.83x the megakernel's samples per second on both CPU runtimes
-and 4-10x slower on a GPU (docs/benchmarks.md "Megakernel or wavefront"); it is retired (git history)."""
+and 4-10x slower on a GPU (docs/benchmarks.md "Megakernel or wavefront"); it is retired: its kernel,
+driver and benchmark last stand in commit e6be59a (kernels/paths/wavefront.cl,
+render/passes/reference.py Reference.wavefront, benchmarks/bench_wavefront.py)."""
 
 from __future__ import annotations
 
