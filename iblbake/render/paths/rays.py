@@ -15,13 +15,15 @@ import numpy as np
 from iblbake.device.launch import whole_units
 from iblbake.render.paths.trace import Launch, Source
 
+PROGRAM = "paths/probe_trace.cl"      # the kernel of rays from points (bound by a Tracer)
+
 
 class PointRays(Source):
     """Rays `dirs` ((rays, 3), or (rays, 4) with each ray's share of the sphere in w) from every
     position; result(): (radiance (positions, rays, 3), signed distance (positions, rays), the object
     each ray met, -1 none). shade False: distances only. probe0, ray0: the first position's and
     ray's numbers (their random streams). progress(done + share * the fraction traced)."""
-    function = "probe_trace"
+    program, function = PROGRAM, "probe_trace"
 
     def __init__(self, tracer, positions, dirs, shade: bool, progress=None, done=0.0, share=1.0, probe0=0, ray0=0):
         rt = self.rt = tracer.rt
@@ -70,7 +72,7 @@ class TexelRays(Source):
     the mean over its rays of the radiance of those that met the scene (RGB), the share that did (A)
     and the radiance of those that escaped (RGB); {object: share of the sphere whose rays met its
     inside}). progress(the fraction traced)."""
-    function = "probe_trace"
+    program, function = PROGRAM, "probe_trace"
 
     def __init__(self, tracer, position, dirs, samples: int, index: int, progress=None):
         self.tracer, self.dirs, self.samples, self.index, self.progress = tracer, dirs, samples, index, progress

@@ -20,6 +20,7 @@ render/passes/reference.py Reference.wavefront, benchmarks/bench_wavefront.py)."
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 
 from iblbake.errors import InputError
@@ -34,7 +35,7 @@ class Launch:
     part: tuple = ()
 
 
-class Source:
+class Source(ABC):
     """A ray source. program, function: its kernel (kernels/NAME). launch(global size, function,
     **args): run it with the source's defines, table and bound arguments. launches(): the Launch
     records that generate its rays, in order (a generator may look at what accumulate() kept:
@@ -43,17 +44,17 @@ class Source:
     program = ""
     function = ""
 
-    def launch(self, global_size, function, **args):
-        raise NotImplementedError
+    @abstractmethod
+    def launch(self, global_size, function, **args): ...
 
-    def launches(self):
-        raise NotImplementedError
+    @abstractmethod
+    def launches(self): ...
 
-    def accumulate(self, launch: Launch) -> bool:
-        raise NotImplementedError
+    @abstractmethod
+    def accumulate(self, launch: Launch) -> bool: ...
 
-    def result(self):
-        raise NotImplementedError
+    @abstractmethod
+    def result(self): ...
 
 
 def megakernel(source: Source, la: Launch):

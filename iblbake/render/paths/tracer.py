@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from iblbake.render.device_scene import environment_frame, geometry_defines, has_lights, panorama_args, scene_lights
-from iblbake.render.paths.rays import PointRays
+from iblbake.render.paths.rays import PROGRAM, PointRays
 from iblbake.render.paths.trace import trace
 
 
@@ -51,8 +51,7 @@ class Tracer:
 
     def launch(self, global_size, function, **args):
         """Run probe_trace.cl's `function` with the scene's defines, table and bound arguments."""
-        return self.rt.launch("paths/probe_trace.cl", function, self.defines, global_size, self.table, **self.args,
-                              **args)
+        return self.rt.launch(PROGRAM, function, self.defines, global_size, self.table, **self.args, **args)
 
     def trace(self, positions, dirs, shade: bool, progress=None, done=0.0, share=1.0, probe0=0, ray0=0):
         """(radiance (probes, rays, 3), signed distance (probes, rays), the object each ray met
