@@ -54,8 +54,6 @@
 #define LIGHT_FLOAT4S 4
 #define TRIANGLE_ATTR_FLOAT4S 7
 #define MATERIAL_MAPS_FLOAT4S 17
-#define PATH_FLOAT4S 8
-#define SHADOW_FLOAT4S 3
 
 /* gb_pos: hit position, w: distance along the ray (MISS_T where nothing is hit) */
 /* gb_nrm: shading normal facing the viewer, w: material index */
@@ -68,6 +66,8 @@
 #define DELTA_ALPHA 0.0001f
 #define ENV_GUIDE_BINS 256
 #define BVH_STACK 96
+#define RR_DEPTH 4
+#define MAX_PATH 256
 #define LUMINANCE_R 0.2126f
 #define LUMINANCE_G 0.7152f
 #define LUMINANCE_B 0.0722f

@@ -2,8 +2,8 @@
 Lambert surfaces (every pixel converges to the environment's 1, however the objects shadow each
 other), an enclosure lit by its own emission (E / (1 - a), and E (1 + a + ... + a^k) with k
 bounces), what compiles a path and what does not, and bounces: 1 as the direct light of before.
-Each closed form runs through both ways of running the paths (effects.reference.paths: the
-megakernel and the wavefront of stages), and the two give the same frame to float32 rounding."""
+Each closed form runs over every ray source of the one driver (render/paths/trace.py): the camera's
+samples (the reference pass), the irradiance probes' rays and a reflection capture's texels."""
 
 from pathlib import Path
 
@@ -30,35 +30,60 @@ def black(tmp_path_factory):
 
 
 LAMBERT = {"roughness": 1, "specular": 0}
-PATHS = ("megakernel", "wavefront")
+SOURCES = ("camera", "probe_rays", "capture_texels")
+PROBE_RAYS, CAPTURE = 4096, {"size": 16, "samples": 16}      # 8192 rays from each point; 8192 a capture
 
 
-def ran(f, paths):
-    """The reference pass's report, checked to have run its paths the way asked for."""
-    ref = next(p for p in f.report["passes"] if p["name"] == "reference")
-    assert ref["paths"] == paths, ref
-    return ref
+def ran(f):
+    """The reference pass's report."""
+    return next(p for p in f.report["passes"] if p["name"] == "reference")
 
 
 write = load_scene
 
 
-def furnace(folder, env, bounces, samples, paths="auto"):
+def traced(source, sc, folder, points, bounces, rt=None):
+    """The radiance the paths bring back along every ray of `source` in scene sc, each source through
+    the one driver: camera, the frame's pixels that met a surface (the reference pass's
+    CameraSamples); probe_rays, PROBE_RAYS rays from each of `points` (PointRays, the irradiance
+    probes' rays, but seeing a solid's inside as the camera does: the enclosures are spheres);
+    capture_texels, a reflection capture at points[0], its scene and sky parts added (TexelRays)."""
+    from iblbake.device.runtime import Runtime
+    from iblbake.render import reflection_probes
+    from iblbake.render.bakes import Bakes
+    from iblbake.render.paths.tracer import Tracer
+    from iblbake.render.probes import spherical_fibonacci
+    from iblbake.render.units import Job
+
+    if source == "camera":
+        f = render(sc, cache_root=folder / "cache")
+        return f.hdr[..., :3][f.hdr[..., 3] > 0.999]
+    job = Job(sc, rt or Runtime(), Bakes(folder / "cache"))
+    if source == "probe_rays":
+        tracer = Tracer(job, {"bounces": bounces, "seed": 1}, back_faces_black=False)
+        return tracer.trace(np.asarray(points, np.float64), spherical_fibonacci(PROBE_RAYS), True)[0].reshape(-1, 3)
+    settings = {"position": list(points[0]), "bounces": bounces, "seed": 1, **CAPTURE}
+    img, _ = reflection_probes.capture(reflection_probes.tracer(job, settings), 0, settings)
+    return (img[..., :3] + img[..., 4:]).reshape(-1, 3).astype(np.float64)
+
+
+def furnace(folder, env, bounces, samples):
     """A white Lambert sphere resting on a white Lambert floor (6 x 6) under L = 1."""
-    return write(folder, f"furnace_{bounces}_{paths}", {
+    return write(folder, f"furnace_{bounces}", {
         "camera": {"perspective": {"position": [0, 1.5, 3], "look_at": [0, 0.4, 0], "fov_y": 50}, "resolution": [24, 24]},
         "environment": {"path": str(env), "background": "hide"},
         "materials": {"white": {"base_color": [1, 1, 1], **LAMBERT}},
         "objects": [{"sphere": {"center": [0, 0.6, 0], "radius": 0.6}, "material": "white"},
                     {"plane": {"point": [0, 0, 0], "size": 6}, "material": "white"}],
         "effects": {"diffuse": "reference", "specular": "reference",
-                    "reference": {"max_samples": samples, "target_noise": 0, "batch": 64, "bounces": bounces,
-                                  "paths": paths}}})
+                    "reference": {"max_samples": samples, "target_noise": 0, "batch": 64, "bounces": bounces}}})
+
+
+FURNACE_POINTS = [[1.5, 0.3, 0.5], [-1.2, 1.5, -0.8]]      # above the floor, beside the sphere
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("paths", PATHS)
-def test_white_furnace_converges_to_one(tmp_path, white, paths):
+def test_white_furnace_converges_to_one(tmp_path, white):
     """Unbounded paths: every pixel of the sphere and the floor is 1 (at 1024 samples the mean
     within 0.1%, measured 0.013%; the RMS over the pixels within 1.5%, measured 0.46% (0.44-0.75%
     over seeds 1-6 with the earlier Halton dimensions); 99% of them within 4%, measured 1.5%):
@@ -67,106 +92,116 @@ def test_white_furnace_converges_to_one(tmp_path, white, paths):
     path is a firefly (worst pixel 2.9%; 2.7-11.5% over seeds 1-6 with the Halton dimensions). The direct
     light alone (bounces 1) misses what the sphere and the floor send each other: 10% or more at
     the contact."""
-    sc = furnace(tmp_path, white, "unbounded", 1024, paths)
+    sc = furnace(tmp_path, white, "unbounded", 1024)
     f = render(sc, cache_root=tmp_path / "cache")
     hit = f.hdr[..., 3] > 0.999
     got = f.hdr[..., :3][hit]
     err = np.abs(got - 1)
     rms, p99 = np.sqrt(np.mean(err ** 2)), np.quantile(err, 0.99)
-    print(f"furnace ({paths}): mean {got.mean():.5f}, rms {rms:.4f}, 99% {p99:.4f}, worst {err.max():.4f} over {hit.sum()} px")
+    print(f"furnace: mean {got.mean():.5f}, rms {rms:.4f}, 99% {p99:.4f}, worst {err.max():.4f} over {hit.sum()} px")
     assert abs(got.mean() - 1) < 1e-3 and rms < 0.015 and p99 < 0.04
-    ref = ran(f, paths)
+    ref = ran(f)
     assert ref["bounces"] == "unbounded" and "BOUNCES" in f.report["effects"]["defines"]["reference"]
     direct = render(furnace(tmp_path, white, 1, 256), cache_root=tmp_path / "cache").hdr[..., :3][hit]
     print(f"direct only: mean {direct.mean():.4f}, min {direct.min():.4f}")
     assert direct.min() < 0.9 and direct.mean() < got.mean() - 0.02
 
 
-def enclosure(folder, env, a, e, bounces, samples=128, paths="auto"):
+@pytest.mark.parametrize("source", SOURCES[1:])
+def test_white_furnace_rays_bring_back_one(tmp_path, white, source):
+    """The white furnace along the rays of the other sources: every ray from a point beside the
+    sphere brings back 1, whatever it meets (one path a ray: the mean over the 8192 rays within 1%;
+    measured 0.26% for the probes' rays, 0.04% for the capture's texels)."""
+    sc = furnace(tmp_path, white, "unbounded", 4)
+    got = traced(source, sc, tmp_path, FURNACE_POINTS, "unbounded")
+    print(f"furnace ({source}): mean {got.mean(0)} over {len(got)} rays or texels, max {got.max():.4f}")
+    assert np.abs(got.mean(0) - 1).max() < 1e-2
+
+
+def enclosure(folder, env, a, e, bounces, samples=128):
     """The camera inside a sphere of albedo a (Lambert) that emits e: L = e / (1 - a) everywhere."""
-    return write(folder, f"enclosure_{bounces}_{paths}", {
+    return write(folder, f"enclosure_{bounces}", {
         "camera": {"perspective": {"position": [0.3, -0.2, 0.5], "look_at": [0, 0, -1], "fov_y": 90},
                    "resolution": [16, 16]},
         "environment": {"path": str(env), "background": "hide"},
         "materials": {"wall": {"base_color": [a] * 3, "emissive": e, **LAMBERT}},
         "objects": [{"sphere": {"center": [0, 0, 0], "radius": 2}, "material": "wall"}],
         "effects": {"diffuse": "reference", "specular": "reference",
-                    "reference": {"max_samples": samples, "target_noise": 0, "batch": 64, "bounces": bounces,
-                                  "paths": paths}}})
+                    "reference": {"max_samples": samples, "target_noise": 0, "batch": 64, "bounces": bounces}}})
 
 
-@pytest.mark.parametrize("paths", PATHS)
+INSIDE = [[0.3, -0.2, 0.5], [-0.5, 0.4, -0.3]]       # points inside the enclosures (the camera's first)
+# the mean's bound past Russian roulette, per source: a camera's pixel holds 128 paths (stratified), a
+# ray one path
+ROULETTE = {"camera": 5e-3, "probe_rays": 1e-2, "capture_texels": 1e-2}
+
+
+@pytest.mark.parametrize("source", SOURCES)
 @pytest.mark.parametrize("bounces", [1, 2, 4, "unbounded"])
-def test_enclosure_is_emission_over_one_minus_albedo(tmp_path, black, bounces, paths):
+def test_enclosure_is_emission_over_one_minus_albedo(tmp_path, black, bounces, source):
     """Inside a sphere of albedo 0.5 emitting E: E (1 + a + ... + a^k) after k > 1 bounces, exact (1e-5)
-    before Russian roulette starts (paths.h RR_DEPTH, bounce 4): every path's estimate is the sum
-    itself; from there on, and unbounded (E / (1 - a)), roulette's noise: mean within 0.5%,
-    measured 0.09% unbounded and under 1e-5 at 4 bounces (the roulette's dimension is stratified)."""
+    before Russian roulette starts (layout.py RR_DEPTH, bounce 4): every path's estimate is the sum
+    itself; from there on, and unbounded (E / (1 - a)), roulette's noise: the camera's mean within
+    0.5%, measured 0.09% unbounded and under 1e-5 at 4 bounces (the roulette's dimension is
+    stratified); a ray's one path within 1% over 8192 rays, measured 0.013% (4 bounces) and 0.024%
+    (unbounded) for the probes' rays, 0.25% and 0.53% for the capture's texels. Bounces 1: the camera's is the environment's direct
+    light (the walls' light reaches nothing: E), a ray's the surfaces it sees lit directly (E (1 + a))."""
     a, e = 0.5, np.array([1.0, 0.5, 0.25])
-    f = render(enclosure(tmp_path, black, a, e.tolist(), bounces, paths=paths), cache_root=tmp_path / "cache")
-    ran(f, paths if bounces != 1 else "megakernel")       # the direct light alone has no path
-    got = f.hdr[..., :3].reshape(-1, 3)
-    # bounces 1 is the environment's direct light only: the walls' light reaches nothing
-    want = e / (1 - a) if bounces == "unbounded" else e * sum(a ** j for j in range(bounces + 1 if bounces > 1 else 1))
+    sc = enclosure(tmp_path, black, a, e.tolist(), bounces)
+    got = traced(source, sc, tmp_path, INSIDE, bounces)
+    k = (0 if source == "camera" else 1) if bounces == 1 else bounces
+    want = e / (1 - a) if bounces == "unbounded" else e * sum(a ** j for j in range(k + 1))
     if bounces in (1, 2):
         assert np.abs(got / want - 1).max() < 1e-5, (got[:2], want)
     else:
         rel = np.abs(got.mean(0) / want - 1)
-        print(f"bounces {bounces}: mean {got.mean(0)} against {want}: {rel.max():.5f}")
-        assert rel.max() < 5e-3
+        print(f"{source}, bounces {bounces}: mean {got.mean(0)} against {want}: {rel.max():.5f}")
+        assert rel.max() < ROULETTE[source]
 
 
-@pytest.mark.parametrize("paths", PATHS)
-def test_no_path_where_light_cannot_pass(tmp_path, white, paths):
+def test_no_path_where_light_cannot_pass(tmp_path, white):
     """A lone sphere seen from outside never sees itself, nor anything with visibility off: the
-    reference compiles no path code there, as bounces: 1 (the default), whichever way the paths
-    are asked to run (the direct light is the megakernel's)."""
+    reference compiles no path code there, as bounces: 1 (the default)."""
     base = {"camera": {"perspective": {"position": [0, 0, 3]}, "resolution": [8, 8]},
             "environment": {"path": str(white)}, "materials": {"m": {}},
             "effects": {"diffuse": "reference", "specular": "reference",
-                        "reference": {"max_samples": 2, "bounces": "unbounded", "paths": paths}}}
+                        "reference": {"max_samples": 2, "bounces": "unbounded"}}}
     lone = write(tmp_path, "lone", {**base, "objects": [{"sphere": {"radius": 1}, "material": "m"}]})
     two = [{"sphere": {"radius": 1}, "material": "m"}, {"plane": {"point": [0, -1, 0]}, "material": "m"}]
     unseen = write(tmp_path, "unseen", {**base, "objects": two,
                                         "effects": {**base["effects"], "reference": {"visibility": False,
-                                                                                     "bounces": "unbounded",
-                                                                                     "paths": paths}}})
+                                                                                     "bounces": "unbounded"}}})
     inside = write(tmp_path, "inside", {**base, "objects": [{"sphere": {"radius": 5}, "material": "m"}]})
     for sc, traced in ((lone, False), (unseen, False), (inside, True)):
         f = render(sc, cache_root=tmp_path / "cache")
         defines = f.report["effects"]["defines"]["reference"]
         assert ("BOUNCES" in defines) == traced, sc.source
-        assert ("WAVEFRONT" in defines) == (traced and paths == "wavefront"), sc.source
-        ran(f, paths if traced else "megakernel")
 
 
-@pytest.mark.parametrize("paths", PATHS)
+@pytest.mark.parametrize("source", SOURCES)
 @pytest.mark.parametrize("bounces", [2, "unbounded"])
-def test_point_light_in_an_enclosure(tmp_path, black, bounces, paths):
+def test_point_light_in_an_enclosure(tmp_path, black, bounces, source):
     """A point light of I candela at the centre of a sphere of radius R and albedo a: the walls
     receive E = I / R^2 straight on and send L = (a E / pi)(1 + a + ... + a^(k-1)) after k bounces,
     (a E / pi) / (1 - a) unbounded. Paths sample the light at every later vertex (the lights pass
-    lights the first): bounces 2 is exact (1e-5), unbounded roulette's noise (0.1%, measured 0.013%
-    at 512 samples)."""
+    lights the first; a ray's first vertex is a later one): bounces 2 is exact (1e-5), unbounded
+    roulette's noise (the camera's 0.1%, measured 0.013% at 512 samples; over 8192 rays of one path
+    1%, measured 0.23% for the probes' rays and 0.18% for the capture's texels)."""
     a, radius, intensity = 0.5, 2.0, 4.0
-    sc = enclosure(tmp_path, black, a, [0, 0, 0], bounces, samples=512, paths=paths)
+    sc = enclosure(tmp_path, black, a, [0, 0, 0], bounces, samples=512)
     sc.data["lights"] = [{"point": {"position": [0, 0, 0], "color": [1, 1, 1], "intensity": intensity,
                                     "radius": 0.0, "range": None}, "shadows": "hard", "shadow_samples": 16}]
-    f = render(sc, cache_root=tmp_path / "cache")
-    ran(f, paths)
-    assert "PATH_LIGHTS" in f.report["effects"]["defines"]["reference"]
+    got = traced(source, sc, tmp_path, INSIDE, bounces)
     direct = a * intensity / radius ** 2 / np.pi
-    got = f.hdr[..., :3].reshape(-1, 3)
     if bounces == 2:
         assert np.abs(got / (direct * (1 + a)) - 1).max() < 1e-5, got[:2]
     else:
         rel = abs(got.mean() / (direct / (1 - a)) - 1)
-        print(f"unbounded: {got.mean():.5f} against {direct / (1 - a):.5f}: {rel:.5f}")
-        assert rel < 1e-3
+        print(f"{source}, unbounded: {got.mean():.5f} against {direct / (1 - a):.5f}: {rel:.5f}")
+        assert rel < {"camera": 1e-3}.get(source, ROULETTE[source])
 
 
-@pytest.mark.parametrize("paths", PATHS)
-def test_shadow_rays_lose_no_light_on_a_lone_sphere(tmp_path, paths):
+def test_shadow_rays_lose_no_light_on_a_lone_sphere(tmp_path):
     """A sphere alone under small bright lamps (near the horizon, where the upper half sees them at
     grazing angles) cannot shadow itself: with visibility on, every shadow ray that leaves the
     surface arrives, so the frame equals the one with visibility off sample for sample (the same
@@ -181,17 +216,16 @@ def test_shadow_rays_lose_no_light_on_a_lone_sphere(tmp_path, paths):
     images.write_exr(env, img)
     frames = []
     for visibility in (True, False):
-        sc = write(tmp_path, f"lone_{visibility}_{paths}", {
+        sc = write(tmp_path, f"lone_{visibility}", {
             "camera": {"orthographic": {"position": [0, 5, 7], "look_at": [0, 0, 0], "width": 1.4},
                        "resolution": [48, 48]},
             "environment": {"path": str(env), "background": "hide"},
             "materials": {"m": {"base_color": [0.6, 0.6, 0.6], "roughness": 0.4}},
             "objects": [{"sphere": {"center": [0, 0, 0], "radius": 0.6}, "material": "m"}],
             "effects": {"diffuse": "reference", "specular": "reference",
-                        "reference": {"max_samples": 64, "target_noise": 0, "visibility": visibility,
-                                      "paths": paths}}})
+                        "reference": {"max_samples": 64, "target_noise": 0, "visibility": visibility}}})
         f = render(sc, cache_root=tmp_path / "cache")
-        ran(f, "megakernel")              # a lone sphere: the direct light, no path to run either way
+        assert "BOUNCES" not in f.report["effects"]["defines"]["reference"]      # a lone sphere: the direct light, no path
         frames.append(f.hdr[..., :3])
     hit = frames[1].sum(-1) > 0
     rel = np.abs(frames[0][hit] / frames[1][hit] - 1)
@@ -293,8 +327,7 @@ def test_every_sample_dimension_is_stratified_owen_sobol():
     assert not np.allclose(two[0][0::2], two[0][1::2])
 
 
-@pytest.mark.parametrize("paths", PATHS)
-def test_textured_glb_through_paths(tmp_path, white, paths):
+def test_textured_glb_through_paths(tmp_path, white):
     """A textured glTF (examples/meshes/tiles.glb: base colour, metallic-roughness and normal maps)
     on a floor: its maps are read at every path vertex (level 0), the frame is finite, and the
     light the tiles and the floor exchange makes it brighter than the direct light alone (measured
@@ -302,7 +335,7 @@ def test_textured_glb_through_paths(tmp_path, white, paths):
     mesh = Path(__file__).resolve().parents[1] / "examples" / "meshes" / "tiles.glb"
     frames = {}
     for bounces in (1, "unbounded"):
-        sc = write(tmp_path, f"tiles_{bounces}_{paths}", {
+        sc = write(tmp_path, f"tiles_{bounces}", {
             "camera": {"perspective": {"position": [0, 1.2, 2.5], "look_at": [0, 0, 0], "fov_y": 50},
                        "resolution": [24, 16]},
             "environment": {"path": str(white), "background": "hide"},
@@ -310,10 +343,8 @@ def test_textured_glb_through_paths(tmp_path, white, paths):
             "objects": [{"mesh": {"path": str(mesh), "rotate": [-90, 0, 0], "translate": [0, 0.05, 0]}},
                         {"plane": {"point": [0, 0, 0], "size": 4}, "material": "floor"}],
             "effects": {"diffuse": "reference", "specular": "reference",
-                        "reference": {"max_samples": 16, "target_noise": 0, "bounces": bounces,
-                                      "paths": paths}}})
+                        "reference": {"max_samples": 16, "target_noise": 0, "bounces": bounces}}})
         f = render(sc, cache_root=tmp_path / "cache")
-        ran(f, paths if bounces != 1 else "megakernel")
         frames[bounces] = f.hdr[..., :3]
         assert np.isfinite(f.hdr).all()
     defines = f.report["effects"]["defines"]["reference"]
@@ -477,13 +508,12 @@ EQUAL_SCENES = {
 }
 
 
-def equal_scene_frame(folder, name, paths, rt=None):
-    """EQUAL_SCENES[name] under the lamp, unbounded paths, 16 samples in batches of 6 (the
-    wavefront's waves forced to 4 samples, so a batch spans waves): the frame and its report."""
-    from iblbake.render.passes import reference as ref_pass
+def equal_scene_frame(folder, name, rt=None):
+    """EQUAL_SCENES[name] under the lamp, unbounded paths, 16 samples in batches of 6: the frame and
+    its report."""
     env = lamp_panorama(folder)
     objects, lights = EQUAL_SCENES[name]
-    sc = write(folder, f"{name}_{paths}", {
+    sc = write(folder, f"{name}", {
         "camera": {"perspective": {"position": [0, 1.5, 3.5], "look_at": [0, 0.5, 0], "fov_y": 45},
                    "resolution": [24, 18]},
         "environment": {"path": str(env), "background": "hide", "rotation_y": 25},
@@ -494,55 +524,10 @@ def equal_scene_frame(folder, name, paths, rt=None):
         "lights": lights,
         "effects": {"diffuse": "reference", "specular": "reference",
                     "reference": {"max_samples": 16, "target_noise": 0, "batch": 6, "bounces": "unbounded",
-                                  "seed": 7, "paths": paths}}})
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(ref_pass, "wave_paths", lambda rt: 4 * 24 * 18)
-        f = render(sc, cache_root=folder / "cache", runtime=rt)
-    ran(f, paths)
+                                  "seed": 7}}})
+    f = render(sc, cache_root=folder / "cache", runtime=rt)
     assert ("PATH_LIGHTS" in f.report["effects"]["defines"]["reference"]) == bool(lights)
     return f
-
-
-@pytest.mark.parametrize("name", list(EQUAL_SCENES))
-def test_wavefront_frame_is_the_megakernels(tmp_path, name):
-    """The wavefront's stages (kernels/paths/wavefront.cl) are the megakernel's estimator cut where rays
-    are traced, through the same functions (kernels/paths/paths.h), dimensions and sums in the same order:
-    for one scene and seed the two frames agree to float32 rounding, pixel for pixel. Unbounded
-    paths, 16 samples in batches of 6 (the wavefront's waves forced to 4 samples, so a batch spans
-    waves); measured max relative difference 0 on PoCL and on Intel's runtime (every sum bit for
-    bit). Bound 1e-6: a GPU shares a sample's batch among work items (sample_slices), which reorders
-    the megakernel's float32 sums (3.6e-7, test_sample_slices_keep_the_frame), and a compiler may
-    fuse a multiply-add in one and not across the other's stages."""
-    frames = {paths: equal_scene_frame(tmp_path, name, paths).hdr[..., :3] for paths in PATHS}
-    a, b = frames["megakernel"], frames["wavefront"]
-    hit = a.sum(-1) > 0
-    rel = np.abs(a[hit] - b[hit]) / np.maximum(np.abs(a[hit]), 1e-6)
-    print(f"{name}: wavefront against megakernel, max relative difference {rel.max():.2e} over {hit.sum()} px, "
-          f"means {a[hit].mean():.6f} / {b[hit].mean():.6f}")
-    assert hit.sum() > 200 and np.isfinite(b).all()
-    assert rel.max() < 1e-6
-
-
-def test_wavefront_launches_are_whole_groups(tmp_path):
-    """The wavefront's queues change length at every stage; each launch is rounded up to whole
-    groups of QUEUE_GROUP with that local size (device/launch.py queue_launch), so PoCL, which builds
-    a kernel again for every work-group size it is given or picks, builds each stage once (a first
-    frame at 96x72 took 57 s on PoCL with exact lengths, 2.2 s rounded: the same bits)."""
-    from iblbake.device import runtime
-    from iblbake.device.launch import QUEUE_GROUP
-    rt = runtime.Runtime()
-    seen, run = [], rt.run
-
-    def recorded(kernel, global_size, local_size, *args):
-        if kernel.function_name.startswith("wf_"):
-            seen.append((kernel.function_name, global_size, local_size))
-        return run(kernel, global_size, local_size, *args)
-
-    rt.run = recorded
-    equal_scene_frame(tmp_path, next(iter(EQUAL_SCENES)), "wavefront", rt)
-    assert {s[0] for s in seen} == {"wf_generate", "wf_extend", "wf_shade", "wf_shadow", "wf_accumulate"}
-    assert {s[2] for s in seen} == {(QUEUE_GROUP,)} and all(s[1][0] % QUEUE_GROUP == 0 for s in seen)
-    assert len({s[1] for s in seen if s[0] == "wf_extend"}) > 3       # the queues did change length
 
 
 def test_a_gpus_build_gives_the_cpus_frame(tmp_path, monkeypatch):
@@ -553,47 +538,58 @@ def test_a_gpus_build_gives_the_cpus_frame(tmp_path, monkeypatch):
     from iblbake.device import runtime
     rt = runtime.Runtime()
     assert {runtime.WIDE_BVH, runtime.PREFETCH} <= set(rt.device_options)
-    cpu = equal_scene_frame(tmp_path, "knot", "megakernel", rt)
+    cpu = equal_scene_frame(tmp_path, "knot", rt)
     options = runtime.device_options
     monkeypatch.setattr(runtime, "device_options",
                         lambda info: [o for o in options(info) if o not in (runtime.WIDE_BVH, runtime.PREFETCH)])
     rt = runtime.Runtime()
     assert not {runtime.WIDE_BVH, runtime.PREFETCH} & set(rt.device_options)
-    gpu = equal_scene_frame(tmp_path, "knot", "megakernel", rt)
+    gpu = equal_scene_frame(tmp_path, "knot", rt)
     np.testing.assert_array_equal(cpu.hdr, gpu.hdr)
 
 
-def test_paths_key_takes_its_three_values_only(tmp_path, white):
-    """effects.reference.paths is auto, megakernel or wavefront; anything else is a one-line error
-    naming the key and the choices."""
+def test_the_removed_paths_key_is_a_note(tmp_path, white):
+    """effects.reference.paths (auto | megakernel | wavefront) is removed: a scene that still names it
+    loads and renders as before (the megakernel was every frame's engine) with a note saying so;
+    another value is still a one-line error naming the key."""
     from iblbake.errors import InputError
-    doc = {"environment": {"path": str(white)},
-           "effects": {"diffuse": "reference", "reference": {"paths": "gpu"}}}
-    with pytest.raises(InputError, match=r"effects\.reference\.paths: 'gpu' is not one of auto \| megakernel \| "
-                                         r"wavefront"):
-        write(tmp_path, "bad", doc)
-    for way in ("auto", *PATHS):
+    from iblbake.render.plan import REMOVED_PATHS, plan
+    doc = {"camera": {"perspective": {"position": [0, 1, 3]}, "resolution": [8, 6]},
+           "environment": {"path": str(white)}, "materials": {"m": {}},
+           "objects": [{"sphere": {"radius": 0.5}, "material": "m"}, {"plane": {"point": [0, -0.5, 0]}, "material": "m"}],
+           "effects": {"diffuse": "reference", "reference": {"max_samples": 2, "bounces": "unbounded"}}}
+    assert "effects.reference.paths" not in " ".join(plan(write(tmp_path, "none", doc)).notes)
+    for way in ("auto", "megakernel", "wavefront"):
         doc["effects"]["reference"]["paths"] = way
-        assert write(tmp_path, way, doc).data["effects"]["reference"]["paths"] == way
+        sc = write(tmp_path, way, doc)
+        pl = plan(sc)
+        assert REMOVED_PATHS in pl.notes and "delete the key" in REMOVED_PATHS
+        assert "BOUNCES" in pl.defines["reference"] and "WAVEFRONT" not in pl.defines["reference"]
+    doc["effects"]["reference"]["paths"] = "gpu"
+    with pytest.raises(InputError, match=r"effects\.reference\.paths: 'gpu' is not one of"):
+        write(tmp_path, "bad", doc)
 
 
-def test_a_wavefront_asked_for_and_not_run_is_said(tmp_path, white):
-    """effects.reference.paths: wavefront where the frame traces no paths (no reference term, or
-    the reference's direct light alone) is a note, not silence; auto and a running wavefront none."""
-    from iblbake.render.plan import plan
-    floor = {"plane": {"point": [0, 0, 0], "size": 4}, "material": "m"}
-    ball = {"sphere": {"center": [0, 0.5, 0], "radius": 0.5}, "material": "m"}
+def test_trace_runs_the_megakernel_only(rt):
+    """render/paths/trace.py's engines: the megakernel; the retired wavefront (or any other name) is a
+    one-line InputError naming it."""
+    from iblbake.errors import InputError
+    from iblbake.render.paths.trace import ENGINES, trace
+    assert list(ENGINES) == ["megakernel"]
+    with pytest.raises(InputError, match=r"path engine 'wavefront' is not one of megakernel \(the wavefront is retired\)"):
+        trace(object(), "wavefront")
 
-    def notes(name, diffuse, bounces, paths, objects):
-        doc = {"camera": {"perspective": {"position": [0, 1, 3], "look_at": [0, 0.5, 0], "fov_y": 40},
-                          "resolution": [8, 6]},
-               "environment": {"path": str(white)}, "materials": {"m": {"roughness": 0.5}}, "objects": objects,
-               "effects": {"diffuse": diffuse, "reference": {"paths": paths, "bounces": bounces}}}
-        return [n for n in plan(write(tmp_path, name, doc)).notes if "effects.reference.paths" in n]
 
-    assert notes("a", "sh", "unbounded", "wavefront", [floor, ball]) == [
-        "effects.reference.paths: wavefront not used: no term of this frame is the reference"]
-    assert "bounces 1" in notes("b", "reference", 1, "wavefront", [floor, ball])[0]
-    assert "bounces 1" in notes("c", "reference", "unbounded", "wavefront", [floor])[0]   # a lone plane
-    assert notes("d", "reference", "unbounded", "wavefront", [floor, ball]) == []
-    assert notes("e", "sh", "unbounded", "auto", [floor, ball]) == []
+def test_the_paths_constants_have_one_definition():
+    """RR_DEPTH and MAX_PATH are scene/layout.py's, emitted to kernels/layout.h (which every path
+    program includes) and read by the twin: no kernel defines them again."""
+    from iblbake.render.twin import paths as twin
+    from iblbake.scene import layout
+
+    kernels = Path(__file__).resolve().parents[1] / "kernels"
+    header = (kernels / "layout.h").read_text()
+    assert f"#define RR_DEPTH {layout.RR_DEPTH}\n" in header and f"#define MAX_PATH {layout.MAX_PATH}\n" in header
+    assert (twin.RR_DEPTH, twin.MAX_PATH) == (layout.RR_DEPTH, layout.MAX_PATH) == (4, 256)
+    again = [f.name for f in kernels.rglob("*.[ch]*") if f.name != "layout.h"
+             and any(f"#define {k} " in f.read_text() for k in ("RR_DEPTH", "MAX_PATH"))]
+    assert again == []

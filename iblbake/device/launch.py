@@ -22,12 +22,6 @@ GPU_ITEMS = 1 << 18
 CPU_GROUPS_PER_CORE = 64
 MAX_GROUP = 4096
 
-# The wavefront's queues change length at every stage. Launched at each exact length, PoCL chose a
-# work-group size dividing it and built the program's work-group function again for each new size
-# (it specialises a kernel per local size): a first wavefront frame on PoCL spent 20-80 s building
-# (docs/benchmarks.md "Megakernel or wavefront"). Its launches are rounded up to whole groups of
-# QUEUE_GROUP items instead (the kernels return past their count), so each stage is built once.
-QUEUE_GROUP = 64
 SPLIT_KERNELS = ("reference", "probe_trace")
 
 
@@ -42,12 +36,6 @@ def cpu_group(items: int, cores: int) -> int:
     groups a core, at most MAX_GROUP."""
     bound = max(1, min(MAX_GROUP, items // (CPU_GROUPS_PER_CORE * max(cores, 1))))
     return next(d for d in range(bound, 0, -1) if items % d == 0)
-
-
-def queue_launch(count: int) -> tuple:
-    """(global size, local size) of a launch over `count` items of a queue (or any length that
-    varies from launch to launch): whole groups of QUEUE_GROUP."""
-    return (-(-count // QUEUE_GROUP) * QUEUE_GROUP,), (QUEUE_GROUP,)
 
 
 def whole_units(rt, unit: int) -> int:
@@ -65,13 +53,6 @@ def sample_slices(rt, n: int, batch: int) -> int:
     return max(1, min(batch, -(-GPU_ITEMS // max(n, 1))))
 
 
-def wave_paths(rt) -> int:
-    """The most paths the reference's wavefront keeps in flight (effects.reference.paths: wavefront;
-    a PATH record of 128 bytes each and their queues): enough for a GPU's resident threads through
-    the queues' shrinking tails (Laine, Karras and Aila 2013 keep 2^20), fewer on a CPU."""
-    return 1 << (20 if rt.info.kind == "GPU" else 17)
-
-
 # Registers a path-tracing work item may hold on an NVIDIA GPU. Unbounded, NVIDIA's compiler gives
 # the reference kernel 141-155 of them (no spills): one 256-item work group per multiprocessor,
 # 8 of its 64 warps resident, too few to hide a path's memory latency. Capped at 64 it spills 0.6-1
@@ -81,7 +62,7 @@ def wave_paths(rt) -> int:
 # traversal (kernels/scene.h) 48 beats 64 on the meshes: the knot's reference 1.01-1.12x, the
 # textured torus's 1.05-1.06x with leaves of 2 (docs/benchmarks.md "While-while on the GPU").
 PATH_REGISTERS = 48
-PATH_PROGRAMS = ("paths/reference.cl", "paths/probe_trace.cl")     # reference.cl holds the wavefront's stages too
+PATH_PROGRAMS = ("paths/reference.cl", "paths/probe_trace.cl")
 
 
 def build_options(info, name) -> list:

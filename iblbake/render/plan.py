@@ -17,6 +17,10 @@ from iblbake.scene import materials
 from iblbake.scene.load import AOVS, Scene
 
 
+# a scene naming the removed key effects.reference.paths renders as before, with this note (scene/schema.py)
+REMOVED_PATHS = ("effects.reference.paths is removed and changes nothing: every reference runs the megakernel "
+                 "(the wavefront engine, slower on every device measured, is retired); delete the key")
+
 # The modes that approximate image-based light (runtime and baked estimates): AO occludes them,
 # the study's AO rungs apply to them. The reference traces true visibility instead.
 APPROXIMATE_MODES = {"diffuse": ("sh", "probes") + bases.DIFFUSE,
@@ -72,11 +76,8 @@ def effect_modes(scene: Scene) -> Effects:
         background = "hide"
     emissive = any(max(m["emissive"]) > 0 for m in mats)     # an emissive map multiplies the factor
     bounces = reference_bounces(scene, diffuse, specular, notes)
-    asked = (((scene.raw or {}).get("effects") or {}).get("reference") or {}).get("paths")
-    if asked == "wavefront" and ("reference" not in (diffuse, specular) or bounces == 1):
-        notes.append("effects.reference.paths: wavefront not used: " + (
-            "no term of this frame is the reference" if "reference" not in (diffuse, specular) else
-            "the reference traces no paths here (bounces 1), its direct light is one kernel"))
+    if "paths" in (((scene.raw or {}).get("effects") or {}).get("reference") or {}):
+        notes.append(REMOVED_PATHS)
     return Effects(diffuse, specular, background, emissive, notes, bounces)
 
 

@@ -13,7 +13,8 @@ from __future__ import annotations
 import numpy as np
 
 from iblbake.core import conventions, sampling
-from iblbake.device.launch import whole_units
+from iblbake.render.paths.rays import TexelRays
+from iblbake.render.paths.trace import trace
 from iblbake.render.paths.tracer import Tracer
 
 
@@ -45,22 +46,8 @@ def capture(tracer, index: int, settings: dict, progress=None):
     read along the reflected ray itself (it is infinitely far: no parallax moves it;
     kernels/reflection_probes.h rprobe_sky). Probe number `index`: its random streams."""
     size, n = settings["size"], settings["samples"]
-    dirs = capture_directions(size, n)
-    sums = np.zeros((len(dirs) // n, 7))
-    per = whole_units(tracer.rt, n) * n            # whole texels per launch (device/launch.py)
-    pos = np.asarray([settings["position"]], np.float64)
-    inside = {}
-    for r0 in range(0, len(dirs), per):
-        rad, t, obj = tracer.trace(pos, dirs[r0:r0 + per], True, probe0=index, ray0=r0)
-        met = np.isfinite(np.abs(t[0]))[:, None]
-        rows = np.concatenate([np.where(met, rad[0], 0.0), met.astype(np.float64), np.where(met, 0.0, rad[0])], 1)
-        sums[r0 // n:(r0 + len(rad[0])) // n] = rows.reshape(-1, n, 7).mean(1)
-        back = t[0] < 0                            # the inside of a solid (scene.h probe_back_face)
-        share = dirs[r0:r0 + per, 3]
-        for o in np.unique(obj[0][back]):
-            inside[int(o)] = inside.get(int(o), 0.0) + float(share[back & (obj[0] == o)].sum()) / (4 * np.pi)
-        if progress:
-            progress(min(1.0, (r0 + per) / len(dirs)))
+    texels = TexelRays(tracer, settings["position"], capture_directions(size, n), n, index, progress)
+    sums, inside = trace(texels)              # the one driver (render/paths/trace.py)
     # radiance is >= 0; the panorama's tiny negative texels (environment.negative: keep) reach a few
     # paths, and read back a negative value would fail the capture's check
     sums[:, :3] = np.maximum(sums[:, :3], 0.0)

@@ -59,17 +59,6 @@ FLOAT4S = {
     # then per map kind (MAP_KINDS order) three rows: the UV transform's rows (m00 m01 m02 | texture
     # index, -1 none) and (m10 m11 m12 | texcoord set), and (0.5 log2(w h |det M|) of its texture, -, -, -)
     "MATERIAL_MAPS": 17,
-    # the wavefront's path state, one record per path (kernels/paths/wavefront.cl; Laine, Karras and Aila
-    # 2013): (the ray's origin | the vertex it will meet, int), (its direction | the G-buffer sample,
-    # int), (throughput | the pdf of the BSDF sample that made the ray: MIS where it misses), the
-    # Sampler (seed, sample number in the frame, sample k, next dimension: uints; what sampler_start
-    # derives from them is derived again), (the first vertex's estimate | the hit's kind, int), (the
-    # environment found past the first vertex | -), (the emission found | -), the closest hit (t, b1,
-    # b2 | primitive index, int)
-    "PATH": 8,
-    # a queued shadow ray (the wavefront's): (origin | tmax), (direction | the accumulator it adds to:
-    # 0 the first vertex's estimate, 1 the environment, 2 the emission), (the light it brings | -)
-    "SHADOW": 3,
 }
 MAP_KINDS = ("base_color", "metallic_roughness", "normal", "occlusion", "emissive")
 # a primitive's surface flags: its material asks for a test at every hit (single-sided, alpha-masked);
@@ -91,6 +80,11 @@ MISS_T = -1.0
 # entries of the kernels' traversal stack of the 4-wide BVH (kernels/scene.h trace_range): a node
 # pushes at most 4 and pops one, so a tree of d levels needs 3 d + 1 (scene/bvh.py widen checks)
 BVH_STACK = 96
+# the paths (kernels/paths/paths.h and its twin render/twin/paths.py): bounces before Russian roulette
+# (pbrt-v4: 1, Mitsuba 3: 5; of 3, 4 and 5 the least time to 1% on the Mitsuba scenes, docs/benchmarks.md),
+# and a float-safety cap on unbounded paths (survival <= 0.95 per bounce)
+RR_DEPTH = 4
+MAX_PATH = 256
 
 
 def _modes(prefix: str, table: dict) -> list[str]:
@@ -109,7 +103,8 @@ def header_text() -> str:
     rows += [f"#define {k}_FLOAT4S {v}" for k, v in FLOAT4S.items()] + [""]
     rows += [f"/* {k}: {v} */" for k, v in GBUFFER.items()]
     rows += [f"#define MISS_T ({MISS_T}f)", f"#define DELTA_ALPHA {DELTA_ALPHA!r}f",
-             f"#define ENV_GUIDE_BINS {ENV_GUIDE_BINS}", f"#define BVH_STACK {BVH_STACK}"]
+             f"#define ENV_GUIDE_BINS {ENV_GUIDE_BINS}", f"#define BVH_STACK {BVH_STACK}",
+             f"#define RR_DEPTH {RR_DEPTH}", f"#define MAX_PATH {MAX_PATH}"]
     rows += [f"#define LUMINANCE_{c} {w!r}f" for c, w in zip("RGB", LUMINANCE.tolist())]
     rows += [f"#define STREAM_{k.upper()} {v:#x}u" for k, v in RANDOM_STREAMS.items()]
     rows += ["", "#endif", ""]

@@ -562,12 +562,11 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
             "bounces": bounces_field("how many times a path may scatter: unbounded (Russian roulette from bounce 4, "
                                  "unbiased: the converged answer), N, or 1, the environment's direct light (no "
                                  "interreflection, no light from emissive surfaces); with visibility false, 1"),
-            "paths": Enum(("auto", "megakernel", "wavefront"), "auto",
-                          doc="how the paths run (bounces other than 1; the same estimator, frames equal to "
-                              "float32 rounding): one kernel per sample (megakernel), or a wavefront of stages "
-                              "(generate, extend, shade, shadow) over compacted queues (Laine, Karras and Aila "
-                              "2013); auto: the faster on the device's kind as measured (docs/benchmarks.md "
-                              "\"Megakernel or wavefront\")"),
+            # removed: older scene files name it; they render as before, with a note (render/plan.py)
+            "paths": Enum(("auto", "megakernel", "wavefront"), None,
+                          doc="removed: every reference runs its paths as one kernel per sample (the megakernel; "
+                              "the wavefront, the same estimator, was slower on every device measured). Still "
+                              "accepted, with a note, so older scene files render as before; delete it"),
         }),
         "ssr": Enum(("off", "on"), "off", doc="stochastic screen-space reflections (Stachowiak 2015) over the split "
                                              "sum (specular: prefiltered): GGX rays marched through the frame's Hi-Z, its own "

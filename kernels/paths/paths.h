@@ -7,9 +7,9 @@
  * (ENV_PARAMS, kernels/envmap.h) and the lights. The one path of every ray source: the
  * reference's camera samples (kernels/paths/reference.cl, from their first vertex), the irradiance
  * probes' rays and the reflection captures' texels (kernels/paths/probe_trace.cl, from a point;
- * iblbake/render/paths/). Each vertex's pieces (first_vertex, vertex_start, env_draw and env_weigh
- * or the two at once, env_sample, light_sample, path_scatter) are functions that the wavefront's
- * stages (kernels/paths/wavefront.cl) call too, where a ray is queued instead of traced.
+ * iblbake/render/paths/ trace()). Each vertex's pieces (first_vertex, vertex_start, env_draw and env_weigh
+ * or the two at once, env_sample, light_sample, path_scatter) are functions of their own: an engine
+ * that queues a ray instead of tracing it (a wavefront) calls them as the megakernel does.
  * numpy twin: iblbake/render/twin/paths.py. */
 #ifndef IBLBAKE_PATHS_H
 #define IBLBAKE_PATHS_H
@@ -52,9 +52,8 @@ IBL_INLINE float3 env_missed(float3 l, float pb, ENV_PARAMS)
 #ifdef BOUNCES
 /* ---------------------------------------------------------------------------- paths */
 
-#define RR_DEPTH 4              /* bounces before Russian roulette (pbrt-v4: 1, Mitsuba 3: 5): of 3, 4 and 5 the
-                                 * least time to 1% on the Mitsuba scenes (docs/benchmarks.md) */
-#define MAX_PATH 256            /* a float-safety cap on unbounded paths: survival <= 0.95 per bounce */
+/* RR_DEPTH (bounces before Russian roulette) and MAX_PATH (the cap on unbounded paths): kernels/layout.h,
+ * from iblbake/scene/layout.py, where the twin reads them too */
 
 /* Where a path meets a surface: the point, the shading normal bent towards the incoming ray's
  * origin, and the full material, its maps read at level 0 (a later vertex's ray cone is not
@@ -109,7 +108,7 @@ IBL_INLINE VertexDims vertex_dims(Sampler *sp)
  * shadow ray, in two steps so that other work hides the texel's miss between them: env_draw, the
  * direction in the panorama and its texel (fetched meanwhile); env_weigh, the direction *l and
  * *c = Le f NoL w / pe, what arrives where it leaves the scene unoccluded; returns whether there
- * is a shadow ray to trace (the wavefront queues it). env_sample: the two at once. */
+ * is a shadow ray to trace. env_sample: the two at once. */
 typedef struct {
     float3 l;
     int texel;
@@ -154,9 +153,9 @@ IBL_INLINE float3 env_direct(const EnvDraw e, const Material mt, float3 v, float
     return (float3)(0.0f);
 }
 
-/* A path's vertices, each piece once: the megakernel (the reference's first vertex, follow_path)
- * and the wavefront's stages (kernels/paths/wavefront.cl; Laine, Karras and Aila 2013) call these, so
- * the two draw the same dimensions in the same order and compute the same estimate. */
+/* A path's vertices, each piece once: the reference's first vertex and follow_path call these, and
+ * an engine that cuts a path where a ray is traced would too, drawing the same dimensions in the
+ * same order and computing the same estimate. */
 
 /* The first vertex (the G-buffer sample; the terms asked for, diffuse and specular): its
  * dimensions, the environment sampled (env_sample's, before the shadow ray) and one BSDF sample

@@ -57,7 +57,7 @@
 /* Intel's CPU runtime vectorises this kernel 16 work items wide where paths meet triangles, and
  * each lane's BVH traversal diverges: the knot's reference ran 2.9x slower than one work item per
  * lane (benchmarks/bench_devices.py). IBL_SCALAR_BVH (runtime.device_options, that runtime only)
- * asks for one (cl_intel_vec_len_hint): SCALAR_BVH, on the wavefront's tracing stages too. */
+ * asks for one (cl_intel_vec_len_hint): SCALAR_BVH. */
 #if defined(IBL_SCALAR_BVH) && defined(HAS_TRIANGLES)
 #define SCALAR_BVH __attribute__((intel_vec_len_hint(1)))
 #else
@@ -166,5 +166,3 @@ __kernel void reference(__global const float4 *gb_pos, SURFACE_PARAMS, const int
     }
     ref_batch[item] = (float4)(sum, odd);
 }
-
-#include "paths/wavefront.cl"

@@ -15,8 +15,7 @@ from iblbake.core import conventions
 from iblbake.core import sampling
 from iblbake.render.twin.gbuffer import _plane_t, _sphere_roots, occluded, ray_offset
 from iblbake.render.twin.surface import _materials, diffuse_weight, facing_normal, surface, to_env
-
-RR_DEPTH, MAX_PATH = 4, 256           # kernels/paths/paths.h
+from iblbake.scene.layout import MAX_PATH, RR_DEPTH        # kernels/paths/paths.h reads them from layout.h
 
 
 def closest(o, d, arrays):
