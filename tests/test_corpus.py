@@ -162,7 +162,7 @@ def test_default_probes_hold_each_interior_to_the_truth(name, panorama, runtime,
     """Default `probes: {}` (the probe box on the walls in probe_box_walls) within REGION_BOUND
     of the converged reference on every region, and the frame within FRAME_BOUND or its measured
     miss in FRAME_MISSES (docs/benchmarks.md
-    "Ordinary interiors in absolute terms" has the figures: on the code of issue 47 the corridor's
+    "The corpus in absolute terms" has the figures: on the code of issue 47 the corridor's
     far end is 10-20x too bright, and every interior is outside one bound or the other)."""
     if not (ROOT / "examples" / "corpus" / "meshes" / "skylight_room.obj").exists():
         pytest.fail("the corpus meshes are missing: run `make meshes`")
