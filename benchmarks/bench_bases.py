@@ -106,8 +106,9 @@ def main():
 def family(name, opts):
     if name == "sh":
         return "SH" + ("" if opts["sh_window"] == "none" else f" {opts['sh_window']}")
-    if name == "sg":
-        return "SG " + ("LS" if opts["sg_fit"] == "least_squares" else "NNLS")
+    fit = opts.get("sg_fit", opts.get("ad_fit"))
+    if fit:         # sg, ambient dice: a curve per fit (irradiance, radiance LS, radiance NNLS)
+        return f"{BASES[name].TITLE} " + {"irradiance": "irradiance", "least_squares": "LS", "nnls": "NNLS"}[fit]
     return BASES[name].TITLE
 
 
