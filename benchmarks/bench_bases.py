@@ -9,7 +9,8 @@ evaluation time (the kernel header on the OpenCL device, ns per normal over 2^16
 
 Prints a markdown table and writes the error-against-bytes plot (one curve per basis family) to
 docs/images/bases_error_bytes.png (matplotlib, imported here only). Run: .venv/bin/python
-benchmarks/bench_bases.py [--plot PATH] [--panoramas a,b,...]."""
+benchmarks/bench_bases.py [--plot PATH] [--panoramas a,b,...] [--bases sh,sg,...] (a subset of the
+bases: its rows alone, and the plot of them)."""
 
 from __future__ import annotations
 
@@ -72,6 +73,7 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--plot", default=str(ROOT / "docs" / "images" / "bases_error_bytes.png"))
     ap.add_argument("--panoramas", default="city,courtyard,forest,interior,night,studio,sunrise,sunset")
+    ap.add_argument("--bases", default=",".join(BASES), help="the registered bases to measure (core/bases BASES)")
     args = ap.parse_args()
     rt = cl.Runtime()
     print(f"device: {rt.device_label}")
@@ -86,7 +88,8 @@ def main():
     ev_dev = rt.to_device(ev.astype(np.float32))
     out = rt.empty(EVAL_NORMALS * 3 * 4)
     rows = []
-    for name, m in BASES.items():
+    for name in args.bases.split(","):
+        m = BASES[name]
         for opts in m.variants():
             rmse, mx, proj = {}, {}, []
             coeffs = None

@@ -6,6 +6,7 @@ evaluator: a 2-D quadrature of each lobe times the clamped cosine, not iblbake's
 import json
 
 import numpy as np
+import pytest
 
 from iblbake.bake import sh as bake_sh
 from iblbake.core import conventions
@@ -29,7 +30,7 @@ def rel_rmse(approx, exact):
 
 def test_irradiance_fit_level_with_l2():
     """Relative RMSE of the irradiance (luminance, 1024 normals) against the exact convolution:
-    measured L2 SH 3.41%; SG9 fitted on the irradiance 3.45%, on the radiance 6.58% (least
+    measured L2 SH 3.41%; SG9 fitted on the irradiance 3.43%, on the radiance 6.58% (least
     squares: its misfit of the sun leaks into the low orders); SG12 3.16% against 6.43%; ambient
     dice 3.54% against 3.78%. The irradiance fits within 1.25x of L2, the radiance fits 1.9x."""
     img = sun_sky()
@@ -61,14 +62,14 @@ def test_basis_file_evaluates_from_its_fields(tmp_path):
     """`iblbake basis --basis sg` (the irradiance fit by default) on the sun sky: its JSON's
     amplitudes, axes and sharpness, put through a 2-D quadrature of sum_k A_k exp(lambda (mu_k.w
     - 1)) max(0, n.w), give the irradiance the file's error block reports (at its 256 Fibonacci
-    normals, luminance: measured 3.5%, within 1.25x of L2's 3.4% there), and the document's
-    Legendre profile gives the same irradiance (measured 4.1e-6 of the largest: the quadrature's)."""
+    normals, luminance: measured 3.43%, within 1.25x of L2's 3.41% there), and the document's
+    Legendre profile gives the same irradiance (measured 4.5e-6 of the largest: the quadrature's)."""
     env = write_exr(tmp_path / "sun.exr", sun_sky().astype(np.float32))
     out = tmp_path / "sg.json"
     r = run_cli("basis", env, "--basis", "sg", "-o", out, "-q")
     assert r.returncode == 0, r.stderr
     doc = json.loads(out.read_text())
-    assert doc["options"] == {"sg_lobes": 9, "sg_fit": "irradiance"}
+    assert doc["options"] == {"sg_lobes": 9, "sg_fit": "irradiance"} and doc["sharpness"] == 2.0
     amp, mu, lam = np.array(doc["coefficients"]), np.array(doc["axes"]), doc["sharpness"]
     # the documented Fibonacci axes
     k = np.arange(len(mu))
@@ -89,3 +90,25 @@ def test_basis_file_evaluates_from_its_fields(tmp_path):
     l2 = BASES["sh"]
     o = {"sh_bands": 3, "sh_window": "none"}
     assert got < 1.25 * rel_rmse(l2.irradiance(l2.project(sun_sky().astype(np.float32), o), n, o), exact)
+
+
+@pytest.mark.external
+def test_sg_irradiance_fit_within_1_25x_of_l2_on_every_example_panorama(panoramas):
+    """The done criterion of issue 62.5 on the eight example panoramas (halved to 512 x 256, 1024
+    normals): SG9 and SG12 fitted on the irradiance within 1.25x of L2 SH's relative RMSE on each
+    (measured SG9 0.99-1.06x: its smoother lobes, lambda 2; at the K's own 4.5 sunset was 1.42x
+    and forest 1.26x; SG12 0.69-0.91x)."""
+    from iblbake.io import images
+    normals = bake_sh.fibonacci_normals(1024)
+    worst = {9: 0.0, 12: 0.0}
+    for path in panoramas.values():
+        img = np.asarray(images.read_exr(path))[::2, ::2, :3].astype(np.float64)
+        exact = bake_sh.exact_irradiance(img, normals)
+
+        def err(name, opts):
+            m = BASES[name]
+            return rel_rmse(m.irradiance(m.project(img, opts), normals, opts), exact)
+        l2 = err("sh", {"sh_bands": 3, "sh_window": "none"})
+        for k in worst:
+            worst[k] = max(worst[k], err("sg", {"sg_lobes": k, "sg_fit": "irradiance"}) / l2)
+    assert worst[9] < 1.12 and worst[12] < 1.0, worst
