@@ -135,10 +135,10 @@ def plot(rows, path):
 
     fig, ax = plt.subplots(figsize=(7, 4.5))
     fams = list(dict.fromkeys(r["family"] for r in rows))
-    for f in fams:
+    for i, f in enumerate(fams):       # tab20: a colour each for more families than the default 10
         pts = sorted((r["bytes"][0], 100 * np.mean(list(r["rmse"].values()))) for r in rows if r["family"] == f)
         x, y = zip(*pts)
-        ax.plot(x, y, "o-", label=f)
+        ax.plot(x, y, "o-", label=f, color=plt.cm.tab20(i % 20))
     ax.set_xscale("log")
     ax.set_xlabel("bytes per probe (fp16 RGB; Haar: and its indices)")
     ax.set_ylabel("diffuse irradiance relative RMSE, % (mean of panoramas)")

@@ -1,7 +1,7 @@
 /* Spherical Gaussians, fixed axes and one sharpness (iblbake/core/bases/sg.py, the twin): each
- * lobe's exact cosine convolution, its Legendre series sum_l e_l P_l(mu.n) to l = SG_PROFILE_LMAX.
- * basis_coeffs: SG_LOBES rows (amplitude rgb), SG_LOBES rows (axis xyz, sharpness), then e_0..
- * e_SG_PROFILE_LMAX four to a row. */
+ * lobe's exact cosine convolution, a polynomial of degree SG_PROFILE_DEGREE in mu.n (sg.py
+ * profile_power). basis_coeffs: SG_LOBES rows (amplitude rgb), SG_LOBES rows (axis xyz,
+ * sharpness), then the polynomial's coefficients of t^0.. four to a row. */
 #ifndef IBLBAKE_BASIS_SG_H
 #define IBLBAKE_BASIS_SG_H
 #include "inline.h"
@@ -10,17 +10,13 @@
 
 IBL_INLINE float3 basis_irradiance(BASIS_SPACE const float4 *bc, float3 n)
 {
-    BASIS_SPACE const float *prof = (BASIS_SPACE const float *)(bc + 2 * SG_LOBES);
+    BASIS_SPACE const float *poly = (BASIS_SPACE const float *)(bc + 2 * SG_LOBES);
     float3 e = (float3)(0.0f);
     for (int k = 0; k < SG_LOBES; ++k) {
         const float t = clamp(dot(bc[SG_LOBES + k].xyz, n), -1.0f, 1.0f);
-        float p0 = 1.0f, p1 = t, s = prof[0] + prof[1] * t;
-        for (int l = 1; l < SG_PROFILE_LMAX; ++l) {      /* Bonnet's recurrence */
-            const float p2 = ((float)(2 * l + 1) * t * p1 - (float)l * p0) / (float)(l + 1);
-            p0 = p1;
-            p1 = p2;
-            s += prof[l + 1] * p2;
-        }
+        float s = poly[SG_PROFILE_DEGREE];
+        for (int i = SG_PROFILE_DEGREE - 1; i >= 0; --i)      /* Horner */
+            s = fma(s, t, poly[i]);
         e += bc[k].xyz * s;
     }
     return fmax(e, (float3)(0.0f));

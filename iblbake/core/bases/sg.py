@@ -10,9 +10,10 @@ BakingLab's SG5-12): G_k(w) = A_k exp(lambda (mu_k . w - 1)), so the fit is line
   exp(lambda t) = sum_l (2l + 1) i_l(lambda) P_l(t) (Abramowitz and Stegun 10.2.36; a_l = i_l/i_0,
   common.vmf_eigenvalues) and the clamped cosine's Ahat_l (Ramamoorthi and Hanrahan 2001). An
   off-axis normal has no elementary closed form (Pettineo, SG Series part 3; Meder and
-  Bruederlin 2018 approximate it); the series falls super-exponentially past l ~ lambda: at
-  l = PROFILE_LMAX = 16 its terms are below 1.1e-9 of the first for K <= 12 (lambda <= 6), so the
-  truncated series is the exact convolution to float32. Hill's fitted SG-cosine product (used
+  Bruederlin 2018 approximate it); the series falls super-exponentially past l ~ lambda:
+  truncated at l = PROFILE_DEGREE = 12 it is within 1.1e-8 of the peak for lambda <= 6, the exact
+  convolution to float32. The kernel evaluates it as that degree-12 polynomial in t (Horner; its
+  power coefficients at most 0.5 of the peak, so float32 holds it to 1.7e-7), as the twin does. Hill's fitted SG-cosine product (used
   before) is 0.5-1.5% of the peak off at these sharpnesses, 3.4-6.6% at lambda 1-2, and fails
   below (192% at 0.5).
 - Fits (`sg_fit`), each for the quantity the lobes serve:
@@ -75,7 +76,7 @@ OPTIONS = {"sg_lobes": (LOBES, 9, "sg: spherical Gaussian lobes (fixed Fibonacci
 # least squares rings negative around a sun, and the lobe, clamped at 0, shows black patches
 # beside white ones on metals (scene/load.py _resolve_specular_fits)
 SPECULAR_DEFAULTS = {"sg_fit": "nnls"}
-PROFILE_LMAX = 16        # the irradiance's Legendre series, truncated (the docstring)
+PROFILE_DEGREE = 12      # the irradiance's Legendre series, truncated (the docstring)
 IRRADIANCE_SHARPNESS = {9: 2.0}     # the irradiance fit's smoother lobes (the docstring)
 GLSL_COEFFS, GLSL_IRRADIANCE = "SG_AMPLITUDE", "sgIrradiance"     # glsl()'s names (the probes' sampler)
 GLSL_SPECULAR = "sgSpecularRadiance"
@@ -133,11 +134,17 @@ def gram(k: int) -> np.ndarray:
     return np.where(r > 1e-12, g, 4 * np.pi * math.exp(-2 * lam))
 
 
-def irradiance_profile(lam: float, lmax: int = PROFILE_LMAX) -> np.ndarray:
+def irradiance_profile(lam: float, lmax: int = PROFILE_DEGREE) -> np.ndarray:
     """e_l, l = 0..lmax: a unit lobe's irradiance is sum_l e_l P_l(mu.n) (the module's docstring)."""
     l = np.arange(lmax + 1)
     return (-math.expm1(-2.0 * lam) / (2.0 * lam) * (2 * l + 1) * common.vmf_eigenvalues(lam, lmax)
             * common.cosine_moments(lmax))
+
+
+def profile_power(lam: float) -> np.ndarray:
+    """The truncated profile as power coefficients of t = mu.n, t^0..t^PROFILE_DEGREE (what the
+    kernel and the GLSL evaluate by Horner)."""
+    return np.polynomial.legendre.leg2poly(irradiance_profile(lam))
 
 
 def exact_irradiance(mu_dot_n, lam: float, lmax: int = 40) -> np.ndarray:
@@ -186,7 +193,7 @@ def irradiance(coeffs, normals, opts) -> np.ndarray:
     k = opts["sg_lobes"]
     t = np.clip(np.asarray(normals, np.float64) @ axes(k).T, -1.0, 1.0)
     # clamped at 0 as SH: a fit can go negative behind a sun
-    e = common.legendre_series(irradiance_profile(lobe_sharpness(opts)), t)
+    e = np.polynomial.polynomial.polyval(t, profile_power(lobe_sharpness(opts)))
     return np.maximum(0.0, e @ np.asarray(coeffs, np.float64))
 
 
@@ -222,18 +229,18 @@ def validate(coeffs, opts) -> np.ndarray:
 
 
 def defines(opts) -> dict:
-    return {"BASIS_SG": 1, "SG_LOBES": opts["sg_lobes"], "SG_PROFILE_LMAX": PROFILE_LMAX}
+    return {"BASIS_SG": 1, "SG_LOBES": opts["sg_lobes"], "SG_PROFILE_DEGREE": PROFILE_DEGREE}
 
 
 def pack(coeffs, opts) -> np.ndarray:
     """What kernels/basis_sg.h reads: K rows (A rgb, 0), K rows (mu xyz, lambda), then the
-    irradiance profile e_0..e_PROFILE_LMAX, four to a row."""
+    irradiance profile's power coefficients (profile_power), four to a row."""
     k = opts["sg_lobes"]
-    prof_rows = PROFILE_LMAX // 4 + 1
+    prof_rows = PROFILE_DEGREE // 4 + 1
     out = common.rgb_rows(coeffs, 2 * k + prof_rows)
     out[k:2 * k, :3] = axes(k)
     out[k:2 * k, 3] = lobe_sharpness(opts)
-    out[2 * k:].flat[:PROFILE_LMAX + 1] = irradiance_profile(lobe_sharpness(opts))
+    out[2 * k:].flat[:PROFILE_DEGREE + 1] = profile_power(lobe_sharpness(opts))
     return out
 
 
@@ -241,25 +248,19 @@ def glsl(coeffs, opts) -> str:
     k = opts["sg_lobes"]
     return f"""// iblbake spherical Gaussians: {k} lobes ({opts['sg_fit']} fit), G(w) = A exp(lambda (mu.w - 1));
 // world +y up.
-// irradiance: each lobe's exact cosine convolution, sum_l SG_PROFILE[l] P_l(mu.n) (Legendre series);
-// diffuse = albedo / PI * sgIrradiance(normalize(N));
+// irradiance: each lobe's exact cosine convolution, a degree-{PROFILE_DEGREE} polynomial in mu.n (SG_PROFILE: its
+// coefficients of t^0..t^{PROFILE_DEGREE}); diffuse = albedo / PI * sgIrradiance(normalize(N));
 const int SG_LOBES = {k};
 const float SG_SHARPNESS = {lobe_sharpness(opts):.9g};
 {common.glsl_vec3_array("SG_AMPLITUDE", np.asarray(coeffs)[:, :3])}
 {common.glsl_vec3_array("SG_AXIS", axes(k))}
-{common.glsl_float_array("SG_PROFILE", irradiance_profile(lobe_sharpness(opts)))}
+{common.glsl_float_array("SG_PROFILE", profile_power(lobe_sharpness(opts)))}
 
 vec3 sgIrradiance(vec3 n) {{
     vec3 e = vec3(0.0);
     for (int k = 0; k < SG_LOBES; ++k) {{
-        float t = clamp(dot(SG_AXIS[k], n), -1.0, 1.0), p0 = 1.0, p1 = t;
-        float s = SG_PROFILE[0] + SG_PROFILE[1] * t;
-        for (int l = 1; l < {PROFILE_LMAX}; ++l) {{
-            float p2 = (float(2 * l + 1) * t * p1 - float(l) * p0) / float(l + 1);
-            p0 = p1;
-            p1 = p2;
-            s += SG_PROFILE[l + 1] * p2;
-        }}
+        float t = clamp(dot(SG_AXIS[k], n), -1.0, 1.0), s = SG_PROFILE[{PROFILE_DEGREE}];
+        for (int i = {PROFILE_DEGREE - 1}; i >= 0; --i) s = s * t + SG_PROFILE[i];
         e += SG_AMPLITUDE[k] * s;
     }}
     return max(e, vec3(0.0));
