@@ -375,9 +375,11 @@ def test_bases_ladder_is_the_registry():
         assert r.term == "diffuse" and vals["effects.diffuse"] == name and name in fields["diffuse"].choices
         assert all(k.split(".", 1)[1] in fields for k in vals)
     assert ladder.bases_ladder(None, SimpleNamespace(diffuse="off", specular="off")) == []
-    # the specular term: the chain and every variant of each basis that carries a lobe
+    # the specular term: the chain and every variant of each basis that carries a lobe, fitted for
+    # the lobe (on the radiance, not the irradiance)
     spec = ladder.bases_ladder(None, SimpleNamespace(diffuse="off", specular="prefiltered"))
-    want = [(n, o) for n, o in VARIANTS if n in bases.SPECULAR]
+    want = [(n, o) for n, o in VARIANTS if n in bases.SPECULAR and "irradiance" not in o.values()]
+    assert len(want) == 2 * len(sg.LOBES) + 2
     assert [r.label for r in spec] == ["prefiltered (distant)"] + [f"{BASES[n].label(o)} specular" for n, o in want]
     for r in spec[1:]:
         vals = dict(r.values)
