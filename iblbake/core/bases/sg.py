@@ -13,23 +13,23 @@ BakingLab's SG5-12): G_k(w) = A_k exp(lambda (mu_k . w - 1)), so the fit is line
   Bruederlin 2018 approximate it); the series falls super-exponentially past l ~ lambda:
   truncated at l = PROFILE_DEGREE = 12 it is within 1.1e-8 of the peak for lambda <= 6, the exact
   convolution to float32. The kernel evaluates it as that degree-12 polynomial in t (Horner; its
-  power coefficients at most 0.5 of the peak, so float32 holds it to 1.7e-7), as the twin does. Hill's fitted SG-cosine product (used
-  before) is 0.5-1.5% of the peak off at these sharpnesses, 3.4-6.6% at lambda 1-2, and fails
-  below (192% at 0.5).
+  power coefficients at most 0.5 of the peak, so float32 holds it to 1.7e-7), as the twin does.
+  Hill's fitted SG-cosine product (used before) is 0.5-1.5% of the peak off at these
+  sharpnesses, 3.4-6.6% at lambda 1-2, and fails below (192% at 0.5).
 - Fits (`sg_fit`), each for the quantity the lobes serve:
   irradiance (the default: the diffuse term, `iblbake basis`, irradiance probes): least squares
   on the irradiance over the whole sphere of normals, E_k above against the panorama's
   (common.irradiance_normal_equations: exact by Funk-Hecke). K = 9 lobes fitted so are smoother,
   lambda = 2 (IRRADIANCE_SHARPNESS): as lambda falls their span nears L2 SH's, and on the eight
   example panoramas their worst relative RMSE against L2's falls from 1.42x (lambda 4.5: sunset
-  1.65% against 1.16%) to 1.06x, the Gram's condition number 1.1e3 and the amplitudes within 12x
+  1.65% against 1.16%) to 1.08x (1.25%), the Gram's condition number 1.1e3 and the amplitudes within 12x
   the mean radiance (fp16 holds them); K = 5 and 6 stay 3-9x L2 at any sharpness (5 or 6 floats
   cannot hold L2's 9) and K = 12 0.91x at lambda 2 or 6, so they keep the K's own.
   least_squares: on the radiance (Roughton and Sloan's exact form): the moments
   b_k = int L G_k dw, then Gram A = b with the lobes' exact Gram matrix
   int G_i G_j dw = 4 pi e^{-2 lambda} sinh(r)/r, r = lambda |mu_i + mu_j|. Its misfit of a sun
-  leaks into the low orders the irradiance depends on: 2.4x the irradiance fit's error (SG9,
-  city 8.7% against 3.8%; docs/benchmarks.md).
+  leaks into the low orders the irradiance depends on: 3x the irradiance fit's error (SG9 11.9%
+  against 3.99% mean relative RMSE on the example panoramas; docs/benchmarks.md).
   nnls: the radiance's normal equations with A >= 0 (Lawson-Hanson, common.nnls_gram): the
   specular lobe's fit (SPECULAR_DEFAULTS), where a negative lobe shows as black patches.
 - Specular (`effects.specular: sg`): the split sum with the SG in place of the prefiltered
@@ -88,7 +88,8 @@ def variants() -> list:
 
 
 def label(opts) -> str:
-    return f"SG{opts['sg_lobes']} " + {"irradiance": "irradiance", "least_squares": "LS", "nnls": "NNLS"}[opts["sg_fit"]]
+    fit = {"irradiance": "irradiance", "least_squares": "LS", "nnls": "NNLS"}[opts["sg_fit"]]
+    return f"SG{opts['sg_lobes']} {fit}"
 
 
 def floats(opts) -> int:
