@@ -9,7 +9,8 @@ evaluation time (the kernel header on the OpenCL device, ns per normal over 2^16
 
 Prints a markdown table and writes the error-against-bytes plot (one curve per basis family) to
 docs/images/bases_error_bytes.png (matplotlib, imported here only). Run: .venv/bin/python
-benchmarks/bench_bases.py [--plot PATH] [--panoramas a,b,...]."""
+benchmarks/bench_bases.py [--plot PATH] [--panoramas a,b,...] [--bases sh,sg,...] (a subset of the
+bases: its rows alone, and the plot of them)."""
 
 from __future__ import annotations
 
@@ -72,6 +73,7 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--plot", default=str(ROOT / "docs" / "images" / "bases_error_bytes.png"))
     ap.add_argument("--panoramas", default="city,courtyard,forest,interior,night,studio,sunrise,sunset")
+    ap.add_argument("--bases", default=",".join(BASES), help="the registered bases to measure (core/bases BASES)")
     args = ap.parse_args()
     rt = cl.Runtime()
     print(f"device: {rt.device_label}")
@@ -86,7 +88,8 @@ def main():
     ev_dev = rt.to_device(ev.astype(np.float32))
     out = rt.empty(EVAL_NORMALS * 3 * 4)
     rows = []
-    for name, m in BASES.items():
+    for name in args.bases.split(","):
+        m = BASES[name]
         for opts in m.variants():
             rmse, mx, proj = {}, {}, []
             coeffs = None
@@ -106,8 +109,9 @@ def main():
 def family(name, opts):
     if name == "sh":
         return "SH" + ("" if opts["sh_window"] == "none" else f" {opts['sh_window']}")
-    if name == "sg":
-        return "SG " + ("LS" if opts["sg_fit"] == "least_squares" else "NNLS")
+    fit = opts.get("sg_fit", opts.get("ad_fit"))
+    if fit:         # sg, ambient dice: a curve per fit (irradiance, radiance LS, radiance NNLS)
+        return f"{BASES[name].TITLE} " + {"irradiance": "irradiance", "least_squares": "LS", "nnls": "NNLS"}[fit]
     return BASES[name].TITLE
 
 
@@ -131,10 +135,10 @@ def plot(rows, path):
 
     fig, ax = plt.subplots(figsize=(7, 4.5))
     fams = list(dict.fromkeys(r["family"] for r in rows))
-    for f in fams:
+    for i, f in enumerate(fams):       # tab20: a colour each for more families than the default 10
         pts = sorted((r["bytes"][0], 100 * np.mean(list(r["rmse"].values()))) for r in rows if r["family"] == f)
         x, y = zip(*pts)
-        ax.plot(x, y, "o-", label=f)
+        ax.plot(x, y, "o-", label=f, color=plt.cm.tab20(i % 20))
     ax.set_xscale("log")
     ax.set_xlabel("bytes per probe (fp16 RGB; Haar: and its indices)")
     ax.set_ylabel("diffuse irradiance relative RMSE, % (mean of panoramas)")

@@ -558,7 +558,7 @@ class Basis:
     bases": l1_geomerics, zh3, sg, ambient_dice, haar), in the world frame (+y up).
 
     name, options: the basis and its options (sg: sg_lobes, sg_fit; haar: haar_coefficients).
-    label: its name in tables ("SG9 LS"). coefficients: float64 (rows, 3) of radiance
+    label: its name in tables ("SG9 irradiance"). coefficients: float64 (rows, 3) of radiance
         coefficients, rows as document['layout'] says (haar: (rows, 4), the 4th column each
         kept coefficient's code).
     error: the irradiance against the exact (float64, every texel) at 256 normals
@@ -630,8 +630,8 @@ def basis(panorama: Panorama, name: str, *, intensity: float = 1.0, error: bool 
     where the basis's lobes are not orthogonal).
 
     name: l1_geomerics, zh3, sg, ambient_dice or haar (spherical harmonics: iblbake.sh).
-    options: the basis's own (sg_lobes 5 | 6 | 9 | 12, sg_fit 'least_squares' | 'nnls';
-        haar_coefficients 16 | 32 | 64 | 128 | 256); the schema's defaults where left out.
+    options: the basis's own (sg_lobes 5 | 6 | 9 | 12, sg_fit and ad_fit 'irradiance' |
+        'least_squares' | 'nnls'; haar_coefficients 16 | 32 | 64 | 128 | 256); the schema's defaults where left out.
     intensity: a scale of the radiance (>= 0). error: measure the irradiance (Basis.error).
     """
     from iblbake.bake import bases as bakebases

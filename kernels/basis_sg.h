@@ -1,6 +1,7 @@
-/* Spherical Gaussians, fixed axes and one sharpness (iblbake/core/bases/sg.py, the twin): Hill's
- * fitted SG-cosine irradiance (Pettineo's SG Series part 3, SGIrradianceFitted). basis_coeffs:
- * SG_LOBES rows (amplitude rgb), then SG_LOBES rows (axis xyz, sharpness). */
+/* Spherical Gaussians, fixed axes and one sharpness (iblbake/core/bases/sg.py, the twin): each
+ * lobe's exact cosine convolution, a polynomial of degree SG_PROFILE_DEGREE in mu.n (sg.py
+ * profile_power). basis_coeffs: SG_LOBES rows (amplitude rgb), SG_LOBES rows (axis xyz,
+ * sharpness), then the polynomial's coefficients of t^0.. four to a row. */
 #ifndef IBLBAKE_BASIS_SG_H
 #define IBLBAKE_BASIS_SG_H
 #include "inline.h"
@@ -9,17 +10,14 @@
 
 IBL_INLINE float3 basis_irradiance(BASIS_SPACE const float4 *bc, float3 n)
 {
-    const float lam = bc[SG_LOBES].w;
-    const float eml = exp(-lam), em2l = eml * eml;
-    const float scale = 1.0f + 2.0f * em2l - 1.0f / lam;
-    const float bias = (eml - em2l) / lam - em2l;
-    const float x = sqrt(1.0f - scale), x1 = x / (4.0f * 0.36f);
-    const float integral = 6.28318530717958648f / lam;      /* the approximate SG integral, 2 pi / lambda */
+    BASIS_SPACE const float *poly = (BASIS_SPACE const float *)(bc + 2 * SG_LOBES);
     float3 e = (float3)(0.0f);
     for (int k = 0; k < SG_LOBES; ++k) {
-        const float mdn = dot(bc[SG_LOBES + k].xyz, n), x0 = 0.36f * mdn;
-        const float y = fabs(x0) <= x1 ? (x0 + x1) * (x0 + x1) / x : clamp(mdn, 0.0f, 1.0f);
-        e += bc[k].xyz * ((scale * y + bias) * integral);
+        const float t = clamp(dot(bc[SG_LOBES + k].xyz, n), -1.0f, 1.0f);
+        float s = poly[SG_PROFILE_DEGREE];
+        for (int i = SG_PROFILE_DEGREE - 1; i >= 0; --i)      /* Horner */
+            s = fma(s, t, poly[i]);
+        e += bc[k].xyz * s;
     }
     return fmax(e, (float3)(0.0f));
 }

@@ -20,9 +20,9 @@ from iblbake.render.twin import probes as twin
 from tests.conftest import run_cli
 from tests.test_probes import Given, far_sphere_scene, kernel_irradiance, settings, sphere_scene, synthetic, unit
 
-# every probe basis, and each SG size by least squares and NNLS at K = 9
+# every probe basis, and each SG size fitted on the irradiance (the default), on the radiance at K = 9
 CASES = [(n, o) for n in bases.PROBES for o in bases.BASES[n].variants()
-         if n != "sg" or o["sg_lobes"] == 9 or o["sg_fit"] == "least_squares"]
+         if n != "sg" or o["sg_lobes"] == 9 or o["sg_fit"] == "irradiance"]
 IDS = [f"{n}-{'-'.join(str(v) for v in o.values())}" if o else n for n, o in CASES]
 
 
@@ -65,11 +65,12 @@ def test_kernel_matches_twin(rt, name, opts):
     assert np.abs(got - want).max() / want.max() < 1e-5
 
 
-# at 1024 rays: SG's K fixed lobes cannot make a constant (tests/test_bases.py test_uniform_sky; from
-# the rays measured 7.7% at K = 5, 5.9%, 4.1%, 2.9% at K = 12); the others are exact but for the rays'
-# quadrature of the moments (measured L1 Geomerics 3.4e-6, ZH3 5.6e-6, ambient dice 4.9e-5; at 64
-# rays 0.3-0.4%)
-UNIFORM = {"sg": {5: 0.09, 6: 0.07, 9: 0.05, 12: 0.035}, "ambient_dice": {None: 2e-4}}
+# at 1024 rays: SG's K fixed lobes cannot make a constant, bounded as the panorama's projection is
+# (tests/test_bases.py test_uniform_sky: fitted on the irradiance 6.0% at K = 5 to 0.72% at K = 9,
+# on the radiance 8.3% to 3.8%); the others are exact but for the rays' quadrature of the moments
+# (measured L1 Geomerics 3.4e-6, ZH3 5.6e-6, ambient dice 4.9e-5; at 64 rays 0.3-0.4%)
+UNIFORM = {"sg": {5: 0.07, 6: 0.045, 9: 0.009, 12: 0.01}, "sg radiance": {5: 0.095, 6: 0.068, 9: 0.05, 12: 0.045},
+           "ambient_dice": {None: 2e-4}}
 
 
 @pytest.mark.parametrize("name, opts", CASES, ids=IDS)
@@ -85,7 +86,8 @@ def test_uniform_sky(tmp_path, rt, sky, name, opts):
     assert vol["irradiance"].shape == (8, bases.BASES[name].floats(opts), 3)
     n = unit(np.random.default_rng(4).normal(size=(300, 3)))
     e = np.concatenate([twin.irradiance_at(vol, np.full(len(n), i), n) for i in range(8)])
-    bound = UNIFORM.get(name, {}).get(opts.get("sg_lobes"), 2e-5)
+    bound = UNIFORM.get(name + (" radiance" if opts.get("sg_fit", "irradiance") != "irradiance" else ""),
+                        {}).get(opts.get("sg_lobes"), 2e-5)
     assert np.abs(e / (0.75 * math.pi) - 1).max() < bound
     lit = render(with_basis(sphere_scene(tmp_path, sky, "probes"), name, opts), runtime=rt,
                  cache=Given(tmp_path / "cache", vol))

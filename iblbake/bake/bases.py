@@ -81,6 +81,7 @@ def document(coeffs, *, name: str, opts: dict, info, options: dict, timings: dic
             "layout": layout_text(name), "frame": "world, +y up (docs/conventions.md 'Space and directions')",
             "irradiance": "docs/conventions.md 'Directional bases': E(n) = int L max(0, n.w) dw, clamped at 0",
             "coefficients": [[float(v) for v in row] for row in c],
+            **(m.document_fields(opts) if hasattr(m, "document_fields") else {}),
             "input": info.to_json(), "options_read": options, "timings": timings}
 
 

@@ -24,10 +24,13 @@ SUFFIXES = {"iblbake": (".json",), "glsl": (".glsl", ".frag", ".vert", ".h", ".t
                    "wavelets, the --haar-coefficients largest kept): docs/conventions.md 'Directional bases'.")
 @click.option("--sg-lobes", type=click.Choice(["5", "6", "9", "12"]), default="9", show_default=True,
               help="sg: the number of lobes (fixed Fibonacci axes, one sharpness).")
-@click.option("--sg-fit", type=click.Choice(["least_squares", "nnls"]), default="least_squares", show_default=True,
-              help="sg: exact least squares, or non-negative least squares.")
-@click.option("--ad-fit", type=click.Choice(["least_squares", "nnls"]), default="least_squares", show_default=True,
-              help="ambient_dice: exact least squares, or non-negative least squares (no negative radiance).")
+@click.option("--sg-fit", type=click.Choice(["irradiance", "least_squares", "nnls"]), default="irradiance",
+              show_default=True, help="sg: least squares on the irradiance (what the diffuse term reads), or on the "
+                                      "radiance: exact least squares, or non-negative (the specular lobe's).")
+@click.option("--ad-fit", type=click.Choice(["irradiance", "least_squares", "nnls"]), default="irradiance",
+              show_default=True, help="ambient_dice: least squares on the irradiance (what the diffuse term reads), "
+                                      "or on the radiance: exact least squares, or non-negative (no negative "
+                                      "radiance: the specular lobe's).")
 @click.option("--haar-coefficients", type=click.Choice(["16", "32", "64", "128", "256"]), default="64",
               show_default=True, help="haar: the coefficients kept (the largest; 6 of them the faces' means).")
 @click.option("--output", "-o", type=click.Path(), default=None,

@@ -153,15 +153,16 @@ def realtime_ladder(sc, fx) -> list:
 
 def distant_specular_rungs(sc, fx) -> list:
     """The split sum's chain and each basis that carries a specular lobe (core/bases SPECULAR), of
-    the panorama, every variant: the specular term, AO, SSR and reflection probes off."""
-    from iblbake.core.bases import BASES, SPECULAR
+    the panorama, every variant fitted for the lobe (specular_variants): the specular term, AO,
+    SSR and reflection probes off."""
+    from iblbake.core.bases import BASES, SPECULAR, specular_variants
     if fx.specular == "off":
         return []
     off = [("effects.ao", "off"), ("effects.ssr", "off"), ("effects.reflection_probes", False)]
     return [Rung("specular", "prefiltered (distant)", [("effects.specular", "prefiltered")] + off)] + [
         Rung("specular", f"{BASES[name].label(opts)} specular",
              [("effects.specular", name), *((f"effects.{k}", v) for k, v in opts.items())] + off)
-        for name in SPECULAR for opts in BASES[name].variants()]
+        for name in SPECULAR for opts in specular_variants(name)]
 
 
 def bases_ladder(sc, fx) -> list:
@@ -183,7 +184,7 @@ def probe_bases_ladder(sc, fx) -> list:
     PROBES), the scene's probes section otherwise as it is: the probes' diffuse term; and the
     specular term from each basis that carries it (core/bases SPECULAR) beside the split sum's
     chain, of the panorama and of the probes (`specular: probes`). AO off."""
-    from iblbake.core.bases import BASES, PROBES, SPECULAR
+    from iblbake.core.bases import BASES, PROBES, SPECULAR, specular_variants
     rungs = []
     if fx.diffuse != "off" and sc.data["objects"]:
         base = [("effects.diffuse", "probes"), ("effects.ao", "off")]
@@ -199,7 +200,7 @@ def probe_bases_ladder(sc, fx) -> list:
             rungs += [Rung("specular", f"probes, {BASES[name].label(opts)} specular",
                            [("effects.specular", "probes"), ("probes.irradiance", name),
                             *((f"probes.{k}", v) for k, v in opts.items())] + off)
-                      for name in SPECULAR if name in PROBES for opts in BASES[name].variants()]
+                      for name in SPECULAR if name in PROBES for opts in specular_variants(name)]
     return rungs
 
 

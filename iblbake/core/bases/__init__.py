@@ -43,6 +43,12 @@ def options_of(name: str, effects: dict) -> dict:
     return {k: effects[k] for k in BASES[name].OPTIONS}
 
 
+def specular_variants(name: str) -> list:
+    """The variants of a basis with a specular lobe that fit it for the lobe: not those fitted on
+    the irradiance (their amplitudes make the cosine-convolved lobes, not the radiance along one)."""
+    return [o for o in BASES[name].variants() if "irradiance" not in o.values()]
+
+
 def specular_radiance(name: str, coeffs, r, lam_w, opts: dict) -> np.ndarray:
     """The radiance (..., C) along the warped GGX lobe about r (..., 3) of sharpness lam_w (...,)
     (common.lobe_axis, common.warp_sharpness) from basis `name`'s coefficients (K, C): linear in

@@ -9,10 +9,15 @@ Only the lobe on the positive side of each of the 6 axes is non-zero, and since 
 are a spherical 5-design, sum_i w_i(w) = 0.35 * 2 + 0.25 * 6/5 = 1 everywhere: a partition of
 unity, so a uniform sky is exact.
 
-Fit (`ad_fit`): exact least squares against the panorama (moments b_i = int L w_i dw, Gram
-int w_i w_j dw by Funk-Hecke, its Legendre series converged to float64 by l = 160), or NNLS on the
-same normal equations (every value >= 0: least squares rings negative around a sun or a softbox,
-which the irradiance's cosine smooths away but the specular lobe reads as dark patches).
+Fit (`ad_fit`), each for the quantity the lobes serve: irradiance (the default: the diffuse
+term, `iblbake basis`, irradiance probes), least squares on the irradiance over the whole sphere
+of normals (common.irradiance_normal_equations with the profile below; the 12 irradiances are
+linearly dependent, so the minimum-norm values): 3.65% against 3.97% on city, 7.66% against 8.21%
+on studio (docs/benchmarks.md); exact least squares on the radiance (moments b_i = int L w_i dw,
+Gram int w_i w_j dw by Funk-Hecke, its Legendre series converged to float64 by l = 160), or NNLS
+on the radiance's normal equations (every value >= 0: least squares rings negative around a sun
+or a softbox, which the irradiance's cosine smooths away but the specular lobe reads as dark
+patches; the specular lobe's fit, SPECULAR_DEFAULTS).
 Irradiance: the cosine convolution of w is exactly a Legendre series of degree 4 (the even
 moments of w vanish past l = 4 and the cosine's odd ones past l = 1):
 E_i(n) = sum_{l in 0,1,2,4} (2l+1)/(4 pi) w_l Ahat_l P_l(v_i . n), its constants derived here.
@@ -23,8 +28,7 @@ normalised spherical Gaussian about the dominant direction, sharpness lambda_w; 
 outside): sum_i c_i h(v_i . r, lambda_w), h the lobe w convolved with the normalised SG (a von
 Mises-Fisher density). By Funk-Hecke h(mu, lambda) = sum_l a_l(lambda) w_l P_l(mu), w_l the
 Legendre coefficients of w (exact Gauss-Legendre on each half, w being a polynomial on [0, 1]),
-a_l = I_{l+1/2}(lambda) / I_{1/2}(lambda) the density's own (their ratios a_l / a_{l-1} by
-Miller's backward recurrence r_l = 1 / ((2l + 1)/lambda + r_{l+1}); a_1 = coth lambda - 1/lambda).
+a_l = I_{l+1/2}(lambda) / I_{1/2}(lambda) the density's own (common.vmf_eigenvalues).
 The kernel reads h from a table (TABLE_ROWS rows of log2 lambda from TABLE_LOG2_LO in steps of
 TABLE_STEP, TABLE_COLS columns of mu over [-1, 1], bilinear; beyond its ends the end rows): within
 5.4e-4 of the lobe's peak 0.6 of the series (measured; tests/test_bases_specular.py), the 12 weights
@@ -48,10 +52,11 @@ from iblbake.core.bases import common
 NAME = "ambient_dice"
 TITLE = "ambient dice"
 HEADER = "basis_ambient_dice.h"
-FITS = ("least_squares", "nnls")
-OPTIONS = {"ad_fit": (FITS, "least_squares", "ambient_dice: the fit, exact least squares or non-negative least "
-                                             "squares (no negative radiance: its specular has no dark rings; nnls "
-                                             "where the lobes serve the specular term, unless given)")}
+FITS = ("irradiance", "least_squares", "nnls")
+OPTIONS = {"ad_fit": (FITS, "irradiance", "ambient_dice: the fit, least squares on the irradiance (the diffuse "
+                                          "term's), or on the radiance, exact least squares or non-negative least "
+                                          "squares (no negative radiance: its specular has no dark rings; nnls "
+                                          "where the lobes serve the specular term, unless given)")}
 SPECULAR_DEFAULTS = {"ad_fit": "nnls"}      # as sg's (sg.py SPECULAR_DEFAULTS)
 VERTICES = 12
 _T = (np.sqrt(5.0) - 1.0) / 2.0
@@ -65,8 +70,12 @@ def variants() -> list:
     return [{"ad_fit": f} for f in FITS]
 
 
+def _fit(opts) -> str:
+    return opts.get("ad_fit", "irradiance")
+
+
 def label(opts) -> str:
-    return "ambient dice" + (" NNLS" if opts.get("ad_fit") == "nnls" else "")
+    return "ambient dice " + {"irradiance": "irradiance", "least_squares": "LS", "nnls": "NNLS"}[_fit(opts)]
 
 
 def floats(opts) -> int:
@@ -103,23 +112,33 @@ def irradiance_profile() -> np.ndarray:
 
 
 def fit(b, opts) -> np.ndarray:
-    """Values (..., 12, C) from the moments b (..., 12, C): least squares, or NNLS on the same
-    normal equations (common.nnls_gram), one fit per leading index and channel."""
+    """Values (..., 12, C) from the moments b (..., 12, C) (_moment_lobes): least squares on the
+    irradiance or the radiance, or NNLS on the radiance's normal equations (common.nnls_gram),
+    one fit per leading index and channel."""
     b = np.asarray(b, np.float64)
+    if _fit(opts) == "irradiance":
+        return common.solve_min_norm(common.irradiance_normal_equations(irradiance_profile(), vertices())[0], b)
     g = gram()
-    if opts.get("ad_fit", "least_squares") == "least_squares":
+    if _fit(opts) == "least_squares":
         return np.linalg.solve(g, b.reshape(-1, *b.shape[-2:])).reshape(b.shape)
     cols = np.moveaxis(b, -2, -1).reshape(-1, b.shape[-2])
     return np.moveaxis(np.stack([common.nnls_gram(g, c) for c in cols]).reshape(*b.shape[:-2], b.shape[-1], -1), -1, -2)
 
 
+def _moment_lobes(opts):
+    """The lobes themselves (a radiance fit), or convolved with the cosine twice (irradiance)."""
+    if _fit(opts) == "irradiance":
+        return common.irradiance_normal_equations(irradiance_profile(), vertices())[1]
+    return lobes
+
+
 def project(image, opts) -> np.ndarray:
-    return fit(common.moments(image, lobes), opts)
+    return fit(common.moments(image, _moment_lobes(opts)), opts)
 
 
 def project_rays(values, dirs, opts) -> np.ndarray:
     """The fit from probe rays (common.ray_moments): values (P, R, C) -> (P, 12, C)."""
-    return fit(common.ray_moments(values, dirs, lobes), opts)
+    return fit(common.ray_moments(values, dirs, _moment_lobes(opts)), opts)
 
 
 def radiance(coeffs, dirs, opts) -> np.ndarray:
@@ -143,28 +162,13 @@ def lobe_legendre(lmax: int) -> np.ndarray:
     return (2 * np.arange(lmax + 1) + 1) / 2 * (_legendre(t, lmax) @ (lobe(t) * wq))
 
 
-def vmf_eigenvalues(lam, lmax: int) -> np.ndarray:
-    """a_l(lambda), l = 0..lmax, of the normalised SG exp(lambda (r.w - 1)) / its integral (the
-    module's docstring), shape lam.shape + (lmax + 1,)."""
-    lam = np.asarray(lam, np.float64)[..., None]
-    top = lmax + 64 + int(4.0 * math.sqrt(float(lam.max())))
-    ratios = np.empty(lam.shape[:-1] + (lmax + 1,))
-    r = np.zeros(lam.shape)
-    for l in range(top, 0, -1):
-        r = 1.0 / ((2 * l + 1) / lam + r)
-        if l <= lmax:
-            ratios[..., l] = r[..., 0]
-    ratios[..., 0] = 1.0
-    return np.cumprod(ratios, -1)
-
-
 def lobe_convolved(mu, lam) -> np.ndarray:
     """h(mu, lambda): lobe w averaged over the normalised SG of sharpness lambda about an axis at
     cosine mu from the vertex (float64 series, converged: lmax grows with sqrt(lambda)); mu (M,),
     lam (N,) -> (N, M)."""
     lam = np.atleast_1d(np.asarray(lam, np.float64))
     lmax = int(64 + 7.0 * math.sqrt(float(lam.max())))
-    coeff = vmf_eigenvalues(lam, lmax) * lobe_legendre(lmax)
+    coeff = common.vmf_eigenvalues(lam, lmax) * lobe_legendre(lmax)
     return coeff @ _legendre(np.clip(np.asarray(mu, np.float64), -1.0, 1.0), lmax)
 
 
@@ -202,9 +206,15 @@ def specular_weights(r, lam_w, opts) -> np.ndarray:
     return s / s.sum(-1, keepdims=True)     # the exact h sum to 1 (the lobes' partition of unity)
 
 
+def document_fields(opts) -> dict:
+    """What `iblbake basis`'s document adds to evaluate the values without this code: the vertices
+    and the irradiance profile, E(n) = max(0, sum_i c_i sum_l e_l P_l(v_i . n))."""
+    return {"axes": vertices().tolist(), "irradiance_legendre": irradiance_profile().tolist()}
+
+
 def validate(coeffs, opts) -> np.ndarray:
     return common.check_coefficients(coeffs, VERTICES, "ambient dice values",
-                                     nonnegative=opts.get("ad_fit") == "nnls")
+                                     nonnegative=_fit(opts) == "nnls")
 
 
 def defines(opts) -> dict:

@@ -109,9 +109,50 @@ def cosine_moments(lmax: int) -> np.ndarray:
     return np.array([core_sh.truncated_cos_sh(l) for l in range(lmax + 1)])
 
 
+def vmf_eigenvalues(lam, lmax: int) -> np.ndarray:
+    """a_l(lambda) = i_l(lambda) / i_0(lambda), l = 0..lmax (i_l the modified spherical Bessel
+    functions of the first kind): the Legendre coefficients of the normalised SG, since
+    exp(lambda t) = sum_l (2l + 1) i_l(lambda) P_l(t) (Abramowitz and Stegun 10.2.36). Their ratios
+    by Miller's backward recurrence r_l = 1 / ((2l + 1)/lambda + r_{l+1}) (a_1 = coth lambda -
+    1/lambda), stable for any lambda > 0; shape lam.shape + (lmax + 1,)."""
+    lam = np.asarray(lam, np.float64)[..., None]
+    top = lmax + 64 + int(4.0 * math.sqrt(float(lam.max())))
+    ratios = np.empty(lam.shape[:-1] + (lmax + 1,))
+    r = np.zeros(lam.shape)
+    for l in range(top, 0, -1):
+        r = 1.0 / ((2 * l + 1) / lam + r)
+        if l <= lmax:
+            ratios[..., l] = r[..., 0]
+    ratios[..., 0] = 1.0
+    return np.cumprod(ratios, -1)
+
+
 def legendre_series(c_l, t) -> np.ndarray:
     """sum_l c_l P_l(t)."""
     return np.polynomial.legendre.legval(np.asarray(t, np.float64), np.asarray(c_l, np.float64))
+
+
+def irradiance_normal_equations(profile, axes):
+    """Least squares on the irradiance over the whole sphere of normals (the limit of uniformly
+    spread sample normals), for lobes whose irradiance is sum_l e_l P_l(mu_k . n) (profile e_l,
+    axes mu_k): min int (sum_k A_k E_k(n) - E(n))^2 dn. By Funk-Hecke the Gram
+    int E_i E_j dn = sum_l 4 pi/(2l + 1) e_l^2 P_l(mu_i . mu_j), and the moments
+    int E E_k dn = int L(w) h(mu_k . w) dw, h = sum_l e_l Ahat_l P_l (the lobe convolved with the
+    cosine twice), summed over texels or rays as every fit's moments. Returns (Gram, the moments'
+    lobes: d (..., 3) -> (..., K)); solve with solve_min_norm."""
+    e, mu = np.asarray(profile, np.float64), np.asarray(axes, np.float64)
+    l = np.arange(len(e))
+    g = legendre_series(4 * np.pi / (2 * l + 1) * e * e, np.clip(mu @ mu.T, -1.0, 1.0))
+    h = e * cosine_moments(len(e) - 1)
+    return g, lambda d: legendre_series(h, np.clip(np.asarray(d, np.float64) @ mu.T, -1.0, 1.0))
+
+
+def solve_min_norm(gram, b) -> np.ndarray:
+    """gram x = b (..., K, C) by the pseudo-inverse (relative cutoff 1e-10): the minimum-norm
+    solution where the lobes' irradiances are linearly dependent (ambient dice's 12: the Gram's
+    condition number 1e17), the plain solution elsewhere."""
+    b = np.asarray(b, np.float64)
+    return np.einsum("ij,...jc->...ic", np.linalg.pinv(gram, rcond=1e-10, hermitian=True), b)
 
 
 def nnls_gram(gram, b, max_iter: int | None = None) -> np.ndarray:

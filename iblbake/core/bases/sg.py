@@ -5,16 +5,33 @@ BakingLab's SG5-12): G_k(w) = A_k exp(lambda (mu_k . w - 1)), so the fit is line
 - Sharpness: the one lambda whose lobe integrates to its share of the sphere, 4 pi / K:
   int exp(lambda (mu.w - 1)) dw = 2 pi (1 - e^{-2 lambda}) / lambda = 4 pi / K (K = 5: 2.48,
   6: 2.99, 9: 4.50, 12: 6.00), so that K lobes of amplitude 1 hold a uniform sky's energy.
-- Least squares (Roughton and Sloan's exact form): the moments b_k = int L G_k dw over the
-  panorama's texels, then Gram A = b with the lobes' exact Gram matrix
-  int G_i G_j dw = 4 pi e^{-2 lambda} sinh(r)/r, r = lambda |mu_i + mu_j|.
-- NNLS: the same normal equations with A >= 0 (Lawson-Hanson, common.nnls_gram).
-- Irradiance: Hill's fitted SG-cosine product (Pettineo, SG Series part 3, "SGIrradianceFitted",
-  after Stephen Hill 2016): with c0 = 0.36, c1 = 1/(4 c0), scale = 1 + 2 e^{-2 lambda} - 1/lambda,
-  bias = (e^{-lambda} - e^{-2 lambda})/lambda - e^{-2 lambda}, x = sqrt(1 - scale),
-  y = (c0 mu.n + c1 x)^2 / x where |c0 mu.n| <= c1 x, else saturate(mu.n);
-  E = (scale y + bias) 2 pi A / lambda (the published approximate SG integral).
-
+- Irradiance: the exact cosine convolution of a unit lobe, E(t) = sum_l e_l P_l(t), t = mu.n,
+  e_l = (1 - e^{-2 lambda})/(2 lambda) (2l + 1) a_l(lambda) Ahat_l: by Funk-Hecke from
+  exp(lambda t) = sum_l (2l + 1) i_l(lambda) P_l(t) (Abramowitz and Stegun 10.2.36; a_l = i_l/i_0,
+  common.vmf_eigenvalues) and the clamped cosine's Ahat_l (Ramamoorthi and Hanrahan 2001). An
+  off-axis normal has no elementary closed form (Pettineo, SG Series part 3; Meder and
+  Bruederlin 2018 approximate it); the series falls super-exponentially past l ~ lambda:
+  truncated at l = PROFILE_DEGREE = 12 it is within 1.1e-8 of the peak for lambda <= 6, the exact
+  convolution to float32. The kernel evaluates it as that degree-12 polynomial in t (Horner; its
+  power coefficients at most 0.5 of the peak, so float32 holds it to 1.7e-7), as the twin does.
+  Hill's fitted SG-cosine product (used before) is 0.5-1.5% of the peak off at these
+  sharpnesses, 3.4-6.6% at lambda 1-2, and fails below (192% at 0.5).
+- Fits (`sg_fit`), each for the quantity the lobes serve:
+  irradiance (the default: the diffuse term, `iblbake basis`, irradiance probes): least squares
+  on the irradiance over the whole sphere of normals, E_k above against the panorama's
+  (common.irradiance_normal_equations: exact by Funk-Hecke). K = 9 lobes fitted so are smoother,
+  lambda = 2 (IRRADIANCE_SHARPNESS): as lambda falls their span nears L2 SH's, and on the eight
+  example panoramas their worst relative RMSE against L2's falls from 1.42x (lambda 4.5: sunset
+  1.65% against 1.16%) to 1.08x (1.25%), the Gram's condition number 1.1e3 and the amplitudes within 12x
+  the mean radiance (fp16 holds them); K = 5 and 6 stay 3-9x L2 at any sharpness (5 or 6 floats
+  cannot hold L2's 9) and K = 12 0.91x at lambda 2 or 6, so they keep the K's own.
+  least_squares: on the radiance (Roughton and Sloan's exact form): the moments
+  b_k = int L G_k dw, then Gram A = b with the lobes' exact Gram matrix
+  int G_i G_j dw = 4 pi e^{-2 lambda} sinh(r)/r, r = lambda |mu_i + mu_j|. Its misfit of a sun
+  leaks into the low orders the irradiance depends on: 3x the irradiance fit's error (SG9 11.9%
+  against 3.99% mean relative RMSE on the example panoramas; docs/benchmarks.md).
+  nnls: the radiance's normal equations with A >= 0 (Lawson-Hanson, common.nnls_gram): the
+  specular lobe's fit (SPECULAR_DEFAULTS), where a negative lobe shows as black patches.
 - Specular (`effects.specular: sg`): the split sum with the SG in place of the prefiltered
   chain. The GGX NDF as an SG about n, sharpness 2/alpha^2 (Pettineo, SG Series part 4,
   DistributionTermSG), warped with sharpness lambda_w = 2/alpha^2 / (4 max(n.v, 1e-4)) (Wang et
@@ -34,7 +51,9 @@ BakingLab's SG5-12): G_k(w) = A_k exp(lambda (mu_k . w - 1)), so the fit is line
   not a glossy one.
 
 Layout: K rows of per-channel amplitudes, row k the lobe about the Fibonacci axis
-y_k = 1 - (2k + 1)/K, azimuth k pi (3 - sqrt 5) from +z towards +x, of the K's one sharpness."""
+y_k = 1 - (2k + 1)/K, azimuth k pi (3 - sqrt 5) from +z towards +x, of the K's one sharpness
+(2 for K = 9 fitted on the irradiance; the document's "axes" and "sharpness"); the irradiance at normal n is
+max(0, sum_k A_k sum_l e_l P_l(mu_k . n)), e_l the document's "irradiance_legendre"."""
 
 from __future__ import annotations
 
@@ -48,15 +67,17 @@ NAME = "sg"
 TITLE = "SG"
 HEADER = "basis_sg.h"
 LOBES = (5, 6, 9, 12)
-FITS = ("least_squares", "nnls")
+FITS = ("irradiance", "least_squares", "nnls")
 OPTIONS = {"sg_lobes": (LOBES, 9, "sg: spherical Gaussian lobes (fixed Fibonacci axes, one sharpness)"),
-           "sg_fit": (FITS, "least_squares", "sg: the fit, exact least squares or non-negative least squares "
-                                             "(nnls where the lobes serve the specular term, unless given)")}
+           "sg_fit": (FITS, "irradiance", "sg: the fit, least squares on the irradiance (the diffuse term's), or on "
+                                          "the radiance, exact least squares or non-negative least squares (nnls "
+                                          "where the lobes serve the specular term, unless given)")}
 # where the lobes serve the specular term (specular: sg, or probes storing sg), these defaults:
 # least squares rings negative around a sun, and the lobe, clamped at 0, shows black patches
 # beside white ones on metals (scene/load.py _resolve_specular_fits)
 SPECULAR_DEFAULTS = {"sg_fit": "nnls"}
-HILL_C0 = 0.36
+PROFILE_DEGREE = 12      # the irradiance's Legendre series, truncated (the docstring)
+IRRADIANCE_SHARPNESS = {9: 2.0}     # the irradiance fit's smoother lobes (the docstring)
 GLSL_COEFFS, GLSL_IRRADIANCE = "SG_AMPLITUDE", "sgIrradiance"     # glsl()'s names (the probes' sampler)
 GLSL_SPECULAR = "sgSpecularRadiance"
 SPECULAR = True        # specular_radiance, kernels/basis_sg.h basis_specular_radiance: `specular: sg`
@@ -67,7 +88,8 @@ def variants() -> list:
 
 
 def label(opts) -> str:
-    return f"SG{opts['sg_lobes']} {'LS' if opts['sg_fit'] == 'least_squares' else 'NNLS'}"
+    fit = {"irradiance": "irradiance", "least_squares": "LS", "nnls": "NNLS"}[opts["sg_fit"]]
+    return f"SG{opts['sg_lobes']} {fit}"
 
 
 def floats(opts) -> int:
@@ -90,9 +112,16 @@ def axes(k: int) -> np.ndarray:
     return common.fibonacci_sphere(k)
 
 
-def lobes(d, k: int) -> np.ndarray:
-    """G_k(d) with unit amplitude, (..., K)."""
-    lam = sharpness(k)
+def lobe_sharpness(opts) -> float:
+    """The lobes' sharpness: the K's one (sharpness), or IRRADIANCE_SHARPNESS where the
+    irradiance fit's smoother lobes serve better (the module's docstring)."""
+    k = opts["sg_lobes"]
+    return IRRADIANCE_SHARPNESS.get(k, sharpness(k)) if opts["sg_fit"] == "irradiance" else sharpness(k)
+
+
+def lobes(d, k: int, lam: float | None = None) -> np.ndarray:
+    """G_k(d) with unit amplitude, (..., K), of sharpness lam (the K's own by default)."""
+    lam = sharpness(k) if lam is None else lam
     return np.exp(lam * (np.asarray(d, np.float64) @ axes(k).T - 1.0))
 
 
@@ -106,57 +135,67 @@ def gram(k: int) -> np.ndarray:
     return np.where(r > 1e-12, g, 4 * np.pi * math.exp(-2 * lam))
 
 
+def irradiance_profile(lam: float, lmax: int = PROFILE_DEGREE) -> np.ndarray:
+    """e_l, l = 0..lmax: a unit lobe's irradiance is sum_l e_l P_l(mu.n) (the module's docstring)."""
+    l = np.arange(lmax + 1)
+    return (-math.expm1(-2.0 * lam) / (2.0 * lam) * (2 * l + 1) * common.vmf_eigenvalues(lam, lmax)
+            * common.cosine_moments(lmax))
+
+
+def profile_power(lam: float) -> np.ndarray:
+    """The truncated profile as power coefficients of t = mu.n, t^0..t^PROFILE_DEGREE (what the
+    kernel and the GLSL evaluate by Horner)."""
+    return np.polynomial.legendre.leg2poly(irradiance_profile(lam))
+
+
+def exact_irradiance(mu_dot_n, lam: float, lmax: int = 40) -> np.ndarray:
+    """The float64 cosine convolution of a unit SG (the series, lmax 40: converged to float64 for
+    lambda <= 12)."""
+    return common.legendre_series(irradiance_profile(lam, lmax), np.clip(mu_dot_n, -1.0, 1.0))
+
+
+def _moment_lobes(opts):
+    """The functions the fit's moments integrate the radiance against: the lobes themselves (a
+    radiance fit), or the lobes convolved with the cosine twice (the irradiance fit)."""
+    k = opts["sg_lobes"]
+    if opts["sg_fit"] == "irradiance":
+        return common.irradiance_normal_equations(irradiance_profile(lobe_sharpness(opts)), axes(k))[1]
+    return lambda d: lobes(d, k)
+
+
 def fit(b, opts) -> np.ndarray:
     """Amplitudes (..., K, C) from the moments b (..., K, C) (one fit per leading index: a probe)."""
     b = np.asarray(b, np.float64)
-    g = gram(opts["sg_lobes"])
+    k = opts["sg_lobes"]
+    if opts["sg_fit"] == "irradiance":
+        g = common.irradiance_normal_equations(irradiance_profile(lobe_sharpness(opts)), axes(k))[0]
+        return common.solve_min_norm(g, b)
     if opts["sg_fit"] == "least_squares":
-        return np.linalg.solve(g, b.reshape(-1, *b.shape[-2:])).reshape(b.shape)
+        return np.linalg.solve(gram(k), b.reshape(-1, *b.shape[-2:])).reshape(b.shape)
     cols = np.moveaxis(b, -2, -1).reshape(-1, b.shape[-2])
-    return np.moveaxis(np.stack([common.nnls_gram(g, c) for c in cols]).reshape(*b.shape[:-2], b.shape[-1], -1), -1, -2)
+    return np.moveaxis(np.stack([common.nnls_gram(gram(k), c) for c in cols]).reshape(*b.shape[:-2], b.shape[-1], -1),
+                       -1, -2)
 
 
 def project(image, opts) -> np.ndarray:
-    k = opts["sg_lobes"]
-    return fit(common.moments(image, lambda d: lobes(d, k)), opts)
+    return fit(common.moments(image, _moment_lobes(opts)), opts)
 
 
 def project_rays(values, dirs, opts) -> np.ndarray:
     """The fit from probe rays (common.ray_moments): values (P, R, C) -> (P, K, C)."""
-    k = opts["sg_lobes"]
-    return fit(common.ray_moments(values, dirs, lambda d: lobes(d, k)), opts)
+    return fit(common.ray_moments(values, dirs, _moment_lobes(opts)), opts)
 
 
 def radiance(coeffs, dirs, opts) -> np.ndarray:
-    return lobes(dirs, opts["sg_lobes"]) @ np.asarray(coeffs, np.float64)
-
-
-def hill_irradiance(mu_dot_n, lam: float) -> np.ndarray:
-    """Hill's fitted irradiance of a unit-amplitude SG (the module's docstring)."""
-    mdn = np.asarray(mu_dot_n, np.float64)
-    c1 = 1.0 / (4.0 * HILL_C0)
-    eml = math.exp(-lam)
-    em2l = eml * eml
-    scale = 1.0 + 2.0 * em2l - 1.0 / lam
-    bias = (eml - em2l) / lam - em2l
-    x = math.sqrt(1.0 - scale)
-    x0, x1 = HILL_C0 * mdn, c1 * x
-    y = np.where(np.abs(x0) <= x1, (x0 + x1) ** 2 / x, np.clip(mdn, 0.0, 1.0))
-    return (scale * y + bias) * 2.0 * math.pi / lam
-
-
-def exact_irradiance(mu_dot_n, lam: float, lmax: int = 40) -> np.ndarray:
-    """The float64 cosine convolution of a unit SG (Funk-Hecke, converged by lmax 40 for lambda
-    <= 12): what hill_irradiance approximates."""
-    f_l = common.zonal_moments(lambda t: np.exp(lam * (t - 1.0)), lmax)
-    return common.legendre_series(common.funk_hecke(f_l, common.cosine_moments(lmax)), mu_dot_n)
+    return lobes(dirs, opts["sg_lobes"], lobe_sharpness(opts)) @ np.asarray(coeffs, np.float64)
 
 
 def irradiance(coeffs, normals, opts) -> np.ndarray:
     k = opts["sg_lobes"]
-    # clamped at 0 as SH: least squares can go negative behind a sun
-    return np.maximum(0.0, hill_irradiance(np.asarray(normals, np.float64) @ axes(k).T, sharpness(k))
-                      @ np.asarray(coeffs, np.float64))
+    t = np.clip(np.asarray(normals, np.float64) @ axes(k).T, -1.0, 1.0)
+    # clamped at 0 as SH: a fit can go negative behind a sun
+    e = np.polynomial.polynomial.polyval(t, profile_power(lobe_sharpness(opts)))
+    return np.maximum(0.0, e @ np.asarray(coeffs, np.float64))
 
 
 def sg_inner_normalised(mu_dot_r, lam: float, lam_w) -> np.ndarray:
@@ -174,7 +213,15 @@ def specular_weights(r, lam_w, opts) -> np.ndarray:
     """s_k (..., K): the radiance along the warped lobe about r (..., 3) of sharpness lam_w (...,)
     is sum_k s_k A_k, s_k the normalised SG-SG inner product of lobe k with the warped lobe."""
     k = opts["sg_lobes"]
-    return sg_inner_normalised(np.asarray(r, np.float64) @ axes(k).T, sharpness(k), np.asarray(lam_w)[..., None])
+    return sg_inner_normalised(np.asarray(r, np.float64) @ axes(k).T, lobe_sharpness(opts),
+                               np.asarray(lam_w)[..., None])
+
+
+def document_fields(opts) -> dict:
+    """What `iblbake basis`'s document adds to evaluate the lobes without this code (the Layout)."""
+    k = opts["sg_lobes"]
+    lam = lobe_sharpness(opts)
+    return {"axes": axes(k).tolist(), "sharpness": lam, "irradiance_legendre": irradiance_profile(lam).tolist()}
 
 
 def validate(coeffs, opts) -> np.ndarray:
@@ -183,39 +230,39 @@ def validate(coeffs, opts) -> np.ndarray:
 
 
 def defines(opts) -> dict:
-    return {"BASIS_SG": 1, "SG_LOBES": opts["sg_lobes"]}
+    return {"BASIS_SG": 1, "SG_LOBES": opts["sg_lobes"], "SG_PROFILE_DEGREE": PROFILE_DEGREE}
 
 
 def pack(coeffs, opts) -> np.ndarray:
-    """What kernels/basis_sg.h reads: K rows (A rgb, 0), then K rows (mu xyz, lambda)."""
+    """What kernels/basis_sg.h reads: K rows (A rgb, 0), K rows (mu xyz, lambda), then the
+    irradiance profile's power coefficients (profile_power), four to a row."""
     k = opts["sg_lobes"]
-    out = common.rgb_rows(coeffs, 2 * k)
-    out[k:, :3] = axes(k)
-    out[k:, 3] = sharpness(k)
+    prof_rows = PROFILE_DEGREE // 4 + 1
+    out = common.rgb_rows(coeffs, 2 * k + prof_rows)
+    out[k:2 * k, :3] = axes(k)
+    out[k:2 * k, 3] = lobe_sharpness(opts)
+    out[2 * k:].flat[:PROFILE_DEGREE + 1] = profile_power(lobe_sharpness(opts))
     return out
 
 
 def glsl(coeffs, opts) -> str:
     k = opts["sg_lobes"]
-    return f"""// iblbake spherical Gaussians: {k} lobes ({opts['sg_fit']}), G(w) = A exp(lambda (mu.w - 1));
+    return f"""// iblbake spherical Gaussians: {k} lobes ({opts['sg_fit']} fit), G(w) = A exp(lambda (mu.w - 1));
 // world +y up.
-// irradiance: Hill's fitted SG-cosine product; diffuse = albedo / PI * sgIrradiance(normalize(N));
+// irradiance: each lobe's exact cosine convolution, a degree-{PROFILE_DEGREE} polynomial in mu.n (SG_PROFILE: its
+// coefficients of t^0..t^{PROFILE_DEGREE}); diffuse = albedo / PI * sgIrradiance(normalize(N));
 const int SG_LOBES = {k};
-const float SG_SHARPNESS = {sharpness(k):.9g};
+const float SG_SHARPNESS = {lobe_sharpness(opts):.9g};
 {common.glsl_vec3_array("SG_AMPLITUDE", np.asarray(coeffs)[:, :3])}
 {common.glsl_vec3_array("SG_AXIS", axes(k))}
+{common.glsl_float_array("SG_PROFILE", profile_power(lobe_sharpness(opts)))}
 
 vec3 sgIrradiance(vec3 n) {{
-    float lam = SG_SHARPNESS;
-    float eml = exp(-lam), em2l = eml * eml;
-    float scale = 1.0 + 2.0 * em2l - 1.0 / lam;
-    float bias = (eml - em2l) / lam - em2l;
-    float x = sqrt(1.0 - scale), x1 = x / (4.0 * {HILL_C0});
     vec3 e = vec3(0.0);
     for (int k = 0; k < SG_LOBES; ++k) {{
-        float mdn = dot(SG_AXIS[k], n), x0 = {HILL_C0} * mdn;
-        float y = abs(x0) <= x1 ? (x0 + x1) * (x0 + x1) / x : clamp(mdn, 0.0, 1.0);
-        e += SG_AMPLITUDE[k] * ((scale * y + bias) * 6.28318530717959 / lam);
+        float t = clamp(dot(SG_AXIS[k], n), -1.0, 1.0), s = SG_PROFILE[{PROFILE_DEGREE}];
+        for (int i = {PROFILE_DEGREE - 1}; i >= 0; --i) s = s * t + SG_PROFILE[i];
+        e += SG_AMPLITUDE[k] * s;
     }}
     return max(e, vec3(0.0));
 }}
