@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from iblbake.core import bases
-from iblbake.render.probes.volume import basis_options
+from iblbake.core.bases.probes import PROBE_BASES
+from iblbake.render.probes.volume import basis_of
 
 
 SH_GLSL = ("0.28209479177387814", "0.4886025119029199 * d.y", "0.4886025119029199 * d.z", "0.4886025119029199 * d.x",
@@ -16,25 +16,12 @@ SH_GLSL = ("0.28209479177387814", "0.4886025119029199 * d.y", "0.488602511902919
 
 
 def basis_glsl(name: str, opts: dict) -> tuple:
-    """(the basis's own GLSL functions (core/bases glsl) with its coefficient array a variable
-    instead of a constant, the lines of probeOwnIrradiance that fill it from the probe's row of the
-    file and call its irradiance function, the same of probeOwnSpecular calling its specular one
-    where the basis carries a lobe, else ""): one formula, the basis module's."""
-    import re
-    m = bases.BASES[name]
-    k = m.floats(opts)
-    src = m.glsl(np.zeros((k, 3)), opts)
-    src, found = re.subn(rf"const vec3 {m.GLSL_COEFFS}\[{k}\] = vec3\[{k}\]\(.*?\n\);",
-                         f"vec3 {m.GLSL_COEFFS}[{k}];     // the probe's coefficients (probeOwnIrradiance)", src,
-                         flags=re.S)
-    assert found == 1, name
-    fill = f"    for (int k = 0; k < {k}; ++k) {m.GLSL_COEFFS}[k] = texelFetch(probeIrradianceAtlas, ivec2(k, index), 0).rgb;\n"
-    own = fill + f"    return {m.GLSL_IRRADIANCE}(d);"
-    spec = fill + f"    return {m.GLSL_SPECULAR}(n, v, roughness);" if name in bases.SPECULAR else ""
-    return src, own, spec
+    """(functions, probeOwnIrradiance's lines, probeOwnSpecular's lines) of probe basis `name` with
+    options `opts` (core/bases/probes.py glsl: a directional basis' own GLSL, one formula)."""
+    return PROBE_BASES[name].glsl(opts)
 
 
-SPECULAR_TABLE = "ambient_dice_specular.exr"      # ambient dice's table, beside the atlases (iblbake probes)
+SPECULAR_TABLES = tuple(b.specular_table for b in PROBE_BASES.values() if b.specular_table)   # beside the atlases
 SPECULAR_HELP = """
 // specular (the basis carries a lobe; effects.specular: probes) = (F0 A + F90 B) (the split sum's DFG
 // table at n.v, roughness) * mix(skySpecular, probeSpecularRadiance(P, N, V, roughness), probeVolumeWeight(P)):
@@ -49,25 +36,23 @@ def glsl(volume: dict, man: dict) -> str:
         return "vec3(" + ", ".join(f"{x:.9g}" for x in v) + ")"
 
     nx, ny, nz = volume["counts"]
-    rep = volume["representation"]
-    sh_rep = rep == "sh"
+    entry = basis_of(volume)
+    flags = entry.defines(volume["settings"])             # kernels/probes.h's switches, the same here
     basis = "\n".join(f"    Y[{k}] = {e};" for k, e in enumerate(SH_GLSL))
-    basis_src, own, spec = "", "", ""
-    if rep in bases.PROBES:
-        basis_src, own, spec = basis_glsl(rep, basis_options(volume["settings"]))
-    table = (f"\n//   ambientDiceSpecularTable  {SPECULAR_TABLE} (unfiltered: the specular functions read it "
-             f"bilinearly)" if rep == "ambient_dice" else "")
+    basis_src, own, spec = entry.glsl(volume["settings"])
+    table = (f"\n//   {entry.glsl_table}  {entry.specular_table} (unfiltered: the specular functions read it "
+             f"bilinearly)" if entry.specular_table else "")
     return f"""// iblbake irradiance probes: {nx} x {ny} x {nz}, {volume['representation']} irradiance, RTXGI-DDGI layout
 // (probes.json holds the conventions). Bind the files as 2D float textures, each with its first
 // (top) row at t = 0, clamped to the edge:
-//   probeIrradianceAtlas  {man['files']['irradiance']} ({'linear' if rep == 'octahedral' else 'nearest'} filtering)
+//   probeIrradianceAtlas  {man['files']['irradiance']} ({'linear' if entry.atlas else 'nearest'} filtering)
 //   probeDistanceAtlas    distance.exr (linear filtering)
 //   probeDataTexture      probe_data.exr (nearest){table}
 // diffuse = albedo / PI * mix(skyIrradiance(N), probeIrradiance(P, N, V), probeVolumeWeight(P)):
 // world position, unit shading normal, unit vector towards the viewer; the sky's irradiance (say
 // `iblbake sh --glsl`'s shIrradiance) takes over outside the volume.{SPECULAR_HELP if spec else ""}
-#define PROBES_SH {int(sh_rep)}
-#define PROBES_BASIS {int(bool(basis_src))}
+#define PROBES_SH {int("PROBES_SH" in flags)}
+#define PROBES_BASIS {int("PROBES_BASIS" in flags)}
 #define PROBES_SPECULAR {int(bool(spec))}
 #define PROBE_VISIBILITY {int(volume['visibility'])}
 #define PROBE_CLASSIFICATION {int(volume['classification'])}

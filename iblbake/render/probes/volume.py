@@ -5,15 +5,20 @@ of a scene's `probes` keys the bake depends on (bake_settings) and which are rea
 from __future__ import annotations
 
 from iblbake.core import bases
+from iblbake.core.bases.probes import PROBE_BASES
 from iblbake.render.probes.grid import Grid
+
+
+def basis_of(volume: dict):
+    """A volume's probe basis (core/bases/probes.py PROBE_BASES): what its representation names."""
+    return PROBE_BASES[volume["representation"]]
 
 
 def basis_options(settings: dict) -> dict:
     """The options of the probes' basis: the probes section's keys of the same names as the
     basis's effects keys (probes.sg_lobes, probes.sg_fit), so a probe basis is set apart from the
     distant one."""
-    return {k: settings.get(k, default) for k, (_choices, default, _doc) in
-            bases.BASES[settings["irradiance"]].OPTIONS.items()}
+    return PROBE_BASES[settings["irradiance"]].options(settings)
 
 
 SAMPLING_KEYS = ("visibility", "normal_bias", "view_bias")   # read when shading, not baked
@@ -24,7 +29,7 @@ def bake_settings(settings: dict) -> dict:
     options of the bases it does not store (probes.sg_lobes beside irradiance: ambient_dice would
     bake the same volume again under another key, and write a setting it did not read)."""
     others = {k for n, m in bases.BASES.items() if n != settings["irradiance"] for k in m.OPTIONS}
-    own = set(bases.BASES[settings["irradiance"]].OPTIONS) if settings["irradiance"] in bases.BASES else set()
+    own = set(PROBE_BASES[settings["irradiance"]].option_specs)
     return {k: v for k, v in settings.items() if k not in SAMPLING_KEYS and (k not in others or k in own)}
 
 

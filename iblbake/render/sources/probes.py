@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from iblbake.core import bases
 from iblbake.render import probes
 from iblbake.render.buffers import Buffer
 from iblbake.render.sources.base import Source
@@ -42,11 +41,8 @@ class IrradianceProbes(Source):
 
 def probe_defines(settings: dict) -> dict:
     """kernels/probes.h's switches for a scene's probes section."""
-    d = {"PROBES_SH": 1} if settings["irradiance"] == "sh" else {}
-    if settings["irradiance"] in bases.PROBES:
-        m, opts = bases.BASES[settings["irradiance"]], probes.basis_options(settings)
-        d = {**m.defines(opts), "PROBES_BASIS": 1, "BASIS_SPACE": "__global",
-             "PROBE_BASIS_ROWS": len(m.pack(np.zeros((m.floats(opts), 3)), opts))}
+    from iblbake.core.bases.probes import PROBE_BASES
+    d = dict(PROBE_BASES[settings["irradiance"]].defines(settings))
     if settings["visibility"]:
         d["PROBE_VISIBILITY"] = 1
     if settings["classification"]:
@@ -63,15 +59,11 @@ def probe_args(rt, vol, bakes=None) -> dict:
                 "probe_nx": 1, "probe_ny": 1, "probe_nz": 1, "probe_irr_texels": 1, "probe_dist_texels": 1}
 
     def upload():
-        irr = np.asarray(vol["irradiance"], np.float32)
-        if vol["representation"] in bases.PROBES:         # each probe's block as its basis packs it
-            m, opts = bases.BASES[vol["representation"]], probes.basis_options(vol["settings"])
-            irr = np.stack([m.pack(c, opts) for c in irr])
-        else:
-            irr = np.pad(irr, [(0, 0)] * (irr.ndim - 1) + [(0, 1)])
+        basis = probes.basis_of(vol)           # each probe's block as its basis packs it
+        irr = basis.pack(vol["irradiance"], basis.options(vol["settings"]))
         dist = np.asarray(vol["distance"], np.float32)
         return (rt.to_device(np.asarray(vol["data"], np.float32)),
-                rt.to_device(irr.reshape(-1, 4)),
+                rt.to_device(irr),
                 rt.to_device(np.pad(dist, ((0, 0), (0, 0), (0, 2))).reshape(-1, 4)))
     data, irr, dist = bakes.on_device(rt, (vol["data"], vol["irradiance"], vol["distance"]), upload) \
         if bakes is not None else upload()

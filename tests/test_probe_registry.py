@@ -1,0 +1,90 @@
+"""The probe bases are a registry (core/bases/probes.py PROBE_BASES, issue 61.2): no module outside
+it compares what a volume stores (probes.irradiance, a volume's representation) with a name or
+with the directional subset; the schema, the files, the kernels' switches and the CLI derive from
+it."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1] / "iblbake"
+REGISTRY = ROOT / "core" / "bases" / "probes.py"
+
+# a probe basis's name compared, or the old directional subset (core/bases PROBES) asked
+COMPARED = re.compile(
+    r"""(representation|irradiance)["']\]\s*(==|!=|not\s+in|in)\s*[("'b]"""      # settings["irradiance"] == "sh"
+    r"""|\b(rep|irradiance|representation)\s*(==|!=)\s*["']"""                  # rep == "octahedral"
+    r"""|(==|!=)\s*["'](octahedral|ambient_dice)["']"""                          # ... == "ambient_dice"
+    r"""|\bbases\.PROBES\b|\bimport\b[^\n]*\bPROBES\b|\bin\s+PROBES\b""")       # in bases.PROBES
+
+
+def compared_lines(root: Path = ROOT) -> list:
+    """(file, line number, line) of every comparison of a probe basis's name outside the registry."""
+    out = []
+    for path in sorted(root.rglob("*.py")):
+        if path == REGISTRY or path == ROOT / "core" / "bases" / "__init__.py":      # where they are defined
+            continue
+        for i, line in enumerate(path.read_text().splitlines(), 1):
+            if COMPARED.search(line):
+                out.append(f"{path.relative_to(root.parent)}:{i}: {line.strip()}")
+    return out
+
+
+def test_no_module_compares_a_probe_basis_by_name():
+    """26 places across 11 files compared the representation with string literals or asked
+    `in bases.PROBES` (issue 61.2); a consumer asks the registry's entry instead."""
+    assert compared_lines() == []
+
+
+def test_the_pattern_finds_the_comparisons_it_forbids(tmp_path):
+    """The grep above is not vacuous: each way the old code compared is found."""
+    (tmp_path / "iblbake").mkdir()
+    old = ['    if settings["irradiance"] == "sh":', '    elif rep in bases.PROBES:',
+           '        if rep == "octahedral":', "    sh_rep = rep == 'sh'",
+           '    table = [T] if irradiance == "ambient_dice" else []',
+           '    if volume["representation"] in ("octahedral", "sh") else',
+           '    from iblbake.core.bases import BASES, PROBES, SPECULAR']
+    (tmp_path / "iblbake" / "old.py").write_text("\n".join(old + ['    basis = PROBE_BASES[settings["irradiance"]]'])
+                                                 + "\n")
+    assert len(compared_lines(tmp_path / "iblbake")) == len(old)
+
+
+def test_the_schema_files_and_switches_come_from_the_registry():
+    """probes.irradiance's choices and option keys, each basis's file, and the kernel's switch (one
+    of PROBES_SH, PROBES_BASIS or none: the octahedral atlas) are the entries'."""
+    from iblbake.core import bases
+    from iblbake.core.bases.probes import PROBE_BASES
+    from iblbake.render import probes
+    from iblbake.render.sources.probes import probe_defines
+    from iblbake.scene.schema import SCHEMA
+
+    fields = SCHEMA.fields["probes"].fields
+    assert fields["irradiance"].choices == tuple(PROBE_BASES) == ("octahedral", "sh", "l1_geomerics", "zh3", "sg",
+                                                                   "ambient_dice")
+    assert {k for b in PROBE_BASES.values() for k in b.option_specs} <= set(fields)
+    assert probes.FILES == {"octahedral": "irradiance.exr", "sh": "irradiance_sh.exr",
+                            **{n: f"basis_{n}.exr" for n in ("l1_geomerics", "zh3", "sg", "ambient_dice")}}
+    base = {"visibility": False, "classification": False}
+    switches = {n: {k for k in probe_defines({**base, "irradiance": n}) if k in ("PROBES_SH", "PROBES_BASIS")}
+                for n in PROBE_BASES}
+    assert switches == {"octahedral": set(), "sh": {"PROBES_SH"},
+                        **{n: {"PROBES_BASIS"} for n in ("l1_geomerics", "zh3", "sg", "ambient_dice")}}
+    sg = probe_defines({**base, "irradiance": "sg", "sg_lobes": 5})
+    assert sg["PROBE_BASIS_ROWS"] == len(bases.BASES["sg"].pack(np.zeros((5, 3)), {"sg_lobes": 5, "sg_fit": "nnls"}))
+
+
+def test_the_basis_command_takes_its_names_and_flags_from_bases():
+    """`iblbake basis`'s --basis choices are the directional bases and its option flags their
+    OPTIONS (cli/basis.py listed them by hand)."""
+    import click
+
+    from iblbake.cli.basis import basis_command
+    from iblbake.core import bases
+    opts = {p.name: p for p in basis_command.params if isinstance(p, click.Option)}
+    assert tuple(opts["name"].type.choices) == tuple(n for n, m in bases.BASES.items() if m.HEADER)
+    for n, m in bases.BASES.items():
+        for k, (choices, default, _doc) in m.OPTIONS.items():
+            assert list(opts[k].type.choices) == [str(c) for c in choices] and opts[k].default == str(default)
