@@ -88,3 +88,45 @@ def test_the_basis_command_takes_its_names_and_flags_from_bases():
     for n, m in bases.BASES.items():
         for k, (choices, default, _doc) in m.OPTIONS.items():
             assert list(opts[k].type.choices) == [str(c) for c in choices] and opts[k].default == str(default)
+
+
+def test_the_volume_record_is_read_by_the_kernel_as_the_host_packs_it(rt):
+    """One volume record (scene/layout.py PROBE_VOLUME, emitted to kernels/layout.h) replaces the
+    kernel's loose grid parameters and the biases in w lanes: the host's packer and the kernel's
+    accessors agree on every field (selftest.cl t_probe_volume)."""
+    from iblbake.render.sources.probes import probe_args
+    from iblbake.scene.layout import PROBE_VOLUME
+
+    vol = {"counts": (5, 3, 7), "origin": (-1.5, 0.25, 2.0), "spacing": (0.5, 0.75, 0.625), "normal_bias": 0.125,
+           "view_bias": 0.0625, "irradiance_texels": 6, "distance_texels": 14,
+           "data": np.zeros((105, 4)), "irradiance": np.zeros((105, 9, 3)), "distance": np.zeros((16, 16, 2)),
+           "representation": "sh", "settings": {}}
+    args = probe_args(rt, vol)
+    assert set(args) == {"probe_data", "probe_irr", "probe_dist", "probe_volume"}
+    out = rt.empty(16 * 4)
+    rt.launch("selftest.cl", "t_probe_volume", {"SH_BANDS": 3}, (1,), {}, out=out, **args)
+    got = rt.read(out, (4, 4))
+    want = [*vol["origin"], vol["normal_bias"], *vol["spacing"], vol["view_bias"], *vol["counts"],
+            vol["irradiance_texels"], vol["distance_texels"], 0, 0, 0]
+    assert got.ravel().tolist() == want
+    assert list(PROBE_VOLUME) == ["counts", "origin", "spacing", "normal_bias", "view_bias", "irradiance_texels",
+                                  "distance_texels"]
+
+
+def test_ddgi_weights_are_defined_once_per_language():
+    """The DDGI weights (wrap floor, Chebyshev floor, crush, trilinear floor) are scene/layout.py's
+    PROBE_WEIGHTS: layout.h's defines for the kernel, the twin's constants, probes.glsl's literals;
+    kernels/probes.h and the GLSL writer hold none of their own."""
+    from iblbake.render.twin import probes as twin
+    from iblbake.scene.layout import PROBE_WEIGHTS, header_text
+
+    assert (twin.WRAP_FLOOR, twin.CHEBYSHEV_FLOOR, twin.CRUSH, twin.TRILINEAR_FLOOR) == (
+        PROBE_WEIGHTS["WRAP_FLOOR"], PROBE_WEIGHTS["CHEBYSHEV_FLOOR"], PROBE_WEIGHTS["CRUSH"],
+        PROBE_WEIGHTS["TRILINEAR_FLOOR"])
+    assert all(f"#define PROBE_{k} {v!r}f" in header_text() for k, v in PROBE_WEIGHTS.items())
+    kernel = (Path(__file__).resolve().parents[1] / "kernels" / "probes.h").read_text()
+    writer = (ROOT / "render" / "probes" / "glsl.py").read_text()
+    for v in {repr(x) for x in PROBE_WEIGHTS.values()}:
+        assert not re.search(rf"(?<![\w.]){re.escape(v)}f?(?![\w])", kernel), v
+        assert not re.search(rf"(?<![\w.]){re.escape(v)}(?![\w])", writer), v
+

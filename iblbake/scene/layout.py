@@ -88,9 +88,51 @@ GBUFFER = {
     "gb_mat": "3 per sample: (base colour, metallic), (emissive, roughness), (shading normal, occlusion)",
 }
 MISS_T = -1.0
+# The irradiance probe volume as the kernels read it (kernels/probes.h PROBE_PARAMS' probe_volume), one
+# record shared by host and shader as RTXGI's DDGIVolumeDescGPU: field -> (row, first lane, lanes,
+# type). Lengths in world units; the names are a sampled volume's keys (render/probes/volume.py
+# sampled), which pack_probe_volume packs and probes.glsl writes as PROBE_<NAME> in this order.
+PROBE_VOLUME = {
+    "counts": (2, 0, 3, "int"),              # probes along x, y, z
+    "origin": (0, 0, 3, "float"),            # probe (0, 0, 0)'s grid position
+    "spacing": (1, 0, 3, "float"),           # the cell
+    "normal_bias": (0, 3, 1, "float"),       # the sample point moved along the normal
+    "view_bias": (1, 3, 1, "float"),         # ... and towards the viewer
+    "irradiance_texels": (2, 3, 1, "int"),   # an octahedral tile's interior texels per side
+    "distance_texels": (3, 0, 1, "int"),     # ... of the distance moments' tile
+}
+FLOAT4S["PROBE_VOLUME"] = 4
+# DDGI's weights (RTXGI Irradiance.hlsl DDGIGetVolumeIrradiance), the one value of each for the kernel
+# (layout.h), the twin (render/twin/probes.py) and probes.glsl (render/probes/glsl.py)
+PROBE_WEIGHTS = {
+    "WRAP_FLOOR": 0.2,          # the wrap-shading term's offset: a probe behind the surface still counts
+    "CHEBYSHEV_FLOOR": 0.05,    # visibility never quite 0: some probe must count
+    "CRUSH": 0.2,               # weights below it are crushed, w^3 / CRUSH^2
+    "TRILINEAR_FLOOR": 0.001,   # the trilinear weight's floor, with visibility
+}
 # entries of the kernels' traversal stack of the 4-wide BVH (kernels/scene.h trace_range): a node
 # pushes at most 4 and pops one, so a tree of d levels needs 3 d + 1 (scene/bvh.py widen checks)
 BVH_STACK = 96
+
+
+def pack_probe_volume(volume: dict) -> "np.ndarray":
+    """PROBE_VOLUME's float4 rows (float32; int fields bit-cast) of a sampled volume's values."""
+    import numpy as np
+    rows = np.zeros((FLOAT4S["PROBE_VOLUME"], 4), np.float32)
+    ints = rows.view(np.int32)
+    for name, (row, lane, n, kind) in PROBE_VOLUME.items():
+        (ints if kind == "int" else rows)[row, lane:lane + n] = volume[name]
+    return rows
+
+
+def _probe_volume_lines() -> list[str]:
+    """The record's fields as accessors of its rows v (kernels/probes.h PROBE_VOLUME_LOCALS)."""
+    out = []
+    for k, (r, lane, n, kind) in PROBE_VOLUME.items():
+        get = f"(v)[{r}].{'xyzw'[lane:lane + n]}"
+        out.append(f"#define PROBE_VOLUME_{k.upper()}(v) "
+                   + (f"as_int{n if n > 1 else ''}({get})" if kind == "int" else f"({get})"))
+    return out
 
 
 def _modes(prefix: str, table: dict) -> list[str]:
@@ -112,6 +154,7 @@ def header_text() -> str:
              f"#define ENV_GUIDE_BINS {ENV_GUIDE_BINS}", f"#define BVH_STACK {BVH_STACK}"]
     rows += [f"#define LUMINANCE_{c} {w!r}f" for c, w in zip("RGB", LUMINANCE.tolist())]
     rows += [f"#define STREAM_{k.upper()} {v:#x}u" for k, v in RANDOM_STREAMS.items()]
+    rows += [""] + _probe_volume_lines() + [f"#define PROBE_{k} {v!r}f" for k, v in PROBE_WEIGHTS.items()]
     rows += ["", "#endif", ""]
     return "\n".join(rows)
 

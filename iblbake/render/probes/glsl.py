@@ -7,6 +7,7 @@ import numpy as np
 
 from iblbake.core.bases.probes import PROBE_BASES
 from iblbake.render.probes.volume import basis_of
+from iblbake.scene.layout import PROBE_VOLUME, PROBE_WEIGHTS
 
 
 SH_GLSL = ("0.28209479177387814", "0.4886025119029199 * d.y", "0.4886025119029199 * d.z", "0.4886025119029199 * d.x",
@@ -29,12 +30,21 @@ SPECULAR_HELP = """
 // distant prefiltered chain takes over outside the volume."""
 
 
+def record_constants(volume: dict) -> str:
+    """The volume record (scene/layout.py PROBE_VOLUME) as GLSL constants PROBE_<NAME>."""
+    rows = []
+    for name, (_row, _lane, n, kind) in PROBE_VOLUME.items():
+        values = [volume[name]] if n == 1 else list(volume[name])
+        text = ", ".join(str(int(x)) if kind == "int" else f"{x:.9g}" for x in values)
+        glsl_type = {"int": "int", "float": "float"}[kind] if n == 1 else ("ivec" if kind == "int" else "vec") + str(n)
+        rows.append(f"const {glsl_type} PROBE_{name.upper()} = {text if n == 1 else f'{glsl_type}({text})'};")
+    return "\n".join(rows)
+
+
 def glsl(volume: dict, man: dict) -> str:
     """A GLSL function sampling the written files as kernels/probes.h does (the hardware's bilinear
     filter in place of its reads), the volume's grid and settings baked in."""
-    def vec(v):
-        return "vec3(" + ", ".join(f"{x:.9g}" for x in v) + ")"
-
+    w = {k: repr(v) for k, v in PROBE_WEIGHTS.items()}      # DDGI's weights, as the kernel's
     nx, ny, nz = volume["counts"]
     entry = basis_of(volume)
     flags = entry.defines(volume["settings"])             # kernels/probes.h's switches, the same here
@@ -56,13 +66,7 @@ def glsl(volume: dict, man: dict) -> str:
 #define PROBES_SPECULAR {int(bool(spec))}
 #define PROBE_VISIBILITY {int(volume['visibility'])}
 #define PROBE_CLASSIFICATION {int(volume['classification'])}
-const ivec3 PROBE_COUNTS = ivec3({nx}, {ny}, {nz});
-const vec3 PROBE_ORIGIN = {vec(volume['origin'])};
-const vec3 PROBE_SPACING = {vec(volume['spacing'])};
-const float PROBE_NORMAL_BIAS = {volume['normal_bias']:.9g};
-const float PROBE_VIEW_BIAS = {volume['view_bias']:.9g};
-const int PROBE_IRRADIANCE_TEXELS = {volume['irradiance_texels']};
-const int PROBE_DISTANCE_TEXELS = {volume['distance_texels']};
+{record_constants(volume)}
 
 uniform sampler2D probeIrradianceAtlas;
 uniform sampler2D probeDistanceAtlas;
@@ -130,9 +134,9 @@ float probeContribution(ivec3 c, vec3 p, vec3 biased, vec3 n, vec3 v, vec3 fallo
 #endif
 #if PROBE_VISIBILITY
     vec3 pp = PROBE_ORIGIN + vec3(c) * PROBE_SPACING + data.xyz * PROBE_SPACING;
-    vec3 tri = max(falloff, vec3(0.001));
+    vec3 tri = max(falloff, vec3({w['TRILINEAR_FLOOR']}));
     float wrap = 0.5 * (dot(normalize(pp - p), n) + 1.0);
-    float w = wrap * wrap + 0.2;
+    float w = wrap * wrap + {w['WRAP_FLOOR']};
     vec3 toProbe = pp - biased;
     float dist = length(toProbe);
     vec2 m = textureLod(probeDistanceAtlas, probeUV(index, probeOctahedral(-toProbe / dist), PROBE_DISTANCE_TEXELS),
@@ -143,9 +147,9 @@ float probeContribution(ivec3 c, vec3 p, vec3 biased, vec3 n, vec3 v, vec3 fallo
         cheb = variance / (variance + dv * dv);
         cheb = cheb * cheb * cheb;
     }}
-    w *= max(0.05, cheb);
+    w *= max({w['CHEBYSHEV_FLOOR']}, cheb);
     w = max(1e-6, w);
-    if (w < 0.2) w *= w * w * (1.0 / (0.2 * 0.2));
+    if (w < {w['CRUSH']}) w *= w * w * (1.0 / ({w['CRUSH']} * {w['CRUSH']}));
     value = specular ? e : sqrt(e);
     return w * tri.x * tri.y * tri.z;
 #else

@@ -8,9 +8,9 @@ import numpy as np
 from iblbake.render import probes
 from iblbake.render.buffers import Buffer
 from iblbake.render.sources.base import Source
+from iblbake.scene.layout import pack_probe_volume
 
-PARAMS = ("probe_data", "probe_irr", "probe_dist", "probe_origin", "probe_spacing", "probe_nx", "probe_ny", "probe_nz",
-          "probe_irr_texels", "probe_dist_texels")
+PARAMS = ("probe_data", "probe_irr", "probe_dist", "probe_volume")
 
 
 class IrradianceProbes(Source):
@@ -55,8 +55,9 @@ def probe_args(rt, vol, bakes=None) -> dict:
     `bakes` (render.Bakes) its atlases go up once per runtime (a series of frames, a study's rungs)."""
     if vol is None:
         z = rt.to_device(np.zeros((1, 4), np.float32))
-        return {"probe_data": z, "probe_irr": z, "probe_dist": z, "probe_origin": np.zeros(4), "probe_spacing": np.ones(4),
-                "probe_nx": 1, "probe_ny": 1, "probe_nz": 1, "probe_irr_texels": 1, "probe_dist_texels": 1}
+        none = {"counts": (1, 1, 1), "origin": (0, 0, 0), "spacing": (1, 1, 1), "normal_bias": 0, "view_bias": 0,
+                "irradiance_texels": 1, "distance_texels": 1}
+        return {"probe_data": z, "probe_irr": z, "probe_dist": z, "probe_volume": rt.to_device(pack_probe_volume(none))}
 
     def upload():
         basis = probes.basis_of(vol)           # each probe's block as its basis packs it
@@ -68,10 +69,7 @@ def probe_args(rt, vol, bakes=None) -> dict:
     data, irr, dist = bakes.on_device(rt, (vol["data"], vol["irradiance"], vol["distance"]), upload) \
         if bakes is not None else upload()
     return {"probe_data": data, "probe_irr": irr, "probe_dist": dist,
-            "probe_origin": np.array([*vol["origin"], vol["normal_bias"]], np.float32),
-            "probe_spacing": np.array([*vol["spacing"], vol["view_bias"]], np.float32),
-            **dict(zip(("probe_nx", "probe_ny", "probe_nz"), vol["counts"])),
-            "probe_irr_texels": vol["irradiance_texels"], "probe_dist_texels": vol["distance_texels"]}
+            "probe_volume": rt.to_device(pack_probe_volume(vol))}
 
 
 class ProbeSpecular(Source):

@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 
 from iblbake.core.bases.probes import PROBE_BASES
+from iblbake.scene.layout import PROBE_WEIGHTS
 
-CRUSH = 0.2                 # Irradiance.hlsl: weights below it are crushed, w^3 / CRUSH^2
-WRAP_FLOOR = 0.2            # the wrap-shading term's offset
-CHEBYSHEV_FLOOR = 0.05      # visibility never quite 0: some probe must count
-TRILINEAR_FLOOR = 0.001     # with visibility, as RTXGI
+# DDGI's weights (Irradiance.hlsl), the kernel's and probes.glsl's: scene/layout.py PROBE_WEIGHTS
+CRUSH, WRAP_FLOOR = PROBE_WEIGHTS["CRUSH"], PROBE_WEIGHTS["WRAP_FLOOR"]
+CHEBYSHEV_FLOOR, TRILINEAR_FLOOR = PROBE_WEIGHTS["CHEBYSHEV_FLOOR"], PROBE_WEIGHTS["TRILINEAR_FLOOR"]
 
 
 def octahedral(d):
