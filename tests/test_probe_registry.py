@@ -83,7 +83,7 @@ def test_the_basis_command_takes_its_names_and_flags_from_bases():
 
     from iblbake.cli.basis import basis_command
     from iblbake.core import bases
-    opts = {p.name: p for p in basis_command.params if isinstance(p, click.Option)}
+    opts = {p.name: p for p in basis_command.get_params(click.Context(basis_command)) if isinstance(p, click.Option)}
     assert tuple(opts["name"].type.choices) == tuple(n for n, m in bases.BASES.items() if m.HEADER)
     for n, m in bases.BASES.items():
         for k, (choices, default, _doc) in m.OPTIONS.items():
@@ -130,3 +130,16 @@ def test_ddgi_weights_are_defined_once_per_language():
         assert not re.search(rf"(?<![\w.]){re.escape(v)}f?(?![\w])", kernel), v
         assert not re.search(rf"(?<![\w.]){re.escape(v)}(?![\w])", writer), v
 
+
+def test_basis_headers_are_generated_from_bases():
+    """kernels/basis_headers.h is what scene/layout.py emits from BASES (make docs), so a new
+    basis's module and header are all the kernels need; the module is found by its NAME and placed
+    by its RANK, with no list of bases by hand."""
+    from iblbake.core import bases
+    from iblbake.scene.layout import basis_headers_text
+
+    path = Path(__file__).resolve().parents[1] / "kernels" / "basis_headers.h"
+    assert path.read_text() == basis_headers_text(), "stale: run make docs"
+    src = (ROOT / "core" / "bases" / "__init__.py").read_text()
+    assert "import ambient_dice" not in src and list(bases.BASES) == ["sh", "l1_geomerics", "zh3", "sg",
+                                                                      "ambient_dice", "haar"]

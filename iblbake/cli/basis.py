@@ -6,44 +6,63 @@ import os
 
 import click
 
-from iblbake.core.bases import BASES
 from iblbake.cli.options import (API_FLAGS, Console, check_inputs_exist, check_suffix, common_options,
                                   depfile_option, input_files_of, input_options, non_negative, panorama_reads,
                                   refuse_foreign, report_results, write_texts)
 from iblbake.errors import IblbakeError
 from iblbake.io.guard import refuse_overlaps
 
-NAMES = tuple(n for n, m in BASES.items() if m.HEADER)     # core/bases BASES but sh (iblbake sh)
 SUFFIXES = {"iblbake": (".json",), "glsl": (".glsl", ".frag", ".vert", ".h", ".txt")}
-# each basis's options (its OPTIONS: key -> (choices, default, doc)) as --KEY flags, and whose each is
-OWNERS = {k: n for n in NAMES for k in BASES[n].OPTIONS}
-TABLES = tuple(n for n in NAMES if hasattr(BASES[n], "specular_table"))     # --specular-table's
+
+
+def names() -> tuple:
+    """The bases `iblbake basis` projects onto: core/bases BASES but sh (iblbake sh)."""
+    from iblbake.core.bases import BASES
+    return tuple(n for n, m in BASES.items() if m.HEADER)
+
+
+def owners() -> dict:
+    """Each basis option (its module's OPTIONS key) -> the basis it belongs to."""
+    from iblbake.core.bases import BASES
+    return {k: n for n in names() for k in BASES[n].OPTIONS}
 
 
 def _flag(key: str) -> str:
     return "--" + key.replace("_", "-")
 
 
-def basis_flags(f):
-    """--basis and every basis's option flags, from BASES (a new basis adds its own)."""
-    for key in reversed(tuple(OWNERS)):
-        choices, default, doc = BASES[OWNERS[key]].OPTIONS[key]
-        f = click.option(_flag(key), key, type=click.Choice([str(c) for c in choices]), default=str(default),
-                         show_default=True, help=doc + ".")(f)
-    flags = {n: ", ".join(_flag(k) for k in BASES[n].OPTIONS) for n in NAMES}
-    return click.option("--basis", "name", type=click.Choice(NAMES), required=True,
-                        help="; ".join(f"{n} ({BASES[n].TITLE}{': ' + flags[n] if flags[n] else ''})" for n in NAMES)
-                        + ": docs/conventions.md 'Directional bases'.")(f)
+def basis_params() -> list:
+    """--basis and every basis's option flags (--KEY of its OPTIONS: choices, default, doc), from BASES."""
+    from iblbake.core.bases import BASES
+    flags = {n: ", ".join(_flag(k) for k in BASES[n].OPTIONS) for n in names()}
+    params = [click.Option(["--basis", "name"], type=click.Choice(names()), required=True,
+                           help="; ".join(f"{n} ({BASES[n].TITLE}{': ' + flags[n] if flags[n] else ''})"
+                                          for n in names()) + ": docs/conventions.md 'Directional bases'.")]
+    for key, owner in owners().items():
+        choices, default, doc = BASES[owner].OPTIONS[key]
+        params.append(click.Option([_flag(key), key], type=click.Choice([str(c) for c in choices]),
+                                   default=str(default), show_default=True, help=doc + "."))
+    return params
+
+
+class BasisCommand(click.Command):
+    """`iblbake basis`, its --basis and option flags built from BASES when it parses or prints its
+    help (the bases load numpy: `iblbake --help` lists the command without them)."""
+
+    def get_params(self, ctx):
+        if not any(p.name == "name" for p in self.params):
+            self.params[1:1] = basis_params()          # after ENV...
+        return super().get_params(ctx)
 
 
 def basis_options(name: str, given: dict) -> dict:
     """The options of basis `name` from the flags' strings, typed as its OPTIONS' choices."""
+    from iblbake.core.bases import BASES
     return {k: next(c for c in BASES[name].OPTIONS[k][0] if str(c) == given[k]) for k in BASES[name].OPTIONS}
 
 
-@click.command("basis")
+@click.command("basis", cls=BasisCommand)
 @click.argument("envs", metavar="ENV...", nargs=-1, required=True)
-@basis_flags
 @click.option("--output", "-o", type=click.Path(), default=None,
               help="Write the document here (atomically); with several ENV, a folder (DIR/NAME.json or .glsl "
                    "each). Without it, --format glsl prints to stdout and the JSON is not written.")
@@ -54,11 +73,11 @@ def basis_options(name: str, given: dict) -> dict:
 @click.option("--format", "fmt", type=click.Choice(["iblbake", "glsl"]), default="iblbake", show_default=True,
               help="What -o holds (or stdout without -o): iblbake's JSON document (the coefficients, their "
                    "layout, the bytes a probe of them takes, the error), or the basis's GLSL (its coefficients "
-                   "and its irradiance function; sg and ambient_dice add their specular ones).")
+                   "and its irradiance function; a basis that carries a specular lobe adds its specular one).")
 @click.option("--glsl", is_flag=True, help="Print the basis's GLSL (--format glsl).")
 @click.option("--specular-table", type=click.Path(dir_okay=False), default=None, metavar="FILE.exr",
-              help=f"{', '.join(TABLES)}: also write the table its GLSL specular function reads (each lobe averaged "
-                   "over the warped GGX lobe; one channel: docs/conventions.md 'Directional bases').")
+              help="A basis whose GLSL specular function reads a table: also write it (each lobe "
+                   "averaged over the warped GGX lobe; one channel: docs/conventions.md 'Directional bases').")
 @click.option("--error/--no-error", "with_error", default=True, show_default=True,
               help="Measure the basis's irradiance against the exact irradiance (float64, every texel) at 256 "
                    "fixed normals: relative RMSE and max relative error (the JSON's error block).")
@@ -79,7 +98,7 @@ def basis_command(envs, name, output, force, intensity, fmt, glsl, specular_tabl
             raise click.UsageError(f"--glsl is --format glsl: leave out --format {fmt}")
         fmt = "glsl"
     ctx = click.get_current_context()
-    for param, owner in OWNERS.items():
+    for param, owner in owners().items():
         if owner != name and ctx.get_parameter_source(param) == click.core.ParameterSource.COMMANDLINE:
             raise click.UsageError(f"--{param.replace('_', '-')} is an option of --basis {owner}, not of {name}: "
                                    "leave it out")
@@ -97,8 +116,10 @@ def basis_command(envs, name, output, force, intensity, fmt, glsl, specular_tabl
                    for e in envs]
     else:
         outputs = [output]
-    if specular_table and name not in TABLES:
-        raise click.UsageError(f"--specular-table is {' and '.join(TABLES)}'s (the others' specular, where they "
+    from iblbake.core.bases import BASES
+    tables = [n for n in names() if hasattr(BASES[n], "specular_table")]
+    if specular_table and name not in tables:
+        raise click.UsageError(f"--specular-table is {' and '.join(tables)}'s (the others' specular, where they "
                                f"carry one, has a closed form): leave it out with --basis {name}")
     if specular_table:
         check_suffix(specular_table, (".exr",), "--specular-table", "a table")

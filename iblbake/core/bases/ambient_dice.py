@@ -47,6 +47,7 @@ from iblbake.core.bases import common
 
 NAME = "ambient_dice"
 TITLE = "ambient dice"
+RANK = 4                # its place in BASES (the schema's choices, the CLI's, the studies')
 HEADER = "basis_ambient_dice.h"
 FITS = ("least_squares", "nnls")
 OPTIONS = {"ad_fit": (FITS, "least_squares", "ambient_dice: the fit, exact least squares or non-negative least "
