@@ -143,3 +143,30 @@ def test_basis_headers_are_generated_from_bases():
     src = (ROOT / "core" / "bases" / "__init__.py").read_text()
     assert "import ambient_dice" not in src and list(bases.BASES) == ["sh", "l1_geomerics", "zh3", "sg",
                                                                       "ambient_dice", "haar"]
+
+
+def test_a_volume_is_a_frozen_record_with_its_basis():
+    """bake() and load() give a Volume (render/probes/volume.py): frozen, its basis the registry's
+    entry, its grid and texel counts read from its grid and settings; sampled() a new record with
+    the sampling settings, read by the names of the volume record's fields."""
+    import dataclasses
+
+    import pytest
+
+    from iblbake.core.bases.probes import PROBE_BASES
+    from iblbake.render import probes
+    from iblbake.scene.layout import PROBE_VOLUME
+
+    grid = probes.Grid((0.0, 0.0, 0.0), (0.5, 0.5, 0.5), (2, 3, 4))
+    st = {"irradiance": "zh3", "irradiance_texels": 6, "distance_texels": 14, "classification": True,
+          "visibility": True, "normal_bias": 0.25, "view_bias": 0.1, "sg_lobes": 9}
+    vol = probes.volume_dict(grid, st, np.zeros((24, 5, 3)), np.zeros((48, 64, 2)), np.zeros((24, 4)), {})
+    assert vol.basis is PROBE_BASES["zh3"] and vol.representation == "zh3" and vol.counts == (2, 3, 4)
+    assert "sg_lobes" not in vol.settings and "visibility" not in vol
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        vol.representation = "sh"
+    s = probes.sampled(vol, st)
+    assert isinstance(s, probes.Volume) and s is not vol and vol.normal_bias is None
+    assert {k: s[k] for k in PROBE_VOLUME} == {"counts": (2, 3, 4), "origin": (0.0, 0.0, 0.0),
+                                               "spacing": (0.5, 0.5, 0.5), "normal_bias": 0.125, "view_bias": 0.05,
+                                               "irradiance_texels": 6, "distance_texels": 14}
