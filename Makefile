@@ -107,10 +107,12 @@ bench: opencl assets
 	$(BIN)/python benchmarks/bench_study.py
 	$(BIN)/python benchmarks/bench_scale.py
 
-# the generated files: kernels/layout.h from scene/layout.py, docs/scene.md from scene/schema.py
+# the generated files: kernels/layout.h and basis_headers.h from scene/layout.py, docs/scene.md from scene/schema.py
 # (tests fail while either is stale)
 docs: $(STAMP)
 	$(BIN)/python -m iblbake.scene.layout > kernels/layout.h.tmp && mv kernels/layout.h.tmp kernels/layout.h
+	$(BIN)/python -m iblbake.scene.layout basis_headers > kernels/basis_headers.h.tmp \
+		&& mv kernels/basis_headers.h.tmp kernels/basis_headers.h
 	$(BIN)/python -m iblbake.scene.schema > docs/scene.md.tmp && mv docs/scene.md.tmp docs/scene.md
 
 clean:

@@ -19,11 +19,8 @@
 #define BASIS_SPACE __constant
 #endif
 
-#include "basis_l1_geomerics.h"
-#include "basis_zh3.h"
-#include "basis_sg.h"
-#include "basis_ambient_dice.h"
-#include "basis_haar.h"
+/* each basis's header (generated from core/bases: make docs) */
+#include "basis_headers.h"
 
 #ifdef HAS_BASIS_SPECULAR
 /* the warped lobe's sharpness at alpha = roughness^2 and n.v (core/bases/common.py warp_sharpness) */

@@ -54,6 +54,7 @@
 #define LIGHT_FLOAT4S 4
 #define TRIANGLE_ATTR_FLOAT4S 7
 #define MATERIAL_MAPS_FLOAT4S 17
+#define PROBE_VOLUME_FLOAT4S 4
 
 /* gb_pos: hit position, w: distance along the ray (MISS_T where nothing is hit) */
 /* gb_nrm: shading normal facing the viewer, w: material index */
@@ -72,5 +73,17 @@
 #define LUMINANCE_G 0.7152f
 #define LUMINANCE_B 0.0722f
 #define STREAM_AO 0x5a0u
+
+#define PROBE_VOLUME_COUNTS(v) as_int3((v)[2].xyz)
+#define PROBE_VOLUME_ORIGIN(v) ((v)[0].xyz)
+#define PROBE_VOLUME_SPACING(v) ((v)[1].xyz)
+#define PROBE_VOLUME_NORMAL_BIAS(v) ((v)[0].w)
+#define PROBE_VOLUME_VIEW_BIAS(v) ((v)[1].w)
+#define PROBE_VOLUME_IRRADIANCE_TEXELS(v) as_int((v)[2].w)
+#define PROBE_VOLUME_DISTANCE_TEXELS(v) as_int((v)[3].x)
+#define PROBE_WRAP_FLOOR 0.2f
+#define PROBE_CHEBYSHEV_FLOOR 0.05f
+#define PROBE_CRUSH 0.2f
+#define PROBE_TRILINEAR_FLOOR 0.001f
 
 #endif

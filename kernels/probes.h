@@ -18,12 +18,20 @@
 #include "sh.h"
 #include "bases.h"
 
+/* the probes' data rows, irradiance, distance moments and the volume record (scene/layout.py
+ * PROBE_VOLUME, packed by its pack_probe_volume: grid, biases, texels) */
 #define PROBE_PARAMS __global const float4 *probe_data, __global const float4 *probe_irr, \
-                     __global const float4 *probe_dist, const float4 probe_origin, const float4 probe_spacing, \
-                     const int probe_nx, const int probe_ny, const int probe_nz, const int probe_irr_texels, \
-                     const int probe_dist_texels
-#define PROBE_ARGS probe_data, probe_irr, probe_dist, probe_origin, probe_spacing, probe_nx, probe_ny, probe_nz, \
-                   probe_irr_texels, probe_dist_texels
+                     __global const float4 *probe_dist, __global const float4 *probe_volume
+#define PROBE_ARGS probe_data, probe_irr, probe_dist, probe_volume
+/* the record's fields as the locals a function of PROBE_PARAMS reads (layout.h's accessors) */
+#define PROBE_VOLUME_LOCALS \
+    const float3 probe_origin = PROBE_VOLUME_ORIGIN(probe_volume), probe_spacing = PROBE_VOLUME_SPACING(probe_volume); \
+    const float probe_normal_bias = PROBE_VOLUME_NORMAL_BIAS(probe_volume); \
+    const float probe_view_bias = PROBE_VOLUME_VIEW_BIAS(probe_volume); \
+    const int3 probe_counts = PROBE_VOLUME_COUNTS(probe_volume); \
+    const int probe_nx = probe_counts.x, probe_ny = probe_counts.y, probe_nz = probe_counts.z; \
+    const int probe_irr_texels = PROBE_VOLUME_IRRADIANCE_TEXELS(probe_volume); \
+    const int probe_dist_texels = PROBE_VOLUME_DISTANCE_TEXELS(probe_volume)
 /* where a point's irradiance came from (probe_irradiance's w) */
 #define PROBE_SOURCE_CELL 1.0f
 #define PROBE_SOURCE_NEAREST 2.0f
@@ -79,13 +87,13 @@ IBL_INLINE float3 probe_irradiance_at(__global const float4 *probe_irr, int inde
  * one: a probes.min/max box's faces, whose probes stand half a cell in), falling linearly to 0 one
  * spacing outside it along each axis (the rest from what lies outside every volume: the
  * panorama's SH). */
-IBL_INLINE float probe_volume_weight(float3 p, const float4 probe_origin, const float4 probe_spacing, const int probe_nx,
-                                 const int probe_ny, const int probe_nz)
+IBL_INLINE float probe_volume_weight(float3 p, __global const float4 *probe_volume)
 {
+    PROBE_VOLUME_LOCALS;
     const float3 n = (float3)(probe_nx, probe_ny, probe_nz);
-    const float3 half_extent = 0.5f * probe_spacing.xyz * select(n, (float3)(0.0f), isequal(n, (float3)(1.0f)));
-    const float3 delta = fabs(p - (probe_origin.xyz + 0.5f * probe_spacing.xyz * (n - 1.0f))) - half_extent;
-    const float3 w = 1.0f - clamp(delta / probe_spacing.xyz, 0.0f, 1.0f);
+    const float3 half_extent = 0.5f * probe_spacing * select(n, (float3)(0.0f), isequal(n, (float3)(1.0f)));
+    const float3 delta = fabs(p - (probe_origin + 0.5f * probe_spacing * (n - 1.0f))) - half_extent;
+    const float3 w = 1.0f - clamp(delta / probe_spacing, 0.0f, 1.0f);
     return w.x * w.y * w.z;
 }
 
@@ -108,7 +116,8 @@ IBL_INLINE float3 probe_value(__global const float4 *probe_irr, int index, float
 IBL_INLINE float probe_contribution(int3 c, float3 p, float3 biased, float3 n, float3 falloff, const float *spec,
                                 float3 *value, PROBE_PARAMS)
 {
-    const float3 origin = probe_origin.xyz, spacing = probe_spacing.xyz;
+    PROBE_VOLUME_LOCALS;
+    const float3 origin = probe_origin, spacing = probe_spacing;
     const int index = c.y * probe_nx * probe_nz + c.z * probe_nx + c.x;
     const float4 data = probe_data[index];
 #ifdef PROBE_CLASSIFICATION
@@ -120,10 +129,10 @@ IBL_INLINE float probe_contribution(int3 c, float3 p, float3 biased, float3 n, f
     const float3 e = probe_value(probe_irr, index, n, spec, probe_irr_texels, probe_nx, probe_ny, probe_nz);
 #ifdef PROBE_VISIBILITY
     const float3 pp = origin + convert_float3(c) * spacing + data.xyz;
-    const float3 tri = fmax(falloff, 0.001f);
+    const float3 tri = fmax(falloff, PROBE_TRILINEAR_FLOOR);
     /* wrap shading: a probe behind the surface still counts a little */
     const float wrap = 0.5f * (dot(normalize(pp - p), n) + 1.0f);
-    float w = wrap * wrap + 0.2f;
+    float w = wrap * wrap + PROBE_WRAP_FLOOR;
     /* Chebyshev's bound on the chance the probe sees the point, from the mean and mean square
      * of the probe's distances towards it */
     const float3 to_probe = pp - biased;
@@ -136,9 +145,9 @@ IBL_INLINE float probe_contribution(int3 c, float3 p, float3 biased, float3 n, f
         cheb = var / (var + dv * dv);
         cheb = cheb * cheb * cheb;
     }
-    w *= fmax(0.05f, cheb);
+    w *= fmax(PROBE_CHEBYSHEV_FLOOR, cheb);
     w = fmax(1e-6f, w);
-    if (w < 0.2f) w *= w * w * (1.0f / (0.2f * 0.2f));     /* crush tiny weights, continuously */
+    if (w < PROBE_CRUSH) w *= w * w * (1.0f / (PROBE_CRUSH * PROBE_CRUSH));     /* crush tiny weights, continuously */
     *value = spec ? e : sqrt(e);
     return w * tri.x * tri.y * tri.z;
 #else
@@ -151,15 +160,15 @@ IBL_INLINE float probe_contribution(int3 c, float3 p, float3 biased, float3 n, f
  * xyz; w where it came from (PROBE_SOURCE_*): the eight probes of the cell around the point
  * (RTXGI), or where all eight are inactive the active probes of the 4 x 4 x 4 around it, each
  * weighted by its inverse square distance (in cells) with the same visibility (RTXGI returns 0
- * there), or none of those (0: the caller falls back to the panorama). probe_origin.xyz: probe
- * (0, 0, 0); .w the normal bias; probe_spacing.xyz the cell; .w the view bias (world units).
- * Given `spec` (the warped lobe's weights) the radiance along the lobe instead, the same weights
+ * there), or none of those (0: the caller falls back to the panorama); the grid and biases from
+ * the volume record (PROBE_VOLUME_LOCALS, world units). Given `spec` (the warped lobe's weights) the radiance along the lobe instead, the same weights
  * blending it linearly. */
 IBL_INLINE float4 probe_blend(float3 p, float3 n, float3 v, const float *spec, PROBE_PARAMS)
 {
-    const float3 origin = probe_origin.xyz, spacing = probe_spacing.xyz;
+    PROBE_VOLUME_LOCALS;
+    const float3 origin = probe_origin, spacing = probe_spacing;
     const int3 last = (int3)(probe_nx - 1, probe_ny - 1, probe_nz - 1);
-    const float3 biased = p + n * probe_origin.w + v * probe_spacing.w;
+    const float3 biased = p + n * probe_normal_bias + v * probe_view_bias;
     const float3 g = (biased - origin) / spacing;
     const int3 base = clamp(convert_int3(floor(g)), (int3)(0), last);
     const float3 alpha = clamp(g - convert_float3(base), 0.0f, 1.0f);
@@ -206,7 +215,7 @@ IBL_INLINE float4 probe_irradiance(float3 p, float3 n, float3 v, PROBE_PARAMS)
  * the volume or on its fading edge. */
 IBL_INLINE float3 probes_diffuse(float3 p, float3 n, float3 v, float3 sky, PROBE_PARAMS, __global int *probe_stats)
 {
-    const float wv = probe_volume_weight(p, probe_origin, probe_spacing, probe_nx, probe_ny, probe_nz);
+    const float wv = probe_volume_weight(p, probe_volume);
     float3 e = (1.0f - wv) * sky;
     if (wv < 1.0f) atomic_inc(&probe_stats[4]);       /* outside the volume, or on its fading edge */
     if (wv > 0.0f) {
@@ -226,7 +235,7 @@ IBL_INLINE float3 probes_diffuse(float3 p, float3 n, float3 v, float3 sky, PROBE
 IBL_INLINE float3 probes_specular(float3 p, float3 n, float3 v, float3 d, float lam_w, float3 sky,
                               __global const float *basis_table, PROBE_PARAMS, __global int *probe_stats)
 {
-    const float wv = probe_volume_weight(p, probe_origin, probe_spacing, probe_nx, probe_ny, probe_nz);
+    const float wv = probe_volume_weight(p, probe_volume);
     float3 li = (1.0f - wv) * sky;
     if (wv > 0.0f) {
         float s[BASIS_SPECULAR_ROWS];

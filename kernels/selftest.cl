@@ -135,6 +135,17 @@ __kernel void t_product(__global const float *a, __global const float *b, __glob
     out[i] = a[i] * b[i];
 }
 
+/* the volume record's fields as probes.h reads them (PROBE_VOLUME_LOCALS): origin | normal bias,
+ * spacing | view bias, counts | irradiance texels, distance texels (tests/test_probe_registry.py) */
+__kernel void t_probe_volume(PROBE_PARAMS, __global float4 *out)
+{
+    PROBE_VOLUME_LOCALS;
+    out[0] = (float4)(probe_origin, probe_normal_bias);
+    out[1] = (float4)(probe_spacing, probe_view_bias);
+    out[2] = (float4)(convert_float3(probe_counts), (float)probe_irr_texels);
+    out[3] = (float4)((float)probe_dist_texels, 0.0f, 0.0f, 0.0f);
+}
+
 /* probes.h at points p, normals n, view vectors v (float4 each); defines PROBES_SH,
  * PROBE_VISIBILITY, PROBE_CLASSIFICATION as the shade pass sets them */
 __kernel void t_probes(__global const float4 *p, __global const float4 *n, __global const float4 *v, PROBE_PARAMS,
@@ -165,7 +176,8 @@ __kernel void t_probe_contribution(__global const int4 *c, __global const float4
 {
     const int i = get_global_id(0);
     float3 value = (float3)(NAN);
-    const float3 biased = p[i].xyz + n[i].xyz * probe_origin.w + v[i].xyz * probe_spacing.w;
+    const float3 biased = p[i].xyz + n[i].xyz * PROBE_VOLUME_NORMAL_BIAS(probe_volume)
+                          + v[i].xyz * PROBE_VOLUME_VIEW_BIAS(probe_volume);
     const float w = probe_contribution(c[i].xyz, p[i].xyz, biased, n[i].xyz, (float3)(1.0f), (const float *)0, &value,
                                        PROBE_ARGS);
     out[i] = (float4)(value, w);

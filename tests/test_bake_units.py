@@ -134,7 +134,7 @@ def test_the_probe_package_keeps_its_names_and_imports_no_pass():
     from iblbake.render import probes
     names = ("ACTIVE", "BACKFACE_BLEND_LIMIT", "DEFAULT_LONGEST", "FILES", "FIXED_RAYS", "FORMAT", "Grid", "INACTIVE",
              "INSIDE_WARN", "MAX_ATLAS_SIDE", "MAX_DISTANCE", "MAX_OFFSET", "RELOCATION_PASSES", "SAMPLING_KEYS",
-             "SH_GLSL", "Tracer", "VERSION", "atlas", "bake", "bake_settings", "basis_glsl", "basis_manifest",
+             "SH_GLSL", "Tracer", "VERSION", "atlas", "bake", "bake_settings", "basis_glsl",
              "basis_options", "classify", "data_texture", "glsl", "grid_of", "inside_geometry", "load", "manifest",
              "outside_camera_rooms", "project", "random_rotation", "ray_directions", "read_manifest", "relocate",
              "sampled", "save", "scene_bounds", "spherical_fibonacci", "trace_defines", "volume_dict", "warnings",

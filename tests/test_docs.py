@@ -7,7 +7,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 BENCHMARKS = ROOT / "docs" / "benchmarks.md"
-MAX_BENCHMARK_LINES = 1200
+MAX_BENCHMARK_LINES = 1300      # about half of what it was as a diary (2,496 lines)
 MAX_README_LINES = 250
 # sections of benchmarks.md that describe no measurement of their own
 NOT_MEASURED = {"Machines", "Contents", "Changelog"}

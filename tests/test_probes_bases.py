@@ -1,5 +1,5 @@
-"""Irradiance probes that store a directional basis (probes.irradiance: any of core/bases PROBES):
-the sampling kernel against its twin, a uniform sky, each basis's probe fit from its rays against
+"""Irradiance probes that store a directional basis (probes.irradiance: any directional entry of
+core/bases/probes.py PROBE_BASES): the sampling kernel against its twin, a uniform sky, each basis's probe fit from its rays against
 the same basis projected from the panorama, a probe-lit sphere, and the files, manifest and GLSL
 `iblbake probes` writes. The bases themselves: tests/test_bases.py."""
 
@@ -13,6 +13,7 @@ import pytest
 
 from iblbake.core import bases
 from iblbake.core.bases import common
+from iblbake.core.bases.probes import PROBE_BASES
 from iblbake.io import images
 from iblbake.render import probes, render
 from iblbake.render.bakes import Bakes
@@ -21,7 +22,7 @@ from tests.conftest import run_cli
 from tests.test_probes import Given, far_sphere_scene, kernel_irradiance, settings, sphere_scene, synthetic, unit
 
 # every probe basis, and each SG size fitted on the irradiance (the default), on the radiance at K = 9
-CASES = [(n, o) for n in bases.PROBES for o in bases.BASES[n].variants()
+CASES = [(n, o) for n, b in PROBE_BASES.items() if b.directional for o in b.variants()
          if n != "sg" or o["sg_lobes"] == 9 or o["sg_fit"] == "irradiance"]
 IDS = [f"{n}-{'-'.join(str(v) for v in o.values())}" if o else n for n, o in CASES]
 

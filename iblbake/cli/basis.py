@@ -12,27 +12,57 @@ from iblbake.cli.options import (API_FLAGS, Console, check_inputs_exist, check_s
 from iblbake.errors import IblbakeError
 from iblbake.io.guard import refuse_overlaps
 
-NAMES = ("l1_geomerics", "zh3", "sg", "ambient_dice", "haar")     # core/bases BASES but sh (iblbake sh)
 SUFFIXES = {"iblbake": (".json",), "glsl": (".glsl", ".frag", ".vert", ".h", ".txt")}
 
 
-@click.command("basis")
+def names() -> tuple:
+    """The bases `iblbake basis` projects onto: core/bases BASES but sh (iblbake sh)."""
+    from iblbake.core.bases import BASES
+    return tuple(n for n, m in BASES.items() if m.HEADER)
+
+
+def owners() -> dict:
+    """Each basis option (its module's OPTIONS key) -> the basis it belongs to."""
+    from iblbake.core.bases import BASES
+    return {k: n for n in names() for k in BASES[n].OPTIONS}
+
+
+def _flag(key: str) -> str:
+    return "--" + key.replace("_", "-")
+
+
+def basis_params() -> list:
+    """--basis and every basis's option flags (--KEY of its OPTIONS: choices, default, doc), from BASES."""
+    from iblbake.core.bases import BASES
+    flags = {n: ", ".join(_flag(k) for k in BASES[n].OPTIONS) for n in names()}
+    params = [click.Option(["--basis", "name"], type=click.Choice(names()), required=True,
+                           help="; ".join(f"{n} ({BASES[n].TITLE}{': ' + flags[n] if flags[n] else ''})"
+                                          for n in names()) + ": docs/conventions.md 'Directional bases'.")]
+    for key, owner in owners().items():
+        choices, default, doc = BASES[owner].OPTIONS[key]
+        params.append(click.Option([_flag(key), key], type=click.Choice([str(c) for c in choices]),
+                                   default=str(default), show_default=True, help=doc + "."))
+    return params
+
+
+class BasisCommand(click.Command):
+    """`iblbake basis`, its --basis and option flags built from BASES when it parses or prints its
+    help (the bases load numpy: `iblbake --help` lists the command without them)."""
+
+    def get_params(self, ctx):
+        if not any(p.name == "name" for p in self.params):
+            self.params[1:1] = basis_params()          # after ENV...
+        return super().get_params(ctx)
+
+
+def basis_options(name: str, given: dict) -> dict:
+    """The options of basis `name` from the flags' strings, typed as its OPTIONS' choices."""
+    from iblbake.core.bases import BASES
+    return {k: next(c for c in BASES[name].OPTIONS[k][0] if str(c) == given[k]) for k in BASES[name].OPTIONS}
+
+
+@click.command("basis", cls=BasisCommand)
 @click.argument("envs", metavar="ENV...", nargs=-1, required=True)
-@click.option("--basis", "name", type=click.Choice(NAMES), required=True,
-              help="l1_geomerics (4 floats, Geomerics' non-linear L1), zh3 (5, L1 and a zonal L2), sg (spherical "
-                   "Gaussians: --sg-lobes, --sg-fit), ambient_dice (12, the RBF variant: --ad-fit), haar (cube-face "
-                   "wavelets, the --haar-coefficients largest kept): docs/conventions.md 'Directional bases'.")
-@click.option("--sg-lobes", type=click.Choice(["5", "6", "9", "12"]), default="9", show_default=True,
-              help="sg: the number of lobes (fixed Fibonacci axes, one sharpness).")
-@click.option("--sg-fit", type=click.Choice(["irradiance", "least_squares", "nnls"]), default="irradiance",
-              show_default=True, help="sg: least squares on the irradiance (what the diffuse term reads), or on the "
-                                      "radiance: exact least squares, or non-negative (the specular lobe's).")
-@click.option("--ad-fit", type=click.Choice(["irradiance", "least_squares", "nnls"]), default="irradiance",
-              show_default=True, help="ambient_dice: least squares on the irradiance (what the diffuse term reads), "
-                                      "or on the radiance: exact least squares, or non-negative (no negative "
-                                      "radiance: the specular lobe's).")
-@click.option("--haar-coefficients", type=click.Choice(["16", "32", "64", "128", "256"]), default="64",
-              show_default=True, help="haar: the coefficients kept (the largest; 6 of them the faces' means).")
 @click.option("--output", "-o", type=click.Path(), default=None,
               help="Write the document here (atomically); with several ENV, a folder (DIR/NAME.json or .glsl "
                    "each). Without it, --format glsl prints to stdout and the JSON is not written.")
@@ -43,20 +73,19 @@ SUFFIXES = {"iblbake": (".json",), "glsl": (".glsl", ".frag", ".vert", ".h", ".t
 @click.option("--format", "fmt", type=click.Choice(["iblbake", "glsl"]), default="iblbake", show_default=True,
               help="What -o holds (or stdout without -o): iblbake's JSON document (the coefficients, their "
                    "layout, the bytes a probe of them takes, the error), or the basis's GLSL (its coefficients "
-                   "and its irradiance function; sg and ambient_dice add their specular ones).")
+                   "and its irradiance function; a basis that carries a specular lobe adds its specular one).")
 @click.option("--glsl", is_flag=True, help="Print the basis's GLSL (--format glsl).")
 @click.option("--specular-table", type=click.Path(dir_okay=False), default=None, metavar="FILE.exr",
-              help="ambient_dice: also write the table its GLSL specular function reads (each lobe averaged over "
-                   "the warped GGX lobe; one channel, 129 x 65: docs/conventions.md 'Directional bases').")
+              help="A basis whose GLSL specular function reads a table: also write it (each lobe "
+                   "averaged over the warped GGX lobe; one channel: docs/conventions.md 'Directional bases').")
 @click.option("--error/--no-error", "with_error", default=True, show_default=True,
               help="Measure the basis's irradiance against the exact irradiance (float64, every texel) at 256 "
                    "fixed normals: relative RMSE and max relative error (the JSON's error block).")
 @depfile_option
 @input_options
 @common_options
-def basis_command(envs, name, sg_lobes, sg_fit, ad_fit, haar_coefficients, output, force, intensity, fmt, glsl,
-                  specular_table, with_error, nonfinite, negative, transfer, primaries, input_layout, max_pixels,
-                  depfile, quiet, as_json):
+def basis_command(envs, name, output, force, intensity, fmt, glsl, specular_table, with_error, nonfinite, negative,
+                  transfer, primaries, input_layout, max_pixels, depfile, quiet, as_json, **given):
     """Project each panorama ENV onto a directional basis (exact texel integrals, float64; least
     squares where the lobes are not orthogonal) and write its coefficients for an engine: the
     same projection `effects.diffuse: <basis>` renders with. Spherical harmonics: `iblbake sh`.
@@ -68,17 +97,15 @@ def basis_command(envs, name, sg_lobes, sg_fit, ad_fit, haar_coefficients, outpu
         if fmt != "iblbake" and fmt != "glsl":
             raise click.UsageError(f"--glsl is --format glsl: leave out --format {fmt}")
         fmt = "glsl"
-    owners = {"sg_lobes": "sg", "sg_fit": "sg", "ad_fit": "ambient_dice", "haar_coefficients": "haar"}
     ctx = click.get_current_context()
-    for param, owner in owners.items():
+    for param, owner in owners().items():
         if owner != name and ctx.get_parameter_source(param) == click.core.ParameterSource.COMMANDLINE:
             raise click.UsageError(f"--{param.replace('_', '-')} is an option of --basis {owner}, not of {name}: "
                                    "leave it out")
     if as_json and fmt == "glsl" and not output:
         raise click.UsageError("--json prints the summary on stdout, where --format glsl prints the GLSL: give -o FILE "
                                "for the GLSL")
-    options = {"sg": {"sg_lobes": int(sg_lobes), "sg_fit": sg_fit}, "ambient_dice": {"ad_fit": ad_fit},
-               "haar": {"haar_coefficients": int(haar_coefficients)}}.get(name, {})
+    options = basis_options(name, given)
     suffix = SUFFIXES[fmt][0]
     if len(envs) > 1:
         if fmt != "iblbake" and not output:
@@ -89,9 +116,11 @@ def basis_command(envs, name, sg_lobes, sg_fit, ad_fit, haar_coefficients, outpu
                    for e in envs]
     else:
         outputs = [output]
-    if specular_table and name != "ambient_dice":
-        raise click.UsageError(f"--specular-table is ambient_dice's (sg's specular has a closed form): leave it out "
-                               f"with --basis {name}")
+    from iblbake.core.bases import BASES
+    tables = [n for n in names() if hasattr(BASES[n], "specular_table")]
+    if specular_table and name not in tables:
+        raise click.UsageError(f"--specular-table is {' and '.join(tables)}'s (the others' specular, where they "
+                               f"carry one, has a closed form): leave it out with --basis {name}")
     if specular_table:
         check_suffix(specular_table, (".exr",), "--specular-table", "a table")
     same = {(os.path.realpath(e), o): o for e, o in zip(envs, outputs) if o}
@@ -108,9 +137,8 @@ def basis_command(envs, name, sg_lobes, sg_fit, ad_fit, haar_coefficients, outpu
     results = [_project_one(env, name, options, intensity, fmt, with_error, nonfinite, negative, transfer,
                             primaries, input_layout, max_pixels, con) for env in envs]
     if specular_table:
-        from iblbake.core import bases
         from iblbake.io import images
-        images.write_exr(specular_table, bases.BASES[name].specular_table(options).astype("float32"),
+        images.write_exr(specular_table, BASES[name].specular_table(options).astype("float32"),
                          channels=("R",))
     results = write_texts(results, outputs, fmt)
     if depfile:

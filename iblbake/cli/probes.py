@@ -43,12 +43,12 @@ def probes_command(scene_path, out_dir, overrides, cache_dir, force, device, qui
     sc = api.load_scene(scene_path, overrides, outputs=[], names=API_FLAGS)
     if not sc.data["objects"]:       # a usage error here, before the folder's checks (the library says it too)
         raise click.UsageError(f"{scene_path}: the scene has no objects; probes light objects (add some)")
+    from iblbake.core.bases.probes import PROBE_BASES
     out = Path(out_dir)
-    rep_name = probes.FILES[sc.data["probes"]["irradiance"]]
+    basis = PROBE_BASES[sc.data["probes"]["irradiance"]]
     captures = [f"reflection_{k}.exr" for k in range(len(sc.data["reflection_probes"]))]
-    irradiance = sc.data["probes"]["irradiance"]
-    table = [probes.SPECULAR_TABLE] if irradiance == "ambient_dice" else []     # probes.glsl's specular reads it
-    names = ["probes.json", rep_name, "distance.exr", "probe_data.exr", "probes.glsl", *table, *captures]
+    table = [basis.specular_table] if basis.specular_table else []     # probes.glsl's specular reads it
+    names = ["probes.json", basis.file, "distance.exr", "probe_data.exr", "probes.glsl", *table, *captures]
     writes = [("--output", out / n) for n in names]
     refuse_overlaps(writes, scene.named_input_files(sc))
     for n in names:                  # the folder is made when the files are written, not before
@@ -66,9 +66,7 @@ def probes_command(scene_path, out_dir, overrides, cache_dir, force, device, qui
         for n in names[1:4]:         # the cache entry's atlases (verified against their manifest)
             batch.write_bytes(out / n, reads.read_bytes(entry / n, 1 << 40, "a cached atlas"))
         if table:
-            from iblbake.core import bases
-            images.write_exr(out / table[0], bases.BASES[irradiance].specular_table({}).astype("float32"),
-                             channels=("R",), batch=batch)
+            images.write_exr(out / table[0], basis.table_image(), channels=("R",), batch=batch)
         batch.write_json(out / "probes.json", man)
         batch.write_text(out / "probes.glsl", vol.glsl())
     removed = _remove_stale(out, names)
@@ -92,7 +90,7 @@ def _remove_stale(out: Path, names: list) -> list:
     volume's files alone (a user's own files are left)."""
     from iblbake.io.guard import written_by_iblbake
     from iblbake.render import probes
-    stale = {*probes.FILES.values(), probes.SPECULAR_TABLE, *(p.name for p in out.glob("reflection_*.exr"))} - set(names)
+    stale = {*probes.FILES.values(), *probes.SPECULAR_TABLES, *(p.name for p in out.glob("reflection_*.exr"))} - set(names)
     removed = []
     for n in sorted(stale):
         f = out / n

@@ -13,6 +13,7 @@ import math
 from dataclasses import dataclass, field
 
 from iblbake.core import bases
+from iblbake.core.bases.probes import PROBE_BASES
 from iblbake.scene import materials
 from iblbake.scene.load import AOVS, Scene
 
@@ -99,7 +100,7 @@ def unread_basis_options(scene: Scene, diffuse: str, specular: str) -> list:
                                                  else ""))
     probes_used = "probes" in (diffuse, specular)
     rep = scene.data["probes"]["irradiance"]
-    own = set(bases.BASES[rep].OPTIONS) if rep in bases.BASES else set()
+    own = set(PROBE_BASES[rep].option_specs)
     for k in (raw.get("probes") or {}):
         owner = next((n for n, m in bases.BASES.items() if k in m.OPTIONS), None)
         if owner and (k not in own or not probes_used) and probes_used:

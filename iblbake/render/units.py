@@ -361,15 +361,17 @@ def probes_code_hash() -> str:
     import importlib
     import pkgutil
 
-    from iblbake.core import bases, sampling
+    from iblbake.core import sampling
     from iblbake.core.bases import common
+    from iblbake.core.bases import probes as probe_bases
     from iblbake.device.runtime import source_hash
     from iblbake.render import device_scene, probes, reflection_probes
     from iblbake.render.bakes import _code_hash
     package = [importlib.import_module(f"{probes.__name__}.{m.name}")
                for m in sorted(pkgutil.iter_modules(probes.__path__), key=lambda m: m.name)]
     return _code_hash((probes, *package, reflection_probes, device_scene, sampling, common,
-                       *(bases.BASES[n] for n in bases.PROBES)), source_hash("paths/probe_trace.cl"))
+                       probe_bases, *(b.m for b in probe_bases.PROBE_BASES.values() if b.directional)),
+                      source_hash("paths/probe_trace.cl"))
 
 
 def _external(path) -> list:

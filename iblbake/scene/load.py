@@ -474,18 +474,20 @@ def _resolve_basis_specular(v: "_Validator", fx: dict, probes: dict) -> None:
     store one: the shade pass compiles one basis header a frame (kernels/bases.h); `specular:
     probes` from probes whose basis carries a specular lobe, beside no distant basis."""
     from iblbake.core import bases
-    s, d = fx["specular"], fx["diffuse"]
+    from iblbake.core.bases.probes import PROBE_BASES
+    s, d, stored = fx["specular"], fx["diffuse"], PROBE_BASES[probes["irradiance"]]
     if s in bases.SPECULAR and d in bases.DIFFUSE and d != s:
         v.fail("effects.specular", f"{s} beside effects.diffuse: {d}: a frame lights from one directional basis; "
                                    f"give effects.diffuse {s} (or sh, probes) or another specular mode")
-    if s in bases.SPECULAR and d == "probes" and probes["irradiance"] in bases.PROBES:
+    if s in bases.SPECULAR and d == "probes" and stored.directional:
+        others = " or ".join(n for n, b in PROBE_BASES.items() if not b.directional)
         v.fail("effects.specular", f"{s} beside probes storing {probes['irradiance']}: a frame lights from one "
-                                   f"directional basis; give probes.irradiance octahedral or sh, or another specular mode")
-    if s == "probes" and probes["irradiance"] not in bases.SPECULAR:
+                                   f"directional basis; give probes.irradiance {others}, or another specular mode")
+    if s == "probes" and not stored.specular:
         v.fail("effects.specular", f"probes reads the radiance along the lobe from the probes' basis, and "
-                                   f"probes.irradiance {probes['irradiance']} stores no specular lobe: give "
-                                   f"probes.irradiance {' or '.join(bases.SPECULAR)} (a probes: section), or another "
-                                   "specular mode")
+                                   f"probes.irradiance {probes['irradiance']} stores no specular lobe: give probes."
+                                   f"irradiance {' or '.join(n for n, b in PROBE_BASES.items() if b.specular)} (a "
+                                   "probes: section), or another specular mode")
     if s == "probes" and d in bases.DIFFUSE:
         v.fail("effects.specular", f"probes beside effects.diffuse: {d}: a frame lights from one directional basis; "
                                    "give effects.diffuse probes (or sh), or another specular mode")

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from iblbake.core import bases
+from iblbake.core.bases.probes import PROBE_BASES
 from iblbake.core.conventions import wrap_degrees
 
 # Field types. Each checks one value and returns it normalised, or raises _Bad with the reason.
@@ -445,15 +446,11 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "bounces": bounces_field("how many times the light a probe ray brings back may have scattered: unbounded "
                                  "(the reference's paths, Russian roulette), or N (1: the surfaces the probe sees, "
                                  "lit directly)"),
-        "irradiance": Enum(("octahedral", "sh") + bases.PROBES, "octahedral",
-                           doc="what each probe stores: DDGI's octahedral irradiance map, L2 SH irradiance "
-                               "(9 RGB coefficients, least squares over its rays), or a directional basis fitted "
-                               "to its rays, "
-                               + ", ".join(f"`{n}`: {bases.BASES[n].TITLE}" for n in bases.PROBES)
-                               + " (docs/conventions.md 'Directional bases'; its options are the probes' keys "
-                                 "of the effects' names)"),
-        **{k: Enum(choices, default, doc=doc + " (the probes' basis)") for n in bases.PROBES
-           for k, (choices, default, doc) in bases.BASES[n].OPTIONS.items()},
+        "irradiance": Enum(tuple(PROBE_BASES), "octahedral",
+                           doc="what each probe stores (core/bases/probes.py; a directional basis: docs/conventions.md "
+                               "'Directional bases', its options the probes' keys of the effects' names): " + "; ".join(f"`{n}`: {b.doc}" for n, b in PROBE_BASES.items())),
+        **{k: Enum(choices, default, doc=doc + " (the probes' basis)") for b in PROBE_BASES.values()
+           for k, (choices, default, doc) in b.option_specs.items()},
         "irradiance_texels": Num(6, 2, 64, integer=True, doc="octahedral irradiance: interior texels per side (DDGI: 6; "
                                                               "the atlas adds a 1-texel border)"),
         "distance_texels": Num(14, 2, 64, integer=True, doc="distance moments: interior texels per side (DDGI: 14)"),

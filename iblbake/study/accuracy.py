@@ -387,13 +387,9 @@ def lighting_bytes(sc, term: str, bakes: list) -> int | None:
     if mode in bases.BASES and mode != "sh":
         return bases.probe_bytes(mode, bases.options_of(mode, fx), 2)
     if mode == "probes":
+        from iblbake.core.bases.probes import PROBE_BASES
         p = sc.data["probes"]
-        rep = p["irradiance"]
-        if rep == "octahedral":
-            return p["irradiance_texels"] ** 2 * 3 * 2
-        if rep == "sh":
-            return 9 * 3 * 2
-        return bases.probe_bytes(rep, {k: p[k] for k in bases.BASES[rep].OPTIONS}, 2)
+        return PROBE_BASES[p["irradiance"]].stored_bytes(p, 2)
     if mode in ("prefiltered", "lobe"):
         return next((b.get("fp16_bytes") for b in bakes if b["name"] == "prefiltered"), None)
     return None

@@ -180,27 +180,26 @@ def bases_ladder(sc, fx) -> list:
 
 def probe_bases_ladder(sc, fx) -> list:
     """Every representation the irradiance probes can store (`--ladder probe_bases`: the octahedral
-    map, L2 SH, and each registered basis and size that fits from a probe's rays, core/bases
-    PROBES), the scene's probes section otherwise as it is: the probes' diffuse term; and the
+    map, L2 SH, and each registered basis and size that fits from a probe's rays: core/bases/probes.py
+    PROBE_BASES), the scene's probes section otherwise as it is: the probes' diffuse term; and the
     specular term from each basis that carries it (core/bases SPECULAR) beside the split sum's
     chain, of the panorama and of the probes (`specular: probes`). AO off."""
-    from iblbake.core.bases import BASES, PROBES, SPECULAR, specular_variants
+    from iblbake.core.bases import specular_variants
+    from iblbake.core.bases.probes import PROBE_BASES
     rungs = []
     if fx.diffuse != "off" and sc.data["objects"]:
         base = [("effects.diffuse", "probes"), ("effects.ao", "off")]
-        rungs += [Rung("diffuse", "probes, octahedral", base + [("probes.irradiance", "octahedral")]),
-                  Rung("diffuse", "probes, SH L2", base + [("probes.irradiance", "sh")])] + [
-            Rung("diffuse", f"probes, {BASES[name].label(opts)}",
-                 base + [("probes.irradiance", name), *((f"probes.{k}", v) for k, v in opts.items())])
-            for name in PROBES for opts in BASES[name].variants()]
+        rungs += [Rung("diffuse", f"probes, {b.label(opts)}",
+                       base + [("probes.irradiance", name), *((f"probes.{k}", v) for k, v in opts.items())])
+                  for name, b in PROBE_BASES.items() for opts in b.variants()]
     if fx.specular != "off":
         off = [("effects.ao", "off"), ("effects.ssr", "off"), ("effects.reflection_probes", False)]
         rungs += distant_specular_rungs(sc, fx)
         if sc.data["objects"]:          # the same bases in the probes: the room's light along the lobe
-            rungs += [Rung("specular", f"probes, {BASES[name].label(opts)} specular",
+            rungs += [Rung("specular", f"probes, {b.label(opts)} specular",
                            [("effects.specular", "probes"), ("probes.irradiance", name),
                             *((f"probes.{k}", v) for k, v in opts.items())] + off)
-                      for name in SPECULAR if name in PROBES for opts in specular_variants(name)]
+                      for name, b in PROBE_BASES.items() if b.specular for opts in specular_variants(name)]
     return rungs
 
 

@@ -1,23 +1,33 @@
 """The directional bases of the distant environment's diffuse light, registered once: each module
 here is one basis (its float64 projection and evaluation, the twin of its kernel header; its
-coefficient layout and checks; its GLSL function), and the scene's `effects.diffuse` choices and
-options, the render source (render/sources/basis.py), the tests and the shoot-out
-(benchmarks/bench_bases.py) are derived from BASES. `sh` keeps its own kernel source
-(render/sources/sh.py; HEADER None). Adding a basis: README's checklist."""
+coefficient layout and checks; its GLSL function), found by its NAME and placed by its RANK, and
+the scene's `effects.diffuse` choices and options, the render source (render/sources/basis.py),
+the probes' bases (probes.py), the kernels' list of headers (kernels/basis_headers.h, generated),
+`iblbake basis`, the tests and the shoot-out (benchmarks/bench_bases.py) are derived from BASES.
+`sh` keeps its own kernel source (render/sources/sh.py; HEADER None). Adding a basis:
+docs/conventions.md "Directional bases"."""
 
 from __future__ import annotations
 
+import importlib
+import pkgutil
+
 import numpy as np
 
-from iblbake.core.bases import ambient_dice, haar, l1_geomerics, sg, sh, zh3
+REGISTRIES = ("probes",)       # modules here built from BASES (imported after it)
 
-BASES = {m.NAME: m for m in (sh, l1_geomerics, zh3, sg, ambient_dice, haar)}
+
+def _found() -> list:
+    """The modules here that are a basis (a NAME), in RANK order."""
+    mods = [importlib.import_module(f"{__name__}.{m.name}") for m in pkgutil.iter_modules(__path__)
+            if m.name not in REGISTRIES]
+    return sorted((m for m in mods if hasattr(m, "NAME")), key=lambda m: m.RANK)
+
+
+BASES = {m.NAME: m for m in _found()}
 
 # the ones evaluated by the generic source and kernels/bases.h (sh has its own)
 DIFFUSE = tuple(n for n, m in BASES.items() if m.HEADER)
-# the ones an irradiance probe can store: those that fit from a probe's rays (project_rays; the
-# probes' own sh and octahedral maps aside, render/probes/)
-PROBES = tuple(n for n, m in BASES.items() if m.HEADER and hasattr(m, "project_rays"))
 # the ones that carry a specular lobe (specular_weights, kernels/bases.h basis_specular_radiance):
 # `effects.specular: <name>` for the panorama, `specular: probes` for probes that store one
 SPECULAR = tuple(n for n, m in BASES.items() if m.HEADER and getattr(m, "SPECULAR", False))

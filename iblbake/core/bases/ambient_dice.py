@@ -51,6 +51,7 @@ from iblbake.core.bases import common
 
 NAME = "ambient_dice"
 TITLE = "ambient dice"
+RANK = 4                # its place in BASES (the schema's choices, the CLI's, the studies')
 HEADER = "basis_ambient_dice.h"
 FITS = ("irradiance", "least_squares", "nnls")
 OPTIONS = {"ad_fit": (FITS, "irradiance", "ambient_dice: the fit, least squares on the irradiance (the diffuse "
@@ -62,6 +63,7 @@ VERTICES = 12
 _T = (np.sqrt(5.0) - 1.0) / 2.0
 GLSL_COEFFS, GLSL_IRRADIANCE = "AD_VALUE", "ambientDiceIrradiance"     # glsl()'s names (the probes' sampler)
 GLSL_SPECULAR = "ambientDiceSpecularRadiance"
+GLSL_TABLE = "ambientDiceSpecularTable"          # the sampler of specular_table in glsl()
 SPECULAR = True        # specular_weights, kernels/basis_ambient_dice.h: `specular: ambient_dice`
 TABLE_LOG2_LO, TABLE_STEP, TABLE_ROWS, TABLE_COLS = -2.0, 0.25, 65, 129   # lambda 0.25 .. 16384
 

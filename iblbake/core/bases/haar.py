@@ -33,6 +33,7 @@ from iblbake.core.bases import common
 
 NAME = "haar"
 TITLE = "Haar wavelets"
+RANK = 5                # its place in BASES (the schema's choices, the CLI's, the studies')
 HEADER = "basis_haar.h"
 KEPT = (16, 32, 64, 128, 256)
 OPTIONS = {"haar_coefficients": (KEPT, 64, "haar: the cube-map Haar coefficients kept (the largest; 6 of them the "

@@ -22,6 +22,7 @@ from iblbake.core.bases import common
 
 NAME = "l1_geomerics"
 TITLE = "L1 Geomerics"
+RANK = 1                # its place in BASES (the schema's choices, the CLI's, the studies')
 HEADER = "basis_l1_geomerics.h"
 OPTIONS: dict = {}
 Y0 = 0.5 / math.sqrt(math.pi)

@@ -65,6 +65,7 @@ from iblbake.core.bases import common
 
 NAME = "sg"
 TITLE = "SG"
+RANK = 3                # its place in BASES (the schema's choices, the CLI's, the studies')
 HEADER = "basis_sg.h"
 LOBES = (5, 6, 9, 12)
 FITS = ("irradiance", "least_squares", "nnls")

@@ -12,6 +12,7 @@ from iblbake.core.bases import common
 
 NAME = "sh"
 TITLE = "SH"
+RANK = 0                # its place in BASES (the schema's choices, the CLI's, the studies')
 HEADER = None          # render/sources/sh.py
 OPTIONS: dict = {}
 

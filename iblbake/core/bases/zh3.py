@@ -20,6 +20,7 @@ from iblbake.core.bases import common
 
 NAME = "zh3"
 TITLE = "ZH3"
+RANK = 2                # its place in BASES (the schema's choices, the CLI's, the studies')
 HEADER = "basis_zh3.h"
 OPTIONS: dict = {}
 ZONAL = math.sqrt(5.0 / (16.0 * math.pi))

@@ -9,7 +9,8 @@ temporal here). One module per idea:
                  camera's room
   project.py     the rays' projection into RTXGI's atlases (octahedral irradiance or L2 SH, the
                  distance moments) or a directional basis's coefficients
-  volume.py      a baked volume as a value: bake settings, sampling settings, a basis's options
+  volume.py      a baked volume as a frozen record (Volume, with its basis): bake settings, sampling
+                 settings, a basis's options
   files.py       probes.json and the atlases: written, read back and validated
   glsl.py        probes.glsl, sampling the files as kernels/probes.h does
 
@@ -26,9 +27,8 @@ import time
 import numpy as np
 
 from iblbake.errors import IblbakeError
-from iblbake.render.probes.files import (FILES, FORMAT, VERSION, basis_manifest, data_texture, load, manifest,
-                                         read_manifest, save)
-from iblbake.render.probes.glsl import SH_GLSL, SPECULAR_TABLE, basis_glsl, glsl
+from iblbake.render.probes.files import FILES, FORMAT, VERSION, data_texture, load, manifest, read_manifest, save
+from iblbake.render.probes.glsl import SH_GLSL, SPECULAR_TABLES, basis_glsl, glsl
 from iblbake.render.probes.grid import (AUTO_MAX_PROBES, DEFAULT_LONGEST, MAX_PROBES, SCALE_RAYS, Grid, auto_step,
                                         axis_counts, grid_of, probe_bytes, scene_bounds)
 from iblbake.render.probes.project import BACKFACE_BLEND_LIMIT, MAX_DISTANCE, atlas, project, with_borders
@@ -37,12 +37,13 @@ from iblbake.render.probes.rays import random_rotation, ray_directions, spherica
 from iblbake.render.probes.relocation import (ACTIVE, FIXED_RAYS, INACTIVE, MAX_OFFSET, RELOCATION_PASSES, SURFACE_RAYS,
                                               beyond_bounds, classify, inside_geometry, off_surfaces,
                                               outside_camera_rooms, outside_sealed_room, relocate)
-from iblbake.render.probes.volume import SAMPLING_KEYS, bake_settings, basis_options, sampled, volume_dict
+from iblbake.render.probes.volume import (SAMPLING_KEYS, Volume, bake_settings, basis_of, basis_options, sampled,
+                                          volume_dict)
 
 __all__ = ["ACTIVE", "AUTO_MAX_PROBES", "BACKFACE_BLEND_LIMIT", "DEFAULT_LONGEST", "FILES", "FIXED_RAYS", "FORMAT",
            "INACTIVE", "INSIDE_WARN", "MAX_ATLAS_SIDE", "MAX_DISTANCE", "MAX_OFFSET", "MAX_PROBES", "OFF_SAID",
-           "RELOCATION_PASSES", "SAMPLING_KEYS", "SCALE_RAYS", "SH_GLSL", "SPECULAR_TABLE", "SURFACE_RAYS", "VERSION",
-           "Grid", "Tracer", "atlas", "auto_step", "bake", "bake_settings", "basis_glsl", "basis_manifest",
+           "RELOCATION_PASSES", "SAMPLING_KEYS", "SCALE_RAYS", "SH_GLSL", "SPECULAR_TABLES", "SURFACE_RAYS", "VERSION",
+           "Grid", "Tracer", "Volume", "atlas", "auto_step", "bake", "bake_settings", "basis_glsl", "basis_of",
            "basis_options", "beyond_bounds", "classify", "data_texture", "glsl", "grid_of", "inside_geometry", "load",
            "manifest", "off_surfaces", "outside_camera_rooms", "outside_sealed_room", "placement_warnings",
            "probe_bytes", "project", "random_rotation", "ray_directions", "read_manifest", "relocate", "sampled",
@@ -84,7 +85,7 @@ def switch_off(tracer, grid: Grid, offset, t, dirs, obj, settings: dict, camera)
 
 def bake(job, settings: dict, progress=None) -> dict:
     """The volume of a job's scene (render/units.py Job: the scene, a runtime and the bake store;
-    the probes unit asks for it): a dict of the arrays (as load() returns) and a report."""
+    the probes unit asks for it): a Volume of the arrays (as load() returns) and a report."""
     t0 = time.perf_counter()
     arrays = job.arrays
     from iblbake.scene import pack
@@ -176,7 +177,7 @@ def warnings(report: dict, scene_data: dict, volume: dict | None = None) -> list
     if volume is not None:
         nx, ny, nz = volume["counts"]
         for what, texels in (("irradiance", volume["irradiance_texels"]), ("distance", volume["distance_texels"])):
-            if what == "irradiance" and volume["representation"] != "octahedral":
+            if what == "irradiance" and not basis_of(volume).atlas:
                 continue
             w, h = (texels + 2) * nx * ny, (texels + 2) * nz
             if max(w, h) > MAX_ATLAS_SIDE:

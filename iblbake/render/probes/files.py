@@ -10,43 +10,37 @@ from pathlib import Path
 
 import numpy as np
 
-from iblbake.core import bases
+from iblbake.core.bases.probes import PROBE_BASES
 from iblbake.errors import IblbakeError
 from iblbake.render.probes.grid import Grid
 from iblbake.render.probes.relocation import ACTIVE, INACTIVE, MAX_OFFSET
-from iblbake.render.probes.volume import basis_options, volume_dict
+from iblbake.render.probes.volume import basis_of, volume_dict
 
 FORMAT = "iblbake-probes"
 VERSION = 1
-# a directional basis (core/bases PROBES) stores each probe's radiance coefficients in its layout
-FILES = {"octahedral": "irradiance.exr", "sh": "irradiance_sh.exr", **{n: f"basis_{n}.exr" for n in bases.PROBES}}
+FILES = {n: b.file for n, b in PROBE_BASES.items()}      # each probe basis's file (core/bases/probes.py)
 
 
 def manifest(volume: dict) -> dict:
     """The manifest of a sampled volume's files: the grid, the representation, how to sample it
     and every convention the files are read with, each probe's state."""
-    g, s = volume["grid"], volume["settings"]
+    g, s, basis = volume["grid"], volume["settings"], basis_of(volume)
     states = volume["data"][:, 3].astype(int)
     return {
         "format": FORMAT, "version": VERSION,
         "grid": {"origin": list(g.origin), "spacing": list(g.spacing), "counts": list(g.counts),
                  "probe_position": "origin + (gx, gy, gz) * spacing + offset"},
-        "representation": volume["representation"],
-        "files": {"irradiance": FILES[volume["representation"]], "distance": "distance.exr",
-                  "probe_data": "probe_data.exr",
-                  # the table probes.glsl's ambient-dice specular reads (kernels: basis_table)
-                  **({"specular_table": "ambient_dice_specular.exr"} if volume["representation"] == "ambient_dice"
-                     else {})},
+        "representation": basis.name,
+        "files": {"irradiance": basis.file, "distance": "distance.exr", "probe_data": "probe_data.exr",
+                  # the table probes.glsl's specular reads (kernels: basis_table)
+                  **({"specular_table": basis.specular_table} if basis.specular_table else {})},
         "irradiance_texels": volume["irradiance_texels"], "distance_texels": volume["distance_texels"],
         "normal_bias": volume["normal_bias"], "view_bias": volume["view_bias"],
         "visibility": volume["visibility"], "classification": volume["classification"],
         "settings": {k: v for k, v in s.items()},
         "states": {"active": int((states == ACTIVE).sum()), "inactive": int((states == INACTIVE).sum())},
         "conventions": {
-            "units": ("irradiance E (W m^-2 for radiance in W m^-2 sr^-1), linear, float32; diffuse = albedo / pi * E"
-                      if volume["representation"] in ("octahedral", "sh") else
-                      "radiance coefficients of the basis (W m^-2 sr^-1 in radiance units), linear, float32; its "
-                      "irradiance function gives E, diffuse = albedo / pi * E"),
+            "units": basis.units,
             "probe_index": "gy * nx * nz + gz * nx + gx (RTXGI, right-handed, y up)",
             "atlas": "probe tile (n + 2) texels square, 1-texel octahedral border; tile column gx + gy * nx, "
                      "row gz; the file's first row at the top (v = 0)",
@@ -58,20 +52,8 @@ def manifest(volume: dict) -> dict:
                           "A = state (0 active, 1 inactive), as RTXGI's probe data texture",
         },
         "report": volume["report"],
-        **({"basis": basis_manifest(volume)} if volume["representation"] in bases.PROBES else {}),
+        **basis.manifest(volume),
     }
-
-
-def basis_manifest(volume: dict) -> dict:
-    """What a basis's file holds: the basis, its options and its layout (the basis module's)."""
-    rep = volume["representation"]
-    m = bases.BASES[rep]
-    return {"name": rep, "title": m.TITLE, "options": basis_options(volume["settings"]), "floats": m.floats(
-            basis_options(volume["settings"])),
-            "layout": f"{FILES[rep]}: row = probe index, column k = the basis's coefficient k (RGB radiance "
-                      f"coefficients, world frame; back-face rays black); the basis's own layout, its rows being "
-                      f"the columns here: " + " ".join(m.__doc__.split("Layout:")[1].split()),
-            "irradiance": "docs/conventions.md 'Directional bases'; probes.glsl's probeOwnIrradiance evaluates it"}
 
 
 def data_texture(data: np.ndarray, grid: Grid) -> np.ndarray:
@@ -90,7 +72,7 @@ def save(volume: dict, folder: Path) -> list:
     folder = Path(folder)
     names = []
     irr = volume["irradiance"]
-    name = FILES[volume["representation"]]
+    name = basis_of(volume).file
     images.write_exr(folder / name, np.asarray(irr, np.float32))
     names.append(name)
     images.write_exr(folder / "distance.exr", np.asarray(volume["distance"], np.float32), channels=("R", "G"))
@@ -126,10 +108,9 @@ def load(folder: Path, man: dict, manifest_name: str = "probes.json") -> dict:
                                                                for x in (n, nd))
                 and isinstance(settings, dict) and isinstance(settings.get("classification"), bool)):
             raise ValueError("representation, texels or settings")
-        if rep in bases.PROBES:
-            for k, (choices, _default, _doc) in bases.BASES[rep].OPTIONS.items():
-                if settings.get(k) not in choices:
-                    raise ValueError(f"settings.{k}")
+        for k, (choices, _default, _doc) in PROBE_BASES[rep].option_specs.items():
+            if settings.get(k) not in choices:
+                raise ValueError(f"settings.{k}")
     except (KeyError, TypeError, ValueError) as e:
         raise _bad(where, f"manifest lacks or mangles {e}") from None
     if min(grid.counts) < 1 or grid.count > 1 << 20 or min(grid.spacing) <= 0 \
@@ -151,20 +132,11 @@ def load(folder: Path, man: dict, manifest_name: str = "probes.json") -> dict:
             raise _bad(path, "holds a value that is not finite")
         return a
 
-    if rep == "sh":
-        irr = read(FILES[rep], (grid.count, 9, 3))
-    elif rep in bases.PROBES:
-        m = bases.BASES[rep]
-        opts = {k: settings[k] for k in m.OPTIONS}
-        irr = read(FILES[rep], (grid.count, m.floats(opts), 3))
-        try:                          # every probe's coefficients as one basis's columns
-            m.validate(irr.transpose(1, 0, 2).reshape(irr.shape[1], -1), opts)
-        except ValueError as e:
-            raise _bad(folder / FILES[rep], str(e)) from None
-    else:
-        irr = read(FILES[rep], ((n + 2) * nz, (n + 2) * nx * ny, 3))
-        if (irr < 0).any():
-            raise _bad(folder / FILES[rep], "holds negative irradiance")
+    basis = PROBE_BASES[rep]
+    irr = read(basis.file, basis.shape(grid, {**settings, "irradiance_texels": n}))
+    wrong = basis.check(irr, basis.options(settings))
+    if wrong:
+        raise _bad(folder / basis.file, wrong)
     dist = read("distance.exr", ((nd + 2) * nz, (nd + 2) * nx * ny, 2))
     if (dist < 0).any():
         raise _bad(folder / "distance.exr", "holds a negative distance moment")

@@ -5,8 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from iblbake.core import bases
-from iblbake.render.probes.volume import basis_options
+from iblbake.core.bases.probes import PROBE_BASES
+from iblbake.render.probes.volume import basis_of
+from iblbake.scene.layout import PROBE_VOLUME, PROBE_WEIGHTS
 
 
 SH_GLSL = ("0.28209479177387814", "0.4886025119029199 * d.y", "0.4886025119029199 * d.z", "0.4886025119029199 * d.x",
@@ -16,25 +17,12 @@ SH_GLSL = ("0.28209479177387814", "0.4886025119029199 * d.y", "0.488602511902919
 
 
 def basis_glsl(name: str, opts: dict) -> tuple:
-    """(the basis's own GLSL functions (core/bases glsl) with its coefficient array a variable
-    instead of a constant, the lines of probeOwnIrradiance that fill it from the probe's row of the
-    file and call its irradiance function, the same of probeOwnSpecular calling its specular one
-    where the basis carries a lobe, else ""): one formula, the basis module's."""
-    import re
-    m = bases.BASES[name]
-    k = m.floats(opts)
-    src = m.glsl(np.zeros((k, 3)), opts)
-    src, found = re.subn(rf"const vec3 {m.GLSL_COEFFS}\[{k}\] = vec3\[{k}\]\(.*?\n\);",
-                         f"vec3 {m.GLSL_COEFFS}[{k}];     // the probe's coefficients (probeOwnIrradiance)", src,
-                         flags=re.S)
-    assert found == 1, name
-    fill = f"    for (int k = 0; k < {k}; ++k) {m.GLSL_COEFFS}[k] = texelFetch(probeIrradianceAtlas, ivec2(k, index), 0).rgb;\n"
-    own = fill + f"    return {m.GLSL_IRRADIANCE}(d);"
-    spec = fill + f"    return {m.GLSL_SPECULAR}(n, v, roughness);" if name in bases.SPECULAR else ""
-    return src, own, spec
+    """(functions, probeOwnIrradiance's lines, probeOwnSpecular's lines) of probe basis `name` with
+    options `opts` (core/bases/probes.py glsl: a directional basis' own GLSL, one formula)."""
+    return PROBE_BASES[name].glsl(opts)
 
 
-SPECULAR_TABLE = "ambient_dice_specular.exr"      # ambient dice's table, beside the atlases (iblbake probes)
+SPECULAR_TABLES = tuple(b.specular_table for b in PROBE_BASES.values() if b.specular_table)   # beside the atlases
 SPECULAR_HELP = """
 // specular (the basis carries a lobe; effects.specular: probes) = (F0 A + F90 B) (the split sum's DFG
 // table at n.v, roughness) * mix(skySpecular, probeSpecularRadiance(P, N, V, roughness), probeVolumeWeight(P)):
@@ -42,42 +30,43 @@ SPECULAR_HELP = """
 // distant prefiltered chain takes over outside the volume."""
 
 
+def record_constants(volume: dict) -> str:
+    """The volume record (scene/layout.py PROBE_VOLUME) as GLSL constants PROBE_<NAME>."""
+    rows = []
+    for name, (_row, _lane, n, kind) in PROBE_VOLUME.items():
+        values = [volume[name]] if n == 1 else list(volume[name])
+        text = ", ".join(str(int(x)) if kind == "int" else f"{x:.9g}" for x in values)
+        glsl_type = {"int": "int", "float": "float"}[kind] if n == 1 else ("ivec" if kind == "int" else "vec") + str(n)
+        rows.append(f"const {glsl_type} PROBE_{name.upper()} = {text if n == 1 else f'{glsl_type}({text})'};")
+    return "\n".join(rows)
+
+
 def glsl(volume: dict, man: dict) -> str:
     """A GLSL function sampling the written files as kernels/probes.h does (the hardware's bilinear
     filter in place of its reads), the volume's grid and settings baked in."""
-    def vec(v):
-        return "vec3(" + ", ".join(f"{x:.9g}" for x in v) + ")"
-
+    w = {k: repr(v) for k, v in PROBE_WEIGHTS.items()}      # DDGI's weights, as the kernel's
     nx, ny, nz = volume["counts"]
-    rep = volume["representation"]
-    sh_rep = rep == "sh"
+    entry = basis_of(volume)
+    flags = entry.defines(volume["settings"])             # kernels/probes.h's switches, the same here
     basis = "\n".join(f"    Y[{k}] = {e};" for k, e in enumerate(SH_GLSL))
-    basis_src, own, spec = "", "", ""
-    if rep in bases.PROBES:
-        basis_src, own, spec = basis_glsl(rep, basis_options(volume["settings"]))
-    table = (f"\n//   ambientDiceSpecularTable  {SPECULAR_TABLE} (unfiltered: the specular functions read it "
-             f"bilinearly)" if rep == "ambient_dice" else "")
+    basis_src, own, spec = entry.glsl(volume["settings"])
+    table = (f"\n//   {entry.glsl_table}  {entry.specular_table} (unfiltered: the specular functions read it "
+             f"bilinearly)" if entry.specular_table else "")
     return f"""// iblbake irradiance probes: {nx} x {ny} x {nz}, {volume['representation']} irradiance, RTXGI-DDGI layout
 // (probes.json holds the conventions). Bind the files as 2D float textures, each with its first
 // (top) row at t = 0, clamped to the edge:
-//   probeIrradianceAtlas  {man['files']['irradiance']} ({'linear' if rep == 'octahedral' else 'nearest'} filtering)
+//   probeIrradianceAtlas  {man['files']['irradiance']} ({'linear' if entry.atlas else 'nearest'} filtering)
 //   probeDistanceAtlas    distance.exr (linear filtering)
 //   probeDataTexture      probe_data.exr (nearest){table}
 // diffuse = albedo / PI * mix(skyIrradiance(N), probeIrradiance(P, N, V), probeVolumeWeight(P)):
 // world position, unit shading normal, unit vector towards the viewer; the sky's irradiance (say
 // `iblbake sh --glsl`'s shIrradiance) takes over outside the volume.{SPECULAR_HELP if spec else ""}
-#define PROBES_SH {int(sh_rep)}
-#define PROBES_BASIS {int(bool(basis_src))}
+#define PROBES_SH {int("PROBES_SH" in flags)}
+#define PROBES_BASIS {int("PROBES_BASIS" in flags)}
 #define PROBES_SPECULAR {int(bool(spec))}
 #define PROBE_VISIBILITY {int(volume['visibility'])}
 #define PROBE_CLASSIFICATION {int(volume['classification'])}
-const ivec3 PROBE_COUNTS = ivec3({nx}, {ny}, {nz});
-const vec3 PROBE_ORIGIN = {vec(volume['origin'])};
-const vec3 PROBE_SPACING = {vec(volume['spacing'])};
-const float PROBE_NORMAL_BIAS = {volume['normal_bias']:.9g};
-const float PROBE_VIEW_BIAS = {volume['view_bias']:.9g};
-const int PROBE_IRRADIANCE_TEXELS = {volume['irradiance_texels']};
-const int PROBE_DISTANCE_TEXELS = {volume['distance_texels']};
+{record_constants(volume)}
 
 uniform sampler2D probeIrradianceAtlas;
 uniform sampler2D probeDistanceAtlas;
@@ -145,9 +134,9 @@ float probeContribution(ivec3 c, vec3 p, vec3 biased, vec3 n, vec3 v, vec3 fallo
 #endif
 #if PROBE_VISIBILITY
     vec3 pp = PROBE_ORIGIN + vec3(c) * PROBE_SPACING + data.xyz * PROBE_SPACING;
-    vec3 tri = max(falloff, vec3(0.001));
+    vec3 tri = max(falloff, vec3({w['TRILINEAR_FLOOR']}));
     float wrap = 0.5 * (dot(normalize(pp - p), n) + 1.0);
-    float w = wrap * wrap + 0.2;
+    float w = wrap * wrap + {w['WRAP_FLOOR']};
     vec3 toProbe = pp - biased;
     float dist = length(toProbe);
     vec2 m = textureLod(probeDistanceAtlas, probeUV(index, probeOctahedral(-toProbe / dist), PROBE_DISTANCE_TEXELS),
@@ -158,9 +147,9 @@ float probeContribution(ivec3 c, vec3 p, vec3 biased, vec3 n, vec3 v, vec3 fallo
         cheb = variance / (variance + dv * dv);
         cheb = cheb * cheb * cheb;
     }}
-    w *= max(0.05, cheb);
+    w *= max({w['CHEBYSHEV_FLOOR']}, cheb);
     w = max(1e-6, w);
-    if (w < 0.2) w *= w * w * (1.0 / (0.2 * 0.2));
+    if (w < {w['CRUSH']}) w *= w * w * (1.0 / ({w['CRUSH']} * {w['CRUSH']}));
     value = specular ? e : sqrt(e);
     return w * tri.x * tri.y * tri.z;
 #else

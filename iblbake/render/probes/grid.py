@@ -74,7 +74,8 @@ INTERIOR_FRACTION = 0.5          # the automatic spacing: this share of the encl
 def probe_bytes(settings: dict) -> int:
     """Bytes a probe takes in the volume's float4 buffers (irradiance and distance tiles with their
     borders, its data row): what a grid's count costs, said up front."""
-    irr = (settings["irradiance_texels"] + 2) ** 2 if settings["irradiance"] == "octahedral" else 16
+    from iblbake.core.bases.probes import PROBE_BASES
+    irr = PROBE_BASES[settings["irradiance"]].device_floats(settings)
     return 16 * (irr + (settings["distance_texels"] + 2) ** 2 + 1)
 
 

@@ -1,14 +1,13 @@
 """The rays' projection (render/probes): each probe's traced rays into RTXGI's atlases (octahedral
 irradiance tiles with their 1-texel borders, the distance moments), or into L2 SH irradiance, or
-into a directional basis's radiance coefficients (core/bases PROBES project_rays)."""
+into a directional basis's radiance coefficients (core/bases/probes.py PROBE_BASES)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from iblbake.core import bases, sh
+from iblbake.core.bases.probes import PROBE_BASES
 from iblbake.render.probes.grid import Grid
-from iblbake.render.probes.volume import basis_options
 from iblbake.render.twin import probes as twin
 
 BACKFACE_BLEND_LIMIT = 0.1       # a probe with this share of back-face rays blends no irradiance
@@ -48,24 +47,16 @@ def project(radiance, t, dirs, grid: Grid, settings: dict):
     L2 fit of those rays' radiance (a field in the span, a uniform sky, is exact), convolved with
     the clamped cosine. Distance moments: weights cos^distance_exponent, the mean of min(|t|,
     1.5 |spacing|) and of its square over every ray (RTXGI halves both; the moments here are the
-    means the Chebyshev test reads). A directional basis (core/bases PROBES): its own project_rays
+    means the Chebyshev test reads). A directional basis (core/bases/probes.py): its own project_rays
     on the same rays, back-face rays black: (probes, floats, 3) radiance coefficients."""
     p, r = t.shape
     front = (t >= 0).astype(np.float64)
     blends = (1 - front).mean(1) < BACKFACE_BLEND_LIMIT
     lit = radiance * front[..., None]
     lit_rows = lit.transpose(0, 2, 1).reshape(p * 3, r)            # one GEMM for every probe and colour
-    if settings["irradiance"] == "sh":
-        y = sh.sh_basis(dirs, 3)                                    # (rays, 9)
-        a = np.einsum("pr,rk,rj->pkj", front, y, y, optimize=True)
-        b = (lit_rows @ y).reshape(p, 3, 9).transpose(0, 2, 1)
-        a[~blends] = np.eye(9)
-        coeffs = np.linalg.solve(a, b) * sh.ahat(3)[None, :, None]
-        irr = np.where(blends[:, None, None], coeffs, 0.0)
-    elif settings["irradiance"] in bases.PROBES:
-        # the basis's own fit on the rays (an equal-area set: moments 4 pi / N sum L B), back faces black
-        coeffs = bases.BASES[settings["irradiance"]].project_rays(lit, dirs, basis_options(settings))
-        irr = np.where(blends[:, None, None], coeffs, 0.0)
+    basis = PROBE_BASES[settings["irradiance"]]
+    if not basis.atlas:              # the basis's own fit on the rays (core/bases/probes.py), back faces black
+        irr = basis.project_rays(lit, front, blends, dirs, basis.options(settings))
     else:
         n = settings["irradiance_texels"]
         w = np.maximum(0.0, twin.texel_directions(n) @ dirs.T)      # (texels, rays)

@@ -5,13 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from iblbake.core import bases
 from iblbake.render import probes
 from iblbake.render.buffers import Buffer
 from iblbake.render.sources.base import Source
+from iblbake.scene.layout import pack_probe_volume
 
-PARAMS = ("probe_data", "probe_irr", "probe_dist", "probe_origin", "probe_spacing", "probe_nx", "probe_ny", "probe_nz",
-          "probe_irr_texels", "probe_dist_texels")
+PARAMS = ("probe_data", "probe_irr", "probe_dist", "probe_volume")
 
 
 class IrradianceProbes(Source):
@@ -42,11 +41,8 @@ class IrradianceProbes(Source):
 
 def probe_defines(settings: dict) -> dict:
     """kernels/probes.h's switches for a scene's probes section."""
-    d = {"PROBES_SH": 1} if settings["irradiance"] == "sh" else {}
-    if settings["irradiance"] in bases.PROBES:
-        m, opts = bases.BASES[settings["irradiance"]], probes.basis_options(settings)
-        d = {**m.defines(opts), "PROBES_BASIS": 1, "BASIS_SPACE": "__global",
-             "PROBE_BASIS_ROWS": len(m.pack(np.zeros((m.floats(opts), 3)), opts))}
+    from iblbake.core.bases.probes import PROBE_BASES
+    d = dict(PROBE_BASES[settings["irradiance"]].defines(settings))
     if settings["visibility"]:
         d["PROBE_VISIBILITY"] = 1
     if settings["classification"]:
@@ -59,27 +55,21 @@ def probe_args(rt, vol, bakes=None) -> dict:
     `bakes` (render.Bakes) its atlases go up once per runtime (a series of frames, a study's rungs)."""
     if vol is None:
         z = rt.to_device(np.zeros((1, 4), np.float32))
-        return {"probe_data": z, "probe_irr": z, "probe_dist": z, "probe_origin": np.zeros(4), "probe_spacing": np.ones(4),
-                "probe_nx": 1, "probe_ny": 1, "probe_nz": 1, "probe_irr_texels": 1, "probe_dist_texels": 1}
+        none = {"counts": (1, 1, 1), "origin": (0, 0, 0), "spacing": (1, 1, 1), "normal_bias": 0, "view_bias": 0,
+                "irradiance_texels": 1, "distance_texels": 1}
+        return {"probe_data": z, "probe_irr": z, "probe_dist": z, "probe_volume": rt.to_device(pack_probe_volume(none))}
 
     def upload():
-        irr = np.asarray(vol["irradiance"], np.float32)
-        if vol["representation"] in bases.PROBES:         # each probe's block as its basis packs it
-            m, opts = bases.BASES[vol["representation"]], probes.basis_options(vol["settings"])
-            irr = np.stack([m.pack(c, opts) for c in irr])
-        else:
-            irr = np.pad(irr, [(0, 0)] * (irr.ndim - 1) + [(0, 1)])
+        basis = probes.basis_of(vol)           # each probe's block as its basis packs it
+        irr = basis.pack(vol["irradiance"], basis.options(vol["settings"]))
         dist = np.asarray(vol["distance"], np.float32)
         return (rt.to_device(np.asarray(vol["data"], np.float32)),
-                rt.to_device(irr.reshape(-1, 4)),
+                rt.to_device(irr),
                 rt.to_device(np.pad(dist, ((0, 0), (0, 0), (0, 2))).reshape(-1, 4)))
     data, irr, dist = bakes.on_device(rt, (vol["data"], vol["irradiance"], vol["distance"]), upload) \
         if bakes is not None else upload()
     return {"probe_data": data, "probe_irr": irr, "probe_dist": dist,
-            "probe_origin": np.array([*vol["origin"], vol["normal_bias"]], np.float32),
-            "probe_spacing": np.array([*vol["spacing"], vol["view_bias"]], np.float32),
-            **dict(zip(("probe_nx", "probe_ny", "probe_nz"), vol["counts"])),
-            "probe_irr_texels": vol["irradiance_texels"], "probe_dist_texels": vol["distance_texels"]}
+            "probe_volume": rt.to_device(pack_probe_volume(vol))}
 
 
 class ProbeSpecular(Source):

@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from iblbake.core import bases, sh
+from iblbake.core.bases.probes import PROBE_BASES
+from iblbake.scene.layout import PROBE_WEIGHTS
 
-CRUSH = 0.2                 # Irradiance.hlsl: weights below it are crushed, w^3 / CRUSH^2
-WRAP_FLOOR = 0.2            # the wrap-shading term's offset
-CHEBYSHEV_FLOOR = 0.05      # visibility never quite 0: some probe must count
-TRILINEAR_FLOOR = 0.001     # with visibility, as RTXGI
+# DDGI's weights (Irradiance.hlsl), the kernel's and probes.glsl's: scene/layout.py PROBE_WEIGHTS
+CRUSH, WRAP_FLOOR = PROBE_WEIGHTS["CRUSH"], PROBE_WEIGHTS["WRAP_FLOOR"]
+CHEBYSHEV_FLOOR, TRILINEAR_FLOOR = PROBE_WEIGHTS["CHEBYSHEV_FLOOR"], PROBE_WEIGHTS["TRILINEAR_FLOOR"]
 
 
 def octahedral(d):
@@ -74,17 +74,9 @@ def atlas_read(atlas, index, oct_uv, n: int, counts):
 
 def irradiance_at(volume, index, n):
     """Each probe's own irradiance at normals n (>= 0)."""
-    rep = volume["representation"]
-    if rep == "sh":
-        e = np.einsum("...k,...kc->...c", sh.sh_basis(n, 3), volume["irradiance"][index])
-    elif rep in bases.PROBES:       # the basis's own float64 irradiance, probe by probe
-        m = bases.BASES[rep]
-        opts = {k: volume["settings"][k] for k in m.OPTIONS}
-        index = np.asarray(index)
-        e = np.zeros(index.shape + (3,))
-        for i in np.unique(index):
-            sel = index == i
-            e[sel] = m.irradiance(volume["irradiance"][i], n[sel], opts)
+    basis = PROBE_BASES[volume["representation"]]      # a coefficient basis evaluates itself (core/bases/probes.py)
+    if not basis.atlas:
+        e = basis.irradiance_at(volume["irradiance"], index, n, basis.options(volume["settings"]))
     else:
         e = atlas_read(volume["irradiance"], index, octahedral(n), volume["irradiance_texels"], volume["counts"])[..., :3]
     return np.maximum(e, 0.0)

@@ -7,6 +7,7 @@ import numpy as np
 
 from iblbake.core import bases, brdf
 from iblbake.core.bases import common
+from iblbake.core.bases.probes import PROBE_BASES
 from iblbake.core import conventions
 from iblbake.bake.dfg import dfg_lookup
 from iblbake.bake import radiance
@@ -106,9 +107,8 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
             r = n + (r - n) * (s * (np.sqrt(s) + alpha[:, None]))
             r /= np.linalg.norm(r, axis=1, keepdims=True)
         sky = scale * radiance.chain_lookup_twin(prefiltered, to_env(r, rot), rough * (len(prefiltered) - 1))
-        name = probes["representation"]
-        spec = bases.BASES[name].specular_weights(common.lobe_axis(n, v, alpha), common.warp_sharpness(alpha, nov),
-                                                  {k: probes["settings"][k] for k in bases.BASES[name].OPTIONS})
+        spec = PROBE_BASES[probes["representation"]].specular_weights(
+            common.lobe_axis(n, v, alpha), common.warp_sharpness(alpha, nov), probes["settings"])
         li = probe_twin.specular(probes, gb["pos"][hit], n, v, spec, sky)
         ab = dfg_lookup(dfg, nov, rough)
         color += spec_occ * li * (f0 * ab[:, 0:1] + f90 * ab[:, 1:2])
