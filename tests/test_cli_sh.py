@@ -163,13 +163,13 @@ def test_device_probe_prints_no_compiler_warning(monkeypatch):
     """A probe build that logs (NVIDIA notes every inlined kernel; here a conversion warning)
     still counts and prints nothing: pyopencl's CompilerWarning is suppressed as for every build."""
     import warnings
-    from iblbake.device import runtime
-    devices, _ = runtime.enumerate_devices()
-    monkeypatch.setattr(runtime, "PROBE_SOURCE", runtime.PROBE_SOURCE.replace(
+    from iblbake.device import choice
+    devices, _ = choice.enumerate_devices()
+    monkeypatch.setattr(choice, "PROBE_SOURCE", choice.PROBE_SOURCE.replace(
         "{ int i", "{ int unused = 1.5; int i"))
     with warnings.catch_warnings(record=True) as seen:
         warnings.simplefilter("always")
-        info = runtime.probe(devices[0])
+        info = choice.probe(devices[0])
     assert info.ok, info.reason
     assert not [w for w in seen if "compiler" in str(w.category).lower()], [str(w.message) for w in seen]
 

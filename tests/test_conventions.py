@@ -84,7 +84,7 @@ def _kernel(rt, name, n, inputs, out_floats):
 
 
 def test_kernels_flush_subnormal_floats(rt):
-    """Every program runs with subnormals flushed (runtime.DENORMS; docs/conventions.md amendment
+    """Every program runs with subnormals flushed (programs.DENORMS; docs/conventions.md amendment
     15), as operands (an integer's bits in a record's w lane read as a float: DAZ) and as results
     (FTZ); normal floats are untouched. Without the flush this CPU took a microcode assist for each
     such operand: the reference 1.2-3.7x slower (docs/benchmarks.md "Subnormal floats")."""
