@@ -242,7 +242,7 @@ def test_uniform_sky_probes_are_the_environment_sh(tmp_path, rt, sky, rep):
     Lambert sphere shaded from them equals `diffuse: sh` to float32 rounding."""
     bakes = Bakes(tmp_path / "cache")
     frame = render(far_sphere_scene(tmp_path, sky, rep), runtime=rt, cache=bakes)
-    vol = bakes._memo[next(k for k in bakes._memo if isinstance(k, str) and k.startswith("probes-"))][0]
+    vol = bakes.result("probes")
     assert frame.report["bakes"][-1]["name"] == "probes"
     if rep == "sh":
         want = np.zeros((9, 3))
@@ -360,7 +360,7 @@ def test_relocation_and_classification(tmp_path, rt, sky):
         "effects": {"diffuse": "probes", "specular": "off"}})
     bakes = Bakes(tmp_path / "cache")
     render(sc, runtime=rt, cache=bakes)
-    vol = next(v[0] for k, v in bakes._memo.items() if isinstance(k, str) and k.startswith("probes-"))
+    vol = bakes.result("probes")
     centre = twin.probe_index(np.array([1, 1, 1]), (5, 3, 3))
     off = vol["data"][centre, :3]
     assert np.linalg.norm(off / 2.0) < 0.45
@@ -504,7 +504,7 @@ def test_frame_matches_the_twin(tmp_path, rt, sky):
     sc = write(tmp_path, "rooms_outside", doc)
     bakes = Bakes(tmp_path / "cache")
     frame = render(sc, runtime=rt, cache=bakes)
-    vol = next(v[0] for k, v in bakes._memo.items() if isinstance(k, str) and k.startswith("probes-"))
+    vol = bakes.result("probes")
     arrays = pack.scene_arrays(sc)
     gb = rr.primary(sc["camera"], arrays)
     coeffs = sh.project(images.read_exr(sky)[..., :3], 3) * sh.ahat(3)[:, None]
@@ -541,7 +541,7 @@ def test_probe_rays_in_a_glowing_box(tmp_path, rt, bounces):
         "effects": {"diffuse": "probes", "specular": "off"}})
     bakes = Bakes(tmp_path / "cache")
     render(sc, runtime=rt, cache=bakes)
-    vol = next(v[0] for k, v in bakes._memo.items() if isinstance(k, str) and k.startswith("probes-"))
+    vol = bakes.result("probes")
     n = vol["irradiance_texels"]
     tiles = vol["irradiance"].reshape(2, n + 2, 4, n + 2, 3)[:, 1:-1, :, 1:-1]
     want = math.pi * e * (1 / (1 - a) if bounces == "unbounded" else sum(a ** j for j in range(bounces + 1)))
@@ -606,7 +606,7 @@ def test_probes_under_a_lobed_sky_point_where_the_sky_is(tmp_path, rt, lobed_sky
     sc.data["probes"]["rays"] = 1024
     bakes = Bakes(tmp_path / "cache")
     render(sc, runtime=rt, cache=bakes)
-    vol = bakes._memo[next(k for k in bakes._memo if isinstance(k, str) and k.startswith("probes-"))][0]
+    vol = bakes.result("probes")
     img = images.read_exr(lobed_sky)[..., :3].astype(np.float64)
     h, w = img.shape[:2]
     v, u = np.meshgrid((np.arange(h) + 0.5) / h, (np.arange(w) + 0.5) / w, indexing="ij")

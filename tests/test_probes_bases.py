@@ -32,7 +32,7 @@ def with_basis(sc, name, opts):
 
 
 def baked_volume(bakes):
-    return bakes._memo[next(k for k in bakes._memo if isinstance(k, str) and k.startswith("probes-"))][0]
+    return bakes.result("probes")
 
 
 def basis_volume(name, opts, rng, counts=(3, 2, 4), states=None):

@@ -132,8 +132,8 @@ def test_metal_sphere_frame_matches_the_twin(tmp_path, rt, lobed_sky, name, opts
     sc = metal_scene(tmp_path, lobed_sky, name, opts)
     given = Given(tmp_path / "cache", vol)
     frame = render(sc, runtime=rt, cache=given)
-    chain = next(v[0] for k, v in given._memo.items() if isinstance(k, tuple) and k[0] == "prefiltered")
-    dfg = next(v[0] for k, v in given._memo.items() if isinstance(k, tuple) and k[0] == "dfg")
+    chain = given.result("prefiltered")
+    dfg = given.result("dfg")
     arrays = pack.scene_arrays(sc)
     gb = rr.primary(sc["camera"], arrays)
     hit = gb["hit"]

@@ -131,7 +131,7 @@ def open_box(folder, sky, inward: bool, diffuse="probes"):
 
 
 def baked(bakes):
-    return next(v[0] for k, v in bakes._memo.items() if isinstance(k, str) and k.startswith("probes-"))
+    return bakes.result("probes")
 
 
 def test_a_box_of_quads_lights_its_sphere_whichever_way_they_are_wound(tmp_path, rt, lobed_sky):
@@ -321,6 +321,5 @@ def test_negative_texels_do_not_spoil_a_bake(tmp_path, rt):
         bakes = Bakes(tmp_path / "cache")
         render(sc, runtime=rt, cache=bakes)
         assert (baked(bakes)["irradiance"] >= 0).all()
-        (capture, _cached, _report), = [v for k, v in bakes._memo.items() if isinstance(k, tuple)
-                                        and k[0] == "reflection"]
+        (capture, _cached, _report), = list(bakes.held("reflection").values())
         assert (capture >= 0).all() and capture[..., 3].max() == 1
