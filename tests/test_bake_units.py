@@ -16,7 +16,7 @@ import pytest
 from iblbake.io import images
 from iblbake.render import Bakes, plan, render, units
 from iblbake.render.units import Job, Unit, order
-from tests.conftest import load_scene
+from tests.helpers import load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 

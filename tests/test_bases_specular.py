@@ -14,7 +14,7 @@ from iblbake.core import bases, brdf
 from iblbake.core.bases import common
 from iblbake.errors import InputError
 from iblbake.render.plan import plan
-from tests.conftest import load_scene
+from tests.helpers import load_scene
 
 SG = bases.BASES["sg"]
 AD = bases.BASES["ambient_dice"]

@@ -19,7 +19,7 @@ from iblbake.device import icd
 from iblbake.device import choice as cl
 from iblbake.device import programs
 
-from .conftest import run_cli
+from tests.helpers import run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 

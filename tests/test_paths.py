@@ -12,7 +12,7 @@ import pytest
 
 from iblbake.render import render
 from iblbake.io import images
-from tests.conftest import load_scene
+from tests.helpers import load_scene
 
 
 @pytest.fixture(scope="module")

@@ -17,9 +17,9 @@ from iblbake.render.bakes import Bakes
 from iblbake.render.sources.basis import table_args
 from iblbake.render.sources.probes import probe_args, probe_defines
 from iblbake.render.twin import probes as twin
-from tests.conftest import load_scene
-from tests.test_probes import Given, far_sphere_scene, settings, synthetic, unit
-from tests.test_probes_bases import baked_volume, basis_volume, with_basis
+from tests.helpers import load_scene
+from tests.probe_helpers import Given, far_sphere_scene, settings, synthetic, unit
+from tests.probe_helpers import baked_volume, basis_volume, with_basis
 
 CASES = [("sg", {"sg_lobes": 9, "sg_fit": "least_squares"}), ("ambient_dice", {"ad_fit": "least_squares"})]
 IDS = ["sg9", "ambient_dice"]

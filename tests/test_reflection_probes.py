@@ -15,7 +15,7 @@ from iblbake.render import plan, render
 from iblbake.io import images
 from iblbake.render.bakes import Bakes
 from iblbake.scene import load, pack
-from tests.conftest import BakeContext, load_scene, run_cli
+from tests.helpers import BakeContext, load_scene, run_cli
 
 
 write = load_scene

@@ -19,7 +19,6 @@ from iblbake.render import twin as rr
 from iblbake.scene import layout, pack
 from iblbake.scene import load as scene
 
-from .test_render import small_panoramas  # noqa: F401  (fixture: city and studio at 256x128)
 
 ROOT = Path(__file__).resolve().parents[1]
 R = 1.0

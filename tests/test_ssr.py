@@ -10,7 +10,7 @@ from iblbake.core import sh
 from iblbake.io import images
 from iblbake.render.bakes import Bakes
 from iblbake.scene import pack
-from tests.conftest import BakeContext, load_scene
+from tests.helpers import BakeContext, load_scene
 
 from pathlib import Path
 
