@@ -16,7 +16,7 @@ MAX_SAMPLES = 1 << 20
 # Host memory of the panorama bakes, measured with tracemalloc (64x32 to 1024x512 panoramas, every
 # basis and option; the constants hold the largest per texel, the fixed tables aside): the float64
 # copy of the texels and the exact irradiance the `error` blocks sum, per texel; sh's host
-# projection adds its (bands^2, rows x azimuth terms) contraction; a basis's fit its design rows.
+# projection adds its (bands^2, rows x azimuth terms) contraction (a basis's fit: api/bases.py).
 SH_BYTES_PER_TEXEL = {"numpy": 64, "opencl": 16}
 ERROR_BYTES_PER_TEXEL = 64
 TABLE_BYTES = 64 << 20
