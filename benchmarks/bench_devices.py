@@ -7,7 +7,7 @@ alternating within each round (so a busy spell of a shared machine falls on both
 seconds (the frame report's) and the whole render call's, median and range. The frames of the
 devices are compared (mean luminance, relative). With --build-log, the vectorisation remarks of
 Intel's build log per kernel (a fresh kernel cache, so the programs are built from source). With
---subnormals, each device twice: as iblbake builds (subnormal floats flushed, runtime.DENORMS) and
+--subnormals, each device twice: as iblbake builds (subnormal floats flushed, programs.DENORMS) and
 with subnormals kept, alternating, and whether the two frames are equal bit for bit.
 
     .venv/bin/python benchmarks/bench_devices.py [--devices pocl,intel-cpu] [--repeats 5] [--subnormals]
@@ -47,18 +47,18 @@ def main():
     os.environ["IBLBAKE_KERNEL_CACHE"] = str(tmp / "kernels")      # cold builds: their logs are there
 
     import iblbake
-    from iblbake.device import runtime
+    from iblbake.device import programs
     from iblbake.device.runtime import Runtime
     from iblbake.render import Bakes, render
     from iblbake.scene.load import AOVS
 
-    flush = runtime.DENORMS
+    flush = programs.DENORMS
     specs = [s + k for s in args.devices.split(",") for k in (("", KEPT) if args.subnormals else ("",))]
     runtimes = {s: Runtime(s.removesuffix(KEPT)) for s in specs}
     kept = {s for s in specs if s.endswith(KEPT)}
 
     def build_as(s):            # the option is read when a runtime builds a program (its first render)
-        runtime.DENORMS = "" if s in kept else flush
+        programs.DENORMS = "" if s in kept else flush
 
     def bits(a, b):
         return "equal bit for bit" if np.array_equal(a.view(np.uint32), b.view(np.uint32)) else \

@@ -80,7 +80,8 @@ def main():
     a = ap.parse_args()
     from iblbake.bake.radiance import to_rgba
     from iblbake.core.sampling import EnvironmentDistribution
-    from iblbake.device.runtime import Runtime, kernel_source
+    from iblbake.device.programs import kernel_source
+    from iblbake.device.runtime import Runtime
     per_item = 64
     items = a.samples // per_item
     with tempfile.TemporaryDirectory() as tmp:

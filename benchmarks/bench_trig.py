@@ -82,7 +82,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--devices", default=None, help="comma-separated --device specs; default the device iblbake picks")
     a = ap.parse_args()
-    from iblbake.device.runtime import Runtime, kernel_source
+    from iblbake.device.programs import kernel_source
+    from iblbake.device.runtime import Runtime
     per_item, items = 64, (1 << 20) // 64
     for spec in (a.devices.split(",") if a.devices else [None]):
         rt = Runtime(spec)

@@ -1,1 +1,1 @@
-"""OpenCL C sources of iblbake, shipped as package data (see iblbake/device/runtime.py)."""
+"""OpenCL C sources of iblbake, shipped as package data (see iblbake/device/programs.py)."""

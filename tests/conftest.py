@@ -1,9 +1,7 @@
-import contextlib
 import os
 import shutil
 import subprocess
 import tempfile
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +9,8 @@ import pytest
 import platformdirs
 from hypothesis import settings
 from hypothesis.configuration import set_hypothesis_home_dir
+
+from tests.helpers import ROOT, STRESS, box_downsample
 
 # `make test` (and CI) replays the same generated examples every run, so a result is reproducible;
 # `make stress` (IBLBAKE_STRESS=1) draws new ones each time to keep searching.
@@ -20,8 +20,6 @@ set_hypothesis_home_dir(os.path.join(platformdirs.user_cache_dir("iblbake"), "hy
 settings.register_profile("reproducible", derandomize=True, database=None)
 settings.register_profile("search", derandomize=False)
 settings.load_profile("search" if os.environ.get("IBLBAKE_STRESS") else "reproducible")
-
-ROOT = Path(__file__).resolve().parents[1]
 
 # Tests bake into a temporary folder, never into the working tree: a render or bake that names no
 # cache folder of its own lands here (subprocesses inherit it).
@@ -95,44 +93,16 @@ def load_panorama(panoramas):
     return load
 
 
-def write_exr(path, image, half=False):
+@pytest.fixture(scope="module")
+def small_panoramas(tmp_path_factory, load_panorama):
+    """city and studio at 256x128: the same light, faster to bake (tests of plumbing)."""
     from iblbake.io import images
-    images.write_exr(path, np.asarray(image, dtype=np.float32), half=half)
-    return str(path)
-
-
-def run_cli(*args, cwd=None, env=None):
-    """Run the installed CLI in a subprocess (end-to-end: exit codes, stderr, no tracebacks)."""
-    full_env = dict(os.environ)
-    full_env.pop("IBLBAKE_DEBUG", None)
-    if env:
-        full_env.update(env)
-    # a file name that is not UTF-8 is printed as its bytes: read back as Python names it
-    return subprocess.run([sys.executable, "-m", "iblbake.cli", *map(str, args)], capture_output=True,
-                          text=True, errors="surrogateescape", cwd=cwd, env=full_env, timeout=600)
-
-
-def scene_file(folder, env, *, name="scene.yaml", **sections):
-    """Write a scene file into `folder` and return its path: a unit sphere of material `m` seen
-    from +z at 64x64 under `env` (background hidden), with each top-level section given by
-    keyword replacing the default one (camera=, materials=, objects=, effects=, output=, lights=)
-    and `environment=` merged into the default environment. `materials` holding a base_color is
-    the one material `m`. The shared builder of every test's scenes."""
-    import yaml
-    doc = {"camera": {"perspective": {"position": [0, 0, 3], "fov_y": 45}, "resolution": [64, 64]},
-           "environment": {"path": str(env), "background": "hide"},
-           "materials": {"m": {}},
-           "objects": [{"sphere": {"radius": 1}, "material": "m"}]}
-    env_extra = sections.pop("environment", None) or {}
-    doc["environment"].update(env_extra)
-    for k, v in sections.items():
-        if v is not None:
-            doc[k] = v
-    if "base_color" in doc["materials"]:
-        doc["materials"] = {"m": doc["materials"]}
-    path = Path(folder) / name
-    path.write_text(yaml.safe_dump(doc))
-    return path
+    d = tmp_path_factory.mktemp("small")
+    out = {}
+    for name in ("city", "studio"):
+        out[name] = d / f"{name}.exr"
+        images.write_exr(out[name], box_downsample(load_panorama(name), 4).astype(np.float32))
+    return out
 
 
 @pytest.fixture(scope="session")
@@ -146,48 +116,7 @@ def lobed_sky(tmp_path_factory):
     return p
 
 
-def load_scene(folder, name, doc):
-    """Write the scene `doc` (a dict) as folder/NAME.yaml and load it (iblbake.scene.load)."""
-    import yaml
-    from iblbake.scene import load as scene_load
-    path = Path(folder) / f"{name}.yaml"
-    path.write_text(yaml.safe_dump(doc))
-    return scene_load.load(path)
-
-
-def mend_cache_entry(entry, edit_manifest=None, **arrays):
-    """Rewrite a cache entry as another version or a hand might: each name=array saved as NAME.npy
-    over the entry's file, edit_manifest(manifest) applied, and the manifest's sizes, times and
-    hashes made to match every file (one the caller rewrote itself, an EXR say, too), so that the
-    files pass its check and only what they hold is wrong."""
-    import hashlib
-    import json
-    from iblbake.bake import cache
-    man = json.loads((entry / cache.MANIFEST).read_text())
-    for name, a in arrays.items():
-        np.save(entry / f"{name}.npy", a)
-    if edit_manifest:
-        edit_manifest(man)
-    for f in man["files"]:
-        p = entry / f["name"]
-        f.update(sha256=hashlib.sha256(p.read_bytes()).hexdigest(), bytes=p.stat().st_size,
-                 mtime_ns=p.stat().st_mtime_ns)
-    (entry / cache.MANIFEST).write_text(json.dumps(man))
-
-
-def rel_err(a, b):
-    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
-    return float(np.abs(a - b).max() / max(np.abs(b).max(), 1e-300))
-
-
 # --- the stress report (issue 7): every stress case records its bound and what it measured ---------
-
-STRESS = os.environ.get("IBLBAKE_STRESS") == "1"     # `make stress`: more fuzz inputs and kill runs
-
-
-def stress_scale(fast: int, full: int) -> int:
-    """How many inputs or runs a stress loop takes: `fast` in `make test`, `full` in `make stress`."""
-    return full if STRESS else fast
 
 
 class StressLog:
@@ -248,25 +177,3 @@ def pytest_terminal_summary(terminalreporter):
         terminalreporter.write_line(f"stress table written to {dest}")
 
 
-@contextlib.contextmanager
-def mounted_tmpfs(path, options: str):
-    """A tmpfs mounted at `path` with mount `options` (e.g. "size=256k", "ro,size=64k") for the
-    full-disk and read-only tests; skips where mounting is not allowed (not root, a container)."""
-    path.mkdir(parents=True, exist_ok=True)
-    r = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(path)], capture_output=True)
-    if r.returncode:
-        pytest.skip(f"cannot mount a tmpfs here ({r.stderr.decode().strip()})")
-    try:
-        yield path
-    finally:
-        subprocess.run(["umount", "-l", str(path)])
-
-
-class BakeContext:
-    """What Bakes.load reads of a frame's context (render/units.py Job.of): the scene, the runtime,
-    the bakes' store (the geometry comes from it), no warnings, no progress."""
-
-    def __init__(self, sc, rt, bakes):
-        self.scene, self.rt, self.bakes = sc, rt, bakes
-        self.warn, self.progress = (lambda _m: None), None
-        self.arrays = None

@@ -22,7 +22,7 @@ import subprocess
 
 import pytest
 
-from iblbake.device import runtime
+from iblbake.device import programs, runtime
 
 CLANG = "/usr/bin/clang-15"
 
@@ -36,8 +36,8 @@ class _PoisonedSource:
     def build(self, options=(), cache_dir=None):
         # the subnormal flush is a load option (PoCL sets the threads' FTZ and DAZ from it);
         # clang -cc1 spells it otherwise and the bitcode does not need it
-        opts = [o for o in options if o.startswith(("-D", "-cl-")) and o != runtime.DENORMS]
-        folder = os.path.join(runtime._cache_dir(), "poisoned-spir")
+        opts = [o for o in options if o.startswith(("-D", "-cl-")) and o != programs.DENORMS]
+        folder = os.path.join(programs._cache_dir(), "poisoned-spir")
         os.makedirs(folder, exist_ok=True)
         h = hashlib.sha256((self.source + "\0" + " ".join(opts)).encode()).hexdigest()[:24]
         bc = os.path.join(folder, h + ".bc")
@@ -57,7 +57,7 @@ class _PoisonedSource:
         with open(bc, "rb") as f:
             binary = f.read()
         return self.cl.Program(self.ctx, list(self.ctx.devices), [binary] * len(self.ctx.devices)).build(
-            options=" ".join(["-x spir -spir-std=1.2", *(o for o in options if o == runtime.DENORMS)]))
+            options=" ".join(["-x spir -spir-std=1.2", *(o for o in options if o == programs.DENORMS)]))
 
 
 class _PoisonedCL:

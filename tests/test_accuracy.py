@@ -12,7 +12,7 @@ import yaml
 from iblbake.io import images
 from iblbake.study import accuracy, report
 
-from .conftest import run_cli
+from tests.helpers import run_cli
 
 
 def brute_force_front(points):
@@ -314,7 +314,7 @@ def test_a_black_reference_is_said_not_divided_by(tmp_path):
     """A scene no light reaches (a black panorama): every relative error would divide by zero (a new
     user's closed room printed 1.5e301% on every row); the study says so in one line, naming the
     term and what to do, and exits 1."""
-    from .conftest import scene_file, write_exr
+    from tests.helpers import scene_file, write_exr
     env = write_exr(tmp_path / "black.exr", np.zeros((8, 16, 3), np.float32))
     p = scene_file(tmp_path, env, camera={"perspective": {"position": [0, 0, 3], "fov_y": 45}, "resolution": [16, 16]},
                    effects={"diffuse": "sh", "specular": "off"})
@@ -330,7 +330,7 @@ def test_report_page_holds_every_rung(study):
     frame and mask its metrics read: the relative RMSE recomputed from the page's float16 data is
     the table's (float16 rounding moves it by about 1e-4 of itself)."""
     from iblbake.core.metrics import relative_rmse
-    from .test_report import decode, manifest_of
+    from tests.helpers import decode, manifest_of
 
     s, out = study["summary"], study["dir"] / "out"
     m = manifest_of(out / "index.html")

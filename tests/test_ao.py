@@ -12,7 +12,7 @@ from iblbake.render import twin as rr
 from iblbake.scene import load as scene
 from iblbake.scene import pack
 
-from .test_render import prefiltered_bakes
+from tests.helpers import prefiltered_bakes
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import iblbake
-from tests.conftest import run_cli, write_exr
+from tests.helpers import run_cli, write_exr
 
 # semantic versioning (docs/api.md): a public name may be added here, never taken away
 PUBLIC = {
@@ -121,7 +121,7 @@ def test_panorama_from_pixels_and_bad_arguments():
 def test_the_band_energy_example_plots_two_panoramas(tmp_path):
     """examples/sh_band_energy.py over a folder of two tiny panoramas: a uniform sky (all its
     energy in band 0) and a sky with one bright texel (a sun: energy in every band)."""
-    from tests.conftest import ROOT
+    from tests.helpers import ROOT
     folder = tmp_path / "panoramas"
     folder.mkdir()
     write_exr(folder / "overcast.exr", np.ones((16, 32, 3)))

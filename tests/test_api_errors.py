@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import iblbake
-from tests.conftest import write_exr
+from tests.helpers import write_exr
 
 
 @pytest.fixture(scope="module")

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import iblbake
-from tests.conftest import ROOT, write_exr
+from tests.helpers import ROOT, write_exr
 
 LIMIT = 3 << 30           # the address space the memory cases run in (RLIMIT_AS), as a small container's
 

@@ -16,7 +16,7 @@ import pytest
 from iblbake.io import images
 from iblbake.render import Bakes, plan, render, units
 from iblbake.render.units import Job, Unit, order
-from tests.conftest import load_scene
+from tests.helpers import load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -119,7 +119,7 @@ def test_the_scene_goes_to_the_device_once_per_content(tmp_path, rt, sky):
     a2 = render(grey, runtime=rt, cache=bakes)
 
     def held(kind):
-        return [k for k in bakes._memo if isinstance(k, tuple) and k[0] == kind]
+        return list(bakes.held(kind))
     assert len(held("device-scene")) == 2 and len(held("device-geometry")) == 1
     assert bakes.device_scene(rt, grey) is bakes.device_scene(rt, grey)
     assert bakes.device_scene(rt, red).arrays.tris is bakes.device_scene(rt, grey).arrays.tris     # one copy
@@ -148,3 +148,20 @@ def test_the_probe_package_keeps_its_names_and_imports_no_pass():
         mods = [n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module] + \
                [a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names]
         assert not [m for m in mods if m.startswith(("iblbake.render.passes", "iblbake.render.frame"))], f.name
+
+
+def test_the_store_says_what_it_holds_in_memory(tmp_path, sky):
+    """Bakes.held(kind) and Bakes.result(kind): what tests and tools read of a store (they reached
+    into its private memo): the bakes of a kind by key in the order made, and the first one's
+    result; a kind not held is a KeyError naming it."""
+    sc = load_scene(tmp_path, "held", {"camera": {"perspective": {"position": [0, 0, 3]}, "resolution": [8, 8]},
+                                       "environment": {"path": str(sky)}})
+    bakes = Bakes(tmp_path / "cache")
+    with pytest.raises(KeyError, match="'env'"):
+        bakes.result("env")
+    image, info = bakes.environment(sc.data["environment"])
+    assert bakes.result("env") is image and len(bakes.held("env")) == 1
+    assert info.width == 64 and float(image.mean()) == pytest.approx(0.75, abs=1e-6)
+    digest = bakes.file_sha256(sky)
+    (key, value), = bakes.held("sha256").items()
+    assert key[:2] == ("sha256", str(sky)) and value == digest and not bakes.held("dfg")

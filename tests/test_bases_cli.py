@@ -9,7 +9,7 @@ import pytest
 
 import iblbake
 from iblbake.core import bases
-from tests.conftest import run_cli, write_exr
+from tests.helpers import run_cli, write_exr
 
 
 def sky():
@@ -105,7 +105,7 @@ def test_options_of_another_basis_are_refused_or_said(tmp_path):
     effects.sg_lobes beside diffuse zh3, or beside probes storing SG (they read probes.sg_lobes),
     probes.ad_fit beside probes storing SG."""
     from iblbake.render.plan import plan
-    from tests.conftest import load_scene
+    from tests.helpers import load_scene
     env = write_exr(tmp_path / "sky.exr", sky())
     r = run_cli("basis", env, "--basis", "zh3", "--sg-lobes", "12")
     assert r.returncode == 2 and "--sg-lobes is an option of --basis sg, not of zh3" in r.stderr

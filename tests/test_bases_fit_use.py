@@ -12,7 +12,7 @@ from iblbake.bake import sh as bake_sh
 from iblbake.core import conventions
 from iblbake.core.bases import BASES
 from iblbake.core.metrics import LUMINANCE
-from tests.conftest import run_cli, write_exr
+from tests.helpers import run_cli, write_exr
 
 
 def sun_sky(w=128, h=64):

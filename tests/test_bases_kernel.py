@@ -54,7 +54,7 @@ def test_render_matches_shade_twin(tmp_path, name, opts):
     from iblbake.render.plan import plan
     from iblbake.scene import load as scene, pack
 
-    from .conftest import scene_file
+    from tests.helpers import scene_file
 
     env = tmp_path / "sky.exr"
     img = sky().astype(np.float32)

@@ -14,7 +14,7 @@ from iblbake.core import bases, brdf
 from iblbake.core.bases import common
 from iblbake.errors import InputError
 from iblbake.render.plan import plan
-from tests.conftest import load_scene
+from tests.helpers import load_scene
 
 SG = bases.BASES["sg"]
 AD = bases.BASES["ambient_dice"]
@@ -197,7 +197,7 @@ def test_rough_metal_sphere_kernel_matches_twin(tmp_path, rt, sky):
     assert "dfg" in pl.bakes and "prefiltered" not in pl.bakes
     bakes = Bakes(tmp_path / "cache")
     frame = render(sc, runtime=rt, cache=bakes)
-    dfg = next(v[0] for k, v in bakes._memo.items() if isinstance(k, tuple) and k[0] == "dfg")
+    dfg = bakes.result("dfg")
     arrays = pack.scene_arrays(sc)
     gb = rr.primary(sc["camera"], arrays)
     hit = gb["hit"]

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from .conftest import scene_file, write_exr
+from tests.helpers import scene_file, write_exr
 
 WORKER = Path(__file__).with_name("reads_worker.py")
 # every reader, by the suffix its files have

@@ -83,7 +83,7 @@ def test_opencl_brdf_and_sampling_match_numpy(rt):
         float3 h = sample_ggx_half(hammersley((uint)i, 1000u), a);
         out[8*i+4] = h.x; out[8*i+5] = h.y; out[8*i+6] = h.z; out[8*i+7] = radical_inverse_vdc((uint)i);
     }'''
-    from iblbake.device import runtime as icl
+    from iblbake.device import programs as icl
     import pyopencl as pcl
     text = src.replace('#include "brdf.h"', icl.kernel_source("brdf.h")).replace(
         '#include "sampling.h"', icl.kernel_source("sampling.h"))

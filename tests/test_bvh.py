@@ -143,7 +143,7 @@ def test_a_cached_geometry_entry_that_does_not_read_back_is_built_again(tmp_path
     naming it, built again, and the frame is the fresh cache's."""
     from iblbake.render import render
     from iblbake.scene import load as scene_load
-    from tests.conftest import mend_cache_entry, scene_file, write_exr
+    from tests.helpers import mend_cache_entry, scene_file, write_exr
     import trimesh
     trimesh.creation.icosphere(subdivisions=3).export(tmp_path / "ball.ply")
     env = write_exr(tmp_path / "sky.exr", np.full((8, 16, 3), 0.5, np.float32))

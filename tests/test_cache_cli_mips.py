@@ -11,7 +11,7 @@ import numpy as np
 
 from iblbake.bake import cache
 
-from .conftest import run_cli, write_exr
+from tests.helpers import run_cli, write_exr
 
 ARGS = ["--size", "16", "--samples", "32", "--dfg-size", "16", "--dfg-samples", "64", "--json"]
 

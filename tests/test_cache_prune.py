@@ -12,9 +12,7 @@ import numpy as np
 
 from iblbake.bake import cache
 
-from .conftest import run_cli
-from .test_render import small_panoramas  # noqa: F401  (fixture: city and studio at 256x128)
-from .test_sheet import read_png, sheet_scene
+from tests.helpers import read_png, run_cli, sheet_scene
 
 
 def test_default_cache_is_the_per_user_folder(monkeypatch):

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from .conftest import ROOT, run_cli, scene_file, write_exr
+from tests.helpers import ROOT, run_cli, scene_file, write_exr
 
 
 def one_line_error(p, code, *words):

@@ -8,7 +8,7 @@ import pytest
 
 from iblbake.core import sh
 
-from .conftest import run_cli, write_exr
+from tests.helpers import run_cli, write_exr
 
 
 def assert_one_line_error(proc, *needles):
@@ -163,13 +163,13 @@ def test_device_probe_prints_no_compiler_warning(monkeypatch):
     """A probe build that logs (NVIDIA notes every inlined kernel; here a conversion warning)
     still counts and prints nothing: pyopencl's CompilerWarning is suppressed as for every build."""
     import warnings
-    from iblbake.device import runtime
-    devices, _ = runtime.enumerate_devices()
-    monkeypatch.setattr(runtime, "PROBE_SOURCE", runtime.PROBE_SOURCE.replace(
+    from iblbake.device import choice
+    devices, _ = choice.enumerate_devices()
+    monkeypatch.setattr(choice, "PROBE_SOURCE", choice.PROBE_SOURCE.replace(
         "{ int i", "{ int unused = 1.5; int i"))
     with warnings.catch_warnings(record=True) as seen:
         warnings.simplefilter("always")
-        info = runtime.probe(devices[0])
+        info = choice.probe(devices[0])
     assert info.ok, info.reason
     assert not [w for w in seen if "compiler" in str(w.category).lower()], [str(w.message) for w in seen]
 
@@ -178,7 +178,7 @@ def test_a_cold_kernel_build_prints_nothing(tmp_path):
     """PoCL's clang writes "13 warnings generated." (its float16 builtins' ABI notes) straight to
     file descriptor 2 on a cold build of sh_project.cl: `-q` printed it on every fresh machine
     (and the API's "prints nothing" broke). The line is dropped; the output is unchanged."""
-    from .conftest import write_exr
+    from tests.helpers import write_exr
     env = write_exr(tmp_path / "sky.exr", np.full((16, 32, 3), 0.5, np.float32))
     r = run_cli("sh", env, "-q", "-o", tmp_path / "sh.json", "--backend", "opencl",
                 env={"POCL_CACHE_DIR": str(tmp_path / "pocl"), "IBLBAKE_KERNEL_CACHE": str(tmp_path / "kernels")})

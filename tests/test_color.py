@@ -12,7 +12,7 @@ import pytest
 from iblbake.io import color
 from iblbake.io import images
 
-from .conftest import run_cli
+from tests.helpers import run_cli
 
 colour = pytest.importorskip("colour")
 
@@ -119,4 +119,3 @@ def test_bakes_key_on_the_policies(tmp_path, small_panoramas):
     assert 1e-6 < rel < 1e-3
 
 
-from .test_render import small_panoramas  # noqa: E402,F401  (fixture: city and studio at 256x128)

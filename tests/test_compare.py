@@ -10,7 +10,7 @@ import numpy as np
 from iblbake.io import images
 
 from . import make_reference
-from .conftest import run_cli
+from tests.helpers import run_cli
 
 REF_PNG = make_reference.REFERENCE / "sheet_small.png"
 REF_LAYOUT = make_reference.REFERENCE / "sheet_small.json"

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from iblbake.core import conventions as cv
+from tests.helpers import selftest_kernel
 
 
 def random_dirs(n, seed=0):
@@ -74,36 +75,28 @@ def test_bilinear_wraps_u_and_clamps_v():
 
 # ---- kernels/common.h against numpy ------------------------------------------------------
 
-def _kernel(rt, name, n, inputs, out_floats):
-    prg = rt.program("selftest.cl", {"SH_BANDS": 3})
-    out = rt.empty(n * out_floats * 4)
-    bufs = [rt.to_device(np.ascontiguousarray(x, np.float32)) if isinstance(x, np.ndarray) else x for x in inputs]
-    import pyopencl as cl
-    rt.run(cl.Kernel(prg, name), (n,), None, *bufs, out)
-    return rt.read(out, (n, out_floats))
-
 
 def test_kernels_flush_subnormal_floats(rt):
-    """Every program runs with subnormals flushed (runtime.DENORMS; docs/conventions.md amendment
+    """Every program runs with subnormals flushed (programs.DENORMS; docs/conventions.md amendment
     15), as operands (an integer's bits in a record's w lane read as a float: DAZ) and as results
     (FTZ); normal floats are untouched. Without the flush this CPU took a microcode assist for each
     such operand: the reference 1.2-3.7x slower (docs/benchmarks.md "Subnormal floats")."""
     a = np.array([1e-20, 1e-30, 2.0, np.array(5, np.int32).view(np.float32), 1.5e-38], np.float32)
     b = np.array([1e-20, 1.0, 3.0, 1.0, 0.5], np.float32)
-    got = _kernel(rt, "t_product", len(a), [a, b], 1)[:, 0]
+    got = selftest_kernel(rt, "t_product", len(a), [a, b], 1)[:, 0]
     assert got.tolist() == [0.0, np.float32(1e-30), 6.0, 0.0, 0.0]
     assert (a * b)[[0, 3, 4]].min() > 0                     # numpy keeps them: the kernel flushed
 
 
 def test_opencl_equirect_matches_numpy(rt):
     d = np.concatenate([random_dirs(4096), np.eye(3), -np.eye(3)])
-    uv = _kernel(rt, "t_equirect_uv", len(d), [d], 2)
+    uv = selftest_kernel(rt, "t_equirect_uv", len(d), [d], 2)
     u, v = cv.equirect_uv_from_dir(d)
     du = np.abs(uv[:, 0] - u)
     du = np.minimum(du, 1 - du)  # the seam: 0 and 1 are the same column
     assert du.max() < 2e-6 and np.abs(uv[:, 1] - v).max() < 2e-6
     uvs = np.random.default_rng(1).random((4096, 2))
-    dd = _kernel(rt, "t_dir_from_equirect", len(uvs), [uvs], 3)
+    dd = selftest_kernel(rt, "t_dir_from_equirect", len(uvs), [uvs], 3)
     assert np.abs(dd - cv.dir_from_equirect_uv(uvs[:, 0], uvs[:, 1])).max() < 2e-6
 
 
@@ -117,19 +110,19 @@ def test_opencl_solid_angles_and_bilinear_match_numpy(rt):
     assert np.abs(got / ref - 1).max() < 1e-5
     img = np.random.default_rng(2).random((8, 16, 3)).astype(np.float32)      # RGB, 3 floats a texel
     uv = np.concatenate([np.random.default_rng(3).random((2000, 2)), [[0, 0], [1, 1], [0.999999, 0.0]]])
-    res = _kernel(rt, "t_bilinear", len(uv), [img, np.int32(16), np.int32(8), uv], 3)
+    res = selftest_kernel(rt, "t_bilinear", len(uv), [img, np.int32(16), np.int32(8), uv], 3)
     assert np.abs(res - cv.bilinear_equirect(img, uv[:, 0], uv[:, 1])).max() < 1e-5
 
 
 def test_opencl_cube_octahedral_frames_match_numpy(rt):
     rng = np.random.default_rng(4)
     st = np.stack([np.repeat(np.arange(6), 200), rng.random(1200), rng.random(1200)], 1)
-    got = _kernel(rt, "t_cube", len(st), [st], 3)
+    got = selftest_kernel(rt, "t_cube", len(st), [st], 3)
     assert np.abs(got - cv.dir_from_cube(st[:, 0].astype(int), st[:, 1], st[:, 2])).max() < 2e-6
     uv = rng.random((2000, 2))
-    got = _kernel(rt, "t_octahedral", len(uv), [uv], 3)
+    got = selftest_kernel(rt, "t_octahedral", len(uv), [uv], 3)
     assert np.abs(got - cv.dir_from_octahedral(uv[:, 0], uv[:, 1])).max() < 2e-6
     n = np.concatenate([random_dirs(1000, 5), np.eye(3), -np.eye(3)])
-    tb = _kernel(rt, "t_frame", len(n), [n], 6)
+    tb = selftest_kernel(rt, "t_frame", len(n), [n], 6)
     t, b = cv.tangent_frame(n)
     assert np.abs(tb[:, :3] - t).max() < 2e-6 and np.abs(tb[:, 3:] - b).max() < 2e-6

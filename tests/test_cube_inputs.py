@@ -15,7 +15,7 @@ from iblbake.core import conventions
 from iblbake.errors import InputError
 from iblbake.io import images, ktx2
 
-from .conftest import run_cli
+from tests.helpers import run_cli
 
 S = 32
 

@@ -21,7 +21,7 @@ import yaml
 from iblbake.errors import IblbakeError
 from iblbake.io import images
 
-from .conftest import mounted_tmpfs, scene_file, write_exr
+from tests.helpers import mounted_tmpfs, scene_file, write_exr
 
 
 @contextlib.contextmanager

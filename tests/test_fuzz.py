@@ -21,7 +21,7 @@ import yaml
 
 from iblbake.io import images
 
-from .conftest import ROOT, run_cli, stress_scale
+from tests.helpers import ROOT, run_cli, stress_scale
 
 WORKER = Path(__file__).with_name("fuzz_worker.py")
 ASSIMP = ROOT / "tests" / "data" / "assimp"

@@ -12,7 +12,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from .conftest import STRESS, stress_scale
+from tests.helpers import STRESS, stress_scale
 
 WORKER = Path(__file__).resolve().with_name("fuzz_api.py")
 LIMIT = 3 << 30

@@ -23,7 +23,7 @@ from iblbake.bake import gltf_light
 from iblbake.core import conventions
 from iblbake.io import gltf, images
 
-from .conftest import run_cli, write_exr
+from tests.helpers import run_cli, write_exr
 
 NODE = Path(__file__).parent / "node"
 CHROMIUM = "/usr/bin/chromium"

@@ -16,9 +16,10 @@ import numpy as np
 import pytest
 
 from iblbake.device import icd
-from iblbake.device import runtime as cl
+from iblbake.device import choice as cl
+from iblbake.device import programs
 
-from .conftest import run_cli
+from tests.helpers import run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -106,9 +107,9 @@ def test_device_specs_name_the_runtimes_and_pocl_stays_the_default():
     assert cl._candidates(devs, None) == [intel_gpu, pocl_on_intel, intel]
     assert cl._candidates(devs, "cpu:0") == [intel]                  # cpu:N stays enumeration order
     cpu = ["-DIBL_WIDE_BVH=1", "-DIBL_PREFETCH=1"]                    # every CPU
-    assert cl.device_options(intel) == cpu + ["-DIBL_ALWAYS_INLINE=1", "-DIBL_SCALAR_BVH=1"]
-    assert cl.device_options(pocl_on_intel) == cpu
-    assert cl.device_options(intel_gpu) == []
+    assert programs.device_options(intel) == cpu + ["-DIBL_ALWAYS_INLINE=1", "-DIBL_SCALAR_BVH=1"]
+    assert programs.device_options(pocl_on_intel) == cpu
+    assert programs.device_options(intel_gpu) == []
 
 
 def test_a_device_spec_with_no_devices_at_all_says_what_to_install(tmp_path):
@@ -124,7 +125,7 @@ def test_a_device_spec_with_no_devices_at_all_says_what_to_install(tmp_path):
 
 def _intel_device():
     devices, _ = cl.enumerate_devices()
-    return next((d for d in devices if cl._is_intel_cpu(d)), None)
+    return next((d for d in devices if icd.is_intel_cpu(d)), None)
 
 
 needs_intel = pytest.mark.skipif(icd.intel_cpu_library() is None,
@@ -160,7 +161,7 @@ def _float3_call(dev, attr, options=()):
     ctx = pyopencl.Context([dev.device])
     q = pyopencl.CommandQueue(ctx)
     n = np.arange(64 * 4, dtype=np.float32).reshape(64, 4)
-    source = cl.kernel_source("inline.h") + FLOAT3_CALL
+    source = programs.kernel_source("inline.h") + FLOAT3_CALL
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", pyopencl.CompilerWarning)
         prg = pyopencl.Program(ctx, source).build(options=[f"-DATTR={attr}", *options], cache_dir=False)
@@ -185,7 +186,7 @@ def test_intels_vectoriser_passes_out_of_line_float3_wrongly_and_inline_h_avoids
     assert dev is not None and cl.probe(dev).ok
     out_of_line = _float3_call(dev, "__attribute__((noinline))")
     print(f"Intel's runtime, float3 through an out-of-line call: {out_of_line} of 64 work items wrong")
-    assert _float3_call(dev, "IBL_INLINE", cl.device_options(dev)) == 0
+    assert _float3_call(dev, "IBL_INLINE", programs.device_options(dev)) == 0
     if out_of_line == 0:
         pytest.skip("this Intel runtime passes out-of-line float3 arguments correctly: kernels/inline.h's "
                     "always_inline may no longer be needed there")
@@ -195,7 +196,7 @@ def test_every_kernel_function_is_ibl_inline():
     """No function of kernels/ is declared plain `inline`: each is IBL_INLINE (kernels/inline.h),
     which the runtime makes always_inline on Intel's CPU runtime, and each file that declares one
     reaches inline.h through its includes."""
-    from iblbake.device.runtime import kernel_source
+    from iblbake.device.programs import kernel_source
     plain, unreached = [], []
     for path in sorted((ROOT / "kernels").rglob("*.[ch]*")):
         name, text = path.relative_to(ROOT / "kernels").as_posix(), path.read_text()

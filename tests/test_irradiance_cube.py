@@ -18,7 +18,7 @@ from iblbake.bake import sh as shbake
 from iblbake.core import conventions
 from iblbake.io import images
 
-from .conftest import run_cli
+from tests.helpers import run_cli
 
 NODE = Path(__file__).parent / "node"
 
@@ -78,4 +78,3 @@ def test_cli_cube_and_its_ktx2(tmp_path, small_panoramas):
     assert json.loads(p.stdout)["entries"]["irradiance"]["cached"]
 
 
-from .test_render import small_panoramas  # noqa: E402,F401  (fixture: city and studio at 256x128)

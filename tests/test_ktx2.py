@@ -18,8 +18,7 @@ import pytest
 from iblbake.core import conventions
 from iblbake.io import images, ktx2
 
-from .conftest import run_cli
-from .test_render import small_panoramas  # noqa: F401  (fixture: city and studio at 256x128)
+from tests.helpers import run_cli
 
 NODE = Path(__file__).parent / "node"
 VK = {"rgba16f": 97, "rgba32f": 109, "b10g11r11": 122, "e5b9g9r9": 123}

@@ -11,7 +11,7 @@ from iblbake.bake import prefilter
 from iblbake.bake import radiance
 from iblbake.bake import mips as mipsbake
 
-from .conftest import rel_err
+from tests.helpers import rel_err
 
 
 @pytest.fixture(scope="module")

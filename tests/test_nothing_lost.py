@@ -19,7 +19,7 @@ import pytest
 from iblbake.bake import cache
 from iblbake.io import images
 
-from .conftest import ROOT, mounted_tmpfs, run_cli, scene_file, stress_scale, write_exr
+from tests.helpers import ROOT, mounted_tmpfs, read_only_folder, run_cli, scene_file, stress_scale, write_exr
 
 
 def cli(*args):
@@ -434,20 +434,6 @@ def test_full_disk_fails_cleanly(tmp_path, stress, random_env, warm):
         left = _leftovers(disk, {"filler"})
         assert all(x.endswith(".lock") for x in left), left
         assert cache_entries_ok(disk / "cache") == (0, [])
-
-
-@contextlib.contextmanager
-def read_only_folder(path: Path):
-    path.mkdir(parents=True, exist_ok=True)
-    if os.geteuid() != 0:
-        path.chmod(0o555)
-        try:
-            yield path
-        finally:
-            path.chmod(0o755)
-        return
-    with mounted_tmpfs(path, "ro,size=64k") as p:   # root ignores mode bits: use a read-only mount
-        yield p
 
 
 def test_read_only_folder_fails_cleanly(tmp_path, stress, random_env, warm):

@@ -17,7 +17,7 @@ from iblbake.cli.main import COMMANDS, cli
 from iblbake.io import images
 from iblbake.study import sweep
 
-from .conftest import run_cli, write_exr
+from tests.helpers import run_cli, write_exr
 
 # Every path-valued option of every command, as what it does with the path. A new option that
 # takes a path fails test_every_path_option_is_known until it is placed here (and, if it
@@ -465,7 +465,7 @@ def test_mips_bakes_every_panorama_before_writing_any_output(files):
     ids=lambda a: a[0])
 def test_a_depfile_into_a_read_only_folder_fails_before_any_work(files, argv):
     """render found it only after the frame was written (exit 1 with the frame on disk)."""
-    from .test_nothing_lost import read_only_folder
+    from tests.helpers import read_only_folder
     with read_only_folder(files["dir"] / "ro") as ro:
         p = run_cli(*[a.format(**files) for a in argv], "--depfile", ro / "f.d", "--cache", files["dir"] / "c")
         assert p.returncode == 1 and "f.d" in p.stderr and len(p.stderr.strip().splitlines()) == 1, p.stderr

@@ -6,7 +6,7 @@ import sys
 import zipfile
 from pathlib import Path
 
-from iblbake.device import runtime as cl
+from iblbake.device import programs as cl
 
 ROOT = Path(__file__).resolve().parents[1]
 KERNELS = sorted(p.relative_to(ROOT / "kernels").as_posix() for p in (ROOT / "kernels").rglob("*")
@@ -50,7 +50,7 @@ def test_source_checkout_without_install_finds_the_kernels(tmp_path):
     site = sysconfig.get_paths()["purelib"]
     code = (f"import sys; sys.path.insert(0, {str(ROOT)!r}); sys.path.append({site!r}); "
             "import importlib.util as u; assert u.find_spec('iblbake.kernels') is None, 'installed'; "
-            "from iblbake.device import runtime; print(len(runtime.kernel_source('paths/reference.cl')))")
+            "from iblbake.device import programs; print(len(programs.kernel_source('paths/reference.cl')))")
     p = subprocess.run([sys.executable, "-S", "-c", code], capture_output=True, text=True, cwd=tmp_path)
     assert p.returncode == 0, p.stderr[-2000:]
     assert int(p.stdout) > 1000

@@ -12,7 +12,7 @@ import pytest
 
 from iblbake.render import render
 from iblbake.io import images
-from tests.conftest import load_scene
+from tests.helpers import load_scene
 
 
 @pytest.fixture(scope="module")
@@ -430,7 +430,7 @@ def test_the_paths_register_cap_is_asked_for_on_nvidia_gpus_only():
     """device/launch.py build_options: the programs holding the paths (alone or among a frame's
     kernel files) get NVIDIA's register cap on an NVIDIA GPU; other programs and devices none."""
     from iblbake.device import launch
-    from iblbake.device.runtime import DeviceInfo
+    from iblbake.device.choice import DeviceInfo
 
     nv = DeviceInfo("0:0", "NVIDIA CUDA", "NVIDIA H200", "GPU")
     cap = [f"-cl-nv-maxrregcount={launch.PATH_REGISTERS}"]
@@ -469,7 +469,7 @@ def test_pocl_launches_are_split_into_many_groups(rt):
     other = Kernel()
     other.function_name = "shade"
     rt.run(other, (3072,), None)
-    from iblbake.device.runtime import _matches
+    from iblbake.device.choice import _matches
     pocl = rt.info.kind == "CPU" and _matches(rt.info, "pocl")      # Runtime's own test (its _split)
     cores = rt.info.device.max_compute_units
     assert seen == [(launch.cpu_group(3072, cores),) if pocl else None, None, (8,), None]
@@ -531,19 +531,19 @@ def equal_scene_frame(folder, name, rt=None):
 
 
 def test_a_gpus_build_gives_the_cpus_frame(tmp_path, monkeypatch):
-    """A CPU's kernels traverse the 4-wide BVH and prefetch the panorama's texels (device/runtime.py
+    """A CPU's kernels traverse the 4-wide BVH and prefetch the panorama's texels (device/programs.py
     device_options: IBL_WIDE_BVH, IBL_PREFETCH); a GPU's are built without either, on the binary
     tree: the knot's frame (escaped rays and environment samples at every vertex, 102k triangles)
     is the same bit for bit either way. The GPU's build runs here on the CPU."""
-    from iblbake.device import runtime
+    from iblbake.device import programs, runtime
     rt = runtime.Runtime()
-    assert {runtime.WIDE_BVH, runtime.PREFETCH} <= set(rt.device_options)
+    assert {programs.WIDE_BVH, programs.PREFETCH} <= set(rt.device_options)
     cpu = equal_scene_frame(tmp_path, "knot", rt)
-    options = runtime.device_options
-    monkeypatch.setattr(runtime, "device_options",
-                        lambda info: [o for o in options(info) if o not in (runtime.WIDE_BVH, runtime.PREFETCH)])
+    options = programs.device_options
+    monkeypatch.setattr(programs, "device_options",
+                        lambda info: [o for o in options(info) if o not in (programs.WIDE_BVH, programs.PREFETCH)])
     rt = runtime.Runtime()
-    assert not {runtime.WIDE_BVH, runtime.PREFETCH} & set(rt.device_options)
+    assert not {programs.WIDE_BVH, programs.PREFETCH} & set(rt.device_options)
     gpu = equal_scene_frame(tmp_path, "knot", rt)
     np.testing.assert_array_equal(cpu.hdr, gpu.hdr)
 

@@ -12,7 +12,7 @@ import pytest
 from iblbake.errors import InputError
 from iblbake.render import render
 from iblbake.render.paths import profile as paths_profile
-from tests.conftest import load_scene, run_cli
+from tests.helpers import load_scene, run_cli
 
 # the differential parts against the whole launch: medians of a few rounds of launches of some
 # milliseconds on a shared 2-core machine (measured 0.98-1.03 on these scenes)

@@ -19,12 +19,13 @@ from iblbake.render import Reuse, plan, render
 from iblbake.core import sh
 from iblbake.errors import IblbakeError, InputError
 from iblbake.io import images
-from iblbake.render import probes, units
+from iblbake.render import probes
 from iblbake.render.bakes import Bakes
 from iblbake.render.sources.probes import probe_args, probe_defines
 from iblbake.render.twin import probes as twin
 from iblbake.render.probes.relocation import SEALED_RAYS
-from tests.conftest import load_scene, mend_cache_entry, run_cli
+from tests.helpers import load_scene, mend_cache_entry, run_cli
+from tests.probe_helpers import Given, far_sphere_scene, kernel_irradiance, settings, sphere_scene, synthetic, unit
 
 
 write = load_scene
@@ -35,61 +36,6 @@ def sky(tmp_path_factory):
     p = tmp_path_factory.mktemp("sky") / "sky.exr"
     images.write_exr(p, np.full((32, 64, 3), 0.75, np.float32))
     return p
-
-
-def settings(**kw):
-    """A probes section with the schema's defaults (docs/scene.md), some replaced."""
-    from iblbake.scene.schema import SCHEMA
-    return {**{k: f.default for k, f in SCHEMA.fields["probes"].fields.items()}, **kw}
-
-
-def synthetic(counts, spacing, origin, rep="octahedral", value=None, rng=None, texels=6, dtexels=14, states=None):
-    """A volume whose probe p holds value(position) (3,) at every direction, or random smooth
-    irradiance (rng), with random but consistent distance moments."""
-    grid = probes.Grid(tuple(origin), tuple(spacing), tuple(counts))
-    pos = grid.positions()
-    n = grid.count
-    st = settings(irradiance=rep, irradiance_texels=texels, distance_texels=dtexels)
-    if rep == "sh":
-        irr = np.zeros((n, 9, 3))
-        if value is not None:
-            irr[:, 0] = np.array([value(p) for p in pos]) * math.sqrt(4 * math.pi)
-        else:
-            irr[:, 0] = rng.uniform(1, 3, (n, 3)) * math.sqrt(4 * math.pi)
-            irr[:, 1:] = rng.uniform(-0.3, 0.3, (n, 8, 3))
-    else:
-        if value is not None:
-            tiles = np.broadcast_to(np.array([value(p) for p in pos])[:, None, None, :], (n, texels, texels, 3))
-        else:
-            tiles = rng.uniform(0.5, 3, (n, texels, texels, 3))
-        irr = probes.atlas(probes.with_borders(np.ascontiguousarray(tiles)), counts)
-    mean = rng.uniform(0.2, 1.5, (n, dtexels, dtexels)) if rng is not None else np.full((n, dtexels, dtexels), 1.0)
-    sq = mean ** 2 * (1 + (rng.uniform(0, 0.3, mean.shape) if rng is not None else 0.0))
-    dist = probes.atlas(probes.with_borders(np.stack([mean, sq], -1)), counts)
-    data = np.zeros((n, 4))
-    if rng is not None:
-        data[:, :3] = rng.uniform(-0.3, 0.3, (n, 3)) * np.asarray(spacing)
-    if states is not None:
-        data[:, 3] = states
-    return probes.volume_dict(grid, st, irr, dist, data, {})
-
-
-def kernel_irradiance(rt, vol, p, n, v, visibility, classification):
-    """t_probes (kernels/selftest.cl) at points p, normals n, view directions v, with the volume's
-    switches and its basis's options (a basis volume's settings carry them)."""
-    defines = {"SH_BANDS": 3, **probe_defines({**vol.get("settings", {}), "irradiance": vol["representation"],
-                                              "visibility": visibility, "classification": classification})}
-    out = rt.empty(16 * len(p))
-
-    def f4(a):
-        return rt.to_device(np.pad(np.asarray(a, np.float32), ((0, 0), (0, 1))))
-    rt.launch("selftest.cl", "t_probes", defines, (len(p),), {}, p=f4(p), n=f4(n), v=f4(v), out=out,
-              **probe_args(rt, vol))
-    return rt.read(out, (len(p), 4))[:, :3].astype(np.float64)
-
-
-def unit(a):
-    return a / np.linalg.norm(a, axis=-1, keepdims=True)
 
 
 def test_octahedral_mapping_kernel_twin_and_inverse(rt):
@@ -198,43 +144,6 @@ def test_an_inactive_probe_contributes_zero_weight_and_zero_value(rt, visibility
     assert np.isfinite(got[~off]).all() and (got[~off, 3] > 0).all() and (got[~off, :3] > 0.5).all()
 
 
-def far_sphere_scene(folder, sky, rep):
-    """Probes around the origin; the only object a small sphere far away (no probe ray meets it)."""
-    return write(folder, f"far_{rep}", {
-        "camera": {"perspective": {"position": [0, 0, 3], "look_at": [0, 0, 0]}, "resolution": [8, 8]},
-        "environment": {"path": str(sky)},
-        "materials": {"m": {"base_color": [0.8, 0.8, 0.8], "roughness": 1, "specular": 0}},
-        "objects": [{"sphere": {"center": [500, 0, 0], "radius": 0.01}, "material": "m"}],
-        "probes": {"min": [-1, -1, -1], "max": [1, 1, 1], "counts": [2, 2, 2], "irradiance": rep, "rays": 64,
-                   "classification": False},
-        "effects": {"diffuse": "probes", "specular": "off"}})
-
-
-def sphere_scene(folder, sky, diffuse, rep="octahedral"):
-    """A Lambert sphere in the uniform sky, shaded by `diffuse`."""
-    return write(folder, f"sphere_{diffuse}_{rep}", {
-        "camera": {"perspective": {"position": [0, 0, 3], "look_at": [0, 0, 0], "fov_y": 40}, "resolution": [32, 32]},
-        "environment": {"path": str(sky)},
-        "materials": {"m": {"base_color": [0.8, 0.6, 0.4], "roughness": 1, "specular": 0}},
-        "objects": [{"sphere": {"center": [0, 0, 0], "radius": 0.8}, "material": "m"}],
-        "probes": {"min": [-2, -2, -2], "max": [2, 2, 2], "counts": [2, 2, 2], "irradiance": rep},   # probes at +-1
-        "effects": {"diffuse": diffuse, "specular": "off"}})
-
-
-class Given(Bakes):
-    """A bake store whose probe volume is a given one (the far-sphere scene's, for another scene):
-    its probes unit (render/units.py) loads that volume."""
-
-    def __init__(self, root, volume):
-        super().__init__(root)
-        self.volume = volume
-
-        class GivenProbes(units.Probes):
-            def load(self, job):
-                return volume, False, {}
-        self.units = {**self.units, "probes": GivenProbes()}
-
-
 @pytest.mark.parametrize("rep", ["octahedral", "sh"])
 def test_uniform_sky_probes_are_the_environment_sh(tmp_path, rt, sky, rep):
     """No geometry in the probes' rays, a sky of 0.75: every probe holds E = 0.75 pi in every
@@ -242,7 +151,7 @@ def test_uniform_sky_probes_are_the_environment_sh(tmp_path, rt, sky, rep):
     Lambert sphere shaded from them equals `diffuse: sh` to float32 rounding."""
     bakes = Bakes(tmp_path / "cache")
     frame = render(far_sphere_scene(tmp_path, sky, rep), runtime=rt, cache=bakes)
-    vol = bakes._memo[next(k for k in bakes._memo if isinstance(k, str) and k.startswith("probes-"))][0]
+    vol = bakes.result("probes")
     assert frame.report["bakes"][-1]["name"] == "probes"
     if rep == "sh":
         want = np.zeros((9, 3))
@@ -360,7 +269,7 @@ def test_relocation_and_classification(tmp_path, rt, sky):
         "effects": {"diffuse": "probes", "specular": "off"}})
     bakes = Bakes(tmp_path / "cache")
     render(sc, runtime=rt, cache=bakes)
-    vol = next(v[0] for k, v in bakes._memo.items() if isinstance(k, str) and k.startswith("probes-"))
+    vol = bakes.result("probes")
     centre = twin.probe_index(np.array([1, 1, 1]), (5, 3, 3))
     off = vol["data"][centre, :3]
     assert np.linalg.norm(off / 2.0) < 0.45
@@ -434,7 +343,7 @@ def test_probe_files_fuzzed(tmp_path, sky, stress):
     """Mutated manifests (values of the wrong type, range or shape) and mutated images (bytes
     flipped or cut, arrays of other shapes, NaN, negative values): each is read, or refused with an
     IblbakeError of one line naming the file; nothing else escapes."""
-    from tests.conftest import stress_scale
+    from tests.helpers import stress_scale
 
     sc = far_sphere_scene(tmp_path, sky, "sh")
     out = tmp_path / "vol"
@@ -504,7 +413,7 @@ def test_frame_matches_the_twin(tmp_path, rt, sky):
     sc = write(tmp_path, "rooms_outside", doc)
     bakes = Bakes(tmp_path / "cache")
     frame = render(sc, runtime=rt, cache=bakes)
-    vol = next(v[0] for k, v in bakes._memo.items() if isinstance(k, str) and k.startswith("probes-"))
+    vol = bakes.result("probes")
     arrays = pack.scene_arrays(sc)
     gb = rr.primary(sc["camera"], arrays)
     coeffs = sh.project(images.read_exr(sky)[..., :3], 3) * sh.ahat(3)[:, None]
@@ -541,7 +450,7 @@ def test_probe_rays_in_a_glowing_box(tmp_path, rt, bounces):
         "effects": {"diffuse": "probes", "specular": "off"}})
     bakes = Bakes(tmp_path / "cache")
     render(sc, runtime=rt, cache=bakes)
-    vol = next(v[0] for k, v in bakes._memo.items() if isinstance(k, str) and k.startswith("probes-"))
+    vol = bakes.result("probes")
     n = vol["irradiance_texels"]
     tiles = vol["irradiance"].reshape(2, n + 2, 4, n + 2, 3)[:, 1:-1, :, 1:-1]
     want = math.pi * e * (1 / (1 - a) if bounces == "unbounded" else sum(a ** j for j in range(bounces + 1)))
@@ -606,7 +515,7 @@ def test_probes_under_a_lobed_sky_point_where_the_sky_is(tmp_path, rt, lobed_sky
     sc.data["probes"]["rays"] = 1024
     bakes = Bakes(tmp_path / "cache")
     render(sc, runtime=rt, cache=bakes)
-    vol = bakes._memo[next(k for k in bakes._memo if isinstance(k, str) and k.startswith("probes-"))][0]
+    vol = bakes.result("probes")
     img = images.read_exr(lobed_sky)[..., :3].astype(np.float64)
     h, w = img.shape[:2]
     v, u = np.meshgrid((np.arange(h) + 0.5) / h, (np.arange(w) + 0.5) / w, indexing="ij")

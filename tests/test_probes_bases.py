@@ -18,35 +18,14 @@ from iblbake.io import images
 from iblbake.render import probes, render
 from iblbake.render.bakes import Bakes
 from iblbake.render.twin import probes as twin
-from tests.conftest import run_cli
-from tests.test_probes import Given, far_sphere_scene, kernel_irradiance, settings, sphere_scene, synthetic, unit
+from tests.helpers import run_cli
+from tests.probe_helpers import (Given, baked_volume, basis_volume, far_sphere_scene, kernel_irradiance, settings,
+                                 sphere_scene, unit, with_basis)
 
 # every probe basis, and each SG size fitted on the irradiance (the default), on the radiance at K = 9
 CASES = [(n, o) for n, b in PROBE_BASES.items() if b.directional for o in b.variants()
          if n != "sg" or o["sg_lobes"] == 9 or o["sg_fit"] == "irradiance"]
 IDS = [f"{n}-{'-'.join(str(v) for v in o.values())}" if o else n for n, o in CASES]
-
-
-def with_basis(sc, name, opts):
-    sc.data["probes"].update(irradiance=name, **opts)
-    return sc
-
-
-def baked_volume(bakes):
-    return bakes._memo[next(k for k in bakes._memo if isinstance(k, str) and k.startswith("probes-"))][0]
-
-
-def basis_volume(name, opts, rng, counts=(3, 2, 4), states=None):
-    """synthetic()'s grid and distances, each probe holding its basis's fit of a random smooth sky."""
-    vol = synthetic(counts, (0.5, 0.6, 0.4), (0, 0, 0), rng=rng, states=states)
-    m = bases.BASES[name]
-    dirs = probes.ray_directions(256, 3)
-    n = int(np.prod(counts))
-    a = rng.uniform(0.5, 2.0, (n, 1, 3))
-    b = rng.normal(size=(n, 3, 3)) * 0.3
-    sky = a + np.maximum(0, np.einsum("rj,pjc->prc", dirs, b))          # > 0, smooth, directional
-    st = {**vol["settings"], "irradiance": name, **opts}
-    return {**vol, "representation": name, "settings": st, "irradiance": m.project_rays(sky, dirs, opts)}
 
 
 @pytest.mark.parametrize("name, opts", CASES, ids=IDS)

@@ -15,8 +15,8 @@ from iblbake.core.metrics import region_errors
 from iblbake.errors import InputError
 from iblbake.render import probes, render
 from iblbake.render.twin import probes as twin
-from tests.conftest import load_scene
-from tests.test_probes import settings
+from tests.helpers import load_scene
+from tests.probe_helpers import settings
 
 
 def sphere_arrays(radius=8.0):

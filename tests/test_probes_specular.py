@@ -17,9 +17,9 @@ from iblbake.render.bakes import Bakes
 from iblbake.render.sources.basis import table_args
 from iblbake.render.sources.probes import probe_args, probe_defines
 from iblbake.render.twin import probes as twin
-from tests.conftest import load_scene
-from tests.test_probes import Given, far_sphere_scene, settings, synthetic, unit
-from tests.test_probes_bases import baked_volume, basis_volume, with_basis
+from tests.helpers import load_scene
+from tests.probe_helpers import Given, far_sphere_scene, settings, synthetic, unit
+from tests.probe_helpers import baked_volume, basis_volume, with_basis
 
 CASES = [("sg", {"sg_lobes": 9, "sg_fit": "least_squares"}), ("ambient_dice", {"ad_fit": "least_squares"})]
 IDS = ["sg9", "ambient_dice"]
@@ -132,8 +132,8 @@ def test_metal_sphere_frame_matches_the_twin(tmp_path, rt, lobed_sky, name, opts
     sc = metal_scene(tmp_path, lobed_sky, name, opts)
     given = Given(tmp_path / "cache", vol)
     frame = render(sc, runtime=rt, cache=given)
-    chain = next(v[0] for k, v in given._memo.items() if isinstance(k, tuple) and k[0] == "prefiltered")
-    dfg = next(v[0] for k, v in given._memo.items() if isinstance(k, tuple) and k[0] == "dfg")
+    chain = given.result("prefiltered")
+    dfg = given.result("dfg")
     arrays = pack.scene_arrays(sc)
     gb = rr.primary(sc["camera"], arrays)
     hit = gb["hit"]

@@ -15,7 +15,7 @@ from iblbake.render import plan, render
 from iblbake.io import images
 from iblbake.render.bakes import Bakes
 from iblbake.scene import load, pack
-from tests.conftest import BakeContext, load_scene, run_cli
+from tests.helpers import BakeContext, load_scene, run_cli
 
 
 write = load_scene
@@ -41,7 +41,7 @@ def window(folder, sky, probes, name="window"):
 
 def captures(bakes):
     """(image, cached) of every capture the store holds."""
-    return [v[:2] for k, v in bakes._memo.items() if isinstance(k, tuple) and k[0] == "reflection"]
+    return [v[:2] for v in bakes.held("reflection").values()]
 
 
 @pytest.mark.slow       # make test; make check keeps under 3 minutes
@@ -163,9 +163,8 @@ def test_frame_matches_the_twin(tmp_path, rt):
     bakes = Bakes(tmp_path / "cache")
     frame = render(sc, runtime=rt, cache=bakes)
     env_sha = bakes.environment(sc.data["environment"])[1].sha256
-    distant = next(v[0] for k, v in bakes._memo.items() if isinstance(k, tuple) and k[0] == "prefiltered"
-                   and k[1] == env_sha)
-    table = next(v[0] for k, v in bakes._memo.items() if isinstance(k, tuple) and k[0] == "dfg")
+    distant = next(v[0] for k, v in bakes.held("prefiltered").items() if k[1] == env_sha)
+    table = bakes.result("dfg")
     captured = bakes.load("reflection_probes", BakeContext(sc, rt, bakes))[0]
     arrays = pack.scene_arrays(sc)
     gb = rr.primary(sc["camera"], arrays)

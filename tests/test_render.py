@@ -20,7 +20,7 @@ from iblbake.scene import pack
 from iblbake.render import twin as rr
 from iblbake.scene import load as scene
 
-from .conftest import run_cli, scene_file
+from tests.helpers import box_downsample, prefiltered_bakes, run_cli, scene_file
 
 LUM = np.array([0.2126, 0.7152, 0.0722])
 
@@ -48,26 +48,6 @@ def constant_env(tmp_path_factory):
     p = d / "one.exr"
     images.write_exr(p, np.ones((32, 64, 3), np.float32))
     return p
-
-
-def box_downsample(img, factor):
-    """Solid-angle-weighted mean over factor x factor blocks (rows weighted by their solid angle)."""
-    h, w = img.shape[:2]
-    om = conventions.equirect_row_solid_angles(w, h)[:, None, None]
-    wimg = (img * om).reshape(h // factor, factor, w // factor, factor, 3).sum((1, 3))
-    wsum = om.reshape(h // factor, factor).sum(1)[:, None, None] * factor
-    return wimg / wsum
-
-
-@pytest.fixture(scope="module")
-def small_panoramas(tmp_path_factory, load_panorama):
-    """city and studio at 256x128: the same light, faster to bake (tests of plumbing)."""
-    d = tmp_path_factory.mktemp("small")
-    out = {}
-    for name in ("city", "studio"):
-        out[name] = d / f"{name}.exr"
-        images.write_exr(out[name], box_downsample(load_panorama(name), 4).astype(np.float32))
-    return out
 
 
 @pytest.fixture(scope="module")
@@ -213,15 +193,6 @@ def test_gbuffer_matches_numpy(tmp_path, small_panoramas, mesh_file, rt, project
     err = np.abs(frame.aovs["normal"][..., :3] - nref)[both]
     assert np.quantile(err, 0.99) < 1e-4
     assert both.sum() > 500
-
-
-def prefiltered_bakes(frame):
-    """The prefiltered chain and DFG table a render baked (float64), as rr.shade takes them."""
-    rep = {b["name"]: b for b in frame.report["bakes"]}
-    entry = Path(rep["prefiltered"]["entry"])
-    man = json.loads((entry / "manifest.json").read_text())
-    return {"prefiltered": [images.read_exr(entry / f["name"])[..., :3].astype(np.float64) for f in man["files"]],
-            "dfg": images.read_exr(Path(rep["dfg"]["entry"]) / "dfg.exr")[..., :2].astype(np.float64)}
 
 
 @pytest.mark.external

@@ -21,7 +21,6 @@ from iblbake.render import twin as rr
 from iblbake.scene import layout, pack
 from iblbake.scene import load as scene
 
-from .test_render import small_panoramas  # noqa: F401  (fixture: city and studio at 256x128)
 
 ROOT = Path(__file__).resolve().parents[1]
 R = 1.0
@@ -182,14 +181,14 @@ def test_every_kernel_parameter_is_bound_by_name():
     values, every declared buffer, the tile's counts) or the pass's own arguments provide (a
     missing one would be a KeyError at launch, not a shifted argument), and what a pass reads and
     writes (from its kernels' const and non-const pointers) is in the table."""
-    from iblbake.device import runtime
+    from iblbake.device import programs
     from iblbake.render import frame
     from iblbake.render.passes import PASSES
     table = set(frame.TABLE_SCENE) | set(frame.buffer_names()) | set(frame.TABLE_TILE)
     own = {p.name: set(p.bound_params()) for p in PASSES}        # the passes' (and shade's sources') declarations
     for p in PASSES:
         for fn in p.kernel_functions():
-            names = {n for n, _ in runtime.kernel_params(p.kernel, fn)}
+            names = {n for n, _ in programs.kernel_params(p.kernel, fn)}
             assert names <= table | own.get(p.name, set()), (fn, names - table - own.get(p.name, set()))
         assert set(p.reads) | set(p.writes) <= table | own.get(p.name, set()), p.name
         assert p.writes, p.name                    # every pass leaves something in a buffer

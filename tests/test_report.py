@@ -4,7 +4,6 @@ puppeteer-core (tests/node/report_page.cjs): no console error, the tone mapping 
 iblbake/core/tonemap.py to the last bit, the A/B flip, the exposure, the pixel readout against
 the EXR, the plot linked to the table, and a large study's size and open time."""
 
-import base64
 import json
 import shutil
 import subprocess
@@ -19,7 +18,7 @@ from iblbake.core import tonemap
 from iblbake.io import atomic, images
 from iblbake.study import html
 
-from .conftest import run_cli, scene_file
+from tests.helpers import decode, manifest_of, run_cli, scene_file
 
 NODE = Path(__file__).parent / "node"
 CHROMIUM = "/usr/bin/chromium"
@@ -46,17 +45,6 @@ def synthetic_page(folder, n=6, w=40, h=24, seed=1, title="synthetic", radius=0.
     with atomic.Batch() as b:
         html.write(folder, page, b)
     return page
-
-
-def decode(path, shape):
-    """A data script's image: (float16 RGB, mask), as the page decodes it."""
-    text = Path(path).read_text()
-    b64 = text.split('", "', 1)[1].rsplit('"', 1)[0]
-    raw = zlib.decompress(base64.b64decode(b64))
-    h, w = shape
-    rgb = np.frombuffer(raw[:6 * w * h], np.uint8).reshape(2, -1).T.copy().view("<f2").reshape(h, w, 3)
-    mask = np.unpackbits(np.frombuffer(raw[6 * w * h:], np.uint8))[:w * h].reshape(h, w).astype(bool)
-    return rgb, mask
 
 
 def test_data_files_hold_the_float16_frames_and_masks(tmp_path):
@@ -257,12 +245,6 @@ def test_a_study_of_80_rungs_is_small_and_opens_in_a_second(tmp_path, browser):
     assert (tmp_path / "index.html").stat().st_size < 60_000
     best = min(browser(tmp_path / "index.html", [], tmp_path)["open_ms"] for _ in range(2))
     assert best < 1000                               # measured 250-350 ms
-
-
-def manifest_of(index) -> dict:
-    """The page's inline data (what html.manifest wrote)."""
-    text = Path(index).read_text()
-    return json.loads(text.split("window.IBL_DATA = ", 1)[1].split(";</script>", 1)[0].replace("<\\/", "</"))
 
 
 @pytest.mark.external

@@ -19,7 +19,7 @@ from iblbake.scene import load as scene_load
 from iblbake.scene.yaml_lines import load_with_lines
 from iblbake.study import sweep
 
-from .conftest import run_cli, scene_file, write_exr
+from tests.helpers import run_cli, scene_file, write_exr
 
 
 @pytest.fixture
@@ -281,7 +281,7 @@ def test_what_a_new_user_tripped_on_is_said_plainly(tmp_path, lobed_sky):
     from iblbake.scene import load as scene_load
     from iblbake.study import ladder, sweep
     from iblbake.errors import InputError
-    from .conftest import scene_file
+    from tests.helpers import scene_file
     p = scene_file(tmp_path, lobed_sky)
     with pytest.raises(InputError) as e:
         scene_load.load(p, ["probes={counts: 4, spacing: 0.5}"])

@@ -10,17 +10,7 @@ from iblbake.core import conventions as cv
 from iblbake.core import sh
 from iblbake.bake import sh as shbake
 
-from .conftest import rel_err
-
-
-def gauss_sphere(n_theta=48, n_phi=96):
-    """Exact quadrature for polynomials of degree < 2*n_theta on the sphere."""
-    z, wz = npleg.leggauss(n_theta)
-    phi = 2 * np.pi * np.arange(n_phi) / n_phi
-    s = np.sqrt(1 - z * z)
-    d = np.stack(np.broadcast_arrays(s[:, None] * np.cos(phi), s[:, None] * np.sin(phi), z[:, None]), -1)
-    w = np.broadcast_to(wz[:, None] * (2 * np.pi / n_phi), d.shape[:2])
-    return d.reshape(-1, 3), w.reshape(-1)
+from tests.helpers import gauss_sphere, rel_err
 
 
 def test_basis_is_seed_000_for_l_le_2():
@@ -169,7 +159,7 @@ def test_single_bright_texel(rt, backend, bands):
 @pytest.mark.external
 @pytest.mark.parametrize("bands", [3, 8])
 def test_opencl_matches_numpy_on_real_panoramas(rt, load_panorama, bands):
-    from .conftest import PANORAMA_NAMES
+    from tests.helpers import PANORAMA_NAMES
     for name in PANORAMA_NAMES:
         img = load_panorama(name)
         a = project(img, bands, "opencl", rt)

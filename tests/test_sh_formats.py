@@ -28,8 +28,7 @@ import pytest
 
 from iblbake.core import sh
 
-from .conftest import run_cli
-from .test_render import small_panoramas  # noqa: F401  (fixture: city and studio at 256x128)
+from tests.helpers import run_cli
 
 
 def directions(n=500, seed=11):

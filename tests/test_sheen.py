@@ -15,8 +15,7 @@ from iblbake.bake import dfg, layouts, mips, prefilter, spectral
 from iblbake.core import brdf
 from iblbake.io import images
 
-from .conftest import run_cli
-from .test_render import box_downsample, small_panoramas  # noqa: F401
+from tests.helpers import box_downsample, run_cli
 
 
 def viewer_d_charlie(sheen_roughness, noh):

@@ -4,7 +4,6 @@ once), the CLI shorthand, and bad sweep specs as one-line errors with nothing wr
 
 import json
 import shutil
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,32 +12,11 @@ import yaml
 from iblbake.io import images
 from iblbake.study import sheet, sweep
 
-from .conftest import run_cli
-from .test_render import small_panoramas  # noqa: F401  (fixture: city and studio at 256x128)
-
-
-def sheet_scene(folder, env, sweep_spec=None, res=(48, 32)):
-    doc = {"camera": {"perspective": {"position": [0, 0.4, 4], "fov_y": 40}, "resolution": list(res)},
-           "environment": {"path": str(env), "background": "show"},
-           "materials": {"gold": {"base_color": [1.0, 0.78, 0.34], "metallic": 1, "roughness": 0.3},
-                         "paint": {"base_color": [0.8, 0.1, 0.1], "roughness": 0.5}},
-           "objects": [{"sphere": {"center": [-0.6, 0, 0], "radius": 0.5}, "material": "gold"},
-                       {"sphere": {"center": [0.6, 0, 0], "radius": 0.5}, "material": "paint"}],
-           "effects": {"specular": "prefiltered", "samples": 8}}
-    if sweep_spec:
-        doc["sweep"] = sweep_spec
-    p = Path(folder) / "sheet.yaml"
-    p.write_text(yaml.safe_dump(doc))
-    return p
+from tests.helpers import read_png, run_cli, sheet_scene
 
 
 SWEEP = {"title": "gold", "rows": {"key": "materials.gold.metallic", "values": [0, 1]},
          "columns": {"key": "materials.gold.roughness", "range": {"start": 0, "stop": 1, "count": 3}}}
-
-
-def read_png(path):
-    import OpenImageIO as oiio
-    return oiio.ImageBuf(str(path)).get_pixels(oiio.UINT8)
 
 
 @pytest.mark.external

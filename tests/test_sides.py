@@ -16,7 +16,7 @@ from iblbake.render.bakes import Bakes
 from iblbake.render.twin import probes as twin
 from iblbake.scene import geometry, pack
 from iblbake.scene.layout import SURFACE_FLAGS
-from tests.conftest import load_scene
+from tests.helpers import load_scene
 
 
 def cube_triangles(centre=(0, 0, 0), half=0.5, inward=False):
@@ -131,7 +131,7 @@ def open_box(folder, sky, inward: bool, diffuse="probes"):
 
 
 def baked(bakes):
-    return next(v[0] for k, v in bakes._memo.items() if isinstance(k, str) and k.startswith("probes-"))
+    return bakes.result("probes")
 
 
 def test_a_box_of_quads_lights_its_sphere_whichever_way_they_are_wound(tmp_path, rt, lobed_sky):
@@ -233,7 +233,7 @@ def test_a_cell_of_inactive_probes_falls_back(rt):
     """The eight probes of a cell all off: the nearest active ones of the 4 x 4 x 4 around it
     stand in (a constant field: exactly its value; RTXGI returns 0 there), in the kernel and its
     twin alike; no active probe near: the source says none (the shade pass then reads the SH)."""
-    from tests.test_probes import kernel_irradiance, settings, synthetic
+    from tests.probe_helpers import kernel_irradiance, settings, synthetic
     counts = (4, 4, 4)
     grid = probes.Grid((0.0, 0.0, 0.0), (1.0, 1.0, 1.0), counts)
     cell = np.array([[x, y, z] for x in (1, 2) for y in (1, 2) for z in (1, 2)])
@@ -255,7 +255,7 @@ def test_a_cell_of_inactive_probes_falls_back(rt):
 def test_the_shade_pass_counts_the_samples_that_fell_back(tmp_path, rt, lobed_sky):
     """A volume whose probes are all off: the sphere is lit by the panorama's SH, exactly as
     `diffuse: sh` lights it (not black, as RTXGI's 0 made it), and the report counts every sample."""
-    from tests.test_probes import Given, sphere_scene
+    from tests.probe_helpers import Given, sphere_scene
     sc = sphere_scene(tmp_path, lobed_sky, "probes")
     bakes = Bakes(tmp_path / "cache")
     render(sc, runtime=rt, cache=bakes)
@@ -321,6 +321,5 @@ def test_negative_texels_do_not_spoil_a_bake(tmp_path, rt):
         bakes = Bakes(tmp_path / "cache")
         render(sc, runtime=rt, cache=bakes)
         assert (baked(bakes)["irradiance"] >= 0).all()
-        (capture, _cached, _report), = [v for k, v in bakes._memo.items() if isinstance(k, tuple)
-                                        and k[0] == "reflection"]
+        (capture, _cached, _report), = list(bakes.held("reflection").values())
         assert (capture >= 0).all() and capture[..., 3].max() == 1

@@ -10,7 +10,7 @@ from iblbake.core import sh
 from iblbake.io import images
 from iblbake.render.bakes import Bakes
 from iblbake.scene import pack
-from tests.conftest import BakeContext, load_scene
+from tests.helpers import BakeContext, load_scene
 
 from pathlib import Path
 
@@ -92,9 +92,8 @@ def test_frame_matches_the_twin(tmp_path, rt, sky, roughness):
     bakes = Bakes(tmp_path / "cache")
     frame = render(sc, runtime=rt, cache=bakes)
     env_sha = bakes.environment(sc.data["environment"])[1].sha256
-    memo = {k: v for k, v in bakes._memo.items() if isinstance(k, tuple)}
-    pre = next(v[0] for k, v in memo.items() if k[0] == "prefiltered" and k[1] == env_sha)
-    table = next(v[0] for k, v in memo.items() if k[0] == "dfg")
+    pre = next(v[0] for k, v in bakes.held("prefiltered").items() if k[1] == env_sha)
+    table = bakes.result("dfg")
     coeffs = sh.project(images.read_exr(sky)[..., :3], 3) * sh.ahat(3)[:, None]
     arrays = pack.scene_arrays(sc)
     gb = rr.primary(sc["camera"], arrays)
@@ -226,10 +225,9 @@ def test_more_frames_match_the_twin(tmp_path, rt, case):
     sc = mirror_ball(tmp_path, name=case.replace(" ", "_"), **kw)
     bakes = Bakes(tmp_path / "cache")
     frame = render(sc, runtime=rt, cache=bakes)
-    memo = {k: v for k, v in bakes._memo.items() if isinstance(k, tuple)}
     env_sha = bakes.environment(sc.data["environment"])[1].sha256
-    pre = next(v[0] for k, v in memo.items() if k[0] == "prefiltered" and k[1] == env_sha)
-    table = next(v[0] for k, v in memo.items() if k[0] == "dfg")
+    pre = next(v[0] for k, v in bakes.held("prefiltered").items() if k[1] == env_sha)
+    table = bakes.result("dfg")
     captured = bakes.load("reflection_probes", BakeContext(sc, rt, bakes))[0] if kw.get("probe") else None
     arrays = pack.scene_arrays(sc)
     gb = rr.primary(sc["camera"], arrays)
@@ -316,8 +314,7 @@ def test_a_tiled_ssr_frame_counts_each_sample_once(tmp_path, rt, sky):
     counted once (they were doubled, and the warning said twice). A volume whose probes are all
     off: every sample of the sphere takes the panorama's SH."""
     from iblbake.render import frame
-    from tests.test_probes import Given, sphere_scene
-    from tests.test_sides import baked
+    from tests.probe_helpers import Given, baked_volume as baked, sphere_scene
     sc = sphere_scene(tmp_path, sky, "probes")
     sc.data["effects"].update(specular="prefiltered", ssr="on")
     bakes = Bakes(tmp_path / "cache")

@@ -23,7 +23,7 @@ from iblbake.bake import radiance
 from iblbake.core import sh
 from iblbake.bake import sh as shbake
 
-from .conftest import run_cli, write_exr
+from tests.helpers import run_cli, write_exr
 
 unit = st.tuples(st.floats(-1, 1), st.floats(-1, 1), st.floats(-1, 1)).filter(
     lambda v: 1e-3 < math.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2))
@@ -160,7 +160,7 @@ def test_4096x2048_sun(rt):
 def test_sh_bands_up_to_8_orthonormal_in_both_languages(rt, stress):
     """The Gram matrix of the basis by exact Gauss quadrature: float64 numpy and the float32
     OpenCL recurrence (bands 1..8, poles included in the directions)."""
-    from .test_sh import gauss_sphere
+    from tests.helpers import gauss_sphere
     d, w = gauss_sphere()
     worst_np = worst_cl = 0.0
     for bands in range(1, 9):
@@ -212,7 +212,8 @@ def test_tonemap_hostile_values(rt, stress):
     """0, 1e-30, 1e30, +-inf, NaN and negatives through every operator: display values finite and
     in [0, 1] in both languages, and the languages agree."""
     from iblbake.core import tonemap
-    from .test_tonemap import HOSTILE, OPS, run_cl
+    from iblbake.scene.layout import TONEMAP_IDS as OPS
+    from tests.helpers import HOSTILE, run_cl
     hdr = np.stack(list(np.meshgrid(HOSTILE, HOSTILE, indexing="ij")) + [np.full((len(HOSTILE),) * 2, 0.3)], -1)
     hdr = hdr.reshape(-1, 3).astype(np.float32)
     outside = diff = 0.0

@@ -26,8 +26,7 @@ from iblbake.render import twin as rr
 from iblbake.core import sampling
 from iblbake.scene import load as scene
 
-from .conftest import scene_file
-from .test_render import prefiltered_bakes
+from tests.helpers import prefiltered_bakes, scene_file
 
 EXTREMES = [(r, m, b) for r in (0.0, 1e-4, 0.5, 1.0) for m in (0.0, 1.0) for b in (0.0, 1.0)]
 
@@ -278,9 +277,9 @@ def test_chain_lookup_at_poles_seam_and_extreme_levels(rt, stress):
 
 
 def test_mapping_round_trip_at_poles_and_seam(rt, stress):
-    from .test_conventions import _kernel
+    from tests.helpers import selftest_kernel
     d = _edge_directions()
-    uv = _kernel(rt, "t_equirect_uv", len(d), [d], 2)
+    uv = selftest_kernel(rt, "t_equirect_uv", len(d), [d], 2)
     u, v = cv.equirect_uv_from_dir(d)
     assert ((uv[:, 0] >= 0) & (uv[:, 0] < 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= 1)).all()
     du = np.abs(uv[:, 0] - u)
@@ -297,12 +296,12 @@ def test_mapping_round_trip_at_poles_and_seam(rt, stress):
 
 
 def test_tangent_frames_along_the_axes(rt, stress):
-    from .test_conventions import _kernel
+    from tests.helpers import selftest_kernel
     e = 1e-8
     n = np.array([[0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1], [e, -1, 0], [0, -1, e], [e, 1, e],
                   [-e, 0, -1], [1, 0, 0], [-1, 0, 0]], np.float64)
     n /= np.linalg.norm(n, axis=1, keepdims=True)
-    tb = _kernel(rt, "t_frame", len(n), [n], 6).astype(np.float64)
+    tb = selftest_kernel(rt, "t_frame", len(n), [n], 6).astype(np.float64)
     worst = 0.0
     for t, b in ((tb[:, :3], tb[:, 3:]), cv.tangent_frame(n)):
         m = np.stack([t, b, n], 1)
@@ -378,7 +377,7 @@ def test_no_rays_slip_through_shared_edges(stress):
     shared edge must hit one of its triangles. A ray that slips through hits the far side of the
     tube: a pixel deeper than all four neighbours (which agree with each other). Moller-Trumbore
     on per-triangle edge vectors left 7 such pixels; the watertight test leaves 0."""
-    from .conftest import ROOT
+    from tests.helpers import ROOT
     sc = scene.load(ROOT / "examples" / "scenes" / "mesh.yaml",
                     ["effects.specular=off", "effects.diffuse=off", "output.depth=depth.exr"], ["unused.exr"])
     import tempfile

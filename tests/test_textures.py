@@ -27,8 +27,7 @@ from iblbake.render import twin as rr
 from iblbake.scene import load as scene
 from iblbake.scene import pack
 
-from .conftest import mend_cache_entry, run_cli, write_exr
-from .conftest import scene_file as write_scene_file
+from tests.helpers import mend_cache_entry, run_cli, scene_file as write_scene_file, write_exr
 
 QUAD_V = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], float)
 QUAD_F = np.array([[0, 1, 2], [0, 2, 3]])

@@ -4,21 +4,8 @@ import numpy as np
 import pytest
 
 from iblbake.core import tonemap
-
-from iblbake.scene.layout import TONEMAP_IDS as OPS  # noqa: E402
-HOSTILE = np.array([0.0, 1e-30, 1e-8, 0.5, 1.0, 11.2, 1e4, 6.5e4, 1e30, np.inf, -np.inf, np.nan, -1.0, -1e30],
-                   dtype=np.float32)
-
-
-def run_cl(rt, hdr, op, ev=0.0, srgb=True, gamma=2.2):
-    hdr = np.asarray(hdr, np.float32).reshape(-1, 3)
-    n = len(hdr)
-    rgba = np.zeros((n, 4), np.float32)
-    rgba[:, :3] = hdr
-    out, disp = rt.empty(n * 4), rt.empty(n * 16)
-    rt.launch("tonemap.cl", "tonemap_u8", {"TONEMAP": OPS[op], "OUTPUT_SRGB": int(srgb)}, (n,), {},
-              hdr=rt.to_device(rgba), exposure_scale=2.0 ** ev, gamma=gamma, n=n, pixel0=0, png_u8=out, display=disp)
-    return rt.read(disp, (n, 4))[:, :3], rt.read(out, (n, 4), np.uint8)[:, :3]
+from iblbake.scene.layout import TONEMAP_IDS as OPS
+from tests.helpers import HOSTILE, run_cl
 
 
 def test_closed_forms():

@@ -29,7 +29,7 @@ from iblbake.io import images
 from iblbake.scene import geometry, gltf, materials
 from iblbake.scene import load as scene_load
 
-from .conftest import run_cli, scene_file, stress_scale, write_exr
+from tests.helpers import run_cli, scene_file, stress_scale, write_exr
 
 ALLOW = "IBLBAKE_ALLOW_OUTSIDE"
 # a triangle's positions and texture coordinates: the bytes of every buffer here (a canary read

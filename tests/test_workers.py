@@ -19,9 +19,7 @@ from iblbake.device.runtime import Runtime
 from iblbake.scene import load as scene_load
 from iblbake.study import sheet, sweep, workers
 
-from .conftest import run_cli
-from .test_render import small_panoramas  # noqa: F401  (fixture: city and studio at 256x128)
-from .test_sheet import sheet_scene
+from tests.helpers import run_cli, sheet_scene
 
 # 16 cells, each heavy enough (importance sampling) that a worker is mid-cell when it is killed
 GRID = {"title": "grid", "rows": {"key": "materials.gold.roughness", "range": {"start": 0.1, "stop": 0.9, "count": 4}},

@@ -20,6 +20,7 @@ import numpy as np
 
 from iblbake.bake import cache
 from iblbake.device import runtime as cl
+from iblbake.device.programs import source_hash
 from iblbake.io import images, memory
 from iblbake.bake import dfg
 from iblbake.bake import layouts
@@ -174,7 +175,7 @@ def prefilter_host_bytes(src_size, opts: dict, methods, backend: str) -> int:
 
 
 class OpenCLBaker:
-    """Runs kernels/mips.cl on one device (iblbake.cl.Runtime)."""
+    """Runs kernels/mips.cl on one device (iblbake.device.runtime.Runtime)."""
 
     def __init__(self, rt):
         self.rt = rt
@@ -349,7 +350,7 @@ def _check_finite(name, img):
 def bake_radiance(baker: Baker, image, info, root: Path, policies: dict, warn=None):
     key = cache.content_key({"format": FORMAT, "v": FORMAT_VERSION, "kind": "radiance",
                              "input": info.sha256, "policies": policies,
-                             "kernel": cl.source_hash("mips.cl")})
+                             "kernel": source_hash("mips.cl")})
     state = {}
 
     def build(tmp: Path):
@@ -364,7 +365,7 @@ def bake_radiance(baker: Baker, image, info, root: Path, policies: dict, warn=No
             files.append({"name": name, "level": k, "width": lvl.shape[1], "height": lvl.shape[0]})
         return {"format": FORMAT, "format_version": FORMAT_VERSION, "kind": "radiance",
                 "layout": "equirect", "files": files, "input": info.to_json(), "parameters": policies,
-                "kernel_source_sha256": cl.source_hash("mips.cl"), "device": baker.device_label,
+                "kernel_source_sha256": source_hash("mips.cl"), "device": baker.device_label,
                 "timings": {"bake_s": time.perf_counter() - t0},
                 "filter": "each texel is the solid-angle-weighted mean of the texels it covers"}
 
@@ -477,7 +478,7 @@ def bake_prefiltered(baker: Baker, chain, info, root: Path, policies: dict, opts
     keyed = {k: v for k, v in opts.items() if k != "method_name"}
     key = cache.content_key({"format": FORMAT, "v": FORMAT_VERSION, "kind": "prefiltered",
                              "input": info.sha256, "policies": policies, "options": keyed,
-                             "kernel": cl.source_hash("mips.cl"), "spectral": spectral.source_hash()})
+                             "kernel": source_hash("mips.cl"), "spectral": spectral.source_hash()})
 
     def build(tmp: Path):
         t0 = time.perf_counter()
@@ -497,7 +498,7 @@ def bake_prefiltered(baker: Baker, chain, info, root: Path, policies: dict, opts
                     "octahedral": "s x s octahedral map, +y at the centre"}[opts["layout"]],
                 "roughness_mapping": "level k of K has perceptual roughness r_k = k / (K - 1), alpha = r^2",
                 "files": files, "input": info.to_json(), "parameters": {**policies, **keyed},
-                "kernel_source_sha256": cl.source_hash("mips.cl"), "device": baker.device_label,
+                "kernel_source_sha256": source_hash("mips.cl"), "device": baker.device_label,
                 "timings": {"bake_s": time.perf_counter() - t0}}
 
     return cache.get_or_build(root, key, build, warn=warn)
@@ -518,7 +519,7 @@ def dfg_table(baker: Baker, size: int, samples: int, multiscatter: bool):
 def bake_dfg(baker: Baker, root: Path, size: int, samples: int, multiscatter: bool, warn=None):
     params = {"size": size, "samples": samples, "multiscatter": multiscatter}
     key = "dfg-" + cache.content_key({"format": FORMAT, "v": FORMAT_VERSION, "kind": "dfg", **params,
-                                      "kernel": cl.source_hash("mips.cl")})
+                                      "kernel": source_hash("mips.cl")})
 
     def build(tmp: Path):
         t0 = time.perf_counter()
@@ -535,7 +536,7 @@ def bake_dfg(baker: Baker, root: Path, size: int, samples: int, multiscatter: bo
                 "use": ("specular = prefiltered * mix(R, G, F0): R = B, G = A + B; energy compensation "
                         "1 + F0 * (1/G - 1) (Filament)") if multiscatter else
                        "specular = prefiltered * (F0 * R + F90 * G): R = A (scale), G = B (bias)",
-                "kernel_source_sha256": cl.source_hash("mips.cl"), "device": baker.device_label,
+                "kernel_source_sha256": source_hash("mips.cl"), "device": baker.device_label,
                 "timings": {"bake_s": time.perf_counter() - t0}}
 
     return cache.get_or_build(root, key, build, warn=warn)
@@ -580,7 +581,7 @@ def bake_sheen_dfg(baker: Baker, root: Path, size: int, samples: int, warn=None)
     """The sheen albedo table E(NoV, r) = int D_charlie V_ashikhmin NoL dl on the DFG's grid."""
     params = {"size": size, "samples": samples}
     key = "dfg-sheen-" + cache.content_key({"format": FORMAT, "v": FORMAT_VERSION, "kind": "dfg-sheen", **params,
-                                            "kernel": cl.source_hash("mips.cl")})
+                                            "kernel": source_hash("mips.cl")})
 
     def build(tmp: Path):
         t0 = time.perf_counter()

@@ -303,7 +303,7 @@ def bake_irradiance(rt, image, info, root, policies: dict, bands: int, window: s
     from pathlib import Path
 
     from iblbake.bake import cache
-    from iblbake.device.runtime import source_hash
+    from iblbake.device.programs import source_hash
     from iblbake.io.atomic import write_json
 
     root = Path(root)

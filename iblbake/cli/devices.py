@@ -12,7 +12,7 @@ from iblbake.errors import IblbakeError
 @common_options
 def devices(quiet, as_json):
     """List OpenCL devices, whether each builds and runs a probe kernel, and which is used."""
-    from iblbake.device import runtime as cl
+    from iblbake.device import choice as cl
 
     from iblbake.device import icd
 

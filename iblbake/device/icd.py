@@ -13,7 +13,7 @@ loader reads both, so OCL_ICD_VENDORS is the variable that works with either.
 Nothing changes where the extra is not installed, where OCL_ICD_VENDORS is already set (the user's
 choice of drivers stands; a child process inherits the folder written here), or where
 IBLBAKE_INTEL_OPENCL=0. The device iblbake picks by default stays the same: among CPU devices PoCL
-ranks before Intel's (runtime._preference); `--device intel-cpu` (or IBLBAKE_DEVICE=intel-cpu)
+ranks before Intel's (choice._preference); `--device intel-cpu` (or IBLBAKE_DEVICE=intel-cpu)
 picks Intel's.
 """
 
@@ -33,6 +33,11 @@ REGISTERED = "IBLBAKE_ICD_REGISTERED"     # the folder this process pointed OCL_
 
 # what register() did, for `iblbake devices`: None (not tried), or a one-line note
 note: str | None = None
+
+
+def is_intel_cpu(info) -> bool:
+    """Whether device `info` (a choice.DeviceInfo) is Intel's CPU runtime, not PoCL on an Intel CPU."""
+    return info.kind == "CPU" and info.platform == INTEL_PLATFORM
 
 
 def intel_cpu_library() -> Path | None:
@@ -131,7 +136,7 @@ def register(cache_root: str | os.PathLike | None = None) -> str | None:
     icds = _system_icds()
     icds["zz-iblbake-intel-cpu.icd"] = f"{lib}\n"
     if cache_root is None:
-        from iblbake.device.runtime import _cache_dir
+        from iblbake.device.programs import _cache_dir
         cache_root = os.path.dirname(_cache_dir())
     try:
         folder = vendors_folder(os.path.join(cache_root, "opencl-vendors"), icds)

@@ -145,6 +145,21 @@ class Bakes:
         held = key in self._memo
         return self._get(key, make), held
 
+    def held(self, kind: str) -> dict:
+        """{key: value} of the bakes of `kind` this store holds in memory, in the order they were
+        made (what a frame loaded, for tests and tools). A key names its kind: a tuple's first item
+        ('dfg', 'prefiltered', 'reflection', 'device-scene', ...) or a string's part before its
+        first '-' ('probes-HASH'); a unit's value is (result, cached, report fields)."""
+        return {k: v for k, v in self._memo.items()
+                if (k[0] if isinstance(k, tuple) else str(k).split("-", 1)[0]) == kind}
+
+    def result(self, kind: str):
+        """The result (its value's first item) of the first bake of `kind` held in memory (held)."""
+        made = self.held(kind)
+        if not made:
+            raise KeyError(f"no bake of kind {kind!r} held in memory")
+        return next(iter(made.values()))[0]
+
     def environment(self, env: dict):
         """(image, info), read once per file content (path, size, mtime) and policies. With
         `sun: extract`, the panorama without its sun, its info's hash that of what is left (every

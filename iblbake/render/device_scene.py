@@ -55,8 +55,8 @@ def digest(*arrays, head: str = "") -> str:
 def geometry_tables(rt, arrays) -> dict:
     """The triangles, BVH and triangle attributes on the device (the large part of a mesh scene): the
     BVH the device's kernels traverse, the 4-wide tree on a CPU, the binary tree elsewhere
-    (device/runtime.py device_options, WIDE_BVH)."""
-    from iblbake.device.runtime import WIDE_BVH
+    (device/programs.py device_options, WIDE_BVH)."""
+    from iblbake.device.programs import WIDE_BVH
     from iblbake.scene.layout import FLOAT4S
     bvh = arrays.bvh_wide if WIDE_BVH in rt.device_options else arrays.bvh.reshape(-1, 4)
     return {"bvh": rt.to_device(_padded(bvh, (1, 4))), "tris": rt.to_device(_padded(arrays.tris, (1, 6, 4))),

@@ -364,7 +364,7 @@ def probes_code_hash() -> str:
     from iblbake.core import sampling
     from iblbake.core.bases import common
     from iblbake.core.bases import probes as probe_bases
-    from iblbake.device.runtime import source_hash
+    from iblbake.device.programs import source_hash
     from iblbake.render import device_scene, probes, reflection_probes
     from iblbake.render.bakes import _code_hash
     package = [importlib.import_module(f"{probes.__name__}.{m.name}")

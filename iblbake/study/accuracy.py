@@ -136,7 +136,7 @@ class Study:
     def _reference_key(self, sc, seed) -> str:
         from iblbake.bake.cache import content_key
         from iblbake.core import sampling
-        from iblbake.device.runtime import source_hash
+        from iblbake.device.programs import source_hash
         from iblbake.render.bakes import _code_hash
         from iblbake.render.passes.base import lighting_inputs
 

@@ -85,7 +85,7 @@ def cell_scenes(scene_path, overrides, cells, cell_size=None, keep_going=False):
 @functools.lru_cache(maxsize=1)
 def _kernels_hash() -> str:
     """Every pass's kernel source, headers inlined (read once per process)."""
-    from iblbake.device.runtime import source_hash
+    from iblbake.device.programs import source_hash
     from iblbake.render.passes import PASSES
     return source_hash(tuple(dict.fromkeys(p.kernel for p in PASSES if p.kernel)))
 

@@ -129,7 +129,7 @@ class Pass:
 
 @functools.lru_cache(maxsize=None)
 def _access(kernel, functions) -> tuple:
-    from iblbake.device.runtime import kernel_buffers
+    from iblbake.device.programs import kernel_buffers
 
     reads, writes = {}, {}
     for fn in functions:

@@ -31,7 +31,7 @@ import time
 
 import numpy as np
 
-from iblbake.device.runtime import kernel_params
+from iblbake.device.programs import kernel_params
 
 DEPTH = 4                     # bounces profiled one by one; the rest of a deeper path is one entry
 REPEATS = 5
