@@ -134,9 +134,10 @@ PART_MISSES = {("quad_room", "studio"): 0.60}
 MIN_PIXELS = 10
 
 
-def absolute_study(name, panorama, panoramas, runtime, cache, term, label):
+def absolute_study(name, panorama, panoramas, runtime, cache, term, label, extra=()):
     """The term's converged reference (40 px; two seeds, each to 3% or 256 samples: the region
-    means' noise is well under a percent) and the real-time rung `label` against it."""
+    means' noise is well under a percent) and the real-time rung `label` against it, the rung
+    with the scene keys `extra` ([(key, value)]) on top (the reference without them)."""
     from iblbake.study import accuracy as acc, ladder
     other = {"diffuse": "specular", "specular": "diffuse"}[term]
     settings = acc.Settings(max_side=40, repeats=1, target_noise=0.03, max_samples=256, flip=False)
@@ -145,7 +146,7 @@ def absolute_study(name, panorama, panoramas, runtime, cache, term, label):
                    runtime=runtime, bakes=Bakes(cache))
     st.render_reference(term)
     rung = next(r for r in ladder.realtime_ladder(st.scene, st.fx) if r.label == label)
-    return st, st.run_rung(rung)
+    return st, st.run_rung(ladder.Rung(rung.term, rung.label, rung.values + list(extra)))
 
 
 def outside(errors: dict, bound: float) -> dict:
