@@ -14,7 +14,11 @@ the same reuses them:
 
     .venv/bin/python benchmarks/corpus_absolute.py [--tree DIR] [--panoramas studio,city]
         [--max-side 64] [--max-samples 4096] [--target-noise 0.01] [--scenes corridor,l_room]
-        [--cache DIR] [--json out.json]
+        [--cache DIR] [--json out.json] [--rung-set KEY=VALUE ...]
+
+--rung-set puts a scene key on every real-time rung, the reference left as it is: docs/manual.md's
+quality setting for interiors is `--rung-set environment.sun=extract --rung-set
+environment.sun_lights=4 --rung-set environment.sun_shadows=soft`.
 """
 
 from __future__ import annotations
@@ -24,6 +28,8 @@ import json
 import sys
 import time
 from pathlib import Path
+
+import yaml
 
 DIFFUSE = ("probes", "SH + GTAO")
 SPECULAR = ("reflection probes", "distant")
@@ -45,7 +51,9 @@ def study_scene(path, panorama, args, rt, bakes, root) -> dict:
     study = make([])
     if not study.scene.data["reflection_probes"] and "specular" in study.terms:
         study = make(["effects.specular=off"])     # no reflection probe to judge: no specular reference
-    rungs = [r for r in ladder.realtime_ladder(study.scene, study.fx) if r.label in DIFFUSE + SPECULAR]
+    extra = [(k, yaml.safe_load(v)) for k, _, v in (kv.partition("=") for kv in args.rung_set)]
+    rungs = [ladder.Rung(r.term, r.label, r.values + extra)
+             for r in ladder.realtime_ladder(study.scene, study.fx) if r.label in DIFFUSE + SPECULAR]
     refs = {t: study.render_reference(t) for t in study.terms}
     keep = ("term", "label", "relative_rmse", "region_absolute", "worst_region_absolute", "part_absolute",
             "worst_part_absolute", "time_s")
@@ -125,6 +133,8 @@ def main():
     ap.add_argument("--device", default=None)
     ap.add_argument("--cache", default=None)
     ap.add_argument("--json", default=None)
+    ap.add_argument("--rung-set", action="append", default=[], metavar="KEY=VALUE",
+                    help="a scene key on every real-time rung (not the reference); repeatable")
     ap.add_argument("--from-json", default=None, help="print the tables of an earlier run's --json, rendering nothing")
     args = ap.parse_args()
     if args.from_json:

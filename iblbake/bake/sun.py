@@ -10,6 +10,11 @@ channel E_c = sum over the region of (L_c - fill_c) dOmega (what a surface facin
 receives from it, to the cosine spread over the disk: 1 - cos of half a degree is 4e-5), the
 direction the removed energy's centroid, the angular diameter that of a disk of the region's
 solid angle. A panorama with no texel above the threshold has no sun: nothing is extracted.
+
+extract_lights(image, count): the same for up to `count` regions, brightest first: the sun, and
+lamps and softboxes up to LAMP_DIAMETER degrees carrying at least LAMP_SHARE of the panorama's
+energy each (studio's four lamps, 4-16 degrees wide, 87% of its energy). Each comes back as a
+directional light whose disk spreads its shadow's penumbra (`sun_shadows: soft`).
 """
 
 from __future__ import annotations
@@ -30,6 +35,8 @@ THRESHOLD = 100.0
 MAX_DIAMETER = 6.0       # degrees (the sun's 0.53 spreads over 1.5-4.4 in a 1024x512 panorama)
 RING = 2
 MAX_TEXELS = 1 << 16     # the region search stops here (a bright sky, not a disk)
+LAMP_DIAMETER = 20.0     # degrees: extract_lights takes lamps this wide (studio's span 4-16)
+LAMP_SHARE = 0.02        # of the panorama's energy: a dimmer region stays in the panorama
 
 
 @dataclass
@@ -80,35 +87,59 @@ def _dilate(region: np.ndarray, k: int) -> np.ndarray:
     return out
 
 
-def extract(image) -> tuple[np.ndarray, Sun | None]:
-    """(residual panorama, Sun or None). The image is (H, W, 3) linear RGB."""
-    img = np.asarray(image, np.float64)[..., :3]
-    h, w = img.shape[:2]
-    lum = img @ LUMINANCE
-    median = float(np.median(lum))
-    peak = np.unravel_index(int(np.argmax(lum)), lum.shape)
-    none = (np.asarray(image, np.float32), None)
-    if lum[peak] <= 0 or lum[peak] < PEAK * max(median, 0.0):
-        return none
-    region = _region(lum > THRESHOLD * median, peak)
+def _removed(img, region, om, total):
+    """The region's texels down to its ring's level: (residual texels, Sun)."""
     n = int(region.sum())
-    om = conventions.equirect_solid_angles(w, h)
     solid = float(om[region].sum())
     half = math.acos(max(-1.0, 1.0 - solid / (2 * math.pi)))
-    if n > MAX_TEXELS or math.degrees(2 * half) > MAX_DIAMETER:
-        return none
     ring = _dilate(region, RING) & ~region
     fill = img[ring].mean(axis=0)
     removed = np.maximum(img[region] - fill, 0.0)           # per texel and channel
     e = (removed * om[region][:, None]).sum(axis=0)           # E per channel, facing the sun
+    h, w = img.shape[:2]
     dirs = conventions.equirect_texel_dirs(w, h)[region]
     centroid = ((removed @ LUMINANCE)[:, None] * om[region][:, None] * dirs).sum(axis=0)
     direction = centroid / np.linalg.norm(centroid)
-    residual = img.copy()
-    residual[region] = np.minimum(img[region], fill)          # never brighter than it was
-    total = float(((img @ LUMINANCE) * om).sum())
     illum = float(e @ LUMINANCE)
     sun = Sun(direction=direction.tolist(), color=(e / illum).tolist() if illum > 0 else [1.0, 1.0, 1.0],
               illuminance=illum, angular_diameter=math.degrees(2 * half), texels=n,
               energy_fraction=float((removed @ LUMINANCE * om[region]).sum()) / total if total > 0 else 0.0)
-    return residual.astype(np.float32), sun
+    return np.minimum(img[region], fill), sun                 # never brighter than it was
+
+
+def extract_lights(image, count: int = 1, max_diameter: float = MAX_DIAMETER, share: float = 0.0):
+    """(residual panorama, [Sun]): up to count compact regions (at most max_diameter degrees, at
+    least share of the energy), brightest texel first; none when the peak is under PEAK x median."""
+    img = np.asarray(image, np.float64)[..., :3]
+    h, w = img.shape[:2]
+    lum = img @ LUMINANCE
+    median = float(np.median(lum))
+    om = conventions.equirect_solid_angles(w, h)
+    total = float((lum * om).sum())
+    bright = lum > THRESHOLD * median
+    residual, found = img.copy(), []
+    while len(found) < count and bright.any():
+        peak = np.unravel_index(int(np.argmax(np.where(bright, lum, -np.inf))), lum.shape)
+        if lum[peak] <= 0 or lum[peak] < PEAK * max(median, 0.0):
+            break
+        region = _region(bright, peak)
+        bright &= ~region
+        solid = float(om[region].sum())
+        diameter = math.degrees(2 * math.acos(max(-1.0, 1.0 - solid / (2 * math.pi))))
+        if int(region.sum()) > MAX_TEXELS or diameter > max_diameter:
+            if count == 1:
+                break                # the brightest region is no sun: the panorama has none
+            continue
+        if float((lum * om)[region].sum()) < share * total:
+            continue
+        residual[region], sun = _removed(img, region, om, total)
+        found.append(sun)
+    if not found:
+        return np.asarray(image, np.float32), []
+    return residual.astype(np.float32), found
+
+
+def extract(image) -> tuple[np.ndarray, Sun | None]:
+    """(residual panorama, Sun or None). The image is (H, W, 3) linear RGB."""
+    residual, found = extract_lights(image, 1)
+    return residual, (found[0] if found else None)

@@ -171,7 +171,7 @@ class Bakes:
             transfer=env["transfer"], primaries=env["primaries"], names=POLICY_KEYS))
         if env.get("sun") != "extract":
             return image, info
-        return self._get(key + ("sun",), lambda: self._extract(image, info))[:2]
+        return self._get(key + ("sun", env.get("sun_lights", 1)), lambda: self._extract(image, info, env))[:2]
 
     @staticmethod
     def _env_key(env: dict) -> tuple:
@@ -180,20 +180,27 @@ class Bakes:
         return ("env", env["path"], st.st_size, st.st_mtime_ns, env["nonfinite"], env["negative"], env["transfer"],
                 env["primaries"], env["layout"])
 
-    def _extract(self, image, info):
+    def _extract(self, image, info, env):
         import hashlib
 
         from iblbake.bake import sun as sunbake
-        residual, found = sunbake.extract(image)
-        tag = hashlib.sha256(f"{info.sha256}:sun-extract:{sunbake.PEAK}:{sunbake.THRESHOLD}:{sunbake.RING}".encode())
+        count = env.get("sun_lights", 1)
+        if count == 1:
+            residual, found = sunbake.extract_lights(image, 1)
+            tag = hashlib.sha256(f"{info.sha256}:sun-extract:{sunbake.PEAK}:{sunbake.THRESHOLD}:{sunbake.RING}".encode())
+        else:                     # lamps too (bake/sun.py extract_lights)
+            residual, found = sunbake.extract_lights(image, count, sunbake.LAMP_DIAMETER, sunbake.LAMP_SHARE)
+            tag = hashlib.sha256(f"{info.sha256}:sun-extract:{sunbake.PEAK}:{sunbake.THRESHOLD}:{sunbake.RING}:"
+                                 f"{count}:{sunbake.LAMP_DIAMETER}:{sunbake.LAMP_SHARE}".encode())
         return residual, dataclasses.replace(info, sha256=tag.hexdigest()), found
 
-    def sun(self, env: dict):
-        """The extracted sun of the scene's panorama (bake/sun.py), or None."""
+    def sun(self, env: dict) -> list:
+        """The lights extracted from the scene's panorama (bake/sun.py: the sun, lamps where
+        `sun_lights` > 1), brightest first; none without `sun: extract`."""
         if env.get("sun") != "extract":
-            return None
+            return []
         self.environment(env)
-        return self._memo[self._env_key(env) + ("sun",)][2]
+        return self._memo[self._env_key(env) + ("sun", env.get("sun_lights", 1))][2]
 
     def geometry(self, sc, warn=None):
         """The scene's device records; its meshes' triangles, BVH and triangle attributes from the

@@ -93,13 +93,13 @@ def panorama_args(rt, bakes, image, dist) -> dict:
             "w": dist.width, "h": dist.height, "env_norm": dist.norm}
 
 
-def scene_lights(scene, sun) -> list:
-    """The scene's lights, and the panorama's extracted sun (bake/sun.py) as a directional light
-    in world space, scaled like the panorama."""
+def scene_lights(scene, suns) -> list:
+    """The scene's lights, and the lights extracted from the panorama (bake/sun.py: Bakes.sun) as
+    directional lights in world space, scaled like the panorama."""
     out = list(scene.data["lights"])
-    if sun is not None:
-        from iblbake.core import conventions
-        env = scene.data["environment"]
+    from iblbake.core import conventions
+    env = scene.data["environment"]
+    for sun in suns:
         d = conventions.rotate_y(sun.direction, env["rotation_y"])
         out.append({"directional": {"direction": [-x for x in d], "color": sun.color,
                                     "illuminance": sun.illuminance * env["intensity"],

@@ -326,6 +326,10 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                     doc="extract: the panorama's sun (a compact region 1e4 x brighter than the median) leaves the "
                         "panorama and comes back as a directional light of exactly its energy, so it casts shadows"),
         "sun_shadows": Enum(("hard", "soft", "none"), "hard", doc="the extracted sun's shadows"),
+        "sun_lights": Num(1, 1, 8, integer=True, doc="extract: how many compact bright regions leave the panorama as directional "
+                                       "lights, brightest first: 1 the sun (at most 6 degrees); more takes lamps and "
+                                       "softboxes too (up to 20 degrees, each 2% of the energy or more: studio's "
+                                       "four lamps), each a disk whose soft shadows spread its penumbra"),
     }),
     "materials": MapOf(doc="named materials (glTF 2.0's metallic-roughness model)", section=Section(
         doc="a metallic-roughness material", fields={

@@ -78,8 +78,12 @@ class Lights(Pass):
         args = ctx.args[self.name]
         rays = shadow_rays_per_sample(ctx.scene, ctx.plan.effects, args["frame_lights"])
         extra = {}
-        if args["sun"] is not None:       # what was extracted; the light's direction in world space
-            extra["sun"] = {**args["sun"].to_json(), "light_direction_world": [
-                round(x, 6) for x in args["frame_lights"][-1]["directional"]["direction"]]}
+        first = len(ctx.scene.data["lights"])     # what was extracted; each light's direction in world space
+        said = [{**s.to_json(), "light_direction_world": [round(x, 6) for x in lt["directional"]["direction"]]}
+                for s, lt in zip(args["sun"], args["frame_lights"][first:])]
+        if said:
+            extra["sun"] = said[0]
+        if len(said) > 1:
+            extra["lamps"] = said[1:]
         return {"lights": ctx.args[self.name]["nlights"], "exact": exact(ctx.plan.effects),
                 "shadow_rays_per_sample": rays, "shadow_rays_per_s": round(n * rays / max(s, 1e-9)), **extra}
