@@ -1,5 +1,5 @@
 /* IBL_INLINE, what every function of kernels/ is declared with: `inline`, and on Intel's OpenCL CPU
- * runtime (the runtime defines IBL_ALWAYS_INLINE there: iblbake/device/runtime.py) always inlined.
+ * runtime (the runtime defines IBL_ALWAYS_INLINE there: iblbake/device/programs.py) always inlined.
  * That runtime (2026.2) passes a float3 argument or return value of a call it leaves out of line
  * wrongly from a vectorised kernel (work items 1-15 of each 16 get other items' components), and
  * its inliner leaves large functions called from two kernels of one program out of line

@@ -18,7 +18,7 @@
 /* PROFILE_RAYS (the reference's path profile only, iblbake/render/paths/profile.py): every ray
  * traced is recorded (1) or answered from that record without traversal (2), through two more
  * buffers that every function tracing rays passes on. The host reads the last definitions below
- * (device/runtime.py kernel_params): kernels built without it have the signatures they always had. */
+ * (device/programs.py kernel_params): kernels built without it have the signatures they always had. */
 #ifdef PROFILE_RAYS
 #define SCENE_PARAMS GEOMETRY_PARAMS, __global float4 *prof_rays, __global int *prof_index
 #define SCENE_ARGS GEOMETRY_ARGS, prof_rays, prof_index
@@ -101,7 +101,7 @@ IBL_INLINE RayShear ray_shear(float3 d)
 
 /* The triangles' and the boxes' tests of the two BVH layouts (scene/bvh.py): the 4-wide tree on a
  * CPU, whose float4 lanes are SIMD there, the binary tree on a GPU, where the wide one's private
- * arrays and lanes cost more than its fewer nodes save (IBL_WIDE_BVH: iblbake/device/runtime.py
+ * arrays and lanes cost more than its fewer nodes save (IBL_WIDE_BVH: iblbake/device/programs.py
  * device_options; docs/benchmarks.md "A 4-wide BVH"). FP_CONTRACT OFF keeps a*b - c*d unfused,
  * which the watertight test's exact antisymmetry needs. */
 #pragma OPENCL FP_CONTRACT OFF

@@ -153,6 +153,11 @@ class Bakes:
         return {k: v for k, v in self._memo.items()
                 if (k[0] if isinstance(k, tuple) else str(k).split("-", 1)[0]) == kind}
 
+    def held_key(self, key):
+        """The value this store holds in memory under `key` (a unit's: (result, cached, report
+        fields)), or None: a bake that reuses another's result where it is already made."""
+        return self._memo.get(key)
+
     def result(self, kind: str):
         """The result (its value's first item) of the first bake of `kind` held in memory (held)."""
         made = self.held(kind)

@@ -311,9 +311,12 @@ class Prefiltered(Unit):
     def load(self, job):
         image, info = job.panorama()
         rkey = Radiance().key(job)
-        memo, bk = job.bakes._memo, baker(job)
-        return prefilter(job, image, info, self._base(job, info),
-                         lambda: memo[rkey][0] if rkey in memo else bk.radiance_chain(image))
+        bk = baker(job)
+
+        def radiance():
+            held = job.bakes.held_key(rkey)
+            return held[0] if held is not None else bk.radiance_chain(image)
+        return prefilter(job, image, info, self._base(job, info), radiance)
 
 
 class DFG(Unit):

@@ -23,7 +23,7 @@
 #include "light.h"
 
 /* A texel of the panorama fetched into the cache ahead of its use (IBL_PREFETCH: CPUs,
- * iblbake/device/runtime.py device_options), where other work can hide the miss: a path's
+ * iblbake/device/programs.py device_options), where other work can hide the miss: a path's
  * lookups in the full-resolution panorama (the environment sample's texel, the escaped ray's)
  * miss a CPU's cache, and one work item has no other path to run meanwhile. */
 IBL_INLINE void env_prefetch(int texel, __global const float4 *img)
