@@ -23,7 +23,7 @@ from iblbake.render import probes, units
 from iblbake.render.bakes import Bakes
 from iblbake.render.sources.probes import probe_args, probe_defines
 from iblbake.render.twin import probes as twin
-from iblbake.render.probes.relocation import SEALED_RAYS
+from iblbake.render.probes.relocation import CAMERA_RAYS, SEALED_RAYS
 from tests.conftest import load_scene, mend_cache_entry, run_cli
 
 
@@ -376,7 +376,7 @@ def test_cli_writes_the_volume_and_reads_refuse_damage(tmp_path, sky):
     p = run_cli("probes", sc.source, "-o", out, "--cache", tmp_path / "cache", "--json", "-q")
     assert p.returncode == 0, p.stderr
     doc = json.loads(p.stdout)
-    assert doc["states"] == {"active": 8, "inactive": 0} and doc["rays_traced"] == 8 * (64 + probes.FIXED_RAYS + probes.SURFACE_RAYS) + SEALED_RAYS
+    assert doc["states"] == {"active": 8, "inactive": 0} and doc["rays_traced"] == 8 * (64 + probes.FIXED_RAYS + probes.SURFACE_RAYS) + SEALED_RAYS + CAMERA_RAYS
     man = json.loads((out / "probes.json").read_text())
     vol = probes.load(out, man)
     assert vol["irradiance"].shape == (16, 32, 3) and np.abs(vol["irradiance"] - 0.75 * math.pi).max() < 2e-6
