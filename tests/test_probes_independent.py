@@ -50,7 +50,9 @@ def scaled(doc, k):
 @pytest.mark.parametrize("name", ["thin_wall", "l_room"])
 def test_a_corpus_interior_gives_the_same_frame_at_any_scale(tmp_path, rt, panoramas, name):
     """Measured: the probes' frame at scale 0.01 and 100 within 1e-6 (thin_wall, l_room) and 1.3e-4
-    (corridor) relative RMSE of the frame at scale 1."""
+    (corridor) relative RMSE of the frame at scale 1 (with cells of 0.35 of the interior's free
+    distance, a few of thin_wall's 1,700 probes classified the other way where a ray grazes an
+    edge, float32 hits: 1.4%)."""
     doc = corpus_doc(name, panoramas)
     doc["camera"]["resolution"] = [48, 36]
     doc["effects"] = {"diffuse": "probes", "specular": "off"}

@@ -68,7 +68,7 @@ MAX_PROBES = 1 << 20             # any grid: the buffers and atlases a device ta
 AUTO_MAX_PROBES = 1 << 14        # an automatic grid's cap (~80 MiB of atlases at the default texels): coarser above
 SCALE_RAYS = 64                  # rays from each coarse probe and the camera that measure the interior's scale
 ENCLOSED = 0.5                   # the share of those rays meeting a front face that makes a point enclosed
-INTERIOR_FRACTION = 0.35         # the automatic spacing: this share of the enclosed points' median free distance
+INTERIOR_FRACTION = 0.5          # the automatic spacing: this share of the enclosed points' median free distance
 
 
 def probe_bytes(settings: dict) -> int:
@@ -104,9 +104,8 @@ def auto_step(t) -> float | None:
     """The spacing the interior's scale asks for, from SCALE_RAYS rays' signed distances t (points,
     rays; +inf a miss, < 0 a back face) traced from the coarse grid's probes and the camera: of the
     points enclosed (ENCLOSED of their rays meet a front face), INTERIOR_FRACTION of the median over
-    them of their median ray length (a miss the longest). A corridor 2 wide gets cells of ~0.47, a
-    few across its width (a grid by the longest axis had none; at half the median, 0.67, thin_wall's
-    dim sphere of radius 0.45 was lit from its bright side only, 1.46x too bright); None where no point is enclosed (an
+    them of their median ray length (a miss the longest). A corridor 2 wide gets cells of ~0.65, a
+    few across its width (a grid by the longest axis had none); None where no point is enclosed (an
     open scene keeps the coarse grid)."""
     t = np.asarray(t, np.float64)
     front = (t >= 0) & np.isfinite(t)
