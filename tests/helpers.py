@@ -238,3 +238,15 @@ def selftest_kernel(rt, name, n, inputs, out_floats):
     import pyopencl as cl
     rt.run(cl.Kernel(prg, name), (n,), None, *bufs, out)
     return rt.read(out, (n, out_floats))
+
+
+# The corpus' absolute judgement (issue 59): default irradiance probes within REGION_BOUND of the
+# converged reference on every region of at least MIN_PIXELS pixels.
+REGION_BOUND = 0.30
+MIN_PIXELS = 10
+
+
+def outside(errors: dict, bound: float) -> dict:
+    """The regions of a study row's region_absolute / part_absolute over bound, as their ratio and worst channel."""
+    return {n: f"x{e['ratio']:.2f}, worst channel {100 * e['channel']:.0f}%" for n, e in errors.items()
+            if e["pixels"] >= MIN_PIXELS and e["absolute"] > bound}

@@ -13,6 +13,7 @@ import pytest
 
 from iblbake.render import render
 from iblbake.render.bakes import Bakes
+from tests.helpers import REGION_BOUND, outside
 
 ROOT = Path(__file__).resolve().parents[1]
 CORPUS = sorted((ROOT / "examples" / "corpus").glob("*.yaml"))
@@ -121,7 +122,6 @@ def test_the_gold_sphere_mirrors_the_floor(tmp_path, runtime, panoramas, panoram
 # noise (in quadrature), is what seams along wall edges and blotches raise while region means
 # hide them.
 INTERIORS = ("corridor", "two_storey", "quad_room", "l_room", "probe_box_walls")
-REGION_BOUND = 0.30        # default irradiance probes on every region (the bound)
 FRAME_BOUND = 0.30         # the diffuse term's relative RMSE over the frame
 PART_BOUND = 0.10          # a reflection probe at a metal object's centre, each half of the object
 # Measured misses, each bound about 1.2x the figure measured at 40 px (docs/benchmarks.md and
@@ -133,7 +133,6 @@ PART_BOUND = 0.10          # a reflection probe at a metal object's centre, each
 # while the distant chain's lobe filled the edge of the window its points see but the probe does not.
 FRAME_MISSES = {("two_storey", "studio"): 1.05, ("two_storey", "city"): 0.63, ("probe_box_walls", "studio"): 0.70}
 PART_MISSES: dict = {}
-MIN_PIXELS = 10
 
 
 def absolute_study(name, panorama, panoramas, runtime, cache, term, label, extra=()):
@@ -149,11 +148,6 @@ def absolute_study(name, panorama, panoramas, runtime, cache, term, label, extra
     st.render_reference(term)
     rung = next(r for r in ladder.realtime_ladder(st.scene, st.fx) if r.label == label)
     return st, st.run_rung(ladder.Rung(rung.term, rung.label, rung.values + list(extra)))
-
-
-def outside(errors: dict, bound: float) -> dict:
-    return {n: f"x{e['ratio']:.2f}, worst channel {100 * e['channel']:.0f}%" for n, e in errors.items()
-            if e["pixels"] >= MIN_PIXELS and e["absolute"] > bound}
 
 
 @pytest.mark.external

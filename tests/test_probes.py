@@ -23,7 +23,7 @@ from iblbake.render import probes
 from iblbake.render.bakes import Bakes
 from iblbake.render.sources.probes import probe_args, probe_defines
 from iblbake.render.twin import probes as twin
-from iblbake.render.probes.relocation import SEALED_RAYS
+from iblbake.render.probes.relocation import CAMERA_RAYS, SEALED_RAYS
 from tests.helpers import load_scene, mend_cache_entry, run_cli
 from tests.probe_helpers import Given, far_sphere_scene, kernel_irradiance, settings, sphere_scene, synthetic, unit
 
@@ -214,6 +214,8 @@ def test_visibility_stops_light_leaking_through_a_thin_wall(tmp_path, rt, sky, m
     monkeypatch.setattr(probes, "outside_sealed_room", lambda tracer, camera, obj: np.zeros(len(obj), bool))
     # so would the rule that switches off the probes beyond the scene's bounds (above the roof)
     monkeypatch.setattr(probes, "beyond_bounds", lambda pos, bounds, camera: np.zeros(len(pos), bool))
+    # and the one that switches off the probes behind a surface from all the camera sees near them
+    monkeypatch.setattr(probes, "behind_surfaces", lambda tracer, pos, spacing, camera: np.zeros(len(pos), bool))
     cache = Bakes(tmp_path / "cache")
     lit = lambda f: f.hdr[..., :3][f.hdr[..., 3] > 0.999].mean()      # noqa: E731
     without = lit(render(rooms(tmp_path, sky, False, counts=8), runtime=rt, cache=cache))
@@ -285,7 +287,7 @@ def test_cli_writes_the_volume_and_reads_refuse_damage(tmp_path, sky):
     p = run_cli("probes", sc.source, "-o", out, "--cache", tmp_path / "cache", "--json", "-q")
     assert p.returncode == 0, p.stderr
     doc = json.loads(p.stdout)
-    assert doc["states"] == {"active": 8, "inactive": 0} and doc["rays_traced"] == 8 * (64 + probes.FIXED_RAYS + probes.SURFACE_RAYS) + SEALED_RAYS
+    assert doc["states"] == {"active": 8, "inactive": 0} and doc["rays_traced"] == 8 * (64 + probes.FIXED_RAYS + probes.SURFACE_RAYS) + SEALED_RAYS + CAMERA_RAYS
     man = json.loads((out / "probes.json").read_text())
     vol = probes.load(out, man)
     assert vol["irradiance"].shape == (16, 32, 3) and np.abs(vol["irradiance"] - 0.75 * math.pi).max() < 2e-6

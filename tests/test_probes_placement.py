@@ -18,6 +18,8 @@ from iblbake.render.twin import probes as twin
 from tests.helpers import load_scene
 from tests.probe_helpers import settings
 
+ROOT = Path(__file__).resolve().parents[1]
+
 
 def sphere_arrays(radius=8.0):
     return SimpleNamespace(spheres=np.array([[[0, 0, 0, radius], [0, 0, 0, 0]]]), planes=np.zeros((0, 5, 4)),
@@ -274,3 +276,85 @@ def test_a_thin_slab_keeps_the_storey_above_out(tmp_path, rt, panoramas):
     got = render(scene("probes"), runtime=rt, cache_root=tmp_path / "cache")
     slab = region_errors(got.hdr, ref.hdr, mask, regions)[1]
     assert slab < 0.12, slab
+
+
+def sphere_probes_against_traced(scene, cache, centre, radius, points=160):
+    """(the twin's probe irradiance, the irradiance traced from the points: 1024 paths each) at
+    points of a sphere that face the camera, luminance means: the probes' bias on that object."""
+    from iblbake.render import Bakes
+    from iblbake.render.paths.tracer import Tracer
+    from iblbake.render.units import Job
+    from iblbake.device.runtime import Runtime
+    from iblbake.scene import pack
+
+    rt = Runtime()
+    bakes = Bakes(cache)
+    bakes.runtime = rt
+    job = Job(scene, rt, bakes, lambda _m: None, None)
+    vol = probes.sampled(bakes.load("probes", job)[0], scene.data["probes"])
+    cam = pack.camera_vectors(scene.data["camera"])[0]
+    n = probes.spherical_fibonacci(4 * points)
+    p = np.asarray(centre) + radius * n
+    v = cam - p
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    facing = (n * v).sum(1) > 0.05
+    p, n, v = p[facing], n[facing], v[facing]
+    rad, _, _ = Tracer(job, scene.data["probes"]).trace(p + 1e-4 * radius * n, probes.spherical_fibonacci(1024), True)
+    cos = np.maximum(0, n @ probes.spherical_fibonacci(1024).T)
+    truth = np.pi * (rad * cos[..., None]).sum(1) / cos.sum(1)[:, None]
+    est = twin.irradiance(vol, p, n, v, visibility=True, classification=True)
+    lum = np.array([0.2126, 0.7152, 0.0722])
+    return float((est @ lum).mean()), float((truth @ lum).mean()), vol
+
+
+def flipped_obj(src: Path, dst: Path) -> str:
+    """The OBJ at src with every face wound the other way."""
+    lines = src.read_text().splitlines()
+    dst.write_text("".join((" ".join(["f", *ln.split()[1:][::-1]]) if ln.startswith("f ") else ln) + "\n"
+                           for ln in lines))
+    return str(dst)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("winding", ["as made", "flipped"])
+def test_probes_behind_a_floor_do_not_light_what_rests_on_it(tmp_path, panoramas, winding):
+    """Issue 59: thin_wall's dim sphere rests on a floor of no thickness with the sky below it; the
+    probes under the floor saw the sphere's underside past the floor (the normal bias and the
+    distance moments cannot tell a point a hair above a surface of no thickness from one below it),
+    and relocation had moved a probe beside the sphere towards the opening's sky: the sphere 1.85x
+    too bright in the frame (studio). Each probe whose every segment to the points the camera sees
+    in its cells meets a surface is off, either winding; the probes' irradiance on the sphere's
+    side the camera sees, against the irradiance traced from its points: 1.28 (1.58 before)."""
+    corpus = ROOT / "examples" / "corpus"
+    sets = [f"environment.path={panoramas['studio']}"]
+    if winding == "flipped":
+        sets += [f"objects.{i}.mesh.path={flipped_obj(corpus / 'meshes' / f'{name}.obj', tmp_path / f'{name}.obj')}"
+                 for i, name in ((2, "rooms_shell"), (3, "rooms_wall"))]
+    sc = iblbake.load_scene(str(corpus / "thin_wall.yaml"), sets)
+    est, truth, vol = sphere_probes_against_traced(sc, tmp_path / "cache", [0.9, 0.45, -0.1], 0.45)
+    assert est / truth < 1.4, (est, truth)
+    grid = probes.Grid(tuple(vol["origin"]), tuple(vol["spacing"]), tuple(vol["counts"]))
+    pos = grid.positions()
+    under = (pos[:, 1] < 0) & (np.abs(pos[:, 0] - 0.9) < 0.6) & (np.abs(pos[:, 2] + 0.1) < 0.6)
+    assert under.any() and (vol["data"][under, 3] == probes.INACTIVE).all()
+    assert vol["report"]["off_by"]["behind_surfaces"] > 0
+
+
+def test_relocation_moves_a_probe_towards_a_surface_not_the_sky():
+    """RTXGI moves a probe nearer a front face than min_frontface_distance towards its farthest
+    ray, a miss counting as farthest: beside thin_wall's dim sphere a probe moved towards the
+    opening and lit the sphere with the sky beyond it. Now towards the farthest front face met."""
+    dirs = probes.spherical_fibonacci(probes.FIXED_RAYS)
+    near = 0                                  # a surface 0.1 away along ray 0
+    wall = int(np.argmin(dirs @ dirs[near] + np.abs(dirs[:, 1])))     # one 1.5 away, across from it
+
+    class Rays:
+        def trace(self, positions, d, shade, *args):
+            t = np.full((len(positions), len(d)), np.inf)
+            t[:, near], t[:, wall] = 0.1, 1.5
+            return None, t, np.where(np.isfinite(t), 0, -1)
+
+    grid = probes.Grid((0.0, 0.0, 0.0), (1.0, 1.0, 1.0), (1, 1, 1))
+    offset, _ = probes.relocate(Rays(), grid, settings(), start=np.zeros((1, 3)))
+    step = offset[0] / np.linalg.norm(offset[0])
+    assert np.allclose(step, dirs[wall], atol=1e-9), (step, dirs[wall])

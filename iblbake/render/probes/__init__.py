@@ -7,6 +7,7 @@ temporal here). One module per idea:
                  kernels/paths/probe_trace.cl, the reference's paths against the scene on the device)
   relocation.py  RTXGI's relocation and classification, probes inside geometry or outside the
                  camera's room
+  dilate.py      the off probes' irradiance filled from the active ones around them (Unity APV)
   project.py     the rays' projection into RTXGI's atlases (octahedral irradiance or L2 SH, the
                  distance moments) or a directional basis's coefficients
   volume.py      a baked volume as a frozen record (Volume, with its basis): bake settings, sampling
@@ -27,6 +28,7 @@ import time
 import numpy as np
 
 from iblbake.errors import IblbakeError
+from iblbake.render.probes.dilate import dilate, dilate_values
 from iblbake.render.probes.files import FILES, FORMAT, VERSION, data_texture, load, manifest, read_manifest, save
 from iblbake.render.probes.glsl import SH_GLSL, SPECULAR_TABLES, basis_glsl, glsl
 from iblbake.render.probes.grid import (AUTO_MAX_PROBES, DEFAULT_LONGEST, MAX_PROBES, SCALE_RAYS, Grid, auto_step,
@@ -35,7 +37,7 @@ from iblbake.render.probes.project import BACKFACE_BLEND_LIMIT, MAX_DISTANCE, at
 from iblbake.render.paths.tracer import Tracer, trace_defines
 from iblbake.render.probes.rays import random_rotation, ray_directions, spherical_fibonacci
 from iblbake.render.probes.relocation import (ACTIVE, FIXED_RAYS, INACTIVE, MAX_OFFSET, RELOCATION_PASSES, SURFACE_RAYS,
-                                              beyond_bounds, classify, inside_geometry, off_surfaces,
+                                              behind_surfaces, beyond_bounds, classify, inside_geometry, off_surfaces,
                                               outside_camera_rooms, outside_sealed_room, relocate)
 from iblbake.render.probes.volume import (SAMPLING_KEYS, Volume, bake_settings, basis_of, basis_options, sampled,
                                           volume_dict)
@@ -44,7 +46,8 @@ __all__ = ["ACTIVE", "AUTO_MAX_PROBES", "BACKFACE_BLEND_LIMIT", "DEFAULT_LONGEST
            "INACTIVE", "INSIDE_WARN", "MAX_ATLAS_SIDE", "MAX_DISTANCE", "MAX_OFFSET", "MAX_PROBES", "OFF_SAID",
            "RELOCATION_PASSES", "SAMPLING_KEYS", "SCALE_RAYS", "SH_GLSL", "SPECULAR_TABLES", "SURFACE_RAYS", "VERSION",
            "Grid", "Tracer", "Volume", "atlas", "auto_step", "bake", "bake_settings", "basis_glsl", "basis_of",
-           "basis_options", "beyond_bounds", "classify", "data_texture", "glsl", "grid_of", "inside_geometry", "load",
+           "basis_options", "behind_surfaces", "beyond_bounds", "classify", "data_texture", "dilate", "dilate_values",
+           "glsl", "grid_of", "inside_geometry", "load",
            "manifest", "off_surfaces", "outside_camera_rooms", "outside_sealed_room", "placement_warnings",
            "probe_bytes", "project", "random_rotation", "ray_directions", "read_manifest", "relocate", "sampled",
            "save", "scaled_grid", "scene_bounds", "spherical_fibonacci", "switch_off", "trace_defines", "volume_dict",
@@ -78,9 +81,13 @@ def switch_off(tracer, grid: Grid, offset, t, dirs, obj, settings: dict, camera)
     pos = grid.positions() + offset
     outside = outside_camera_rooms(pos, arrays, camera) | outside_sealed_room(tracer, camera, obj)
     beyond = beyond_bounds(grid.positions(), scene_bounds(arrays), camera) & ~outside & (states != INACTIVE)
+    live = (states != INACTIVE) & ~outside & ~beyond
+    behind = np.zeros(grid.count, bool)
+    behind[live] = behind_surfaces(tracer, pos[live], grid.spacing, camera)
     off_by = {"inside_geometry": int(inside.sum()), "no_surface_near": int(empty.sum()),
-              "outside_camera_room": int((outside & (states != INACTIVE)).sum()), "beyond_bounds": int(beyond.sum())}
-    return np.where(outside | beyond, INACTIVE, states), off_by, outside
+              "outside_camera_room": int((outside & (states != INACTIVE)).sum()), "beyond_bounds": int(beyond.sum()),
+              "behind_surfaces": int(behind.sum())}
+    return np.where(outside | beyond | behind, INACTIVE, states), off_by, outside
 
 
 def bake(job, settings: dict, progress=None) -> dict:
@@ -111,6 +118,7 @@ def bake(job, settings: dict, progress=None) -> dict:
     radiance, t, obj = tracer.trace(grid.positions() + offset, dirs, True, progress, base, 1.0 - base)
     states, off_by, outside = switch_off(tracer, grid, offset, t, dirs, obj, settings, camera)
     irr, dist = project(radiance, t, dirs, grid, settings)
+    irr = dilate(irr, states == INACTIVE, grid.counts, settings["irradiance"], settings["irradiance_texels"])
     data = np.concatenate([offset, states[:, None].astype(np.float64)], 1)
     inside, who = inside_geometry(t, obj, settings["backface_threshold"])
     if at_grid is not None:                       # inside at their grid positions: moved out, or not
@@ -138,7 +146,8 @@ MAX_ATLAS_SIDE = 16384       # texels: the largest 2D texture most GPUs take (Vu
 OFF_SAID = 0.75         # the share of probes off (by any rule) that is said, with each rule's count
 RULES = {"inside_geometry": "inside geometry", "no_surface_near": "no surface within their cells (classification)",
          "outside_camera_room": "outside the camera's closed room",
-         "beyond_bounds": "beyond the scene's bounds, the camera within them"}
+         "beyond_bounds": "beyond the scene's bounds, the camera within them",
+         "behind_surfaces": "behind a surface from every point the camera sees near them"}
 
 
 def placement_warnings(report: dict) -> list:

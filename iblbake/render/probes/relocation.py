@@ -64,7 +64,9 @@ def relocate(tracer: Tracer, grid: Grid, settings: dict, progress=None, start=No
     """Probe offsets (world units) after RELOCATION_PASSES of RTXGI's ProbeRelocationCS on the
     FIXED_RAYS unrotated rays: a probe whose rays meet back faces more often than the threshold is
     inside geometry and moves out past the nearest one; one nearer a front face than
-    min_frontface_distance moves towards the farthest (RTXGI steps one world unit there; here
+    min_frontface_distance moves towards the farthest front face a ray met (RTXGI counts a miss as
+    farthest: a probe beside thin_wall's dim sphere moved towards the opening's sky and lit the
+    sphere as the opening does; RTXGI steps one world unit there; here
     min(min_frontface_distance, half that distance)); one far from everything moves back
     towards its grid position. First, a probe standing on a surface is moved off it (off_surfaces,
     or `start`: those offsets, found already). A move that would leave 45% of the cell is not made. Returns the
@@ -84,12 +86,12 @@ def relocate(tracer: Tracer, grid: Grid, settings: dict, progress=None, start=No
         n_back = back.sum(1)
         tb = np.where(back, -t, np.inf)
         tf = np.where(back, np.inf, t)
-        tfar = np.where(back, -1.0, t)
+        tfar = np.where(back | ~np.isfinite(t), -1.0, t)
         ib, i_near = tb.argmin(1), tf.argmin(1)
         rows = np.arange(len(t))
         near = tf[rows, i_near]
-        # the farthest front face (a miss counts as farthest, as RTXGI's 1e27); among equals (every
-        # miss) the one most opposite the nearest face
+        # the farthest front face a ray met (not a miss, RTXGI's 1e27: that moved probes towards
+        # the sky); among equals the one most opposite the nearest face
         farthest = tfar.max(1, keepdims=True)
         opposite = dirs @ dirs.T                                  # (rays, rays): cosines between rays
         i_far = np.where(tfar >= farthest, -opposite[i_near], -np.inf).argmax(1)
@@ -201,3 +203,38 @@ def outside_camera_rooms(positions, arrays, camera) -> np.ndarray:
             out |= np.array([c not in geometry.inside_closed(q, *args) for q in pos])
     return out
 
+
+
+CAMERA_RAYS = 1 << 14           # rays from the camera whose hits are the points it may see
+SEEN_POINTS = 2                 # a probe is judged by the camera's points in its cells only where it has this many
+SEGMENTS = 256                  # of those points, at most this many segments a probe
+
+
+def behind_surfaces(tracer: Tracer, positions, spacing, camera) -> np.ndarray:
+    """The probes on the far side of a surface from every point the camera sees within their cells
+    (a box a cell each way): a segment from the probe to each such point meets a surface first.
+    Such a probe lights nothing the camera sees but through that surface: a probe under a floor of
+    no thickness (the sky below it) leaked into a sphere resting on the floor, the sphere's
+    underside 2x too bright (thin_wall's dim sphere, x1.85 in all). A segment test, so it holds
+    for quads of no thickness of either winding as for solids. The points are the hits of
+    CAMERA_RAYS rays from the camera (a hair before the hit, towards the camera: on its side of
+    the surface); a probe with fewer than SEEN_POINTS of them in its cells is kept."""
+    pos = np.asarray(positions, np.float64)
+    cam = np.asarray(camera, np.float64)
+    s = np.asarray(spacing, np.float64)
+    dirs = spherical_fibonacci(CAMERA_RAYS)
+    _, t, _ = tracer.trace(cam[None], dirs, False)
+    t = np.abs(t[0])
+    hit = np.isfinite(t)
+    pts = cam + dirs[hit] * (t[hit] - 1e-3 * float(s.min()))[:, None]
+    off = np.zeros(len(pos), bool)
+    for i, p in enumerate(pos):          # one launch a probe: its segments to the points in its cells
+        near = pts[(np.abs(pts - p) < s).all(1)]
+        near = near[::-(-len(near) // SEGMENTS) or 1]
+        if len(near) < SEEN_POINTS:
+            continue
+        seg = near - p
+        length = np.linalg.norm(seg, axis=1)
+        _, t, _ = tracer.trace(p[None], seg / length[:, None], False)
+        off[i] = (np.abs(t[0]) < length * (1 - 1e-4)).all()
+    return off
