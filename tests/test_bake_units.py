@@ -95,6 +95,26 @@ def test_a_probe_bake_runs_from_a_scene_whose_effects_do_not_read_probes(tmp_pat
     assert np.array_equal(api.irradiance, vol["irradiance"])
 
 
+def test_the_probes_key_follows_the_camera_and_the_extracted_lights(tmp_path, rt, sky):
+    """Which probes are off follows what the camera sees (its room, the bounds it stands in, the
+    points behind surfaces), and the extracted lights light every vertex of the probes' paths: a
+    moved camera or another `sun_lights` reused the volume baked for the first (stale states, stale
+    light). Each now keys its own volume; the same scene keys the same."""
+    import iblbake
+
+    bakes = Bakes(tmp_path / "cache")
+    unit = units.UNITS["probes"]
+
+    def key(*overrides):
+        sc = far_sphere(tmp_path, sky, "k")
+        return unit.key(Job(iblbake.load_scene(sc, list(overrides)) if overrides else sc, rt, bakes))
+
+    first = key()
+    assert key() == first
+    assert key("camera.perspective.position=[0, 0.5, 3]") != first
+    assert key("environment.sun=extract") != key("environment.sun=extract", "environment.sun_lights=4")
+
+
 def quad_scene(tmp_path, sky, name, colour):
     quad = tmp_path / "quad.obj"
     quad.write_text("v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nf 1 2 3\nf 1 3 4\n")

@@ -102,6 +102,36 @@ def test_probes_beyond_an_interiors_bounds_are_off_only_with_the_camera_inside()
     assert not probes.beyond_bounds(pos, bounds, [0, 1.2, 5]).any()
 
 
+@pytest.mark.parametrize("spacing", [0.3, 0.4, 0.2, 0.6])
+def test_a_round_spacing_keeps_every_probe_half_a_cell_off_a_rooms_walls(spacing):
+    """A new user's room 3 x 2.4 x 4 of float32 vertices at spacing 0.3 or 0.4 (the manual's advice):
+    2.4f / 0.3 = 8.0000003 counted one cell more, the centred grid moved half a cell and put a layer
+    of probes on the floor and the ceiling, moved off them outwards and left on (ceiling 27x). Each
+    layer now stands half a cell off each wall the spacing divides the room's side into."""
+    corners = np.array([[-1.5, 0.0, -2.0], [1.5, 2.4, 2.0]], np.float32)
+    tris = np.zeros((1, 6, 4), np.float32)
+    tris[0, 0, :3], tris[0, 1, :3], tris[0, 2, :3] = corners[0], corners[1], [1.5, 0.0, 2.0]
+    arrays = SimpleNamespace(spheres=np.zeros((0, 2, 4)), planes=np.zeros((0, 5, 4)), tris=tris)
+    lo, hi = probes.scene_bounds(arrays)
+    assert (hi - lo)[1] / spacing != round(2.4 / spacing)          # the float32 bounds, not exact
+    grid = probes.grid_of({**settings(), "min": None, "max": None, "counts": None, "spacing": spacing}, arrays)
+    pos = grid.positions()
+    divides = [axis for axis, e in enumerate((3.0, 2.4, 4.0)) if abs(e / spacing - round(e / spacing)) < 1e-9]
+    assert 1 in divides
+    for axis in divides:
+        gap = np.abs(pos[:, axis, None] - np.array([lo[axis], hi[axis]])[None]).min()
+        assert gap == pytest.approx(spacing / 2, rel=1e-5), (axis, gap)
+
+
+def test_a_probe_moved_beyond_the_bounds_is_off():
+    """relocation may move a probe that stands on a wall at the bounds outwards: judged where it
+    stands and where it was moved, it is off with the camera inside (it was judged where it stood)."""
+    bounds = (np.array([-1.5, 0.0, -2.0]), np.array([1.5, 2.4, 2.0]))
+    on_floor, moved = np.array([[0.0, 0.0, 0.0]]), np.array([[0.0, -0.075, 0.0]])
+    assert not probes.beyond_bounds(on_floor, bounds, [0, 1.2, 0]).any()
+    assert probes.beyond_bounds(moved, bounds, [0, 1.2, 0]).all()
+
+
 def test_most_probes_off_is_said_with_its_rules():
     """Issue 59: `probes.rays: 16` on a small grid left every probe inactive, nothing said."""
     rep = {"probes": 8, "inactive": 8, "off_by": {"inside_geometry": 0, "no_surface_near": 8,

@@ -412,8 +412,9 @@ def light_transport(job) -> dict:
     files = [bakes.file_sha256(f) for o in d["objects"] if "mesh" in o
              for f in (o["mesh"]["path"], *_external(o["mesh"]["path"]))]
     files += [bakes.file_sha256(m["path"]) for m in _map_refs(d["materials"])]
-    return {"environment": info.sha256, "frame": {k: env[k] for k in ("rotation_y", "intensity", "sun", "nonfinite",
-                                                                     "negative")},
+    # the extracted lights light every vertex of the paths (sun_lights, sun_shadows: their count and disks)
+    return {"environment": info.sha256, "frame": {k: env.get(k) for k in ("rotation_y", "intensity", "sun", "sun_lights",
+                                                                         "sun_shadows", "nonfinite", "negative")},
             "objects": d["objects"], "materials": d["materials"], "lights": d["lights"], "files": files,
             "solids": solids}
 
@@ -421,14 +422,18 @@ def light_transport(job) -> dict:
 class Probes(Unit):
     """The scene's irradiance probe volume (render/probes), baked by tracing the scene on the job's
     device, keyed by everything its rays see: the geometry and materials (their files' content),
-    the lights, the panorama's content and frame, the bake settings and the code."""
+    the lights, the panorama's content and frame, the camera (the rules that switch probes off follow
+    what it sees), the bake settings and the code."""
     name = "probes"
     reads = ("env_cdf", "radiance")          # the tracer's (render/paths/tracer.py)
 
     def key(self, job):
         from iblbake.bake import cache
         from iblbake.render import probes
+        # the camera too: which probes are off follows what it sees (its room, the bounds it stands
+        # in, the points it sees behind surfaces: render/probes/relocation.py)
         return "probes-" + cache.content_key({"kind": "probes", "v": probes.VERSION, **light_transport(job),
+                                              "camera": job.scene.data["camera"],
                                               "settings": probes.bake_settings(job.scene.data["probes"]),
                                               "code": probes_code_hash()})
 

@@ -80,7 +80,9 @@ def switch_off(tracer, grid: Grid, offset, t, dirs, obj, settings: dict, camera)
     empty = (states == INACTIVE) & ~inside
     pos = grid.positions() + offset
     outside = outside_camera_rooms(pos, arrays, camera) | outside_sealed_room(tracer, camera, obj)
-    beyond = beyond_bounds(grid.positions(), scene_bounds(arrays), camera) & ~outside & (states != INACTIVE)
+    bounds = scene_bounds(arrays)          # where it stands, or where relocation moved it (off a wall: outwards)
+    beyond = ((beyond_bounds(grid.positions(), bounds, camera) | beyond_bounds(pos, bounds, camera))
+              & ~outside & (states != INACTIVE))
     live = (states != INACTIVE) & ~outside & ~beyond
     behind = np.zeros(grid.count, bool)
     behind[live] = behind_surfaces(tracer, pos[live], grid.spacing, camera)

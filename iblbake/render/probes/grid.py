@@ -79,14 +79,20 @@ def probe_bytes(settings: dict) -> int:
     return 16 * (irr + (settings["distance_texels"] + 2) ** 2 + 1)
 
 
+COUNT_TOLERANCE = 4e-7        # a few float32 roundings (2^-24 each) of the bounds and the step
+
+
 def axis_counts(extent, step, plus: int) -> list:
     """Probes along each axis, Python ints (a tiny spacing gives a count no int64 holds, and a
     wrapped count passed the size check once): ceil(extent / step) + plus, or None where that is
-    not finite (more probes than any grid holds)."""
+    not finite (more probes than any grid holds). An extent a whole number of steps within float32's
+    rounding counts that number: the bounds come from float32 vertices (2.4f / 0.3 = 8.0000003),
+    and one cell more shifted the centred grid by half a cell, a layer of probes onto the floor and
+    the ceiling, moved off them to the outside (a new user's room at spacing 0.3: ceiling 27x)."""
     out = []
     for e, s in zip(np.broadcast_to(extent, 3), np.broadcast_to(step, 3)):
         q = float(e) / float(s)
-        out.append(math.ceil(q - 1e-9) + plus if math.isfinite(q) else None)
+        out.append(math.ceil(q - COUNT_TOLERANCE * max(q, 1.0)) + plus if math.isfinite(q) else None)
     return out
 
 
