@@ -142,6 +142,16 @@ def test_most_probes_off_is_said_with_its_rules():
     assert probes.placement_warnings(rep) == []            # the shell around an interior is off by design
 
 
+def test_few_rays_a_probe_are_said():
+    """A new user's `probes.rays: 16` (the schema's least) with the sun through a window: the floor
+    x0.43, the sphere x0.56 of the reference, and nothing said. Under FEW_RAYS it is said; not at
+    the default."""
+    rep = {"probes": 8, "inactive": 0, "off_by": {}}
+    said = probes.warnings(rep, {"probes": settings(rays=16), "objects": []})
+    assert len(said) == 1 and said[0].startswith("probes.rays 16:") and "1024" in said[0], said
+    assert probes.warnings(rep, {"probes": settings(), "objects": []}) == []
+
+
 def test_a_frame_falling_back_to_the_sky_is_said(tmp_path, rt, panoramas):
     """Every probe off (16 rays, none meeting the small sphere within its cells): the frame's
     samples take the panorama's SH, and the bake and the frame say so."""

@@ -178,10 +178,14 @@ def placement_warnings(report: dict) -> list:
     return out
 
 
+FEW_RAYS = 256          # a probe's rays under which its mean is said to be noisy
+
+
 def warnings(report: dict, scene_data: dict, volume: dict | None = None) -> list:
     """What a bake's report says a user should know: more than INSIDE_WARN of the probes were inside
     geometry (relocated out of it, or switched off), with the objects whose back faces they saw; an
-    atlas wider or taller than MAX_ATLAS_SIDE (an engine cannot load it as one texture)."""
+    atlas wider or taller than MAX_ATLAS_SIDE (an engine cannot load it as one texture); fewer than
+    FEW_RAYS rays a probe."""
     from iblbake.scene.load import object_label
 
     out = []
@@ -195,6 +199,11 @@ def warnings(report: dict, scene_data: dict, volume: dict | None = None) -> list
                 out.append(f"probes: the {what} atlas is {w} x {h} texels, over the {MAX_ATLAS_SIDE} most GPUs take "
                            f"in one texture; give fewer probes (probes.counts, probes.spacing) or texels")
     out += placement_warnings(report)
+    rays = (scene_data.get("probes") or {}).get("rays")
+    if rays is not None and rays < FEW_RAYS:
+        out.append(f"probes.rays {rays}: each probe's light is a mean over {rays} paths, noisy where a sun or a lamp "
+                   f"reaches the room (a sun through a window: the floor x0.43 at 16 rays, in a new user's room); "
+                   f"give {FEW_RAYS} or more (the default 1024), or environment.sun: extract")
     n, inside = report["probes"], report.get("inside_geometry", 0)
     if not n or inside <= INSIDE_WARN * n:
         return out

@@ -79,7 +79,7 @@ def probe_bytes(settings: dict) -> int:
     return 16 * (irr + (settings["distance_texels"] + 2) ** 2 + 1)
 
 
-COUNT_TOLERANCE = 4e-7        # a few float32 roundings (2^-24 each) of the bounds and the step
+COUNT_TOLERANCE = 4e-7        # a few float32 roundings (2^-24 each) of the bounds and the step, in cells
 
 
 def axis_counts(extent, step, plus: int) -> list:
@@ -92,7 +92,12 @@ def axis_counts(extent, step, plus: int) -> list:
     out = []
     for e, s in zip(np.broadcast_to(extent, 3), np.broadcast_to(step, 3)):
         q = float(e) / float(s)
-        out.append(math.ceil(q - COUNT_TOLERANCE * max(q, 1.0)) + plus if math.isfinite(q) else None)
+        if not math.isfinite(q):
+            out.append(None)
+            continue
+        whole = math.floor(q)
+        near = q - whole <= min(COUNT_TOLERANCE * max(q, 1.0), 1e-4)     # within rounding of `whole` steps
+        out.append((whole if near else math.ceil(q)) + plus)
     return out
 
 
