@@ -64,6 +64,7 @@ def rprobe_args(rt, captured, bakes=None) -> dict:
             info[k, 2] = [*(st["max"] if box else st["position"]), 0.0 if box else st["radius"]]
             info[k, 3, 0] = 1.0 if st["parallax"] else 0.0
             info[k, 3, 1] = np.pi / st["size"]          # the capture's texel, in radians (its rows)
+            info[k, 3, 2] = st["taps"]                  # the lobe's taps (kernels/reflection_probes.h rprobe_taps)
         return (rt.to_device(flat), rt.to_device(off), rt.to_device(np.array([w for _h, w in sizes[0]], np.int32)),
                 rt.to_device(np.array([h for h, _w in sizes[0]], np.int32)), rt.to_device(info.reshape(-1, 4)))
     chains = tuple(lv for c in captured for lv in c["levels"] + c["coverage"] + c["sky"])
