@@ -447,6 +447,23 @@ def sides_error(scene, reference, rt, bakes, sphere: int, centre) -> dict:
             for side, m in metrics.halves(normals, on, 10).items()}
 
 
+def test_a_frame_reads_its_own_probe_settings_where_another_shares_the_capture(tmp_path, rt, panoramas):
+    """Two frames of one room through one store, the probe's taps (or its blend) changed between
+    them: their captures' chains are the same content, and before the second frame read the
+    first's probe settings from the device memo (the same picture); now each its own, as a fresh
+    store renders it."""
+    doc = square_room(tmp_path, panoramas["studio"])
+    doc["camera"]["resolution"] = [16, 12]
+    doc["objects"][0]["material"] = "gold"          # every pixel reads the probe
+    doc["reflection_probes"][0].update(size=16, samples=4, taps=0)
+    shared = Bakes(tmp_path / "shared")
+    first = render(load_scene(tmp_path, "a", doc), runtime=rt, cache=shared).hdr
+    doc["reflection_probes"][0]["taps"] = 16
+    second = render(load_scene(tmp_path, "b", doc), runtime=rt, cache=shared).hdr
+    fresh = render(load_scene(tmp_path, "c", doc), runtime=rt, cache=Bakes(tmp_path / "fresh")).hdr
+    assert np.abs(second - first).max() > 0.01 and np.array_equal(second, fresh)
+
+
 @pytest.mark.slow           # over a minute on the 2-core CPU: make test, not make check
 def test_a_probe_at_a_sphere_by_the_window_of_an_independent_room_holds_every_side(tmp_path, rt, panoramas):
     """The square room (square_room) under the studio: every side of the gold sphere within 10%
