@@ -145,8 +145,8 @@ IBL_INLINE float3 rprobe_sky(RPROBE_PARAMS, int k, float3 r, float lod, float op
 /* The level a tap reads, a share of the lobe's (reflection_probes.N.taps: how many). One read a
  * lobe about the split sum's r (n = v = r) can't tell which part of it p sees through a window (a
  * key light at the window's edge) and reaches below the surface where the true lobe does not (an
- * independent square room under studio: 61-74% off on three sides with one read, 0.4-3.1% with
- * 16 taps; docs/conventions.md "Reflection probes") */
+ * independent square room under studio: 61-74% off on three sides with one read, 0.9-4.4% with
+ * 64 taps; docs/conventions.md "Reflection probes", "Taps") */
 #define RPROBE_TAP_ROUGH 0.15f
 
 /* Probe k's reading at p of the GGX lobe of normal n and view v (alpha rough^2, rough = lod over
