@@ -5,13 +5,17 @@
  * (parallax, the capture's texel in radians, 0, 0). Each probe has three chains: its capture's radiance
  * of the scene (chain 3k), the coverage of its texels by the scene (chain 3k + 1, grey) and the sky
  * its escaping rays saw (chain 3k + 2: the panorama through the scene's openings, 0 where covered).
- * The sky is infinitely far: no parallax moves it (rprobe_sky).
+ * The sky is infinitely far: no parallax moves it (rprobe_sky). rp_info's fourth z: the probe's
+ * taps (reflection_probes.N.taps), 0: one read a lobe.
  * The chains lie back to back in rp_chain, level l of chain c at rp_off[c rp_nlev + l] texels,
  * every level rp_lw x rp_lh.
  * numpy twin: iblbake/render/twin/reflection_probes.py. */
 #ifndef IBLBAKE_REFLECTION_PROBES_H
 #define IBLBAKE_REFLECTION_PROBES_H
 #include "common.h"
+#include "ggx.h"
+#include "sampler.h"
+#include "split_sum.h"
 
 #define RPROBE_PARAMS __global const float *rp_chain, __global const int *rp_off, __global const int *rp_lw, \
                       __global const int *rp_lh, const int rp_nlev, const int rp_count, __global const float4 *rp_info
@@ -138,14 +142,58 @@ IBL_INLINE float3 rprobe_sky(RPROBE_PARAMS, int k, float3 r, float lod, float op
  * 2, the reference's 0.105 at 2048 samples a pixel) */
 #define RPROBE_FINEST 2.0f
 
-/* The prefiltered radiance at point p along r (world frame) at chain level lod: the probes whose
- * influence holds p, weighted (their weights normalised where they sum past 1), and `distant`
- * (the panorama's chain, scaled) for the rest. Each probe's scene is read along the direction
- * corrected to where p's ray leaves its proxy, at a level narrowed by p's distance to that point
+/* The level a tap reads, a share of the lobe's (reflection_probes.N.taps: how many). One read a
+ * lobe about the split sum's r (n = v = r) can't tell which part of it p sees through a window (a
+ * key light at the window's edge) and reaches below the surface where the true lobe does not (an
+ * independent square room under studio: 61-74% off on three sides with one read, 0.9-4.4% with
+ * 64 taps; docs/conventions.md "Reflection probes", "Taps") */
+#define RPROBE_TAP_ROUGH 0.15f
+
+/* Probe k's reading at p of the GGX lobe of normal n and view v (alpha rough^2, rough = lod over
+ * the chain's last level) in `count` Hammersley directions l, each weighted as the BRDF over
+ * its pdf without Fresnel (V 4 NoL VoH / NoH; none below the surface; the split sum's albedo
+ * scales the mean): the scene where l leaves the proxy (x), read from the probe along x - probe,
+ * and the panorama along l itself (at infinity: no parallax) over the share of that direction p
+ * sees open (the coverage read along x - probe), all at RPROBE_TAP_ROUGH of the lobe's level (the
+ * scene's no finer than RPROBE_FINEST). */
+IBL_INLINE float3 rprobe_taps(RPROBE_PARAMS, int k, float3 p, float3 n, float3 v, float lod, int count,
+                              CHAIN_PARAMS, float2 env_rot, float env_scale)
+{
+    const float4 a = rp_info[4 * k], b = rp_info[4 * k + 1], c = rp_info[4 * k + 2];
+    const float rough = lod / fmax((float)(rp_nlev - 1), 1.0f), alpha = rough * rough;
+    const float tap = RPROBE_TAP_ROUGH * lod, scene_lod = fmax(tap, fmin(lod, RPROBE_FINEST));
+    const float nov = fmax(dot(n, v), 1e-4f);
+    float3 t, bt, acc = (float3)(0.0f);
+    float wsum = 0.0f;
+    tangent_frame(n, &t, &bt);
+    for (int i = 0; i < count; ++i) {
+        const float3 hl = sample_ggx_half(hammersley((uint)i, (uint)count), alpha);
+        const float3 h = t * hl.x + bt * hl.y + n * hl.z;
+        const float voh = dot(v, h);
+        const float3 l = 2.0f * voh * h - v;
+        const float nol = dot(n, l);
+        if (nol <= 0.0f || voh <= 0.0f) continue;
+        const float w = v_smith_ggx_correlated(nov, nol, alpha) * 4.0f * nol * voh / fmax(hl.z, 1e-7f);
+        const float3 x = rprobe_exit(p, l, a, b, c);
+        const float3 d = (x - a.xyz) / fmax(distance(x, a.xyz), 1e-6f);
+        const float open = fmax(1.0f - rprobe_lookup(RPROBE_ARGS, 3 * k + 1, d, tap).x, 0.0f);
+        acc += w * (rprobe_lookup(RPROBE_ARGS, 3 * k, d, scene_lod)
+                    + open * env_scale * split_sum_radiance(CHAIN_ARGS, l, env_rot, RPROBE_TAP_ROUGH * rough));
+        wsum += w;
+    }
+    return acc / fmax(wsum, 1e-9f);
+}
+
+/* The prefiltered radiance at point p (normal n, view v) along r (world frame) at chain level lod:
+ * the probes whose influence holds p, weighted (their weights normalised where they sum past 1),
+ * and `distant` (the panorama's chain, scaled) for the rest. A parallax probe with taps (its
+ * rp_info's fourth z) is read in that many taps over the lobe (rprobe_taps). Otherwise each
+ * probe's scene is read along the direction corrected to where p's ray leaves its proxy, at a level narrowed by p's distance to that point
  * over the probe's (Lagarde and Zanuttini 2012's distance-based roughness: the lobe's footprint
  * there, seen from the probe), down to RPROBE_FINEST; the sky it saw fills the rest (rprobe_sky).
  * Captures hold the panorama's intensity and frame. */
-IBL_INLINE float3 reflection_probes(float3 p, float3 r, float lod, float3 distant, RPROBE_PARAMS)
+IBL_INLINE float3 reflection_probes(float3 p, float3 n, float3 v, float3 r, float lod, float3 distant,
+                                    RPROBE_PARAMS, CHAIN_PARAMS, float2 env_rot, float env_scale)
 {
     float3 acc = (float3)(0.0f);
     float wsum = 0.0f;
@@ -153,6 +201,11 @@ IBL_INLINE float3 reflection_probes(float3 p, float3 r, float lod, float3 distan
         const float4 a = rp_info[4 * k], b = rp_info[4 * k + 1], c = rp_info[4 * k + 2], e = rp_info[4 * k + 3];
         const float w = rprobe_weight(p, a, b, c);
         if (w <= 0.0f) continue;
+        wsum += w;
+        if (e.x > 0.5f && e.z > 0.5f) {
+            acc += w * rprobe_taps(RPROBE_ARGS, k, p, n, v, lod, (int)e.z, CHAIN_ARGS, env_rot, env_scale);
+            continue;
+        }
         float3 d = r;
         float near_lod = lod, off = 0.0f, shift = 0.0f;
         if (e.x > 0.5f) {
@@ -166,7 +219,6 @@ IBL_INLINE float3 reflection_probes(float3 p, float3 r, float lod, float3 distan
         const float open = 1.0f - rprobe_lookup(RPROBE_ARGS, 3 * k + 1, d, near_lod).x;
         acc += w * (rprobe_lookup(RPROBE_ARGS, 3 * k, d, near_lod)
                     + rprobe_sky(RPROBE_ARGS, k, r, lod, open, off, shift, distant));
-        wsum += w;
     }
     if (wsum > 1.0f) return acc / wsum;
     return acc + (1.0f - wsum) * distant;

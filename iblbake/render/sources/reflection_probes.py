@@ -55,18 +55,26 @@ def rprobe_args(rt, captured, bakes=None) -> dict:
                                for chain in (c["levels"], c["coverage"], c["sky"]) for lv in chain])
         counts = [h * w for h, w in sizes[0]] * (3 * len(captured))      # each probe: radiance, coverage, sky
         off = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int32)
-        info = np.zeros((len(captured), 4, 4), np.float32)
-        for k, c in enumerate(captured):
-            st = c["settings"]
-            box = st["shape"] == "box"
-            info[k, 0] = [*st["position"], 0.0 if box else 1.0]
-            info[k, 1] = [*(st["min"] if box else st["position"]), st["blend"]]
-            info[k, 2] = [*(st["max"] if box else st["position"]), 0.0 if box else st["radius"]]
-            info[k, 3, 0] = 1.0 if st["parallax"] else 0.0
-            info[k, 3, 1] = np.pi / st["size"]          # the capture's texel, in radians (its rows)
         return (rt.to_device(flat), rt.to_device(off), rt.to_device(np.array([w for _h, w in sizes[0]], np.int32)),
-                rt.to_device(np.array([h for h, _w in sizes[0]], np.int32)), rt.to_device(info.reshape(-1, 4)))
+                rt.to_device(np.array([h for h, _w in sizes[0]], np.int32)))
     chains = tuple(lv for c in captured for lv in c["levels"] + c["coverage"] + c["sky"])
-    chain, off, lw, lh, info = bakes.on_device(rt, chains, upload) if bakes is not None else upload()
+    chain, off, lw, lh = bakes.on_device(rt, chains, upload) if bakes is not None else upload()
+    # the settings each frame's own: probes of other settings (blend, box, taps) can share chains of
+    # the same content, and with them the memo's upload
     return {"rp_chain": chain, "rp_off": off, "rp_lw": lw, "rp_lh": lh, "rp_nlev": len(sizes[0]),
-            "rp_count": len(captured), "rp_info": info}
+            "rp_count": len(captured), "rp_info": rt.to_device(rprobe_info(captured))}
+
+
+def rprobe_info(captured) -> np.ndarray:
+    """rp_info (kernels/reflection_probes.h): 4 float4 per probe from its settings."""
+    info = np.zeros((len(captured), 4, 4), np.float32)
+    for k, c in enumerate(captured):
+        st = c["settings"]
+        box = st["shape"] == "box"
+        info[k, 0] = [*st["position"], 0.0 if box else 1.0]
+        info[k, 1] = [*(st["min"] if box else st["position"]), st["blend"]]
+        info[k, 2] = [*(st["max"] if box else st["position"]), 0.0 if box else st["radius"]]
+        info[k, 3, 0] = 1.0 if st["parallax"] else 0.0
+        info[k, 3, 1] = np.pi / st["size"]          # the capture's texel, in radians (its rows)
+        info[k, 3, 2] = st["taps"]                  # the lobe's taps (rprobe_taps)
+    return info.reshape(-1, 4)

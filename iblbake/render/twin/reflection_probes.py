@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from iblbake.bake import radiance
+from iblbake.core import brdf, conventions, sampling
 
 
 def weight(st: dict, p):
@@ -72,15 +73,58 @@ def sky(c: dict, r, lod, open_, off, shift, distant):
     return got * (np.minimum(open_, seen) / np.maximum(seen, 1e-6)) + fill * (near * through + (1 - near) * distant)
 
 
-def blend(captured: list, p, r, lod, distant):
+TAP_ROUGH = 0.15      # kernels/reflection_probes.h RPROBE_TAP_ROUGH
+
+
+def taps(c: dict, p, n, v, lod, env, count: int):
+    """Twin of rprobe_taps: the GGX lobe of normal n and view v (alpha rough^2, rough lod over the
+    chain's last level) read in `count` Hammersley directions l, each weighted as the BRDF over its
+    pdf without Fresnel (V 4 NoL VoH / NoH, none below the surface): the scene where l leaves the
+    proxy, seen from the probe, and the panorama along l itself (env: the distant chain, its
+    rotation, its intensity) over the share of that direction p sees open (the coverage read with
+    parallax), at a level TAP_ROUGH of the lobe's (the scene's no finer than FINEST)."""
+    st, nlev = c["settings"], len(c["levels"])
+    pos = np.asarray(st["position"], np.float64)
+    rough = lod / max(nlev - 1, 1)
+    alpha = rough * rough
+    tap = TAP_ROUGH * lod
+    scene_lod = np.maximum(tap, np.minimum(lod, FINEST))
+    chain, rot, scale = env
+    nov = np.maximum((n * v).sum(1), 1e-4)
+    t, b = conventions.tangent_frame(n)
+    acc, wsum = np.zeros((len(p), 3)), np.zeros((len(p), 1))
+    for u in sampling.hammersley(count):
+        hl = sampling.sample_ggx_half(np.broadcast_to(u, (len(p), 2)), alpha)
+        h = t * hl[:, 0:1] + b * hl[:, 1:2] + n * hl[:, 2:3]
+        voh = (v * h).sum(1)
+        l = 2 * voh[:, None] * h - v
+        nol = (n * l).sum(1)
+        ok = (nol > 0) & (voh > 0)
+        w = np.where(ok, brdf.v_smith_ggx_correlated(nov, nol, alpha) * 4 * nol * voh / np.maximum(hl[:, 2], 1e-7),
+                     0.0)[:, None]
+        x = exit_point(st, p, l)
+        d = (x - pos) / np.maximum(np.linalg.norm(x - pos, axis=-1, keepdims=True), 1e-6)
+        open_ = np.maximum(1 - radiance.chain_lookup_twin(c["coverage"], d, tap)[:, :1], 0.0)
+        sky = scale * radiance.chain_lookup_twin(chain, conventions.rotate_y(l, -rot), TAP_ROUGH * rough * (len(chain) - 1))
+        acc += w * (radiance.chain_lookup_twin(c["levels"], d, scene_lod) + open_ * sky)
+        wsum += w
+    return acc / np.maximum(wsum, 1e-9)
+
+
+def blend(captured: list, p, r, lod, distant, env, lobe):
     """Twin of reflection_probes: captured [{settings, levels, coverage, sky}], distant the scaled
-    distant chain's radiance at (p, r) (m, 3), which takes the share no probe's influence holds."""
+    distant chain's radiance at (p, r) (m, 3), which takes the share no probe's influence holds;
+    env (the distant chain, its rotation, its intensity) and lobe (n, v) for a probe read in taps."""
     acc = np.zeros_like(distant)
     wsum = np.zeros(len(p))
     lod = np.broadcast_to(np.asarray(lod, np.float64), (len(p),))
     for c in captured:
         st = c["settings"]
         w = weight(st, p)
+        wsum += w
+        if st["parallax"] and st.get("taps"):
+            acc += w[:, None] * taps(c, p, *lobe, lod, env, st["taps"])
+            continue
         d, near_lod, off, shift = r, lod, np.zeros((len(p), 1)), np.zeros(len(p))
         if st["parallax"]:
             pos = np.asarray(st["position"], np.float64)
@@ -94,7 +138,6 @@ def blend(captured: list, p, r, lod, distant):
         open_ = 1 - radiance.chain_lookup_twin(c["coverage"], d, near_lod)[:, :1]
         acc += w[:, None] * (radiance.chain_lookup_twin(c["levels"], d, near_lod)
                              + sky(c, r, lod, open_, off, shift, distant))
-        wsum += w
     over = wsum > 1
     out = acc + (1 - wsum)[:, None] * distant
     return np.where(over[:, None], acc / np.where(over, wsum, 1)[:, None], out)

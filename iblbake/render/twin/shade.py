@@ -95,7 +95,8 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
         li = scale * pre
         if reflection_probes:
             nlev = len(reflection_probes[0]["levels"])
-            li = rp_twin.blend(reflection_probes, gb["pos"][hit], r, rough * (nlev - 1), li)
+            li = rp_twin.blend(reflection_probes, gb["pos"][hit], r, rough * (nlev - 1), li,
+                               (prefiltered, rot, scale), (n, v))
         color += spec_occ * li * (f0 * ab[:, 0:1] + f90 * ab[:, 1:2])
         if ssr_out is not None:
             ssr_out["w"] = spec_occ * (f0 * ab[:, 0:1] + f90 * ab[:, 1:2]) * material_occlusion(gb)[:, None]
