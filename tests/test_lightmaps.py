@@ -1,0 +1,147 @@
+"""Lightmaps (iblbake/render/lightmaps): the second UV set and its texels (every texel centre a
+triangle claims whole lies inside it, no texel claimed whole twice), the bake against closed forms
+(a plane under a uniform sky: E = pi L; a closed Lambert enclosure of albedo a emitting e: E = pi e /
+(1 - a) at every texel, from the irradiance and from the L1 SH alike), the rejection of texels
+inside a solid, dilation and the density's cap."""
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from iblbake.errors import InputError
+from iblbake.io import images
+from iblbake.render import lightmaps
+from tests.conftest import load_scene
+
+CUBE = str(Path(__file__).resolve().parents[1] / "examples/corpus/meshes/cube.obj")
+LAMBERT = {"roughness": 1, "specular": 0}
+
+
+@pytest.fixture(scope="module")
+def white(tmp_path_factory):
+    p = tmp_path_factory.mktemp("white") / "white.exr"
+    images.write_exr(p, np.ones((32, 64, 3), np.float32))
+    return p
+
+
+def scene(folder, env, objects, materials, camera=(0, 1.5, 3), **lightmap):
+    return load_scene(folder, "lm", {
+        "camera": {"perspective": {"position": list(camera), "look_at": [0, 0.3, 0], "fov_y": 50}, "resolution": [16, 16]},
+        "environment": {"path": str(env), "background": "hide"}, "materials": materials, "objects": objects,
+        "lightmap": {"samples": 64, **lightmap}})
+
+
+def baked(sc, folder):
+    from iblbake.device.runtime import Runtime
+    from iblbake.render.bakes import Bakes
+    from iblbake.render.units import Job
+    return lightmaps.bake(Job(sc, Runtime(), Bakes(folder / "cache")), sc.data["lightmap"])
+
+
+def host_triangles(sc):
+    from iblbake.scene import geometry, materials
+    _r, offsets = materials.table(sc)
+    return geometry.build_triangles(sc.data["objects"], offsets, sc.source, {}, True)
+
+
+def test_unwrap_texels_inside_their_triangles(tmp_path, white):
+    """A cube mesh (xatlas) and a sphere (meshed): each texel claimed whole has its centre inside its
+    triangle (barycentrics >= 0, the corners' UVs at them give the centre back, the point on the
+    surface), no centre lies inside two triangles (no overlap), and the atlas holds the area at the
+    density (within xatlas' packing with its padding: measured 36% use at this small size)."""
+    sc = scene(tmp_path, white, [{"mesh": {"path": CUBE}, "material": "m"},
+                                 {"sphere": {"center": [1, 0.5, 0], "radius": 0.4}, "material": "m"}],
+               {"m": LAMBERT}, texels_per_unit=16)
+    lay = lightmaps.layout(sc, host_triangles(sc), 16.0, 1 << 20)
+    assert lay.source == {0: "xatlas", 1: "sphere"}
+    tx = lightmaps.texels(lay)
+    ins = tx.inside
+    assert ins.mean() > 0.6 and (tx.bary[ins] >= -1e-9).all()
+    back = np.einsum("kc,kcx->kx", tx.bary[ins], lay.uv[tx.triangle[ins]])
+    centre = np.stack([tx.index[ins] % lay.width + 0.5, tx.index[ins] // lay.width + 0.5], 1)
+    assert np.abs(back - centre).max() < 1e-6
+    claims = np.zeros(lay.width * lay.height, int)         # every triangle's centre-inside texels
+    for uv in lay.uv:
+        i, j = np.meshgrid(np.arange(lay.width) + 0.5, np.arange(lay.height) + 0.5)
+        p = np.stack([i.ravel(), j.ravel()], 1)
+        w, d = lightmaps.uv._closest_bary(p, *uv)
+        claims += d == 0
+    assert claims.max() == 1
+    on_sphere = np.linalg.norm(tx.position[tx.solid] - [1, 0.5, 0], axis=1)
+    assert np.abs(on_sphere - 0.4).max() < 1e-9
+    area = 6 * 0.7 ** 2 + 4 * math.pi * 0.4 ** 2
+    use = area * 16 ** 2 / (lay.width * lay.height)
+    print(f"atlas {lay.width} x {lay.height}, {len(tx.index)} texels, use {use:.2f}")
+    assert 0.3 < use < 1.0
+
+
+def test_plane_under_uniform_sky_is_pi(tmp_path, white):
+    """A finite plane alone under L = 1: every texel's irradiance is pi (the mean within 0.5%, each
+    texel within 5%: 64 stratified rays), the L1 SH's irradiance at the normal too (within 3%: L1
+    rings on a hemisphere's edge)."""
+    sc = scene(tmp_path, white, [{"plane": {"point": [0, 0, 0], "size": 2}, "material": "m"}], {"m": LAMBERT},
+               texels_per_unit=4)
+    lm = baked(sc, tmp_path)
+    e = lm["irradiance"][lm["valid"]]
+    print(f"plane: {len(e)} texels, mean {e.mean():.5f} (pi {math.pi:.5f}), range {e.min():.4f}-{e.max():.4f}")
+    assert abs(e.mean() / math.pi - 1) < 5e-3 and np.abs(e / math.pi - 1).max() < 0.05
+    tx = lm["texels"]
+    from_sh = lightmaps.sh_irradiance(lm["sh_l1"].reshape(-1, 4, 3)[tx.index], tx.normal)
+    assert np.abs(from_sh.mean() / math.pi - 1) < 0.03
+    assert lm["report"]["rejected_inside"] == 0
+
+
+def test_enclosure_closed_form(tmp_path, white):
+    """The camera inside a closed cube of albedo a = 0.5 emitting e = 1 (solid: false: a shell seen
+    from inside), unbounded bounces: L = e / (1 - a) everywhere, every texel's irradiance pi e / (1 - a)
+    = 2 pi (the mean within 1%, measured below; paths end by roulette); the sides the camera sees are
+    the ones baked."""
+    sc = scene(tmp_path, white, [{"mesh": {"path": CUBE}, "material": "wall", "solid": False}],
+               {"wall": {"base_color": [0.5] * 3, "emissive": [1, 1, 1], **LAMBERT}}, camera=(0.1, 0.3, 0.1),
+               texels_per_unit=8)
+    lm = baked(sc, tmp_path)
+    e = lm["irradiance"][lm["valid"]]
+    print(f"enclosure: {len(e)} texels, mean {e.mean(0)} (2 pi {2 * math.pi:.5f})")
+    assert np.abs(e.mean(0) / (2 * math.pi) - 1).max() < 1e-2
+    tx = lm["texels"]
+    inward = ((np.array([0, 0.35, 0]) - tx.position) * tx.normal).sum(1)
+    assert (inward > 0).all()
+
+
+def test_texels_inside_a_solid_rejected_and_dilated(tmp_path, white):
+    """A closed (solid) cube resting on a plane: the plane's texels under the cube see its inside and
+    are rejected, then filled from their neighbours: no texel of the plane is left dark, and beside the
+    cube the plane sees the sky over less than its hemisphere (E < pi)."""
+    sc = scene(tmp_path, white, [{"mesh": {"path": CUBE}, "material": "m"},
+                                 {"plane": {"point": [0, 0, 0], "size": 1.4}, "material": "m"}],
+               {"m": {"base_color": [0.5] * 3, **LAMBERT}}, texels_per_unit=8)
+    lm = baked(sc, tmp_path)
+    tx, rep = lm["texels"], lm["report"]
+    plane = lm["layout"].objects[tx.triangle] == 1
+    under = plane & (np.abs(tx.position[:, 0]) < 0.3) & (np.abs(tx.position[:, 2]) < 0.3)
+    print(rep)
+    assert rep["rejected_inside"] >= under.sum() > 0
+    e = lm["irradiance"].reshape(-1, 3)[tx.index[plane]]
+    assert e.min() > 0.3 and e.max() < math.pi
+
+
+def test_dilation_fills_from_valid_neighbours():
+    a = np.zeros((4, 5, 3))
+    a[1, 1] = 2.0
+    a[1, 2] = 4.0
+    v = np.zeros((4, 5), bool)
+    v[1, 1] = v[1, 2] = True
+    got, filled = lightmaps.dilate(a, v, passes=1)
+    assert got[0, 1, 0] == 3.0 and got[1, 0, 0] == 2.0 and got[1, 3, 0] == 4.0 and filled[2, 2] and not filled[3, 0]
+    assert got[1, 1, 0] == 2.0 and not np.any(got[3, 4])
+
+
+def test_density_over_the_cap_refused(tmp_path, white):
+    """A density whose estimate passes lightmap.max_texels: one line naming the key, before packing."""
+    sc = scene(tmp_path, white, [{"plane": {"point": [0, 0, 0], "size": 100}, "material": "m"}], {"m": LAMBERT},
+               texels_per_unit=64)
+    with pytest.raises(InputError, match=r"lightmap.texels_per_unit: 64 texels per unit asks about \d+ texels") as e:
+        lightmaps.layout(sc, host_triangles(sc), 64.0, sc.data["lightmap"]["max_texels"])
+    assert "\n" not in str(e.value)
