@@ -62,13 +62,13 @@ def test_unwrap_texels_inside_their_triangles(tmp_path, white):
     back = np.einsum("kc,kcx->kx", tx.bary[ins], lay.uv[tx.triangle[ins]])
     centre = np.stack([tx.index[ins] % lay.width + 0.5, tx.index[ins] // lay.width + 0.5], 1)
     assert np.abs(back - centre).max() < 1e-6
-    claims = np.zeros(lay.width * lay.height, int)         # every triangle's centre-inside texels
+    claims = np.zeros((lay.height, lay.width), int)       # every triangle's centre-inside texels
     for uv in lay.uv:
-        i, j = np.meshgrid(np.arange(lay.width) + 0.5, np.arange(lay.height) + 0.5)
-        p = np.stack([i.ravel(), j.ravel()], 1)
-        w, d = lightmaps.uv._closest_bary(p, *uv)
-        claims += d == 0
-    assert claims.max() == 1
+        lo, hi = np.floor(uv.min(0)).astype(int), np.ceil(uv.max(0)).astype(int)
+        i, j = np.meshgrid(np.arange(lo[0], hi[0]) + 0.5, np.arange(lo[1], hi[1]) + 0.5)
+        w, d = lightmaps.uv._closest_bary(np.stack([i.ravel(), j.ravel()], 1), *uv)
+        claims[lo[1]:hi[1], lo[0]:hi[0]] += (d == 0).reshape(i.shape)
+    assert claims.max() == 1 and (claims > 0).sum() == ins.sum()
     on_sphere = np.linalg.norm(tx.position[tx.solid] - [1, 0.5, 0], axis=1)
     assert np.abs(on_sphere - 0.4).max() < 1e-9
     area = 6 * 0.7 ** 2 + 4 * math.pi * 0.4 ** 2
@@ -145,3 +145,24 @@ def test_density_over_the_cap_refused(tmp_path, white):
     with pytest.raises(InputError, match=r"lightmap.texels_per_unit: 64 texels per unit asks about \d+ texels") as e:
         lightmaps.layout(sc, host_triangles(sc), 64.0, sc.data["lightmap"]["max_texels"])
     assert "\n" not in str(e.value)
+
+
+def test_cached_by_content(tmp_path, white):
+    """A second bake of the same scene comes from the store (the same atlases), a changed material
+    bakes again."""
+    from iblbake.device.runtime import Runtime
+    from iblbake.render.bakes import Bakes
+    from iblbake.render.lightmaps import store
+    from iblbake.render.units import Job
+
+    def run(albedo):
+        sc = scene(tmp_path, white, [{"plane": {"point": [0, 0, 0], "size": 1}, "material": "m"},
+                                     {"sphere": {"center": [0, 0.4, 0], "radius": 0.3}, "material": "m"}],
+                   {"m": {"base_color": [albedo] * 3, **LAMBERT}}, texels_per_unit=4, samples=16)
+        return store.baked(Job(sc, Runtime(), Bakes(tmp_path / "cache")))
+    first, was = run(0.5)
+    again, was_again = run(0.5)
+    other, was_other = run(0.9)
+    assert not was and was_again and not was_other
+    assert np.array_equal(first["irradiance"], again["irradiance"]) and first["layout"].width == again["layout"].width
+    assert other["irradiance"][other["valid"]].mean() > first["irradiance"][first["valid"]].mean()
