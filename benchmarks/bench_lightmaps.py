@@ -20,44 +20,13 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 ROOT = Path(__file__).resolve().parents[1]
 BOUND = 0.10           # issue 62: within 10% of the reference on every region of static geometry
 
 
-def diffuse_image(study, lm, shape, basis):
-    """The lightmap's diffuse term (h, w, 4) at the study's camera (one centred sample a pixel), alpha
-    1 where a lightmapped object is hit."""
-    from iblbake.render.lightmaps import read
-    from iblbake.render.twin.gbuffer import primary
-    from iblbake.scene.layout import PRIM_KINDS
-
-    h, w = shape
-    sc = study.scene
-    cam = {**sc.data["camera"], "resolution": [w, h], "spp": 1}
-    arrays = study.bakes.geometry(sc)
-    gb = primary(cam, arrays)
-    ints = lambda a: np.asarray(a, np.float32).view(np.int32)
-    obj = np.full(len(gb["hit"]), -1)
-    for kind, recs, row, col in (("sphere", arrays.spheres, 1, 1), ("triangle", arrays.tris, 1, 3),
-                                 ("plane", arrays.planes, 1, 3)):
-        sel = gb["hit"] & (gb["kind"] == PRIM_KINDS[kind])
-        if sel.any():
-            obj[sel] = ints(recs[gb["index"][sel], row, col])
-    e, found = read.irradiance(lm, obj, gb["pos"], gb["normal"], basis)
-    albedo = np.zeros((len(obj), 3))
-    for k, o in enumerate(sc.data["objects"]):
-        m = sc.data["materials"][o["material"]]
-        albedo[obj == k] = np.asarray(m["base_color"]) * (1 - m["metallic"])
-    out = np.zeros((h * w, 4))
-    out[:, :3] = albedo * e / np.pi
-    out[:, 3] = found & gb["hit"]
-    return out.reshape(h, w, 4)
-
-
 def measure(name, args, rt, bakes) -> dict:
     from iblbake.render import lightmaps
+    from iblbake.render.lightmaps import read
     from iblbake.render.units import Job
     from iblbake.study import accuracy as acc
 
@@ -75,7 +44,7 @@ def measure(name, args, rt, bakes) -> dict:
     bake_s = time.perf_counter() - t0
     rows = {}
     for basis in lightmaps.BASES:
-        hdr = diffuse_image(study, lm, ref["hdr"].shape[:2], basis)
+        hdr = read.diffuse_frame(study.scene, study.bakes.geometry(study.scene), lm, ref["hdr"].shape[:2], basis)
         mask = study.metric_mask("diffuse", hdr)
         m = study.region_metrics(hdr, ref["hdr"], mask)
         rows[basis] = {"region_absolute": m["region_absolute"], "worst_region_absolute": m["worst_region_absolute"],

@@ -79,8 +79,8 @@ def test_unwrap_texels_inside_their_triangles(tmp_path, white):
 
 def test_plane_under_uniform_sky_is_pi(tmp_path, white):
     """A finite plane alone under L = 1: every texel's irradiance is pi (the mean within 0.5%, each
-    texel within 5%: 64 stratified rays), the L1 SH's irradiance at the normal too (within 3%: L1
-    rings on a hemisphere's edge)."""
+    texel within 5%: 64 stratified rays), the L1 SH's irradiance at the normal the same (its constant
+    term is set to give the texel's E there; to rounding)."""
     sc = scene(tmp_path, white, [{"plane": {"point": [0, 0, 0], "size": 2}, "material": "m"}], {"m": LAMBERT},
                texels_per_unit=4)
     lm = baked(sc, tmp_path)
@@ -89,7 +89,7 @@ def test_plane_under_uniform_sky_is_pi(tmp_path, white):
     assert abs(e.mean() / math.pi - 1) < 5e-3 and np.abs(e / math.pi - 1).max() < 0.05
     tx = lm["texels"]
     from_sh = lightmaps.sh_irradiance(lm["sh_l1"].reshape(-1, 4, 3)[tx.index], tx.normal)
-    assert np.abs(from_sh.mean() / math.pi - 1) < 0.03
+    assert np.abs(from_sh - lm["irradiance"].reshape(-1, 3)[tx.index]).max() < 1e-9
     assert lm["report"]["rejected_inside"] == 0
 
 
@@ -166,3 +166,71 @@ def test_cached_by_content(tmp_path, white):
     assert not was and was_again and not was_other
     assert np.array_equal(first["irradiance"], again["irradiance"]) and first["layout"].width == again["layout"].width
     assert other["irradiance"][other["valid"]].mean() > first["irradiance"][first["valid"]].mean()
+
+
+ROOT = Path(__file__).resolve().parents[1]
+CORPUS_BOUND = 0.10        # issue 62: every region of static geometry within 10% of the converged reference
+MIN_PIXELS = 10            # a region's least full-coverage pixels (tests/test_corpus.py)
+
+
+@pytest.mark.external
+@pytest.mark.slow
+@pytest.mark.parametrize("basis", lightmaps.BASES)
+def test_lightmap_holds_quad_room_to_the_truth(basis, tmp_path, panoramas):
+    """quad_room under studio at 4 texels a unit and 64 rays a texel: the lightmap's diffuse term
+    (read at the camera's hits) within CORPUS_BOUND of the converged reference's diffuse term on every
+    lightmapped region (at 40 px, two seeds to 3% or 256 samples as tests/test_corpus.py's; the
+    metal gold sphere has no diffuse term). Measured at 64 px: irradiance 7.7%, L1 SH 12.4% worst
+    (back wall x0.88) before the L1 SH's constant term was set to the texel's irradiance; see
+    docs/manual.md 'Lightmaps'."""
+    from iblbake.device.runtime import Runtime
+    from iblbake.render.bakes import Bakes
+    from iblbake.render.lightmaps import read
+    from iblbake.render.units import Job
+    from iblbake.study import accuracy as acc
+
+    settings = acc.Settings(max_side=40, repeats=1, target_noise=0.03, max_samples=256, flip=False)
+    rt, bakes = Runtime(), Bakes(tmp_path / "cache")
+    st = acc.Study(ROOT / "examples" / "corpus" / "quad_room.yaml",
+                   [f"environment.path={panoramas['studio']}", "effects.specular=off", "lightmap.texels_per_unit=4",
+                    "lightmap.samples=64"], settings, runtime=rt, bakes=bakes)
+    ref = st.render_reference("diffuse")
+    lm = lightmaps.bake(Job(st.scene, rt, bakes), st.scene.data["lightmap"])
+    hdr = read.diffuse_frame(st.scene, bakes.geometry(st.scene), lm, ref["hdr"].shape[:2], basis)
+    regions = st.region_metrics(hdr, ref["hdr"], st.metric_mask("diffuse", hdr))["region_absolute"]
+    print({n: (round(e["ratio"], 3), e["pixels"]) for n, e in regions.items()})
+    held = {n: e for n, e in regions.items() if e["pixels"] >= MIN_PIXELS}
+    assert len(held) >= 4
+    bad = {n: round(e["ratio"], 3) for n, e in held.items() if e["absolute"] > CORPUS_BOUND}
+    assert not bad, bad
+
+
+def test_nudge_kernel_matches_its_twin(tmp_path, white):
+    """lightmap_nudge against bake.nudge_twin (float64): a solid cube resting on a plane; the plane's
+    texels beside and under the cube (those the nudge is for): the same points moved, every start point
+    within float32's rounding (measured 3e-8). The cube's own texels are left out: their tangent rays
+    run in the planes of its faces and meet the next face edge-on, where the kernel's watertight test
+    and the twin's Moller-Trumbore part."""
+    import importlib
+
+    from iblbake.device.runtime import Runtime
+    from iblbake.render.bakes import Bakes
+    from iblbake.render.paths.tracer import Tracer
+    from iblbake.render.units import Job
+    lb = importlib.import_module("iblbake.render.lightmaps.bake")
+
+    sc = scene(tmp_path, white, [{"mesh": {"path": CUBE}, "material": "m"},
+                                 {"plane": {"point": [0, 0, 0], "size": 1.4}, "material": "m"}],
+               {"m": LAMBERT}, texels_per_unit=8)
+    job = Job(sc, Runtime(), Bakes(tmp_path / "cache"))
+    lay = lightmaps.layout(sc, host_triangles(sc), 8.0, 1 << 20)
+    tx = lightmaps.texels(lay)
+    lb.facing(tx, [0, 1.5, 3])
+    points = lb.inset(tx, lay.corners, 1 / 8)
+    got, _ = lb.nudge(Tracer(job, {"bounces": 1, "seed": 1}), tx, points, 1 / 8)
+    want, _ = lb.nudge_twin(points, tx.geometric, 1 / 8, job.arrays)
+    plane = lay.objects[tx.triangle] == 1
+    lift = points + lb.OFFSET / 8 * tx.geometric
+    moved = plane & (np.abs(want - lift).max(1) > 1e-3)
+    print(f"plane texels {plane.sum()}, moved {moved.sum()}, max |kernel - twin| {np.abs(got - want)[plane].max():.2e}")
+    assert moved.sum() > 20 and np.abs(got - want)[plane].max() < 1e-6

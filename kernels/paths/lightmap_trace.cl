@@ -13,7 +13,8 @@
  * texel's tangent plane (nudge_dirs, 4 a texel) out to its reach (w of texel_pos); where one meets
  * the back of a solid (scene.h probe_back_face: an open surface has no inside) the point moves to
  * just past it, on its front.
- * numpy twin: iblbake/render/lightmaps/bake.py (nudge_twin and the projection). */
+ * numpy twins: iblbake/render/lightmaps/bake.py nudge_twin (lightmap_nudge) and project() (what a
+ * texel keeps of its rays). */
 #include "common.h"
 #include "envmap.h"
 #include "scene.h"

@@ -6,7 +6,10 @@ lifted OFFSET texels along the geometric normal; moved past a solid's back face 
 lightmap_nudge), whole texels per launch. Per texel, from the same rays (uniform hemisphere: weight 2 pi / samples a ray):
   irradiance  E(n) = sum w L cos               (a non-directional lightmap, RGB)
   sh_l1       L_lm = sum w L Y_lm              (the radiance's L1 SH over the hemisphere, 4 x RGB; its
-                                               irradiance at a normal n' is sum Ahat_l L_lm Y_lm(n'))
+                                               irradiance at a normal n' is sum Ahat_l L_lm Y_lm(n'));
+                                               L_00 then moved so that reading at the texel's normal
+                                               is its E (project(): the linear L1 reading of light
+                                               met head-on is 25% low)
 A texel more than REJECT of whose rays meet the inside of a solid starts inside geometry: it is
 dropped and dilated over (BakingLab's rejection). Dilation: every empty texel takes the mean of its
 valid 8-neighbours, DILATE passes (across chart seams and the padding)."""
@@ -113,7 +116,14 @@ def project(radiance, t, dirs, normals):
     cos = np.einsum("ksx,kx->ks", dirs, normals)
     e = w * np.einsum("ksc,ks->kc", radiance, cos)
     y = sh.sh_basis(dirs, 2)                                         # (k, s, 4)
-    return e, w * np.einsum("ksc,ksj->kjc", radiance, y), (t < 0).mean(1)
+    coeffs = w * np.einsum("ksc,ksj->kjc", radiance, y)
+    # the linear L1 reading weighs a direction by 1/4 + cos/2, not max(cos, 0): light met head-on is
+    # read 25% low (quad_room's back wall x0.88 at 4 texels a unit); its constant term moved so the
+    # reading at the texel's own normal is the texel's irradiance, the L1 band giving the change
+    # with the normal (a normal map's), as Unity's directional lightmaps keep irradiance + direction
+    linear = np.einsum("kj,kjc->kc", sh.sh_basis(normals, 2), coeffs * sh.ahat(2)[:, None])
+    coeffs[:, 0] += (e - linear) / (math.pi * sh.sh_basis(normals[:1], 2)[0, 0])
+    return e, coeffs, (t < 0).mean(1)
 
 
 def sh_irradiance(coeffs, normals):
@@ -159,6 +169,50 @@ def nudge(tracer, tx: uvs.Texels, points, texel_size: float):
               pos_out=out)
     moved = rt.read(out, (len(lift), 4))[:, :3].astype(np.float64)
     return moved, int((np.abs(moved - pos[:, :3]).sum(1) > 0).sum())
+
+
+def _first_hits(o, d, arrays, reach):
+    """(t, whether it is a solid's back face (scene.h probe_back_face)) of the nearest hit of each ray
+    (o, d) within reach, any side (cull 0); inf where none. The twin of lightmap_nudge's trace."""
+    from iblbake.render.twin.gbuffer import _plane_t, _sphere_t, _triangle_t
+    from iblbake.scene.layout import SURFACE_FLAGS
+
+    ints = lambda a: int(np.asarray(a, np.float32).view(np.int32))
+    best, back = np.full(len(o), np.inf), np.zeros(len(o), bool)
+
+    def take(t, ng, flags):
+        nonlocal best, back
+        s = (ng * d).sum(1)
+        solid = flags & SURFACE_FLAGS["solid"]
+        b = (s < 0 if flags & SURFACE_FLAGS["solid_flipped"] else s > 0) if solid else \
+            (s > 0) & bool(flags & SURFACE_FLAGS["single_sided"])
+        closer = (t < best) & (t < reach)
+        best, back = np.where(closer, t, best), np.where(closer, np.asarray(b, bool), back)
+    for sp in arrays.spheres.astype(np.float64):
+        t = _sphere_t(o, d, sp)
+        ng = (o + np.where(np.isfinite(t), t, 0)[:, None] * d - sp[0, :3]) / sp[0, 3]
+        take(t, ng, ints(sp[1, 2]))
+    for pl in arrays.planes.astype(np.float64):
+        take(_plane_t(o, d, pl), np.broadcast_to(pl[1, :3], o.shape), ints(pl[4, 0]))
+    for tri in arrays.tris.astype(np.float64):
+        ng = np.cross(tri[1, :3] - tri[0, :3], tri[2, :3] - tri[0, :3])
+        take(_triangle_t(o, d, tri)[0], np.broadcast_to(ng, o.shape), ints(tri[2, 3]))
+    return best, back
+
+
+def nudge_twin(points, geometric, texel_size: float, arrays):
+    """lightmap_nudge in float64: the start points and how many moved (the kernel's twin)."""
+    lift = points + OFFSET * texel_size * geometric
+    reach = math.sqrt(0.5) * texel_size
+    t, b = frames(geometric)
+    nearest, moved = np.full(len(lift), reach), lift.copy()
+    for d in (t, -t, b, -b):
+        with np.errstate(invalid="ignore", divide="ignore"):       # rays along a triangle's plane
+            hit, back = _first_hits(lift, d, arrays, reach)
+        take = back & (hit < nearest)
+        nearest = np.where(take, hit, nearest)
+        moved[take] = lift[take] + (hit[take] + 0.05 * reach)[:, None] * d[take] + 0.05 * reach * geometric[take]
+    return moved, int((np.abs(moved - lift).sum(1) > 0).sum())
 
 
 def dilate(atlas, valid, passes: int = DILATE):

@@ -68,3 +68,29 @@ def irradiance(lm: dict, objects, points, normals, basis: str = "sh_l1"):
         else:
             e[found] = sh_irradiance(bilinear(lm["sh_l1"], uv[found]), normals[found])
     return e, found
+
+
+def diffuse_frame(sc, arrays, lm: dict, shape, basis: str = "sh_l1"):
+    """The lightmap's diffuse term (h, w, 4) of scene sc at its camera (one centred sample a pixel;
+    Lambert: base colour x (1 - metallic) x E / pi), alpha 1 where a lightmapped object is hit:
+    the primary hits of the G-buffer's twin (render/twin/gbuffer.py) over the scene's records
+    `arrays` (scene/pack.py), read as irradiance() reads them."""
+    from iblbake.render.twin.gbuffer import primary
+    from iblbake.scene.layout import PRIM_KINDS
+
+    h, w = shape
+    gb = primary({**sc.data["camera"], "resolution": [w, h], "spp": 1}, arrays)
+    obj = np.full(len(gb["hit"]), -1)
+    for kind, recs, col in (("sphere", arrays.spheres, 1), ("triangle", arrays.tris, 3), ("plane", arrays.planes, 3)):
+        sel = gb["hit"] & (gb["kind"] == PRIM_KINDS[kind])
+        if sel.any():
+            obj[sel] = np.asarray(recs[gb["index"][sel], 1, col], np.float32).view(np.int32)
+    e, found = irradiance(lm, obj, gb["pos"], gb["normal"], basis)
+    albedo = np.zeros((len(obj), 3))
+    for k, o in enumerate(sc.data["objects"]):
+        m = sc.data["materials"][o["material"]]
+        albedo[obj == k] = np.asarray(m["base_color"]) * (1 - m["metallic"])
+    out = np.zeros((h * w, 4))
+    out[:, :3] = albedo * e / np.pi
+    out[:, 3] = found & gb["hit"]
+    return out.reshape(h, w, 4)
