@@ -77,6 +77,21 @@ def test_unwrap_texels_inside_their_triangles(tmp_path, white):
     assert 0.3 < use < 1.0
 
 
+def test_texcoord_1_charts_kept(tmp_path, white):
+    """A glTF quad (2 x 2, square) with a TEXCOORD_1 of aspect 4:1: its chart is packed as authored
+    (the atlas chart 4:1, turned or not, where xatlas' own unwrap of the square would be square),
+    scaled to the density (16 texels a unit: 4 x 16^2 texels)."""
+    from tests.test_textures import QUAD_UV, quad_glb
+
+    glb = quad_glb(tmp_path / "q.glb", uv1=np.asarray(QUAD_UV, float) * [0.5, 0.125] + 0.1)
+    sc = scene(tmp_path, white, [{"mesh": {"path": glb}, "material": "m"}], {"m": LAMBERT})
+    lay = lightmaps.layout(sc, host_triangles(sc), 16.0, 1 << 20)
+    assert lay.source == {0: "texcoord_1"}
+    span = np.sort(np.ptp(lay.uv.reshape(-1, 2), axis=0))
+    print(f"atlas chart {span}")
+    assert abs(span[1] / span[0] - 4) < 0.05 and abs(span.prod() / (4 * 16 ** 2) - 1) < 0.05
+
+
 def test_plane_under_uniform_sky_is_pi(tmp_path, white):
     """A finite plane alone under L = 1: every texel's irradiance is pi (the mean within 0.5%, each
     texel within 5%: 64 stratified rays), the L1 SH's irradiance at the normal the same (its constant
