@@ -8,7 +8,7 @@ channel's |mean difference| (study/accuracy.py Study.region_metrics), for the no
 holds them). Prints a Markdown table; --json writes every figure.
 
     .venv/bin/python benchmarks/bench_lightmaps.py [--scenes quad_room,corridor,l_room]
-        [--panorama studio] [--density 8] [--samples 256] [--max-side 64] [--max-samples 4096]
+        [--panorama studio] [--density 8] [--samples 1024] [--max-side 64] [--max-samples 4096]
         [--target-noise 0.01] [--cache DIR] [--json out.json]
 """
 
@@ -40,7 +40,13 @@ def measure(name, args, rt, bakes) -> dict:
     ref = study.render_reference("diffuse")
     ref_s = time.perf_counter() - t0
     t0 = time.perf_counter()
-    lm = lightmaps.bake(Job(study.scene, rt, bakes), study.scene.data["lightmap"])
+    said = [-1]
+
+    def progress(f):                     # the bake's fraction traced, on the terminal every 10%
+        if int(10 * f) > said[0]:
+            said[0] = int(10 * f)
+            print(f"  {name}: lightmap {100 * f:.0f}%", file=sys.stderr, flush=True)
+    lm = lightmaps.bake(Job(study.scene, rt, bakes), study.scene.data["lightmap"], progress)
     bake_s = time.perf_counter() - t0
     rows = {}
     for basis in lightmaps.BASES:
@@ -72,7 +78,7 @@ def main(argv=None):
     ap.add_argument("--scenes", default="quad_room,corridor,l_room")
     ap.add_argument("--panorama", default="studio")
     ap.add_argument("--density", type=float, default=8.0)
-    ap.add_argument("--samples", type=int, default=256)
+    ap.add_argument("--samples", type=int, default=1024)
     ap.add_argument("--max-side", type=int, default=64)
     ap.add_argument("--max-samples", type=int, default=4096)
     ap.add_argument("--target-noise", type=float, default=0.01)
