@@ -33,11 +33,11 @@ def scene(folder, env, objects, materials, camera=(0, 1.5, 3), **lightmap):
         "lightmap": {"samples": 64, **lightmap}})
 
 
-def baked(sc, folder):
+def baked(sc, folder, progress=None):
     from iblbake.device.runtime import Runtime
     from iblbake.render.bakes import Bakes
     from iblbake.render.units import Job
-    return lightmaps.bake(Job(sc, Runtime(), Bakes(folder / "cache")), sc.data["lightmap"])
+    return lightmaps.bake(Job(sc, Runtime(), Bakes(folder / "cache")), sc.data["lightmap"], progress)
 
 
 def host_triangles(sc):
@@ -116,7 +116,9 @@ def test_enclosure_closed_form(tmp_path, white):
     sc = scene(tmp_path, white, [{"mesh": {"path": CUBE}, "material": "wall", "solid": False}],
                {"wall": {"base_color": [0.5] * 3, "emissive": [1, 1, 1], **LAMBERT}}, camera=(0.1, 0.3, 0.1),
                texels_per_unit=8)
-    lm = baked(sc, tmp_path)
+    said = []
+    lm = baked(sc, tmp_path, said.append)
+    assert said[-1] == 1.0 and said == sorted(said)            # the fraction traced, to the end
     e = lm["irradiance"][lm["valid"]]
     print(f"enclosure: {len(e)} texels, mean {e.mean(0)} (2 pi {2 * math.pi:.5f})")
     assert np.abs(e.mean(0) / (2 * math.pi) - 1).max() < 1e-2

@@ -3,7 +3,8 @@
 hemisphere of its shading normal (stratified, uniform in solid angle, each texel's strata jittered by
 its own stream), from its start point (the surface point moved OFFSET texels into its triangle and
 lifted OFFSET texels along the geometric normal; moved past a solid's back face its tangent rays meet,
-lightmap_nudge), whole texels per launch. Per texel, from the same rays (uniform hemisphere: weight 2 pi / samples a ray):
+lightmap_nudge), whole texels per launch. Per texel, from the same rays (uniform over the
+hemisphere: weight w = 2 pi / samples a ray):
   irradiance  E(n) = sum w L cos               (a non-directional lightmap, RGB)
   sh_l1       L_lm = sum w L Y_lm              (the radiance's L1 SH over the hemisphere, 4 x RGB; its
                                                irradiance at a normal n' is sum Ahat_l L_lm Y_lm(n'));
