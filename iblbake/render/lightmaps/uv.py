@@ -23,6 +23,8 @@ from iblbake.errors import InputError
 
 PADDING = 2                  # texels between charts
 SPHERE_SEGMENTS = (32, 16)   # a sphere's mesh: around, pole to pole
+SPHERE_TEXELS = 16           # a sphere's least texels around its equator (the corridor's sphere, 0.3 in
+                             # radius at 4 texels a unit, has 7.5 and read x1.54 its reference)
 TEXEL_BYTES = 4 * 4          # the bake's float32 RGBA per texel per basis coefficient set (see bake.bytes_of)
 
 
@@ -116,7 +118,9 @@ def layout(scene, tris, density: float, max_texels: int, key: str = "lightmap.te
         raise InputError(f"{scene.source}: lightmap: the scene has no mesh, sphere or finite plane to lightmap")
     import xatlas                                   # only where lightmaps are baked (the lightmaps extra)
     atlas = xatlas.Atlas()
-    for _o, how, v, f, uv, _s in parts:
+    for _o, how, v, f, uv, s in parts:
+        if s is not None:             # a small sphere charted larger: at least SPHERE_TEXELS around
+            v = s[0] + (v - s[0]) * max(1.0, SPHERE_TEXELS / (2 * math.pi * s[1] * density))
         atlas.add_mesh(v.astype(np.float32), f.astype(np.uint32), None,
                        None if uv is None else uv.astype(np.float32))
     charts, pack = xatlas.ChartOptions(), xatlas.PackOptions()
