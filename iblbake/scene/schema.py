@@ -476,6 +476,21 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                                                            "lets the floor's far side through)"),
         "seed": Num(1, 0, 2**31 - 1, integer=True, doc="random seed of the rays' rotation and paths"),
     }),
+    "lightmap": Section(doc="the static geometry's lightmap (iblbake.render.lightmaps: a second UV set, its texels "
+                            "baked by the path tracer as irradiance and L1 SH; docs/manual.md 'Lightmaps')", fields={
+        "texels_per_unit": Num(8.0, 0.0, lo_open=True, doc="texels per world unit along each side of a surface (the "
+                                                           "atlas' density; xatlas packs the charts at it)"),
+        "samples": Num(1024, 16, 1 << 16, integer=True, doc="rays per texel over its hemisphere, one path each "
+                                                            "(stratified: the nearest square below is taken; a room "
+                                                            "lit through a small opening needs many: the corridor's "
+                                                            "far end was 13-17% bright at 144, within 4% at 1024)"),
+        "bounces": bounces_field("how many times the light a texel's ray brings back may have scattered: unbounded "
+                                 "(the reference's paths), or N"),
+        "max_texels": Num(4194304, 1, 1 << 28, integer=True,
+                          doc="the largest atlas baked: a density whose estimate (area x density^2 over 70% use) "
+                              "passes it is refused before anything is packed"),
+        "seed": Num(1, 0, 2**31 - 1, integer=True, doc="random seed of the texels' rays and paths"),
+    }),
     "reflection_probes": ListOf(doc="local reflection probes (Lagarde and Zanuttini 2012): radiance captured by the "
                                     "path tracer at a point, prefiltered as the distant chain, read by `specular: "
                                     "prefiltered` inside each probe's influence with parallax correction",

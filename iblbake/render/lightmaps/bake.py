@@ -1,0 +1,279 @@
+"""A lightmap's bake: its texels as one more ray source of the path tracer's one driver
+(render/paths/trace.py), kernels/paths/lightmap_trace.cl: per texel `samples` rays over the
+hemisphere of its shading normal (stratified, uniform in solid angle, each texel's strata jittered by
+its own stream), from its start point (the surface point moved OFFSET texels into its triangle and
+lifted OFFSET texels along the geometric normal; moved past a solid's back face its tangent rays meet,
+lightmap_nudge), whole texels per launch. Per texel, from the same rays (uniform over the
+hemisphere: weight w = 2 pi / samples a ray):
+  irradiance  E(n) = sum w L cos               (a non-directional lightmap, RGB)
+  sh_l1       L_lm = sum w L Y_lm              (the radiance's L1 SH over the hemisphere, 4 x RGB; its
+                                               irradiance at a normal n' is sum Ahat_l L_lm Y_lm(n'));
+                                               L_00 then moved so that reading at the texel's normal
+                                               is its E (project(): the linear L1 reading of light
+                                               met head-on is 25% low)
+A texel more than REJECT of whose rays meet the inside of a solid starts inside geometry: it is
+dropped and dilated over (BakingLab's rejection). Dilation: every empty texel takes the mean of its
+valid 8-neighbours, DILATE passes (across chart seams and the padding)."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from iblbake.core import sh
+from iblbake.device.launch import whole_units
+from iblbake.render.lightmaps import uv as uvs
+from iblbake.render.paths.trace import Launch, Source, trace
+
+PROGRAM = "paths/lightmap_trace.cl"
+OFFSET = 0.1          # the start point's lift along the geometric normal, in texels (BakingLab's bias)
+REJECT = 0.1          # a texel whose rays meet a solid's inside more often than this is inside geometry
+DILATE = 4            # dilation passes (PADDING texels between charts, and their seams)
+BASES = ("irradiance", "sh_l1")
+
+
+def frames(n):
+    """An orthonormal tangent and bitangent per unit normal n (k, 3) (Duff et al. 2017)."""
+    s = np.where(n[:, 2] >= 0, 1.0, -1.0)
+    a = -1.0 / (s + n[:, 2])
+    b = n[:, 0] * n[:, 1] * a
+    t = np.stack([1 + s * n[:, 0] ** 2 * a, s * b, -s * n[:, 0]], 1)
+    bt = np.stack([b, s + n[:, 1] ** 2 * a, -n[:, 1]], 1)
+    return t, bt
+
+
+def hemisphere_dirs(normals, samples: int, texel0: np.ndarray, seed: int):
+    """(k, samples, 3) world directions: a sqrt(samples)^2 grid of strata over the hemisphere
+    (uniform in solid angle: cos = u, phi = 2 pi v) about each normal, jittered per texel and
+    stratum by its texel number's stream."""
+    side = int(math.isqrt(samples))
+    i, j = np.divmod(np.arange(samples), side)
+    out = np.empty((len(normals), samples, 3))
+    t, b = frames(normals)
+    for k, tex in enumerate(texel0):
+        rng = np.random.default_rng([seed, int(tex)])
+        u = (i + rng.random(samples)) / side
+        v = (j + rng.random(samples)) / side
+        r = np.sqrt(np.maximum(0.0, 1 - u * u))
+        ph = 2 * math.pi * v
+        out[k] = (r * np.cos(ph))[:, None] * t[k] + (r * np.sin(ph))[:, None] * b[k] + u[:, None] * normals[k]
+    return out
+
+
+class LightmapTexels(Source):
+    """The texels' rays (lightmap_trace.cl through a Tracer's scene, panorama and lights), whole
+    texels per launch; kept per texel: E (k, 3), the L1 SH (k, 4, 3) and its share of rays that met
+    a solid's inside (k,). progress(the fraction traced)."""
+    program, function = PROGRAM, "lightmap_trace"
+
+    def __init__(self, tracer, start, normals, samples: int, seed: int, progress=None):
+        self.tracer, self.rt, self.samples, self.seed, self.progress = tracer, tracer.rt, samples, seed, progress
+        self.normals, self.n = normals, len(start)
+        self.pos = self.rt.to_device(np.pad(np.asarray(start, np.float32), ((0, 0), (0, 1))))
+        self.per = whole_units(self.rt, samples)
+        self.buf = self.rt.empty(16 * min(self.n, self.per) * samples)
+        self.irradiance = np.zeros((self.n, 3))
+        self.sh = np.zeros((self.n, 4, 3))
+        self.inside = np.zeros(self.n)
+        self.dirs = {}
+
+    def launch(self, global_size, function, **args):
+        t = self.tracer
+        return self.rt.launch(PROGRAM, function, t.defines, global_size, t.table, **t.args, **args)
+
+    def launches(self):
+        for first in range(0, self.n, self.per):
+            count = min(self.per, self.n - first)
+            d = hemisphere_dirs(self.normals[first:first + count], self.samples, np.arange(first, first + count), self.seed)
+            self.dirs[first] = d
+            w = np.full((count * self.samples, 1), 2 * math.pi / self.samples)
+            dev = self.rt.to_device(np.concatenate([d.reshape(-1, 3), w], 1).astype(np.float32))
+            yield Launch(count * self.samples, {"texel_pos": self.pos, "ray_dirs": dev, "nrays": self.samples,
+                                                "first": first, "count": count, "seed": self.tracer.settings["seed"],
+                                                "ray_out": self.buf}, (first, count))
+
+    def accumulate(self, la: Launch) -> bool:
+        first, count = la.part
+        out = self.rt.read(self.buf, (count * self.samples, 4)).reshape(count, self.samples, 4).astype(np.float64)
+        d = self.dirs.pop(first)
+        self.irradiance[first:first + count], self.sh[first:first + count], self.inside[first:first + count] = \
+            project(out[..., :3], out[..., 3], d, self.normals[first:first + count])
+        if self.progress:
+            self.progress((first + count) / self.n)
+        return False
+
+    def result(self):
+        self.tracer.rays_traced += self.n * self.samples
+        return self.irradiance, self.sh, self.inside
+
+
+def project(radiance, t, dirs, normals):
+    """Per texel (E (k, 3), L1 SH of the radiance (k, 4, 3), the share of its rays that met a
+    solid's inside) from its rays' radiance (k, s, 3), signed distance (k, s) and directions
+    (k, s, 3) over the hemisphere of normals (k, 3), uniform in solid angle."""
+    w = 2 * math.pi / radiance.shape[1]
+    cos = np.einsum("ksx,kx->ks", dirs, normals)
+    e = w * np.einsum("ksc,ks->kc", radiance, cos)
+    y = sh.sh_basis(dirs, 2)                                         # (k, s, 4)
+    coeffs = w * np.einsum("ksc,ksj->kjc", radiance, y)
+    # the linear L1 reading weighs a direction by 1/4 + cos/2, not max(cos, 0): light met head-on is
+    # read 25% low (quad_room's back wall x0.88 at 4 texels a unit); its constant term moved so the
+    # reading at the texel's own normal is the texel's irradiance, the L1 band giving the change
+    # with the normal (a normal map's), as Unity's directional lightmaps keep irradiance + direction
+    linear = np.einsum("kj,kjc->kc", sh.sh_basis(normals, 2), coeffs * sh.ahat(2)[:, None])
+    coeffs[:, 0] += (e - linear) / (math.pi * sh.sh_basis(normals[:1], 2)[0, 0])
+    return e, coeffs, (t < 0).mean(1)
+
+
+def sh_irradiance(coeffs, normals):
+    """E at unit normals (..., 3) from the L1 SH of the radiance (..., 4, 3) (clamped at 0)."""
+    e = coeffs * sh.ahat(2)[:, None]
+    return np.maximum(0.0, np.einsum("...j,...jc->...c", sh.sh_basis(normals, 2), e))
+
+
+def facing(tx: uvs.Texels, camera) -> None:
+    """One lightmap a surface, of the side the camera is on: a texel whose normal faces away from the
+    camera turns (a wall wound either way, seen from inside its room). A closed solid (a sphere)
+    keeps its outside."""
+    away = ((np.asarray(camera) - tx.position) * tx.geometric).sum(1) < 0
+    away &= ~tx.solid
+    tx.normal[away] *= -1
+    tx.geometric[away] *= -1
+
+
+def inset(tx: uvs.Texels, corners, texel_size: float):
+    """The texels' points moved OFFSET texels towards their triangle's centroid (at most half way):
+    a point on a chart's edge lies in the plane of the wall meeting it there, and its rays along that
+    wall would start on it and pass through (a room's corner lit by the sky outside)."""
+    to = corners[tx.triangle].mean(1) - tx.position
+    dist = np.linalg.norm(to, axis=1, keepdims=True)
+    step = np.minimum(OFFSET * texel_size, 0.5 * dist)
+    return tx.position + np.divide(to * step, dist, out=np.zeros_like(to), where=dist > 0)
+
+
+def nudge(tracer, tx: uvs.Texels, points, texel_size: float):
+    """The texels' start points: `points` lifted OFFSET texels along the geometric normal, then moved
+    past a solid's back face that one of four tangent rays (half a texel's diagonal long) meets
+    (lightmap_nudge)."""
+    rt = tracer.rt
+    lift = points + OFFSET * texel_size * tx.geometric
+    reach = math.sqrt(0.5) * texel_size
+    t, b = frames(tx.geometric)
+    dirs = np.stack([t, -t, b, -b], 1).reshape(-1, 3)
+    pos = np.concatenate([lift, np.full((len(lift), 1), reach)], 1).astype(np.float32)
+    out = rt.empty(16 * len(lift))
+    rt.launch(PROGRAM, "lightmap_nudge", tracer.defines, (len(lift),), tracer.table,
+              texel_pos=rt.to_device(pos), nudge_dirs=rt.to_device(np.pad(dirs, ((0, 0), (0, 1))).astype(np.float32)),
+              texel_nrm=rt.to_device(np.pad(tx.geometric, ((0, 0), (0, 1))).astype(np.float32)), count=len(lift),
+              pos_out=out)
+    moved = rt.read(out, (len(lift), 4))[:, :3].astype(np.float64)
+    return moved, int((np.abs(moved - pos[:, :3]).sum(1) > 0).sum())
+
+
+def _first_hits(o, d, arrays, reach):
+    """(t, whether it is a solid's back face (scene.h probe_back_face)) of the nearest hit of each ray
+    (o, d) within reach, any side (cull 0); inf where none. The twin of lightmap_nudge's trace."""
+    from iblbake.render.twin.gbuffer import _plane_t, _sphere_t, _triangle_t
+    from iblbake.scene.layout import SURFACE_FLAGS
+
+    ints = lambda a: int(np.asarray(a, np.float32).view(np.int32))
+    best, back = np.full(len(o), np.inf), np.zeros(len(o), bool)
+
+    def take(t, ng, flags):
+        nonlocal best, back
+        s = (ng * d).sum(1)
+        solid = flags & SURFACE_FLAGS["solid"]
+        b = (s < 0 if flags & SURFACE_FLAGS["solid_flipped"] else s > 0) if solid else \
+            (s > 0) & bool(flags & SURFACE_FLAGS["single_sided"])
+        closer = (t < best) & (t < reach)
+        best, back = np.where(closer, t, best), np.where(closer, np.asarray(b, bool), back)
+    for sp in arrays.spheres.astype(np.float64):
+        t = _sphere_t(o, d, sp)
+        ng = (o + np.where(np.isfinite(t), t, 0)[:, None] * d - sp[0, :3]) / sp[0, 3]
+        take(t, ng, ints(sp[1, 2]))
+    for pl in arrays.planes.astype(np.float64):
+        take(_plane_t(o, d, pl), np.broadcast_to(pl[1, :3], o.shape), ints(pl[4, 0]))
+    for tri in arrays.tris.astype(np.float64):
+        ng = np.cross(tri[1, :3] - tri[0, :3], tri[2, :3] - tri[0, :3])
+        take(_triangle_t(o, d, tri)[0], np.broadcast_to(ng, o.shape), ints(tri[2, 3]))
+    return best, back
+
+
+def nudge_twin(points, geometric, texel_size: float, arrays):
+    """lightmap_nudge in float64: the start points and how many moved (the kernel's twin)."""
+    lift = points + OFFSET * texel_size * geometric
+    reach = math.sqrt(0.5) * texel_size
+    t, b = frames(geometric)
+    nearest, moved = np.full(len(lift), reach), lift.copy()
+    for d in (t, -t, b, -b):
+        with np.errstate(invalid="ignore", divide="ignore"):       # rays along a triangle's plane
+            hit, back = _first_hits(lift, d, arrays, reach)
+        take = back & (hit < nearest)
+        nearest = np.where(take, hit, nearest)
+        moved[take] = lift[take] + (hit[take] + 0.05 * reach)[:, None] * d[take] + 0.05 * reach * geometric[take]
+    return moved, int((np.abs(moved - lift).sum(1) > 0).sum())
+
+
+def dilate(atlas, valid, passes: int = DILATE):
+    """Each empty texel (valid False) takes the mean of its valid 8-neighbours, `passes` times;
+    atlas (h, w, ...) and valid (h, w) are returned filled (copies)."""
+    a, v = atlas.copy(), valid.copy()
+    h, w = v.shape
+    for _ in range(passes):
+        pa = np.pad(a * v.reshape(h, w, *([1] * (a.ndim - 2))), [(1, 1), (1, 1)] + [(0, 0)] * (a.ndim - 2))
+        pv = np.pad(v.astype(np.float64), 1)
+        s = sum(pa[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dy or dx)
+        c = sum(pv[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dy or dx)
+        fill = ~v & (c > 0)
+        if not fill.any():
+            break
+        a[fill] = s[fill] / c[fill].reshape(-1, *([1] * (a.ndim - 2)))
+        v = v | fill
+    return a, v
+
+
+def bytes_of(lay: uvs.Layout, basis: str) -> int:
+    """The atlas' bytes as an engine holds it: fp16 RGBA per texel, one texture for the irradiance,
+    four (one per SH coefficient, RGB in each) for L1 SH."""
+    return lay.width * lay.height * 8 * (1 if basis == "irradiance" else 4)
+
+
+def bake(job, settings: dict, progress=None) -> dict:
+    """The scene's lightmap (settings: the scene's lightmap section): the layout and the atlases
+    {'irradiance': (h, w, 3), 'sh_l1': (h, w, 4, 3), 'valid': (h, w) bool} and a report."""
+    from iblbake.render.paths.tracer import Tracer
+    from iblbake.scene import geometry, materials, pack
+
+    t0 = time.perf_counter()
+    sc = job.scene
+    _records, offsets = materials.table(sc)
+    counts = {oid: len(materials.file_materials(o["mesh"]["path"], f"{sc.source}: objects.{oid}.mesh"))
+              for oid, o in enumerate(sc.data["objects"]) if materials.brings_materials(o)}
+    tris = geometry.build_triangles(sc.data["objects"], offsets, sc.source, counts, True)
+    density = settings["texels_per_unit"]
+    lay = uvs.layout(sc, tris, density, settings["max_texels"])
+    tx = uvs.texels(lay)
+    facing(tx, pack.camera_vectors(sc.data["camera"])[0])
+    t_layout = time.perf_counter() - t0
+    tracer = Tracer(job, {"bounces": settings["bounces"], "seed": settings["seed"]})
+    start, moved = nudge(tracer, tx, inset(tx, lay.corners, 1.0 / density), 1.0 / density)
+    samples = math.isqrt(settings["samples"]) ** 2          # whole strata
+    e, coeffs, inside = trace(LightmapTexels(tracer, start, tx.normal, samples, settings["seed"], progress))
+    ok = inside <= REJECT
+    h, w = lay.height, lay.width
+    valid = np.zeros(h * w, bool)
+    valid[tx.index[ok]] = True
+    irr = np.zeros((h * w, 3))
+    irr[tx.index] = e
+    shc = np.zeros((h * w, 4, 3))
+    shc[tx.index] = coeffs
+    irr, filled = dilate(irr.reshape(h, w, 3), valid.reshape(h, w))
+    shc, _ = dilate(shc.reshape(h, w, 4, 3), valid.reshape(h, w))
+    report = {"width": w, "height": h, "texels": len(tx.index), "texels_per_unit": density,
+              "samples": samples, "rays_traced": tracer.rays_traced, "moved": moved,
+              "rejected_inside": int((~ok).sum()), "layout_s": round(t_layout, 4),
+              "bytes": {b: bytes_of(lay, b) for b in BASES}, "uv_sources": {str(k): v for k, v in lay.source.items()},
+              "seconds": round(time.perf_counter() - t0, 4)}
+    return {"layout": lay, "texels": tx, "irradiance": irr, "sh_l1": shc, "valid": filled, "report": report}

@@ -1,0 +1,262 @@
+"""A lightmap's second UV set and its texels (docs/manual.md "Lightmaps").
+
+layout(): one atlas over every lightmapped surface of a scene: each mesh object's triangles (welded
+by shared corners) charted and packed by xatlas (Young's xatlas, the library trimesh's unwrap uses;
+docs/libraries.md), its own TEXCOORD_1 charts kept where the mesh has them (xatlas packs them as they
+are, scaled to the density); a finite plane as two triangles; an analytic sphere meshed (SPHERE_SEGMENTS),
+its texels' points and normals then put back on the true sphere. The density is lightmap.texels_per_unit
+texels per world unit along each side, with PADDING texels between charts (the bilinear footprint of
+the mip levels an engine samples, and room for dilation).
+
+texels(): each texel a triangle claims: the texel's centre where it lies inside the triangle, else
+(a texel the triangle only partly covers, at a chart's edge) the nearest point of the triangle to it;
+a texel claimed whole by one triangle keeps it, a partial one goes to the nearest triangle."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from iblbake.errors import InputError
+
+PADDING = 2                  # texels between charts
+SPHERE_SEGMENTS = (32, 16)   # a sphere's mesh: around, pole to pole
+SPHERE_TEXELS = 16           # a sphere's least texels around its equator (the corridor's sphere, 0.3 in
+                             # radius at 4 texels a unit, has 7.5 and read x1.54 its reference)
+TEXEL_BYTES = 4 * 4          # the bake's float32 RGBA per texel per basis coefficient set (see bake.bytes_of)
+
+
+@dataclass
+class Layout:
+    """An atlas: width x height texels; per triangle its corners in world space (n, 3, 3), shading
+    normals (n, 3, 3), object index (n,), its corners in texel units (n, 3, 2) (the texel (i, j)
+    covers [i, i+1] x [j, j+1]); spheres: per triangle (centre, radius) of the sphere it meshes,
+    radius 0 for a flat triangle; how each object got its UVs (object index -> 'texcoord_1' |
+    'xatlas' | 'sphere' | 'plane')."""
+    width: int
+    height: int
+    corners: np.ndarray
+    normals: np.ndarray
+    objects: np.ndarray
+    uv: np.ndarray
+    spheres: np.ndarray
+    source: dict
+
+
+def sphere_mesh(center, radius, segments=SPHERE_SEGMENTS):
+    """(vertices, faces) of a UV sphere: rings of `segments[0]` around, `segments[1]` bands."""
+    na, nb = segments
+    th = np.linspace(0, math.pi, nb + 1)
+    ph = np.linspace(0, 2 * math.pi, na + 1)[:-1]
+    t, p = np.meshgrid(th, ph, indexing="ij")
+    v = np.stack([np.sin(t) * np.cos(p), np.cos(t), np.sin(t) * np.sin(p)], -1).reshape(-1, 3)
+    idx = np.arange((nb + 1) * na).reshape(nb + 1, na)
+    a, b = idx[:-1], np.roll(idx[:-1], -1, 1)
+    c, d = idx[1:], np.roll(idx[1:], -1, 1)
+    faces = np.concatenate([np.stack([a, b, c], -1)[1:].reshape(-1, 3),      # no sliver at the poles
+                            np.stack([b, d, c], -1)[:-1].reshape(-1, 3)])
+    return np.asarray(center, np.float64) + radius * v, faces
+
+
+def plane_mesh(plane: dict):
+    """(vertices, faces) of a finite plane (scene key plane: point, normal, size)."""
+    from iblbake.scene.geometry import plane_frame
+    n, t, b = plane_frame(plane["normal"])
+    size = plane["size"]
+    hw, hd = (size / 2, size / 2) if not isinstance(size, list) else (size[0] / 2, size[1] / 2)
+    p = np.asarray(plane["point"], np.float64)
+    v = np.array([p - hw * t - hd * b, p + hw * t - hd * b, p + hw * t + hd * b, p - hw * t + hd * b])
+    winding = np.dot(np.cross(v[1] - v[0], v[2] - v[0]), n) > 0
+    return v, np.array([[0, 1, 2], [0, 2, 3]] if winding else [[0, 2, 1], [0, 3, 2]])
+
+
+def weld(corners):
+    """(vertices, faces) of a flat triangle list (n, 3, 3): corners at one position shared."""
+    flat = corners.reshape(-1, 3)
+    verts, inverse = np.unique(flat, axis=0, return_inverse=True)
+    return verts, inverse.reshape(-1, 3)
+
+
+def _parts(scene, tris):
+    """Each lightmapped object's (object index, how, vertices, faces, TEXCOORD_1 per vertex or None,
+    sphere (centre, radius) or None). An infinite plane has none (it keeps the probes)."""
+    out = []
+    for oid, o in enumerate(scene.data["objects"]):
+        if "sphere" in o:
+            v, f = sphere_mesh(o["sphere"]["center"], o["sphere"]["radius"])
+            out.append((oid, "sphere", v, f, None, (o["sphere"]["center"], o["sphere"]["radius"])))
+        elif "plane" in o and o["plane"]["size"] is not None:
+            out.append((oid, "plane", *plane_mesh(o["plane"]), None, None))
+    for oid in np.unique(tris.object_id):
+        mine = tris.object_id == oid
+        corners = np.stack([tris.v0[mine], tris.v1[mine], tris.v2[mine]], 1)
+        uv1 = None if tris.uv is None else tris.uv[mine][..., 2:4]
+        if uv1 is not None and np.isfinite(uv1).all():
+            # the authored charts: corners kept apart (a seam in TEXCOORD_1 is a seam in the atlas)
+            out.append((int(oid), "texcoord_1", corners.reshape(-1, 3), np.arange(3 * mine.sum()).reshape(-1, 3),
+                        uv1.reshape(-1, 2), None))
+        else:
+            out.append((int(oid), "xatlas", *weld(corners), None, None))
+    return out
+
+
+def layout(scene, tris, density: float, max_texels: int, key: str = "lightmap.texels_per_unit") -> Layout:
+    """The scene's atlas at `density` texels per unit (xatlas), refused past max_texels (a one-line
+    error naming `key` and the estimate) before anything is packed: the estimate is the surfaces' area
+    times density squared, over xatlas' usual 70% use."""
+    parts = _parts(scene, tris)
+    area = sum(0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1).sum()
+               for _o, _h, v, f, _uv, _s in parts)
+    estimate = int(area * density ** 2 / 0.7)
+    if estimate > max_texels:
+        raise InputError(f"{scene.source}: {key}: {density:g} texels per unit asks about {estimate} texels "
+                         f"(~{estimate * TEXEL_BYTES * 4 / 2**20:.0f} MiB to bake) over the cap of {max_texels} "
+                         f"(lightmap.max_texels); give a lower density")
+    if not parts:
+        raise InputError(f"{scene.source}: lightmap: the scene has no mesh, sphere or finite plane to lightmap")
+    import xatlas                                   # only where lightmaps are baked (the lightmaps extra)
+    atlas = xatlas.Atlas()
+    for _o, how, v, f, uv, s in parts:
+        if s is not None:             # a small sphere charted larger: at least SPHERE_TEXELS around
+            v = s[0] + (v - s[0]) * max(1.0, SPHERE_TEXELS / (2 * math.pi * s[1] * density))
+        atlas.add_mesh(v.astype(np.float32), f.astype(np.uint32), None,
+                       None if uv is None else uv.astype(np.float32))
+    charts, pack = xatlas.ChartOptions(), xatlas.PackOptions()
+    charts.use_input_mesh_uvs = any(p[1] == "texcoord_1" for p in parts)
+    pack.texels_per_unit, pack.padding, pack.bilinear, pack.resolution = float(density), PADDING, True, 0
+    pack.blockAlign = False
+    atlas.generate(charts, pack)
+    if atlas.atlas_count != 1:
+        raise InputError(f"{scene.source}: {key}: the charts took {atlas.atlas_count} atlases; give a lower density")
+    w, h = atlas.width, atlas.height
+    corners, normals, objs, uvs, sph = [], [], [], [], []
+    for i, (oid, how, v, f, _uv, s) in enumerate(parts):
+        vmap, idx, uv = atlas[i]
+        idx = idx.reshape(-1, 3)
+        c = v[vmap][idx]
+        corners.append(c)
+        uvs.append(uv[idx].astype(np.float64) * [w, h])
+        objs.append(np.full(len(idx), oid))
+        nrm = _normals(tris, oid, c) if how in ("xatlas", "texcoord_1") else None
+        if s is not None:
+            nrm = (c - np.asarray(s[0])) / s[1]
+        if nrm is None or how == "plane":
+            g = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
+            nrm = np.repeat((g / np.linalg.norm(g, axis=1, keepdims=True))[:, None], 3, 1)
+        normals.append(nrm)
+        sph.append(np.tile([*(s[0] if s else (0, 0, 0)), s[1] if s else 0.0], (len(idx), 1)))
+    source = {p[0]: p[1] for p in parts}
+    return Layout(w, h, np.concatenate(corners), np.concatenate(normals), np.concatenate(objs),
+                  np.concatenate(uvs), np.concatenate(sph).astype(np.float64), source)
+
+
+def _normals(tris, oid, corners):
+    """The scene's shading normals at the corners of object oid's atlas triangles (matched by their
+    corner positions; the mesh's own normals, creases kept)."""
+    mine = tris.object_id == oid
+    src = np.stack([tris.v0[mine], tris.v1[mine], tris.v2[mine]], 1)
+    key = {tuple(np.round(t.ravel(), 9)): k for k, t in enumerate(src)}
+    out = np.empty_like(corners)
+    for k, t in enumerate(corners):
+        j = key.get(tuple(np.round(t.ravel(), 9)))
+        if j is None:                   # xatlas keeps every triangle, in its order or rotated
+            j = _rotated(key, t)
+        out[k] = tris.normals[mine][j][_order(src[j], t)]
+    return out
+
+
+def _rotated(key, t):
+    for r in (1, 2):
+        j = key.get(tuple(np.round(np.roll(t, r, 0).ravel(), 9)))
+        if j is not None:
+            return j
+    raise AssertionError("xatlas returned a triangle the mesh does not have")
+
+
+def _order(src, t):
+    """The corner of src at each corner of t."""
+    return [int(np.argmin(np.abs(src - c).sum(1))) for c in t]
+
+
+@dataclass
+class Texels:
+    """The texels a layout's triangles claim: flat index j * width + i (k,), the triangle (k,), its
+    barycentrics at the texel's point (k, 3), the point (k, 3), its shading normal (k, 3), the
+    triangle's geometric normal (k, 3), whether the texel's centre lies inside it (k,) and whether it
+    is on an analytic sphere (k,: its outside is lightmapped)."""
+    index: np.ndarray
+    triangle: np.ndarray
+    bary: np.ndarray
+    position: np.ndarray
+    normal: np.ndarray
+    geometric: np.ndarray
+    inside: np.ndarray
+    solid: np.ndarray
+
+
+def _closest_bary(p, a, b, c):
+    """Barycentrics (m, 3) of the point of the 2D triangle abc nearest each of p (m, 2), and the distance."""
+    def bary(q):
+        v0, v1, v2 = b - a, c - a, q - a
+        den = v0[0] * v1[1] - v1[0] * v0[1]
+        s = (v2[:, 0] * v1[1] - v1[0] * v2[:, 1]) / den
+        t = (v0[0] * v2[:, 1] - v2[:, 0] * v0[1]) / den
+        return np.stack([1 - s - t, s, t], 1)
+    w = bary(p)
+    inside = (w >= -1e-9).all(1)
+    best, dist = w.copy(), np.zeros(len(p))
+    out = ~inside
+    if out.any():
+        q = p[out]
+        cands, ds = [], []
+        for (i, j), (e0, e1) in zip(((0, 1), (1, 2), (2, 0)), ((a, b), (b, c), (c, a))):
+            e = e1 - e0
+            f = np.clip(((q - e0) @ e) / max(e @ e, 1e-30), 0, 1)
+            pt = e0 + f[:, None] * e
+            wb = np.zeros((len(q), 3))
+            wb[:, i], wb[:, j] = 1 - f, f
+            cands.append(wb)
+            ds.append(np.linalg.norm(q - pt, axis=1))
+        k = np.argmin(np.stack(ds), 0)
+        best[out] = np.stack(cands)[k, np.arange(len(q))]
+        dist[out] = np.stack(ds)[k, np.arange(len(q))]
+    return best, dist
+
+
+def texels(lay: Layout) -> Texels:
+    """Every texel a triangle covers (its centre inside) or touches (within half a texel's diagonal)."""
+    reach = math.sqrt(0.5)
+    idx, tri, bary, dist = [], [], [], []
+    for k, uv in enumerate(lay.uv):
+        lo = np.maximum(np.floor(uv.min(0) - reach).astype(int), 0)
+        hi = np.minimum(np.ceil(uv.max(0) + reach).astype(int), [lay.width, lay.height])
+        if (hi <= lo).any():
+            continue
+        i, j = np.meshgrid(np.arange(lo[0], hi[0]), np.arange(lo[1], hi[1]), indexing="xy")
+        p = np.stack([i.ravel() + 0.5, j.ravel() + 0.5], 1)
+        w, d = _closest_bary(p, *uv)
+        keep = d < reach
+        idx.append((j.ravel() * lay.width + i.ravel())[keep])
+        tri.append(np.full(keep.sum(), k))
+        bary.append(w[keep])
+        dist.append(d[keep])
+    idx, tri, bary, dist = map(np.concatenate, (idx, tri, bary, dist))
+    order = np.lexsort((dist, idx))                  # per texel the nearest triangle first
+    first = np.unique(idx[order], return_index=True)[1]
+    pick = order[first]
+    idx, tri, bary, inside = idx[pick], tri[pick], bary[pick], dist[pick] == 0
+    pos = np.einsum("kc,kcx->kx", bary, lay.corners[tri])
+    nrm = np.einsum("kc,kcx->kx", bary, lay.normals[tri])
+    c = lay.corners[tri]
+    geo = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
+    geo /= np.linalg.norm(geo, axis=1, keepdims=True)
+    on = lay.spheres[tri, 3] > 0                      # a meshed sphere: its texels back on the sphere
+    if on.any():
+        r = pos[on] - lay.spheres[tri[on], :3]
+        nrm[on] = geo[on] = r / np.linalg.norm(r, axis=1, keepdims=True)
+        pos[on] = lay.spheres[tri[on], :3] + lay.spheres[tri[on], 3:4] * geo[on]
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    geo = np.where((geo * nrm).sum(1, keepdims=True) < 0, -geo, geo)     # the side the shading normal faces
+    return Texels(idx, tri, bary, pos, nrm, geo, inside, on)
