@@ -6,6 +6,7 @@ import base64
 import contextlib
 import json
 import os
+import struct
 import subprocess
 import sys
 import zlib
@@ -250,3 +251,52 @@ def outside(errors: dict, bound: float) -> dict:
     """The regions of a study row's region_absolute / part_absolute over bound, as their ratio and worst channel."""
     return {n: f"x{e['ratio']:.2f}, worst channel {100 * e['channel']:.0f}%" for n, e in errors.items()
             if e["pixels"] >= MIN_PIXELS and e["absolute"] > bound}
+
+
+# a textured quad as a GLB (tests of textures and of lightmaps' TEXCOORD_1)
+QUAD_V = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], float)
+QUAD_F = np.array([[0, 1, 2], [0, 2, 3]])
+QUAD_UV = np.array([[0, 1], [1, 1], [1, 0], [0, 0]], float)       # glTF's: v down the image
+
+
+def quad_glb(path, *, base=None, mr=None, normal=None, occlusion=None, emissive=None, uv=QUAD_UV, uv1=None,
+             vertices=QUAD_V, faces=QUAD_F, edit=None, **factors):
+    """A quad (or other mesh) as a GLB written by trimesh's exporter with a PBRMaterial; `uv` in
+    glTF's convention; `uv1` (TEXCOORD_1) and `edit(doc)` applied to the exporter's JSON after."""
+    import trimesh
+    from PIL import Image
+    from trimesh.visual.material import PBRMaterial
+
+    def im(a):
+        return None if a is None else Image.fromarray(np.asarray(a, np.uint8))
+
+    mat = PBRMaterial(baseColorTexture=im(base), metallicRoughnessTexture=im(mr), normalTexture=im(normal),
+                      occlusionTexture=im(occlusion), emissiveTexture=im(emissive), **factors)
+    gl_uv = np.asarray(uv, float) * [1, -1] + [0, 1]                  # trimesh keeps OpenGL's v up
+    m = trimesh.Trimesh(vertices, faces, visual=trimesh.visual.TextureVisuals(uv=gl_uv, material=mat), process=False)
+    m.export(str(path))
+    if uv1 is not None or edit is not None:
+        rewrite_glb(path, uv1, edit)
+    return str(path)
+
+
+def rewrite_glb(path, uv1=None, edit=None):
+    from iblbake.io.gltf import glb_bytes
+    data = Path(path).read_bytes()
+    n = struct.unpack_from("<I", data, 12)[0]
+    doc = json.loads(data[20:20 + n])
+    pos = 20 + n
+    bn = struct.unpack_from("<I", data, pos)[0]
+    binary = bytearray(data[pos + 8:pos + 8 + bn])
+    if uv1 is not None:
+        extra = np.asarray(uv1, np.float32).tobytes()
+        binary += b"\0" * (-len(binary) % 4)
+        doc["bufferViews"].append({"buffer": 0, "byteOffset": len(binary), "byteLength": len(extra)})
+        binary += extra
+        doc["accessors"].append({"bufferView": len(doc["bufferViews"]) - 1, "componentType": 5126,
+                                 "count": len(uv1), "type": "VEC2"})
+        doc["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_1"] = len(doc["accessors"]) - 1
+    if edit is not None:
+        edit(doc)
+    doc["buffers"][0]["byteLength"] = len(binary)
+    Path(path).write_bytes(glb_bytes(doc, bytes(binary)))

@@ -13,7 +13,7 @@ import pytest
 from iblbake.errors import InputError
 from iblbake.io import images
 from iblbake.render import lightmaps
-from tests.conftest import load_scene
+from tests.helpers import load_scene
 
 CUBE = str(Path(__file__).resolve().parents[1] / "examples/corpus/meshes/cube.obj")
 LAMBERT = {"roughness": 1, "specular": 0}
@@ -95,7 +95,7 @@ def test_texcoord_1_charts_kept(tmp_path, white):
     """A glTF quad (2 x 2, square) with a TEXCOORD_1 of aspect 4:1: its chart is packed as authored
     (the atlas chart 4:1, turned or not, where xatlas' own unwrap of the square would be square),
     scaled to the density (16 texels a unit: 4 x 16^2 texels)."""
-    from tests.test_textures import QUAD_UV, quad_glb
+    from tests.helpers import QUAD_UV, quad_glb
 
     glb = quad_glb(tmp_path / "q.glb", uv1=np.asarray(QUAD_UV, float) * [0.5, 0.125] + 0.1)
     sc = scene(tmp_path, white, [{"mesh": {"path": glb}, "material": "m"}], {"m": LAMBERT})

@@ -22,7 +22,7 @@ def code_hash() -> str:
     import importlib
     import pkgutil
 
-    from iblbake.device.runtime import source_hash
+    from iblbake.device.programs import source_hash
     from iblbake.render import lightmaps
     from iblbake.render.bakes import _code_hash
     mods = [importlib.import_module(f"{lightmaps.__name__}.{m.name}") for m in sorted(
