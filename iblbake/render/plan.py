@@ -19,6 +19,8 @@ from iblbake.scene.load import AOVS, Scene
 
 
 # a scene naming the removed key effects.reference.paths renders as before, with this note (scene/schema.py)
+UNREAD_LIGHTMAP = ("lightmap: not read by render yet: iblbake.render.lightmaps bakes it (docs/manual.md "
+                   "'Lightmaps'); a frame's diffuse light comes from effects.diffuse")
 REMOVED_PATHS = ("effects.reference.paths is removed and changes nothing: every reference runs the megakernel "
                  "(the wavefront engine, slower on every device measured, is retired); delete the key")
 
@@ -79,6 +81,8 @@ def effect_modes(scene: Scene) -> Effects:
     bounces = reference_bounces(scene, diffuse, specular, notes)
     if "paths" in (((scene.raw or {}).get("effects") or {}).get("reference") or {}):
         notes.append(REMOVED_PATHS)
+    if "lightmap" in (scene.raw or {}):
+        notes.append(UNREAD_LIGHTMAP)
     return Effects(diffuse, specular, background, emissive, notes, bounces)
 
 
