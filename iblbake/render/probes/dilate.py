@@ -56,10 +56,12 @@ def tiles_of(image, counts, texels: int):
 
 
 def dilate(irradiance, off, counts, representation: str, texels: int):
-    """The volume's irradiance (the octahedral atlas, or (probes, k, 3) coefficients) with the off
-    probes' dilated (dilate_values), in its own dtype."""
+    """The volume's irradiance (an atlas of bordered tiles, or (probes, k, 3) coefficients, as its
+    basis stores it: core/bases/probes.py) with the off probes' dilated (dilate_values), in its own
+    dtype."""
+    from iblbake.core.bases.probes import PROBE_BASES
     irr = np.asarray(irradiance)
-    if representation != "octahedral":
+    if not PROBE_BASES[representation].atlas:
         return dilate_values(irr, off, counts).astype(irr.dtype)
     tiles = dilate_values(tiles_of(irr, counts, texels), off, counts)
     return atlas(tiles, counts).astype(irr.dtype)
