@@ -223,8 +223,8 @@ def test_specular_lobes_are_fitted_without_negative_light_by_default(tmp_path, p
     fit rings negative, the lobe clamps it to black, and metals show black patches beside white
     ones (the sphere grid under city at 320 x 180: 3.2% of the metal pixels black with SG9, 12%
     with ambient dice; NNLS none, the metal pixels' min 0.069 and 0.042). The fit defaults to
-    NNLS where the lobes serve the specular term; the irradiance fit stays sg's diffuse default
-    (least squares ambient dice's), and a fit is kept where given."""
+    NNLS where the lobes serve the specular term; the irradiance fit stays the diffuse default of
+    both (issue 62), and a fit is kept where given."""
     import yaml
 
     from iblbake.render import render
@@ -249,4 +249,4 @@ def test_specular_lobes_are_fitted_without_negative_light_by_default(tmp_path, p
     assert diffuse.data["effects"]["sg_fit"] == "irradiance"
     probes = scene_load.load_data({**doc, "effects": {**doc["effects"], "diffuse": "probes", "specular": "probes"},
                                    "probes": {"irradiance": "ambient_dice"}}, tmp_path)
-    assert probes.data["probes"]["ad_fit"] == "nnls" and probes.data["effects"]["ad_fit"] == "least_squares"
+    assert probes.data["probes"]["ad_fit"] == "nnls" and probes.data["effects"]["ad_fit"] == "irradiance"
