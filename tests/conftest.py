@@ -10,7 +10,7 @@ import platformdirs
 from hypothesis import settings
 from hypothesis.configuration import set_hypothesis_home_dir
 
-from tests.helpers import ROOT, STRESS, box_downsample
+from tests.helpers import PANORAMA_NAMES, ROOT, STRESS, box_downsample
 
 # `make test` (and CI) replays the same generated examples every run, so a result is reproducible;
 # `make stress` (IBLBAKE_STRESS=1) draws new ones each time to keep searching.
@@ -62,7 +62,6 @@ def pytest_sessionfinish(session, exitstatus):
 
 
 PANORAMAS = ROOT / "examples" / "panoramas"
-PANORAMA_NAMES = ("city", "courtyard", "forest", "interior", "night", "studio", "sunrise", "sunset")
 
 
 @pytest.fixture(scope="session")

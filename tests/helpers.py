@@ -22,6 +22,8 @@ from iblbake.io import images
 from iblbake.scene.layout import TONEMAP_IDS
 
 ROOT = Path(__file__).resolve().parents[1]
+# the example panoramas `make assets` fetches (examples/panoramas/NAME.exr; conftest's `panoramas` fixture)
+PANORAMA_NAMES = ("city", "courtyard", "forest", "interior", "night", "studio", "sunrise", "sunset")
 
 
 def write_exr(path, image, half=False):
