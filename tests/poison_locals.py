@@ -42,18 +42,21 @@ class _PoisonedSource:
         h = hashlib.sha256((self.source + "\0" + " ".join(opts)).encode()).hexdigest()[:24]
         bc = os.path.join(folder, h + ".bc")
         if not os.path.exists(bc):
-            src = os.path.join(folder, h + ".cl")
+            # names of this process's own: `make check-locals` runs on several xdist workers, and one
+            # worker's unlink of a shared NAME.cl left another's clang without its source
+            own = f"{bc}.{os.getpid()}"
+            src = own + ".cl"
             with open(src, "w", encoding="utf-8") as f:
                 f.write(self.source)
             # -fgnu89-inline: kernels/inline.h's plain `inline` emits each function's body, as
             # PoCL's own front end does
             r = subprocess.run([CLANG, "-cc1", "-triple", "spir64-unknown-unknown", "-emit-llvm-bc",
                                 "-finclude-default-header", "-ftrivial-auto-var-init=pattern", "-O2",
-                                "-fgnu89-inline", *opts, src, "-o", bc + ".part"], capture_output=True, text=True)
+                                "-fgnu89-inline", *opts, src, "-o", own + ".part"], capture_output=True, text=True)
             os.unlink(src)
             if r.returncode:
                 raise RuntimeError(f"clang-15 could not build the poisoned program: {r.stderr[-2000:]}")
-            os.replace(bc + ".part", bc)
+            os.replace(own + ".part", bc)           # atomic: a reader sees the whole bitcode or none
         with open(bc, "rb") as f:
             binary = f.read()
         return self.cl.Program(self.ctx, list(self.ctx.devices), [binary] * len(self.ctx.devices)).build(
