@@ -50,6 +50,17 @@ def sample_ggx_half(u, alpha):
     return np.stack([st * np.cos(phi), st * np.sin(phi), np.cos(theta)], axis=-1)
 
 
+def reflect_ggx_half(u, t, b, n, v, alpha):
+    """One GGX half vector a point (sample_ggx_half of u (2,), in the frame t, b, n) and the view v
+    reflected about it: (noh, voh, l, nol), noh floored at 1e-7 (a weight divides by it). The
+    importance twin and the reflection probes' taps draw their lobes this way."""
+    hl = sample_ggx_half(np.broadcast_to(u, (len(n), 2)), alpha)
+    h = t * hl[:, 0:1] + b * hl[:, 1:2] + n * hl[:, 2:3]
+    voh = (v * h).sum(1)
+    l = 2 * voh[:, None] * h - v
+    return np.maximum(hl[:, 2], 1e-7), voh, l, (n * l).sum(1)
+
+
 def pdf_ggx_half(noh, alpha):
     return brdf.d_ggx(noh, alpha) * np.clip(noh, 0.0, 1.0)
 

@@ -94,14 +94,9 @@ def taps(c: dict, p, n, v, lod, env, count: int):
     t, b = conventions.tangent_frame(n)
     acc, wsum = np.zeros((len(p), 3)), np.zeros((len(p), 1))
     for u in sampling.hammersley(count):
-        hl = sampling.sample_ggx_half(np.broadcast_to(u, (len(p), 2)), alpha)
-        h = t * hl[:, 0:1] + b * hl[:, 1:2] + n * hl[:, 2:3]
-        voh = (v * h).sum(1)
-        l = 2 * voh[:, None] * h - v
-        nol = (n * l).sum(1)
+        noh, voh, l, nol = sampling.reflect_ggx_half(u, t, b, n, v, alpha)
         ok = (nol > 0) & (voh > 0)
-        w = np.where(ok, brdf.v_smith_ggx_correlated(nov, nol, alpha) * 4 * nol * voh / np.maximum(hl[:, 2], 1e-7),
-                     0.0)[:, None]
+        w = np.where(ok, brdf.v_smith_ggx_correlated(nov, nol, alpha) * 4 * nol * voh / noh, 0.0)[:, None]
         x = exit_point(st, p, l)
         d = (x - pos) / np.maximum(np.linalg.norm(x - pos, axis=-1, keepdims=True), 1e-6)
         open_ = np.maximum(1 - radiance.chain_lookup_twin(c["coverage"], d, tap)[:, :1], 0.0)

@@ -62,13 +62,8 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
         acc = np.zeros((len(n), 3))
         accepted = np.zeros(len(n))
         for u in pts:
-            hl = sampling.sample_ggx_half(np.broadcast_to(u, (len(n), 2)), alpha)
-            h = t * hl[:, 0:1] + b * hl[:, 1:2] + n * hl[:, 2:3]
-            voh = (v * h).sum(1)
-            l = 2 * voh[:, None] * h - v
-            nol = (n * l).sum(1)
+            noh, voh, l, nol = sampling.reflect_ggx_half(u, t, b, n, v, alpha)
             ok = (nol > 0) & (voh > 0)
-            noh = np.maximum(hl[:, 2], 1e-7)
             le = to_env(l, rot)
             if effects["force_mip0"]:
                 lod = np.zeros(len(n))
