@@ -9,8 +9,8 @@ docs/conventions.md "Lightmaps in files"), every basis the bake holds written th
   lightmap.json                   the manifest: the atlas, per basis its files, layout, units and how
                                   to evaluate the irradiance at a normal
   lightmap.gltf + lightmap.bin    the static geometry with TEXCOORD_1, its materials and the camera,
-                                  the irradiance as lightmap.png (RGBD) named by IBLBAKE_lightmap
-  lightmap.png                    the irradiance, 8-bit RGBD (what a glTF may hold)
+                                  the irradiance as lightmap.png named by IBLBAKE_lightmap
+  lightmap.png                    the irradiance in 8 bits (what a glTF may hold: E / its scale, gamma 2.2)
 
 A basis' description comes from the probes' registry (core/bases/probes.py PROBE_BASES: its
 title, units, options, layout and GLSL), so a basis the bake adds needs nothing here; the two
@@ -147,6 +147,7 @@ vec3 lightmapIrradiance(vec2 uv1, vec3 n) {{
 def manifest(lm: dict, settings: dict, scale: float) -> dict:
     """lightmap.json: the atlas, every basis' files and reading, the glTF's, the bake's report."""
     from iblbake.io.guard import mark
+    from iblbake.render.lightmaps import gltf_scene
     from iblbake.render.lightmaps.uv import PADDING
     lay, rep = lm["layout"], lm["report"]
     bases = {}
@@ -161,7 +162,7 @@ def manifest(lm: dict, settings: dict, scale: float) -> dict:
         "atlas": {"width": lay.width, "height": lay.height, "texels_per_unit": rep["texels_per_unit"],
                   "padding": PADDING, "texels": rep["texels"], "uv_sources": rep["uv_sources"]},
         "bases": bases,
-        "gltf": {"file": f"{STEM}.gltf", "extension": EXTENSION, "image": f"{STEM}.png", "encoding": "RGBD",
+        "gltf": {"file": f"{STEM}.gltf", "extension": EXTENSION, "image": f"{STEM}.png", "encoding": gltf_scene.ENCODING,
                  "irradiance_scale": scale},
         "conventions": {
             "uv": "TEXCOORD_1 in [0, 1]^2, (0, 0) the atlas' top-left corner (glTF's), texel (i, j) covers "

@@ -1,12 +1,12 @@
-"""lightmap.gltf (+ .bin, + the RGBD image): a lightmap's static geometry as glTF 2.0, each
+"""lightmap.gltf (+ .bin, + the 8-bit image): a lightmap's static geometry as glTF 2.0, each
 lightmapped object one mesh (POSITION, NORMAL, TEXCOORD_1: the atlas' UVs, TEXCOORD_0 the same: glTF's
 sets start at 0 and the layout keeps no material UVs) with its scene material,
 the scene's camera, and the irradiance atlas referenced by the IBLBAKE_lightmap extension (no
 standard glTF extension exists; docs/conventions.md "Lightmaps in files" says why this one):
 
   material.extensions.IBLBAKE_lightmap = {"lightmapTexture": {"index": 0, "texCoord": 1},
-                                          "encoding": "RGBD", "irradianceScale": s}
-  E (the irradiance, linear) = s * fromRGBD(texel); diffuse = albedo / pi * E
+                                          "encoding": "gamma 2.2", "irradianceScale": s}
+  E (the irradiance, linear) = s * (texel / 255)^2.2; diffuse = albedo / pi * E
 
 declared in extensionsUsed, not extensionsRequired: a loader that does not know it still loads the
 meshes. The root's extension block names lightmap.json, which holds every basis' atlases."""
@@ -21,6 +21,7 @@ import numpy as np
 from iblbake.io import gltf
 
 LINEAR, CLAMP = 9729, 33071
+ENCODING = "gamma 2.2"       # E = irradianceScale * (texel / 255)^2.2
 DEFAULT_MATERIAL = {"base_color": [0.8, 0.8, 0.8], "metallic": 0.0, "roughness": 1.0}   # a mesh's file materials
 
 
@@ -72,15 +73,24 @@ def material(m: dict, name: str, extension: str, scale: float) -> dict:
     return {"name": name, "doubleSided": True,     # iblbake's surfaces are lit on the camera's side, wound either way
             "pbrMetallicRoughness": {"baseColorFactor": [float(x) for x in m["base_color"]] + [1.0],
                                      "metallicFactor": float(m["metallic"]), "roughnessFactor": float(m["roughness"])},
-            "extensions": {extension: {"lightmapTexture": {"index": 0, "texCoord": 1}, "encoding": "RGBD",
+            "extensions": {extension: {"lightmapTexture": {"index": 0, "texCoord": 1}, "encoding": ENCODING,
                                        "irradianceScale": scale}}}
 
 
-def rgbd_scale(e) -> float:
-    """The factor s the image's RGBD holds E / s at: its brightest texel at RGBD's 255, so every
-    texel down to 1/255 of it keeps RGBD's relative precision (1 where E stays below 255)."""
+def image_scale(e) -> float:
+    """The factor s the 8-bit image holds E / s at: the brightest texel at 1 (8-bit gamma keeps
+    about 0.4% of a texel near the top, a few % of one a tenth of it)."""
     top = float(np.max(e)) if np.size(e) else 0.0
-    return max(top / gltf.RGBD_MAX, 1.0 / gltf.RGBD_MAX) if top > 0 else 1.0
+    return top if top > 0 else 1.0
+
+
+def image(e, scale: float) -> bytes:
+    """The irradiance atlas as an 8-bit RGB PNG: (E / scale)^(1 / 2.2), its first row at the top.
+    Not RGBD: a browser premultiplies a PNG's alpha as it decodes it, and RGBD's alpha (1/255 on a
+    texel 255 times the dimmest) then left its RGB a step or two (Babylon read a floor 50% dark)."""
+    from iblbake.io.images import png_bytes
+    v = np.clip(np.asarray(e, np.float64) / scale, 0.0, 1.0) ** (1.0 / gltf.GAMMA)
+    return png_bytes(np.rint(v * 255.0).astype(np.uint8), colour=False)
 
 
 def document(lm: dict, sc, stem: str, extension: str, scale: float) -> tuple:
@@ -121,11 +131,11 @@ def document(lm: dict, sc, stem: str, extension: str, scale: float) -> tuple:
 
 
 def write(lm: dict, sc, folder: Path, stem: str, extension: str, batch) -> float:
-    """STEM.gltf, STEM.bin and STEM.png into folder through batch; the RGBD scale written."""
+    """STEM.gltf, STEM.bin and STEM.png into folder through batch; the image's scale written."""
     e = np.asarray(lm["irradiance"], np.float64)
-    scale = rgbd_scale(e[lm["valid"]])
+    scale = image_scale(e[lm["valid"]])
     doc, data = document(lm, sc, stem, extension, scale)
     batch.write_bytes(Path(folder) / f"{stem}.bin", data)
-    batch.write_bytes(Path(folder) / f"{stem}.png", gltf.png_bytes(gltf.rgbd_encode(e / scale)))
+    batch.write_bytes(Path(folder) / f"{stem}.png", image(e, scale))
     batch.write_text(Path(folder) / f"{stem}.gltf", json.dumps(doc, indent=1, allow_nan=False) + "\n")
     return scale
