@@ -59,7 +59,7 @@ def _sh(name, title, bands, convolved):
     ahat = [1.0] * k if convolved else [float(a) for a in core_sh.ahat(bands)]      # per coefficient
     terms = " +\n               ".join(f"{a!r} * {y} * c[{i}]" for i, (a, y) in enumerate(zip(ahat, SH_TERMS[:k])))
     what = "E(n) = max(0, sum_k c_k Y_k(n))" if convolved else \
-        f"E(n) = max(0, sum_k Ahat_l c_k Y_k(n)), Ahat_l = pi, 2 pi / 3 for l = 0, 1"
+        "E(n) = max(0, sum_k Ahat_l c_k Y_k(n)), Ahat_l = pi, 2 pi / 3 for l = 0, 1"
     return Basis(name, title, k, IRRADIANCE_UNITS if convolved else RADIANCE_UNITS,
                  f"{k} coefficient sets; {SH_LAYOUT}", what, "", f"    return max({terms}, vec3(0.0));", {})
 
@@ -162,7 +162,8 @@ def manifest(lm: dict, settings: dict, scale: float) -> dict:
         "atlas": {"width": lay.width, "height": lay.height, "texels_per_unit": rep["texels_per_unit"],
                   "padding": PADDING, "texels": rep["texels"], "uv_sources": rep["uv_sources"]},
         "bases": bases,
-        "gltf": {"file": f"{STEM}.gltf", "extension": EXTENSION, "image": f"{STEM}.png", "encoding": gltf_scene.ENCODING,
+        "gltf": {"file": f"{STEM}.gltf", "extension": EXTENSION, "image": f"{STEM}.png",
+                 "encoding": gltf_scene.ENCODING,
                  "irradiance_scale": scale},
         "conventions": {
             "uv": "TEXCOORD_1 in [0, 1]^2, (0, 0) the atlas' top-left corner (glTF's), texel (i, j) covers "

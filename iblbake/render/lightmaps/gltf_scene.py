@@ -61,8 +61,8 @@ def camera(cam: dict) -> tuple:
     rot = np.stack([right / np.linalg.norm(right), up / np.linalg.norm(up), -fwd], 1)
     c = cam[cam["projection"]]
     if ortho:
-        glc = {"type": "orthographic", "orthographic": {"xmag": float(np.linalg.norm(right)),
-                                                        "ymag": float(np.linalg.norm(up)), "znear": 0.01, "zfar": 1000.0}}
+        mags = {"xmag": float(np.linalg.norm(right)), "ymag": float(np.linalg.norm(up))}
+        glc = {"type": "orthographic", "orthographic": {**mags, "znear": 0.01, "zfar": 1000.0}}
     else:
         glc = {"type": "perspective", "perspective": {"yfov": float(np.radians(c["fov_y"])), "aspectRatio": w / h,
                                                       "znear": 0.01, "zfar": 1000.0}}
