@@ -224,3 +224,29 @@ def test_command_and_its_bad_input(baked, tmp_path):
     summary = json.loads(p.stdout)
     assert summary["cached"] and summary["files"] == baked["files"] and summary["bases"] == ["irradiance", "sh_l1"]
     assert (summary["width"], summary["height"]) == (baked["lm"].width, baked["lm"].height)
+
+
+def test_a_basis_the_bake_adds_is_exported_with_no_code_here(baked, tmp_path, monkeypatch):
+    """A bake holding another basis of the probes' registry (SG, 9 lobes: what lmbases adds) is
+    written with its 9 coefficient sets, its registry layout and options in lightmap.json and its
+    GLSL, nothing in the exporter naming it."""
+    import importlib
+
+    from iblbake.core.bases.probes import PROBE_BASES
+    bake = importlib.import_module("iblbake.render.lightmaps.bake")     # the module (the package names its function)
+    lm = baked["lm"]
+    rng = np.random.default_rng(1)
+    sg = rng.uniform(0, 2, (lm.height, lm.width, 9, 3))
+    monkeypatch.setattr(bake, "BASES", (*bake.BASES, "sg"))
+    lm.baked["sg"] = sg
+    try:
+        man = lm.write(tmp_path)
+    finally:
+        del lm.baked["sg"]
+    b = man["bases"]["sg"]
+    assert b["floats"] == 9 and b["options"] == PROBE_BASES["sg"].options({}) and b["title"] == "SG", b
+    assert b["exr"] == [f"lightmap_sg_{k}.exr" for k in range(9)] and "lobe" in b["layout"]
+    for k, f in enumerate(b["exr"]):
+        got = images.read_exr(tmp_path / f)[..., :3]
+        assert np.array_equal(got, sg[..., k, :].astype(np.float16).astype(np.float32))
+    assert "lightmapCoefficient8" in (tmp_path / "lightmap_sg.glsl").read_text()
