@@ -1,4 +1,5 @@
-"""glTF 2.0 files holding one EXT_lights_image_based light (the extension's README in the Khronos
+"""glTF 2.0 files: one EXT_lights_image_based light (below), and Binary, the buffer of meshes'
+accessors a lightmap's glTF is built with (render/lightmaps/gltf_scene.py). The light (the extension's README in the Khronos
 glTF repository: extensions/2.0/Vendor/EXT_lights_image_based): its irradianceCoefficients,
 and its specularImages, N mips x 6 faces (+X -X +Y -Y +Z -Z) of square power-of-two PNGs, each
 mip half the size of the one above, in RGBD.
