@@ -219,9 +219,13 @@ def test_command_and_its_bad_input(baked, tmp_path):
     p = run_cli("lightmap", tmp / "scene.yaml", "-o", mine, "--cache", tmp / "cache")
     assert p.returncode == 1 and "--force" in p.stderr and len(p.stderr.strip().splitlines()) == 1, p.stderr
     assert sorted(x.name for x in mine.iterdir()) == ["lightmap.gltf"]
+    images.write_exr(baked["out"] / "lightmap_sg_0.exr", np.zeros((2, 2, 3)))     # an earlier bake's other basis
+    (baked["out"] / "lightmap_notes.glsl").write_text("// my notes\n")
     p = run_cli("lightmap", tmp / "scene.yaml", "-o", baked["out"], "--cache", tmp / "cache", "--json")
     assert p.returncode == 0, p.stderr                        # its own files (the .bin too): replaced
     summary = json.loads(p.stdout)
+    assert summary["removed"] == ["lightmap_sg_0.exr"] and (baked["out"] / "lightmap_notes.glsl").exists()
+    (baked["out"] / "lightmap_notes.glsl").unlink()
     assert summary["cached"] and summary["files"] == baked["files"] and summary["bases"] == ["irradiance", "sh_l1"]
     assert (summary["width"], summary["height"]) == (baked["lm"].width, baked["lm"].height)
 

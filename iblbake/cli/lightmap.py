@@ -37,7 +37,6 @@ def lightmap_command(scene_path, out_dir, overrides, cache_dir, force, device, q
     from iblbake.io import atomic
     from iblbake.io.guard import refuse_overlaps
     from iblbake.render.lightmaps import export
-    from iblbake.render.lightmaps.bake import BASES
     from iblbake.scene import load as scene
 
     con = Console(quiet, as_json)
@@ -47,7 +46,8 @@ def lightmap_command(scene_path, out_dir, overrides, cache_dir, force, device, q
                                f"takes the defaults) or --set lightmap.texels_per_unit=N")
     out = Path(out_dir)
     # every file a bake may write, checked before it (a refused folder costs no bake)
-    writes = [("--output", out / n) for n in export.file_names(BASES, sc.data["lightmap"])]
+    settings = sc.data["lightmap"]
+    writes = [("--output", out / n) for n in export.file_names(export.expected(settings), settings)]
     refuse_overlaps(writes, scene.named_input_files(sc))
     for _flag, p in writes:
         atomic.check_writable(p)
@@ -56,11 +56,28 @@ def lightmap_command(scene_path, out_dir, overrides, cache_dir, force, device, q
         lm = api.bake_lightmap(sc, device, cache=cache_dir, warn=con.warn, progress=progress, names=API_FLAGS)
     names = lm.files()
     man = lm.write(out)
+    removed = _remove_stale(out, names)
     r = man["report"]
     summary = {"scene": sc.source, "output": str(out), "files": names, "cached": lm.cached, "device": lm.device,
                "width": lm.width, "height": lm.height, "texels_per_unit": man["atlas"]["texels_per_unit"],
                "bases": list(man["bases"]), "texels": r["texels"], "rays_traced": r["rays_traced"],
                "bake_s": r["seconds"], "bytes": r.get("bytes", {})}
+    if removed:
+        summary["removed"] = removed
     con.result(summary, f"wrote {out}/ ({lm.width}x{lm.height} atlas at {man['atlas']['texels_per_unit']:g} texels a "
                         f"unit, {', '.join(man['bases'])}; {r['texels']} texels, {r['rays_traced']} rays in "
                         f"{r['seconds']:.2f} s{' (cached)' if lm.cached else ''} on {lm.device})")
+
+
+def _remove_stale(out: Path, names: list) -> list:
+    """The atlases and GLSL of another basis an earlier call left in the folder, which iblbake
+    wrote: removed, so that the folder holds this bake's files alone (a user's own are left)."""
+    from iblbake.io.guard import written_by_iblbake
+    from iblbake.render.lightmaps.export import STEM
+    removed = []
+    for f in sorted(out.glob(f"{STEM}_*")):
+        if f.name not in names and f.suffix in (".exr", ".ktx2", ".glsl") and f.is_file() and not f.is_symlink() \
+                and written_by_iblbake(f):
+            f.unlink()
+            removed.append(f.name)
+    return removed

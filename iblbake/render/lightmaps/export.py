@@ -91,9 +91,17 @@ def basis(name: str, settings: dict) -> Basis:
 
 
 def held(lm: dict) -> list:
-    """The bases a baked lightmap holds (bake.BASES' that it has), in their order."""
+    """The bases a baked lightmap holds: those of bake.BASES it has and its chosen one (its 'basis',
+    where the bake names one: lightmap.basis), in that order."""
     from iblbake.render.lightmaps.bake import BASES
-    return [b for b in BASES if b in lm]
+    return [b for b in dict.fromkeys([*BASES, lm.get("basis")]) if b and b in lm]
+
+
+def expected(settings: dict) -> list:
+    """The bases a bake of a lightmap section will hold (its files are checked before it): the
+    irradiance and the section's basis where it has the key, else every one of bake.BASES."""
+    from iblbake.render.lightmaps.bake import BASES
+    return list(dict.fromkeys(["irradiance", settings["basis"]] if "basis" in settings else BASES))
 
 
 def coefficient_sets(lm: dict, name: str) -> np.ndarray:
