@@ -254,3 +254,26 @@ def test_a_basis_the_bake_adds_is_exported_with_no_code_here(baked, tmp_path, mo
         got = images.read_exr(tmp_path / f)[..., :3]
         assert np.array_equal(got, sg[..., k, :].astype(np.float16).astype(np.float32))
     assert "lightmapCoefficient8" in (tmp_path / "lightmap_sg.glsl").read_text()
+
+
+@pytest.mark.parametrize("name", ["sh_l1", "sh"])
+def test_sh_glsl_is_the_float64_reading(name):
+    """lightmapIrradiance's SH body, evaluated term by term as GLSL would (numpy for vec3), equals
+    the float64 reading of the same coefficients at 200 random normals: sh_l1 as the bake reads it
+    (bake.sh_irradiance), the probes' L2 SH irradiance as the registry does."""
+    from iblbake.core.bases.probes import PROBE_BASES
+    from iblbake.render.lightmaps import export, sh_irradiance
+    rng = np.random.default_rng(4)
+    b = export.basis(name, {})
+    c = rng.normal(size=(200, b.floats, 3))
+    c[:, 0] += 2.0                                  # mostly positive light: the clamp at 0 seldom acts
+    n = rng.normal(size=(200, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+
+    class Vec:
+        x, y, z = n[:, 0:1], n[:, 1:2], n[:, 2:3]
+    expr = b.body.strip().removeprefix("return ").removesuffix(";")
+    got = eval(expr, {"c": [c[:, k] for k in range(b.floats)], "n": Vec, "max": np.maximum, "vec3": float})
+    want = sh_irradiance(c, n) if name == "sh_l1" else \
+        np.maximum(0, PROBE_BASES["sh"].irradiance_at(c, np.arange(200), n, {}))
+    assert np.abs(got - want).max() < 1e-12 * np.abs(want).max()

@@ -26,14 +26,12 @@ import numpy as np
 
 from iblbake.core import sh as core_sh
 from iblbake.core.bases.probes import IRRADIANCE_UNITS, PROBE_BASES, RADIANCE_UNITS
+from iblbake.render.probes.glsl import SH_GLSL
 
 FORMAT, VERSION = "iblbake-lightmap", 1
 EXTENSION = "IBLBAKE_lightmap"          # the glTF extension (docs/conventions.md "Lightmaps in files")
 STEM = "lightmap"
-SH_TERMS = ("0.28209479177387814", "0.4886025119029199 * n.y", "0.4886025119029199 * n.z",
-            "0.4886025119029199 * n.x", "1.0925484305920792 * n.x * n.y", "1.0925484305920792 * n.y * n.z",
-            "0.31539156525252005 * (3.0 * n.z * n.z - 1.0)", "1.0925484305920792 * n.x * n.z",
-            "0.5462742152960396 * (n.x * n.x - n.y * n.y)")      # sh.h's basis at l <= 2 (render/probes/glsl.py)
+SH_TERMS = tuple(t.replace("d.", "n.") for t in SH_GLSL)      # sh.h's basis at l <= 2, at the normal n
 SH_LAYOUT = "coefficient k = l (l + 1) + m, real orthonormal SH, z polar axis, no Condon-Shortley phase, world frame"
 
 
