@@ -277,3 +277,10 @@ def test_sh_glsl_is_the_float64_reading(name):
     want = sh_irradiance(c, n) if name == "sh_l1" else \
         np.maximum(0, PROBE_BASES["sh"].irradiance_at(c, np.arange(200), n, {}))
     assert np.abs(got - want).max() < 1e-12 * np.abs(want).max()
+
+
+def test_write_takes_a_folder_path(baked):
+    """Lightmap.write(5) is an InputError naming its argument, not a TypeError from pathlib."""
+    import iblbake
+    with pytest.raises(iblbake.InputError, match="folder: give the output folder's path"):
+        baked["lm"].write(5)
