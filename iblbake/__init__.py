@@ -25,9 +25,9 @@ __version__ = "0.1.0"
 
 # what follows semantic versioning from 0.1.0: a name removed here is a major version
 __all__ = [
-    "Accuracy", "Basis", "Chain", "DeviceError", "Error", "Frame", "InputError", "Panorama", "ProbeVolume",
-    "Renderer", "SH", "Scene", "UsageError", "accuracy", "bake_probes", "basis", "dfg", "load_panorama",
-    "load_scene", "prefilter", "render", "sh",
+    "Accuracy", "Basis", "Chain", "DeviceError", "Error", "Frame", "InputError", "Lightmap", "Panorama",
+    "ProbeVolume", "Renderer", "SH", "Scene", "UsageError", "accuracy", "bake_lightmap", "bake_probes", "basis",
+    "dfg", "load_panorama", "load_scene", "prefilter", "render", "sh",
 ]
 _LAZY = frozenset(__all__) - {"DeviceError", "Error", "InputError", "UsageError"}
 

@@ -192,6 +192,12 @@ BAD = {
         ("cache", lambda c: iblbake.bake_probes(c["scene"], cache=1)),
         ("warn", lambda c: iblbake.bake_probes(c["scene"], warn="x")),
     ],
+    "bake_lightmap": [
+        ("scene", lambda c: iblbake.bake_lightmap(["scene.yaml"])),
+        ("no `lightmap:` section", lambda c: iblbake.bake_lightmap(c["scene"])),
+        ("cache", lambda c: iblbake.bake_lightmap(c["scene"], cache=1)),
+        ("progress", lambda c: iblbake.bake_lightmap(c["scene"], progress="x")),
+    ],
     "accuracy": [
         ("scene", lambda c: iblbake.accuracy(123)),
         ("repeats", lambda c: iblbake.accuracy(c["scene"], repeats=0)),

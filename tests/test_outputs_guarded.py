@@ -24,13 +24,13 @@ from tests.helpers import run_cli, write_exr
 # writes, walked below).
 READS = {("accuracy", "ladder_path"), ("compare", "layout_path"), ("deps", "outputs")}
 FOLDERS = {("accuracy", "cache_dir"), ("cache", "cache_dir"), ("mips", "cache_dir"), ("export-gltf", "cache_dir"),
-           ("render", "cache_dir"), ("sheet", "cache_dir"), ("probes", "cache_dir")}
+           ("render", "cache_dir"), ("sheet", "cache_dir"), ("probes", "cache_dir"), ("lightmap", "cache_dir")}
 WRITES = {("sh", "output"), ("sh", "depfile"), ("basis", "output"), ("basis", "depfile"), ("basis", "specular_table"),
           ("mips", "ktx2_path"), ("mips", "ktx2_irradiance"),
           ("mips", "ktx2_sheen"), ("mips", "depfile"), ("export-gltf", "output"), ("export-gltf", "depfile"),
           ("render", "outputs"), ("render", "depfile"), ("sheet", "outputs"), ("sheet", "layout_path"),
           ("sheet", "depfile"), ("sheet", "frames_dir"), ("sheet", "html_dir"), ("accuracy", "out_dir"),
-          ("probes", "out_dir")}
+          ("probes", "out_dir"), ("lightmap", "out_dir")}
 
 
 def _path_options():
@@ -97,6 +97,8 @@ CASES = [
     ("accuracy", "out_dir", "scene", lambda f, p: ["accuracy", f["scene"], "-o", p.parent], "acc/table.md"),
     ("accuracy", "out_dir", "env", lambda f, p: ["accuracy", f["scene"], "-o", p.parent.parent], "acc/report/0001.js"),
     ("probes", "out_dir", "env", lambda f, p: ["probes", f["scene"], "-o", p.parent], "vol/distance.exr"),
+    ("lightmap", "out_dir", "env", lambda f, p: ["lightmap", f["scene"], "--set", "lightmap.texels_per_unit=4", "-o",
+                                                  p.parent], "lm/lightmap_irradiance.exr"),
 ]
 
 
@@ -320,7 +322,8 @@ def test_progress_time_left_skips_the_cold_first_stage_and_warnings_clear_the_ba
 FOREIGN = {".png": None, ".exr": None, ".json": b'{"mine": true}\n', ".ktx2": b"\xabKTX 20\xbb\r\n\x1a\nnot ours",
            ".d": b"all:\n\techo mine\n", ".md": b"# my notes\n", ".csv": b"a,b\n1,2\n", ".glsl": b"// my shader\n",
            ".gltf": b'{"asset": {"version": "2.0", "generator": "Blender"}}',
-           ".html": b"<!DOCTYPE html><html><body>my page</body></html>\n", ".js": b"// my script\n"}
+           ".html": b"<!DOCTYPE html><html><body>my page</body></html>\n", ".js": b"// my script\n",
+           ".bin": b"\x00\x01my buffer"}
 
 
 def _foreign(path: Path) -> bytes:
@@ -356,7 +359,10 @@ def test_the_mark_tells_iblbakes_files_from_others(tmp_path):
     atomic.write_text(d / "a.csv", report.csv_text([], {}))
     report.plot([{"term": "diffuse", "label": "SH 3", "time_s": 1e-3, "relative_rmse": 0.1, "configured": True}],
                 {"diffuse": ["SH 3"]}, d / "plot.png", "t")
-    for name in ("a.png", "a.exr", "a.ktx2", "a.json", "a.d", "plot.png"):
+    # a glTF's buffer carries no mark: it is iblbake's where the .gltf beside it is and names it
+    atomic.write_json(d / "m.gltf", {"asset": {"version": "2.0", "generator": guard.mark()}, "buffers": [{"uri": "m.bin"}]})
+    atomic.write_bytes(d / "m.bin", b"\0" * 8)
+    for name in ("a.png", "a.exr", "a.ktx2", "a.json", "a.d", "plot.png", "m.bin"):
         assert guard.written_by_iblbake(d / name), name
     for name in ("a.md", "a.csv"):
         assert guard.written_by_iblbake(d / name, report.header_lines()) and not guard.written_by_iblbake(d / name)
@@ -394,6 +400,8 @@ OVERWRITES = [
     ("accuracy", "out_dir", lambda f, p: ["accuracy", f["scene"], "-o", p.parent], "study/index.html"),
     ("probes", "out_dir", lambda f, p: ["probes", f["scene"], "-o", p.parent], "vol/probes.glsl"),
     ("probes", "out_dir", lambda f, p: ["probes", f["scene"], "-o", p.parent], "vol/probes.json"),
+    ("lightmap", "out_dir", lambda f, p: ["lightmap", f["scene"], "--set", "lightmap.texels_per_unit=4", "-o", p.parent],
+     "lm/lightmap.bin"),
 ]
 
 

@@ -18,23 +18,26 @@ line calls take `names`, a mapping of argument names to what its messages call t
 
 The modules by concept, each importing only those above it: guards (the argument checks),
 runtimes (one OpenCL runtime per device), panorama, bakes (sh, prefilter, dfg), bases (the
-directional bases), scenes (load_scene, render, Renderer), probes (bake_probes), study (accuracy).
+directional bases), scenes (load_scene, render, Renderer), probes (bake_probes), lightmaps
+(bake_lightmap), study (accuracy).
 """
 
 from iblbake.api.bakes import SH, Chain, dfg, prefilter, sh
 from iblbake.api.bases import Basis, basis
+from iblbake.api.lightmaps import Lightmap, bake_lightmap
 from iblbake.api.panorama import Panorama, load_panorama
 from iblbake.api.probes import ProbeVolume, bake_probes
 from iblbake.api.scenes import Renderer, load_scene, render
 from iblbake.api.study import Accuracy, accuracy
 
-__all__ = ["Accuracy", "Basis", "Chain", "Frame", "Panorama", "ProbeVolume", "Renderer", "SH", "Scene", "accuracy",
-           "bake_probes", "basis", "dfg", "load_panorama", "load_scene", "prefilter", "render", "sh"]
+__all__ = ["Accuracy", "Basis", "Chain", "Frame", "Lightmap", "Panorama", "ProbeVolume", "Renderer", "SH", "Scene",
+           "accuracy", "bake_lightmap", "bake_probes", "basis", "dfg", "load_panorama", "load_scene", "prefilter",
+           "render", "sh"]
 
 # each public name says it is iblbake.api's (help(), reprs and pickles name it so, as before the
 # modules were split): where it is defined is internal and moves with refactors
-for _public in (SH, Chain, dfg, prefilter, sh, Basis, basis, Panorama, load_panorama, ProbeVolume, bake_probes,
-                Renderer, load_scene, render, Accuracy, accuracy):
+for _public in (SH, Chain, dfg, prefilter, sh, Basis, basis, Lightmap, bake_lightmap, Panorama, load_panorama,
+                ProbeVolume, bake_probes, Renderer, load_scene, render, Accuracy, accuracy):
     _public.__module__ = __name__
 del _public
 

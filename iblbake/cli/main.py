@@ -27,7 +27,8 @@ COMMANDS = {
     "accuracy": ("accuracy", "accuracy_command"), "basis": ("basis", "basis_command"), "cache": ("cache", "cache_group"),
     "compare": ("compare", "compare_command"),
     "deps": ("render", "deps_command"), "devices": ("devices", "devices"),
-    "export-gltf": ("export_gltf", "export_gltf_command"), "mips": ("mips", "mips_command"),
+    "export-gltf": ("export_gltf", "export_gltf_command"), "lightmap": ("lightmap", "lightmap_command"),
+    "mips": ("mips", "mips_command"),
     "probes": ("probes", "probes_command"), "render": ("render", "render_command"), "sh": ("sh", "sh_command"), "sheet": ("sheet", "sheet_command"),
 }
 
@@ -70,6 +71,7 @@ def cli():
     iblbake mips ENV --cache DIR    radiance chain, GGX-prefiltered chain, DFG table
     iblbake export-gltf ENV -o l.gltf  a glTF image-based light (EXT_lights_image_based)
     iblbake probes SCENE -o DIR/    irradiance probes (DDGI): atlases, manifest, GLSL sampler
+    iblbake lightmap SCENE -o DIR/  a lightmap: atlases (EXR, KTX2), manifest, GLSL, glTF with TEXCOORD_1
     iblbake render SCENE -o out.png render a scene YAML (see render --help-schema)
     iblbake sheet SCENE -o s.png    a contact sheet of the scene's sweep (or --rows/--columns)
     iblbake deps SCENE              the Make rule of what rendering SCENE reads

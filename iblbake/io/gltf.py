@@ -1,4 +1,5 @@
-"""glTF 2.0 files holding one EXT_lights_image_based light (the extension's README in the Khronos
+"""glTF 2.0 files: one EXT_lights_image_based light (below), and Binary, the buffer of meshes'
+accessors a lightmap's glTF is built with (render/lightmaps/gltf_scene.py). The light (the extension's README in the Khronos
 glTF repository: extensions/2.0/Vendor/EXT_lights_image_based): its irradianceCoefficients,
 and its specularImages, N mips x 6 faces (+X -X +Y -Y +Z -Z) of square power-of-two PNGs, each
 mip half the size of the one above, in RGBD.
@@ -175,3 +176,37 @@ def glb_bytes(doc: dict, binary: bytes) -> bytes:
     binary += b"\0" * (-len(binary) % 4)
     chunks = struct.pack("<II", len(js), JSON_CHUNK) + js + struct.pack("<II", len(binary), BIN_CHUNK) + binary
     return struct.pack("<III", GLB_MAGIC, 2, 12 + len(chunks)) + chunks
+
+
+class Binary:
+    """A glTF buffer being built (lightmaps' meshes: render/lightmaps/gltf_scene.py): each array
+    added is a bufferView of its own, 4-byte aligned, and an accessor over it."""
+    TYPES = {1: "SCALAR", 2: "VEC2", 3: "VEC3", 4: "VEC4"}
+    COMPONENTS = {np.dtype(np.float32): 5126, np.dtype(np.uint32): 5125}
+
+    def __init__(self):
+        self.data, self.views, self.accessors = bytearray(), [], []
+
+    def add(self, array, target: int | None = None, bounds: bool = False) -> int:
+        """The accessor index of `array` (n,) or (n, c), float32 or uint32; bounds: its min and max
+        (POSITION needs them). target: 34962 vertex attributes, 34963 indices."""
+        a = np.ascontiguousarray(array)
+        self.data += b"\0" * (-len(self.data) % 4)
+        view = {"buffer": 0, "byteOffset": len(self.data), "byteLength": a.nbytes}
+        if target:
+            view["target"] = target
+        self.data += a.astype(a.dtype.newbyteorder("<")).tobytes()
+        self.views.append(view)
+        acc = {"bufferView": len(self.views) - 1, "componentType": self.COMPONENTS[a.dtype], "count": len(a),
+               "type": self.TYPES[1 if a.ndim == 1 else a.shape[1]]}
+        if bounds:
+            acc["min"], acc["max"] = [float(x) for x in a.min(0)], [float(x) for x in a.max(0)]
+        self.accessors.append(acc)
+        return len(self.accessors) - 1
+
+    def attach(self, doc: dict, uri: str) -> bytes:
+        """The buffer's bytes, its views and accessors set in doc, the buffer at `uri` (file_uri)."""
+        self.data += b"\0" * (-len(self.data) % 4)
+        doc["buffers"] = [{"byteLength": len(self.data), "uri": uri}]
+        doc["bufferViews"], doc["accessors"] = self.views, self.accessors
+        return bytes(self.data)

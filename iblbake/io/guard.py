@@ -100,6 +100,15 @@ def written_by_iblbake(path, first_lines=()) -> bool:
         if suffix in (".gltf", ".glb"):
             from iblbake.io import gltf
             return gltf.written_by_iblbake(path)
+        if suffix == ".bin":          # a glTF's buffer: iblbake's where the .gltf beside it, iblbake's, names it
+            from urllib.parse import unquote
+
+            from iblbake.io import gltf
+            doc_path = Path(path).with_suffix(".gltf")
+            if not gltf.written_by_iblbake(doc_path):
+                return False
+            doc = json.loads(reads.read_bytes(doc_path, reads.JSON_BYTES, "a glTF document"))
+            return any(unquote(b.get("uri", "")) == Path(path).name for b in doc.get("buffers", []))
         if suffix == ".json":
             doc = json.loads(reads.read_text(path, reads.JSON_BYTES, "a JSON document"))
             return isinstance(doc, dict) and any(str(doc.get(k, "")).startswith("iblbake")

@@ -1,7 +1,7 @@
-"""KTX 2.0 cube maps with their mip levels, uncompressed, written from the KTX 2.0 specification
-(Khronos, "KTX File Format Specification", version 2.0) and the Khronos Data Format
-Specification's basic descriptor block (what libktx's createDFDUnpacked / createDFDPacked
-produce for the same formats):
+"""KTX 2.0 cube maps with their mip levels and 2D textures of one level (lightmap atlases),
+uncompressed, written from the KTX 2.0 specification (Khronos, "KTX File Format Specification",
+version 2.0) and the Khronos Data Format Specification's basic descriptor block (what libktx's
+createDFDUnpacked / createDFDPacked produce for the same formats):
 
     identifier | header (9 x u32) | index (4 x u32, 2 x u64) | level index (levelCount x 3 x u64,
     level 0 first) | DFD (u32 total size + one basic block) | key/value data (sorted by key, each
@@ -171,8 +171,27 @@ def cube_bytes(levels: list, fmt: str = "rgba16f", metadata: dict | None = None,
         if lv.shape[:3] != (6, max(1, s0 >> k), max(1, s0 >> k)):
             raise InputError(f"KTX2 level {k}: faces of {lv.shape[1:3]}, expected 6 of {max(1, s0 >> k)} "
                              f"(a mip chain halves its size at each level)")
+    return _container([texels(lv, fmt) for lv in levels], s0, s0, 6, fmt, metadata, writer)
+
+
+def image_bytes(image, fmt: str = "rgba16f", metadata: dict | None = None, writer: str = "iblbake") -> bytes:
+    """A KTX2 2D texture of one level, image (h, w, 3 or 4) with its first row at the top ("rd");
+    RGBA formats keep a fourth channel where the image has one (else alpha 1)."""
+    if fmt not in FORMATS:
+        raise InputError(f"KTX2 format {fmt!r}: one of {', '.join(FORMATS)}")
+    a = np.asarray(image, np.float32)
+    h, w = a.shape[:2]
+    if fmt in PACKED or a.shape[2] == 3:
+        data = texels(a[None], fmt)
+    else:
+        data = a[..., :4].astype("<f2" if fmt == "rgba16f" else "<f4").tobytes()
+    return _container([data], w, h, 1, fmt, metadata, writer)
+
+
+def _container(data: list, width: int, height: int, faces: int, fmt: str, metadata, writer: str) -> bytes:
+    """The file around levels' bytes `data` (level 0 first, each level's faces in order)."""
     f = FORMATS[fmt]
-    n = len(levels)
+    n = len(data)
     dfd = _dfd(fmt)
     kvd = _key_values({"KTXorientation": "rd", "KTXwriter": writer, **(metadata or {})})
     head = 12 + 9 * 4 + 4 * 4 + 2 * 8
@@ -180,15 +199,14 @@ def cube_bytes(levels: list, fmt: str = "rgba16f", metadata: dict | None = None,
     kvd_offset = dfd_offset + len(dfd)
     end = kvd_offset + len(kvd)
     align = math.lcm(f["texel"], 4)
-    data, offsets = [None] * n, [0] * n
+    offsets = [0] * n
     body = b""
     for k in reversed(range(n)):                       # smallest level first in the file
         pad = -(end + len(body)) % align
         body += b"\0" * pad
         offsets[k] = end + len(body)
-        data[k] = texels(levels[k], fmt)
         body += data[k]
-    header = IDENTIFIER + struct.pack("<9I", f["vk"], f["type_size"], s0, s0, 0, 0, 6, n, 0)
+    header = IDENTIFIER + struct.pack("<9I", f["vk"], f["type_size"], width, height, 0, 0, faces, n, 0)
     index = struct.pack("<4I2Q", dfd_offset, len(dfd), kvd_offset, len(kvd), 0, 0)
     level_index = b"".join(struct.pack("<3Q", offsets[k], len(data[k]), len(data[k])) for k in range(n))
     return header + index + level_index + dfd + kvd + body

@@ -197,18 +197,25 @@ class Directional(ProbeBasis):
     def pack(self, irr, opts):
         return np.stack([self.m.pack(c, opts) for c in np.asarray(irr, np.float32)]).reshape(-1, 4)
 
-    def glsl(self, settings):
+    def functions(self, settings, owner: str = "the probe's coefficients (probeOwnIrradiance)") -> str:
         """The basis's own GLSL functions (its module's glsl) with its coefficient array a variable
-        instead of a constant, the lines that fill it from the probe's row of the file and call its
-        irradiance function, the same calling its specular one where it carries a lobe."""
+        instead of a constant (filled by its reader: `owner` says which), for probes.glsl and the
+        lightmaps' GLSL (render/lightmaps/export.py)."""
         import re
         m, opts = self.m, self.options(settings)
         k = m.floats(opts)
-        src = m.glsl(np.zeros((k, 3)), opts)
         src, found = re.subn(rf"const vec3 {m.GLSL_COEFFS}\[{k}\] = vec3\[{k}\]\(.*?\n\);",
-                             f"vec3 {m.GLSL_COEFFS}[{k}];     // the probe's coefficients (probeOwnIrradiance)", src,
-                             flags=re.S)
+                             f"vec3 {m.GLSL_COEFFS}[{k}];     // {owner}", m.glsl(np.zeros((k, 3)), opts), flags=re.S)
         assert found == 1, self.name
+        return src
+
+    def glsl(self, settings):
+        """The basis's functions (functions()), the lines that fill its coefficients from the probe's
+        row of the file and call its irradiance function, the same calling its specular one where
+        it carries a lobe."""
+        m, opts = self.m, self.options(settings)
+        k = m.floats(opts)
+        src = self.functions(settings)
         fill = (f"    for (int k = 0; k < {k}; ++k) {m.GLSL_COEFFS}[k] = texelFetch(probeIrradianceAtlas, "
                 f"ivec2(k, index), 0).rgb;\n")
         return src, fill + f"    return {m.GLSL_IRRADIANCE}(d);", \

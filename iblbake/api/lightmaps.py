@@ -1,0 +1,84 @@
+"""A scene's lightmap: baked (cached by content) and written as the files engines load."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from iblbake.api.guards import _arguments, _cache, _callback, _device, _names, _path
+from iblbake.api.runtimes import _on_device, _runtime
+from iblbake.api.scenes import load_scene
+from iblbake.errors import InputError
+
+
+@dataclass
+class Lightmap:
+    """A scene's baked lightmap (docs/manual.md 'iblbake lightmap').
+
+    atlases: per basis the bake holds (render/lightmaps/bake.py BASES), float64 (h, w, 3) for the
+        plain irradiance or (h, w, floats, 3) coefficient sets (lightmap.json's `bases` says how
+        each is read).
+    valid: (h, w) bool, the texels baked or dilated.  width, height: the atlas' texels.
+    report: the bake's (texels, rays traced, seconds...).  cached: whether it came from the cache.
+    """
+
+    atlases: dict
+    valid: object
+    width: int
+    height: int
+    report: dict
+    cached: bool
+    device: str
+    scene: object = field(repr=False, default=None)
+    baked: dict = field(repr=False, default_factory=dict)
+
+    def write(self, folder) -> dict:
+        """Every file of `iblbake lightmap` into folder (made where missing), replaced together
+        (atomically) or none; returns lightmap.json's content."""
+        from iblbake.io import atomic
+        from iblbake.render.lightmaps import export
+        folder = Path(_path("folder", folder, "the output folder's"))
+        for n in self.files():
+            atomic.check_writable(folder / n)
+        with atomic.Batch() as batch:
+            return export.write(self.baked, self.scene, folder, batch)
+
+    def files(self) -> list:
+        """The names write() writes, lightmap.json last."""
+        from iblbake.render.lightmaps import export
+        return export.file_names(export.held(self.baked), self.scene.data["lightmap"])
+
+
+def declared(sc) -> bool:
+    """Whether the scene asks for a lightmap: its file (or a --set) has a `lightmap:` section."""
+    return isinstance(sc.raw, dict) and "lightmap" in sc.raw
+
+
+@_arguments
+def bake_lightmap(scene, device: str | None = None, *, cache=None, warn=None, progress=None,
+                  names: dict | None = None) -> Lightmap:
+    """Bake a scene's lightmap (its `lightmap:` section, which it must have) by tracing paths from
+    every texel of its static geometry; cached by content in `cache` (as render). names: what
+    error messages call each argument (the command line passes its flags)."""
+    from iblbake.render import Bakes
+    from iblbake.render.lightmaps import export, store
+    from iblbake.render.units import Job
+
+    _names(names)
+    _device(device)
+    cache = _cache(cache)
+    _callback("warn", warn)
+    _callback("progress", progress)
+    sc = load_scene(scene, names=names)
+    if not declared(sc):
+        raise InputError(f"{sc.source}: the scene has no `lightmap:` section; add one (`lightmap: {{}}` takes the "
+                         f"defaults, docs/scene.md)")
+    rt = _runtime(device, names)
+    bakes = Bakes(cache)
+    bakes.runtime = rt
+    job = Job(sc, rt, bakes, warn or (lambda _m: None), progress)
+    with _on_device(rt):
+        lm, cached = store.baked(job, progress=progress)
+    atlases = {b: lm[b] for b in export.held(lm)}
+    return Lightmap(atlases, lm["valid"], lm["layout"].width, lm["layout"].height, lm["report"], cached,
+                    rt.device_label, sc, lm)

@@ -1,0 +1,212 @@
+"""A baked lightmap as files an engine loads (`iblbake lightmap`; docs/manual.md "iblbake lightmap",
+docs/conventions.md "Lightmaps in files"), every basis the bake holds written the same way:
+
+  lightmap_BASIS.exr / .ktx2      a basis of one coefficient set (the plain irradiance), or
+  lightmap_BASIS_K.exr / .ktx2    its coefficient K: fp16 RGBA atlases, RGB the coefficient, A 1 on
+                                  the texels an engine may sample (baked or dilated), 0 elsewhere
+  lightmap_BASIS.glsl             lightmapIrradiance(uv1, n): the basis' own GLSL (core/bases) fed by
+                                  the atlases, bilinearly
+  lightmap.json                   the manifest: the atlas, per basis its files, layout, units and how
+                                  to evaluate the irradiance at a normal
+  lightmap.gltf + lightmap.bin    the static geometry with TEXCOORD_1, its materials and the camera,
+                                  the irradiance as lightmap.png named by IBLBAKE_lightmap
+  lightmap.png                    the irradiance in 8 bits (what a glTF may hold: E / its scale, gamma 2.2)
+
+A basis' description comes from the probes' registry (core/bases/probes.py PROBE_BASES: its
+title, units, options, layout and GLSL), so a basis the bake adds needs nothing here; the two
+the lightmap bake has of its own (the plain irradiance, the L1 SH of the radiance) are OWN."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from iblbake.core import sh as core_sh
+from iblbake.core.bases.probes import IRRADIANCE_UNITS, PROBE_BASES, RADIANCE_UNITS
+from iblbake.render.probes.glsl import SH_GLSL
+
+FORMAT, VERSION = "iblbake-lightmap", 1
+EXTENSION = "IBLBAKE_lightmap"          # the glTF extension (docs/conventions.md "Lightmaps in files")
+STEM = "lightmap"
+SH_TERMS = tuple(t.replace("d.", "n.") for t in SH_GLSL)      # sh.h's basis at l <= 2, at the normal n
+SH_LAYOUT = "coefficient k = l (l + 1) + m, real orthonormal SH, z polar axis, no Condon-Shortley phase, world frame"
+
+
+@dataclass
+class Basis:
+    """How one basis' atlases are read: `floats` coefficient sets (RGB each), the units, the layout
+    and evaluation in words, the GLSL functions it needs and lightmapIrradiance's body over the
+    coefficients c[0..floats-1] (already filled from the atlases)."""
+    name: str
+    title: str
+    floats: int
+    units: str
+    layout: str
+    evaluate: str
+    functions: str
+    body: str
+    options: dict
+
+
+def _sh(name, title, bands, convolved):
+    """An SH basis: the radiance's (convolved: False, read with Ahat) or the irradiance's."""
+    k = bands * bands
+    ahat = [1.0] * k if convolved else [float(a) for a in core_sh.ahat(bands)]      # per coefficient
+    terms = " +\n               ".join(f"{a!r} * {y} * c[{i}]" for i, (a, y) in enumerate(zip(ahat, SH_TERMS[:k])))
+    what = "E(n) = max(0, sum_k c_k Y_k(n))" if convolved else \
+        "E(n) = max(0, sum_k Ahat_l c_k Y_k(n)), Ahat_l = pi, 2 pi / 3 for l = 0, 1"
+    return Basis(name, title, k, IRRADIANCE_UNITS if convolved else RADIANCE_UNITS,
+                 f"{k} coefficient sets; {SH_LAYOUT}", what, "", f"    return max({terms}, vec3(0.0));", {})
+
+
+OWN = {
+    "irradiance": lambda s: Basis("irradiance", "irradiance (non-directional)", 1, IRRADIANCE_UNITS,
+                                  "one set: the texel's irradiance at its own normal (no direction)",
+                                  "E = the texel's RGB, whatever the normal", "", "    return c[0];", {}),
+    # the L1 SH of the incoming radiance, its constant term set so the reading at the texel's normal
+    # is its irradiance (render/lightmaps/bake.py project())
+    "sh_l1": lambda s: _sh("sh_l1", "SH L1 (radiance)", 2, False),
+}
+
+
+def basis(name: str, settings: dict) -> Basis:
+    """The description of basis `name` as the lightmap settings choose its options."""
+    if name in OWN:
+        return OWN[name](settings)
+    entry = PROBE_BASES[name]
+    if not entry.directional:                 # L2 SH irradiance (the probes' `sh`)
+        return _sh(name, entry.title, 3, True)
+    m, opts = entry.m, entry.options(settings)
+    layout = " ".join(m.__doc__.split("Layout:")[1].split())
+    return Basis(name, entry.title, m.floats(opts), entry.units, f"{m.floats(opts)} coefficient sets; {layout}",
+                 f"the basis' irradiance (docs/conventions.md 'Directional bases'; the GLSL's {m.GLSL_IRRADIANCE})",
+                 entry.functions(settings, "the texel's coefficients (lightmapIrradiance)"),
+                 f"    for (int k = 0; k < {m.floats(opts)}; ++k) {m.GLSL_COEFFS}[k] = c[k];\n"
+                 f"    return {m.GLSL_IRRADIANCE}(n);", opts)
+
+
+def held(lm: dict) -> list:
+    """The bases a baked lightmap holds: those of bake.BASES it has and its chosen one (its 'basis',
+    where the bake names one: lightmap.basis), in that order."""
+    from iblbake.render.lightmaps.bake import BASES
+    return [b for b in dict.fromkeys([*BASES, lm.get("basis")]) if b and b in lm]
+
+
+def expected(settings: dict) -> list:
+    """The bases a bake of a lightmap section will hold (its files are checked before it): the
+    irradiance and the section's basis where it has the key, else every one of bake.BASES."""
+    from iblbake.render.lightmaps.bake import BASES
+    return list(dict.fromkeys(["irradiance", settings["basis"]] if "basis" in settings else BASES))
+
+
+def coefficient_sets(lm: dict, name: str) -> np.ndarray:
+    """A basis' atlases (h, w, floats, 3) of the bake."""
+    a = np.asarray(lm[name], np.float64)
+    return a.reshape(a.shape[0], a.shape[1], -1, 3)
+
+
+def atlas_names(name: str, floats: int) -> list:
+    """The atlas files' stems of a basis of `floats` coefficient sets."""
+    return [f"{STEM}_{name}"] if floats == 1 else [f"{STEM}_{name}_{k}" for k in range(floats)]
+
+
+def file_names(bases, settings: dict) -> list:
+    """Every file write() writes for a bake holding `bases`, the manifest last."""
+    names = [f"{STEM}.gltf", f"{STEM}.bin", f"{STEM}.png"]
+    for name in bases:
+        stems = atlas_names(name, basis(name, settings).floats)
+        names += [f"{s}.{x}" for s in stems for x in ("exr", "ktx2")] + [f"{STEM}_{name}.glsl"]
+    return names + [f"{STEM}.json"]
+
+
+def rgba(coeff, valid) -> np.ndarray:
+    """One coefficient atlas (h, w, 3) as RGBA float32, A the texels an engine may sample."""
+    return np.concatenate([np.asarray(coeff, np.float32), valid[..., None].astype(np.float32)], -1)
+
+
+def glsl(lm: dict, b: Basis) -> str:
+    """lightmap_BASIS.glsl: lightmapIrradiance(uv1, n) from the basis' atlases."""
+    lay = lm["layout"]
+    stems = atlas_names(b.name, b.floats)
+    binds = "\n".join(f"//   lightmapCoefficient{k}  {s}.ktx2 (or {s}.exr)" for k, s in enumerate(stems))
+    uniforms = "\n".join(f"uniform sampler2D lightmapCoefficient{k};" for k in range(b.floats))
+    fill = "\n".join(f"    c[{k}] = texture(lightmapCoefficient{k}, uv1).rgb;" for k in range(b.floats))
+    return f"""// iblbake lightmap: {lay.width} x {lay.height} texels, {b.title} ({b.name}); lightmap.json holds the
+// conventions. Bind each atlas as a 2D float texture with its first (top) row at t = 0, linear
+// filtering, clamped to the edge:
+{binds}
+// uv1 is the mesh's TEXCOORD_1 (lightmap.gltf), n the unit shading normal (world frame):
+// diffuse = albedo / PI * lightmapIrradiance(uv1, n). Units: {b.units.split(";")[0]}.
+{uniforms}
+{b.functions}
+vec3 lightmapIrradiance(vec2 uv1, vec3 n) {{
+    vec3 c[{b.floats}];
+{fill}
+{b.body}
+}}
+"""
+
+
+def manifest(lm: dict, settings: dict, scale: float) -> dict:
+    """lightmap.json: the atlas, every basis' files and reading, the glTF's, the bake's report."""
+    from iblbake.io.guard import mark
+    from iblbake.render.lightmaps import gltf_scene
+    from iblbake.render.lightmaps.uv import PADDING
+    lay, rep = lm["layout"], lm["report"]
+    bases = {}
+    for name in held(lm):
+        b = basis(name, settings)
+        stems = atlas_names(name, b.floats)
+        bases[name] = {"title": b.title, "floats": b.floats, "options": b.options, "units": b.units,
+                       "layout": b.layout, "irradiance": b.evaluate, "exr": [f"{s}.exr" for s in stems],
+                       "ktx2": [f"{s}.ktx2" for s in stems], "glsl": f"{STEM}_{name}.glsl"}
+    return {
+        "format": FORMAT, "version": VERSION, "generator": mark(),
+        "atlas": {"width": lay.width, "height": lay.height, "texels_per_unit": rep["texels_per_unit"],
+                  "padding": PADDING, "texels": rep["texels"], "uv_sources": rep["uv_sources"]},
+        "bases": bases,
+        "gltf": {"file": f"{STEM}.gltf", "extension": EXTENSION, "image": f"{STEM}.png",
+                 "encoding": gltf_scene.ENCODING,
+                 "irradiance_scale": scale},
+        "conventions": {
+            "uv": "TEXCOORD_1 in [0, 1]^2, (0, 0) the atlas' top-left corner (glTF's), texel (i, j) covers "
+                  "[i, i + 1] x [j, j + 1] / (width, height), its centre at half-integers (a GPU's linear filter)",
+            "channels": "RGB: one coefficient set of the basis (linear, fp16); A: 1 on texels baked or dilated "
+                        "(safe to sample), 0 on texels no chart reaches",
+            "files": "EXR (OpenEXR, half, channels R G B A, first row at the top) and KTX2 (R16G16B16A16_SFLOAT, "
+                     "orientation rd) hold the same values",
+            "diffuse": "albedo / pi * E(n) with E the basis' irradiance at the shading normal n (a normal map's "
+                       "included for a directional basis)",
+            "frame": "world, right-handed, +y up (the scene's and glTF's)",
+        },
+        "settings": {k: v for k, v in settings.items()},
+        "report": rep,
+    }
+
+
+def write(lm: dict, sc, folder: Path, batch) -> dict:
+    """Every file of the bake into folder through `batch` (atomic.Batch: replaced together or
+    none); the manifest written."""
+    from iblbake.io import images, ktx2
+    from iblbake.io.guard import mark
+    from iblbake.render.lightmaps import gltf_scene
+    folder = Path(folder)
+    settings = sc.data["lightmap"]
+    valid = np.asarray(lm["valid"], bool)
+    for name in held(lm):
+        b = basis(name, settings)
+        sets = coefficient_sets(lm, name)
+        for k, stem in enumerate(atlas_names(name, b.floats)):
+            img = rgba(sets[..., k, :], valid)
+            images.write_exr(folder / f"{stem}.exr", img, half=True, channels=("R", "G", "B", "A"), batch=batch)
+            batch.write_bytes(folder / f"{stem}.ktx2", ktx2.image_bytes(img, "rgba16f", writer=mark(),
+                                                                           metadata={"iblbake.basis": name}))
+        batch.write_text(folder / f"{STEM}_{name}.glsl", glsl(lm, b))
+    scale = gltf_scene.write(lm, sc, folder, STEM, EXTENSION, batch)
+    man = manifest(lm, settings, scale)
+    batch.write_text(folder / f"{STEM}.json", json.dumps(man, indent=1, allow_nan=False) + "\n")
+    return man
+

@@ -1,0 +1,141 @@
+"""lightmap.gltf (+ .bin, + the 8-bit image): a lightmap's static geometry as glTF 2.0, each
+lightmapped object one mesh (POSITION, NORMAL, TEXCOORD_1: the atlas' UVs, TEXCOORD_0 the same: glTF's
+sets start at 0 and the layout keeps no material UVs) with its scene material,
+the scene's camera, and the irradiance atlas referenced by the IBLBAKE_lightmap extension (no
+standard glTF extension exists; docs/conventions.md "Lightmaps in files" says why this one):
+
+  material.extensions.IBLBAKE_lightmap = {"lightmapTexture": {"index": 0, "texCoord": 1},
+                                          "encoding": "gamma 2.2", "irradianceScale": s}
+  E (the irradiance, linear) = s * (texel / 255)^2.2; diffuse = albedo / pi * E
+
+declared in extensionsUsed, not extensionsRequired: a loader that does not know it still loads the
+meshes. The root's extension block names lightmap.json, which holds every basis' atlases."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from iblbake.io import gltf
+
+LINEAR, CLAMP = 9729, 33071
+ENCODING = "gamma 2.2"       # E = irradianceScale * (texel / 255)^2.2
+DEFAULT_MATERIAL = {"base_color": [0.8, 0.8, 0.8], "metallic": 0.0, "roughness": 1.0}   # a mesh's file materials
+
+
+def object_mesh(lay, oid: int):
+    """(positions (v, 3), normals (v, 3), TEXCOORD_1 (v, 2), indices (3t,)) of object oid's
+    triangles in the atlas, corners shared where position, normal and UV all agree."""
+    tri = lay.objects == oid
+    n = lay.normals[tri].reshape(-1, 3)
+    n = n / np.linalg.norm(n, axis=1, keepdims=True)
+    uv = lay.uv[tri].reshape(-1, 2) / [lay.width, lay.height]
+    rows = np.concatenate([lay.corners[tri].reshape(-1, 3), n, uv], 1).astype(np.float32)
+    verts, inverse = np.unique(rows, axis=0, return_inverse=True)
+    return verts[:, :3], verts[:, 3:6], verts[:, 6:8], inverse.reshape(-1).astype(np.uint32)
+
+
+def quaternion(m) -> list:
+    """The unit quaternion (x, y, z, w) of rotation matrix m (3, 3) (Shepperd's method)."""
+    t = np.trace(m)
+    if t > 0:
+        s = 2 * np.sqrt(1 + t)
+        q = [(m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, s / 4]
+    else:
+        i = int(np.argmax(np.diag(m)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2 * np.sqrt(1 + m[i, i] - m[j, j] - m[k, k])
+        q = [0.0] * 4
+        q[i], q[j], q[k], q[3] = s / 4, (m[j, i] + m[i, j]) / s, (m[k, i] + m[i, k]) / s, (m[k, j] - m[j, k]) / s
+    q = np.asarray(q) / np.linalg.norm(q)
+    return [float(x) for x in q]
+
+
+def camera(cam: dict) -> tuple:
+    """(glTF camera, its node) of the scene's camera: glTF's looks down its -z, +y up."""
+    from iblbake.scene.pack import camera_vectors
+    pos, fwd, right, up, ortho = camera_vectors(cam)
+    w, h = cam["resolution"]
+    rot = np.stack([right / np.linalg.norm(right), up / np.linalg.norm(up), -fwd], 1)
+    c = cam[cam["projection"]]
+    if ortho:
+        mags = {"xmag": float(np.linalg.norm(right)), "ymag": float(np.linalg.norm(up))}
+        glc = {"type": "orthographic", "orthographic": {**mags, "znear": 0.01, "zfar": 1000.0}}
+    else:
+        glc = {"type": "perspective", "perspective": {"yfov": float(np.radians(c["fov_y"])), "aspectRatio": w / h,
+                                                      "znear": 0.01, "zfar": 1000.0}}
+    return glc, {"name": "camera", "camera": 0, "translation": [float(x) for x in pos], "rotation": quaternion(rot)}
+
+
+def material(m: dict, name: str, extension: str, scale: float) -> dict:
+    return {"name": name, "doubleSided": True,     # iblbake's surfaces are lit on the camera's side, wound either way
+            "pbrMetallicRoughness": {"baseColorFactor": [float(x) for x in m["base_color"]] + [1.0],
+                                     "metallicFactor": float(m["metallic"]), "roughnessFactor": float(m["roughness"])},
+            "extensions": {extension: {"lightmapTexture": {"index": 0, "texCoord": 1}, "encoding": ENCODING,
+                                       "irradianceScale": scale}}}
+
+
+def image_scale(e) -> float:
+    """The factor s the 8-bit image holds E / s at: the brightest texel at 1 (8-bit gamma keeps
+    about 0.4% of a texel near the top, a few % of one a tenth of it)."""
+    top = float(np.max(e)) if np.size(e) else 0.0
+    return top if top > 0 else 1.0
+
+
+def image(e, scale: float) -> bytes:
+    """The irradiance atlas as an 8-bit RGB PNG: (E / scale)^(1 / 2.2), its first row at the top.
+    Not RGBD: a browser premultiplies a PNG's alpha as it decodes it, and RGBD's alpha (1/255 on a
+    texel 255 times the dimmest) then left its RGB a step or two (Babylon read a floor 50% dark)."""
+    from iblbake.io.images import png_bytes
+    v = np.clip(np.asarray(e, np.float64) / scale, 0.0, 1.0) ** (1.0 / gltf.GAMMA)
+    return png_bytes(np.rint(v * 255.0).astype(np.uint8), colour=False)
+
+
+def document(lm: dict, sc, stem: str, extension: str, scale: float) -> tuple:
+    """(the glTF document, the .bin's bytes)."""
+    from iblbake.io.guard import mark
+    lay = lm["layout"]
+    buf = gltf.Binary()
+    objects, mats = sc.data["objects"], sc.data["materials"]
+    meshes, nodes, materials, names = [], [], [], {}
+    for oid in sorted(int(o) for o in np.unique(lay.objects)):
+        o = objects[oid]
+        mname = o.get("material") or ""
+        if mname not in names:
+            names[mname] = len(materials)
+            materials.append(material(mats.get(mname, DEFAULT_MATERIAL), mname or "file materials", extension, scale))
+        pos, nrm, uv1, idx = object_mesh(lay, oid)
+        uv = buf.add(uv1, 34962)
+        # TEXCOORD_0 the atlas' UVs too: glTF's indexed attributes start at 0 (the layout keeps no material UVs)
+        prim = {"attributes": {"POSITION": buf.add(pos, 34962, bounds=True), "NORMAL": buf.add(nrm, 34962),
+                               "TEXCOORD_0": uv, "TEXCOORD_1": uv},
+                "indices": buf.add(idx, 34963), "material": names[mname], "mode": 4}
+        label = o.get("name") or f"objects.{oid}"
+        meshes.append({"name": label, "primitives": [prim]})
+        nodes.append({"name": label, "mesh": len(meshes) - 1})
+    glc, cam_node = camera(sc.data["camera"])
+    nodes.append(cam_node)
+    doc = {"asset": {"version": "2.0", "generator": mark()},
+           "extensionsUsed": [extension],
+           "extensions": {extension: {"manifest": gltf.file_uri(f"{stem}.json")}},
+           "scene": 0, "scenes": [{"name": Path(sc.source).stem, "nodes": list(range(len(nodes)))}],
+           "nodes": nodes, "meshes": meshes, "materials": materials, "cameras": [glc],
+           "samplers": [{"magFilter": LINEAR, "minFilter": LINEAR, "wrapS": CLAMP, "wrapT": CLAMP}],
+           "images": [{"uri": gltf.file_uri(f"{stem}.png"), "mimeType": "image/png"}],
+           "textures": [{"sampler": 0, "source": 0}],
+           "extras": {"source": sc.source, "atlas": [lay.width, lay.height]}}
+    data = buf.attach(doc, gltf.file_uri(f"{stem}.bin"))
+    return doc, data
+
+
+def write(lm: dict, sc, folder: Path, stem: str, extension: str, batch) -> float:
+    """STEM.gltf, STEM.bin and STEM.png into folder through batch; the image's scale written."""
+    e = np.asarray(lm["irradiance"], np.float64)
+    scale = image_scale(e[lm["valid"]])
+    doc, data = document(lm, sc, stem, extension, scale)
+    batch.write_bytes(Path(folder) / f"{stem}.bin", data)
+    batch.write_bytes(Path(folder) / f"{stem}.png", image(e, scale))
+    batch.write_text(Path(folder) / f"{stem}.gltf", json.dumps(doc, indent=1, allow_nan=False) + "\n")
+    return scale

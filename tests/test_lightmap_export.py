@@ -1,0 +1,286 @@
+"""`iblbake lightmap` (render/lightmaps/export.py, gltf_scene.py): a scene's lightmap as the files
+engines load, read back by real readers:
+- the atlases' EXR read back equal the bake to fp16 (what the file stores), A the texels baked or
+  dilated; the manifest's reading of each basis, applied to the files, gives the bake's irradiance;
+- ktx-parse (three.js's KTX2Loader parser) returns the KTX2 atlases bit for bit equal to the EXR's,
+  and the glTF Sample Viewer's libktx opens them;
+- Khronos' glTF-Validator finds no error or warning in lightmap.gltf (+ .bin);
+- Babylon.js loads lightmap.gltf through its glTF loader (TEXCOORD_1 as its uv2, the lightmap as
+  its lightmapTexture through the loader's extension hook, tests/node/babylon_page.html) and renders
+  albedo / pi * E equal to iblbake's own reading of the bake (lightmaps/read.py) to about an 8-bit step;
+- the GLSL of every basis (the bake's and every other of the probes' registry) compiles;
+- bad input is one line (no `lightmap:` section, an unwritable folder, a file iblbake did not write)."""
+
+import base64
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from iblbake.io import images
+from tests.helpers import run_cli, write_exr
+
+NODE = Path(__file__).parent / "node"
+CUBE = str(Path(__file__).resolve().parents[1] / "examples/corpus/meshes/cube.obj")
+W, H = 64, 48
+SCENE = f"""camera:
+  perspective: {{position: [0, 1.5, 3], look_at: [0, 0.3, 0], fov_y: 50}}
+  resolution: [{W}, {H}]
+environment: {{path: sky.exr, background: hide}}
+materials:
+  floor: {{base_color: [0.7, 0.6, 0.5], roughness: 1, specular: 0}}
+  box: {{base_color: [0.3, 0.5, 0.7], roughness: 1, specular: 0}}
+objects:
+  - plane: {{point: [0, 0, 0], size: 3}}
+    material: floor
+  - mesh: {{path: {CUBE}}}
+    material: box
+    name: box
+"""
+
+
+@pytest.fixture(scope="module")
+def baked(tmp_path_factory):
+    """The scene under a blue sky, its lightmap (4 texels a unit, 64 rays a texel) baked and written
+    as `iblbake lightmap` does (iblbake.bake_lightmap, Lightmap.write)."""
+    import iblbake
+    tmp = tmp_path_factory.mktemp("lightmap-export")
+    write_exr(tmp / "sky.exr", np.ones((32, 64, 3)) * [0.6, 0.8, 1.0])
+    (tmp / "scene.yaml").write_text(SCENE + "lightmap: {texels_per_unit: 4, samples: 64}\n")
+    lm = iblbake.bake_lightmap(str(tmp / "scene.yaml"), cache=str(tmp / "cache"))
+    man = lm.write(tmp / "out")
+    return {"tmp": tmp, "out": tmp / "out", "files": lm.files(), "manifest": man, "lm": lm}
+
+
+def test_atlases_read_back_equal_the_bake_to_fp16(baked):
+    """Each basis' coefficient sets, read back from the EXR, equal the bake cast to half (the
+    files' precision: |error| <= 2^-11 relative), A the texels baked or dilated; the manifest names
+    every file written and its reading of each basis gives the bake's irradiance back."""
+    from iblbake.core import sh
+    out, lm = baked["out"], baked["lm"]
+    man = json.loads((out / "lightmap.json").read_text())
+    assert man["atlas"]["width"] == lm.width and man["atlas"]["texels_per_unit"] == 4
+    assert sorted(man["bases"]) == sorted(lm.atlases) == ["irradiance", "sh_l1"]
+    written = sorted(p.name for p in out.iterdir())
+    assert written == sorted(baked["files"]) and man == baked["manifest"]
+    for name, b in man["bases"].items():
+        sets = np.asarray(lm.atlases[name]).reshape(lm.height, lm.width, -1, 3)
+        assert len(b["exr"]) == b["floats"] == sets.shape[2] and all(f in written for f in b["exr"] + b["ktx2"])
+        for k, f in enumerate(b["exr"]):
+            got = images.read_exr(out / f)
+            assert got.shape == (lm.height, lm.width, 4)
+            want = sets[..., k, :].astype(np.float16).astype(np.float32)
+            assert np.array_equal(got[..., :3], want), (f, np.abs(got[..., :3] - want).max())
+            assert np.array_equal(got[..., 3], lm.valid.astype(np.float32))
+    # sh_l1 read as the manifest says (E = sum Ahat_l c_k Y_k(n)) at each texel's normal: its irradiance
+    from iblbake.render import lightmaps
+    from iblbake.render.lightmaps.bake import facing
+    from iblbake.scene.pack import camera_vectors
+    tx = lightmaps.texels(lm.baked["layout"])                 # as the bake took them: lit on the camera's side
+    facing(tx, camera_vectors(lm.scene.data["camera"])[0])
+    c = np.stack([images.read_exr(out / f)[..., :3] for f in man["bases"]["sh_l1"]["exr"]], 2).reshape(-1, 4, 3)
+    e_sh = np.maximum(0, np.einsum("kj,kjc->kc", sh.sh_basis(tx.normal, 2), c[tx.index] * sh.ahat(2)[:, None]))
+    e = images.read_exr(out / man["bases"]["irradiance"]["exr"][0])[..., :3].reshape(-1, 3)[tx.index]
+    ok = lm.valid.reshape(-1)[tx.index]
+    rel = np.abs(e_sh - e)[ok] / e[ok].max()
+    print(f"sh_l1 read at the texels' normals against the irradiance: {rel.max():.2e} of the brightest")
+    assert rel.max() < 2e-3                                   # the two halves' rounding (measured 5e-4)
+
+
+@pytest.fixture(scope="module")
+def node():
+    if shutil.which("node") is None or not (NODE / "node_modules" / "gltf-validator").is_dir():
+        pytest.skip("the Node readers are not set up: run `make readers` (make test does)")
+
+    def run(script, *args):
+        p = subprocess.run(["node", str(NODE / script), *map(str, args)], capture_output=True, text=True, timeout=300)
+        assert p.returncode == 0, p.stderr
+        return json.loads(p.stdout)
+    return run
+
+
+@pytest.mark.external
+def test_ktx2_atlases_read_by_ktx_parse_and_libktx(baked, node):
+    """ktx-parse gives every KTX2 atlas back as R16G16B16A16_SFLOAT, one level, one face, bit for
+    bit the EXR's halves; libktx opens each without a message."""
+    out = baked["out"]
+    ktx = sorted(out.glob("*.ktx2"))
+    assert len(ktx) == 5
+    parsed = node("read_ktx2.mjs", *ktx)
+    info = node("libktx_info.cjs", *ktx)
+    for f in ktx:
+        got = parsed[str(f)]
+        assert "error" not in got, got
+        assert (got["vkFormat"], got["pixelWidth"], got["pixelHeight"], got["faceCount"], got["pixelDepth"]) == \
+            (97, baked["lm"].width, baked["lm"].height, 1, 0)
+        assert got["keyValue"]["KTXorientation"] == "rd" and len(got["levels"]) == 1
+        data = np.frombuffer(base64.b64decode(got["levels"][0]["data"]), "<f2").reshape(baked["lm"].height, -1, 4)
+        assert np.array_equal(data.astype(np.float32), images.read_exr(f.with_suffix(".exr")))
+        assert info[str(f)]["messages"] == [] and info[str(f)]["vkFormat"] == 97
+
+
+@pytest.mark.external
+def test_gltf_is_valid(baked, node):
+    """glTF-Validator: no error, no warning; what it cannot check is the extension (and so the
+    lightmap image it alone uses) and TEXCOORD_0/1 no core texture reads."""
+    gl = baked["out"] / "lightmap.gltf"
+    r = node("validate_gltf.mjs", gl)[str(gl)]
+    assert "error" not in r, r
+    assert r["numErrors"] == 0 and r["numWarnings"] == 0, r["messages"]
+    assert {m["code"] for m in r["messages"]} <= {"UNSUPPORTED_EXTENSION", "UNUSED_OBJECT", "IMAGE_NPOT_DIMENSIONS"}
+    doc = json.loads(gl.read_text())
+    assert doc["extensionsUsed"] == ["IBLBAKE_lightmap"] and "extensionsRequired" not in doc
+    assert all("TEXCOORD_1" in p["attributes"] for m in doc["meshes"] for p in m["primitives"])
+    assert [m["name"] for m in doc["meshes"]] == ["objects.0", "box"]
+
+
+@pytest.mark.external
+def test_babylon_renders_the_lightmap_as_iblbake_reads_it(baked, node):
+    """Babylon.js (its glTF loader, WebGL2 on SwiftShader) renders the lightmapped scene from the
+    glTF's camera: albedo / pi * E with E from lightmap.png on TEXCOORD_1, equal to iblbake's reading
+    of the bake at the same camera (lightmaps/read.py diffuse_frame), gamma 2.2, inside the objects
+    (their silhouettes left out): measured 0.0045 RMS (an 8-bit step is 0.0039). Without the
+    lightmap's scale (irradianceScale 1) the floor reads 3x too dark, so the test sees the lightmap."""
+    if not Path("/usr/bin/chromium").exists() or not (NODE / "node_modules" / "babylonjs").is_dir():
+        pytest.skip("Babylon.js and Chromium are not set up: run `make readers` (make test does)")
+    from scipy import ndimage
+
+    from iblbake.render.bakes import Bakes
+    from iblbake.render.lightmaps import read
+
+    def render(path):
+        out = node("babylon_render.cjs", path, W, H, json.dumps({"iblbakeLightmap": True}))
+        px = np.frombuffer(base64.b64decode(out["pixels"]), np.uint8).reshape(H, W, 4)[::-1]
+        return px[..., :3] / 255.0, out
+
+    got, info = render(baked["out"] / "lightmap.gltf")
+    assert len(info["lightmaps"]) == 2 and all(m["uv"] == 1 and m["uv2"] for m in info["lightmaps"]), info["lightmaps"]
+    lm = baked["lm"]
+    hdr = read.diffuse_frame(lm.scene, Bakes(baked["tmp"] / "cache").geometry(lm.scene), lm.baked, (H, W), "irradiance")
+    want = np.clip(hdr[..., :3], 0, 1) ** (1 / 2.2)
+    covered = hdr[..., 3] > 0
+    differ = float((covered != (got.sum(-1) > 0)).mean())
+    print(f"silhouettes differ on {differ:.2%} of the pixels")
+    assert differ < 0.01                # the same camera: edge pixels alone (a rasteriser against a centred ray)
+    inner = ndimage.binary_erosion(covered)
+    rms = float(np.sqrt(((got - want)[inner] ** 2).mean()))
+    print(f"Babylon against iblbake: {rms:.4f} RMS over {inner.sum()} pixels ({info['version']})")
+    assert rms < 0.01, rms
+    doc = json.loads((baked["out"] / "lightmap.gltf").read_text())
+    for m in doc["materials"]:
+        m["extensions"]["IBLBAKE_lightmap"]["irradianceScale"] = 1.0
+    unscaled = baked["out"].parent / "unscaled" / "lightmap.gltf"
+    shutil.copytree(baked["out"], unscaled.parent)
+    unscaled.write_text(json.dumps(doc))
+    off, _ = render(unscaled)
+    assert float(np.sqrt(((off - want)[inner] ** 2).mean())) > 10 * rms
+
+
+@pytest.mark.external
+@pytest.mark.parametrize("name", ["irradiance", "sh_l1", "sh", "l1_geomerics", "zh3", "sg", "ambient_dice"])
+def test_glsl_of_every_basis_compiles(name, tmp_path):
+    """lightmapIrradiance of the bake's bases and of every basis the probes' registry holds (those a
+    bake may add): glslangValidator compiles it in a fragment shader."""
+    if shutil.which("glslangValidator") is None:
+        pytest.skip("glslangValidator not installed (Debian's glslang-tools; make readers installs it)")
+    from types import SimpleNamespace
+
+    from iblbake.render.lightmaps import export
+    b = export.basis(name, {})
+    src = export.glsl({"layout": SimpleNamespace(width=8, height=4)}, b)
+    assert src.count("uniform sampler2D lightmapCoefficient") == b.floats
+    shader = tmp_path / "lightmap.frag"
+    shader.write_text("#version 330 core\n" + src + "in vec2 UV;\nin vec3 N;\nout vec4 color;\n"
+                      "void main() { color = vec4(lightmapIrradiance(UV, normalize(N)), 1.0); }\n")
+    p = subprocess.run(["glslangValidator", str(shader)], capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0, p.stdout + p.stderr
+
+
+@pytest.mark.slow
+def test_command_and_its_bad_input(baked, tmp_path):
+    """No `lightmap:` section: a usage error (2) naming it; an output folder under a file, or one
+    holding a file of the names iblbake did not write: one line (1), nothing written; iblbake's own
+    files are replaced without --force, the bake from the cache (--json)."""
+    tmp = baked["tmp"]
+    (tmp / "bare.yaml").write_text(SCENE)
+    p = run_cli("lightmap", tmp / "bare.yaml", "-o", tmp_path / "x")
+    assert p.returncode == 2 and "no `lightmap:` section" in p.stderr and len(p.stderr.strip().splitlines()) == 1
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    p = run_cli("lightmap", tmp / "scene.yaml", "-o", blocker / "out", "--cache", tmp / "cache")
+    assert p.returncode == 1 and str(blocker) in p.stderr and len(p.stderr.strip().splitlines()) == 1, p.stderr
+    assert "Traceback" not in p.stderr
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "lightmap.gltf").write_text('{"asset": {"version": "2.0", "generator": "Blender"}}')
+    p = run_cli("lightmap", tmp / "scene.yaml", "-o", mine, "--cache", tmp / "cache")
+    assert p.returncode == 1 and "--force" in p.stderr and len(p.stderr.strip().splitlines()) == 1, p.stderr
+    assert sorted(x.name for x in mine.iterdir()) == ["lightmap.gltf"]
+    images.write_exr(baked["out"] / "lightmap_sg_0.exr", np.zeros((2, 2, 3)))     # an earlier bake's other basis
+    (baked["out"] / "lightmap_notes.glsl").write_text("// my notes\n")
+    p = run_cli("lightmap", tmp / "scene.yaml", "-o", baked["out"], "--cache", tmp / "cache", "--json")
+    assert p.returncode == 0, p.stderr                        # its own files (the .bin too): replaced
+    summary = json.loads(p.stdout)
+    assert summary["removed"] == ["lightmap_sg_0.exr"] and (baked["out"] / "lightmap_notes.glsl").exists()
+    (baked["out"] / "lightmap_notes.glsl").unlink()
+    assert summary["cached"] and summary["files"] == baked["files"] and summary["bases"] == ["irradiance", "sh_l1"]
+    assert (summary["width"], summary["height"]) == (baked["lm"].width, baked["lm"].height)
+
+
+def test_a_basis_the_bake_adds_is_exported_with_no_code_here(baked, tmp_path, monkeypatch):
+    """A bake holding another basis of the probes' registry (SG, 9 lobes: what lmbases adds) is
+    written with its 9 coefficient sets, its registry layout and options in lightmap.json and its
+    GLSL, nothing in the exporter naming it."""
+    import importlib
+
+    from iblbake.core.bases.probes import PROBE_BASES
+    bake = importlib.import_module("iblbake.render.lightmaps.bake")     # the module (the package names its function)
+    lm = baked["lm"]
+    rng = np.random.default_rng(1)
+    sg = rng.uniform(0, 2, (lm.height, lm.width, 9, 3))
+    monkeypatch.setattr(bake, "BASES", (*bake.BASES, "sg"))
+    lm.baked["sg"] = sg
+    try:
+        man = lm.write(tmp_path)
+    finally:
+        del lm.baked["sg"]
+    b = man["bases"]["sg"]
+    assert b["floats"] == 9 and b["options"] == PROBE_BASES["sg"].options({}) and b["title"] == "SG", b
+    assert b["exr"] == [f"lightmap_sg_{k}.exr" for k in range(9)] and "lobe" in b["layout"]
+    for k, f in enumerate(b["exr"]):
+        got = images.read_exr(tmp_path / f)[..., :3]
+        assert np.array_equal(got, sg[..., k, :].astype(np.float16).astype(np.float32))
+    assert "lightmapCoefficient8" in (tmp_path / "lightmap_sg.glsl").read_text()
+
+
+@pytest.mark.parametrize("name", ["sh_l1", "sh"])
+def test_sh_glsl_is_the_float64_reading(name):
+    """lightmapIrradiance's SH body, evaluated term by term as GLSL would (numpy for vec3), equals
+    the float64 reading of the same coefficients at 200 random normals: sh_l1 as the bake reads it
+    (bake.sh_irradiance), the probes' L2 SH irradiance as the registry does."""
+    from iblbake.core.bases.probes import PROBE_BASES
+    from iblbake.render.lightmaps import export, sh_irradiance
+    rng = np.random.default_rng(4)
+    b = export.basis(name, {})
+    c = rng.normal(size=(200, b.floats, 3))
+    c[:, 0] += 2.0                                  # mostly positive light: the clamp at 0 seldom acts
+    n = rng.normal(size=(200, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+
+    class Vec:
+        x, y, z = n[:, 0:1], n[:, 1:2], n[:, 2:3]
+    expr = b.body.strip().removeprefix("return ").removesuffix(";")
+    got = eval(expr, {"c": [c[:, k] for k in range(b.floats)], "n": Vec, "max": np.maximum, "vec3": float})
+    want = sh_irradiance(c, n) if name == "sh_l1" else \
+        np.maximum(0, PROBE_BASES["sh"].irradiance_at(c, np.arange(200), n, {}))
+    assert np.abs(got - want).max() < 1e-12 * np.abs(want).max()
+
+
+def test_write_takes_a_folder_path(baked):
+    """Lightmap.write(5) is an InputError naming its argument, not a TypeError from pathlib."""
+    import iblbake
+    with pytest.raises(iblbake.InputError, match="folder: give the output folder's path"):
+        baked["lm"].write(5)
