@@ -346,3 +346,30 @@ def test_report_page_holds_every_rung(study):
         assert got == pytest.approx(r["relative_rmse"], rel=5e-4, abs=5e-5), r["label"]
         assert e["row"]["relative_rmse"] == pytest.approx(r["relative_rmse"])
         assert e["regions"] == r["region_errors"]
+
+
+def test_a_study_says_each_warning_once_per_rung(tmp_path, panoramas, rt):
+    """A new user's trial: each rung printed the panorama's chromaticity warning and the probes'
+    share outside their volume twice (the rung's warm-up render and its timed one each said them).
+    A sphere under city (it declares non-Rec.709 chromaticities) with its probe box over its left
+    half: each rung says each of the two once; a second rung says them again."""
+    from iblbake.render.bakes import Bakes
+    from iblbake.study.ladder import Rung
+
+    p = tmp_path / "s.yaml"
+    p.write_text(yaml.safe_dump({
+        "camera": {"perspective": {"position": [0, 0, 3], "fov_y": 40}, "resolution": [16, 16]},
+        "environment": {"path": str(panoramas["city"])},
+        "materials": {"m": {"base_color": [0.8, 0.6, 0.4], "roughness": 1, "specular": 0}},
+        "objects": [{"sphere": {"radius": 0.8}, "material": "m"}],
+        "probes": {"min": [-1.9, -2, -2], "max": [-0.1, 2, 2], "counts": [2, 2, 2], "rays": 256},
+        "effects": {"diffuse": "probes", "specular": "off"}}))
+    said = []
+    st = accuracy.Study(p, (), accuracy.Settings(max_side=16, repeats=1, max_samples=16, flip=False),
+                        runtime=rt, bakes=Bakes(tmp_path / "c"), warn=said.append)
+    st.render_reference("diffuse")
+    for label in ("probes", "probes again"):
+        del said[:]
+        st.run_rung(Rung("diffuse", label, [("effects.diffuse", "probes")]))
+        assert len(said) == len(set(said)) == 2, said
+        assert "chromaticities" in said[0] + said[1] and "outside the probe volume" in said[0] + said[1], said
