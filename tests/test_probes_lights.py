@@ -14,7 +14,7 @@ import pytest
 import iblbake
 from iblbake.render import render
 from iblbake.scene import pack
-from tests.helpers import load_scene
+from tests.helpers import load_scene, run_cli
 
 
 def lit_scene(folder, studio):
@@ -69,6 +69,10 @@ def test_probes_json_lists_the_lights_the_frame_draws(tmp_path, panoramas, rt):
     rebuilt = [{k: v for k, v in lt.items() if k not in ("source", "irradiance", "solid_angle_sr")} for lt in lights]
     assert np.allclose(pack.light_records(rebuilt), pack.light_records(frame_lights), rtol=1e-6, atol=1e-7)
     assert man["reflection_probes"][0]["taps"] == 16
+    # the command writes the same list, and says how many lights it found in the panorama
+    r = run_cli("probes", sc.source, "-o", tmp_path / "out", "--cache", tmp_path / "cache")
+    assert r.returncode == 0 and "; 4 lights extracted from the panorama, to draw per pixel" in r.stdout, r.stdout + r.stderr
+    assert json.loads((tmp_path / "out" / "probes.json").read_text())["lights"] == lights
     assert "lights" in man["conventions"]
     src = vol.glsl()
     assert "#define PROBE_LIGHT_COUNT 4" in src
