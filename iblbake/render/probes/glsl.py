@@ -52,7 +52,8 @@ def light_constants(lights: list) -> str:
     head = (f"// + the {n} directional lights of probes.json's lights, drawn per pixel with their shadows (the probes\n"
             f"// hold their bounce, not their direct light): diffuse += albedo / PI * PROBE_LIGHT_IRRADIANCE[i] *\n"
             f"// max(dot(N, PROBE_LIGHT_TO[i]), 0.0) * shadow (a disk of PROBE_LIGHT_SIN_RADIUS[i], the sine of its\n"
-            f"// angular radius); PROBE_LIGHT_TO: unit, world frame, towards the light\n#define PROBE_LIGHT_COUNT {n}")
+            f"// angular radius); PROBE_LIGHT_TO: unit, world frame, towards the light (the arrays only where\n"
+            f"// PROBE_LIGHT_COUNT > 0: guard a loop over them with #if)\n#define PROBE_LIGHT_COUNT {n}")
     if not n:
         return head
 
