@@ -70,9 +70,11 @@ def short(label: str) -> str:
 
 
 def worst(errors: dict) -> str:
-    """The worst entry of {name: mean_errors} as 'name x ratio (channel c%)'."""
+    """The worst entry of {name: mean_errors} as 'name x ratio (absolute a%)', its tint (the
+    colour shift once the luminances match) where the worst channel is most of it."""
     name, e = max(errors.items(), key=lambda kv: kv[1]["absolute"])
-    return f"{short(name)} x{e['ratio']:.2f} ({100 * e['absolute']:.0f}%)"
+    tint = f", tint {100 * e['tint']:.0f}%" if e.get("channel", 0) > abs(e["ratio"] - 1) and "tint" in e else ""
+    return f"{short(name)} x{e['ratio']:.2f} ({100 * e['absolute']:.0f}%{tint})"
 
 
 def ratios(errors: dict) -> str:

@@ -217,7 +217,9 @@ IBL_INLINE float3 probes_diffuse(float3 p, float3 n, float3 v, float3 sky, PROBE
 {
     const float wv = probe_volume_weight(p, probe_volume);
     float3 e = (1.0f - wv) * sky;
-    if (wv < 1.0f) atomic_inc(&probe_stats[4]);       /* outside the volume, or on its fading edge */
+    /* outside the volume, or on its fading edge (over 0.1% of its light the SH's): a point on the
+     * box's faces (the walls a box was drawn on) rounds to 1 - 2e-7 in float32, and is inside */
+    if (wv < 0.999f) atomic_inc(&probe_stats[4]);
     if (wv > 0.0f) {
         const float4 pe = probe_irradiance(p, n, v, PROBE_ARGS);
         if (pe.w == PROBE_SOURCE_NEAREST) atomic_inc(&probe_stats[0]);

@@ -118,6 +118,8 @@ def test_absolute_region_errors_read_brightness_and_colour():
     assert e[0]["ratio"] == pytest.approx(15) and e[0]["absolute"] == pytest.approx(14)
     assert e[1]["ratio"] == pytest.approx(0.2126 * 0.8 + 0.7152 + 0.0722 * 3.3)
     assert e[1]["channel"] == pytest.approx(2.3) == e[1]["absolute"]
+    assert e[0]["tint"] == pytest.approx(0, abs=1e-12)      # as coloured as the truth: brighter only
+    assert e[1]["tint"] == pytest.approx(np.abs(np.array([0.8, 1.0, 3.3]) / e[1]["ratio"] - 1).max())
     assert region_absolute(got, ref, mask, regions, min_pixels=5).keys() == {0}
     normals = np.zeros((4, 4, 3))
     normals[:2, :, 1], normals[2:, :, 1] = 1, -1           # upper rows face up, lower rows down
@@ -346,3 +348,43 @@ def test_report_page_holds_every_rung(study):
         assert got == pytest.approx(r["relative_rmse"], rel=5e-4, abs=5e-5), r["label"]
         assert e["row"]["relative_rmse"] == pytest.approx(r["relative_rmse"])
         assert e["regions"] == r["region_errors"]
+
+
+def test_a_study_says_each_warning_once_per_rung(tmp_path, panoramas, rt):
+    """A new user's trial: each rung printed the panorama's chromaticity warning and the probes'
+    share outside their volume twice (the rung's warm-up render and its timed one each said them).
+    A sphere under city (it declares non-Rec.709 chromaticities) with its probe box over its left
+    half: each rung says each of the two once; a second rung says them again."""
+    from iblbake.render.bakes import Bakes
+    from iblbake.study.ladder import Rung
+
+    p = tmp_path / "s.yaml"
+    p.write_text(yaml.safe_dump({
+        "camera": {"perspective": {"position": [0, 0, 3], "fov_y": 40}, "resolution": [16, 16]},
+        "environment": {"path": str(panoramas["city"])},
+        "materials": {"m": {"base_color": [0.8, 0.6, 0.4], "roughness": 1, "specular": 0}},
+        "objects": [{"sphere": {"radius": 0.8}, "material": "m"}],
+        "probes": {"min": [-1.9, -2, -2], "max": [-0.1, 2, 2], "counts": [2, 2, 2], "rays": 256},
+        "effects": {"diffuse": "probes", "specular": "off"}}))
+    said = []
+    st = accuracy.Study(p, (), accuracy.Settings(max_side=16, repeats=1, max_samples=16, flip=False),
+                        runtime=rt, bakes=Bakes(tmp_path / "c"), warn=said.append)
+    st.render_reference("diffuse")
+    for label in ("probes", "probes again"):
+        del said[:]
+        st.run_rung(Rung("diffuse", label, [("effects.diffuse", "probes")]))
+        assert len(said) == len(set(said)) == 2, said
+        assert "chromaticities" in said[0] + said[1] and "outside the probe volume" in said[0] + said[1], said
+
+
+def test_a_saturated_spheres_worst_channel_is_its_brightness():
+    """A new user's trial: coloured Lambert spheres' worst channel 24-33% off while their luminance
+    was within 20%. Measured (64 px, CPU, studio): a blue sphere [0.3, 0.3, 0.8] in a corridor,
+    each channel x1.203, x1.202, x1.175 of the converged reference's [0.566, 0.659, 1.775] (its
+    mean 1): the worst channel 31% is its luminance's 20% times blue's 1.775 over the mean; the
+    colour itself is near (tint 3%: blue 1.8% under the luminance, times 1.775)."""
+    from iblbake.core.metrics import mean_errors
+    truth = np.array([0.566, 0.659, 1.775])
+    e = mean_errors(truth * [1.203, 1.202, 1.175], truth)
+    assert e["ratio"] == pytest.approx(1.197, abs=2e-3) and e["channel"] == pytest.approx(0.310, abs=2e-3)
+    assert e["tint"] == pytest.approx(0.033, abs=2e-3) and e["absolute"] == e["channel"]

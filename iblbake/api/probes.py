@@ -81,7 +81,7 @@ def bake_probes(scene, device: str | None = None, *, cache=None, warn=None, prog
         vol, cached, extra = bakes.load("probes", job)
         reflections = bakes.load("reflection_probes", job)[0] if sc.data["reflection_probes"] else []
     vol = probes.sampled(vol, sc.data["probes"])
-    man = probes.manifest(vol)
+    man = probes.manifest(vol, probes.light_entries(sc, bakes.sun(sc.data["environment"])))
     from iblbake.render.reflection_probes import CHANNELS as rp_channels
     man["reflection_probes"] = [{"file": f"reflection_{k}.exr", **c["settings"],
                                  "channels": list(rp_channels),

@@ -59,7 +59,8 @@ def accuracy(scene, ladder=None, *, overrides=(), max_side: int = 320, repeats: 
     target_noise (>= 0), max_samples (1 to 2^20): the reference's stopping rule per seed.
     jobs, devices: render the reference seeds in `jobs` worker processes, one device spec each
         in turn (a list), into the cache.
-    warn(message): what the study says (a reference stopped short, rungs left out).
+    warn(message): what the study says (a reference stopped short, rungs left out), each message
+        once per rung.
     progress(): called as each reference seed and rung is done.
     before_run(study, rungs, reads): called once every rung's scene has validated and before
         anything renders; reads are (what, path) of every file the study reads.

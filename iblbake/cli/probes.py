@@ -74,14 +74,22 @@ def probes_command(scene_path, out_dir, overrides, cache_dir, force, device, qui
     summary = {"scene": sc.source, "output": str(out), "files": names, "cached": cached, "device": vol.device,
                "grid": man["grid"], "representation": man["representation"], "states": man["states"],
                "rays_traced": r["rays_traced"], "bake_s": r["seconds"], "relocated": r["relocated"],
-               "inside_geometry": r.get("inside_geometry", 0), "outside_camera_room": r.get("outside_camera_room", 0)}
+               "inside_geometry": r.get("inside_geometry", 0), "outside_camera_room": r.get("outside_camera_room", 0),
+               "lights": len(man["lights"])}
     if removed:
         summary["removed"] = removed
     nx, ny, nz = man["grid"]["counts"]
     con.result(summary, f"wrote {out}/ ({nx}x{ny}x{nz} probes, {man['representation']}, "
                         f"{man['states']['inactive']} inactive, {r['relocated']} relocated; "
                         f"{r['rays_traced']} rays in {r['seconds']:.2f} s{' (cached)' if cached else ''} "
-                        f"on {vol.device})")
+                        f"on {vol.device}){lights_said(man['lights'])}")
+
+
+def lights_said(lights: list) -> str:
+    """The lights extracted from the panorama, which an engine cannot know of but from probes.json."""
+    n = sum(not lt["source"].startswith("lights.") for lt in lights)
+    return f"; {n} light{'s' if n != 1 else ''} extracted from the panorama, to draw per pixel: probes.json's lights" \
+        if n else ""
 
 
 def _remove_stale(out: Path, names: list) -> list:

@@ -79,11 +79,15 @@ def mean_errors(got_mean, ref_mean) -> dict:
     """How far a region's mean colour is from the truth's, in absolute terms (issue 59): `ratio`
     of their luminances (15 is 15x too bright), `channel` the worst channel's |difference| over
     the truth's mean channel (a colour shift, a red wall turned blue), `absolute` the larger of
-    |ratio - 1| and channel: what a bound on a region reads."""
+    |ratio - 1| and channel: what a bound on a region reads. `tint`: the channel's figure once the
+    luminances match, the colour shift alone: a saturated colour's channel error is its
+    luminance error times its largest channel over its mean (a sphere of [0.8, 0.15, 0.1] 10% too
+    bright: channel 22%, tint 0)."""
     g, r = np.asarray(got_mean, np.float64), np.asarray(ref_mean, np.float64)
     ratio = float(luminance(g) / max(luminance(r), 1e-30))
     channel = float(np.abs(g - r).max() / max(r.mean(), 1e-30))
-    return {"ratio": ratio, "channel": channel, "absolute": max(abs(ratio - 1.0), channel)}
+    tint = float(np.abs(g / max(ratio, 1e-30) - r).max() / max(r.mean(), 1e-30))
+    return {"ratio": ratio, "channel": channel, "tint": tint, "absolute": max(abs(ratio - 1.0), channel)}
 
 
 def region_absolute(got, ref, mask, regions, min_pixels: int = 1) -> dict:

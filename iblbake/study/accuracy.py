@@ -96,7 +96,8 @@ class Study:
         self.name = scene_path.source if isinstance(scene_path, scene_load.Scene) else scene_path
         self.names = {"max_side": "--max-side", "overrides": "--set", **(names or {})}
         self.rt, self.bakes = runtime, bakes
-        self.warn = warn or (lambda _m: None)
+        self._tell = warn or (lambda _m: None)
+        self._said: set = set()            # what was said since the rung began (run_rung)
         self.progress = progress or (lambda *_: None)
         self.scene = scene_load.load_any(scene_path, overrides, ["study.png"])
         self.base = base_values(self.scene, settings)
@@ -113,6 +114,14 @@ class Study:
         self._objects = None
         self._normals = None
         self.times = {"reference_s": 0.0, "rungs_s": 0.0, "bakes_s": 0.0}
+
+    def warn(self, message: str) -> None:
+        """Say `message` once per rung: a rung renders twice or more (a warm-up, its repeats, the
+        diffuse term alone), and each render said the panorama's chromaticities and the probes'
+        share outside their volume again."""
+        if message not in self._said:
+            self._said.add(message)
+            self._tell(message)
 
     def load(self, values, origin="ladder"):
         return scene_load.load_any(self.path, self.overrides, ["study.png"], values=self.base + values, origin=origin)
@@ -301,6 +310,7 @@ class Study:
         reference); frame = median of the whole render."""
         from iblbake.render import lighting_passes, plan, render
 
+        self._said = set()
         sc = self.load(self.rung_values(rung))
         lighting_names = set(lighting_passes(plan(sc)))
         t0 = time.perf_counter()

@@ -29,7 +29,8 @@ import numpy as np
 
 from iblbake.errors import IblbakeError
 from iblbake.render.probes.dilate import dilate, dilate_values
-from iblbake.render.probes.files import FILES, FORMAT, VERSION, data_texture, load, manifest, read_manifest, save
+from iblbake.render.probes.files import (FILES, FORMAT, VERSION, data_texture, light_entries, load, manifest,
+                                         read_manifest, save)
 from iblbake.render.probes.glsl import SH_GLSL, SPECULAR_TABLES, basis_glsl, glsl
 from iblbake.render.probes.grid import (AUTO_MAX_PROBES, DEFAULT_LONGEST, MAX_PROBES, SCALE_RAYS, Grid, auto_step,
                                         axis_counts, grid_of, probe_bytes, scene_bounds)
@@ -47,7 +48,7 @@ __all__ = ["ACTIVE", "AUTO_MAX_PROBES", "BACKFACE_BLEND_LIMIT", "DEFAULT_LONGEST
            "RELOCATION_PASSES", "SAMPLING_KEYS", "SCALE_RAYS", "SH_GLSL", "SPECULAR_TABLES", "SURFACE_RAYS", "VERSION",
            "Grid", "Tracer", "Volume", "atlas", "auto_step", "bake", "bake_settings", "basis_glsl", "basis_of",
            "basis_options", "behind_surfaces", "beyond_bounds", "classify", "data_texture", "dilate", "dilate_values",
-           "glsl", "grid_of", "inside_geometry", "load",
+           "glsl", "grid_of", "inside_geometry", "light_entries", "load",
            "manifest", "off_surfaces", "outside_camera_rooms", "outside_sealed_room", "placement_warnings",
            "probe_bytes", "project", "random_rotation", "ray_directions", "read_manifest", "relocate", "sampled",
            "save", "scaled_grid", "scene_bounds", "spherical_fibonacci", "switch_off", "trace_defines", "volume_dict",

@@ -21,9 +21,40 @@ VERSION = 1
 FILES = {n: b.file for n, b in PROBE_BASES.items()}      # each probe basis's file (core/bases/probes.py)
 
 
-def manifest(volume: dict) -> dict:
+LIGHTS_CONVENTION = (
+    "the lights whose direct light an engine draws per pixel, as the frame does: the probes' paths add each at "
+    "every vertex they meet (its bounce is in the probes), never along their own first ray, so neither the scene's "
+    "lights (source lights.N) nor those extracted from the panorama (environment.sun: extract; the panorama the "
+    "probes saw lacks them) are in the probes' direct light. Each as the scene's lights.N: directional.direction "
+    "the direction the light travels (world frame, environment.rotation_y applied), color linear RGB of luminance "
+    "1, illuminance the E a surface facing it receives (environment.intensity applied; the probes' units), "
+    "angular_diameter in degrees (the disk of solid_angle_sr it came from: the soft shadows' penumbra); "
+    "irradiance = color x illuminance per channel; shadows hard, soft (over the disk) or none")
+
+
+def light_entries(scene, suns) -> list:
+    """probes.json's `lights` (LIGHTS_CONVENTION): the frame's lights (device_scene.scene_lights:
+    the scene's, then those extracted from the panorama, `suns`, Bakes.sun), each with its source,
+    and a directional one with its irradiance per channel and its disk's solid angle."""
+    from iblbake.render.device_scene import scene_lights
+
+    own = len(scene.data["lights"])
+    out = []
+    for k, lt in enumerate(scene_lights(scene, suns)):
+        source = f"lights.{k}" if k < own else f"environment.sun: extract ({k - own + 1} of {len(suns)}, brightest first)"
+        entry = {"source": source, **lt}
+        d = lt.get("directional")
+        if d:
+            entry["irradiance"] = [c * d["illuminance"] for c in d["color"]]
+            entry["solid_angle_sr"] = 2 * math.pi * (1 - math.cos(math.radians(d["angular_diameter"]) / 2))
+        out.append(entry)
+    return out
+
+
+def manifest(volume: dict, lights: list = ()) -> dict:
     """The manifest of a sampled volume's files: the grid, the representation, how to sample it
-    and every convention the files are read with, each probe's state."""
+    and every convention the files are read with, each probe's state; `lights` (light_entries)
+    the lights an engine adds."""
     g, s, basis = volume["grid"], volume["settings"], basis_of(volume)
     states = volume["data"][:, 3].astype(int)
     return {
@@ -50,8 +81,10 @@ def manifest(volume: dict) -> dict:
             "distance": "R: mean of min(|t|, 1.5 |spacing|), G: mean of its square, weights cos^distance_exponent",
             "probe_data": "RGBA, texel (index % (nx * ny), index / (nx * ny)): offset in units of spacing, "
                           "A = state (0 active, 1 inactive), as RTXGI's probe data texture",
+            "lights": LIGHTS_CONVENTION,
         },
         "report": volume["report"],
+        "lights": list(lights),
         **basis.manifest(volume),
     }
 

@@ -3,6 +3,8 @@ does, the grid and settings baked in (a directional basis through its own GLSL, 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from iblbake.core.bases.probes import PROBE_BASES
@@ -41,6 +43,31 @@ def record_constants(volume: dict) -> str:
     return "\n".join(rows)
 
 
+def light_constants(lights: list) -> str:
+    """The directional lights of probes.json's `lights` (files.light_entries) as GLSL constants: what
+    an engine draws per pixel besides the probes (the panorama's extracted sun and lamps, which it
+    cannot know of otherwise); point and spot lights are the scene's own, listed in probes.json."""
+    sun = [lt for lt in lights if "directional" in lt]
+    n = len(sun)
+    head = (f"// + the {n} directional lights of probes.json's lights, drawn per pixel with their shadows (the probes\n"
+            f"// hold their bounce, not their direct light): diffuse += albedo / PI * PROBE_LIGHT_IRRADIANCE[i] *\n"
+            f"// max(dot(N, PROBE_LIGHT_TO[i]), 0.0) * shadow (a disk of PROBE_LIGHT_SIN_RADIUS[i], the sine of its\n"
+            f"// angular radius); PROBE_LIGHT_TO: unit, world frame, towards the light (the arrays only where\n"
+            f"// PROBE_LIGHT_COUNT > 0: guard a loop over them with #if)\n#define PROBE_LIGHT_COUNT {n}")
+    if not n:
+        return head
+
+    def vec3s(rows):
+        return ", ".join("vec3(" + ", ".join(f"{x:.9g}" for x in r) + ")" for r in rows)
+    to = [[-x / math.sqrt(sum(y * y for y in lt["directional"]["direction"])) for x in lt["directional"]["direction"]]
+          for lt in sun]
+    sines = ", ".join(f"{math.sin(math.radians(lt['directional']['angular_diameter']) / 2):.9g}" for lt in sun)
+    sources = "".join(f"\n// [{k}] {lt['source']}, shadows {lt['shadows']}" for k, lt in enumerate(sun))
+    return (f"{head}{sources}\nconst vec3 PROBE_LIGHT_TO[{n}] = vec3[{n}]({vec3s(to)});\n"
+            f"const vec3 PROBE_LIGHT_IRRADIANCE[{n}] = vec3[{n}]({vec3s(lt['irradiance'] for lt in sun)});\n"
+            f"const float PROBE_LIGHT_SIN_RADIUS[{n}] = float[{n}]({sines});")
+
+
 def glsl(volume: dict, man: dict) -> str:
     """A GLSL function sampling the written files as kernels/probes.h does (the hardware's bilinear
     filter in place of its reads), the volume's grid and settings baked in."""
@@ -61,6 +88,7 @@ def glsl(volume: dict, man: dict) -> str:
 // diffuse = albedo / PI * mix(skyIrradiance(N), probeIrradiance(P, N, V), probeVolumeWeight(P)):
 // world position, unit shading normal, unit vector towards the viewer; the sky's irradiance (say
 // `iblbake sh --glsl`'s shIrradiance) takes over outside the volume.{SPECULAR_HELP if spec else ""}
+{light_constants(man.get("lights", []))}
 #define PROBES_SH {int("PROBES_SH" in flags)}
 #define PROBES_BASIS {int("PROBES_BASIS" in flags)}
 #define PROBES_SPECULAR {int(bool(spec))}

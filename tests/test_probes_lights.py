@@ -1,0 +1,90 @@
+"""probes.json's `lights` (render/probes/files.py light_entries): the lights an engine draws per
+pixel beside the probes, above all those extracted from the panorama (`environment.sun: extract`),
+which the probes' paths count at every vertex but an engine loading the files could not know of;
+probes.glsl's constants of the directional ones; each reflection probe's settings, `taps` too."""
+
+import json
+import math
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+import iblbake
+from iblbake.render import render
+from iblbake.scene import pack
+from tests.helpers import load_scene, run_cli
+
+
+def lit_scene(folder, studio):
+    """A sphere on a floor under studio, its four lamps extracted (the panorama turned 30 degrees,
+    twice as bright), a point light of the scene's own, a reflection probe read in 16 taps."""
+    return load_scene(folder, "lit", {
+        "camera": {"perspective": {"position": [0, 1, 3], "look_at": [0, 0.5, 0]}, "resolution": [16, 12]},
+        "environment": {"path": str(studio), "sun": "extract", "sun_lights": 4, "sun_shadows": "soft",
+                        "intensity": 2, "rotation_y": 30},
+        "materials": {"m": {"base_color": [0.8, 0.8, 0.8], "specular": 0}},
+        "objects": [{"plane": {"point": [0, 0, 0], "size": 4}, "material": "m"},
+                    {"sphere": {"center": [0, 0.5, 0], "radius": 0.5}, "material": "m"}],
+        "lights": [{"point": {"position": [1, 2, 1], "intensity": 3}}],
+        "probes": {"counts": [2, 2, 2], "rays": 64},
+        "reflection_probes": [{"position": [0, 0.5, 1.5], "min": [-2, 0, -2], "max": [2, 2, 2], "size": 8,
+                               "samples": 1, "taps": 16}],
+        "effects": {"diffuse": "probes", "specular": "off"}})
+
+
+def test_probes_json_lists_the_lights_the_frame_draws(tmp_path, panoramas, rt):
+    """A new user's trial: probes.json did not list the lights extracted from the panorama, so an
+    engine loading the volume lit by `sun: extract` lacked their direct light (the probes hold their
+    bounce only). Read back from the manifest's JSON, the lights are the frame's: the scene's point
+    light, then the four lamps the frame's lights pass reports (its direction in the world frame,
+    the illuminance times environment.intensity, colour, disk), and their records (what the
+    kernels read) rebuild from the entries alone; each lamp's irradiance per channel and solid
+    angle; probes.glsl's constants compile; the reflection probe's taps are listed."""
+    sc = lit_scene(tmp_path, panoramas["studio"])
+    vol = iblbake.bake_probes(sc, cache=tmp_path / "cache")
+    man = json.loads(json.dumps(vol.manifest))
+    lights = man["lights"]
+    frame = render(sc, runtime=rt, cache_root=tmp_path / "cache")
+    passed = next(p for p in frame.report["passes"] if p["name"] == "lights")
+    extracted = [passed["sun"], *passed["lamps"]]
+    assert len(extracted) == 4 and len(lights) == 5 and passed["lights"] == 5
+    assert lights[0]["source"] == "lights.0" and lights[0]["point"]["intensity"] == 3
+    for k, (got, said) in enumerate(zip(lights[1:], extracted)):
+        d = got["directional"]
+        assert got["source"].startswith(f"environment.sun: extract ({k + 1} of 4") and got["shadows"] == "soft"
+        assert np.allclose(d["direction"], said["light_direction_world"], atol=1e-6)
+        assert d["illuminance"] == pytest.approx(2 * said["illuminance"], rel=1e-9)
+        assert np.allclose(d["color"], said["color"], atol=1e-6)
+        assert d["angular_diameter"] == pytest.approx(said["angular_diameter_deg"], abs=1e-4)
+        assert np.allclose(got["irradiance"], np.multiply(d["color"], d["illuminance"]), rtol=1e-12)
+        half = math.radians(d["angular_diameter"]) / 2
+        assert got["solid_angle_sr"] == pytest.approx(2 * math.pi * (1 - math.cos(half)), rel=1e-12)
+    # the records the frame's kernels read, from the frame's own list and from the entries alone
+    from iblbake.render.device_scene import scene_lights
+    from iblbake.render.bakes import Bakes
+    bakes = Bakes(tmp_path / "cache")
+    frame_lights = scene_lights(sc, bakes.sun(sc.data["environment"]))
+    rebuilt = [{k: v for k, v in lt.items() if k not in ("source", "irradiance", "solid_angle_sr")} for lt in lights]
+    assert np.allclose(pack.light_records(rebuilt), pack.light_records(frame_lights), rtol=1e-6, atol=1e-7)
+    assert man["reflection_probes"][0]["taps"] == 16
+    # the command writes the same list, and says how many lights it found in the panorama
+    r = run_cli("probes", sc.source, "-o", tmp_path / "out", "--cache", tmp_path / "cache")
+    assert r.returncode == 0 and "; 4 lights extracted from the panorama, to draw per pixel" in r.stdout, r.stdout + r.stderr
+    assert json.loads((tmp_path / "out" / "probes.json").read_text())["lights"] == lights
+    assert "lights" in man["conventions"]
+    src = vol.glsl()
+    assert "#define PROBE_LIGHT_COUNT 4" in src
+    to = src.split("const vec3 PROBE_LIGHT_TO[4] = vec3[4](vec3(")[1].split(")")[0]
+    assert np.allclose([float(x) for x in to.split(",")], -np.asarray(lights[1]["directional"]["direction"]), atol=1e-8)
+    if shutil.which("glslangValidator") is None:
+        pytest.skip("glslangValidator not installed (Debian's glslang-tools; make readers installs it)")
+    shader = tmp_path / "probes.frag"
+    shader.write_text("#version 330 core\n" + src + "\nin vec3 P;\nin vec3 N;\nin vec3 V;\nout vec4 color;\n"
+                      "void main() { vec3 e = probeIrradiance(P, normalize(N), normalize(V));\n"
+                      "  for (int i = 0; i < PROBE_LIGHT_COUNT; ++i)\n"
+                      "    e += PROBE_LIGHT_IRRADIANCE[i] * max(dot(normalize(N), PROBE_LIGHT_TO[i]), 0.0)"
+                      " * PROBE_LIGHT_SIN_RADIUS[i];\n  color = vec4(e, 1.0); }\n")
+    p = subprocess.run(["glslangValidator", str(shader)], capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0, p.stdout + p.stderr
