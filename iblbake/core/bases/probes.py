@@ -85,8 +85,9 @@ class ProbeBasis:
 
     def project_rays(self, lit, front, blends, dirs, opts: dict):
         """Each probe's coefficients (probes, floats, 3) from its rays' radiance lit (probes, rays, 3),
-        back faces black (front: 1 where a ray met a front face or nothing), dirs (rays, 3); 0 for a
-        probe that blends none (blends False)."""
+        back faces black (front: 1 where a ray met a front face or nothing), dirs (rays, 3) or each
+        probe's own (probes, rays, 3) (a lightmap's texels); 0 for a probe that blends none (blends
+        False)."""
         raise NotImplementedError
 
     def irradiance_at(self, irr, index, normals, opts: dict) -> np.ndarray:
@@ -133,10 +134,10 @@ class SphericalHarmonics(ProbeBasis):
     def project_rays(self, lit, front, blends, dirs, opts):
         """The least-squares L2 fit of the front rays' radiance (a field in the span, a uniform sky,
         is exact), convolved with the clamped cosine."""
-        p, r = front.shape
-        y = core_sh.sh_basis(dirs, 3)                                  # (rays, 9)
-        a = np.einsum("pr,rk,rj->pkj", front, y, y, optimize=True)
-        b = (lit.transpose(0, 2, 1).reshape(p * 3, r) @ y).reshape(p, 3, 9).transpose(0, 2, 1)
+        y = core_sh.sh_basis(dirs, 3)               # (rays, 9), or each probe's own (probes, rays, 9)
+        per = "p" if y.ndim == 3 else ""
+        a = np.einsum(f"pr,{per}rk,{per}rj->pkj", front, y, y, optimize=True)
+        b = np.einsum(f"prc,{per}rk->pkc", lit, y, optimize=True)
         a[~blends] = np.eye(9)
         coeffs = np.linalg.solve(a, b) * core_sh.ahat(3)[None, :, None]
         return np.where(blends[:, None, None], coeffs, 0.0)

@@ -1,0 +1,85 @@
+"""What a lightmap texel keeps of its rays (`lightmap.basis`): the non-directional irradiance, the
+L1 SH with its reading at the texel's normal made exact (sh_l1), or any coefficient basis of the
+irradiance probes' registry (core/bases/probes.py PROBE_BASES: L2 SH, L1 Geomerics, ZH3, SG,
+ambient dice), fitted by that basis's own project_rays and read by its own irradiance_at: a texel
+is a probe with a hemisphere of rays. The octahedral atlas is left out (a tile of n x n texels a
+texel). Per texel, rays uniform over its hemisphere, weight w = 2 pi / samples a ray:
+  irradiance  E(n) = sum w L cos (RGB)
+  sh_l1       L_lm = sum w L Y_lm, then L_00 moved so that the reading at the texel's normal is its
+              E (the linear L1 reading weighs a direction by 1/4 + cos/2, not max(cos, 0): light met
+              head-on is read 25% low; Unity's directional lightmaps keep irradiance + direction)
+  a registry basis: the lower hemisphere, behind the surface, where no light comes from, enters its
+              fit as black: each ray's mirror image through the tangent plane with radiance 0, so the
+              rays share the whole sphere equally as the probes' fits expect (BakingLab's SH
+              lightmaps integrate the hemisphere's samples with the lower half zero). The
+              irradiance fits (SG's and ambient dice's default) then fit the irradiance over every
+              normal of the sphere, those into the surface (where it falls to 0) included.
+docs/manual.md 'Lightmaps' has each basis's error at normals tilted off the texel's."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from iblbake.core import sh
+from iblbake.core.bases.probes import PROBE_BASES
+from iblbake.scene.schema import LIGHTMAP_BASES as NAMES
+
+OWN = NAMES[:2]         # irradiance, sh_l1: this module's; the rest the registry's
+CHUNK = 256             # texels projected at once (the registry's fits hold texels x 2 samples x floats)
+
+
+def options(name: str, settings: dict) -> dict:
+    """The basis's options from a lightmap section (PROBE_BASES' keys: sg_lobes, sg_fit, ad_fit)."""
+    return PROBE_BASES[name].options(settings) if name not in OWN else {}
+
+
+def floats(name: str, opts: dict) -> int:
+    """RGB coefficients a texel keeps."""
+    return {"irradiance": 1, "sh_l1": 4}[name] if name in OWN else PROBE_BASES[name].floats(opts)
+
+
+def project(name: str, radiance, dirs, normals, opts: dict):
+    """(E (k, 3), the basis's coefficients (k, floats, 3)) of texels from their rays' radiance
+    (k, s, 3) along dirs (k, s, 3) over the hemisphere of normals (k, 3), uniform in solid angle."""
+    w = 2 * math.pi / radiance.shape[1]
+    e = w * np.einsum("ksc,ksx,kx->kc", radiance, dirs, normals)
+    if name == "irradiance":
+        return e, e[:, None]
+    if name == "sh_l1":
+        return e, _sh_l1(radiance, dirs, normals, e)
+    basis = PROBE_BASES[name]
+    out = np.empty((len(e), basis.floats(opts), 3))
+    for a in range(0, len(e), CHUNK):
+        r, d, n = radiance[a:a + CHUNK], dirs[a:a + CHUNK], normals[a:a + CHUNK]
+        mirror = d - 2 * np.einsum("ksx,kx->ks", d, n)[..., None] * n[:, None]
+        lit = np.concatenate([r, np.zeros_like(r)], 1)
+        out[a:a + CHUNK] = basis.project_rays(lit, np.ones(lit.shape[:2]), np.ones(len(r), bool),
+                                              np.concatenate([d, mirror], 1), opts)
+    return e, out
+
+
+def _sh_l1(radiance, dirs, normals, e):
+    """The L1 SH of the radiance over the hemisphere, L_00 moved to read E at the normal."""
+    coeffs = 2 * math.pi / radiance.shape[1] * np.einsum("ksc,ksj->kjc", radiance, sh.sh_basis(dirs, 2))
+    linear = np.einsum("kj,kjc->kc", sh.sh_basis(normals, 2), coeffs * sh.ahat(2)[:, None])
+    coeffs[:, 0] += (e - linear) / (math.pi * sh.sh_basis(normals[:1], 2)[0, 0])
+    return coeffs
+
+
+def sh_irradiance(coeffs, normals):
+    """E at unit normals (..., 3) from the L1 SH of the radiance (..., 4, 3) (clamped at 0)."""
+    e = coeffs * sh.ahat(2)[:, None]
+    return np.maximum(0.0, np.einsum("...j,...jc->...c", sh.sh_basis(normals, 2), e))
+
+
+def irradiance(name: str, coeffs, normals, opts: dict) -> np.ndarray:
+    """E (n, 3) at unit normals (n, 3) from each point's coefficients (n, floats, 3), float64,
+    clamped at 0."""
+    coeffs = np.asarray(coeffs, np.float64)
+    if name == "irradiance":
+        return np.maximum(0.0, coeffs[:, 0])
+    if name == "sh_l1":
+        return sh_irradiance(coeffs, normals)
+    return np.maximum(0.0, PROBE_BASES[name].irradiance_at(coeffs, np.arange(len(coeffs)), normals, opts))
