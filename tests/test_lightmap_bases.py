@@ -147,3 +147,135 @@ def test_a_basis_the_bake_does_not_hold_is_refused(tmp_path, white):
     assert "\n" not in str(err.value)
     with pytest.raises(InputError, match=r"lightmap.basis"):
         scene(tmp_path, white, PLANE, {"m": LAMBERT}, name="bad", basis="octahedral")
+
+
+def cached(sc, folder, warn=None):
+    from iblbake.device.runtime import Runtime
+    from iblbake.render.bakes import Bakes
+    from iblbake.render.units import Job
+    return store.baked(Job(sc, Runtime(), Bakes(folder / "cache"), warn=warn) if warn else
+                       Job(sc, Runtime(), Bakes(folder / "cache")))
+
+
+def entry_of(folder):
+    (entry,) = [p for p in (folder / "cache").iterdir() if p.name.startswith("lightmap-")]
+    return entry
+
+
+def test_entry_of_any_basis_read_back(tmp_path, white):
+    """An SG12 lightmap through the store: the entry read back holds the basis, its options and its
+    coefficients (float32 of the bake's); the second bake comes from the store."""
+    sc = scene(tmp_path, white, PLANE, {"m": LAMBERT}, basis="sg", sg_lobes=12)
+    lm, was = cached(sc, tmp_path)
+    again, was_again = cached(sc, tmp_path)
+    assert not was and was_again
+    assert again["basis"] == "sg" and again["options"] == {"sg_lobes": 12, "sg_fit": "irradiance"}
+    assert again["sg"].shape[2:] == (12, 3) and np.array_equal(again["sg"], lm["sg"])
+    fresh = lightmaps.bake(job_of(sc, tmp_path), sc.data["lightmap"])
+    assert np.abs(again["sg"] - fresh["sg"]).max() < 1e-6 * np.abs(fresh["sg"]).max()
+
+
+def _rehash(entry, name):
+    """The manifest made to match a file changed by hand (its hash, size and time): the store's own
+    check passes it, so only load() stands between it and the pixels."""
+    from iblbake.bake import cache
+    from iblbake.io.images import file_sha256
+    mp = entry / cache.MANIFEST
+    man = json.loads(mp.read_text())
+    for f in man["files"]:
+        if f["name"] == name:
+            st = (entry / name).stat()
+            f["sha256"], f["bytes"], f["mtime_ns"] = file_sha256(entry / name), st.st_size, st.st_mtime_ns
+    mp.write_text(json.dumps(man))
+
+
+DAMAGE = {
+    "truncated": ("irradiance.npy", lambda f: f.write_bytes(f.read_bytes()[:100])),
+    "wrong shape": ("basis.npy", lambda f: np.save(f, np.zeros((3, 4, 9, 3), np.float32))),
+    "nan": ("basis.npy", lambda f: np.save(f, np.where(np.arange(np.load(f).size).reshape(np.load(f).shape) == 5,
+                                                       np.nan, np.load(f)).astype(np.float32))),
+    "wrong dtype": ("valid.npy", lambda f: np.save(f, np.load(f).astype(np.float32))),
+    "negative": ("irradiance.npy", lambda f: np.save(f, -np.load(f))),
+    "uv off the atlas": ("uv.npy", lambda f: np.save(f, np.load(f) + 1e4)),
+    "header bits": ("corners.npy", lambda f: f.write_bytes(f.read_bytes()[:20] + b"\xff" + f.read_bytes()[21:])),
+}
+
+
+@pytest.mark.parametrize("damage", DAMAGE)
+def test_corrupt_entry_baked_again(damage, tmp_path, white):
+    """A cached entry whose file was changed and its manifest made to match (so the store's hash check
+    passes it): load() refuses it, the store says so in one line and bakes it again: the same atlases
+    as the first bake, never the damaged ones."""
+    sc = scene(tmp_path, white, PLANE, {"m": LAMBERT}, basis="ambient_dice")
+    first, _ = cached(sc, tmp_path)
+    entry = entry_of(tmp_path)
+    name, hurt = DAMAGE[damage]
+    hurt(entry / name)
+    _rehash(entry, name)
+    said = []
+    again, was = cached(sc, tmp_path, said.append)
+    assert not was and len(said) == 1 and "not a lightmap entry" in said[0] and "baking it again" in said[0]
+    assert "\n" not in said[0] and name.split(".")[0] in said[0]
+    assert np.array_equal(again["ambient_dice"], first["ambient_dice"])
+    assert np.array_equal(again["irradiance"], first["irradiance"])
+
+
+def _mutated_manifest(m, rng):
+    junk = [None, -1, 0, 1e308, float("nan"), "x", [], [1, 2], {"a": 1}, True, "octahedral", {"sg_lobes": 7}]
+    key = ["width", "height", "basis", "options", "uv_sources", "report"][rng.integers(6)]
+    m[key] = junk[rng.integers(len(junk))]
+
+
+def _mutated_array(case, rng):
+    name = ["irradiance", "basis", "valid", "corners", "normals", "objects", "uv", "spheres"][rng.integers(8)]
+    f = case / f"{name}.npy"
+    kind = rng.integers(5)
+    if kind == 0:
+        b = bytearray(f.read_bytes())
+        for _ in range(8):
+            b[rng.integers(len(b))] = rng.integers(256)
+        f.write_bytes(bytes(b))
+    elif kind == 1:
+        f.write_bytes(f.read_bytes()[:rng.integers(0, 300)])
+    else:
+        a = np.load(f)
+        if kind == 2:
+            a = rng.normal(size=tuple(int(rng.integers(1, 9)) for _ in range(int(rng.integers(1, 5))))).astype(a.dtype)
+        elif a.dtype.kind == "f":
+            a = a.copy()
+            a.flat[rng.integers(a.size)] = [np.nan, np.inf, -1e30][rng.integers(3)] if kind == 3 else -a.flat[0] - 1
+        else:
+            a = a.astype(np.float64)
+        np.save(f, a)
+
+
+def test_lightmap_entries_fuzzed(tmp_path, white, stress):
+    """Mutated manifests (values of the wrong type, range or basis) and mutated arrays (bytes flipped or
+    cut, other shapes and dtypes, NaN, infinities, negative values) of an SG entry: each is read back
+    whole or refused with an IblbakeError of one line naming the entry; what is read gives finite,
+    non-negative irradiance at its own texels (read.irradiance); nothing else escapes."""
+    sc = scene(tmp_path, white, PLANE, {"m": LAMBERT}, basis="sg")
+    lm, _ = cached(sc, tmp_path)
+    entry = entry_of(tmp_path)
+    man = json.loads((entry / "manifest.json").read_text())
+    tx = lightmaps.bake(job_of(sc, tmp_path), sc.data["lightmap"])["texels"]
+    rng = np.random.default_rng(5)
+    refused, n = 0, stress_scale(150, 1500)
+    for i in range(n):
+        case = tmp_path / f"case{i}"
+        shutil.copytree(entry, case)
+        m = json.loads(json.dumps(man))
+        _mutated_manifest(m, rng) if i % 3 == 0 else _mutated_array(case, rng)
+        try:
+            got = store.load(case, m)
+        except IblbakeError as e:
+            assert "\n" not in str(e) and str(case) in str(e), str(e)
+            refused += 1
+            continue
+        finally:
+            shutil.rmtree(case)
+        e, found = read.irradiance(got, np.zeros(len(tx.index), int), tx.position, tx.normal)
+        assert np.isfinite(e).all() and (e >= 0).all() and np.isfinite(got["irradiance"]).all()
+    stress.count("inputs fuzzed", n)
+    print(f"{refused} of {n} refused")
+    assert refused > n // 2

@@ -10,6 +10,7 @@ again: bake/cache.py get_checked)."""
 from __future__ import annotations
 
 from pathlib import Path
+from tokenize import TokenError
 
 import numpy as np
 
@@ -57,7 +58,10 @@ def save(lm: dict, folder: Path) -> list:
 
 def _read(folder: Path, name: str, shape: tuple) -> np.ndarray:
     """One array of the entry, of the dtype and shape its name asks (None in shape: any length)."""
-    a = np.load(folder / f"{name}.npy", mmap_mode="r", allow_pickle=False)     # no header's size allocated
+    try:
+        a = np.load(folder / f"{name}.npy", mmap_mode="r", allow_pickle=False)     # no header's size allocated
+    except (OSError, EOFError, ValueError, SyntaxError, TokenError, TypeError, KeyError, MemoryError) as e:
+        raise ValueError(f"{name}.npy: {e}") from None       # numpy's header parser: a flipped byte gives any
     if a.dtype != np.dtype(INT.get(name, np.float32)) or len(a.shape) != len(shape) or \
             any(want is not None and got != want for got, want in zip(a.shape, shape)):
         raise ValueError(f"{name}.npy holds {a.dtype} {a.shape}, not {np.dtype(INT.get(name, np.float32))} {shape}")
@@ -97,13 +101,14 @@ def load(folder: Path, man: dict) -> dict:
              "basis": _read(folder, "basis", (h, w, bases.floats(name, opts), 3))}
         a["objects"] = _read(folder, "objects", (None,))
         a.update({n: _read(folder, n, (len(a["objects"]), *tail)) for n, tail in LAYOUT.items() if n != "objects"})
-        if (a["irradiance"] < 0).any() or (a["objects"] < 0).any():
-            raise ValueError("negative irradiance or object indices")
-        if (a["uv"] < 0).any() or (a["uv"][..., 0] > w).any() or (a["uv"][..., 1] > h).any():
-            raise ValueError("UVs outside the atlas")
-        bad = PROBE_BASES[name].check(a["basis"].reshape(h * w, -1, 3), opts) if name in PROBE_BASES else None
-        if bad:
-            raise ValueError(bad)
+        bad = {"irradiance": "negative irradiance" if (a["irradiance"] < 0).any() else None,
+               "objects": "negative object indices" if (a["objects"] < 0).any() else None,
+               "uv": "UVs outside the atlas" if (a["uv"] < 0).any() or (a["uv"][..., 0] > w).any()
+               or (a["uv"][..., 1] > h).any() else None,
+               "basis": PROBE_BASES[name].check(a["basis"].reshape(h * w, -1, 3), opts) if name in PROBE_BASES else None}
+        for n, why in bad.items():
+            if why:
+                raise ValueError(f"{n}.npy: {why}")
     except (OSError, EOFError, KeyError, TypeError, ValueError, AttributeError) as e:
         raise IblbakeError(f"{folder}: not a lightmap entry ({' '.join(str(e).split())})") from None
     lay = Layout(w, h, *(a[n].astype(np.float64) for n in ("corners", "normals")), a["objects"],
