@@ -59,9 +59,9 @@ def errors(name, opts, radiance, dirs, normals):
 
 
 # measured relative RMSE (n, 30, 60 degrees) on the field of test_bases_read_the_rays_integral
-MEASURED = {"irradiance": (0.0, 0.186, 0.614), "sh_l1": (0.0, 0.083, 0.194), "sh": (0.013, 0.0087, 0.0106),
-            "l1_geomerics": (0.081, 0.060, 0.036), "zh3": (0.022, 0.033, 0.047), "sg9": (0.013, 0.0083, 0.0103),
-            "sg12": (0.011, 0.0079, 0.0104), "ambient_dice": (0.013, 0.0084, 0.0103)}
+MEASURED = {"irradiance": (0.0, 0.186, 0.614), "sh_l1": (0.0, 0.083, 0.194), "sh": (0.0080, 0.0077, 0.0091),
+            "l1_geomerics": (0.081, 0.060, 0.036), "zh3": (0.022, 0.033, 0.047), "sg9": (0.0080, 0.0077, 0.0092),
+            "sg12": (0.0079, 0.0067, 0.0092), "ambient_dice": (0.0079, 0.0077, 0.0092)}
 
 
 def test_bases_read_the_rays_integral():
@@ -88,6 +88,38 @@ def test_bases_read_the_rays_integral():
     for key, want in MEASURED.items():
         assert all(g <= 1.5 * w + 1e-9 for g, w in zip(got[key], want)), (key, got[key], want)
     assert all(got[k][2] < 0.1 * got["irradiance"][2] for k in ("sh", "sg9", "sg12", "ambient_dice"))
+
+
+def test_hemisphere_fit_beats_black_below():
+    """The irradiance fit over the texel's hemisphere of normals (bases.hemisphere_fitted: L2 SH, SG
+    and ambient dice fitted for the irradiance) against the same basis's fit with the lower
+    hemisphere black: at the texel's normal 0.6x its error (measured 0.008 against 0.013, the
+    field of test_bases_read_the_rays_integral), no worse at 30 and 60 degrees."""
+    from iblbake.core.bases.probes import PROBE_BASES
+    rng = np.random.default_rng(3)
+    normals = rng.normal(size=(24, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    dirs = lb.hemisphere_dirs(normals, 1024, np.arange(24), 7)
+    up = np.einsum("ksx,kx->ks", dirs, normals)
+    radiance = 1 + 6 * np.maximum(0, dirs[..., 0:1]) ** 8 - 0.7 * (up < 0.2)[..., None]
+    mirror = dirs - 2 * up[..., None] * normals[:, None]
+    for name in ("sh", "sg", "ambient_dice"):
+        o = bases.options(name, {})
+        assert bases.hemisphere_fitted(name, o)
+        black = PROBE_BASES[name].project_rays(np.concatenate([radiance, 0 * radiance], 1), np.ones((24, 2048)),
+                                               np.ones(24, bool), np.concatenate([dirs, mirror], 1), o)
+        fitted = bases.project(name, radiance, dirs, normals, o)[1]
+        errs = []
+        for c in (fitted, black):
+            e = []
+            for deg in (0, 30, 60):
+                m = [tilted(normals, deg, az) for az in np.arange(8 if deg else 1) * math.pi / 4]
+                got = np.stack([bases.irradiance(name, c, x, o) for x in m])
+                want = np.stack([reference(radiance, dirs, x) for x in m])
+                e.append(math.sqrt(((got - want) ** 2).mean()) / want.mean())
+            errs.append(e)
+        print(name, [[round(x, 4) for x in e] for e in errs])
+        assert errs[0][0] < 0.75 * errs[1][0] and errs[0][1] <= 1.05 * errs[1][1] and errs[0][2] <= 1.05 * errs[1][2]
 
 
 def scene(folder, env, objects, materials, name="lm", **lightmap):

@@ -95,6 +95,12 @@ class ProbeBasis:
         (m, 3), float64 (before the clamp at 0)."""
         raise NotImplementedError
 
+    def irradiance_columns(self, normals, opts: dict):
+        """The irradiance (..., floats) at normals (..., 3) of each unit coefficient where the
+        reading is linear in the coefficients (before its clamp at 0), else None: what a fit of
+        the irradiance over chosen normals solves with (a lightmap texel's hemisphere)."""
+        return None
+
 
 class Octahedral(ProbeBasis):
     """DDGI's octahedral irradiance: a tile of n x n texels (probes.irradiance_texels) with RTXGI's
@@ -144,6 +150,9 @@ class SphericalHarmonics(ProbeBasis):
 
     def irradiance_at(self, irr, index, normals, opts):
         return np.einsum("...k,...kc->...c", core_sh.sh_basis(normals, 3), irr[index])
+
+    def irradiance_columns(self, normals, opts):
+        return core_sh.sh_basis(normals, 3)
 
 
 class Directional(ProbeBasis):
@@ -232,6 +241,14 @@ class Directional(ProbeBasis):
     def project_rays(self, lit, front, blends, dirs, opts):
         """The basis's own fit on the rays (an equal-area set: moments 4 pi / N sum L B)."""
         return np.where(blends[:, None, None], self.m.project_rays(lit, dirs, opts), 0.0)
+
+    def irradiance_columns(self, normals, opts):
+        """Where the module's irradiance is linear (LINEAR): max(0, x) - max(0, -x) = x, so the
+        unit coefficients' readings and their negatives' give each column before the clamp."""
+        if not getattr(self.m, "LINEAR", False):
+            return None
+        eye = np.eye(self.m.floats(opts))
+        return self.m.irradiance(eye, normals, opts) - self.m.irradiance(-eye, normals, opts)
 
     def irradiance_at(self, irr, index, normals, opts):
         """The basis's own float64 irradiance, probe by probe."""

@@ -28,6 +28,7 @@ from iblbake.scene.schema import LIGHTMAP_BASES as NAMES
 
 OWN = NAMES[:2]         # irradiance, sh_l1: this module's; the rest the registry's
 CHUNK = 256             # texels projected at once (the registry's fits hold texels x 2 samples x floats)
+NORMALS = 128           # normals over a texel's hemisphere its irradiance is fitted at (hemisphere_fitted)
 
 
 def options(name: str, settings: dict) -> dict:
@@ -50,14 +51,48 @@ def project(name: str, radiance, dirs, normals, opts: dict):
     if name == "sh_l1":
         return e, _sh_l1(radiance, dirs, normals, e)
     basis = PROBE_BASES[name]
+    hemi = hemisphere_fitted(name, opts)
     out = np.empty((len(e), basis.floats(opts), 3))
     for a in range(0, len(e), CHUNK):
         r, d, n = radiance[a:a + CHUNK], dirs[a:a + CHUNK], normals[a:a + CHUNK]
+        if hemi:
+            out[a:a + CHUNK] = _hemisphere_fit(basis, r, d, n, opts)
+            continue
         mirror = d - 2 * np.einsum("ksx,kx->ks", d, n)[..., None] * n[:, None]
         lit = np.concatenate([r, np.zeros_like(r)], 1)
         out[a:a + CHUNK] = basis.project_rays(lit, np.ones(lit.shape[:2]), np.ones(len(r), bool),
                                               np.concatenate([d, mirror], 1), opts)
     return e, out
+
+
+def hemisphere_fitted(name: str, opts: dict) -> bool:
+    """Whether a registry basis is fitted on the irradiance over its texel's hemisphere of normals:
+    one fitted for the irradiance (L2 SH, an `irradiance` fit) whose reading is linear."""
+    basis = PROBE_BASES[name]
+    return (not opts or "irradiance" in opts.values()) and basis.irradiance_columns(np.eye(3), opts) is not None
+
+
+def hemisphere_normals(normals) -> np.ndarray:
+    """(k, NORMALS, 3): the Fibonacci lattice's upper half about each normal (Duff's frame), equal
+    shares of the hemisphere."""
+    from iblbake.core.bases.common import fibonacci_sphere
+    from iblbake.render.lightmaps.bake import frames
+    f = fibonacci_sphere(2 * NORMALS)
+    f = f[f[:, 1] > 0]
+    t, b = frames(normals)
+    return f[:, 0, None] * t[:, None] + f[:, 2, None] * b[:, None] + f[:, 1, None] * normals[:, None]
+
+
+def _hemisphere_fit(basis, radiance, dirs, normals, opts):
+    """Least squares of the basis's irradiance (its columns, linear) against the rays' own at
+    NORMALS normals over the texel's hemisphere, the minimum-norm solution (ambient dice's columns
+    are dependent): (k, floats, 3)."""
+    nn = hemisphere_normals(normals)
+    cos = np.maximum(0.0, np.einsum("kmx,ksx->kms", nn, dirs))
+    want = 2 * math.pi / radiance.shape[1] * np.einsum("kms,ksc->kmc", cos, radiance)
+    a = basis.irradiance_columns(nn, opts)                           # (k, NORMALS, floats)
+    g = np.linalg.pinv(np.einsum("kmi,kmj->kij", a, a), rcond=1e-10, hermitian=True)
+    return np.einsum("kij,kmj,kmc->kic", g, a, want)
 
 
 def _sh_l1(radiance, dirs, normals, e):
