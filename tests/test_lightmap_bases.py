@@ -311,3 +311,14 @@ def test_lightmap_entries_fuzzed(tmp_path, white, stress):
     stress.count("inputs fuzzed", n)
     print(f"{refused} of {n} refused")
     assert refused > n // 2
+
+
+def test_key_holds_its_own_basis_options_only(tmp_path, white):
+    """The store's key: an SG option does not change an L1 SH lightmap's entry, but does an SG one's;
+    the basis itself does."""
+    def key(**lm):
+        sc = scene(tmp_path, white, PLANE, {"m": LAMBERT}, name="k", **lm)
+        return store.key(job_of(sc, tmp_path), sc.data["lightmap"])
+    assert key(basis="sh_l1") == key(basis="sh_l1", sg_lobes=12, ad_fit="nnls")
+    assert key(basis="sg") != key(basis="sg", sg_lobes=12) != key(basis="sh_l1")
+    assert key(basis="sg") == key(basis="sg", ad_fit="nnls")

@@ -22,23 +22,33 @@ INT = {"objects": np.int32, "valid": bool}                          # the rest f
 
 
 def code_hash() -> str:
+    """This package's source, the bases' registry's (core/bases: every fit a texel may take) and
+    the kernel's."""
     import importlib
     import pkgutil
 
+    from iblbake.core import bases as core_bases
     from iblbake.device.programs import source_hash
     from iblbake.render import lightmaps
     from iblbake.render.bakes import _code_hash
-    mods = [importlib.import_module(f"{lightmaps.__name__}.{m.name}") for m in sorted(
-        pkgutil.iter_modules(lightmaps.__path__), key=lambda m: m.name)]
+    mods = [importlib.import_module(f"{pkg.__name__}.{m.name}") for pkg in (lightmaps, core_bases)
+            for m in sorted(pkgutil.iter_modules(pkg.__path__), key=lambda m: m.name)]
     return _code_hash(tuple(mods), source_hash("paths/lightmap_trace.cl"))
 
 
 def key(job, settings: dict) -> str:
+    """The entry's key: the settings less the options of bases other than its own (an SG option
+    does not bake an L1 SH lightmap again)."""
     from iblbake.bake import cache
+    from iblbake.core.bases.probes import PROBE_BASES
+    from iblbake.render.lightmaps import bases
     from iblbake.render.units import light_transport
     from iblbake.scene import pack
     camera = pack.camera_vectors(job.scene.data["camera"])[0]
-    return "lightmap-" + cache.content_key({"kind": "lightmap", "v": VERSION, **light_transport(job), "settings": settings,
+    others = {k for b in PROBE_BASES.values() for k in b.option_specs} - set(
+        bases.options(settings.get("basis", "sh_l1"), settings) if settings.get("basis") in bases.NAMES else ())
+    kept = {k: v for k, v in settings.items() if k not in others}
+    return "lightmap-" + cache.content_key({"kind": "lightmap", "v": VERSION, **light_transport(job), "settings": kept,
                                             "camera": [float(x) for x in camera], "code": code_hash()})
 
 
