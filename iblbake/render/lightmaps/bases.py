@@ -8,12 +8,16 @@ texel). Per texel, rays uniform over its hemisphere, weight w = 2 pi / samples a
   sh_l1       L_lm = sum w L Y_lm, then L_00 moved so that the reading at the texel's normal is its
               E (the linear L1 reading weighs a direction by 1/4 + cos/2, not max(cos, 0): light met
               head-on is read 25% low; Unity's directional lightmaps keep irradiance + direction)
-  a registry basis: the lower hemisphere, behind the surface, where no light comes from, enters its
-              fit as black: each ray's mirror image through the tangent plane with radiance 0, so the
-              rays share the whole sphere equally as the probes' fits expect (BakingLab's SH
-              lightmaps integrate the hemisphere's samples with the lower half zero). The
-              irradiance fits (SG's and ambient dice's default) then fit the irradiance over every
-              normal of the sphere, those into the surface (where it falls to 0) included.
+  a registry basis fitted for the irradiance with a linear reading (L2 SH; SG and ambient dice
+              with their `irradiance` fit): least squares of its irradiance against the rays' own
+              at NORMALS normals over the texel's hemisphere, the only normals a lightmap is read
+              at (a normal map's); the error at the texel's normal 0.55-0.65x that of the fit
+              below on quad_room and the corridor, level at 60 degrees
+  the others (ZH3, L1 Geomerics, the radiance fits): the registry's own project_rays, the lower
+              hemisphere (behind the surface, where no light comes from) entering it as black:
+              each ray's mirror image through the tangent plane with radiance 0, so the rays share
+              the sphere equally as the probes' fits expect (BakingLab's SH lightmaps integrate
+              the lower half as zero)
 docs/manual.md 'Lightmaps' has each basis's error at normals tilted off the texel's."""
 
 from __future__ import annotations
