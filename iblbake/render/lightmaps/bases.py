@@ -11,8 +11,9 @@ texel). Per texel, rays uniform over its hemisphere, weight w = 2 pi / samples a
   a registry basis fitted for the irradiance with a linear reading (L2 SH; SG and ambient dice
               with their `irradiance` fit): least squares of its irradiance against the rays' own
               at NORMALS normals over the texel's hemisphere, the only normals a lightmap is read
-              at (a normal map's); the error at the texel's normal 0.55-0.65x that of the fit
-              below on quad_room and the corridor, level at 60 degrees
+              at (a normal map's); the error at the texel's normal 0.55-0.68x that of the fit
+              below on quad_room and the corridor (SG12 0.77x and 1.1x, better tilted), level
+              at 60 degrees
   the others (ZH3, L1 Geomerics, the radiance fits): the registry's own project_rays, the lower
               hemisphere (behind the surface, where no light comes from) entering it as black:
               each ray's mirror image through the tangent plane with radiance 0, so the rays share
