@@ -165,8 +165,8 @@ def test_plane_under_a_uniform_sky_in_every_basis(basis, tmp_path, white):
 
 
 def test_a_basis_the_bake_does_not_hold_is_refused(tmp_path, white):
-    """Reading a lightmap as a basis it was not baked in, baking an unknown basis through the API and
-    a scene asking the octahedral atlas of a texel: each one line naming lightmap.basis."""
+    """Reading a lightmap as a basis it was not baked in, baking an unknown basis or option through
+    the API and a scene asking the octahedral atlas of a texel: each one line naming its key."""
     sc = scene(tmp_path, white, PLANE, {"m": LAMBERT}, basis="sg")
     lm = lightmaps.bake(job_of(sc, tmp_path), sc.data["lightmap"])
     tx = lm["texels"]
@@ -177,6 +177,8 @@ def test_a_basis_the_bake_does_not_hold_is_refused(tmp_path, white):
     with pytest.raises(InputError, match=r"lightmap.basis: 'octahedral' is not a lightmap basis") as err:
         lightmaps.bake(job_of(sc, tmp_path), {**sc.data["lightmap"], "basis": "octahedral"})
     assert "\n" not in str(err.value)
+    with pytest.raises(InputError, match=r"lightmap.sg_lobes: 7 is not one of 5, 6, 9, 12"):
+        lightmaps.bake(job_of(sc, tmp_path), {**sc.data["lightmap"], "sg_lobes": 7})
     with pytest.raises(InputError, match=r"lightmap.basis"):
         scene(tmp_path, white, PLANE, {"m": LAMBERT}, name="bad", basis="octahedral")
 

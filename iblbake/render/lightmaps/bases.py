@@ -29,6 +29,7 @@ import numpy as np
 
 from iblbake.core import sh
 from iblbake.core.bases.probes import PROBE_BASES
+from iblbake.errors import InputError
 from iblbake.scene.schema import LIGHTMAP_BASES as NAMES
 
 OWN = NAMES[:2]         # irradiance, sh_l1: this module's; the rest the registry's
@@ -37,8 +38,16 @@ NORMALS = 128           # normals over a texel's hemisphere its irradiance is fi
 
 
 def options(name: str, settings: dict) -> dict:
-    """The basis's options from a lightmap section (PROBE_BASES' keys: sg_lobes, sg_fit, ad_fit)."""
-    return PROBE_BASES[name].options(settings) if name not in OWN else {}
+    """The basis's options from a lightmap section (PROBE_BASES' keys: sg_lobes, sg_fit, ad_fit),
+    each one of its choices (an InputError naming the key otherwise: the API's settings are not
+    the schema's)."""
+    if name in OWN:
+        return {}
+    specs, opts = PROBE_BASES[name].option_specs, PROBE_BASES[name].options(settings)
+    for k, v in opts.items():
+        if isinstance(v, bool) or v not in specs[k][0]:
+            raise InputError(f"lightmap.{k}: {v!r} is not one of {', '.join(map(str, specs[k][0]))}")
+    return opts
 
 
 def floats(name: str, opts: dict) -> int:
