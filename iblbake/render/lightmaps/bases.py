@@ -131,4 +131,8 @@ def irradiance(name: str, coeffs, normals, opts: dict) -> np.ndarray:
         return np.maximum(0.0, coeffs[:, 0])
     if name == "sh_l1":
         return sh_irradiance(coeffs, normals)
-    return np.maximum(0.0, PROBE_BASES[name].irradiance_at(coeffs, np.arange(len(coeffs)), normals, opts))
+    basis = PROBE_BASES[name]
+    cols = basis.irradiance_columns(normals, opts)          # a linear reading: every point at once
+    if cols is not None:
+        return np.maximum(0.0, np.einsum("nk,nkc->nc", cols, coeffs))
+    return np.maximum(0.0, basis.irradiance_at(coeffs, np.arange(len(coeffs)), normals, opts))
