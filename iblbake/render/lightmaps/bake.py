@@ -250,7 +250,8 @@ def bake(job, settings: dict, progress=None) -> dict:
     tracer = Tracer(job, {"bounces": settings["bounces"], "seed": settings["seed"]})
     start, moved = nudge(tracer, tx, inset(tx, lay.corners, 1.0 / density), 1.0 / density)
     samples = math.isqrt(settings["samples"]) ** 2          # whole strata
-    e, coeffs, inside = trace(LightmapTexels(tracer, start, tx.normal, samples, settings["seed"], progress, basis, opts))
+    e, coeffs, inside = trace(LightmapTexels(tracer, start, tx.normal, samples, settings["seed"], progress,
+                                             basis, opts))
     ok = inside <= REJECT
     h, w = lay.height, lay.width
     valid = np.zeros(h * w, bool)
@@ -264,7 +265,8 @@ def bake(job, settings: dict, progress=None) -> dict:
     report = {"width": w, "height": h, "texels": len(tx.index), "texels_per_unit": density,
               "samples": samples, "rays_traced": tracer.rays_traced, "moved": moved,
               "rejected_inside": int((~ok).sum()), "layout_s": round(t_layout, 4),
-              "bytes": {b: bytes_of(lay, b, opts) for b in ("irradiance", basis)}, "uv_sources": {str(k): v for k, v in lay.source.items()},
+              "bytes": {b: bytes_of(lay, b, opts) for b in ("irradiance", basis)},
+              "uv_sources": {str(k): v for k, v in lay.source.items()},
               "seconds": round(time.perf_counter() - t0, 4)}
     return {"layout": lay, "texels": tx, "irradiance": irr, basis: atlas if basis != "irradiance" else irr,
             "basis": basis, "options": opts, "valid": filled, "report": report}

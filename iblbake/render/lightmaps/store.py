@@ -115,7 +115,8 @@ def load(folder: Path, man: dict) -> dict:
                "objects": "negative object indices" if (a["objects"] < 0).any() else None,
                "uv": "UVs outside the atlas" if (a["uv"] < 0).any() or (a["uv"][..., 0] > w).any()
                or (a["uv"][..., 1] > h).any() else None,
-               "basis": PROBE_BASES[name].check(a["basis"].reshape(h * w, -1, 3), opts) if name in PROBE_BASES else None}
+               "basis": PROBE_BASES[name].check(a["basis"].reshape(h * w, -1, 3), opts)
+               if name in PROBE_BASES else None}
         for n, why in bad.items():
             if why:
                 raise ValueError(f"{n}.npy: {why}")
