@@ -15,6 +15,10 @@ from iblbake.core import bases
 from iblbake.core.bases.probes import PROBE_BASES
 from iblbake.core.conventions import wrap_degrees
 
+# what a lightmap texel can keep (render/lightmaps/bases.py): its own two, then every coefficient basis
+# of the probes' registry (not the octahedral atlas: a tile of texels a texel)
+LIGHTMAP_BASES = ("irradiance", "sh_l1", *(n for n, b in PROBE_BASES.items() if not b.atlas))
+
 # Field types. Each checks one value and returns it normalised, or raises _Bad with the reason.
 
 
@@ -477,7 +481,15 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "seed": Num(1, 0, 2**31 - 1, integer=True, doc="random seed of the rays' rotation and paths"),
     }),
     "lightmap": Section(doc="the static geometry's lightmap (iblbake.render.lightmaps: a second UV set, its texels "
-                            "baked by the path tracer as irradiance and L1 SH; docs/manual.md 'Lightmaps')", fields={
+                            "baked by the path tracer as irradiance and a directional basis; docs/manual.md "
+                            "'Lightmaps')", fields={
+        "basis": Enum(LIGHTMAP_BASES, "sh_l1",
+                      doc="what each texel keeps beside its irradiance (render/lightmaps/bases.py): `irradiance` "
+                          "(none: a non-directional lightmap), `sh_l1` (L1 SH read exactly at the texel's normal), "
+                          "or an irradiance probes' basis (core/bases/probes.py; its options the probes' keys): "
+                          + "; ".join(f"`{n}`: {b.doc}" for n, b in PROBE_BASES.items() if not b.atlas)),
+        **{k: Enum(choices, default, doc=doc + " (the lightmap's basis)") for b in PROBE_BASES.values()
+           for k, (choices, default, doc) in b.option_specs.items()},
         "texels_per_unit": Num(8.0, 0.0, lo_open=True, doc="texels per world unit along each side of a surface (the "
                                                            "atlas' density; xatlas packs the charts at it)"),
         "samples": Num(1024, 16, 1 << 16, integer=True, doc="rays per texel over its hemisphere, one path each "

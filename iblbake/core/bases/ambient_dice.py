@@ -65,6 +65,7 @@ GLSL_COEFFS, GLSL_IRRADIANCE = "AD_VALUE", "ambientDiceIrradiance"     # glsl()'
 GLSL_SPECULAR = "ambientDiceSpecularRadiance"
 GLSL_TABLE = "ambientDiceSpecularTable"          # the sampler of specular_table in glsl()
 SPECULAR = True        # specular_weights, kernels/basis_ambient_dice.h: `specular: ambient_dice`
+LINEAR = True          # irradiance() linear in the coefficients before its clamp (probes.py irradiance_columns)
 TABLE_LOG2_LO, TABLE_STEP, TABLE_ROWS, TABLE_COLS = -2.0, 0.25, 65, 129   # lambda 0.25 .. 16384
 
 

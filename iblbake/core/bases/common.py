@@ -38,10 +38,11 @@ def moments(image, lobes) -> np.ndarray:
 
 def ray_moments(values, dirs, lobes) -> np.ndarray:
     """The moments from ray samples instead of texels: values (..., R, C) of R rays along dirs
-    (R, 3) that share the sphere equally (the probes' spherical Fibonacci set), so each weighs
-    4 pi / R: b_k = 4 pi / R sum_i L_i f_k(d_i), shape (..., K, C)."""
+    (R, 3), or each probe's own (..., R, 3) (a lightmap's texels), that share the sphere equally
+    (the probes' spherical Fibonacci set), so each weighs 4 pi / R:
+    b_k = 4 pi / R sum_i L_i f_k(d_i), shape (..., K, C)."""
     f = lobes(np.asarray(dirs, np.float64))
-    return np.einsum("rk,...rc->...kc", f, np.asarray(values, np.float64), optimize=True) * (FOUR_PI / f.shape[0])
+    return np.einsum("...rk,...rc->...kc", f, np.asarray(values, np.float64), optimize=True) * (FOUR_PI / f.shape[-2])
 
 
 def fibonacci_sphere(n: int) -> np.ndarray:

@@ -85,14 +85,21 @@ class ProbeBasis:
 
     def project_rays(self, lit, front, blends, dirs, opts: dict):
         """Each probe's coefficients (probes, floats, 3) from its rays' radiance lit (probes, rays, 3),
-        back faces black (front: 1 where a ray met a front face or nothing), dirs (rays, 3); 0 for a
-        probe that blends none (blends False)."""
+        back faces black (front: 1 where a ray met a front face or nothing), dirs (rays, 3) or each
+        probe's own (probes, rays, 3) (a lightmap's texels); 0 for a probe that blends none (blends
+        False)."""
         raise NotImplementedError
 
     def irradiance_at(self, irr, index, normals, opts: dict) -> np.ndarray:
         """The twin's irradiance (m, 3) of probes index (m,) of the file's values irr at normals
         (m, 3), float64 (before the clamp at 0)."""
         raise NotImplementedError
+
+    def irradiance_columns(self, normals, opts: dict):
+        """The irradiance (..., floats) at normals (..., 3) of each unit coefficient where the
+        reading is linear in the coefficients (before its clamp at 0), else None: what a fit of
+        the irradiance over chosen normals solves with (a lightmap texel's hemisphere)."""
+        return None
 
 
 class Octahedral(ProbeBasis):
@@ -133,16 +140,19 @@ class SphericalHarmonics(ProbeBasis):
     def project_rays(self, lit, front, blends, dirs, opts):
         """The least-squares L2 fit of the front rays' radiance (a field in the span, a uniform sky,
         is exact), convolved with the clamped cosine."""
-        p, r = front.shape
-        y = core_sh.sh_basis(dirs, 3)                                  # (rays, 9)
-        a = np.einsum("pr,rk,rj->pkj", front, y, y, optimize=True)
-        b = (lit.transpose(0, 2, 1).reshape(p * 3, r) @ y).reshape(p, 3, 9).transpose(0, 2, 1)
+        y = core_sh.sh_basis(dirs, 3)               # (rays, 9), or each probe's own (probes, rays, 9)
+        per = "p" if y.ndim == 3 else ""
+        a = np.einsum(f"pr,{per}rk,{per}rj->pkj", front, y, y, optimize=True)
+        b = np.einsum(f"prc,{per}rk->pkc", lit, y, optimize=True)
         a[~blends] = np.eye(9)
         coeffs = np.linalg.solve(a, b) * core_sh.ahat(3)[None, :, None]
         return np.where(blends[:, None, None], coeffs, 0.0)
 
     def irradiance_at(self, irr, index, normals, opts):
         return np.einsum("...k,...kc->...c", core_sh.sh_basis(normals, 3), irr[index])
+
+    def irradiance_columns(self, normals, opts):
+        return core_sh.sh_basis(normals, 3)
 
 
 class Directional(ProbeBasis):
@@ -238,6 +248,14 @@ class Directional(ProbeBasis):
     def project_rays(self, lit, front, blends, dirs, opts):
         """The basis's own fit on the rays (an equal-area set: moments 4 pi / N sum L B)."""
         return np.where(blends[:, None, None], self.m.project_rays(lit, dirs, opts), 0.0)
+
+    def irradiance_columns(self, normals, opts):
+        """Where the module's irradiance is linear (LINEAR): max(0, x) - max(0, -x) = x, so the
+        unit coefficients' readings and their negatives' give each column before the clamp."""
+        if not getattr(self.m, "LINEAR", False):
+            return None
+        eye = np.eye(self.m.floats(opts))
+        return self.m.irradiance(eye, normals, opts) - self.m.irradiance(-eye, normals, opts)
 
     def irradiance_at(self, irr, index, normals, opts):
         """The basis's own float64 irradiance, probe by probe."""

@@ -82,6 +82,7 @@ IRRADIANCE_SHARPNESS = {9: 2.0}     # the irradiance fit's smoother lobes (the d
 GLSL_COEFFS, GLSL_IRRADIANCE = "SG_AMPLITUDE", "sgIrradiance"     # glsl()'s names (the probes' sampler)
 GLSL_SPECULAR = "sgSpecularRadiance"
 SPECULAR = True        # specular_radiance, kernels/basis_sg.h basis_specular_radiance: `specular: sg`
+LINEAR = True          # irradiance() linear in the coefficients before its clamp (probes.py irradiance_columns)
 
 
 def variants() -> list:

@@ -4,13 +4,9 @@ hemisphere of its shading normal (stratified, uniform in solid angle, each texel
 its own stream), from its start point (the surface point moved OFFSET texels into its triangle and
 lifted OFFSET texels along the geometric normal; moved past a solid's back face its tangent rays meet,
 lightmap_nudge), whole texels per launch. Per texel, from the same rays (uniform over the
-hemisphere: weight w = 2 pi / samples a ray):
-  irradiance  E(n) = sum w L cos               (a non-directional lightmap, RGB)
-  sh_l1       L_lm = sum w L Y_lm              (the radiance's L1 SH over the hemisphere, 4 x RGB; its
-                                               irradiance at a normal n' is sum Ahat_l L_lm Y_lm(n'));
-                                               L_00 then moved so that reading at the texel's normal
-                                               is its E (project(): the linear L1 reading of light
-                                               met head-on is 25% low)
+hemisphere: weight w = 2 pi / samples a ray): its irradiance E(n) = sum w L cos (the
+non-directional lightmap, kept always) and its coefficients in the scene's `lightmap.basis`
+(bases.py: L1 SH, or any coefficient basis of the probes' registry fitted by its own code).
 A texel more than REJECT of whose rays meet the inside of a solid starts inside geometry: it is
 dropped and dilated over (BakingLab's rejection). Dilation: every empty texel takes the mean of its
 valid 8-neighbours, DILATE passes (across chart seams and the padding)."""
@@ -22,16 +18,18 @@ import time
 
 import numpy as np
 
-from iblbake.core import sh
 from iblbake.device.launch import whole_units
+from iblbake.errors import InputError
+from iblbake.render.lightmaps import bases
 from iblbake.render.lightmaps import uv as uvs
+from iblbake.render.lightmaps.bases import sh_irradiance  # noqa: F401  (the package's, read.py's)
 from iblbake.render.paths.trace import Launch, Source, trace
 
 PROGRAM = "paths/lightmap_trace.cl"
 OFFSET = 0.1          # the start point's lift along the geometric normal, in texels (BakingLab's bias)
 REJECT = 0.1          # a texel whose rays meet a solid's inside more often than this is inside geometry
 DILATE = 4            # dilation passes (PADDING texels between charts, and their seams)
-BASES = ("irradiance", "sh_l1")
+BASES = bases.OWN       # what a bake of the default basis (sh_l1) can be read as; every choice: bases.NAMES
 
 
 def frames(n):
@@ -64,18 +62,21 @@ def hemisphere_dirs(normals, samples: int, texel0: np.ndarray, seed: int):
 
 class LightmapTexels(Source):
     """The texels' rays (lightmap_trace.cl through a Tracer's scene, panorama and lights), whole
-    texels per launch; kept per texel: E (k, 3), the L1 SH (k, 4, 3) and its share of rays that met
-    a solid's inside (k,). progress(the fraction traced)."""
+    texels per launch; kept per texel: E (k, 3), the coefficients of `basis` (bases.py) with its
+    options (k, floats, 3) and its share of rays that met a solid's inside (k,). progress(the
+    fraction traced)."""
     program, function = PROGRAM, "lightmap_trace"
 
-    def __init__(self, tracer, start, normals, samples: int, seed: int, progress=None):
+    def __init__(self, tracer, start, normals, samples: int, seed: int, progress=None, basis: str = "sh_l1",
+                 opts: dict | None = None):
         self.tracer, self.rt, self.samples, self.seed, self.progress = tracer, tracer.rt, samples, seed, progress
+        self.basis, self.opts = basis, opts or {}
         self.normals, self.n = normals, len(start)
         self.pos = self.rt.to_device(np.pad(np.asarray(start, np.float32), ((0, 0), (0, 1))))
         self.per = whole_units(self.rt, samples)
         self.buf = self.rt.empty(16 * min(self.n, self.per) * samples)
         self.irradiance = np.zeros((self.n, 3))
-        self.sh = np.zeros((self.n, 4, 3))
+        self.coeffs = np.zeros((self.n, bases.floats(basis, self.opts), 3))
         self.inside = np.zeros(self.n)
         self.dirs = {}
 
@@ -98,39 +99,23 @@ class LightmapTexels(Source):
         first, count = la.part
         out = self.rt.read(self.buf, (count * self.samples, 4)).reshape(count, self.samples, 4).astype(np.float64)
         d = self.dirs.pop(first)
-        self.irradiance[first:first + count], self.sh[first:first + count], self.inside[first:first + count] = \
-            project(out[..., :3], out[..., 3], d, self.normals[first:first + count])
+        self.irradiance[first:first + count], self.coeffs[first:first + count], self.inside[first:first + count] = \
+            project(out[..., :3], out[..., 3], d, self.normals[first:first + count], self.basis, self.opts)
         if self.progress:
             self.progress((first + count) / self.n)
         return False
 
     def result(self):
         self.tracer.rays_traced += self.n * self.samples
-        return self.irradiance, self.sh, self.inside
+        return self.irradiance, self.coeffs, self.inside
 
 
-def project(radiance, t, dirs, normals):
-    """Per texel (E (k, 3), L1 SH of the radiance (k, 4, 3), the share of its rays that met a
-    solid's inside) from its rays' radiance (k, s, 3), signed distance (k, s) and directions
-    (k, s, 3) over the hemisphere of normals (k, 3), uniform in solid angle."""
-    w = 2 * math.pi / radiance.shape[1]
-    cos = np.einsum("ksx,kx->ks", dirs, normals)
-    e = w * np.einsum("ksc,ks->kc", radiance, cos)
-    y = sh.sh_basis(dirs, 2)                                         # (k, s, 4)
-    coeffs = w * np.einsum("ksc,ksj->kjc", radiance, y)
-    # the linear L1 reading weighs a direction by 1/4 + cos/2, not max(cos, 0): light met head-on is
-    # read 25% low (quad_room's back wall x0.88 at 4 texels a unit); its constant term moved so the
-    # reading at the texel's own normal is the texel's irradiance, the L1 band giving the change
-    # with the normal (a normal map's), as Unity's directional lightmaps keep irradiance + direction
-    linear = np.einsum("kj,kjc->kc", sh.sh_basis(normals, 2), coeffs * sh.ahat(2)[:, None])
-    coeffs[:, 0] += (e - linear) / (math.pi * sh.sh_basis(normals[:1], 2)[0, 0])
+def project(radiance, t, dirs, normals, basis: str = "sh_l1", opts: dict | None = None):
+    """Per texel (E (k, 3), its coefficients in basis (k, floats, 3), the share of its rays that
+    met a solid's inside) from its rays' radiance (k, s, 3), signed distance (k, s) and directions
+    (k, s, 3) over the hemisphere of normals (k, 3), uniform in solid angle (bases.project)."""
+    e, coeffs = bases.project(basis, radiance, dirs, normals, opts or {})
     return e, coeffs, (t < 0).mean(1)
-
-
-def sh_irradiance(coeffs, normals):
-    """E at unit normals (..., 3) from the L1 SH of the radiance (..., 4, 3) (clamped at 0)."""
-    e = coeffs * sh.ahat(2)[:, None]
-    return np.maximum(0.0, np.einsum("...j,...jc->...c", sh.sh_basis(normals, 2), e))
 
 
 def facing(tx: uvs.Texels, camera) -> None:
@@ -234,20 +219,25 @@ def dilate(atlas, valid, passes: int = DILATE):
     return a, v
 
 
-def bytes_of(lay: uvs.Layout, basis: str) -> int:
-    """The atlas' bytes as an engine holds it: fp16 RGBA per texel, one texture for the irradiance,
-    four (one per SH coefficient, RGB in each) for L1 SH."""
-    return lay.width * lay.height * 8 * (1 if basis == "irradiance" else 4)
+def bytes_of(lay: uvs.Layout, basis: str, opts: dict | None = None) -> int:
+    """The atlas' bytes as an engine holds it: fp16 RGBA per texel, one texture per RGB coefficient
+    (one for the irradiance, four for L1 SH, nine for SG9)."""
+    return lay.width * lay.height * 8 * bases.floats(basis, opts or {})
 
 
 def bake(job, settings: dict, progress=None) -> dict:
-    """The scene's lightmap (settings: the scene's lightmap section): the layout and the atlases
-    {'irradiance': (h, w, 3), 'sh_l1': (h, w, 4, 3), 'valid': (h, w) bool} and a report."""
+    """The scene's lightmap (settings: the scene's lightmap section): the layout, the atlases
+    {'irradiance': (h, w, 3), BASIS: (h, w, floats, 3), 'valid': (h, w) bool}, BASIS the section's
+    `basis` (bases.py) under 'basis' with its options under 'options', and a report."""
     from iblbake.render.paths.tracer import Tracer
     from iblbake.scene import geometry, materials, pack
 
     t0 = time.perf_counter()
     sc = job.scene
+    basis = settings.get("basis", "sh_l1")
+    if basis not in bases.NAMES:
+        raise InputError(f"lightmap.basis: {basis!r} is not a lightmap basis; give one of {', '.join(bases.NAMES)}")
+    opts = bases.options(basis, settings)
     _records, offsets = materials.table(sc)
     counts = {oid: len(materials.file_materials(o["mesh"]["path"], f"{sc.source}: objects.{oid}.mesh"))
               for oid, o in enumerate(sc.data["objects"]) if materials.brings_materials(o)}
@@ -260,20 +250,23 @@ def bake(job, settings: dict, progress=None) -> dict:
     tracer = Tracer(job, {"bounces": settings["bounces"], "seed": settings["seed"]})
     start, moved = nudge(tracer, tx, inset(tx, lay.corners, 1.0 / density), 1.0 / density)
     samples = math.isqrt(settings["samples"]) ** 2          # whole strata
-    e, coeffs, inside = trace(LightmapTexels(tracer, start, tx.normal, samples, settings["seed"], progress))
+    e, coeffs, inside = trace(LightmapTexels(tracer, start, tx.normal, samples, settings["seed"], progress,
+                                             basis, opts))
     ok = inside <= REJECT
     h, w = lay.height, lay.width
     valid = np.zeros(h * w, bool)
     valid[tx.index[ok]] = True
     irr = np.zeros((h * w, 3))
     irr[tx.index] = e
-    shc = np.zeros((h * w, 4, 3))
-    shc[tx.index] = coeffs
+    atlas = np.zeros((h * w,) + coeffs.shape[1:])
+    atlas[tx.index] = coeffs
     irr, filled = dilate(irr.reshape(h, w, 3), valid.reshape(h, w))
-    shc, _ = dilate(shc.reshape(h, w, 4, 3), valid.reshape(h, w))
+    atlas, _ = dilate(atlas.reshape(h, w, *coeffs.shape[1:]), valid.reshape(h, w))
     report = {"width": w, "height": h, "texels": len(tx.index), "texels_per_unit": density,
               "samples": samples, "rays_traced": tracer.rays_traced, "moved": moved,
               "rejected_inside": int((~ok).sum()), "layout_s": round(t_layout, 4),
-              "bytes": {b: bytes_of(lay, b) for b in BASES}, "uv_sources": {str(k): v for k, v in lay.source.items()},
+              "bytes": {b: bytes_of(lay, b, opts) for b in ("irradiance", basis)},
+              "uv_sources": {str(k): v for k, v in lay.source.items()},
               "seconds": round(time.perf_counter() - t0, 4)}
-    return {"layout": lay, "texels": tx, "irradiance": irr, "sh_l1": shc, "valid": filled, "report": report}
+    return {"layout": lay, "texels": tx, "irradiance": irr, basis: atlas if basis != "irradiance" else irr,
+            "basis": basis, "options": opts, "valid": filled, "report": report}

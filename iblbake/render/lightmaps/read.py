@@ -3,13 +3,15 @@ a G-buffer's UV1 (not yet a kernel: docs/manual.md 'Lightmaps'). A point of a li
 its atlas triangle (the object's triangle whose plane holds it, projected along the triangle's normal:
 exact for a mesh, the facet under the point for a meshed sphere), its UV1 from the barycentrics, and
 the atlas bilinearly there (texel centres at half-integers, as a GPU's linear filter). The irradiance
-at the point: the non-directional atlas as it is, or the L1 SH atlas at the shading normal."""
+at the point: the non-directional atlas as it is, or the basis's coefficients, filtered so, read at
+the shading normal by the basis's own irradiance (bases.irradiance: the probes' registry's)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from iblbake.render.lightmaps.bake import sh_irradiance
+from iblbake.errors import InputError
+from iblbake.render.lightmaps import bases
 from iblbake.render.lightmaps.uv import Layout
 
 
@@ -57,20 +59,25 @@ def bilinear(atlas, uv):
     return out
 
 
-def irradiance(lm: dict, objects, points, normals, basis: str = "sh_l1"):
+def irradiance(lm: dict, objects, points, normals, basis: str | None = None):
     """(E (n, 3), found (n,)) at points on objects with shading normals, from a baked lightmap
-    (bake.bake()'s dict) in `basis` ('irradiance' or 'sh_l1')."""
+    (bake.bake()'s dict) read as `basis`: 'irradiance' (every bake holds it) or the bake's own basis
+    (lm['basis'], the default)."""
+    basis = basis or lm["basis"]
+    if basis != "irradiance" and basis not in lm:
+        raise InputError(f"lightmap.basis: this lightmap holds {lm['basis']!r}, not {basis!r}; bake it with "
+                         f"lightmap.basis: {basis}")
     uv, found = atlas_uv(lm["layout"], objects, points)
     e = np.zeros((len(points), 3))
     if found.any():
         if basis == "irradiance":
             e[found] = bilinear(lm["irradiance"], uv[found])
         else:
-            e[found] = sh_irradiance(bilinear(lm["sh_l1"], uv[found]), normals[found])
+            e[found] = bases.irradiance(basis, bilinear(lm[basis], uv[found]), normals[found], lm["options"])
     return e, found
 
 
-def diffuse_frame(sc, arrays, lm: dict, shape, basis: str = "sh_l1"):
+def diffuse_frame(sc, arrays, lm: dict, shape, basis: str | None = None):
     """The lightmap's diffuse term (h, w, 4) of scene sc at its camera (one centred sample a pixel;
     Lambert: base colour x (1 - metallic) x E / pi), alpha 1 where a lightmapped object is hit:
     the primary hits of the G-buffer's twin (render/twin/gbuffer.py) over the scene's records
