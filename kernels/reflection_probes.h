@@ -148,7 +148,7 @@ IBL_INLINE float3 rprobe_sky(RPROBE_PARAMS, int k, float3 r, float lod, float op
  * about 4 pi a^2 steradians) spans RPROBE_TAP_SPREAD of that, no wider than the lobe itself and
  * its alpha within RPROBE_TAP_HORIZON NoL (a tap near the horizon does not read under the
  * surface). Taps at a fixed share of the lobe's level aliased on a compact key light (a studio's
- * lamps, a city's sun: which taps met it decided a half's mean: resting under city 27% off with
+ * lamps, a city's sun: which taps met it decided a half's mean: resting under city 54% off with
  * 64 taps, 2% now); wider taps leak a lamp behind a window's edge (quad_room under studio: x1.40
  * on the window half at 4x the tap's solid angle, x1.06 at half). */
 #define RPROBE_TAP_SPREAD 0.5f
@@ -170,7 +170,7 @@ IBL_INLINE float rprobe_tap_rough(float noh, float voh, float nol, float alpha, 
  * d at the capture's own level: a window's edge as sharp as the capture holds it). That sky is
  * the capture's own through its openings per unit of open share (a lamp behind the wall beside a
  * window is not in it, where the distant chain's filtered tap spread it through the edge:
- * quad_room under studio x1.28 on the window half), the distant chain's where the probe saw
+ * quad_room under studio x1.28 on the window half with it), the distant chain's where the probe saw
  * less than RPROBE_SKY_SEEN of that tap open. */
 IBL_INLINE float3 rprobe_taps(RPROBE_PARAMS, int k, float3 p, float3 n, float3 v, float lod, int count,
                               CHAIN_PARAMS, float2 env_rot, float env_scale)
