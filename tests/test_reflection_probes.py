@@ -622,3 +622,40 @@ def test_taps_hold_a_resting_sphere_in_a_room_they_were_not_tuned_on(tmp_path, r
     sc = load_scene(tmp_path, "corner", doc)
     err = sides_error(sc, load.load(sc.source, REFERENCE), rt, Bakes(tmp_path / "cache"), 0, centre)
     assert len(err) >= 4 and max(err.values()) < 0.10, err
+
+
+def test_taps_do_not_alias_on_a_compact_key_light():
+    """A capture that saw no scene, only a panorama of 1 with a key light of 500 (a 10-degree disk),
+    a surface (roughness 0.5) facing that light, seen from 30 degrees off its normal as the view
+    turns about it in steps of 10 degrees: 64 taps against the exact integral of the same lobe over
+    the panorama's texels within 20% at every turn (measured -13.6% to +4.7%). Taps read at a fixed
+    share of the lobe's level (before) met the light or missed it as the turn moved the taps across
+    it: -32% to +19%."""
+    from iblbake.bake.prefilter import prefilter_bruteforce
+    from iblbake.core import brdf, conventions
+    from iblbake.render.twin import reflection_probes as rpt
+
+    w, h, levels, rough = 64, 32, 5, 0.5
+    dirs = conventions.equirect_texel_dirs(w, h)
+    key = np.array([0.0, 0.6, 0.8])
+    img = np.ones((h, w, 3))
+    img[dirs @ key > np.cos(np.radians(10))] = 500.0
+    chain = [prefilter_bruteforce(img, dirs, k / (levels - 1), max_sub=1) for k in range(levels)]
+    zero = [np.zeros((h, w, 3))] * levels
+    box = {"shape": "box", "position": [0, 0, 0], "min": [-2, -2, -2], "max": [2, 2, 2], "blend": 0.1,
+           "parallax": True, "taps": 64}
+    n = key[None]
+    t, b = conventions.tangent_frame(n)
+    omega, flat, alpha = conventions.equirect_solid_angles(w, h).reshape(-1), dirs.reshape(-1, 3), rough ** 2
+    nol = np.clip(flat @ key, 0.0, 1.0)
+    errors = []
+    for phi in np.radians(np.arange(0, 360, 10)):
+        v = np.cos(np.radians(30)) * n + np.sin(np.radians(30)) * (np.cos(phi) * t + np.sin(phi) * b)
+        half = flat + v
+        half /= np.linalg.norm(half, axis=1, keepdims=True)
+        f = brdf.d_ggx(half @ key, alpha) * brdf.v_smith_ggx_correlated(float(v[0] @ key), nol, alpha) * nol * omega
+        r = 2 * (n * v).sum(1, keepdims=True) * n - v
+        got = rpt.blend([{"settings": box, "levels": zero, "coverage": zero, "sky": chain}], np.zeros((1, 3)), r,
+                        rough * (levels - 1), np.zeros((1, 3)), (chain, 0.0, 1.0), (n, v))[0, 0]
+        errors.append(got / ((f * img.reshape(-1, 3)[:, 0]).sum() / f.sum()) - 1)
+    assert max(np.abs(errors)) < 0.20, errors
