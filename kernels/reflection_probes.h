@@ -142,26 +142,42 @@ IBL_INLINE float3 rprobe_sky(RPROBE_PARAMS, int k, float3 r, float lod, float op
  * 2, the reference's 0.105 at 2048 samples a pixel) */
 #define RPROBE_FINEST 2.0f
 
-/* The level a tap reads, a share of the lobe's (reflection_probes.N.taps: how many). One read a
- * lobe about the split sum's r (n = v = r) can't tell which part of it p sees through a window (a
- * key light at the window's edge) and reaches below the surface where the true lobe does not (an
- * independent square room under studio: 61-74% off on three sides with one read, 0.9-4.4% with
- * 64 taps; docs/conventions.md "Reflection probes", "Taps") */
-#define RPROBE_TAP_ROUGH 0.15f
+/* The roughness a tap reads (reflection_probes.N.taps: how many): filtered importance sampling
+ * (Krivanek and Colbert 2008, GPU Gems 3 ch. 20): each tap stands for the solid angle 1 / (N pdf)
+ * of the lobe about it and reads the level whose prefiltered lobe (a GGX lobe of alpha a spans
+ * about 4 pi a^2 steradians) spans RPROBE_TAP_SPREAD of that, no wider than the lobe itself and
+ * its alpha within RPROBE_TAP_HORIZON NoL (a tap near the horizon does not read under the
+ * surface). Taps at a fixed share of the lobe's level aliased on a compact key light (a studio's
+ * lamps, a city's sun: which taps met it decided a half's mean: resting under city 54% off with
+ * 64 taps, 2% now); wider taps leak a lamp behind a window's edge (quad_room under studio: x1.40
+ * on the window half at 4x the tap's solid angle, x1.06 at half). */
+#define RPROBE_TAP_SPREAD 0.5f
+#define RPROBE_TAP_HORIZON 0.1f
+IBL_INLINE float rprobe_tap_rough(float noh, float voh, float nol, float alpha, int count)
+{
+    const float pdf = d_ggx(noh, alpha) * noh / fmax(4.0f * voh, 1e-30f);
+    const float omega = RPROBE_TAP_SPREAD / fmax((float)count * pdf, 1e-20f);
+    const float a = fmin(sqrt(omega / (4.0f * 3.14159265358979323846f)), RPROBE_TAP_HORIZON * nol);
+    return fmin(sqrt(a), sqrt(alpha));
+}
 
 /* Probe k's reading at p of the GGX lobe of normal n and view v (alpha rough^2, rough = lod over
  * the chain's last level) in `count` Hammersley directions l, each weighted as the BRDF over
  * its pdf without Fresnel (V 4 NoL VoH / NoH; none below the surface; the split sum's albedo
- * scales the mean): the scene where l leaves the proxy (x), read from the probe along x - probe,
- * and the panorama along l itself (at infinity: no parallax) over the share of that direction p
- * sees open (the coverage read along x - probe), all at RPROBE_TAP_ROUGH of the lobe's level (the
- * scene's no finer than RPROBE_FINEST). */
+ * scales the mean), each at its own roughness (rprobe_tap_rough): the scene where l leaves the
+ * proxy (x), read from the probe along d = x - probe (no finer than RPROBE_FINEST), and the sky
+ * along l itself (at infinity: no parallax) where p sees that direction open (the coverage along
+ * d at the capture's own level: a window's edge as sharp as the capture holds it). That sky is
+ * the capture's own through its openings per unit of open share (a lamp behind the wall beside a
+ * window is not in it, where the distant chain's filtered tap spread it through the edge:
+ * quad_room under studio x1.28 on the window half with it), the distant chain's where the probe saw
+ * less than RPROBE_SKY_SEEN of that tap open. */
 IBL_INLINE float3 rprobe_taps(RPROBE_PARAMS, int k, float3 p, float3 n, float3 v, float lod, int count,
                               CHAIN_PARAMS, float2 env_rot, float env_scale)
 {
     const float4 a = rp_info[4 * k], b = rp_info[4 * k + 1], c = rp_info[4 * k + 2];
-    const float rough = lod / fmax((float)(rp_nlev - 1), 1.0f), alpha = rough * rough;
-    const float tap = RPROBE_TAP_ROUGH * lod, scene_lod = fmax(tap, fmin(lod, RPROBE_FINEST));
+    const float top = fmax((float)(rp_nlev - 1), 1.0f);
+    const float rough = lod / top, alpha = rough * rough;
     const float nov = fmax(dot(n, v), 1e-4f);
     float3 t, bt, acc = (float3)(0.0f);
     float wsum = 0.0f;
@@ -173,12 +189,16 @@ IBL_INLINE float3 rprobe_taps(RPROBE_PARAMS, int k, float3 p, float3 n, float3 v
         const float3 l = 2.0f * voh * h - v;
         const float nol = dot(n, l);
         if (nol <= 0.0f || voh <= 0.0f) continue;
-        const float w = v_smith_ggx_correlated(nov, nol, alpha) * 4.0f * nol * voh / fmax(hl.z, 1e-7f);
+        const float noh = fmax(hl.z, 1e-7f);
+        const float w = v_smith_ggx_correlated(nov, nol, alpha) * 4.0f * nol * voh / noh;
+        const float tap_rough = rprobe_tap_rough(noh, voh, nol, alpha, count), tap = tap_rough * top;
         const float3 x = rprobe_exit(p, l, a, b, c);
         const float3 d = (x - a.xyz) / fmax(distance(x, a.xyz), 1e-6f);
-        const float open = fmax(1.0f - rprobe_lookup(RPROBE_ARGS, 3 * k + 1, d, tap).x, 0.0f);
-        acc += w * (rprobe_lookup(RPROBE_ARGS, 3 * k, d, scene_lod)
-                    + open * env_scale * split_sum_radiance(CHAIN_ARGS, l, env_rot, RPROBE_TAP_ROUGH * rough));
+        const float open = fmax(1.0f - rprobe_lookup(RPROBE_ARGS, 3 * k + 1, d, 0.0f).x, 0.0f);
+        const float seen = 1.0f - rprobe_lookup(RPROBE_ARGS, 3 * k + 1, l, tap).x;
+        const float3 through = seen > RPROBE_SKY_SEEN ? rprobe_lookup(RPROBE_ARGS, 3 * k + 2, l, tap) / seen
+                               : env_scale * split_sum_radiance(CHAIN_ARGS, l, env_rot, tap_rough);
+        acc += w * (rprobe_lookup(RPROBE_ARGS, 3 * k, d, fmax(tap, fmin(lod, RPROBE_FINEST))) + open * through);
         wsum += w;
     }
     return acc / fmax(wsum, 1e-9f);

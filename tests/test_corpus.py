@@ -132,16 +132,23 @@ PART_BOUND = 0.10          # a reflection probe at a metal object's centre, each
 # none left here: quad_room's gold sphere under studio was x1.25 on its window half (32% at 64 px)
 # while the distant chain's lobe filled the edge of the window its points see but the probe does not.
 FRAME_MISSES = {("two_storey", "studio"): 1.05, ("two_storey", "city"): 0.63, ("probe_box_walls", "studio"): 0.70}
-PART_MISSES: dict = {}
+# Read in taps (TAPS below; 64 px, references of 1024 samples), three halves miss, the same with one
+# read: window_room's probe stands at the room's centre, not the chrome sphere's, and the half
+# facing the clay sphere mirrors an object off the probe's box (x1.20, 23% at 64 px; 27% with one
+# read); metal_box's cube under city, its face towards -x x0.88 (13%; 14% with one read), under
+# studio its +x and +z faces' worst channel 10.6% (x1.05; 10.5% with one read), not explained yet.
+PART_MISSES = {("window_room", "studio"): 0.28, ("metal_box", "studio"): 0.13, ("metal_box", "city"): 0.16}
 
 
-def absolute_study(name, panorama, panoramas, runtime, cache, term, label, extra=()):
+def absolute_study(name, panorama, panoramas, runtime, cache, term, label, extra=(), max_side=40, max_samples=256):
     """The term's converged reference (40 px; two seeds, each to 3% or 256 samples: the region
     means' noise is well under a percent) and the real-time rung `label` against it, the rung
-    with the scene keys `extra` ([(key, value)]) on top (the reference without them)."""
+    with the scene keys `extra` ([(key, value)]) on top (the reference without them). A metal
+    object's halves want more (max_side, max_samples): at 40 px and 256 samples the studio's
+    specular reference is 14% noisy a pixel and its small halves move by 5-10%."""
     from iblbake.study import accuracy as acc, ladder
     other = {"diffuse": "specular", "specular": "diffuse"}[term]
-    settings = acc.Settings(max_side=40, repeats=1, target_noise=0.03, max_samples=256, flip=False)
+    settings = acc.Settings(max_side=max_side, repeats=1, target_noise=0.03, max_samples=max_samples, flip=False)
     st = acc.Study(ROOT / "examples" / "corpus" / f"{name}.yaml",
                    [f"environment.path={panoramas[panorama]}", f"effects.{other}=off"], settings,
                    runtime=runtime, bakes=Bakes(cache))
@@ -189,6 +196,35 @@ def test_the_reflection_probe_holds_each_half_of_the_metal_object(panorama, runt
     bound = PART_MISSES.get((name, panorama), PART_BOUND)
     bad = outside(row["part_absolute"], bound)
     assert not bad, f"{name} under {panorama}: halves over {bound:.0%}: {bad}"
+
+
+# A reflection probe at (or in the room of) a metal object, its capture excluding the object, read
+# in TAPS taps over the material's lobe (reflection_probes.N.taps; kernels/reflection_probes.h
+# rprobe_taps): each half of the object within PART_BOUND or its measured miss in PART_MISSES
+# (each about 1.2x the figure measured at 64 px). Measured worst halves: resting 1.5% (studio),
+# 2.4% (city); quad_room 7.6%, 6.0%; window_room under city 5.4%.
+TAPS = 64
+TAPS_SCENES = ("quad_room", "window_room", "metal_box", "resting")
+
+
+@pytest.mark.external
+@pytest.mark.slow
+@pytest.mark.parametrize("panorama", ["studio", "city"])
+@pytest.mark.parametrize("name", TAPS_SCENES)
+def test_the_reflection_probe_in_taps_holds_each_half_of_the_metal_object(name, panorama, runtime, tmp_path,
+                                                                          panoramas):
+    """The corpus' metal objects under their reflection probe read in TAPS taps, each half within
+    PART_BOUND of the converged reference or its measured miss (taps at a fixed share of the lobe's
+    level, before: city's sun aliased between them, resting's gold sphere 54% off on its -x half
+    (x1.36) and 51% on +y at 64 px; metal_box under studio 14%)."""
+    if not (ROOT / "examples" / "corpus" / "meshes" / "skylight_room.obj").exists():
+        pytest.fail("the corpus meshes are missing: run `make meshes`")
+    st, row = absolute_study(name, panorama, panoramas, runtime, tmp_path / "cache", "specular", "reflection probes",
+                             [("reflection_probes.0.taps", TAPS)], max_side=64, max_samples=1024)
+    assert row.get("part_absolute"), "the study judges the metal object's halves"
+    bound = PART_MISSES.get((name, panorama), PART_BOUND)
+    bad = outside(row["part_absolute"], bound)
+    assert not bad, f"{name} under {panorama} with {TAPS} taps: halves over {bound:.0%}: {bad}"
 
 
 # The documented quality setting for interiors (docs/manual.md "Irradiance probes in interiors"):

@@ -518,10 +518,11 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "blend": Num(0.1, 0.0, 1.0, doc="the share of each half extent (or of the radius) beyond the influence over "
                                         "which the probe fades out (inside it, the probe's capture alone)"),
         "taps": Num(0, 0, 256, integer=True, doc="parallax probes: read the material's true GGX lobe in this many "
-                                                 "directions, each corrected to where it leaves the proxy, the sky "
-                                                 "along each over the share the point sees open (costs that many "
-                                                 "reads of three chains a pixel; 64 for rooms lit through windows by "
-                                                 "compact key lights: fewer alias). 0: one read a lobe about the reflected ray"),
+                                                 "directions, each corrected to where it leaves the proxy, filtered "
+                                                 "over its share of the lobe, the sky along each where the point sees "
+                                                 "it open (costs that many reads of four chains a pixel; 64 for a "
+                                                 "metal object under compact key lights). 0: one read a lobe about the "
+                                                 "reflected ray"),
         "size": Num(128, 4, 2048, integer=True, doc="capture height in texels (an equirect of 2 size x size; the "
                                                    "prefiltered chain's base, effects.prefilter.size ignored)"),
         "samples": Num(64, 1, 1 << 16, integer=True, doc="paths per capture texel (stratified in the texel)"),

@@ -73,35 +73,55 @@ def sky(c: dict, r, lod, open_, off, shift, distant):
     return got * (np.minimum(open_, seen) / np.maximum(seen, 1e-6)) + fill * (near * through + (1 - near) * distant)
 
 
-TAP_ROUGH = 0.15      # kernels/reflection_probes.h RPROBE_TAP_ROUGH
+TAP_SPREAD = 0.5     # kernels/reflection_probes.h RPROBE_TAP_SPREAD
+
+
+TAP_HORIZON = 0.1     # kernels/reflection_probes.h RPROBE_TAP_HORIZON
+
+
+def tap_rough(noh, voh, nol, alpha, count: int):
+    """Twin of rprobe_tap_rough: the roughness whose prefiltered lobe (about 4 pi alpha^2
+    steradians) spans TAP_SPREAD of the solid angle 1 / (count pdf) a tap stands for (filtered
+    importance sampling), no wider than the lobe's, its alpha within TAP_HORIZON NoL (above the
+    surface)."""
+    pdf = sampling.pdf_ggx_reflected(noh, voh, alpha)
+    omega = TAP_SPREAD / np.maximum(count * pdf, 1e-20)
+    a = np.minimum(np.sqrt(omega / (4 * np.pi)), TAP_HORIZON * nol)
+    return np.minimum(np.sqrt(a), np.sqrt(alpha))
 
 
 def taps(c: dict, p, n, v, lod, env, count: int):
     """Twin of rprobe_taps: the GGX lobe of normal n and view v (alpha rough^2, rough lod over the
     chain's last level) read in `count` Hammersley directions l, each weighted as the BRDF over its
     pdf without Fresnel (V 4 NoL VoH / NoH, none below the surface): the scene where l leaves the
-    proxy, seen from the probe, and the panorama along l itself (env: the distant chain, its
-    rotation, its intensity) over the share of that direction p sees open (the coverage read with
-    parallax), at a level TAP_ROUGH of the lobe's (the scene's no finer than FINEST)."""
+    proxy, seen from the probe (no finer than FINEST), and the sky along l itself, the capture's
+    own through its openings per unit of open share (the distant chain where it saw none; env: the
+    distant chain, its rotation, its intensity), times whether p sees that direction open (the
+    coverage at the capture's own level along the parallax-corrected direction); each tap at its
+    own roughness (tap_rough)."""
     st, nlev = c["settings"], len(c["levels"])
     pos = np.asarray(st["position"], np.float64)
-    rough = lod / max(nlev - 1, 1)
-    alpha = rough * rough
-    tap = TAP_ROUGH * lod
-    scene_lod = np.maximum(tap, np.minimum(lod, FINEST))
-    chain, rot, scale = env
+    top = max(nlev - 1, 1)
+    alpha = (lod / top) ** 2
     nov = np.maximum((n * v).sum(1), 1e-4)
     t, b = conventions.tangent_frame(n)
+    chain, rot, scale = env
     acc, wsum = np.zeros((len(p), 3)), np.zeros((len(p), 1))
     for u in sampling.hammersley(count):
         noh, voh, l, nol = sampling.reflect_ggx_half(u, t, b, n, v, alpha)
         ok = (nol > 0) & (voh > 0)
         w = np.where(ok, brdf.v_smith_ggx_correlated(nov, nol, alpha) * 4 * nol * voh / noh, 0.0)[:, None]
+        rough_t = tap_rough(noh, np.maximum(voh, 1e-30), np.maximum(nol, 0.0), alpha, count)
+        tap = rough_t * top
         x = exit_point(st, p, l)
         d = (x - pos) / np.maximum(np.linalg.norm(x - pos, axis=-1, keepdims=True), 1e-6)
-        open_ = np.maximum(1 - radiance.chain_lookup_twin(c["coverage"], d, tap)[:, :1], 0.0)
-        sky = scale * radiance.chain_lookup_twin(chain, conventions.rotate_y(l, -rot), TAP_ROUGH * rough * (len(chain) - 1))
-        acc += w * (radiance.chain_lookup_twin(c["levels"], d, scene_lod) + open_ * sky)
+        open_ = np.maximum(1 - radiance.chain_lookup_twin(c["coverage"], d, 0.0)[:, :1], 0.0)
+        seen = 1 - radiance.chain_lookup_twin(c["coverage"], l, tap)[:, :1]
+        distant = scale * radiance.chain_lookup_twin(chain, conventions.rotate_y(l, -rot), rough_t * (len(chain) - 1))
+        through = np.where(seen > SKY_SEEN, radiance.chain_lookup_twin(c["sky"], l, tap) / np.maximum(seen, 1e-30),
+                           distant)
+        acc += w * (radiance.chain_lookup_twin(c["levels"], d, np.maximum(tap, np.minimum(lod, FINEST)))
+                    + open_ * through)
         wsum += w
     return acc / np.maximum(wsum, 1e-9)
 
