@@ -15,6 +15,10 @@ from iblbake.core import bases
 from iblbake.core.bases.probes import PROBE_BASES
 from iblbake.core.conventions import wrap_degrees
 
+# what a lightmap's texel can hold (render/lightmaps/bake.py BASES: the ones baked so far): its own
+# two, then the probes' registry's bases a texel can store (not an octahedral atlas)
+LIGHTMAP_BASES = ("irradiance", "sh_l1", *(n for n, b in PROBE_BASES.items() if not b.atlas))
+
 # Field types. Each checks one value and returns it normalised, or raises _Bad with the reason.
 
 
@@ -490,6 +494,11 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                           doc="the largest atlas baked: a density whose estimate (area x density^2 over 70% use) "
                               "passes it is refused before anything is packed"),
         "seed": Num(1, 0, 2**31 - 1, integer=True, doc="random seed of the texels' rays and paths"),
+        "basis": Enum(LIGHTMAP_BASES, "sh_l1",
+                      doc="what `effects.diffuse: lightmap` reads of the bake: `irradiance` (non-directional), "
+                          "`sh_l1` (L1 SH: the irradiance at the shading normal, a normal map's), or a basis of "
+                          "the probes' registry the bake holds (core/bases/probes.py; read at the shading normal "
+                          "by its kernel function)"),
     }),
     "reflection_probes": ListOf(doc="local reflection probes (Lagarde and Zanuttini 2012): radiance captured by the "
                                     "path tracer at a point, prefiltered as the distant chain, read by `specular: "
@@ -522,11 +531,13 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                                "it still meet them, so a floor keeps their shadow and the light they throw"),
     })),
     "effects": Section(doc="what the renderer simulates; nothing else is baked, compiled or run", fields={
-        "diffuse": Enum(("sh",) + bases.DIFFUSE + ("probes", "reference", "off"), "sh",
+        "diffuse": Enum(("sh",) + bases.DIFFUSE + ("probes", "lightmap", "reference", "off"), "sh",
                         doc="diffuse IBL: SH irradiance of the panorama, another directional basis of it ("
                             + ", ".join(f"`{n}`: {bases.BASES[n].TITLE}" for n in bases.DIFFUSE)
                             + "; docs/conventions.md), irradiance probes (`probes`: the light between surfaces "
-                              "too), Monte Carlo reference, or none"),
+                              "too), the scene's lightmap (`lightmap`: its `lightmap` section baked, read at each "
+                              "pixel's UV1; what has none reads the probes, else the panorama's SH), Monte Carlo "
+                              "reference, or none"),
         "sh_bands": Num(3, 1, 8, integer=True, doc="SH bands for diffuse: sh (3 = 9 coefficients)"),
         "sh_window": Enum(("none", "hann", "lanczos"), "none", doc="SH ringing window"),
         **{k: Enum(choices, default, doc=doc) for n in bases.DIFFUSE

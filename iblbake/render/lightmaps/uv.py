@@ -79,6 +79,12 @@ def weld(corners):
     return verts, inverse.reshape(-1, 3)
 
 
+def charted(obj: dict) -> bool:
+    """Whether a scene object gets a lightmap: a mesh, a sphere or a finite plane (an infinite plane
+    has none: it keeps the probes or the panorama's SH)."""
+    return "mesh" in obj or "sphere" in obj or ("plane" in obj and obj["plane"]["size"] is not None)
+
+
 def _parts(scene, tris):
     """Each lightmapped object's (object index, how, vertices, faces, TEXCOORD_1 per vertex or None,
     sphere (centre, radius) or None). An infinite plane has none (it keeps the probes)."""
@@ -87,7 +93,7 @@ def _parts(scene, tris):
         if "sphere" in o:
             v, f = sphere_mesh(o["sphere"]["center"], o["sphere"]["radius"])
             out.append((oid, "sphere", v, f, None, (o["sphere"]["center"], o["sphere"]["radius"])))
-        elif "plane" in o and o["plane"]["size"] is not None:
+        elif "plane" in o and charted(o):
             out.append((oid, "plane", *plane_mesh(o["plane"]), None, None))
     for oid in np.unique(tris.object_id):
         mine = tris.object_id == oid
