@@ -50,15 +50,22 @@ def basis_defines(settings: dict) -> dict:
     return {**b.m.defines(opts), "LIGHTMAP_BASIS": 1, "BASIS_SPACE": "__global", "LM_ROWS": b.rows(opts)}
 
 
+def baked_basis(settings: dict) -> str:
+    """lightmap.basis, where the bake holds it (lightmaps.BASES); else a one-line error naming the key,
+    before anything is baked."""
+    from iblbake.render import lightmaps
+    name = settings["basis"]
+    if name not in lightmaps.BASES:
+        raise InputError(f"lightmap.basis: {name} is not baked into lightmaps yet (the bake holds "
+                         f"{', '.join(lightmaps.BASES)}); give one of those")
+    return name
+
+
 def texels_of(lm: dict, settings: dict) -> np.ndarray:
     """The atlas' float4 rows, LM_ROWS a texel in row-major texel order, as the kernel reads them:
     the irradiance; the L1 SH as irradiance coefficients (E_lm = Ahat_l L_lm); a registry basis as
     its entry packs a probe's block."""
-    name = settings["basis"]
-    if name not in lm:
-        from iblbake.render.lightmaps.bake import BASES
-        raise InputError(f"lightmap.basis: {name} is not baked into lightmaps (the bake holds "
-                         f"{', '.join(BASES)}); give one of those")
+    name = baked_basis(settings)
     b, opts = basis_of(settings)
     h, w = lm["layout"].height, lm["layout"].width
     if name == "irradiance":
@@ -129,6 +136,7 @@ class Lightmap(Source):
         return fx.diffuse == "lightmap"
 
     def defines(self, scene, fx):
+        baked_basis(scene.data["lightmap"])
         d = {**uv_defines(), **basis_defines(scene.data["lightmap"])}
         if fallback_probes(scene):
             d["LIGHTMAP_FALLBACK_PROBES"] = 1
@@ -139,8 +147,6 @@ class Lightmap(Source):
 
     def args(self, ctx):
         lm, settings = ctx.loaded["lightmap"], ctx.scene.data["lightmap"]
-        if settings["basis"] not in lm:
-            texels_of(lm, settings)                      # says which bases the bake holds
         atlas = ctx.bakes.on_device(ctx.rt, (lm["layout"].uv, lm[settings["basis"]]),
                                     lambda: ctx.rt.to_device(texels_of(lm, settings)))
         return {"lm_atlas": atlas, "lm_width": lm["layout"].width, "lm_height": lm["layout"].height}
