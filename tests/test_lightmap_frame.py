@@ -32,8 +32,8 @@ def sky(tmp_path_factory):
     th = (np.arange(h) + 0.5) / h * math.pi
     ph = (np.arange(w) + 0.5) / w * 2 * math.pi
     y = np.cos(th)[:, None] * np.ones(w)
-    x = np.sin(th)[:, None] * np.cos(ph)[None]
-    img = np.stack([1 + 0.8 * y + 0.3 * x, 1 + 0.5 * y, 1 + 0.2 * x], -1).clip(0.05)
+    x = np.sin(th)[:, None] * np.sin(ph)[None]          # world +x (docs/conventions.md: u = 0.5 - atan2(x, z) / 2 pi)
+    img = np.stack([1 + 0.8 * y + 0.9 * x, 1 + 0.5 * y + 0.6 * x, 1 + 0.4 * x], -1).clip(0.05)
     images.write_exr(p, img.astype(np.float32))
     return p
 
@@ -227,3 +227,61 @@ def test_quad_room_frame_holds_the_truth(tmp_path, panoramas):
     assert not bad, bad
     for n, e in held.items():            # the frame is the twin's reading (the bench's)
         assert abs(e["ratio"] - twin_regions[n]["ratio"]) < 0.01
+
+
+def test_directional_lightmap_reads_the_normal_map(tmp_path, sky):
+    """A glTF quad facing the camera with a normal map tilting its left half towards +x and its right
+    half towards -x, under a sky brighter towards +x: the L1 SH lightmap lights the halves apart (the
+    irradiance at each shading normal), the non-directional one alike; the kernel against the twin
+    (its material pass resolving the same normals) within KERNEL_TWIN."""
+    from iblbake.render import twin as rr
+    from iblbake.render.bakes import Bakes
+    from iblbake.render.frame import render
+    from iblbake.render.twin.shade import shade
+    from tests.helpers import quad_glb
+
+    nrm = np.zeros((16, 16, 3), np.uint8)
+    nrm[:, :8] = (218, 128, 180)                  # tangent space: +u (the quad's +x), up
+    nrm[:, 8:] = (38, 128, 180)
+    glb = quad_glb(tmp_path / "q.glb", normal=nrm, roughnessFactor=1.0, metallicFactor=0.0)
+    halves = {}
+    for basis in ("sh_l1", "irradiance"):
+        d = {"camera": {"perspective": {"position": [0, 0, 2.6], "look_at": [0, 0, 0], "fov_y": 50},
+                        "resolution": [32, 24]},
+             "environment": {"path": str(sky), "background": "hide"},
+             "objects": [{"mesh": {"path": glb}}], "effects": {"diffuse": "lightmap", "specular": "off"},
+             "lightmap": {"samples": 16, "texels_per_unit": 4, "basis": basis}}
+        sc = load_scene(tmp_path, basis, d)
+        bakes = Bakes(tmp_path / "cache")
+        fr = render(sc, cache=bakes)
+        arrays = bakes.geometry(sc)
+        tex = rr.textures(sc, arrays)
+        gb = rr.primary(sc["camera"], arrays, tex)
+        rr.gbuffer_coords(gb, arrays, sc["camera"])
+        rr.resolve_materials(gb, arrays, tex)
+        tw = shade(gb, arrays, sc.data["effects"], sc.data["environment"], sh_coeffs=bakes.result("sh"),
+                   lightmap=(bakes.result("lightmap"), sc.data["lightmap"]))
+        err = worst_relative(fr, tw, gb)
+        lum = fr.hdr[..., :3].mean(2)
+        cover = fr.hdr[..., 3] == 1
+        left, right = lum[:, :16][cover[:, :16]].mean(), lum[:, 16:][cover[:, 16:]].mean()
+        halves[basis] = left / right
+        print(f"{basis}: kernel/twin {err:.2e}, left/right {left / right:.3f}")
+        assert err < KERNEL_TWIN
+    assert halves["sh_l1"] > 1.1 and abs(halves["irradiance"] - 1) < 0.03
+
+
+def test_tiled_frame_with_gtao_is_the_whole_frame(tmp_path, sky):
+    """A frame in tiles of rows (GTAO's whole-frame G-buffer writing its own UV1 buffer, not past the
+    tile's) gives the untiled frame's pixels."""
+    from iblbake.render import frame
+    from iblbake.render.bakes import Bakes
+    from iblbake.render.plan import plan
+    d = doc(sky)
+    d["effects"]["ao"] = "gtao"
+    sc = load_scene(tmp_path, "t", d)
+    bakes = Bakes(tmp_path / "cache")
+    whole = frame.render(sc, cache=bakes)
+    tiled = frame.render(sc, cache=bakes, device_budget=frame.frame_bytes(sc, plan(sc), 7, tiled=True))
+    assert whole.report["tiles"] == 1 and tiled.report["tiles"] > 1
+    assert np.abs(tiled.hdr - whole.hdr).max() < 1e-6
