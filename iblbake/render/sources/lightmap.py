@@ -94,21 +94,20 @@ def uv_tables(lay, arrays) -> tuple:
     for i, obj in enumerate(ints(arrays.planes[:, 1, 3]) if npl else []):
         prims[ns + i, :2] = (first[obj], count[obj]) if obj in first else (0, 0)
     if nt:
-        corners = np.asarray(lay.corners, np.float32)
-        key = {_corner_key(c): k for k, c in enumerate(corners)}
-        scene_c = arrays.tris[:, :3, :3]
-        objs = ints(arrays.tris[:, 1, 3])
-        for i in range(nt):
-            k = key.get(_corner_key(scene_c[i])) if int(objs[i]) in first else None
-            if k is not None:
-                prims[ns + npl + i, :2] = (k, 1)
+        mine = np.isin(ints(arrays.tris[:, 1, 3]), list(first))
+        atlas, scene = _corner_keys(lay.corners), _corner_keys(arrays.tris[:, :3, :3])
+        order = np.argsort(atlas)
+        at = np.minimum(np.searchsorted(atlas[order], scene), len(atlas) - 1)
+        found = mine & (atlas[order][at] == scene)
+        prims[ns + npl:][found, 0], prims[ns + npl:][found, 1] = order[at][found], 1
     return prims, tris
 
 
-def _corner_key(c) -> bytes:
-    """A triangle's corners (3, 3) as a key independent of their order (xatlas may rotate them)."""
-    c = np.asarray(c, np.float32)
-    return c[np.lexsort(c.T[::-1])].tobytes()
+def _corner_keys(corners) -> np.ndarray:
+    """Each triangle's corners (n, 3, 3) as one key independent of their order (xatlas may rotate
+    them): their float32 bytes, the three corners sorted."""
+    c = np.ascontiguousarray(np.asarray(corners, np.float32)).view(np.dtype((np.void, 12))).reshape(len(corners), 3)
+    return np.ascontiguousarray(np.sort(c, axis=1)).view(np.dtype((np.void, 36))).ravel()
 
 
 def uv_args(rt, lm, arrays, bakes=None) -> dict:
