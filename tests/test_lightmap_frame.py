@@ -164,7 +164,9 @@ def test_bad_input_one_line(tmp_path, sky):
     cases = [(doc(sky, lightmap=False), "effects.diffuse: lightmap reads the scene's lightmap: section"),
              ({**doc(sky), "lightmap": {"basis": "zh3"}}, "lightmap.basis: zh3 is not baked into lightmaps"),
              ({**doc(sky), "lightmap": {"basis": "sg"}, "probes": {"irradiance": "ambient_dice"}},
-              "lightmap.basis: sg beside probes storing ambient_dice")]
+              "lightmap.basis: sg {"),
+             ({**doc(sky), "lightmap": {"basis": "sg"}, "probes": {"irradiance": "sg", "sg_lobes": 12}},
+              "beside probes storing sg {'sg_lobes': 12")]
     if "zh3" in lightmaps.BASES:              # once the bake holds it, that case is no longer bad input
         cases.pop(1)
     for k, (d, said) in enumerate(cases):

@@ -515,9 +515,11 @@ def _resolve_lightmap(v: "_Validator", out: dict, raw: dict) -> None:
         v.fail("effects.specular", f"{fx['specular']} beside a lightmap or probes storing a directional basis: a frame "
                                    "lights from one directional basis; give lightmap.basis (and probes.irradiance) "
                                    "irradiance, sh_l1 or sh, or another specular mode")
-    if mine and mine.directional and stored and stored.directional and stored is not mine:
-        v.fail("lightmap.basis", f"{name} beside probes storing {stored.name} (they light what has no lightmap): a "
-                                 f"frame lights from one directional basis; give lightmap.basis {stored.name}, or "
+    if mine and mine.directional and stored and stored.directional and (
+            stored is not mine or mine.options(out["lightmap"]) != stored.options(out["probes"])):
+        v.fail("lightmap.basis", f"{name} {mine.options(out['lightmap'])} beside probes storing {stored.name} "
+                                 f"{stored.options(out['probes'])} (they light what has no lightmap): a frame lights "
+                                 f"from one directional basis; give the probes the lightmap's basis and options, or "
                                  "probes.irradiance octahedral or sh")
     coeffs = {"sh_l1": 4}.get(name, mine.floats({}) if mine and not mine.directional and not mine.atlas else 0)
     if coeffs > fx["sh_bands"] ** 2:
