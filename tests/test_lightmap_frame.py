@@ -287,3 +287,18 @@ def test_tiled_frame_with_gtao_is_the_whole_frame(tmp_path, sky):
     tiled = frame.render(sc, cache=bakes, device_budget=frame.frame_bytes(sc, plan(sc), 7, tiled=True))
     assert whole.report["tiles"] == 1 and tiled.report["tiles"] > 1
     assert np.abs(tiled.hdr - whole.hdr).max() < 1e-6
+
+
+def test_dynamic_object_reads_the_fallback(tmp_path, sky):
+    """objects.N.lightmap: false (a dynamic object): the bake charts it not (fewer texels), the frame
+    lights it from the panorama's SH as the twin does, and the report names it."""
+    from iblbake.render.bakes import Bakes
+    rows = {}
+    for dynamic in (False, True):
+        d = doc(sky)
+        d["objects"][1]["lightmap"] = not dynamic
+        sc = load_scene(tmp_path, f"d{dynamic}", d)
+        fr, tw, gb = frame_and_twin(sc, Bakes(tmp_path / "cache"))
+        assert worst_relative(fr, tw, gb) < KERNEL_TWIN
+        rows[dynamic] = next(b for b in fr.report["bakes"] if b["name"] == "lightmap")
+    assert rows[True]["objects_without"] == ["ball", "ground"] and rows[True]["texels"] < rows[False]["texels"]

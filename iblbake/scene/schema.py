@@ -397,6 +397,10 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                                                   "rays pass through it, as Unreal's Visible in Reflection Captures "
                                                   "and Unity's culling mask; it still shadows and reflects light "
                                                   "further along the paths)"),
+            "lightmap": Bool(True, doc="gets a lightmap where the scene has one (a mesh, sphere or finite "
+                                       "plane); false: a dynamic object, lit by the irradiance probes (else the "
+                                       "panorama's SH) under `effects.diffuse: lightmap`, still met by the "
+                                       "lightmap's rays"),
         })),
     "lights": ListOf(doc="analytic lights in the units of glTF's KHR_lights_punctual, added to the IBL and "
                          "shaded with its BRDF", section=Section(
