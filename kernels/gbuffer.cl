@@ -2,7 +2,7 @@
  * too (the background pass reads their directions). Records: kernels/layout.h. Defines:
  * HAS_SPHERES HAS_PLANES HAS_TRIANGLES (only the primitives the scene has are traced);
  * HAS_TEXTURES: each hit's texture coordinates, tangent frame and footprint too, for the material
- * pass (kernels/material.cl).
+ * pass (kernels/material.cl); HAS_LIGHTMAP: each hit's place in the lightmap's atlas (gb_lm, kernels/lightmap.h).
  * This file comes first in every frame program (one source of the running passes' files, each
  * header once), so its includes place the headers: the shading math before scene.h, whose
  * FP_CONTRACT OFF then holds for everything after it. Every frame has been built that way. */
@@ -11,6 +11,7 @@
 #include "sampling.h"
 #include "envmap.h"
 #include "sh.h"
+#include "lightmap.h"
 #include "scene.h"
 #include "surface.h"
 
@@ -23,7 +24,8 @@ __kernel void gbuffer(__constant float4 *cam, const int width, const int height,
                       __global const float2 *jitter,
                       SCENE_PARAMS,
                       __global float4 *gb_pos, __global float4 *gb_nrm, __global float4 *gb_dir,
-                      __global float4 *gb_uv, __global float4 *gb_tan, __global float4 *gb_lod)
+                      __global float4 *gb_uv, __global float4 *gb_tan, __global float4 *gb_lod,
+                      LIGHTMAP_UV_PARAMS, __global float4 *gb_lm)
 {
     const int gid = get_global_id(0);
     if (gid >= n) return;
@@ -36,6 +38,9 @@ __kernel void gbuffer(__constant float4 *cam, const int width, const int height,
         gb_pos[gid] = (float4)(0.0f, 0.0f, 0.0f, MISS_T);
         gb_nrm[gid] = (float4)(0.0f, 0.0f, 0.0f, as_float(-1));
         gb_dir[gid] = (float4)(d, as_float(-1));
+#ifdef HAS_LIGHTMAP
+        gb_lm[gid] = (float4)(0.0f);
+#endif
         return;
     }
     const float3 p = o + h.t * d;
@@ -63,6 +68,9 @@ __kernel void gbuffer(__constant float4 *cam, const int width, const int height,
     }
 #ifdef HAS_NORMAL_MAP
     gb_tan[gid] = tw;
+#endif
+#ifdef HAS_LIGHTMAP
+    gb_lm[gid] = lightmap_uv(h.kind, h.index, p, nspheres, nplanes, spheres, LIGHTMAP_UV_ARGS);
 #endif
     gb_pos[gid] = (float4)(p, h.t);
     gb_nrm[gid] = (float4)(ns, as_float(mat));

@@ -8,6 +8,7 @@
 #define DIFFUSE_REFERENCE 2
 #define DIFFUSE_PROBES 3
 #define DIFFUSE_BASIS 4
+#define DIFFUSE_LIGHTMAP 5
 #define SPECULAR_OFF 0
 #define SPECULAR_IMPORTANCE 1
 #define SPECULAR_PREFILTERED 2
@@ -62,6 +63,7 @@
 /* gb_uv: TEXCOORD_0 and TEXCOORD_1 at the hit (u0, v0, u1, v1) */
 /* gb_tan: unit tangent (the direction of increasing u), w: the bitangent's side */
 /* gb_lod: mip level of the hit's footprint for each set, before the texture's size (x, y) */
+/* gb_lm: UV1 in the lightmap's texel units (u, v), z: 1 where the hit has a lightmap, else 0 */
 /* gb_mat: 3 per sample: (base colour, metallic), (emissive, roughness), (shading normal, occlusion) */
 #define MISS_T (-1.0f)
 #define DELTA_ALPHA 0.0001f

@@ -1,7 +1,10 @@
 /* Shade pass: the approximate lighting terms the scene asks for, added into the radiance buffer.
  *   DIFFUSE_MODE  DIFFUSE_SH (SH_BANDS bands), DIFFUSE_BASIS (the directional basis BASIS_<NAME>
  *                 selects, kernels/bases.h), DIFFUSE_PROBES (the irradiance probes around the point,
- *                 kernels/probes.h; probe_stats counts the samples that fell back) or off
+ *                 kernels/probes.h; probe_stats counts the samples that fell back), DIFFUSE_LIGHTMAP
+ *                 (the lightmap's atlas at the G-buffer's UV1, kernels/lightmap.h; a sample without
+ *                 one reads the probes with LIGHTMAP_FALLBACK_PROBES, else the panorama's SH; lm_stats
+ *                 counts both) or off
  *   SPECULAR_MODE SPECULAR_IMPORTANCE (the importance pass's sums, kernels/importance.cl,
  *                 combined here with f0) or SPECULAR_PREFILTERED
  *                 (DOMINANT_DIRECTION; HAS_REFLECTION_PROBES: the local probes' captures where they
@@ -22,6 +25,7 @@
 #include "sh.h"
 #include "bases.h"
 #include "probes.h"
+#include "lightmap.h"
 #include "importance.h"
 #include "split_sum.h"
 #include "lobe.h"
@@ -52,7 +56,8 @@ __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
                     __constant float4 *sh_coeffs, __constant float4 *basis_coeffs, __global const float *basis_table,
                     CHAIN_PARAMS, __global const float2 *dfg, const int dfg_size,
                     LOBE_PARAMS, __global const float *ao_buf, __global const float4 *spec_sums, PROBE_PARAMS,
-                    RPROBE_PARAMS, __global float4 *ssr_env, __global int *probe_stats, __global float4 *radiance)
+                    RPROBE_PARAMS, __global float4 *ssr_env, __global int *probe_stats,
+                    __global const float4 *gb_lm, LIGHTMAP_PARAMS, __global int *lm_stats, __global float4 *radiance)
 {
     const int gid = get_global_id(0);
     if (gid >= n) return;
@@ -79,6 +84,25 @@ __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
     color += diff_occ * diffuse_weight(mt, nov)
              * probes_diffuse(gb_pos[gid].xyz, nrm, v, env_scale * sh_irradiance(sh_coeffs, to_env(nrm, env_rot)),
                               PROBE_ARGS, probe_stats);
+#elif DIFFUSE_MODE == DIFFUSE_LIGHTMAP
+    {
+        /* the lightmap's irradiance holds the panorama's intensity already (its paths read it scaled) */
+        const float4 lm = gb_lm[gid];
+        float3 e;
+        if (lm.z > 0.0f) {
+            e = lightmap_irradiance(lm.xy, nrm, LIGHTMAP_ARGS);
+            atomic_inc(&lm_stats[0]);
+        } else {
+            const float3 sky = env_scale * sh_irradiance(sh_coeffs, to_env(nrm, env_rot));
+#ifdef LIGHTMAP_FALLBACK_PROBES
+            e = probes_diffuse(gb_pos[gid].xyz, nrm, v, sky, PROBE_ARGS, probe_stats);
+#else
+            e = sky;
+#endif
+            atomic_inc(&lm_stats[1]);
+        }
+        color += diff_occ * diffuse_weight(mt, nov) * e;
+    }
 #endif
 #if SPECULAR_MODE == SPECULAR_IMPORTANCE
     color += spec_occ * env_scale * importance_specular(spec_sums, gid, mt);

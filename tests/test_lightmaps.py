@@ -265,15 +265,3 @@ def test_nudge_kernel_matches_its_twin(tmp_path, white):
     moved = plane & (np.abs(want - lift).max(1) > 1e-3)
     print(f"plane texels {plane.sum()}, moved {moved.sum()}, max |kernel - twin| {np.abs(got - want)[plane].max():.2e}")
     assert moved.sum() > 20 and np.abs(got - want)[plane].max() < 1e-6
-
-
-def test_render_says_it_does_not_read_the_lightmap_yet(tmp_path, white):
-    """The `lightmap` section is the library's (iblbake.render.lightmaps) until a frame reads it:
-    render says so rather than take it in silence; a scene without one hears nothing."""
-    from iblbake.render.plan import UNREAD_LIGHTMAP, plan
-    objs = [{"sphere": {"radius": 0.5}, "material": "m"}]
-    assert UNREAD_LIGHTMAP in plan(scene(tmp_path, white, objs, {"m": {}})).notes
-    plain = load_scene(tmp_path, "plain", {"camera": {"perspective": {"position": [0, 1.5, 3]}, "resolution": [8, 6]},
-                                           "environment": {"path": str(white)}, "materials": {"m": {}},
-                                           "objects": objs})
-    assert UNREAD_LIGHTMAP not in plan(plain).notes

@@ -64,8 +64,8 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, profi
         check_writable(p)
     refuse_foreign(writes, force)
     pl = plan(sc)
-    # paths (the reference, probe rays, reflection captures): a bar on a terminal
-    long_work = "reference" in pl.pass_names or {"probes", "reflection_probes"} & set(pl.bakes)
+    # paths (the reference, probe rays, reflection captures, lightmap texels): a bar on a terminal
+    long_work = "reference" in pl.pass_names or {"probes", "reflection_probes", "lightmap"} & set(pl.bakes)
     with con.fraction("render", "paths") if long_work else contextlib.nullcontext(None) as progress:
         frame = api.render(sc, device, cache=cache_dir, warn=con.warn, progress=progress, profile_paths=profile_paths,
                            names=API_FLAGS)

@@ -19,20 +19,20 @@ from iblbake.scene.load import AOVS, Scene
 
 
 # a scene naming the removed key effects.reference.paths renders as before, with this note (scene/schema.py)
-UNREAD_LIGHTMAP = ("lightmap: not read by render yet: iblbake.render.lightmaps bakes it (docs/manual.md "
-                   "'Lightmaps'); a frame's diffuse light comes from effects.diffuse")
+UNREAD_LIGHTMAP = ("lightmap: not read: effects.diffuse {diffuse} lights the frame; effects.diffuse: lightmap "
+                   "bakes and reads it (docs/manual.md 'Lightmaps')")
 REMOVED_PATHS = ("effects.reference.paths is removed and changes nothing: every reference runs the megakernel "
                  "(the wavefront engine, slower on every device measured, is retired); delete the key")
 
 # The modes that approximate image-based light (runtime and baked estimates): AO occludes them,
 # the study's AO rungs apply to them. The reference traces true visibility instead.
-APPROXIMATE_MODES = {"diffuse": ("sh", "probes") + bases.DIFFUSE,
+APPROXIMATE_MODES = {"diffuse": ("sh", "probes", "lightmap") + bases.DIFFUSE,
                      "specular": ("importance", "prefiltered", "lobe", "probes") + bases.SPECULAR}
 
 
 @dataclass
 class Effects:
-    diffuse: str          # off | sh | probes | reference | a basis of core/bases (DIFFUSE)
+    diffuse: str          # off | sh | probes | lightmap | reference | a basis of core/bases (DIFFUSE)
     specular: str         # off | importance | prefiltered | lobe | probes | reference | a basis (SPECULAR)
     background: str       # hide | show | color | blur
     emissive: bool
@@ -81,8 +81,8 @@ def effect_modes(scene: Scene) -> Effects:
     bounces = reference_bounces(scene, diffuse, specular, notes)
     if "paths" in (((scene.raw or {}).get("effects") or {}).get("reference") or {}):
         notes.append(REMOVED_PATHS)
-    if "lightmap" in (scene.raw or {}):
-        notes.append(UNREAD_LIGHTMAP)
+    if "lightmap" in (scene.raw or {}) and diffuse != "lightmap":
+        notes.append(UNREAD_LIGHTMAP.format(diffuse=diffuse))
     return Effects(diffuse, specular, background, emissive, notes, bounces)
 
 

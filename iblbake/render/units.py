@@ -537,11 +537,46 @@ class ReflectionProbes(Unit):
         return out, cached_all, {"probes": len(out), "rays_traced": rays}
 
 
+class Lightmap(Unit):
+    """The scene's lightmap (render/lightmaps: its texels traced by the path tracer on the job's
+    device, cached by content in the bake store, lightmaps/store.py), for `effects.diffuse: lightmap`;
+    its row says the atlas, the bake and the objects left without one (they read the probes or the
+    panorama's SH)."""
+    name = "lightmap"
+    reads = ("env_cdf", "radiance")          # the tracer's (render/paths/tracer.py)
+
+    @staticmethod
+    def settings(job) -> dict:
+        """The section's bake settings, `basis` included: the bake fits the texels to it (its key
+        holds that basis' options only, lightmaps/store.py)."""
+        return job.scene.data["lightmap"]
+
+    def key(self, job):
+        from iblbake.render.lightmaps import store
+        return store.key(job, self.settings(job))
+
+    def build(self, job, key):
+        from iblbake.render.lightmaps import store
+        lm, cached = store.baked(job, self.settings(job), job.progress)
+        return lm, None, cached
+
+    def result(self, job, made, held):
+        lm, _manifest, cached = made
+        rep, lay = lm["report"], lm["layout"]
+        objects = job.scene.data["objects"]
+        without = [o.get("name") or f"objects.{i}" for i, o in enumerate(objects) if i not in lay.source]
+        return lm, cached or held, {"atlas": [rep["width"], rep["height"]], "texels": rep["texels"],
+                                    "texels_per_unit": rep["texels_per_unit"], "samples": rep["samples"],
+                                    "bake_s": rep["seconds"], "basis": job.scene.data["lightmap"]["basis"],
+                                    "bytes": rep["bytes"], "objects_lightmapped": len(objects) - len(without),
+                                    "objects_without": without}
+
+
 # every unit, in the order that breaks ties between units that do not read one another (the
 # scene's first, as a frame places them; the radiance chain before the prefiltered one, which
 # reuses it where both are planned)
 UNITS = {u.name: u for u in (Geometry(), Panorama(), Sun(), Textures(), DeviceScene(), SH(), Basis(), Radiance(),
-                             Prefiltered(), DFG(), EnvCDF(), Probes(), ReflectionProbes())}
+                             Prefiltered(), DFG(), EnvCDF(), Probes(), ReflectionProbes(), Lightmap())}
 
 
 def order(names, units: dict | None = None) -> list:

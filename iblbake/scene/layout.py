@@ -11,7 +11,7 @@ from iblbake.core.bsdf import DELTA_ALPHA
 from iblbake.core.metrics import LUMINANCE
 from iblbake.core.sampling import ENV_GUIDE_BINS
 
-DIFFUSE_MODES = {"off": 0, "sh": 1, "reference": 2, "probes": 3, "basis": 4}   # basis: core/bases DIFFUSE
+DIFFUSE_MODES = {"off": 0, "sh": 1, "reference": 2, "probes": 3, "basis": 4, "lightmap": 5}   # basis: core/bases DIFFUSE
 SPECULAR_MODES = {"off": 0, "importance": 1, "prefiltered": 2, "reference": 3, "lobe": 4, "basis": 5,   # basis: core/bases SPECULAR
                   "probes": 6}
 BACKGROUND_MODES = {"hide": 0, "show": 1, "color": 2, "blur": 3}
@@ -74,6 +74,8 @@ GBUFFER = {
     "gb_uv": "TEXCOORD_0 and TEXCOORD_1 at the hit (u0, v0, u1, v1)",
     "gb_tan": "unit tangent (the direction of increasing u), w: the bitangent's side",
     "gb_lod": "mip level of the hit's footprint for each set, before the texture's size (x, y)",
+    # with a lightmap (HAS_LIGHTMAP): where the hit lies in its atlas (kernels/lightmap.h lightmap_uv)
+    "gb_lm": "UV1 in the lightmap's texel units (u, v), z: 1 where the hit has a lightmap, else 0",
     "gb_mat": "3 per sample: (base colour, metallic), (emissive, roughness), (shading normal, occlusion)",
 }
 MISS_T = -1.0

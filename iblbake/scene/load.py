@@ -284,6 +284,7 @@ def _validated(data, lines, source, folder, overrides, outputs, values, origin, 
     _resolve_reflection_probes(v, out["reflection_probes"])
     _resolve_probes(v, out["probes"])
     _resolve_basis_specular(v, out["effects"], out["probes"])
+    _resolve_lightmap(v, out, raw)
     _resolve_specular_fits(out, raw)
     writes = _resolve_outputs(v, out["output"], folder, outputs)
     return Scene(out, source, folder, lines, writes, raw, overridden, copy.deepcopy(out))
@@ -491,6 +492,39 @@ def _resolve_basis_specular(v: "_Validator", fx: dict, probes: dict) -> None:
     if s == "probes" and d in bases.DIFFUSE:
         v.fail("effects.specular", f"probes beside effects.diffuse: {d}: a frame lights from one directional basis; "
                                    "give effects.diffuse probes (or sh), or another specular mode")
+
+
+def _resolve_lightmap(v: "_Validator", out: dict, raw: dict) -> None:
+    """`effects.diffuse: lightmap` reads the scene's `lightmap` section (it must have one); the shade
+    pass compiles one directional basis a frame (kernels/bases.h), so a lightmap storing one sits
+    beside no other (the distant specular basis', the probes' that light what has no lightmap); the
+    SH reading of an SH lightmap takes its coefficients' bands from effects.sh_bands' evaluation."""
+    from iblbake.core import bases
+    from iblbake.core.bases.probes import PROBE_BASES
+    fx = out["effects"]
+    if fx["diffuse"] != "lightmap":
+        return
+    if "lightmap" not in raw:
+        v.fail("effects.diffuse", "lightmap reads the scene's lightmap: section, and it has none; add one "
+                                  "(`lightmap: {}` takes the defaults; docs/manual.md 'Lightmaps') or give another "
+                                  "diffuse mode")
+    name = out["lightmap"]["basis"]
+    mine = PROBE_BASES.get(name)
+    stored = PROBE_BASES[out["probes"]["irradiance"]] if "probes" in raw else None
+    if fx["specular"] in bases.SPECULAR and ((mine and mine.directional) or (stored and stored.directional)):
+        v.fail("effects.specular", f"{fx['specular']} beside a lightmap or probes storing a directional basis: a frame "
+                                   "lights from one directional basis; give lightmap.basis (and probes.irradiance) "
+                                   "irradiance, sh_l1 or sh, or another specular mode")
+    if mine and mine.directional and stored and stored.directional and (
+            stored is not mine or mine.options(out["lightmap"]) != stored.options(out["probes"])):
+        v.fail("lightmap.basis", f"{name} {mine.options(out['lightmap'])} beside probes storing {stored.name} "
+                                 f"{stored.options(out['probes'])} (they light what has no lightmap): a frame lights "
+                                 f"from one directional basis; give the probes the lightmap's basis and options, or "
+                                 "probes.irradiance octahedral or sh")
+    coeffs = {"sh_l1": 4}.get(name, mine.floats({}) if mine and not mine.directional and not mine.atlas else 0)
+    if coeffs > fx["sh_bands"] ** 2:
+        v.fail("effects.sh_bands", f"{fx['sh_bands']} evaluates fewer SH coefficients than lightmap.basis {name} "
+                                   f"holds ({coeffs}); give {math.isqrt(coeffs)} or more")
 
 
 def _resolve_specular_fits(out: dict, raw: dict) -> None:

@@ -397,6 +397,10 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                                                   "rays pass through it, as Unreal's Visible in Reflection Captures "
                                                   "and Unity's culling mask; it still shadows and reflects light "
                                                   "further along the paths)"),
+            "lightmap": Bool(True, doc="gets a lightmap where the scene has one (a mesh, sphere or finite "
+                                       "plane); false: a dynamic object, lit by the irradiance probes (else the "
+                                       "panorama's SH) under `effects.diffuse: lightmap`, still met by the "
+                                       "lightmap's rays"),
         })),
     "lights": ListOf(doc="analytic lights in the units of glTF's KHR_lights_punctual, added to the IBL and "
                          "shaded with its BRDF", section=Section(
@@ -486,7 +490,8 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "basis": Enum(LIGHTMAP_BASES, "sh_l1",
                       doc="what each texel keeps beside its irradiance (render/lightmaps/bases.py): `irradiance` "
                           "(none: a non-directional lightmap), `sh_l1` (L1 SH read exactly at the texel's normal), "
-                          "or an irradiance probes' basis (core/bases/probes.py; its options the probes' keys): "
+                          "or an irradiance probes' basis (core/bases/probes.py; its options the probes' keys); "
+                          "`effects.diffuse: lightmap` reads it at the shading normal (a normal map's): "
                           + "; ".join(f"`{n}`: {b.doc}" for n, b in PROBE_BASES.items() if not b.atlas)),
         **{k: Enum(choices, default, doc=doc + " (the lightmap's basis)") for b in PROBE_BASES.values()
            for k, (choices, default, doc) in b.option_specs.items()},
@@ -535,11 +540,13 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                                "it still meet them, so a floor keeps their shadow and the light they throw"),
     })),
     "effects": Section(doc="what the renderer simulates; nothing else is baked, compiled or run", fields={
-        "diffuse": Enum(("sh",) + bases.DIFFUSE + ("probes", "reference", "off"), "sh",
+        "diffuse": Enum(("sh",) + bases.DIFFUSE + ("probes", "lightmap", "reference", "off"), "sh",
                         doc="diffuse IBL: SH irradiance of the panorama, another directional basis of it ("
                             + ", ".join(f"`{n}`: {bases.BASES[n].TITLE}" for n in bases.DIFFUSE)
                             + "; docs/conventions.md), irradiance probes (`probes`: the light between surfaces "
-                              "too), Monte Carlo reference, or none"),
+                              "too), the scene's lightmap (`lightmap`: its `lightmap` section baked, read at each "
+                              "pixel's UV1; what has none reads the probes, else the panorama's SH), Monte Carlo "
+                              "reference, or none"),
         "sh_bands": Num(3, 1, 8, integer=True, doc="SH bands for diffuse: sh (3 = 9 coefficients)"),
         "sh_window": Enum(("none", "hann", "lanczos"), "none", doc="SH ringing window"),
         **{k: Enum(choices, default, doc=doc) for n in bases.DIFFUSE

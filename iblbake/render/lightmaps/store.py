@@ -58,7 +58,8 @@ def save(lm: dict, folder: Path) -> list:
     the layout; the names written."""
     names = []
     lay = lm["layout"]
-    arrays = {"irradiance": lm["irradiance"], "basis": lm[lm["basis"]], "valid": lm["valid"],
+    coeffs = np.reshape(lm[lm["basis"]], (lay.height, lay.width, -1, 3))    # `irradiance`: one row a texel
+    arrays = {"irradiance": lm["irradiance"], "basis": coeffs, "valid": lm["valid"],
               **{n: getattr(lay, n) for n in LAYOUT}}
     for name, arr in arrays.items():
         np.save(Path(folder) / f"{name}.npy", np.asarray(arr, INT.get(name, np.float32)))

@@ -79,17 +79,28 @@ def weld(corners):
     return verts, inverse.reshape(-1, 3)
 
 
+def charted(obj: dict) -> bool:
+    """Whether a scene object gets a lightmap: a mesh, a sphere or a finite plane (an infinite plane
+    has none: it keeps the probes or the panorama's SH), unless `lightmap: false` (a dynamic object)."""
+    return obj.get("lightmap", True) and (
+        "mesh" in obj or "sphere" in obj or ("plane" in obj and obj["plane"]["size"] is not None))
+
+
 def _parts(scene, tris):
     """Each lightmapped object's (object index, how, vertices, faces, TEXCOORD_1 per vertex or None,
-    sphere (centre, radius) or None). An infinite plane has none (it keeps the probes)."""
+    sphere (centre, radius) or None): those charted() (an infinite plane and a dynamic object have none)."""
     out = []
     for oid, o in enumerate(scene.data["objects"]):
+        if not charted(o):
+            continue
         if "sphere" in o:
             v, f = sphere_mesh(o["sphere"]["center"], o["sphere"]["radius"])
             out.append((oid, "sphere", v, f, None, (o["sphere"]["center"], o["sphere"]["radius"])))
-        elif "plane" in o and o["plane"]["size"] is not None:
+        elif "plane" in o:
             out.append((oid, "plane", *plane_mesh(o["plane"]), None, None))
     for oid in np.unique(tris.object_id):
+        if not charted(scene.data["objects"][int(oid)]):
+            continue
         mine = tris.object_id == oid
         corners = np.stack([tris.v0[mine], tris.v1[mine], tris.v2[mine]], 1)
         uv1 = None if tris.uv is None else tris.uv[mine][..., 2:4]

@@ -158,6 +158,6 @@ DISPLAY_KEYS = ("tonemap", "exposure", "output_transfer", "gamma")
 def lighting_inputs(scene: Scene) -> dict:
     d = scene.data
     return {"camera": d["camera"], "environment": d["environment"], "materials": d["materials"],
-            "objects": d["objects"], "lights": d["lights"], "probes": d["probes"],
+            "objects": d["objects"], "lights": d["lights"], "probes": d["probes"], "lightmap": d["lightmap"],
             "reflection_probes": d["reflection_probes"],
             "effects": {k: v for k, v in d["effects"].items() if k not in DISPLAY_KEYS}}

@@ -24,14 +24,17 @@ class Shade(Pass):
     kernel = "shade.cl"
     # every lighting pass adds into radiance; each source's own buffers
     buffers = (Buffer("radiance"),) + tuple(b for s in SOURCES for b in s.buffers)
-    host_writes = ("probe_stats",)
+    host_writes = ("probe_stats", "lm_stats")
     # probe_stats summed over the tiles, and the samples they are out of
     counters = (Counter("probe_fallback_nearest", lambda fx: fx.diffuse == "probes"),
                 Counter("probe_fallback_sky", lambda fx: fx.diffuse == "probes"),
                 Counter("probe_outside_volume", lambda fx: fx.diffuse == "probes"),
                 Counter("probe_specular_fallback_nearest", lambda fx: fx.specular == "probes"),
                 Counter("probe_specular_fallback_sky", lambda fx: fx.specular == "probes"),
-                Counter("probe_samples", lambda _fx: False))
+                Counter("probe_samples", lambda _fx: False),
+                # diffuse lightmap: the samples it lit, and those on surfaces without one (kernels/shade.cl lm_stats)
+                Counter("lightmap_samples", lambda fx: fx.diffuse == "lightmap"),
+                Counter("lightmap_fallback", lambda fx: fx.diffuse == "lightmap"))
 
     def runs(self, scene, fx):
         return fx.any_approximate or fx.emissive
@@ -74,7 +77,13 @@ class Shade(Pass):
         probes_in = "probes" in (fx.diffuse, fx.specular)
         if probes_in:
             ctx.rt.cl.enqueue_fill_buffer(ctx.rt.queue, ctx.table["probe_stats"], np.int32(0), 0, 20)
+        lightmap = fx.diffuse == "lightmap"
+        if lightmap:
+            ctx.rt.cl.enqueue_fill_buffer(ctx.rt.queue, ctx.table["lm_stats"], np.int32(0), 0, 8)
         s = self.launch_samples(ctx)
+        if lightmap:
+            lit, fallback = ctx.rt.read(ctx.table["lm_stats"], (2,), np.int32).tolist()
+            self.count(ctx, lightmap_samples=lit, lightmap_fallback=fallback)
         lobe = ctx.plan.effects.specular == "lobe"
         k = ctx.args[self.name]["lobe_samples"] if lobe else 1
         extra = {"samples": k} if lobe else {}

@@ -24,7 +24,9 @@ class IrradianceProbes(Source):
     buffers = (Buffer("probe_stats", "int", per="frame", count=5, when="PROBE_STATS"),)
 
     def runs(self, scene, fx):
-        return fx.diffuse == "probes"
+        from iblbake.render.sources.lightmap import fallback_probes
+        # with a lightmap, for what has none
+        return fx.diffuse == "probes" or (fx.diffuse == "lightmap" and fallback_probes(scene))
 
     def defines(self, scene, fx):
         return {**probe_defines(scene.data["probes"]), "PROBE_STATS": 1}

@@ -1,5 +1,5 @@
 """Spherical-harmonic irradiance of the panorama (`diffuse: sh`; the light outside the irradiance
-probes' volume and where no probe is near). Kernel: kernels/sh.h sh_irradiance."""
+probes' volume and where no probe is near, and on what has no lightmap). Kernel: kernels/sh.h sh_irradiance."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ class SphericalHarmonics(Source):
     params = ("sh_coeffs",)
 
     def runs(self, scene, fx):
-        return fx.diffuse in ("sh", "probes")
+        return fx.diffuse in ("sh", "probes", "lightmap")
 
     def defines(self, scene, fx):
         return {"SH_BANDS": scene.data["effects"]["sh_bands"]}

@@ -19,13 +19,15 @@ from iblbake.render.twin.surface import diffuse_weight, material_occlusion, surf
 
 
 def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, prefiltered=None, dfg=None,
-          ao=None, probes=None, reflection_probes=None, ssr_out=None, basis_coeffs=None):
+          ao=None, probes=None, reflection_probes=None, ssr_out=None, basis_coeffs=None, lightmap=None):
     """Per-sample radiance of the `shade` pass, with the `importance` pass's sums for it (hits
     only; misses are 0); `ao` the ambient occlusion of every sample (ambient_occlusion) where
     effects.ao is on. The importance estimate is summed with Fresnel inside, which the kernels
     split around f0: the same sum, to float rounding. `probes`: the sampled probe volume
     (render/probes sampled) where effects.diffuse is probes, sh_coeffs then the panorama's SH
-    that takes over outside it. `basis_coeffs`: the `basis` bake where diffuse is a directional basis. `reflection_probes`: the captured probes [{settings, levels}]
+    that takes over outside it. `lightmap`: (the `lightmap` bake, the scene's lightmap section) where
+    diffuse is lightmap (render/lightmaps/read.py), the probes (`probes`) or the panorama's SH
+    (`sh_coeffs`) on what has none. `basis_coeffs`: the `basis` bake where diffuse is a directional basis. `reflection_probes`: the captured probes [{settings, levels}]
     (the reflection_probes bake) where specular is prefiltered. `ssr_out` (a dict) receives the
     reflected environment's weight and radiance per hit sample ("w", "li"), as HAS_SSR writes
     ssr_env for the ssr pass (twin/ssr.py)."""
@@ -54,6 +56,10 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
         e = wv * np.where((source == probe_twin.SOURCE_NONE)[:, None], sky, e) + (1 - wv) * sky
         diff_occ = ao_multibounce(occ, base * (1 - metallic[:, None])) if effects["ao_multibounce"] else occ[:, None]
         color += diff_occ * diffuse_weight(base, metallic, rough, f0, f90, nov) * e
+    elif effects["diffuse"] == "lightmap":
+        color += occ[:, None] * diffuse_weight(base, metallic, rough, f0, f90, nov) * lightmap_irradiance(
+            gb, arrays, lightmap, n, v, probes, scale * np.maximum(sh.evaluate(sh_coeffs, to_env(n, rot),
+                                                                                effects["sh_bands"]), 0.0))
     if effects["specular"] == "importance":
         nsamp = effects["samples"]
         pts = sampling.hammersley(nsamp).astype(np.float32).astype(np.float64)
@@ -119,6 +125,25 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
                               effects["lobe"]["spread"], prefiltered, dfg)
     out[hit] = color * material_occlusion(gb)[:, None] + emissive
     return out
+
+
+def lightmap_irradiance(gb, arrays, lightmap, n, v, probes, sky):
+    """The irradiance of the hits (kernels/shade.cl DIFFUSE_LIGHTMAP): the lightmap's at their UV1
+    (read.py), the probes' (or `sky`, the panorama's SH) on what has none."""
+    from iblbake.render.lightmaps import read
+    lm, settings = lightmap
+    from iblbake.render.sources.lightmap import basis_of
+    hit = gb["hit"]
+    e, found = read.irradiance(lm, read.hit_objects(gb, arrays)[hit], gb["pos"][hit], n, settings["basis"],
+                               basis_of(settings)[1])
+    rest = ~found
+    if probes is not None and rest.any():
+        p = gb["pos"][hit][rest]
+        wv = probe_twin.volume_weight(probes, p)[:, None]
+        pe, source = probe_twin.irradiance_and_source(probes, p, n[rest], v[rest], visibility=probes["visibility"],
+                                                      classification=probes["classification"])
+        sky[rest] = wv * np.where((source == probe_twin.SOURCE_NONE)[:, None], sky[rest], pe) + (1 - wv) * sky[rest]
+    return np.where(found[:, None], e, sky)
 
 
 def specular_occlusion(nov, ao, roughness):

@@ -1,0 +1,154 @@
+"""The scene's lightmap (`diffuse: lightmap`): the `lightmap` bake (render/lightmaps) read at each
+hit's UV1, which the G-buffer pass finds (passes/gbuffer.py binds uv_tables()); a hit without one
+reads the irradiance probes where the scene has a `probes` section, else the panorama's SH, and
+lm_stats counts both. What a texel holds is `lightmap.basis`: the irradiance, L1 SH, or a basis of
+the probes' registry (core/bases/probes.py PROBE_BASES), packed by the registry and evaluated by its
+kernel function (kernels/lightmap.h). Twin: render/lightmaps/read.py."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from iblbake.core import sh
+from iblbake.errors import InputError
+from iblbake.render.buffers import Buffer
+from iblbake.render.sources.base import Source
+
+PARAMS = ("lm_atlas", "lm_width", "lm_height")
+UV_PARAMS = ("lm_prims", "lm_tris")
+
+
+def fallback_probes(scene) -> bool:
+    """Whether what has no lightmap reads the irradiance probes: some object has none (an infinite
+    plane) and the scene has a `probes` section (else the panorama's SH: no probes are baked)."""
+    from iblbake.render.lightmaps.uv import charted
+    return "probes" in (scene.raw or {}) and not all(charted(o) for o in scene.data["objects"])
+
+
+def uv_defines() -> dict:
+    """What the G-buffer's UV1 lookup compiles with (kernels/lightmap.h lightmap_uv)."""
+    from iblbake.render.lightmaps.uv import SPHERE_SEGMENTS
+    return {"HAS_LIGHTMAP": 1, "LM_SPHERE_AROUND": SPHERE_SEGMENTS[0], "LM_SPHERE_BANDS": SPHERE_SEGMENTS[1]}
+
+
+def basis_of(settings: dict):
+    """(the registry's entry or None for the lightmap's own irradiance and sh_l1, its options)."""
+    from iblbake.core.bases.probes import PROBE_BASES
+    b = PROBE_BASES.get(settings["basis"])
+    return b, (b.options(settings) if b is not None else {})
+
+
+def basis_defines(settings: dict) -> dict:
+    """kernels/lightmap.h's switches for lightmap.basis: which texel reading, its rows a texel."""
+    name = settings["basis"]
+    b, opts = basis_of(settings)
+    if name == "irradiance":
+        return {"LIGHTMAP_IRRADIANCE": 1, "LM_ROWS": 1}
+    if b is None or not b.directional:                 # sh_l1, or the registry's SH irradiance
+        k = 4 if b is None else b.floats(opts)
+        return {"LIGHTMAP_SH": 1, "LIGHTMAP_SH_COEFFS": k, "LM_ROWS": k}
+    return {**b.m.defines(opts), "LIGHTMAP_BASIS": 1, "BASIS_SPACE": "__global", "LM_ROWS": b.rows(opts)}
+
+
+def baked_basis(settings: dict) -> str:
+    """lightmap.basis, where a bake can hold it (lightmaps.NAMES); else a one-line error naming the
+    key, before anything is baked."""
+    from iblbake.render import lightmaps
+    name = settings["basis"]
+    if name not in lightmaps.NAMES:
+        raise InputError(f"lightmap.basis: {name} is not a lightmap's basis (give one of "
+                         f"{', '.join(lightmaps.NAMES)})")
+    return name
+
+
+def texels_of(lm: dict, settings: dict) -> np.ndarray:
+    """The atlas' float4 rows, LM_ROWS a texel in row-major texel order, as the kernel reads them:
+    the irradiance; the L1 SH as irradiance coefficients (E_lm = Ahat_l L_lm); a registry basis as
+    its entry packs a probe's block."""
+    name = baked_basis(settings)
+    b, opts = basis_of(settings)
+    h, w = lm["layout"].height, lm["layout"].width
+    if name == "irradiance":
+        return np.pad(np.asarray(lm[name], np.float32).reshape(-1, 3), ((0, 0), (0, 1)))
+    if b is None:
+        e = np.asarray(lm[name], np.float64) * sh.ahat(2)[:, None]
+        return np.pad(e.reshape(-1, 3), ((0, 0), (0, 1))).astype(np.float32)
+    return b.pack(np.asarray(lm[name]).reshape(h * w, -1, 3), opts)
+
+
+def uv_tables(lay, arrays) -> tuple:
+    """(lm_prims (records, 4) int32, lm_tris (atlas triangles, 5, 4) float32) of a layout over the
+    scene's records (kernels/lightmap.h): per sphere, plane and triangle (BVH order) record its first
+    atlas triangle and their count (0: none), the triangle of a mesh found by its corners."""
+    ints = lambda a: np.asarray(a, np.float32).view(np.int32)
+    tris = np.zeros((max(len(lay.uv), 1), 5, 4), np.float32)
+    tris[:len(lay.uv), :3, :3] = lay.corners
+    tris[:len(lay.uv), 3] = lay.uv[:, :2].reshape(-1, 4)
+    tris[:len(lay.uv), 4, :2] = lay.uv[:, 2]
+    first = {int(o): int(np.flatnonzero(lay.objects == o)[0]) for o in np.unique(lay.objects)}
+    count = {o: int((lay.objects == o).sum()) for o in first}
+    ns, npl, nt = len(arrays.spheres), len(arrays.planes), len(arrays.tris)
+    prims = np.zeros((max(ns + npl + nt, 1), 4), np.int32)
+    for i, obj in enumerate(ints(arrays.spheres[:, 1, 1]) if ns else []):
+        prims[i, :2] = (first[obj], count[obj]) if obj in first else (0, 0)
+    for i, obj in enumerate(ints(arrays.planes[:, 1, 3]) if npl else []):
+        prims[ns + i, :2] = (first[obj], count[obj]) if obj in first else (0, 0)
+    if nt:
+        mine = np.isin(ints(arrays.tris[:, 1, 3]), list(first))
+        atlas, scene = _corner_keys(lay.corners), _corner_keys(arrays.tris[:, :3, :3])
+        order = np.argsort(atlas)
+        at = np.minimum(np.searchsorted(atlas[order], scene), len(atlas) - 1)
+        found = mine & (atlas[order][at] == scene)
+        prims[ns + npl:][found, 0], prims[ns + npl:][found, 1] = order[at][found], 1
+    return prims, tris
+
+
+def _corner_keys(corners) -> np.ndarray:
+    """Each triangle's corners (n, 3, 3) as one key independent of their order (xatlas may rotate
+    them): their float32 bytes, the three corners sorted."""
+    c = np.ascontiguousarray(np.asarray(corners, np.float32)).view(np.dtype((np.void, 12))).reshape(len(corners), 3)
+    return np.ascontiguousarray(np.sort(c, axis=1)).view(np.dtype((np.void, 36))).ravel()
+
+
+def uv_args(rt, lm, arrays, bakes=None) -> dict:
+    """lm_prims and lm_tris on the device (placeholders without a lightmap)."""
+    if lm is None:
+        return {"lm_prims": rt.to_device(np.zeros((1, 4), np.int32)),
+                "lm_tris": rt.to_device(np.zeros((1, 4), np.float32))}
+
+    def upload():
+        return tuple(rt.to_device(a) for a in uv_tables(lm["layout"], arrays))
+    prims, tris = bakes.on_device(rt, (lm["layout"].uv, arrays.tris, arrays.spheres, arrays.planes), upload) \
+        if bakes is not None else upload()
+    return {"lm_prims": prims, "lm_tris": tris}
+
+
+class Lightmap(Source):
+    name = "lightmap"
+    header = "lightmap.h"
+    params = PARAMS
+    sections = ("lightmap", "probes")
+    # [0] the samples the lightmap lit, [1] those of surfaces without one (the probes or the panorama's SH)
+    buffers = (Buffer("lm_stats", "int", per="frame", count=2, when="HAS_LIGHTMAP"),)
+
+    def runs(self, scene, fx):
+        return fx.diffuse == "lightmap"
+
+    def defines(self, scene, fx):
+        baked_basis(scene.data["lightmap"])
+        d = {**uv_defines(), **basis_defines(scene.data["lightmap"])}
+        if fallback_probes(scene):
+            d["LIGHTMAP_FALLBACK_PROBES"] = 1
+        return d
+
+    def reads_bakes(self, scene, fx):
+        return ["lightmap"]
+
+    def args(self, ctx):
+        lm, settings = ctx.loaded["lightmap"], ctx.scene.data["lightmap"]
+        atlas = ctx.bakes.on_device(ctx.rt, (lm["layout"].uv, lm[settings["basis"]]),
+                                    lambda: ctx.rt.to_device(texels_of(lm, settings)))
+        return {"lm_atlas": atlas, "lm_width": lm["layout"].width, "lm_height": lm["layout"].height}
+
+    def placeholders(self, rt):
+        return {"lm_atlas": rt.to_device(np.zeros((1, 4), np.float32)), "lm_width": 1, "lm_height": 1}
