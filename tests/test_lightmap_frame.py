@@ -12,7 +12,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from iblbake.core.bases.probes import PROBE_BASES
 from iblbake.errors import InputError
 from iblbake.io import images
 from iblbake.render import lightmaps
