@@ -133,16 +133,6 @@ def sh_irradiance(coeffs, normals):
     return np.maximum(0.0, np.einsum("...j,...jc->...c", sh.sh_basis(normals, 2), e))
 
 
-def facing(tx: uvs.Texels, camera) -> None:
-    """One lightmap a surface, of the side the camera is on: a texel whose normal faces away from the
-    camera turns (a wall wound either way, seen from inside its room). A closed solid (a sphere)
-    keeps its outside."""
-    away = ((np.asarray(camera) - tx.position) * tx.geometric).sum(1) < 0
-    away &= ~tx.solid
-    tx.normal[away] *= -1
-    tx.geometric[away] *= -1
-
-
 def inset(tx: uvs.Texels, corners, texel_size: float):
     """The texels' points moved OFFSET texels towards their triangle's centroid (at most half way):
     a point on a chart's edge lies in the plane of the wall meeting it there, and its rays along that
@@ -244,7 +234,7 @@ def bake(job, settings: dict, progress=None) -> dict:
     """The scene's lightmap (settings: the scene's lightmap section): the layout and the atlases
     {'irradiance': (h, w, 3), 'sh_l1': (h, w, 4, 3), 'valid': (h, w) bool} and a report."""
     from iblbake.render.paths.tracer import Tracer
-    from iblbake.scene import geometry, materials, pack
+    from iblbake.scene import geometry, materials
 
     t0 = time.perf_counter()
     sc = job.scene
@@ -255,7 +245,6 @@ def bake(job, settings: dict, progress=None) -> dict:
     density = settings["texels_per_unit"]
     lay = uvs.layout(sc, tris, density, settings["max_texels"])
     tx = uvs.texels(lay)
-    facing(tx, pack.camera_vectors(sc.data["camera"])[0])
     t_layout = time.perf_counter() - t0
     tracer = Tracer(job, {"bounces": settings["bounces"], "seed": settings["seed"]})
     start, moved = nudge(tracer, tx, inset(tx, lay.corners, 1.0 / density), 1.0 / density)

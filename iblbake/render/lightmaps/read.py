@@ -13,8 +13,9 @@ from iblbake.render.lightmaps.bake import sh_irradiance
 from iblbake.render.lightmaps.uv import Layout
 
 
-def atlas_uv(lay: Layout, objects, points):
-    """(UV1 in texel units (n, 2), found (n,)) of points (n, 3) on objects (n,)."""
+def atlas_uv(lay: Layout, objects, points, normals=None):
+    """(UV1 in texel units (n, 2), found (n,)) of points (n, 3) on objects (n,); with shading normals
+    (n, 3), on the side they face (a two-sided surface has a chart a side, each wound to face its side)."""
     uv = np.full((len(points), 2), np.nan)
     for o in np.unique(objects):
         mine = np.flatnonzero(objects == o)
@@ -34,7 +35,8 @@ def atlas_uv(lay: Layout, objects, points):
         b1 = (d11 * d20 - d01 * d21) / den
         b2 = (d00 * d21 - d01 * d20) / den
         out = np.maximum(0, -np.minimum(np.minimum(b1, b2), 1 - b1 - b2))    # how far outside
-        best = np.argmin(out * 1e3 + dist, axis=1)
+        back = 0.0 if normals is None else np.einsum("px,tx->pt", normals[mine], n) < 0
+        best = np.argmin(out * 1e3 + dist + back * 1e6, axis=1)
         p = np.arange(len(mine))
         bb1, bb2 = np.clip(b1[p, best], 0, 1), np.clip(b2[p, best], 0, 1)
         s = np.maximum(bb1 + bb2, 1.0)
@@ -60,7 +62,7 @@ def bilinear(atlas, uv):
 def irradiance(lm: dict, objects, points, normals, basis: str = "sh_l1"):
     """(E (n, 3), found (n,)) at points on objects with shading normals, from a baked lightmap
     (bake.bake()'s dict) in `basis` ('irradiance' or 'sh_l1')."""
-    uv, found = atlas_uv(lm["layout"], objects, points)
+    uv, found = atlas_uv(lm["layout"], objects, points, normals)
     e = np.zeros((len(points), 3))
     if found.any():
         if basis == "irradiance":
