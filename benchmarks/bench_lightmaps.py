@@ -5,7 +5,8 @@ lightmap (iblbake/render/lightmaps) baked at a texel density, read at the camera
 per object region the ratio of its mean luminance to the reference's diffuse term and the worst
 channel's |mean difference| (study/accuracy.py Study.region_metrics), for the non-directional
 (irradiance) and the L1 SH atlases; with the bake's time and the atlases' bytes (fp16 as an engine
-holds them). Prints a Markdown table; --json writes every figure.
+holds them), and the scene's default irradiance probes beside them (the study's `probes` rung: its
+bake's time, bytes and worst region). Prints a Markdown table; --json writes every figure.
 
     .venv/bin/python benchmarks/bench_lightmaps.py [--scenes quad_room,corridor,l_room]
         [--panorama studio] [--density 8] [--samples 1024] [--max-side 64] [--max-samples 4096]
@@ -58,18 +59,32 @@ def measure(name, args, rt, bakes) -> dict:
     return {"scene": name, "panorama": args.panorama, "density": args.density, "samples": lm["report"]["samples"],
             "atlas": [lm["report"]["width"], lm["report"]["height"]], "texels": lm["report"]["texels"],
             "bake_s": round(bake_s, 2), "reference_s": round(ref_s, 1), "reference_noise": ref["noise"],
-            "bases": rows}
+            "bases": rows, "probes": probes(study)}
+
+
+def probes(study) -> dict | None:
+    """The scene's default irradiance probes (the study's `probes` rung) beside the lightmap: their
+    bake's seconds, bytes and worst region against the same reference."""
+    from iblbake.study import ladder
+    rung = next((r for r in ladder.realtime_ladder(study.scene, study.fx) if r.label == "probes"), None)
+    if rung is None:
+        return None
+    row = study.run_rung(rung)
+    return {"bake_s": round(sum(b["seconds"] for b in row["bakes"]), 2), "bytes": row["bytes"],   # cached: as baked
+            "worst_region_absolute": max(e["absolute"] for e in row["region_absolute"].values())}
 
 
 def table(results) -> str:
-    lines = ["| scene | basis | texels/unit | atlas | bytes | bake s | worst region | regions (ratio to the reference) |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = ["| scene | panorama | basis | texels/unit | atlas | bytes | bake s | worst region | regions (ratio to the "
+             "reference) | probes: bytes, bake s, worst region |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in results:
+        p = r.get("probes")
+        probe = f"{p['bytes']}, {p['bake_s']:.2f}, {100 * p['worst_region_absolute']:.1f}%" if p else ""
         for basis, b in r["bases"].items():
             regions = ", ".join(f"{n.split(' (objects.')[0].strip(chr(39))} x{e['ratio']:.3f}"
                                 for n, e in b["region_absolute"].items())
-            lines.append(f"| {r['scene']} | {basis} | {r['density']:g} | {r['atlas'][0]}x{r['atlas'][1]} | "
-                         f"{b['bytes']} | {r['bake_s']} | {100 * b['worst_region_absolute']:.1f}% | {regions} |")
+            lines.append(f"| {r['scene']} | {r['panorama']} | {basis} | {r['density']:g} | {r['atlas'][0]}x{r['atlas'][1]} | "
+                         f"{b['bytes']} | {r['bake_s']} | {100 * b['worst_region_absolute']:.1f}% | {regions} | {probe} |")
     return "\n".join(lines)
 
 

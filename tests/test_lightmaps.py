@@ -77,6 +77,23 @@ def test_unwrap_texels_inside_their_triangles(tmp_path, white):
     assert 0.3 < use < 1.0
 
 
+def test_texels_the_same_in_chunks(tmp_path, white, monkeypatch):
+    """The rasterisation tests every triangle's box of texels at once, uv.CHUNK (triangle, texel)
+    pairs at a time: cut into chunks of a few triangles each, the same texels, triangles and points
+    (a cube and a sphere, 972 triangles; docs/manual.md "Lightmaps" has its time on a large mesh)."""
+    sc = scene(tmp_path, white, [{"mesh": {"path": CUBE}, "material": "m"},
+                                 {"sphere": {"center": [1, 0.5, 0], "radius": 0.4}, "material": "m"}],
+               {"m": LAMBERT}, texels_per_unit=16)
+    lay = lightmaps.layout(sc, host_triangles(sc), 16.0, 1 << 20)
+    whole = lightmaps.texels(lay)
+    monkeypatch.setattr(lightmaps.uv, "CHUNK", 40)
+    cut = lightmaps.texels(lay)
+    print(f"{len(lay.uv)} triangles, {len(whole.index)} texels")
+    assert len(whole.index) > 1000
+    for f in ("index", "triangle", "bary", "position", "normal", "geometric", "inside", "solid"):
+        assert np.array_equal(getattr(whole, f), getattr(cut, f)), f
+
+
 def test_small_sphere_gets_its_least_texels(tmp_path, white):
     """A sphere of radius 0.1 at 4 texels a unit (2.5 texels around at the density) is charted at
     SPHERE_TEXELS = 16 around: its charts' area at least 4 pi r^2 (16 / (2 pi r))^2 = 256 / pi texels
