@@ -193,6 +193,32 @@ def test_texels_inside_a_solid_rejected_and_dilated(tmp_path, white):
     assert abs(e[tx.index[bottom]].mean() / math.pi - 1) < 0.01      # the plane's underside: the sky below
 
 
+def test_diffuse_frame_weighs_as_the_frame(tmp_path, white):
+    """The reading's diffuse term weighs E as the frame does (kernels/surface.h diffuse_weight:
+    (1 - F(NoV)) (1 - metallic) base colour / pi): a dielectric sphere of specular 1 alone under
+    L = 1 (E = pi at every normal) against the converged reference's diffuse term, within 2%
+    (measured x1.000; Lambert's base colour x E / pi read it x1.082, window_room's clay sphere x1.13
+    under city)."""
+    from iblbake.device.runtime import Runtime
+    from iblbake.render.bakes import Bakes
+    from iblbake.render.lightmaps import read
+    from iblbake.render.units import Job
+    from iblbake.study import accuracy as acc
+
+    scene(tmp_path, white, [{"sphere": {"center": [0, 0.3, 0], "radius": 0.8}, "material": "m"}],
+          {"m": {"base_color": [0.8, 0.7, 0.6], "roughness": 0.3}}, texels_per_unit=8)
+    rt, bakes = Runtime(), Bakes(tmp_path / "cache")
+    st = acc.Study(tmp_path / "lm.yaml", [], acc.Settings(max_side=48, repeats=1, target_noise=0.01, max_samples=1024,
+                                                          flip=False), runtime=rt, bakes=bakes)
+    ref = st.render_reference("diffuse")
+    lm = lightmaps.bake(Job(st.scene, rt, bakes), st.scene.data["lightmap"])
+    hdr = read.diffuse_frame(st.scene, bakes.geometry(st.scene), lm, ref["hdr"].shape[:2], "irradiance")
+    regions = st.region_metrics(hdr, ref["hdr"], st.metric_mask("diffuse", hdr))["region_absolute"]
+    print({n: (round(e["ratio"], 4), e["pixels"]) for n, e in regions.items()})
+    (got,) = regions.values()
+    assert got["pixels"] > 40 and abs(got["ratio"] - 1) < 0.02
+
+
 def test_dilation_fills_from_valid_neighbours():
     a = np.zeros((4, 5, 3))
     a[1, 1] = 2.0

@@ -74,10 +74,12 @@ def irradiance(lm: dict, objects, points, normals, basis: str = "sh_l1"):
 
 def diffuse_frame(sc, arrays, lm: dict, shape, basis: str = "sh_l1"):
     """The lightmap's diffuse term (h, w, 4) of scene sc at its camera (one centred sample a pixel;
-    Lambert: base colour x (1 - metallic) x E / pi), alpha 1 where a lightmapped object is hit:
+    the frame's diffuse weight, (1 - F(NoV)) (1 - metallic) base colour / pi, x E), alpha 1 where a
+    lightmapped object is hit:
     the primary hits of the G-buffer's twin (render/twin/gbuffer.py) over the scene's records
     `arrays` (scene/pack.py), read as irradiance() reads them."""
     from iblbake.render.twin.gbuffer import primary
+    from iblbake.render.twin.surface import diffuse_weight, surface
     from iblbake.scene.layout import PRIM_KINDS
 
     h, w = shape
@@ -88,11 +90,10 @@ def diffuse_frame(sc, arrays, lm: dict, shape, basis: str = "sh_l1"):
         if sel.any():
             obj[sel] = np.asarray(recs[gb["index"][sel], 1, col], np.float32).view(np.int32)
     e, found = irradiance(lm, obj, gb["pos"], gb["normal"], basis)
-    albedo = np.zeros((len(obj), 3))
-    for k, o in enumerate(sc.data["objects"]):
-        m = sc.data["materials"][o["material"]]
-        albedo[obj == k] = np.asarray(m["base_color"]) * (1 - m["metallic"])
+    _v, _n, nov, (base, metallic, _emissive, rough, f0, f90) = surface(gb, arrays)
     out = np.zeros((h * w, 4))
-    out[:, :3] = albedo * e / np.pi
+    # the frame's weight (kernels/surface.h diffuse_weight): a specular layer takes its Fresnel share
+    # (window_room's clay sphere read x1.13 its reference under city with base colour x E / pi)
+    out[gb["hit"], :3] = diffuse_weight(base, metallic, rough, f0, f90, nov) * e[gb["hit"]]
     out[:, 3] = found & gb["hit"]
     return out.reshape(h, w, 4)
