@@ -5,7 +5,8 @@ luminance ratio and the worst channel, as tests/test_corpus.py judges the probes
 and the same on scenes the lightmaps were not tuned on: the open box wound either way, at scales
 0.01 and 100 (the density scaled with the scene: the same texels), and with a glTF floor that brings
 its own TEXCOORD_1. The settings are benchmarks/bench_lightmaps.py's `--max-side 40 --target-noise
-0.03 --max-samples 256` (the references tests/test_corpus.py takes)."""
+0.01 --max-samples 4096` (at tests/test_corpus.py's 256 samples window_room's reference under city
+is 20% noisy a pixel, and its clay sphere's mean a few percent off)."""
 
 from pathlib import Path
 
@@ -18,15 +19,15 @@ from tests.helpers import MIN_PIXELS, outside
 ROOT = Path(__file__).resolve().parents[1]
 DENSITY, SAMPLES = 8, 1024
 CORPUS_BOUND = 0.10        # issue 62: every region of static geometry within 10% of the converged reference
-# Each interior's worst region (the larger of |ratio - 1| and the worst channel, over both bases)
-# as measured at these settings, its bound about 1.2x that (never above CORPUS_BOUND).
+# Each interior's worst region (the larger of |ratio - 1| and the worst channel, the worse basis)
+# measured at these settings; the bound is 1.2x it (never above CORPUS_BOUND).
 WORST = {
     ("corridor", "studio"): 0.085, ("corridor", "city"): 0.045,
     ("quad_room", "studio"): 0.045, ("quad_room", "city"): 0.045,
     ("l_room", "studio"): 0.065, ("l_room", "city"): 0.045,
-    ("two_storey", "studio"): 0.045, ("two_storey", "city"): 0.045,
-    ("probe_box_walls", "studio"): 0.045, ("probe_box_walls", "city"): 0.045,
-    ("window_room", "studio"): 0.085, ("window_room", "city"): 0.085,
+    ("two_storey", "studio"): 0.045, ("two_storey", "city"): 0.035,
+    ("probe_box_walls", "studio"): 0.045, ("probe_box_walls", "city"): 0.044,
+    ("window_room", "studio"): 0.085, ("window_room", "city"): 0.064,
 }
 INTERIORS = ("corridor", "two_storey", "quad_room", "l_room", "probe_box_walls", "window_room")
 
@@ -42,7 +43,7 @@ def regions(name, panorama, panoramas, cache, sets=(), density=DENSITY):
 
     if not (ROOT / "examples" / "corpus" / "meshes" / "skylight_room.obj").exists():
         pytest.fail("the corpus meshes are missing: run `make meshes`")
-    settings = acc.Settings(max_side=40, repeats=1, target_noise=0.03, max_samples=256, flip=False)
+    settings = acc.Settings(max_side=40, repeats=1, target_noise=0.01, max_samples=4096, flip=False)
     rt, bakes = Runtime(), Bakes(cache)
     st = acc.Study(ROOT / "examples" / "corpus" / f"{name}.yaml",
                    [f"environment.path={panoramas[panorama]}", f"lightmap.texels_per_unit={density}",
@@ -63,8 +64,8 @@ def regions(name, panorama, panoramas, cache, sets=(), density=DENSITY):
 @pytest.mark.parametrize("panorama", ["studio", "city"])
 @pytest.mark.parametrize("name", INTERIORS)
 def test_lightmap_holds_each_interior_to_the_truth(name, panorama, tmp_path, panoramas):
-    """Every region of the interior within WORST's measured bound (1.2x the figure) under both bases."""
-    bound = min(WORST[(name, panorama)], CORPUS_BOUND)
+    """Every region of the interior within 1.2x WORST's measured figure under both bases."""
+    bound = min(1.2 * WORST[(name, panorama)], CORPUS_BOUND)
     for basis, held in regions(name, panorama, panoramas, tmp_path / "cache")[0].items():
         assert len(held) >= 2, held
         bad = outside(held, bound)
@@ -80,10 +81,10 @@ def gltf_floor(folder):
     return quad_glb(folder / "floor.glb", vertices=v, faces=np.array([[0, 2, 1], [0, 3, 2]]), uv1=uv1)
 
 
-UNTUNED = {   # scene, the density (8 a unit at the box's size), scene keys on top
-    "box_in": ("box_in", DENSITY, ()), "box_out": ("box_out", DENSITY, ()),
-    "small": ("small", DENSITY / 0.01, ()), "large": ("large", DENSITY / 100, ()),
-    "gltf_texcoord_1": ("box_out", DENSITY, ("gltf",)),
+UNTUNED = {   # scene, the density (8 a unit at the box's size), scene keys on top, the worst region measured
+    "box_in": ("box_in", DENSITY, (), 0.043), "box_out": ("box_out", DENSITY, (), 0.043),
+    "small": ("small", DENSITY / 0.01, (), 0.038), "large": ("large", DENSITY / 100, (), 0.032),
+    "gltf_texcoord_1": ("box_out", DENSITY, ("gltf",), 0.043),
 }
 
 
@@ -92,12 +93,13 @@ UNTUNED = {   # scene, the density (8 a unit at the box's size), scene keys on t
 @pytest.mark.parametrize("case", list(UNTUNED))
 def test_lightmap_on_scenes_it_was_not_tuned_on(case, tmp_path, panoramas):
     """The open box wound inwards and outwards, scaled by 0.01 and 100 (its density with it), with a
-    glTF floor's own TEXCOORD_1 charts: every region within CORPUS_BOUND under city, both bases."""
-    name, density, extra = UNTUNED[case]
+    glTF floor's own TEXCOORD_1 charts: every region within 1.2x the measured figure under city, both
+    bases (measured 3.2-4.3%)."""
+    name, density, extra, worst = UNTUNED[case]
     sets = [f"objects.1.mesh.path={gltf_floor(tmp_path)}"] if "gltf" in extra else []
     got, report = regions(name, "city", panoramas, tmp_path / "cache", sets, density)
     assert report["uv_sources"]["1"] == ("texcoord_1" if sets else "xatlas")
     for basis, held in got.items():
         assert len(held) >= 4, held
-        bad = outside(held, CORPUS_BOUND)
-        assert not bad, f"{case}, {basis}: regions over {CORPUS_BOUND:.0%}: {bad}"
+        bad = outside(held, 1.2 * worst)
+        assert not bad, f"{case}, {basis}: regions over {1.2 * worst:.1%}: {bad}"
