@@ -1,5 +1,6 @@
 """Lightmaps on the corpus (issue 62, docs/benchmarks.md "Lightmaps on the corpus' interiors"): each
-interior's lightmap at DENSITY texels a unit and SAMPLES rays a texel, read at the camera's primary
+interior's lightmap at DENSITY texels a unit and SAMPLES rays a texel (RAYS' where the light comes
+through a small opening from small lamps), read at the camera's primary
 hits into the diffuse term, against the converged reference's diffuse term, region by region (the
 luminance ratio and the worst channel, as tests/test_corpus.py judges the probes), for both bases;
 and the same on scenes the lightmaps were not tuned on: the open box wound either way, at scales
@@ -19,20 +20,25 @@ from tests.helpers import MIN_PIXELS, outside
 ROOT = Path(__file__).resolve().parents[1]
 DENSITY, SAMPLES = 8, 1024
 CORPUS_BOUND = 0.10        # issue 62: every region of static geometry within 10% of the converged reference
-# Each interior's worst region (the larger of |ratio - 1| and the worst channel, the worse basis)
-# measured at these settings; the bound is 1.2x it (never above CORPUS_BOUND).
+# Rays a texel: 1024, but 4096 where studio's small lamps are seen through a small or far opening
+# (a texel's uniform rays find them rarely: at 1024 the corridor's far end read x0.79-0.94 over three
+# seeds, l_room's sphere x1.09, probe_box_walls' cube x0.90; docs/benchmarks.md).
+RAYS = {("corridor", "studio"): 4096, ("l_room", "studio"): 4096, ("probe_box_walls", "studio"): 4096}
+# Each interior's worst region (the larger of |ratio - 1| and the worst channel, the worse basis,
+# regions of at least MIN_PIXELS pixels) measured at these settings; the bound is 1.2x it (never
+# above CORPUS_BOUND).
 WORST = {
-    ("corridor", "studio"): 0.085, ("corridor", "city"): 0.045,
-    ("quad_room", "studio"): 0.045, ("quad_room", "city"): 0.045,
-    ("l_room", "studio"): 0.065, ("l_room", "city"): 0.045,
-    ("two_storey", "studio"): 0.045, ("two_storey", "city"): 0.035,
-    ("probe_box_walls", "studio"): 0.045, ("probe_box_walls", "city"): 0.044,
-    ("window_room", "studio"): 0.085, ("window_room", "city"): 0.064,
+    ("corridor", "studio"): 0.021, ("corridor", "city"): 0.046,
+    ("quad_room", "studio"): 0.015, ("quad_room", "city"): 0.017,
+    ("l_room", "studio"): 0.042, ("l_room", "city"): 0.089,
+    ("two_storey", "studio"): 0.027, ("two_storey", "city"): 0.035,
+    ("probe_box_walls", "studio"): 0.040, ("probe_box_walls", "city"): 0.044,
+    ("window_room", "studio"): 0.051, ("window_room", "city"): 0.064,
 }
 INTERIORS = ("corridor", "two_storey", "quad_room", "l_room", "probe_box_walls", "window_room")
 
 
-def regions(name, panorama, panoramas, cache, sets=(), density=DENSITY):
+def regions(name, panorama, panoramas, cache, sets=(), density=DENSITY, rays=SAMPLES):
     """({basis: the regions of at least MIN_PIXELS pixels (study region_absolute)} of the scene's
     lightmap against its reference, the bake's report)."""
     from iblbake.device.runtime import Runtime
@@ -47,7 +53,7 @@ def regions(name, panorama, panoramas, cache, sets=(), density=DENSITY):
     rt, bakes = Runtime(), Bakes(cache)
     st = acc.Study(ROOT / "examples" / "corpus" / f"{name}.yaml",
                    [f"environment.path={panoramas[panorama]}", f"lightmap.texels_per_unit={density}",
-                    f"lightmap.samples={SAMPLES}", *sets], settings, runtime=rt, bakes=bakes)
+                    f"lightmap.samples={rays}", *sets], settings, runtime=rt, bakes=bakes)
     ref = st.render_reference("diffuse")
     lm = lightmaps.bake(Job(st.scene, rt, bakes), st.scene.data["lightmap"])
     out = {}
@@ -64,9 +70,11 @@ def regions(name, panorama, panoramas, cache, sets=(), density=DENSITY):
 @pytest.mark.parametrize("panorama", ["studio", "city"])
 @pytest.mark.parametrize("name", INTERIORS)
 def test_lightmap_holds_each_interior_to_the_truth(name, panorama, tmp_path, panoramas):
-    """Every region of the interior within 1.2x WORST's measured figure under both bases."""
+    """Every region of the interior within 1.2x WORST's measured figure under both bases, at RAYS'
+    rays a texel (measured 1.5-6.4%, l_room under city 8.9%: its ceiling x0.92)."""
     bound = min(1.2 * WORST[(name, panorama)], CORPUS_BOUND)
-    for basis, held in regions(name, panorama, panoramas, tmp_path / "cache")[0].items():
+    rays = RAYS.get((name, panorama), SAMPLES)
+    for basis, held in regions(name, panorama, panoramas, tmp_path / "cache", rays=rays)[0].items():
         assert len(held) >= 2, held
         bad = outside(held, bound)
         assert not bad, f"{name} under {panorama}, {basis}: regions over {bound:.1%}: {bad}"
