@@ -4,13 +4,16 @@ layout(): one atlas over every lightmapped surface of a scene: each mesh object'
 by shared corners) charted and packed by xatlas (Young's xatlas, the library trimesh's unwrap uses;
 docs/libraries.md), its own TEXCOORD_1 charts kept where the mesh has them (xatlas packs them as they
 are, scaled to the density); a finite plane as two triangles; an analytic sphere meshed (SPHERE_SEGMENTS),
-its texels' points and normals then put back on the true sphere. The density is lightmap.texels_per_unit
-texels per world unit along each side, with PADDING texels between charts (the bilinear footprint of
-the mip levels an engine samples, and room for dilation).
+its texels' points and normals then put back on the true sphere. Each lit side of a surface is a
+chart set of its own (sides(): a wall of no thickness both, a solid its outside), its triangles wound
+to face that side (the geometric normal of an atlas triangle is its lit side's). The density is
+lightmap.texels_per_unit texels per world unit along each side, with PADDING texels between charts
+(the bilinear footprint of the mip levels an engine samples, and room for dilation).
 
 texels(): each texel a triangle claims: the texel's centre where it lies inside the triangle, else
 (a texel the triangle only partly covers, at a chart's edge) the nearest point of the triangle to it;
-a texel claimed whole by one triangle keeps it, a partial one goes to the nearest triangle."""
+a texel claimed whole by one triangle keeps it, a partial one goes to the nearest triangle (every
+triangle's box of texels at once in numpy, CHUNK pairs at a time)."""
 
 from __future__ import annotations
 
