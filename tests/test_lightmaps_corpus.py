@@ -22,15 +22,17 @@ DENSITY, SAMPLES = 8, 1024
 CORPUS_BOUND = 0.10        # issue 62: every region of static geometry within 10% of the converged reference
 # Rays a texel: 1024, but 4096 where studio's small lamps are seen through a small or far opening
 # (a texel's uniform rays find them rarely: at 1024 the corridor's far end read x0.79-0.94 over three
-# seeds, l_room's sphere x1.09, probe_box_walls' cube x0.90; docs/benchmarks.md).
-RAYS = {("corridor", "studio"): 4096, ("l_room", "studio"): 4096, ("probe_box_walls", "studio"): 4096}
+# seeds, l_room's sphere x1.09, probe_box_walls' cube x0.90; docs/benchmarks.md) and in l_room (its
+# ceiling, lit from the window's far leg, x0.92 under city at 1024, x0.97 at 4096).
+RAYS = {("corridor", "studio"): 4096, ("l_room", "studio"): 4096, ("l_room", "city"): 4096,
+        ("probe_box_walls", "studio"): 4096}
 # Each interior's worst region (the larger of |ratio - 1| and the worst channel, the worse basis,
 # regions of at least MIN_PIXELS pixels) measured at these settings; the bound is 1.2x it (never
 # above CORPUS_BOUND).
 WORST = {
     ("corridor", "studio"): 0.021, ("corridor", "city"): 0.046,
     ("quad_room", "studio"): 0.015, ("quad_room", "city"): 0.017,
-    ("l_room", "studio"): 0.042, ("l_room", "city"): 0.089,
+    ("l_room", "studio"): 0.042, ("l_room", "city"): 0.039,
     ("two_storey", "studio"): 0.027, ("two_storey", "city"): 0.035,
     ("probe_box_walls", "studio"): 0.040, ("probe_box_walls", "city"): 0.044,
     ("window_room", "studio"): 0.051, ("window_room", "city"): 0.064,
@@ -71,7 +73,7 @@ def regions(name, panorama, panoramas, cache, sets=(), density=DENSITY, rays=SAM
 @pytest.mark.parametrize("name", INTERIORS)
 def test_lightmap_holds_each_interior_to_the_truth(name, panorama, tmp_path, panoramas):
     """Every region of the interior within 1.2x WORST's measured figure under both bases, at RAYS'
-    rays a texel (measured 1.5-6.4%, l_room under city 8.9%: its ceiling x0.92)."""
+    rays a texel (measured 1.5-6.4%)."""
     bound = min(1.2 * WORST[(name, panorama)], CORPUS_BOUND)
     rays = RAYS.get((name, panorama), SAMPLES)
     for basis, held in regions(name, panorama, panoramas, tmp_path / "cache", rays=rays)[0].items():
