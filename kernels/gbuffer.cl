@@ -70,7 +70,7 @@ __kernel void gbuffer(__constant float4 *cam, const int width, const int height,
     gb_tan[gid] = tw;
 #endif
 #ifdef HAS_LIGHTMAP
-    gb_lm[gid] = lightmap_uv(h.kind, h.index, p, nspheres, nplanes, spheres, LIGHTMAP_UV_ARGS);
+    gb_lm[gid] = lightmap_uv(h.kind, h.index, p, ng, nspheres, nplanes, spheres, LIGHTMAP_UV_ARGS);
 #endif
     gb_pos[gid] = (float4)(p, h.t);
     gb_nrm[gid] = (float4)(ns, as_float(mat));

@@ -72,9 +72,9 @@ IBL_INLINE float lightmap_facet(__global const float4 *lm_tris, int k, float3 p,
     return out;
 }
 
-/* (u, v, 1, 0): UV1 in texel units of a hit on primitive (kind, index) at p; (0, 0, 0, 0) where it
- * has no lightmap. */
-IBL_INLINE float4 lightmap_uv(int kind, int index, float3 p, const int nspheres, const int nplanes,
+/* (u, v, 1, 0): UV1 in texel units of a hit on primitive (kind, index) at p, ng its geometric normal
+ * towards the viewer; (0, 0, 0, 0) where it has no lightmap. */
+IBL_INLINE float4 lightmap_uv(int kind, int index, float3 p, float3 ng, const int nspheres, const int nplanes,
                               __global const float4 *spheres, LIGHTMAP_UV_PARAMS)
 {
     const int rec = kind == PRIM_SPHERE ? index : kind == PRIM_PLANE ? nspheres + index : nspheres + nplanes + index;
@@ -104,7 +104,10 @@ IBL_INLINE float4 lightmap_uv(int kind, int index, float3 p, const int nspheres,
         }
     } else {
         for (int k = r.x; k < r.x + r.y; ++k) {
-            const float o = lightmap_facet(lm_tris, k, p, p, 0, &cand);
+            /* a chart facing away from the viewer last: a surface lit on both sides has one a side */
+            __global const float4 *t = lm_tris + 5 * k;
+            const float away = dot(cross(t[1].xyz - t[0].xyz, t[2].xyz - t[0].xyz), ng) < 0.0f ? 1e6f : 0.0f;
+            const float o = lightmap_facet(lm_tris, k, p, p, 0, &cand) + away;
             if (o < best) { best = o; uv = cand; }
         }
     }

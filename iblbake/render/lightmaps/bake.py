@@ -118,14 +118,6 @@ def project(radiance, t, dirs, normals, basis: str = "sh_l1", opts: dict | None 
     return e, coeffs, (t < 0).mean(1)
 
 
-def facing(tx: uvs.Texels, camera) -> None:
-    """One lightmap a surface, of the side the camera is on: a texel whose normal faces away from the
-    camera turns (a wall wound either way, seen from inside its room). A closed solid (a sphere)
-    keeps its outside."""
-    away = ((np.asarray(camera) - tx.position) * tx.geometric).sum(1) < 0
-    away &= ~tx.solid
-    tx.normal[away] *= -1
-    tx.geometric[away] *= -1
 
 
 def inset(tx: uvs.Texels, corners, texel_size: float):
@@ -230,7 +222,7 @@ def bake(job, settings: dict, progress=None) -> dict:
     {'irradiance': (h, w, 3), BASIS: (h, w, floats, 3), 'valid': (h, w) bool}, BASIS the section's
     `basis` (bases.py) under 'basis' with its options under 'options', and a report."""
     from iblbake.render.paths.tracer import Tracer
-    from iblbake.scene import geometry, materials, pack
+    from iblbake.scene import geometry, materials
 
     t0 = time.perf_counter()
     sc = job.scene
@@ -245,7 +237,6 @@ def bake(job, settings: dict, progress=None) -> dict:
     density = settings["texels_per_unit"]
     lay = uvs.layout(sc, tris, density, settings["max_texels"])
     tx = uvs.texels(lay)
-    facing(tx, pack.camera_vectors(sc.data["camera"])[0])
     t_layout = time.perf_counter() - t0
     tracer = Tracer(job, {"bounces": settings["bounces"], "seed": settings["seed"]})
     start, moved = nudge(tracer, tx, inset(tx, lay.corners, 1.0 / density), 1.0 / density)

@@ -70,7 +70,9 @@ def camera(cam: dict) -> tuple:
 
 
 def material(m: dict, name: str, extension: str, scale: float) -> dict:
-    return {"name": name, "doubleSided": True,     # iblbake's surfaces are lit on the camera's side, wound either way
+    # single-sided: the atlas holds a chart for each lit side of a surface, each wound to face its
+    # side (render/lightmaps/uv.py), so a back face culled is the other side's chart shown
+    return {"name": name, "doubleSided": False,
             "pbrMetallicRoughness": {"baseColorFactor": [float(x) for x in m["base_color"]] + [1.0],
                                      "metallicFactor": float(m["metallic"]), "roughnessFactor": float(m["roughness"])},
             "extensions": {extension: {"lightmapTexture": {"index": 0, "texCoord": 1}, "encoding": ENCODING,

@@ -17,8 +17,9 @@ from iblbake.render.lightmaps import bases
 from iblbake.render.lightmaps.uv import Layout
 
 
-def atlas_uv(lay: Layout, objects, points):
-    """(UV1 in texel units (n, 2), found (n,)) of points (n, 3) on objects (n,)."""
+def atlas_uv(lay: Layout, objects, points, normals=None):
+    """(UV1 in texel units (n, 2), found (n,)) of points (n, 3) on objects (n,); with shading normals
+    (n, 3), on the side they face (a two-sided surface has a chart a side, each wound to face its side)."""
     uv = np.full((len(points), 2), np.nan)
     for o in np.unique(objects):
         mine = np.flatnonzero(objects == o)
@@ -50,8 +51,10 @@ def atlas_uv(lay: Layout, objects, points):
         b2 = (d00 * d21 - d01 * d20) / den
         out = np.maximum(0, -np.minimum(np.minimum(b1, b2), 1 - b1 - b2))    # how far outside
         # inside (or least outside) first, then the nearest plane: a point of a room's floor lies
-        # inside a wall's triangle projected along the wall's normal too
-        rank = np.where(np.isfinite(out), out * 1e3 + dist, np.inf)
+        # inside a wall's triangle projected along the wall's normal too; a chart facing away from
+        # the normal last (a two-sided surface's other side)
+        back = 0.0 if normals is None else np.einsum("px,tx->pt", normals[mine], n) < 0
+        rank = np.where(np.isfinite(out), out * 1e3 + dist + back * 1e6, np.inf)
         best = np.argmin(rank, axis=1)
         p = np.arange(len(mine))
         bb1, bb2 = np.clip(b1[p, best], 0, 1), np.clip(b2[p, best], 0, 1)
@@ -96,13 +99,13 @@ def texel_irradiance(lm: dict, basis: str, texels, normals, opts: dict):
 def irradiance(lm: dict, objects, points, normals, basis: str | None = None, opts: dict | None = None):
     """(E (n, 3), found (n,)) at points on objects with shading normals, from a baked lightmap
     (bake.bake()'s dict) read as `basis`: 'irradiance' (every bake holds it) or the bake's own basis
-    (lm['basis'], the default; its options lm['options'] unless `opts`)."""
+    (lm['basis'], the default; its options lm['options'] unless `opts`), on the side the normals face."""
     basis = basis or lm["basis"]
     if basis != "irradiance" and basis not in lm:
         raise InputError(f"lightmap.basis: this lightmap holds {lm['basis']!r}, not {basis!r}; bake it with "
                          f"lightmap.basis: {basis}")
     opts = lm["options"] if opts is None else opts
-    uv, found = atlas_uv(lm["layout"], objects, points)
+    uv, found = atlas_uv(lm["layout"], objects, points, normals)
     e = np.zeros((len(points), 3))
     if found.any():
         taps, weights = bilinear_taps((lm["layout"].height, lm["layout"].width), uv[found])
@@ -124,20 +127,20 @@ def hit_objects(gb, arrays):
 
 def diffuse_frame(sc, arrays, lm: dict, shape, basis: str | None = None):
     """The lightmap's diffuse term (h, w, 4) of scene sc at its camera (one centred sample a pixel;
-    Lambert: base colour x (1 - metallic) x E / pi), alpha 1 where a lightmapped object is hit:
-    the primary hits of the G-buffer's twin (render/twin/gbuffer.py) over the scene's records
-    `arrays` (scene/pack.py), read as irradiance() reads them."""
+    the frame's diffuse weight, (1 - F(NoV)) (1 - metallic) base colour / pi, x E), alpha 1 where a
+    lightmapped object is hit: the primary hits of the G-buffer's twin (render/twin/gbuffer.py) over
+    the scene's records `arrays` (scene/pack.py), read as irradiance() reads them."""
     from iblbake.render.twin.gbuffer import primary
+    from iblbake.render.twin.surface import diffuse_weight, surface
 
     h, w = shape
     gb = primary({**sc.data["camera"], "resolution": [w, h], "spp": 1}, arrays)
     obj = hit_objects(gb, arrays)
     e, found = irradiance(lm, obj, gb["pos"], gb["normal"], basis)
-    albedo = np.zeros((len(obj), 3))
-    for k, o in enumerate(sc.data["objects"]):
-        m = sc.data["materials"][o["material"]]
-        albedo[obj == k] = np.asarray(m["base_color"]) * (1 - m["metallic"])
+    _v, _n, nov, (base, metallic, _emissive, rough, f0, f90) = surface(gb, arrays)
     out = np.zeros((h * w, 4))
-    out[:, :3] = albedo * e / np.pi
+    # the frame's weight (kernels/surface.h diffuse_weight): a specular layer takes its Fresnel share
+    # (window_room's clay sphere read x1.13 its reference under city with base colour x E / pi)
+    out[gb["hit"], :3] = diffuse_weight(base, metallic, rough, f0, f90, nov) * e[gb["hit"]]
     out[:, 3] = found & gb["hit"]
     return out.reshape(h, w, 4)

@@ -79,7 +79,8 @@ def texels_of(lm: dict, settings: dict) -> np.ndarray:
 def uv_tables(lay, arrays) -> tuple:
     """(lm_prims (records, 4) int32, lm_tris (atlas triangles, 5, 4) float32) of a layout over the
     scene's records (kernels/lightmap.h): per sphere, plane and triangle (BVH order) record its first
-    atlas triangle and their count (0: none), the triangle of a mesh found by its corners."""
+    atlas triangle and their count (0: none); a mesh triangle's found by its corners, among copies of
+    the atlas' triangles sorted by them (a surface lit on both sides has one a side, together)."""
     ints = lambda a: np.asarray(a, np.float32).view(np.int32)
     tris = np.zeros((max(len(lay.uv), 1), 5, 4), np.float32)
     tris[:len(lay.uv), :3, :3] = lay.corners
@@ -94,12 +95,17 @@ def uv_tables(lay, arrays) -> tuple:
     for i, obj in enumerate(ints(arrays.planes[:, 1, 3]) if npl else []):
         prims[ns + i, :2] = (first[obj], count[obj]) if obj in first else (0, 0)
     if nt:
+        # a scene triangle's atlas triangles (one a lit side: two for a surface seen from both,
+        # uv.py) found by their corners, then copied after the layout's so that they lie together
         mine = np.isin(ints(arrays.tris[:, 1, 3]), list(first))
         atlas, scene = _corner_keys(lay.corners), _corner_keys(arrays.tris[:, :3, :3])
-        order = np.argsort(atlas)
-        at = np.minimum(np.searchsorted(atlas[order], scene), len(atlas) - 1)
-        found = mine & (atlas[order][at] == scene)
-        prims[ns + npl:][found, 0], prims[ns + npl:][found, 1] = order[at][found], 1
+        order = np.argsort(atlas, kind="stable")
+        lo = np.searchsorted(atlas[order], scene, "left")
+        hi = np.searchsorted(atlas[order], scene, "right")
+        found = mine & (hi > lo)
+        prims[ns + npl:][found, 0] = len(tris) + lo[found]
+        prims[ns + npl:][found, 1] = (hi - lo)[found]
+        tris = np.concatenate([tris, tris[order]])
     return prims, tris
 
 
