@@ -281,3 +281,35 @@ def test_dynamic_object_reads_the_fallback(tmp_path, sky):
         assert worst_relative(fr, tw, gb) < KERNEL_TWIN
         rows[dynamic] = next(b for b in fr.report["bakes"] if b["name"] == "lightmap")
     assert rows[True]["objects_without"] == ["ball", "ground"] and rows[True]["texels"] < rows[False]["texels"]
+
+
+@pytest.mark.parametrize("surface", ["plane", "quad"])
+def test_each_side_of_a_two_sided_surface_reads_its_own_chart(tmp_path, sky, surface):
+    """A finite surface of no thickness (a plane, or a glTF quad) over a dark ground, double-sided:
+    the bake charts each lit side (render/lightmaps/uv.py), and the frame reads the chart of the side
+    the camera sees (kernels/lightmap.h ranks a chart facing away from the viewer last): from above
+    the sky's irradiance, from below the ground's dim bounce (under a fifth of it), each the twin's
+    reading within KERNEL_TWIN. Reading one chart for both sides, one view is wrong by 5x or more."""
+    from iblbake.render.bakes import Bakes
+    from tests.helpers import quad_glb
+
+    if surface == "plane":
+        obj = {"plane": {"point": [0, 0.5, 0], "size": 2.0}, "material": "m", "name": "slab"}
+    else:
+        two_sided = lambda doc: [m.update(doubleSided=True) for m in doc["materials"]]   # noqa: E731
+        glb = quad_glb(tmp_path / "q.glb", roughnessFactor=1.0, metallicFactor=0.0, edit=two_sided)
+        obj = {"mesh": {"path": str(glb), "rotate": [-90, 0, 0], "translate": [0, 0.5, 0]}, "name": "slab"}
+    means = {}
+    for side, y in (("top", 1.6), ("bottom", 0.1)):
+        d = doc(sky)
+        d["camera"]["perspective"].update(position=[0, y, 1.2], look_at=[0, 0.5, 0], fov_y=40)
+        d["materials"]["dark"] = {"base_color": [0.1, 0.1, 0.1], "roughness": 1, "specular": 0}
+        d["objects"] = [obj, {"plane": {"point": [0, 0, 0]}, "material": "dark", "name": "ground"}]
+        sc = load_scene(tmp_path, f"{surface}_{side}", d)
+        fr, tw, gb = frame_and_twin(sc, Bakes(tmp_path / "cache"))
+        assert worst_relative(fr, tw, gb) < KERNEL_TWIN
+        lit = fr.hdr[..., 3].reshape(-1) > 0
+        slab = gb["hit"] & (gb["pos"][:, 1] > 0.45)
+        means[side] = float(fr.hdr[..., :3].reshape(-1, 3)[slab].mean())
+    print(surface, means)
+    assert means["bottom"] < 0.2 * means["top"]
