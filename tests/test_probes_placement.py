@@ -74,11 +74,11 @@ def test_a_box_drawn_on_the_walls_puts_no_probe_on_them():
 
 
 def test_auto_step_reads_the_enclosed_points_only():
-    """The interior's scale: 0.35 of the median free distance of the points whose rays mostly meet a
+    """The interior's scale: half the median free distance of the points whose rays mostly meet a
     surface; an open scene (every point sees mostly sky) keeps the coarse grid (None)."""
     inf = np.inf
     t = np.array([[1.0, 2.0, 3.0, inf], [2.0, 2.0, 2.0, 2.0], [inf, inf, inf, 1.0]])
-    assert probes.auto_step(t) == pytest.approx(0.35 * np.median([2.5, 2.0]))
+    assert probes.auto_step(t) == pytest.approx(0.5 * np.median([2.5, 2.0]))
     assert probes.auto_step(np.full((4, 8), inf)) is None
     # a floor under an open sky: every point meets it with half its rays (the median a miss): open,
     # not an interior of infinite scale (whose inf reached the probes' manifest, unwritable JSON)

@@ -441,7 +441,7 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                             "scale, docs/conventions.md 'Irradiance probes'); an automatic grid takes N >= 3 (or "
                             ">= 2 per axis), min and max >= 2 along an axis they differ on; at most 1048576 probes"),
         "spacing": Num(None, 0.0, lo_open=True, doc="the distance between probes, where counts is omitted (omitted too: "
-                                                    "0.35 of the typical free distance of rays in the scene's enclosed "
+                                                    "half the typical free distance of rays in the scene's enclosed "
                                                     "spaces, at most 16384 probes, coarser above and said)"),
         "rays": Num(1024, 16, 1 << 16, integer=True,
                     doc="rays per probe, one path each (a spherical Fibonacci set, randomly rotated; DDGI traces "

@@ -68,9 +68,7 @@ MAX_PROBES = 1 << 20             # any grid: the buffers and atlases a device ta
 AUTO_MAX_PROBES = 1 << 14        # an automatic grid's cap (~80 MiB of atlases at the default texels): coarser above
 SCALE_RAYS = 64                  # rays from each coarse probe and the camera that measure the interior's scale
 ENCLOSED = 0.5                   # the share of those rays meeting a front face that makes a point enclosed
-INTERIOR_FRACTION = 0.35         # the automatic spacing: this share of the enclosed points' median free distance
-# (0.5 left a patch of lamp light through an opening sharper than the grid: thin_wall's dim sphere
-# x1.44 under studio, 1.18 at 0.35; l_room's ceiling x0.76 -> 0.92; 2-3x the probes, within the cap)
+INTERIOR_FRACTION = 0.5          # the automatic spacing: this share of the enclosed points' median free distance
 
 
 def probe_bytes(settings: dict) -> int:
@@ -118,7 +116,7 @@ def auto_step(t) -> float | None:
     """The spacing the interior's scale asks for, from SCALE_RAYS rays' signed distances t (points,
     rays; +inf a miss, < 0 a back face) traced from the coarse grid's probes and the camera: of the
     points enclosed (ENCLOSED of their rays meet a front face), INTERIOR_FRACTION of the median over
-    them of their median ray length (a miss the longest). A corridor 2 wide gets cells of ~0.45, a
+    them of their median ray length (a miss the longest). A corridor 2 wide gets cells of ~0.65, a
     few across its width (a grid by the longest axis had none); None where no point is enclosed (an
     open scene keeps the coarse grid)."""
     t = np.asarray(t, np.float64)
