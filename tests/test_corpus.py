@@ -127,11 +127,12 @@ PART_BOUND = 0.10          # a reflection probe at a metal object's centre, each
 # Measured misses, each bound about 1.2x the figure measured at 40 px (docs/benchmarks.md and
 # docs/status.md, issue 59): the patch studio's lamps throw through a window or skylight is sharper
 # than the probe grid resolves (the region means hold; the frame's RMSE is the patch spread over the
-# floor around it: QUALITY below, the lamps extracted as lights, closes it), and two_storey's top row
-# of wall pixels under the slab takes the storey above (both panoramas). The reflection probe has
+# floor around it: QUALITY below, the lamps extracted as lights, closes it): two_storey 72.3% and
+# probe_box_walls 58.8% under studio at 40 px, 93% of two_storey's squared error the patch on its
+# left wall (two_storey under city 26.7%, within the bound). The reflection probe has
 # none left here: quad_room's gold sphere under studio was x1.25 on its window half (32% at 64 px)
 # while the distant chain's lobe filled the edge of the window its points see but the probe does not.
-FRAME_MISSES = {("two_storey", "studio"): 1.05, ("two_storey", "city"): 0.63, ("probe_box_walls", "studio"): 0.70}
+FRAME_MISSES = {("two_storey", "studio"): 0.87, ("probe_box_walls", "studio"): 0.70}
 # Read in taps (TAPS below; 64 px, references of 1024 samples), three halves miss, the same with one
 # read: window_room's probe stands at the room's centre, not the chrome sphere's, and the half
 # facing the clay sphere mirrors an object off the probe's box (x1.20, 23% at 64 px; 27% with one
@@ -143,13 +144,14 @@ PART_MISSES = {("window_room", "studio"): 0.28, ("metal_box", "studio"): 0.13, (
 def absolute_study(name, panorama, panoramas, runtime, cache, term, label, extra=(), max_side=40, max_samples=256):
     """The term's converged reference (40 px; two seeds, each to 3% or 256 samples: the region
     means' noise is well under a percent) and the real-time rung `label` against it, the rung
-    with the scene keys `extra` ([(key, value)]) on top (the reference without them). A metal
-    object's halves want more (max_side, max_samples): at 40 px and 256 samples the studio's
-    specular reference is 14% noisy a pixel and its small halves move by 5-10%."""
+    with the scene keys `extra` ([(key, value)]) on top (the reference without them). `name`: a
+    corpus scene's, or a scene file's path. A metal object's halves want more (max_side,
+    max_samples): at 40 px and 256 samples the studio's specular reference is 14% noisy a pixel and
+    its small halves move by 5-10%."""
     from iblbake.study import accuracy as acc, ladder
     other = {"diffuse": "specular", "specular": "diffuse"}[term]
     settings = acc.Settings(max_side=max_side, repeats=1, target_noise=0.03, max_samples=max_samples, flip=False)
-    st = acc.Study(ROOT / "examples" / "corpus" / f"{name}.yaml",
+    st = acc.Study(name if isinstance(name, Path) else ROOT / "examples" / "corpus" / f"{name}.yaml",
                    [f"environment.path={panoramas[panorama]}", f"effects.{other}=off"], settings,
                    runtime=runtime, bakes=Bakes(cache))
     st.render_reference(term)
@@ -176,6 +178,40 @@ def test_default_probes_hold_each_interior_to_the_truth(name, panorama, runtime,
     bound = FRAME_MISSES.get((name, panorama), FRAME_BOUND)
     assert not bad and frame <= bound, \
         f"{name} under {panorama}: regions over {REGION_BOUND:.0%}: {bad}; frame {frame:.1%} (bound {bound:.0%})"
+
+
+def thin_wall_variant(folder, scale: float) -> Path:
+    """A scene the automatic spacing was not tuned on: thin_wall scaled by `scale`, its wall wound
+    the other way, the dim sphere smaller and moved towards the back wall."""
+    import yaml
+    data = yaml.safe_load((ROOT / "examples" / "corpus" / "thin_wall.yaml").read_text())
+    meshes = ROOT / "examples" / "corpus" / "meshes"
+    lines = (meshes / "rooms_wall.obj").read_text().splitlines()
+    flipped = [" ".join(["f", *reversed(ln.split()[1:])]) if ln.startswith("f ") else ln for ln in lines]
+    (folder / "wall.obj").write_text("\n".join(flipped) + "\n")
+    cam = data["camera"]["perspective"]
+    cam.update(position=[scale * x for x in cam["position"]], look_at=[scale * x for x in cam["look_at"]])
+    spheres = [o["sphere"] for o in data["objects"] if "sphere" in o]
+    spheres[1].update(center=[1.0, 0.4, -0.3], radius=0.4)
+    for s in spheres:
+        s.update(center=[scale * x for x in s["center"]], radius=scale * s["radius"])
+    data["objects"][2]["mesh"] = {"path": str(meshes / "rooms_shell.obj"), "scale": scale}
+    data["objects"][3]["mesh"] = {"path": str(folder / "wall.obj"), "scale": scale}
+    path = folder / "variant.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+@pytest.mark.external
+@pytest.mark.slow
+@pytest.mark.parametrize("scale", [0.01, 100.0])
+def test_default_probes_hold_a_thin_wall_room_they_were_not_tuned_on(scale, runtime, tmp_path, panoramas):
+    """thin_wall_variant under studio at default `probes: {}`: every region within REGION_BOUND
+    (the automatic spacing, the biases and the rules are in the interior's own units)."""
+    path = thin_wall_variant(tmp_path, scale)
+    st, row = absolute_study(path, "studio", panoramas, runtime, tmp_path / "cache", "diffuse", "probes")
+    bad = outside(row["region_absolute"], REGION_BOUND)
+    assert not bad, f"the thin wall's variant at scale {scale}: regions over {REGION_BOUND:.0%}: {bad}"
 
 
 @pytest.mark.external
@@ -240,7 +276,7 @@ QUALITY = (("environment.sun", "extract"), ("environment.sun_lights", 4), ("envi
            ("probes.rays", 4096))
 QUALITY_BOUND = 0.15
 QUALITY_MISSES = {("quad_room", "city"): 0.19}
-QUALITY_FRAME = {("two_storey", "studio"): 0.44, ("two_storey", "city"): 0.61}
+QUALITY_FRAME: dict = {}
 
 
 @pytest.mark.external
@@ -251,9 +287,9 @@ def test_the_quality_setting_holds_each_interior(name, panorama, runtime, tmp_pa
     """QUALITY on top of the scene's probes: every region within QUALITY_BOUND of the converged
     reference and the frame's relative RMSE (less the reference's noise) within FRAME_BOUND, or
     QUALITY_MISSES' and QUALITY_FRAME's measured figures. Measured at 40 px, the frame less noise:
-    studio 7.8% corridor, 36.9% two_storey, 7.8% quad_room, 9.9% l_room, 18.5% probe_box_walls,
-    14.0% window_room, every region within 12.3%; city 7.2%, 50.8%, 16.9%, 17.7%, 11.0%, 16.2%,
-    every region within 13.9% but quad_room's floor, 15.8%. On the code before `sun_lights` studio,
+    studio 7.8% corridor, 17.2% two_storey, 7.8% quad_room, 9.9% l_room, 18.5% probe_box_walls,
+    14.0% window_room, every region within 12.3%; city 7.2%, 21.4%, 16.9%, 17.7%, 11.0%, 16.2%,
+    every region within 13.9% but quad_room's floor, 15.4%. On the code before `sun_lights` studio,
     which has no sun, lost nothing: its frames were 83% (two_storey), 60% (probe_box_walls) and 56%
     (window_room) at 64 px."""
     if not (ROOT / "examples" / "corpus" / "meshes" / "skylight_room.obj").exists():
