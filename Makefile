@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.iblbake-installed
 PANOS  := examples/panoramas
 OUT    := examples/out
 
-.PHONY: demo test check check-locals stress install opencl intel-cpu test-intel check-intel meshes assets testmodels readers peers bench docs clean
+.PHONY: demo test check check-locals test-corpus stress install opencl intel-cpu test-intel check-intel meshes assets testmodels readers peers bench docs clean
 
 install: $(STAMP)
 # editable_mode=compat: the editable install is a plain path in a .pth file. setuptools' default
@@ -56,9 +56,14 @@ readers:
 peers: $(STAMP)
 	sh scripts/ensure_peers.sh $(BIN)/python
 
+# the whole suite but the corpus' other scenes (pytest marker `corpus`), on every core up to four
 test: opencl assets testmodels readers peers
-	$(BIN)/python -m pytest -q tests
+	$(BIN)/python -m pytest -q -n $(CORES) -m "not corpus" tests
 	$(MAKE) --no-print-directory check-locals
+
+# every scene of the corpus tests (each case minutes; docs/benchmarks.md has their figures)
+test-corpus: opencl assets testmodels readers peers
+	$(BIN)/python -m pytest -q -n $(CORES) -m corpus tests
 
 # the developer loop (at most 3 minutes on a 2-core CPU): no network, synthetic panoramas, no
 # readers, browser, Dask or kill loops, nothing over about 5 s (pytest markers: pyproject.toml), on

@@ -302,3 +302,11 @@ def rewrite_glb(path, uv1=None, edit=None):
         edit(doc)
     doc["buffers"][0]["byteLength"] = len(binary)
     Path(path).write_bytes(glb_bytes(doc, bytes(binary)))
+
+
+def corpus_cases(names, panoramas=("studio", "city"), keep=()):
+    """(name, panorama) cases of a corpus test, those not in `keep` marked `corpus`: minutes each,
+    `make test-corpus` runs them all, `make test` the kept ones (one of each kind of miss)."""
+    import pytest
+    return [pytest.param(n, p, id=f"{n}-{p}", marks=() if (n, p) in keep else pytest.mark.corpus)
+            for n in names for p in panoramas]

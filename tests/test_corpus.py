@@ -13,7 +13,7 @@ import pytest
 
 from iblbake.render import render
 from iblbake.render.bakes import Bakes
-from tests.helpers import REGION_BOUND, outside
+from tests.helpers import REGION_BOUND, corpus_cases, outside
 
 ROOT = Path(__file__).resolve().parents[1]
 CORPUS = sorted((ROOT / "examples" / "corpus").glob("*.yaml"))
@@ -245,8 +245,7 @@ TAPS_SCENES = ("quad_room", "window_room", "metal_box", "resting")
 
 @pytest.mark.external
 @pytest.mark.slow
-@pytest.mark.parametrize("panorama", ["studio", "city"])
-@pytest.mark.parametrize("name", TAPS_SCENES)
+@pytest.mark.parametrize("name, panorama", corpus_cases(TAPS_SCENES, keep={("resting", "studio"), ("metal_box", "city")}))
 def test_the_reflection_probe_in_taps_holds_each_half_of_the_metal_object(name, panorama, runtime, tmp_path,
                                                                           panoramas):
     """The corpus' metal objects under their reflection probe read in TAPS taps, each half within

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from iblbake.render import lightmaps
-from tests.helpers import MIN_PIXELS, outside
+from tests.helpers import MIN_PIXELS, corpus_cases, outside
 
 ROOT = Path(__file__).resolve().parents[1]
 DENSITY, SAMPLES = 8, 1024
@@ -69,8 +69,8 @@ def regions(name, panorama, panoramas, cache, sets=(), density=DENSITY, rays=SAM
 
 @pytest.mark.external
 @pytest.mark.slow
-@pytest.mark.parametrize("panorama", ["studio", "city"])
-@pytest.mark.parametrize("name", INTERIORS)
+@pytest.mark.parametrize("name, panorama", corpus_cases(INTERIORS, keep={("quad_room", "studio"), ("window_room", "city"),
+                                                                         ("two_storey", "city")}))
 def test_lightmap_holds_each_interior_to_the_truth(name, panorama, tmp_path, panoramas):
     """Every region of the interior within 1.2x WORST's measured figure under both bases, at RAYS'
     rays a texel (measured 1.5-6.4%)."""
@@ -100,7 +100,8 @@ UNTUNED = {   # scene, the density (8 a unit at the box's size), scene keys on t
 
 @pytest.mark.external
 @pytest.mark.slow
-@pytest.mark.parametrize("case", list(UNTUNED))
+@pytest.mark.parametrize("case", [c if c in ("small", "gltf_texcoord_1") else pytest.param(c, marks=pytest.mark.corpus)
+                                  for c in UNTUNED])
 def test_lightmap_on_scenes_it_was_not_tuned_on(case, tmp_path, panoramas):
     """The open box wound inwards and outwards, scaled by 0.01 and 100 (its density with it), with a
     glTF floor's own TEXCOORD_1 charts: every region within 1.2x the measured figure under city, both
