@@ -165,7 +165,10 @@ IBL_INLINE float rprobe_tap_rough(float noh, float voh, float nol, float alpha, 
  * the chain's last level) in `count` Hammersley directions l, each weighted as the BRDF over
  * its pdf without Fresnel (V 4 NoL VoH / NoH; none below the surface; the split sum's albedo
  * scales the mean), each at its own roughness (rprobe_tap_rough): the scene where l leaves the
- * proxy (x), read from the probe along d = x - probe (no finer than RPROBE_FINEST), and the sky
+ * proxy (x), read from the probe along d = x - probe (at the tap's level, not floored at
+ * RPROBE_FINEST: the taps average the capture's noise, and a floored read bled the black floor
+ * under a probe's excluded cube into the lit floor beside it: metal_box under city, the -x face
+ * x0.88 at level 2, x0.93 at the tap's), and the sky
  * along l itself (at infinity: no parallax) where p sees that direction open (the coverage along
  * d at the capture's own level: a window's edge as sharp as the capture holds it). That sky is
  * the capture's own through its openings per unit of open share (a lamp behind the wall beside a
@@ -198,7 +201,7 @@ IBL_INLINE float3 rprobe_taps(RPROBE_PARAMS, int k, float3 p, float3 n, float3 v
         const float seen = 1.0f - rprobe_lookup(RPROBE_ARGS, 3 * k + 1, l, tap).x;
         const float3 through = seen > RPROBE_SKY_SEEN ? rprobe_lookup(RPROBE_ARGS, 3 * k + 2, l, tap) / seen
                                : env_scale * split_sum_radiance(CHAIN_ARGS, l, env_rot, tap_rough);
-        acc += w * (rprobe_lookup(RPROBE_ARGS, 3 * k, d, fmax(tap, fmin(lod, RPROBE_FINEST))) + open * through);
+        acc += w * (rprobe_lookup(RPROBE_ARGS, 3 * k, d, tap) + open * through);
         wsum += w;
     }
     return acc / fmax(wsum, 1e-9f);

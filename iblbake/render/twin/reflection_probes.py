@@ -94,7 +94,7 @@ def taps(c: dict, p, n, v, lod, env, count: int):
     """Twin of rprobe_taps: the GGX lobe of normal n and view v (alpha rough^2, rough lod over the
     chain's last level) read in `count` Hammersley directions l, each weighted as the BRDF over its
     pdf without Fresnel (V 4 NoL VoH / NoH, none below the surface): the scene where l leaves the
-    proxy, seen from the probe (no finer than FINEST), and the sky along l itself, the capture's
+    proxy, seen from the probe at the tap's own level (not floored at FINEST), and the sky along l itself, the capture's
     own through its openings per unit of open share (the distant chain where it saw none; env: the
     distant chain, its rotation, its intensity), times whether p sees that direction open (the
     coverage at the capture's own level along the parallax-corrected direction); each tap at its
@@ -120,8 +120,7 @@ def taps(c: dict, p, n, v, lod, env, count: int):
         distant = scale * radiance.chain_lookup_twin(chain, conventions.rotate_y(l, -rot), rough_t * (len(chain) - 1))
         through = np.where(seen > SKY_SEEN, radiance.chain_lookup_twin(c["sky"], l, tap) / np.maximum(seen, 1e-30),
                            distant)
-        acc += w * (radiance.chain_lookup_twin(c["levels"], d, np.maximum(tap, np.minimum(lod, FINEST)))
-                    + open_ * through)
+        acc += w * (radiance.chain_lookup_twin(c["levels"], d, tap) + open_ * through)
         wsum += w
     return acc / np.maximum(wsum, 1e-9)
 
