@@ -50,7 +50,7 @@ def accuracy(scene, ladder=None, *, overrides=(), max_side: int = 320, repeats: 
     scene: a scene file, a mapping or a Scene, as load_scene takes (the study loads it at
         `max_side` with each rung's values); overrides: as load_scene's.
     ladder: None (the default ladder for the scene and device), 'realtime' (the real-time modes
-        as shipped), 'bases', 'probe_bases' or a ladder file ({rungs: [AXIS, ...]} in the sweep
+        as shipped), 'bases', 'probe_bases', 'lightmaps' or a ladder file ({rungs: [AXIS, ...]} in the sweep
         syntax).
     max_side: 8 to 8192. repeats: 1 to 100.
     bounces: the reference's bounces: 'unbounded' or a count (1: the direct light alone). None is
