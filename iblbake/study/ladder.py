@@ -52,7 +52,8 @@ def default_ladder(sc, fx, device_kind: str = "GPU", paths: bool = False) -> lis
     """The rungs of the terms the scene calls for (fx: plan.effect_modes of the scene): a
     diffuse-only scene runs only diffuse rungs. One factor at a time around the defaults.
     paths: the study's reference traces interreflection here (Study.paths), so "direct only"
-    (the reference at bounces 1) is a rung: what ignoring the light between surfaces costs."""
+    (the reference at bounces 1) is a rung: what ignoring the light between surfaces costs. A
+    scene with a lightmap section: its basis at each density, each basis at its own (lightmap_rungs)."""
     rungs = []
     if fx.diffuse != "off":
         for window in ("none", "hann"):
@@ -125,7 +126,8 @@ def default_ladder(sc, fx, device_kind: str = "GPU", paths: bool = False) -> lis
 
 def realtime_ladder(sc, fx) -> list:
     """The real-time modes of each term the scene calls for, as shipped (`--ladder realtime`; the
-    corpus of docs/benchmarks.md): diffuse SH, SH with GTAO, irradiance probes (octahedral, L2 SH);
+    corpus of docs/benchmarks.md): diffuse SH, SH with GTAO, irradiance probes (octahedral, L2 SH),
+    the scene's lightmap section as it is (where it has one);
     specular importance N=64, the split sum with the distant panorama alone, the lobe K=4, the
     split sum with SSR, and with the scene's reflection probes, with and without SSR."""
     rungs = []
