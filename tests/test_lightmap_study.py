@@ -43,7 +43,8 @@ def labels(rungs) -> list:
 def test_the_ladders_study_a_lightmap_only_where_the_scene_asks_for_one(lobed_sky):
     """With a lightmap section: `lightmaps` is the grid (4 bases x 3 densities), the default ladder
     the scene's basis at each density and each other basis at its own, realtime the section as it
-    is. Without one, none; `--ladder lightmaps` says in one line what to add."""
+    is, and the scene's own lightmap names its basis and density. Without one, none; `--ladder
+    lightmaps` says in one line what to add."""
     sc = iblbake.load_scene(doc(lobed_sky))
     fx = effect_modes(sc)
     grid = labels(ladder.LADDERS["lightmaps"](sc, fx))
@@ -52,6 +53,9 @@ def test_the_ladders_study_a_lightmap_only_where_the_scene_asks_for_one(lobed_sk
     assert sorted(labels(ladder.default_ladder(sc, fx, "CPU"))) == sorted(
         [f"lightmap sh_l1 @ {d}" for d in DENSITIES] + [f"lightmap {b} @ 2" for b in ("irradiance", "sh", "sg")])
     assert labels(ladder.realtime_ladder(sc, fx)) == ["lightmap"]
+
+    lit = iblbake.load_scene({**doc(lobed_sky), "effects": {"diffuse": "lightmap", "specular": "off"}})
+    assert ladder.configured_rung(lit, "diffuse").label == "configured: lightmap sh_l1 @ 2"
 
     bare = iblbake.load_scene(doc(lobed_sky, lightmap=False))
     fx = effect_modes(bare)

@@ -31,6 +31,9 @@ def configured_rung(sc, term: str) -> Rung:
         vals = [("effects.diffuse", mode)]
         label = f"SH {fx['sh_bands']} bands" + ("" if fx["sh_window"] == "none" else f" {fx['sh_window']}") \
             if mode == "sh" else mode
+        if mode == "lightmap":           # as its rungs name it (lightmap_rungs)
+            lm = sc.data["lightmap"]
+            label = f"lightmap {lm['basis']} @ {lm['texels_per_unit']:g}"
     else:
         mode = fx["specular"]
         vals = [("effects.specular", mode)]
