@@ -64,6 +64,11 @@ def test_the_ladders_study_a_lightmap_only_where_the_scene_asks_for_one(lobed_sk
     with pytest.raises(InputError, match=r"no lightmap: section; add one \(`lightmap: \{\}`") as e:
         ladder.LADDERS["lightmaps"](bare, fx)
     assert "\n" not in str(e.value)
+    dark = iblbake.load_scene({**doc(lobed_sky), "effects": {"diffuse": "off", "specular": "prefiltered"}})
+    fx = effect_modes(dark)
+    assert labels(ladder.default_ladder(dark, fx, "CPU", paths=True)) == labels(ladder.realtime_ladder(dark, fx)) == []
+    with pytest.raises(InputError, match=r"no diffuse term \(effects.diffuse: off\); give effects.diffuse a mode"):
+        ladder.LADDERS["lightmaps"](dark, fx)
 
 
 def test_lightmap_rungs_report_bytes_bake_time_and_error(tmp_path, lobed_sky):

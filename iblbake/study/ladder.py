@@ -241,10 +241,10 @@ def lightmaps_ladder(sc, fx) -> list:
     """The lightmap's grid of resolution x basis (`--ladder lightmaps`: lightmap_rungs), each rung's
     atlas bytes and bake time beside its frame time and error. A scene without a lightmap section
     (or a diffuse term) has nothing to study: one line saying so."""
+    why = ("no diffuse term (effects.diffuse: off); give effects.diffuse a mode" if lightmapped(sc) else
+           "no lightmap: section; add one (`lightmap: {}` takes the defaults; docs/manual.md 'Lightmaps')")
     if fx.diffuse == "off" or not lightmapped(sc):
-        raise InputError(f"{sc.source}: the lightmaps ladder studies the scene's lightmap, and it has "
-                         + ("no diffuse term" if lightmapped(sc) else
-                            "no lightmap: section; add one (`lightmap: {}` takes the defaults; docs/manual.md 'Lightmaps')"))
+        raise InputError(f"{sc.source}: the lightmaps ladder studies the scene's lightmap, and it has {why}")
     return lightmap_rungs(sc, fx)
 
 
