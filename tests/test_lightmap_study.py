@@ -107,3 +107,18 @@ def test_lightmap_rungs_report_bytes_bake_time_and_error(tmp_path, lobed_sky):
     for label, x in rows.items():
         assert f"| diffuse | {label} |" in table and f"| {x['bytes']} |" in table
         assert label in page
+
+
+def test_a_rung_past_the_atlas_cap_is_refused_before_anything_renders(tmp_path, lobed_sky):
+    """A density of the grid whose atlas passes lightmap.max_texels (the scene's 2 texels a unit fit
+    300 texels, 4 do not: about 28 units of surface) is a one-line error naming the rung and the key,
+    said before the reference renders (its bake would refuse it after)."""
+    d = doc(lobed_sky)
+    d["lightmap"]["max_texels"] = 300
+    ran = []
+    with pytest.raises(InputError, match=r"ladder rung 'lightmap irradiance @ 4': lightmap.texels_per_unit: 4 texels "
+                                         r"per unit asks about \d+ texels .* over the cap of 300") as e:
+        iblbake.accuracy(d, "lightmaps", max_side=16, repeats=1, max_samples=16, flip=False, cache=tmp_path / "c",
+                         before_run=lambda *a: ran.append(a))
+    assert "\n" not in str(e.value) and not ran
+    assert not (tmp_path / "c").exists() or not any((tmp_path / "c").iterdir())
