@@ -50,7 +50,7 @@ def accuracy(scene, ladder=None, *, overrides=(), max_side: int = 320, repeats: 
     scene: a scene file, a mapping or a Scene, as load_scene takes (the study loads it at
         `max_side` with each rung's values); overrides: as load_scene's.
     ladder: None (the default ladder for the scene and device), 'realtime' (the real-time modes
-        as shipped), 'bases', 'probe_bases' or a ladder file ({rungs: [AXIS, ...]} in the sweep
+        as shipped), 'bases', 'probe_bases', 'lightmaps' or a ladder file ({rungs: [AXIS, ...]} in the sweep
         syntax).
     max_side: 8 to 8192. repeats: 1 to 100.
     bounces: the reference's bounces: 'unbounded' or a count (1: the direct light alone). None is
@@ -133,8 +133,16 @@ def accuracy(scene, ladder=None, *, overrides=(), max_side: int = 320, repeats: 
                 rungs = [r for r in rungs if r not in over]
         rungs = [ladders.configured_rung(study.scene, t) for t in study.terms] + rungs
         reads = scene_load.named_input_files(study.scene) + ([("the ladder", ladder_file)] if ladder_file else [])
+        atlases = {}                     # lightmap densities: their bakes' size cap, checked up front too
         for r in rungs:                  # every rung's scene validates before anything renders
-            reads += scene_load.named_input_files(study.load(study.rung_values(r), origin=f"ladder rung {r.label!r}"))
+            rs = study.load(study.rung_values(r), origin=f"ladder rung {r.label!r}")
+            reads += scene_load.named_input_files(rs)
+            if rs.data["effects"]["diffuse"] == "lightmap":
+                atlases.setdefault(rs.data["lightmap"]["texels_per_unit"],
+                                   f"ladder rung {r.label!r}: lightmap.texels_per_unit")
+        if atlases:
+            from iblbake.render.lightmaps.bake import check_sizes
+            check_sizes(study.scene, atlases)
         if not os.path.isfile(sc.source):    # a mapping: no scene file is read
             reads = [(what, path) for what, path in reads if what != "the scene file"]
         if before_run:

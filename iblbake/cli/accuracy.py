@@ -32,13 +32,14 @@ def bounces_value(v: str):
               help="Write table.md, table.csv, accuracy.json, plot.png (error against time, the Pareto "
                    "frontier marked), errors.png (best and worst rungs beside their error maps) and "
                    "index.html (every rung against the reference, interactive; its images in report/) here.")
-@click.option("--ladder", "ladder_path", type=click.Path(dir_okay=False), default=None, metavar="FILE|realtime|bases|probe_bases",
+@click.option("--ladder", "ladder_path", type=click.Path(dir_okay=False), default=None, metavar="FILE|realtime|bases|probe_bases|lightmaps",
               help="The rungs to run instead of the default ladder: `realtime` (the real-time modes as shipped: "
                    "SH, GTAO, probes; importance, the split sum, lobe, SSR, reflection probes), `bases` (every "
                    "directional basis and size of the diffuse light: SH, L1 Geomerics, ZH3, SG, ambient dice, Haar), "
                    "`probe_bases` (every representation of the irradiance probes: octahedral, L2 SH and the bases "
                    "that fit from a probe's rays; and the specular term from the bases that carry it), "
-                   "or a file "
+                   "`lightmaps` (the scene's lightmap: section baked in irradiance, L1 SH, L2 SH and SG at its "
+                   "texels_per_unit x 0.5, 1 and 2, each rung's atlas bytes and bake time), or a file "
                    "{rungs: [AXIS, ...]}, each axis in the sweep syntax ({key, values}, {key, range}, {steps}) "
                    "with optional term: and with:.")
 @click.option("--set", "overrides", multiple=True, metavar="KEY.PATH=VALUE",

@@ -350,6 +350,7 @@ class Study:
             "bake_s": round(sum(b["seconds"] for b in bakes if not b["cached"]), 4),
             "bakes": [{"name": b["name"], "seconds": b["seconds"], "cached": b["cached"]} for b in bakes],
             "kernel_build_s": round(builds, 4), "bytes": lighting_bytes(sc, rung.term, bakes),
+            **lightmap_row(bakes),
             **error_metrics(frame.hdr, ref["hdr"], mask, self.settings.flip),
             **self.region_metrics(frame.hdr, ref["hdr"], mask, rung.term)}
         if rung.result["mode"] == "reference":
@@ -402,7 +403,20 @@ def lighting_bytes(sc, term: str, bakes: list) -> int | None:
         return PROBE_BASES[p["irradiance"]].stored_bytes(p, 2)
     if mode in ("prefiltered", "lobe"):
         return next((b.get("fp16_bytes") for b in bakes if b["name"] == "prefiltered"), None)
+    if mode == "lightmap":              # the atlases of its basis (render/lightmaps bake.bytes_of)
+        return next((b["bytes"][b["basis"]] for b in bakes if b["name"] == "lightmap"), None)
     return None
+
+
+def lightmap_row(bakes: list) -> dict:
+    """{'lightmap': the lightmap bake's report row (render/units.py Lightmap): its atlas, texels,
+    density, rays a texel, basis, bytes of that basis and the bake's own seconds, also when the
+    rung read it from the cache}; {} where the rung reads no lightmap."""
+    row = next((b for b in bakes if b["name"] == "lightmap"), None)
+    if row is None:
+        return {}
+    keep = ("atlas", "texels", "texels_per_unit", "samples", "basis", "bake_s", "objects_without")
+    return {"lightmap": {**{k: row[k] for k in keep}, "bytes": row["bytes"][row["basis"]]}}
 
 
 def display(sc, hdr, like) -> np.ndarray:

@@ -31,6 +31,9 @@ def configured_rung(sc, term: str) -> Rung:
         vals = [("effects.diffuse", mode)]
         label = f"SH {fx['sh_bands']} bands" + ("" if fx["sh_window"] == "none" else f" {fx['sh_window']}") \
             if mode == "sh" else mode
+        if mode == "lightmap":           # as its rungs name it (lightmap_rungs)
+            lm = sc.data["lightmap"]
+            label = f"lightmap {lm['basis']} @ {lm['texels_per_unit']:g}"
     else:
         mode = fx["specular"]
         vals = [("effects.specular", mode)]
@@ -52,7 +55,8 @@ def default_ladder(sc, fx, device_kind: str = "GPU", paths: bool = False) -> lis
     """The rungs of the terms the scene calls for (fx: plan.effect_modes of the scene): a
     diffuse-only scene runs only diffuse rungs. One factor at a time around the defaults.
     paths: the study's reference traces interreflection here (Study.paths), so "direct only"
-    (the reference at bounces 1) is a rung: what ignoring the light between surfaces costs."""
+    (the reference at bounces 1) is a rung: what ignoring the light between surfaces costs. A
+    scene with a lightmap section: its basis at each density, each basis at its own (lightmap_rungs)."""
     rungs = []
     if fx.diffuse != "off":
         for window in ("none", "hann"):
@@ -102,6 +106,8 @@ def default_ladder(sc, fx, device_kind: str = "GPU", paths: bool = False) -> lis
     if fx.diffuse != "off" and paths:    # irradiance probes: the light between surfaces, baked
         for label, vals in probe_rungs():
             rungs.append(Rung("diffuse", label, [("effects.diffuse", "probes")] + vals))
+    own = sc.data["lightmap"]["basis"]  # the scene's lightmap: its basis at each density, each basis at its own
+    rungs += lightmap_rungs(sc, fx, (own,)) + lightmap_rungs(sc, fx, [b for b in LIGHTMAP_BASES if b != own], (1.0,))
     for term in TERMS:                   # AO on the approximate IBL (the reference has visibility)
         if fx.approximate(term):
             rungs.append(Rung(term, "ao gtao", [("effects.ao", "gtao")]))
@@ -123,7 +129,8 @@ def default_ladder(sc, fx, device_kind: str = "GPU", paths: bool = False) -> lis
 
 def realtime_ladder(sc, fx) -> list:
     """The real-time modes of each term the scene calls for, as shipped (`--ladder realtime`; the
-    corpus of docs/benchmarks.md): diffuse SH, SH with GTAO, irradiance probes (octahedral, L2 SH);
+    corpus of docs/benchmarks.md): diffuse SH, SH with GTAO, irradiance probes (octahedral, L2 SH),
+    the scene's lightmap section as it is (where it has one);
     specular importance N=64, the split sum with the distant panorama alone, the lobe K=4, the
     split sum with SSR, and with the scene's reflection probes, with and without SSR."""
     rungs = []
@@ -133,6 +140,8 @@ def realtime_ladder(sc, fx) -> list:
                   Rung("diffuse", "probes", [("effects.diffuse", "probes"), ("effects.ao", "off")]),
                   Rung("diffuse", "probes, L2 SH", [("effects.diffuse", "probes"), ("effects.ao", "off"),
                                                    ("probes.irradiance", "sh")])]
+        if lightmapped(sc):
+            rungs.append(Rung("diffuse", "lightmap", [("effects.diffuse", "lightmap"), ("effects.ao", "off")]))
     if fx.specular != "off":
         # every rung says whether SSR runs: a scene's `ssr: on` is not to leak into the rungs without it
         distant = [("effects.specular", "prefiltered"), ("effects.reflection_probes", False), ("effects.ao", "off")]
@@ -203,7 +212,44 @@ def probe_bases_ladder(sc, fx) -> list:
     return rungs
 
 
-LADDERS = {"realtime": realtime_ladder, "bases": bases_ladder, "probe_bases": probe_bases_ladder}  # --ladder NAME
+# the lightmap's grid: these bases (every name of render/lightmaps NAMES is a valid lightmap.basis)
+# at the scene's texels_per_unit times each scale
+LIGHTMAP_BASES = ("irradiance", "sh_l1", "sh", "sg")
+LIGHTMAP_SCALES = (0.5, 1.0, 2.0)
+
+
+def lightmapped(sc) -> bool:
+    """Whether the scene asks for a lightmap (a `lightmap:` section in its file or a --set): an
+    effect it does not ask for is not studied."""
+    return "lightmap" in (sc.raw or {})
+
+
+def lightmap_rungs(sc, fx, bases=LIGHTMAP_BASES, scales=LIGHTMAP_SCALES) -> list:
+    """`lightmap BASIS @ DENSITY`: the diffuse term read from the scene's lightmap section baked in
+    each of `bases` at its texels_per_unit x each of `scales` (its other keys as they are), AO off;
+    none where the scene has no lightmap section or no diffuse term."""
+    if fx.diffuse == "off" or not lightmapped(sc):
+        return []
+    tpu = sc.data["lightmap"]["texels_per_unit"]
+    return [Rung("diffuse", f"lightmap {basis} @ {tpu * k:g}",
+                 [("effects.diffuse", "lightmap"), ("effects.ao", "off"), ("lightmap.basis", basis),
+                  ("lightmap.texels_per_unit", tpu * k)])
+            for k in scales for basis in bases]
+
+
+def lightmaps_ladder(sc, fx) -> list:
+    """The lightmap's grid of resolution x basis (`--ladder lightmaps`: lightmap_rungs), each rung's
+    atlas bytes and bake time beside its frame time and error. A scene without a lightmap section
+    (or a diffuse term) has nothing to study: one line saying so."""
+    why = ("no diffuse term (effects.diffuse: off); give effects.diffuse a mode" if lightmapped(sc) else
+           "no lightmap: section; add one (`lightmap: {}` takes the defaults; docs/manual.md 'Lightmaps')")
+    if fx.diffuse == "off" or not lightmapped(sc):
+        raise InputError(f"{sc.source}: the lightmaps ladder studies the scene's lightmap, and it has {why}")
+    return lightmap_rungs(sc, fx)
+
+
+LADDERS = {"realtime": realtime_ladder, "bases": bases_ladder, "probe_bases": probe_bases_ladder,
+           "lightmaps": lightmaps_ladder}  # --ladder NAME
 
 
 def probe_rungs() -> list:

@@ -217,12 +217,29 @@ def bytes_of(lay: uvs.Layout, basis: str, opts: dict | None = None) -> int:
     return lay.width * lay.height * 8 * bases.floats(basis, opts or {})
 
 
+def triangles(sc):
+    """The scene's triangles as the bake charts them (scene/geometry build_triangles, spheres meshed)."""
+    from iblbake.scene import geometry, materials
+    _records, offsets = materials.table(sc)
+    counts = {oid: len(materials.file_materials(o["mesh"]["path"], f"{sc.source}: objects.{oid}.mesh"))
+              for oid, o in enumerate(sc.data["objects"]) if materials.brings_materials(o)}
+    return geometry.build_triangles(sc.data["objects"], offsets, sc.source, counts, True)
+
+
+def check_sizes(sc, densities: dict) -> None:
+    """Each density (texels per unit) of {density: what the message calls it} against the scene's
+    lightmap.max_texels, as a bake checks it (uv.check_size) without packing: a study's rungs
+    checked before anything renders."""
+    surface = uvs.surface_area(sc, triangles(sc))
+    for d, key in densities.items():
+        uvs.check_size(sc, surface, d, sc.data["lightmap"]["max_texels"], key)
+
+
 def bake(job, settings: dict, progress=None) -> dict:
     """The scene's lightmap (settings: the scene's lightmap section): the layout, the atlases
     {'irradiance': (h, w, 3), BASIS: (h, w, floats, 3), 'valid': (h, w) bool}, BASIS the section's
     `basis` (bases.py) under 'basis' with its options under 'options', and a report."""
     from iblbake.render.paths.tracer import Tracer
-    from iblbake.scene import geometry, materials
 
     t0 = time.perf_counter()
     sc = job.scene
@@ -230,10 +247,7 @@ def bake(job, settings: dict, progress=None) -> dict:
     if basis not in bases.NAMES:
         raise InputError(f"lightmap.basis: {basis!r} is not a lightmap basis; give one of {', '.join(bases.NAMES)}")
     opts = bases.options(basis, settings)
-    _records, offsets = materials.table(sc)
-    counts = {oid: len(materials.file_materials(o["mesh"]["path"], f"{sc.source}: objects.{oid}.mesh"))
-              for oid, o in enumerate(sc.data["objects"]) if materials.brings_materials(o)}
-    tris = geometry.build_triangles(sc.data["objects"], offsets, sc.source, counts, True)
+    tris = triangles(sc)
     density = settings["texels_per_unit"]
     lay = uvs.layout(sc, tris, density, settings["max_texels"])
     tx = uvs.texels(lay)

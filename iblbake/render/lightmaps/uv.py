@@ -156,18 +156,33 @@ def _parts(scene, tris):
     return out
 
 
+def surface_area(scene, tris) -> float:
+    """The area of the surfaces the lightmap charts (world units squared; each lit side once)."""
+    return area(_parts(scene, tris))
+
+
+def area(parts) -> float:
+    """The area of _parts' surfaces."""
+    return float(sum(0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1).sum()
+                     for _o, _h, v, f, _uv, _s, _n in parts))
+
+
+def check_size(scene, surface: float, density: float, max_texels: int, key: str = "lightmap.texels_per_unit"):
+    """Refuse a density whose atlas (estimated: `surface` x density^2 over xatlas' usual 70% use)
+    passes max_texels, in one line naming `key`."""
+    estimate = int(surface * density ** 2 / 0.7)
+    if estimate > max_texels:
+        raise InputError(f"{scene.source}: {key}: {density:g} texels per unit asks about {estimate} texels "
+                         f"(~{estimate * TEXEL_BYTES * 4 / 2**20:.0f} MiB to bake) over the cap of {max_texels} "
+                         f"(lightmap.max_texels); give a lower density")
+
+
 def layout(scene, tris, density: float, max_texels: int, key: str = "lightmap.texels_per_unit") -> Layout:
     """The scene's atlas at `density` texels per unit (xatlas), refused past max_texels (a one-line
     error naming `key` and the estimate) before anything is packed: the estimate is the surfaces' area
     times density squared, over xatlas' usual 70% use."""
     parts = _parts(scene, tris)
-    area = sum(0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1).sum()
-               for _o, _h, v, f, _uv, _s, _n in parts)
-    estimate = int(area * density ** 2 / 0.7)
-    if estimate > max_texels:
-        raise InputError(f"{scene.source}: {key}: {density:g} texels per unit asks about {estimate} texels "
-                         f"(~{estimate * TEXEL_BYTES * 4 / 2**20:.0f} MiB to bake) over the cap of {max_texels} "
-                         f"(lightmap.max_texels); give a lower density")
+    check_size(scene, area(parts), density, max_texels, key)
     if not parts:
         raise InputError(f"{scene.source}: lightmap: the scene has no mesh, sphere or finite plane to lightmap")
     import xatlas                                   # only where lightmaps are baked (the lightmaps extra)
