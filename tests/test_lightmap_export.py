@@ -177,7 +177,7 @@ def test_babylon_renders_the_lightmap_as_iblbake_reads_it(baked, node):
 
 
 @pytest.mark.external
-@pytest.mark.parametrize("name", ["irradiance", "sh_l1", "sh", "l1_geomerics", "zh3", "sg", "ambient_dice"])
+@pytest.mark.parametrize("name", ["irradiance", "sh_l1", "sh", "zh3", "sg", "ambient_dice"])
 def test_glsl_of_every_basis_compiles(name, tmp_path):
     """lightmapIrradiance of the bake's bases and of every basis the probes' registry holds (those a
     bake may add): glslangValidator compiles it in a fragment shader."""
