@@ -290,7 +290,8 @@ def manifest_irradiance(b: dict, conventions: dict, c, n):
 
     class N:
         x, y, z = n[:, 0], n[:, 1], n[:, 2]
-    y = np.stack([eval(t, {"n": N}) * np.ones(len(n)) for t in conventions["sh_basis"].split(": ", 1)[1].split("; ")], 1)
+    terms = conventions["sh_basis"].split(": ", 1)[1].split("; ")
+    y = np.stack([eval(t, {"n": N}) * np.ones(len(n)) for t in terms], 1)
     if "irradiance_legendre" in b:                             # SG, ambient dice: lobes about the axes
         p = legendre.legval(np.clip(n @ np.array(b["axes"]).T, -1, 1), np.array(b["irradiance_legendre"]))
         return np.maximum(0, np.einsum("kj,kjc->kc", p, c))
@@ -299,7 +300,8 @@ def manifest_irradiance(b: dict, conventions: dict, c, n):
         a = np.einsum("kxc,c->kx", c[:, [3, 1, 2]], b["luminance"])
         a /= np.linalg.norm(a, axis=1, keepdims=True)
         zonal = b["zonal"] * (3 * np.einsum("kx,kx->k", a, n) ** 2 - 1)
-        return np.maximum(0, np.einsum("kj,kjc->kc", y[:, :4] * ahat[:4], c[:, :4]) + (ahat[4] * zonal)[:, None] * c[:, 4])
+        e = np.einsum("kj,kjc->kc", y[:, :4] * ahat[:4], c[:, :4]) + (ahat[4] * zonal)[:, None] * c[:, 4]
+        return np.maximum(0, e)
     return np.maximum(0, np.einsum("kj,kjc->kc", y[:, :b["floats"]] * b["ahat"], c))
 
 
@@ -341,3 +343,16 @@ def test_manifest_alone_evaluates_each_basis(name, baked, tmp_path, monkeypatch)
     want = bases.irradiance(name, c, n, bases.options(name, {}))
     print(name, np.abs(got - want).max() / np.abs(want).max())
     assert np.abs(got - want).max() < 1e-14 * np.abs(want).max()
+
+
+def test_manifest_names_each_object_and_its_gltf_node(baked):
+    """lightmap.json's objects: each lightmapped object's scene index, its name (the scene's `name`,
+    else objects.N) and the index of its node in lightmap.gltf, which carries that name and mesh."""
+    out = baked["out"]
+    man = json.loads((out / "lightmap.json").read_text())
+    doc = json.loads((out / "lightmap.gltf").read_text())
+    assert man["objects"] == [{"index": 0, "name": "objects.0", "gltf_node": 0},
+                              {"index": 1, "name": "box", "gltf_node": 1}]
+    for o in man["objects"]:
+        node = doc["nodes"][o["gltf_node"]]
+        assert node["name"] == o["name"] == doc["meshes"][node["mesh"]]["name"]

@@ -159,8 +159,9 @@ vec3 lightmapIrradiance(vec2 uv1, vec3 n) {{
 """
 
 
-def manifest(lm: dict, settings: dict, scale: float) -> dict:
-    """lightmap.json: the atlas, every basis' files and reading, the glTF's, the bake's report."""
+def manifest(lm: dict, settings: dict, scale: float, objects=()) -> dict:
+    """lightmap.json: the atlas, every basis' files and reading, the glTF's, the bake's report;
+    `objects` (gltf_scene.lightmapped) each object's name and glTF node."""
     from iblbake.io.guard import mark
     from iblbake.render.lightmaps import gltf_scene
     from iblbake.render.lightmaps.uv import PADDING
@@ -177,6 +178,7 @@ def manifest(lm: dict, settings: dict, scale: float) -> dict:
         "atlas": {"width": lay.width, "height": lay.height, "texels_per_unit": rep["texels_per_unit"],
                   "padding": PADDING, "texels": rep["texels"], "uv_sources": rep["uv_sources"]},
         "bases": bases,
+        "objects": [{"index": oid, "name": name, "gltf_node": node} for node, (oid, name) in enumerate(objects)],
         "gltf": {"file": f"{STEM}.gltf", "extension": EXTENSION, "image": f"{STEM}.png",
                  "encoding": gltf_scene.ENCODING,
                  "irradiance_scale": scale},
@@ -216,7 +218,7 @@ def write(lm: dict, sc, folder: Path, batch) -> dict:
                                                                            metadata={"iblbake.basis": name}))
         batch.write_text(folder / f"{STEM}_{name}.glsl", glsl(lm, b))
     scale = gltf_scene.write(lm, sc, folder, STEM, EXTENSION, batch)
-    man = manifest(lm, settings, scale)
+    man = manifest(lm, settings, scale, gltf_scene.lightmapped(lm, sc))
     batch.write_text(folder / f"{STEM}.json", json.dumps(man, indent=1, allow_nan=False) + "\n")
     return man
 

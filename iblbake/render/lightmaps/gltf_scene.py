@@ -95,6 +95,14 @@ def image(e, scale: float) -> bytes:
     return png_bytes(np.rint(v * 255.0).astype(np.uint8), colour=False)
 
 
+def lightmapped(lm: dict, sc) -> list:
+    """(object index, its name: the scene's `name` or objects.N) of each object in the atlas, in
+    the order of the glTF's meshes and nodes (node i is the i-th)."""
+    objects = sc.data["objects"]
+    ids = sorted(int(o) for o in np.unique(lm["layout"].objects))
+    return [(oid, objects[oid].get("name") or f"objects.{oid}") for oid in ids]
+
+
 def document(lm: dict, sc, stem: str, extension: str, scale: float) -> tuple:
     """(the glTF document, the .bin's bytes)."""
     from iblbake.io.guard import mark
@@ -102,7 +110,7 @@ def document(lm: dict, sc, stem: str, extension: str, scale: float) -> tuple:
     buf = gltf.Binary()
     objects, mats = sc.data["objects"], sc.data["materials"]
     meshes, nodes, materials, names = [], [], [], {}
-    for oid in sorted(int(o) for o in np.unique(lay.objects)):
+    for oid, label in lightmapped(lm, sc):
         o = objects[oid]
         mname = o.get("material") or ""
         if mname not in names:
@@ -114,7 +122,6 @@ def document(lm: dict, sc, stem: str, extension: str, scale: float) -> tuple:
         prim = {"attributes": {"POSITION": buf.add(pos, 34962, bounds=True), "NORMAL": buf.add(nrm, 34962),
                                "TEXCOORD_0": uv, "TEXCOORD_1": uv},
                 "indices": buf.add(idx, 34963), "material": names[mname], "mode": 4}
-        label = o.get("name") or f"objects.{oid}"
         meshes.append({"name": label, "primitives": [prim]})
         nodes.append({"name": label, "mesh": len(meshes) - 1})
     glc, cam_node = camera(sc.data["camera"])
