@@ -129,7 +129,8 @@ def test_gltf_is_valid(baked, node):
     assert r["numErrors"] == 0 and r["numWarnings"] == 0, r["messages"]
     assert {m["code"] for m in r["messages"]} <= {"UNSUPPORTED_EXTENSION", "UNUSED_OBJECT", "IMAGE_NPOT_DIMENSIONS"}
     doc = json.loads(gl.read_text())
-    assert doc["extensionsUsed"] == ["IBLBAKE_lightmap"] and "extensionsRequired" not in doc
+    assert doc["extensionsUsed"] == ["IBLBAKE_lightmap", "KHR_materials_specular"] and "extensionsRequired" not in doc
+    assert all(m["extensions"]["KHR_materials_specular"]["specularFactor"] == 0 for m in doc["materials"])
     assert all("TEXCOORD_1" in p["attributes"] for m in doc["meshes"] for p in m["primitives"])
     assert [m["name"] for m in doc["meshes"]] == ["objects.0", "box"]
 
@@ -356,3 +357,35 @@ def test_manifest_names_each_object_and_its_gltf_node(baked):
     for o in man["objects"]:
         node = doc["nodes"][o["gltf_node"]]
         assert node["name"] == o["name"] == doc["meshes"][node["mesh"]]["name"]
+
+
+def test_gltf_keeps_file_materials_specular_and_no_absolute_path(tmp_path):
+    """lightmap.gltf's materials: a glTF mesh without a scene material keeps its file's own
+    (examples/meshes/tiles.glb's "glazed tiles", not "file materials"); a scene material's
+    `specular: 0` is KHR_materials_specular's specularFactor 0 (declared used), a tinted one its
+    factor and colour, the default none; extras.source is the scene's file name, no absolute path."""
+    from iblbake.render.lightmaps import gltf_scene
+    from iblbake.render.lightmaps.uv import Layout
+    from tests.helpers import load_scene
+    tiles = Path(__file__).resolve().parents[1] / "examples" / "meshes" / "tiles.glb"
+    write_exr(tmp_path / "sky.exr", np.ones((8, 16, 3)))
+    sc = load_scene(tmp_path, "scene", {
+        "camera": {"perspective": {"position": [0, 1.5, 3], "look_at": [0, 0, 0], "fov_y": 50}, "resolution": [8, 8]},
+        "environment": {"path": "sky.exr"},
+        "materials": {"matte": {"specular": 0}, "tinted": {"specular": 0.5, "specular_color": [1, 0.5, 0.25]},
+                      "plain": {}},
+        "objects": [{"plane": {"point": [0, 0, 0], "size": 2}, "material": "matte"},
+                    {"mesh": {"path": str(tiles)}, "name": "tiles"},
+                    {"sphere": {"center": [0, 1, 0], "radius": 0.5}, "material": "tinted"},
+                    {"sphere": {"center": [1, 1, 0], "radius": 0.5}, "material": "plain"}]})
+    tri = np.array([[0, 0, 0], [1, 0, 0], [0, 0, 1]], float)
+    lay = Layout(8, 8, np.stack([tri] * 4), np.tile([0, 1, 0.0], (4, 3, 1)), np.arange(4),
+                 np.tile([[1, 1], [6, 1], [1, 6.0]], (4, 1, 1)), np.zeros((4, 4)), {})
+    doc, _data = gltf_scene.document({"layout": lay}, sc, "lightmap", "IBLBAKE_lightmap", 1.0)
+    mats = doc["materials"]
+    assert [m["name"] for m in mats] == ["matte", "glazed tiles", "tinted", "plain"]
+    spec = [m["extensions"].get("KHR_materials_specular") for m in mats]
+    assert spec == [{"specularFactor": 0.0, "specularColorFactor": [1.0, 1.0, 1.0]}, None,
+                    {"specularFactor": 0.5, "specularColorFactor": [1.0, 0.5, 0.25]}, None]
+    assert doc["extensionsUsed"] == ["IBLBAKE_lightmap", "KHR_materials_specular"]
+    assert doc["extras"]["source"] == "scene.yaml" and str(tmp_path) not in json.dumps(doc)
