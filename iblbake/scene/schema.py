@@ -15,9 +15,9 @@ from iblbake.core import bases
 from iblbake.core.bases.probes import PROBE_BASES
 from iblbake.core.conventions import wrap_degrees
 
-# what a lightmap texel can keep (render/lightmaps/bases.py): its own two, then every coefficient basis
-# of the probes' registry (not the octahedral atlas: a tile of texels a texel)
-LIGHTMAP_BASES = ("irradiance", "sh_l1", *(n for n, b in PROBE_BASES.items() if not b.atlas))
+# what a lightmap texel can keep (render/lightmaps/bases.py): its own two, then every basis of the
+# probes' registry that says it may (ProbeBasis.lightmap: not the octahedral atlas, not L1 Geomerics)
+LIGHTMAP_BASES = ("irradiance", "sh_l1", *(n for n, b in PROBE_BASES.items() if b.lightmap))
 
 # Field types. Each checks one value and returns it normalised, or raises _Bad with the reason.
 
@@ -492,7 +492,7 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                           "(none: a non-directional lightmap), `sh_l1` (L1 SH read exactly at the texel's normal), "
                           "or an irradiance probes' basis (core/bases/probes.py; its options the probes' keys); "
                           "`effects.diffuse: lightmap` reads it at the shading normal (a normal map's): "
-                          + "; ".join(f"`{n}`: {b.doc}" for n, b in PROBE_BASES.items() if not b.atlas)),
+                          + "; ".join(f"`{n}`: {b.doc}" for n, b in PROBE_BASES.items() if b.lightmap)),
         **{k: Enum(choices, default, doc=doc + " (the lightmap's basis)") for b in PROBE_BASES.values()
            for k, (choices, default, doc) in b.option_specs.items()},
         "texels_per_unit": Num(8.0, 0.0, lo_open=True, doc="texels per world unit along each side of a surface (the "

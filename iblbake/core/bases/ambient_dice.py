@@ -212,7 +212,9 @@ def specular_weights(r, lam_w, opts) -> np.ndarray:
 def document_fields(opts) -> dict:
     """What `iblbake basis`'s document adds to evaluate the values without this code: the vertices
     and the irradiance profile, E(n) = max(0, sum_i c_i sum_l e_l P_l(v_i . n))."""
-    return {"axes": vertices().tolist(), "irradiance_legendre": irradiance_profile().tolist()}
+    return {"formula": "E(n) = max(0, sum_i c_i sum_l irradiance_legendre[l] P_l(axes[i] . n)), P_l the Legendre "
+                       "polynomials",
+            "axes": vertices().tolist(), "irradiance_legendre": irradiance_profile().tolist()}
 
 
 def validate(coeffs, opts) -> np.ndarray:

@@ -25,6 +25,7 @@ TITLE = "L1 Geomerics"
 RANK = 1                # its place in BASES (the schema's choices, the CLI's, the studies')
 HEADER = "basis_l1_geomerics.h"
 OPTIONS: dict = {}
+LIGHTMAP = False        # uniform light over a texel's hemisphere, black below, reads 7/6 of its irradiance
 Y0 = 0.5 / math.sqrt(math.pi)
 Y1 = math.sqrt(3.0 / (4.0 * math.pi))
 GLSL_COEFFS, GLSL_IRRADIANCE = "L1_SH", "l1GeomericsIrradiance"     # glsl()'s names (the probes' sampler)

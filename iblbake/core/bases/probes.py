@@ -28,6 +28,8 @@ class ProbeBasis:
     atlas = False            # an octahedral atlas of (texels + 2)^2 tiles (render/probes/project.py)
     directional = False      # a basis of BASES, evaluated by its kernels/bases.h header (one a frame)
     specular = False         # carries a specular lobe: `effects.specular: probes`
+    lightmap = True          # a lightmap texel may hold it (scene/schema.py LIGHTMAP_BASES): its reading of a
+                             # hemisphere's light (black below) at the normal is that light's irradiance
     specular_table = None    # the file of the table its GLSL specular reads, beside the atlases
     glsl_table = None        # ... and its sampler's name there
     units = RADIANCE_UNITS
@@ -107,6 +109,7 @@ class Octahedral(ProbeBasis):
     1-texel border per probe, in RTXGI's atlas, read bilinearly."""
     name, title, file = "octahedral", "octahedral", "irradiance.exr"
     atlas = True
+    lightmap = False         # a tile of texels a texel
     units = IRRADIANCE_UNITS
     doc = "DDGI's octahedral irradiance map"
 
@@ -165,6 +168,7 @@ class Directional(ProbeBasis):
         self.m = module
         self.name, self.title, self.file = module.NAME, module.TITLE, f"basis_{module.NAME}.exr"
         self.specular = bool(getattr(module, "SPECULAR", False))
+        self.lightmap = bool(getattr(module, "LIGHTMAP", True))
         self.specular_table = f"{module.NAME}_specular.exr" if hasattr(module, "specular_table") else None
         self.glsl_table = getattr(module, "GLSL_TABLE", None)
         self.option_specs = module.OPTIONS

@@ -223,7 +223,9 @@ def document_fields(opts) -> dict:
     """What `iblbake basis`'s document adds to evaluate the lobes without this code (the Layout)."""
     k = opts["sg_lobes"]
     lam = lobe_sharpness(opts)
-    return {"axes": axes(k).tolist(), "sharpness": lam, "irradiance_legendre": irradiance_profile(lam).tolist()}
+    return {"formula": "E(n) = max(0, sum_k c_k sum_l irradiance_legendre[l] P_l(axes[k] . n)), P_l the Legendre "
+                       "polynomials (the lobes exp(sharpness (axes[k] . w - 1)) convolved with max(0, n . w))",
+            "axes": axes(k).tolist(), "sharpness": lam, "irradiance_legendre": irradiance_profile(lam).tolist()}
 
 
 def validate(coeffs, opts) -> np.ndarray:

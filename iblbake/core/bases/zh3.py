@@ -78,6 +78,16 @@ def irradiance(coeffs, normals, opts) -> np.ndarray:
     return np.maximum(0.0, e + core_sh.truncated_cos_sh(2) * _zonal(c, normals)[..., None] * c[4])
 
 
+def document_fields(opts) -> dict:
+    """What a document of ZH3 coefficients adds to evaluate them without this code (irradiance())."""
+    from iblbake.core.metrics import LUMINANCE
+    return {"formula": "E(n) = max(0, sum_{k<4} ahat[k] c_k Y_k(n) + ahat[4] zonal (3 (a.n)^2 - 1) c_4), Y_k the "
+                       "real orthonormal SH (k = l (l + 1) + m), a the unit vector of sum_channels luminance[ch] "
+                       "(c_3, c_1, c_2)[ch] (x, y, z; +y where it is 0)",
+            "ahat": [math.pi, *[2.0 * math.pi / 3.0] * 3, core_sh.truncated_cos_sh(2)], "zonal": ZONAL,
+            "luminance": LUMINANCE.tolist()}
+
+
 def validate(coeffs, opts) -> np.ndarray:
     return common.check_coefficients(coeffs, 5, "ZH3 coefficients")
 

@@ -1,8 +1,9 @@
 """What a lightmap texel keeps of its rays (`lightmap.basis`): the non-directional irradiance, the
 L1 SH with its reading at the texel's normal made exact (sh_l1), or any coefficient basis of the
-irradiance probes' registry (core/bases/probes.py PROBE_BASES: L2 SH, L1 Geomerics, ZH3, SG,
-ambient dice), fitted by that basis's own project_rays and read by its own irradiance_at: a texel
-is a probe with a hemisphere of rays. The octahedral atlas is left out (a tile of n x n texels a
+irradiance probes' registry a texel may hold (core/bases/probes.py PROBE_BASES, `lightmap`: L2 SH,
+ZH3, SG, ambient dice; not L1 Geomerics, which reads a hemisphere's light 7/6 bright), fitted by
+that basis's own project_rays and read by its own irradiance_at: a texel is a probe with a
+hemisphere of rays. The octahedral atlas is left out (a tile of n x n texels a
 texel). Per texel, rays uniform over its hemisphere, weight w = 2 pi / samples a ray:
   irradiance  E(n) = sum w L cos (RGB)
   sh_l1       L_lm = sum w L Y_lm, then L_00 moved so that the reading at the texel's normal is its

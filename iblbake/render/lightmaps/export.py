@@ -49,6 +49,7 @@ class Basis:
     functions: str
     body: str
     options: dict
+    fields: dict        # what evaluates it from lightmap.json alone beside its layout (axes, profiles, factors)
 
 
 def _sh(name, title, bands, convolved):
@@ -56,16 +57,16 @@ def _sh(name, title, bands, convolved):
     k = bands * bands
     ahat = [1.0] * k if convolved else [float(a) for a in core_sh.ahat(bands)]      # per coefficient
     terms = " +\n               ".join(f"{a!r} * {y} * c[{i}]" for i, (a, y) in enumerate(zip(ahat, SH_TERMS[:k])))
-    what = "E(n) = max(0, sum_k c_k Y_k(n))" if convolved else \
-        "E(n) = max(0, sum_k Ahat_l c_k Y_k(n)), Ahat_l = pi, 2 pi / 3 for l = 0, 1"
+    what = "E(n) = max(0, sum_k ahat[k] c_k Y_k(n)), Y_k conventions.sh_basis"
     return Basis(name, title, k, IRRADIANCE_UNITS if convolved else RADIANCE_UNITS,
-                 f"{k} coefficient sets; {SH_LAYOUT}", what, "", f"    return max({terms}, vec3(0.0));", {})
+                 f"{k} coefficient sets; {SH_LAYOUT}", what, "", f"    return max({terms}, vec3(0.0));", {},
+                 {"ahat": ahat})
 
 
 OWN = {
     "irradiance": lambda s: Basis("irradiance", "irradiance (non-directional)", 1, IRRADIANCE_UNITS,
                                   "one set: the texel's irradiance at its own normal (no direction)",
-                                  "E = the texel's RGB, whatever the normal", "", "    return c[0];", {}),
+                                  "E = the texel's RGB, whatever the normal", "", "    return c[0];", {}, {}),
     # the L1 SH of the incoming radiance, its constant term set so the reading at the texel's normal
     # is its irradiance (render/lightmaps/bake.py project())
     "sh_l1": lambda s: _sh("sh_l1", "SH L1 (radiance)", 2, False),
@@ -73,19 +74,27 @@ OWN = {
 
 
 def basis(name: str, settings: dict) -> Basis:
-    """The description of basis `name` as the lightmap settings choose its options."""
-    if name in OWN:
-        return OWN[name](settings)
+    """The description of basis `name` as the lightmap settings choose its options; its units the
+    atlases' (halves, where the registry's files hold float32)."""
+    b = OWN[name](settings) if name in OWN else _registry(name, settings)
+    b.units = b.units.replace("float32", "fp16")
+    return b
+
+
+def _registry(name: str, settings: dict) -> Basis:
+    """A basis of the probes' registry, its fields those `iblbake basis` writes (document_fields)."""
     entry = PROBE_BASES[name]
     if not entry.directional:                 # L2 SH irradiance (the probes' `sh`)
         return _sh(name, entry.title, 3, True)
     m, opts = entry.m, entry.options(settings)
     layout = " ".join(m.__doc__.split("Layout:")[1].split())
+    fields = dict(m.document_fields(opts)) if hasattr(m, "document_fields") else {}
+    what = fields.pop("formula", "docs/conventions.md 'Directional bases'")
     return Basis(name, entry.title, m.floats(opts), entry.units, f"{m.floats(opts)} coefficient sets; {layout}",
-                 f"the basis' irradiance (docs/conventions.md 'Directional bases'; the GLSL's {m.GLSL_IRRADIANCE})",
+                 f"{what} (the GLSL's {m.GLSL_IRRADIANCE})",
                  entry.functions(settings, "the texel's coefficients (lightmapIrradiance)"),
                  f"    for (int k = 0; k < {m.floats(opts)}; ++k) {m.GLSL_COEFFS}[k] = c[k];\n"
-                 f"    return {m.GLSL_IRRADIANCE}(n);", opts)
+                 f"    return {m.GLSL_IRRADIANCE}(n);", opts, fields)
 
 
 def held(lm: dict) -> list:
@@ -150,8 +159,9 @@ vec3 lightmapIrradiance(vec2 uv1, vec3 n) {{
 """
 
 
-def manifest(lm: dict, settings: dict, scale: float) -> dict:
-    """lightmap.json: the atlas, every basis' files and reading, the glTF's, the bake's report."""
+def manifest(lm: dict, settings: dict, scale: float, objects=()) -> dict:
+    """lightmap.json: the atlas, every basis' files and reading, the glTF's, the bake's report;
+    `objects` (gltf_scene.lightmapped) each object's name and glTF node."""
     from iblbake.io.guard import mark
     from iblbake.render.lightmaps import gltf_scene
     from iblbake.render.lightmaps.uv import PADDING
@@ -162,12 +172,13 @@ def manifest(lm: dict, settings: dict, scale: float) -> dict:
         stems = atlas_names(name, b.floats)
         bases[name] = {"title": b.title, "floats": b.floats, "options": b.options, "units": b.units,
                        "layout": b.layout, "irradiance": b.evaluate, "exr": [f"{s}.exr" for s in stems],
-                       "ktx2": [f"{s}.ktx2" for s in stems], "glsl": f"{STEM}_{name}.glsl"}
+                       "ktx2": [f"{s}.ktx2" for s in stems], "glsl": f"{STEM}_{name}.glsl", **b.fields}
     return {
         "format": FORMAT, "version": VERSION, "generator": mark(),
         "atlas": {"width": lay.width, "height": lay.height, "texels_per_unit": rep["texels_per_unit"],
                   "padding": PADDING, "texels": rep["texels"], "uv_sources": rep["uv_sources"]},
         "bases": bases,
+        "objects": [{"index": oid, "name": name, "gltf_node": node} for node, (oid, name) in enumerate(objects)],
         "gltf": {"file": f"{STEM}.gltf", "extension": EXTENSION, "image": f"{STEM}.png",
                  "encoding": gltf_scene.ENCODING,
                  "irradiance_scale": scale},
@@ -181,6 +192,7 @@ def manifest(lm: dict, settings: dict, scale: float) -> dict:
             "diffuse": "albedo / pi * E(n) with E the basis' irradiance at the shading normal n (a normal map's "
                        "included for a directional basis)",
             "frame": "world, right-handed, +y up (the scene's and glTF's)",
+            "sh_basis": "Y_k(n), k = l (l + 1) + m: " + "; ".join(SH_TERMS),
         },
         "settings": {k: v for k, v in settings.items()},
         "report": rep,
@@ -206,7 +218,7 @@ def write(lm: dict, sc, folder: Path, batch) -> dict:
                                                                            metadata={"iblbake.basis": name}))
         batch.write_text(folder / f"{STEM}_{name}.glsl", glsl(lm, b))
     scale = gltf_scene.write(lm, sc, folder, STEM, EXTENSION, batch)
-    man = manifest(lm, settings, scale)
+    man = manifest(lm, settings, scale, gltf_scene.lightmapped(lm, sc))
     batch.write_text(folder / f"{STEM}.json", json.dumps(man, indent=1, allow_nan=False) + "\n")
     return man
 

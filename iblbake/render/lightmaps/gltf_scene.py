@@ -1,6 +1,6 @@
 """lightmap.gltf (+ .bin, + the 8-bit image): a lightmap's static geometry as glTF 2.0, each
 lightmapped object one mesh (POSITION, NORMAL, TEXCOORD_1: the atlas' UVs, TEXCOORD_0 the same: glTF's
-sets start at 0 and the layout keeps no material UVs) with its scene material,
+sets start at 0 and the layout keeps no material UVs) with its material (object_material),
 the scene's camera, and the irradiance atlas referenced by the IBLBAKE_lightmap extension (no
 standard glTF extension exists; docs/conventions.md "Lightmaps in files" says why this one):
 
@@ -22,7 +22,10 @@ from iblbake.io import gltf
 
 LINEAR, CLAMP = 9729, 33071
 ENCODING = "gamma 2.2"       # E = irradianceScale * (texel / 255)^2.2
-DEFAULT_MATERIAL = {"base_color": [0.8, 0.8, 0.8], "metallic": 0.0, "roughness": 1.0}   # a mesh's file materials
+# an object with no material of the scene's nor of its file's
+DEFAULT_MATERIAL = {"base_color": [0.8, 0.8, 0.8], "metallic": 0.0, "roughness": 1.0, "specular": 1.0,
+                    "specular_color": [1.0, 1.0, 1.0]}
+SPECULAR = "KHR_materials_specular"
 
 
 def object_mesh(lay, oid: int):
@@ -70,13 +73,34 @@ def camera(cam: dict) -> tuple:
 
 
 def material(m: dict, name: str, extension: str, scale: float) -> dict:
+    """A scene or file material record (scene/materials.py) as glTF's, its KHR_materials_specular
+    where it is not the default (specular 0: a loader adds no lobe the bake did not have)."""
     # single-sided: the atlas holds a chart for each lit side of a surface, each wound to face its
     # side (render/lightmaps/uv.py), so a back face culled is the other side's chart shown
+    ext = {extension: {"lightmapTexture": {"index": 0, "texCoord": 1}, "encoding": ENCODING, "irradianceScale": scale}}
+    colour = [float(x) for x in m["specular_color"]]
+    if m["specular"] != 1.0 or colour != [1.0, 1.0, 1.0]:
+        ext[SPECULAR] = {"specularFactor": float(m["specular"]), "specularColorFactor": colour}
     return {"name": name, "doubleSided": False,
             "pbrMetallicRoughness": {"baseColorFactor": [float(x) for x in m["base_color"]] + [1.0],
                                      "metallicFactor": float(m["metallic"]), "roughnessFactor": float(m["roughness"])},
-            "extensions": {extension: {"lightmapTexture": {"index": 0, "texCoord": 1}, "encoding": ENCODING,
-                                       "irradianceScale": scale}}}
+            "extensions": ext}
+
+
+def object_material(sc, oid: int, records: list, offsets: dict) -> tuple:
+    """(a key, the record, its glTF name) of object oid's material: the scene's, or its glTF file's
+    own (named as in the file) where it brings one; the layout keeps no material a triangle, so a
+    file of several is exported as the default, named after them all."""
+    from iblbake.scene import materials
+    o, first = sc.data["objects"][oid], offsets[oid]
+    if not materials.brings_materials(o):
+        return (first, records[first], o["material"]) if first >= 0 else (-1, DEFAULT_MATERIAL, "default")
+    own = records[first:first + len(materials.file_materials(o["mesh"]["path"], "")) - 1]   # the glTF default last
+    if len(own) == 1:
+        return first, own[0], own[0]["name"].split(": ", 1)[1]
+    if not own:                                     # its primitives take the glTF default
+        return first, records[first], "default"
+    return ("file", oid), DEFAULT_MATERIAL, ", ".join(r["name"] for r in own)
 
 
 def image_scale(e) -> float:
@@ -95,39 +119,47 @@ def image(e, scale: float) -> bytes:
     return png_bytes(np.rint(v * 255.0).astype(np.uint8), colour=False)
 
 
+def lightmapped(lm: dict, sc) -> list:
+    """(object index, its name: the scene's `name` or objects.N) of each object in the atlas, in
+    the order of the glTF's meshes and nodes (node i is the i-th)."""
+    objects = sc.data["objects"]
+    ids = sorted(int(o) for o in np.unique(lm["layout"].objects))
+    return [(oid, objects[oid].get("name") or f"objects.{oid}") for oid in ids]
+
+
 def document(lm: dict, sc, stem: str, extension: str, scale: float) -> tuple:
     """(the glTF document, the .bin's bytes)."""
     from iblbake.io.guard import mark
     lay = lm["layout"]
     buf = gltf.Binary()
-    objects, mats = sc.data["objects"], sc.data["materials"]
+    from iblbake.scene.materials import table
+    records, offsets = table(sc)
     meshes, nodes, materials, names = [], [], [], {}
-    for oid in sorted(int(o) for o in np.unique(lay.objects)):
-        o = objects[oid]
-        mname = o.get("material") or ""
-        if mname not in names:
-            names[mname] = len(materials)
-            materials.append(material(mats.get(mname, DEFAULT_MATERIAL), mname or "file materials", extension, scale))
+    for oid, label in lightmapped(lm, sc):
+        key, rec, mname = object_material(sc, oid, records, offsets)
+        if key not in names:
+            names[key] = len(materials)
+            materials.append(material(rec, mname, extension, scale))
         pos, nrm, uv1, idx = object_mesh(lay, oid)
         uv = buf.add(uv1, 34962)
         # TEXCOORD_0 the atlas' UVs too: glTF's indexed attributes start at 0 (the layout keeps no material UVs)
         prim = {"attributes": {"POSITION": buf.add(pos, 34962, bounds=True), "NORMAL": buf.add(nrm, 34962),
                                "TEXCOORD_0": uv, "TEXCOORD_1": uv},
-                "indices": buf.add(idx, 34963), "material": names[mname], "mode": 4}
-        label = o.get("name") or f"objects.{oid}"
+                "indices": buf.add(idx, 34963), "material": names[key], "mode": 4}
         meshes.append({"name": label, "primitives": [prim]})
         nodes.append({"name": label, "mesh": len(meshes) - 1})
     glc, cam_node = camera(sc.data["camera"])
     nodes.append(cam_node)
+    used = sorted({k for m in materials for k in m["extensions"]} - {extension})
     doc = {"asset": {"version": "2.0", "generator": mark()},
-           "extensionsUsed": [extension],
+           "extensionsUsed": [extension, *used],
            "extensions": {extension: {"manifest": gltf.file_uri(f"{stem}.json")}},
            "scene": 0, "scenes": [{"name": Path(sc.source).stem, "nodes": list(range(len(nodes)))}],
            "nodes": nodes, "meshes": meshes, "materials": materials, "cameras": [glc],
            "samplers": [{"magFilter": LINEAR, "minFilter": LINEAR, "wrapS": CLAMP, "wrapT": CLAMP}],
            "images": [{"uri": gltf.file_uri(f"{stem}.png"), "mimeType": "image/png"}],
            "textures": [{"sampler": 0, "source": 0}],
-           "extras": {"source": sc.source, "atlas": [lay.width, lay.height]}}
+           "extras": {"source": Path(sc.source).name, "atlas": [lay.width, lay.height]}}    # no absolute path
     data = buf.attach(doc, gltf.file_uri(f"{stem}.bin"))
     return doc, data
 
