@@ -332,3 +332,41 @@ def test_nudge_kernel_matches_its_twin(tmp_path, white):
     assert moved.sum() > 20 and np.abs(got - want)[plane & ~tie].max() < 1e-6
     assert tie.sum() <= 2 and same[tie].all()
 
+
+
+def _quad_obj(path, corners):
+    path.write_text("".join(f"v {x} {y} {z}\n" for x, y, z in corners) + "f 1 2 3\nf 1 3 4\n")
+    return str(path)
+
+
+def test_box_flush_in_a_corner_leaks_no_sky(tmp_path, white):
+    """A closed room of zero-thickness walls (each its own object; the x = -2 wall wound facing out,
+    the z = -2 one facing in), the sky outside, and a solid box standing flush in the (-2, -2) corner,
+    its sides in the walls' planes (the user's trial: a white spot on the wall just above the box,
+    22x the reference). No light gets in: the truth on the walls just above the box is 0; a texel's
+    start point pushed out of the box through its side (and the wall there) sees the sky, E ~ pi / 2.
+    Measured here: main 0.97 and 0.49 on the z wall at x = -1.95, -1.85; fixed 0 (< 1e-3)."""
+    q = lambda name, c: {"mesh": {"path": _quad_obj(tmp_path / f"{name}.obj", c)}, "material": "m", "solid": False}
+    r, h = 2.5, 3
+    walls = [q("floor", [(-r, 0, -r), (-r, 0, r), (r, 0, r), (r, 0, -r)]),
+             q("ceil", [(-r, h, -r), (r, h, -r), (r, h, r), (-r, h, r)]),
+             q("zback", [(-r, 0, -2), (r, 0, -2), (r, h, -2), (-r, h, -2)]),         # faces +z (in)
+             q("xleft", [(-2, 0, -r), (-2, 0, r), (-2, h, r), (-2, h, -r)]),         # faces -x (out)
+             q("zfront", [(-r, 0, 2), (-r, h, 2), (r, h, 2), (r, 0, 2)]),
+             q("xright", [(2, 0, -r), (2, h, -r), (2, h, r), (2, 0, r)])]
+    v = [(x, y, z) for x in (-2, -1.2) for y in (0, 0.8) for z in (-2, -1.2)]        # index 4x + 2y + z
+    faces = [(0, 4, 6, 2), (1, 3, 7, 5), (0, 1, 5, 4), (2, 6, 7, 3), (0, 2, 3, 1), (4, 5, 7, 6)]   # outwards
+    (tmp_path / "box.obj").write_text("".join(f"v {x} {y} {z}\n" for x, y, z in v) + "".join(
+        f"f {a + 1} {b + 1} {c + 1}\nf {a + 1} {c + 1} {d + 1}\n" for a, b, c, d in faces))
+    box = {"mesh": {"path": str(tmp_path / "box.obj")}, "material": "m"}
+    sc = scene(tmp_path, white, walls + [box], {"m": {"base_color": [0.5] * 3, **LAMBERT}}, camera=(0.5, 1.5, 0.5),
+               texels_per_unit=4, bounces=1)
+    lm = baked(sc, tmp_path)
+    from iblbake.render.lightmaps import read
+    s = np.linspace(-1.95, -1.25, 8)
+    pts = np.concatenate([np.stack([s, np.full(8, 0.81), np.full(8, -2.0)], 1),
+                          np.stack([np.full(8, -2.0), np.full(8, 0.81), s], 1)])
+    nrm = np.repeat([[0, 0, 1.0], [1.0, 0, 0]], 8, 0)
+    e, found = read.irradiance(lm, np.repeat([2, 3], 8), pts, nrm, "irradiance")
+    print(lm["report"], e.max(1).reshape(2, 8).round(3))
+    assert found.all() and e.max() < 0.02 * math.pi
