@@ -370,3 +370,61 @@ def test_box_flush_in_a_corner_leaks_no_sky(tmp_path, white):
     e, found = read.irradiance(lm, np.repeat([2, 3], 8), pts, nrm, "irradiance")
     print(lm["report"], e.max(1).reshape(2, 8).round(3))
     assert found.all() and e.max() < 0.02 * math.pi
+
+
+def test_bake_says_its_size_up_front(tmp_path, white, capsys):
+    """The command line's progress (Console.fraction) is told the bake's size before the trace: a
+    note on stderr with the texel count, rays a texel and paths (the trial's density of 100 sat at 0%
+    for 40 s with no word of its 2 hours)."""
+    from iblbake.cli.options import Console
+    sc = scene(tmp_path, white, [{"plane": {"point": [0, 0, 0], "size": 1.0}, "material": "m"}],
+               {"m": LAMBERT}, texels_per_unit=8)
+    with Console(False, False).fraction("lightmap", "texel rays") as progress:
+        lm = baked(sc, tmp_path, progress)
+    n = lm["report"]["texels"]
+    err = capsys.readouterr().err
+    assert f"iblbake: {n:,} lightmap texels x 64 rays = {n * 64:,} paths" in err, err
+    assert n > 100
+
+
+def test_progress_estimates_from_the_first_launch(monkeypatch):
+    """The bar's time left shows from the first launch (bounded by the time since its start, which
+    pays the kernel builds), then from the launches after it; the bar's label takes the work's size."""
+    import time
+
+    import click
+
+    from iblbake.cli.options import Console
+    items, clock = [], [0.0]
+
+    class Bar:
+        label = ""
+
+        def __init__(self, length, label, **_):
+            self.label = label
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *a):
+            return False
+
+        def update(self, k, item):
+            items.append((self.label, item))
+
+        def render_progress(self):
+            items.append((self.label, None))
+
+    monkeypatch.setattr(click, "progressbar", Bar)
+    monkeypatch.setattr(time, "perf_counter", lambda: clock[0])
+    monkeypatch.setattr(Console, "interactive", property(lambda self: True))
+    with Console(False, False).fraction("lightmap", "texel rays") as progress:
+        progress.describe("10 texels")
+        clock[0] = 10.0
+        progress(0.02)                   # the first launch: 2% in 10 s, builds included
+        first = items[-1]
+        clock[0] = 12.0
+        progress(0.04)                   # the second: 2% in 2 s
+        second = items[-1]
+    assert first == ("lightmap: 10 texels", "texel rays, at most 8 min 10 s left"), first
+    assert second[1] == "texel rays, 1 min 36 s left", second

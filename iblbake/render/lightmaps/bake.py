@@ -221,6 +221,14 @@ def dilate(atlas, valid, passes: int = DILATE):
     return a, v
 
 
+def describe(progress, text: str):
+    """Say the work's size before it starts, where the progress callback can (the command line's
+    carries describe(text): a note on stderr and the bar's label); a plain callable is not told."""
+    tell = getattr(progress, "describe", None)
+    if callable(tell):
+        tell(text)
+
+
 def bytes_of(lay: uvs.Layout, basis: str, opts: dict | None = None) -> int:
     """The atlas' bytes as an engine holds it: fp16 RGBA per texel, one texture per RGB coefficient
     (one for the irradiance, four for L1 SH, nine for SG9)."""
@@ -251,6 +259,8 @@ def bake(job, settings: dict, progress=None) -> dict:
     tracer = Tracer(job, {"bounces": settings["bounces"], "seed": settings["seed"]})
     start, moved = nudge(tracer, tx, inset(tx, lay.corners, 1.0 / density), 1.0 / density)
     samples = math.isqrt(settings["samples"]) ** 2          # whole strata
+    describe(progress, f"{len(tx.index):,} lightmap texels x {samples} rays = {len(tx.index) * samples:,} paths "
+                       f"({lay.width}x{lay.height} atlas, {density:g} texels a unit)")
     e, coeffs, inside = trace(LightmapTexels(tracer, start, tx.normal, samples, settings["seed"], progress,
                                              basis, opts))
     ok = inside <= REJECT
