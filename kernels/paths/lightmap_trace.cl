@@ -56,7 +56,9 @@ __kernel void lightmap_trace(__global const float4 *texel_pos, __global const fl
 /* Whether a point just past a solid's back face lies on that solid's front: the nearest surface
  * back along the move (d, within dist) is a solid's front face. Not where another surface lies in
  * or just past it (a zero-thickness wall of either winding the solid stands flush against: past both
- * is the wall's far side, outside the room). */
+ * is the wall's far side, outside the room). Where the two lie in one plane the trace meets
+ * whichever its BVH reaches first (the twin refuses such a tie): a texel hidden inside a box's
+ * footprint may still cross there. */
 IBL_INLINE int lands_on_front(float3 p, float3 d, float dist, SCENE_PARAMS)
 {
     const Hit h = trace_range(p, d, 0.0f, dist, 0, 0, SCENE_ARGS);
