@@ -45,9 +45,11 @@ class Console:
         return not self.quiet and sys.stderr.isatty() and not os.environ.get("CI")
 
     @contextlib.contextmanager
-    def stages(self, names, label: str):
+    def stages(self, names, label: str, bound_first: bool = False):
         """A progress bar over named stages on an interactive terminal; silent otherwise.
-        Yields a function that marks the current stage done."""
+        Yields a function that marks the current stage done. bound_first: until a second burst
+        of steps, the time left is bounded from the bar's start (fraction(): a long bake's first
+        launch says its scale)."""
         if not self.interactive:
             quiet = lambda _=1: None
             quiet.relabel = lambda _text: None
@@ -59,8 +61,7 @@ class Console:
         n = len(names)
         # The time left is estimated from the stages after the first: the first pays the kernel
         # builds and the device's first-launch specialisation (click's own ETA counted it, and
-        # read 2 min 49 s left of a 6 s render). Until a second burst, the first (from the bar's
-        # start) bounds it: a long bake says its scale at its first launch.
+        # read 2 min 49 s left of a 6 s render); with bound_first, "at most" the first's rate until then.
         with click.progressbar(length=n, label=label, file=sys.stderr, show_eta=False,
                                item_show_func=lambda i: i) as bar:
             done, start = [0], time.perf_counter()
@@ -77,7 +78,7 @@ class Console:
                 if len(anchor) == 3 and done[0] < n:
                     left = (now - anchor[0]) / (done[0] - anchor[1]) * (n - done[0])
                     item += f", {_duration(left)} left"
-                elif done[0] < n:
+                elif bound_first and done[0] < n:
                     item += f", at most {_duration((now - start) / done[0] * (n - done[0]))} left"
                 bar.update(k, item)
             def relabel(text):       # the work's size, once known (the bar's label)
@@ -95,7 +96,7 @@ class Console:
     def fraction(self, label: str, name: str):
         """stages() over 1000 steps of one named kind of work, fed by the fraction done (0 to 1):
         yields progress(frac), for the library's progress callbacks."""
-        with self.stages([name] * 1000, label) as step:
+        with self.stages([name] * 1000, label, bound_first=True) as step:
             done = [0]
 
             def progress(frac):
