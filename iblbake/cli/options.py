@@ -45,11 +45,15 @@ class Console:
         return not self.quiet and sys.stderr.isatty() and not os.environ.get("CI")
 
     @contextlib.contextmanager
-    def stages(self, names, label: str):
+    def stages(self, names, label: str, bound_first: bool = False):
         """A progress bar over named stages on an interactive terminal; silent otherwise.
-        Yields a function that marks the current stage done."""
+        Yields a function that marks the current stage done. bound_first: until a second burst
+        of steps, the time left is bounded from the bar's start (fraction(): a long bake's first
+        launch says its scale)."""
         if not self.interactive:
-            yield lambda _=1: None
+            quiet = lambda _=1: None
+            quiet.relabel = lambda _text: None
+            yield quiet
             return
         import time
 
@@ -57,14 +61,14 @@ class Console:
         n = len(names)
         # The time left is estimated from the stages after the first: the first pays the kernel
         # builds and the device's first-launch specialisation (click's own ETA counted it, and
-        # read 2 min 49 s left of a 6 s render).
+        # read 2 min 49 s left of a 6 s render); with bound_first, "at most" the first's rate until then.
         with click.progressbar(length=n, label=label, file=sys.stderr, show_eta=False,
                                item_show_func=lambda i: i) as bar:
-            done = [0]
+            done, start = [0], time.perf_counter()
             anchor = []          # (time, stages done) at the end of the first burst of steps
 
-            def step(_=1):   # also fits callers that report progress(1)
-                done[0] += 1
+            def step(k=1):   # k stages done (callers that report progress(1): one)
+                done[0] += k
                 now = time.perf_counter()
                 if not anchor or (len(anchor) == 2 and now - anchor[0] < 0.01):
                     anchor[:] = [now, done[0]]          # steps a batch reports at once
@@ -74,7 +78,13 @@ class Console:
                 if len(anchor) == 3 and done[0] < n:
                     left = (now - anchor[0]) / (done[0] - anchor[1]) * (n - done[0])
                     item += f", {_duration(left)} left"
-                bar.update(1, item)
+                elif bound_first and done[0] < n:
+                    item += f", at most {_duration((now - start) / done[0] * (n - done[0]))} left"
+                bar.update(k, item)
+            def relabel(text):       # the work's size, once known (the bar's label)
+                bar.label = f"{label}: {text}"
+                bar.render_progress()
+            step.relabel = relabel
             self._bar = True
             try:
                 bar.update(0, names[0])
@@ -84,15 +94,23 @@ class Console:
 
     @contextlib.contextmanager
     def fraction(self, label: str, name: str):
-        """stages() over 100 steps of one named kind of work, fed by the fraction done (0 to 1):
+        """stages() over 1000 steps of one named kind of work, fed by the fraction done (0 to 1):
         yields progress(frac), for the library's progress callbacks."""
-        with self.stages([name] * 100, label) as step:
+        with self.stages([name] * 1000, label, bound_first=True) as step:
             done = [0]
 
             def progress(frac):
-                while done[0] < min(int(frac * 100), 100):
-                    step()
-                    done[0] += 1
+                now = min(int(frac * 1000), 1000)
+                if now > done[0]:
+                    step(now - done[0])
+                    done[0] = now
+
+            def describe(text):
+                """The work's size, said up front by the library (bake.describe): a note on
+                stderr (before the bar's line) and the bar's label."""
+                self.note(("\r\x1b[2K" if self._bar else "") + f"iblbake: {text}")
+                step.relabel(text)
+            progress.describe = describe
             yield progress
 
     def result(self, summary: dict, human: str):

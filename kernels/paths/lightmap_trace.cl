@@ -12,7 +12,7 @@
  * lightmap_nudge: BakingLab's fix of a texel start point behind a nearby surface: rays along the
  * texel's tangent plane (nudge_dirs, 4 a texel) out to its reach (w of texel_pos); where one meets
  * the back of a solid (scene.h probe_back_face: an open surface has no inside) the point moves to
- * just past it, on its front.
+ * just past it, on its front, where it lands there (lands_on_front).
  * numpy twins: iblbake/render/lightmaps/bake.py nudge_twin (lightmap_nudge) and project() (what a
  * texel keeps of its rays). */
 #include "common.h"
@@ -53,6 +53,23 @@ __kernel void lightmap_trace(__global const float4 *texel_pos, __global const fl
     ray_out[item] = (float4)(env_part * env_scale + emitted, hh.t);
 }
 
+/* Whether a point just past a solid's back face lies on that solid's front: the nearest surface
+ * back along the move (d, within dist) is a solid's front face. Not where another surface lies in
+ * or just past it (a zero-thickness wall of either winding the solid stands flush against: past both
+ * is the wall's far side, outside the room). Where the two lie in one plane the trace meets
+ * whichever its BVH reaches first (the twin refuses such a tie): a texel hidden inside a box's
+ * footprint may still cross there. */
+IBL_INLINE int lands_on_front(float3 p, float3 d, float dist, SCENE_PARAMS)
+{
+    const Hit h = trace_range(p, d, 0.0f, dist, 0, 0, SCENE_ARGS);
+    if (h.kind == PRIM_NONE) return 0;
+    float3 ng, ns;
+    int m, obj;
+    hit_normals(h.kind, h.index, p + h.t * d, h.b1, h.b2, &ng, &ns, &m, &obj, SCENE_ARGS);
+    return (surface_flags(h.kind, h.index, SCENE_ARGS) & SURFACE_SOLID)
+           && !probe_back_face(h.kind, h.index, ng, d, SCENE_ARGS);
+}
+
 __kernel void lightmap_nudge(__global const float4 *texel_pos, __global const float4 *nudge_dirs,
                              __global const float4 *texel_nrm, const int count, SCENE_PARAMS,
                              __global float4 *pos_out)
@@ -72,8 +89,10 @@ __kernel void lightmap_nudge(__global const float4 *texel_pos, __global const fl
         int m, obj;
         hit_normals(h.kind, h.index, o + h.t * d, h.b1, h.b2, &ng, &ns, &m, &obj, SCENE_ARGS);
         if (!probe_back_face(h.kind, h.index, ng, d, SCENE_ARGS)) continue;   /* its front: the texel sees it */
+        const float past = h.t + 0.05f * reach;
+        if (!lands_on_front(o + past * d, -d, past, SCENE_ARGS)) continue;
         nearest = h.t;
-        moved = o + (h.t + 0.05f * reach) * d + 0.05f * reach * n;      /* just past it, on its front */
+        moved = o + past * d + 0.05f * reach * n;      /* just past it, on its front */
     }
     pos_out[i] = (float4)(moved, reach);
 }

@@ -2,8 +2,8 @@
 (render/paths/trace.py), kernels/paths/lightmap_trace.cl: per texel `samples` rays over the
 hemisphere of its shading normal (stratified, uniform in solid angle, each texel's strata jittered by
 its own stream), from its start point (the surface point moved OFFSET texels into its triangle and
-lifted OFFSET texels along the geometric normal; moved past a solid's back face its tangent rays meet,
-lightmap_nudge), whole texels per launch. Per texel, from the same rays (uniform over the
+lifted OFFSET texels along the geometric normal; moved past a solid's back face its tangent rays meet
+where the move lands on that solid's front, lightmap_nudge), whole texels per launch. Per texel, from the same rays (uniform over the
 hemisphere: weight w = 2 pi / samples a ray): its irradiance E(n) = sum w L cos (the
 non-directional lightmap, kept always) and its coefficients in the scene's `lightmap.basis`
 (bases.py: L1 SH, or any coefficient basis of the probes' registry fitted by its own code).
@@ -132,8 +132,10 @@ def inset(tx: uvs.Texels, corners, texel_size: float):
 
 def nudge(tracer, tx: uvs.Texels, points, texel_size: float):
     """The texels' start points: `points` lifted OFFSET texels along the geometric normal, then moved
-    past a solid's back face that one of four tangent rays (half a texel's diagonal long) meets
-    (lightmap_nudge)."""
+    past the nearest solid's back face that one of four tangent rays (half a texel's diagonal long)
+    meets, where the first surface back along the move is that solid's front (lightmap_nudge's
+    lands_on_front: not through a box's side into the zero-thickness wall it stands flush against,
+    which put a texel behind the wall, lit by the sky outside)."""
     rt = tracer.rt
     lift = points + OFFSET * texel_size * tx.geometric
     reach = math.sqrt(0.5) * texel_size
@@ -150,22 +152,27 @@ def nudge(tracer, tx: uvs.Texels, points, texel_size: float):
 
 
 def _first_hits(o, d, arrays, reach):
-    """(t, whether it is a solid's back face (scene.h probe_back_face)) of the nearest hit of each ray
-    (o, d) within reach, any side (cull 0); inf where none. The twin of lightmap_nudge's trace."""
+    """(t, whether it is a solid's back face (scene.h probe_back_face), whether it is a solid's front
+    face) of the nearest hit of each ray (o, d) within reach, any side (cull 0); inf where none. Two
+    surfaces at one distance (a solid flush against a wall) count as neither face of a solid. The
+    twin of lightmap_nudge's traces."""
     from iblbake.render.twin.gbuffer import _plane_t, _sphere_t, _triangle_t
     from iblbake.scene.layout import SURFACE_FLAGS
 
     ints = lambda a: int(np.asarray(a, np.float32).view(np.int32))
-    best, back = np.full(len(o), np.inf), np.zeros(len(o), bool)
+    best, back, front = np.full(len(o), np.inf), np.zeros(len(o), bool), np.zeros(len(o), bool)
 
     def take(t, ng, flags):
-        nonlocal best, back
+        nonlocal best, back, front
         s = (ng * d).sum(1)
-        solid = flags & SURFACE_FLAGS["solid"]
-        b = (s < 0 if flags & SURFACE_FLAGS["solid_flipped"] else s > 0) if solid else \
-            (s > 0) & bool(flags & SURFACE_FLAGS["single_sided"])
-        closer = (t < best) & (t < reach)
-        best, back = np.where(closer, t, best), np.where(closer, np.asarray(b, bool), back)
+        solid = bool(flags & SURFACE_FLAGS["solid"])
+        b = np.asarray((s < 0 if flags & SURFACE_FLAGS["solid_flipped"] else s > 0) if solid else
+                       (s > 0) & bool(flags & SURFACE_FLAGS["single_sided"]), bool)
+        tie = np.isclose(t, best, rtol=1e-9, atol=1e-12) & (t < reach)
+        back, front = np.where(tie, False, back), np.where(tie, False, front)
+        closer = (t < best) & (t < reach) & ~tie
+        best, back = np.where(closer, t, best), np.where(closer, b, back)
+        front = np.where(closer, solid & ~b, front)
     for sp in arrays.spheres.astype(np.float64):
         t = _sphere_t(o, d, sp)
         ng = (o + np.where(np.isfinite(t), t, 0)[:, None] * d - sp[0, :3]) / sp[0, 3]
@@ -175,7 +182,7 @@ def _first_hits(o, d, arrays, reach):
     for tri in arrays.tris.astype(np.float64):
         ng = np.cross(tri[1, :3] - tri[0, :3], tri[2, :3] - tri[0, :3])
         take(_triangle_t(o, d, tri)[0], np.broadcast_to(ng, o.shape), ints(tri[2, 3]))
-    return best, back
+    return best, back, front
 
 
 def nudge_twin(points, geometric, texel_size: float, arrays):
@@ -186,10 +193,13 @@ def nudge_twin(points, geometric, texel_size: float, arrays):
     nearest, moved = np.full(len(lift), reach), lift.copy()
     for d in (t, -t, b, -b):
         with np.errstate(invalid="ignore", divide="ignore"):       # rays along a triangle's plane
-            hit, back = _first_hits(lift, d, arrays, reach)
-        take = back & (hit < nearest)
+            hit, back, _ = _first_hits(lift, d, arrays, reach)
+            past = np.where(np.isfinite(hit), hit, 0) + 0.05 * reach
+            land = lift + past[:, None] * d
+            _, _, front = _first_hits(land, -d, arrays, past)            # lands_on_front
+        take = back & (hit < nearest) & front
         nearest = np.where(take, hit, nearest)
-        moved[take] = lift[take] + (hit[take] + 0.05 * reach)[:, None] * d[take] + 0.05 * reach * geometric[take]
+        moved[take] = land[take] + 0.05 * reach * geometric[take]
     return moved, int((np.abs(moved - lift).sum(1) > 0).sum())
 
 
@@ -209,6 +219,14 @@ def dilate(atlas, valid, passes: int = DILATE):
         a[fill] = s[fill] / c[fill].reshape(-1, *([1] * (a.ndim - 2)))
         v = v | fill
     return a, v
+
+
+def describe(progress, text: str):
+    """Say the work's size before it starts, where the progress callback can (the command line's
+    carries describe(text): a note on stderr and the bar's label); a plain callable is not told."""
+    tell = getattr(progress, "describe", None)
+    if callable(tell):
+        tell(text)
 
 
 def bytes_of(lay: uvs.Layout, basis: str, opts: dict | None = None) -> int:
@@ -255,6 +273,8 @@ def bake(job, settings: dict, progress=None) -> dict:
     tracer = Tracer(job, {"bounces": settings["bounces"], "seed": settings["seed"]})
     start, moved = nudge(tracer, tx, inset(tx, lay.corners, 1.0 / density), 1.0 / density)
     samples = math.isqrt(settings["samples"]) ** 2          # whole strata
+    describe(progress, f"{len(tx.index):,} lightmap texels x {samples} rays = {len(tx.index) * samples:,} paths "
+                       f"({lay.width}x{lay.height} atlas, {density:g} texels a unit)")
     e, coeffs, inside = trace(LightmapTexels(tracer, start, tx.normal, samples, settings["seed"], progress,
                                              basis, opts))
     ok = inside <= REJECT
