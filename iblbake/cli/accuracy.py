@@ -9,8 +9,9 @@ from pathlib import Path
 
 import click
 
-from iblbake.cli.options import (API_FLAGS, Console, allow_outside_option, common_options, device_option, force_option,
-                                  json_text, max_pixels_option, max_texture_pixels_option, non_negative, refuse_foreign)
+from iblbake.cli.options import (API_FLAGS, Console, allow_outside_option, cache_option, common_options, device_option,
+                                 force_option, json_text, max_pixels_option, max_texture_pixels_option, non_negative,
+                                 refuse_foreign)
 from iblbake.errors import IblbakeError
 
 FILES = {"table.md": "Markdown table", "table.csv": "CSV", "accuracy.json": "JSON", "plot.png": "error-time plot",
@@ -62,9 +63,7 @@ def bounces_value(v: str):
 @click.option("--max-error", type=float, default=None, callback=non_negative, metavar="X",
               help="Exit non-zero if the scene as configured (both terms) is further than X (relative RMSE) "
                    "from the reference: a CI guard.")
-@click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
-              help="Bake cache folder (the reference is cached there too). Default: $IBLBAKE_CACHE, else "
-                   "the per-user cache folder.")
+@cache_option("Bake cache folder (the reference is cached there too)")
 @click.option("--jobs", "-j", type=click.IntRange(min=1), default=1, show_default=True,
               help="Render the reference seeds in N worker processes (each its own OpenCL runtime on "
                    "--device or one of --devices) into the cache; the rungs are then timed alone.")

@@ -7,7 +7,7 @@ import time
 
 import click
 
-from iblbake.cli.options import Console, common_options
+from iblbake.cli.options import Console, cache_option, common_options
 
 _UNITS = {"": 1, "k": 1 << 10, "m": 1 << 20, "g": 1 << 30, "t": 1 << 40}
 
@@ -33,12 +33,10 @@ def _root(cache_dir):
     return Path(cache_dir) if cache_dir else cache.default_root()
 
 
-cache_option = click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
-                            help="The cache folder. Default: $IBLBAKE_CACHE, else the per-user cache folder.")
 
 
 @click.group("cache", invoke_without_command=True)
-@cache_option
+@cache_option("The cache folder")
 @common_options
 @click.pass_context
 def cache_group(ctx, cache_dir, quiet, as_json):
@@ -60,7 +58,7 @@ def cache_group(ctx, cache_dir, quiet, as_json):
 @cache_group.command("prune")
 @click.option("--max-size", required=True, callback=_size, metavar="SIZE",
               help="Remove least-recently-used entries until the cache holds at most SIZE (500M, 2G).")
-@cache_option
+@cache_option("The cache folder")
 @common_options
 def prune_command(max_size, cache_dir, quiet, as_json):
     """Trim the cache to --max-size, least recently used first. Safe while other processes use it:

@@ -8,8 +8,9 @@ from pathlib import Path
 
 import click
 
-from iblbake.cli.options import (POLICY_FLAGS, Console, check_inputs_exist, common_options, depfile_option,
-                                  device_option, input_files_of, input_options, panorama_reads, refuse_foreign)
+from iblbake.cli.options import (POLICY_FLAGS, Console, cache_option, check_inputs_exist, common_options,
+                                 depfile_option, device_option, input_files_of, input_options, panorama_reads,
+                                 refuse_foreign)
 from iblbake.io.guard import refuse_overlaps
 
 
@@ -52,8 +53,7 @@ def _scale(ctx, param, value):
                    "of 8-bit precision in everything dimmer.")
 @click.option("--method", type=click.Choice(["auto", "spectral", "convolve", "fis"]), default="auto",
               show_default=True, help="How each prefiltered mip is computed (as iblbake mips --method).")
-@click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
-              help="Bake cache folder. Default: $IBLBAKE_CACHE, else the per-user cache folder.")
+@cache_option("Bake cache folder")
 @click.option("--backend", type=click.Choice(["opencl", "numpy"]), default="opencl", show_default=True,
               help="opencl: the kernels; numpy: their float64 twins (slow; small sizes).")
 @depfile_option

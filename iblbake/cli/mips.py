@@ -8,9 +8,9 @@ from pathlib import Path
 
 import click
 
-from iblbake.cli.options import (POLICY_FLAGS, Console, check_inputs_exist, check_suffix, common_options,
-                                  depfile_option, device_option, finite, force_option, input_files_of,
-                                  input_options, non_negative, panorama_reads, refuse_foreign)
+from iblbake.cli.options import (POLICY_FLAGS, Console, cache_option, check_inputs_exist, check_suffix, common_options,
+                                 depfile_option, device_option, finite, force_option, input_files_of, input_options,
+                                 non_negative, panorama_reads, refuse_foreign)
 from iblbake.io.guard import refuse_overlaps
 
 
@@ -31,9 +31,7 @@ def _per_env(envs, path, flag) -> dict:
 
 @click.command("mips")
 @click.argument("envs", metavar="ENV...", nargs=-1, required=True)
-@click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
-              help="Cache folder; entries go to CACHE/<key>/ with a manifest.json. "
-                   "Default: $IBLBAKE_CACHE, else the per-user cache folder.")
+@cache_option("Cache folder; entries go to CACHE/<key>/ with a manifest.json")
 @click.option("--layout", type=click.Choice(["equirect", "cubemap", "octahedral"]), default="equirect",
               show_default=True, help="Layout of the prefiltered chain (cubemap: faces +X -X +Y -Y +Z -Z "
                                       "stacked vertically).")

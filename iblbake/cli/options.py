@@ -255,6 +255,12 @@ def max_texture_pixels_option(f):
                              "$IBLBAKE_MAX_TEXTURE_PIXELS or 8192*8192.")(f)
 
 
+def cache_option(what: str = "Bake cache folder"):
+    """--cache: the bake store's folder (iblbake.bake.cache), `what` its help's first words."""
+    return click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
+                        help=f"{what}. Default: $IBLBAKE_CACHE, else the per-user cache folder.")
+
+
 def force_option(f):
     """--force: the one overwrite rule (iblbake.io.guard.refuse_foreign) let through."""
     return click.option("--force", "-f", is_flag=True,

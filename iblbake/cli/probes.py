@@ -7,8 +7,8 @@ from pathlib import Path
 
 import click
 
-from iblbake.cli.options import (API_FLAGS, Console, allow_outside_option, common_options, device_option, force_option,
-                                  max_pixels_option, max_texture_pixels_option, refuse_foreign)
+from iblbake.cli.options import (API_FLAGS, Console, allow_outside_option, cache_option, common_options, device_option,
+                                 force_option, max_pixels_option, max_texture_pixels_option, refuse_foreign)
 
 
 @click.command("probes")
@@ -18,8 +18,7 @@ from iblbake.cli.options import (API_FLAGS, Console, allow_outside_option, commo
                    "those names iblbake wrote are replaced (together, atomically); other files need --force.")
 @click.option("--set", "overrides", multiple=True, metavar="KEY.PATH=VALUE",
               help="Override a scene value, e.g. --set probes.rays=512 --set probes.irradiance=sh (as render --set).")
-@click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
-              help="Bake cache folder (as render). Default: $IBLBAKE_CACHE, else the per-user cache folder.")
+@cache_option("Bake cache folder (as render)")
 @force_option
 @device_option
 @max_pixels_option
@@ -36,7 +35,6 @@ def probes_command(scene_path, out_dir, overrides, cache_dir, force, device, qui
     from iblbake import api
     from iblbake.io import atomic
     from iblbake.io.guard import refuse_overlaps
-    from iblbake.render import probes
     from iblbake.scene import load as scene
 
     con = Console(quiet, as_json)

@@ -6,8 +6,9 @@ import contextlib
 
 import click
 
-from iblbake.cli.options import (API_FLAGS, Console, allow_outside_option, common_options, depfile_option, device_option,
-                                  force_option, max_pixels_option, max_texture_pixels_option, refuse_foreign)
+from iblbake.cli.options import (API_FLAGS, Console, allow_outside_option, cache_option, common_options, depfile_option,
+                                 device_option, force_option, max_pixels_option, max_texture_pixels_option,
+                                 refuse_foreign)
 
 
 def _help_schema(ctx, param, value):
@@ -25,8 +26,7 @@ def _help_schema(ctx, param, value):
 @click.option("--set", "overrides", multiple=True, metavar="KEY.PATH=VALUE",
               help="Override a scene value, e.g. --set effects.samples=40 --set materials.gold.roughness=0.3 "
                    "--set objects.0.sphere.radius=2 (repeatable; values parse as YAML).")
-@click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
-              help="Bake cache folder (shared with `iblbake mips`). Default: $IBLBAKE_CACHE, else the per-user cache folder.")
+@cache_option("Bake cache folder (shared with `iblbake mips`)")
 @click.option("--report", "show_report", is_flag=True,
               help="Print the effect set, every bake and pass with its time and cache hit/miss, and the device.")
 @click.option("--profile-paths", is_flag=True,

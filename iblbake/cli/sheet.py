@@ -8,8 +8,9 @@ from pathlib import Path
 
 import click
 
-from iblbake.cli.options import (Console, allow_outside_option, common_options, depfile_option, device_option,
-                                  force_option, max_pixels_option, max_texture_pixels_option, refuse_foreign)
+from iblbake.cli.options import (Console, allow_outside_option, cache_option, common_options, depfile_option,
+                                 device_option, force_option, max_pixels_option, max_texture_pixels_option,
+                                 refuse_foreign)
 from iblbake.errors import IblbakeError
 
 
@@ -120,8 +121,7 @@ def _shard(ctx, param, value):
 @click.option("--resources", default=None, callback=_resources, metavar="NAME=N,...",
               help="With --scheduler: Dask resources each cell needs (GPU=1 sends cells only to workers "
                    "started with `dask worker --resources GPU=1`; with local, every worker has them).")
-@click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
-              help="Bake cache folder. Default: $IBLBAKE_CACHE, else the per-user cache folder.")
+@cache_option("Bake cache folder")
 @depfile_option
 @force_option
 @device_option
