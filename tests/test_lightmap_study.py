@@ -71,6 +71,7 @@ def test_the_ladders_study_a_lightmap_only_where_the_scene_asks_for_one(lobed_sk
         ladder.LADDERS["lightmaps"](dark, fx)
 
 
+@pytest.mark.slow
 def test_lightmap_rungs_report_bytes_bake_time_and_error(tmp_path, lobed_sky):
     """`iblbake accuracy --ladder lightmaps` on a cube on a floor (64 rays a texel): every rung of
     the grid in the JSON, the table and the report page, with its atlas bytes (the basis' RGB

@@ -34,6 +34,7 @@ def lit_scene(folder, studio):
         "effects": {"diffuse": "probes", "specular": "off"}})
 
 
+@pytest.mark.slow
 def test_probes_json_lists_the_lights_the_frame_draws(tmp_path, panoramas, rt):
     """A new user's trial: probes.json did not list the lights extracted from the panorama, so an
     engine loading the volume lit by `sun: extract` lacked their direct light (the probes hold their

@@ -446,6 +446,7 @@ def sides_error(scene, reference, rt, bakes, sphere: int, centre) -> dict:
             for side, m in metrics.halves(normals, on, 10).items()}
 
 
+@pytest.mark.slow
 def test_a_frame_reads_its_own_probe_settings_where_another_shares_the_capture(tmp_path, rt, panoramas):
     """Two frames of one room through one store, the probe's taps (or its blend) changed between
     them: their captures' chains are the same content, and before the second frame read the
@@ -507,6 +508,7 @@ def test_a_probe_at_a_resting_sphere_sees_the_floor_it_lights(tmp_path, rt, pano
     assert err["first"] < 0.05 and err["second"] < 0.05, err
 
 
+@pytest.mark.slow
 def test_a_room_whose_specular_mirrors_the_distant_sky_says_so(tmp_path, rt, panoramas):
     """Inside a room (98% of 256 directions from the camera meet its walls; the window the rest)
     a specular term that reads the distant panorama alone mirrors the sky, not the room: the frame
@@ -624,6 +626,7 @@ def test_taps_hold_a_resting_sphere_in_a_room_they_were_not_tuned_on(tmp_path, r
     assert len(err) >= 4 and max(err.values()) < 0.10, err
 
 
+@pytest.mark.slow
 def test_taps_do_not_alias_on_a_compact_key_light():
     """A capture that saw no scene, only a panorama of 1 with a key light of 500 (a 10-degree disk),
     a surface (roughness 0.5) facing that light, seen from 30 degrees off its normal as the view
