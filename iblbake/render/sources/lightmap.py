@@ -10,7 +10,6 @@ from __future__ import annotations
 import numpy as np
 
 from iblbake.core import sh
-from iblbake.errors import InputError
 from iblbake.render.buffers import Buffer
 from iblbake.render.sources.base import Source
 
@@ -50,22 +49,11 @@ def basis_defines(settings: dict) -> dict:
     return {**b.m.defines(opts), "LIGHTMAP_BASIS": 1, "BASIS_SPACE": "__global", "LM_ROWS": b.rows(opts)}
 
 
-def baked_basis(settings: dict) -> str:
-    """lightmap.basis, where a bake can hold it (lightmaps.NAMES); else a one-line error naming the
-    key, before anything is baked."""
-    from iblbake.render import lightmaps
-    name = settings["basis"]
-    if name not in lightmaps.NAMES:
-        raise InputError(f"lightmap.basis: {name} is not a lightmap's basis (give one of "
-                         f"{', '.join(lightmaps.NAMES)})")
-    return name
-
-
 def texels_of(lm: dict, settings: dict) -> np.ndarray:
     """The atlas' float4 rows, LM_ROWS a texel in row-major texel order, as the kernel reads them:
     the irradiance; the L1 SH as irradiance coefficients (E_lm = Ahat_l L_lm); a registry basis as
     its entry packs a probe's block."""
-    name = baked_basis(settings)
+    name = settings["basis"]
     b, opts = basis_of(settings)
     h, w = lm["layout"].height, lm["layout"].width
     if name == "irradiance":
@@ -141,7 +129,6 @@ class Lightmap(Source):
         return fx.diffuse == "lightmap"
 
     def defines(self, scene, fx):
-        baked_basis(scene.data["lightmap"])
         d = {**uv_defines(), **basis_defines(scene.data["lightmap"])}
         if fallback_probes(scene):
             d["LIGHTMAP_FALLBACK_PROBES"] = 1
