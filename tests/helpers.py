@@ -310,3 +310,27 @@ def corpus_cases(names, panoramas=("studio", "city"), keep=()):
     import pytest
     return [pytest.param(n, p, id=f"{n}-{p}", marks=() if (n, p) in keep else pytest.mark.corpus)
             for n in names for p in panoramas]
+
+
+def flip_bytes(path, rng, n: int = 8) -> None:
+    """A fuzz case's damage: n bytes of the file at random places set to random values."""
+    b = bytearray(Path(path).read_bytes())
+    for _ in range(n):
+        b[rng.integers(len(b))] = rng.integers(256)
+    Path(path).write_bytes(bytes(b))
+
+
+def quad_room_lightmap_study(cache, panoramas):
+    """The corpus' quad_room under studio at 40 px (specular off; its lightmap at 4 texels a unit,
+    1024 rays a texel): (the study, its runtime, its bakes, the diffuse term's converged reference;
+    two seeds to 3% or 256 samples, as tests/test_corpus.py's)."""
+    from iblbake.device.runtime import Runtime
+    from iblbake.render.bakes import Bakes
+    from iblbake.study import accuracy as acc
+
+    settings = acc.Settings(max_side=40, repeats=1, target_noise=0.03, max_samples=256, flip=False)
+    rt, bakes = Runtime(), Bakes(cache)
+    st = acc.Study(ROOT / "examples" / "corpus" / "quad_room.yaml",
+                   [f"environment.path={panoramas['studio']}", "effects.specular=off", "lightmap.texels_per_unit=4",
+                    "lightmap.samples=1024"], settings, runtime=rt, bakes=bakes)
+    return st, rt, bakes, st.render_reference("diffuse")

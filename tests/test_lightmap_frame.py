@@ -15,7 +15,7 @@ import pytest
 from iblbake.errors import InputError
 from iblbake.io import images
 from iblbake.render import lightmaps
-from tests.helpers import load_scene, run_cli
+from tests.helpers import load_scene, quad_room_lightmap_study, run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 CUBE = str(ROOT / "examples/corpus/meshes/cube.obj")
@@ -184,18 +184,10 @@ def test_quad_room_frame_holds_the_truth(tmp_path, panoramas):
     """quad_room under studio, the frame's `diffuse: lightmap` (4 texels a unit, 1024 rays a texel,
     L1 SH) against the converged reference's diffuse term: every lightmapped region within
     CORPUS_BOUND (as benchmarks/bench_lightmaps.py measures the twin's reading at the same hits)."""
-    from iblbake.device.runtime import Runtime
-    from iblbake.render.bakes import Bakes
     from iblbake.render.frame import render
     from iblbake.render.lightmaps import read
-    from iblbake.study import accuracy as acc
 
-    settings = acc.Settings(max_side=40, repeats=1, target_noise=0.03, max_samples=256, flip=False)
-    rt, bakes = Runtime(), Bakes(tmp_path / "cache")
-    st = acc.Study(ROOT / "examples" / "corpus" / "quad_room.yaml",
-                   [f"environment.path={panoramas['studio']}", "effects.specular=off", "lightmap.texels_per_unit=4",
-                    "lightmap.samples=1024"], settings, runtime=rt, bakes=bakes)
-    ref = st.render_reference("diffuse")
+    st, rt, bakes, ref = quad_room_lightmap_study(tmp_path / "cache", panoramas)
     sc = st.load([("effects.diffuse", "lightmap"), ("camera.spp", 1)])
     fr = render(sc, runtime=rt, cache=bakes)
     regions = st.region_metrics(fr.hdr, ref["hdr"], st.metric_mask("diffuse", fr.hdr))["region_absolute"]
@@ -308,7 +300,6 @@ def test_each_side_of_a_two_sided_surface_reads_its_own_chart(tmp_path, sky, sur
         sc = load_scene(tmp_path, f"{surface}_{side}", d)
         fr, tw, gb = frame_and_twin(sc, Bakes(tmp_path / "cache"))
         assert worst_relative(fr, tw, gb) < KERNEL_TWIN
-        lit = fr.hdr[..., 3].reshape(-1) > 0
         slab = gb["hit"] & (gb["pos"][:, 1] > 0.45)
         means[side] = float(fr.hdr[..., :3].reshape(-1, 3)[slab].mean())
     print(surface, means)

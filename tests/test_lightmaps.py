@@ -13,7 +13,7 @@ import pytest
 from iblbake.errors import InputError
 from iblbake.io import images
 from iblbake.render import lightmaps
-from tests.helpers import load_scene
+from tests.helpers import load_scene, quad_room_lightmap_study
 
 CUBE = str(Path(__file__).resolve().parents[1] / "examples/corpus/meshes/cube.obj")
 LAMBERT = {"roughness": 1, "specular": 0}
@@ -275,18 +275,10 @@ def test_lightmap_holds_quad_room_to_the_truth(basis, tmp_path, panoramas):
     metal gold sphere has no diffuse term). At 64 rays a texel the regions' means move by 5-12%
     from one set of ray streams to another (left wall x1.06 or x1.18): the bound needs the default's
     rays. At 64 px, 1024 rays: worst 3.2%; see docs/manual.md 'Lightmaps'."""
-    from iblbake.device.runtime import Runtime
-    from iblbake.render.bakes import Bakes
     from iblbake.render.lightmaps import read
     from iblbake.render.units import Job
-    from iblbake.study import accuracy as acc
 
-    settings = acc.Settings(max_side=40, repeats=1, target_noise=0.03, max_samples=256, flip=False)
-    rt, bakes = Runtime(), Bakes(tmp_path / "cache")
-    st = acc.Study(ROOT / "examples" / "corpus" / "quad_room.yaml",
-                   [f"environment.path={panoramas['studio']}", "effects.specular=off", "lightmap.texels_per_unit=4",
-                    "lightmap.samples=1024"], settings, runtime=rt, bakes=bakes)
-    ref = st.render_reference("diffuse")
+    st, rt, bakes, ref = quad_room_lightmap_study(tmp_path / "cache", panoramas)
     lm = lightmaps.bake(Job(st.scene, rt, bakes), st.scene.data["lightmap"])
     hdr = read.diffuse_frame(st.scene, bakes.geometry(st.scene), lm, ref["hdr"].shape[:2], basis)
     regions = st.region_metrics(hdr, ref["hdr"], st.metric_mask("diffuse", hdr))["region_absolute"]

@@ -24,7 +24,7 @@ from iblbake.render.bakes import Bakes
 from iblbake.render.sources.probes import probe_args, probe_defines
 from iblbake.render.twin import probes as twin
 from iblbake.render.probes.relocation import CAMERA_RAYS, SEALED_RAYS
-from tests.helpers import load_scene, mend_cache_entry, run_cli
+from tests.helpers import flip_bytes, load_scene, mend_cache_entry, run_cli
 from tests.probe_helpers import Given, far_sphere_scene, kernel_irradiance, settings, sphere_scene, synthetic, unit
 
 
@@ -371,10 +371,7 @@ def test_probe_files_fuzzed(tmp_path, sky, stress):
             f = case / name
             kind = rng.integers(4)
             if kind == 0:
-                b = bytearray(f.read_bytes())
-                for _ in range(8):
-                    b[rng.integers(len(b))] = rng.integers(256)
-                f.write_bytes(bytes(b))
+                flip_bytes(f, rng)
             elif kind == 1:
                 f.write_bytes(f.read_bytes()[:rng.integers(1, 400)])
             else:
