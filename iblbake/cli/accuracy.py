@@ -9,9 +9,8 @@ from pathlib import Path
 
 import click
 
-from iblbake.cli.options import (API_FLAGS, Console, allow_outside_option, cache_option, common_options, device_option,
-                                 force_option, json_text, max_pixels_option, max_texture_pixels_option, non_negative,
-                                 refuse_foreign)
+from iblbake.cli.options import (API_FLAGS, Console, cache_option, json_text, non_negative, refuse_foreign,
+                                 scene_options)
 from iblbake.errors import IblbakeError
 
 FILES = {"table.md": "Markdown table", "table.csv": "CSV", "accuracy.json": "JSON", "plot.png": "error-time plot",
@@ -69,12 +68,7 @@ def bounces_value(v: str):
                    "--device or one of --devices) into the cache; the rungs are then timed alone.")
 @click.option("--devices", default=None, metavar="SPEC,SPEC,...",
               help="With --jobs: one device per worker, in turn, e.g. gpu,cpu.")
-@force_option
-@device_option
-@max_pixels_option
-@allow_outside_option
-@max_texture_pixels_option
-@common_options
+@scene_options
 def accuracy_command(scene_path, out_dir, ladder_path, overrides, max_side, repeats, target_noise, max_samples,
                      visibility, bounces, flip, max_error, cache_dir, jobs, devices, force, device, quiet, as_json):
     """Render SCENE's converged reference (diffuse and specular with visibility and every

@@ -268,6 +268,16 @@ def force_option(f):
                              "(iblbake's own earlier outputs are replaced without it).")(f)
 
 
+def scene_options(f):
+    """What every command that loads a scene takes, in one order: --force, --device, --max-pixels,
+    --allow-outside, --max-texture-pixels and the common options (render, probes, lightmap,
+    accuracy, sheet)."""
+    for option in (common_options, max_texture_pixels_option, allow_outside_option, max_pixels_option,
+                   device_option, force_option):
+        f = option(f)
+    return f
+
+
 def write_texts(results, outputs, fmt: str) -> list:
     """`sh` and `basis`: each panorama's result (summary, human line, text) written to its output
     (atomically) or, without one, its text printed where the format is an engine's; returns

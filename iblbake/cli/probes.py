@@ -7,8 +7,7 @@ from pathlib import Path
 
 import click
 
-from iblbake.cli.options import (API_FLAGS, Console, allow_outside_option, cache_option, common_options, device_option,
-                                 force_option, max_pixels_option, max_texture_pixels_option, refuse_foreign)
+from iblbake.cli.options import (API_FLAGS, Console, cache_option, refuse_foreign, scene_options)
 
 
 @click.command("probes")
@@ -19,12 +18,7 @@ from iblbake.cli.options import (API_FLAGS, Console, allow_outside_option, cache
 @click.option("--set", "overrides", multiple=True, metavar="KEY.PATH=VALUE",
               help="Override a scene value, e.g. --set probes.rays=512 --set probes.irradiance=sh (as render --set).")
 @cache_option("Bake cache folder (as render)")
-@force_option
-@device_option
-@max_pixels_option
-@allow_outside_option
-@max_texture_pixels_option
-@common_options
+@scene_options
 def probes_command(scene_path, out_dir, overrides, cache_dir, force, device, quiet, as_json):
     """Bake the irradiance probes of SCENE (its `probes:` section; see render --help-schema) by
     tracing paths from every probe, and write them as RTXGI-layout EXR atlases with a JSON

@@ -6,9 +6,8 @@ import contextlib
 
 import click
 
-from iblbake.cli.options import (API_FLAGS, Console, allow_outside_option, cache_option, common_options, depfile_option,
-                                 device_option, force_option, max_pixels_option, max_texture_pixels_option,
-                                 refuse_foreign)
+from iblbake.cli.options import (API_FLAGS, Console, allow_outside_option, cache_option, common_options,
+                                 depfile_option, refuse_foreign, scene_options)
 
 
 def _help_schema(ctx, param, value):
@@ -36,12 +35,7 @@ def _help_schema(ctx, param, value):
 @click.option("--help-schema", is_flag=True, expose_value=False, is_eager=True, callback=_help_schema,
               help="Print every scene key with its type, range and default, and exit.")
 @depfile_option
-@force_option
-@device_option
-@max_pixels_option
-@allow_outside_option
-@max_texture_pixels_option
-@common_options
+@scene_options
 def render_command(scene_path, outputs, overrides, cache_dir, show_report, profile_paths, depfile, force, device, quiet,
                    as_json):
     """Render the scene file SCENE (YAML; see --help-schema and examples/scenes/) with OpenCL.

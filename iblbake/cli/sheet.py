@@ -8,9 +8,7 @@ from pathlib import Path
 
 import click
 
-from iblbake.cli.options import (Console, allow_outside_option, cache_option, common_options, depfile_option,
-                                 device_option, force_option, max_pixels_option, max_texture_pixels_option,
-                                 refuse_foreign)
+from iblbake.cli.options import (Console, cache_option, depfile_option, refuse_foreign, scene_options)
 from iblbake.errors import IblbakeError
 
 
@@ -123,12 +121,7 @@ def _shard(ctx, param, value):
                    "started with `dask worker --resources GPU=1`; with local, every worker has them).")
 @cache_option("Bake cache folder")
 @depfile_option
-@force_option
-@device_option
-@max_pixels_option
-@allow_outside_option
-@max_texture_pixels_option
-@common_options
+@scene_options
 def sheet_command(scene_path, outputs, rows, columns, overrides, cell_size, label_format, caption, repeat, title,
                   frames_dir, frames_exr, layout_path, html_dir, keep_going, resume, shard, assemble, jobs, devices, scheduler,
                   resources, cache_dir, depfile, force, device, quiet, as_json):
