@@ -30,6 +30,7 @@ OFFSET = 0.1          # the start point's lift along the geometric normal, in te
 REJECT = 0.1          # a texel whose rays meet a solid's inside more often than this is inside geometry
 DILATE = 4            # dilation passes (PADDING texels between charts, and their seams)
 BASES = bases.OWN       # what a bake of the default basis (sh_l1) can be read as; every choice: bases.NAMES
+DEFAULT_BASIS = "sh_l1"  # a lightmap section's basis where it names none (the schema's default)
 
 
 def frames(n):
@@ -261,7 +262,7 @@ def bake(job, settings: dict, progress=None) -> dict:
 
     t0 = time.perf_counter()
     sc = job.scene
-    basis = settings.get("basis", "sh_l1")
+    basis = settings.get("basis", DEFAULT_BASIS)
     if basis not in bases.NAMES:
         raise InputError(f"lightmap.basis: {basis!r} is not a lightmap basis; give one of {', '.join(bases.NAMES)}")
     opts = bases.options(basis, settings)
