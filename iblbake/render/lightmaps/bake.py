@@ -22,6 +22,7 @@ import time
 import numpy as np
 
 from iblbake.core import conventions
+from iblbake.core.sampling import power_heuristic
 from iblbake.device.launch import whole_units
 from iblbake.errors import InputError
 from iblbake.render.lightmaps import bases
@@ -99,7 +100,6 @@ def ray_weights(dirs, t, uniform: int, dist, rotation: float):
     heuristic against the importance rays' sampling of the panorama (Veach 1997, n samples of
     each); an importance ray that escapes (t = +inf) 1 / (n pe) times the heuristic against the
     paths' (0 where it met a surface: the paths bring that light, or behind the surface)."""
-    from iblbake.core.sampling import power_heuristic
     w = np.zeros(dirs.shape[:2])
     w[:, :uniform] = 2 * math.pi / uniform
     extra = dirs.shape[1] - uniform
@@ -109,9 +109,9 @@ def ray_weights(dirs, t, uniform: int, dist, rotation: float):
     pu = np.full_like(pe, 1 / (2 * math.pi))
     missed = np.isinf(t) & (t > 0)
     w[:, :uniform] *= np.where(missed[:, :uniform], power_heuristic(pu, pe)[:, :uniform], 1.0)
-    esc = missed[:, uniform:] & (pe[:, uniform:] > 0)
-    with np.errstate(divide="ignore"):
-        w[:, uniform:] = np.where(esc, power_heuristic(pe, pu)[:, uniform:] / (extra * np.where(esc, pe[:, uniform:], 1)), 0)
+    pe_s = pe[:, uniform:]
+    esc = missed[:, uniform:] & (pe_s > 0)
+    w[:, uniform:] = np.where(esc, power_heuristic(pe, pu)[:, uniform:] / (extra * np.where(esc, pe_s, 1)), 0.0)
     return w
 
 
