@@ -30,8 +30,8 @@
 #include "paths/paths.h"
 
 __kernel void lightmap_trace(__global const float4 *texel_pos, __global const float4 *ray_dirs, const int nrays,
-                             const int paths, const int env_rays, const int first, const int count, const uint seed, ENV_PARAMS, CHAIN_PARAMS,
-                             __global const float4 *materials, SCENE_PARAMS,
+                             const int paths, const int env_rays, const int first, const int count, const uint seed,
+                             ENV_PARAMS, __global const float4 *materials, SCENE_PARAMS,
                              __global const float4 *lights, const int nlights, __global float4 *ray_out)
 {
     const int item = get_global_id(0);
