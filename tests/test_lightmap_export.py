@@ -228,23 +228,23 @@ def test_command_and_its_bad_input(baked, tmp_path):
     assert (summary["width"], summary["height"]) == (baked["lm"].width, baked["lm"].height)
 
 
-def test_a_basis_the_bake_adds_is_exported_with_no_code_here(baked, tmp_path, monkeypatch):
-    """A bake holding another basis of the probes' registry (SG, 9 lobes: what lmbases adds) is
+def test_a_basis_the_bake_adds_is_exported_with_no_code_here(baked, tmp_path):
+    """A bake holding another basis of the probes' registry (SG, 9 lobes: lightmap.basis sg) is
     written with its 9 coefficient sets, its registry layout and options in lightmap.json and its
-    GLSL, nothing in the exporter naming it."""
-    import importlib
-
+    GLSL, nothing in the exporter naming it; the bases written are the bake's irradiance and its
+    basis (held() reads the bake's 'basis', not a list of its own)."""
     from iblbake.core.bases.probes import PROBE_BASES
-    bake = importlib.import_module("iblbake.render.lightmaps.bake")     # the module (the package names its function)
     lm = baked["lm"]
     rng = np.random.default_rng(1)
     sg = rng.uniform(0, 2, (lm.height, lm.width, 9, 3))
-    monkeypatch.setattr(bake, "BASES", (*bake.BASES, "sg"))
-    lm.baked["sg"] = sg
+    saved = lm.baked["basis"]
+    lm.baked["sg"], lm.baked["basis"] = sg, "sg"
     try:
         man = lm.write(tmp_path)
     finally:
         del lm.baked["sg"]
+        lm.baked["basis"] = saved
+    assert list(man["bases"]) == ["irradiance", "sg"]
     b = man["bases"]["sg"]
     assert b["floats"] == 9 and b["options"] == PROBE_BASES["sg"].options({}) and b["title"] == "SG", b
     assert b["exr"] == [f"lightmap_sg_{k}.exr" for k in range(9)] and "lobe" in b["layout"]
@@ -307,32 +307,28 @@ def manifest_irradiance(b: dict, conventions: dict, c, n):
 
 
 @pytest.mark.parametrize("name", ["sh_l1", "sh", "zh3", "sg", "ambient_dice"])
-def test_manifest_alone_evaluates_each_basis(name, baked, tmp_path, monkeypatch):
+def test_manifest_alone_evaluates_each_basis(name, baked, tmp_path):
     """Each basis' atlases written (a bake holding it: random coefficients, mostly positive light),
     read back from their EXR and evaluated at 300 random normals with lightmap.json's fields alone
     (SG's axes, sharpness and Legendre profile, the ambient dice's axes and profile, ZH3's factors
     and luminance axis, SH's basis and Ahat) equal the library's reading of the same halves
     (render/lightmaps/bases.py irradiance; measured <= 5.3e-16 of the largest: float64 rounding); the
     units say fp16, the atlases' precision."""
-    import importlib
-
     from iblbake.render.lightmaps import bases
-    bake = importlib.import_module("iblbake.render.lightmaps.bake")
     lm = baked["lm"]
     rng = np.random.default_rng(7)
     floats = bases.floats(name, bases.options(name, {}))
     coeffs = rng.normal(0.2, 0.5, (lm.height, lm.width, floats, 3))
     coeffs[..., 0, :] += 2.0
-    monkeypatch.setattr(bake, "BASES", (*bake.BASES, name))
-    saved = lm.baked.get(name)
-    lm.baked[name] = coeffs
+    saved = {k: lm.baked.get(k) for k in (name, "basis")}
+    lm.baked[name], lm.baked["basis"] = coeffs, name       # a bake of lightmap.basis NAME
     try:
         lm.write(tmp_path)
     finally:
-        if saved is None:
+        for k, v in saved.items():
+            lm.baked[k] = v
+        if saved[name] is None:
             del lm.baked[name]
-        else:
-            lm.baked[name] = saved
     man = json.loads((tmp_path / "lightmap.json").read_text())
     b = man["bases"][name]
     assert "fp16" in b["units"] and "float32" not in b["units"]
@@ -389,3 +385,56 @@ def test_gltf_keeps_file_materials_specular_and_no_absolute_path(tmp_path):
                     {"specularFactor": 0.5, "specularColorFactor": [1.0, 0.5, 0.25]}, None]
     assert doc["extensionsUsed"] == ["IBLBAKE_lightmap", "KHR_materials_specular"]
     assert doc["extras"]["source"] == "scene.yaml" and str(tmp_path) not in json.dumps(doc)
+
+
+def _two_material_gltf(path):
+    """A .gltf of two quads side by side (x in [0, 1] and [1, 2], y = 0, facing up), one primitive
+    each, materials "red" and "blue"."""
+    quads = []
+    for x0 in (0.0, 1.0):
+        v = np.array([[x0, 0, 0], [x0, 0, 1], [x0 + 1, 0, 1], [x0 + 1, 0, 0]], np.float32)
+        quads.append((v, np.array([0, 1, 2, 0, 2, 3], np.uint16)))
+    blob, views, accessors, prims = b"", [], [], []
+    for k, (v, f) in enumerate(quads):
+        for arr, target, acc in ((v, 34962, {"componentType": 5126, "type": "VEC3", "min": v.min(0).tolist(),
+                                             "max": v.max(0).tolist()}),
+                                 (f, 34963, {"componentType": 5123, "type": "SCALAR"})):
+            views.append({"buffer": 0, "byteOffset": len(blob), "byteLength": arr.nbytes, "target": target})
+            accessors.append({"bufferView": len(views) - 1, "count": len(arr), **acc})
+            blob += arr.tobytes() + b"\0" * (-arr.nbytes % 4)
+        prims.append({"attributes": {"POSITION": len(accessors) - 2}, "indices": len(accessors) - 1, "material": k})
+    doc = {"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+           "meshes": [{"primitives": prims}], "accessors": accessors, "bufferViews": views,
+           "buffers": [{"byteLength": len(blob),
+                        "uri": "data:application/octet-stream;base64," + base64.b64encode(blob).decode()}],
+           "materials": [{"name": "red", "pbrMetallicRoughness": {"baseColorFactor": [1, 0, 0, 1]}},
+                         {"name": "blue", "pbrMetallicRoughness": {"baseColorFactor": [0, 0, 1, 1]}}]}
+    path.write_text(json.dumps(doc))
+    return str(path)
+
+
+def test_gltf_keeps_each_primitive_material(tmp_path):
+    """A glTF mesh of two materials (no scene material) is exported with a primitive per material,
+    each holding the triangles of its own (the red quad's at x < 1, the blue's at x > 1), where the
+    export had one primitive under a default material named "red, blue"."""
+    from iblbake.render import lightmaps
+    from iblbake.render.lightmaps import gltf_scene
+    from iblbake.render.lightmaps.bake import triangles
+    from tests.helpers import load_scene
+    write_exr(tmp_path / "sky.exr", np.ones((8, 16, 3)))
+    sc = load_scene(tmp_path, "scene", {
+        "camera": {"perspective": {"position": [1, 1.5, 3], "look_at": [1, 0, 0], "fov_y": 50}, "resolution": [8, 8]},
+        "environment": {"path": "sky.exr"},
+        "objects": [{"mesh": {"path": _two_material_gltf(tmp_path / "two.gltf")}, "name": "two"}]})
+    lay = lightmaps.layout(sc, triangles(sc), 4.0, 1 << 20)
+    doc, data = gltf_scene.document({"layout": lay}, sc, "lightmap", "IBLBAKE_lightmap", 1.0)
+    prims = doc["meshes"][0]["primitives"]
+    names = [doc["materials"][p["material"]]["name"] for p in prims]
+    print(names, [doc["materials"][p["material"]]["pbrMetallicRoughness"]["baseColorFactor"] for p in prims])
+    assert sorted(names) == ["blue", "red"]
+    for p, name in zip(prims, names):
+        acc = doc["accessors"][p["attributes"]["POSITION"]]
+        x = (acc["min"][0] + acc["max"][0]) / 2
+        assert (x < 1) == (name == "red") and acc["max"][0] - acc["min"][0] <= 1 + 1e-6, (name, acc)
+        assert doc["materials"][p["material"]]["pbrMetallicRoughness"]["baseColorFactor"][:3] == \
+            ([1.0, 0.0, 0.0] if name == "red" else [0.0, 0.0, 1.0])

@@ -252,8 +252,11 @@ class EnvironmentDistribution:
         u = np.asarray(u, np.float64)
         h, w = self.height, self.width
         j = np.clip(np.searchsorted(self.marginal, u[:, 0], side="right") - 1, 0, h - 1)
-        i = np.clip(np.array([np.searchsorted(self.conditional[jj], uu, side="right") - 1
-                              for jj, uu in zip(j, u[:, 1])]), 0, w - 1)
+        i = np.zeros(len(u), np.int64)
+        for jj in np.unique(j):                   # row by row (a lightmap draws millions at once)
+            at = j == jj
+            i[at] = np.searchsorted(self.conditional[jj], u[at, 1], side="right") - 1
+        i = np.clip(i, 0, w - 1)
         uu = (i + u[:, 2]) / w
         ct = np.cos(np.pi * j / h) + u[:, 3] * (np.cos(np.pi * (j + 1) / h) - np.cos(np.pi * j / h))
         st, phi = np.sqrt(np.maximum(0.0, 1 - ct * ct)), 2 * np.pi * (0.5 - uu)

@@ -3,8 +3,14 @@
  * follow_path), as probe_trace.cl brings it to a probe; every bounce the scene's BOUNCES allows, the
  * lights and emission included.
  *   texel_pos[first + i]: the texel's start point (its surface point, lifted along its normal)
- *   ray_dirs[i nrays + r]: ray r of that texel (world space, w: its share of the sphere, the
- *                          panorama's filter footprint for a miss)
+ *   ray_dirs[i nrays + r]: ray r of that texel (world space): r < paths a path (w its share of the
+ *                          hemisphere), then env_rays shadow rays drawn from the panorama's importance
+ *                          table (w 0: behind the surface, not traced), then shadow rays to the
+ *                          lights (w the ray's length, inf a distant light's; 0 not traced): out 1
+ *                          where it arrives (render/lightmaps/bake.py device_shares, light_rays; the
+ *                          weights ray_weights)
+ *   a miss reads the panorama's texel (what the importance table samples and the camera's paths
+ *   meet, paths.h env_missed; a filtered read spreads a lamp where only the uniform rays find it)
  *   out[i nrays + r] = (radiance, t): t = +INFINITY a miss; the back of a solid (scene.h
  *                      probe_back_face) -t and no light (a texel inside geometry: its rays are
  *                      rejected there and the texel dilated over)
@@ -24,19 +30,30 @@
 #include "paths/paths.h"
 
 __kernel void lightmap_trace(__global const float4 *texel_pos, __global const float4 *ray_dirs, const int nrays,
-                             const int first, const int count, const uint seed, ENV_PARAMS, CHAIN_PARAMS,
-                             __global const float4 *materials, SCENE_PARAMS,
+                             const int paths, const int env_rays, const int first, const int count, const uint seed,
+                             ENV_PARAMS, __global const float4 *materials, SCENE_PARAMS,
                              __global const float4 *lights, const int nlights, __global float4 *ray_out)
 {
     const int item = get_global_id(0);
     if (item >= count * nrays) return;
     const int texel = first + item / nrays, r = item % nrays;
     const float3 o = texel_pos[texel].xyz, d = ray_dirs[item].xyz;
+    if (r >= paths + env_rays) {        /* a shadow ray to a light, w long: 1 where it arrives */
+        const float vis = ray_dirs[item].w > 0.0f && !occluded_to(o, d, ray_dirs[item].w, SCENE_ARGS);
+        ray_out[item] = (float4)(vis, vis, vis, INFINITY);
+        return;
+    }
+    if (ray_dirs[item].w == 0.0f) {     /* a shadow ray behind the surface */
+        ray_out[item] = (float4)(0.0f, 0.0f, 0.0f, INFINITY);
+        return;
+    }
     const Hit hh = trace_range(o, d, 0.0f, INFINITY, 0, 2, SCENE_ARGS);
-    if (hh.kind == PRIM_NONE) {
-        const float3 e = to_env(d, env_rot);
-        const float lod = 0.5f * log2(ray_dirs[item].w / texel_solid_angle(e, lw[0], lh[0]));
-        ray_out[item] = (float4)(chain_lookup(CHAIN_ARGS, e, lod) * env_scale, INFINITY);
+    if (hh.kind == PRIM_NONE) {        /* the panorama's texel, as its importance table has it */
+        ray_out[item] = (float4)(img[env_texel_index(to_env(d, env_rot), w, h)].xyz * env_scale, INFINITY);
+        return;
+    }
+    if (r >= paths) {                   /* a shadow ray to the panorama: the paths bring what it meets */
+        ray_out[item] = (float4)(0.0f, 0.0f, 0.0f, hh.t);
         return;
     }
     float3 ng, ns;

@@ -1,10 +1,13 @@
 """A lightmap's bake: its texels as one more ray source of the path tracer's one driver
-(render/paths/trace.py), kernels/paths/lightmap_trace.cl: per texel `samples` rays over the
-hemisphere of its shading normal (stratified, uniform in solid angle, each texel's strata jittered by
-its own stream), from its start point (the surface point moved OFFSET texels into its triangle and
-lifted OFFSET texels along the geometric normal; moved past a solid's back face its tangent rays meet
-where the move lands on that solid's front, lightmap_nudge), whole texels per launch. Per texel, from the same rays (uniform over the
-hemisphere: weight w = 2 pi / samples a ray): its irradiance E(n) = sum w L cos (the
+(render/paths/trace.py), kernels/paths/lightmap_trace.cl: per texel `samples` paths, a square of
+strata over the hemisphere of its shading normal (uniform in solid angle, each texel's strata
+jittered by its own stream), and as many shadow rays drawn from the panorama's importance table,
+the two weighed by the power heuristic where a path escapes (ray_weights: next-event estimation of
+the panorama at the texel, as the camera's reference has it at every vertex), from its start point (the surface
+point moved OFFSET texels into its triangle and lifted OFFSET texels along the geometric normal;
+moved past a solid's back face its tangent rays meet where the move lands on that solid's front,
+lightmap_nudge), whole texels per launch. Per texel, from the same rays (w each ray's share of the
+hemisphere): its irradiance E(n) = sum w L cos (the
 non-directional lightmap, kept always) and its coefficients in the scene's `lightmap.basis`
 (bases.py: L1 SH, or any coefficient basis of the probes' registry fitted by its own code).
 A texel more than REJECT of whose rays meet the inside of a solid starts inside geometry: it is
@@ -18,6 +21,8 @@ import time
 
 import numpy as np
 
+from iblbake.core import conventions
+from iblbake.core.sampling import power_heuristic
 from iblbake.device.launch import whole_units
 from iblbake.errors import InputError
 from iblbake.render.lightmaps import bases
@@ -30,6 +35,8 @@ OFFSET = 0.1          # the start point's lift along the geometric normal, in te
 REJECT = 0.1          # a texel whose rays meet a solid's inside more often than this is inside geometry
 DILATE = 4            # dilation passes (PADDING texels between charts, and their seams)
 BASES = bases.OWN       # what a bake of the default basis (sh_l1) can be read as; every choice: bases.NAMES
+DEFAULT_BASIS = "sh_l1"  # a lightmap section's basis where it names none (the schema's default)
+LIGHT_RAYS = 16       # shadow rays a texel draws over each analytic light (the reference's shadow_samples)
 
 
 def frames(n):
@@ -42,13 +49,25 @@ def frames(n):
     return t, bt
 
 
-def hemisphere_dirs(normals, samples: int, texel0: np.ndarray, seed: int):
-    """(k, samples, 3) world directions: a sqrt(samples)^2 grid of strata over the hemisphere
+def importance_rays(uniform: int, dist) -> int:
+    """How many shadow rays a texel draws from the panorama's importance table beside its `uniform`
+    paths: one each, as the camera's reference samples the panorama at every path vertex; none
+    where that table is flat (a uniform sky, or no light: uniform over the sphere, which the
+    hemisphere's strata beat)."""
+    return uniform if dist.pdf.max() > dist.pdf.min() * (1 + 1e-6) else 0
+
+
+def hemisphere_dirs(normals, samples: int, texel0: np.ndarray, seed: int, dist=None, rotation: float = 0.0,
+                    extra: int = 0):
+    """(k, samples + extra, 3) world directions: a sqrt(samples)^2 grid of strata over the hemisphere
     (uniform in solid angle: cos = u, phi = 2 pi v) about each normal, jittered per texel and
-    stratum by its texel number's stream."""
+    stratum by its texel number's stream; then `extra` directions drawn from the panorama's
+    importance table dist (EnvironmentDistribution, turned by the scene's rotation_y) by the same
+    stream (Latin hypercube samples), any side of the surface."""
     side = int(math.isqrt(samples))
     i, j = np.divmod(np.arange(samples), side)
-    out = np.empty((len(normals), samples, 3))
+    out = np.empty((len(normals), samples + extra, 3))
+    u_env = np.empty((len(normals), extra, 4))
     t, b = frames(normals)
     for k, tex in enumerate(texel0):
         rng = np.random.default_rng([seed, int(tex)])
@@ -56,8 +75,69 @@ def hemisphere_dirs(normals, samples: int, texel0: np.ndarray, seed: int):
         v = (j + rng.random(samples)) / side
         r = np.sqrt(np.maximum(0.0, 1 - u * u))
         ph = 2 * math.pi * v
-        out[k] = (r * np.cos(ph))[:, None] * t[k] + (r * np.sin(ph))[:, None] * b[k] + u[:, None] * normals[k]
+        out[k, :samples] = (r * np.cos(ph))[:, None] * t[k] + (r * np.sin(ph))[:, None] * b[k] + u[:, None] * normals[k]
+        # a Latin hypercube over the table's four dimensions: rows and columns spread evenly (a
+        # plain draw leaves a uniform sky's texel 25% off at 64 rays, its share above the horizon random)
+        u_env[k] = (np.argsort(rng.random((4, extra)), 1).T + rng.random((extra, 4))) / max(extra, 1)
+    if extra:
+        d, _texel = dist.sample(u_env.reshape(-1, 4))
+        out[:, samples:] = conventions.rotate_y(d, rotation).reshape(len(normals), extra, 3)
     return out
+
+
+def device_shares(dirs, normals, uniform: int):
+    """ray_dirs' w (k, s) for lightmap_trace.cl's paths and shadow rays to the panorama: a path's
+    share of the hemisphere (2 pi / uniform); 1 a shadow ray (the panorama where it escapes,
+    nothing where it meets a surface), 0 one behind the surface (not traced)."""
+    w = np.full(dirs.shape[:2], 2 * math.pi / uniform)
+    w[:, uniform:] = np.einsum("ksx,kx->ks", dirs[:, uniform:], normals) > 0
+    return w
+
+
+def ray_weights(dirs, t, uniform: int, dist, rotation: float):
+    """Each ray's weight w (k, s), sum w L f estimating the integral of L f over the texel's
+    hemisphere: the `uniform` paths 1 / (n pu) (pu = 1 / 2 pi), their escapes times the power
+    heuristic against the importance rays' sampling of the panorama (Veach 1997, n samples of
+    each); an importance ray that escapes (t = +inf) 1 / (n pe) times the heuristic against the
+    paths' (0 where it met a surface: the paths bring that light, or behind the surface)."""
+    w = np.zeros(dirs.shape[:2])
+    w[:, :uniform] = 2 * math.pi / uniform
+    extra = dirs.shape[1] - uniform
+    if not extra:
+        return w
+    pe = dist.pdf_of(conventions.rotate_y(dirs, -rotation))
+    pu = np.full_like(pe, 1 / (2 * math.pi))
+    missed = np.isinf(t) & (t > 0)
+    w[:, :uniform] *= np.where(missed[:, :uniform], power_heuristic(pu, pe)[:, :uniform], 1.0)
+    pe_s = pe[:, uniform:]
+    esc = missed[:, uniform:] & (pe_s > 0)
+    w[:, uniform:] = np.where(esc, power_heuristic(pe, pu)[:, uniform:] / (extra * np.where(esc, pe_s, 1)), 0.0)
+    return w
+
+
+def light_rays(records, points, normals, texel0: np.ndarray, seed: int):
+    """A texel's next-event estimation of the analytic lights (the scene's and the panorama's
+    extracted ones: no ray finds them, so this is their only strategy): per texel LIGHT_RAYS
+    directions over each light (uniform in the cone its disk or sphere fills, its centre where it
+    has no size; render/twin/lights.py light_toward, as the paths' light_sample draws them), from
+    the texel's start point. (dirs (k, m, 3), what each brings unoccluded, Le times the cone's solid
+    angle over LIGHT_RAYS (k, m, 3), the shadow ray's length (k, m): inf a distant light, 0 behind
+    the surface: not traced), m = lights x LIGHT_RAYS."""
+    from iblbake.render.twin.lights import cone_direction, light_toward
+    k = len(points)
+    dirs, value, length = np.zeros((k, len(records), LIGHT_RAYS, 3)), np.zeros((k, len(records), LIGHT_RAYS, 3)), \
+        np.zeros((k, len(records), LIGHT_RAYS))
+    u = np.stack([np.random.default_rng([seed, int(t), 2]).random((len(records), LIGHT_RAYS, 2)) for t in texel0])
+    for j, r in enumerate(np.asarray(records, np.float64)):
+        e, wc, dist, sin_max, omc = light_toward(r, points)
+        sized = sin_max > 0
+        # over the cone: radiance E / (pi sin^2) times its solid angle 2 pi omc; a point: E
+        scale = np.where(sized, 2 * omc / np.where(sized, sin_max, 1) ** 2, 1.0) / LIGHT_RAYS
+        for s in range(LIGHT_RAYS):
+            dirs[:, j, s] = np.where(sized[:, None], cone_direction(wc, omc, u[:, j, s]), wc)
+            value[:, j, s], length[:, j, s] = e * scale[:, None], dist
+    length = np.where(np.einsum("kjsx,kx->kjs", dirs, normals) > 0, length, 0.0)
+    return dirs.reshape(k, -1, 3), value.reshape(k, -1, 3), length.reshape(k, -1)
 
 
 class LightmapTexels(Source):
@@ -71,7 +151,12 @@ class LightmapTexels(Source):
                  opts: dict | None = None):
         self.tracer, self.rt, self.samples, self.seed, self.progress = tracer, tracer.rt, samples, seed, progress
         self.basis, self.opts = basis, opts or {}
-        self.normals, self.n = normals, len(start)
+        self.normals, self.n, self.start = normals, len(start), np.asarray(start, np.float64)
+        self.uniform = samples
+        self.extra = importance_rays(samples, tracer.dist)
+        self.lights = len(tracer.light_records) * LIGHT_RAYS
+        # rays a texel: paths, shadow rays to the panorama, shadow rays to the lights
+        self.samples = samples = self.uniform + self.extra + self.lights
         self.pos = self.rt.to_device(np.pad(np.asarray(start, np.float32), ((0, 0), (0, 1))))
         self.per = whole_units(self.rt, samples)
         self.buf = self.rt.empty(16 * min(self.n, self.per) * samples)
@@ -87,20 +172,31 @@ class LightmapTexels(Source):
     def launches(self):
         for first in range(0, self.n, self.per):
             count = min(self.per, self.n - first)
-            d = hemisphere_dirs(self.normals[first:first + count], self.samples, np.arange(first, first + count), self.seed)
-            self.dirs[first] = d
-            w = np.full((count * self.samples, 1), 2 * math.pi / self.samples)
-            dev = self.rt.to_device(np.concatenate([d.reshape(-1, 3), w], 1).astype(np.float32))
+            t, n = self.tracer, self.normals[first:first + count]
+            texel = np.arange(first, first + count)
+            d = hemisphere_dirs(n, self.uniform, texel, self.seed, t.dist, t.rotation, self.extra)
+            ld, lv, ll = light_rays(t.light_records, self.start[first:first + count], n, texel, self.seed)
+            self.dirs[first] = d, ld, lv
+            rays = np.concatenate([np.concatenate([d, device_shares(d, n, self.uniform)[..., None]], 2),
+                                   np.concatenate([ld, ll[..., None]], 2)], 1)
+            dev = self.rt.to_device(rays.reshape(-1, 4).astype(np.float32))
             yield Launch(count * self.samples, {"texel_pos": self.pos, "ray_dirs": dev, "nrays": self.samples,
-                                                "first": first, "count": count, "seed": self.tracer.settings["seed"],
+                                                "paths": self.uniform, "env_rays": self.extra, "first": first,
+                                                "count": count, "seed": self.tracer.settings["seed"],
                                                 "ray_out": self.buf}, (first, count))
 
     def accumulate(self, la: Launch) -> bool:
         first, count = la.part
         out = self.rt.read(self.buf, (count * self.samples, 4)).reshape(count, self.samples, 4).astype(np.float64)
-        d = self.dirs.pop(first)
+        d, ld, lv = self.dirs.pop(first)
+        c = self.uniform + self.extra
+        w = np.concatenate([ray_weights(d, out[:, :c, 3], self.uniform, self.tracer.dist, self.tracer.rotation),
+                            np.ones(ld.shape[:2])], 1)
+        radiance = out[..., :3]
+        radiance[:, c:] *= lv                 # a light's shadow ray: 1 where it arrives
         self.irradiance[first:first + count], self.coeffs[first:first + count], self.inside[first:first + count] = \
-            project(out[..., :3], out[..., 3], d, self.normals[first:first + count], self.basis, self.opts)
+            project(radiance, out[..., 3], np.concatenate([d, ld], 1), self.normals[first:first + count], self.basis,
+                    self.opts, w, self.uniform)
         if self.progress:
             self.progress((first + count) / self.n)
         return False
@@ -110,12 +206,14 @@ class LightmapTexels(Source):
         return self.irradiance, self.coeffs, self.inside
 
 
-def project(radiance, t, dirs, normals, basis: str = "sh_l1", opts: dict | None = None):
-    """Per texel (E (k, 3), its coefficients in basis (k, floats, 3), the share of its rays that
-    met a solid's inside) from its rays' radiance (k, s, 3), signed distance (k, s) and directions
-    (k, s, 3) over the hemisphere of normals (k, 3), uniform in solid angle (bases.project)."""
-    e, coeffs = bases.project(basis, radiance, dirs, normals, opts or {})
-    return e, coeffs, (t < 0).mean(1)
+def project(radiance, t, dirs, normals, basis: str = "sh_l1", opts: dict | None = None, weights=None,
+            uniform: int | None = None):
+    """Per texel (E (k, 3), its coefficients in basis (k, floats, 3), the share of its uniform rays
+    (the first `uniform`; None: all) that met a solid's inside) from its rays' radiance (k, s, 3),
+    signed distance (k, s) and directions (k, s, 3) over the hemisphere of normals (k, 3), each
+    ray's share of the hemisphere in weights (k, s) (None: uniform rays; bases.project)."""
+    e, coeffs = bases.project(basis, radiance, dirs, normals, opts or {}, weights)
+    return e, coeffs, (t[:, :uniform] < 0).mean(1)
 
 
 
@@ -261,7 +359,7 @@ def bake(job, settings: dict, progress=None) -> dict:
 
     t0 = time.perf_counter()
     sc = job.scene
-    basis = settings.get("basis", "sh_l1")
+    basis = settings.get("basis", DEFAULT_BASIS)
     if basis not in bases.NAMES:
         raise InputError(f"lightmap.basis: {basis!r} is not a lightmap basis; give one of {', '.join(bases.NAMES)}")
     opts = bases.options(basis, settings)
@@ -273,10 +371,10 @@ def bake(job, settings: dict, progress=None) -> dict:
     tracer = Tracer(job, {"bounces": settings["bounces"], "seed": settings["seed"]})
     start, moved = nudge(tracer, tx, inset(tx, lay.corners, 1.0 / density), 1.0 / density)
     samples = math.isqrt(settings["samples"]) ** 2          # whole strata
+    texels = LightmapTexels(tracer, start, tx.normal, samples, settings["seed"], progress, basis, opts)
     describe(progress, f"{len(tx.index):,} lightmap texels x {samples} rays = {len(tx.index) * samples:,} paths "
                        f"({lay.width}x{lay.height} atlas, {density:g} texels a unit)")
-    e, coeffs, inside = trace(LightmapTexels(tracer, start, tx.normal, samples, settings["seed"], progress,
-                                             basis, opts))
+    e, coeffs, inside = trace(texels)
     ok = inside <= REJECT
     h, w = lay.height, lay.width
     valid = np.zeros(h * w, bool)
@@ -288,7 +386,7 @@ def bake(job, settings: dict, progress=None) -> dict:
     irr, filled = dilate(irr.reshape(h, w, 3), valid.reshape(h, w))
     atlas, _ = dilate(atlas.reshape(h, w, *coeffs.shape[1:]), valid.reshape(h, w))
     report = {"width": w, "height": h, "texels": len(tx.index), "texels_per_unit": density,
-              "samples": samples, "rays_traced": tracer.rays_traced, "moved": moved,
+              "samples": samples, "importance_rays": texels.extra, "rays_traced": tracer.rays_traced, "moved": moved,
               "rejected_inside": int((~ok).sum()), "layout_s": round(t_layout, 4),
               "bytes": {b: bytes_of(lay, b, opts) for b in ("irradiance", basis)},
               "uv_sources": {str(k): v for k, v in lay.source.items()},

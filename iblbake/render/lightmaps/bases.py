@@ -4,7 +4,8 @@ irradiance probes' registry a texel may hold (core/bases/probes.py PROBE_BASES, 
 ZH3, SG, ambient dice; not L1 Geomerics, which reads a hemisphere's light 7/6 bright), fitted by
 that basis's own project_rays and read by its own irradiance_at: a texel is a probe with a
 hemisphere of rays. The octahedral atlas is left out (a tile of n x n texels a
-texel). Per texel, rays uniform over its hemisphere, weight w = 2 pi / samples a ray:
+texel). Per texel, rays over its hemisphere, each with its share w of it (solid angle; the bake's
+mix of uniform and panorama-importance rays, render/lightmaps/bake.py texel_rays):
   irradiance  E(n) = sum w L cos (RGB)
   sh_l1       L_lm = sum w L Y_lm, then L_00 moved so that the reading at the texel's normal is its
               E (the linear L1 reading weighs a direction by 1/4 + cos/2, not max(cos, 0): light met
@@ -56,11 +57,15 @@ def floats(name: str, opts: dict) -> int:
     return {"irradiance": 1, "sh_l1": 4}[name] if name in OWN else PROBE_BASES[name].floats(opts)
 
 
-def project(name: str, radiance, dirs, normals, opts: dict):
+def project(name: str, radiance, dirs, normals, opts: dict, weights=None):
     """(E (k, 3), the basis's coefficients (k, floats, 3)) of texels from their rays' radiance
-    (k, s, 3) along dirs (k, s, 3) over the hemisphere of normals (k, 3), uniform in solid angle."""
-    w = 2 * math.pi / radiance.shape[1]
-    e = w * np.einsum("ksc,ksx,kx->kc", radiance, dirs, normals)
+    (k, s, 3) along dirs (k, s, 3) over the hemisphere of normals (k, 3), each ray's share of the
+    hemisphere in weights (k, s) (solid angle: the sum over rays of w L f estimates the integral of
+    L f; None: uniform rays, 2 pi / s each)."""
+    if weights is None:
+        weights = np.full(radiance.shape[:2], 2 * math.pi / radiance.shape[1])
+    radiance = radiance * weights[..., None]          # from here on w L: each fit a sum over rays
+    e = np.einsum("ksc,ksx,kx->kc", radiance, dirs, normals)
     if name == "irradiance":
         return e, e[:, None]
     if name == "sh_l1":
@@ -74,7 +79,8 @@ def project(name: str, radiance, dirs, normals, opts: dict):
             out[a:a + CHUNK] = _hemisphere_fit(basis, r, d, n, opts)
             continue
         mirror = d - 2 * np.einsum("ksx,kx->ks", d, n)[..., None] * n[:, None]
-        lit = np.concatenate([r, np.zeros_like(r)], 1)
+        # the registry's fits take moments 4 pi / R sum L f over R = 2 s rays (common.ray_moments)
+        lit = np.concatenate([r, np.zeros_like(r)], 1) * (2 * r.shape[1] / (4 * math.pi))
         out[a:a + CHUNK] = basis.project_rays(lit, np.ones(lit.shape[:2]), np.ones(len(r), bool),
                                               np.concatenate([d, mirror], 1), opts)
     return e, out
@@ -101,18 +107,19 @@ def hemisphere_normals(normals) -> np.ndarray:
 def _hemisphere_fit(basis, radiance, dirs, normals, opts):
     """Least squares of the basis's irradiance (its columns, linear) against the rays' own at
     NORMALS normals over the texel's hemisphere, the minimum-norm solution (ambient dice's columns
-    are dependent): (k, floats, 3)."""
+    are dependent): (k, floats, 3). radiance: w L, each ray's times its share."""
     nn = hemisphere_normals(normals)
     cos = np.maximum(0.0, np.einsum("kmx,ksx->kms", nn, dirs))
-    want = 2 * math.pi / radiance.shape[1] * np.einsum("kms,ksc->kmc", cos, radiance)
+    want = np.einsum("kms,ksc->kmc", cos, radiance)
     a = basis.irradiance_columns(nn, opts)                           # (k, NORMALS, floats)
     g = np.linalg.pinv(np.einsum("kmi,kmj->kij", a, a), rcond=1e-10, hermitian=True)
     return np.einsum("kij,kmj,kmc->kic", g, a, want)
 
 
 def _sh_l1(radiance, dirs, normals, e):
-    """The L1 SH of the radiance over the hemisphere, L_00 moved to read E at the normal."""
-    coeffs = 2 * math.pi / radiance.shape[1] * np.einsum("ksc,ksj->kjc", radiance, sh.sh_basis(dirs, 2))
+    """The L1 SH of the radiance over the hemisphere (radiance: w L, each ray's times its share),
+    L_00 moved to read E at the normal."""
+    coeffs = np.einsum("ksc,ksj->kjc", radiance, sh.sh_basis(dirs, 2))
     linear = np.einsum("kj,kjc->kc", sh.sh_basis(normals, 2), coeffs * sh.ahat(2)[:, None])
     coeffs[:, 0] += (e - linear) / (math.pi * sh.sh_basis(normals[:1], 2)[0, 0])
     return coeffs

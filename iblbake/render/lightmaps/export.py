@@ -98,17 +98,16 @@ def _registry(name: str, settings: dict) -> Basis:
 
 
 def held(lm: dict) -> list:
-    """The bases a baked lightmap holds: those of bake.BASES it has and its chosen one (its 'basis',
-    where the bake names one: lightmap.basis), in that order."""
-    from iblbake.render.lightmaps.bake import BASES
-    return [b for b in dict.fromkeys([*BASES, lm.get("basis")]) if b and b in lm]
+    """The bases a baked lightmap holds: its irradiance and its basis (lm['basis']: lightmap.basis),
+    in that order, once each."""
+    return [b for b in dict.fromkeys(["irradiance", lm.get("basis")]) if b and b in lm]
 
 
 def expected(settings: dict) -> list:
     """The bases a bake of a lightmap section will hold (its files are checked before it): the
-    irradiance and the section's basis where it has the key, else every one of bake.BASES."""
-    from iblbake.render.lightmaps.bake import BASES
-    return list(dict.fromkeys(["irradiance", settings["basis"]] if "basis" in settings else BASES))
+    irradiance and the section's basis (bake.DEFAULT_BASIS where it has none), once each."""
+    from iblbake.render.lightmaps.bake import DEFAULT_BASIS
+    return list(dict.fromkeys(["irradiance", settings.get("basis", DEFAULT_BASIS)]))
 
 
 def coefficient_sets(lm: dict, name: str) -> np.ndarray:

@@ -1,6 +1,7 @@
 """lightmap.gltf (+ .bin, + the 8-bit image): a lightmap's static geometry as glTF 2.0, each
 lightmapped object one mesh (POSITION, NORMAL, TEXCOORD_1: the atlas' UVs, TEXCOORD_0 the same: glTF's
-sets start at 0 and the layout keeps no material UVs) with its material (object_material),
+sets start at 0 and the layout keeps no material UVs), a primitive per material (primitives: a glTF
+file's several kept apart),
 the scene's camera, and the irradiance atlas referenced by the IBLBAKE_lightmap extension (no
 standard glTF extension exists; docs/conventions.md "Lightmaps in files" says why this one):
 
@@ -13,6 +14,7 @@ meshes. The root's extension block names lightmap.json, which holds every basis'
 
 from __future__ import annotations
 
+import functools
 import json
 from pathlib import Path
 
@@ -28,10 +30,11 @@ DEFAULT_MATERIAL = {"base_color": [0.8, 0.8, 0.8], "metallic": 0.0, "roughness":
 SPECULAR = "KHR_materials_specular"
 
 
-def object_mesh(lay, oid: int):
+def object_mesh(lay, oid: int, select=None):
     """(positions (v, 3), normals (v, 3), TEXCOORD_1 (v, 2), indices (3t,)) of object oid's
-    triangles in the atlas, corners shared where position, normal and UV all agree."""
-    tri = lay.objects == oid
+    triangles in the atlas (those of them `select` (n,) marks, where given), corners shared where
+    position, normal and UV all agree."""
+    tri = lay.objects == oid if select is None else (lay.objects == oid) & select
     n = lay.normals[tri].reshape(-1, 3)
     n = n / np.linalg.norm(n, axis=1, keepdims=True)
     uv = lay.uv[tri].reshape(-1, 2) / [lay.width, lay.height]
@@ -89,8 +92,8 @@ def material(m: dict, name: str, extension: str, scale: float) -> dict:
 
 def object_material(sc, oid: int, records: list, offsets: dict) -> tuple:
     """(a key, the record, its glTF name) of object oid's material: the scene's, or its glTF file's
-    own (named as in the file) where it brings one; the layout keeps no material a triangle, so a
-    file of several is exported as the default, named after them all."""
+    own (named as in the file) where it brings one; a file of several: the key ("file", oid), its
+    triangles' own found by primitives()."""
     from iblbake.scene import materials
     o, first = sc.data["objects"][oid], offsets[oid]
     if not materials.brings_materials(o):
@@ -101,6 +104,31 @@ def object_material(sc, oid: int, records: list, offsets: dict) -> tuple:
     if not own:                                     # its primitives take the glTF default
         return first, records[first], "default"
     return ("file", oid), DEFAULT_MATERIAL, ", ".join(r["name"] for r in own)
+
+
+def triangle_records(lay, oid: int, tris) -> np.ndarray:
+    """The material record of each of object oid's atlas triangles: the scene triangle (tris:
+    scene/geometry.py build_triangles) with the same corners, which the atlas keeps (a back side's
+    wound the other way; compared in float32, as a cached atlas may hold them)."""
+    def keys(c):                      # the corners in one order, as bytes
+        c = np.ascontiguousarray(c, np.float32)
+        order = np.lexsort((c[..., 2], c[..., 1], c[..., 0]))
+        return [r.tobytes() for r in np.take_along_axis(c, order[..., None], 1).reshape(len(c), 9)]
+    mine = tris.object_id == oid
+    record = dict(zip(keys(np.stack([tris.v0[mine], tris.v1[mine], tris.v2[mine]], 1)), tris.material[mine]))
+    first = int(tris.material[mine][0])
+    return np.array([record.get(k, first) for k in keys(lay.corners[lay.objects == oid])], np.int64)
+
+
+def primitives(sc, lay, oid: int, records: list, offsets: dict, tris) -> list:
+    """(key, record, glTF name, the atlas triangles it covers (n,) or None: all) per primitive of
+    object oid: one, or one per material of a glTF file of several (tris(): the scene's triangles)."""
+    key, rec, name = object_material(sc, oid, records, offsets)
+    if key != ("file", oid):
+        return [(key, rec, name, None)]
+    per = np.full(len(lay.objects), -1, np.int64)
+    per[lay.objects == oid] = triangle_records(lay, oid, tris())
+    return [(int(r), records[r], records[r]["name"].split(": ", 1)[-1], per == r) for r in np.unique(per[per >= 0])]
 
 
 def image_scale(e) -> float:
@@ -127,6 +155,11 @@ def lightmapped(lm: dict, sc) -> list:
     return [(oid, objects[oid].get("name") or f"objects.{oid}") for oid in ids]
 
 
+def _scene_triangles(sc):
+    from iblbake.render.lightmaps.bake import triangles
+    return triangles(sc)
+
+
 def document(lm: dict, sc, stem: str, extension: str, scale: float) -> tuple:
     """(the glTF document, the .bin's bytes)."""
     from iblbake.io.guard import mark
@@ -135,18 +168,20 @@ def document(lm: dict, sc, stem: str, extension: str, scale: float) -> tuple:
     from iblbake.scene.materials import table
     records, offsets = table(sc)
     meshes, nodes, materials, names = [], [], [], {}
+    tris = functools.cache(lambda: _scene_triangles(sc))
     for oid, label in lightmapped(lm, sc):
-        key, rec, mname = object_material(sc, oid, records, offsets)
-        if key not in names:
-            names[key] = len(materials)
-            materials.append(material(rec, mname, extension, scale))
-        pos, nrm, uv1, idx = object_mesh(lay, oid)
-        uv = buf.add(uv1, 34962)
-        # TEXCOORD_0 the atlas' UVs too: glTF's indexed attributes start at 0 (the layout keeps no material UVs)
-        prim = {"attributes": {"POSITION": buf.add(pos, 34962, bounds=True), "NORMAL": buf.add(nrm, 34962),
-                               "TEXCOORD_0": uv, "TEXCOORD_1": uv},
-                "indices": buf.add(idx, 34963), "material": names[key], "mode": 4}
-        meshes.append({"name": label, "primitives": [prim]})
+        prims = []
+        for key, rec, mname, select in primitives(sc, lay, oid, records, offsets, tris):
+            if key not in names:
+                names[key] = len(materials)
+                materials.append(material(rec, mname, extension, scale))
+            pos, nrm, uv1, idx = object_mesh(lay, oid, select)
+            uv = buf.add(uv1, 34962)
+            # TEXCOORD_0 the atlas' UVs too: glTF's indexed attributes start at 0 (the layout keeps no material UVs)
+            prims.append({"attributes": {"POSITION": buf.add(pos, 34962, bounds=True), "NORMAL": buf.add(nrm, 34962),
+                                         "TEXCOORD_0": uv, "TEXCOORD_1": uv},
+                          "indices": buf.add(idx, 34963), "material": names[key], "mode": 4})
+        meshes.append({"name": label, "primitives": prims})
         nodes.append({"name": label, "mesh": len(meshes) - 1})
     glc, cam_node = camera(sc.data["camera"])
     nodes.append(cam_node)

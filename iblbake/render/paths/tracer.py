@@ -34,7 +34,8 @@ class Tracer:
         rt = self.rt = job.rt
         scene, bakes = job.scene, job.bakes
         self.job, self.settings, self.back_faces_black = job, settings, back_faces_black
-        dist = job.read("env_cdf")
+        dist = self.dist = job.read("env_cdf")         # the texels' importance samples too (lightmaps/bake.py)
+        self.rotation = scene.data["environment"]["rotation_y"]
         chain = job.read("radiance")       # what an escaping probe ray reads (probe_trace.cl)
         image, _info = job.panorama()
         self.defines = trace_defines(scene, settings["bounces"])
@@ -43,6 +44,7 @@ class Tracer:
             recs = pack.light_records(scene_lights(scene, bakes.sun(scene.data["environment"])))
         skip = np.zeros(max(len(scene.data["objects"]), 1), np.int32)
         skip[list(skip_objects)] = 1
+        self.light_records = recs          # the texels' shadow rays to the lights too (lightmaps/bake.py)
         self.table = {**job.device_scene.table, **environment_frame(scene.data["environment"])}
         self.args = {**panorama_args(rt, bakes, image, dist), "nlights": len(recs), **bakes.chain(rt, chain),
                      "lights": rt.to_device(recs.reshape(-1, 4) if len(recs) else np.zeros((4, 4), np.float32)),

@@ -49,12 +49,36 @@ def light_brdf_cos(base, metallic, rough, f0, f90, n, v, nov, l, diffuse: bool, 
     return out
 
 
-def _cone_direction(a, omc, u):
+def cone_direction(a, omc, u):
+    """kernels/light.h cone_direction: directions uniform in the cone about a (n, 3) of 1 - cos omc."""
     x = u[..., 0] * omc
     ct, st, phi = 1 - x, np.sqrt(np.maximum(0, x * (2 - x))), 2 * np.pi * u[..., 1]
     t, b = conventions.tangent_frame(a)
     d = t * (st * np.cos(phi))[:, None] + b * (st * np.sin(phi))[:, None] + a * ct[:, None]
     return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def light_toward(r, p):
+    """kernels/light.h light_toward (and light_omc) of a light record r (LIGHT float4s, 4; float64)
+    at points p (n, 3): (E (n, 3) what arrives facing it, the direction to its centre (n, 3), the
+    shadow ray's length (n,), the sine of its angular radius (n,), 1 - cos of that radius (n,))."""
+    e = np.broadcast_to(r[1, :3], (len(p), 3)).copy()
+    if int(r[0, 3]) == LIGHT_KINDS["directional"]:
+        wc = np.broadcast_to(r[0, :3], p.shape).copy()
+        dist = np.full(len(p), np.inf)
+        sin_max = np.full(len(p), r[2, 3])
+    else:
+        dv = r[0, :3] - p
+        d = np.linalg.norm(dv, axis=-1)
+        wc = dv / d[:, None]
+        win = 1 / (d * d)
+        if r[3, 2] > 0:
+            win *= np.clip(1 - (d / r[3, 2]) ** 4, 0, 1) ** 2
+        a = np.clip((wc @ -r[2, :3]) * r[3, 0] + r[3, 1], 0, 1)
+        e *= (win * a * a)[:, None]
+        sin_max = np.minimum(r[2, 3] / d, 1.0)
+        dist = np.maximum(d - r[2, 3], 0)
+    return e, wc, dist, sin_max, sin_max ** 2 / (1 + np.sqrt(np.maximum(0, 1 - sin_max ** 2)))
 
 
 def lights(gb, arrays, records, effects: dict, *, diffuse=True, specular=True, exact=False, visibility=True,
@@ -74,23 +98,7 @@ def lights(gb, arrays, records, effects: dict, *, diffuse=True, specular=True, e
     mt = bsdf.Material(f0, f90, rough ** 2, diffuse_weight(base, metallic, rough, f0, f90, nov))
     shade = lambda l: bsdf.evaluate(mt, v, n, nov, l, 0.5, diffuse, specular)[0]   # noqa: E731
     for j, r in enumerate(records.astype(np.float64)):
-        kind, e = int(r[0, 3]), np.broadcast_to(r[1, :3], (len(p), 3)).copy()
-        if kind == LIGHT_KINDS["directional"]:
-            wc = np.broadcast_to(r[0, :3], p.shape).copy()
-            dist = np.full(len(p), np.inf)
-            sin_max = np.full(len(p), r[2, 3])
-        else:
-            dv = r[0, :3] - p
-            d = np.linalg.norm(dv, axis=-1)
-            wc = dv / d[:, None]
-            win = 1 / (d * d)
-            if r[3, 2] > 0:
-                win *= np.clip(1 - (d / r[3, 2]) ** 4, 0, 1) ** 2
-            a = np.clip((wc @ -r[2, :3]) * r[3, 0] + r[3, 1], 0, 1)
-            e *= (win * a * a)[:, None]
-            sin_max = np.minimum(r[2, 3] / d, 1.0)
-            dist = np.maximum(d - r[2, 3], 0)
-        omc = sin_max ** 2 / (1 + np.sqrt(np.maximum(0, 1 - sin_max ** 2)))
+        e, wc, dist, sin_max, omc = light_toward(r, p)
         ls = int(np.uint32(seed) ^ sampling.pcg_hash(j + 1))
         ns = effects["reference"]["max_samples"] if exact else int(r[3, 3])
         mode = int(r[1, 3])
@@ -99,7 +107,7 @@ def lights(gb, arrays, records, effects: dict, *, diffuse=True, specular=True, e
             le = e / (np.pi * sin_max ** 2)[:, None]
             acc = np.zeros((len(p), 3))
             for k in range(ns):
-                l = _cone_direction(wc, omc, sampling.Sampler(ls, sid, k).next_2d())
+                l = cone_direction(wc, omc, sampling.Sampler(ls, sid, k).next_2d())
                 ok = ~occluded(origin, l, arrays, dist) if visibility else np.ones(len(p), bool)
                 acc += np.where(ok[:, None], shade(l), 0.0)
             color += le * (2 * np.pi * omc)[:, None] * acc / ns
@@ -116,7 +124,7 @@ def lights(gb, arrays, records, effects: dict, *, diffuse=True, specular=True, e
         elif mode == 1 or (mode == 2 and (sin_max <= 0).all()):
             vis = (~occluded(origin, wc, arrays, dist)).astype(float)
         elif mode == 2:             # soft: the share of ns rays over the disk or sphere that arrive
-            vis = sum(~occluded(origin, _cone_direction(wc, omc, sampling.Sampler(ls, sid, k).next_2d()), arrays, dist)
+            vis = sum(~occluded(origin, cone_direction(wc, omc, sampling.Sampler(ls, sid, k).next_2d()), arrays, dist)
                       for k in range(ns)) / ns
         else:
             vis = np.ones(len(p))
