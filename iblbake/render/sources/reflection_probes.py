@@ -7,6 +7,7 @@ import numpy as np
 
 from iblbake.errors import IblbakeError
 from iblbake.render.sources.base import Source
+from iblbake.render.twin.reflection_probes import marches
 
 PARAMS = ("rp_chain", "rp_off", "rp_lw", "rp_lh", "rp_nlev", "rp_count", "rp_info")
 
@@ -84,5 +85,5 @@ def rprobe_info(captured) -> np.ndarray:
         info[k, 3, 0] = 1.0 if st["parallax"] else 0.0
         info[k, 3, 1] = np.pi / st["size"]          # the capture's texel, in radians (its rows)
         info[k, 3, 2] = st["taps"]                  # the lobe's taps (rprobe_taps)
-        info[k, 3, 3] = 1.0 if c.get("depth") else 0.0     # a distance chain to march (rprobe_hit)
+        info[k, 3, 3] = 1.0 if marches(c) else 0.0      # a distance chain to march (rprobe_hit)
     return info.reshape(-1, 4)

@@ -52,15 +52,26 @@ def depth(c: dict, o, q):
     return np.where(length[:, 0] < 1e-6, 0.0, ratio * proxy)
 
 
+def marches(c: dict) -> bool:
+    """Whether capture c's reads march its distance chain (rp_info's fourth w): it has one, and it
+    sees something in front of its proxy. Where every texel's ratio is 1 / (1 + BEHIND) or more
+    no step inside the proxy goes behind the captured surface by BEHIND of its distance: the march
+    would end at the proxy's exit (a closed room, the object at the probe excluded)."""
+    return c.get("depth") is not None and float(np.min(c["depth"][0])) < 1.0 / (1.0 + BEHIND)
+
+
 def hit(c: dict, p, r):
     """Twin of rprobe_hit: where p + t r meets the surface capture c saw (its distance chain marched
     in MARCH even steps to the proxy's exit, the first step behind it by BEHIND of the distance
-    refined by REFINE secant steps), the proxy's exit where it has none or no step goes behind."""
-    st = c["settings"]
-    x = exit_point(st, p, r)
-    if c.get("depth") is None:
-        return x
-    o = np.asarray(st["position"], np.float64)
+    refined by REFINE secant steps), the proxy's exit where it does not march or no step goes
+    behind."""
+    x = exit_point(c["settings"], p, r)
+    return march(c, p, r, x) if marches(c) else x
+
+
+def march(c: dict, p, r, x):
+    """rprobe_hit's march from p along r to the proxy's exit x."""
+    o = np.asarray(c["settings"]["position"], np.float64)
     far = np.linalg.norm(x - p, axis=-1)
     t0, f0 = np.zeros(len(p)), np.linalg.norm(p - o, axis=-1) - depth(c, o, p)
     out, done = x.copy(), np.zeros(len(p), bool)
