@@ -728,19 +728,20 @@ def box_probe_distances(st: dict, h: int, w: int, sphere=None):
 
 
 def test_the_march_keeps_the_box_projection_in_a_closed_box():
-    """A probe off the centre of a closed box whose distance channel is the box's (each texel 1%
-    off at random, as a capture's texel means are): 20000 rays from random points in the box meet
-    the captured surface exactly where they leave the box (the closed form: the march's distance
-    is stored over the box's, 1 on the box whatever the direction; read as the distance itself,
-    8.8% of the rays stopped up to 0.41 short of the wall at the box's edges, at 32 x 64). A probe
-    that sees nothing in front of its proxy skips the march (the same point, at no cost)."""
+    """A probe off the centre of a closed box whose distance channel is the box's (each texel 0.4%
+    off at random, as a capture's texel means are: 0.06% at the 99th percentile of window_room's
+    walls): 20000 rays from random points in the box meet the captured surface exactly where they
+    leave the box (the closed form: the march's distance is stored over the box's, 1 on the box
+    whatever the direction; read as the distance itself, 14% of the rays stopped up to 0.72 short
+    of the wall at the box's edges, at 32 x 64). A probe that sees nothing in front of its proxy
+    skips the march (the same point, at no cost)."""
     from iblbake.render.reflection_probes import depth_levels
     from iblbake.render.twin import reflection_probes as rpt
 
     st = {"shape": "box", "position": [0.3, 0.2, -0.1], "min": [-2, 0, -2], "max": [2, 3, 2], "blend": 0.0,
           "parallax": True}
     rng = np.random.default_rng(1)
-    dist = box_probe_distances(st, 32, 64) * (1 + 0.01 * rng.uniform(-1, 1, (32, 64)))
+    dist = box_probe_distances(st, 32, 64) * (1 + 0.004 * rng.uniform(-1, 1, (32, 64)))
     c = {"settings": st, "depth": depth_levels(dist, st, [(32, 64)])}
     p = rng.uniform([-1.9, 0.1, -1.9], [1.9, 2.9, 1.9], (20000, 3))
     r = rng.normal(size=(20000, 3))

@@ -38,7 +38,7 @@ def exit_point(st: dict, p, r):
     return p + np.maximum(t, 0.0)[:, None] * r
 
 
-MARCH, REFINE, BEHIND = 16, 4, 0.02   # kernels/reflection_probes.h RPROBE_MARCH, RPROBE_REFINE, RPROBE_BEHIND
+MARCH, REFINE, BEHIND = 16, 4, 0.005  # kernels/reflection_probes.h RPROBE_MARCH, RPROBE_REFINE, RPROBE_BEHIND
 
 
 def depth(c: dict, o, q):
