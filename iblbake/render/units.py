@@ -530,8 +530,10 @@ class ReflectionProbes(Unit):
                 chains.append(levels)
                 cached = cached and pre_cached
             levels, coverage, sky = chains
-            out.append({"settings": settings, "levels": levels, "coverage": coverage, "sky": sky,
-                        "depth": rp.depth_levels(image[..., 7], settings, [lv.shape[:2] for lv in levels]),
+            # held by the memo as the chains are: the same arrays each frame, uploaded once
+            depth = job.bakes._get(("reflection-depth", key), lambda: rp.depth_levels(
+                image[..., 7], settings, [lv.shape[:2] for lv in levels]))
+            out.append({"settings": settings, "levels": levels, "coverage": coverage, "sky": sky, "depth": depth,
                         "capture": image})
             cached_all = cached_all and cached
             rays += 2 * settings["size"] ** 2 * settings["samples"] if traced else 0
