@@ -64,7 +64,7 @@ def traced(source, sc, folder, points, bounces, rt=None):
         return tracer.trace(np.asarray(points, np.float64), spherical_fibonacci(PROBE_RAYS), True)[0].reshape(-1, 3)
     settings = {"position": list(points[0]), "bounces": bounces, "seed": 1, **CAPTURE}
     img, _ = reflection_probes.capture(reflection_probes.tracer(job, settings), 0, settings)
-    return (img[..., :3] + img[..., 4:]).reshape(-1, 3).astype(np.float64)
+    return (img[..., :3] + img[..., 4:7]).reshape(-1, 3).astype(np.float64)
 
 
 def furnace(folder, env, bounces, samples):

@@ -25,8 +25,8 @@ class ProbeVolume:
         origin + (gx, gy, gz) * spacing + offset, index gy * nx * nz + gz * nx + gx.
     states: the count of active and inactive probes.
     manifest: probes.json as `iblbake probes` writes it (every convention spelled out).
-    reflections: each reflection probe's capture: {'capture': float32 (h, 2h, 7): R, G, B, A, sky.R,
-        sky.G, sky.B (render/reflection_probes.py CHANNELS), 'settings', and its prefiltered chains}.
+    reflections: each reflection probe's capture: {'capture': float32 (h, 2h, 8): R, G, B, A, sky.R,
+        sky.G, sky.B, Z (render/reflection_probes.py CHANNELS), 'settings', and its prefiltered chains}.
     cached: whether the bake came from the cache. entry: the cache folder holding the atlases.
     """
 
@@ -88,7 +88,8 @@ def bake_probes(scene, device: str | None = None, *, cache=None, warn=None, prog
                                  "layout": "equirect in the world frame (the panoramas' mapping); R, G, B the linear "
                                            "radiance of the paths that met the scene, A the share of them that did "
                                            "(the coverage), sky.R, sky.G, sky.B the radiance of those that escaped "
-                                           "(the sky through the openings, read without parallax); "
+                                           "(the sky through the openings, read without parallax), Z the mean distance from the "
+                                           "probe to where they met the scene (0 where none did; read channels by name); "
                                            "docs/conventions.md 'Reflection probes' has the reading"}
                                 for k, c in enumerate(reflections)]
     f32 = [np.asarray(vol[k], np.float32) for k in ("irradiance", "distance", "data")]     # as the files hold them

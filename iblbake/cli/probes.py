@@ -23,7 +23,7 @@ def probes_command(scene_path, out_dir, overrides, cache_dir, force, device, qui
     """Bake the irradiance probes of SCENE (its `probes:` section; see render --help-schema) by
     tracing paths from every probe, and write them as RTXGI-layout EXR atlases with a JSON
     manifest and a GLSL function that samples them, and each reflection probe's capture
-    (reflection_K.exr: the scene's radiance, its coverage and the sky seen past it, docs/conventions.md
+    (reflection_K.exr: the scene's radiance, its coverage, the sky seen past it and the distance, docs/conventions.md
     "Reflection probes"; `iblbake mips` prefilters its RGB). `render` bakes the same volume on demand
     (cached by content) where a scene sets effects.diffuse: probes."""
     from iblbake import api

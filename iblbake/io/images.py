@@ -404,11 +404,20 @@ def write_png(path, image_u8, batch=None):
     write_bytes(path, png_bytes(image_u8), batch)
 
 
-def read_exr(path) -> np.ndarray:
-    """Read back an EXR written by iblbake (cache files), float32 (H, W, C)."""
+def read_exr(path, channels=None) -> np.ndarray:
+    """Read back an EXR written by iblbake (cache files), float32 (H, W, C); `channels`: those
+    names in that order (OpenImageIO puts R, G, B, A and Z before the layers, whatever order they
+    were written in)."""
     inp = _open_exr(path)
     try:
-        return _exr_pixels(inp, path, inp.spec().nchannels)
+        image = _exr_pixels(inp, path, inp.spec().nchannels)
+        if channels is None:
+            return image
+        names = list(inp.spec().channelnames)
+        missing = [c for c in channels if c not in names]
+        if missing:
+            raise InputError(f"{path}: no channel {missing[0]} (it holds {', '.join(names)}); write it again")
+        return image[..., [names.index(c) for c in channels]]
     finally:
         inp.close()
 

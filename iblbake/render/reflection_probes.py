@@ -34,26 +34,55 @@ def capture_directions(size: int, samples: int) -> np.ndarray:
     return np.concatenate([d, share[..., None]], -1).reshape(-1, 4)
 
 
-# a capture's channels: the scene's radiance (RGB), its coverage (A) and the sky seen past it
-CHANNELS = ("R", "G", "B", "A", "sky.R", "sky.G", "sky.B")
+# a capture's channels: the scene's radiance (RGB), its coverage (A), the sky seen past it and the
+# distance to the scene (Z: the read marches a reflected ray against it, kernels/reflection_probes.h
+# rprobe_hit)
+CHANNELS = ("R", "G", "B", "A", "sky.R", "sky.G", "sky.B", "Z")
 
 
 def capture(tracer, index: int, settings: dict, progress=None):
-    """((size, 2 size, 7) float32: per texel the mean over its paths from the probe's position of
-    the radiance of those that met the scene (RGB), the share of them that did (A, the coverage)
-    and the radiance of those that escaped (the panorama through the scene's openings: sky RGB);
+    """((size, 2 size, 8) float32: per texel the mean over its paths from the probe's position of
+    the radiance of those that met the scene (RGB), the share of them that did (A, the coverage),
+    the radiance of those that escaped (the panorama through the scene's openings: sky RGB) and the
+    mean distance from the probe to where those that met the scene met it (Z, 0 where none did);
     report: {"inside": {object: share of the solid angle whose rays met its inside}}). The sky is
     read along the reflected ray itself (it is infinitely far: no parallax moves it;
     kernels/reflection_probes.h rprobe_sky). Probe number `index`: its random streams."""
     size, n = settings["size"], settings["samples"]
     texels = TexelRays(tracer, settings["position"], capture_directions(size, n), n, index, progress)
     sums, inside = trace(texels)              # the one driver (render/paths/trace.py)
+    sums = np.concatenate([sums, texels.depth()[:, None]], 1)
     # radiance is >= 0; the panorama's tiny negative texels (environment.negative: keep) reach a few
     # paths, and read back a negative value would fail the capture's check
     sums[:, :3] = np.maximum(sums[:, :3], 0.0)
     sums[:, 4:] = np.maximum(sums[:, 4:], 0.0)
-    return sums.reshape(size, 2 * size, 7).astype(np.float32), {"inside": {str(k): round(v, 4)
+    return sums.reshape(size, 2 * size, len(CHANNELS)).astype(np.float32), {"inside": {str(k): round(v, 4)
                                                                            for k, v in inside.items()}}
+
+
+def depth_levels(depth, settings: dict, shapes) -> list:
+    """The capture's distance channel (size, 2 size) as the probes' table holds it (a fourth chain,
+    grey, at the radiance chain's level `shapes`, (h, w) each; only level 0 is read): each texel's
+    distance over the distance from the probe to its proxy's side in that direction, 1 where no
+    ray met the scene (an opening). On the proxy the ratio is 1 whatever the direction, so its
+    bilinear read is too (a box's edges, where the distance itself bends, included), and the
+    march keeps the box projection exactly there (kernels/reflection_probes.h rprobe_hit)."""
+    h, w = depth.shape
+    d = conventions.equirect_texel_dirs(w, h).reshape(-1, 3)
+    ratio = np.where(depth > 0, depth / proxy_distance(settings, d).reshape(h, w), 1.0)
+    out = []
+    for lh, lw in shapes:            # nearest texel: a distance is not filtered across an edge
+        rows, cols = (np.arange(lh) * h) // lh, (np.arange(lw) * w) // lw
+        out.append(np.repeat(ratio[rows][:, cols, None], 3, -1).astype(np.float32))
+    return out
+
+
+def proxy_distance(settings: dict, d) -> np.ndarray:
+    """The distance from the probe's position to its box's or sphere's side along directions d (m, 3)."""
+    from iblbake.render.twin.reflection_probes import exit_point
+
+    pos = np.asarray(settings["position"], np.float64)
+    return np.linalg.norm(exit_point(settings, np.broadcast_to(pos, d.shape), d) - pos, axis=-1)
 
 
 INSIDE_WARN = 0.25     # a capture whose rays meet this share of an object's inside is inside it

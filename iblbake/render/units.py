@@ -475,7 +475,7 @@ class ReflectionProbes(Unit):
     def key(self, job) -> tuple:
         from iblbake.bake import cache
         transport = light_transport(job)
-        return tuple("reflection-" + cache.content_key({"kind": "reflection", "v": 3, "index": k, **transport,
+        return tuple("reflection-" + cache.content_key({"kind": "reflection", "v": 4, "index": k, **transport,
                                                         "settings": settings, "code": probes_code_hash()})
                      for k, settings in enumerate(job.scene.data["reflection_probes"]))
 
@@ -496,12 +496,12 @@ class ReflectionProbes(Unit):
             if not isinstance(report, dict) or not isinstance(report.get("inside"), dict):
                 raise IblbakeError(f"{root / manifest['key']}: a reflection capture without its report")
             path = root / manifest["key"] / "capture.exr"
-            image = images.read_exr(path)
+            image = images.read_exr(path, rp.CHANNELS)
             size = settings["size"]
             if image.shape != (size, 2 * size, len(rp.CHANNELS)) or not np.isfinite(image).all() \
                     or (image < 0).any() or (image[..., 3] > 1).any():
                 raise IblbakeError(f"{path}: not a {2 * size}x{size} capture of finite, non-negative radiance, "
-                                   f"coverage and sky ({', '.join(rp.CHANNELS)})")
+                                   f"coverage, sky and distance ({', '.join(rp.CHANNELS)})")
             return np.ascontiguousarray(image, np.float32), report
 
         (image, report), _manifest, cached = cache.get_checked(root, key, build, read, warn=job.warn)
@@ -521,7 +521,7 @@ class ReflectionProbes(Unit):
             bk = baker(job)
             chains = []
             for part, img in (("radiance", image[..., :3]), ("coverage", np.repeat(image[..., 3:4], 3, -1)),
-                              ("sky", image[..., 4:])):
+                              ("sky", image[..., 4:7])):
                 img = np.ascontiguousarray(img)
                 info = ImageInfo(f"reflection probe {k} {part}", img.shape[1], img.shape[0], ("R", "G", "B"),
                                  "float32", hashlib.sha256(img.tobytes()).hexdigest())
@@ -530,7 +530,10 @@ class ReflectionProbes(Unit):
                 chains.append(levels)
                 cached = cached and pre_cached
             levels, coverage, sky = chains
-            out.append({"settings": settings, "levels": levels, "coverage": coverage, "sky": sky,
+            # held by the memo as the chains are: the same arrays each frame, uploaded once
+            depth = job.bakes._get(("reflection-depth", key), lambda: rp.depth_levels(
+                image[..., 7], settings, [lv.shape[:2] for lv in levels]))
+            out.append({"settings": settings, "levels": levels, "coverage": coverage, "sky": sky, "depth": depth,
                         "capture": image})
             cached_all = cached_all and cached
             rays += 2 * settings["size"] ** 2 * settings["samples"] if traced else 0

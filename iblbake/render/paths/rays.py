@@ -71,7 +71,8 @@ class TexelRays(Source):
     numbered from its first ray (ray0) under probe number `index`. result(): ((texels, 7) per texel
     the mean over its rays of the radiance of those that met the scene (RGB), the share that did (A)
     and the radiance of those that escaped (RGB); {object: share of the sphere whose rays met its
-    inside}). progress(the fraction traced)."""
+    inside}; a texel's distance, the mean over its rays that met the scene of where they met it, 0
+    where none did: depth()). progress(the fraction traced)."""
     program, function = PROGRAM, "probe_trace"
 
     def __init__(self, tracer, position, dirs, samples: int, index: int, progress=None):
@@ -79,6 +80,7 @@ class TexelRays(Source):
         self.pos = np.asarray([position], np.float64)
         self.per = whole_units(tracer.rt, samples) * samples          # whole texels per launch (device/launch.py)
         self.sums = np.zeros((len(dirs) // samples, 7))
+        self.dist = np.zeros(len(dirs) // samples)
         self.inside = {}
 
     def launch(self, global_size, function, **args):
@@ -97,7 +99,10 @@ class TexelRays(Source):
         n, share = self.samples, self.dirs[r0:r0 + self.per, 3]
         met = np.isfinite(np.abs(t[0]))[:, None]
         rows = np.concatenate([np.where(met, rad[0], 0.0), met.astype(np.float64), np.where(met, 0.0, rad[0])], 1)
-        self.sums[r0 // n:(r0 + len(rad[0])) // n] = rows.reshape(-1, n, 7).mean(1)
+        texels = slice(r0 // n, (r0 + len(rad[0])) // n)
+        self.sums[texels] = rows.reshape(-1, n, 7).mean(1)
+        hits = met[:, 0].reshape(-1, n)
+        self.dist[texels] = np.where(hits, np.abs(t[0]).reshape(-1, n), 0.0).sum(1) / np.maximum(hits.sum(1), 1)
         back = t[0] < 0                            # the inside of a solid (scene.h probe_back_face)
         for o in np.unique(obj[0][back]):
             self.inside[int(o)] = self.inside.get(int(o), 0.0) + float(share[back & (obj[0] == o)].sum()) / (4 * np.pi)
@@ -107,3 +112,7 @@ class TexelRays(Source):
 
     def result(self):
         return self.sums, self.inside
+
+    def depth(self):
+        """(texels,) each texel's mean distance to where its rays met the scene, 0 where none did."""
+        return self.dist

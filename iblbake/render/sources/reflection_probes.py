@@ -7,6 +7,7 @@ import numpy as np
 
 from iblbake.errors import IblbakeError
 from iblbake.render.sources.base import Source
+from iblbake.render.twin.reflection_probes import marches
 
 PARAMS = ("rp_chain", "rp_off", "rp_lw", "rp_lh", "rp_nlev", "rp_count", "rp_info")
 
@@ -52,17 +53,24 @@ def rprobe_args(rt, captured, bakes=None) -> dict:
 
     def upload():
         flat = np.concatenate([np.asarray(lv[..., :3], np.float32).reshape(-1) for c in captured
-                               for chain in (c["levels"], c["coverage"], c["sky"]) for lv in chain])
-        counts = [h * w for h, w in sizes[0]] * (3 * len(captured))      # each probe: radiance, coverage, sky
+                               for chain in probe_chains(c) for lv in chain])
+        counts = [h * w for h, w in sizes[0]] * (4 * len(captured))   # each probe: radiance, coverage, sky, distance
         off = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int32)
         return (rt.to_device(flat), rt.to_device(off), rt.to_device(np.array([w for _h, w in sizes[0]], np.int32)),
                 rt.to_device(np.array([h for h, _w in sizes[0]], np.int32)))
-    chains = tuple(lv for c in captured for lv in c["levels"] + c["coverage"] + c["sky"])
+    chains = tuple(lv for c in captured for chain in probe_chains(c) for lv in chain)
     chain, off, lw, lh = bakes.on_device(rt, chains, upload) if bakes is not None else upload()
     # the settings each frame's own: probes of other settings (blend, box, taps) can share chains of
     # the same content, and with them the memo's upload
     return {"rp_chain": chain, "rp_off": off, "rp_lw": lw, "rp_lh": lh, "rp_nlev": len(sizes[0]),
             "rp_count": len(captured), "rp_info": rt.to_device(rprobe_info(captured))}
+
+
+def probe_chains(c: dict) -> tuple:
+    """A probe's four chains in the table (kernels/reflection_probes.h): radiance, coverage, sky and
+    distance (zeros where the probe has none: rp_info says so)."""
+    depth = c.get("depth") or [np.zeros_like(lv) for lv in c["levels"]]
+    return c["levels"], c["coverage"], c["sky"], depth
 
 
 def rprobe_info(captured) -> np.ndarray:
@@ -77,4 +85,5 @@ def rprobe_info(captured) -> np.ndarray:
         info[k, 3, 0] = 1.0 if st["parallax"] else 0.0
         info[k, 3, 1] = np.pi / st["size"]          # the capture's texel, in radians (its rows)
         info[k, 3, 2] = st["taps"]                  # the lobe's taps (rprobe_taps)
+        info[k, 3, 3] = 1.0 if marches(c) else 0.0      # a distance chain to march (rprobe_hit)
     return info.reshape(-1, 4)

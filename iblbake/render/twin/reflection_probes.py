@@ -38,6 +38,70 @@ def exit_point(st: dict, p, r):
     return p + np.maximum(t, 0.0)[:, None] * r
 
 
+MARCH, REFINE, BEHIND = 16, 4, 0.005  # kernels/reflection_probes.h RPROBE_MARCH, RPROBE_REFINE, RPROBE_BEHIND
+
+
+def depth(c: dict, o, q):
+    """Twin of rprobe_depth: the distance from the probe at o to what capture c saw towards q (its
+    distance chain, the ratio to the proxy's distance, times that distance)."""
+    d = q - o
+    length = np.linalg.norm(d, axis=-1, keepdims=True)
+    d = d / np.maximum(length, 1e-300)
+    ratio = radiance.chain_lookup_twin(c["depth"][:1], d, 0.0)[:, 0]
+    proxy = np.linalg.norm(exit_point(c["settings"], np.broadcast_to(o, d.shape), d) - o, axis=-1)
+    return np.where(length[:, 0] < 1e-6, 0.0, ratio * proxy)
+
+
+def marches(c: dict) -> bool:
+    """Whether capture c's reads march its distance chain (rp_info's fourth w): it has one, and it
+    sees something in front of its proxy. Where every texel's ratio is 1 / (1 + BEHIND) or more
+    no step inside the proxy goes behind the captured surface by BEHIND of its distance: the march
+    would end at the proxy's exit (a closed room, the object at the probe excluded)."""
+    return c.get("depth") is not None and float(np.min(c["depth"][0])) < 1.0 / (1.0 + BEHIND)
+
+
+def hit(c: dict, p, r):
+    """Twin of rprobe_hit: where p + t r meets the surface capture c saw (its distance chain marched
+    in MARCH even steps to the proxy's exit, the first step behind it by BEHIND of the distance
+    refined by REFINE secant steps), the proxy's exit where it does not march or no step goes
+    behind."""
+    x = exit_point(c["settings"], p, r)
+    return march(c, p, r, x) if marches(c) else x
+
+
+def march(c: dict, p, r, x):
+    """rprobe_hit's march from p along r to the proxy's exit x."""
+    o = np.asarray(c["settings"]["position"], np.float64)
+    far = np.linalg.norm(x - p, axis=-1)
+    t0, f0 = np.zeros(len(p)), np.linalg.norm(p - o, axis=-1) - depth(c, o, p)
+    out, done = x.copy(), np.zeros(len(p), bool)
+    for i in range(1, MARCH + 1):
+        t1 = far * i / MARCH
+        q = p + t1[:, None] * r
+        dq = depth(c, o, q)
+        f1 = np.linalg.norm(q - o, axis=-1) - dq
+        cross = ~done & (f0 <= 0) & (f1 > BEHIND * dq)
+        if cross.any():
+            out[cross] = _secant(c, o, p[cross], r[cross], t0[cross], f0[cross], t1[cross], f1[cross])
+            done |= cross
+        t0, f0 = t1, f1
+    return out
+
+
+def _secant(c: dict, o, p, r, lo, flo, hi, fhi):
+    """REFINE secant steps of rprobe_hit within [lo, hi] (in front at lo, behind at hi)."""
+    def root(lo, flo, hi, fhi):
+        return lo + (hi - lo) * flo / np.minimum(flo - fhi, -1e-12)
+    for _ in range(REFINE):
+        t = root(lo, flo, hi, fhi)
+        m = p + t[:, None] * r
+        fm = np.linalg.norm(m - o, axis=-1) - depth(c, o, m)
+        behind = fm > 0
+        hi, fhi = np.where(behind, t, hi), np.where(behind, fm, fhi)
+        lo, flo = np.where(behind, lo, t), np.where(behind, flo, fm)
+    return p + root(lo, flo, hi, fhi)[:, None] * r
+
+
 NEAR, FAR, FINEST = 0.1, 0.4, 2.0      # kernels/reflection_probes.h RPROBE_NEAR, RPROBE_FAR, RPROBE_FINEST
 
 
@@ -113,7 +177,7 @@ def taps(c: dict, p, n, v, lod, env, count: int):
         w = np.where(ok, brdf.v_smith_ggx_correlated(nov, nol, alpha) * 4 * nol * voh / noh, 0.0)[:, None]
         rough_t = tap_rough(noh, np.maximum(voh, 1e-30), np.maximum(nol, 0.0), alpha, count)
         tap = rough_t * top
-        x = exit_point(st, p, l)
+        x = hit(c, p, l)
         d = (x - pos) / np.maximum(np.linalg.norm(x - pos, axis=-1, keepdims=True), 1e-6)
         open_ = np.maximum(1 - radiance.chain_lookup_twin(c["coverage"], d, 0.0)[:, :1], 0.0)
         seen = 1 - radiance.chain_lookup_twin(c["coverage"], l, tap)[:, :1]
@@ -126,7 +190,8 @@ def taps(c: dict, p, n, v, lod, env, count: int):
 
 
 def blend(captured: list, p, r, lod, distant, env, lobe):
-    """Twin of reflection_probes: captured [{settings, levels, coverage, sky}], distant the scaled
+    """Twin of reflection_probes: captured [{settings, levels, coverage, sky, depth (optional: the
+    distance chain, rprobe_hit)}], distant the scaled
     distant chain's radiance at (p, r) (m, 3), which takes the share no probe's influence holds;
     env (the distant chain, its rotation, its intensity) and lobe (n, v) for a probe read in taps."""
     acc = np.zeros_like(distant)
@@ -142,7 +207,7 @@ def blend(captured: list, p, r, lod, distant, env, lobe):
         d, near_lod, off, shift = r, lod, np.zeros((len(p), 1)), np.zeros(len(p))
         if st["parallax"]:
             pos = np.asarray(st["position"], np.float64)
-            x = exit_point(st, p, r)
+            x = hit(c, p, r)
             from_probe = np.maximum(np.linalg.norm(x - pos, axis=-1), 1e-6)
             d = (x - pos) / from_probe[:, None]
             near_lod = np.maximum(lod * np.clip(np.linalg.norm(x - p, axis=-1) / from_probe, 0.0, 1.0),
