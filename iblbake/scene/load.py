@@ -284,6 +284,7 @@ def _validated(data, lines, source, folder, overrides, outputs, values, origin, 
     _resolve_reflection_probes(v, out["reflection_probes"])
     _resolve_probes(v, out["probes"])
     _resolve_basis_specular(v, out["effects"], out["probes"])
+    _resolve_lightmap_specular(v, out)
     _resolve_lightmap(v, out, raw)
     _resolve_specular_fits(out, raw)
     writes = _resolve_outputs(v, out["output"], folder, outputs)
@@ -525,6 +526,25 @@ def _resolve_lightmap(v: "_Validator", out: dict, raw: dict) -> None:
     if coeffs > fx["sh_bands"] ** 2:
         v.fail("effects.sh_bands", f"{fx['sh_bands']} evaluates fewer SH coefficients than lightmap.basis {name} "
                                    f"holds ({coeffs}); give {math.isqrt(coeffs)} or more")
+
+
+def _resolve_lightmap_specular(v: "_Validator", out: dict) -> None:
+    """`effects.specular: lightmap` reads the radiance along the lobe from the lightmap's texels: beside
+    `diffuse: lightmap` (its section, its atlas, its UV1), of a basis that carries a lobe."""
+    from iblbake.core.bases.probes import PROBE_BASES
+    fx = out["effects"]
+    if fx["specular"] != "lightmap":
+        return
+    if fx["diffuse"] != "lightmap":
+        v.fail("effects.specular", f"lightmap reads the lobe from the lightmap that effects.diffuse: lightmap bakes, "
+                                   f"and effects.diffuse is {fx['diffuse']}; give effects.diffuse lightmap (and a "
+                                   "lightmap: section), or another specular mode")
+    lobed = [n for n, b in PROBE_BASES.items() if b.lightmap and b.specular]
+    name = out["lightmap"]["basis"]
+    if name not in lobed:
+        v.fail("effects.specular", f"lightmap reads the radiance along the lobe from the lightmap's basis, and "
+                                   f"lightmap.basis {name} carries no lobe: give lightmap.basis {' or '.join(lobed)}, "
+                                   "or effects.specular prefiltered")
 
 
 def _resolve_specular_fits(out: dict, raw: dict) -> None:

@@ -34,6 +34,7 @@ from iblbake.errors import InputError
 from iblbake.scene.schema import LIGHTMAP_BASES as NAMES
 
 OWN = NAMES[:2]         # irradiance, sh_l1: this module's; the rest the registry's
+LOBED = tuple(n for n in NAMES if n in PROBE_BASES and PROBE_BASES[n].specular)   # a second set for the lobe
 CHUNK = 256             # texels projected at once (the registry's fits hold texels x 2 samples x floats)
 NORMALS = 128           # normals over a texel's hemisphere its irradiance is fitted at (hemisphere_fitted)
 
@@ -70,14 +71,34 @@ def project(name: str, radiance, dirs, normals, opts: dict):
     out = np.empty((len(e), basis.floats(opts), 3))
     for a in range(0, len(e), CHUNK):
         r, d, n = radiance[a:a + CHUNK], dirs[a:a + CHUNK], normals[a:a + CHUNK]
-        if hemi:
-            out[a:a + CHUNK] = _hemisphere_fit(basis, r, d, n, opts)
-            continue
-        mirror = d - 2 * np.einsum("ksx,kx->ks", d, n)[..., None] * n[:, None]
-        lit = np.concatenate([r, np.zeros_like(r)], 1)
-        out[a:a + CHUNK] = basis.project_rays(lit, np.ones(lit.shape[:2]), np.ones(len(r), bool),
-                                              np.concatenate([d, mirror], 1), opts)
+        out[a:a + CHUNK] = (_hemisphere_fit if hemi else _black_below)(basis, r, d, n, opts)
     return e, out
+
+
+def specular_options(name: str, opts: dict) -> dict:
+    """The options of the texels' second set, the one the specular lobe reads (`effects.specular:
+    lightmap`): the basis's, fitted for the radiance as its SPECULAR_DEFAULTS say (NNLS: least
+    squares rings negative around a sun, black patches on metals; core/bases/sg.py)."""
+    return {**opts, **getattr(PROBE_BASES[name].m, "SPECULAR_DEFAULTS", {})}
+
+
+def project_specular(name: str, radiance, dirs, normals, opts: dict):
+    """The texels' second set (k, floats, 3), for the specular lobe: the basis's fit of the radiance
+    with specular_options (the hemisphere below black, as project's radiance fits)."""
+    basis, spec = PROBE_BASES[name], specular_options(name, opts)
+    out = np.empty((len(radiance), basis.floats(spec), 3))
+    for a in range(0, len(radiance), CHUNK):
+        out[a:a + CHUNK] = _black_below(basis, radiance[a:a + CHUNK], dirs[a:a + CHUNK], normals[a:a + CHUNK], spec)
+    return out
+
+
+def _black_below(basis, radiance, dirs, normals, opts):
+    """The basis's own fit of the sphere (project_rays), the lower hemisphere entering it as black:
+    each ray's mirror image through the tangent plane with radiance 0."""
+    mirror = dirs - 2 * np.einsum("ksx,kx->ks", dirs, normals)[..., None] * normals[:, None]
+    lit = np.concatenate([radiance, np.zeros_like(radiance)], 1)
+    return basis.project_rays(lit, np.ones(lit.shape[:2]), np.ones(len(radiance), bool),
+                              np.concatenate([dirs, mirror], 1), opts)
 
 
 def hemisphere_fitted(name: str, opts: dict) -> bool:
