@@ -84,19 +84,27 @@ def specular_options(name: str, opts: dict) -> dict:
 
 def project_specular(name: str, radiance, dirs, normals, opts: dict):
     """The texels' second set (k, floats, 3), for the specular lobe: the basis's fit of the radiance
-    with specular_options (the hemisphere below black, as project's radiance fits)."""
+    with specular_options over the sphere, the lower hemisphere the upper one's mirror image (the
+    lobe's tail past the horizon reads the light just above it, not black: a uniform sky is
+    uniform, so read exactly)."""
     basis, spec = PROBE_BASES[name], specular_options(name, opts)
     out = np.empty((len(radiance), basis.floats(spec), 3))
     for a in range(0, len(radiance), CHUNK):
-        out[a:a + CHUNK] = _black_below(basis, radiance[a:a + CHUNK], dirs[a:a + CHUNK], normals[a:a + CHUNK], spec)
+        r, d, n = radiance[a:a + CHUNK], dirs[a:a + CHUNK], normals[a:a + CHUNK]
+        out[a:a + CHUNK] = _sphere_fit(basis, r, d, n, spec, r)
     return out
 
 
 def _black_below(basis, radiance, dirs, normals, opts):
-    """The basis's own fit of the sphere (project_rays), the lower hemisphere entering it as black:
-    each ray's mirror image through the tangent plane with radiance 0."""
+    """The basis's own fit of the sphere, the lower hemisphere entering it as black."""
+    return _sphere_fit(basis, radiance, dirs, normals, opts, np.zeros_like(radiance))
+
+
+def _sphere_fit(basis, radiance, dirs, normals, opts, below):
+    """The basis's own fit (project_rays) of the rays and their mirror images through the tangent
+    plane, those of radiance `below` (k, s, 3)."""
     mirror = dirs - 2 * np.einsum("ksx,kx->ks", dirs, normals)[..., None] * normals[:, None]
-    lit = np.concatenate([radiance, np.zeros_like(radiance)], 1)
+    lit = np.concatenate([radiance, below], 1)
     return basis.project_rays(lit, np.ones(lit.shape[:2]), np.ones(len(radiance), bool),
                               np.concatenate([dirs, mirror], 1), opts)
 
