@@ -163,3 +163,46 @@ def test_bad_input_one_line(tmp_path, sky):
         assert said in str(e.value) and "\n" not in str(e.value)
     r = run_cli("render", tmp_path / "bad0.yaml", "-o", tmp_path / "o.png", "--cache", tmp_path / "cache")
     assert r.returncode == 1 and cases[0][1] in r.stderr and "Traceback" not in r.stderr, r.stderr
+
+
+@pytest.mark.external
+@pytest.mark.parametrize("basis", LOBED)
+def test_export_writes_the_lobes_set(tmp_path, sky, basis):
+    """`iblbake lightmap` of a scene whose frame reads `specular: lightmap`: the lobe's set as fp16
+    atlases equal to the bake cast to half, its manifest entry (the NNLS options), its GLSL
+    (lightmapSpecularRadiance, compiled by glslangValidator in a fragment shader) and the table
+    ambient dice's GLSL reads; a scene of the split sum writes none of it."""
+    import json
+    import shutil
+    import subprocess
+
+    import yaml
+
+    import iblbake
+    (tmp_path / "s.yaml").write_text(yaml.safe_dump(doc(sky, basis)))
+    lm = iblbake.bake_lightmap(str(tmp_path / "s.yaml"), cache=str(tmp_path / "cache"))
+    man = lm.write(tmp_path / "out")
+    spec = man["bases"]["specular"]
+    written = sorted(p.name for p in (tmp_path / "out").iterdir())
+    assert written == sorted(lm.files()) and spec["basis"] == basis and "nnls" in spec["options"].values()
+    sets = np.asarray(lm.baked["specular"]).reshape(lm.height, lm.width, -1, 3)
+    assert len(spec["exr"]) == spec["floats"] == sets.shape[2]
+    for k, f in enumerate(spec["exr"]):
+        got = images.read_exr(tmp_path / "out" / f)
+        assert np.array_equal(got[..., :3], sets[..., k, :].astype(np.float16).astype(np.float32)), f
+    assert ("table" in spec) == (basis == "ambient_dice") and spec["glsl"] in written
+    assert spec.get("table", spec["glsl"]) in written
+    src = (tmp_path / "out" / spec["glsl"]).read_text()
+    assert src.count("uniform sampler2D lightmapSpecular") == spec["floats"]
+    if shutil.which("glslangValidator") is None:
+        pytest.skip("glslangValidator not installed (Debian's glslang-tools; make readers installs it)")
+    shader = tmp_path / "spec.frag"
+    shader.write_text("#version 330 core\n" + src + "in vec2 UV;\nin vec3 N;\nin vec3 V;\nout vec4 color;\n"
+                      "void main() { color = vec4(lightmapSpecularRadiance(UV, normalize(N), normalize(V), 0.4), "
+                      "1.0); }\n")
+    p = subprocess.run(["glslangValidator", str(shader)], capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0, p.stdout + p.stderr
+    (tmp_path / "p.yaml").write_text(yaml.safe_dump(doc(sky, basis, specular="prefiltered")))
+    plain = iblbake.bake_lightmap(str(tmp_path / "p.yaml"), cache=str(tmp_path / "cache"))
+    assert not any("specular" in f for f in plain.files()) and "specular" not in plain.baked
+    print(json.dumps(spec)[:300])
