@@ -248,3 +248,37 @@ def test_quad_room_specular_holds_its_measure(tmp_path, panoramas):
         assert got["lightmap"][region] < 1.3 * measured, (region, got["lightmap"][region])
         assert got["distant"][region] > SPLIT_SUM_AT_LEAST * got["lightmap"][region]
     assert got["lightmap"]["worst half"] < 1.2 * WORST_HALF
+
+
+def test_lobes_set_through_the_store(tmp_path, sky):
+    """The store keeps the lobe's set (specular.npy, its options in the manifest): read back as the
+    bake's float32, the second bake from the store; a set made not finite (its manifest made to
+    match) is said in one line and baked again, the same values."""
+    import json
+
+    from iblbake.bake import cache
+    from iblbake.device.runtime import Runtime
+    from iblbake.render.bakes import Bakes
+    from iblbake.render.lightmaps import store
+    from iblbake.render.units import UNITS, Job
+    from tests.helpers import mend_cache_entry
+    d = doc(sky, "ambient_dice")
+    d["objects"] = [{"plane": {"point": [0, 0, 0], "size": 2}, "material": "tile"}]
+    sc = load_scene(tmp_path, "plane", d)
+    said = []
+
+    def baked():
+        job = Job(sc, Runtime(), Bakes(tmp_path / "cache"), warn=said.append)
+        return store.baked(job, UNITS["lightmap"].settings(job))
+    first, was = baked()
+    again, was_again = baked()
+    assert not was and was_again and np.array_equal(again["specular"], first["specular"])
+    assert first["specular_options"] == {"ad_fit": "nnls"} and first["specular"].shape[2] == 12
+    (entry,) = [p for p in (tmp_path / "cache").iterdir() if p.name.startswith("lightmap-")]
+    assert json.loads((entry / cache.MANIFEST).read_text())["specular_options"] == {"ad_fit": "nnls"}
+    hurt = np.load(entry / "specular.npy")
+    hurt.flat[7] = np.nan
+    mend_cache_entry(entry, specular=hurt)
+    third, was_third = baked()
+    assert not was_third and len(said) == 1 and "specular.npy" in said[0] and "\n" not in said[0]
+    assert np.array_equal(third["specular"], first["specular"])
