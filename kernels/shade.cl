@@ -59,8 +59,8 @@ __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
                     CHAIN_PARAMS, __global const float2 *dfg, const int dfg_size,
                     LOBE_PARAMS, __global const float *ao_buf, __global const float4 *spec_sums, PROBE_PARAMS,
                     RPROBE_PARAMS, __global float4 *ssr_env, __global int *probe_stats,
-                    __global const float4 *gb_lm, LIGHTMAP_PARAMS, __global const float4 *lm_spec, __global int *lm_stats,
-                    __global float4 *radiance)
+                    __global const float4 *gb_lm, LIGHTMAP_PARAMS, __global const float4 *lm_spec,
+                    __global int *lm_stats, __global float4 *radiance)
 {
     const int gid = get_global_id(0);
     if (gid >= n) return;

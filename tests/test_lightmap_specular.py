@@ -163,6 +163,15 @@ def test_bad_input_one_line(tmp_path, sky):
         assert said in str(e.value) and "\n" not in str(e.value)
     r = run_cli("render", tmp_path / "bad0.yaml", "-o", tmp_path / "o.png", "--cache", tmp_path / "cache")
     assert r.returncode == 1 and cases[0][1] in r.stderr and "Traceback" not in r.stderr, r.stderr
+    # a library caller's settings: the bake refuses the lobe's set of a basis without one, up front
+    from iblbake.device.runtime import Runtime
+    from iblbake.render.bakes import Bakes
+    from iblbake.render.lightmaps import bake
+    from iblbake.render.units import Job
+    sc = load_scene(tmp_path, "ok", doc(sky, diffuse="lightmap", specular="prefiltered"))
+    with pytest.raises(InputError, match="lightmap.basis: sh_l1 carries no specular lobe; give one of sg, "
+                                         "ambient_dice"):
+        bake(Job(sc, Runtime(), Bakes(tmp_path / "cache")), {**sc.data["lightmap"], "basis": "sh_l1", "specular": True})
 
 
 @pytest.mark.external

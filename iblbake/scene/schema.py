@@ -561,9 +561,9 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                                "options the effects' keys, the same basis as a basis diffuse; docs/conventions.md "
                                "'Directional bases'), the irradiance probes' basis (`probes`: the same from the probes "
                                "around a point, probes.irradiance one of "
-                             + ", ".join(bases.SPECULAR) + "; the distant chain outside them), the lightmap's (`lightmap`: "
-                               "the same from a second set of the texels' coefficients fitted for the radiance, "
-                               "beside `diffuse: lightmap` with lightmap.basis one of " + ", ".join(bases.SPECULAR)
+                             + ", ".join(bases.SPECULAR) + "; the distant chain outside them), the lightmap's "
+                               "(`lightmap`: the same from a second set of the texels' coefficients fitted for the "
+                               "radiance, beside `diffuse: lightmap` with lightmap.basis one of " + ", ".join(bases.SPECULAR)
                              + "; the distant chain on what has none), Monte Carlo reference, none"),
         "samples": Num(40, 1, 65536, integer=True, doc="importance: GGX samples per pixel"),
         "mip_bias": Num(1.0, -16.0, 16.0, doc="importance: added to each sample's mip level (Krivanek and "

@@ -6,7 +6,9 @@ lifted OFFSET texels along the geometric normal; moved past a solid's back face 
 where the move lands on that solid's front, lightmap_nudge), whole texels per launch. Per texel, from the same rays (uniform over the
 hemisphere: weight w = 2 pi / samples a ray): its irradiance E(n) = sum w L cos (the
 non-directional lightmap, kept always) and its coefficients in the scene's `lightmap.basis`
-(bases.py: L1 SH, or any coefficient basis of the probes' registry fitted by its own code).
+(bases.py: L1 SH, or any coefficient basis of the probes' registry fitted by its own code), and
+where the frame reads `specular: lightmap` a second set fitted for the radiance (bases.py
+project_specular: the lobe's).
 A texel more than REJECT of whose rays meet the inside of a solid starts inside geometry: it is
 dropped and dilated over (BakingLab's rejection). Dilation: every empty texel takes the mean of its
 valid 8-neighbours, DILATE passes (across chart seams and the padding)."""

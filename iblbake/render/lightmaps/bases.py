@@ -20,6 +20,9 @@ texel). Per texel, rays uniform over its hemisphere, weight w = 2 pi / samples a
               each ray's mirror image through the tangent plane with radiance 0, so the rays share
               the sphere equally as the probes' fits expect (BakingLab's SH lightmaps integrate
               the lower half as zero)
+A basis that carries a specular lobe (LOBED: sg, ambient dice) keeps, where the frame reads
+`specular: lightmap`, a second set for it (project_specular): its own fit of the radiance with its
+SPECULAR_DEFAULTS (NNLS), the lower hemisphere the upper's mirror.
 docs/manual.md 'Lightmaps' has each basis's error at normals tilted off the texel's."""
 
 from __future__ import annotations

@@ -158,8 +158,9 @@ def specular_glsl(lm: dict, settings: dict) -> str:
         if entry.specular_table else ""
     uniforms = "\n".join(f"uniform sampler2D lightmapSpecular{i};" for i in range(k))
     fill = "\n".join(f"    {m.GLSL_COEFFS}[{i}] = texture(lightmapSpecular{i}, uv1).rgb;" for i in range(k))
-    return f"""// iblbake lightmap, the specular lobe's set: {lm['layout'].width} x {lm['layout'].height} texels, {entry.title}
-// fitted for the radiance ({m.label(opts)}); lightmap.json holds the conventions. Bind each atlas
+    size = f"{lm['layout'].width} x {lm['layout'].height}"
+    return f"""// iblbake lightmap, the specular lobe's set: {size} texels, {entry.title} fitted for the
+// radiance ({m.label(opts)}); lightmap.json holds the conventions. Bind each atlas
 // as a 2D float texture, first (top) row at t = 0, linear filtering, clamped to the edge:
 {binds}{table}
 // specular = (F0 A + F90 B) (the split sum's DFG table at n.v, roughness)

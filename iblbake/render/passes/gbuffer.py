@@ -1,5 +1,6 @@
 """G-buffer: the primary hit of every camera sample of the tile (kernels/gbuffer.cl); with
-`diffuse: lightmap` (and `specular: lightmap`), where each hit lies in the lightmap's atlas (gb_lm, kernels/lightmap.h)."""
+`diffuse: lightmap` (and `specular: lightmap`), where each hit lies in the lightmap's atlas (gb_lm,
+kernels/lightmap.h)."""
 
 from __future__ import annotations
 
@@ -27,7 +28,8 @@ class GBuffer(Pass):
         # what a ray meets depends on cut-outs and sides (alpha masks, single-sided materials)
         d = scene.data
         return {"camera": d["camera"], "objects": d["objects"], "materials": list(d["materials"]),
-                "cut": surface_cuts(scene), "lightmap": "lightmap" in (d["effects"]["diffuse"], d["effects"]["specular"])}
+                "cut": surface_cuts(scene),
+                "lightmap": "lightmap" in (d["effects"]["diffuse"], d["effects"]["specular"])}
 
     def setup(self, ctx):
         return lightmap.uv_args(ctx.rt, ctx.loaded.get("lightmap") if lightmap.reads(ctx.plan.effects) else None,

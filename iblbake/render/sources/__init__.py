@@ -11,6 +11,7 @@ from iblbake.render.sources.reflection_probes import ReflectionProbes
 from iblbake.render.sources.sh import SphericalHarmonics
 from iblbake.render.sources.ssr import ScreenSpaceSplit
 
-SOURCES = (SphericalHarmonics(), DirectionalBasis(), IrradianceProbes(), Lightmap(), ImportanceSampled(), SplitSum(), Lobe(), BasisSpecular(), ProbeSpecular(), LightmapSpecular(),
+SOURCES = (SphericalHarmonics(), DirectionalBasis(), IrradianceProbes(), Lightmap(), ImportanceSampled(), SplitSum(),
+           Lobe(), BasisSpecular(), ProbeSpecular(), LightmapSpecular(),
            ReflectionProbes(),
            ScreenSpaceSplit())
