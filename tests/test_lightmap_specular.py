@@ -103,6 +103,7 @@ def test_kernel_matches_twin(tmp_path, sky, basis):
     assert lm["specular"].shape == lm[basis].shape and (lm["specular"] >= 0).all()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("basis", LOBED)
 def test_uniform_sky_reads_the_dfg_scale(tmp_path, basis):
     """A rough metal sphere alone under a uniform sky: the lobe reads the sky's radiance, so each
