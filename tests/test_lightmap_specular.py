@@ -142,6 +142,22 @@ def test_second_set_only_when_asked(tmp_path, sky):
                    for k in d)
 
 
+def test_realtime_ladder_studies_the_lobe_where_the_basis_carries_one(tmp_path, sky):
+    """`--ladder realtime`: a specular rung `lightmap lobe` where the scene's lightmap basis carries a
+    lobe, none for one without (L1 SH) or without a lightmap section."""
+    from iblbake.render.plan import effect_modes
+    from iblbake.study import ladder
+
+    def lobe_rungs(d):
+        sc = load_scene(tmp_path, "l", d)
+        return [(r.term, r.values) for r in ladder.realtime_ladder(sc, effect_modes(sc)) if r.label == "lightmap lobe"]
+    assert lobe_rungs(doc(sky, "sg")) == [("specular", [("effects.specular", "lightmap"), ("effects.ao", "off")])]
+    assert lobe_rungs(doc(sky, "sh_l1", specular="prefiltered")) == []
+    bare = doc(sky, "sg", specular="prefiltered", diffuse="sh")
+    del bare["lightmap"]
+    assert lobe_rungs(bare) == []
+
+
 def test_bad_input_one_line(tmp_path, sky):
     """`specular: lightmap` of a basis without a lobe, without a lightmap section, beside a distant
     basis's diffuse: each a one-line InputError naming the keys, from the API and the CLI (exit 1,
