@@ -18,7 +18,11 @@
  *                         PROBE_BASES pack), evaluated by its header's basis_irradiance
  *                         (kernels/bases.h, BASIS_SPACE __global)
  * read bilinearly at UV1 (texel centres at half-integers, clamped at the atlas' edges): each of the
- * four texels' irradiance at the shading normal (clamped at 0), blended. */
+ * four texels' irradiance at the shading normal (clamped at 0), blended.
+ *   LIGHTMAP_SPECULAR     (`specular: lightmap`) lm_spec: LM_SPEC_ROWS float4 rows a texel, the
+ *                         basis's second set fitted for the radiance, packed as LIGHTMAP_BASIS's
+ *                         block; lightmap_specular reads the radiance along the warped lobe from it
+ *                         (kernels/bases.h basis_specular_weights), bilinearly as above. */
 #ifndef IBLBAKE_LIGHTMAP_H
 #define IBLBAKE_LIGHTMAP_H
 #include "common.h"
@@ -130,21 +134,47 @@ IBL_INLINE float3 lightmap_texel(__global const float4 *block, float3 n)
 #endif
 }
 
-/* The irradiance at UV1 uv (texel units) and shading normal n: the four texels around uv (centres
- * at half-integers, clamped at the edges), each evaluated at n, blended bilinearly. */
-IBL_INLINE float3 lightmap_irradiance(float2 uv, float3 n, LIGHTMAP_PARAMS)
+/* The four texels around UV1 uv (texel units; centres at half-integers, clamped at the edges):
+ * their indices in t and bilinear weights in w, in the order (x0 y0) (x1 y0) (x0 y1) (x1 y1). */
+IBL_INLINE void lightmap_taps(float2 uv, const int lm_width, const int lm_height, int *t, float *w)
 {
     const float x = uv.x - 0.5f, y = uv.y - 0.5f;
     const float fx0 = floor(x), fy0 = floor(y);
     const float fx = x - fx0, fy = y - fy0;
     const int x0 = clamp((int)fx0, 0, lm_width - 1), x1 = clamp((int)fx0 + 1, 0, lm_width - 1);
     const int y0 = clamp((int)fy0, 0, lm_height - 1), y1 = clamp((int)fy0 + 1, 0, lm_height - 1);
-    const float3 a = lightmap_texel(lm_atlas + LM_ROWS * (y0 * lm_width + x0), n);
-    const float3 b = lightmap_texel(lm_atlas + LM_ROWS * (y0 * lm_width + x1), n);
-    const float3 c = lightmap_texel(lm_atlas + LM_ROWS * (y1 * lm_width + x0), n);
-    const float3 d = lightmap_texel(lm_atlas + LM_ROWS * (y1 * lm_width + x1), n);
-    return (1.0f - fy) * ((1.0f - fx) * a + fx * b) + fy * ((1.0f - fx) * c + fx * d);
+    t[0] = y0 * lm_width + x0; t[1] = y0 * lm_width + x1; t[2] = y1 * lm_width + x0; t[3] = y1 * lm_width + x1;
+    w[0] = (1.0f - fy) * (1.0f - fx); w[1] = (1.0f - fy) * fx; w[2] = fy * (1.0f - fx); w[3] = fy * fx;
 }
+
+/* The irradiance at UV1 uv (texel units) and shading normal n: the four texels around uv, each
+ * evaluated at n, blended bilinearly. */
+IBL_INLINE float3 lightmap_irradiance(float2 uv, float3 n, LIGHTMAP_PARAMS)
+{
+    int t[4];
+    float w[4];
+    lightmap_taps(uv, lm_width, lm_height, t, w);
+    float3 e = (float3)(0.0f);
+    for (int k = 0; k < 4; ++k) e += w[k] * lightmap_texel(lm_atlas + LM_ROWS * t[k], n);
+    return e;
+}
+
+#if defined(LIGHTMAP_SPECULAR) && defined(HAS_BASIS_SPECULAR)
+/* The radiance along the warped GGX lobe about d (world frame) of sharpness lam_w at UV1 uv: the
+ * four texels' weighted sums (clamped at 0, kernels/bases.h basis_weighted), blended bilinearly.
+ * The weights once: every texel's block has the same axes and sharpness. */
+IBL_INLINE float3 lightmap_specular(float2 uv, float3 d, float lam_w, __global const float *basis_table,
+                                    __global const float4 *lm_spec, const int lm_width, const int lm_height)
+{
+    int t[4];
+    float w[4], s[BASIS_SPECULAR_ROWS];
+    lightmap_taps(uv, lm_width, lm_height, t, w);
+    basis_specular_weights(lm_spec + LM_SPEC_ROWS * t[0], basis_table, d, lam_w, s);
+    float3 li = (float3)(0.0f);
+    for (int k = 0; k < 4; ++k) li += w[k] * basis_weighted(lm_spec + LM_SPEC_ROWS * t[k], s);
+    return li;
+}
+#endif
 
 #endif
 #endif

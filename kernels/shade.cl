@@ -10,7 +10,9 @@
  *                 (DOMINANT_DIRECTION; HAS_REFLECTION_PROBES: the local probes' captures where they
  *                 reach, kernels/reflection_probes.h) or SPECULAR_LOBE or SPECULAR_BASIS (the split sum
  *                 with the frame's basis's basis_specular_radiance, kernels/bases.h) or SPECULAR_PROBES
- *                 (the same from the irradiance probes' basis, kernels/probes.h probes_specular) or off
+ *                 (the same from the irradiance probes' basis, kernels/probes.h probes_specular) or
+ *                 SPECULAR_LIGHTMAP (the same from the lightmap's second set, kernels/lightmap.h
+ *                 lightmap_specular; the distant chain on what has none; lm_stats[2], [3]) or off
  *   HAS_SSR       (prefiltered) the reflected environment, its weight and radiance, into ssr_env, which
  *                 the ssr pass replaces where its rays meet the frame (kernels/ssr.cl)
  *   HAS_EMISSIVE  emission
@@ -57,7 +59,8 @@ __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
                     CHAIN_PARAMS, __global const float2 *dfg, const int dfg_size,
                     LOBE_PARAMS, __global const float *ao_buf, __global const float4 *spec_sums, PROBE_PARAMS,
                     RPROBE_PARAMS, __global float4 *ssr_env, __global int *probe_stats,
-                    __global const float4 *gb_lm, LIGHTMAP_PARAMS, __global int *lm_stats, __global float4 *radiance)
+                    __global const float4 *gb_lm, LIGHTMAP_PARAMS, __global const float4 *lm_spec,
+                    __global int *lm_stats, __global float4 *radiance)
 {
     const int gid = get_global_id(0);
     if (gid >= n) return;
@@ -143,6 +146,23 @@ __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
         color += spec_occ * split_sum_albedo(dfg, dfg_size, mt, nov)
                  * probes_specular(gb_pos[gid].xyz, nrm, v, d, basis_warp_sharpness(mt.alpha, nov), sky, basis_table,
                                    PROBE_ARGS, probe_stats);
+    }
+#elif SPECULAR_MODE == SPECULAR_LIGHTMAP && defined(LIGHTMAP_SPECULAR) && defined(HAS_BASIS_SPECULAR)
+    /* the split sum with the lightmap's radiance along the warped lobe (world frame; its radiance
+     * holds the panorama's intensity), the distant chain's on what has none */
+    {
+        const float4 lm = gb_lm[gid];
+        float3 li;
+        if (lm.z > 0.0f) {
+            li = lightmap_specular(lm.xy, dominant_direction(nrm, 2.0f * dot(nrm, v) * nrm - v, mt.alpha),
+                                   basis_warp_sharpness(mt.alpha, nov), basis_table, lm_spec, lm_width, lm_height);
+            atomic_inc(&lm_stats[2]);
+        } else {
+            li = env_scale * split_sum_radiance(CHAIN_ARGS, split_sum_direction(nrm, v, mt.alpha), env_rot,
+                                                mt.roughness);
+            atomic_inc(&lm_stats[3]);
+        }
+        color += spec_occ * split_sum_albedo(dfg, dfg_size, mt, nov) * li;
     }
 #endif
 #ifdef HAS_OCCLUSION_MAP

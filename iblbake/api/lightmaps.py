@@ -46,7 +46,8 @@ class Lightmap:
     def files(self) -> list:
         """The names write() writes, lightmap.json last."""
         from iblbake.render.lightmaps import export
-        return export.file_names(export.held(self.baked), self.scene.data["lightmap"])
+        return export.file_names(export.held(self.baked), self.scene.data["lightmap"],
+                                 self.baked.get("specular_options"))
 
 
 def declared(sc) -> bool:
@@ -63,6 +64,7 @@ def bake_lightmap(scene, device: str | None = None, *, cache=None, warn=None, pr
     from iblbake.render import Bakes
     from iblbake.render.lightmaps import export, store
     from iblbake.render.units import Job
+    from iblbake.render.units import Lightmap as UnitLightmap
 
     _names(names)
     _device(device)
@@ -78,7 +80,7 @@ def bake_lightmap(scene, device: str | None = None, *, cache=None, warn=None, pr
     bakes.runtime = rt
     job = Job(sc, rt, bakes, warn or (lambda _m: None), progress)
     with _on_device(rt):
-        lm, cached = store.baked(job, progress=progress)
+        lm, cached = store.baked(job, UnitLightmap.settings(job), progress=progress)   # the frame's: the lobe's set
     atlases = {b: lm[b] for b in export.held(lm)}
     return Lightmap(atlases, lm["valid"], lm["layout"].width, lm["layout"].height, lm["report"], cached,
                     rt.device_label, sc, lm)

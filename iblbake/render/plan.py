@@ -27,13 +27,13 @@ REMOVED_PATHS = ("effects.reference.paths is removed and changes nothing: every 
 # The modes that approximate image-based light (runtime and baked estimates): AO occludes them,
 # the study's AO rungs apply to them. The reference traces true visibility instead.
 APPROXIMATE_MODES = {"diffuse": ("sh", "probes", "lightmap") + bases.DIFFUSE,
-                     "specular": ("importance", "prefiltered", "lobe", "probes") + bases.SPECULAR}
+                     "specular": ("importance", "prefiltered", "lobe", "probes", "lightmap") + bases.SPECULAR}
 
 
 @dataclass
 class Effects:
     diffuse: str          # off | sh | probes | lightmap | reference | a basis of core/bases (DIFFUSE)
-    specular: str         # off | importance | prefiltered | lobe | probes | reference | a basis (SPECULAR)
+    specular: str         # off | importance | prefiltered | lobe | probes | lightmap | reference | a basis (SPECULAR)
     background: str       # hide | show | color | blur
     emissive: bool
     notes: list = field(default_factory=list)
@@ -81,7 +81,7 @@ def effect_modes(scene: Scene) -> Effects:
     bounces = reference_bounces(scene, diffuse, specular, notes)
     if "paths" in (((scene.raw or {}).get("effects") or {}).get("reference") or {}):
         notes.append(REMOVED_PATHS)
-    if "lightmap" in (scene.raw or {}) and diffuse != "lightmap":
+    if "lightmap" in (scene.raw or {}) and "lightmap" not in (diffuse, specular):
         notes.append(UNREAD_LIGHTMAP.format(diffuse=diffuse))
     return Effects(diffuse, specular, background, emissive, notes, bounces)
 

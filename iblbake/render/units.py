@@ -551,8 +551,10 @@ class Lightmap(Unit):
     @staticmethod
     def settings(job) -> dict:
         """The section's bake settings, `basis` included: the bake fits the texels to it (its key
-        holds that basis' options only, lightmaps/store.py)."""
-        return job.scene.data["lightmap"]
+        holds that basis' options only, lightmaps/store.py); `specular` where the frame reads the
+        lobe from it (`effects.specular: lightmap`: a second set, in the key only then)."""
+        s = job.scene.data["lightmap"]
+        return {**s, "specular": True} if job.scene.data["effects"]["specular"] == "lightmap" else s
 
     def key(self, job):
         from iblbake.render.lightmaps import store

@@ -13,7 +13,7 @@ from iblbake.core.sampling import ENV_GUIDE_BINS
 
 DIFFUSE_MODES = {"off": 0, "sh": 1, "reference": 2, "probes": 3, "basis": 4, "lightmap": 5}   # basis: core/bases DIFFUSE
 SPECULAR_MODES = {"off": 0, "importance": 1, "prefiltered": 2, "reference": 3, "lobe": 4, "basis": 5,   # basis: core/bases SPECULAR
-                  "probes": 6}
+                  "probes": 6, "lightmap": 7}
 BACKGROUND_MODES = {"hide": 0, "show": 1, "color": 2, "blur": 3}
 TONEMAP_IDS = {"aces": 0, "reinhard": 1, "hable": 2, "pbr_neutral": 3, "linear": 4}
 LIGHT_KINDS = {"directional": 0, "point": 1, "spot": 2}

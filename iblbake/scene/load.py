@@ -284,6 +284,7 @@ def _validated(data, lines, source, folder, overrides, outputs, values, origin, 
     _resolve_reflection_probes(v, out["reflection_probes"])
     _resolve_probes(v, out["probes"])
     _resolve_basis_specular(v, out["effects"], out["probes"])
+    _resolve_lightmap_specular(v, out, raw)
     _resolve_lightmap(v, out, raw)
     _resolve_specular_fits(out, raw)
     writes = _resolve_outputs(v, out["output"], folder, outputs)
@@ -525,6 +526,33 @@ def _resolve_lightmap(v: "_Validator", out: dict, raw: dict) -> None:
     if coeffs > fx["sh_bands"] ** 2:
         v.fail("effects.sh_bands", f"{fx['sh_bands']} evaluates fewer SH coefficients than lightmap.basis {name} "
                                    f"holds ({coeffs}); give {math.isqrt(coeffs)} or more")
+
+
+def _resolve_lightmap_specular(v: "_Validator", out: dict, raw: dict) -> None:
+    """`effects.specular: lightmap` reads the radiance along the lobe from the scene's lightmap (its
+    section baked), of a basis that carries a lobe, beside no other directional basis (the shade
+    pass compiles one basis a frame: kernels/bases.h): not a distant one, nor probes storing another."""
+    from iblbake.core import bases
+    from iblbake.core.bases.probes import PROBE_BASES
+    fx = out["effects"]
+    if fx["specular"] != "lightmap":
+        return
+    if "lightmap" not in raw:
+        v.fail("effects.specular", "lightmap reads the lobe from the scene's lightmap: section, and it has none; add "
+                                   "one (`lightmap: {basis: sg}`; docs/manual.md 'Lightmaps') or give another "
+                                   "specular mode")
+    lobed = [n for n, b in PROBE_BASES.items() if b.lightmap and b.specular]
+    name = out["lightmap"]["basis"]
+    if name not in lobed:
+        v.fail("effects.specular", f"lightmap reads the radiance along the lobe from the lightmap's basis, and "
+                                   f"lightmap.basis {name} carries no lobe: give lightmap.basis {' or '.join(lobed)}, "
+                                   "or effects.specular prefiltered")
+    mine, stored = PROBE_BASES[name], PROBE_BASES[out["probes"]["irradiance"]]
+    if fx["diffuse"] in bases.DIFFUSE or (fx["diffuse"] == "probes" and stored.directional and (
+            stored is not mine or mine.options(out["lightmap"]) != stored.options(out["probes"]))):
+        v.fail("effects.specular", f"lightmap (lightmap.basis {name}) beside effects.diffuse {fx['diffuse']} of "
+                                   "another directional basis: a frame lights from one; give effects.diffuse "
+                                   "lightmap, sh, off (or probes storing the lightmap's basis and options)")
 
 
 def _resolve_specular_fits(out: dict, raw: dict) -> None:

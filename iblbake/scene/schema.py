@@ -551,7 +551,8 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "sh_window": Enum(("none", "hann", "lanczos"), "none", doc="SH ringing window"),
         **{k: Enum(choices, default, doc=doc) for n in bases.DIFFUSE
            for k, (choices, default, doc) in bases.BASES[n].OPTIONS.items()},
-        "specular": Enum(("importance", "prefiltered", "lobe") + bases.SPECULAR + ("probes", "reference", "off"),
+        "specular": Enum(("importance", "prefiltered", "lobe") + bases.SPECULAR + ("probes", "lightmap", "reference",
+                                                                                "off"),
                          "prefiltered",
                          doc="specular IBL: runtime GGX importance sampling (Colbert and Krivanek 2007), split sum, "
                              "lobe (K visible-normal samples reading the prefiltered chain), a directional basis ("
@@ -560,8 +561,10 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                                "options the effects' keys, the same basis as a basis diffuse; docs/conventions.md "
                                "'Directional bases'), the irradiance probes' basis (`probes`: the same from the probes "
                                "around a point, probes.irradiance one of "
-                             + ", ".join(bases.SPECULAR) + "; the distant chain outside them), Monte Carlo reference, "
-                               "none"),
+                             + ", ".join(bases.SPECULAR) + "; the distant chain outside them), the lightmap's "
+                               "(`lightmap`: the same from a second set of the texels' coefficients fitted for the "
+                               "radiance, beside `diffuse: lightmap` with lightmap.basis one of " + ", ".join(bases.SPECULAR)
+                             + "; the distant chain on what has none), Monte Carlo reference, none"),
         "samples": Num(40, 1, 65536, integer=True, doc="importance: GGX samples per pixel"),
         "mip_bias": Num(1.0, -16.0, 16.0, doc="importance: added to each sample's mip level (Krivanek and "
                                               "Colbert: 1, closer to the reference; 0: none)"),

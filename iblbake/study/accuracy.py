@@ -403,8 +403,9 @@ def lighting_bytes(sc, term: str, bakes: list) -> int | None:
         return PROBE_BASES[p["irradiance"]].stored_bytes(p, 2)
     if mode in ("prefiltered", "lobe"):
         return next((b.get("fp16_bytes") for b in bakes if b["name"] == "prefiltered"), None)
-    if mode == "lightmap":              # the atlases of its basis (render/lightmaps bake.bytes_of)
-        return next((b["bytes"][b["basis"]] for b in bakes if b["name"] == "lightmap"), None)
+    if mode == "lightmap":              # the atlases of its basis, or of its set for the lobe (bake.bytes_of)
+        return next((b["bytes"]["specular" if term == "specular" else b["basis"]] for b in bakes
+                     if b["name"] == "lightmap"), None)
     return None
 
 

@@ -132,7 +132,8 @@ def realtime_ladder(sc, fx) -> list:
     corpus of docs/benchmarks.md): diffuse SH, SH with GTAO, irradiance probes (octahedral, L2 SH),
     the scene's lightmap section as it is (where it has one);
     specular importance N=64, the split sum with the distant panorama alone, the lobe K=4, the
-    split sum with SSR, and with the scene's reflection probes, with and without SSR."""
+    split sum with SSR, and with the scene's reflection probes, with and without SSR; the lightmap's
+    lobe (`specular: lightmap`) where its basis carries one."""
     rungs = []
     if fx.diffuse != "off":
         rungs += [Rung("diffuse", "SH", [("effects.diffuse", "sh"), ("effects.ao", "off")]),
@@ -157,6 +158,9 @@ def realtime_ladder(sc, fx) -> list:
                       Rung("specular", "reflection probes + SSR", local + [("effects.ssr", "on")]),
                       Rung("specular", "reflection probes + SSR over them", local + [
                           ("effects.ssr", "on"), ("effects.ssr_settings.defer_to_probes", False)])]
+        from iblbake.core.bases.probes import PROBE_BASES
+        if lightmapped(sc) and getattr(PROBE_BASES.get(sc.data["lightmap"]["basis"]), "specular", False):
+            rungs.append(Rung("specular", "lightmap lobe", [("effects.specular", "lightmap"), ("effects.ao", "off")]))
     return rungs
 
 

@@ -9,7 +9,9 @@ moved past a solid's back face its tangent rays meet where the move lands on tha
 lightmap_nudge), whole texels per launch. Per texel, from the same rays (w each ray's share of the
 hemisphere): its irradiance E(n) = sum w L cos (the
 non-directional lightmap, kept always) and its coefficients in the scene's `lightmap.basis`
-(bases.py: L1 SH, or any coefficient basis of the probes' registry fitted by its own code).
+(bases.py: L1 SH, or any coefficient basis of the probes' registry fitted by its own code), and
+where the frame reads `specular: lightmap` a second set fitted for the radiance (bases.py
+project_specular: the lobe's).
 A texel more than REJECT of whose rays meet the inside of a solid starts inside geometry: it is
 dropped and dilated over (BakingLab's rejection). Dilation: every empty texel takes the mean of its
 valid 8-neighbours, DILATE passes (across chart seams and the padding)."""
@@ -143,12 +145,13 @@ def light_rays(records, points, normals, texel0: np.ndarray, seed: int):
 class LightmapTexels(Source):
     """The texels' rays (lightmap_trace.cl through a Tracer's scene, panorama and lights), whole
     texels per launch; kept per texel: E (k, 3), the coefficients of `basis` (bases.py) with its
-    options (k, floats, 3) and its share of rays that met a solid's inside (k,). progress(the
+    options (k, floats, 3) and its share of rays that met a solid's inside (k,); with `specular`,
+    the basis's second set fitted for the radiance (bases.project_specular) in .spec. progress(the
     fraction traced)."""
     program, function = PROGRAM, "lightmap_trace"
 
     def __init__(self, tracer, start, normals, samples: int, seed: int, progress=None, basis: str = "sh_l1",
-                 opts: dict | None = None):
+                 opts: dict | None = None, specular: bool = False):
         self.tracer, self.rt, self.samples, self.seed, self.progress = tracer, tracer.rt, samples, seed, progress
         self.basis, self.opts = basis, opts or {}
         self.normals, self.n, self.start = normals, len(start), np.asarray(start, np.float64)
@@ -163,6 +166,8 @@ class LightmapTexels(Source):
         self.irradiance = np.zeros((self.n, 3))
         self.coeffs = np.zeros((self.n, bases.floats(basis, self.opts), 3))
         self.inside = np.zeros(self.n)
+        self.spec = np.zeros((self.n, bases.floats(basis, bases.specular_options(basis, self.opts)), 3)) \
+            if specular else None
         self.dirs = {}
 
     def launch(self, global_size, function, **args):
@@ -197,6 +202,9 @@ class LightmapTexels(Source):
         self.irradiance[first:first + count], self.coeffs[first:first + count], self.inside[first:first + count] = \
             project(radiance, out[..., 3], np.concatenate([d, ld], 1), self.normals[first:first + count], self.basis,
                     self.opts, w, self.uniform)
+        if self.spec is not None:
+            self.spec[first:first + count] = bases.project_specular(
+                self.basis, radiance, np.concatenate([d, ld], 1), self.normals[first:first + count], self.opts, w)
         if self.progress:
             self.progress((first + count) / self.n)
         return False
@@ -354,7 +362,9 @@ def check_sizes(sc, densities: dict) -> None:
 def bake(job, settings: dict, progress=None) -> dict:
     """The scene's lightmap (settings: the scene's lightmap section): the layout, the atlases
     {'irradiance': (h, w, 3), BASIS: (h, w, floats, 3), 'valid': (h, w) bool}, BASIS the section's
-    `basis` (bases.py) under 'basis' with its options under 'options', and a report."""
+    `basis` (bases.py) under 'basis' with its options under 'options', and a report; with settings'
+    `specular` (true where the frame reads `specular: lightmap`) the basis's second set fitted for
+    the radiance, 'specular' (h, w, floats, 3), with its options under 'specular_options'."""
     from iblbake.render.paths.tracer import Tracer
 
     t0 = time.perf_counter()
@@ -371,7 +381,11 @@ def bake(job, settings: dict, progress=None) -> dict:
     tracer = Tracer(job, {"bounces": settings["bounces"], "seed": settings["seed"]})
     start, moved = nudge(tracer, tx, inset(tx, lay.corners, 1.0 / density), 1.0 / density)
     samples = math.isqrt(settings["samples"]) ** 2          # whole strata
-    texels = LightmapTexels(tracer, start, tx.normal, samples, settings["seed"], progress, basis, opts)
+    specular = bool(settings.get("specular"))      # `effects.specular: lightmap` (units.py Lightmap.settings)
+    if specular and basis not in bases.LOBED:
+        raise InputError(f"lightmap.basis: {basis} carries no specular lobe; give one of {', '.join(bases.LOBED)} "
+                         "for effects.specular: lightmap")
+    texels = LightmapTexels(tracer, start, tx.normal, samples, settings["seed"], progress, basis, opts, specular)
     describe(progress, f"{len(tx.index):,} lightmap texels x {samples} rays = {len(tx.index) * samples:,} paths "
                        f"({lay.width}x{lay.height} atlas, {density:g} texels a unit)")
     e, coeffs, inside = trace(texels)
@@ -385,11 +399,18 @@ def bake(job, settings: dict, progress=None) -> dict:
     atlas[tx.index] = coeffs
     irr, filled = dilate(irr.reshape(h, w, 3), valid.reshape(h, w))
     atlas, _ = dilate(atlas.reshape(h, w, *coeffs.shape[1:]), valid.reshape(h, w))
+    spec = {}
+    if specular:
+        sp = np.zeros((h * w,) + texels.spec.shape[1:])
+        sp[tx.index] = texels.spec
+        spec = {"specular": dilate(sp.reshape(h, w, *texels.spec.shape[1:]), valid.reshape(h, w))[0],
+                "specular_options": bases.specular_options(basis, opts)}
     report = {"width": w, "height": h, "texels": len(tx.index), "texels_per_unit": density,
               "samples": samples, "importance_rays": texels.extra, "rays_traced": tracer.rays_traced, "moved": moved,
               "rejected_inside": int((~ok).sum()), "layout_s": round(t_layout, 4),
-              "bytes": {b: bytes_of(lay, b, opts) for b in ("irradiance", basis)},
+              "bytes": {**{b: bytes_of(lay, b, opts) for b in ("irradiance", basis)},
+                        **({"specular": bytes_of(lay, basis, opts)} if specular else {})},
               "uv_sources": {str(k): v for k, v in lay.source.items()},
               "seconds": round(time.perf_counter() - t0, 4)}
     return {"layout": lay, "texels": tx, "irradiance": irr, basis: atlas if basis != "irradiance" else irr,
-            "basis": basis, "options": opts, "valid": filled, "report": report}
+            "basis": basis, "options": opts, "valid": filled, "report": report, **spec}

@@ -21,6 +21,9 @@ mix of uniform and panorama-importance rays, render/lightmaps/bake.py texel_rays
               each ray's mirror image through the tangent plane with radiance 0, so the rays share
               the sphere equally as the probes' fits expect (BakingLab's SH lightmaps integrate
               the lower half as zero)
+A basis that carries a specular lobe (LOBED: sg, ambient dice) keeps, where the frame reads
+`specular: lightmap`, a second set for it (project_specular): its own fit of the radiance with its
+SPECULAR_DEFAULTS (NNLS), the lower hemisphere the upper's mirror.
 docs/manual.md 'Lightmaps' has each basis's error at normals tilted off the texel's."""
 
 from __future__ import annotations
@@ -35,6 +38,7 @@ from iblbake.errors import InputError
 from iblbake.scene.schema import LIGHTMAP_BASES as NAMES
 
 OWN = NAMES[:2]         # irradiance, sh_l1: this module's; the rest the registry's
+LOBED = tuple(n for n in NAMES if n in PROBE_BASES and PROBE_BASES[n].specular)   # a second set for the lobe
 CHUNK = 256             # texels projected at once (the registry's fits hold texels x 2 samples x floats)
 NORMALS = 128           # normals over a texel's hemisphere its irradiance is fitted at (hemisphere_fitted)
 
@@ -62,9 +66,7 @@ def project(name: str, radiance, dirs, normals, opts: dict, weights=None):
     (k, s, 3) along dirs (k, s, 3) over the hemisphere of normals (k, 3), each ray's share of the
     hemisphere in weights (k, s) (solid angle: the sum over rays of w L f estimates the integral of
     L f; None: uniform rays, 2 pi / s each)."""
-    if weights is None:
-        weights = np.full(radiance.shape[:2], 2 * math.pi / radiance.shape[1])
-    radiance = radiance * weights[..., None]          # from here on w L: each fit a sum over rays
+    radiance = _weighted(radiance, weights)          # from here on w L: each fit a sum over rays
     e = np.einsum("ksc,ksx,kx->kc", radiance, dirs, normals)
     if name == "irradiance":
         return e, e[:, None]
@@ -75,15 +77,52 @@ def project(name: str, radiance, dirs, normals, opts: dict, weights=None):
     out = np.empty((len(e), basis.floats(opts), 3))
     for a in range(0, len(e), CHUNK):
         r, d, n = radiance[a:a + CHUNK], dirs[a:a + CHUNK], normals[a:a + CHUNK]
-        if hemi:
-            out[a:a + CHUNK] = _hemisphere_fit(basis, r, d, n, opts)
-            continue
-        mirror = d - 2 * np.einsum("ksx,kx->ks", d, n)[..., None] * n[:, None]
-        # the registry's fits take moments 4 pi / R sum L f over R = 2 s rays (common.ray_moments)
-        lit = np.concatenate([r, np.zeros_like(r)], 1) * (2 * r.shape[1] / (4 * math.pi))
-        out[a:a + CHUNK] = basis.project_rays(lit, np.ones(lit.shape[:2]), np.ones(len(r), bool),
-                                              np.concatenate([d, mirror], 1), opts)
+        out[a:a + CHUNK] = (_hemisphere_fit if hemi else _black_below)(basis, r, d, n, opts)
     return e, out
+
+
+def specular_options(name: str, opts: dict) -> dict:
+    """The options of the texels' second set, the one the specular lobe reads (`effects.specular:
+    lightmap`): the basis's, fitted for the radiance as its SPECULAR_DEFAULTS say (NNLS: least
+    squares rings negative around a sun, black patches on metals; core/bases/sg.py)."""
+    return {**opts, **getattr(PROBE_BASES[name].m, "SPECULAR_DEFAULTS", {})}
+
+
+def project_specular(name: str, radiance, dirs, normals, opts: dict, weights=None):
+    """The texels' second set (k, floats, 3), for the specular lobe: the basis's fit of the radiance
+    (rays and weights as project's) with specular_options over the sphere, the lower hemisphere the
+    upper one's mirror image (the lobe's tail past the horizon reads the light just above it, not
+    black: a uniform sky is uniform, so read exactly)."""
+    basis, spec = PROBE_BASES[name], specular_options(name, opts)
+    radiance = _weighted(radiance, weights)
+    out = np.empty((len(radiance), basis.floats(spec), 3))
+    for a in range(0, len(radiance), CHUNK):
+        r, d, n = radiance[a:a + CHUNK], dirs[a:a + CHUNK], normals[a:a + CHUNK]
+        out[a:a + CHUNK] = _sphere_fit(basis, r, d, n, spec, r)
+    return out
+
+
+def _weighted(radiance, weights):
+    """w L: each ray's radiance (k, s, 3) times its share of the hemisphere (k, s); None: uniform
+    rays, 2 pi / s each."""
+    if weights is None:
+        weights = np.full(radiance.shape[:2], 2 * math.pi / radiance.shape[1])
+    return radiance * weights[..., None]
+
+
+def _black_below(basis, radiance, dirs, normals, opts):
+    """The basis's own fit of the sphere, the lower hemisphere entering it as black."""
+    return _sphere_fit(basis, radiance, dirs, normals, opts, np.zeros_like(radiance))
+
+
+def _sphere_fit(basis, radiance, dirs, normals, opts, below):
+    """The basis's own fit (project_rays) of the rays (radiance: w L) and their mirror images through
+    the tangent plane, those of `below` (k, s, 3)."""
+    mirror = dirs - 2 * np.einsum("ksx,kx->ks", dirs, normals)[..., None] * normals[:, None]
+    # the registry's fits take moments 4 pi / R sum L f over R = 2 s rays (common.ray_moments)
+    lit = np.concatenate([radiance, below], 1) * (2 * radiance.shape[1] / (4 * math.pi))
+    return basis.project_rays(lit, np.ones(lit.shape[:2]), np.ones(len(radiance), bool),
+                              np.concatenate([dirs, mirror], 1), opts)
 
 
 def hemisphere_fitted(name: str, opts: dict) -> bool:

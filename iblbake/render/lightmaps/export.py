@@ -11,6 +11,10 @@ docs/conventions.md "Lightmaps in files"), every basis the bake holds written th
   lightmap.gltf + lightmap.bin    the static geometry with TEXCOORD_1, its materials and the camera,
                                   the irradiance as lightmap.png named by IBLBAKE_lightmap
   lightmap.png                    the irradiance in 8 bits (what a glTF may hold: E / its scale, gamma 2.2)
+  lightmap_specular_K.exr / .ktx2 where the scene's frame reads `effects.specular: lightmap`: the
+  lightmap_specular.glsl          basis' second set, fitted for the radiance (its coefficient K), and
+                                  lightmapSpecularRadiance(uv1, n, v, roughness), the radiance along
+                                  the warped GGX lobe (the basis' table beside it where it reads one)
 
 A basis' description comes from the probes' registry (core/bases/probes.py PROBE_BASES: its
 title, units, options, layout and GLSL), so a basis the bake adds needs nothing here; the two
@@ -31,6 +35,7 @@ from iblbake.render.probes.glsl import SH_GLSL
 FORMAT, VERSION = "iblbake-lightmap", 1
 EXTENSION = "IBLBAKE_lightmap"          # the glTF extension (docs/conventions.md "Lightmaps in files")
 STEM = "lightmap"
+SPECULAR = "specular"                   # the lobe's set's stem (lightmap_specular_K)
 SH_TERMS = tuple(t.replace("d.", "n.") for t in SH_GLSL)      # sh.h's basis at l <= 2, at the normal n
 SH_LAYOUT = "coefficient k = l (l + 1) + m, real orthonormal SH, z polar axis, no Condon-Shortley phase, world frame"
 
@@ -121,13 +126,52 @@ def atlas_names(name: str, floats: int) -> list:
     return [f"{STEM}_{name}"] if floats == 1 else [f"{STEM}_{name}_{k}" for k in range(floats)]
 
 
-def file_names(bases, settings: dict) -> list:
-    """Every file write() writes for a bake holding `bases`, the manifest last."""
+def file_names(bases, settings: dict, specular: dict | None = None) -> list:
+    """Every file write() writes for a bake holding `bases` (and the lobe's set of options
+    `specular`, where it holds one), the manifest last."""
     names = [f"{STEM}.gltf", f"{STEM}.bin", f"{STEM}.png"]
     for name in bases:
         stems = atlas_names(name, basis(name, settings).floats)
         names += [f"{s}.{x}" for s in stems for x in ("exr", "ktx2")] + [f"{STEM}_{name}.glsl"]
+    if specular is not None:
+        names += specular_files(settings, specular)
     return names + [f"{STEM}.json"]
+
+
+def specular_files(settings: dict, opts: dict) -> list:
+    """The files of the lobe's set (`effects.specular: lightmap`): its atlases, its GLSL, the table
+    its basis' GLSL reads (ambient dice's)."""
+    entry = PROBE_BASES[settings["basis"]]
+    stems = atlas_names(SPECULAR, entry.m.floats(opts))
+    return [f"{s}.{x}" for s in stems for x in ("exr", "ktx2")] + [f"{STEM}_{SPECULAR}.glsl"] + \
+        ([entry.specular_table] if entry.specular_table else [])
+
+
+def specular_glsl(lm: dict, settings: dict) -> str:
+    """lightmap_specular.glsl: lightmapSpecularRadiance(uv1, n, v, roughness) from the lobe's set."""
+    entry, opts = PROBE_BASES[lm["basis"]], lm["specular_options"]
+    m, k = entry.m, entry.m.floats(opts)
+    stems = atlas_names(SPECULAR, k)
+    binds = "\n".join(f"//   lightmapSpecular{i}  {s}.ktx2 (or {s}.exr)" for i, s in enumerate(stems))
+    table = f"\n//   {entry.glsl_table}  {entry.specular_table} (nearest: the function filters it)" \
+        if entry.specular_table else ""
+    uniforms = "\n".join(f"uniform sampler2D lightmapSpecular{i};" for i in range(k))
+    fill = "\n".join(f"    {m.GLSL_COEFFS}[{i}] = texture(lightmapSpecular{i}, uv1).rgb;" for i in range(k))
+    size = f"{lm['layout'].width} x {lm['layout'].height}"
+    return f"""// iblbake lightmap, the specular lobe's set: {size} texels, {entry.title} fitted for the
+// radiance ({m.label(opts)}); lightmap.json holds the conventions. Bind each atlas
+// as a 2D float texture, first (top) row at t = 0, linear filtering, clamped to the edge:
+{binds}{table}
+// specular = (F0 A + F90 B) (the split sum's DFG table at n.v, roughness)
+//            * lightmapSpecularRadiance(uv1, n, v, roughness): n the unit shading normal, v the unit
+// vector towards the viewer (world frame), uv1 the mesh's TEXCOORD_1.
+{uniforms}
+{entry.functions({**settings, **opts}, "the texel's coefficients (lightmapSpecularRadiance)")}
+vec3 lightmapSpecularRadiance(vec2 uv1, vec3 n, vec3 v, float roughness) {{
+{fill}
+    return {m.GLSL_SPECULAR}(n, v, roughness);
+}}
+"""
 
 
 def rgba(coeff, valid) -> np.ndarray:
@@ -172,6 +216,18 @@ def manifest(lm: dict, settings: dict, scale: float, objects=()) -> dict:
         bases[name] = {"title": b.title, "floats": b.floats, "options": b.options, "units": b.units,
                        "layout": b.layout, "irradiance": b.evaluate, "exr": [f"{s}.exr" for s in stems],
                        "ktx2": [f"{s}.ktx2" for s in stems], "glsl": f"{STEM}_{name}.glsl", **b.fields}
+    if "specular" in lm:
+        entry, opts = PROBE_BASES[lm["basis"]], lm["specular_options"]
+        stems = atlas_names(SPECULAR, entry.m.floats(opts))
+        bases[SPECULAR] = {
+            "title": f"{entry.title} for the specular lobe", "basis": lm["basis"], "floats": entry.m.floats(opts),
+            "options": opts, "units": RADIANCE_UNITS.split(";")[0].replace("float32", "fp16"),
+            "layout": f"{entry.m.floats(opts)} coefficient sets, the basis' layout (bases.{lm['basis']}) with these "
+                      "options, fitted to the radiance over the sphere (the lower hemisphere the upper's mirror)",
+            "specular": "(F0 A + F90 B) x the radiance along the warped GGX lobe (the GLSL's "
+                        "lightmapSpecularRadiance(uv1, n, v, roughness))",
+            "exr": [f"{s}.exr" for s in stems], "ktx2": [f"{s}.ktx2" for s in stems],
+            "glsl": f"{STEM}_{SPECULAR}.glsl", **({"table": entry.specular_table} if entry.specular_table else {})}
     return {
         "format": FORMAT, "version": VERSION, "generator": mark(),
         "atlas": {"width": lay.width, "height": lay.height, "texels_per_unit": rep["texels_per_unit"],
@@ -216,8 +272,26 @@ def write(lm: dict, sc, folder: Path, batch) -> dict:
             batch.write_bytes(folder / f"{stem}.ktx2", ktx2.image_bytes(img, "rgba16f", writer=mark(),
                                                                            metadata={"iblbake.basis": name}))
         batch.write_text(folder / f"{STEM}_{name}.glsl", glsl(lm, b))
+    if "specular" in lm:
+        _write_specular(lm, settings, folder, valid, batch)
     scale = gltf_scene.write(lm, sc, folder, STEM, EXTENSION, batch)
     man = manifest(lm, settings, scale, gltf_scene.lightmapped(lm, sc))
     batch.write_text(folder / f"{STEM}.json", json.dumps(man, indent=1, allow_nan=False) + "\n")
     return man
 
+
+
+def _write_specular(lm: dict, settings: dict, folder: Path, valid, batch) -> None:
+    """The lobe's set's atlases, GLSL and table (specular_files) through batch."""
+    from iblbake.io import images, ktx2
+    from iblbake.io.guard import mark
+    entry, opts = PROBE_BASES[lm["basis"]], lm["specular_options"]
+    sets = coefficient_sets(lm, SPECULAR)
+    for k, stem in enumerate(atlas_names(SPECULAR, entry.m.floats(opts))):
+        img = rgba(sets[..., k, :], valid)
+        images.write_exr(folder / f"{stem}.exr", img, half=True, channels=("R", "G", "B", "A"), batch=batch)
+        batch.write_bytes(folder / f"{stem}.ktx2", ktx2.image_bytes(img, "rgba16f", writer=mark(),
+                                                                       metadata={"iblbake.basis": lm["basis"]}))
+    batch.write_text(folder / f"{STEM}_{SPECULAR}.glsl", specular_glsl(lm, settings))
+    if entry.specular_table:
+        images.write_exr(folder / entry.specular_table, entry.table_image(), channels=("R",), batch=batch)

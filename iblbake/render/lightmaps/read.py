@@ -114,6 +114,28 @@ def irradiance(lm: dict, objects, points, normals, basis: str | None = None, opt
     return e, found
 
 
+def specular(lm: dict, objects, points, normals, axes, lam_w):
+    """(the radiance (n, 3) along the warped GGX lobes about world directions axes (n, 3) of
+    sharpness lam_w (n,), found (n,)) at points on objects with shading normals, from the bake's
+    second set for the lobe (lm['specular'], lm['specular_options']; `specular: lightmap`): each of
+    the four texels around the UV1 its basis's weighted sum clamped at 0 (core/bases
+    specular_radiance), blended bilinearly (kernels/lightmap.h lightmap_specular)."""
+    from iblbake.core.bases.probes import PROBE_BASES
+    if "specular" not in lm:
+        raise InputError("lightmap: this lightmap holds no set for the specular lobe; bake it for a frame of "
+                         "effects.specular: lightmap")
+    lay, opts = lm["layout"], lm["specular_options"]
+    uv, found = atlas_uv(lay, objects, points, normals)
+    li = np.zeros((len(points), 3))
+    if found.any():
+        taps, weights = bilinear_taps((lay.height, lay.width), uv[found])
+        s = PROBE_BASES[lm["basis"]].m.specular_weights(axes[found], lam_w[found], opts)        # (m, floats)
+        sets = np.asarray(lm["specular"], np.float64).reshape(lay.height * lay.width, -1, 3)
+        li[found] = sum(weights[:, k, None] * np.maximum(0.0, np.einsum("mf,mfc->mc", s, sets[taps[:, k]]))
+                        for k in range(4))
+    return li, found
+
+
 def hit_objects(gb, arrays):
     """The object index of each sample of a twin G-buffer (render/twin/gbuffer.py), -1 where it misses."""
     from iblbake.scene.layout import PRIM_KINDS

@@ -2,7 +2,8 @@
 Probes): keyed by everything its rays see (units.light_transport: the geometry and materials by their
 files' content, the lights, the panorama by content and its frame), the lightmap settings, the
 camera's position (it picks each two-sided surface's lit side) and the code (this package and its
-kernel). The entry holds the atlases (the irradiance, the basis's coefficients, the valid texels)
+kernel). The entry holds the atlases (the irradiance, the basis's coefficients, the valid texels,
+the basis's second set fitted for the specular lobe where the frame reads one: its key says so)
 and the layout as .npy files (float32; the reading's float64 comes back from them), the basis with
 its options and the bake's report in its manifest; load() checks each (a corrupt entry is baked
 again: bake/cache.py get_checked)."""
@@ -60,7 +61,7 @@ def save(lm: dict, folder: Path) -> list:
     lay = lm["layout"]
     coeffs = np.reshape(lm[lm["basis"]], (lay.height, lay.width, -1, 3))    # `irradiance`: one row a texel
     arrays = {"irradiance": lm["irradiance"], "basis": coeffs, "valid": lm["valid"],
-              **{n: getattr(lay, n) for n in LAYOUT}}
+              **{n: getattr(lay, n) for n in LAYOUT}, **({"specular": lm["specular"]} if "specular" in lm else {})}
     for name, arr in arrays.items():
         np.save(Path(folder) / f"{name}.npy", np.asarray(arr, INT.get(name, np.float32)))
         names.append(f"{name}.npy")
@@ -82,11 +83,12 @@ def _read(folder: Path, name: str, shape: tuple) -> np.ndarray:
     return a
 
 
-def _basis(man: dict) -> tuple:
-    """(basis, options) of a manifest, each a choice of bases.py's."""
+def _basis(man: dict, key: str = "options") -> tuple:
+    """(basis, options) of a manifest, each a choice of bases.py's (`key`: the options of the basis's
+    set, or of its second set for the specular lobe)."""
     from iblbake.core.bases.probes import PROBE_BASES
     from iblbake.render.lightmaps import bases
-    name, opts = man["basis"], man["options"]
+    name, opts = man["basis"], man[key]
     specs = PROBE_BASES[name].option_specs if name in PROBE_BASES else {}
     if name not in bases.NAMES or not isinstance(opts, dict) or set(opts) != set(specs) or \
             any(opts[k] not in specs[k][0] or isinstance(opts[k], bool) for k in specs):
@@ -121,6 +123,7 @@ def load(folder: Path, man: dict) -> dict:
         for n, why in bad.items():
             if why:
                 raise ValueError(f"{n}.npy: {why}")
+        spec = _specular(folder, man, name, h, w)
     except (OSError, EOFError, KeyError, TypeError, ValueError, AttributeError) as e:
         raise IblbakeError(f"{folder}: not a lightmap entry ({' '.join(str(e).split())})") from None
     lay = Layout(w, h, *(a[n].astype(np.float64) for n in ("corners", "normals")), a["objects"],
@@ -128,7 +131,24 @@ def load(folder: Path, man: dict) -> dict:
     coeffs = a["basis"].astype(np.float64)
     return {"layout": lay, "irradiance": a["irradiance"].astype(np.float64),
             name: coeffs if name != "irradiance" else a["irradiance"].astype(np.float64), "basis": name,
-            "options": opts, "valid": a["valid"], "report": report}
+            "options": opts, "valid": a["valid"], "report": report, **spec}
+
+
+def _specular(folder: Path, man: dict, name: str, h: int, w: int) -> dict:
+    """The entry's second set for the specular lobe (specular.npy, its options in the manifest's
+    specular_options; bake.bake), checked as the basis's, where it has one: {} otherwise."""
+    from iblbake.core.bases.probes import PROBE_BASES
+    from iblbake.render.lightmaps import bases
+    if man.get("specular_options") is None:
+        return {}
+    if name not in bases.LOBED:
+        raise ValueError(f"a specular set for basis {name!r}, which carries no lobe")
+    _name, opts = _basis(man, "specular_options")
+    sp = _read(folder, "specular", (h, w, bases.floats(name, opts), 3))
+    why = PROBE_BASES[name].check(sp.reshape(h * w, -1, 3), opts)
+    if why:
+        raise ValueError(f"specular.npy: {why}")
+    return {"specular": sp.astype(np.float64), "specular_options": opts}
 
 
 def baked(job, settings: dict | None = None, progress=None) -> tuple:
@@ -144,6 +164,7 @@ def baked(job, settings: dict | None = None, progress=None) -> tuple:
         rep = lm["report"]
         return {"kind": "lightmap", "files": [{"name": n} for n in save(lm, tmp)], "width": rep["width"],
                 "height": rep["height"], "basis": lm["basis"], "options": lm["options"],
+                **({"specular_options": lm["specular_options"]} if "specular" in lm else {}),
                 "uv_sources": rep["uv_sources"], "report": rep}
 
     lm, manifest, was = cache.get_checked(root, k, build, lambda m: load(root / m["key"], m), warn=job.warn)

@@ -1,5 +1,6 @@
 """G-buffer: the primary hit of every camera sample of the tile (kernels/gbuffer.cl); with
-`diffuse: lightmap`, where each hit lies in the lightmap's atlas (gb_lm, kernels/lightmap.h)."""
+`diffuse: lightmap` (and `specular: lightmap`), where each hit lies in the lightmap's atlas (gb_lm,
+kernels/lightmap.h)."""
 
 from __future__ import annotations
 
@@ -17,20 +18,21 @@ class GBuffer(Pass):
     params = lightmap.UV_PARAMS
 
     def defines(self, scene, fx):
-        return {**geometry_defines(scene), **(lightmap.uv_defines() if fx.diffuse == "lightmap" else {})}
+        return {**geometry_defines(scene), **(lightmap.uv_defines() if lightmap.reads(fx) else {})}
 
     def reads_bakes(self, scene, fx):
-        return ["lightmap"] if fx.diffuse == "lightmap" else []
+        return ["lightmap"] if lightmap.reads(fx) else []
 
     def scene_inputs(self, scene):
         # the materials' names only: hits store material indices, values are resolved later; but
         # what a ray meets depends on cut-outs and sides (alpha masks, single-sided materials)
         d = scene.data
         return {"camera": d["camera"], "objects": d["objects"], "materials": list(d["materials"]),
-                "cut": surface_cuts(scene), "lightmap": d["effects"]["diffuse"] == "lightmap"}
+                "cut": surface_cuts(scene),
+                "lightmap": "lightmap" in (d["effects"]["diffuse"], d["effects"]["specular"])}
 
     def setup(self, ctx):
-        return lightmap.uv_args(ctx.rt, ctx.loaded.get("lightmap") if ctx.plan.effects.diffuse == "lightmap" else None,
+        return lightmap.uv_args(ctx.rt, ctx.loaded.get("lightmap") if lightmap.reads(ctx.plan.effects) else None,
                                 ctx.arrays, ctx.bakes)
 
     def run(self, ctx):

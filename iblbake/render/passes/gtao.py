@@ -82,9 +82,10 @@ class GroundTruthAO(Pass):
         if ctx.tile_index == 0:
             if ctx.tile_count > 1:      # the whole frame's first samples, as the G-buffer traces them
                 from iblbake.render.passes.gbuffer import GBuffer
+                from iblbake.render.sources import lightmap
                 gb = GBuffer()
                 # its lightmap tables, and a frame-sized gb_lm where it writes one (GTAO reads none)
-                lm = {"gb_lm": ctx.rt.empty(16 * w * h)} if ctx.plan.effects.diffuse == "lightmap" else {}
+                lm = {"gb_lm": ctx.rt.empty(16 * w * h)} if lightmap.reads(ctx.plan.effects) else {}
                 ctx.launch(gb, (w * h,), spp=1, pixel0=0, n=w * h, gb_pos=t["ao_pos"], gb_nrm=t["ao_nrm"],
                            gb_dir=t["ao_dir"], **(ctx.args.get(gb.name) or gb.setup(ctx)), **lm)
                 depth.ao_pos, depth.ao_nrm, depth.ao_dir, depth.ao_stride = t["ao_pos"], t["ao_nrm"], t["ao_dir"], 1

@@ -9,6 +9,7 @@ import numpy as np
 
 from iblbake.render.passes.base import Buffer, Counter, Pass, mode_defines
 from iblbake.render.sources import SOURCES
+from iblbake.render.sources.lightmap import reads as reads_lightmap
 
 
 SKY_SAID = 0.1           # the share of a frame's samples with no active probe near (the panorama's SH) said
@@ -34,7 +35,10 @@ class Shade(Pass):
                 Counter("probe_samples", lambda _fx: False),
                 # diffuse lightmap: the samples it lit, and those on surfaces without one (kernels/shade.cl lm_stats)
                 Counter("lightmap_samples", lambda fx: fx.diffuse == "lightmap"),
-                Counter("lightmap_fallback", lambda fx: fx.diffuse == "lightmap"))
+                Counter("lightmap_fallback", lambda fx: fx.diffuse == "lightmap"),
+                # the same of `specular: lightmap` (its fallback the distant chain)
+                Counter("lightmap_specular_samples", lambda fx: fx.specular == "lightmap"),
+                Counter("lightmap_specular_fallback", lambda fx: fx.specular == "lightmap"))
 
     def runs(self, scene, fx):
         return fx.any_approximate or fx.emissive
@@ -77,13 +81,16 @@ class Shade(Pass):
         probes_in = "probes" in (fx.diffuse, fx.specular)
         if probes_in:
             ctx.rt.cl.enqueue_fill_buffer(ctx.rt.queue, ctx.table["probe_stats"], np.int32(0), 0, 20)
-        lightmap = fx.diffuse == "lightmap"
+        lightmap = reads_lightmap(fx)
         if lightmap:
-            ctx.rt.cl.enqueue_fill_buffer(ctx.rt.queue, ctx.table["lm_stats"], np.int32(0), 0, 8)
+            ctx.rt.cl.enqueue_fill_buffer(ctx.rt.queue, ctx.table["lm_stats"], np.int32(0), 0, 16)
         s = self.launch_samples(ctx)
         if lightmap:
-            lit, fallback = ctx.rt.read(ctx.table["lm_stats"], (2,), np.int32).tolist()
-            self.count(ctx, lightmap_samples=lit, lightmap_fallback=fallback)
+            lit, fallback, spec, spec_fallback = ctx.rt.read(ctx.table["lm_stats"], (4,), np.int32).tolist()
+            counts = {"lightmap_samples": lit, "lightmap_fallback": fallback} if fx.diffuse == "lightmap" else {}
+            if fx.specular == "lightmap":
+                counts.update(lightmap_specular_samples=spec, lightmap_specular_fallback=spec_fallback)
+            self.count(ctx, **counts)
         lobe = ctx.plan.effects.specular == "lobe"
         k = ctx.args[self.name]["lobe_samples"] if lobe else 1
         extra = {"samples": k} if lobe else {}

@@ -3,7 +3,10 @@ hit's UV1, which the G-buffer pass finds (passes/gbuffer.py binds uv_tables()); 
 reads the irradiance probes where the scene has a `probes` section, else the panorama's SH, and
 lm_stats counts both. What a texel holds is `lightmap.basis`: the irradiance, L1 SH, or a basis of
 the probes' registry (core/bases/probes.py PROBE_BASES), packed by the registry and evaluated by its
-kernel function (kernels/lightmap.h). Twin: render/lightmaps/read.py."""
+kernel function (kernels/lightmap.h). `specular: lightmap` (LightmapSpecular): the split sum with the
+radiance along the warped GGX lobe from the texels' second set, fitted for the radiance (a basis
+that carries a lobe: sg, ambient dice), the distant chain on what has none, lm_stats[2..3] counting
+both. Twin: render/lightmaps/read.py."""
 
 from __future__ import annotations
 
@@ -15,6 +18,11 @@ from iblbake.render.sources.base import Source
 
 PARAMS = ("lm_atlas", "lm_width", "lm_height")
 UV_PARAMS = ("lm_prims", "lm_tris")
+
+
+def reads(fx) -> bool:
+    """Whether a frame of these effects (plan.Effects) reads the lightmap (its UV1, its atlases)."""
+    return "lightmap" in (fx.diffuse, fx.specular)
 
 
 def fallback_probes(scene) -> bool:
@@ -122,8 +130,9 @@ class Lightmap(Source):
     header = "lightmap.h"
     params = PARAMS
     sections = ("lightmap", "probes")
-    # [0] the samples the lightmap lit, [1] those of surfaces without one (the probes or the panorama's SH)
-    buffers = (Buffer("lm_stats", "int", per="frame", count=2, when="HAS_LIGHTMAP"),)
+    # [0] the samples the lightmap lit, [1] those of surfaces without one (the probes or the panorama's
+    # SH); [2], [3] the same of the specular lobe (LightmapSpecular; the distant chain)
+    buffers = (Buffer("lm_stats", "int", per="frame", count=4, when="HAS_LIGHTMAP"),)
 
     def runs(self, scene, fx):
         return fx.diffuse == "lightmap"
@@ -145,3 +154,54 @@ class Lightmap(Source):
 
     def placeholders(self, rt):
         return {"lm_atlas": rt.to_device(np.zeros((1, 4), np.float32)), "lm_width": 1, "lm_height": 1}
+
+
+class LightmapSpecular(Source):
+    """`specular: lightmap`: the split sum's DFG table times the radiance along the warped GGX lobe
+    read from the texels' second set (the bake's `specular`, fitted for the radiance: NNLS,
+    render/lightmaps/bases.py project_specular), as `specular: probes` reads the probes'; the
+    distant prefiltered chain on what has no lightmap (lm_stats[3]). Binds the lightmap's size
+    itself: a frame of metals has no diffuse term. Kernel: kernels/lightmap.h lightmap_specular."""
+    name = "lightmap_specular"
+    header = "lightmap.h"
+    params = ("lm_spec", "lm_width", "lm_height", "basis_table", "chain", "off", "lw", "lh", "nlev", "dfg",
+              "dfg_size")
+    sections = ("lightmap",)
+
+    def runs(self, scene, fx):
+        return fx.specular == "lightmap"
+
+    def defines(self, scene, fx):
+        settings = scene.data["lightmap"]
+        b, opts = basis_of(settings)
+        spec = specular_options(settings)
+        d = {**uv_defines(), **b.m.defines(spec), "BASIS_SPACE": "__global", "LIGHTMAP_SPECULAR": 1,
+             "LM_SPEC_ROWS": b.rows(spec)}
+        if scene.data["effects"]["prefilter"]["dominant_direction"]:
+            d["DOMINANT_DIRECTION"] = 1
+        return d
+
+    def reads_bakes(self, scene, fx):
+        return ["lightmap", "prefiltered", "dfg"]
+
+    def args(self, ctx):
+        from iblbake.render.sources.basis import table_args
+        from iblbake.render.sources.prefiltered import dfg_args
+        lm, settings = ctx.loaded["lightmap"], ctx.scene.data["lightmap"]
+        b, spec = basis_of(settings)[0], lm["specular_options"]
+        h, w = lm["layout"].height, lm["layout"].width
+        atlas = ctx.bakes.on_device(ctx.rt, (lm["layout"].uv, lm["specular"]),
+                                    lambda: ctx.rt.to_device(b.pack(np.asarray(lm["specular"]).reshape(h * w, -1, 3),
+                                                                    spec)))
+        return {"lm_spec": atlas, "lm_width": w, "lm_height": h, **table_args(ctx.rt, settings["basis"], spec),
+                **ctx.chain(ctx.loaded["prefiltered"]), **dfg_args(ctx.rt, ctx.loaded["dfg"])}
+
+    def placeholders(self, rt):
+        return {"lm_spec": rt.to_device(np.zeros((1, 4), np.float32))}
+
+
+def specular_options(settings: dict) -> dict:
+    """The options of the texels' second set, the lobe's (render/lightmaps/bases.py specular_options)."""
+    from iblbake.render.lightmaps.bases import specular_options as options
+    b, opts = basis_of(settings)
+    return options(b.name, opts)

@@ -114,6 +114,10 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
         li = probe_twin.specular(probes, gb["pos"][hit], n, v, spec, sky)
         ab = dfg_lookup(dfg, nov, rough)
         color += spec_occ * li * (f0 * ab[:, 0:1] + f90 * ab[:, 1:2])
+    elif effects["specular"] == "lightmap":            # kernels/shade.cl SPECULAR_LIGHTMAP
+        li = lightmap_specular(gb, arrays, lightmap[0], n, v, alpha, nov, effects, prefiltered, rot, scale, rough)
+        ab = dfg_lookup(dfg, nov, rough)
+        color += spec_occ * li * (f0 * ab[:, 0:1] + f90 * ab[:, 1:2])
     elif effects["specular"] in bases.SPECULAR:         # kernels/shade.cl SPECULAR_BASIS
         name = effects["specular"]
         li = scale * bases.specular_radiance(name, basis_coeffs, to_env(common.lobe_axis(n, v, alpha), rot),
@@ -144,6 +148,20 @@ def lightmap_irradiance(gb, arrays, lightmap, n, v, probes, sky):
                                                       classification=probes["classification"])
         sky[rest] = wv * np.where((source == probe_twin.SOURCE_NONE)[:, None], sky[rest], pe) + (1 - wv) * sky[rest]
     return np.where(found[:, None], e, sky)
+
+
+def lightmap_specular(gb, arrays, lm, n, v, alpha, nov, effects, prefiltered, rot, scale, rough):
+    """The radiance along the hits' lobes (kernels/shade.cl SPECULAR_LIGHTMAP): the lightmap's second
+    set at their UV1 (read.py specular), the distant chain's on what has none."""
+    from iblbake.render.lightmaps import read
+    hit = gb["hit"]
+    li, found = read.specular(lm, read.hit_objects(gb, arrays)[hit], gb["pos"][hit], n, common.lobe_axis(n, v, alpha),
+                              common.warp_sharpness(alpha, nov))
+    r = 2 * (n * v).sum(1, keepdims=True) * n - v
+    if effects["prefilter"]["dominant_direction"]:
+        r = common.lobe_axis(n, v, alpha)
+    sky = scale * radiance.chain_lookup_twin(prefiltered, to_env(r, rot), rough * (len(prefiltered) - 1))
+    return np.where(found[:, None], li, sky)
 
 
 def specular_occlusion(nov, ao, roughness):
