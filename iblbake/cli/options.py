@@ -22,11 +22,11 @@ def _set_debug(ctx, param, value):
 
 class Console:
     """Where a command's human output goes: notes and warnings on stderr, silenced by --quiet;
-    machine-readable JSON on stdout with --json."""
+    machine-readable JSON on stdout with --json, its `warnings` every warning said (or silenced)."""
 
     def __init__(self, quiet: bool, as_json: bool):
         self.quiet, self.as_json = quiet, as_json
-        self._warned: set = set()
+        self._warned: dict = {}          # each warning once, in the order said
         self._bar = False                # a progress bar holds the terminal's last line
 
     def note(self, text: str):
@@ -35,8 +35,10 @@ class Console:
 
     def warn(self, text: str):
         """Once per message (a sheet's cells read the same panorama)."""
-        if not self.quiet and text not in self._warned:
-            self._warned.add(text)
+        if text in self._warned:
+            return
+        self._warned[text] = None
+        if not self.quiet:
             # on its own line: the bar's line is cleared first and redrawn at its next step
             click.echo(("\r\x1b[2K" if self._bar else "") + f"iblbake: warning: {text}", err=True)
 
@@ -115,7 +117,7 @@ class Console:
 
     def result(self, summary: dict, human: str):
         if self.as_json:
-            click.echo(json_text(summary))
+            click.echo(json_text({**summary, "warnings": list(self._warned)}))
         elif not self.quiet:
             click.echo(human)
 
