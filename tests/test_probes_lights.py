@@ -56,7 +56,8 @@ def test_probes_json_lists_the_lights_the_frame_draws(tmp_path, panoramas, rt):
         d = got["directional"]
         assert got["source"].startswith(f"environment.sun: extract ({k + 1} of 4") and got["shadows"] == "soft"
         assert np.allclose(d["direction"], said["light_direction_world"], atol=1e-6)
-        assert d["illuminance"] == pytest.approx(2 * said["illuminance"], rel=1e-9)
+        assert d["illuminance"] == pytest.approx(said["illuminance"], rel=1e-9)       # the frame's, as said
+        assert d["illuminance"] == pytest.approx(2 * said["illuminance_before_intensity"], rel=1e-9)
         assert np.allclose(d["color"], said["color"], atol=1e-6)
         assert d["angular_diameter"] == pytest.approx(said["angular_diameter_deg"], abs=1e-4)
         assert np.allclose(got["irradiance"], np.multiply(d["color"], d["illuminance"]), rtol=1e-12)

@@ -50,7 +50,7 @@ class Sun:
 
     def to_json(self) -> dict:
         return {"direction": [round(x, 6) for x in self.direction], "color": [round(x, 6) for x in self.color],
-                "illuminance": self.illuminance, "angular_diameter_deg": round(self.angular_diameter, 4),
+                "illuminance": float(self.illuminance), "angular_diameter_deg": round(self.angular_diameter, 4),
                 "texels": self.texels, "energy_fraction": round(self.energy_fraction, 6)}
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import json
 
 import click
 
@@ -79,11 +80,11 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, profi
         for name, defs in e["defines"].items():
             lines.append(f"defines {name}: " + (" ".join(f"{k}={v}" for k, v in defs.items()) or "-"))
         for b in rep["bakes"]:
-            extra = " ".join(f"{k}={v}" for k, v in b.items() if k not in ("name", "seconds", "cached", "entry",
-                                                                             "meshes"))
+            extra = " ".join(f"{k}={_plain(v)}" for k, v in b.items() if k not in ("name", "seconds", "cached",
+                                                                                    "entry", "meshes"))
             lines.append(f"bake  {b['name']:<16} {b['seconds']:8.3f} s  {'hit ' if b['cached'] else 'miss'}  {extra}")
         for p in rep["passes"]:
-            extra = " ".join(f"{k}={v}" for k, v in p.items() if k not in ("name", "seconds"))
+            extra = " ".join(f"{k}={_plain(v)}" for k, v in p.items() if k not in ("name", "seconds"))
             lines.append(f"pass  {p['name']:<16} {p['seconds']:8.3f} s        {extra}")
         for b in rep["kernel_builds"]:
             lines.append(f"build {b['kernel']:<16} {b['seconds']:8.3f} s")
@@ -93,6 +94,14 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, profi
     lines.append(f"{'wrote ' + ', '.join(written) if written else 'rendered'} ({w}x{h}, {_samples(rep)}) "
                  f"in {rep['elapsed_s']:.3f} s on {rep['device']}")
     con.result(summary, "\n".join(lines))
+
+
+def _plain(value) -> str:
+    """A report's value as --report shows it: a dict or list as JSON (numpy's floats plainly,
+    not np.float64(0.93) as their repr reads)."""
+    if isinstance(value, (dict, list, tuple)):
+        return json.dumps(value, default=lambda v: v.item() if hasattr(v, "item") else str(v))
+    return str(value)
 
 
 def profile_lines(pr: dict) -> list:

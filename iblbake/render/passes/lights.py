@@ -79,7 +79,10 @@ class Lights(Pass):
         rays = shadow_rays_per_sample(ctx.scene, ctx.plan.effects, args["frame_lights"])
         extra = {}
         first = len(ctx.scene.data["lights"])     # what was extracted; each light's direction in world space
-        said = [{**s.to_json(), "light_direction_world": [round(x, 6) for x in lt["directional"]["direction"]]}
+        # its illuminance as the frame lights with it (environment.intensity's, as probes.json's lights)
+        said = [{**s.to_json(), "illuminance": float(lt["directional"]["illuminance"]),
+                 "illuminance_before_intensity": s.to_json()["illuminance"],
+                 "light_direction_world": [round(x, 6) for x in lt["directional"]["direction"]]}
                 for s, lt in zip(args["sun"], args["frame_lights"][first:])]
         if said:
             extra["sun"] = said[0]
