@@ -84,6 +84,7 @@ __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
 #elif DIFFUSE_MODE == DIFFUSE_BASIS
     color += diff_occ * diffuse_weight(mt, nov) * env_scale * basis_irradiance(basis_coeffs, to_env(nrm, env_rot));
 #elif DIFFUSE_MODE == DIFFUSE_PROBES
+    atomic_inc(&probe_stats[5]);         /* the samples on geometry: what the fallbacks' shares are of */
     color += diff_occ * diffuse_weight(mt, nov)
              * probes_diffuse(gb_pos[gid].xyz, nrm, v, env_scale * sh_irradiance(sh_coeffs, to_env(nrm, env_rot)),
                               PROBE_ARGS, probe_stats);

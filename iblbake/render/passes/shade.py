@@ -15,9 +15,11 @@ from iblbake.render.sources.lightmap import reads as reads_lightmap
 SKY_SAID = 0.1           # the share of a frame's samples with no active probe near (the panorama's SH) said
 OUTSIDE_SAID = 0.1       # the share of a frame's samples outside the probe volume that is said
 # kernels/shade.cl's probe_stats, in its order: the samples whose cell's probes were all off (the
-# nearest probe's or the panorama's light instead), diffuse then specular, and those outside the volume
+# nearest probe's or the panorama's light instead), diffuse then specular, those outside the volume,
+# and the samples on geometry the diffuse probes shade (the shares said are of these: the
+# background's pixels read no probe)
 PROBE_STATS = ("probe_fallback_nearest", "probe_fallback_sky", "probe_specular_fallback_nearest",
-               "probe_specular_fallback_sky", "probe_outside_volume")
+               "probe_specular_fallback_sky", "probe_outside_volume", "probe_samples")
 
 
 class Shade(Pass):
@@ -32,7 +34,7 @@ class Shade(Pass):
                 Counter("probe_outside_volume", lambda fx: fx.diffuse == "probes"),
                 Counter("probe_specular_fallback_nearest", lambda fx: fx.specular == "probes"),
                 Counter("probe_specular_fallback_sky", lambda fx: fx.specular == "probes"),
-                Counter("probe_samples", lambda _fx: False),
+                Counter("probe_samples", lambda fx: fx.diffuse == "probes"),
                 # diffuse lightmap: the samples it lit, and those on surfaces without one (kernels/shade.cl lm_stats)
                 Counter("lightmap_samples", lambda fx: fx.diffuse == "lightmap"),
                 Counter("lightmap_fallback", lambda fx: fx.diffuse == "lightmap"),
@@ -80,7 +82,7 @@ class Shade(Pass):
         fx = ctx.plan.effects
         probes_in = "probes" in (fx.diffuse, fx.specular)
         if probes_in:
-            ctx.rt.cl.enqueue_fill_buffer(ctx.rt.queue, ctx.table["probe_stats"], np.int32(0), 0, 20)
+            ctx.rt.cl.enqueue_fill_buffer(ctx.rt.queue, ctx.table["probe_stats"], np.int32(0), 0, 4 * len(PROBE_STATS))
         lightmap = reads_lightmap(fx)
         if lightmap:
             ctx.rt.cl.enqueue_fill_buffer(ctx.rt.queue, ctx.table["lm_stats"], np.int32(0), 0, 16)
@@ -95,17 +97,17 @@ class Shade(Pass):
         k = ctx.args[self.name]["lobe_samples"] if lobe else 1
         extra = {"samples": k} if lobe else {}
         if probes_in:                 # the samples whose cell's probes were all off, summed over tiles
-            counts = ctx.rt.read(ctx.table["probe_stats"], (5,), np.int32).tolist()
-            tot = self.count(ctx, **dict(zip(PROBE_STATS, counts)), probe_samples=n)
+            counts = ctx.rt.read(ctx.table["probe_stats"], (len(PROBE_STATS),), np.int32).tolist()
+            tot = self.count(ctx, **dict(zip(PROBE_STATS, counts)))
             last = ctx.tile_index == ctx.tile_count - 1
             if fx.diffuse == "probes":
                 sky, outside, samples = tot["probe_fallback_sky"], tot["probe_outside_volume"], tot["probe_samples"]
                 if last and sky > SKY_SAID * samples:
-                    ctx.warn(f"probes: {100 * sky / samples:.0f}% of the frame's samples found no active probe "
+                    ctx.warn(f"probes: {100 * sky / samples:.0f}% of the samples on geometry found no active probe "
                              "near them and took the panorama's SH (no light between surfaces there); see the "
                              "bake's report (--report: probes off, by which rule) or give more probes.rays")
                 if last and outside > OUTSIDE_SAID * samples:
-                    ctx.warn(f"probes: {100 * outside / samples:.0f}% of the frame's samples lie outside the probe "
+                    ctx.warn(f"probes: {100 * outside / samples:.0f}% of the samples on geometry lie outside the probe "
                              "volume or on its fading edge and take the panorama's SH there; widen probes.min/max "
                              "(or the scene's bounds) to cover what the camera sees")
         return {"mpixel_samples_per_s": round(n * k / max(s, 1e-9) / 1e6, 2), **extra}

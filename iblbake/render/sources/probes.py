@@ -20,8 +20,8 @@ class IrradianceProbes(Source):
     sections = ("probes",)
     # the samples that fell back: [0] to the nearest active probes, [1] to the panorama's SH; [2],
     # [3] the same of the probes' specular (ProbeSpecular); [4] those outside the volume (or on its
-    # fading edge), which take the panorama's SH
-    buffers = (Buffer("probe_stats", "int", per="frame", count=5, when="PROBE_STATS"),)
+    # fading edge), which take the panorama's SH; [5] the samples on geometry the diffuse probes shade
+    buffers = (Buffer("probe_stats", "int", per="frame", count=6, when="PROBE_STATS"),)
 
     def runs(self, scene, fx):
         from iblbake.render.sources.lightmap import fallback_probes
