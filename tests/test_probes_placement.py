@@ -135,7 +135,7 @@ def test_a_probe_moved_beyond_the_bounds_is_off():
 
 def test_most_probes_off_is_said_with_its_rules():
     """Issue 59: `probes.rays: 16` on a small grid left every probe inactive, nothing said."""
-    rep = {"probes": 8, "inactive": 8, "off_by": {"inside_geometry": 0, "no_surface_near": 8,
+    rep = {"probes": 8, "inactive": 8, "off_by": {"still_inside_geometry": 0, "no_surface_near": 8,
                                                   "outside_camera_room": 0, "beyond_bounds": 0}}
     said = probes.placement_warnings(rep)
     assert len(said) == 1 and "8 of the 8" in said[0] and "8 no surface" in said[0] and "probes.rays" in said[0]

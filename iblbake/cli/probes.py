@@ -67,6 +67,7 @@ def probes_command(scene_path, out_dir, overrides, cache_dir, force, device, qui
                "grid": man["grid"], "representation": man["representation"], "states": man["states"],
                "rays_traced": r["rays_traced"], "bake_s": r["seconds"], "relocated": r["relocated"],
                "inside_geometry": r.get("inside_geometry", 0), "outside_camera_room": r.get("outside_camera_room", 0),
+               "off_by": r.get("off_by", {}),
                "lights": len(man["lights"])}
     if removed:
         summary["removed"] = removed

@@ -27,7 +27,7 @@ import time
 
 import numpy as np
 
-from iblbake.errors import IblbakeError
+from iblbake.errors import IblbakeError, InputError
 from iblbake.render.probes.dilate import dilate, dilate_values
 from iblbake.render.probes.files import (FILES, FORMAT, VERSION, data_texture, light_entries, load, manifest,
                                          read_manifest, save)
@@ -47,8 +47,8 @@ __all__ = ["ACTIVE", "AUTO_MAX_PROBES", "BACKFACE_BLEND_LIMIT", "DEFAULT_LONGEST
            "INACTIVE", "INSIDE_WARN", "MAX_ATLAS_SIDE", "MAX_DISTANCE", "MAX_OFFSET", "MAX_PROBES", "OFF_SAID",
            "RELOCATION_PASSES", "SAMPLING_KEYS", "SCALE_RAYS", "SH_GLSL", "SPECULAR_TABLES", "SURFACE_RAYS", "VERSION",
            "Grid", "Tracer", "Volume", "atlas", "auto_step", "bake", "bake_settings", "basis_glsl", "basis_of",
-           "basis_options", "behind_surfaces", "beyond_bounds", "classify", "data_texture", "dilate", "dilate_values",
-           "glsl", "grid_of", "inside_geometry", "light_entries", "load",
+           "basis_options", "behind_surfaces", "beyond_bounds", "box_outside", "classify", "data_texture", "dilate",
+           "dilate_values", "glsl", "grid_of", "inside_geometry", "light_entries", "load",
            "manifest", "off_surfaces", "outside_camera_rooms", "outside_sealed_room", "placement_warnings",
            "probe_bytes", "project", "random_rotation", "ray_directions", "read_manifest", "relocate", "sampled",
            "save", "scaled_grid", "scene_bounds", "spherical_fibonacci", "switch_off", "trace_defines", "volume_dict",
@@ -87,7 +87,9 @@ def switch_off(tracer, grid: Grid, offset, t, dirs, obj, settings: dict, camera)
     live = (states != INACTIVE) & ~outside & ~beyond
     behind = np.zeros(grid.count, bool)
     behind[live] = behind_surfaces(tracer, pos[live], grid.spacing, camera)
-    off_by = {"inside_geometry": int(inside.sum()), "no_surface_near": int(empty.sum()),
+    # still_inside_geometry: off at their last positions; the report's inside_geometry also counts
+    # those relocation moved out (inside at their grid positions)
+    off_by = {"still_inside_geometry": int(inside.sum()), "no_surface_near": int(empty.sum()),
               "outside_camera_room": int((outside & (states != INACTIVE)).sum()), "beyond_bounds": int(beyond.sum()),
               "behind_surfaces": int(behind.sum())}
     return np.where(outside | beyond | behind, INACTIVE, states), off_by, outside
@@ -110,6 +112,11 @@ def bake(job, settings: dict, progress=None) -> dict:
     placement = {}
     if settings["min"] is None and settings["counts"] is None and settings["spacing"] is None:
         grid, placement = scaled_grid(tracer, grid, settings, arrays, camera)      # within the cap: no error
+    from iblbake.render.lightmaps.bake import describe
+    rays = settings["rays"]          # the work's size said up front (a huge grid printed nothing for minutes)
+    describe(progress, f"{grid.count:,} probes x {rays} rays = {grid.count * rays:,} paths "
+                       f"({'x'.join(map(str, grid.counts))} grid, spacing {grid.unit:.4g})")
+    fits(job.scene.source, grid.count, rays)
     if settings["relocation"]:
         start = off_surfaces(tracer, grid.positions(), grid.spacing)
         placement["on_surface"] = int(start.any(1).sum())        # moved off a surface they stood on
@@ -136,8 +143,36 @@ def bake(job, settings: dict, progress=None) -> dict:
               "relocated": int((np.abs(offset).sum(1) > 0).sum()),
               "inside_geometry": int(inside.sum()), "outside_camera_room": int(outside.sum()),
               "inside_objects": {str(k): v for k, v in sorted(objects.items(), key=lambda kv: -kv[1])},
-              "seconds": round(time.perf_counter() - t0, 4)}
+              **box_outside(grid, scene_bounds(arrays)), "seconds": round(time.perf_counter() - t0, 4)}
     return volume_dict(grid, settings, irr, dist, data, report)
+
+
+PATH_BYTES = 20         # host memory a probe's ray takes: the trace's radiance and distance (4 float32), object met
+
+
+def fits(source, count: int, rays: int) -> None:
+    """An InputError before the work where the trace's results would not fit in this process's
+    memory (451,656 probes x 65,536 rays asked 441 GiB and died of a MemoryError after relocation)."""
+    from iblbake.io import memory
+    need, free = count * rays * PATH_BYTES, memory.host_bytes_available()
+    if free is not None and need > free:
+        raise InputError(f"{source}: probes: {count:,} probes x {rays} rays need about {need / 2**30:.3g} GiB of "
+                         f"memory for their results, more than the {max(free, 0) / 2**30:.3g} GiB this process may "
+                         "still allocate; give fewer probes.rays or a coarser probes.spacing (or probes.min/max "
+                         "around what the camera sees)")
+
+
+def box_outside(grid: Grid, bounds) -> dict:
+    """{'box_outside_bounds': {box, bounds}} where the grid's box and the scene's bounds do not
+    meet (no surface within the box: no frame reads its probes), else {}."""
+    if bounds is None:
+        return {}
+    pos, half = grid.positions(), np.asarray(grid.spacing) / 2        # the cells' box: probes.min/max
+    box, (lo, hi) = (pos.min(0) - half, pos.max(0) + half), bounds
+    if not ((box[1] < lo) | (box[0] > hi)).any():
+        return {}
+    plain = lambda v: [round(float(x), 6) for x in v]
+    return {"box_outside_bounds": {"box": [plain(box[0]), plain(box[1])], "bounds": [plain(lo), plain(hi)]}}
 
 
 INSIDE_WARN = 0.25      # the share of probes inside geometry (at their grid positions or after) that is said
@@ -147,7 +182,7 @@ MAX_ATLAS_SIDE = 16384       # texels: the largest 2D texture most GPUs take (Vu
 
 
 OFF_SAID = 0.75         # the share of probes off (by any rule) that is said, with each rule's count
-RULES = {"inside_geometry": "inside geometry", "no_surface_near": "no surface within their cells (classification)",
+RULES = {"still_inside_geometry": "still inside geometry (relocation did not move them out)", "no_surface_near": "no surface within their cells (classification)",
          "outside_camera_room": "outside the camera's closed room",
          "beyond_bounds": "beyond the scene's bounds, the camera within them",
          "behind_surfaces": "behind a surface from every point the camera sees near them"}
@@ -155,7 +190,8 @@ RULES = {"inside_geometry": "inside geometry", "no_surface_near": "no surface wi
 
 def placement_warnings(report: dict) -> list:
     """The grid's placement said: an automatic grid the AUTO_MAX_PROBES cap made coarser than the
-    scene's interior asks (the count and bytes it would have taken), and more than OFF_SAID of the
+    scene's interior asks (the count and bytes it would have taken), a box wholly outside the
+    scene's bounds (box_outside: that, not its probes off), else more than OFF_SAID of the
     probes within the scene's bounds off, by which rule (those beyond the bounds, off around an
     interior the camera is in, are counted in the report, not said)."""
     out = []
@@ -166,11 +202,17 @@ def placement_warnings(report: dict) -> list:
                    f"grid is capped at {AUTO_MAX_PROBES} probes, so {report['probes']} probes "
                    f"({report['bytes'] / 2**20:.0f} MiB) stand coarser; give probes.spacing (or probes.min/max "
                    "around the part the camera sees) for the finer grid")
+    away = report.get("box_outside_bounds")
+    if away:                  # its probes' rays meet no surface near: true of them, but no help said
+        return out + [f"probes: the probe box {away['box'][0]}..{away['box'][1]} lies wholly outside the scene's "
+                      f"bounds {away['bounds'][0]}..{away['bounds'][1]}: no surface is within it, so a frame reads "
+                      "none of its probes (the panorama's SH instead); move probes.min/max over the part of the "
+                      "scene the camera sees"]
     by = report.get("off_by", {})
     beyond = by.get("beyond_bounds", 0)        # the shell around an interior: off by design, not said
     n, off = report["probes"] - beyond, report.get("inactive", 0) - beyond
     if n > 0 and off > OFF_SAID * n:
-        why = ", ".join(f"{c} {RULES[k]}" for k, c in by.items() if c and k != "beyond_bounds")
+        why = ", ".join(f"{by[k]} {text}" for k, text in RULES.items() if by.get(k) and k != "beyond_bounds")
         out.append(f"probes: {off} of the {n} probes within the scene's bounds ({100 * off / n:.0f}%) are off "
                    f"({why or 'classification'}); "
                    "the frame falls back to the nearest active probes, else the panorama's SH"

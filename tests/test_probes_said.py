@@ -1,0 +1,120 @@
+"""What the probes' bake and frame say (issue 59, a new user's trial): a box wholly outside the
+scene said as that (not as probes off for want of rays), the shares of the frame's fallbacks over
+the samples on geometry (not the background's), the work's size up front, the two inside-geometry
+counts named apart, `--json`'s off_by and warnings, and --report's numbers written plainly."""
+
+import json
+import re
+
+import numpy as np
+import pytest
+
+from iblbake.render import probes
+from tests.helpers import run_cli, scene_file, write_exr
+
+
+@pytest.fixture(scope="module")
+def sky(tmp_path_factory):
+    return write_exr(tmp_path_factory.mktemp("sky") / "sky.exr", np.full((16, 32, 3), 0.5))
+
+
+def outside_scene(folder, sky):
+    """The unit sphere at 32x32 (its silhouette about a third of the frame) and a box of 2x2x2
+    probes far from it."""
+    return scene_file(folder, sky, camera={"perspective": {"position": [0, 0, 3], "fov_y": 45}, "resolution": [32, 32]},
+                      materials={"base_color": [0.8, 0.8, 0.8], "specular": 0},
+                      probes={"min": [10, 10, 10], "max": [12, 12, 12], "counts": [2, 2, 2], "rays": 256},
+                      effects={"diffuse": "probes", "specular": "off"})
+
+
+def test_a_box_outside_the_scene_is_found():
+    """probes.box_outside: a grid whose cells' box (probes.min/max) misses the scene's bounds along
+    any axis is reported with both boxes; one that meets them (even only at a face) is not."""
+    bounds = (np.array([-1.0, -1, -1]), np.array([1.0, 1, 1]))
+    away = probes.Grid((10.5, 10.5, 10.5), (1.0, 1.0, 1.0), (2, 2, 2))          # the box 10..12
+    assert probes.box_outside(away, bounds) == {"box_outside_bounds": {"box": [[10, 10, 10], [12, 12, 12]],
+                                                                       "bounds": [[-1, -1, -1], [1, 1, 1]]}}
+    beside = probes.Grid((1.5, -0.5, -0.5), (1.0, 1.0, 1.0), (2, 2, 2))         # x 1..3: touches the bounds
+    assert probes.box_outside(beside, bounds) == {}
+    assert probes.box_outside(away, None) == {}
+
+
+def test_a_box_outside_the_scene_is_said_as_that():
+    """The new user's box at 10..12 beside a room: said as '512 of the 512 probes within the
+    scene's bounds ... are off ... give more probes.rays' (none within the bounds; more rays would
+    not help). Now one line: the box lies outside the bounds, move it."""
+    rep = {"probes": 512, "inactive": 512, "off_by": {"no_surface_near": 512},
+           "box_outside_bounds": {"box": [[10, 10, 10], [12, 12, 12]], "bounds": [[-2.5, 0, -2], [2.5, 2.6, 2]]}}
+    said = probes.placement_warnings(rep)
+    assert len(said) == 1 and "[10, 10, 10]..[12, 12, 12] lies wholly outside the scene's bounds" in said[0]
+    assert "move probes.min/max" in said[0] and "probes.rays" not in said[0], said
+
+
+def test_the_two_inside_geometry_counts_are_named_apart():
+    """The report's inside_geometry (7: inside at their grid positions or after, relocated out or
+    not) beside off_by's (2: off, still inside) read as a contradiction; off_by's is
+    still_inside_geometry and its warning says so."""
+    rep = {"probes": 8, "inactive": 7, "inside_geometry": 7,
+           "off_by": {"still_inside_geometry": 2, "no_surface_near": 5, "beyond_bounds": 0}}
+    said = probes.placement_warnings(rep)
+    assert len(said) == 1 and "2 still inside geometry (relocation did not move them out)" in said[0], said
+    assert "5 no surface within their cells" in said[0]
+
+
+def test_render_and_probes_say_the_box_outside_the_scene(tmp_path, sky):
+    """End to end on the command line: `render --json` and `iblbake probes --json` carry the
+    warnings said (a `warnings` list, --quiet or not); the render's share of samples outside the
+    volume is of the samples on geometry (100%: the background's pixels, two thirds of the frame,
+    made it 34%); both say the work's size before it starts; probes' --json has the report's
+    off_by."""
+    path = outside_scene(tmp_path, sky)
+    p = run_cli("render", path, "-o", tmp_path / "out.exr", "--cache", tmp_path / "cache", "--json")
+    assert p.returncode == 0, p.stderr
+    assert "iblbake: 8 probes x 256 rays = 2,048 paths (2x2x2 grid, spacing 1)" in p.stderr
+    doc = json.loads(p.stdout)
+    shade = next(r for r in doc["passes"] if r["name"] == "shade")
+    assert 250 < shade["probe_samples"] < 600 and shade["probe_outside_volume"] == shade["probe_samples"], shade
+    said = doc["warnings"]
+    assert any("lies wholly outside the scene's bounds" in w for w in said), said
+    assert any(w.startswith("probes: 100% of the samples on geometry lie outside the probe volume") for w in said)
+    assert not any("probes.rays" in w for w in said), said
+    out = tmp_path / "probes_out"
+    q = run_cli("probes", path, "-o", out, "--cache", tmp_path / "cache2", "--json", "--quiet")
+    assert q.returncode == 0 and q.stderr == "", q.stderr
+    doc = json.loads(q.stdout)
+    assert doc["off_by"]["no_surface_near"] == 8 and doc["off_by"]["still_inside_geometry"] == 0, doc
+    assert len(doc["warnings"]) == 1 and "lies wholly outside the scene's bounds" in doc["warnings"][0]
+    assert json.loads((out / "probes.json").read_text())["report"]["off_by"] == doc["off_by"]
+
+
+def test_report_writes_the_suns_numbers_plainly(tmp_path, panoramas):
+    """`render --report`'s lights row printed `np.float64(0.93)` inside its sun's dict, and the
+    illuminance before environment.intensity (1.417 where probes.json says 2.83): its dicts are
+    JSON now, the illuminance the frame's, the one before the intensity named as that."""
+    path = scene_file(tmp_path, panoramas["studio"], camera={"perspective": {"position": [0, 0, 3], "fov_y": 45},
+                                                             "resolution": [16, 16]},
+                      environment={"sun": "extract", "sun_lights": 2, "intensity": 2}, effects={"diffuse": "sh", "specular": "off"})
+    p = run_cli("render", path, "-o", tmp_path / "out.exr", "--cache", tmp_path / "cache", "--report")
+    assert p.returncode == 0, p.stderr
+    row = next(line for line in p.stdout.splitlines() if line.startswith("pass  lights"))
+    assert "np.float" not in row, row
+    sun = json.loads(re.search(r" sun=(\{.*?\})(?= lamps=|$)", row).group(1))
+    assert sun["illuminance"] == pytest.approx(2 * sun["illuminance_before_intensity"], rel=1e-6), sun
+
+
+def test_a_bake_whose_rays_cannot_fit_is_refused_up_front(tmp_path, sky, monkeypatch):
+    """A new user's `probes.spacing: 0.05` with `probes.rays: 65536` (451,656 probes) relocated its
+    probes for 14 s, then died of a MemoryError (441 GiB: an internal error). Refused before the
+    work now, in one line naming the scene, the counts, the memory and what to give: here 8 probes
+    x 65,536 rays (10 MiB of results) against 1 MiB left to the process."""
+    import iblbake
+    from iblbake.errors import InputError
+    from iblbake.io import memory
+
+    sc = iblbake.load_scene(outside_scene(tmp_path, sky), ["probes.rays=65536"])
+    monkeypatch.setattr(memory, "host_bytes_available", lambda: 1 << 20)
+    with pytest.raises(InputError) as e:
+        iblbake.bake_probes(sc, cache=tmp_path / "cache")
+    msg = str(e.value)
+    assert msg.startswith(f"{sc.source}: probes: 8 probes x 65536 rays need about 0.00977 GiB") and "\n" not in msg
+    assert "probes.rays" in msg and "probes.spacing" in msg, msg
