@@ -93,7 +93,8 @@ def test_report_writes_the_suns_numbers_plainly(tmp_path, panoramas):
     JSON now, the illuminance the frame's, the one before the intensity named as that."""
     path = scene_file(tmp_path, panoramas["studio"], camera={"perspective": {"position": [0, 0, 3], "fov_y": 45},
                                                              "resolution": [16, 16]},
-                      environment={"sun": "extract", "sun_lights": 2, "intensity": 2}, effects={"diffuse": "sh", "specular": "off"})
+                      environment={"sun": "extract", "sun_lights": 2, "intensity": 2},
+                      effects={"diffuse": "sh", "specular": "off"})
     p = run_cli("render", path, "-o", tmp_path / "out.exr", "--cache", tmp_path / "cache", "--report")
     assert p.returncode == 0, p.stderr
     row = next(line for line in p.stdout.splitlines() if line.startswith("pass  lights"))

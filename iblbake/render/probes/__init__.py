@@ -182,7 +182,8 @@ MAX_ATLAS_SIDE = 16384       # texels: the largest 2D texture most GPUs take (Vu
 
 
 OFF_SAID = 0.75         # the share of probes off (by any rule) that is said, with each rule's count
-RULES = {"still_inside_geometry": "still inside geometry (relocation did not move them out)", "no_surface_near": "no surface within their cells (classification)",
+RULES = {"still_inside_geometry": "still inside geometry (relocation did not move them out)",
+         "no_surface_near": "no surface within their cells (classification)",
          "outside_camera_room": "outside the camera's closed room",
          "beyond_bounds": "beyond the scene's bounds, the camera within them",
          "behind_surfaces": "behind a surface from every point the camera sees near them"}
