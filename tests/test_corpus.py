@@ -164,7 +164,7 @@ def absolute_study(name, panorama, panoramas, runtime, cache, term, label, extra
 @pytest.mark.external
 @pytest.mark.slow
 @pytest.mark.parametrize("panorama", ["studio", "city"])
-@pytest.mark.parametrize("name", INTERIORS)
+@pytest.mark.parametrize("name", INTERIORS + ("thin_wall",))
 def test_default_probes_hold_each_interior_to_the_truth(name, panorama, runtime, tmp_path, panoramas):
     """Default `probes: {}` (the probe box on the walls in probe_box_walls) within REGION_BOUND
     of the converged reference on every region, and the frame within FRAME_BOUND or its measured

@@ -162,8 +162,13 @@ def test_most_probes_off_is_said_with_its_rules():
                                                   "outside_camera_room": 0, "beyond_bounds": 0}}
     said = probes.placement_warnings(rep)
     assert len(said) == 1 and "8 of the 8" in said[0] and "8 no surface" in said[0] and "probes.rays" in said[0]
-    rep = {**rep, "inactive": 6, "off_by": {**rep["off_by"], "no_surface_near": 0, "beyond_bounds": 6}}
-    assert probes.placement_warnings(rep) == []            # the shell around an interior is off by design
+    rep6 = {**rep, "inactive": 6, "off_by": {**rep["off_by"], "no_surface_near": 0, "beyond_bounds": 6}}
+    assert probes.placement_warnings(rep6) == []            # the shell around an interior is off by design
+    # the corpus' garden at its automatic spacing: 80% of the probes in empty air, off by classification
+    # (RTXGI's design): not said
+    garden = {"probes": 1092, "inactive": 874, "off_by": {"inside_geometry": 2, "no_surface_near": 851,
+                                                          "outside_camera_room": 0, "beyond_bounds": 0}}
+    assert probes.placement_warnings(garden) == []
 
 
 def test_few_rays_a_probe_are_said():
