@@ -224,9 +224,13 @@ def test_visibility_stops_light_leaking_through_a_thin_wall(tmp_path, rt, sky, m
     assert ref == 0.0
     assert without > 0.06                    # measured 0.102
     assert with_vis <= 0.06 * without        # measured 1.7%
-    # the grid placed from the rooms' own scale (cells of about half the free distance, probes
-    # moved off the planes) leaks next to nothing even without visibility (measured 0.00019)
-    assert lit(render(rooms(tmp_path, sky, False), runtime=rt, cache=cache)) < 0.001
+    # the grid placed from the rooms' own scale, without visibility and the three rules: measured
+    # 0.00019 at cells of half the median free distance, whose layer of probes on the wall between
+    # the rooms was moved to its freer side; at the nearer quarter's cells 0.0013 so, and 0.021 with
+    # the lattice kept half a cell off the wall (a layer each side of it, blended across it without
+    # visibility; the scale test needs it: thin_wall's frame 0.9% apart by scale). A trade made
+    # knowingly (issue 59): visibility and the three rules are on by default.
+    assert lit(render(rooms(tmp_path, sky, False), runtime=rt, cache=cache)) < 0.026
 
 
 @pytest.mark.slow

@@ -75,15 +75,38 @@ def test_a_box_drawn_on_the_walls_puts_no_probe_on_them():
 
 
 def test_auto_step_reads_the_enclosed_points_only():
-    """The interior's scale: half the median free distance of the points whose rays mostly meet a
-    surface; an open scene (every point sees mostly sky) keeps the coarse grid (None)."""
+    """The interior's scale: half the lower quartile of the free distances (each point's median
+    ray) of the points whose rays mostly meet a surface; an open scene (every point sees mostly
+    sky) keeps the coarse grid (None)."""
     inf = np.inf
     t = np.array([[1.0, 2.0, 3.0, inf], [2.0, 2.0, 2.0, 2.0], [inf, inf, inf, 1.0]])
-    assert probes.auto_step(t) == pytest.approx(0.5 * np.median([2.5, 2.0]))
+    assert probes.auto_step(t) == pytest.approx(0.5 * 2.0)
+    # four enclosed points, free distances 1-4: the nearer quarter sets the cells (the median, 2.5,
+    # left thin_wall's dim sphere by its lintel x1.47 at 48 px under studio; the quarter x1.10)
+    quarter = np.array([[f] * 4 for f in (3.0, 1.0, 4.0, 2.0)])
+    assert probes.auto_step(quarter) == pytest.approx(0.5 * 1.0)
     assert probes.auto_step(np.full((4, 8), inf)) is None
     # a floor under an open sky: every point meets it with half its rays (the median a miss): open,
     # not an interior of infinite scale (whose inf reached the probes' manifest, unwritable JSON)
     assert probes.auto_step(np.array([[1.0, 2.0, inf, inf]] * 3)) is None
+
+
+def test_an_automatic_grid_keeps_its_probes_off_an_axis_aligned_wall():
+    """A wall of no thickness across the middle of the scene (x = 0, two triangles) and a grid
+    whose odd count put a layer of probes on it (11 along x): moved off it by float32 hits that
+    differ with the scene's scale (thin_wall at scale 0.01 and 100: frames 0.9% apart). One probe
+    more shifts the layer half a cell: every probe at least PLANE_CLEARANCE of a cell off it."""
+    from iblbake.render.probes import grid as probe_grid
+    wall = np.zeros((2, 6, 4))
+    wall[0, :3, :3] = [[0, -2, -2], [0, 2, -2], [0, 2, 2]]
+    wall[1, :3, :3] = [[0, -2, -2], [0, 2, 2], [0, -2, 2]]
+    arrays = sphere_arrays(2.0)
+    arrays.tris = wall
+    g = probes.grid_of(settings(), arrays, step_hint=4.0 / 9)
+    x = g.positions()[:, 0]
+    assert g.counts[0] == 12 and np.abs(x).min() >= probe_grid.PLANE_CLEARANCE * g.spacing[0]
+    assert x.min() < -2 - 0.5 * g.spacing[0] and x.max() > 2 + 0.5 * g.spacing[0]      # still overhangs
+    assert g.counts[1:] == (11, 11)                 # no surface across y or z: the counts as they were
 
 
 def test_the_cap_coarsens_an_automatic_grid_and_is_said():
@@ -139,8 +162,13 @@ def test_most_probes_off_is_said_with_its_rules():
                                                   "outside_camera_room": 0, "beyond_bounds": 0}}
     said = probes.placement_warnings(rep)
     assert len(said) == 1 and "8 of the 8" in said[0] and "8 no surface" in said[0] and "probes.rays" in said[0]
-    rep = {**rep, "inactive": 6, "off_by": {**rep["off_by"], "no_surface_near": 0, "beyond_bounds": 6}}
-    assert probes.placement_warnings(rep) == []            # the shell around an interior is off by design
+    rep6 = {**rep, "inactive": 6, "off_by": {**rep["off_by"], "no_surface_near": 0, "beyond_bounds": 6}}
+    assert probes.placement_warnings(rep6) == []            # the shell around an interior is off by design
+    # the corpus' garden at its automatic spacing: 80% of the probes in empty air, off by classification
+    # (RTXGI's design): not said
+    garden = {"probes": 1092, "inactive": 874, "off_by": {"still_inside_geometry": 2, "no_surface_near": 851,
+                                                          "outside_camera_room": 0, "beyond_bounds": 0}}
+    assert probes.placement_warnings(garden) == []
 
 
 def test_few_rays_a_probe_are_said():
@@ -376,7 +404,12 @@ def test_probes_behind_a_floor_do_not_light_what_rests_on_it(tmp_path, panoramas
     assert est / truth < 1.4, (est, truth)
     grid = probes.Grid(tuple(vol["origin"]), tuple(vol["spacing"]), tuple(vol["counts"]))
     pos = grid.positions()
-    under = (pos[:, 1] < 0) & (np.abs(pos[:, 0] - 0.9) < 0.6) & (np.abs(pos[:, 2] + 0.1) < 0.6)
+    # a cell and a half each way of the point under the sphere (0.6 at the median's cells of 0.405),
+    # on the camera's side of its centre: at the finer cells the probes under its far side have no
+    # point the camera sees in their cells (the sphere hides the floor there), and light none
+    reach = 1.5 * grid.spacing[0]
+    under = ((pos[:, 1] < 0) & (np.abs(pos[:, 0] - 0.9) < reach) & (np.abs(pos[:, 2] + 0.1) < reach)
+             & (pos[:, 2] > -0.1 - 0.5 * grid.spacing[2]))
     assert under.any() and (vol["data"][under, 3] == probes.INACTIVE).all()
     assert vol["report"]["off_by"]["behind_surfaces"] > 0
 

@@ -68,7 +68,9 @@ MAX_PROBES = 1 << 20             # any grid: the buffers and atlases a device ta
 AUTO_MAX_PROBES = 1 << 14        # an automatic grid's cap (~80 MiB of atlases at the default texels): coarser above
 SCALE_RAYS = 64                  # rays from each coarse probe and the camera that measure the interior's scale
 ENCLOSED = 0.5                   # the share of those rays meeting a front face that makes a point enclosed
-INTERIOR_FRACTION = 0.5          # the automatic spacing: this share of the enclosed points' median free distance
+INTERIOR_FRACTION = 0.5          # the automatic spacing: this share of...
+INTERIOR_QUANTILE = 0.25         # ...this quantile of the enclosed points' free distances (the nearer quarter:
+                                 # where the light changes fastest, by openings and objects)
 
 
 def probe_bytes(settings: dict) -> int:
@@ -125,10 +127,49 @@ def auto_step(t) -> float | None:
     if not enclosed.any():
         return None
     free = np.median(np.where(t[enclosed] < 0, np.inf, t[enclosed]), axis=1)
-    step = INTERIOR_FRACTION * float(np.median(free))
+    step = INTERIOR_FRACTION * float(np.quantile(free, INTERIOR_QUANTILE, method="lower"))
     # points that meet a surface with only half their rays (a floor below an open sky) have a
     # median ray that is a miss: where they are most of the enclosed points the scene is open
     return step if math.isfinite(step) else None
+
+
+PLANE_CLEARANCE = 0.1          # of a cell: an automatic grid's probes keep this far off an axis-aligned surface
+
+
+def axis_planes(arrays) -> list:
+    """Per axis, the coordinates of the scene's surfaces that lie across it (triangles and planes
+    whose normal is that axis): where a probe of an automatic grid must not stand."""
+    out = [set(), set(), set()]
+    if len(arrays.tris):
+        v = arrays.tris[:, :3, :3].astype(np.float64)
+        for k in range(3):
+            flat = np.ptp(v[:, :, k], axis=1) <= 1e-9 * max(float(np.abs(v).max()), 1e-30)
+            out[k].update(np.unique(v[flat, 0, k]).tolist())
+    for pl in arrays.planes:
+        nrm = pl[1, :3].astype(np.float64)
+        k = int(np.argmax(np.abs(nrm)))
+        if abs(abs(nrm[k]) - 1.0) < 1e-6:
+            out[k].add(float(pl[0, k]))
+    return [np.array(sorted(c)) for c in out]
+
+
+def off_planes(n: list, centre, step: float, planes: list) -> list:
+    """Counts of a centred automatic grid with no probe on an axis-aligned surface: along an axis
+    where a probe would stand within PLANE_CLEARANCE of a cell of one (a wall of no thickness at
+    the scene's centre, an odd count: a layer of probes on it, moved off it by float32 hits that
+    differ with the scene's scale), one probe more, which shifts the layer half a cell, where that
+    clears more. Counts stay Python ints; the grid still overhangs the bounds by half a cell."""
+    out = list(n)
+    for k in range(3):
+        if n[k] is None or not len(planes[k]):
+            continue
+
+        def clearance(c):
+            pos = centre[k] + (np.arange(c) - (c - 1) / 2) * step
+            return float(np.abs(pos[:, None] - planes[k][None]).min()) / step
+        if clearance(n[k]) < PLANE_CLEARANCE and clearance(n[k] + 1) > clearance(n[k]):
+            out[k] = n[k] + 1
+    return out
 
 
 def grid_of(settings: dict, arrays, step_hint: float | None = None) -> Grid:
@@ -199,6 +240,8 @@ def grid_of(settings: dict, arrays, step_hint: float | None = None) -> Grid:
             s = coarse
         step = np.full(3, s)
         n = axis_counts(extent, step, 2)
+        if counts is None and step_hint is not None and settings["spacing"] is None:
+            n = off_planes(n, (lo + hi) / 2, s, axis_planes(arrays))
     check_count(n, settings)
     spacing = step
     origin = (lo + hi) / 2 - (np.asarray(n) - 1) * step / 2         # centred: at least half a cell over each face

@@ -16,6 +16,7 @@ ACTIVE, INACTIVE = 0, 1          # RTXGI_DDGI_PROBE_STATE_ACTIVE / _INACTIVE
 FIXED_RAYS = 32                  # RTXGI_DDGI_NUM_FIXED_RAYS: the unrotated rays relocation reads
 RELOCATION_PASSES = 4            # RTXGI moves probes a step a frame; a bake takes a few steps at once
 MAX_OFFSET = 0.45                # of a cell, per axis (RTXGI: the ellipsoid x^2/s^2 + ... < 0.45^2)
+TIE = 1e-4                       # distances within this share of each other are equal (float32 hits)
 
 
 def inside_geometry(t, obj, threshold: float):
@@ -91,18 +92,22 @@ def relocate(tracer: Tracer, grid: Grid, settings: dict, progress=None, start=No
         rows = np.arange(len(t))
         near = tf[rows, i_near]
         # the farthest front face a ray met (not a miss, RTXGI's 1e27: that moved probes towards
-        # the sky); among equals the one most opposite the nearest face
+        # the sky); among equals (within TIE: float32 hits that tie at one scale differ at another,
+        # and the probe moved elsewhere) the one most opposite the nearest face
         farthest = tfar.max(1, keepdims=True)
         opposite = dirs @ dirs.T                                  # (rays, rays): cosines between rays
-        i_far = np.where(tfar >= farthest, -opposite[i_near], -np.inf).argmax(1)
+        i_far = np.where(tfar >= farthest * (1 - TIE), -opposite[i_near], -np.inf).argmax(1)
         far = tfar[rows, i_far]
         full = offset.copy()
         inside = (n_back > 0) & (n_back / FIXED_RAYS > settings["backface_threshold"])
         full[inside] += dirs[ib[inside]] * (tb[rows, ib][inside] + 0.5 * min_front)[:, None]
-        close = ~inside & (near < min_front) & ((dirs[i_near] * dirs[i_far]).sum(1) <= 0)
+        # a probe moved back home stops where its nearest face is min_front away: a tie within
+        # TIE is neither close nor free (float32 hits broke it one way or the other by scale,
+        # and the probe oscillated to a different place)
+        close = ~inside & (near < min_front * (1 - TIE)) & ((dirs[i_near] * dirs[i_far]).sum(1) <= 0)
         step = np.minimum(min_front, 0.5 * np.where(np.isfinite(far), far, np.inf))
         full[close] += dirs[i_far[close]] * step[close, None]
-        free = ~inside & (near > min_front)
+        free = ~inside & (near > min_front * (1 + TIE))
         length = np.linalg.norm(offset, axis=1)
         back_by = np.minimum(near - min_front, length)
         with np.errstate(invalid="ignore", divide="ignore"):
