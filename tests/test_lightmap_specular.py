@@ -240,8 +240,11 @@ def test_export_writes_the_lobes_set(tmp_path, sky, basis):
 # "Lightmaps on the corpus' interiors"), measured, held at 1.2-1.3x; the distant chain (no reflection
 # probe) at least SPLIT_SUM_AT_LEAST x the lightmap's on each
 ROUGHNESS = 0.6
-QUAD_ROOM_SPECULAR = {"'floor' (objects.0)": 0.0075, "'gold' (objects.7)": 0.0707}
-WORST_HALF = 0.240              # the sphere's -x half (x0.84: its lobes see the room's dim back)
+# The sphere x0.91 (15%): with the texels' next-event estimation its +x half, which faces the lamps'
+# opening, reads x1.01 where the escaped rays' filtered read of the panorama had put it at x1.17 (and
+# the whole sphere, its halves' errors cancelling, at x0.97, 7.1%)
+QUAD_ROOM_SPECULAR = {"'floor' (objects.0)": 0.0072, "'gold' (objects.7)": 0.150}
+WORST_HALF = 0.237              # the sphere's -y and -x halves (x0.84: their lobes see the room's dim back)
 SPLIT_SUM_AT_LEAST = 50         # measured: floor 4.89 (x5.04), sphere 15.4 (x13.0)
 
 
