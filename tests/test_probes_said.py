@@ -53,12 +53,12 @@ def test_a_box_outside_the_scene_is_said_as_that():
 def test_the_two_inside_geometry_counts_are_named_apart():
     """The report's inside_geometry (7: inside at their grid positions or after, relocated out or
     not) beside off_by's (2: off, still inside) read as a contradiction; off_by's is
-    still_inside_geometry and its warning says so."""
-    rep = {"probes": 8, "inactive": 7, "inside_geometry": 7,
-           "off_by": {"still_inside_geometry": 2, "no_surface_near": 5, "beyond_bounds": 0}}
+    still_inside_geometry and its warning says so (every probe off: over OFF_SAID)."""
+    rep = {"probes": 8, "inactive": 8, "inside_geometry": 7,
+           "off_by": {"still_inside_geometry": 2, "no_surface_near": 6, "beyond_bounds": 0}}
     said = probes.placement_warnings(rep)
     assert len(said) == 1 and "2 still inside geometry (relocation did not move them out)" in said[0], said
-    assert "5 no surface within their cells" in said[0]
+    assert "6 no surface within their cells" in said[0]
 
 
 def test_render_and_probes_say_the_box_outside_the_scene(tmp_path, sky):
