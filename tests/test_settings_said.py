@@ -4,9 +4,6 @@ sweeps from the command line, limits that name real options, negative panoramas 
 the reference's samples), the plot's labels apart."""
 
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np

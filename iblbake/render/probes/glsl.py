@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from iblbake.core.bases.probes import PROBE_BASES
 from iblbake.render.probes.volume import basis_of
 from iblbake.scene.layout import PROBE_VOLUME, PROBE_WEIGHTS
