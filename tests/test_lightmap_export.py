@@ -355,6 +355,19 @@ def test_manifest_names_each_object_and_its_gltf_node(baked):
         assert node["name"] == o["name"] == doc["meshes"][node["mesh"]]["name"]
 
 
+def test_manifest_lists_the_lights_an_engine_draws(baked, tmp_path):
+    """lightmap.json's `lights`: the atlas holds no analytic light's direct light (the frame's lights
+    pass draws it), so the manifest lists them as probes.json does, with the convention that says
+    so; none in a scene without lights."""
+    import iblbake
+    assert baked["manifest"]["lights"] == [] and "twice" in baked["manifest"]["conventions"]["lights"]
+    write_exr(tmp_path / "sky.exr", np.ones((32, 64, 3)) * [0.6, 0.8, 1.0])
+    (tmp_path / "lamp.yaml").write_text(SCENE + "lights:\n  - point: {position: [0, 2, 0], intensity: 5}\n"
+                                        "lightmap: {texels_per_unit: 2, samples: 16}\n")
+    man = iblbake.bake_lightmap(str(tmp_path / "lamp.yaml"), cache=str(tmp_path / "cache")).write(tmp_path / "out")
+    assert [lt["source"] for lt in man["lights"]] == ["lights.0"] and "point" in man["lights"][0]
+
+
 def test_gltf_keeps_file_materials_specular_and_no_absolute_path(tmp_path):
     """lightmap.gltf's materials: a glTF mesh without a scene material keeps its file's own
     (examples/meshes/tiles.glb's "glazed tiles", not "file materials"); a scene material's

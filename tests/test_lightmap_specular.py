@@ -213,6 +213,11 @@ def test_export_writes_the_lobes_set(tmp_path, sky, basis):
     assert written == sorted(lm.files()) and spec["basis"] == basis and "nnls" in spec["options"].values()
     sets = np.asarray(lm.baked["specular"]).reshape(lm.height, lm.width, -1, 3)
     assert len(spec["exr"]) == spec["floats"] == sets.shape[2]
+    # the lobes' axes and their own sharpness (a new user read SG9's diffuse 2.0 for the set's 4.5)
+    assert len(spec["axes"]) == spec["floats"]
+    if basis == "sg":
+        from iblbake.core.bases import sg
+        assert spec["sharpness"] == sg.lobe_sharpness(spec["options"]) != man["bases"]["sg"]["sharpness"]
     for k, f in enumerate(spec["exr"]):
         got = images.read_exr(tmp_path / "out" / f)
         assert np.array_equal(got[..., :3], sets[..., k, :].astype(np.float16).astype(np.float32)), f

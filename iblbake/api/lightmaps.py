@@ -20,6 +20,8 @@ class Lightmap:
         each is read).
     valid: (h, w) bool, the texels baked or dilated.  width, height: the atlas' texels.
     report: the bake's (texels, rays traced, seconds...).  cached: whether it came from the cache.
+    lights: the lights whose direct light is not in the atlases (the scene's and those extracted
+    from the panorama), which an engine draws per pixel as the frame does (lightmap.json's `lights`).
     """
 
     atlases: dict
@@ -31,6 +33,7 @@ class Lightmap:
     device: str
     scene: object = field(repr=False, default=None)
     baked: dict = field(repr=False, default_factory=dict)
+    lights: list = field(repr=False, default_factory=list)
 
     def write(self, folder) -> dict:
         """Every file of `iblbake lightmap` into folder (made where missing), replaced together
@@ -41,7 +44,7 @@ class Lightmap:
         for n in self.files():
             atomic.check_writable(folder / n)
         with atomic.Batch() as batch:
-            return export.write(self.baked, self.scene, folder, batch)
+            return export.write(self.baked, self.scene, folder, batch, self.lights)
 
     def files(self) -> list:
         """The names write() writes, lightmap.json last."""
@@ -82,5 +85,6 @@ def bake_lightmap(scene, device: str | None = None, *, cache=None, warn=None, pr
     with _on_device(rt):
         lm, cached = store.baked(job, UnitLightmap.settings(job), progress=progress)   # the frame's: the lobe's set
     atlases = {b: lm[b] for b in export.held(lm)}
+    from iblbake.render.probes import light_entries      # what an engine draws itself, as probes.json says
     return Lightmap(atlases, lm["valid"], lm["layout"].width, lm["layout"].height, lm["report"], cached,
-                    rt.device_label, sc, lm)
+                    rt.device_label, sc, lm, light_entries(sc, bakes.sun(sc.data["environment"])))

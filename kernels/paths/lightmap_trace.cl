@@ -4,11 +4,11 @@
  * lights and emission included.
  *   texel_pos[first + i]: the texel's start point (its surface point, lifted along its normal)
  *   ray_dirs[i nrays + r]: ray r of that texel (world space): r < paths a path (w its share of the
- *                          hemisphere), then env_rays shadow rays drawn from the panorama's importance
- *                          table (w 0: behind the surface, not traced), then shadow rays to the
- *                          lights (w the ray's length, inf a distant light's; 0 not traced): out 1
- *                          where it arrives (render/lightmaps/bake.py device_shares, light_rays; the
- *                          weights ray_weights)
+ *                          hemisphere), then shadow rays drawn from the panorama's importance
+ *                          table (w 0: behind the surface, not traced) (render/lightmaps/bake.py
+ *                          device_shares; the weights ray_weights). No shadow ray to the analytic
+ *                          lights: their direct light is the frame's (the lights pass); the paths'
+ *                          later vertices sample them (follow_path)
  *   a miss reads the panorama's texel (what the importance table samples and the camera's paths
  *   meet, paths.h env_missed; a filtered read spreads a lamp where only the uniform rays find it)
  *   out[i nrays + r] = (radiance, t): t = +INFINITY a miss; the back of a solid (scene.h
@@ -30,7 +30,7 @@
 #include "paths/paths.h"
 
 __kernel void lightmap_trace(__global const float4 *texel_pos, __global const float4 *ray_dirs, const int nrays,
-                             const int paths, const int env_rays, const int first, const int count, const uint seed,
+                             const int paths, const int first, const int count, const uint seed,
                              ENV_PARAMS, __global const float4 *materials, SCENE_PARAMS,
                              __global const float4 *lights, const int nlights, __global float4 *ray_out)
 {
@@ -38,11 +38,6 @@ __kernel void lightmap_trace(__global const float4 *texel_pos, __global const fl
     if (item >= count * nrays) return;
     const int texel = first + item / nrays, r = item % nrays;
     const float3 o = texel_pos[texel].xyz, d = ray_dirs[item].xyz;
-    if (r >= paths + env_rays) {        /* a shadow ray to a light, w long: 1 where it arrives */
-        const float vis = ray_dirs[item].w > 0.0f && !occluded_to(o, d, ray_dirs[item].w, SCENE_ARGS);
-        ray_out[item] = (float4)(vis, vis, vis, INFINITY);
-        return;
-    }
     if (ray_dirs[item].w == 0.0f) {     /* a shadow ray behind the surface */
         ray_out[item] = (float4)(0.0f, 0.0f, 0.0f, INFINITY);
         return;

@@ -38,7 +38,6 @@ REJECT = 0.1          # a texel whose rays meet a solid's inside more often than
 DILATE = 4            # dilation passes (PADDING texels between charts, and their seams)
 BASES = bases.OWN       # what a bake of the default basis (sh_l1) can be read as; every choice: bases.NAMES
 DEFAULT_BASIS = "sh_l1"  # a lightmap section's basis where it names none (the schema's default)
-LIGHT_RAYS = 16       # shadow rays a texel draws over each analytic light (the reference's shadow_samples)
 
 
 def frames(n):
@@ -117,31 +116,6 @@ def ray_weights(dirs, t, uniform: int, dist, rotation: float):
     return w
 
 
-def light_rays(records, points, normals, texel0: np.ndarray, seed: int):
-    """A texel's next-event estimation of the analytic lights (the scene's and the panorama's
-    extracted ones: no ray finds them, so this is their only strategy): per texel LIGHT_RAYS
-    directions over each light (uniform in the cone its disk or sphere fills, its centre where it
-    has no size; render/twin/lights.py light_toward, as the paths' light_sample draws them), from
-    the texel's start point. (dirs (k, m, 3), what each brings unoccluded, Le times the cone's solid
-    angle over LIGHT_RAYS (k, m, 3), the shadow ray's length (k, m): inf a distant light, 0 behind
-    the surface: not traced), m = lights x LIGHT_RAYS."""
-    from iblbake.render.twin.lights import cone_direction, light_toward
-    k = len(points)
-    dirs, value, length = np.zeros((k, len(records), LIGHT_RAYS, 3)), np.zeros((k, len(records), LIGHT_RAYS, 3)), \
-        np.zeros((k, len(records), LIGHT_RAYS))
-    u = np.stack([np.random.default_rng([seed, int(t), 2]).random((len(records), LIGHT_RAYS, 2)) for t in texel0])
-    for j, r in enumerate(np.asarray(records, np.float64)):
-        e, wc, dist, sin_max, omc = light_toward(r, points)
-        sized = sin_max > 0
-        # over the cone: radiance E / (pi sin^2) times its solid angle 2 pi omc; a point: E
-        scale = np.where(sized, 2 * omc / np.where(sized, sin_max, 1) ** 2, 1.0) / LIGHT_RAYS
-        for s in range(LIGHT_RAYS):
-            dirs[:, j, s] = np.where(sized[:, None], cone_direction(wc, omc, u[:, j, s]), wc)
-            value[:, j, s], length[:, j, s] = e * scale[:, None], dist
-    length = np.where(np.einsum("kjsx,kx->kjs", dirs, normals) > 0, length, 0.0)
-    return dirs.reshape(k, -1, 3), value.reshape(k, -1, 3), length.reshape(k, -1)
-
-
 class LightmapTexels(Source):
     """The texels' rays (lightmap_trace.cl through a Tracer's scene, panorama and lights), whole
     texels per launch; kept per texel: E (k, 3), the coefficients of `basis` (bases.py) with its
@@ -157,9 +131,11 @@ class LightmapTexels(Source):
         self.normals, self.n, self.start = normals, len(start), np.asarray(start, np.float64)
         self.uniform = samples
         self.extra = importance_rays(samples, tracer.dist)
-        self.lights = len(tracer.light_records) * LIGHT_RAYS
-        # rays a texel: paths, shadow rays to the panorama, shadow rays to the lights
-        self.samples = samples = self.uniform + self.extra + self.lights
+        # rays a texel: paths, then shadow rays to the panorama. None to the analytic lights: their
+        # direct light is the frame's (the lights pass, per pixel with its shadows) and an engine's
+        # (lightmap.json's `lights`), as the probes leave it out; the paths' later vertices sample
+        # them, so their bounce is in the texel's light
+        self.samples = samples = self.uniform + self.extra
         self.pos = self.rt.to_device(np.pad(np.asarray(start, np.float32), ((0, 0), (0, 1))))
         self.per = whole_units(self.rt, samples)
         self.buf = self.rt.empty(16 * min(self.n, self.per) * samples)
@@ -180,31 +156,24 @@ class LightmapTexels(Source):
             t, n = self.tracer, self.normals[first:first + count]
             texel = np.arange(first, first + count)
             d = hemisphere_dirs(n, self.uniform, texel, self.seed, t.dist, t.rotation, self.extra)
-            ld, lv, ll = light_rays(t.light_records, self.start[first:first + count], n, texel, self.seed)
-            self.dirs[first] = d, ld, lv
-            rays = np.concatenate([np.concatenate([d, device_shares(d, n, self.uniform)[..., None]], 2),
-                                   np.concatenate([ld, ll[..., None]], 2)], 1)
+            self.dirs[first] = d
+            rays = np.concatenate([d, device_shares(d, n, self.uniform)[..., None]], 2)
             dev = self.rt.to_device(rays.reshape(-1, 4).astype(np.float32))
             yield Launch(count * self.samples, {"texel_pos": self.pos, "ray_dirs": dev, "nrays": self.samples,
-                                                "paths": self.uniform, "env_rays": self.extra, "first": first,
+                                                "paths": self.uniform, "first": first,
                                                 "count": count, "seed": self.tracer.settings["seed"],
                                                 "ray_out": self.buf}, (first, count))
 
     def accumulate(self, la: Launch) -> bool:
         first, count = la.part
         out = self.rt.read(self.buf, (count * self.samples, 4)).reshape(count, self.samples, 4).astype(np.float64)
-        d, ld, lv = self.dirs.pop(first)
-        c = self.uniform + self.extra
-        w = np.concatenate([ray_weights(d, out[:, :c, 3], self.uniform, self.tracer.dist, self.tracer.rotation),
-                            np.ones(ld.shape[:2])], 1)
-        radiance = out[..., :3]
-        radiance[:, c:] *= lv                 # a light's shadow ray: 1 where it arrives
+        d = self.dirs.pop(first)
+        w = ray_weights(d, out[..., 3], self.uniform, self.tracer.dist, self.tracer.rotation)
+        radiance, n = out[..., :3], self.normals[first:first + count]
         self.irradiance[first:first + count], self.coeffs[first:first + count], self.inside[first:first + count] = \
-            project(radiance, out[..., 3], np.concatenate([d, ld], 1), self.normals[first:first + count], self.basis,
-                    self.opts, w, self.uniform)
+            project(radiance, out[..., 3], d, n, self.basis, self.opts, w, self.uniform)
         if self.spec is not None:
-            self.spec[first:first + count] = bases.project_specular(
-                self.basis, radiance, np.concatenate([d, ld], 1), self.normals[first:first + count], self.opts, w)
+            self.spec[first:first + count] = bases.project_specular(self.basis, radiance, d, n, self.opts, w)
         if self.progress:
             self.progress((first + count) / self.n)
         return False

@@ -202,9 +202,18 @@ vec3 lightmapIrradiance(vec2 uv1, vec3 n) {{
 """
 
 
-def manifest(lm: dict, settings: dict, scale: float, objects=()) -> dict:
+LIGHTS_CONVENTION = (
+    "the lights whose direct light an engine draws per pixel, as the frame does: not in the atlases (a texel's "
+    "paths add each at every later vertex, so its bounce is in them, never along their own first ray), neither the "
+    "scene's lights (source lights.N) nor those extracted from the panorama (environment.sun: extract; the "
+    "panorama the texels saw lacks them); adding them to the lightmap's light counts them twice. ")
+
+
+def manifest(lm: dict, settings: dict, scale: float, objects=(), lights=()) -> dict:
     """lightmap.json: the atlas, every basis' files and reading, the glTF's, the bake's report;
-    `objects` (gltf_scene.lightmapped) each object's name and glTF node."""
+    `objects` (gltf_scene.lightmapped) each object's name and glTF node; `lights`
+    (probes.light_entries) those an engine draws per pixel."""
+    from iblbake.render.probes.files import LIGHT_FIELDS
     from iblbake.io.guard import mark
     from iblbake.render.lightmaps import gltf_scene
     from iblbake.render.lightmaps.uv import PADDING
@@ -225,15 +234,20 @@ def manifest(lm: dict, settings: dict, scale: float, objects=()) -> dict:
             "layout": f"{entry.m.floats(opts)} coefficient sets, the basis' layout (bases.{lm['basis']}) with these "
                       "options, fitted to the radiance over the sphere (the lower hemisphere the upper's mirror)",
             "specular": "(F0 A + F90 B) x the radiance along the warped GGX lobe (the GLSL's "
-                        "lightmapSpecularRadiance(uv1, n, v, roughness))",
+                        "lightmapSpecularRadiance(uv1, n, v, roughness)); A, B the split sum's DFG table at (n.v, "
+                        "roughness): an engine's own, or iblbake mips' dfg.exr (R = A, G = B)",
             "exr": [f"{s}.exr" for s in stems], "ktx2": [f"{s}.ktx2" for s in stems],
-            "glsl": f"{STEM}_{SPECULAR}.glsl", **({"table": entry.specular_table} if entry.specular_table else {})}
+            "glsl": f"{STEM}_{SPECULAR}.glsl", **({"table": entry.specular_table} if entry.specular_table else {}),
+            # the lobes' own (the set's sharpness is its NNLS options', not the diffuse set's)
+            **{k: v for k, v in (entry.m.document_fields(opts) if hasattr(entry.m, "document_fields") else {}).items()
+               if k in ("axes", "sharpness")}}
     return {
         "format": FORMAT, "version": VERSION, "generator": mark(),
         "atlas": {"width": lay.width, "height": lay.height, "texels_per_unit": rep["texels_per_unit"],
                   "padding": PADDING, "texels": rep["texels"], "uv_sources": rep["uv_sources"]},
         "bases": bases,
         "objects": [{"index": oid, "name": name, "gltf_node": node} for node, (oid, name) in enumerate(objects)],
+        "lights": list(lights),
         "gltf": {"file": f"{STEM}.gltf", "extension": EXTENSION, "image": f"{STEM}.png",
                  "encoding": gltf_scene.ENCODING,
                  "irradiance_scale": scale},
@@ -248,15 +262,16 @@ def manifest(lm: dict, settings: dict, scale: float, objects=()) -> dict:
                        "included for a directional basis)",
             "frame": "world, right-handed, +y up (the scene's and glTF's)",
             "sh_basis": "Y_k(n), k = l (l + 1) + m: " + "; ".join(SH_TERMS),
+            "lights": LIGHTS_CONVENTION + LIGHT_FIELDS,
         },
         "settings": {k: v for k, v in settings.items()},
         "report": rep,
     }
 
 
-def write(lm: dict, sc, folder: Path, batch) -> dict:
+def write(lm: dict, sc, folder: Path, batch, lights=()) -> dict:
     """Every file of the bake into folder through `batch` (atomic.Batch: replaced together or
-    none); the manifest written."""
+    none); the manifest written, with `lights` (manifest)."""
     from iblbake.io import images, ktx2
     from iblbake.io.guard import mark
     from iblbake.render.lightmaps import gltf_scene
@@ -275,7 +290,7 @@ def write(lm: dict, sc, folder: Path, batch) -> dict:
     if "specular" in lm:
         _write_specular(lm, settings, folder, valid, batch)
     scale = gltf_scene.write(lm, sc, folder, STEM, EXTENSION, batch)
-    man = manifest(lm, settings, scale, gltf_scene.lightmapped(lm, sc))
+    man = manifest(lm, settings, scale, gltf_scene.lightmapped(lm, sc), lights)
     batch.write_text(folder / f"{STEM}.json", json.dumps(man, indent=1, allow_nan=False) + "\n")
     return man
 

@@ -21,15 +21,17 @@ VERSION = 1
 FILES = {n: b.file for n, b in PROBE_BASES.items()}      # each probe basis's file (core/bases/probes.py)
 
 
-LIGHTS_CONVENTION = (
-    "the lights whose direct light an engine draws per pixel, as the frame does: the probes' paths add each at "
-    "every vertex they meet (its bounce is in the probes), never along their own first ray, so neither the scene's "
-    "lights (source lights.N) nor those extracted from the panorama (environment.sun: extract; the panorama the "
-    "probes saw lacks them) are in the probes' direct light. Each as the scene's lights.N: directional.direction "
+LIGHT_FIELDS = (
+    "Each as the scene's lights.N: directional.direction "
     "the direction the light travels (world frame, environment.rotation_y applied), color linear RGB of luminance "
     "1, illuminance the E a surface facing it receives (environment.intensity applied; the probes' units), "
     "angular_diameter in degrees (the disk of solid_angle_sr it came from: the soft shadows' penumbra); "
     "irradiance = color x illuminance per channel; shadows hard, soft (over the disk) or none")
+LIGHTS_CONVENTION = (
+    "the lights whose direct light an engine draws per pixel, as the frame does: the probes' paths add each at "
+    "every vertex they meet (its bounce is in the probes), never along their own first ray, so neither the scene's "
+    "lights (source lights.N) nor those extracted from the panorama (environment.sun: extract; the panorama the "
+    "probes saw lacks them) are in the probes' direct light. " + LIGHT_FIELDS)
 
 
 def light_entries(scene, suns) -> list:
