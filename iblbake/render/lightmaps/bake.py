@@ -128,7 +128,7 @@ class LightmapTexels(Source):
                  opts: dict | None = None, specular: bool = False):
         self.tracer, self.rt, self.samples, self.seed, self.progress = tracer, tracer.rt, samples, seed, progress
         self.basis, self.opts = basis, opts or {}
-        self.normals, self.n, self.start = normals, len(start), np.asarray(start, np.float64)
+        self.normals, self.n = normals, len(start)
         self.uniform = samples
         self.extra = importance_rays(samples, tracer.dist)
         # rays a texel: paths, then shadow rays to the panorama. None to the analytic lights: their
