@@ -108,7 +108,7 @@ class Console:
                     done[0] = now
 
             def describe(text):
-                """The work's size, said up front by the library (bake.describe): a note on
+                """The work's size, said up front by the library (render/paths/trace.py describe): a note on
                 stderr (before the bar's line) and the bar's label."""
                 self.note(("\r\x1b[2K" if self._bar else "") + f"iblbake: {text}")
                 step.relabel(text)

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from iblbake.errors import InputError, UsageError
-from iblbake.scene.schema import SCHEMA, ListOf, MapOf, Section, _Bad
+from iblbake.scene.schema import LIGHTMAP_LOBED, SCHEMA, ListOf, MapOf, Section, _Bad
 from iblbake.io import confine, reads
 from iblbake.scene.yaml_lines import MAX_SCENE_BYTES, load_with_lines
 
@@ -541,12 +541,11 @@ def _resolve_lightmap_specular(v: "_Validator", out: dict, raw: dict) -> None:
         v.fail("effects.specular", "lightmap reads the lobe from the scene's lightmap: section, and it has none; add "
                                    "one (`lightmap: {basis: sg}`; docs/manual.md 'Lightmaps') or give another "
                                    "specular mode")
-    lobed = [n for n, b in PROBE_BASES.items() if b.lightmap and b.specular]
     name = out["lightmap"]["basis"]
-    if name not in lobed:
+    if name not in LIGHTMAP_LOBED:
         v.fail("effects.specular", f"lightmap reads the radiance along the lobe from the lightmap's basis, and "
-                                   f"lightmap.basis {name} carries no lobe: give lightmap.basis {' or '.join(lobed)}, "
-                                   "or effects.specular prefiltered")
+                                   f"lightmap.basis {name} carries no lobe: give lightmap.basis "
+                                   f"{' or '.join(LIGHTMAP_LOBED)}, or effects.specular prefiltered")
     mine, stored = PROBE_BASES[name], PROBE_BASES[out["probes"]["irradiance"]]
     if fx["diffuse"] in bases.DIFFUSE or (fx["diffuse"] == "probes" and stored.directional and (
             stored is not mine or mine.options(out["lightmap"]) != stored.options(out["probes"]))):

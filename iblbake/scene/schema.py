@@ -18,6 +18,8 @@ from iblbake.core.conventions import wrap_degrees
 # what a lightmap texel can keep (render/lightmaps/bases.py): its own two, then every basis of the
 # probes' registry that says it may (ProbeBasis.lightmap: not the octahedral atlas, not L1 Geomerics)
 LIGHTMAP_BASES = ("irradiance", "sh_l1", *(n for n, b in PROBE_BASES.items() if b.lightmap))
+# those whose lobe serves the specular term too (`effects.specular: lightmap`: a second set a texel)
+LIGHTMAP_LOBED = tuple(n for n, b in PROBE_BASES.items() if b.lightmap and b.specular)
 
 # Field types. Each checks one value and returns it normalised, or raises _Bad with the reason.
 

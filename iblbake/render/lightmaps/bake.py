@@ -30,7 +30,7 @@ from iblbake.errors import InputError
 from iblbake.render.lightmaps import bases
 from iblbake.render.lightmaps import uv as uvs
 from iblbake.render.lightmaps.bases import sh_irradiance  # noqa: F401  (the package's, read.py's)
-from iblbake.render.paths.trace import Launch, Source, trace
+from iblbake.render.paths.trace import Launch, Source, describe, trace
 
 PROGRAM = "paths/lightmap_trace.cl"
 OFFSET = 0.1          # the start point's lift along the geometric normal, in texels (BakingLab's bias)
@@ -294,14 +294,6 @@ def dilate(atlas, valid, passes: int = DILATE):
         a[fill] = s[fill] / c[fill].reshape(-1, *([1] * (a.ndim - 2)))
         v = v | fill
     return a, v
-
-
-def describe(progress, text: str):
-    """Say the work's size before it starts, where the progress callback can (the command line's
-    carries describe(text): a note on stderr and the bar's label); a plain callable is not told."""
-    tell = getattr(progress, "describe", None)
-    if callable(tell):
-        tell(text)
 
 
 def bytes_of(lay: uvs.Layout, basis: str, opts: dict | None = None) -> int:

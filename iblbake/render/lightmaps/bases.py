@@ -36,9 +36,9 @@ from iblbake.core import sh
 from iblbake.core.bases.probes import PROBE_BASES
 from iblbake.errors import InputError
 from iblbake.scene.schema import LIGHTMAP_BASES as NAMES
+from iblbake.scene.schema import LIGHTMAP_LOBED as LOBED  # noqa: F401  (bake's, store's: a second set)
 
 OWN = NAMES[:2]         # irradiance, sh_l1: this module's; the rest the registry's
-LOBED = tuple(n for n in NAMES if n in PROBE_BASES and PROBE_BASES[n].specular)   # a second set for the lobe
 CHUNK = 256             # texels projected at once (the registry's fits hold texels x 2 samples x floats)
 NORMALS = 128           # normals over a texel's hemisphere its irradiance is fitted at (hemisphere_fitted)
 

@@ -26,6 +26,14 @@ from dataclasses import dataclass, field
 from iblbake.errors import InputError
 
 
+def describe(progress, text: str):
+    """Say the work's size before it starts, where the progress callback can (the command line's
+    carries describe(text): a note on stderr and the bar's label); a plain callable is not told."""
+    tell = getattr(progress, "describe", None)
+    if callable(tell):
+        tell(text)
+
+
 @dataclass(frozen=True)
 class Launch:
     """One launch of a source: its work items, its arguments beyond what the source binds, and

@@ -44,7 +44,6 @@ class Tracer:
             recs = pack.light_records(scene_lights(scene, bakes.sun(scene.data["environment"])))
         skip = np.zeros(max(len(scene.data["objects"]), 1), np.int32)
         skip[list(skip_objects)] = 1
-        self.light_records = recs          # the texels' shadow rays to the lights too (lightmaps/bake.py)
         self.table = {**job.device_scene.table, **environment_frame(scene.data["environment"])}
         self.args = {**panorama_args(rt, bakes, image, dist), "nlights": len(recs), **bakes.chain(rt, chain),
                      "lights": rt.to_device(recs.reshape(-1, 4) if len(recs) else np.zeros((4, 4), np.float32)),

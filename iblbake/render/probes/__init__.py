@@ -112,7 +112,7 @@ def bake(job, settings: dict, progress=None) -> dict:
     placement = {}
     if settings["min"] is None and settings["counts"] is None and settings["spacing"] is None:
         grid, placement = scaled_grid(tracer, grid, settings, arrays, camera)      # within the cap: no error
-    from iblbake.render.lightmaps.bake import describe
+    from iblbake.render.paths.trace import describe
     rays = settings["rays"]          # the work's size said up front (a huge grid printed nothing for minutes)
     describe(progress, f"{grid.count:,} probes x {rays} rays = {grid.count * rays:,} paths "
                        f"({'x'.join(map(str, grid.counts))} grid, spacing {grid.unit:.4g})")

@@ -175,18 +175,16 @@ class LightmapSpecular(Source):
         settings = scene.data["lightmap"]
         b, opts = basis_of(settings)
         spec = specular_options(settings)
-        d = {**uv_defines(), **b.m.defines(spec), "BASIS_SPACE": "__global", "LIGHTMAP_SPECULAR": 1,
-             "LM_SPEC_ROWS": b.rows(spec)}
-        if scene.data["effects"]["prefilter"]["dominant_direction"]:
-            d["DOMINANT_DIRECTION"] = 1
-        return d
+        from iblbake.render.sources.prefiltered import split_sum_defines
+        return {**uv_defines(), **b.m.defines(spec), "BASIS_SPACE": "__global", "LIGHTMAP_SPECULAR": 1,
+                "LM_SPEC_ROWS": b.rows(spec), **split_sum_defines(scene)}
 
     def reads_bakes(self, scene, fx):
         return ["lightmap", "prefiltered", "dfg"]
 
     def args(self, ctx):
         from iblbake.render.sources.basis import table_args
-        from iblbake.render.sources.prefiltered import dfg_args
+        from iblbake.render.sources.prefiltered import split_sum_args
         lm, settings = ctx.loaded["lightmap"], ctx.scene.data["lightmap"]
         b, spec = basis_of(settings)[0], lm["specular_options"]
         h, w = lm["layout"].height, lm["layout"].width
@@ -194,7 +192,7 @@ class LightmapSpecular(Source):
                                     lambda: ctx.rt.to_device(b.pack(np.asarray(lm["specular"]).reshape(h * w, -1, 3),
                                                                     spec)))
         return {"lm_spec": atlas, "lm_width": w, "lm_height": h, **table_args(ctx.rt, settings["basis"], spec),
-                **ctx.chain(ctx.loaded["prefiltered"]), **dfg_args(ctx.rt, ctx.loaded["dfg"])}
+                **split_sum_args(ctx)}
 
     def placeholders(self, rt):
         return {"lm_spec": rt.to_device(np.zeros((1, 4), np.float32))}

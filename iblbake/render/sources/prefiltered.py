@@ -20,6 +20,17 @@ def no_chain(rt) -> dict:
     return {"chain": rt.to_device(np.zeros(4, np.float32)), "off": z, "lw": z, "lh": z, "nlev": 1}
 
 
+def split_sum_defines(scene) -> dict:
+    """The split sum's own define: the chain read along the dominant direction where asked."""
+    return {"DOMINANT_DIRECTION": 1} if scene.data["effects"]["prefilter"]["dominant_direction"] else {}
+
+
+def split_sum_args(ctx) -> dict:
+    """The split sum's arguments: the prefiltered chain and the DFG table (what `specular:
+    prefiltered` binds, and the probes' and the lightmap's lobes beside it)."""
+    return {**ctx.chain(ctx.loaded["prefiltered"]), **dfg_args(ctx.rt, ctx.loaded["dfg"])}
+
+
 class SplitSum(Source):
     name = "prefiltered"
     header = "split_sum.h"
@@ -29,13 +40,13 @@ class SplitSum(Source):
         return fx.specular == "prefiltered"
 
     def defines(self, scene, fx):
-        return {"DOMINANT_DIRECTION": 1} if scene.data["effects"]["prefilter"]["dominant_direction"] else {}
+        return split_sum_defines(scene)
 
     def reads_bakes(self, scene, fx):
         return ["prefiltered", "dfg"]
 
     def args(self, ctx):
-        return {**ctx.chain(ctx.loaded["prefiltered"]), **dfg_args(ctx.rt, ctx.loaded["dfg"])}
+        return split_sum_args(ctx)
 
     def placeholders(self, rt):
         return {**no_chain(rt), **dfg_args(rt, None)}

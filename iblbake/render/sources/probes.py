@@ -88,18 +88,15 @@ class ProbeSpecular(Source):
         return fx.specular == "probes"
 
     def defines(self, scene, fx):
-        d = {**probe_defines(scene.data["probes"]), "PROBE_STATS": 1}
-        if scene.data["effects"]["prefilter"]["dominant_direction"]:
-            d["DOMINANT_DIRECTION"] = 1
-        return d
+        from iblbake.render.sources.prefiltered import split_sum_defines
+        return {**probe_defines(scene.data["probes"]), "PROBE_STATS": 1, **split_sum_defines(scene)}
 
     def reads_bakes(self, scene, fx):
         return ["probes", "prefiltered", "dfg"]
 
     def args(self, ctx):
         from iblbake.render.sources.basis import table_args
-        from iblbake.render.sources.prefiltered import dfg_args
+        from iblbake.render.sources.prefiltered import split_sum_args
         settings = ctx.scene.data["probes"]
         return {**probe_args(ctx.rt, probes.sampled(ctx.loaded["probes"], settings), ctx.bakes),
-                **table_args(ctx.rt, settings["irradiance"], probes.basis_options(settings)),
-                **ctx.chain(ctx.loaded["prefiltered"]), **dfg_args(ctx.rt, ctx.loaded["dfg"])}
+                **table_args(ctx.rt, settings["irradiance"], probes.basis_options(settings)), **split_sum_args(ctx)}

@@ -49,7 +49,7 @@ def light_brdf_cos(base, metallic, rough, f0, f90, n, v, nov, l, diffuse: bool, 
     return out
 
 
-def cone_direction(a, omc, u):
+def _cone_direction(a, omc, u):
     """kernels/light.h cone_direction: directions uniform in the cone about a (n, 3) of 1 - cos omc."""
     x = u[..., 0] * omc
     ct, st, phi = 1 - x, np.sqrt(np.maximum(0, x * (2 - x))), 2 * np.pi * u[..., 1]
@@ -107,7 +107,7 @@ def lights(gb, arrays, records, effects: dict, *, diffuse=True, specular=True, e
             le = e / (np.pi * sin_max ** 2)[:, None]
             acc = np.zeros((len(p), 3))
             for k in range(ns):
-                l = cone_direction(wc, omc, sampling.Sampler(ls, sid, k).next_2d())
+                l = _cone_direction(wc, omc, sampling.Sampler(ls, sid, k).next_2d())
                 ok = ~occluded(origin, l, arrays, dist) if visibility else np.ones(len(p), bool)
                 acc += np.where(ok[:, None], shade(l), 0.0)
             color += le * (2 * np.pi * omc)[:, None] * acc / ns
@@ -124,7 +124,7 @@ def lights(gb, arrays, records, effects: dict, *, diffuse=True, specular=True, e
         elif mode == 1 or (mode == 2 and (sin_max <= 0).all()):
             vis = (~occluded(origin, wc, arrays, dist)).astype(float)
         elif mode == 2:             # soft: the share of ns rays over the disk or sphere that arrive
-            vis = sum(~occluded(origin, cone_direction(wc, omc, sampling.Sampler(ls, sid, k).next_2d()), arrays, dist)
+            vis = sum(~occluded(origin, _cone_direction(wc, omc, sampling.Sampler(ls, sid, k).next_2d()), arrays, dist)
                       for k in range(ns)) / ns
         else:
             vis = np.ones(len(p))
