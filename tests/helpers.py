@@ -6,6 +6,7 @@ import base64
 import contextlib
 import json
 import os
+import shutil
 import struct
 import subprocess
 import sys
@@ -334,3 +335,13 @@ def quad_room_lightmap_study(cache, panoramas):
                    [f"environment.path={panoramas['studio']}", "effects.specular=off", "lightmap.texels_per_unit=4",
                     "lightmap.samples=1024"], settings, runtime=rt, bakes=bakes)
     return st, rt, bakes, st.render_reference("diffuse")
+
+
+def glsl_compiles(path, source: str) -> None:
+    """glslangValidator compiles `source` as a GLSL 330 fragment shader written to path (a .frag);
+    the test is skipped where it is not installed (Debian's glslang-tools; make readers installs it)."""
+    if shutil.which("glslangValidator") is None:
+        pytest.skip("glslangValidator not installed (Debian's glslang-tools; make readers installs it)")
+    Path(path).write_text("#version 330 core\n" + source)
+    p = subprocess.run(["glslangValidator", str(path)], capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0, p.stdout + p.stderr
