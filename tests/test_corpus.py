@@ -134,18 +134,18 @@ PART_BOUND = 0.10          # a reflection probe at a metal object's centre, each
 # none left here: quad_room's gold sphere under studio was x1.25 on its window half (32% at 64 px)
 # while the distant chain's lobe filled the edge of the window its points see but the probe does not.
 FRAME_MISSES = {("two_storey", "studio"): 0.68, ("probe_box_walls", "studio"): 0.70}
-# Read in taps (TAPS below; 64 px), no half misses now: metal_box's cube under studio was 11.4% on
-# its +x face's worst channel (its upper part, which mirrors the box's open corner, 1.46-1.58x too
-# bright in red and blue) while each tap's sky was the probe's over its open share alone: a studio
-# lamp the probe saw in a sliver of the opening spread over all the face sees of it
-# (kernels/reflection_probes.h rprobe_tap_sky): 3.0% now (10.9-11.4% before over the capture's seeds
-# 1-3, 0.5-4.4% now). Its worst half under studio, -x 9.3% (the red wall), is the capture's path noise
-# at 64 samples a texel: 3.4% and 0.7% with seeds 2 and 3, 1.6% at 256 samples; under city -x 8.6%
-# (7.9% at 256 samples), as before. window_room's chrome sphere under studio (its probe at the room's
-# centre) now mirrors the clay sphere where it stands through the capture's distance (kernels/reflection_probes.h rprobe_hit): 5.1% (x1.04) on
-# the half facing it; pinned on the wall behind by the box alone it was 24.3% (x1.21). metal_box under
-# city was x0.88 on its -x face (13%) while each tap's read of the scene was floored at level 2 (the
-# black floor under the cube bled into the lit floor beside it): x0.93 (8%) at the tap's own level.
+# Read in taps (TAPS below; 64 px), no half misses now: metal_box's cube under studio was 11.4% on its
+# +x face's worst channel (its upper part, which mirrors the box's open corner, 1.46-1.58x too bright in
+# red and blue) while each tap's sky was the probe's over its open share alone: a studio lamp the probe
+# saw in a sliver of the opening spread over all the face sees of it (kernels/reflection_probes.h
+# rprobe_tap_sky): 3.0% now (10.9-11.4% before over the capture's seeds 1-3, 0.5-4.4% now). Its worst
+# half under studio, -x 9.3% (the red wall), is the capture's path noise at 64 samples a texel: 3.4% and
+# 0.7% with seeds 2 and 3, 1.6% at 256 samples; under city -x 8.6% (7.9% at 256 samples), as before.
+# window_room's chrome sphere under studio (its probe at the room's centre) now mirrors the clay sphere
+# where it stands through the capture's distance (kernels/reflection_probes.h rprobe_hit): 5.1% (x1.04)
+# on the half facing it; pinned on the wall behind by the box alone it was 24.3% (x1.21). metal_box
+# under city was x0.88 on its -x face (13%) while each tap's read of the scene was floored at level 2
+# (the black floor under the cube bled into the lit floor beside it): x0.93 (8%) at the tap's own level.
 PART_MISSES: dict = {}
 
 
