@@ -221,6 +221,33 @@ IBL_INLINE float rprobe_tap_rough(float noh, float voh, float nol, float alpha, 
     return fmin(sqrt(a), sqrt(alpha));
 }
 
+/* The sky a tap along l (at roughness tap_rough, chain level tap_rough top) meets through probe k's
+ * openings, per unit of the share of its footprint p sees open: where the probe saw that share
+ * too, the capture's own sky about l per unit of its open share seen = 1 - coverage(l) (a lamp
+ * behind the wall beside a window is not in it, where the distant chain's filtered tap spread it
+ * through the edge: quad_room under studio x1.28 on the window half with it; the distant chain's
+ * where the probe saw less than RPROBE_SKY_SEEN of it open); the share p sees open beyond the
+ * probe's (open = 1 - coverage(d) at the tap's level, d towards where l meets the capture: an
+ * opening nearer p than the probe) holds the panorama about l itself (at infinity), read at the
+ * tap's roughness times the square root of that share (it lies along the opening's edge). The
+ * probe's sky there (before) spread a lamp it saw in a sliver of the opening over all p sees of
+ * it: metal_box's cube under studio, the face that mirrors the box's open corner x1.19 in red and
+ * blue (11.4%), 3.0% now; at the share's own solid angle (its fourth root) the lamp behind
+ * quad_room's window wall came back through the edge (9.9%, 6.5% now). */
+IBL_INLINE float3 rprobe_tap_sky(RPROBE_PARAMS, int k, float3 l, float3 d, float tap_rough, CHAIN_PARAMS,
+                                 float2 env_rot, float env_scale)
+{
+    const float tap = tap_rough * fmax((float)(rp_nlev - 1), 1.0f);
+    const float seen = fmax(1.0f - rprobe_lookup(RPROBE_ARGS, 4 * k + 1, l, tap).x, 0.0f);
+    const float open = fmax(1.0f - rprobe_lookup(RPROBE_ARGS, 4 * k + 1, d, tap).x, 0.0f);
+    const float3 through = seen > RPROBE_SKY_SEEN ? rprobe_lookup(RPROBE_ARGS, 4 * k + 2, l, tap) / seen
+                           : env_scale * split_sum_radiance(CHAIN_ARGS, l, env_rot, tap_rough);
+    if (open <= seen) return through;
+    const float known = seen / open;
+    return known * through
+           + (1.0f - known) * env_scale * split_sum_radiance(CHAIN_ARGS, l, env_rot, tap_rough * sqrt(open - seen));
+}
+
 /* Probe k's reading at p of the GGX lobe of normal n and view v (alpha rough^2, rough = lod over
  * the chain's last level) in `count` Hammersley directions l, each weighted as the BRDF over
  * its pdf without Fresnel (V 4 NoL VoH / NoH; none below the surface; the split sum's albedo
@@ -230,11 +257,7 @@ IBL_INLINE float rprobe_tap_rough(float noh, float voh, float nol, float alpha, 
  * under a probe's excluded cube into the lit floor beside it: metal_box under city, the -x face
  * x0.88 at level 2, x0.93 at the tap's), and the sky
  * along l itself (at infinity: no parallax) where p sees that direction open (the coverage along
- * d at the capture's own level: a window's edge as sharp as the capture holds it). That sky is
- * the capture's own through its openings per unit of open share (a lamp behind the wall beside a
- * window is not in it, where the distant chain's filtered tap spread it through the edge:
- * quad_room under studio x1.28 on the window half with it), the distant chain's where the probe saw
- * less than RPROBE_SKY_SEEN of that tap open. */
+ * d at the capture's own level: a window's edge as sharp as the capture holds it), rprobe_tap_sky. */
 IBL_INLINE float3 rprobe_taps(RPROBE_PARAMS, int k, float3 p, float3 n, float3 v, float lod, int count,
                               CHAIN_PARAMS, float2 env_rot, float env_scale)
 {
@@ -258,9 +281,7 @@ IBL_INLINE float3 rprobe_taps(RPROBE_PARAMS, int k, float3 p, float3 n, float3 v
         const float3 x = rprobe_hit(RPROBE_ARGS, k, p, l);
         const float3 d = (x - a.xyz) / fmax(distance(x, a.xyz), 1e-6f);
         const float open = fmax(1.0f - rprobe_lookup(RPROBE_ARGS, 4 * k + 1, d, 0.0f).x, 0.0f);
-        const float seen = 1.0f - rprobe_lookup(RPROBE_ARGS, 4 * k + 1, l, tap).x;
-        const float3 through = seen > RPROBE_SKY_SEEN ? rprobe_lookup(RPROBE_ARGS, 4 * k + 2, l, tap) / seen
-                               : env_scale * split_sum_radiance(CHAIN_ARGS, l, env_rot, tap_rough);
+        const float3 through = rprobe_tap_sky(RPROBE_ARGS, k, l, d, tap_rough, CHAIN_ARGS, env_rot, env_scale);
         acc += w * (rprobe_lookup(RPROBE_ARGS, 4 * k, d, tap) + open * through);
         wsum += w;
     }

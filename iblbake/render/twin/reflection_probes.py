@@ -154,22 +154,43 @@ def tap_rough(noh, voh, nol, alpha, count: int):
     return np.minimum(np.sqrt(a), np.sqrt(alpha))
 
 
+def tap_sky(c: dict, l, d, rough_t, env):
+    """Twin of rprobe_tap_sky: the sky a tap along l (roughness rough_t) meets through capture c's
+    openings per unit of the share p sees open: the capture's sky about l over its open share seen
+    (the distant chain's where seen <= SKY_SEEN) on the part the probe saw too; the part p sees
+    open beyond it (open: the coverage along d at the tap's level) the distant chain about l at
+    rough_t times the square root of that part's share. env: the distant chain, its rotation, its
+    intensity."""
+    chain, rot, scale = env
+    tap = rough_t * max(len(c["levels"]) - 1, 1)
+    seen = np.maximum(1 - radiance.chain_lookup_twin(c["coverage"], l, tap)[:, :1], 0.0)
+    open_ = np.maximum(1 - radiance.chain_lookup_twin(c["coverage"], d, tap)[:, :1], 0.0)
+
+    def distant(rough):
+        return scale * radiance.chain_lookup_twin(chain, conventions.rotate_y(l, -rot), rough * (len(chain) - 1))
+    through = np.where(seen > SKY_SEEN, radiance.chain_lookup_twin(c["sky"], l, tap) / np.maximum(seen, 1e-30),
+                       distant(rough_t))
+    beyond = np.maximum(open_ - seen, 0.0)
+    if not beyond.any():
+        return through
+    known = np.where(beyond > 0, seen / np.maximum(open_, 1e-30), 1.0)
+    return known * through + (1 - known) * distant(rough_t * np.sqrt(beyond[:, 0]))
+
+
 def taps(c: dict, p, n, v, lod, env, count: int):
     """Twin of rprobe_taps: the GGX lobe of normal n and view v (alpha rough^2, rough lod over the
     chain's last level) read in `count` Hammersley directions l, each weighted as the BRDF over its
     pdf without Fresnel (V 4 NoL VoH / NoH, none below the surface): the scene where l leaves the
-    proxy, seen from the probe at the tap's own level (not floored at FINEST), and the sky along l itself, the capture's
-    own through its openings per unit of open share (the distant chain where it saw none; env: the
-    distant chain, its rotation, its intensity), times whether p sees that direction open (the
-    coverage at the capture's own level along the parallax-corrected direction); each tap at its
-    own roughness (tap_rough)."""
+    proxy, seen from the probe at the tap's own level (not floored at FINEST), and the sky along l
+    itself (tap_sky; env: the distant chain, its rotation, its intensity), times whether p sees
+    that direction open (the coverage at the capture's own level along the parallax-corrected
+    direction); each tap at its own roughness (tap_rough)."""
     st, nlev = c["settings"], len(c["levels"])
     pos = np.asarray(st["position"], np.float64)
     top = max(nlev - 1, 1)
     alpha = (lod / top) ** 2
     nov = np.maximum((n * v).sum(1), 1e-4)
     t, b = conventions.tangent_frame(n)
-    chain, rot, scale = env
     acc, wsum = np.zeros((len(p), 3)), np.zeros((len(p), 1))
     for u in sampling.hammersley(count):
         noh, voh, l, nol = sampling.reflect_ggx_half(u, t, b, n, v, alpha)
@@ -180,11 +201,7 @@ def taps(c: dict, p, n, v, lod, env, count: int):
         x = hit(c, p, l)
         d = (x - pos) / np.maximum(np.linalg.norm(x - pos, axis=-1, keepdims=True), 1e-6)
         open_ = np.maximum(1 - radiance.chain_lookup_twin(c["coverage"], d, 0.0)[:, :1], 0.0)
-        seen = 1 - radiance.chain_lookup_twin(c["coverage"], l, tap)[:, :1]
-        distant = scale * radiance.chain_lookup_twin(chain, conventions.rotate_y(l, -rot), rough_t * (len(chain) - 1))
-        through = np.where(seen > SKY_SEEN, radiance.chain_lookup_twin(c["sky"], l, tap) / np.maximum(seen, 1e-30),
-                           distant)
-        acc += w * (radiance.chain_lookup_twin(c["levels"], d, tap) + open_ * through)
+        acc += w * (radiance.chain_lookup_twin(c["levels"], d, tap) + open_ * tap_sky(c, l, d, rough_t, env))
         wsum += w
     return acc / np.maximum(wsum, 1e-9)
 
