@@ -223,6 +223,7 @@ def test_reflection_probes_run_only_where_the_split_sum_reads_them(tmp_path, sky
     ({"position": [5, 0, 0], "min": [-1, -1, -1], "max": [1, 1, 1]}, "lies outside the box"),
     ({"position": [0, 0, 0], "shape": "sphere"}, "missing required key 'radius'"),
     ({"position": [0, 0, 0], "shape": "cone", "radius": 1}, "is not one of box | sphere"),
+    ({"position": [0, 0, 0], "min": [-1, -1, -1], "max": [1, 1, 1], "grazing_taps": 300}, "grazing_taps"),
 ])
 def test_bad_reflection_probes_are_one_line_errors(tmp_path, sky, probe, words):
     p = tmp_path / "s.yaml"
