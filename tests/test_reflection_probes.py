@@ -192,6 +192,11 @@ def test_frame_matches_the_twin(tmp_path, rt, taps, grazing):
     boxed = rr.shade(gb, arrays, sc["effects"], sc["environment"], prefiltered=distant, dfg=table,
                      reflection_probes=[{**c, "depth": None} for c in captured])[gb["hit"]]
     assert np.abs(boxed - want).max() / want.max() > 0.1      # the march met the ball somewhere
+    if grazing:             # the frame has grazing views: their taps changed it
+        once = rr.shade(gb, arrays, sc["effects"], sc["environment"], prefiltered=distant, dfg=table,
+                        reflection_probes=[{**c, "settings": {**c["settings"], "grazing_taps": 0}}
+                                           for c in captured])[gb["hit"]]
+        assert np.abs(once - want).max() / want.max() > 0.01
 
 
 def test_reflection_probes_run_only_where_the_split_sum_reads_them(tmp_path, sky):
