@@ -1,5 +1,5 @@
 """Render benchmark: the 1280x720 sphere grid in every specular mode and the 102,400-triangle mesh
-scene, and the corpus' window_room under its reflection probe read once a lobe or in 16, 32 or 64
+scene, and the corpus' window_room under its reflection probe read once a lobe, at its default (taps at grazing views) or in 16, 32 or 64
 taps (128x96 and 256x192); per configuration the median of 3 warm runs (caches baked and kernels built by a first run)
 of the end-to-end render and of each pass, Mpixel-samples/s of the lighting pass, primary rays/s,
 and BVH build time. Targets (2-core CPU): prefiltered < 1 s end to end, importance N=40 < 3 s.
@@ -58,14 +58,19 @@ CONFIGS = [
     # the tiled torus of examples/make_textured.py with its own five maps, and the same mesh untextured
     ("textured mesh, 5 maps", "textured.yaml", []),
     ("textured mesh, untextured", "textured.yaml", ["objects.0.material=plain"]),
-    # the corpus' window_room under its parallax reflection probe: one read a lobe against taps
-    # (reflection_probes.N.taps), each pixel in the probe's box paying them
-] + [(f"reflection probe {res}, {n} taps" if n else f"reflection probe {res}, one read", "../corpus/window_room.yaml",
-      [f"camera.resolution=[{res.replace('x', ',')}]", f"reflection_probes.0.taps={n}"])
-     for res in ("128x96", "256x192") for n in (0, 16, 32, 64)]
+    # the corpus' window_room under its parallax reflection probe: one read a lobe everywhere, the
+    # default (16 taps at grazing views, reflection_probes.N.grazing_taps), taps everywhere
+    # (reflection_probes.N.taps), each pixel that reflects in the probe's box paying them
+] + [(f"reflection probe {res}, {label}", "../corpus/window_room.yaml",
+      [f"camera.resolution=[{res.replace('x', ',')}]", *sets])
+     for res in ("128x96", "256x192")
+     for label, sets in [("one read", ["reflection_probes.0.taps=0", "reflection_probes.0.grazing_taps=0"]),
+                         ("default", ["reflection_probes.0.taps=0"])]
+     + [(f"{n} taps", [f"reflection_probes.0.taps={n}"]) for n in (16, 32, 64)]]
 # keys a baseline from before them does not know (its scene loader refuses them); without them it
 # renders what they switch off
-NEWER_KEYS = ("effects.reference.visibility", "effects.lobe.samples", "lights=", "effects.ao")
+NEWER_KEYS = ("effects.reference.visibility", "effects.lobe.samples", "lights=", "effects.ao",
+              "reflection_probes.0.grazing_taps")
 
 
 def main():

@@ -7,7 +7,8 @@
  * grey), the sky its escaping rays saw (chain 4k + 2: the panorama through the scene's openings, 0
  * where covered) and the distance from the probe to the scene (chain 4k + 3, grey, level 0 read;
  * an opening's texels the proxy's). The sky is infinitely far: no parallax moves it (rprobe_sky).
- * rp_info's fourth z: the probe's taps (reflection_probes.N.taps), 0: one read a lobe; w: 1 where
+ * rp_info's fourth z: the probe's taps (reflection_probes.N.taps), -N: N taps at grazing views alone
+ * (reflection_probes.N.grazing_taps, rprobe_grazing), 0: one read a lobe; w: 1 where
  * the probe has its distance chain (rprobe_hit marches against it), 0: the proxy alone.
  * The chains lie back to back in rp_chain, level l of chain c at rp_off[c rp_nlev + l] texels,
  * every level rp_lw x rp_lh.
@@ -288,14 +289,50 @@ IBL_INLINE float3 rprobe_taps(RPROBE_PARAMS, int k, float3 p, float3 n, float3 v
     return acc / fmax(wsum, 1e-9f);
 }
 
+/* Probe k's one read at p along r (the split sum's direction) at chain level lod: its scene along
+ * the direction corrected to where p's ray meets the capture (a parallax probe: rprobe_hit), at a
+ * level narrowed by p's distance to that point over the probe's (Lagarde and Zanuttini 2012's
+ * distance-based roughness: the lobe's footprint there, seen from the probe), down to
+ * RPROBE_FINEST; the sky it saw fills the rest (rprobe_sky). */
+IBL_INLINE float3 rprobe_read(RPROBE_PARAMS, int k, float3 p, float3 r, float lod, float3 distant)
+{
+    const float4 a = rp_info[4 * k], e = rp_info[4 * k + 3];
+    float3 d = r;
+    float near_lod = lod, off = 0.0f, shift = 0.0f;
+    if (e.x > 0.5f) {
+        const float3 x = rprobe_hit(RPROBE_ARGS, k, p, r);
+        const float from_probe = fmax(distance(x, a.xyz), 1e-6f);
+        d = (x - a.xyz) / from_probe;
+        near_lod = fmax(lod * clamp(distance(x, p) / from_probe, 0.0f, 1.0f), fmin(lod, RPROBE_FINEST));
+        shift = distance(p, a.xyz) / from_probe;
+        off = clamp((shift - RPROBE_NEAR) / (RPROBE_FAR - RPROBE_NEAR), 0.0f, 1.0f);
+    }
+    const float open = 1.0f - rprobe_lookup(RPROBE_ARGS, 4 * k + 1, d, near_lod).x;
+    return rprobe_lookup(RPROBE_ARGS, 4 * k, d, near_lod) + rprobe_sky(RPROBE_ARGS, k, r, lod, open, off, shift, distant);
+}
+
+/* The share of a parallax probe's reading taken in taps where its taps are left to the view's
+ * angle (rp_info's fourth z -N: reflection_probes.N.grazing_taps): all of it below
+ * RPROBE_GRAZING_LO NoV, none above RPROBE_GRAZING_HI, linear between (no seam where the reading
+ * changes). There the split sum's lobe about r misses the material's: the lobe is stretched and
+ * cut by the horizon, and its read along the dominant direction (Lagarde and de Rousiers 2014's
+ * fit, view-independent) is 13-29% off on the halves of a rough gold sphere seen edge-on
+ * (docs/conventions.md "Grazing"). */
+#define RPROBE_GRAZING_LO 0.4f
+#define RPROBE_GRAZING_HI 0.8f
+IBL_INLINE float rprobe_grazing(float z, float nov)
+{
+    if (z > 0.5f) return 1.0f;
+    if (z > -0.5f) return 0.0f;
+    return clamp((RPROBE_GRAZING_HI - nov) / (RPROBE_GRAZING_HI - RPROBE_GRAZING_LO), 0.0f, 1.0f);
+}
+
 /* The prefiltered radiance at point p (normal n, view v) along r (world frame) at chain level lod:
  * the probes whose influence holds p, weighted (their weights normalised where they sum past 1),
- * and `distant` (the panorama's chain, scaled) for the rest. A parallax probe with taps (its
- * rp_info's fourth z) is read in that many taps over the lobe (rprobe_taps). Otherwise each
- * probe's scene is read along the direction corrected to where p's ray leaves its proxy, at a level narrowed by p's distance to that point
- * over the probe's (Lagarde and Zanuttini 2012's distance-based roughness: the lobe's footprint
- * there, seen from the probe), down to RPROBE_FINEST; the sky it saw fills the rest (rprobe_sky).
- * Captures hold the panorama's intensity and frame. */
+ * and `distant` (the panorama's chain, scaled) for the rest. A parallax probe with taps (rp_info's
+ * fourth z: N everywhere, -N at grazing views, rprobe_grazing) is read in that many taps over the
+ * lobe (rprobe_taps), elsewhere in one read (rprobe_read). Captures hold the panorama's intensity
+ * and frame. */
 IBL_INLINE float3 reflection_probes(float3 p, float3 n, float3 v, float3 r, float lod, float3 distant,
                                     RPROBE_PARAMS, CHAIN_PARAMS, float2 env_rot, float env_scale)
 {
@@ -306,23 +343,11 @@ IBL_INLINE float3 reflection_probes(float3 p, float3 n, float3 v, float3 r, floa
         const float w = rprobe_weight(p, a, b, c);
         if (w <= 0.0f) continue;
         wsum += w;
-        if (e.x > 0.5f && e.z > 0.5f) {
-            acc += w * rprobe_taps(RPROBE_ARGS, k, p, n, v, lod, (int)e.z, CHAIN_ARGS, env_rot, env_scale);
-            continue;
-        }
-        float3 d = r;
-        float near_lod = lod, off = 0.0f, shift = 0.0f;
-        if (e.x > 0.5f) {
-            const float3 x = rprobe_hit(RPROBE_ARGS, k, p, r);
-            const float from_probe = fmax(distance(x, a.xyz), 1e-6f);
-            d = (x - a.xyz) / from_probe;
-            near_lod = fmax(lod * clamp(distance(x, p) / from_probe, 0.0f, 1.0f), fmin(lod, RPROBE_FINEST));
-            shift = distance(p, a.xyz) / from_probe;
-            off = clamp((shift - RPROBE_NEAR) / (RPROBE_FAR - RPROBE_NEAR), 0.0f, 1.0f);
-        }
-        const float open = 1.0f - rprobe_lookup(RPROBE_ARGS, 4 * k + 1, d, near_lod).x;
-        acc += w * (rprobe_lookup(RPROBE_ARGS, 4 * k, d, near_lod)
-                    + rprobe_sky(RPROBE_ARGS, k, r, lod, open, off, shift, distant));
+        const float g = e.x > 0.5f ? rprobe_grazing(e.z, dot(n, v)) : 0.0f;
+        if (g > 0.0f)
+            acc += w * g * rprobe_taps(RPROBE_ARGS, k, p, n, v, lod, (int)fabs(e.z), CHAIN_ARGS, env_rot, env_scale);
+        if (g < 1.0f)
+            acc += w * (1.0f - g) * rprobe_read(RPROBE_ARGS, k, p, r, lod, distant);
     }
     if (wsum > 1.0f) return acc / wsum;
     return acc + (1.0f - wsum) * distant;

@@ -114,12 +114,14 @@ __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
     {
         const float3 r = split_sum_direction(nrm, v, mt.alpha);
         float3 li = env_scale * split_sum_radiance(CHAIN_ARGS, r, env_rot, mt.roughness);
-#ifdef HAS_REFLECTION_PROBES
-        /* the local captures (world frame, the panorama's intensity in them) where they reach */
-        li = reflection_probes(gb_pos[gid].xyz, nrm, v, r, mt.roughness * (float)(rp_nlev - 1), li, RPROBE_ARGS, CHAIN_ARGS,
-                               env_rot, env_scale);
-#endif
         const float3 w = spec_occ * split_sum_albedo(dfg, dfg_size, mt, nov);
+#ifdef HAS_REFLECTION_PROBES
+        /* the local captures (world frame, the panorama's intensity in them) where they reach and
+         * the lobe reflects anything (a Lambert wall of specular 0 pays no taps at grazing views) */
+        if (w.x + w.y + w.z > 0.0f)
+            li = reflection_probes(gb_pos[gid].xyz, nrm, v, r, mt.roughness * (float)(rp_nlev - 1), li, RPROBE_ARGS,
+                                   CHAIN_ARGS, env_rot, env_scale);
+#endif
         color += w * li;
 #ifdef HAS_SSR
 #ifdef HAS_OCCLUSION_MAP

@@ -73,6 +73,12 @@ def probe_chains(c: dict) -> tuple:
     return c["levels"], c["coverage"], c["sky"], depth
 
 
+def tap_code(st: dict) -> int:
+    """rp_info's fourth z: `taps` over the whole lobe where set, else minus `grazing_taps` (taps
+    where the view grazes the surface alone; kernels/reflection_probes.h rprobe_grazing)."""
+    return int(st["taps"]) if st["taps"] else -int(st.get("grazing_taps", 0))
+
+
 def rprobe_info(captured) -> np.ndarray:
     """rp_info (kernels/reflection_probes.h): 4 float4 per probe from its settings."""
     info = np.zeros((len(captured), 4, 4), np.float32)
@@ -84,6 +90,6 @@ def rprobe_info(captured) -> np.ndarray:
         info[k, 2] = [*(st["max"] if box else st["position"]), 0.0 if box else st["radius"]]
         info[k, 3, 0] = 1.0 if st["parallax"] else 0.0
         info[k, 3, 1] = np.pi / st["size"]          # the capture's texel, in radians (its rows)
-        info[k, 3, 2] = st["taps"]                  # the lobe's taps (rprobe_taps)
+        info[k, 3, 2] = tap_code(st)                # the lobe's taps (rprobe_taps, rprobe_grazing)
         info[k, 3, 3] = 1.0 if marches(c) else 0.0      # a distance chain to march (rprobe_hit)
     return info.reshape(-1, 4)

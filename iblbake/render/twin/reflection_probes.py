@@ -206,34 +206,61 @@ def taps(c: dict, p, n, v, lod, env, count: int):
     return acc / np.maximum(wsum, 1e-9)
 
 
+def read(c: dict, p, r, lod, distant):
+    """Twin of rprobe_read: capture c's one read at p along r (the scene along the direction
+    corrected to where p's ray meets the capture, at the distance-narrowed level; the sky)."""
+    st = c["settings"]
+    d, near_lod, off, shift = r, lod, np.zeros((len(p), 1)), np.zeros(len(p))
+    if st["parallax"]:
+        pos = np.asarray(st["position"], np.float64)
+        x = hit(c, p, r)
+        from_probe = np.maximum(np.linalg.norm(x - pos, axis=-1), 1e-6)
+        d = (x - pos) / from_probe[:, None]
+        near_lod = np.maximum(lod * np.clip(np.linalg.norm(x - p, axis=-1) / from_probe, 0.0, 1.0),
+                              np.minimum(lod, FINEST))
+        shift = np.linalg.norm(p - pos, axis=-1) / from_probe
+        off = np.clip((shift - NEAR) / (FAR - NEAR), 0.0, 1.0)[:, None]
+    open_ = 1 - radiance.chain_lookup_twin(c["coverage"], d, near_lod)[:, :1]
+    return radiance.chain_lookup_twin(c["levels"], d, near_lod) + sky(c, r, lod, open_, off, shift, distant)
+
+
+GRAZING_LO, GRAZING_HI = 0.4, 0.8     # kernels/reflection_probes.h RPROBE_GRAZING_LO, RPROBE_GRAZING_HI
+
+
+def grazing(st: dict, nov):
+    """Twin of rprobe_grazing: the share of a parallax probe's reading taken in taps (all of it
+    with `taps`, else by NoV where `grazing_taps` is set, none without either)."""
+    if not st["parallax"] or not (st.get("taps") or st.get("grazing_taps")):
+        return np.zeros(len(nov))
+    if st.get("taps"):
+        return np.ones(len(nov))
+    return np.clip((GRAZING_HI - nov) / (GRAZING_HI - GRAZING_LO), 0.0, 1.0)
+
+
 def blend(captured: list, p, r, lod, distant, env, lobe):
     """Twin of reflection_probes: captured [{settings, levels, coverage, sky, depth (optional: the
-    distance chain, rprobe_hit)}], distant the scaled
-    distant chain's radiance at (p, r) (m, 3), which takes the share no probe's influence holds;
-    env (the distant chain, its rotation, its intensity) and lobe (n, v) for a probe read in taps."""
+    distance chain, rprobe_hit)}], distant the scaled distant chain's radiance at (p, r) (m, 3),
+    which takes the share no probe's influence holds; env (the distant chain, its rotation, its
+    intensity) and lobe (n, v) for a probe read in taps (everywhere, or at grazing views)."""
     acc = np.zeros_like(distant)
     wsum = np.zeros(len(p))
     lod = np.broadcast_to(np.asarray(lod, np.float64), (len(p),))
+    nov = (lobe[0] * lobe[1]).sum(-1) if lobe is not None else np.ones(len(p))     # no lobe: no taps
     for c in captured:
         st = c["settings"]
         w = weight(st, p)
         wsum += w
-        if st["parallax"] and st.get("taps"):
-            acc += w[:, None] * taps(c, p, *lobe, lod, env, st["taps"])
-            continue
-        d, near_lod, off, shift = r, lod, np.zeros((len(p), 1)), np.zeros(len(p))
-        if st["parallax"]:
-            pos = np.asarray(st["position"], np.float64)
-            x = hit(c, p, r)
-            from_probe = np.maximum(np.linalg.norm(x - pos, axis=-1), 1e-6)
-            d = (x - pos) / from_probe[:, None]
-            near_lod = np.maximum(lod * np.clip(np.linalg.norm(x - p, axis=-1) / from_probe, 0.0, 1.0),
-                                  np.minimum(lod, FINEST))
-            shift = np.linalg.norm(p - pos, axis=-1) / from_probe
-            off = np.clip((shift - NEAR) / (FAR - NEAR), 0.0, 1.0)[:, None]
-        open_ = 1 - radiance.chain_lookup_twin(c["coverage"], d, near_lod)[:, :1]
-        acc += w[:, None] * (radiance.chain_lookup_twin(c["levels"], d, near_lod)
-                             + sky(c, r, lod, open_, off, shift, distant))
+        g = grazing(st, nov)
+        got = np.zeros_like(distant)
+        tapped = (w > 0) & (g > 0)
+        if tapped.any():
+            count = st.get("taps") or st["grazing_taps"]
+            got[tapped] = g[tapped, None] * taps(c, p[tapped], lobe[0][tapped], lobe[1][tapped], lod[tapped], env,
+                                                 count)
+        one = (w > 0) & (g < 1)
+        if one.any():
+            got[one] += (1 - g[one, None]) * read(c, p[one], r[one], lod[one], distant[one])
+        acc += w[:, None] * got
     over = wsum > 1
     out = acc + (1 - wsum)[:, None] * distant
     return np.where(over[:, None], acc / np.where(over, wsum, 1)[:, None], out)

@@ -94,10 +94,11 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
         pre = radiance.chain_lookup_twin(prefiltered, to_env(r, rot), rough * (len(prefiltered) - 1))
         ab = dfg_lookup(dfg, nov, rough)
         li = scale * pre
-        if reflection_probes:
+        lit = (spec_occ * (f0 * ab[:, 0:1] + f90 * ab[:, 1:2])).sum(1) > 0   # what reflects: probes read there
+        if reflection_probes and lit.any():
             nlev = len(reflection_probes[0]["levels"])
-            li = rp_twin.blend(reflection_probes, gb["pos"][hit], r, rough * (nlev - 1), li,
-                               (prefiltered, rot, scale), (n, v))
+            li[lit] = rp_twin.blend(reflection_probes, gb["pos"][hit][lit], r[lit], rough[lit] * (nlev - 1), li[lit],
+                                    (prefiltered, rot, scale), (n[lit], v[lit]))
         color += spec_occ * li * (f0 * ab[:, 0:1] + f90 * ab[:, 1:2])
         if ssr_out is not None:
             ssr_out["w"] = spec_occ * (f0 * ab[:, 0:1] + f90 * ab[:, 1:2]) * material_occlusion(gb)[:, None]
