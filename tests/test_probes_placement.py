@@ -94,9 +94,8 @@ def test_auto_step_reads_the_enclosed_points_only():
 def test_an_automatic_grid_keeps_its_probes_off_an_axis_aligned_wall():
     """A wall of no thickness across the middle of the scene (x = 0, two triangles) and a grid
     whose odd count put a layer of probes on it (11 along x): moved off it by float32 hits that
-    differ with the scene's scale (thin_wall at scale 0.01 and 100: frames 0.9% apart). One probe
-    more shifts the layer half a cell: every probe at least PLANE_CLEARANCE of a cell off it."""
-    from iblbake.render.probes import grid as probe_grid
+    differ with the scene's scale (thin_wall at scale 0.01 and 100: frames 0.9% apart). The layers
+    phased mid-way: every probe half a cell off it, one probe more along x."""
     wall = np.zeros((2, 6, 4))
     wall[0, :3, :3] = [[0, -2, -2], [0, 2, -2], [0, 2, 2]]
     wall[1, :3, :3] = [[0, -2, -2], [0, 2, 2], [0, -2, 2]]
@@ -104,9 +103,47 @@ def test_an_automatic_grid_keeps_its_probes_off_an_axis_aligned_wall():
     arrays.tris = wall
     g = probes.grid_of(settings(), arrays, step_hint=4.0 / 9)
     x = g.positions()[:, 0]
-    assert g.counts[0] == 12 and np.abs(x).min() >= probe_grid.PLANE_CLEARANCE * g.spacing[0]
+    assert g.counts[0] == 12 and np.abs(x).min() == pytest.approx(0.5 * g.spacing[0], rel=1e-6)
     assert x.min() < -2 - 0.5 * g.spacing[0] and x.max() > 2 + 0.5 * g.spacing[0]      # still overhangs
     assert g.counts[1:] == (11, 11)                 # no surface across y or z: the counts as they were
+
+
+def two_storeys(scale: float):
+    """A new user's two storeys (3.6 x 4.4 x 3, float32 quads): floor, slab at y = 2.2, roof and
+    four walls, at `scale`."""
+    x, y, z = 1.8, (0.0, 2.2, 4.4), 1.5
+    quads = [[(-x, h, -z), (x, h, -z), (x, h, z), (-x, h, z)] for h in y]
+    quads += [[(sx * x, 0, -z), (sx * x, 4.4, -z), (sx * x, 4.4, z), (sx * x, 0, z)] for sx in (-1, 1)]
+    quads += [[(-x, 0, sz * z), (x, 0, sz * z), (x, 4.4, sz * z), (-x, 4.4, sz * z)] for sz in (-1, 1)]
+    tris = np.zeros((2 * len(quads), 6, 4), np.float32)
+    for i, q in enumerate(np.asarray(quads, np.float64) * scale):
+        tris[2 * i, :3, :3], tris[2 * i + 1, :3, :3] = q[[0, 1, 2]], q[[0, 2, 3]]
+    return SimpleNamespace(spheres=np.zeros((0, 2, 4)), planes=np.zeros((0, 5, 4)), tris=tris)
+
+
+def test_an_automatic_grid_stands_its_layers_mid_way_between_floors():
+    """Issue 59: a new user's two storeys at the interior's step (0.213) had a layer 0.17 cell
+    under the floor (off) and the next 0.83 cell above it: the floor read the window's beam at
+    that height, 8x what it is at the floor (x1.34). Each axis' layers phased, the spacing up to
+    15% finer where that clears the planes: every floor, slab, roof and wall half a cell (0.45
+    along z: 3.0 over 0.213 is 14.08 cells) from the nearest layer, the grid still over the bounds
+    by half a cell, the same lattice in scene units at scale 0.01 and 100."""
+    step = 0.213021
+    grids = {k: probes.grid_of(settings(), two_storeys(k), step_hint=step * k) for k in (0.01, 1.0, 100.0)}
+    g = grids[1.0]
+    pos = g.positions()
+    for axis, planes in ((0, (-1.8, 1.8)), (1, (0.0, 2.2, 4.4)), (2, (-1.5, 1.5))):
+        cells = np.abs(pos[:, axis, None] - np.array(planes)[None]).min(0) / g.spacing[axis]
+        assert cells.min() >= (0.45 if axis == 2 else 0.49), (axis, cells)
+        assert step / 1.15 <= g.spacing[axis] <= step * (1 + 1e-9)
+    lo, hi = probes.scene_bounds(two_storeys(1.0))
+    assert (pos.min(0) <= lo - 0.5 * np.array(g.spacing) + 1e-6).all()
+    assert (pos.max(0) >= hi + 0.5 * np.array(g.spacing) - 1e-6).all()
+    assert all(type(c) is int for c in g.counts)
+    for k in (0.01, 100.0):
+        assert grids[k].counts == g.counts
+        np.testing.assert_allclose(np.array(grids[k].spacing) / k, g.spacing, rtol=1e-5)
+        np.testing.assert_allclose(np.array(grids[k].origin) / k, g.origin, rtol=1e-5, atol=1e-6)
 
 
 def test_the_cap_coarsens_an_automatic_grid_and_is_said():

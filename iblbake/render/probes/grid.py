@@ -133,43 +133,122 @@ def auto_step(t) -> float | None:
     return step if math.isfinite(step) else None
 
 
-PLANE_CLEARANCE = 0.1          # of a cell: an automatic grid's probes keep this far off an axis-aligned surface
+PHASE_FINER = 1.15     # an automatic grid's spacing along an axis may be this much finer where that clears its planes
+FINER_COST = 2.0       # clearance (cells) a spacing finer by a share f costs: finer only where it clears 2f more
+PHASE_PLANES = 16      # the largest planes across an axis that place its layers (a mesh may have hundreds)
+PAIR_PLANES = 8        # ...and the largest of those whose distances propose the finer spacings
+PLANE_MERGE = 1e-6     # of the scene's extent: surfaces nearer than this across an axis are one plane
 
 
-def axis_planes(arrays) -> list:
-    """Per axis, the coordinates of the scene's surfaces that lie across it (triangles and planes
-    whose normal is that axis): where a probe of an automatic grid must not stand."""
-    out = [set(), set(), set()]
+def axis_planes(arrays, lo, hi) -> list:
+    """Per axis, an array of (coordinate, area) rows: the scene's surfaces that lie across it (flat
+    triangles, planes whose normal is that axis), merged within PLANE_MERGE of the extent, the
+    PHASE_PLANES largest first: the floors, slabs, ceilings and walls an automatic grid's layers
+    keep off. An infinite plane's area is the bounds' cross-section."""
+    extent = np.asarray(hi, np.float64) - np.asarray(lo, np.float64)
+    coords, areas = [[], [], []], [[], [], []]
     if len(arrays.tris):
         v = arrays.tris[:, :3, :3].astype(np.float64)
+        area = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
         for k in range(3):
             flat = np.ptp(v[:, :, k], axis=1) <= 1e-9 * max(float(np.abs(v).max()), 1e-30)
-            out[k].update(np.unique(v[flat, 0, k]).tolist())
+            coords[k].append(v[flat, 0, k])
+            areas[k].append(area[flat])
     for pl in arrays.planes:
         nrm = pl[1, :3].astype(np.float64)
         k = int(np.argmax(np.abs(nrm)))
         if abs(abs(nrm[k]) - 1.0) < 1e-6:
-            out[k].add(float(pl[0, k]))
-    return [np.array(sorted(c)) for c in out]
-
-
-def off_planes(n: list, centre, step: float, planes: list) -> list:
-    """Counts of a centred automatic grid with no probe on an axis-aligned surface: along an axis
-    where a probe would stand within PLANE_CLEARANCE of a cell of one (a wall of no thickness at
-    the scene's centre, an odd count: a layer of probes on it, moved off it by float32 hits that
-    differ with the scene's scale), one probe more, which shifts the layer half a cell, where that
-    clears more. Counts stay Python ints; the grid still overhangs the bounds by half a cell."""
-    out = list(n)
+            hw, hd = float(pl[2, 3]), float(pl[3, 3])
+            finite = math.isfinite(hw) and math.isfinite(hd)
+            coords[k].append([float(pl[0, k])])
+            areas[k].append([4 * hw * hd if finite else math.prod(np.delete(extent, k))])
+    out = []
     for k in range(3):
-        if n[k] is None or not len(planes[k]):
-            continue
-
-        def clearance(c):
-            pos = centre[k] + (np.arange(c) - (c - 1) / 2) * step
-            return float(np.abs(pos[:, None] - planes[k][None]).min()) / step
-        if clearance(n[k]) < PLANE_CLEARANCE and clearance(n[k] + 1) > clearance(n[k]):
-            out[k] = n[k] + 1
+        c, a = np.concatenate([[], *coords[k]]), np.concatenate([[], *areas[k]])
+        order = np.argsort(c, kind="stable")
+        c, a = c[order], a[order]
+        starts = np.flatnonzero(np.diff(c, prepend=-np.inf) > PLANE_MERGE * max(float(extent.max()), 1e-30))
+        rows = np.stack([c[starts], np.add.reduceat(a, starts)], 1) if len(c) else np.zeros((0, 2))
+        rows = rows[rows[:, 1] > 0]
+        out.append(rows[np.lexsort((rows[:, 0], -rows[:, 1]))][:PHASE_PLANES])
     return out
+
+
+def clearance(phase, q, w) -> np.ndarray:
+    """The planes' least weighted clearance, in cells, for each layer phase (cells, [0, 1)): a
+    plane at phase q (its distance d to the nearest layer) counts 0.5 - w (0.5 - d), w its area
+    over the largest's, so the largest plane counts d and a small one barely lowers it."""
+    d = np.abs((np.asarray(phase, np.float64)[..., None] - q + 0.5) % 1.0 - 0.5)
+    return (0.5 - w * (0.5 - d)).min(-1)
+
+
+def best_phase(q, w) -> tuple:
+    """(phase, clearance): the layers' phase that maximises clearance(). Its optimum is where one
+    plane's rising clearance meets another's falling one (a lone plane: half a cell off it), so
+    every such point is a candidate; ties (to 1e-6 of a cell) take the smaller phase."""
+    gap = (q[None, :] - q[:, None]) % 1.0
+    gap = np.where(gap <= 0, 1.0, gap)
+    cand = ((q[:, None] + gap * w[None, :] / (w[:, None] + w[None, :])) % 1.0).ravel()
+    score = np.round(clearance(cand, q, w), 6)
+    best = np.flatnonzero(score == score.max())
+    i = best[np.argmin(np.round(cand[best], 6))]
+    return float(cand[i]), float(score[i])
+
+
+def phased_axis(lo: float, hi: float, step: float, planes, finer: bool = True) -> tuple:
+    """(spacing, origin, count) along one axis of an automatic grid whose layers stand as near
+    mid-way between the axis' planes ((coordinate, area) rows) as they come: the phase of
+    best_phase and, where it clears FINER_COST cells more per share finer, a spacing up to
+    PHASE_FINER finer (the candidates: those that make two planes' distance whole cells). The
+    first and last layers at least half a cell beyond lo and hi; the count a Python int."""
+    c, w = planes[:, 0], planes[:, 1] / planes[:, 1].max()
+    steps = {step}
+    for i in range(min(len(c), PAIR_PLANES) if finer else 0):
+        for j in range(i + 1, min(len(c), PAIR_PLANES)):
+            span = abs(c[i] - c[j])
+            most = math.ceil(span / step - 1e-9)
+            steps.update(span / m for m in range(max(most, 1), most + 4) if span / m >= step / PHASE_FINER)
+    best = None
+    for s in sorted(steps, reverse=True):          # ties: the coarsest spacing
+        phase, clear = best_phase(((c - lo) / s) % 1.0, w)
+        gain = round(clear - FINER_COST * (step / s - 1.0), 6)
+        if best is None or gain > best[0]:
+            best = (gain, s, phase)
+    _, s, phase = best
+    e = (hi - lo) / s
+    tol = min(COUNT_TOLERANCE * max(e, 1.0), 1e-4)
+    first = math.floor(-0.5 - phase + tol)          # layers at lo + (phase + k) s
+    last = math.ceil(e + 0.5 - phase - tol)
+    return s, lo + (phase + first) * s, int(last - first + 1)
+
+
+def phased(lo, hi, step: float, planes: list) -> tuple:
+    """(origin, spacing, counts) of an automatic grid of cells about `step` wide whose layers stand
+    clear of the scene's axis-aligned planes (phased_axis) along each axis that has some, centred
+    along the others; the finer spacings dropped where they would pass AUTO_MAX_PROBES."""
+    for finer in (True, False):
+        axes = []
+        for k in range(3):
+            if len(planes[k]):
+                axes.append(phased_axis(float(lo[k]), float(hi[k]), step, planes[k], finer))
+            else:
+                n = axis_counts(hi[k] - lo[k], step, 2)[0]
+                axes.append((step, (lo[k] + hi[k]) / 2 - (n - 1) * step / 2, n))
+        if math.prod(a[2] for a in axes) <= AUTO_MAX_PROBES:
+            break
+    spacing, origin, counts = zip(*axes)
+    return origin, spacing, counts
+
+
+def lattice(grid: Grid, arrays) -> dict:
+    """What the report says of an automatic grid's lattice: its counts and spacing and, per axis,
+    the planes' least weighted clearance from its layers (clearance(), cells; None: no plane)."""
+    lo, hi = scene_bounds(arrays)
+    out = []
+    for k, pl in enumerate(axis_planes(arrays, lo, hi)):
+        q = ((pl[:, 0] - grid.origin[k]) / grid.spacing[k]) % 1.0
+        out.append(round(float(clearance(0.0, q, pl[:, 1] / pl[:, 1].max())), 4) if len(pl) else None)
+    return {"counts": list(grid.counts), "spacing": [round(s, 6) for s in grid.spacing], "clearance": out}
 
 
 def grid_of(settings: dict, arrays, step_hint: float | None = None) -> Grid:
@@ -179,7 +258,9 @@ def grid_of(settings: dict, arrays, step_hint: float | None = None) -> Grid:
     walls, seeing the sky through them). Automatic: cubic cells (N along the longest axis, or
     `spacing`, or step_hint: the scene's interior scale, auto_step) whose probes overhang the
     scene's bounds on every side by at least half a cell, so that every surface has probes on both
-    of its sides (RTXGI's volumes enclose the scene), at most AUTO_MAX_PROBES (coarser above)."""
+    of its sides (RTXGI's volumes enclose the scene), at most AUTO_MAX_PROBES (coarser above); from
+    the interior's scale, each axis' layers phased mid-way between its planes (phased: a floor
+    read a layer 0.83 cell above it, where a window's beam was 8x what it is at the floor)."""
     if (settings["min"] is None) != (settings["max"] is None):
         raise InputError("probes: give both min and max, or neither (auto: the scene's bounds)")
     counts = settings["counts"]
@@ -234,14 +315,15 @@ def grid_of(settings: dict, arrays, step_hint: float | None = None) -> Grid:
             s = float(settings["spacing"])
         elif counts is None and step_hint is not None:
             s = min(coarse, step_hint)
-            while math.prod(axis_counts(extent, s, 2)) > AUTO_MAX_PROBES:     # the cap: coarser cells
+            # the cap: coarser cells (a phased axis may take one probe more)
+            while math.prod(axis_counts(extent, s, 3)) > AUTO_MAX_PROBES:
                 s *= 1.05
+            origin, spacing, n = phased(lo, hi, s, axis_planes(arrays, lo, hi))
+            return Grid(tuple(float(x) for x in origin), tuple(float(x) for x in spacing), tuple(n))
         else:
             s = coarse
         step = np.full(3, s)
         n = axis_counts(extent, step, 2)
-        if counts is None and step_hint is not None and settings["spacing"] is None:
-            n = off_planes(n, (lo + hi) / 2, s, axis_planes(arrays))
     check_count(n, settings)
     spacing = step
     origin = (lo + hi) / 2 - (np.asarray(n) - 1) * step / 2         # centred: at least half a cell over each face
