@@ -121,22 +121,25 @@ def two_storeys(scale: float):
     return SimpleNamespace(spheres=np.zeros((0, 2, 4)), planes=np.zeros((0, 5, 4)), tris=tris)
 
 
-def test_an_automatic_grid_stands_its_layers_mid_way_between_floors():
+def test_an_automatic_grid_phases_its_layers_between_floors():
     """Issue 59: a new user's two storeys at the interior's step (0.213) had a layer 0.17 cell
     under the floor (off) and the next 0.83 cell above it: the floor read the window's beam at
     that height, 8x what it is at the floor (x1.34). Each axis' layers phased, the spacing up to
-    15% finer where that clears the planes: every floor, slab, roof and wall half a cell (0.45
-    along z: 3.0 over 0.213 is 14.08 cells) from the nearest layer, the grid still over the bounds
-    by half a cell, the same lattice in scene units at scale 0.01 and 100."""
+    15% finer: the slab (seen from both sides) half a cell from the layers on each side, the floor,
+    the roof and the walls (on the bounds, seen from inside) a quarter of a cell in, the grid still
+    over the bounds by half a cell, the same lattice in scene units at scale 0.01 and 100."""
     step = 0.213021
     grids = {k: probes.grid_of(settings(), two_storeys(k), step_hint=step * k) for k in (0.01, 1.0, 100.0)}
     g = grids[1.0]
     pos = g.positions()
-    for axis, planes in ((0, (-1.8, 1.8)), (1, (0.0, 2.2, 4.4)), (2, (-1.5, 1.5))):
-        cells = np.abs(pos[:, axis, None] - np.array(planes)[None]).min(0) / g.spacing[axis]
-        assert cells.min() >= (0.45 if axis == 2 else 0.49), (axis, cells)
-        assert step / 1.15 <= g.spacing[axis] <= step * (1 + 1e-9)
     lo, hi = probes.scene_bounds(two_storeys(1.0))
+    for axis, plane, inside in ((1, 2.2, 0.5), (1, 0.0, 0.25), (1, 4.4, 0.25), (0, -1.8, 0.25), (0, 1.8, 0.25),
+                                (2, -1.5, 0.25), (2, 1.5, 0.25)):
+        layers = np.unique(pos[:, axis])
+        inner = layers[(layers - plane) * (1 if plane < hi[axis] - 1e-3 else -1) > 0]
+        cells = np.abs(inner - plane).min() / g.spacing[axis]        # to the nearest layer on the inside
+        assert cells == pytest.approx(inside, abs=0.02), (axis, plane, cells)
+        assert step / 1.15 <= g.spacing[axis] <= step * (1 + 1e-9)
     assert (pos.min(0) <= lo - 0.5 * np.array(g.spacing) + 1e-6).all()
     assert (pos.max(0) >= hi + 0.5 * np.array(g.spacing) - 1e-6).all()
     assert all(type(c) is int for c in g.counts)

@@ -138,6 +138,7 @@ FINER_COST = 2.0       # clearance (cells) a spacing finer by a share f costs: f
 PHASE_PLANES = 16      # the largest planes across an axis that place its layers (a mesh may have hundreds)
 PAIR_PLANES = 8        # ...and the largest of those whose distances propose the finer spacings
 PLANE_MERGE = 1e-6     # of the scene's extent: surfaces nearer than this across an axis are one plane
+BOUND_OFFSET = 0.25    # cells: a plane on the scene's bounds (seen from inside only) is best read by a layer this far in
 
 
 def axis_planes(arrays, lo, hi) -> list:
@@ -174,22 +175,35 @@ def axis_planes(arrays, lo, hi) -> list:
     return out
 
 
-def clearance(phase, q, w) -> np.ndarray:
-    """The planes' least weighted clearance, in cells, for each layer phase (cells, [0, 1)): a
-    plane at phase q (its distance d to the nearest layer) counts 0.5 - w (0.5 - d), w its area
-    over the largest's, so the largest plane counts d and a small one barely lowers it."""
-    d = np.abs((np.asarray(phase, np.float64)[..., None] - q + 0.5) % 1.0 - 0.5)
-    return (0.5 - w * (0.5 - d)).min(-1)
+def tents(q, w, side) -> tuple:
+    """Each plane's best layer phase (cells), the share of a cell from it to the plane's own phase
+    (the worst: a layer on the plane), and how far the score falls there (0.5 w): a plane inside
+    the scene (side 0), seen from both sides, is best read from half a cell off; one on the scene's
+    bounds (side +1 at lo, -1 at hi), seen from inside only, from BOUND_OFFSET in."""
+    t = (q + np.where(side == 0, 0.5, side * BOUND_OFFSET)) % 1.0
+    return t, (q - t) % 1.0, 0.5 * w
 
 
-def best_phase(q, w) -> tuple:
-    """(phase, clearance): the layers' phase that maximises clearance(). Its optimum is where one
-    plane's rising clearance meets another's falling one (a lone plane: half a cell off it), so
-    every such point is a candidate; ties (to 1e-6 of a cell) take the smaller phase."""
-    gap = (q[None, :] - q[:, None]) % 1.0
+def clearance(phase, q, w, side) -> np.ndarray:
+    """The planes' least weighted clearance for each layer phase (cells, [0, 1)): a plane at phase
+    q counts 0.5 with a layer where it is best read (tents), falling linearly to 0.5 - w/2 with a
+    layer on it (w its area over the largest's: the largest falls to 0, a small one barely counts);
+    inside the scene that is 0.5 - w (0.5 - d), d the plane's distance to its nearest layer."""
+    t, fall, depth = tents(q, w, side)
+    x = (np.asarray(phase, np.float64)[..., None] - t) % 1.0
+    return (0.5 - np.where(x <= fall, depth / fall * x, depth / (1.0 - fall) * (1.0 - x))).min(-1)
+
+
+def best_phase(q, w, side) -> tuple:
+    """(phase, clearance): the layers' phase that maximises clearance(). Its optimum is a plane's
+    best phase or where one plane's falling score meets another's rising one, so each is a
+    candidate; ties (to 1e-6 of a cell) take the smaller phase."""
+    t, fall, depth = tents(q, w, side)
+    gap = (t[None, :] - t[:, None]) % 1.0
     gap = np.where(gap <= 0, 1.0, gap)
-    cand = ((q[:, None] + gap * w[None, :] / (w[:, None] + w[None, :])) % 1.0).ravel()
-    score = np.round(clearance(cand, q, w), 6)
+    down, up = depth / fall, depth / (1.0 - fall)          # slopes after and before each best phase
+    cand = np.concatenate([t, ((t[:, None] + gap * up[None, :] / (down[:, None] + up[None, :])) % 1.0).ravel()])
+    score = np.round(clearance(cand, q, w, side), 6)
     best = np.flatnonzero(score == score.max())
     i = best[np.argmin(np.round(cand[best], 6))]
     return float(cand[i]), float(score[i])
@@ -202,15 +216,17 @@ def phased_axis(lo: float, hi: float, step: float, planes, finer: bool = True) -
     PHASE_FINER finer (the candidates: those that make two planes' distance whole cells). The
     first and last layers at least half a cell beyond lo and hi; the count a Python int."""
     c, w = planes[:, 0], planes[:, 1] / planes[:, 1].max()
+    near = PLANE_MERGE * max(hi - lo, 1e-30)
+    side = np.where(c <= lo + near, 1, np.where(c >= hi - near, -1, 0))
     steps = {step}
     for i in range(min(len(c), PAIR_PLANES) if finer else 0):
         for j in range(i + 1, min(len(c), PAIR_PLANES)):
             span = abs(c[i] - c[j])
-            most = math.ceil(span / step - 1e-9)
-            steps.update(span / m for m in range(max(most, 1), most + 4) if span / m >= step / PHASE_FINER)
+            most = math.ceil(4 * span / step - 1e-9)            # quarter cells: a bound's best layer is 1/4 in
+            steps.update(4 * span / m for m in range(max(most, 1), most + 16) if 4 * span / m >= step / PHASE_FINER)
     best = None
     for s in sorted(steps, reverse=True):          # ties: the coarsest spacing
-        phase, clear = best_phase(((c - lo) / s) % 1.0, w)
+        phase, clear = best_phase(((c - lo) / s) % 1.0, w, side)
         gain = round(clear - FINER_COST * (step / s - 1.0), 6)
         if best is None or gain > best[0]:
             best = (gain, s, phase)
@@ -246,8 +262,10 @@ def lattice(grid: Grid, arrays) -> dict:
     lo, hi = scene_bounds(arrays)
     out = []
     for k, pl in enumerate(axis_planes(arrays, lo, hi)):
+        near = PLANE_MERGE * max(hi[k] - lo[k], 1e-30)
+        side = np.where(pl[:, 0] <= lo[k] + near, 1, np.where(pl[:, 0] >= hi[k] - near, -1, 0))
         q = ((pl[:, 0] - grid.origin[k]) / grid.spacing[k]) % 1.0
-        out.append(round(float(clearance(0.0, q, pl[:, 1] / pl[:, 1].max())), 4) if len(pl) else None)
+        out.append(round(float(clearance(0.0, q, pl[:, 1] / pl[:, 1].max(), side)), 4) if len(pl) else None)
     return {"counts": list(grid.counts), "spacing": [round(s, 6) for s in grid.spacing], "clearance": out}
 
 
