@@ -138,14 +138,17 @@ FINER_COST = 2.0       # clearance (cells) a spacing finer by a share f costs: f
 PHASE_PLANES = 16      # the largest planes across an axis that place its layers (a mesh may have hundreds)
 PAIR_PLANES = 8        # ...and the largest of those whose distances propose the finer spacings
 PLANE_MERGE = 1e-6     # of the scene's extent: surfaces nearer than this across an axis are one plane
-BOUND_OFFSET = 0.25    # cells: a plane on the scene's bounds (seen from inside only) is best read by a layer this far in
+BOUND_OFFSET = 0.3     # cells: a plane on the scene's bounds (seen from inside only) is best read by a layer this far in
+PHASED_AXES = (1,)     # y (up): floors, slabs, ceilings; walls phased too moved a one-sided screen's probes
+                       # (backface under city: frame 11% -> 20%) and l_room's (17.5% -> 20.5%)
 
 
 def axis_planes(arrays, lo, hi) -> list:
-    """Per axis, an array of (coordinate, area) rows: the scene's surfaces that lie across it (flat
-    triangles, planes whose normal is that axis), merged within PLANE_MERGE of the extent, the
+    """Per axis, an array of (coordinate, area, side) rows: the scene's surfaces that lie across it
+    (flat triangles, planes whose normal is that axis), merged within PLANE_MERGE of the extent, the
     PHASE_PLANES largest first: the floors, slabs, ceilings and walls an automatic grid's layers
-    keep off. An infinite plane's area is the bounds' cross-section."""
+    keep off. side: +1 on the bounds' lo, -1 on hi (seen from inside only), 0 inside. An infinite
+    plane's area is the bounds' cross-section."""
     extent = np.asarray(hi, np.float64) - np.asarray(lo, np.float64)
     coords, areas = [[], [], []], [[], [], []]
     if len(arrays.tris):
@@ -163,14 +166,16 @@ def axis_planes(arrays, lo, hi) -> list:
             finite = math.isfinite(hw) and math.isfinite(hd)
             coords[k].append([float(pl[0, k])])
             areas[k].append([4 * hw * hd if finite else math.prod(np.delete(extent, k))])
-    out = []
+    out, near = [], PLANE_MERGE * max(float(extent.max()), 1e-30)
     for k in range(3):
         c, a = np.concatenate([[], *coords[k]]), np.concatenate([[], *areas[k]])
         order = np.argsort(c, kind="stable")
         c, a = c[order], a[order]
-        starts = np.flatnonzero(np.diff(c, prepend=-np.inf) > PLANE_MERGE * max(float(extent.max()), 1e-30))
+        starts = np.flatnonzero(np.diff(c, prepend=-np.inf) > near)
         rows = np.stack([c[starts], np.add.reduceat(a, starts)], 1) if len(c) else np.zeros((0, 2))
         rows = rows[rows[:, 1] > 0]
+        side = np.where(rows[:, 0] <= lo[k] + near, 1.0, np.where(rows[:, 0] >= hi[k] - near, -1.0, 0.0))
+        rows = np.concatenate([rows, side[:, None]], 1)
         out.append(rows[np.lexsort((rows[:, 0], -rows[:, 1]))][:PHASE_PLANES])
     return out
 
@@ -210,20 +215,22 @@ def best_phase(q, w, side) -> tuple:
 
 
 def phased_axis(lo: float, hi: float, step: float, planes, finer: bool = True) -> tuple:
-    """(spacing, origin, count) along one axis of an automatic grid whose layers stand as near
-    mid-way between the axis' planes ((coordinate, area) rows) as they come: the phase of
-    best_phase and, where it clears FINER_COST cells more per share finer, a spacing up to
-    PHASE_FINER finer (the candidates: those that make two planes' distance whole cells). The
+    """(spacing, origin, count) along one axis of an automatic grid whose layers stand where the
+    axis' planes (axis_planes rows) are best read, as near as they come: the phase of best_phase
+    and, where it clears FINER_COST cells more per share finer, a spacing up to PHASE_FINER finer
+    (the candidates: those that put two planes' best layers on one lattice). The
     first and last layers at least half a cell beyond lo and hi; the count a Python int."""
-    c, w = planes[:, 0], planes[:, 1] / planes[:, 1].max()
-    near = PLANE_MERGE * max(hi - lo, 1e-30)
-    side = np.where(c <= lo + near, 1, np.where(c >= hi - near, -1, 0))
+    c, w, side = planes[:, 0], planes[:, 1] / planes[:, 1].max(), planes[:, 2]
     steps = {step}
+    best_at = np.where(side == 0, 0.5, side * BOUND_OFFSET)    # each plane's best layer, cells from it
     for i in range(min(len(c), PAIR_PLANES) if finer else 0):
         for j in range(i + 1, min(len(c), PAIR_PLANES)):
-            span = abs(c[i] - c[j])
-            most = math.ceil(4 * span / step - 1e-9)            # quarter cells: a bound's best layer is 1/4 in
-            steps.update(4 * span / m for m in range(max(most, 1), most + 16) if 4 * span / m >= step / PHASE_FINER)
+            # the spacings that put both planes' best layers on the lattice: span = (n + shift) s
+            span, shift = c[j] - c[i], best_at[i] - best_at[j]
+            span, shift = (span, shift) if span > 0 else (-span, -shift)
+            first = math.ceil(span / step - shift - 1e-9)
+            steps.update(span / (n + shift) for n in range(first, first + 4)
+                         if n + shift > 0 and span / (n + shift) >= step / PHASE_FINER)
     best = None
     for s in sorted(steps, reverse=True):          # ties: the coarsest spacing
         phase, clear = best_phase(((c - lo) / s) % 1.0, w, side)
@@ -238,18 +245,34 @@ def phased_axis(lo: float, hi: float, step: float, planes, finer: bool = True) -
     return s, lo + (phase + first) * s, int(last - first + 1)
 
 
+PLANE_CLEARANCE = 0.1    # of a cell: along the other axes, no layer of probes nearer a plane than this
+
+
+def centred_axis(lo: float, hi: float, step: float, coords) -> tuple:
+    """(spacing, origin, count) along an axis not phased: centred on the bounds; where a layer
+    would stand within PLANE_CLEARANCE of a cell of a plane across it (a wall of no thickness at
+    the scene's centre, an odd count: probes on it, moved off it by float32 hits that differ with
+    the scene's scale), one probe more, which shifts the layers half a cell, where that clears more."""
+    def clear(n):
+        pos = (lo + hi) / 2 + (np.arange(n) - (n - 1) / 2) * step
+        return float(np.abs(pos[:, None] - coords[None]).min()) / step if len(coords) else 0.5
+    n = axis_counts(hi - lo, step, 2)[0]
+    if clear(n) < PLANE_CLEARANCE and clear(n + 1) > clear(n):
+        n += 1
+    return step, (lo + hi) / 2 - (n - 1) * step / 2, n
+
+
 def phased(lo, hi, step: float, planes: list) -> tuple:
     """(origin, spacing, counts) of an automatic grid of cells about `step` wide whose layers stand
-    clear of the scene's axis-aligned planes (phased_axis) along each axis that has some, centred
-    along the others; the finer spacings dropped where they would pass AUTO_MAX_PROBES."""
+    where the scene's planes across PHASED_AXES are best read (phased_axis), centred along the
+    others (centred_axis); the finer spacings dropped where they would pass AUTO_MAX_PROBES."""
     for finer in (True, False):
         axes = []
         for k in range(3):
-            if len(planes[k]):
+            if k in PHASED_AXES and len(planes[k]):
                 axes.append(phased_axis(float(lo[k]), float(hi[k]), step, planes[k], finer))
             else:
-                n = axis_counts(hi[k] - lo[k], step, 2)[0]
-                axes.append((step, (lo[k] + hi[k]) / 2 - (n - 1) * step / 2, n))
+                axes.append(centred_axis(float(lo[k]), float(hi[k]), step, planes[k][:, 0]))
         if math.prod(a[2] for a in axes) <= AUTO_MAX_PROBES:
             break
     spacing, origin, counts = zip(*axes)
@@ -257,15 +280,14 @@ def phased(lo, hi, step: float, planes: list) -> tuple:
 
 
 def lattice(grid: Grid, arrays) -> dict:
-    """What the report says of an automatic grid's lattice: its counts and spacing and, per axis,
-    the planes' least weighted clearance from its layers (clearance(), cells; None: no plane)."""
+    """What the report says of an automatic grid's lattice: its counts and spacing and, per axis of
+    PHASED_AXES, its planes' least score (clearance(): 0.5 at best; None: not phased, no plane)."""
     lo, hi = scene_bounds(arrays)
     out = []
     for k, pl in enumerate(axis_planes(arrays, lo, hi)):
-        near = PLANE_MERGE * max(hi[k] - lo[k], 1e-30)
-        side = np.where(pl[:, 0] <= lo[k] + near, 1, np.where(pl[:, 0] >= hi[k] - near, -1, 0))
         q = ((pl[:, 0] - grid.origin[k]) / grid.spacing[k]) % 1.0
-        out.append(round(float(clearance(0.0, q, pl[:, 1] / pl[:, 1].max(), side)), 4) if len(pl) else None)
+        score = clearance(0.0, q, pl[:, 1] / pl[:, 1].max(), pl[:, 2]) if len(pl) and k in PHASED_AXES else None
+        out.append(None if score is None else round(float(score), 4))
     return {"counts": list(grid.counts), "spacing": [round(s, 6) for s in grid.spacing], "clearance": out}
 
 
@@ -277,7 +299,7 @@ def grid_of(settings: dict, arrays, step_hint: float | None = None) -> Grid:
     `spacing`, or step_hint: the scene's interior scale, auto_step) whose probes overhang the
     scene's bounds on every side by at least half a cell, so that every surface has probes on both
     of its sides (RTXGI's volumes enclose the scene), at most AUTO_MAX_PROBES (coarser above); from
-    the interior's scale, each axis' layers phased mid-way between its planes (phased: a floor
+    the interior's scale, each axis' layers phased where its planes are best read (phased: a floor
     read a layer 0.83 cell above it, where a window's beam was 8x what it is at the floor)."""
     if (settings["min"] is None) != (settings["max"] is None):
         raise InputError("probes: give both min and max, or neither (auto: the scene's bounds)")
