@@ -144,6 +144,8 @@ def test_an_automatic_grid_phases_its_layers_between_floors():
     assert step / 1.15 <= g.spacing[1] < step and g.spacing[0] == g.spacing[2] == step
     for axis, walls in ((0, (-1.8, 1.8)), (2, (-1.5, 1.5))):
         assert np.abs(pos[:, axis, None] - np.array(walls)).min() >= 0.1 * step
+    said = probes.lattice(g, two_storeys(1.0))          # the bake's report
+    assert said["counts"] == list(g.counts) and said["clearance"] == [None, 0.5, None]
     assert (pos.min(0) <= lo - 0.5 * np.array(g.spacing) + 1e-6).all()
     assert (pos.max(0) >= hi + 0.5 * np.array(g.spacing) - 1e-6).all()
     assert all(type(c) is int for c in g.counts)
