@@ -299,8 +299,9 @@ def grid_of(settings: dict, arrays, step_hint: float | None = None) -> Grid:
     `spacing`, or step_hint: the scene's interior scale, auto_step) whose probes overhang the
     scene's bounds on every side by at least half a cell, so that every surface has probes on both
     of its sides (RTXGI's volumes enclose the scene), at most AUTO_MAX_PROBES (coarser above); from
-    the interior's scale, each axis' layers phased where its planes are best read (phased: a floor
-    read a layer 0.83 cell above it, where a window's beam was 8x what it is at the floor)."""
+    the interior's scale, the layers across y phased where its floors, slabs and ceilings are best
+    read, y's cells up to 15% finer, no layer on a wall along x and z (phased: a floor read a layer
+    0.83 cell above it, where a window's beam was 8x what it is at the floor)."""
     if (settings["min"] is None) != (settings["max"] is None):
         raise InputError("probes: give both min and max, or neither (auto: the scene's bounds)")
     counts = settings["counts"]
