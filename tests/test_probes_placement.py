@@ -109,6 +109,52 @@ def test_an_automatic_grid_keeps_its_probes_off_an_axis_aligned_wall():
     assert g.counts[1:] == (11, 11)                 # no surface across y or z: the counts as they were
 
 
+def two_storeys(scale: float):
+    """A new user's two storeys (3.6 x 4.4 x 3, float32 quads): floor, slab at y = 2.2, roof and
+    four walls, at `scale`."""
+    x, y, z = 1.8, (0.0, 2.2, 4.4), 1.5
+    quads = [[(-x, h, -z), (x, h, -z), (x, h, z), (-x, h, z)] for h in y]
+    quads += [[(sx * x, 0, -z), (sx * x, 4.4, -z), (sx * x, 4.4, z), (sx * x, 0, z)] for sx in (-1, 1)]
+    quads += [[(-x, 0, sz * z), (x, 0, sz * z), (x, 4.4, sz * z), (-x, 4.4, sz * z)] for sz in (-1, 1)]
+    tris = np.zeros((2 * len(quads), 6, 4), np.float32)
+    for i, q in enumerate(np.asarray(quads, np.float64) * scale):
+        tris[2 * i, :3, :3], tris[2 * i + 1, :3, :3] = q[[0, 1, 2]], q[[0, 2, 3]]
+    return SimpleNamespace(spheres=np.zeros((0, 2, 4)), planes=np.zeros((0, 5, 4)), tris=tris)
+
+
+def test_an_automatic_grid_phases_its_layers_between_floors():
+    """Issue 59: a new user's two storeys at the interior's step (0.213) had a layer 0.17 cell
+    under the floor (off) and the next 0.83 cell above it: the floor read the window's beam at
+    that height, 8x what it is at the floor (x1.34). The layers across y phased, the spacing there
+    up to 15% finer: the slab (seen from both sides) half a cell from the layers on each side, the
+    floor and the roof (on the bounds, seen from inside) 0.3 of a cell in; x and z centred, no
+    layer on a wall; the grid still over the bounds by half a cell, the same lattice in scene
+    units at scale 0.01 and 100."""
+    step = 0.213021
+    grids = {k: probes.grid_of(settings(), two_storeys(k), step_hint=step * k) for k in (0.01, 1.0, 100.0)}
+    g = grids[1.0]
+    pos = g.positions()
+    lo, hi = probes.scene_bounds(two_storeys(1.0))
+    bound = 0.3                     # grid.BOUND_OFFSET
+    layers = np.unique(pos[:, 1])
+    for plane, inside in ((2.2, 0.5), (0.0, bound), (4.4, bound)):
+        inner = layers[(layers - plane) * (1 if plane < hi[1] - 1e-3 else -1) > 0]
+        cells = np.abs(inner - plane).min() / g.spacing[1]        # to the nearest layer on the inside
+        assert cells == pytest.approx(inside, abs=0.02), (plane, cells)
+    assert step / 1.15 <= g.spacing[1] < step and g.spacing[0] == g.spacing[2] == step
+    for axis, walls in ((0, (-1.8, 1.8)), (2, (-1.5, 1.5))):
+        assert np.abs(pos[:, axis, None] - np.array(walls)).min() >= 0.1 * step
+    said = probes.lattice(g, two_storeys(1.0))          # the bake's report
+    assert said["counts"] == list(g.counts) and said["clearance"] == [None, 0.5, None]
+    assert (pos.min(0) <= lo - 0.5 * np.array(g.spacing) + 1e-6).all()
+    assert (pos.max(0) >= hi + 0.5 * np.array(g.spacing) - 1e-6).all()
+    assert all(type(c) is int for c in g.counts)
+    for k in (0.01, 100.0):
+        assert grids[k].counts == g.counts
+        np.testing.assert_allclose(np.array(grids[k].spacing) / k, g.spacing, rtol=1e-5)
+        np.testing.assert_allclose(np.array(grids[k].origin) / k, g.origin, rtol=1e-5, atol=1e-6)
+
+
 def test_the_cap_coarsens_an_automatic_grid_and_is_said():
     g = probes.grid_of(settings(), sphere_arrays(), step_hint=0.01)
     assert g.count <= probes.AUTO_MAX_PROBES and g.count > probes.AUTO_MAX_PROBES // 2

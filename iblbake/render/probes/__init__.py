@@ -33,7 +33,7 @@ from iblbake.render.probes.files import (FILES, FORMAT, VERSION, data_texture, l
                                          read_manifest, save)
 from iblbake.render.probes.glsl import SH_GLSL, SPECULAR_TABLES, basis_glsl, glsl
 from iblbake.render.probes.grid import (AUTO_MAX_PROBES, DEFAULT_LONGEST, MAX_PROBES, SCALE_RAYS, Grid, auto_step,
-                                        axis_counts, grid_of, probe_bytes, scene_bounds)
+                                        axis_counts, grid_of, lattice, probe_bytes, scene_bounds)
 from iblbake.render.probes.project import BACKFACE_BLEND_LIMIT, MAX_DISTANCE, atlas, project, with_borders
 from iblbake.render.paths.tracer import Tracer, trace_defines
 from iblbake.render.probes.rays import random_rotation, ray_directions, spherical_fibonacci
@@ -64,6 +64,8 @@ def scaled_grid(tracer, coarse: Grid, settings: dict, arrays, camera):
     hint = auto_step(t)
     grid = grid_of(settings, arrays, hint)
     info = {"interior_step": None if hint is None else round(hint, 6)}
+    if hint is not None:
+        info["lattice"] = lattice(grid, arrays)
     if hint is not None and grid.unit > min(hint, coarse.unit) * 1.0001:
         lo, hi = scene_bounds(arrays)
         info["capped"] = {"step": round(min(hint, coarse.unit), 6),

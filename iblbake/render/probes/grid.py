@@ -133,43 +133,162 @@ def auto_step(t) -> float | None:
     return step if math.isfinite(step) else None
 
 
-PLANE_CLEARANCE = 0.1          # of a cell: an automatic grid's probes keep this far off an axis-aligned surface
+PHASE_FINER = 1.15     # an automatic grid's spacing along an axis may be this much finer where that clears its planes
+FINER_COST = 2.0       # clearance (cells) a spacing finer by a share f costs: finer only where it clears 2f more
+PHASE_PLANES = 16      # the largest planes across an axis that place its layers (a mesh may have hundreds)
+PAIR_PLANES = 8        # ...and the largest of those whose distances propose the finer spacings
+PLANE_MERGE = 1e-6     # of the scene's extent: surfaces nearer than this across an axis are one plane
+BOUND_OFFSET = 0.3     # cells: a plane on the scene's bounds (seen from inside only) is best read by a layer this far in
+PHASED_AXES = (1,)     # y (up): floors, slabs, ceilings; walls phased too moved a one-sided screen's probes
+                       # (backface under city: frame 11% -> 20%) and l_room's (17.5% -> 20.5%)
 
 
-def axis_planes(arrays) -> list:
-    """Per axis, the coordinates of the scene's surfaces that lie across it (triangles and planes
-    whose normal is that axis): where a probe of an automatic grid must not stand."""
-    out = [set(), set(), set()]
+def axis_planes(arrays, lo, hi) -> list:
+    """Per axis, an array of (coordinate, area, side) rows: the scene's surfaces that lie across it
+    (flat triangles, planes whose normal is that axis), merged within PLANE_MERGE of the extent, the
+    PHASE_PLANES largest first: the floors, slabs, ceilings and walls an automatic grid's layers
+    keep off. side: +1 on the bounds' lo, -1 on hi (seen from inside only), 0 inside. An infinite
+    plane's area is the bounds' cross-section."""
+    extent = np.asarray(hi, np.float64) - np.asarray(lo, np.float64)
+    coords, areas = [[], [], []], [[], [], []]
     if len(arrays.tris):
         v = arrays.tris[:, :3, :3].astype(np.float64)
+        area = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
         for k in range(3):
             flat = np.ptp(v[:, :, k], axis=1) <= 1e-9 * max(float(np.abs(v).max()), 1e-30)
-            out[k].update(np.unique(v[flat, 0, k]).tolist())
+            coords[k].append(v[flat, 0, k])
+            areas[k].append(area[flat])
     for pl in arrays.planes:
         nrm = pl[1, :3].astype(np.float64)
         k = int(np.argmax(np.abs(nrm)))
         if abs(abs(nrm[k]) - 1.0) < 1e-6:
-            out[k].add(float(pl[0, k]))
-    return [np.array(sorted(c)) for c in out]
-
-
-def off_planes(n: list, centre, step: float, planes: list) -> list:
-    """Counts of a centred automatic grid with no probe on an axis-aligned surface: along an axis
-    where a probe would stand within PLANE_CLEARANCE of a cell of one (a wall of no thickness at
-    the scene's centre, an odd count: a layer of probes on it, moved off it by float32 hits that
-    differ with the scene's scale), one probe more, which shifts the layer half a cell, where that
-    clears more. Counts stay Python ints; the grid still overhangs the bounds by half a cell."""
-    out = list(n)
+            hw, hd = float(pl[2, 3]), float(pl[3, 3])
+            finite = math.isfinite(hw) and math.isfinite(hd)
+            coords[k].append([float(pl[0, k])])
+            areas[k].append([4 * hw * hd if finite else math.prod(np.delete(extent, k))])
+    out, near = [], PLANE_MERGE * max(float(extent.max()), 1e-30)
     for k in range(3):
-        if n[k] is None or not len(planes[k]):
-            continue
-
-        def clearance(c):
-            pos = centre[k] + (np.arange(c) - (c - 1) / 2) * step
-            return float(np.abs(pos[:, None] - planes[k][None]).min()) / step
-        if clearance(n[k]) < PLANE_CLEARANCE and clearance(n[k] + 1) > clearance(n[k]):
-            out[k] = n[k] + 1
+        c, a = np.concatenate([[], *coords[k]]), np.concatenate([[], *areas[k]])
+        order = np.argsort(c, kind="stable")
+        c, a = c[order], a[order]
+        starts = np.flatnonzero(np.diff(c, prepend=-np.inf) > near)
+        rows = np.stack([c[starts], np.add.reduceat(a, starts)], 1) if len(c) else np.zeros((0, 2))
+        rows = rows[rows[:, 1] > 0]
+        side = np.where(rows[:, 0] <= lo[k] + near, 1.0, np.where(rows[:, 0] >= hi[k] - near, -1.0, 0.0))
+        rows = np.concatenate([rows, side[:, None]], 1)
+        out.append(rows[np.lexsort((rows[:, 0], -rows[:, 1]))][:PHASE_PLANES])
     return out
+
+
+def tents(q, w, side) -> tuple:
+    """Each plane's best layer phase (cells), the share of a cell from it to the plane's own phase
+    (the worst: a layer on the plane), and how far the score falls there (0.5 w): a plane inside
+    the scene (side 0), seen from both sides, is best read from half a cell off; one on the scene's
+    bounds (side +1 at lo, -1 at hi), seen from inside only, from BOUND_OFFSET in."""
+    t = (q + np.where(side == 0, 0.5, side * BOUND_OFFSET)) % 1.0
+    return t, (q - t) % 1.0, 0.5 * w
+
+
+def clearance(phase, q, w, side) -> np.ndarray:
+    """The planes' least weighted clearance for each layer phase (cells, [0, 1)): a plane at phase
+    q counts 0.5 with a layer where it is best read (tents), falling linearly to 0.5 - w/2 with a
+    layer on it (w its area over the largest's: the largest falls to 0, a small one barely counts);
+    inside the scene that is 0.5 - w (0.5 - d), d the plane's distance to its nearest layer."""
+    t, fall, depth = tents(q, w, side)
+    x = (np.asarray(phase, np.float64)[..., None] - t) % 1.0
+    return (0.5 - np.where(x <= fall, depth / fall * x, depth / (1.0 - fall) * (1.0 - x))).min(-1)
+
+
+def best_phase(q, w, side) -> tuple:
+    """(phase, clearance): the layers' phase that maximises clearance(). Its optimum is a plane's
+    best phase or where one plane's falling score meets another's rising one, so each is a
+    candidate; ties (to 1e-6 of a cell) take the smaller phase."""
+    t, fall, depth = tents(q, w, side)
+    gap = (t[None, :] - t[:, None]) % 1.0
+    gap = np.where(gap <= 0, 1.0, gap)
+    down, up = depth / fall, depth / (1.0 - fall)          # slopes after and before each best phase
+    cand = np.concatenate([t, ((t[:, None] + gap * up[None, :] / (down[:, None] + up[None, :])) % 1.0).ravel()])
+    score = np.round(clearance(cand, q, w, side), 6)
+    best = np.flatnonzero(score == score.max())
+    i = best[np.argmin(np.round(cand[best], 6))]
+    return float(cand[i]), float(score[i])
+
+
+def phased_axis(lo: float, hi: float, step: float, planes, finer: bool = True) -> tuple:
+    """(spacing, origin, count) along one axis of an automatic grid whose layers stand where the
+    axis' planes (axis_planes rows) are best read, as near as they come: the phase of best_phase
+    and, where it clears FINER_COST cells more per share finer, a spacing up to PHASE_FINER finer
+    (the candidates: those that put two planes' best layers on one lattice). The
+    first and last layers at least half a cell beyond lo and hi; the count a Python int."""
+    c, w, side = planes[:, 0], planes[:, 1] / planes[:, 1].max(), planes[:, 2]
+    steps = {step}
+    best_at = np.where(side == 0, 0.5, side * BOUND_OFFSET)    # each plane's best layer, cells from it
+    for i in range(min(len(c), PAIR_PLANES) if finer else 0):
+        for j in range(i + 1, min(len(c), PAIR_PLANES)):
+            # the spacings that put both planes' best layers on the lattice: span = (n + shift) s
+            span, shift = c[j] - c[i], best_at[i] - best_at[j]
+            span, shift = (span, shift) if span > 0 else (-span, -shift)
+            first = math.ceil(span / step - shift - 1e-9)
+            steps.update(span / (n + shift) for n in range(first, first + 4)
+                         if n + shift > 0 and span / (n + shift) >= step / PHASE_FINER)
+    best = None
+    for s in sorted(steps, reverse=True):          # ties: the coarsest spacing
+        phase, clear = best_phase(((c - lo) / s) % 1.0, w, side)
+        gain = round(clear - FINER_COST * (step / s - 1.0), 6)
+        if best is None or gain > best[0]:
+            best = (gain, s, phase)
+    _, s, phase = best
+    e = (hi - lo) / s
+    tol = min(COUNT_TOLERANCE * max(e, 1.0), 1e-4)
+    first = math.floor(-0.5 - phase + tol)          # layers at lo + (phase + k) s
+    last = math.ceil(e + 0.5 - phase - tol)
+    return s, lo + (phase + first) * s, int(last - first + 1)
+
+
+PLANE_CLEARANCE = 0.1    # of a cell: along the other axes, no layer of probes nearer a plane than this
+
+
+def centred_axis(lo: float, hi: float, step: float, coords) -> tuple:
+    """(spacing, origin, count) along an axis not phased: centred on the bounds; where a layer
+    would stand within PLANE_CLEARANCE of a cell of a plane across it (a wall of no thickness at
+    the scene's centre, an odd count: probes on it, moved off it by float32 hits that differ with
+    the scene's scale), one probe more, which shifts the layers half a cell, where that clears more."""
+    def clear(n):
+        pos = (lo + hi) / 2 + (np.arange(n) - (n - 1) / 2) * step
+        return float(np.abs(pos[:, None] - coords[None]).min()) / step if len(coords) else 0.5
+    n = axis_counts(hi - lo, step, 2)[0]
+    if clear(n) < PLANE_CLEARANCE and clear(n + 1) > clear(n):
+        n += 1
+    return step, (lo + hi) / 2 - (n - 1) * step / 2, n
+
+
+def phased(lo, hi, step: float, planes: list) -> tuple:
+    """(origin, spacing, counts) of an automatic grid of cells about `step` wide whose layers stand
+    where the scene's planes across PHASED_AXES are best read (phased_axis), centred along the
+    others (centred_axis); the finer spacings dropped where they would pass AUTO_MAX_PROBES."""
+    for finer in (True, False):
+        axes = []
+        for k in range(3):
+            if k in PHASED_AXES and len(planes[k]):
+                axes.append(phased_axis(float(lo[k]), float(hi[k]), step, planes[k], finer))
+            else:
+                axes.append(centred_axis(float(lo[k]), float(hi[k]), step, planes[k][:, 0]))
+        if math.prod(a[2] for a in axes) <= AUTO_MAX_PROBES:
+            break
+    spacing, origin, counts = zip(*axes)
+    return origin, spacing, counts
+
+
+def lattice(grid: Grid, arrays) -> dict:
+    """What the report says of an automatic grid's lattice: its counts and spacing and, per axis of
+    PHASED_AXES, its planes' least score (clearance(): 0.5 at best; None: not phased, no plane)."""
+    lo, hi = scene_bounds(arrays)
+    out = []
+    for k, pl in enumerate(axis_planes(arrays, lo, hi)):
+        q = ((pl[:, 0] - grid.origin[k]) / grid.spacing[k]) % 1.0
+        score = clearance(0.0, q, pl[:, 1] / pl[:, 1].max(), pl[:, 2]) if len(pl) and k in PHASED_AXES else None
+        out.append(None if score is None else round(float(score), 4))
+    return {"counts": list(grid.counts), "spacing": [round(s, 6) for s in grid.spacing], "clearance": out}
 
 
 def grid_of(settings: dict, arrays, step_hint: float | None = None) -> Grid:
@@ -179,7 +298,10 @@ def grid_of(settings: dict, arrays, step_hint: float | None = None) -> Grid:
     walls, seeing the sky through them). Automatic: cubic cells (N along the longest axis, or
     `spacing`, or step_hint: the scene's interior scale, auto_step) whose probes overhang the
     scene's bounds on every side by at least half a cell, so that every surface has probes on both
-    of its sides (RTXGI's volumes enclose the scene), at most AUTO_MAX_PROBES (coarser above)."""
+    of its sides (RTXGI's volumes enclose the scene), at most AUTO_MAX_PROBES (coarser above); from
+    the interior's scale, the layers across y phased where its floors, slabs and ceilings are best
+    read, y's cells up to 15% finer, no layer on a wall along x and z (phased: a floor read a layer
+    0.83 cell above it, where a window's beam was 8x what it is at the floor)."""
     if (settings["min"] is None) != (settings["max"] is None):
         raise InputError("probes: give both min and max, or neither (auto: the scene's bounds)")
     counts = settings["counts"]
@@ -234,14 +356,15 @@ def grid_of(settings: dict, arrays, step_hint: float | None = None) -> Grid:
             s = float(settings["spacing"])
         elif counts is None and step_hint is not None:
             s = min(coarse, step_hint)
-            while math.prod(axis_counts(extent, s, 2)) > AUTO_MAX_PROBES:     # the cap: coarser cells
+            # the cap: coarser cells (a phased axis may take one probe more)
+            while math.prod(axis_counts(extent, s, 3)) > AUTO_MAX_PROBES:
                 s *= 1.05
+            origin, spacing, n = phased(lo, hi, s, axis_planes(arrays, lo, hi))
+            return Grid(tuple(float(x) for x in origin), tuple(float(x) for x in spacing), tuple(n))
         else:
             s = coarse
         step = np.full(3, s)
         n = axis_counts(extent, step, 2)
-        if counts is None and step_hint is not None and settings["spacing"] is None:
-            n = off_planes(n, (lo + hi) / 2, s, axis_planes(arrays))
     check_count(n, settings)
     spacing = step
     origin = (lo + hi) / 2 - (np.asarray(n) - 1) * step / 2         # centred: at least half a cell over each face
