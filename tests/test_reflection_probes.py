@@ -942,3 +942,23 @@ def test_a_reflection_meets_an_object_off_the_box_where_it_stands():
     got = rpt.blend([c], p, r, 0.0, np.zeros((1, 3)), None, None)[0]
     boxed = rpt.blend([{**c, "depth": None}], p, r, 0.0, np.zeros((1, 3)), None, None)[0]
     assert np.all(np.abs(got - 1.0) < 0.02) and np.all(boxed < 0.02), (got, boxed)
+
+
+def test_an_influence_wholly_outside_the_scene_is_said():
+    """A new user's probe box at 19..21 beside a room (bounds about -2..3) bakes, and the chrome
+    sphere it was meant for read the distant sky (8x off): said now, naming the key and both
+    boxes; a box that meets the bounds (at a face) or a sphere over them is not."""
+    from iblbake.render import reflection_probes as rp
+
+    bounds = (np.array([-2.0, 0, -2]), np.array([2.0, 3, 2]))
+    away = {"reflection_probes": [{"position": [20, 20, 20], "min": [19, 19, 19], "max": [21, 21, 21]}], "objects": []}
+    said = rp.warnings(0, {}, away, bounds)
+    assert len(said) == 1 and said[0].startswith("reflection_probes.0: its influence [19.0, 19.0, 19.0]..[21.0, "
+                                                 "21.0, 21.0] lies wholly outside the scene's bounds"), said
+    touching = {"reflection_probes": [{"position": [2.5, 1, 0], "min": [2, 0, -1], "max": [3, 2, 1]}], "objects": []}
+    assert rp.warnings(0, {}, touching, bounds) == []
+    sphere = {"reflection_probes": [{"position": [2.5, 1, 0], "shape": "sphere", "radius": 0.6}], "objects": []}
+    assert rp.warnings(0, {}, sphere, bounds) == []
+    sphere["reflection_probes"][0]["radius"] = 0.4                    # 2.1..2.9 along x: beyond 2
+    assert len(rp.warnings(0, {}, sphere, bounds)) == 1
+    assert rp.warnings(0, {}, away, None) == []

@@ -88,16 +88,35 @@ def proxy_distance(settings: dict, d) -> np.ndarray:
 INSIDE_WARN = 0.25     # a capture whose rays meet this share of an object's inside is inside it
 
 
-def warnings(k: int, report: dict, scene_data: dict) -> list:
+def influence_box(settings: dict) -> tuple:
+    """The box (lo, hi) a probe's influence holds: its min/max, or its sphere's about position."""
+    if settings.get("shape", "box") == "sphere":
+        pos, r = np.asarray(settings["position"], np.float64), float(settings["radius"])
+        return pos - r, pos + r
+    return np.asarray(settings["min"], np.float64), np.asarray(settings["max"], np.float64)
+
+
+def warnings(k: int, report: dict, scene_data: dict, bounds=None) -> list:
     """A capture from inside an object: its rays meet that object's inside over more than
-    INSIDE_WARN of the sphere (the probe sees the object's inner walls, not the room)."""
+    INSIDE_WARN of the sphere (the probe sees the object's inner walls, not the room); an
+    influence wholly outside the scene's bounds (lo, hi): no surface reads the probe (a new user's
+    box at 19..21 beside a room: the chrome sphere read the distant sky, 8x, nothing said)."""
     from iblbake.scene.load import object_label
 
-    return [f"reflection_probes.{k}: its position {scene_data['reflection_probes'][k]['position']} lies inside "
-            f"{object_label(scene_data, int(o))} ({100 * share:.0f}% of its capture sees that object's inside); add "
-            f"it to reflection_probes.{k}.exclude or move the probe"
-            for o, share in report.get("inside", {}).items() if share > INSIDE_WARN
-            and int(o) < len(scene_data["objects"])]
+    settings = scene_data["reflection_probes"][k]
+    out = [f"reflection_probes.{k}: its position {settings['position']} lies inside "
+           f"{object_label(scene_data, int(o))} ({100 * share:.0f}% of its capture sees that object's inside); add "
+           f"it to reflection_probes.{k}.exclude or move the probe"
+           for o, share in report.get("inside", {}).items() if share > INSIDE_WARN
+           and int(o) < len(scene_data["objects"])]
+    if bounds is not None:
+        lo, hi = influence_box(settings)
+        if ((hi < bounds[0]) | (lo > bounds[1])).any():
+            plain = lambda v: [round(float(x), 6) for x in v]
+            out.append(f"reflection_probes.{k}: its influence {plain(lo)}..{plain(hi)} lies wholly outside the "
+                       f"scene's bounds {plain(bounds[0])}..{plain(bounds[1])}: no surface reads it (the distant "
+                       f"panorama instead); move reflection_probes.{k} over the part of the scene the camera sees")
+    return out
 
 
 def excluded(scene_data: dict, settings: dict) -> list:

@@ -511,11 +511,13 @@ class ReflectionProbes(Unit):
         from iblbake.io.images import ImageInfo
         from iblbake.render import reflection_probes as rp
 
-        out, cached_all, rays = [], True, 0
+        from iblbake.render.probes.grid import scene_bounds
+
+        out, cached_all, rays, bounds = [], True, 0, scene_bounds(job.arrays)
         for k, (settings, key) in enumerate(zip(job.scene.data["reflection_probes"], self.key(job))):
             image, cached, report = job.bakes._get(("reflection", key),
                                                    lambda: self.capture(job, k, settings, key))
-            for w in rp.warnings(k, report, job.scene.data):     # said for a cached capture too
+            for w in rp.warnings(k, report, job.scene.data, bounds):     # said for a cached capture too
                 job.warn(w)
             traced = not cached
             bk = baker(job)
