@@ -222,6 +222,19 @@ def test_default_probes_hold_a_thin_wall_room_they_were_not_tuned_on(scale, runt
     assert not bad, f"the thin wall's variant at scale {scale}: regions over {REGION_BOUND:.0%}: {bad}"
 
 
+def metal_halves_over(name, panorama, panoramas, runtime, cache, extra=()):
+    """(halves, bound): the halves of a corpus scene's metal object whose specular term under its
+    reflection probe (extra: scene keys on the rung) lies outside their bound (PART_MISSES, else
+    PART_BOUND), judged at 64 px against 1024-sample references, as every metal object's are."""
+    if not (ROOT / "examples" / "corpus" / "meshes" / "skylight_room.obj").exists():
+        pytest.fail("the corpus meshes are missing: run `make meshes`")
+    st, row = absolute_study(name, panorama, panoramas, runtime, cache, "specular", "reflection probes", extra,
+                             max_side=64, max_samples=1024)
+    assert row.get("part_absolute"), "the study judges the metal object's halves"
+    bound = PART_MISSES.get((name, panorama), PART_BOUND)
+    return outside(row["part_absolute"], bound), bound
+
+
 @pytest.mark.external
 @pytest.mark.slow
 @pytest.mark.parametrize("panorama", ["studio", "city"])
@@ -237,15 +250,8 @@ def test_the_reflection_probe_holds_each_half_of_the_metal_object(panorama, runt
     x0.97-1.03 here), and the default's taps at grazing views raise the window half under studio
     by 6% (x0.975 -> x1.037 here; x1.155 at 40 px: the lamps beside the window leak through a
     tap's filtered edge, docs/conventions.md "Taps")."""
-    name = "quad_room"
-    if not (ROOT / "examples" / "corpus" / "meshes" / "skylight_room.obj").exists():
-        pytest.fail("the corpus meshes are missing: run `make meshes`")
-    st, row = absolute_study(name, panorama, panoramas, runtime, tmp_path / "cache", "specular", "reflection probes",
-                             max_side=64, max_samples=1024)
-    assert row.get("part_absolute"), "the study judges the metal object's halves"
-    bound = PART_MISSES.get((name, panorama), PART_BOUND)
-    bad = outside(row["part_absolute"], bound)
-    assert not bad, f"{name} under {panorama}: halves over {bound:.0%}: {bad}"
+    bad, bound = metal_halves_over("quad_room", panorama, panoramas, runtime, tmp_path / "cache")
+    assert not bad, f"quad_room under {panorama}: halves over {bound:.0%}: {bad}"
 
 
 # A reflection probe at (or in the room of) a metal object, its capture excluding the object, read
@@ -268,13 +274,8 @@ def test_the_reflection_probe_in_taps_holds_each_half_of_the_metal_object(name, 
     level, before: city's sun aliased between them, resting's gold sphere 54% off on its -x half
     (x1.36) and 51% on +y at 64 px; metal_box under studio 14%, 11.4% while each tap's sky was the
     probe's over its open share alone)."""
-    if not (ROOT / "examples" / "corpus" / "meshes" / "skylight_room.obj").exists():
-        pytest.fail("the corpus meshes are missing: run `make meshes`")
-    st, row = absolute_study(name, panorama, panoramas, runtime, tmp_path / "cache", "specular", "reflection probes",
-                             [("reflection_probes.0.taps", TAPS)], max_side=64, max_samples=1024)
-    assert row.get("part_absolute"), "the study judges the metal object's halves"
-    bound = PART_MISSES.get((name, panorama), PART_BOUND)
-    bad = outside(row["part_absolute"], bound)
+    bad, bound = metal_halves_over(name, panorama, panoramas, runtime, tmp_path / "cache",
+                                   [("reflection_probes.0.taps", TAPS)])
     assert not bad, f"{name} under {panorama} with {TAPS} taps: halves over {bound:.0%}: {bad}"
 
 
@@ -293,14 +294,9 @@ def test_the_reflection_probe_at_its_default_holds_each_half_of_the_metal_object
                                                                                  panoramas):
     """The corpus' metal objects under their reflection probe at its defaults (taps at grazing
     views), each half within PART_BOUND of the converged reference or its measured miss."""
-    if not (ROOT / "examples" / "corpus" / "meshes" / "skylight_room.obj").exists():
-        pytest.fail("the corpus meshes are missing: run `make meshes`")
-    st, row = absolute_study(name, panorama, panoramas, runtime, tmp_path / "cache", "specular", "reflection probes",
-                             max_side=64, max_samples=1024)
-    assert row.get("part_absolute"), "the study judges the metal object's halves"
-    bound = PART_MISSES.get((name, panorama), PART_BOUND)
-    bad = outside(row["part_absolute"], bound)
+    bad, bound = metal_halves_over(name, panorama, panoramas, runtime, tmp_path / "cache")
     assert not bad, f"{name} under {panorama} at the default reading: halves over {bound:.0%}: {bad}"
+
 
 # The documented quality setting for interiors (docs/manual.md "Irradiance probes in interiors"):
 # the panorama's sun and lamps extracted as lights with soft shadows, so the patch a window or

@@ -705,6 +705,35 @@ def test_taps_hold_a_resting_sphere_in_a_room_they_were_not_tuned_on(tmp_path, r
     assert len(err) >= 4 and max(err.values()) < 0.10, err
 
 
+def key_light_sky(degrees, value, levels, w=64, h=32):
+    """(key, panorama, its chain, a black chain): a panorama of 1 with a key light of `value` (a disk
+    `degrees` wide about key) at w x h, prefiltered by brute force at `levels` roughnesses."""
+    from iblbake.bake.prefilter import prefilter_bruteforce
+    from iblbake.core import conventions
+
+    dirs = conventions.equirect_texel_dirs(w, h)
+    key = np.array([0.0, 0.6, 0.8])
+    img = np.ones((h, w, 3))
+    img[dirs @ key > np.cos(np.radians(degrees))] = value
+    chain = [prefilter_bruteforce(img, dirs, k / (levels - 1), max_sub=1) for k in range(levels)]
+    return key, img, chain, [np.zeros((h, w, 3))] * levels
+
+
+def lobe_truth(img, n, v, alpha):
+    """The exact integral of the GGX lobe (normal n, view v; no Fresnel) over the panorama's
+    texels, normalised by the lobe's own (red channel): what a probe's reading should give."""
+    from iblbake.core import brdf, conventions
+
+    h, w = img.shape[:2]
+    flat = conventions.equirect_texel_dirs(w, h).reshape(-1, 3)
+    omega = conventions.equirect_solid_angles(w, h).reshape(-1)
+    half = flat + v
+    half /= np.linalg.norm(half, axis=1, keepdims=True)
+    nol = np.clip(flat @ n, 0.0, 1.0)
+    f = brdf.d_ggx(half @ n, alpha) * brdf.v_smith_ggx_correlated(float(v @ n), nol, alpha) * nol * omega
+    return (f * img.reshape(-1, 3)[:, 0]).sum() / f.sum()
+
+
 @pytest.mark.slow
 def test_taps_do_not_alias_on_a_compact_key_light():
     """A capture that saw no scene, only a panorama of 1 with a key light of 500 (a 10-degree disk),
@@ -713,33 +742,22 @@ def test_taps_do_not_alias_on_a_compact_key_light():
     the panorama's texels within 20% at every turn (measured -13.6% to +4.7%). Taps read at a fixed
     share of the lobe's level (before) met the light or missed it as the turn moved the taps across
     it: -32% to +19%."""
-    from iblbake.bake.prefilter import prefilter_bruteforce
-    from iblbake.core import brdf, conventions
+    from iblbake.core import conventions
     from iblbake.render.twin import reflection_probes as rpt
 
-    w, h, levels, rough = 64, 32, 5, 0.5
-    dirs = conventions.equirect_texel_dirs(w, h)
-    key = np.array([0.0, 0.6, 0.8])
-    img = np.ones((h, w, 3))
-    img[dirs @ key > np.cos(np.radians(10))] = 500.0
-    chain = [prefilter_bruteforce(img, dirs, k / (levels - 1), max_sub=1) for k in range(levels)]
-    zero = [np.zeros((h, w, 3))] * levels
+    levels, rough = 5, 0.5
+    key, img, chain, zero = key_light_sky(10, 500.0, levels)
     box = {"shape": "box", "position": [0, 0, 0], "min": [-2, -2, -2], "max": [2, 2, 2], "blend": 0.1,
            "parallax": True, "taps": 64}
     n = key[None]
     t, b = conventions.tangent_frame(n)
-    omega, flat, alpha = conventions.equirect_solid_angles(w, h).reshape(-1), dirs.reshape(-1, 3), rough ** 2
-    nol = np.clip(flat @ key, 0.0, 1.0)
     errors = []
     for phi in np.radians(np.arange(0, 360, 10)):
         v = np.cos(np.radians(30)) * n + np.sin(np.radians(30)) * (np.cos(phi) * t + np.sin(phi) * b)
-        half = flat + v
-        half /= np.linalg.norm(half, axis=1, keepdims=True)
-        f = brdf.d_ggx(half @ key, alpha) * brdf.v_smith_ggx_correlated(float(v[0] @ key), nol, alpha) * nol * omega
         r = 2 * (n * v).sum(1, keepdims=True) * n - v
         got = rpt.blend([{"settings": box, "levels": zero, "coverage": zero, "sky": chain}], np.zeros((1, 3)), r,
                         rough * (levels - 1), np.zeros((1, 3)), (chain, 0.0, 1.0), (n, v))[0, 0]
-        errors.append(got / ((f * img.reshape(-1, 3)[:, 0]).sum() / f.sum()) - 1)
+        errors.append(got / lobe_truth(img, key, v[0], rough ** 2) - 1)
     assert max(np.abs(errors)) < 0.20, errors
 
 
@@ -751,21 +769,15 @@ def test_the_default_reading_holds_a_lobe_seen_edge_on(tmp_path, sky):
     (measured -5% to +8%). The split sum's one read along the dominant direction, the old default,
     is 34% off where the normal looks away from the light (its lobe about r reaches below the
     horizon into the light): the split sum's own error at grazing, the distant panorama alone."""
-    from iblbake.bake.prefilter import prefilter_bruteforce
-    from iblbake.core import brdf, conventions
+    from iblbake.core import conventions
+    from iblbake.core.bases.common import lobe_axis
     from iblbake.render.twin import reflection_probes as rpt
 
-    w, h, levels, rough = 64, 32, 5, 0.35
-    dirs = conventions.equirect_texel_dirs(w, h)
-    key = np.array([0.0, 0.6, 0.8])
-    img = np.ones((h, w, 3))
-    img[dirs @ key > np.cos(np.radians(30))] = 20.0
-    chain = [prefilter_bruteforce(img, dirs, k / (levels - 1), max_sub=1) for k in range(levels)]
-    zero = [np.zeros((h, w, 3))] * levels
+    levels, rough = 5, 0.35
+    key, img, chain, zero = key_light_sky(30, 20.0, levels)
     defaults = window(tmp_path, sky, [{"position": [0, 0, -1], "min": [-2, -2, -2], "max": [2, 2, 2]}])
     box = {**defaults["reflection_probes"][0], "position": [0, 0, 0]}
-    flat, alpha = dirs.reshape(-1, 3), rough ** 2
-    omega = conventions.equirect_solid_angles(w, h).reshape(-1)
+    alpha = rough ** 2
     nov = np.cos(np.radians(78))
 
     def ring(tilt, settings):
@@ -775,20 +787,10 @@ def test_the_default_reading_holds_a_lobe_seen_edge_on(tmp_path, sky):
         phi = np.radians(np.arange(0, 360, 15))[:, None]
         v = nov * n + np.sqrt(1 - nov * nov) * (np.cos(phi) * t + np.sin(phi) * b)
         nn = np.repeat(n, len(v), 0)
-        r = 2 * nov * nn - v
-        s = 1 - alpha
-        r = nn + (r - nn) * (s * (np.sqrt(s) + alpha))
-        r /= np.linalg.norm(r, axis=1, keepdims=True)
+        r = lobe_axis(nn, v, np.full(len(v), alpha))          # the split sum's dominant direction
         got = rpt.blend([{"settings": settings, "levels": zero, "coverage": zero, "sky": chain}], np.zeros_like(v), r,
                         rough * (levels - 1), np.zeros_like(v), (chain, 0.0, 1.0), (nn, v))[:, 0]
-        nol = np.clip(flat @ n[0], 0.0, 1.0)
-        truth = 0.0
-        for vk in v:
-            half = flat + vk
-            half /= np.linalg.norm(half, axis=1, keepdims=True)
-            f = brdf.d_ggx(half @ n[0], alpha) * brdf.v_smith_ggx_correlated(nov, nol, alpha) * nol * omega
-            truth += (f * img.reshape(-1, 3)[:, 0]).sum() / f.sum()
-        return got.sum() / truth - 1
+        return got.sum() / sum(lobe_truth(img, n[0], vk, alpha) for vk in v) - 1
 
     tilts = (0, 45, 90, 135, 180)
     errors = [ring(tilt, box) for tilt in tilts]
