@@ -110,8 +110,10 @@ def warnings(k: int, report: dict, scene_data: dict, bounds=None) -> list:
            for o, share in report.get("inside", {}).items() if share > INSIDE_WARN
            and int(o) < len(scene_data["objects"])]
     if bounds is not None:
+        from iblbake.render.probes.grid import apart
+
         lo, hi = influence_box(settings)
-        if ((hi < bounds[0]) | (lo > bounds[1])).any():
+        if apart(lo, hi, bounds):
             plain = lambda v: [round(float(x), 6) for x in v]
             out.append(f"reflection_probes.{k}: its influence {plain(lo)}..{plain(hi)} lies wholly outside the "
                        f"scene's bounds {plain(bounds[0])}..{plain(bounds[1])}: no surface reads it (the distant "

@@ -32,8 +32,8 @@ from iblbake.render.probes.dilate import dilate, dilate_values
 from iblbake.render.probes.files import (FILES, FORMAT, VERSION, data_texture, light_entries, load, manifest,
                                          read_manifest, save)
 from iblbake.render.probes.glsl import SH_GLSL, SPECULAR_TABLES, basis_glsl, glsl
-from iblbake.render.probes.grid import (AUTO_MAX_PROBES, DEFAULT_LONGEST, MAX_PROBES, SCALE_RAYS, Grid, auto_step,
-                                        axis_counts, grid_of, lattice, probe_bytes, scene_bounds)
+from iblbake.render.probes.grid import (AUTO_MAX_PROBES, DEFAULT_LONGEST, MAX_PROBES, SCALE_RAYS, Grid, apart,
+                                        auto_step, axis_counts, grid_of, lattice, probe_bytes, scene_bounds)
 from iblbake.render.probes.project import BACKFACE_BLEND_LIMIT, MAX_DISTANCE, atlas, project, with_borders
 from iblbake.render.paths.tracer import Tracer, trace_defines
 from iblbake.render.probes.rays import random_rotation, ray_directions, spherical_fibonacci
@@ -171,7 +171,7 @@ def box_outside(grid: Grid, bounds) -> dict:
         return {}
     pos, half = grid.positions(), np.asarray(grid.spacing) / 2        # the cells' box: probes.min/max
     box, (lo, hi) = (pos.min(0) - half, pos.max(0) + half), bounds
-    if not ((box[1] < lo) | (box[0] > hi)).any():
+    if not apart(box[0], box[1], bounds):
         return {}
     plain = lambda v: [round(float(x), 6) for x in v]
     return {"box_outside_bounds": {"box": [plain(box[0]), plain(box[1])], "bounds": [plain(lo), plain(hi)]}}

@@ -35,6 +35,12 @@ class Grid:
         return np.asarray(self.origin) + twin.probe_coords(np.arange(self.count), self.counts) * np.asarray(self.spacing)
 
 
+def apart(lo, hi, bounds) -> bool:
+    """Whether the box lo..hi misses the box bounds (lo, hi) along some axis (a shared face meets):
+    a probe box or a reflection probe's influence no surface of the scene lies in."""
+    return bool(((np.asarray(hi) < bounds[0]) | (np.asarray(lo) > bounds[1])).any())
+
+
 def scene_bounds(arrays) -> tuple | None:
     """(lo, hi) of the scene's spheres, finite planes and triangles; an infinite plane bounds the
     axis its normal lies along, where it does; None where nothing is bounded."""
@@ -138,7 +144,8 @@ FINER_COST = 2.0       # clearance (cells) a spacing finer by a share f costs: f
 PHASE_PLANES = 16      # the largest planes across an axis that place its layers (a mesh may have hundreds)
 PAIR_PLANES = 8        # ...and the largest of those whose distances propose the finer spacings
 PLANE_MERGE = 1e-6     # of the scene's extent: surfaces nearer than this across an axis are one plane
-BOUND_OFFSET = 0.3     # cells: a plane on the scene's bounds (seen from inside only) is best read by a layer this far in
+BOUND_OFFSET = 0.3     # cells: a plane on the scene's bounds (seen from inside only) is best read by a layer
+                       # this far in
 PHASED_AXES = (1,)     # y (up): floors, slabs, ceilings; walls phased too moved a one-sided screen's probes
                        # (backface under city: frame 11% -> 20%) and l_room's (17.5% -> 20.5%)
 

@@ -88,27 +88,24 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
     elif effects["specular"] == "prefiltered":
         r = 2 * (n * v).sum(1, keepdims=True) * n - v
         if effects["prefilter"]["dominant_direction"]:
-            s = np.clip(1 - alpha, 0, 1)[:, None]
-            r = n + (r - n) * (s * (np.sqrt(s) + alpha[:, None]))
-            r /= np.linalg.norm(r, axis=1, keepdims=True)
+            r = common.lobe_axis(n, v, alpha)
         pre = radiance.chain_lookup_twin(prefiltered, to_env(r, rot), rough * (len(prefiltered) - 1))
         ab = dfg_lookup(dfg, nov, rough)
         li = scale * pre
-        lit = (spec_occ * (f0 * ab[:, 0:1] + f90 * ab[:, 1:2])).sum(1) > 0   # what reflects: probes read there
+        w = spec_occ * (f0 * ab[:, 0:1] + f90 * ab[:, 1:2])           # the split sum's albedo, occluded
+        lit = w.sum(1) > 0                                              # what reflects: probes read there
         if reflection_probes and lit.any():
             nlev = len(reflection_probes[0]["levels"])
             li[lit] = rp_twin.blend(reflection_probes, gb["pos"][hit][lit], r[lit], rough[lit] * (nlev - 1), li[lit],
                                     (prefiltered, rot, scale), (n[lit], v[lit]))
-        color += spec_occ * li * (f0 * ab[:, 0:1] + f90 * ab[:, 1:2])
+        color += w * li
         if ssr_out is not None:
-            ssr_out["w"] = spec_occ * (f0 * ab[:, 0:1] + f90 * ab[:, 1:2]) * material_occlusion(gb)[:, None]
+            ssr_out["w"] = w * material_occlusion(gb)[:, None]
             ssr_out["li"] = li
     elif effects["specular"] == "probes":              # kernels/shade.cl SPECULAR_PROBES
         r = 2 * (n * v).sum(1, keepdims=True) * n - v
         if effects["prefilter"]["dominant_direction"]:
-            s = np.clip(1 - alpha, 0, 1)[:, None]
-            r = n + (r - n) * (s * (np.sqrt(s) + alpha[:, None]))
-            r /= np.linalg.norm(r, axis=1, keepdims=True)
+            r = common.lobe_axis(n, v, alpha)
         sky = scale * radiance.chain_lookup_twin(prefiltered, to_env(r, rot), rough * (len(prefiltered) - 1))
         spec = PROBE_BASES[probes["representation"]].specular_weights(
             common.lobe_axis(n, v, alpha), common.warp_sharpness(alpha, nov), probes["settings"])
