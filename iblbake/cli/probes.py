@@ -81,8 +81,8 @@ def probes_command(scene_path, out_dir, overrides, cache_dir, force, device, qui
 def lights_said(lights: list) -> str:
     """The lights extracted from the panorama, which an engine cannot know of but from probes.json."""
     n = sum(not lt["source"].startswith("lights.") for lt in lights)
-    return f"; {n} light{'s' if n != 1 else ''} extracted from the panorama, to draw per pixel: probes.json's lights" \
-        if n else ""
+    return (f"; {n} light{'s' if n != 1 else ''} extracted from the panorama, to draw per pixel: probes.json's lights "
+            f"(environment.sun: none keeps {'them' if n != 1 else 'it'} in the probes)") if n else ""
 
 
 def _remove_stale(out: Path, names: list) -> list:

@@ -287,6 +287,7 @@ def _validated(data, lines, source, folder, overrides, outputs, values, origin, 
     _resolve_lightmap_specular(v, out, raw)
     _resolve_lightmap(v, out, raw)
     _resolve_specular_fits(out, raw)
+    _resolve_sun(out, raw)
     writes = _resolve_outputs(v, out["output"], folder, outputs)
     return Scene(out, source, folder, lines, writes, raw, overridden, copy.deepcopy(out))
 
@@ -552,6 +553,40 @@ def _resolve_lightmap_specular(v: "_Validator", out: dict, raw: dict) -> None:
         v.fail("effects.specular", f"lightmap (lightmap.basis {name}) beside effects.diffuse {fx['diffuse']} of "
                                    "another directional basis: a frame lights from one; give effects.diffuse "
                                    "lightmap, sh, off (or probes storing the lightmap's basis and options)")
+
+
+AUTO_SUN_LIGHTS = 4         # the lights `sun: auto` extracts: a sun, or studio's four lamps (bake/sun.py)
+
+
+def has_probes(out: dict, raw: dict) -> bool:
+    """Whether a scene has irradiance probes (a `probes:` section, or a frame that reads them) or
+    reflection probes: what it bakes them from, whichever mode a frame or a study's rung reads
+    (a volume baked by name and a frame reading it key the same panorama)."""
+    fx = out["effects"]
+    return "probes" in raw or "probes" in (fx["diffuse"], fx["specular"]) or bool(out["reflection_probes"])
+
+
+def _resolve_sun(out: dict, raw: dict) -> None:
+    """`environment.sun: auto` (the default): extract where the scene has probes (has_probes), none
+    elsewhere.
+    A probe grid (or a capture read at one point) cannot hold the shadow edge of a compact light
+    through a window: studio's lamps through a new user's window room left a sphere's lit side
+    1.7-1.9x bright at every seed and ray count, x1.02-1.08 with the lamps lit per pixel, as
+    engines light their dominant lights (docs/manual.md "Irradiance probes in interiors"). Where
+    auto extracts, sun_lights is AUTO_SUN_LIGHTS and sun_shadows soft unless the scene gives them
+    (lamps are disks of 4-16 degrees: hard shadows would cut their penumbrae)."""
+    env = out["environment"]
+    if env["sun"] != "auto":
+        return
+    if not has_probes(out, raw):
+        env["sun"] = "none"
+        return
+    given = raw.get("environment") if isinstance(raw.get("environment"), dict) else {}
+    env["sun"] = "extract"
+    if "sun_lights" not in given:
+        env["sun_lights"] = AUTO_SUN_LIGHTS
+    if "sun_shadows" not in given:
+        env["sun_shadows"] = "soft"
 
 
 def _resolve_specular_fits(out: dict, raw: dict) -> None:

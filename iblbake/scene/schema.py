@@ -328,14 +328,20 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
         "primaries": Enum(("auto", "keep", "convert"), "auto",
                           doc="EXR chromaticities other than Rec.709: keep the values and say so (auto), keep them "
                               "silently (keep), or convert to Rec.709/D65"),
-        "sun": Enum(("none", "extract"), "none",
+        "sun": Enum(("auto", "none", "extract"), "auto",
                     doc="extract: the panorama's sun (a compact region 1e4 x brighter than the median) leaves the "
-                        "panorama and comes back as a directional light of exactly its energy, so it casts shadows"),
-        "sun_shadows": Enum(("hard", "soft", "none"), "hard", doc="the extracted sun's shadows"),
+                        "panorama and comes back as a directional light of exactly its energy, so it casts shadows; "
+                        "auto: extract where the scene has irradiance probes (a probes: section, or a frame that "
+                        "reads them) or reflection probes (a probe grid cannot hold a sun's or lamp's shadow edge "
+                        "through a window: docs/manual.md 'Irradiance probes in interiors'), with sun_lights 4 and "
+                        "soft shadows unless given; none elsewhere"),
+        "sun_shadows": Enum(("hard", "soft", "none"), "hard", doc="the extracted sun's shadows (soft where sun: auto "
+                                                                 "extracts, unless given)"),
         "sun_lights": Num(1, 1, 8, integer=True, doc="extract: how many compact bright regions leave the panorama as directional "
                                        "lights, brightest first: 1 the sun (at most 6 degrees); more takes lamps and "
                                        "softboxes too (up to 20 degrees, each 2% of the energy or more: studio's "
-                                       "four lamps), each a disk whose soft shadows spread its penumbra"),
+                                       "four lamps), each a disk whose soft shadows spread its penumbra (4 where "
+                                       "sun: auto extracts, unless given)"),
     }),
     "materials": MapOf(doc="named materials (glTF 2.0's metallic-roughness model)", section=Section(
         doc="a metallic-roughness material", fields={
