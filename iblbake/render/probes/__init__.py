@@ -76,7 +76,9 @@ def scaled_grid(tracer, coarse: Grid, settings: dict, arrays, camera):
 def switch_off(tracer, grid: Grid, offset, t, dirs, obj, settings: dict, camera):
     """(each probe's state, how many each rule switched off, the probes outside the camera's room):
     classification (inside geometry; no surface within its cells), outside the camera's closed or
-    sealed room, beyond the scene's bounds with the camera within them (relocation.beyond_bounds)."""
+    sealed room, beyond the scene's bounds with the camera within them (relocation.beyond_bounds),
+    behind a surface from what the camera sees near them or outside the room it sees
+    (relocation.behind_surfaces)."""
     arrays = tracer.job.arrays
     states = classify(t, dirs, grid, settings) if settings["classification"] else np.zeros(grid.count, int)
     inside = (states == INACTIVE) & ((t < 0).mean(1) > settings["backface_threshold"])
