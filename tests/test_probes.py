@@ -214,7 +214,7 @@ def test_visibility_stops_light_leaking_through_a_thin_wall(tmp_path, rt, sky, m
     # so would the rule that switches off the probes beyond the scene's bounds (above the roof)
     monkeypatch.setattr(probes, "beyond_bounds", lambda pos, bounds, camera: np.zeros(len(pos), bool))
     # and the one that switches off the probes behind a surface from all the camera sees near them
-    monkeypatch.setattr(probes, "behind_surfaces", lambda tracer, pos, spacing, camera: np.zeros(len(pos), bool))
+    monkeypatch.setattr(probes, "behind_surfaces", lambda tracer, pos, spacing, camera: (np.zeros(len(pos), bool),) * 2)
     cache = Bakes(tmp_path / "cache")
     lit = lambda f: f.hdr[..., :3][f.hdr[..., 3] > 0.999].mean()      # noqa: E731
     without = lit(render(rooms(tmp_path, sky, False, counts=8), runtime=rt, cache=cache))

@@ -76,7 +76,9 @@ def scaled_grid(tracer, coarse: Grid, settings: dict, arrays, camera):
 def switch_off(tracer, grid: Grid, offset, t, dirs, obj, settings: dict, camera):
     """(each probe's state, how many each rule switched off, the probes outside the camera's room):
     classification (inside geometry; no surface within its cells), outside the camera's closed or
-    sealed room, beyond the scene's bounds with the camera within them (relocation.beyond_bounds)."""
+    sealed room, beyond the scene's bounds with the camera within them (relocation.beyond_bounds),
+    behind a surface from what the camera sees near them or outside the room it sees
+    (relocation.behind_surfaces)."""
     arrays = tracer.job.arrays
     states = classify(t, dirs, grid, settings) if settings["classification"] else np.zeros(grid.count, int)
     inside = (states == INACTIVE) & ((t < 0).mean(1) > settings["backface_threshold"])
@@ -87,14 +89,14 @@ def switch_off(tracer, grid: Grid, offset, t, dirs, obj, settings: dict, camera)
     beyond = ((beyond_bounds(grid.positions(), bounds, camera) | beyond_bounds(pos, bounds, camera))
               & ~outside & (states != INACTIVE))
     live = (states != INACTIVE) & ~outside & ~beyond
-    behind = np.zeros(grid.count, bool)
-    behind[live] = behind_surfaces(tracer, pos[live], grid.spacing, camera)
+    behind, apart = np.zeros(grid.count, bool), np.zeros(grid.count, bool)
+    behind[live], apart[live] = behind_surfaces(tracer, pos[live], grid.spacing, camera)
     # still_inside_geometry: off at their last positions; the report's inside_geometry also counts
     # those relocation moved out (inside at their grid positions)
     off_by = {"still_inside_geometry": int(inside.sum()), "no_surface_near": int(empty.sum()),
               "outside_camera_room": int((outside & (states != INACTIVE)).sum()), "beyond_bounds": int(beyond.sum()),
-              "behind_surfaces": int(behind.sum())}
-    return np.where(outside | beyond | behind, INACTIVE, states), off_by, outside
+              "behind_surfaces": int(behind.sum()), "outside_seen_room": int(apart.sum())}
+    return np.where(outside | beyond | behind | apart, INACTIVE, states), off_by, outside
 
 
 def bake(job, settings: dict, progress=None) -> dict:
@@ -190,7 +192,9 @@ RULES = {"still_inside_geometry": "still inside geometry (relocation did not mov
          "no_surface_near": "no surface within their cells (classification)",
          "outside_camera_room": "outside the camera's closed room",
          "beyond_bounds": "beyond the scene's bounds, the camera within them",
-         "behind_surfaces": "behind a surface from every point the camera sees near them"}
+         "behind_surfaces": "behind a surface from every point the camera sees near them",
+         "outside_seen_room": "outside the room the camera sees (behind a surface from every point it sees within "
+                              "two cells, none in their own)"}
 
 
 def placement_warnings(report: dict) -> list:

@@ -212,34 +212,57 @@ def outside_camera_rooms(positions, arrays, camera) -> np.ndarray:
 
 CAMERA_RAYS = 1 << 14           # rays from the camera whose hits are the points it may see
 SEEN_POINTS = 2                 # a probe is judged by the camera's points in its cells only where it has this many
+SEEN_REACH = 2                  # cells: where a probe has fewer, it is judged by those within this many cells
 SEGMENTS = 256                  # of those points, at most this many segments a probe
+POINT_BACK = 0.01               # of the camera's distance: how far before its hit a point stands, so that it
+                                # is off the surface by that share of the camera's own distance from the
+                                # surface's plane at any angle (a new user's attic, the camera 0.07 below a
+                                # roof it met at 1-5 degrees: a hair of 1e-3 cells along the ray left the
+                                # points 1e-5 off it, and the segments of 24 probes above it passed)
 
 
-def behind_surfaces(tracer: Tracer, positions, spacing, camera) -> np.ndarray:
-    """The probes on the far side of a surface from every point the camera sees within their cells
-    (a box a cell each way): a segment from the probe to each such point meets a surface first.
-    Such a probe lights nothing the camera sees but through that surface: a probe under a floor of
-    no thickness (the sky below it) leaked into a sphere resting on the floor, the sphere's
-    underside 2x too bright (thin_wall's dim sphere, x1.85 in all). A segment test, so it holds
-    for quads of no thickness of either winding as for solids. The points are the hits of
-    CAMERA_RAYS rays from the camera (a hair before the hit, towards the camera: on its side of
-    the surface); a probe with fewer than SEEN_POINTS of them in its cells is kept."""
-    pos = np.asarray(positions, np.float64)
+def seen_points(tracer: Tracer, camera, spacing) -> np.ndarray:
+    """The points the camera may see: the hits of CAMERA_RAYS rays from it, each POINT_BACK of its
+    distance before the hit (at least 1e-3 of a cell), on the camera's side of the surface."""
     cam = np.asarray(camera, np.float64)
-    s = np.asarray(spacing, np.float64)
     dirs = spherical_fibonacci(CAMERA_RAYS)
     _, t, _ = tracer.trace(cam[None], dirs, False)
     t = np.abs(t[0])
     hit = np.isfinite(t)
-    pts = cam + dirs[hit] * (t[hit] - 1e-3 * float(s.min()))[:, None]
-    off = np.zeros(len(pos), bool)
+    back = np.maximum(POINT_BACK * t[hit], 1e-3 * float(np.min(spacing)))
+    return cam + dirs[hit] * (t[hit] - back)[:, None]
+
+
+def _blocked(tracer: Tracer, p, points) -> bool:
+    """Whether every segment from p to the points (at most SEGMENTS of them) meets a surface first."""
+    near = points[::-(-len(points) // SEGMENTS) or 1]
+    seg = near - p
+    length = np.linalg.norm(seg, axis=1)
+    _, t, _ = tracer.trace(p[None], seg / length[:, None], False)
+    return bool((np.abs(t[0]) < length * (1 - 1e-4)).all())
+
+
+def behind_surfaces(tracer: Tracer, positions, spacing, camera):
+    """(the probes behind a surface, the probes outside the room the camera sees): on the far side
+    of a surface from every point the camera sees (seen_points) within their cells (a box a cell
+    each way: a segment from the probe to each such point meets a surface first), and, for those
+    with fewer than SEEN_POINTS points there, from every point within SEEN_REACH cells. Such a probe
+    lights nothing the camera sees but through that surface: a probe under a floor of no thickness
+    (the sky below it) leaked into a sphere resting on the floor, the sphere's underside 2x too
+    bright (thin_wall's dim sphere, x1.85 in all); probes in the sun above an attic's roof, which
+    the camera sees at a grazing angle (a point or none in their cells), lit the top of a gable
+    along the roof's edge up to 12x. A segment test, so it holds for quads of no thickness of either
+    winding as for solids. A probe with fewer than SEEN_POINTS points within SEEN_REACH cells is kept."""
+    pos = np.asarray(positions, np.float64)
+    s = np.asarray(spacing, np.float64)
+    pts = seen_points(tracer, camera, s)
+    behind, apart = np.zeros(len(pos), bool), np.zeros(len(pos), bool)
     for i, p in enumerate(pos):          # one launch a probe: its segments to the points in its cells
-        near = pts[(np.abs(pts - p) < s).all(1)]
-        near = near[::-(-len(near) // SEGMENTS) or 1]
-        if len(near) < SEEN_POINTS:
+        gap = np.abs(pts - p)
+        near = pts[(gap < s).all(1)]
+        if len(near) >= SEEN_POINTS:
+            behind[i] = _blocked(tracer, p, near)
             continue
-        seg = near - p
-        length = np.linalg.norm(seg, axis=1)
-        _, t, _ = tracer.trace(p[None], seg / length[:, None], False)
-        off[i] = (np.abs(t[0]) < length * (1 - 1e-4)).all()
-    return off
+        near = pts[(gap < SEEN_REACH * s).all(1)]
+        apart[i] = len(near) >= SEEN_POINTS and _blocked(tracer, p, near)
+    return behind, apart
