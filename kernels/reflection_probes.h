@@ -222,6 +222,14 @@ IBL_INLINE float rprobe_tap_rough(float noh, float voh, float nol, float alpha, 
     return fmin(sqrt(a), sqrt(alpha));
 }
 
+/* An opening's edge crosses the tap's footprint (the probe saw between RPROBE_TAP_EDGE and 1 -
+ * RPROBE_TAP_EDGE of it open): its filtered sky per unit of open share spreads a lamp the probe saw
+ * just inside the edge over the part p sees open, where p may see that lamp behind the wall (a new
+ * user's window room under studio, a key light 4 cm inside the window's edge as the probe sees it,
+ * 0.4 m behind it from the gold sphere's +z side: its +x half x1.49 with 64 taps, x1.10 now). There
+ * the share the probe saw reads the sky along l at the capture's own level (the panorama's where the
+ * probe saw none of it open): p sees l open (rprobe_taps), and the sky is at infinity. */
+#define RPROBE_TAP_EDGE 0.02f
 /* The sky a tap along l (at roughness tap_rough, chain level tap_rough top) meets through probe k's
  * openings, per unit of the share of its footprint p sees open: where the probe saw that share
  * too, the capture's own sky about l per unit of its open share seen = 1 - coverage(l) (a lamp
@@ -240,9 +248,13 @@ IBL_INLINE float3 rprobe_tap_sky(RPROBE_PARAMS, int k, float3 l, float3 d, float
 {
     const float tap = tap_rough * fmax((float)(rp_nlev - 1), 1.0f);
     const float seen = fmax(1.0f - rprobe_lookup(RPROBE_ARGS, 4 * k + 1, l, tap).x, 0.0f);
+    const int edge = seen > RPROBE_TAP_EDGE && seen < 1.0f - RPROBE_TAP_EDGE;
+    const float sharp = edge ? 0.0f : tap_rough;        /* the sky's roughness along l */
+    const float seen_l = edge ? fmax(1.0f - rprobe_lookup(RPROBE_ARGS, 4 * k + 1, l, 0.0f).x, 0.0f) : seen;
     const float open = fmax(1.0f - rprobe_lookup(RPROBE_ARGS, 4 * k + 1, d, tap).x, 0.0f);
-    const float3 through = seen > RPROBE_SKY_SEEN ? rprobe_lookup(RPROBE_ARGS, 4 * k + 2, l, tap) / seen
-                           : env_scale * split_sum_radiance(CHAIN_ARGS, l, env_rot, tap_rough);
+    const float3 through = seen_l > RPROBE_SKY_SEEN
+                           ? rprobe_lookup(RPROBE_ARGS, 4 * k + 2, l, edge ? 0.0f : tap) / seen_l
+                           : env_scale * split_sum_radiance(CHAIN_ARGS, l, env_rot, sharp);
     if (open <= seen) return through;
     const float known = seen / open;
     return known * through

@@ -106,6 +106,7 @@ NEAR, FAR, FINEST = 0.1, 0.4, 2.0      # kernels/reflection_probes.h RPROBE_NEAR
 
 
 SKY_SEEN = 0.05       # kernels/reflection_probes.h RPROBE_SKY_SEEN
+EDGE = 0.02           # kernels/reflection_probes.h RPROBE_TAP_EDGE
 
 
 def open_sky(c: dict, r, lod, distant):
@@ -159,8 +160,10 @@ def tap_sky(c: dict, l, d, rough_t, env):
     openings per unit of the share p sees open: the capture's sky about l over its open share seen
     (the distant chain's where seen <= SKY_SEEN) on the part the probe saw too; the part p sees
     open beyond it (open: the coverage along d at the tap's level) the distant chain about l at
-    rough_t times the square root of that part's share. env: the distant chain, its rotation, its
-    intensity."""
+    rough_t times the square root of that part's share. Where an opening's edge crosses the tap's
+    footprint (EDGE < seen < 1 - EDGE) the part the probe saw reads its sky along l at the capture's
+    own level (the panorama's at level 0 where it saw none of l open). env: the distant chain, its
+    rotation, its intensity."""
     chain, rot, scale = env
     tap = rough_t * max(len(c["levels"]) - 1, 1)
     seen = np.maximum(1 - radiance.chain_lookup_twin(c["coverage"], l, tap)[:, :1], 0.0)
@@ -168,11 +171,16 @@ def tap_sky(c: dict, l, d, rough_t, env):
 
     def distant(rough):
         return scale * radiance.chain_lookup_twin(chain, conventions.rotate_y(l, -rot), rough * (len(chain) - 1))
-    through = np.where(seen > SKY_SEEN, radiance.chain_lookup_twin(c["sky"], l, tap) / np.maximum(seen, 1e-30),
-                       distant(rough_t))
+
+    def through_at(level, rough):
+        s = np.maximum(1 - radiance.chain_lookup_twin(c["coverage"], l, level)[:, :1], 0.0)
+        return np.where(s > SKY_SEEN, radiance.chain_lookup_twin(c["sky"], l, level) / np.maximum(s, 1e-30),
+                        distant(rough))
+    edge = (seen > EDGE) & (seen < 1 - EDGE)
+    through = through_at(tap, rough_t)
+    if edge.any():
+        through = np.where(edge, through_at(0.0, 0.0), through)
     beyond = np.maximum(open_ - seen, 0.0)
-    if not beyond.any():
-        return through
     known = np.where(beyond > 0, seen / np.maximum(open_, 1e-30), 1.0)
     return known * through + (1 - known) * distant(rough_t * np.sqrt(beyond[:, 0]))
 
