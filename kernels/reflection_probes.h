@@ -7,8 +7,9 @@
  * grey), the sky its escaping rays saw (chain 4k + 2: the panorama through the scene's openings, 0
  * where covered) and the distance from the probe to the scene (chain 4k + 3, grey, level 0 read;
  * an opening's texels the proxy's). The sky is infinitely far: no parallax moves it (rprobe_sky).
- * rp_info's fourth z: the probe's taps (reflection_probes.N.taps), -N: N taps at grazing views alone
- * (reflection_probes.N.grazing_taps, rprobe_grazing), 0: one read a lobe; w: 1 where
+ * rp_info's fourth z: the probe's taps (reflection_probes.N.taps), -N: N taps at grazing views and
+ * on lobes straddling an opening's edge (reflection_probes.N.grazing_taps, rprobe_grazing,
+ * rprobe_straddle), 0: one read a lobe; w: 1 where
  * the probe has its distance chain (rprobe_hit marches against it), 0: the proxy alone.
  * The chains lie back to back in rp_chain, level l of chain c at rp_off[c rp_nlev + l] texels,
  * every level rp_lw x rp_lh.
@@ -339,11 +340,38 @@ IBL_INLINE float rprobe_grazing(float z, float nov)
     return clamp((RPROBE_GRAZING_HI - nov) / (RPROBE_GRAZING_HI - RPROBE_GRAZING_LO), 0.0f, 1.0f);
 }
 
+/* The share of a parallax probe's reading taken in taps where its lobe about r straddles an
+ * opening's edge and p is off the probe (rp_info's fourth z -N, as grazing views): one read
+ * spreads the sky the probe saw in the lobe over all of it that p sees open, where p may see a
+ * lamp just inside the edge behind the wall (a new user's window room under studio, a rough gold
+ * sphere at the probe: its window half 3.2x with one read), and no one-read estimator can tell
+ * which part of the lobe is open. The weight is the product of two ramps, no seam where the
+ * reading changes: the probe's open share seen = 1 - coverage(r, lod) (that of rprobe_sky) from
+ * RPROBE_STRADDLE_LO to RPROBE_STRADDLE_HI of the way to either end (an open or closed lobe reads
+ * once: the coverage chain's rounding never pays the taps), and p's distance from the probe over
+ * the probe's from where r leaves the proxy (the opening lies on it; no march) from RPROBE_NEAR
+ * (rprobe_read's `off` 0) to RPROBE_NEAR + RPROBE_STRADDLE_RISE (that gold sphere's window half
+ * +27.0% in 16 taps; +26.6% with a step at `off` > 0, +33% with twice the rise). */
+#define RPROBE_STRADDLE_LO 0.005f
+#define RPROBE_STRADDLE_HI 0.02f
+#define RPROBE_STRADDLE_RISE 0.05f
+IBL_INLINE float rprobe_straddle(RPROBE_PARAMS, int k, float3 p, float3 r, float lod)
+{
+    const float4 a = rp_info[4 * k], b = rp_info[4 * k + 1], c = rp_info[4 * k + 2];
+    const float seen = 1.0f - rprobe_lookup(RPROBE_ARGS, 4 * k + 1, r, lod).x;
+    const float edge = clamp((fmin(seen, 1.0f - seen) - RPROBE_STRADDLE_LO) / (RPROBE_STRADDLE_HI - RPROBE_STRADDLE_LO),
+                             0.0f, 1.0f);
+    if (edge <= 0.0f) return 0.0f;
+    const float shift = distance(p, a.xyz) / fmax(distance(rprobe_exit(p, r, a, b, c), a.xyz), 1e-6f);
+    return edge * clamp((shift - RPROBE_NEAR) / RPROBE_STRADDLE_RISE, 0.0f, 1.0f);
+}
+
 /* The prefiltered radiance at point p (normal n, view v) along r (world frame) at chain level lod:
  * the probes whose influence holds p, weighted (their weights normalised where they sum past 1),
  * and `distant` (the panorama's chain, scaled) for the rest. A parallax probe with taps (rp_info's
- * fourth z: N everywhere, -N at grazing views, rprobe_grazing) is read in that many taps over the
- * lobe (rprobe_taps), elsewhere in one read (rprobe_read). Captures hold the panorama's intensity
+ * fourth z: N everywhere, -N at grazing views and on lobes straddling an opening's edge,
+ * rprobe_grazing and rprobe_straddle) is read in that many taps over the lobe (rprobe_taps),
+ * elsewhere in one read (rprobe_read). Captures hold the panorama's intensity
  * and frame. */
 IBL_INLINE float3 reflection_probes(float3 p, float3 n, float3 v, float3 r, float lod, float3 distant,
                                     RPROBE_PARAMS, CHAIN_PARAMS, float2 env_rot, float env_scale)
@@ -355,7 +383,8 @@ IBL_INLINE float3 reflection_probes(float3 p, float3 n, float3 v, float3 r, floa
         const float w = rprobe_weight(p, a, b, c);
         if (w <= 0.0f) continue;
         wsum += w;
-        const float g = e.x > 0.5f ? rprobe_grazing(e.z, dot(n, v)) : 0.0f;
+        float g = e.x > 0.5f ? rprobe_grazing(e.z, dot(n, v)) : 0.0f;
+        if (e.x > 0.5f && e.z < -0.5f && g < 1.0f) g = fmax(g, rprobe_straddle(RPROBE_ARGS, k, p, r, lod));
         if (g > 0.0f)
             acc += w * g * rprobe_taps(RPROBE_ARGS, k, p, n, v, lod, (int)fabs(e.z), CHAIN_ARGS, env_rot, env_scale);
         if (g < 1.0f)

@@ -245,11 +245,28 @@ def grazing(st: dict, nov):
     return np.clip((GRAZING_HI - nov) / (GRAZING_HI - GRAZING_LO), 0.0, 1.0)
 
 
+STRADDLE_LO, STRADDLE_HI, STRADDLE_RISE = 0.005, 0.02, 0.05   # kernels/reflection_probes.h RPROBE_STRADDLE_*
+
+
+def straddle(c: dict, p, r, lod):
+    """Twin of rprobe_straddle: the share of a parallax probe's reading taken in taps where its lobe
+    about r straddles an opening's edge (the probe's open share seen = 1 - coverage(r, lod) from
+    STRADDLE_LO to STRADDLE_HI of the way to either end) and p is off the probe (its distance from
+    the probe over the probe's from where r leaves the proxy, from NEAR to NEAR + STRADDLE_RISE)."""
+    st = c["settings"]
+    pos = np.asarray(st["position"], np.float64)
+    seen = 1 - radiance.chain_lookup_twin(c["coverage"], r, lod)[:, 0]
+    edge = np.clip((np.minimum(seen, 1 - seen) - STRADDLE_LO) / (STRADDLE_HI - STRADDLE_LO), 0.0, 1.0)
+    shift = np.linalg.norm(p - pos, axis=-1) / np.maximum(np.linalg.norm(exit_point(st, p, r) - pos, axis=-1), 1e-6)
+    return edge * np.clip((shift - NEAR) / STRADDLE_RISE, 0.0, 1.0)
+
+
 def blend(captured: list, p, r, lod, distant, env, lobe):
     """Twin of reflection_probes: captured [{settings, levels, coverage, sky, depth (optional: the
     distance chain, rprobe_hit)}], distant the scaled distant chain's radiance at (p, r) (m, 3),
     which takes the share no probe's influence holds; env (the distant chain, its rotation, its
-    intensity) and lobe (n, v) for a probe read in taps (everywhere, or at grazing views)."""
+    intensity) and lobe (n, v) for a probe read in taps (everywhere, or at grazing views and on
+    lobes straddling an opening's edge: grazing, straddle)."""
     acc = np.zeros_like(distant)
     wsum = np.zeros(len(p))
     lod = np.broadcast_to(np.asarray(lod, np.float64), (len(p),))
@@ -259,6 +276,8 @@ def blend(captured: list, p, r, lod, distant, env, lobe):
         w = weight(st, p)
         wsum += w
         g = grazing(st, nov)
+        if lobe is not None and st["parallax"] and not st.get("taps") and st.get("grazing_taps"):
+            g = np.maximum(g, straddle(c, p, r, lod))
         got = np.zeros_like(distant)
         tapped = (w > 0) & (g > 0)
         if tapped.any():
