@@ -345,13 +345,17 @@ IBL_INLINE float rprobe_grazing(float z, float nov)
  * spreads the sky the probe saw in the lobe over all of it that p sees open, where p may see a
  * lamp just inside the edge behind the wall (a new user's window room under studio, a rough gold
  * sphere at the probe: its window half 3.2x with one read), and no one-read estimator can tell
- * which part of the lobe is open. The weight is the product of two ramps, no seam where the
- * reading changes: the probe's open share seen = 1 - coverage(r, lod) (that of rprobe_sky) from
+ * which part of the lobe is open. The weight is a product of ramps, no seam where the reading
+ * changes: the probe's open share seen = 1 - coverage(r, lod) (that of rprobe_sky) from
  * RPROBE_STRADDLE_LO to RPROBE_STRADDLE_HI of the way to either end (an open or closed lobe reads
- * once: the coverage chain's rounding never pays the taps), and p's distance from the probe over
- * the probe's from where r leaves the proxy (the opening lies on it; no march) from RPROBE_NEAR
- * (rprobe_read's `off` 0) to RPROBE_NEAR + RPROBE_STRADDLE_RISE (that gold sphere's window half
- * +27.0% in 16 taps; +26.6% with a step at `off` > 0, +33% with twice the rise). */
+ * once: the coverage chain's rounding never pays the taps); the opening's shift as p sees it (p's
+ * distance from the probe over the probe's from where r leaves the proxy: the opening lies on it,
+ * no march) from RPROBE_NEAR (rprobe_read's `off` 0) to RPROBE_NEAR + RPROBE_STRADDLE_RISE (that
+ * gold sphere's window half +27.0% in 16 taps; +26.6% with a ramp of 0.03, +33% of 0.1); and
+ * rprobe_sky's `near`, 1 while that shift is within the lobe's width, 0 at twice it: there one
+ * read fills with the distant chain, not the probe's sky per unit of open share that spreads the
+ * lamp, and a narrower lobe's taps miss the sliver of an opening (metal_box's cube under studio,
+ * 0.3 roughness: +x x0.90 in taps, x0.97 with `near`, x0.99 in one read). */
 #define RPROBE_STRADDLE_LO 0.005f
 #define RPROBE_STRADDLE_HI 0.02f
 #define RPROBE_STRADDLE_RISE 0.05f
@@ -363,7 +367,9 @@ IBL_INLINE float rprobe_straddle(RPROBE_PARAMS, int k, float3 p, float3 r, float
                              0.0f, 1.0f);
     if (edge <= 0.0f) return 0.0f;
     const float shift = distance(p, a.xyz) / fmax(distance(rprobe_exit(p, r, a, b, c), a.xyz), 1e-6f);
-    return edge * clamp((shift - RPROBE_NEAR) / RPROBE_STRADDLE_RISE, 0.0f, 1.0f);
+    const float rough = lod / fmax((float)(rp_nlev - 1), 1.0f);
+    const float near = clamp(2.0f - shift / fmax(2.0f * rough * rough, 1e-6f), 0.0f, 1.0f);
+    return edge * clamp((shift - RPROBE_NEAR) / RPROBE_STRADDLE_RISE, 0.0f, 1.0f) * near;
 }
 
 /* The prefiltered radiance at point p (normal n, view v) along r (world frame) at chain level lod:

@@ -251,14 +251,17 @@ STRADDLE_LO, STRADDLE_HI, STRADDLE_RISE = 0.005, 0.02, 0.05   # kernels/reflecti
 def straddle(c: dict, p, r, lod):
     """Twin of rprobe_straddle: the share of a parallax probe's reading taken in taps where its lobe
     about r straddles an opening's edge (the probe's open share seen = 1 - coverage(r, lod) from
-    STRADDLE_LO to STRADDLE_HI of the way to either end) and p is off the probe (its distance from
-    the probe over the probe's from where r leaves the proxy, from NEAR to NEAR + STRADDLE_RISE)."""
+    STRADDLE_LO to STRADDLE_HI of the way to either end), p is off the probe (its distance from the
+    probe over the probe's from where r leaves the proxy, from NEAR to NEAR + STRADDLE_RISE) and
+    that shift is within the lobe's width (sky's `near`)."""
     st = c["settings"]
     pos = np.asarray(st["position"], np.float64)
     seen = 1 - radiance.chain_lookup_twin(c["coverage"], r, lod)[:, 0]
     edge = np.clip((np.minimum(seen, 1 - seen) - STRADDLE_LO) / (STRADDLE_HI - STRADDLE_LO), 0.0, 1.0)
     shift = np.linalg.norm(p - pos, axis=-1) / np.maximum(np.linalg.norm(exit_point(st, p, r) - pos, axis=-1), 1e-6)
-    return edge * np.clip((shift - NEAR) / STRADDLE_RISE, 0.0, 1.0)
+    rough = lod / max(len(c["coverage"]) - 1, 1)
+    near = np.clip(2 - shift / np.maximum(2 * rough * rough, 1e-6), 0.0, 1.0)
+    return edge * np.clip((shift - NEAR) / STRADDLE_RISE, 0.0, 1.0) * near
 
 
 def blend(captured: list, p, r, lod, distant, env, lobe):
