@@ -179,7 +179,14 @@ IBL_INLINE float3 rprobe_open_sky(RPROBE_PARAMS, int k, float3 r, float lod, flo
  * |p - probe| / |x - probe| radians) is within the lobe's width (2 alpha), the distant chain's
  * lobe once it is twice that: a studio's key light behind the wall beside a window is in the
  * distant chain's lobe but not in what p sees through the window (quad_room under studio: the
- * window half x1.25 with the distant chain alone, x0.98 now). */
+ * window half x1.25 with the distant chain alone, x0.98 now). rprobe_near: that share of the
+ * probe's sky, 1 within the lobe's width (2 alpha, alpha = (lod / the chain's last level)^2), 0 at
+ * twice it. */
+IBL_INLINE float rprobe_near(float shift, float lod, int nlev)
+{
+    const float rough = lod / fmax((float)(nlev - 1), 1.0f);
+    return clamp(2.0f - shift / fmax(2.0f * rough * rough, 1e-6f), 0.0f, 1.0f);
+}
 IBL_INLINE float3 rprobe_sky(RPROBE_PARAMS, int k, float3 r, float lod, float open, float off, float shift,
                              float3 distant)
 {
@@ -187,8 +194,7 @@ IBL_INLINE float3 rprobe_sky(RPROBE_PARAMS, int k, float3 r, float lod, float op
     const float3 sky = rprobe_lookup(RPROBE_ARGS, 4 * k + 2, r, lod);
     const float fill = off * fmax(open - seen, 0.0f);
     if (fill <= 0.0f) return sky * (fmin(open, seen) / fmax(seen, 1e-6f));
-    const float rough = lod / fmax((float)(rp_nlev - 1), 1.0f);
-    const float near = clamp(2.0f - shift / fmax(2.0f * rough * rough, 1e-6f), 0.0f, 1.0f);
+    const float near = rprobe_near(shift, lod, rp_nlev);
     const float3 through = near > 0.0f ? rprobe_open_sky(RPROBE_ARGS, k, r, lod, distant) : distant;
     return sky * (fmin(open, seen) / fmax(seen, 1e-6f)) + fill * mix(distant, through, near);
 }
@@ -367,9 +373,7 @@ IBL_INLINE float rprobe_straddle(RPROBE_PARAMS, int k, float3 p, float3 r, float
                              0.0f, 1.0f);
     if (edge <= 0.0f) return 0.0f;
     const float shift = distance(p, a.xyz) / fmax(distance(rprobe_exit(p, r, a, b, c), a.xyz), 1e-6f);
-    const float rough = lod / fmax((float)(rp_nlev - 1), 1.0f);
-    const float near = clamp(2.0f - shift / fmax(2.0f * rough * rough, 1e-6f), 0.0f, 1.0f);
-    return edge * clamp((shift - RPROBE_NEAR) / RPROBE_STRADDLE_RISE, 0.0f, 1.0f) * near;
+    return edge * clamp((shift - RPROBE_NEAR) / RPROBE_STRADDLE_RISE, 0.0f, 1.0f) * rprobe_near(shift, lod, rp_nlev);
 }
 
 /* The prefiltered radiance at point p (normal n, view v) along r (world frame) at chain level lod:

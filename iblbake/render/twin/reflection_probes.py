@@ -124,6 +124,13 @@ def open_sky(c: dict, r, lod, distant):
     return out
 
 
+def near(c: dict, shift, lod):
+    """Twin of rprobe_near: 1 while the opening's shift as p sees it is within the lobe's width
+    (2 alpha), 0 at twice it."""
+    rough = lod / max(len(c["coverage"]) - 1, 1)
+    return np.clip(2 - shift / np.maximum(2 * rough * rough, 1e-6), 0.0, 1.0)
+
+
 def sky(c: dict, r, lod, open_, off, shift, distant):
     """Twin of rprobe_sky: the sky capture c saw about r, times the share `open_` of the lobe p sees
     open over the share the probe saw, where that is less; `off` of the rest is filled with the sky
@@ -131,11 +138,10 @@ def sky(c: dict, r, lod, open_, off, shift, distant):
     the lobe's width, the distant chain once it is twice that."""
     seen = np.maximum(1 - radiance.chain_lookup_twin(c["coverage"], r, lod)[:, :1], 0.0)
     got = radiance.chain_lookup_twin(c["sky"], r, lod)
-    rough = lod / max(len(c["coverage"]) - 1, 1)
-    near = np.clip(2 - shift / np.maximum(2 * rough * rough, 1e-6), 0.0, 1.0)[:, None]
+    held = near(c, shift, lod)[:, None]
     fill = off * np.maximum(open_ - seen, 0.0)
-    through = open_sky(c, r, lod, distant) if (near > 0).any() and (fill > 0).any() else distant
-    return got * (np.minimum(open_, seen) / np.maximum(seen, 1e-6)) + fill * (near * through + (1 - near) * distant)
+    through = open_sky(c, r, lod, distant) if (held > 0).any() and (fill > 0).any() else distant
+    return got * (np.minimum(open_, seen) / np.maximum(seen, 1e-6)) + fill * (held * through + (1 - held) * distant)
 
 
 TAP_SPREAD = 0.5     # kernels/reflection_probes.h RPROBE_TAP_SPREAD
@@ -253,15 +259,13 @@ def straddle(c: dict, p, r, lod):
     about r straddles an opening's edge (the probe's open share seen = 1 - coverage(r, lod) from
     STRADDLE_LO to STRADDLE_HI of the way to either end), p is off the probe (its distance from the
     probe over the probe's from where r leaves the proxy, from NEAR to NEAR + STRADDLE_RISE) and
-    that shift is within the lobe's width (sky's `near`)."""
+    that shift is within the lobe's width (near)."""
     st = c["settings"]
     pos = np.asarray(st["position"], np.float64)
     seen = 1 - radiance.chain_lookup_twin(c["coverage"], r, lod)[:, 0]
     edge = np.clip((np.minimum(seen, 1 - seen) - STRADDLE_LO) / (STRADDLE_HI - STRADDLE_LO), 0.0, 1.0)
     shift = np.linalg.norm(p - pos, axis=-1) / np.maximum(np.linalg.norm(exit_point(st, p, r) - pos, axis=-1), 1e-6)
-    rough = lod / max(len(c["coverage"]) - 1, 1)
-    near = np.clip(2 - shift / np.maximum(2 * rough * rough, 1e-6), 0.0, 1.0)
-    return edge * np.clip((shift - NEAR) / STRADDLE_RISE, 0.0, 1.0) * near
+    return edge * np.clip((shift - NEAR) / STRADDLE_RISE, 0.0, 1.0) * near(c, shift, lod)
 
 
 def blend(captured: list, p, r, lod, distant, env, lobe):
