@@ -7,8 +7,9 @@
  * grey), the sky its escaping rays saw (chain 4k + 2: the panorama through the scene's openings, 0
  * where covered) and the distance from the probe to the scene (chain 4k + 3, grey, level 0 read;
  * an opening's texels the proxy's). The sky is infinitely far: no parallax moves it (rprobe_sky).
- * rp_info's fourth z: the probe's taps (reflection_probes.N.taps), -N: N taps at grazing views alone
- * (reflection_probes.N.grazing_taps, rprobe_grazing), 0: one read a lobe; w: 1 where
+ * rp_info's fourth z: the probe's taps (reflection_probes.N.taps), -N: N taps at grazing views and
+ * on lobes straddling an opening's edge (reflection_probes.N.grazing_taps, rprobe_grazing,
+ * rprobe_straddle), 0: one read a lobe; w: 1 where
  * the probe has its distance chain (rprobe_hit marches against it), 0: the proxy alone.
  * The chains lie back to back in rp_chain, level l of chain c at rp_off[c rp_nlev + l] texels,
  * every level rp_lw x rp_lh.
@@ -178,7 +179,14 @@ IBL_INLINE float3 rprobe_open_sky(RPROBE_PARAMS, int k, float3 r, float lod, flo
  * |p - probe| / |x - probe| radians) is within the lobe's width (2 alpha), the distant chain's
  * lobe once it is twice that: a studio's key light behind the wall beside a window is in the
  * distant chain's lobe but not in what p sees through the window (quad_room under studio: the
- * window half x1.25 with the distant chain alone, x0.98 now). */
+ * window half x1.25 with the distant chain alone, x0.98 now). rprobe_near: that share of the
+ * probe's sky, 1 within the lobe's width (2 alpha, alpha = (lod / the chain's last level)^2), 0 at
+ * twice it. */
+IBL_INLINE float rprobe_near(float shift, float lod, int nlev)
+{
+    const float rough = lod / fmax((float)(nlev - 1), 1.0f);
+    return clamp(2.0f - shift / fmax(2.0f * rough * rough, 1e-6f), 0.0f, 1.0f);
+}
 IBL_INLINE float3 rprobe_sky(RPROBE_PARAMS, int k, float3 r, float lod, float open, float off, float shift,
                              float3 distant)
 {
@@ -186,8 +194,7 @@ IBL_INLINE float3 rprobe_sky(RPROBE_PARAMS, int k, float3 r, float lod, float op
     const float3 sky = rprobe_lookup(RPROBE_ARGS, 4 * k + 2, r, lod);
     const float fill = off * fmax(open - seen, 0.0f);
     if (fill <= 0.0f) return sky * (fmin(open, seen) / fmax(seen, 1e-6f));
-    const float rough = lod / fmax((float)(rp_nlev - 1), 1.0f);
-    const float near = clamp(2.0f - shift / fmax(2.0f * rough * rough, 1e-6f), 0.0f, 1.0f);
+    const float near = rprobe_near(shift, lod, rp_nlev);
     const float3 through = near > 0.0f ? rprobe_open_sky(RPROBE_ARGS, k, r, lod, distant) : distant;
     return sky * (fmin(open, seen) / fmax(seen, 1e-6f)) + fill * mix(distant, through, near);
 }
@@ -222,6 +229,14 @@ IBL_INLINE float rprobe_tap_rough(float noh, float voh, float nol, float alpha, 
     return fmin(sqrt(a), sqrt(alpha));
 }
 
+/* An opening's edge crosses the tap's footprint (the probe saw between RPROBE_TAP_EDGE and 1 -
+ * RPROBE_TAP_EDGE of it open): its filtered sky per unit of open share spreads a lamp the probe saw
+ * just inside the edge over the part p sees open, where p may see that lamp behind the wall (a new
+ * user's window room under studio, a key light 4 cm inside the window's edge as the probe sees it,
+ * 0.4 m behind it from the gold sphere's +z side: its +x half x1.49 with 64 taps, x1.10 now). There
+ * the share the probe saw reads the sky along l at the capture's own level (the panorama's where the
+ * probe saw none of it open): p sees l open (rprobe_taps), and the sky is at infinity. */
+#define RPROBE_TAP_EDGE 0.02f
 /* The sky a tap along l (at roughness tap_rough, chain level tap_rough top) meets through probe k's
  * openings, per unit of the share of its footprint p sees open: where the probe saw that share
  * too, the capture's own sky about l per unit of its open share seen = 1 - coverage(l) (a lamp
@@ -240,9 +255,13 @@ IBL_INLINE float3 rprobe_tap_sky(RPROBE_PARAMS, int k, float3 l, float3 d, float
 {
     const float tap = tap_rough * fmax((float)(rp_nlev - 1), 1.0f);
     const float seen = fmax(1.0f - rprobe_lookup(RPROBE_ARGS, 4 * k + 1, l, tap).x, 0.0f);
+    const int edge = seen > RPROBE_TAP_EDGE && seen < 1.0f - RPROBE_TAP_EDGE;
+    const float sharp = edge ? 0.0f : tap_rough;        /* the sky's roughness along l */
+    const float seen_l = edge ? fmax(1.0f - rprobe_lookup(RPROBE_ARGS, 4 * k + 1, l, 0.0f).x, 0.0f) : seen;
     const float open = fmax(1.0f - rprobe_lookup(RPROBE_ARGS, 4 * k + 1, d, tap).x, 0.0f);
-    const float3 through = seen > RPROBE_SKY_SEEN ? rprobe_lookup(RPROBE_ARGS, 4 * k + 2, l, tap) / seen
-                           : env_scale * split_sum_radiance(CHAIN_ARGS, l, env_rot, tap_rough);
+    const float3 through = seen_l > RPROBE_SKY_SEEN
+                           ? rprobe_lookup(RPROBE_ARGS, 4 * k + 2, l, edge ? 0.0f : tap) / seen_l
+                           : env_scale * split_sum_radiance(CHAIN_ARGS, l, env_rot, sharp);
     if (open <= seen) return through;
     const float known = seen / open;
     return known * through
@@ -327,11 +346,42 @@ IBL_INLINE float rprobe_grazing(float z, float nov)
     return clamp((RPROBE_GRAZING_HI - nov) / (RPROBE_GRAZING_HI - RPROBE_GRAZING_LO), 0.0f, 1.0f);
 }
 
+/* The share of a parallax probe's reading taken in taps where its lobe about r straddles an
+ * opening's edge and p is off the probe (rp_info's fourth z -N, as grazing views): one read
+ * spreads the sky the probe saw in the lobe over all of it that p sees open, where p may see a
+ * lamp just inside the edge behind the wall (a new user's window room under studio, a rough gold
+ * sphere at the probe: its window half 3.2x with one read), and no one-read estimator can tell
+ * which part of the lobe is open. The weight is a product of ramps, no seam where the reading
+ * changes: the probe's open share seen = 1 - coverage(r, lod) (that of rprobe_sky) from
+ * RPROBE_STRADDLE_LO to RPROBE_STRADDLE_HI of the way to either end (an open or closed lobe reads
+ * once: the coverage chain's rounding never pays the taps); the opening's shift as p sees it (p's
+ * distance from the probe over the probe's from where r leaves the proxy: the opening lies on it,
+ * no march) from RPROBE_NEAR (rprobe_read's `off` 0) to RPROBE_NEAR + RPROBE_STRADDLE_RISE (that
+ * gold sphere's window half +27.0% in 16 taps; +26.6% with a ramp of 0.03, +33% of 0.1); and
+ * rprobe_sky's `near`, 1 while that shift is within the lobe's width, 0 at twice it: there one
+ * read fills with the distant chain, not the probe's sky per unit of open share that spreads the
+ * lamp, and a narrower lobe's taps miss the sliver of an opening (metal_box's cube under studio,
+ * 0.3 roughness: +x x0.90 in taps, x0.97 with `near`, x0.99 in one read). */
+#define RPROBE_STRADDLE_LO 0.005f
+#define RPROBE_STRADDLE_HI 0.02f
+#define RPROBE_STRADDLE_RISE 0.05f
+IBL_INLINE float rprobe_straddle(RPROBE_PARAMS, int k, float3 p, float3 r, float lod)
+{
+    const float4 a = rp_info[4 * k], b = rp_info[4 * k + 1], c = rp_info[4 * k + 2];
+    const float seen = 1.0f - rprobe_lookup(RPROBE_ARGS, 4 * k + 1, r, lod).x;
+    const float edge = clamp((fmin(seen, 1.0f - seen) - RPROBE_STRADDLE_LO) / (RPROBE_STRADDLE_HI - RPROBE_STRADDLE_LO),
+                             0.0f, 1.0f);
+    if (edge <= 0.0f) return 0.0f;
+    const float shift = distance(p, a.xyz) / fmax(distance(rprobe_exit(p, r, a, b, c), a.xyz), 1e-6f);
+    return edge * clamp((shift - RPROBE_NEAR) / RPROBE_STRADDLE_RISE, 0.0f, 1.0f) * rprobe_near(shift, lod, rp_nlev);
+}
+
 /* The prefiltered radiance at point p (normal n, view v) along r (world frame) at chain level lod:
  * the probes whose influence holds p, weighted (their weights normalised where they sum past 1),
  * and `distant` (the panorama's chain, scaled) for the rest. A parallax probe with taps (rp_info's
- * fourth z: N everywhere, -N at grazing views, rprobe_grazing) is read in that many taps over the
- * lobe (rprobe_taps), elsewhere in one read (rprobe_read). Captures hold the panorama's intensity
+ * fourth z: N everywhere, -N at grazing views and on lobes straddling an opening's edge,
+ * rprobe_grazing and rprobe_straddle) is read in that many taps over the lobe (rprobe_taps),
+ * elsewhere in one read (rprobe_read). Captures hold the panorama's intensity
  * and frame. */
 IBL_INLINE float3 reflection_probes(float3 p, float3 n, float3 v, float3 r, float lod, float3 distant,
                                     RPROBE_PARAMS, CHAIN_PARAMS, float2 env_rot, float env_scale)
@@ -343,7 +393,8 @@ IBL_INLINE float3 reflection_probes(float3 p, float3 n, float3 v, float3 r, floa
         const float w = rprobe_weight(p, a, b, c);
         if (w <= 0.0f) continue;
         wsum += w;
-        const float g = e.x > 0.5f ? rprobe_grazing(e.z, dot(n, v)) : 0.0f;
+        float g = e.x > 0.5f ? rprobe_grazing(e.z, dot(n, v)) : 0.0f;
+        if (e.x > 0.5f && e.z < -0.5f && g < 1.0f) g = fmax(g, rprobe_straddle(RPROBE_ARGS, k, p, r, lod));
         if (g > 0.0f)
             acc += w * g * rprobe_taps(RPROBE_ARGS, k, p, n, v, lod, (int)fabs(e.z), CHAIN_ARGS, env_rot, env_scale);
         if (g < 1.0f)

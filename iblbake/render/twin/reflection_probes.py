@@ -106,6 +106,7 @@ NEAR, FAR, FINEST = 0.1, 0.4, 2.0      # kernels/reflection_probes.h RPROBE_NEAR
 
 
 SKY_SEEN = 0.05       # kernels/reflection_probes.h RPROBE_SKY_SEEN
+EDGE = 0.02           # kernels/reflection_probes.h RPROBE_TAP_EDGE
 
 
 def open_sky(c: dict, r, lod, distant):
@@ -123,6 +124,13 @@ def open_sky(c: dict, r, lod, distant):
     return out
 
 
+def near(c: dict, shift, lod):
+    """Twin of rprobe_near: 1 while the opening's shift as p sees it is within the lobe's width
+    (2 alpha), 0 at twice it."""
+    rough = lod / max(len(c["coverage"]) - 1, 1)
+    return np.clip(2 - shift / np.maximum(2 * rough * rough, 1e-6), 0.0, 1.0)
+
+
 def sky(c: dict, r, lod, open_, off, shift, distant):
     """Twin of rprobe_sky: the sky capture c saw about r, times the share `open_` of the lobe p sees
     open over the share the probe saw, where that is less; `off` of the rest is filled with the sky
@@ -130,11 +138,10 @@ def sky(c: dict, r, lod, open_, off, shift, distant):
     the lobe's width, the distant chain once it is twice that."""
     seen = np.maximum(1 - radiance.chain_lookup_twin(c["coverage"], r, lod)[:, :1], 0.0)
     got = radiance.chain_lookup_twin(c["sky"], r, lod)
-    rough = lod / max(len(c["coverage"]) - 1, 1)
-    near = np.clip(2 - shift / np.maximum(2 * rough * rough, 1e-6), 0.0, 1.0)[:, None]
+    held = near(c, shift, lod)[:, None]
     fill = off * np.maximum(open_ - seen, 0.0)
-    through = open_sky(c, r, lod, distant) if (near > 0).any() and (fill > 0).any() else distant
-    return got * (np.minimum(open_, seen) / np.maximum(seen, 1e-6)) + fill * (near * through + (1 - near) * distant)
+    through = open_sky(c, r, lod, distant) if (held > 0).any() and (fill > 0).any() else distant
+    return got * (np.minimum(open_, seen) / np.maximum(seen, 1e-6)) + fill * (held * through + (1 - held) * distant)
 
 
 TAP_SPREAD = 0.5     # kernels/reflection_probes.h RPROBE_TAP_SPREAD
@@ -159,8 +166,10 @@ def tap_sky(c: dict, l, d, rough_t, env):
     openings per unit of the share p sees open: the capture's sky about l over its open share seen
     (the distant chain's where seen <= SKY_SEEN) on the part the probe saw too; the part p sees
     open beyond it (open: the coverage along d at the tap's level) the distant chain about l at
-    rough_t times the square root of that part's share. env: the distant chain, its rotation, its
-    intensity."""
+    rough_t times the square root of that part's share. Where an opening's edge crosses the tap's
+    footprint (EDGE < seen < 1 - EDGE) the part the probe saw reads its sky along l at the capture's
+    own level (the panorama's at level 0 where it saw none of l open). env: the distant chain, its
+    rotation, its intensity."""
     chain, rot, scale = env
     tap = rough_t * max(len(c["levels"]) - 1, 1)
     seen = np.maximum(1 - radiance.chain_lookup_twin(c["coverage"], l, tap)[:, :1], 0.0)
@@ -168,11 +177,16 @@ def tap_sky(c: dict, l, d, rough_t, env):
 
     def distant(rough):
         return scale * radiance.chain_lookup_twin(chain, conventions.rotate_y(l, -rot), rough * (len(chain) - 1))
-    through = np.where(seen > SKY_SEEN, radiance.chain_lookup_twin(c["sky"], l, tap) / np.maximum(seen, 1e-30),
-                       distant(rough_t))
+
+    def through_at(level, rough):
+        s = np.maximum(1 - radiance.chain_lookup_twin(c["coverage"], l, level)[:, :1], 0.0)
+        return np.where(s > SKY_SEEN, radiance.chain_lookup_twin(c["sky"], l, level) / np.maximum(s, 1e-30),
+                        distant(rough))
+    edge = (seen > EDGE) & (seen < 1 - EDGE)
+    through = through_at(tap, rough_t)
+    if edge.any():
+        through = np.where(edge, through_at(0.0, 0.0), through)
     beyond = np.maximum(open_ - seen, 0.0)
-    if not beyond.any():
-        return through
     known = np.where(beyond > 0, seen / np.maximum(open_, 1e-30), 1.0)
     return known * through + (1 - known) * distant(rough_t * np.sqrt(beyond[:, 0]))
 
@@ -237,11 +251,29 @@ def grazing(st: dict, nov):
     return np.clip((GRAZING_HI - nov) / (GRAZING_HI - GRAZING_LO), 0.0, 1.0)
 
 
+STRADDLE_LO, STRADDLE_HI, STRADDLE_RISE = 0.005, 0.02, 0.05   # kernels/reflection_probes.h RPROBE_STRADDLE_*
+
+
+def straddle(c: dict, p, r, lod):
+    """Twin of rprobe_straddle: the share of a parallax probe's reading taken in taps where its lobe
+    about r straddles an opening's edge (the probe's open share seen = 1 - coverage(r, lod) from
+    STRADDLE_LO to STRADDLE_HI of the way to either end), p is off the probe (its distance from the
+    probe over the probe's from where r leaves the proxy, from NEAR to NEAR + STRADDLE_RISE) and
+    that shift is within the lobe's width (near)."""
+    st = c["settings"]
+    pos = np.asarray(st["position"], np.float64)
+    seen = 1 - radiance.chain_lookup_twin(c["coverage"], r, lod)[:, 0]
+    edge = np.clip((np.minimum(seen, 1 - seen) - STRADDLE_LO) / (STRADDLE_HI - STRADDLE_LO), 0.0, 1.0)
+    shift = np.linalg.norm(p - pos, axis=-1) / np.maximum(np.linalg.norm(exit_point(st, p, r) - pos, axis=-1), 1e-6)
+    return edge * np.clip((shift - NEAR) / STRADDLE_RISE, 0.0, 1.0) * near(c, shift, lod)
+
+
 def blend(captured: list, p, r, lod, distant, env, lobe):
     """Twin of reflection_probes: captured [{settings, levels, coverage, sky, depth (optional: the
     distance chain, rprobe_hit)}], distant the scaled distant chain's radiance at (p, r) (m, 3),
     which takes the share no probe's influence holds; env (the distant chain, its rotation, its
-    intensity) and lobe (n, v) for a probe read in taps (everywhere, or at grazing views)."""
+    intensity) and lobe (n, v) for a probe read in taps (everywhere, or at grazing views and on
+    lobes straddling an opening's edge: grazing, straddle)."""
     acc = np.zeros_like(distant)
     wsum = np.zeros(len(p))
     lod = np.broadcast_to(np.asarray(lod, np.float64), (len(p),))
@@ -251,6 +283,8 @@ def blend(captured: list, p, r, lod, distant, env, lobe):
         w = weight(st, p)
         wsum += w
         g = grazing(st, nov)
+        if lobe is not None and st["parallax"] and not st.get("taps") and st.get("grazing_taps"):
+            g = np.maximum(g, straddle(c, p, r, lod))
         got = np.zeros_like(distant)
         tapped = (w > 0) & (g > 0)
         if tapped.any():
