@@ -119,9 +119,8 @@ def bake(job, settings: dict, progress=None) -> dict:
         grid, placement = scaled_grid(tracer, grid, settings, arrays, camera)      # within the cap: no error
     from iblbake.render.paths.trace import describe
     rays, cap = settings["rays"], ray_cap(settings)   # the work's size said up front (a huge grid printed nothing)
-    describe(progress, f"{grid.count:,} probes x {rays} rays = {grid.count * rays:,} paths "
-                       + (f"(up to {cap} rays where noisy) " if cap > rays else "")
-                       + f"({'x'.join(map(str, grid.counts))} grid, spacing {grid.unit:.4g})")
+    describe(progress, f"{grid.count:,} probes x {rays} rays" + (f" (up to {cap} where noisy)" if cap > rays else "")
+                       + f" = {grid.count * rays:,} paths ({'x'.join(map(str, grid.counts))} grid, spacing {grid.unit:.4g})")
     fits(job.scene.source, grid.count, rays)
     if settings["relocation"]:
         start = off_surfaces(tracer, grid.positions(), grid.spacing)
