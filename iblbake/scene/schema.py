@@ -457,7 +457,7 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                     doc="rays per probe, one path each (a spherical Fibonacci set, randomly rotated; DDGI traces "
                         "256 a frame and accumulates frames, a bake takes them at once: an unextracted sun's "
                         "visibility needs them)"),
-        "target_noise": Num(0.03, 0.0, 1.0, doc="adaptive rays: a live probe whose irradiance's relative standard "
+        "target_noise": Num(0.3, 0.0, 1.0, doc="adaptive rays: a live probe whose irradiance's relative standard "
                                                 "error after its rays (the spread over 7 interleaved batches of them, "
                                                 "at the six axis directions) is over this traces as many rays again in "
                                                 "fresh directions, and again, up to max_rays; its irradiance and "
