@@ -74,7 +74,8 @@ def test_noisy_probes_get_more_rays_and_their_estimate_is_one_pass_over_them():
     live[12] = False                                 # an inactive noisy probe takes no more rays
     tracer = Scripted()
     rad, t, _ = tracer.trace(pos, probes.ray_directions(64, st["seed"]), True)
-    counts, rounds = probes.more_rays(tracer, pos, live, rad, t, st)
+    counts, rounds, short = probes.more_rays(tracer, pos, live, rad, t, st)
+    assert short == 0
     # max_rays 400: 64 x 4 = 256 (the cap rounded down to rays times a power of two)
     assert probes.ray_cap(st) == 256
     assert counts.tolist() == [256] * 12 + [64] * 5
@@ -92,6 +93,22 @@ def test_noisy_probes_get_more_rays_and_their_estimate_is_one_pass_over_them():
     first = probes.probe_values(rad[:12], t[:12], probes.ray_directions(64, st["seed"]), (1, 1, 1), st)[0]
     rms = [np.sqrt(np.mean((e / truth - 1) ** 2)) for e in (first, irr[:12])]
     assert rms[1] == pytest.approx(rms[0] / 2, rel=0.2)
+
+
+def test_rounds_that_would_not_fit_in_memory_are_said_not_traced(monkeypatch):
+    """Where a round's further rays would not fit in the process's memory, the noisy probes keep their
+    rays, and the bake's warnings say how many and what to give."""
+    from iblbake.io import memory
+    st = settings(rays=64, target_noise=0.05, max_rays=256, irradiance_texels=4, distance_texels=4)
+    pos = np.array([[-1, 0, z] for z in range(5)] + [[1, 0, 0]], np.float64)
+    tracer = Scripted()
+    rad, t, _ = tracer.trace(pos, probes.ray_directions(64, st["seed"]), True)
+    monkeypatch.setattr(memory, "host_bytes_available", lambda: 5 * 128 * adaptive.RAY_BYTES - 1)
+    counts, rounds, short = probes.more_rays(tracer, pos, np.ones(6, bool), rad, t, st)
+    assert counts.tolist() == [64] * 6 and rounds == [] and short == 5 and len(tracer.calls) == 1
+    said = probes.warnings({"probes": 6, "noisy_short_of_memory": short}, {"probes": {}, "objects": []})
+    assert said == ["probes: 5 noisy probes took no more rays: their further rays would not fit in this process's "
+                    "memory; give a lower probes.max_rays or fewer probes"]
 
 
 def deep_luminance(vol, z_below):

@@ -132,7 +132,8 @@ def bake(job, settings: dict, progress=None) -> dict:
     base = 0.2 if settings["relocation"] else 0.0
     radiance, t, obj = tracer.trace(grid.positions() + offset, dirs, True, progress, base, 1.0 - base)
     states, off_by, outside = switch_off(tracer, grid, offset, t, dirs, obj, settings, camera)
-    counts, rounds = more_rays(tracer, grid.positions() + offset, states != INACTIVE, radiance, t, settings, progress)
+    counts, rounds, short = more_rays(tracer, grid.positions() + offset, states != INACTIVE, radiance, t, settings,
+                                      progress)
     irr, dist = layout(*combined_values(radiance, t, counts, rounds, grid.spacing, settings), grid, settings)
     irr = dilate(irr, states == INACTIVE, grid.counts, settings["irradiance"], settings["irradiance_texels"])
     data = np.concatenate([offset, states[:, None].astype(np.float64)], 1)
@@ -146,6 +147,7 @@ def bake(job, settings: dict, progress=None) -> dict:
     report = {"probes": grid.count, **placement, "bytes": grid.count * probe_bytes(settings),
               "rays_per_probe": settings["rays"], "rays_traced": tracer.rays_traced,
               "more_rays": {str(n): int((counts == n).sum()) for n in np.unique(counts) if n > rays},
+              **({"noisy_short_of_memory": short} if short else {}),
               "inactive": int((states == INACTIVE).sum()), "off_by": off_by,
               "relocated": int((np.abs(offset).sum(1) > 0).sum()),
               "inside_geometry": int(inside.sum()), "outside_camera_room": int(outside.sum()),
@@ -252,6 +254,9 @@ def warnings(report: dict, scene_data: dict, volume: dict | None = None) -> list
                 out.append(f"probes: the {what} atlas is {w} x {h} texels, over the {MAX_ATLAS_SIDE} most GPUs take "
                            f"in one texture; give fewer probes (probes.counts, probes.spacing) or texels")
     out += placement_warnings(report)
+    if report.get("noisy_short_of_memory"):
+        out.append(f"probes: {report['noisy_short_of_memory']} noisy probes took no more rays: their further rays "
+                   "would not fit in this process's memory; give a lower probes.max_rays or fewer probes")
     rays = (scene_data.get("probes") or {}).get("rays")
     if rays is not None and rays < FEW_RAYS:
         out.append(f"probes.rays {rays}: each probe's light is a mean over {rays} paths, noisy where a sun or a lamp "

@@ -46,6 +46,8 @@ def noise(radiance, t, dirs) -> np.ndarray:
 
 
 CAP = 8             # the most rays a noisy probe takes, omitted max_rays: this many times rays
+RAY_BYTES = 64      # host memory a further ray takes: the trace's float32 results, the float64 copies kept and
+                    # those its probe's combination concatenates
 
 
 def ray_cap(settings: dict) -> int:
@@ -72,7 +74,9 @@ def more_rays(tracer, positions, live, radiance, t, settings: dict, progress=Non
     ray_directions(rays, seed)): while a live probe's noise is over target_noise and twice its rays
     are within ray_cap, it traces as many rays again (round k: batches 2^k .. 2^(k+1) - 1, its rays
     numbered from 2^k rays so that no ray's random stream repeats another's). A round is (the
-    probes' indices, their radiance, their t)."""
+    probes' indices, their radiance, their t); a round whose rays would not fit in this process's
+    memory is not traced (the third value: how many probes it left noisy, else 0)."""
+    from iblbake.io import memory
     from iblbake.render.paths.trace import describe
 
     rays, cap, target = settings["rays"], ray_cap(settings), settings["target_noise"]
@@ -83,13 +87,16 @@ def more_rays(tracer, positions, live, radiance, t, settings: dict, progress=Non
         todo = todo[noise(radiance[todo], t[todo], batch_directions(settings, 0, 1)) > target]
     while len(todo) and 2 * counts[todo[0]] <= cap:
         k = counts[todo[0]] // rays                  # the batches each has: a round's probes have as many
+        free = memory.host_bytes_available()
+        if free is not None and len(todo) * 2 * k * rays * RAY_BYTES > free:
+            return counts, rounds, len(todo)
         describe(progress, f"{len(todo):,} noisy probes x {k * rays} more rays")
         rad, tt, _ = tracer.trace(positions[todo], batch_directions(settings, k, k), True, ray0=k * rays)
         rounds.append((todo, rad, tt))
         counts[todo] *= 2
         r, d, dirs = rays_of(todo, radiance, t, rounds, settings)
         todo = todo[noise(r, d, dirs) > target]
-    return counts, rounds
+    return counts, rounds, 0
 
 
 def rays_of(idx, radiance, t, rounds, settings: dict):
