@@ -111,6 +111,35 @@ def test_rounds_that_would_not_fit_in_memory_are_said_not_traced(monkeypatch):
                     "memory; give a lower probes.max_rays or fewer probes"]
 
 
+def test_the_new_keys_key_their_own_volume_and_a_cap_under_twice_rays_is_said(tmp_path, rt, panoramas):
+    """probes.target_noise and probes.max_rays change what the bake makes: each value keys its own
+    cache entry; a max_rays under twice rays (no probe could take more) is said."""
+    import iblbake
+    from iblbake.render import Bakes, units
+    from iblbake.render.units import Job
+
+    path = tmp_path / "s.yaml"
+    path.write_text(yaml.safe_dump({
+        "camera": {"perspective": {"position": [0, 0, 3], "look_at": [0, 0, 0]}, "resolution": [8, 8]},
+        "environment": {"path": str(panoramas["studio"])},
+        "materials": {"m": {"base_color": [0.8, 0.8, 0.8]}},
+        "objects": [{"sphere": {"center": [0, 0, 0], "radius": 0.8}, "material": "m"}],
+        "probes": {"counts": 2}, "effects": {"diffuse": "probes"}}))
+    bakes = Bakes(tmp_path / "cache")
+
+    def key(*overrides):
+        return units.UNITS["probes"].key(Job(iblbake.load_scene(path, list(overrides)), rt, bakes))
+
+    keys = {key(), key("probes.target_noise=0.1"), key("probes.target_noise=0"), key("probes.max_rays=2048")}
+    assert len(keys) == 4 and key() == key()
+    sc = iblbake.load_scene(path, ["probes.rays=1024", "probes.max_rays=1500"])
+    said = [w for w in probes.warnings({"probes": 8}, sc.data) if "max_rays" in w]
+    assert said == ["probes.max_rays 1500 is under twice probes.rays 1024: no noisy probe takes more rays (a noisy "
+                    "probe's rays double); give max_rays 2048 or more, or omit it (8 x rays)"]
+    assert not [w for w in probes.warnings({"probes": 8}, iblbake.load_scene(path, ["probes.max_rays=0"]).data)
+                if "max_rays" in w]
+
+
 def deep_luminance(vol, z_below):
     """Each live probe's mean irradiance luminance (its octahedral tile without borders) where it
     stands below z_below, in the probes' order."""

@@ -257,7 +257,11 @@ def warnings(report: dict, scene_data: dict, volume: dict | None = None) -> list
     if report.get("noisy_short_of_memory"):
         out.append(f"probes: {report['noisy_short_of_memory']} noisy probes took no more rays: their further rays "
                    "would not fit in this process's memory; give a lower probes.max_rays or fewer probes")
-    rays = (scene_data.get("probes") or {}).get("rays")
+    section = scene_data.get("probes") or {}
+    rays, most = section.get("rays"), section.get("max_rays")
+    if rays is not None and most and section.get("target_noise") and most < 2 * rays:
+        out.append(f"probes.max_rays {most} is under twice probes.rays {rays}: no noisy probe takes more rays (a "
+                   f"noisy probe's rays double); give max_rays {2 * rays} or more, or omit it (8 x rays)")
     if rays is not None and rays < FEW_RAYS:
         out.append(f"probes.rays {rays}: each probe's light is a mean over {rays} paths, noisy where a sun or a lamp "
                    f"reaches the room (a sun through a window: the floor x0.43 at 16 rays, in a new user's room); "
