@@ -72,8 +72,8 @@ def batch_directions(settings: dict, first: int, count: int) -> np.ndarray:
 def more_rays(tracer, positions, live, radiance, t, settings: dict, progress=None):
     """(each probe's rays, the rounds) after the first pass (radiance, t of every probe over
     ray_directions(rays, seed)): while a live probe's noise is over target_noise and twice its rays
-    are within ray_cap, it traces as many rays again (round k: batches 2^k .. 2^(k+1) - 1, its rays
-    numbered from 2^k rays so that no ray's random stream repeats another's). A round is (the
+    are within ray_cap, it traces as many rays again (with k batches so far: batches k .. 2k - 1, its
+    rays numbered on from k x rays so that no ray's random stream repeats another's). A round is (the
     probes' indices, their radiance, their t); a round whose rays would not fit in this process's
     memory is not traced (the third value: how many probes it left noisy, else 0)."""
     from iblbake.io import memory
