@@ -49,13 +49,13 @@ from iblbake.render.probes.volume import (SAMPLING_KEYS, Volume, bake_settings, 
 __all__ = ["ACTIVE", "AUTO_MAX_PROBES", "BACKFACE_BLEND_LIMIT", "DEFAULT_LONGEST", "FILES", "FIXED_RAYS", "FORMAT",
            "INACTIVE", "INSIDE_WARN", "MAX_ATLAS_SIDE", "MAX_DISTANCE", "MAX_OFFSET", "MAX_PROBES", "OFF_SAID",
            "RELOCATION_PASSES", "SAMPLING_KEYS", "SCALE_RAYS", "SH_GLSL", "SPECULAR_TABLES", "SURFACE_RAYS", "VERSION",
-           "Grid", "Tracer", "Volume", "atlas", "auto_step", "bake", "bake_settings", "basis_glsl", "combined_values", "basis_of",
-           "basis_options", "behind_surfaces", "beyond_bounds", "box_outside", "classify", "data_texture", "dilate",
-           "dilate_values", "glsl", "grid_of", "inside_geometry", "layout", "light_entries", "load",
-           "manifest", "more_rays", "noise", "off_surfaces", "outside_camera_rooms", "outside_sealed_room", "placement_warnings",
-           "probe_bytes", "probe_values", "project", "ray_cap", "random_rotation", "ray_directions", "read_manifest", "relocate", "sampled",
-           "save", "scaled_grid", "scene_bounds", "spherical_fibonacci", "switch_off", "trace_defines", "volume_dict",
-           "warnings", "with_borders"]
+           "Grid", "Tracer", "Volume", "atlas", "auto_step", "bake", "bake_settings", "basis_glsl", "basis_of",
+           "basis_options", "behind_surfaces", "beyond_bounds", "box_outside", "classify", "combined_values",
+           "data_texture", "dilate", "dilate_values", "glsl", "grid_of", "inside_geometry", "layout", "light_entries",
+           "load", "manifest", "more_rays", "noise", "off_surfaces", "outside_camera_rooms", "outside_sealed_room",
+           "placement_warnings", "probe_bytes", "probe_values", "project", "random_rotation", "ray_cap",
+           "ray_directions", "read_manifest", "relocate", "sampled", "save", "scaled_grid", "scene_bounds",
+           "spherical_fibonacci", "switch_off", "trace_defines", "volume_dict", "warnings", "with_borders"]
 
 
 def scaled_grid(tracer, coarse: Grid, settings: dict, arrays, camera):
@@ -119,8 +119,9 @@ def bake(job, settings: dict, progress=None) -> dict:
         grid, placement = scaled_grid(tracer, grid, settings, arrays, camera)      # within the cap: no error
     from iblbake.render.paths.trace import describe
     rays, cap = settings["rays"], ray_cap(settings)   # the work's size said up front (a huge grid printed nothing)
-    describe(progress, f"{grid.count:,} probes x {rays} rays" + (f" (up to {cap} where noisy)" if cap > rays else "")
-                       + f" = {grid.count * rays:,} paths ({'x'.join(map(str, grid.counts))} grid, spacing {grid.unit:.4g})")
+    upto = f" (up to {cap} where noisy)" if cap > rays else ""
+    describe(progress, f"{grid.count:,} probes x {rays} rays{upto} = {grid.count * rays:,} paths "
+                       f"({'x'.join(map(str, grid.counts))} grid, spacing {grid.unit:.4g})")
     fits(job.scene.source, grid.count, rays)
     if settings["relocation"]:
         start = off_surfaces(tracer, grid.positions(), grid.spacing)
