@@ -98,6 +98,38 @@ def test_noisy_probes_get_more_rays_and_their_estimate_is_one_pass_over_them():
     assert rms[1] == pytest.approx(rms[0] / 2, rel=0.2)
 
 
+def test_a_bake_whose_probes_all_take_more_rays_is_one_pass_over_their_directions(tmp_path, rt, panoramas):
+    """A Lambert sphere under studio, 8 probes around it, every one noisy (target 1e-4): the baked
+    irradiance and moments equal one trace of the same probes over the same 256 directions (the
+    first pass's 64 and the rounds' batches 1-3, each ray's share 4 pi / 64), ray numbers 0-255."""
+    import iblbake
+    from iblbake.render import Bakes
+    from iblbake.render.paths.tracer import Tracer
+    from iblbake.render.units import Job
+
+    path = tmp_path / "s.yaml"
+    path.write_text(yaml.safe_dump({
+        "camera": {"perspective": {"position": [0, 0, 3], "look_at": [0, 0, 0]}, "resolution": [8, 8]},
+        "environment": {"path": str(panoramas["studio"])},
+        "materials": {"m": {"base_color": [0.8, 0.6, 0.4], "roughness": 1, "specular": 0}},
+        "objects": [{"sphere": {"center": [0, 0, 0], "radius": 0.8}, "material": "m"}],
+        "probes": {"min": [-2, -2, -2], "max": [2, 2, 2], "counts": [2, 2, 2], "rays": 64, "max_rays": 256,
+                   "target_noise": 1e-4, "classification": False},
+        "effects": {"diffuse": "probes", "specular": "off"}}))
+    sc = iblbake.load_scene(path, [])
+    bakes = Bakes(tmp_path / "cache")
+    bakes.runtime = rt
+    job = Job(sc, rt, bakes, lambda _m: None, None)
+    vol = bakes.load("probes", job)[0]
+    assert vol.report["more_rays"] == {"256": 8}
+    st = sc.data["probes"]
+    dirs = adaptive.batch_directions(st, 0, 4)
+    rad, t, _ = Tracer(job, st).trace(vol.grid.positions() + vol.data[:, :3], dirs, True)
+    irr, dist = probes.project(rad, t, dirs[:, :3], vol.grid, st)
+    assert np.allclose(vol.irradiance, irr, rtol=1e-5, atol=1e-7)
+    assert np.allclose(vol.distance, dist, rtol=1e-5, atol=1e-7)
+
+
 def test_rounds_that_would_not_fit_in_memory_are_said_not_traced(monkeypatch):
     """Where a round's further rays would not fit in the process's memory, the noisy probes keep their
     rays, and the bake's warnings say how many and what to give."""
