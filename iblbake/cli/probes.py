@@ -67,15 +67,21 @@ def probes_command(scene_path, out_dir, overrides, cache_dir, force, device, qui
                "grid": man["grid"], "representation": man["representation"], "states": man["states"],
                "rays_traced": r["rays_traced"], "bake_s": r["seconds"], "relocated": r["relocated"],
                "inside_geometry": r.get("inside_geometry", 0), "outside_camera_room": r.get("outside_camera_room", 0),
-               "off_by": r.get("off_by", {}),
+               "off_by": r.get("off_by", {}), "more_rays": r.get("more_rays", {}),
                "lights": len(man["lights"])}
     if removed:
         summary["removed"] = removed
     nx, ny, nz = man["grid"]["counts"]
     con.result(summary, f"wrote {out}/ ({nx}x{ny}x{nz} probes, {man['representation']}, "
                         f"{man['states']['inactive']} inactive, {r['relocated']} relocated; "
-                        f"{r['rays_traced']} rays in {r['seconds']:.2f} s{' (cached)' if cached else ''} "
+                        f"{r['rays_traced']} rays{more_said(r.get('more_rays', {}))} in {r['seconds']:.2f} s"
+                        f"{' (cached)' if cached else ''} "
                         f"on {vol.device}){lights_said(man['lights'])}")
+
+
+def more_said(more: dict) -> str:
+    """The noisy probes' further rays (render/probes/adaptive.py): ' (2048 rays: 40 probes, ...)'."""
+    return f" ({', '.join(f'{n} rays: {c} probes' for n, c in more.items())})" if more else ""
 
 
 def lights_said(lights: list) -> str:

@@ -461,7 +461,8 @@ class Probes(Unit):
                                      "bake_s": rep["seconds"], "inactive": rep["inactive"],
                                      "relocated": rep["relocated"], "inside_geometry": rep.get("inside_geometry", 0),
                                      "outside_camera_room": rep.get("outside_camera_room", 0),
-                                     **{k: rep[k] for k in ("off_by", "on_surface", "interior_step", "lattice", "capped", "bytes") if k in rep},
+                                     **{k: rep[k] for k in ("off_by", "on_surface", "interior_step", "lattice",
+                                                            "capped", "bytes", "more_rays") if k in rep},
                                      "entry": str(job.bakes.root / manifest["key"])}
 
 

@@ -5,6 +5,7 @@ temporal here). One module per idea:
   grid.py        where the probes stand (Grid; an automatic grid from the scene's bounds)
   rays.py        the rays' directions (traced by the paths' Tracer, render/paths/tracer.py:
                  kernels/paths/probe_trace.cl, the reference's paths against the scene on the device)
+  adaptive.py    more rays for the probes whose irradiance is noisy after the first pass
   relocation.py  RTXGI's relocation and classification, probes inside geometry or outside the
                  camera's room
   dilate.py      the off probes' irradiance filled from the active ones around them (Unity APV)
@@ -28,13 +29,15 @@ import time
 import numpy as np
 
 from iblbake.errors import IblbakeError, InputError
+from iblbake.render.probes.adaptive import combined_values, more_rays, noise, ray_cap
 from iblbake.render.probes.dilate import dilate, dilate_values
 from iblbake.render.probes.files import (FILES, FORMAT, VERSION, data_texture, light_entries, load, manifest,
                                          read_manifest, save)
 from iblbake.render.probes.glsl import SH_GLSL, SPECULAR_TABLES, basis_glsl, glsl
 from iblbake.render.probes.grid import (AUTO_MAX_PROBES, DEFAULT_LONGEST, MAX_PROBES, SCALE_RAYS, Grid, apart,
                                         auto_step, axis_counts, grid_of, lattice, probe_bytes, scene_bounds)
-from iblbake.render.probes.project import BACKFACE_BLEND_LIMIT, MAX_DISTANCE, atlas, project, with_borders
+from iblbake.render.probes.project import (BACKFACE_BLEND_LIMIT, MAX_DISTANCE, atlas, layout, probe_values, project,
+                                           with_borders)
 from iblbake.render.paths.tracer import Tracer, trace_defines
 from iblbake.render.probes.rays import random_rotation, ray_directions, spherical_fibonacci
 from iblbake.render.probes.relocation import (ACTIVE, FIXED_RAYS, INACTIVE, MAX_OFFSET, RELOCATION_PASSES, SURFACE_RAYS,
@@ -47,12 +50,12 @@ __all__ = ["ACTIVE", "AUTO_MAX_PROBES", "BACKFACE_BLEND_LIMIT", "DEFAULT_LONGEST
            "INACTIVE", "INSIDE_WARN", "MAX_ATLAS_SIDE", "MAX_DISTANCE", "MAX_OFFSET", "MAX_PROBES", "OFF_SAID",
            "RELOCATION_PASSES", "SAMPLING_KEYS", "SCALE_RAYS", "SH_GLSL", "SPECULAR_TABLES", "SURFACE_RAYS", "VERSION",
            "Grid", "Tracer", "Volume", "atlas", "auto_step", "bake", "bake_settings", "basis_glsl", "basis_of",
-           "basis_options", "behind_surfaces", "beyond_bounds", "box_outside", "classify", "data_texture", "dilate",
-           "dilate_values", "glsl", "grid_of", "inside_geometry", "light_entries", "load",
-           "manifest", "off_surfaces", "outside_camera_rooms", "outside_sealed_room", "placement_warnings",
-           "probe_bytes", "project", "random_rotation", "ray_directions", "read_manifest", "relocate", "sampled",
-           "save", "scaled_grid", "scene_bounds", "spherical_fibonacci", "switch_off", "trace_defines", "volume_dict",
-           "warnings", "with_borders"]
+           "basis_options", "behind_surfaces", "beyond_bounds", "box_outside", "classify", "combined_values",
+           "data_texture", "dilate", "dilate_values", "glsl", "grid_of", "inside_geometry", "layout", "light_entries",
+           "load", "manifest", "more_rays", "noise", "off_surfaces", "outside_camera_rooms", "outside_sealed_room",
+           "placement_warnings", "probe_bytes", "probe_values", "project", "random_rotation", "ray_cap",
+           "ray_directions", "read_manifest", "relocate", "sampled", "save", "scaled_grid", "scene_bounds",
+           "spherical_fibonacci", "switch_off", "trace_defines", "volume_dict", "warnings", "with_borders"]
 
 
 def scaled_grid(tracer, coarse: Grid, settings: dict, arrays, camera):
@@ -117,8 +120,9 @@ def bake(job, settings: dict, progress=None) -> dict:
     if settings["min"] is None and settings["counts"] is None and settings["spacing"] is None:
         grid, placement = scaled_grid(tracer, grid, settings, arrays, camera)      # within the cap: no error
     from iblbake.render.paths.trace import describe
-    rays = settings["rays"]          # the work's size said up front (a huge grid printed nothing for minutes)
-    describe(progress, f"{grid.count:,} probes x {rays} rays = {grid.count * rays:,} paths "
+    rays, cap = settings["rays"], ray_cap(settings)   # the work's size said up front (a huge grid printed nothing)
+    upto = f" (up to {cap} where noisy)" if cap > rays else ""
+    describe(progress, f"{grid.count:,} probes x {rays} rays{upto} = {grid.count * rays:,} paths "
                        f"({'x'.join(map(str, grid.counts))} grid, spacing {grid.unit:.4g})")
     fits(job.scene.source, grid.count, rays)
     if settings["relocation"]:
@@ -131,7 +135,9 @@ def bake(job, settings: dict, progress=None) -> dict:
     base = 0.2 if settings["relocation"] else 0.0
     radiance, t, obj = tracer.trace(grid.positions() + offset, dirs, True, progress, base, 1.0 - base)
     states, off_by, outside = switch_off(tracer, grid, offset, t, dirs, obj, settings, camera)
-    irr, dist = project(radiance, t, dirs, grid, settings)
+    counts, rounds, short = more_rays(tracer, grid.positions() + offset, states != INACTIVE, radiance, t, settings,
+                                      progress)
+    irr, dist = layout(*combined_values(radiance, t, counts, rounds, grid.spacing, settings), grid, settings)
     irr = dilate(irr, states == INACTIVE, grid.counts, settings["irradiance"], settings["irradiance_texels"])
     data = np.concatenate([offset, states[:, None].astype(np.float64)], 1)
     inside, who = inside_geometry(t, obj, settings["backface_threshold"])
@@ -143,6 +149,8 @@ def bake(job, settings: dict, progress=None) -> dict:
         objects[int(o)] = objects.get(int(o), 0) + 1
     report = {"probes": grid.count, **placement, "bytes": grid.count * probe_bytes(settings),
               "rays_per_probe": settings["rays"], "rays_traced": tracer.rays_traced,
+              "more_rays": {str(n): int((counts == n).sum()) for n in np.unique(counts) if n > rays},
+              **({"noisy_short_of_memory": short} if short else {}),
               "inactive": int((states == INACTIVE).sum()), "off_by": off_by,
               "relocated": int((np.abs(offset).sum(1) > 0).sum()),
               "inside_geometry": int(inside.sum()), "outside_camera_room": int(outside.sum()),
@@ -251,7 +259,14 @@ def warnings(report: dict, scene_data: dict, volume: dict | None = None) -> list
                 out.append(f"probes: the {what} atlas is {w} x {h} texels, over the {MAX_ATLAS_SIDE} most GPUs take "
                            f"in one texture; give fewer probes (probes.counts, probes.spacing) or texels")
     out += placement_warnings(report)
-    rays = (scene_data.get("probes") or {}).get("rays")
+    if report.get("noisy_short_of_memory"):
+        out.append(f"probes: {report['noisy_short_of_memory']} noisy probes took no more rays: their further rays "
+                   "would not fit in this process's memory; give a lower probes.max_rays or fewer probes")
+    section = scene_data.get("probes") or {}
+    rays, most = section.get("rays"), section.get("max_rays")
+    if rays is not None and most and section.get("target_noise") and most < 2 * rays:
+        out.append(f"probes.max_rays {most} is under twice probes.rays {rays}: no noisy probe takes more rays (a "
+                   f"noisy probe's rays double); give max_rays {2 * rays} or more, or omit it (8 x rays)")
     if rays is not None and rays < FEW_RAYS:
         out.append(f"probes.rays {rays}: each probe's light is a mean over {rays} paths, noisy where a sun or a lamp "
                    f"reaches the room (a sun through a window: the floor x0.43 at 16 rays, in a new user's room); "

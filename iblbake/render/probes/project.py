@@ -41,11 +41,27 @@ def atlas(tiles: np.ndarray, counts) -> np.ndarray:
 
 def project(radiance, t, dirs, grid: Grid, settings: dict):
     """(irradiance, distance atlas) of every probe from its rays (DDGIProbeBlendingCS, to the mean
-    over all rays). Irradiance at a texel's direction: pi times the cosine-weighted mean radiance
+    over all rays): probe_values laid out as the volume stores them."""
+    irr, moments = probe_values(radiance, t, dirs, grid.spacing, settings)
+    return layout(irr, moments, grid, settings)
+
+
+def layout(irr, moments, grid: Grid, settings: dict):
+    """(irradiance, distance atlas) from probe_values' per-probe arrays: a basis with an atlas and
+    the moments as RTXGI's bordered atlases, a directional basis's coefficients as they are."""
+    if PROBE_BASES[settings["irradiance"]].atlas:
+        irr = atlas(with_borders(irr), grid.counts)
+    return irr, atlas(with_borders(moments), grid.counts)
+
+
+def probe_values(radiance, t, dirs, spacing, settings: dict):
+    """(irradiance, moments) of each probe from its rays, radiance (probes, rays, 3), t (probes,
+    rays), dirs (rays, 3), every probe with the same directions. Irradiance at a texel's direction
+    (probes, n, n, 3): pi times the cosine-weighted mean radiance
     of the rays that met no back face (RTXGI stores that over 2 pi and multiplies it back when
     sampling); a probe with BACKFACE_BLEND_LIMIT of back faces blends none. SH: the least-squares
     L2 fit of those rays' radiance (a field in the span, a uniform sky, is exact), convolved with
-    the clamped cosine. Distance moments: weights cos^distance_exponent, the mean of min(|t|,
+    the clamped cosine. Distance moments (probes, nd, nd, 2): weights cos^distance_exponent, the mean of min(|t|,
     1.5 |spacing|) and of its square over every ray (RTXGI halves both; the moments here are the
     means the Chebyshev test reads). A directional basis (core/bases/probes.py): its own project_rays
     on the same rays, back-face rays black: (probes, floats, 3) radiance coefficients."""
@@ -67,12 +83,10 @@ def project(radiance, t, dirs, grid: Grid, settings: dict):
         e[~blends] = 0.0
         # irradiance is >= 0: the panorama's tiny negative texels (environment.negative: keep) reach a
         # few rays, and read back a negative texel would fail the volume's check
-        irr = atlas(with_borders(np.maximum(e, 0.0).reshape(p, n, n, 3)), grid.counts)
+        irr = np.maximum(e, 0.0).reshape(p, n, n, 3)
     nd = settings["distance_texels"]
     wd = np.maximum(0.0, twin.texel_directions(nd) @ dirs.T) ** settings["distance_exponent"]
-    d = np.minimum(np.abs(t), MAX_DISTANCE * float(np.linalg.norm(grid.spacing)))
+    d = np.minimum(np.abs(t), MAX_DISTANCE * float(np.linalg.norm(spacing)))
     wsum = wd.sum(1)
     moments = np.stack([d @ wd.T, (d * d) @ wd.T], -1) / np.where(wsum > 0, wsum, 1)[None, :, None]
-    dist = atlas(with_borders(moments.reshape(p, nd, nd, 2)), grid.counts)
-    return irr, dist
-
+    return irr, moments.reshape(p, nd, nd, 2)
