@@ -226,6 +226,11 @@ def test_few_rays_a_probe_are_said():
     rep = {"probes": 8, "inactive": 0, "off_by": {}}
     said = probes.warnings(rep, {"probes": settings(rays=16), "objects": []})
     assert len(said) == 1 and said[0].startswith("probes.rays 16:") and "1024" in said[0], said
+    assert "environment.sun: extract" in said[0]
+    # where the lights are extracted already (sun: auto) the advice is the rays alone (a new user's
+    # trial: "or environment.sun: extract" where it was)
+    said = probes.warnings(rep, {"probes": settings(rays=16), "objects": [], "environment": {"sun": "extract"}})
+    assert len(said) == 1 and "1024" in said[0] and "environment.sun" not in said[0], said
     assert probes.warnings(rep, {"probes": settings(), "objects": []}) == []
 
 

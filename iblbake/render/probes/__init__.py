@@ -270,7 +270,9 @@ def warnings(report: dict, scene_data: dict, volume: dict | None = None) -> list
     if rays is not None and rays < FEW_RAYS:
         out.append(f"probes.rays {rays}: each probe's light is a mean over {rays} paths, noisy where a sun or a lamp "
                    f"reaches the room (a sun through a window: the floor x0.43 at 16 rays, in a new user's room); "
-                   f"give {FEW_RAYS} or more (the default 1024), or environment.sun: extract")
+                   f"give {FEW_RAYS} or more (the default 1024)"
+                   + ("" if (scene_data.get("environment") or {}).get("sun") == "extract" else
+                      ", or environment.sun: extract"))
     n, inside = report["probes"], report.get("inside_geometry", 0)
     if not n or inside <= INSIDE_WARN * n:
         return out
