@@ -13,7 +13,7 @@ import pytest
 import iblbake
 from iblbake.render import render
 from iblbake.scene import pack
-from tests.helpers import glsl_compiles, load_scene, run_cli
+from tests.helpers import glsl_compiles, load_scene, run_cli, scene_file
 
 QUADS = Path(__file__).resolve().parents[1] / "examples" / "corpus" / "meshes"
 
@@ -150,3 +150,20 @@ def test_sun_auto_lights_a_sphere_beside_a_lamps_beam_per_pixel(tmp_path, panora
             ball = np.rint(frame.aovs["object"]) == len(room["objects"]) - 1
         means[mode] = float((frame.hdr[..., :3] @ np.array([0.2126, 0.7152, 0.0722]))[ball].mean())
     assert abs(means["probes"] / means["reference"] - 1) < 0.15, means
+
+
+def test_render_says_what_sun_auto_extracted(tmp_path, panoramas):
+    """A new user's trial: the frames of `sun: none` and the default differed and nothing but
+    --report said why. The render's line says how many lights `sun: auto` took out of the
+    panorama; not where the scene asked for none, nor where it has no probes."""
+    def line(**sections):
+        path = scene_file(tmp_path, panoramas["studio"], camera={
+            "perspective": {"position": [0, 0, 3], "fov_y": 45}, "resolution": [8, 8]}, **sections)
+        r = run_cli("render", path, "-o", tmp_path / "out.exr")
+        assert r.returncode == 0, r.stderr
+        return r.stdout.strip().splitlines()[-1]
+    probes = {"min": [-2, -2, -2], "max": [2, 2, 2], "counts": [2, 2, 2], "rays": 64}
+    assert line(probes=probes).endswith("; 4 lights extracted from the panorama and lit per pixel (environment.sun: "
+                                        "auto, the scene has probes; environment.sun: none keeps them in it)")
+    assert "extracted" not in line(probes=probes, environment={"sun": "none"})
+    assert "extracted" not in line()

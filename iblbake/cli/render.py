@@ -92,8 +92,19 @@ def render_command(scene_path, outputs, overrides, cache_dir, show_report, profi
         lines.extend(profile_lines(rep["paths_profile"]))
     w, h = rep["resolution"]
     lines.append(f"{'wrote ' + ', '.join(written) if written else 'rendered'} ({w}x{h}, {_samples(rep)}) "
-                 f"in {rep['elapsed_s']:.3f} s on {rep['device']}")
+                 f"in {rep['elapsed_s']:.3f} s on {rep['device']}{_extracted(sc, rep)}")
     con.result(summary, "\n".join(lines))
+
+
+def _extracted(sc, rep) -> str:
+    """What `environment.sun: auto` took out of the panorama (a new user's trial: the frames of
+    `sun: none` and the default differed and nothing but --report said why)."""
+    lit = next((p for p in rep["passes"] if p["name"] == "lights"), {})
+    n = ("sun" in lit) + len(lit.get("lamps") or [])
+    if not n or ((sc.raw or {}).get("environment") or {}).get("sun", "auto") != "auto":
+        return ""
+    return (f"; {n} light{'s' if n != 1 else ''} extracted from the panorama and lit per pixel (environment.sun: "
+            f"auto, the scene has probes; environment.sun: none keeps {'them' if n != 1 else 'it'} in it)")
 
 
 def _plain(value) -> str:
