@@ -101,6 +101,8 @@ def test_probes_json_lists_the_lights_the_frame_draws(tmp_path, panoramas, rt):
     ({"diffuse": "sh", "specular": "importance"}, {"probe": True}, ("extract", 4, "soft")),
     ({"diffuse": "sh"}, {"sg": True}, ("extract", 4, "soft")),
     ({"diffuse": "sh"}, {"sun": "extract"}, ("extract", 1, "hard")),
+    ({"diffuse": "lightmap"}, {"sg": True, "lightmap": True}, ("none", 1, "hard")),
+    ({"diffuse": "probes"}, {"lightmap": True}, ("none", 1, "hard")),
 ])
 def test_sun_auto_extracts_where_the_frame_reads_probes(tmp_path, panoramas, effects, given, want):
     """`environment.sun: auto` (the default) extracts the panorama's sun and lamps where the scene
@@ -109,7 +111,7 @@ def test_sun_auto_extracts_where_the_frame_reads_probes(tmp_path, panoramas, eff
     shadows unless the scene gives them, and leaves the panorama whole elsewhere (before: none unless asked: a new user's room
     turned 30 degrees under studio, a sphere's lit side 1.7-2.1x bright at defaults)."""
     given = dict(given)
-    probe, sg = given.pop("probe", False), given.pop("sg", False)
+    probe, sg, lightmap = given.pop("probe", False), given.pop("sg", False), given.pop("lightmap", False)
     doc = {"camera": {"perspective": {"position": [0, 1, 3], "look_at": [0, 0.5, 0]}, "resolution": [8, 6]},
            "environment": {"path": str(panoramas["studio"]), **given},
            "materials": {"m": {"base_color": [0.8, 0.8, 0.8]}},
@@ -117,6 +119,8 @@ def test_sun_auto_extracts_where_the_frame_reads_probes(tmp_path, panoramas, eff
            "effects": effects}
     if sg:
         doc["probes"] = {"irradiance": "sg"}
+    if lightmap:
+        doc["lightmap"] = {}
     if probe:
         doc["reflection_probes"] = [{"position": [0, 0.5, 1.5], "min": [-2, 0, -2], "max": [2, 2, 2]}]
     env = load_scene(tmp_path, "auto", doc).data["environment"]

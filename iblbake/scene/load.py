@@ -566,9 +566,16 @@ def has_probes(out: dict, raw: dict) -> bool:
     return "probes" in raw or "probes" in (fx["diffuse"], fx["specular"]) or bool(out["reflection_probes"])
 
 
+def has_lightmap(out: dict, raw: dict) -> bool:
+    """Whether a scene has a lightmap (a `lightmap:` section, or a frame that reads one): what it
+    bakes one from, whichever mode a frame reads (a lightmap baked by name keys the same panorama)."""
+    return "lightmap" in raw or "lightmap" in (out["effects"]["diffuse"], out["effects"]["specular"])
+
+
 def _resolve_sun(out: dict, raw: dict) -> None:
-    """`environment.sun: auto` (the default): extract where the scene has probes (has_probes), none
-    elsewhere.
+    """`environment.sun: auto` (the default): extract where the scene has probes (has_probes) and no
+    lightmap (has_lightmap: a lightmap's texels hold a window's sun patch as sharp as its texels:
+    its measured bounds, docs/benchmarks.md "Lightmaps", are of the panorama whole), none elsewhere.
     A probe grid (or a capture read at one point) cannot hold the shadow edge of a compact light
     through a window: studio's lamps through a new user's window room left a sphere's lit side
     1.7-1.9x bright at every seed and ray count, x1.02-1.08 with the lamps lit per pixel, as
@@ -578,7 +585,7 @@ def _resolve_sun(out: dict, raw: dict) -> None:
     env = out["environment"]
     if env["sun"] != "auto":
         return
-    if not has_probes(out, raw):
+    if not has_probes(out, raw) or has_lightmap(out, raw):
         env["sun"] = "none"
         return
     given = raw.get("environment") if isinstance(raw.get("environment"), dict) else {}

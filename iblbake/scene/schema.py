@@ -332,7 +332,7 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                     doc="extract: the panorama's sun (a compact region 1e4 x brighter than the median) leaves the "
                         "panorama and comes back as a directional light of exactly its energy, so it casts shadows; "
                         "auto: extract where the scene has irradiance probes (a probes: section, or a frame that "
-                        "reads them) or reflection probes (a probe grid cannot hold a sun's or lamp's shadow edge "
+                        "reads them) or reflection probes and no lightmap (a lightmap: section, or a frame that reads one; a probe grid cannot hold a sun's or lamp's shadow edge "
                         "through a window: docs/manual.md 'Irradiance probes in interiors'), with sun_lights 4 and "
                         "soft shadows unless given; none elsewhere"),
         "sun_shadows": Enum(("hard", "soft", "none"), "hard", doc="the extracted sun's shadows (soft where sun: auto "
@@ -463,11 +463,12 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                     doc="rays per probe, one path each (a spherical Fibonacci set, randomly rotated; DDGI traces "
                         "256 a frame and accumulates frames, a bake takes them at once: an unextracted sun's "
                         "visibility needs them)"),
-        "target_noise": Num(0.3, 0.0, 1.0, doc="adaptive rays: a live probe whose irradiance's relative standard "
-                                                "error after its rays (the spread over 7 interleaved batches of them, "
-                                                "at the six axis directions) is over this traces as many rays again in "
-                                                "fresh directions, and again, up to max_rays; its irradiance and "
-                                                "distances the mean over all of them (0: off)"),
+        "target_noise": Num(0.0, 0.0, 1.0, doc="adaptive rays (0: off, the default): a live probe whose irradiance's "
+                                                "relative standard error after its rays (the spread over 7 interleaved "
+                                                "batches of them, at the six axis directions) is over this traces as "
+                                                "many rays again in fresh directions, and again, up to max_rays; its "
+                                                "irradiance and distances the mean over all of them (0.3 measured: "
+                                                "docs/manual.md; not yet the same at every scale)"),
         "max_rays": Num(None, 0, 1 << 19, integer=True,
                         doc="adaptive rays: the most rays a noisy probe takes, rounded down to rays times a power "
                             "of two (omitted: 8 x rays; 0, or under twice rays: off)"),
