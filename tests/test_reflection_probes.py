@@ -843,6 +843,42 @@ def test_taps_read_the_lit_floor_beside_an_excluded_cube_without_its_black_footp
 
 
 
+def lobe_samples(n, v, alpha, m=65536):
+    """(directions, weights) of m Hammersley samples of the GGX lobe about normal n for view v
+    (each (1, 3)): each weight the BRDF over its pdf without Fresnel (V 4 NoL VoH / NoH, 0 below
+    the surface), so that (weights L(directions)).sum() / weights.sum() is the lobe's integral."""
+    from iblbake.core import brdf, conventions, sampling
+
+    nn, vv = np.repeat(n, m, 0), np.repeat(v, m, 0)
+    t, b = conventions.tangent_frame(nn)
+    hl = sampling.sample_ggx_half(sampling.hammersley(m), alpha)
+    hv = t * hl[:, :1] + b * hl[:, 1:2] + nn * hl[:, 2:]
+    voh = (vv * hv).sum(1)
+    ll = 2 * voh[:, None] * hv - vv
+    nol = (nn * ll).sum(1)
+    wt = np.where((nol > 0) & (voh > 0), brdf.v_smith_ggx_correlated(np.full(m, float((n * v).sum())), nol, alpha)
+                  * 4 * nol * voh / np.maximum(hl[:, 2], 1e-7), 0.0)
+    return ll, wt
+
+
+def texel_red(img, ll):
+    """The red channel of the equirect image's texel each direction falls in (nearest)."""
+    from iblbake.core import conventions
+
+    h, w = img.shape[:2]
+    lu, lv = conventions.equirect_uv_from_dir(ll)
+    return img[np.minimum((lv * h).astype(int), h - 1), np.minimum((lu * w).astype(int), w - 1), 0]
+
+
+def first_levels(img, dirs):
+    """A 5-level chain of img whose levels 0-2 are it and its prefilters at roughness 0.25 and 0.5
+    (brute force; what a lobe of roughness up to 0.5 and its taps read), the rest level 2's."""
+    from iblbake.bake.prefilter import prefilter_bruteforce
+
+    out = [img] + [prefilter_bruteforce(img, dirs, r, max_sub=1) for r in (0.25, 0.5)]
+    return out + [out[-1]] * 2
+
+
 def test_taps_fill_an_opening_only_the_point_sees_with_the_panorama_about_the_tap():
     """A probe at the centre of a box [-1, 1]^3 of black walls open on its +z side (32 x 64
     texels), the panorama 0.1 but one texel of 50 (a compact lamp) 40 degrees from +z towards +x,
@@ -853,8 +889,7 @@ def test_taps_fill_an_opening_only_the_point_sees_with_the_panorama_about_the_ta
     over its open share alone (before) spread the lamp it saw in a sliver of the opening over all
     the point sees of it: 2.20x (metal_box's cube under studio, its face mirroring the box's open
     corner 1.2x in red and blue against the converged reference, 11.4%; 3.0% now)."""
-    from iblbake.bake.prefilter import prefilter_bruteforce
-    from iblbake.core import brdf, conventions, sampling
+    from iblbake.core import conventions
     from iblbake.render.twin import reflection_probes as rpt
 
     h, w = 32, 64
@@ -867,31 +902,17 @@ def test_taps_fill_an_opening_only_the_point_sees_with_the_panorama_about_the_ta
     u, v = conventions.equirect_uv_from_dir(np.array([[np.sin(np.radians(40)), 0.0, np.cos(np.radians(40))]]))
     pano[int(v[0] * h), int(u[0] * w)] = 50.0
 
-    def chain(img):         # levels 0-2 of 5 (roughness 0, 0.25, 0.5): all a lobe of 0.3 reads
-        out = [img] + [prefilter_bruteforce(img, dirs, r, max_sub=1) for r in (0.25, 0.5)]
-        return out + [out[-1]] * 2
-    distant = chain(pano)
-    c = {"settings": box, "levels": [np.zeros_like(pano)] * 5, "coverage": chain(1 - opened),
-         "sky": chain(pano * opened)}
+    distant = first_levels(pano, dirs)
+    c = {"settings": box, "levels": [np.zeros_like(pano)] * 5, "coverage": first_levels(1 - opened, dirs),
+         "sky": first_levels(pano * opened, dirs)}
     p = np.array([[0.0, 0.0, 0.6]])
     n = np.array([[np.sin(np.radians(25)), 0.0, np.cos(np.radians(25))]])
     v = np.array([[0.0, 0.0, 1.0]])
     r = 2 * (n * v).sum(1, keepdims=True) * n - v
     got = rpt.blend([c], p, r, 4 * 0.3, np.zeros((1, 3)), (distant, 0.0, 1.0), (n, v))[0, 0]
-    m, alpha = 65536, 0.09
-    nn, vv = np.repeat(n, m, 0), np.repeat(v, m, 0)
-    t, b = conventions.tangent_frame(nn)
-    hl = sampling.sample_ggx_half(sampling.hammersley(m), alpha)
-    hv = t * hl[:, :1] + b * hl[:, 1:2] + nn * hl[:, 2:]
-    voh = (vv * hv).sum(1)
-    ll = 2 * voh[:, None] * hv - vv
-    nol = (nn * ll).sum(1)
-    wt = np.where((nol > 0) & (voh > 0), brdf.v_smith_ggx_correlated(np.full(m, float((n * v).sum())), nol, alpha)
-                  * 4 * nol * voh / np.maximum(hl[:, 2], 1e-7), 0.0)
-    through = rpt.exit_point(box, np.repeat(p, m, 0), ll)[:, 2] > 1 - 1e-9
-    lu, lv = conventions.equirect_uv_from_dir(ll)
-    sky = pano[np.minimum((lv * h).astype(int), h - 1), np.minimum((lu * w).astype(int), w - 1), 0]
-    truth = (wt * through * sky).sum() / wt.sum()
+    ll, wt = lobe_samples(n, v, 0.09)
+    through = rpt.exit_point(box, np.repeat(p, len(ll), 0), ll)[:, 2] > 1 - 1e-9
+    truth = (wt * through * texel_red(pano, ll)).sum() / wt.sum()
     assert 0.9 < got / truth < 1.35, (got, truth)
 
 
@@ -902,8 +923,7 @@ def lamp_inside_a_window_edge():
     straddling the edge), sees the window but the lamp behind the wall. (capture without settings,
     box, p, n = v, the panorama's chain, the true lobe's integral: 65536 directions, the window
     traced from the point)."""
-    from iblbake.bake.prefilter import prefilter_bruteforce
-    from iblbake.core import brdf, conventions, sampling
+    from iblbake.core import conventions
     from iblbake.render.twin import reflection_probes as rpt
 
     h, w = 32, 64
@@ -922,25 +942,12 @@ def lamp_inside_a_window_edge():
     p = np.array([[0.4, 0.0, 0.0]])
     assert window_of(np.zeros((1, 3)), lamp)[0] and not window_of(p, lamp)[0]
 
-    def chain(img):         # roughness 0, 0.25, 0.5 (all a lobe of 0.5 and its taps read), of 5 levels
-        out = [img] + [prefilter_bruteforce(img, dirs, r, max_sub=1) for r in (0.25, 0.5)]
-        return out + [out[-1]] * 2
-    c = {"levels": [np.zeros_like(pano)] * 5, "coverage": chain(1 - opened), "sky": chain(pano * opened)}
+    c = {"levels": [np.zeros_like(pano)] * 5, "coverage": first_levels(1 - opened, dirs),
+         "sky": first_levels(pano * opened, dirs)}
     n = np.array([[0.25, 0.0, 1.0]]) / np.hypot(0.25, 1.0)
-    m, alpha = 65536, 0.25
-    nn = np.repeat(n, m, 0)
-    t, b = conventions.tangent_frame(nn)
-    hl = sampling.sample_ggx_half(sampling.hammersley(m), alpha)
-    hv = t * hl[:, :1] + b * hl[:, 1:2] + nn * hl[:, 2:]
-    voh = (nn * hv).sum(1)
-    ll = 2 * voh[:, None] * hv - nn
-    nol = (nn * ll).sum(1)
-    wt = np.where((nol > 0) & (voh > 0), brdf.v_smith_ggx_correlated(np.ones(m), nol, alpha)
-                  * 4 * nol * voh / np.maximum(hl[:, 2], 1e-7), 0.0)
-    lu, lv = conventions.equirect_uv_from_dir(ll)
-    sky = pano[np.minimum((lv * h).astype(int), h - 1), np.minimum((lu * w).astype(int), w - 1), 0]
-    truth = (wt * window_of(np.repeat(p, m, 0), ll) * sky).sum() / wt.sum()
-    return c, box, p, n, chain(pano), truth
+    ll, wt = lobe_samples(n, n, 0.25)
+    truth = (wt * window_of(np.repeat(p, len(ll), 0), ll) * texel_red(pano, ll)).sum() / wt.sum()
+    return c, box, p, n, first_levels(pano, dirs), truth
 
 
 def test_taps_keep_a_lamp_the_probe_saw_inside_a_window_edge_out_of_what_the_point_sees():
