@@ -178,14 +178,14 @@ def tap_sky(c: dict, l, d, rough_t, env):
     def distant(rough):
         return scale * radiance.chain_lookup_twin(chain, conventions.rotate_y(l, -rot), rough * (len(chain) - 1))
 
-    def through_at(level, rough):
-        s = np.maximum(1 - radiance.chain_lookup_twin(c["coverage"], l, level)[:, :1], 0.0)
+    def through_at(level, s, rough):          # the sky at `level` per unit of its open share s seen there
         return np.where(s > SKY_SEEN, radiance.chain_lookup_twin(c["sky"], l, level) / np.maximum(s, 1e-30),
                         distant(rough))
     edge = (seen > EDGE) & (seen < 1 - EDGE)
-    through = through_at(tap, rough_t)
+    through = through_at(tap, seen, rough_t)
     if edge.any():
-        through = np.where(edge, through_at(0.0, 0.0), through)
+        sharp = np.maximum(1 - radiance.chain_lookup_twin(c["coverage"], l, 0.0)[:, :1], 0.0)
+        through = np.where(edge, through_at(0.0, sharp, 0.0), through)
     beyond = np.maximum(open_ - seen, 0.0)
     known = np.where(beyond > 0, seen / np.maximum(open_, 1e-30), 1.0)
     return known * through + (1 - known) * distant(rough_t * np.sqrt(beyond[:, 0]))
