@@ -2,7 +2,8 @@
 reference (issue 59): every scene under each panorama, the irradiance probes' diffuse term (and
 SH + GTAO's beside it) per object region, as the ratio of its mean luminance to the truth's and
 the worst channel's |mean difference| over the truth's mean, and the term's relative RMSE over
-the frame (what seams along wall edges and blotches raise while region means hide them); the
+the frame (what seams along wall edges and blotches raise while region means hide them) and the
+seams as one number (metrics.edge_over_interior: the junctions' one-pixel band over the interior); the
 specular term of the reflection probes (and the distant chain's) on each half of each metal
 object (study/accuracy.py Study.region_metrics); the specular term only where the scene has
 reflection probes. Prints the Markdown tables docs/benchmarks.md
@@ -56,7 +57,7 @@ def study_scene(path, panorama, args, rt, bakes, root) -> dict:
              for r in ladder.realtime_ladder(study.scene, study.fx) if r.label in DIFFUSE + SPECULAR]
     refs = {t: study.render_reference(t) for t in study.terms}
     keep = ("term", "label", "relative_rmse", "region_absolute", "worst_region_absolute", "part_absolute",
-            "worst_part_absolute", "time_s")
+            "worst_part_absolute", "edge_over_interior", "time_s")
     return {"scene": Path(path).stem, "panorama": panorama,
             "reference_noise": {t: refs[t]["noise"] for t in study.terms},
             "reference_spp": {t: refs[t]["samples_per_pixel"] for t in study.terms},
@@ -88,11 +89,17 @@ def frame(rung, noise) -> str:
     return f"{100 * r:.1f}% ({100 * max(r * r - noise * noise, 0.0) ** 0.5:.1f}%)"
 
 
+def edge(rung) -> str:
+    """The seams' figure (metrics.edge_over_interior), blank in a JSON written before it."""
+    e = rung.get("edge_over_interior")
+    return "" if e is None else f"{e:.2f}"
+
+
 def diffuse_table(results) -> str:
     out = ["| scene | panorama | probes: worst region | probes: regions over 30% | probes: frame rel. RMSE "
-           "(less noise) | probes: each region's luminance ratio | SH + GTAO: worst region | SH + GTAO: frame "
-           "rel. RMSE (less noise) | "
-           "reference noise |", "|---|---|---|---|---|---|---|---|---|"]
+           "(less noise) | probes: edge over interior | probes: each region's luminance ratio | SH + GTAO: worst region | "
+           "SH + GTAO: frame rel. RMSE (less noise) | "
+           "reference noise |", "|---|---|---|---|---|---|---|---|---|---|"]
     for res in results:
         rows = {r["label"]: r for r in res["rungs"] if r["term"] == "diffuse"}
         if "probes" not in rows:
@@ -101,7 +108,7 @@ def diffuse_table(results) -> str:
         noise = res["reference_noise"]["diffuse"]
         over = sum(e["absolute"] > BOUND_REGION for e in p["region_absolute"].values())
         out.append(f"| {res['scene']} | {res['panorama']} | {worst(p['region_absolute'])} | "
-                   f"{over} of {len(p['region_absolute'])} | {frame(p, noise)} | {ratios(p['region_absolute'])} | "
+                   f"{over} of {len(p['region_absolute'])} | {frame(p, noise)} | {edge(p)} | {ratios(p['region_absolute'])} | "
                    + (f"{worst(s['region_absolute'])} | {frame(s, noise)} | " if s else "| | ")
                    + f"{100 * res['reference_noise']['diffuse']:.1f}% |")
     return "\n".join(out) + "\n"

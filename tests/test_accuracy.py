@@ -127,6 +127,36 @@ def test_absolute_region_errors_read_brightness_and_colour():
     assert set(parts) == {"+y", "-y"} and parts["+y"].sum() == 4 and not (parts["+y"] & parts["-y"]).any()
 
 
+def test_edge_over_interior_reads_a_seam_of_one_pixel():
+    """core/metrics edge_over_interior (issue 59, "no seams"): a floor (rows below 8) and a wall
+    of one mesh (one region; the junction found by the normals' turn) or two, the frame right
+    inside and 1.3x bright in the one-pixel rows either side of the junction: 1.3 where the region
+    means move 8%; no seam: 1; a frame uniformly 2x bright: 1 (a seam is relative to the
+    interior). A sphere's smooth normals (4 degrees a pixel) make no junction: None."""
+    from iblbake.core.metrics import edge_over_interior, junctions, luminance
+    h, w = 16, 20
+    ref = np.ones((h, w, 4))
+    ref[8:, :, :3] = 0.5                                   # the floor darker than the wall
+    normals = np.zeros((h, w, 3))
+    normals[:8, :, 2], normals[8:, :, 1] = 1, 1            # wall faces +z, floor +y
+    mask = np.ones((h, w), bool)
+    for regions in (np.zeros((h, w), int), np.repeat((np.arange(h) >= 8)[:, None], w, 1).astype(int)):
+        j = junctions(mask, regions, normals)
+        assert j.sum() == 2 * w and j[7].all() and j[8].all()
+        assert edge_over_interior(ref, ref, mask, regions, normals) == pytest.approx(1)
+        assert edge_over_interior(2 * ref, ref, mask, regions, normals) == pytest.approx(1)
+        got = ref.copy()
+        got[7:9, :, :3] *= 1.3
+        assert edge_over_interior(got, ref, mask, regions, normals) == pytest.approx(1.3)
+        assert luminance(got[:8, :, :3]).mean() / luminance(ref[:8, :, :3]).mean() == pytest.approx(1 + 0.3 / 8)
+        got[:2, :, :3] *= 3          # interior: rows 0-3 (wall, 1) and 12-15 (floor, 0.5); rows 0-1 3x
+        assert edge_over_interior(got, ref, mask, regions, normals) == pytest.approx(1.3 / (10 / 6))
+    a = np.deg2rad(4) * np.arange(w)[None, :] + 0 * np.arange(h)[:, None]
+    sphere = np.stack([np.sin(a), np.zeros_like(a), np.cos(a)], -1)
+    assert not junctions(mask, np.zeros((h, w), int), sphere).any()
+    assert edge_over_interior(ref, ref, mask, np.zeros((h, w), int), sphere) is None
+
+
 @pytest.mark.slow           # over 3 s on the 2-core CPU (with its module's study): make test, not make check
 def test_error_falls_with_samples_and_bands(study):
     """Monotonic within twice the reference's noise."""

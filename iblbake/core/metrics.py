@@ -105,6 +105,50 @@ def region_absolute(got, ref, mask, regions, min_pixels: int = 1) -> dict:
     return out
 
 
+def _near(a, width: int) -> np.ndarray:
+    """Pixels with a True pixel of `a` within `width` pixels (8-neighbour steps; none beyond the border)."""
+    out = a.copy()
+    h, w = a.shape
+    for dy in range(-width, width + 1):
+        for dx in range(-width, width + 1):
+            out[max(dy, 0):h + min(dy, 0), max(dx, 0):w + min(dx, 0)] |= \
+                a[max(-dy, 0):h + min(-dy, 0), max(-dx, 0):w + min(-dx, 0)]
+    return out
+
+
+def junctions(mask, regions, normals, crease: float = 0.5) -> np.ndarray:
+    """Pixels of the mask next to (8 neighbours) a pixel of the mask on another region or whose
+    shading normal turns away by more than acos(crease) (60 degrees): where a wall meets a floor, a
+    wall or another object, whether they are one mesh or several; a sphere's neighbouring normals
+    turn by a few degrees and are no junction."""
+    h, w = mask.shape
+    out = np.zeros_like(mask)
+    for dy, dx in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        a = (slice(0, h - dy), slice(max(-dx, 0), w - max(dx, 0)))
+        b = (slice(dy, h), slice(max(dx, 0), w - max(-dx, 0)))
+        both = mask[a] & mask[b]
+        split = both & ((regions[a] != regions[b]) | ((normals[a] * normals[b]).sum(-1) < crease))
+        out[a] |= split
+        out[b] |= split
+    return out
+
+
+def edge_over_interior(got, ref, mask, regions, normals, width: int = 1, clearance: int = 3):
+    """A seam as one number: the luminance ratio got / ref (sums) over the junctions' band (pixels
+    within width - 1 of a junction pixel, junctions()) over the same ratio in the interior (pixels
+    over `clearance` pixels from any junction): 1 where the frame's edges are as bright, relative
+    to the truth, as its surfaces' insides; a one-pixel band 1.3x too bright along walls whose
+    insides are right reads 1.3 where the region means barely move. Sums, not per-pixel ratios:
+    the reference's noise averages over the band. None where the band or the interior is empty."""
+    j = junctions(mask, regions, normals)
+    band = mask & _near(j, width - 1) if width > 1 else j
+    interior = mask & ~_near(j, clearance)
+    lg, lr = luminance(got), luminance(ref)
+    if not band.any() or not interior.any() or lr[band].sum() <= 0 or lr[interior].sum() <= 0:
+        return None
+    return float((lg[band].sum() / lr[band].sum()) / max(lg[interior].sum() / lr[interior].sum(), 1e-30))
+
+
 def halves(normals, where, min_pixels: int = 4) -> dict:
     """The halves of a region by the side its surface faces (its shading normal's sign along each
     world axis: '+x', '-y', ...): a sphere's six hemispheres, a box's faces grouped. Halves of

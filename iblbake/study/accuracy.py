@@ -28,7 +28,7 @@ import numpy as np
 from iblbake.errors import InputError
 from iblbake.scene import load as scene_load
 from iblbake.scene.layout import DELTA_ALPHA
-from iblbake.core.metrics import error_metrics, halves, object_mask, region_absolute, region_errors
+from iblbake.core.metrics import edge_over_interior, error_metrics, halves, object_mask, region_absolute, region_errors
 from iblbake.study.ladder import TERMS, Rung
 
 # A term alone: the other term off
@@ -256,7 +256,8 @@ class Study:
         colour's relative error (metrics.region_errors) and the worst of them; the same in absolute
         terms (metrics.mean_errors: the ratio of mean luminances, the worst channel) and the worst
         |ratio - 1| or channel error. For the specular term, each half of each metal object
-        (metrics.halves: the side it faces) in absolute terms too."""
+        (metrics.halves: the side it faces) in absolute terms too. For the diffuse term the seams
+        as one number (metrics.edge_over_interior: the junctions' one-pixel band over the interior)."""
         regions = self.object_regions()
 
         def label(k):
@@ -266,6 +267,9 @@ class Study:
         out = {"region_errors": {label(k): round(v, 5) for k, v in errs.items()},
                "worst_region_error": max(errs.values(), default=0.0), "region_absolute": absolute,
                "worst_region_absolute": max((e["absolute"] for e in absolute.values()), default=0.0)}
+        if term == "diffuse":
+            eoi = edge_over_interior(hdr, ref, mask, regions, self._normals)
+            out["edge_over_interior"] = None if eoi is None else round(eoi, 4)
         if term == "specular":
             parts = {}
             for k in self.metal_objects():
