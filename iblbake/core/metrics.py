@@ -120,7 +120,8 @@ def junctions(mask, regions, normals, crease: float = 0.5) -> np.ndarray:
     """Pixels of the mask next to (8 neighbours) a pixel of the mask on another region or whose
     shading normal turns away by more than acos(crease) (60 degrees): where a wall meets a floor, a
     wall or another object, whether they are one mesh or several; a sphere's neighbouring normals
-    turn by a few degrees and are no junction."""
+    turn by a few degrees and are no junction. An object's outline over another counts too (no
+    depth is read; the reference's G-buffer samples are the frame's, so its pixels are the same hits)."""
     h, w = mask.shape
     out = np.zeros_like(mask)
     for dy, dx in ((0, 1), (1, 0), (1, 1), (1, -1)):
