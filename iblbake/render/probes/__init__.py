@@ -32,7 +32,7 @@ from iblbake.errors import IblbakeError, InputError
 from iblbake.render.probes.adaptive import combined_values, more_rays, noise, ray_cap
 from iblbake.render.probes.dilate import dilate, dilate_values
 from iblbake.render.probes.files import (FILES, FORMAT, VERSION, data_texture, light_entries, load, manifest,
-                                         read_manifest, save)
+                                         read_manifest, save, sky_entry)
 from iblbake.render.probes.glsl import SH_GLSL, SPECULAR_TABLES, basis_glsl, glsl
 from iblbake.render.probes.grid import (AUTO_MAX_PROBES, DEFAULT_LONGEST, MAX_PROBES, SCALE_RAYS, Grid, apart,
                                         auto_step, axis_counts, grid_of, lattice, probe_bytes, scene_bounds)
@@ -55,7 +55,7 @@ __all__ = ["ACTIVE", "AUTO_MAX_PROBES", "BACKFACE_BLEND_LIMIT", "DEFAULT_LONGEST
            "load", "manifest", "more_rays", "noise", "off_surfaces", "outside_camera_rooms", "outside_sealed_room",
            "placement_warnings", "probe_bytes", "probe_values", "project", "random_rotation", "ray_cap",
            "ray_directions", "read_manifest", "relocate", "sampled", "save", "scaled_grid", "scene_bounds",
-           "spherical_fibonacci", "switch_off", "trace_defines", "volume_dict", "warnings", "with_borders"]
+           "sky_entry", "spherical_fibonacci", "switch_off", "trace_defines", "volume_dict", "warnings", "with_borders"]
 
 
 def scaled_grid(tracer, coarse: Grid, settings: dict, arrays, camera):
