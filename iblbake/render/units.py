@@ -462,7 +462,7 @@ class Probes(Unit):
                                      "relocated": rep["relocated"], "inside_geometry": rep.get("inside_geometry", 0),
                                      "outside_camera_room": rep.get("outside_camera_room", 0),
                                      **{k: rep[k] for k in ("off_by", "on_surface", "interior_step", "lattice",
-                                                            "capped", "bytes", "more_rays") if k in rep},
+                                                            "capped", "bytes", "more_rays", "estimate") if k in rep},
                                      "entry": str(job.bakes.root / manifest["key"])}
 
 
