@@ -163,7 +163,7 @@ def bake(job, settings: dict, progress=None) -> dict:
 
 
 ESTIMATE_PATHS = 1 << 24    # paths from which a bake's time is measured up front: 5-40 s of paths on 2 cores
-CALIBRATION_PATHS = 1 << 16     # the paths timed for it, of probes spread over the grid (0.1-0.3 s on 2 cores)
+CALIBRATION_PATHS = 1 << 16     # the paths timed for it, of probes spread over the grid (0.4-0.6 s on 2 shared cores)
 
 
 def estimate(tracer, grid: Grid, settings: dict) -> dict:
@@ -197,8 +197,8 @@ def duration_said(seconds: float) -> str:
 
 
 def estimate_said(guess: dict) -> str:
-    """The estimate (estimate()) as the up-front line's tail: ', about 12 min (2.1M paths/s measured
-    here; up to 1.5 h where noisy)'."""
+    """The estimate (estimate()) as the up-front line's tail: ', about 12 min to trace (2.1M paths/s
+    measured on this device; up to 1.5 h where noisy)'."""
     if not guess:
         return ""
     upto = f"; up to {duration_said(guess['seconds_at_max_rays'])} where noisy" if "seconds_at_max_rays" in guess else ""
