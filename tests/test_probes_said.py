@@ -119,3 +119,64 @@ def test_a_bake_whose_rays_cannot_fit_is_refused_up_front(tmp_path, sky, monkeyp
     msg = str(e.value)
     assert msg.startswith(f"{sc.source}: probes: 8 probes x 65536 rays need about 0.00977 GiB") and "\n" not in msg
     assert "probes.rays" in msg and "probes.spacing" in msg, msg
+
+
+def test_a_huge_bake_says_its_time_up_front(tmp_path, sky, monkeypatch):
+    """A new user's trial: a huge grid said its size in paths alone, no time. A bake of
+    ESTIMATE_PATHS paths or more times CALIBRATION_PATHS of its own paths first and says 'about'
+    its time on this device in the up-front line: here 64^3 probes x 256 rays (67M paths),
+    refused for memory before any of its work, the line said already; a small bake measures
+    nothing and says no time."""
+    import iblbake
+    from iblbake.io import memory
+
+    said = []
+
+    class Progress:
+        def __call__(self, _frac):
+            pass
+
+        def describe(self, text):
+            said.append(text)
+    path = outside_scene(tmp_path, sky)
+    huge = iblbake.load_scene(path, ["probes.min=[-2,-2,-2]", "probes.max=[2,2,2]", "probes.counts=[64,64,64]"])
+    monkeypatch.setattr(memory, "host_bytes_available", lambda: 1 << 20)
+    with pytest.raises(iblbake.InputError, match="262,144 probes x 256 rays need about"):
+        iblbake.bake_probes(huge, cache=tmp_path / "cache", progress=Progress())
+    line, = said
+    m = re.fullmatch(r"262,144 probes x 256 rays = 67,108,864 paths \(64x64x64 grid, spacing 0\.0625\), about "
+                     r"(\S+ (?:s|min|h)) to trace \(([\d.]+)M paths/s measured on this device\)", line)
+    assert m, line
+    rate = float(m.group(2)) * 1e6                    # said to 2 digits: the time is of a rate within 5% of it
+    assert m.group(1) in {probes.duration_said(2**26 / (rate * f)) for f in np.linspace(0.95, 1.05, 201)}, line
+    said.clear()
+    monkeypatch.undo()
+    iblbake.bake_probes(iblbake.load_scene(path), cache=tmp_path / "cache", progress=Progress())
+    assert said == ["8 probes x 256 rays = 2,048 paths (2x2x2 grid, spacing 1)"]
+
+
+def test_probes_json_carries_the_estimate_and_the_rays_it_did_not_count(tmp_path, sky, monkeypatch):
+    """`iblbake probes --json` carries the up-front estimate (its paths, the rate measured and the
+    seconds) where one was made (ESTIMATE_PATHS lowered to this 8-probe bake's 2,048 paths), and
+    the calibration's paths are not counted as the bake's (rays_traced as without it) nor change
+    it (the same atlases)."""
+    from iblbake.io import images
+    from click.testing import CliRunner
+
+    from iblbake.cli.probes import probes_command
+    path = outside_scene(tmp_path, sky)
+
+    def bake(name):
+        r = CliRunner().invoke(probes_command, [str(path), "-o", str(tmp_path / name), "--cache",
+                                                str(tmp_path / name / "cache"), "--json", "--quiet"])
+        assert r.exit_code == 0, r.output
+        return json.loads(r.output)
+    plain = bake("plain")
+    monkeypatch.setattr(probes, "ESTIMATE_PATHS", 2048)
+    timed = bake("timed")
+    assert "estimate" not in plain and timed["rays_traced"] == plain["rays_traced"], (plain, timed)
+    guess = timed["estimate"]
+    assert guess["paths"] == 2048 and guess["paths_per_s"] > 0
+    assert guess["seconds"] == pytest.approx(2048 / guess["paths_per_s"], abs=0.051)
+    for name in ("irradiance.exr", "distance.exr", "probe_data.exr"):
+        assert np.array_equal(images.read_exr(tmp_path / "plain" / name), images.read_exr(tmp_path / "timed" / name))

@@ -559,6 +559,34 @@ def test_a_frame_reads_its_own_probe_settings_where_another_shares_the_capture(t
     assert np.abs(second - first).max() > 0.01 and np.array_equal(second, fresh)
 
 
+def test_a_reading_option_rereads_the_capture_and_never_retraces_it(tmp_path, rt, panoramas):
+    """A new user's trial: `taps` (a reading option) was in the capture's key, so changing it traced
+    the capture again. Two frames of one room differing in their reading alone (taps 0 -> 16,
+    grazing_taps, blend, the box): the second traces nothing, in the same store (its memo) or a
+    new one over the same cache (its entry: one capture on disk), and is what a fresh cache renders
+    of it, the frames apart as the taps and box say; a capture setting (samples) still traces."""
+    doc = square_room(tmp_path, panoramas["studio"])
+    doc["camera"]["resolution"] = [16, 12]
+    doc["objects"][0]["material"] = "gold"          # every pixel reads the probe
+    doc["reflection_probes"][0].update(size=16, samples=4, taps=0)
+
+    def frame(name, bakes):
+        f = render(load_scene(tmp_path, name, doc), runtime=rt, cache=bakes)
+        row = next(b for b in f.report["bakes"] if b["name"] == "reflection_probes")
+        return f.hdr, row["rays_traced"]
+    shared = Bakes(tmp_path / "shared")
+    first, traced = frame("a", shared)
+    assert traced == 2 * 16 ** 2 * 4
+    doc["reflection_probes"][0].update(taps=16, grazing_taps=4, blend=0.2, max=[2.5, 2.8, 2.5])
+    second, again = frame("b", shared)
+    later, from_disk = frame("c", Bakes(tmp_path / "shared"))
+    fresh, _ = frame("d", Bakes(tmp_path / "fresh"))
+    assert again == 0 and from_disk == 0 and len(list((tmp_path / "shared").glob("reflection-*"))) == 1
+    assert np.abs(second - first).max() > 0.01 and np.array_equal(second, fresh) and np.array_equal(later, fresh)
+    doc["reflection_probes"][0]["samples"] = 2
+    assert frame("e", shared)[1] == 2 * 16 ** 2 * 2
+
+
 @pytest.mark.slow           # over a minute on the 2-core CPU: make test, not make check
 def test_a_probe_at_a_sphere_by_the_window_of_an_independent_room_holds_every_side(tmp_path, rt, panoramas):
     """The square room (square_room) under the studio: every side of the gold sphere within 10%

@@ -81,7 +81,9 @@ def bake_probes(scene, device: str | None = None, *, cache=None, warn=None, prog
         vol, cached, extra = bakes.load("probes", job)
         reflections = bakes.load("reflection_probes", job)[0] if sc.data["reflection_probes"] else []
     vol = probes.sampled(vol, sc.data["probes"])
-    man = probes.manifest(vol, probes.light_entries(sc, bakes.sun(sc.data["environment"])))
+    env, fx = sc.data["environment"], sc.data["effects"]
+    sky = probes.sky_entry(bakes.environment(env)[0], env, fx["sh_bands"], fx["sh_window"])   # what the probes saw
+    man = probes.manifest(vol, probes.light_entries(sc, bakes.sun(env)), sky)
     from iblbake.render.reflection_probes import CHANNELS as rp_channels
     man["reflection_probes"] = [{"file": f"reflection_{k}.exr", **c["settings"],
                                  "channels": list(rp_channels),

@@ -246,39 +246,46 @@ def export(doc: dict, fmt: str) -> str:
 
 def glsl_snippet(doc: dict) -> str:
     """A GLSL function with the irradiance coefficients baked in, for any number of bands."""
-    bands = doc["bands"]
+    bands, src = doc["bands"], doc["input"]["path"]
     n = bands * bands
-    src = doc["input"]["path"]
-    vals = ",\n    ".join(
-        "vec3(" + ", ".join(f"{v:.9g}" for v in c) + ")" for c in doc["irradiance"])
     return f"""// iblbake SH irradiance: {bands} bands ({n} coefficients), window {doc['window']}, from {src}
 // Real orthonormal SH, z polar axis, no Condon-Shortley phase, k = l*(l+1)+m; world +y up.
 // diffuse = albedo / PI * shIrradiance(normalize(N));
-const int SH_BANDS = {bands};
-const vec3 SH_IRRADIANCE[{n}] = vec3[{n}](
+""" + glsl_function(doc["irradiance"], bands)
+
+
+def glsl_function(irradiance, bands: int, name: str = "shIrradiance", table: str = "SH_IRRADIANCE",
+                  count: str = "SH_BANDS") -> str:
+    """The constants `count` and `table` (irradiance E_k, bands^2 rows) and `vec3 name(vec3 d)`
+    evaluating them at a unit direction, clamped at 0 (the snippet's; probes.glsl's sky too)."""
+    n = bands * bands
+    vals = ",\n    ".join(
+        "vec3(" + ", ".join(f"{v:.9g}" for v in c) + ")" for c in irradiance)
+    return f"""const int {count} = {bands};
+const vec3 {table}[{n}] = vec3[{n}](
     {vals}
 );
 
-vec3 shIrradiance(vec3 d) {{
-    float K[SH_BANDS];
-    for (int l = 0; l < SH_BANDS; ++l) K[l] = sqrt((2.0 * float(l) + 1.0) / (4.0 * 3.14159265358979));
+vec3 {name}(vec3 d) {{
+    float K[{count}];
+    for (int l = 0; l < {count}; ++l) K[l] = sqrt((2.0 * float(l) + 1.0) / (4.0 * 3.14159265358979));
     float pmm = 1.0, cm = 1.0, sm = 0.0;
     vec3 e = vec3(0.0);
-    for (int m = 0; m < SH_BANDS; ++m) {{
+    for (int m = 0; m < {count}; ++m) {{
         if (m > 0) {{
             pmm *= float(2 * m - 1);
             float c = cm * d.x - sm * d.y; sm = sm * d.x + cm * d.y; cm = c;
-            for (int l = m; l < SH_BANDS; ++l) K[l] *= inversesqrt(float((l + m) * (l - m + 1)));
+            for (int l = m; l < {count}; ++l) K[l] *= inversesqrt(float((l + m) * (l - m + 1)));
         }}
         float p2 = 0.0, p1 = pmm;
-        for (int l = m; l < SH_BANDS; ++l) {{
+        for (int l = m; l < {count}; ++l) {{
             float p = (l == m) ? pmm : (l == m + 1) ? (2.0 * float(m) + 1.0) * d.z * pmm
                     : ((2.0 * float(l) - 1.0) * d.z * p1 - float(l + m - 1) * p2) / float(l - m);
             if (l > m) {{ p2 = p1; p1 = p; }}
-            if (m == 0) e += SH_IRRADIANCE[l * (l + 1)] * K[l] * p;
+            if (m == 0) e += {table}[l * (l + 1)] * K[l] * p;
             else {{
                 float kp = 1.41421356 * K[l] * p;
-                e += SH_IRRADIANCE[l * (l + 1) + m] * kp * cm + SH_IRRADIANCE[l * (l + 1) - m] * kp * sm;
+                e += {table}[l * (l + 1) + m] * kp * cm + {table}[l * (l + 1) - m] * kp * sm;
             }}
         }}
     }}

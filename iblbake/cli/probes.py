@@ -68,7 +68,7 @@ def probes_command(scene_path, out_dir, overrides, cache_dir, force, device, qui
                "rays_traced": r["rays_traced"], "bake_s": r["seconds"], "relocated": r["relocated"],
                "inside_geometry": r.get("inside_geometry", 0), "outside_camera_room": r.get("outside_camera_room", 0),
                "off_by": r.get("off_by", {}), "more_rays": r.get("more_rays", {}),
-               "lights": len(man["lights"])}
+               "lights": len(man["lights"]), **({"estimate": r["estimate"]} if "estimate" in r else {})}
     if removed:
         summary["removed"] = removed
     nx, ny, nz = man["grid"]["counts"]

@@ -104,7 +104,7 @@ def scene_lights(scene, suns) -> list:
         out.append({"directional": {"direction": [-x for x in d], "color": sun.color,
                                     "illuminance": sun.illuminance * env["intensity"],
                                     "angular_diameter": sun.angular_diameter},
-                    "shadows": env["sun_shadows"], "shadow_samples": 16})
+                    "shadows": env["sun_shadows"], "shadow_samples": env["sun_shadow_samples"]})
     return out
 
 

@@ -34,6 +34,17 @@ def capture_directions(size: int, samples: int) -> np.ndarray:
     return np.concatenate([d, share[..., None]], -1).reshape(-1, 4)
 
 
+# a probe's settings that only its reading takes (kernels/reflection_probes.h: the lobe's taps, the
+# influence, its fade and its parallax proxy), out of its capture's key: changing them re-reads the
+# capture, never re-traces it (each frame reads its own: sources/reflection_probes.py rprobe_info)
+READ_KEYS = ("taps", "grazing_taps", "blend", "parallax", "shape", "min", "max", "radius")
+
+
+def capture_settings(settings: dict) -> dict:
+    """What a probe's capture is traced from (its key): its settings less READ_KEYS."""
+    return {k: v for k, v in settings.items() if k not in READ_KEYS}
+
+
 # a capture's channels: the scene's radiance (RGB), its coverage (A), the sky seen past it and the
 # distance to the scene (Z: the read marches a reflected ray against it, kernels/reflection_probes.h
 # rprobe_hit)

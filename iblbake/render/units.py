@@ -462,7 +462,7 @@ class Probes(Unit):
                                      "relocated": rep["relocated"], "inside_geometry": rep.get("inside_geometry", 0),
                                      "outside_camera_room": rep.get("outside_camera_room", 0),
                                      **{k: rep[k] for k in ("off_by", "on_surface", "interior_step", "lattice",
-                                                            "capped", "bytes", "more_rays") if k in rep},
+                                                            "capped", "bytes", "more_rays", "estimate") if k in rep},
                                      "entry": str(job.bakes.root / manifest["key"])}
 
 
@@ -475,9 +475,12 @@ class ReflectionProbes(Unit):
 
     def key(self, job) -> tuple:
         from iblbake.bake import cache
+        from iblbake.render.reflection_probes import capture_settings
         transport = light_transport(job)
+        # what the capture is traced from: a reading option (taps, the box) re-reads it, never re-traces it
         return tuple("reflection-" + cache.content_key({"kind": "reflection", "v": 4, "index": k, **transport,
-                                                        "settings": settings, "code": probes_code_hash()})
+                                                        "settings": capture_settings(settings),
+                                                        "code": probes_code_hash()})
                      for k, settings in enumerate(job.scene.data["reflection_probes"]))
 
     def capture(self, job, k: int, settings: dict, key: str):
@@ -488,9 +491,10 @@ class ReflectionProbes(Unit):
         root = job.bakes.root
 
         def build(tmp: Path):
-            image, report = rp.capture(rp.tracer(job, settings), k, settings, job.progress)
+            traced = rp.capture_settings(settings)          # its key's: a reading option cannot reach the trace
+            image, report = rp.capture(rp.tracer(job, traced), k, traced, job.progress)
             images.write_exr(tmp / "capture.exr", image, channels=rp.CHANNELS)
-            return {"kind": "reflection", "files": [{"name": "capture.exr"}], "probe": settings, "report": report}
+            return {"kind": "reflection", "files": [{"name": "capture.exr"}], "probe": traced, "report": report}
 
         def read(manifest):
             report = manifest.get("report")
@@ -516,8 +520,9 @@ class ReflectionProbes(Unit):
 
         out, cached_all, rays, bounds = [], True, 0, scene_bounds(job.arrays)
         for k, (settings, key) in enumerate(zip(job.scene.data["reflection_probes"], self.key(job))):
-            image, cached, report = job.bakes._get(("reflection", key),
-                                                   lambda: self.capture(job, k, settings, key))
+            (image, cached, report), held = job.bakes._recall(("reflection", key),
+                                                              lambda: self.capture(job, k, settings, key))
+            cached = cached or held          # a frame that shares the store's capture traced nothing
             for w in rp.warnings(k, report, job.scene.data, bounds):     # said for a cached capture too
                 job.warn(w)
             traced = not cached
@@ -533,8 +538,10 @@ class ReflectionProbes(Unit):
                 chains.append(levels)
                 cached = cached and pre_cached
             levels, coverage, sky = chains
-            # held by the memo as the chains are: the same arrays each frame, uploaded once
-            depth = job.bakes._get(("reflection-depth", key), lambda: rp.depth_levels(
+            # held by the memo as the chains are: the same arrays each frame, uploaded once; over the
+            # probe's proxy, which the capture's key lacks
+            proxy = tuple(str(settings.get(n)) for n in ("shape", "min", "max", "radius"))
+            depth = job.bakes._get(("reflection-depth", key, proxy), lambda: rp.depth_levels(
                 image[..., 7], settings, [lv.shape[:2] for lv in levels]))
             out.append({"settings": settings, "levels": levels, "coverage": coverage, "sky": sky, "depth": depth,
                         "capture": image})

@@ -337,6 +337,10 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                         "soft shadows unless given; none elsewhere"),
         "sun_shadows": Enum(("hard", "soft", "none"), "hard", doc="the extracted sun's shadows (soft where sun: auto "
                                                                  "extracts, unless given)"),
+        "sun_shadow_samples": Num(16, 1, 4096, integer=True,
+                                  doc="soft sun_shadows: shadow rays per pixel sample over each extracted light's "
+                                      "disk (as a light's shadow_samples; a softbox's penumbra grainy at 16 and "
+                                      "1 spp)"),
         "sun_lights": Num(1, 1, 8, integer=True, doc="extract: how many compact bright regions leave the panorama as directional "
                                        "lights, brightest first: 1 the sun (at most 6 degrees); more takes lamps and "
                                        "softboxes too (up to 20 degrees, each 2% of the energy or more: studio's "

@@ -32,7 +32,7 @@ from iblbake.errors import IblbakeError, InputError
 from iblbake.render.probes.adaptive import combined_values, more_rays, noise, ray_cap
 from iblbake.render.probes.dilate import dilate, dilate_values
 from iblbake.render.probes.files import (FILES, FORMAT, VERSION, data_texture, light_entries, load, manifest,
-                                         read_manifest, save)
+                                         read_manifest, save, sky_entry)
 from iblbake.render.probes.glsl import SH_GLSL, SPECULAR_TABLES, basis_glsl, glsl
 from iblbake.render.probes.grid import (AUTO_MAX_PROBES, DEFAULT_LONGEST, MAX_PROBES, SCALE_RAYS, Grid, apart,
                                         auto_step, axis_counts, grid_of, lattice, probe_bytes, scene_bounds)
@@ -46,15 +46,16 @@ from iblbake.render.probes.relocation import (ACTIVE, FIXED_RAYS, INACTIVE, MAX_
 from iblbake.render.probes.volume import (SAMPLING_KEYS, Volume, bake_settings, basis_of, basis_options, sampled,
                                           volume_dict)
 
-__all__ = ["ACTIVE", "AUTO_MAX_PROBES", "BACKFACE_BLEND_LIMIT", "DEFAULT_LONGEST", "FILES", "FIXED_RAYS", "FORMAT",
-           "INACTIVE", "INSIDE_WARN", "MAX_ATLAS_SIDE", "MAX_DISTANCE", "MAX_OFFSET", "MAX_PROBES", "OFF_SAID",
-           "RELOCATION_PASSES", "SAMPLING_KEYS", "SCALE_RAYS", "SH_GLSL", "SPECULAR_TABLES", "SURFACE_RAYS", "VERSION",
-           "Grid", "Tracer", "Volume", "atlas", "auto_step", "bake", "bake_settings", "basis_glsl", "basis_of",
-           "basis_options", "behind_surfaces", "beyond_bounds", "box_outside", "classify", "combined_values",
-           "data_texture", "dilate", "dilate_values", "glsl", "grid_of", "inside_geometry", "layout", "light_entries",
-           "load", "manifest", "more_rays", "noise", "off_surfaces", "outside_camera_rooms", "outside_sealed_room",
+__all__ = ["ACTIVE", "AUTO_MAX_PROBES", "BACKFACE_BLEND_LIMIT", "CALIBRATION_PATHS", "DEFAULT_LONGEST",
+           "ESTIMATE_PATHS", "FILES", "FIXED_RAYS", "FORMAT", "INACTIVE", "INSIDE_WARN", "MAX_ATLAS_SIDE",
+           "MAX_DISTANCE", "MAX_OFFSET", "MAX_PROBES", "OFF_SAID", "RELOCATION_PASSES", "SAMPLING_KEYS", "SCALE_RAYS",
+           "SH_GLSL", "SPECULAR_TABLES", "SURFACE_RAYS", "VERSION", "Grid", "Tracer", "Volume", "atlas", "auto_step",
+           "bake", "bake_settings", "basis_glsl", "basis_of", "basis_options", "behind_surfaces", "beyond_bounds",
+           "box_outside", "classify", "combined_values", "data_texture", "dilate", "dilate_values", "duration_said",
+           "estimate", "estimate_said", "glsl", "grid_of", "inside_geometry", "layout", "light_entries", "load",
+           "manifest", "more_rays", "noise", "off_surfaces", "outside_camera_rooms", "outside_sealed_room",
            "placement_warnings", "probe_bytes", "probe_values", "project", "random_rotation", "ray_cap",
-           "ray_directions", "read_manifest", "relocate", "sampled", "save", "scaled_grid", "scene_bounds",
+           "ray_directions", "read_manifest", "relocate", "sampled", "save", "scaled_grid", "scene_bounds", "sky_entry",
            "spherical_fibonacci", "switch_off", "trace_defines", "volume_dict", "warnings", "with_borders"]
 
 
@@ -122,8 +123,9 @@ def bake(job, settings: dict, progress=None) -> dict:
     from iblbake.render.paths.trace import describe
     rays, cap = settings["rays"], ray_cap(settings)   # the work's size said up front (a huge grid printed nothing)
     upto = f" (up to {cap} where noisy)" if cap > rays else ""
+    guess = estimate(tracer, grid, settings)          # and for a large one, its time on this device
     describe(progress, f"{grid.count:,} probes x {rays} rays{upto} = {grid.count * rays:,} paths "
-                       f"({'x'.join(map(str, grid.counts))} grid, spacing {grid.unit:.4g})")
+                       f"({'x'.join(map(str, grid.counts))} grid, spacing {grid.unit:.4g}){estimate_said(guess)}")
     fits(job.scene.source, grid.count, rays)
     if settings["relocation"]:
         start = off_surfaces(tracer, grid.positions(), grid.spacing)
@@ -155,8 +157,53 @@ def bake(job, settings: dict, progress=None) -> dict:
               "relocated": int((np.abs(offset).sum(1) > 0).sum()),
               "inside_geometry": int(inside.sum()), "outside_camera_room": int(outside.sum()),
               "inside_objects": {str(k): v for k, v in sorted(objects.items(), key=lambda kv: -kv[1])},
-              **box_outside(grid, scene_bounds(arrays)), "seconds": round(time.perf_counter() - t0, 4)}
+              **box_outside(grid, scene_bounds(arrays)), **({"estimate": guess} if guess else {}),
+              "seconds": round(time.perf_counter() - t0, 4)}
     return volume_dict(grid, settings, irr, dist, data, report)
+
+
+ESTIMATE_PATHS = 1 << 24    # paths from which a bake's time is measured up front: 5-40 s of paths on 2 cores
+CALIBRATION_PATHS = 1 << 16     # the paths timed for it, of probes spread over the grid (0.4-0.6 s on 2 shared cores)
+
+
+def estimate(tracer, grid: Grid, settings: dict) -> dict:
+    """A large bake's time, measured before it starts (a new user's million-probe grid said its
+    size in paths alone): CALIBRATION_PATHS of its own paths (rays in its directions from probes
+    spread over the grid, at their grid positions), timed after a launch that builds the program,
+    the rate extrapolated to its paths (and to its cap where noisy probes may take more). {} below
+    ESTIMATE_PATHS. The calibration's rays are not counted as the bake's."""
+    rays, cap = settings["rays"], ray_cap(settings)
+    paths = grid.count * rays
+    if paths < ESTIMATE_PATHS:
+        return {}
+    per_probe = min(rays, 256)
+    dirs = ray_directions(rays, settings["seed"])[:per_probe]
+    pos = grid.positions()[np.linspace(0, grid.count - 1, max(1, CALIBRATION_PATHS // per_probe)).astype(np.int64)]
+    counted = tracer.rays_traced
+    tracer.trace(pos[:1], dirs, True)                 # the program built and the device warm
+    t0 = time.perf_counter()
+    tracer.trace(pos, dirs, True)
+    rate = len(pos) * per_probe / max(time.perf_counter() - t0, 1e-9)
+    tracer.rays_traced = counted
+    return {"paths": paths, "paths_per_s": round(rate), "seconds": round(paths / rate, 1),
+            **({"seconds_at_max_rays": round(grid.count * cap / rate, 1)} if cap > rays else {})}
+
+
+def duration_said(seconds: float) -> str:
+    """'40 s', '12 min', '3.2 h': a time to the precision an estimate has."""
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    return f"{seconds / 60:.0f} min" if seconds < 5400 else f"{seconds / 3600:.2g} h"
+
+
+def estimate_said(guess: dict) -> str:
+    """The estimate (estimate()) as the up-front line's tail: ', about 12 min to trace (2.1M paths/s
+    measured on this device; up to 1.5 h where noisy)'."""
+    if not guess:
+        return ""
+    upto = f"; up to {duration_said(guess['seconds_at_max_rays'])} where noisy" if "seconds_at_max_rays" in guess else ""
+    return (f", about {duration_said(guess['seconds'])} to trace ({guess['paths_per_s'] / 1e6:.2g}M paths/s measured "
+            f"on this device{upto})")
 
 
 PATH_BYTES = 20         # host memory a probe's ray takes: the trace's radiance and distance (4 float32), object met

@@ -53,10 +53,30 @@ def light_entries(scene, suns) -> list:
     return out
 
 
-def manifest(volume: dict, lights: list = ()) -> dict:
+SKY_CONVENTION = (
+    "the light where no probe is near and outside the volume (the renderer's fallback, effects.sh_bands and "
+    "sh_window): irradiance E_k of the panorama the probes saw, less the lights extracted from it (an engine draws "
+    "those per pixel from `lights`: the whole panorama's SH would count them twice), world frame "
+    "(environment.rotation_y applied), times environment.intensity; real orthonormal SH, z polar axis, no "
+    "Condon-Shortley phase, k = l (l + 1) + m, as `iblbake sh`'s irradiance; E(n) = sum_k E_k Y_k(n), clamped at 0")
+
+
+def sky_entry(image, env: dict, bands: int, window: str) -> dict:
+    """probes.json's `sky` (SKY_CONVENTION): the SH irradiance of `image`, the panorama the probes
+    were baked with (Bakes.environment: the residual where lights were extracted), in the world
+    frame and the probes' units, as the renderer's SH fallback reads it (float64, numpy's exact
+    texel integrals: bake/sh.py)."""
+    from iblbake.core import sh
+    radiance = sh.project(np.asarray(image, np.float64)[..., :3], bands, env["rotation_y"])
+    e = radiance * (sh.window(bands, window) * sh.ahat(bands))[:, None] * env["intensity"]
+    return {"bands": bands, "window": window, "lights_extracted": env.get("sun") == "extract",
+            "irradiance": [[float(v) for v in row] for row in e]}
+
+
+def manifest(volume: dict, lights: list = (), sky: dict | None = None) -> dict:
     """The manifest of a sampled volume's files: the grid, the representation, how to sample it
     and every convention the files are read with, each probe's state; `lights` (light_entries)
-    the lights an engine adds."""
+    the lights an engine adds, `sky` (sky_entry) the light where no probe is."""
     g, s, basis = volume["grid"], volume["settings"], basis_of(volume)
     states = volume["data"][:, 3].astype(int)
     return {
@@ -84,9 +104,11 @@ def manifest(volume: dict, lights: list = ()) -> dict:
             "probe_data": "RGBA, texel (index % (nx * ny), index / (nx * ny)): offset in units of spacing, "
                           "A = state (0 active, 1 inactive), as RTXGI's probe data texture",
             "lights": LIGHTS_CONVENTION,
+            **({"sky": SKY_CONVENTION} if sky else {}),
         },
         "report": volume["report"],
         "lights": list(lights),
+        **({"sky": sky} if sky else {}),
         **basis.manifest(volume),
     }
 

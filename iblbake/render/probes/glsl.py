@@ -66,6 +66,20 @@ def light_constants(lights: list) -> str:
             f"const float PROBE_LIGHT_SIN_RADIUS[{n}] = float[{n}]({sines});")
 
 
+def sky_function(sky: dict | None) -> str:
+    """probes.json's `sky` (files.sky_entry) as probeSkyIrradiance(n): the panorama the probes saw,
+    less the lights extracted from it (those are PROBE_LIGHT_*: `iblbake sh` of the whole panorama
+    would count them twice), in the world frame and the probes' units."""
+    if not sky:
+        return ""
+    from iblbake.bake.sh import glsl_function
+    said = "less the lights extracted from it (PROBE_LIGHT_*)" if sky["lights_extracted"] else "whole"
+    return (f"// the sky's irradiance: probes.json's sky, {sky['bands']} SH bands (window {sky['window']}) of the "
+            f"panorama the\n// probes saw, {said}; world frame, the probes' units\n"
+            + glsl_function(sky["irradiance"], sky["bands"], "probeSkyIrradiance", "PROBE_SKY_SH",
+                            "PROBE_SKY_SH_BANDS"))
+
+
 def glsl(volume: dict, man: dict) -> str:
     """A GLSL function sampling the written files as kernels/probes.h does (the hardware's bilinear
     filter in place of its reads), the volume's grid and settings baked in."""
@@ -83,10 +97,11 @@ def glsl(volume: dict, man: dict) -> str:
 //   probeIrradianceAtlas  {man['files']['irradiance']} ({'linear' if entry.atlas else 'nearest'} filtering)
 //   probeDistanceAtlas    distance.exr (linear filtering)
 //   probeDataTexture      probe_data.exr (nearest){table}
-// diffuse = albedo / PI * mix(skyIrradiance(N), probeIrradiance(P, N, V), probeVolumeWeight(P)):
-// world position, unit shading normal, unit vector towards the viewer; the sky's irradiance (say
-// `iblbake sh --glsl`'s shIrradiance) takes over outside the volume.{SPECULAR_HELP if spec else ""}
+// diffuse = albedo / PI * mix(probeSkyIrradiance(N), probeIrradiance(P, N, V), probeVolumeWeight(P)):
+// world position, unit shading normal, unit vector towards the viewer; the sky's irradiance takes
+// over outside the volume (and where probeBlend's w is 0).{SPECULAR_HELP if spec else ""}
 {light_constants(man.get("lights", []))}
+{sky_function(man.get("sky"))}
 #define PROBES_SH {int("PROBES_SH" in flags)}
 #define PROBES_BASIS {int("PROBES_BASIS" in flags)}
 #define PROBES_SPECULAR {int(bool(spec))}
