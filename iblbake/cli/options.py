@@ -146,6 +146,16 @@ def _duration(seconds: float) -> str:
     return f"{seconds // 60} min {seconds % 60:02d} s" if seconds >= 60 else f"{seconds} s"
 
 
+def extracted_said(n: int, how: str, kept_in: str, why: str = "") -> str:
+    """'; N lights extracted from the panorama[HOW] (WHYenvironment.sun: none keeps them in KEPT_IN)':
+    what render and probes say of the lights `environment.sun` took out of the panorama, in one
+    wording; '' for none."""
+    if not n:
+        return ""
+    s, them = ("s", "them") if n != 1 else ("", "it")
+    return f"; {n} light{s} extracted from the panorama{how} ({why}environment.sun: none keeps {them} in {kept_in})"
+
+
 def common_options(f):
     """--json, --quiet, --debug, shared by every command."""
     f = click.option("--debug", is_flag=True, expose_value=False, is_eager=True, callback=_set_debug,

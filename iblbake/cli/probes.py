@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from iblbake.cli.options import (API_FLAGS, Console, cache_option, refuse_foreign, scene_options)
+from iblbake.cli.options import (API_FLAGS, Console, cache_option, extracted_said, refuse_foreign, scene_options)
 
 
 @click.command("probes")
@@ -87,8 +87,7 @@ def more_said(more: dict) -> str:
 def lights_said(lights: list) -> str:
     """The lights extracted from the panorama, which an engine cannot know of but from probes.json."""
     n = sum(not lt["source"].startswith("lights.") for lt in lights)
-    return (f"; {n} light{'s' if n != 1 else ''} extracted from the panorama, to draw per pixel: probes.json's lights "
-            f"(environment.sun: none keeps {'them' if n != 1 else 'it'} in the probes)") if n else ""
+    return extracted_said(n, ", to draw per pixel: probes.json's lights", "the probes")
 
 
 def _remove_stale(out: Path, names: list) -> list:

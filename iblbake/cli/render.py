@@ -7,7 +7,7 @@ import json
 
 import click
 
-from iblbake.cli.options import (API_FLAGS, Console, allow_outside_option, cache_option, common_options,
+from iblbake.cli.options import (API_FLAGS, Console, allow_outside_option, cache_option, common_options, extracted_said,
                                  depfile_option, refuse_foreign, scene_options)
 
 
@@ -101,10 +101,9 @@ def _extracted(sc, rep) -> str:
     `sun: none` and the default differed and nothing but --report said why)."""
     lit = next((p for p in rep["passes"] if p["name"] == "lights"), {})
     n = ("sun" in lit) + len(lit.get("lamps") or [])
-    if not n or ((sc.raw or {}).get("environment") or {}).get("sun", "auto") != "auto":
+    if ((sc.raw or {}).get("environment") or {}).get("sun", "auto") != "auto":
         return ""
-    return (f"; {n} light{'s' if n != 1 else ''} extracted from the panorama and lit per pixel (environment.sun: "
-            f"auto, the scene has probes; environment.sun: none keeps {'them' if n != 1 else 'it'} in it)")
+    return extracted_said(n, " and lit per pixel", "it", why="environment.sun: auto, the scene has probes; ")
 
 
 def _plain(value) -> str:
