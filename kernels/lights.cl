@@ -9,11 +9,12 @@
  *                                  each shaded with the paths' BSDF (kernels/bsdf.h) and, with
  *                                  VISIBILITY, traced; a mirror adds the light where its one
  *                                  direction meets it
- * Real time: the diffuse term at the light's centre direction, the specular one too for a light
- * of no size; a light with a size: its specular term by shadow_samples samples of its disk or
- * sphere and as many of the GGX lobe (multiple importance sampling). Hard shadows trace one ray
- * to the centre, soft ones the disk's samples (the fraction that arrives; the specular term's
- * samples each their own).
+ * Real time: the diffuse term at the light's centre direction; the specular term at the centre
+ * for a light of no size, at the representative point for one with a size and hard shadows or
+ * none, and for soft shadows the exact integral over the disk or sphere, by the shadows'
+ * shadow_samples samples of it and as many of the GGX lobe (multiple importance sampling), each
+ * traced. Hard shadows trace one ray to the centre, soft ones the disk's samples (the fraction
+ * that arrives shadows the diffuse term).
  * numpy twin: iblbake/render/twin/lights.py lights(). */
 #include "common.h"
 #include "brdf.h"
@@ -23,10 +24,32 @@
 #include "surface.h"
 #include "light.h"
 
-/* The real-time mode's f(v, l) NoL of a light of centre direction l: the diffuse term, and the
- * specular one with `specular` (a light of no size; one with a size: the pass's own estimate of
- * its exact integral, below) */
-IBL_INLINE float3 light_brdf_cos(const Material mt, float3 n, float3 v, float nov, float3 l, int specular)
+/* The specular term of a light of angular radius asin(sin_max) at its representative point
+ * (Karis 2013, "Real Shading in Unreal Engine 4"): the direction of the light's disk closest to
+ * the mirror direction r, with the lobe's energy scaled by (alpha / alpha')^2. Karis widens alpha
+ * by the light's radius over twice its distance (sin_max / 2); over sqrt(VoH) more, the mirror
+ * limit is exact (D V at the widened peak is 1 / (pi alpha'^2 4 NoV), and NoV = VoH there): the
+ * highlight of a sphere light on a glossy plane seen at 17 degrees keeps 0.88-0.95 of the exact
+ * integral's energy, its relative RMSE 0.20-0.31 where the centre's alone is 0.93-4.2
+ * (tests/test_lights.py). Lights with hard shadows or none only: 16 samples of the disk and 16 of
+ * the lobe cost 9-14x the whole hard-shadow pass (the knot, docs/benchmarks.md). *l becomes the
+ * direction, the energy is returned. */
+IBL_INLINE float representative_point(float3 n, float3 v, float3 *l, float sin_max, float alpha)
+{
+    const float3 r = 2.0f * dot(n, v) * n - v;
+    const float3 c = dot(*l, r) * r - *l;            /* from the centre towards the mirror ray */
+    const float cl = sqrt(dot(c, c));
+    if (cl > 0.0f) *l = unit3(*l + c * fmin(sin_max / cl, 1.0f));
+    const float voh = fmax(dot(v, unit3(v + *l)), 1e-4f);
+    const float a = fmax(alpha, ALPHA_MIN);
+    const float wide = fmin(a + 0.5f * sin_max / sqrt(voh), 1.0f);
+    return (a / wide) * (a / wide);
+}
+
+/* The real-time mode's f(v, l) NoL for a light of centre direction l: the diffuse term, and with
+ * `specular` the specular one, with sin_max > 0 at the representative point (a light with soft
+ * shadows: the pass's estimate of the exact integral, below; the exact mode: exact_brdf_cos) */
+IBL_INLINE float3 light_brdf_cos(const Material mt, float3 n, float3 v, float nov, float3 l, float sin_max, int specular)
 {
     float3 f = (float3)(0.0f);
 #ifdef LIGHT_DIFFUSE
@@ -34,11 +57,14 @@ IBL_INLINE float3 light_brdf_cos(const Material mt, float3 n, float3 v, float no
     if (nol > 0.0f) f += diffuse_weight(mt, nov) * nol;
 #endif
 #ifdef LIGHT_SPECULAR
-    const float nols = dot(n, l);
-    if (specular && nols > 0.0f) {
-        const float3 h = unit3(v + l);
+    if (!specular) return f;
+    float3 ls = l;
+    const float energy = sin_max > 0.0f ? representative_point(n, v, &ls, sin_max, mt.alpha) : 1.0f;
+    const float nols = dot(n, ls);
+    if (nols > 0.0f) {
+        const float3 h = unit3(v + ls);
         f += d_ggx(dot(n, h), mt.alpha) * v_smith_ggx_correlated(nov, nols, mt.alpha) * f_schlick(dot(v, h), mt.f0, mt.f90)
-             * nols;
+             * (energy * nols);
     }
 #endif
     return f;
@@ -134,26 +160,29 @@ __kernel void lights(__global const float4 *gb_pos, SURFACE_PARAMS,
 #else
         /* a surface the light's whole disk or sphere lies behind traces no shadow ray */
         if (dot(nrm, wc) <= -sin_max) continue;
-        float vis = 1.0f;
         int soft = 0;
 #ifdef HAS_SHADOWS
         const int shadows = (int)lights[LIGHT_FLOAT4S * j + 1].w;
         soft = shadows == SHADOWS_SOFT && sin_max > 0.0f;
+#endif
+        const int sized_specular = LIGHT_TERM_SPECULAR && soft;
+        const float3 f = light_brdf_cos(mt, nrm, v, nov, wc, sin_max, !sized_specular);
+        if (!sized_specular && f.x + f.y + f.z <= 0.0f) continue;     /* nothing to shadow */
+        float vis = 1.0f;
+#ifdef HAS_SHADOWS
         if (shadows == SHADOWS_HARD || (shadows == SHADOWS_SOFT && sin_max <= 0.0f))
             vis = occluded_to(origin, wc, dist, SCENE_ARGS) ? 0.0f : 1.0f;
 #endif
-        const int sized_specular = LIGHT_TERM_SPECULAR && sin_max > 0.0f;
-        const float3 f = light_brdf_cos(mt, nrm, v, nov, wc, !sized_specular);
-        if (!sized_specular && f.x + f.y + f.z <= 0.0f) continue;     /* nothing to shadow */
-        if (soft || sized_specular) {
-            /* The soft shadows' ns rays over the disk or sphere (the share that arrives), and for
-             * the specular term of a light with a size the exact integral over it, estimated by
-             * the same ns directions of the cone (pdf pd) and ns of the GGX lobe's visible normals
-             * (Heitz 2018; those that land in the cone) combined by the balance heuristic (Veach
-             * 1997): sum f NoL / (ns (pd + p_lobe)), each traced where the shadows are soft. A
-             * lobe narrower than the disk is met by its own samples, a wider one by the cone's, a
-             * mirror's delta by its one direction; Karis's representative point, here before,
-             * kept 0.86-0.95 of a glossy lobe's energy (docs/conventions.md, adopted amendment 17). */
+#ifdef HAS_SHADOWS
+        if (soft) {
+            /* The soft shadows' ns rays over the disk or sphere (the share that arrives), and the
+             * specular term the exact integral over it, estimated by the same ns directions of
+             * the cone (pdf pd) and ns of the GGX lobe's visible normals (Heitz 2018; those that
+             * land in the cone) combined by the balance heuristic (Veach 1997): sum f NoL / (ns
+             * (pd + p_lobe)), each traced. A lobe narrower than the disk is met by its own
+             * samples, a wider one by the cone's, a mirror's delta by its one direction; the
+             * representative point keeps 0.86-0.95 of a glossy lobe's energy (docs/conventions.md,
+             * adopted amendment 17). */
             const int ns = (int)lights[LIGHT_FLOAT4S * j + 3].w;
             const float pd = 1.0f / (2.0f * IBL_PI * omc);
             float3 t, b, spec = (float3)(0.0f);
@@ -162,13 +191,8 @@ __kernel void lights(__global const float4 *gb_pos, SURFACE_PARAMS,
             for (int k = 0; k < ns; ++k) {
                 Sampler sp = sampler_start(ls, sid, k);
                 const float3 l = cone_direction(wc, omc, sampler_2d(&sp));
-                int arrives = 1;
-#ifdef HAS_SHADOWS
-                if (soft) {
-                    arrives = !occluded_to(origin, l, dist, SCENE_ARGS);
-                    lit += arrives;
-                }
-#endif
+                const int arrives = !occluded_to(origin, l, dist, SCENE_ARGS);
+                lit += arrives;
                 if (!sized_specular) continue;
                 float pl, pll;
                 const float3 fl = bsdf_eval(mt, v, nrm, nov, l, 1.0f, 0, 1, &pl);
@@ -177,16 +201,14 @@ __kernel void lights(__global const float4 *gb_pos, SURFACE_PARAMS,
                 const float3 w = bsdf_sample(mt, v, nrm, t, b, nov, 1.0f, 0, 1, 0.0f, sampler_2d(&sp), &ll, &pll);
                 const float3 dl = ll - wc;
                 if (w.x + w.y + w.z <= 0.0f || dot(dl, dl) > 2.0f * omc) continue;
-#ifdef HAS_SHADOWS
-                if (soft && occluded_to(origin, ll, dist, SCENE_ARGS)) continue;
-#endif
+                if (occluded_to(origin, ll, dist, SCENE_ARGS)) continue;
                 spec += w / (1.0f + pd / pll);      /* a mirror's pdf is infinite: all of w */
             }
-            if (soft) vis = (float)lit / (float)ns;
-            /* per unit irradiance facing the light (E = Le pi sin^2), its samples traced where soft,
-             * else shadowed as the rest */
-            color += e * spec * ((soft ? 1.0f : vis) / ((float)ns * IBL_PI * sin_max * sin_max));
+            vis = (float)lit / (float)ns;
+            /* per unit irradiance facing the light (E = Le pi sin^2), each sample traced */
+            color += e * spec / ((float)ns * IBL_PI * sin_max * sin_max);
         }
+#endif
         color += vis * e * f;
 #endif
     }

@@ -14,6 +14,22 @@ from iblbake.render.twin.gbuffer import occluded, ray_offset
 from iblbake.render.twin.surface import diffuse_weight, surface
 
 
+def representative_point(n, v, l, sin_max, alpha):
+    """Twin of kernels/lights.cl representative_point: (direction, energy scale) per hit."""
+    r = 2 * (n * v).sum(-1, keepdims=True) * n - v
+    c = (l * r).sum(-1, keepdims=True) * r - l
+    cl = np.linalg.norm(c, axis=-1, keepdims=True)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ls = l + c * np.minimum(sin_max[:, None] / cl, 1)
+    ls = np.where(cl > 0, ls, l)
+    ls /= np.linalg.norm(ls, axis=-1, keepdims=True)
+    h = v + ls
+    voh = np.maximum((v * h).sum(-1) / np.linalg.norm(h, axis=-1), 1e-4)
+    a = np.maximum(alpha, brdf.ALPHA_MIN)
+    energy = (a / np.minimum(a + 0.5 * sin_max / np.sqrt(voh), 1)) ** 2
+    return np.where((sin_max > 0)[:, None], ls, l), np.where(sin_max > 0, energy, 1.0)
+
+
 def disk_specular(mt, v, n, nov, wc, omc, sin_max, ns, samplers, visible=None):
     """Twin of kernels/lights.cl disk_specular: the specular f NoL over a light's disk or sphere per
     unit irradiance facing it, (1 / (pi sin^2)) integral over the cone of f NoL dw, by ns samples
@@ -40,21 +56,23 @@ def disk_specular(mt, v, n, nov, wc, omc, sin_max, ns, samplers, visible=None):
     return acc / (ns * np.pi * sin_max ** 2)[:, None]
 
 
-def light_brdf_cos(base, metallic, rough, f0, f90, n, v, nov, l, diffuse: bool, specular: bool):
-    """Twin of kernels/lights.cl light_brdf_cos (the real-time mode's): f(v, l) NoL at a light's
-    centre direction l, per hit and colour channel (a light with a size: its specular term is
-    disk_specular's)."""
+def light_brdf_cos(base, metallic, rough, f0, f90, n, v, nov, l, diffuse: bool, specular: bool, sin_max=None):
+    """Twin of kernels/lights.cl light_brdf_cos (the real-time mode's): f(v, l) NoL, per hit and
+    colour channel; with sin_max the specular term at the representative point of a light that size
+    (a light with soft shadows: disk_specular's)."""
     nol = (n * l).sum(-1)
     out = np.zeros(l.shape[:-1] + (3,))
     if diffuse:
         out += np.where((nol > 0)[:, None], diffuse_weight(base, metallic, rough, f0, f90, nov) * np.maximum(nol, 0)[:, None], 0)
     if specular:
         alpha = rough ** 2
-        h = v + l
+        ls, energy = representative_point(n, v, l, sin_max, alpha) if sin_max is not None else (l, 1.0)
+        nols = (n * ls).sum(-1)
+        h = v + ls
         h /= np.linalg.norm(h, axis=-1, keepdims=True)
-        spec = (brdf.d_ggx((n * h).sum(-1), alpha) * brdf.v_smith_ggx_correlated(nov, np.maximum(nol, 0), alpha)
-                * np.maximum(nol, 0))[:, None] * brdf.f_schlick((v * h).sum(-1)[:, None], f0, f90)
-        out += np.where((nol > 0)[:, None], spec, 0)
+        spec = (brdf.d_ggx((n * h).sum(-1), alpha) * brdf.v_smith_ggx_correlated(nov, np.maximum(nols, 0), alpha)
+                * energy * np.maximum(nols, 0))[:, None] * brdf.f_schlick((v * h).sum(-1)[:, None], f0, f90)
+        out += np.where((nols > 0)[:, None], spec, 0)
     return out
 
 
@@ -134,19 +152,20 @@ def lights(gb, arrays, records, effects: dict, *, diffuse=True, specular=True, e
             continue
         # real time: a point whose light's whole disk or sphere lies behind it adds nothing
         front = (n * wc).sum(1) > -sin_max
-        sized = specular and (sin_max > 0).all() and disk
         soft = mode == 2 and (sin_max > 0).all()
+        sized = specular and soft and disk
         vis = np.ones(len(p))
         if mode == 1 or (mode == 2 and not soft):
             vis = (~occluded(origin, wc, arrays, dist)).astype(float)
         elif soft:                  # the share of ns rays over the disk or sphere that arrive
             vis = sum(~occluded(origin, _cone_direction(wc, omc, sampling.Sampler(ls, sid, k).next_2d()), arrays, dist)
                       for k in range(ns)) / ns
-        f = light_brdf_cos(base, metallic, rough, f0, f90, n, v, nov, wc, diffuse, specular and not sized)
-        if sized:                   # each sample traced where the shadows are soft, else shadowed as the rest
-            arrive = (lambda l, k, lobe: (~occluded(origin, l, arrays, dist)).astype(float)) if soft else None
-            spec = disk_specular(mt, v, n, nov, wc, omc, sin_max, ns, lambda k: sampling.Sampler(ls, sid, k), arrive)
-            color += np.where(front[:, None], e * spec * (1.0 if soft else vis[:, None]), 0.0)
+        f = light_brdf_cos(base, metallic, rough, f0, f90, n, v, nov, wc, diffuse, specular and not sized,
+                           sin_max if disk else None)
+        if sized:                   # each sample traced
+            spec = disk_specular(mt, v, n, nov, wc, omc, sin_max, ns, lambda k: sampling.Sampler(ls, sid, k),
+                                 lambda l, k, lobe: (~occluded(origin, l, arrays, dist)).astype(float))
+            color += np.where(front[:, None], e * spec, 0.0)
         color += np.where(front[:, None], vis[:, None] * e * f, 0.0)
     out[hit] = color
     return out
