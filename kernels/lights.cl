@@ -9,9 +9,12 @@
  *                                  each shaded with the paths' BSDF (kernels/bsdf.h) and, with
  *                                  VISIBILITY, traced; a mirror adds the light where its one
  *                                  direction meets it
- * Real time: the light's centre direction is shaded (a light with a size: its specular term at
- * the representative point); hard shadows trace one ray to the centre,
- * soft ones shadow_samples rays over the disk or sphere (the fraction that arrives).
+ * Real time: the diffuse term at the light's centre direction; the specular term at the centre
+ * for a light of no size, at the representative point for one with a size and hard shadows or
+ * none, and for soft shadows the exact integral over the disk or sphere, by the shadows'
+ * shadow_samples samples of it and as many of the GGX lobe (multiple importance sampling), each
+ * traced. Hard shadows trace one ray to the centre, soft ones the disk's samples (the fraction
+ * that arrives shadows the diffuse term).
  * numpy twin: iblbake/render/twin/lights.py lights(). */
 #include "common.h"
 #include "brdf.h"
@@ -28,7 +31,9 @@
  * limit is exact (D V at the widened peak is 1 / (pi alpha'^2 4 NoV), and NoV = VoH there): the
  * highlight of a sphere light on a glossy plane seen at 17 degrees keeps 0.88-0.95 of the exact
  * integral's energy, its relative RMSE 0.20-0.31 where the centre's alone is 0.93-4.2
- * (tests/test_lights.py). *l becomes the direction, the energy is returned. */
+ * (tests/test_lights.py). Lights with hard shadows or none only: 16 samples of the disk and 16 of
+ * the lobe cost 9-14x the whole hard-shadow pass (the knot, docs/benchmarks.md). *l becomes the
+ * direction, the energy is returned. */
 IBL_INLINE float representative_point(float3 n, float3 v, float3 *l, float sin_max, float alpha)
 {
     const float3 r = 2.0f * dot(n, v) * n - v;
@@ -41,9 +46,10 @@ IBL_INLINE float representative_point(float3 n, float3 v, float3 *l, float sin_m
     return (a / wide) * (a / wide);
 }
 
-/* The real-time mode's f(v, l) NoL for a light of centre direction l; with sin_max > 0 the
- * specular term at the light's representative point (the exact mode: exact_brdf_cos) */
-IBL_INLINE float3 light_brdf_cos(const Material mt, float3 n, float3 v, float nov, float3 l, float sin_max)
+/* The real-time mode's f(v, l) NoL for a light of centre direction l: the diffuse term, and with
+ * `specular` the specular one, with sin_max > 0 at the representative point (a light with soft
+ * shadows: the pass's estimate of the exact integral, below; the exact mode: exact_brdf_cos) */
+IBL_INLINE float3 light_brdf_cos(const Material mt, float3 n, float3 v, float nov, float3 l, float sin_max, int specular)
 {
     float3 f = (float3)(0.0f);
 #ifdef LIGHT_DIFFUSE
@@ -51,6 +57,7 @@ IBL_INLINE float3 light_brdf_cos(const Material mt, float3 n, float3 v, float no
     if (nol > 0.0f) f += diffuse_weight(mt, nov) * nol;
 #endif
 #ifdef LIGHT_SPECULAR
+    if (!specular) return f;
     float3 ls = l;
     const float energy = sin_max > 0.0f ? representative_point(n, v, &ls, sin_max, mt.alpha) : 1.0f;
     const float nols = dot(n, ls);
@@ -63,7 +70,6 @@ IBL_INLINE float3 light_brdf_cos(const Material mt, float3 n, float3 v, float no
     return f;
 }
 
-#ifdef LIGHTS_EXACT
 #ifdef LIGHT_DIFFUSE
 #define LIGHT_TERM_DIFFUSE 1
 #else
@@ -74,6 +80,8 @@ IBL_INLINE float3 light_brdf_cos(const Material mt, float3 n, float3 v, float no
 #else
 #define LIGHT_TERM_SPECULAR 0
 #endif
+
+#ifdef LIGHTS_EXACT
 /* f(v, l) NoL of the terms the frame renders, in the exact mode: the BSDF of every path vertex
  * (kernels/bsdf.h; its pdf unused: the light's cone is sampled). A mirror's delta lobe is met by
  * no direction the cone gives: the lights pass adds it from its one direction. */
@@ -150,23 +158,55 @@ __kernel void lights(__global const float4 *gb_pos, SURFACE_PARAMS,
 #endif
         color += e * f;
 #else
-        /* a surface facing away from the light traces no shadow ray */
-        const float3 f = light_brdf_cos(mt, nrm, v, nov, wc, sin_max);
-        if (f.x + f.y + f.z <= 0.0f) continue;
-        float vis = 1.0f;
+        /* a surface the light's whole disk or sphere lies behind traces no shadow ray */
+        if (dot(nrm, wc) <= -sin_max) continue;
+        int soft = 0;
 #ifdef HAS_SHADOWS
         const int shadows = (int)lights[LIGHT_FLOAT4S * j + 1].w;
-        if (shadows == SHADOWS_HARD || (shadows == SHADOWS_SOFT && sin_max <= 0.0f)) {
+        soft = shadows == SHADOWS_SOFT && sin_max > 0.0f;
+#endif
+        const int sized_specular = LIGHT_TERM_SPECULAR && soft;
+        const float3 f = light_brdf_cos(mt, nrm, v, nov, wc, sin_max, !sized_specular);
+        if (!sized_specular && f.x + f.y + f.z <= 0.0f) continue;     /* nothing to shadow */
+        float vis = 1.0f;
+#ifdef HAS_SHADOWS
+        if (shadows == SHADOWS_HARD || (shadows == SHADOWS_SOFT && sin_max <= 0.0f))
             vis = occluded_to(origin, wc, dist, SCENE_ARGS) ? 0.0f : 1.0f;
-        } else if (shadows == SHADOWS_SOFT) {
+#endif
+#ifdef HAS_SHADOWS
+        if (soft) {
+            /* The soft shadows' ns rays over the disk or sphere (the share that arrives), and the
+             * specular term the exact integral over it, estimated by the same ns directions of
+             * the cone (pdf pd) and ns of the GGX lobe's visible normals (Heitz 2018; those that
+             * land in the cone) combined by the balance heuristic (Veach 1997): sum f NoL / (ns
+             * (pd + p_lobe)), each traced. A lobe narrower than the disk is met by its own
+             * samples, a wider one by the cone's, a mirror's delta by its one direction; the
+             * representative point keeps 0.86-0.95 of a glossy lobe's energy (docs/conventions.md,
+             * adopted amendment 17). */
             const int ns = (int)lights[LIGHT_FLOAT4S * j + 3].w;
+            const float pd = 1.0f / (2.0f * IBL_PI * omc);
+            float3 t, b, spec = (float3)(0.0f);
+            tangent_frame(nrm, &t, &b);
             int lit = 0;
             for (int k = 0; k < ns; ++k) {
                 Sampler sp = sampler_start(ls, sid, k);
                 const float3 l = cone_direction(wc, omc, sampler_2d(&sp));
-                lit += !occluded_to(origin, l, dist, SCENE_ARGS);
+                const int arrives = !occluded_to(origin, l, dist, SCENE_ARGS);
+                lit += arrives;
+                if (!sized_specular) continue;
+                float pl, pll;
+                const float3 fl = bsdf_eval(mt, v, nrm, nov, l, 1.0f, 0, 1, &pl);
+                if (arrives) spec += fl / (pd + pl);
+                float3 ll;
+                const float3 w = bsdf_sample(mt, v, nrm, t, b, nov, 1.0f, 0, 1, 0.0f, sampler_2d(&sp), &ll, &pll);
+                const float3 dl = ll - wc;
+                if (w.x + w.y + w.z <= 0.0f || dot(dl, dl) > 2.0f * omc) continue;
+                if (occluded_to(origin, ll, dist, SCENE_ARGS)) continue;
+                spec += w / (1.0f + pd / pll);      /* a mirror's pdf is infinite: all of w */
             }
             vis = (float)lit / (float)ns;
+            /* per unit irradiance facing the light (E = Le pi sin^2), each sample traced */
+            color += e * spec / ((float)ns * IBL_PI * sin_max * sin_max);
         }
 #endif
         color += vis * e * f;

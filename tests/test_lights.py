@@ -365,7 +365,8 @@ def test_sphere_light_highlight_at_its_representative_point(tmp_path, black_env,
     """A sphere light over a glossy metal plane seen at 17 degrees: the real-time highlight (the
     kernel) against the exact integral over the sphere (the numpy twin, 4096 samples per pixel).
     Shading the centre alone makes a point's pinprick; the representative point (Karis 2013) the
-    light's own reflection, with the energy kept."""
+    light's own reflection, with most of the energy kept (lights with hard shadows or none; soft
+    ones: test_soft_light_specular_is_its_exact_integral)."""
     doc = {"camera": {"perspective": {"position": [0, 1.2, 4], "look_at": [0, 0, 0], "fov_y": 40},
                       "resolution": [160, 120]},
            "environment": {"path": str(black_env), "background": "hide"},
@@ -381,13 +382,94 @@ def test_sphere_light_highlight_at_its_representative_point(tmp_path, black_env,
     gb = rr.primary(sc["camera"], arrays)
     records = pack.light_records(sc["lights"])
     want = rr.lights(gb, arrays, records, sc["effects"], diffuse=False, exact=True, visibility=False)[:, 0]
-    centre = rr.lights(gb, arrays, records, sc["effects"], diffuse=False, representative=False)[:, 0]
+    centre = rr.lights(gb, arrays, records, sc["effects"], diffuse=False, disk=False)[:, 0]
     rel = lambda a: float(np.sqrt(np.mean((a - want) ** 2) / np.mean(want ** 2)))
     print(f"roughness {rough}, radius {radius}: relative RMSE {rel(got):.3f} (centre alone {rel(centre):.3f}); "
           f"energy {got.sum() / want.sum():.3f} (centre {centre.sum() / want.sum():.3f})")
     # measured: 0.198 (centre 4.18) and 0.310 (centre 0.93); energy 0.952 and 0.883
     assert rel(got) < 0.4 and rel(got) < rel(centre) / 2.5
     assert got.sum() / want.sum() == pytest.approx(1, abs=0.15)
+
+
+def disk_integral(gb, arrays, wc, sin_max, samples, rng):
+    """The specular f NoL over a disk about wc of angular radius asin(sin_max), per unit
+    irradiance facing it ((1 / (pi sin^2)) integral of f NoL dw) at each hit, apart from the
+    kernel's estimate: `samples` random directions uniform in the cone where the GGX lobe is the
+    wider (2 alpha > sin_max), else from the lobe's visible normals, counted where they land in
+    the cone (each the low-variance one there). Returns the mean and its standard error."""
+    from iblbake.core import bsdf, sampling
+    v, n, nov, (base, metallic, _, rough, f0, f90) = rr.surface(gb, arrays)
+    mt = bsdf.Material(f0, f90, rough ** 2, np.zeros_like(f0))
+    wc = np.broadcast_to(wc, n.shape)
+    omc = sin_max ** 2 / (1 + math.sqrt(1 - sin_max ** 2))
+    lobe = 2 * mt.alpha[0] <= sin_max
+    t, b = np.cross(wc, [0.3, 0.5, 0.81]), None
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    b = np.cross(wc, t)
+    acc, acc2 = np.zeros(len(n)), np.zeros(len(n))
+    for _ in range(samples):
+        u = rng.random((len(n), 2))
+        if lobe:
+            w, l, _ = bsdf.sample(mt, v, n, nov, 1.0, False, True, 0.0, u)
+            x = np.where(((l - wc) ** 2).sum(1) <= 2 * omc, w[:, 1], 0.0)
+        else:
+            c = 1 - u[:, :1] * omc
+            s_ = np.sqrt(np.maximum(0, 1 - c * c))
+            ph = 2 * np.pi * u[:, 1:]
+            l = wc * c + (t * np.cos(ph) + b * np.sin(ph)) * s_
+            x = bsdf.evaluate(mt, v, n, nov, l, 1.0, False, True)[0][:, 1] * (2 * np.pi * omc)
+        acc += x
+        acc2 += x * x
+    mean = acc / samples
+    return mean / (np.pi * sin_max ** 2), np.sqrt(np.maximum(acc2 / samples - mean ** 2, 0) / samples) / (np.pi * sin_max ** 2)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("diameter", [0.53, 5, 20])
+def test_soft_light_specular_is_its_exact_integral(tmp_path, black_env, diameter):
+    """A directional light's disk with soft shadows (the sun's 0.53 degrees, 5, a 20-degree
+    softbox) reflected by a gold plane seen at 17 degrees, roughness 0.05 to 1: the real-time
+    highlight (the kernel: the shadows' 16 samples of the disk and 16 of the lobe, by the balance
+    heuristic; a mirror's delta is its lobe's one sample) against the exact integral over the disk
+    (disk_integral, 4096 independent samples a pixel), in energy (the highlight's sum) and
+    per-pixel relative RMSE; the twin with it. The representative point (hard shadows, none) keeps 0.86-0.99
+    of the energy at roughness 0.1-0.5 and 0.89-1.07 at 1, its relative RMSE up to 0.35 (a sweep
+    of these disks about the mirror direction seen at 17, 45 and 70 degrees; there this estimate
+    0.975-1.03, relative RMSE under 0.15)."""
+    sin_max = math.sin(math.radians(diameter / 2))
+    d = np.array([0, -1.2, 4.0])
+    rng = np.random.default_rng(5)
+    rows = []
+    for rough in (0.05, 0.1, 0.25, 0.5, 1.0):
+        doc = {"camera": {"perspective": {"position": [0, 1.2, 4], "look_at": [0, 0, 0], "fov_y": 40},
+                          "resolution": [64, 48]},
+               "environment": {"path": str(black_env), "background": "hide"},
+               "materials": {"gold": {"base_color": [1, 0.78, 0.34], "metallic": 1, "roughness": rough}},
+               "objects": [{"plane": {"point": [0, 0, 0], "size": 20}, "material": "gold"}],
+               "lights": [{"directional": {"direction": d.tolist(), "illuminance": 2.0, "angular_diameter": diameter},
+                           "shadows": "soft"}],
+               "effects": {"diffuse": "off", "specular": "prefiltered"}}
+        p = tmp_path / f"scene{rough}.yaml"
+        p.write_text(yaml.safe_dump(doc))
+        sc = scene.load(p)
+        got = render(sc, cache_root=tmp_path / "cache").hdr[..., 1].reshape(-1)
+        arrays = pack.scene_arrays(sc)
+        gb = rr.primary(sc["camera"], arrays)
+        twin = rr.lights(gb, arrays, pack.light_records(sc["lights"]), sc["effects"], diffuse=False)[:, 1]
+        want, err = disk_integral(gb, arrays, -d / np.linalg.norm(d), sin_max, 4096, rng)
+        w = np.zeros_like(got)
+        w[gb["hit"]] = 2.0 * want
+        se = 2.0 * math.sqrt((err ** 2).sum()) / w.sum()            # the reference energy's own error
+        energy = got.sum() / w.sum()
+        rel = float(np.sqrt(np.mean((got - w) ** 2) / np.mean(w ** 2)))
+        rows.append((rough, energy, se, rel))
+        print(f"diameter {diameter}, roughness {rough}: energy {energy:.4f} (reference +-{se:.4f}), "
+              f"relative RMSE {rel:.3f}; twin/kernel {twin.sum() / got.sum():.6f}")
+        assert twin.sum() / got.sum() == pytest.approx(1, abs=1e-4)
+    # measured: energy 0.979-1.004 (the references' own error 0.00-0.75%; the sun's highlight at
+    # roughness 0.05-0.1 covers a few pixels of 16 + 16 samples each), relative RMSE 0.001-0.094
+    for rough, energy, se, rel in rows:
+        assert abs(energy - 1) < 0.035 + 3 * se and rel < 0.2, (rough, energy, se, rel)
 
 
 @pytest.mark.parametrize("light", ["point", "directional"])

@@ -18,7 +18,9 @@ def exact(fx) -> bool:
 
 
 def shadow_rays_per_sample(scene, fx, lights) -> int:
-    """Shadow rays one G-buffer sample traces (the planned count: a miss traces none)."""
+    """Shadow rays one G-buffer sample traces (the planned count: a miss traces none; a soft
+    light's specular term traces its lobe's samples that land in the disk too, up to as many
+    again, counted as none here)."""
     if exact(fx):
         if not scene.data["effects"]["reference"]["visibility"]:
             return 0

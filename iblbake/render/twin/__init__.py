@@ -19,6 +19,6 @@ from iblbake.render.twin.surface import facing_normal, to_env, surface, material
 from iblbake.render.twin.shade import shade, specular_occlusion, ao_multibounce, lobe  # noqa: F401
 from iblbake.render.twin.gtao import gtao_noise, acos_fast, gtao, gtao_denoise  # noqa: F401
 from iblbake.render.twin.ao import ambient_occlusion  # noqa: F401
-from iblbake.render.twin.lights import representative_point, light_brdf_cos, lights  # noqa: F401
+from iblbake.render.twin.lights import representative_point, disk_specular, light_brdf_cos, lights  # noqa: F401
 from iblbake.render.twin.reference import exact  # noqa: F401
 from iblbake.render.twin.paths import radiance as path_radiance  # noqa: F401

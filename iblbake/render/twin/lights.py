@@ -30,9 +30,36 @@ def representative_point(n, v, l, sin_max, alpha):
     return np.where((sin_max > 0)[:, None], ls, l), np.where(sin_max > 0, energy, 1.0)
 
 
+def disk_specular(mt, v, n, nov, wc, omc, sin_max, ns, samplers, visible=None):
+    """Twin of kernels/lights.cl disk_specular: the specular f NoL over a light's disk or sphere per
+    unit irradiance facing it, (1 / (pi sin^2)) integral over the cone of f NoL dw, by ns samples
+    of the cone and ns of the GGX lobe's visible normals combined by the balance heuristic; sample
+    k's two pairs from samplers(k) (the cone's first, as the soft shadows'). visible(l, k, lobe)
+    the arriving share of directions l (None: all arrive)."""
+    pd = 1 / (2 * np.pi * omc)
+    acc = np.zeros((len(nov), 3))
+    for k in range(ns):
+        sp = samplers(k)
+        ud, ul = sp.next_2d(), sp.next_2d()
+        ld = _cone_direction(wc, omc, ud)
+        f, pl = bsdf.evaluate(mt, v, n, nov, ld, 1.0, False, True)
+        c = f / (pd + pl)[:, None]
+        w, ll, pll = bsdf.sample(mt, v, n, nov, 1.0, False, True, 0.0, ul)
+        inside = (((ll - wc) ** 2).sum(1) <= 2 * omc) & (w.sum(1) > 0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            share = 1 / (1 + pd / pll)       # a mirror's pdf is infinite: all of it
+        cl = np.where(inside[:, None], w * share[:, None], 0.0)
+        if visible is not None:
+            c = c * visible(ld, k, False)[:, None]
+            cl = cl * np.where(inside, visible(ll, k, True), 0.0)[:, None]
+        acc += c + cl
+    return acc / (ns * np.pi * sin_max ** 2)[:, None]
+
+
 def light_brdf_cos(base, metallic, rough, f0, f90, n, v, nov, l, diffuse: bool, specular: bool, sin_max=None):
     """Twin of kernels/lights.cl light_brdf_cos (the real-time mode's): f(v, l) NoL, per hit and
-    colour channel; with sin_max the specular term at the representative point of a light that size."""
+    colour channel; with sin_max the specular term at the representative point of a light that size
+    (a light with soft shadows: disk_specular's)."""
     nol = (n * l).sum(-1)
     out = np.zeros(l.shape[:-1] + (3,))
     if diffuse:
@@ -82,10 +109,10 @@ def light_toward(r, p):
 
 
 def lights(gb, arrays, records, effects: dict, *, diffuse=True, specular=True, exact=False, visibility=True,
-           representative=True):
+           disk=True):
     """Per-sample radiance of the `lights` pass (hits only; misses are 0): records from
     scene.pack.light_records, effects the scene's (reference seed and max_samples);
-    representative=False shades a light with a size from its centre alone (for comparison)."""
+    disk=False shades a light with a size from its centre alone (for comparison)."""
     hit = gb["hit"]
     out = np.zeros((len(hit), 3))
     v, n, nov, (base, metallic, _, rough, f0, f90) = surface(gb, arrays)
@@ -121,14 +148,24 @@ def lights(gb, arrays, records, effects: dict, *, diffuse=True, specular=True, e
             continue
         if exact:
             vis = (~occluded(origin, wc, arrays, dist)).astype(float) if visibility else np.ones(len(p))
-        elif mode == 1 or (mode == 2 and (sin_max <= 0).all()):
+            color += vis[:, None] * e * shade(wc)
+            continue
+        # real time: a point whose light's whole disk or sphere lies behind it adds nothing
+        front = (n * wc).sum(1) > -sin_max
+        soft = mode == 2 and (sin_max > 0).all()
+        sized = specular and soft and disk
+        vis = np.ones(len(p))
+        if mode == 1 or (mode == 2 and not soft):
             vis = (~occluded(origin, wc, arrays, dist)).astype(float)
-        elif mode == 2:             # soft: the share of ns rays over the disk or sphere that arrive
+        elif soft:                  # the share of ns rays over the disk or sphere that arrive
             vis = sum(~occluded(origin, _cone_direction(wc, omc, sampling.Sampler(ls, sid, k).next_2d()), arrays, dist)
                       for k in range(ns)) / ns
-        else:
-            vis = np.ones(len(p))
-        color += vis[:, None] * e * (shade(wc) if exact else light_brdf_cos(
-            base, metallic, rough, f0, f90, n, v, nov, wc, diffuse, specular, sin_max if representative else None))
+        f = light_brdf_cos(base, metallic, rough, f0, f90, n, v, nov, wc, diffuse, specular and not sized,
+                           sin_max if disk else None)
+        if sized:                   # each sample traced
+            spec = disk_specular(mt, v, n, nov, wc, omc, sin_max, ns, lambda k: sampling.Sampler(ls, sid, k),
+                                 lambda l, k, lobe: (~occluded(origin, l, arrays, dist)).astype(float))
+            color += np.where(front[:, None], e * spec, 0.0)
+        color += np.where(front[:, None], vis[:, None] * e * f, 0.0)
     out[hit] = color
     return out
