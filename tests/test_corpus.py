@@ -136,6 +136,14 @@ PART_BOUND = 0.10          # a reflection probe at a metal object's centre, each
 # Since `environment.sun: auto` lights the extracted lamps per pixel (64 px, 1024-sample references)
 # every frame is within 24% (two_storey under studio 55% -> 11%, probe_box_walls 60% -> 10%): none missed.
 FRAME_MISSES: dict = {}
+# The seams (core/metrics.py edge_over_interior: the luminance ratio to the truth on the one-pixel band
+# either side of every junction over the ratio away from them, or its inverse, whichever is larger):
+# measured at 40 px, 256-sample references, 0.95-1.08 on every interior under either panorama but
+# two_storey under city, 1.22 (its lower room's sun patch seen edge-on from the walls that meet it, which
+# the probes a third of a cell off them cannot resolve; docs/conventions.md "Junctions"). Issue 47's bright
+# lines along every wall edge read far above these.
+SEAM_BOUND = 1.15
+SEAM_MISSES: dict = {("two_storey", "city"): 1.3}
 # Read in taps (TAPS below; 64 px), no half misses now: metal_box's cube under studio was 11.4% on its
 # +x face's worst channel (its upper part, which mirrors the box's open corner, 1.46-1.58x too bright in
 # red and blue) while each tap's sky was the probe's over its open share alone: a studio lamp the probe
@@ -186,8 +194,8 @@ def absolute_study(name, panorama, panoramas, runtime, cache, term, label, extra
 @pytest.mark.parametrize("name", INTERIORS + ("thin_wall",))
 def test_default_probes_hold_each_interior_to_the_truth(name, panorama, runtime, tmp_path, panoramas):
     """Default `probes: {}` (the probe box on the walls in probe_box_walls) within REGION_BOUND
-    of the converged reference on every region, and the frame within FRAME_BOUND or its measured
-    miss in FRAME_MISSES (docs/benchmarks.md
+    of the converged reference on every region, the frame within FRAME_BOUND and its seams within
+    SEAM_BOUND, or their measured misses (docs/benchmarks.md
     "The corpus in absolute terms" has the figures: on the code of issue 47 the corridor's
     far end is 10-20x too bright, and every interior is outside one bound or the other)."""
     if not (ROOT / "examples" / "corpus" / "meshes" / "skylight_room.obj").exists():
@@ -197,8 +205,10 @@ def test_default_probes_hold_each_interior_to_the_truth(name, panorama, runtime,
     frame = max(row["relative_rmse"] ** 2 - noise ** 2, 0.0) ** 0.5
     bad = outside(row["region_absolute"], REGION_BOUND)
     bound = FRAME_MISSES.get((name, panorama), FRAME_BOUND)
-    assert not bad and frame <= bound, \
-        f"{name} under {panorama}: regions over {REGION_BOUND:.0%}: {bad}; frame {frame:.1%} (bound {bound:.0%})"
+    seam, seam_bound = row["edge_over_interior"], SEAM_MISSES.get((name, panorama), SEAM_BOUND)
+    assert not bad and frame <= bound and max(seam, 1 / seam) <= seam_bound, \
+        f"{name} under {panorama}: regions over {REGION_BOUND:.0%}: {bad}; frame {frame:.1%} (bound {bound:.0%}); " \
+        f"seams {seam:.3f} (bound {seam_bound})"
 
 
 def thin_wall_variant(folder, scale: float) -> Path:
