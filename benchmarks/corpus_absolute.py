@@ -14,7 +14,7 @@ the references are cached by content in --cache, so a second tree whose referenc
 the same reuses them:
 
     .venv/bin/python benchmarks/corpus_absolute.py [--tree DIR] [--panoramas studio,city]
-        [--max-side 64] [--max-samples 4096] [--target-noise 0.01] [--scenes corridor,l_room]
+        [--max-side 64] [--max-samples 4096] [--target-noise 0.01] [--scenes corridor,l_room,my_room.yaml]
         [--cache DIR] [--json out.json] [--rung-set KEY=VALUE ...]
 
 --rung-set puts a scene key on every real-time rung, the reference left as it is: docs/manual.md's
@@ -43,7 +43,7 @@ def study_scene(path, panorama, args, rt, bakes, root) -> dict:
 
     settings = acc.Settings(max_side=args.max_side, repeats=1, target_noise=args.target_noise,
                             max_samples=args.max_samples, flip=False)
-    pano = root / "examples" / "panoramas" / f"{panorama}.exr"
+    pano = Path(panorama) if Path(panorama).suffix else root / "examples" / "panoramas" / f"{panorama}.exr"
     sets = [f"environment.path={pano}"]
 
     def make(extra):
@@ -58,7 +58,7 @@ def study_scene(path, panorama, args, rt, bakes, root) -> dict:
     refs = {t: study.render_reference(t) for t in study.terms}
     keep = ("term", "label", "relative_rmse", "region_absolute", "worst_region_absolute", "part_absolute",
             "worst_part_absolute", "edge_over_interior", "time_s")
-    return {"scene": Path(path).stem, "panorama": panorama,
+    return {"scene": Path(path).stem, "panorama": Path(panorama).stem,
             "reference_noise": {t: refs[t]["noise"] for t in study.terms},
             "reference_spp": {t: refs[t]["samples_per_pixel"] for t in study.terms},
             "rungs": [{k: r[k] for k in keep if k in r} for r in (study.run_rung(g) for g in rungs)]}
@@ -134,8 +134,10 @@ def specular_table(results) -> str:
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--tree", default=None, help="the source tree to measure (default: this script's)")
-    ap.add_argument("--panoramas", default="studio,city")
-    ap.add_argument("--scenes", default=None, help="comma-separated names (default: every corpus scene)")
+    ap.add_argument("--panoramas", default="studio,city",
+                    help="comma-separated names of examples/panoramas/ or panorama files")
+    ap.add_argument("--scenes", default=None,
+                    help="comma-separated corpus names or scene files (default: every corpus scene)")
     ap.add_argument("--max-side", type=int, default=64)
     ap.add_argument("--max-samples", type=int, default=4096)
     ap.add_argument("--target-noise", type=float, default=0.01)
@@ -161,7 +163,12 @@ def main():
     bakes = Bakes(args.cache)
     names = args.scenes.split(",") if args.scenes else None
     corpus = root / "examples" / "corpus"
-    paths = [corpus / f"{n}.yaml" for n in names] if names else sorted(corpus.glob("*.yaml"))
+    # a name of the corpus, or a scene file of one's own (a path with a suffix): its regions judged alike
+    paths = ([Path(n) if Path(n).suffix else corpus / f"{n}.yaml" for n in names] if names
+             else sorted(corpus.glob("*.yaml")))
+    missing = [str(p) for p in paths if not p.is_file()]
+    if missing:
+        sys.exit(f"corpus_absolute.py: no scene {missing[0]} (a corpus name: {', '.join(sorted(q.stem for q in corpus.glob('*.yaml')))}; or a scene file)")
     results = []
     for path in paths:
         for pano in args.panoramas.split(","):
