@@ -63,13 +63,15 @@ def test_the_manual_lists_every_exit_code():
 
 def test_sheet_and_accuracy_name_a_missing_mesh_as_render_does(tmp_path):
     """A mesh file not made yet: `sheet` and `accuracy` ended in `internal error: FileNotFoundError`
-    (they hash the scene's files before any render); now the line render prints, key and file."""
+    (they hash the scene's files before any render); now the line render prints, key and file, with
+    the scene's line that names it (a new user's trial: every other error had one)."""
     sky = write_exr(tmp_path / "sky.exr", np.full((8, 16, 3), 0.5, np.float32))
     scene = scene_file(tmp_path, sky, objects=[{"mesh": {"path": "gone.ply"}, "material": "m"}],
                        camera={"resolution": [8, 8]})
-    line = f"{scene}: objects.0.mesh: mesh {tmp_path / 'gone.ply'} not found"
+    line = f"objects.0.mesh: mesh {tmp_path / 'gone.ply'} not found"
     p = run_cli("render", scene, "-o", tmp_path / "f.png")
-    one_line_error(p, 1, line)
+    one_line_error(p, 1, f"{scene}:", line)
+    assert re.match(rf"Error: {re.escape(str(scene))}:\d+: ", p.stderr), p.stderr     # the line naming it
     p = run_cli("sheet", scene, "-o", tmp_path / "s.png", "--columns", "effects.diffuse=sh,off",
                 "--cache", tmp_path / "c")
     one_line_error(p, 1, line)

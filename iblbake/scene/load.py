@@ -395,11 +395,11 @@ def _resolve_references(v: "_Validator", out: dict, folder: Path) -> None:
 
 def _check_mesh_files(v: "_Validator", key: str, path: str) -> None:
     """A mesh (and the buffers and images a .gltf or .glb names beside it) is a regular file within the
-    mesh limit; a missing one is the mesh loader's to report, with its own words."""
+    mesh limit; a missing one said with the line that names it (the loader's words, scene/geometry.py)."""
     from iblbake.scene.gltf import named_files
 
-    if not os.path.exists(path):
-        return
+    if not os.path.exists(path):          # not Path.exists: a name too long raised OSError
+        v.fail(key.removesuffix(".path"), f"mesh {Path(path).resolve()} not found")
     try:
         reads.check_file(path, reads.mesh_bytes(), "a mesh", reads.MESH_HINT)
         named = named_files(path)
