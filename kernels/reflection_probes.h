@@ -12,7 +12,8 @@
  * rprobe_straddle), 0: one read a lobe; w: 1 where
  * the probe has its distance chain (rprobe_hit marches against it), 0: the proxy alone.
  * The chains lie back to back in rp_chain, level l of chain c at rp_off[c rp_nlev + l] texels,
- * every level rp_lw x rp_lh.
+ * every level rp_lw x rp_lh. rp_excl, a uint per object: bit k set where probe k < RPROBE_OWN_MAX
+ * excludes it (reflection_probes.N.exclude, or objects.N.reflection_captures: false).
  * numpy twin: iblbake/render/twin/reflection_probes.py. */
 #ifndef IBLBAKE_REFLECTION_PROBES_H
 #define IBLBAKE_REFLECTION_PROBES_H
@@ -22,8 +23,9 @@
 #include "split_sum.h"
 
 #define RPROBE_PARAMS __global const float *rp_chain, __global const int *rp_off, __global const int *rp_lw, \
-                      __global const int *rp_lh, const int rp_nlev, const int rp_count, __global const float4 *rp_info
-#define RPROBE_ARGS rp_chain, rp_off, rp_lw, rp_lh, rp_nlev, rp_count, rp_info
+                      __global const int *rp_lh, const int rp_nlev, const int rp_count, __global const float4 *rp_info, \
+                      __global const uint *rp_excl
+#define RPROBE_ARGS rp_chain, rp_off, rp_lw, rp_lh, rp_nlev, rp_count, rp_info, rp_excl
 
 /* How much of probe k's capture a point takes: 1 inside its box or sphere (a room-sized box
  * covers the room's own walls and floor), falling to 0 over `blend` of each half extent (a box)
@@ -376,19 +378,37 @@ IBL_INLINE float rprobe_straddle(RPROBE_PARAMS, int k, float3 p, float3 r, float
     return edge * clamp((shift - RPROBE_NEAR) / RPROBE_STRADDLE_RISE, 0.0f, 1.0f) * rprobe_near(shift, lod, rp_nlev);
 }
 
+/* The probes a point reads among those excluding its object (own: rp_excl's bits): own where
+ * any of them holds p in its influence, else 0 (every probe, the usual blend). */
+#define RPROBE_OWN_MAX 32
+IBL_INLINE uint rprobe_own(float3 p, uint own, __global const float4 *rp_info, const int rp_count)
+{
+    for (int k = 0; k < min(rp_count, RPROBE_OWN_MAX); ++k)
+        if (((own >> k) & 1u) && rprobe_weight(p, rp_info[4 * k], rp_info[4 * k + 1], rp_info[4 * k + 2]) > 0.0f)
+            return own;
+    return 0u;
+}
+
 /* The prefiltered radiance at point p (normal n, view v) along r (world frame) at chain level lod:
  * the probes whose influence holds p, weighted (their weights normalised where they sum past 1),
  * and `distant` (the panorama's chain, scaled) for the rest. A parallax probe with taps (rp_info's
  * fourth z: N everywhere, -N at grazing views and on lobes straddling an opening's edge,
  * rprobe_grazing and rprobe_straddle) is read in that many taps over the lobe (rprobe_taps),
  * elsewhere in one read (rprobe_read). Captures hold the panorama's intensity
- * and frame. */
-IBL_INLINE float3 reflection_probes(float3 p, float3 n, float3 v, float3 r, float lod, float3 distant,
+ * and frame. A point on object obj that some probes exclude (rp_excl[obj], rprobe_own) reads,
+ * among the probes whose influence holds it, only those: each of them was captured for that object
+ * (the object is not in it), where any other shows it from outside (a new user's window room with a
+ * probe per sphere, both influences the room: the gold sphere read half the chrome's probe, in which
+ * it stands, x1.47 on its +x half). None of them holding p, or obj -1 (no object): every probe. Only
+ * probes k < RPROBE_OWN_MAX are kept in the mask: a later probe never counts as an object's own. */
+IBL_INLINE float3 reflection_probes(float3 p, float3 n, float3 v, float3 r, float lod, float3 distant, int obj,
                                     RPROBE_PARAMS, CHAIN_PARAMS, float2 env_rot, float env_scale)
 {
     float3 acc = (float3)(0.0f);
     float wsum = 0.0f;
+    const uint own = obj >= 0 ? rprobe_own(p, rp_excl[obj], rp_info, rp_count) : 0u;
     for (int k = 0; k < rp_count; ++k) {
+        if (own != 0u && (k >= RPROBE_OWN_MAX || !((own >> k) & 1u))) continue;    /* not its own probe */
         const float4 a = rp_info[4 * k], b = rp_info[4 * k + 1], c = rp_info[4 * k + 2], e = rp_info[4 * k + 3];
         const float w = rprobe_weight(p, a, b, c);
         if (w <= 0.0f) continue;

@@ -119,8 +119,8 @@ __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
         /* the local captures (world frame, the panorama's intensity in them) where they reach and
          * the lobe reflects anything (a Lambert wall of specular 0 pays no taps at grazing views) */
         if (w.x + w.y + w.z > 0.0f)
-            li = reflection_probes(gb_pos[gid].xyz, nrm, v, r, mt.roughness * (float)(rp_nlev - 1), li, RPROBE_ARGS,
-                                   CHAIN_ARGS, env_rot, env_scale);
+            li = reflection_probes(gb_pos[gid].xyz, nrm, v, r, mt.roughness * (float)(rp_nlev - 1), li,
+                                   as_int(gb_dir[gid].w), RPROBE_ARGS, CHAIN_ARGS, env_rot, env_scale);
 #endif
         color += w * li;
 #ifdef HAS_SSR

@@ -1096,3 +1096,97 @@ def test_an_influence_wholly_outside_the_scene_is_said():
     sphere["reflection_probes"][0]["radius"] = 0.4                    # 2.1..2.9 along x: beyond 2
     assert len(rp.warnings(0, {}, sphere, bounds)) == 1
     assert rp.warnings(0, {}, away, None) == []
+
+
+def two_spheres(folder, name, probes, keep=(0, 1)):
+    """A closed 4 x 3 x 4 room lit by a bright square on its -x wall; a gold sphere and a chrome one,
+    each with a probe at its centre excluding it (both influences the whole room: they overlap
+    everywhere), and a grey metal sphere no probe excludes; `keep` the probes whose influence is the
+    room, the others' a sphere of 5 cm inside their own sphere that nothing seen reads (each probe
+    keeps its number: its capture's random streams)."""
+    walls = [([0, 0, 0], [0, 1, 0]), ([0, 3, 0], [0, -1, 0]), ([-2, 1.5, 0], [1, 0, 0]), ([2, 1.5, 0], [-1, 0, 0]),
+             ([0, 1.5, -2], [0, 0, 1]), ([0, 1.5, 2], [0, 0, -1])]
+    objs = [{"plane": {"point": p, "normal": nrm, "size": 4}, "material": "wall"} for p, nrm in walls]
+    objs.append({"plane": {"point": [-1.98, 1.5, 0], "normal": [1, 0, 0], "size": 1}, "material": "lamp"})
+    objs += [{"name": "gold", "sphere": {"center": [-0.6, 0.5, 0], "radius": 0.5}, "material": "gold"},
+             {"name": "chrome", "sphere": {"center": [0.7, 0.4, -0.3], "radius": 0.4}, "material": "chrome"},
+             {"name": "third", "sphere": {"center": [0.3, 0.3, 0.9], "radius": 0.3}, "material": "grey"}]
+    black = Path(folder) / "black.exr"
+    if not black.exists():
+        images.write_exr(black, np.zeros((8, 16, 3), np.float32))
+    every = [{"position": [-0.6, 0.5, 0], "exclude": ["gold"]}, {"position": [0.7, 0.4, -0.3], "exclude": ["chrome"]}]
+    return write(folder, name, {
+        "camera": {"perspective": {"position": [0, 1.6, 1.9], "look_at": [0, 0.4, 0], "fov_y": 70},
+                   "resolution": [40, 30]},
+        "environment": {"path": str(black)},
+        "materials": {"wall": {"base_color": [0.6, 0.5, 0.4], "roughness": 1, "specular": 0},
+                      "lamp": {"base_color": [0, 0, 0], "emissive": [30, 30, 30], "specular": 0},
+                      "gold": {"base_color": [1.0, 0.78, 0.34], "metallic": 1, "roughness": 0.3},
+                      "chrome": {"base_color": [0.55, 0.56, 0.55], "metallic": 1, "roughness": 0.05},
+                      "grey": {"base_color": [0.8, 0.8, 0.8], "metallic": 1, "roughness": 0.2}},
+        "objects": objs,
+        "reflection_probes": [{**every[k], "size": 32, "samples": 2, "bounces": 1, **probes,
+                               **({"min": [-2, 0, -2], "max": [2, 3, 2]} if k in keep else
+                                  {"shape": "sphere", "radius": 0.05, "blend": 0})} for k in (0, 1)],
+        "effects": {"diffuse": "off", "specular": "prefiltered"}})
+
+
+@pytest.mark.parametrize("probes", [{}, {"taps": 8}])
+def test_an_object_a_probe_excludes_reads_that_probe_alone(tmp_path, rt, probes):
+    """Two probes whose influences overlap everywhere, each at a sphere excluding it: each sphere
+    reads its own probe alone (its frame equals that with the other probe removed, to float
+    rounding), where the blend read half of the other's capture, in which it stands (a new user's
+    window room: gold x1.47 on a half); the third sphere, excluded by none, still blends both. The
+    frame against the shade pass's twin on its G-buffer, over the lamp's 30 (measured 3.5e-6 one read,
+    3.2e-6 in taps: the chrome's sharp lobe on the lamp's edge)."""
+    from iblbake.render import twin as rr
+    from iblbake.render.lightmaps.read import hit_objects
+
+    bakes = Bakes(tmp_path / "cache")
+    sc = two_spheres(tmp_path, "both", probes)
+    frame = render(sc, runtime=rt, cache=bakes).hdr[..., :3].reshape(-1, 3)
+    alone = [render(two_spheres(tmp_path, f"only{k}", probes, (k,)), runtime=rt, cache=bakes).hdr[..., :3]
+             .reshape(-1, 3) for k in (0, 1)]
+    arrays = pack.scene_arrays(sc)
+    gb = rr.primary(sc["camera"], arrays)
+    obj = hit_objects(gb, arrays)
+    gold, chrome, third = (obj == 7), (obj == 8), (obj == 9)
+    assert gold.sum() > 50 and chrome.sum() > 30 and third.sum() > 20
+    for own, mine in ((gold, alone[0]), (chrome, alone[1])):
+        assert np.abs(frame[own] - mine[own]).max() / mine[own].max() < 1e-5
+    for other in alone:                              # the third sphere reads both probes, 50/50
+        assert np.abs(frame[third] - other[third]).max() / frame[third].max() > 0.02
+    env_sha = bakes.environment(sc.data["environment"])[1].sha256
+    distant = next(v[0] for k, v in bakes.held("prefiltered").items() if k[1] == env_sha)
+    captured = bakes.load("reflection_probes", BakeContext(sc, rt, bakes))[0]
+    assert [c["excluded"] for c in captured] == [[7], [8]]
+    hit = gb["hit"]
+    want = rr.shade(gb, arrays, sc["effects"], sc["environment"], prefiltered=distant, dfg=bakes.result("dfg"),
+                    reflection_probes=captured)[hit]
+    assert np.abs(frame[hit] - want).max() / want.max() < 1e-5
+    blended = rr.shade(gb, arrays, sc["effects"], sc["environment"], prefiltered=distant, dfg=bakes.result("dfg"),
+                       reflection_probes=[{**c, "excluded": []} for c in captured])[hit]
+    for own in (gold[hit], chrome[hit]):           # the rule changed what each sphere reads
+        assert np.abs(blended[own] - want[own]).max() / want[own].max() > 0.02
+
+
+def test_an_objects_own_probes_are_the_first_32():
+    """rp_excl keeps the bits of probes 0..31 (kernels/reflection_probes.h RPROBE_OWN_MAX); a scene
+    with more probes that excludes objects is told the rule uses the first 32; a point whose own
+    probes do not hold it blends every probe."""
+    from iblbake.render import reflection_probes as rp
+    from iblbake.render.twin import reflection_probes as rpt
+
+    captured = [{"excluded": [1]}] * 31 + [{"excluded": [0, 1]}, {"excluded": [0]}]
+    masks = rpt.own_masks(captured, 3)
+    assert masks.tolist() == [1 << 31, (1 << 32) - 1, 0]
+    room = {"shape": "box", "min": [-1, -1, -1], "max": [1, 1, 1], "blend": 0, "position": [0, 0, 0]}
+    away = {**room, "min": [4, 4, 4], "max": [5, 5, 5], "position": [4.5, 4.5, 4.5]}
+    p = np.zeros((2, 3))
+    got = rpt.own([{"settings": away}, {"settings": room}], p, np.array([1, 2], np.uint32))
+    assert got.tolist() == [0, 2]
+    data = {"reflection_probes": [{"position": [0, 0, 0], "exclude_ids": [0]}] * 33, "objects": []}
+    said = [w for k in range(33) for w in rp.warnings(k, {}, data)]
+    assert len(said) == 1 and "among the first 32" in said[0], said
+    data["reflection_probes"] = [{"position": [0, 0, 0], "exclude_ids": []}] * 33
+    assert [w for k in range(33) for w in rp.warnings(k, {}, data)] == []

@@ -16,6 +16,7 @@ from iblbake.core import conventions, sampling
 from iblbake.render.paths.rays import TexelRays
 from iblbake.render.paths.trace import trace
 from iblbake.render.paths.tracer import Tracer
+from iblbake.render.twin.reflection_probes import OWN_MAX
 
 
 def capture_directions(size: int, samples: int) -> np.ndarray:
@@ -129,6 +130,11 @@ def warnings(k: int, report: dict, scene_data: dict, bounds=None) -> list:
             out.append(f"reflection_probes.{k}: its influence {plain(lo)}..{plain(hi)} lies wholly outside the "
                        f"scene's bounds {plain(bounds[0])}..{plain(bounds[1])}: no surface reads it (the distant "
                        f"panorama instead); move reflection_probes.{k} over the part of the scene the camera sees")
+    probes = scene_data["reflection_probes"]
+    if k == OWN_MAX and any(p.get("exclude_ids") for p in probes):
+        out.append(f"reflection_probes: {len(probes)} probes and some exclude objects: an object reads only the "
+                   f"probes excluding it among the first {OWN_MAX} (kernels/reflection_probes.h "
+                   f"RPROBE_OWN_MAX); reflection_probes.{OWN_MAX} and later blend as probes of other objects")
     return out
 
 

@@ -544,7 +544,7 @@ class ReflectionProbes(Unit):
             depth = job.bakes._get(("reflection-depth", key, proxy), lambda: rp.depth_levels(
                 image[..., 7], settings, [lv.shape[:2] for lv in levels]))
             out.append({"settings": settings, "levels": levels, "coverage": coverage, "sky": sky, "depth": depth,
-                        "capture": image})
+                        "capture": image, "excluded": rp.excluded(job.scene.data, settings)})
             cached_all = cached_all and cached
             rays += 2 * settings["size"] ** 2 * settings["samples"] if traced else 0
         return out, cached_all, {"probes": len(out), "rays_traced": rays}

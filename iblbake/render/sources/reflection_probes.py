@@ -7,9 +7,9 @@ import numpy as np
 
 from iblbake.errors import IblbakeError
 from iblbake.render.sources.base import Source
-from iblbake.render.twin.reflection_probes import marches
+from iblbake.render.twin.reflection_probes import marches, own_masks
 
-PARAMS = ("rp_chain", "rp_off", "rp_lw", "rp_lh", "rp_nlev", "rp_count", "rp_info")
+PARAMS = ("rp_chain", "rp_off", "rp_lw", "rp_lh", "rp_nlev", "rp_count", "rp_info", "rp_excl")
 
 
 def reflects_locally(scene, fx) -> bool:
@@ -34,19 +34,21 @@ class ReflectionProbes(Source):
         return ["reflection_probes"]
 
     def args(self, ctx):
-        return rprobe_args(ctx.rt, ctx.loaded["reflection_probes"], ctx.bakes)
+        return rprobe_args(ctx.rt, ctx.loaded["reflection_probes"], ctx.bakes, len(ctx.scene.data["objects"]))
 
     def placeholders(self, rt):
         return rprobe_args(rt, None)
 
 
-def rprobe_args(rt, captured, bakes=None) -> dict:
+def rprobe_args(rt, captured, bakes=None, nobj: int = 0) -> dict:
     """RPROBE_PARAMS of the reflection probes' chains (the reflection_probes unit, render/units.py), placeholders
-    without them. Every probe's chain has the same level sizes (one capture size and prefilter)."""
+    without them. Every probe's chain has the same level sizes (one capture size and prefilter). rp_excl: the
+    probes excluding each of the scene's nobj objects (own_masks)."""
     zf, zi = rt.to_device(np.zeros(4, np.float32)), rt.to_device(np.zeros(4, np.int32))
     if not captured:
         return {"rp_chain": zf, "rp_off": zi, "rp_lw": zi, "rp_lh": zi, "rp_nlev": 1, "rp_count": 0,
-                "rp_info": rt.to_device(np.zeros((4, 4), np.float32))}
+                "rp_info": rt.to_device(np.zeros((4, 4), np.float32)),
+                "rp_excl": rt.to_device(np.zeros(4, np.uint32))}
     sizes = [[lv.shape[:2] for lv in c["levels"]] for c in captured]
     if any(s != sizes[0] for s in sizes):
         raise IblbakeError("reflection_probes: every probe needs the same size (their chains share one table)")
@@ -63,7 +65,8 @@ def rprobe_args(rt, captured, bakes=None) -> dict:
     # the settings each frame's own: probes of other settings (blend, box, taps) can share chains of
     # the same content, and with them the memo's upload
     return {"rp_chain": chain, "rp_off": off, "rp_lw": lw, "rp_lh": lh, "rp_nlev": len(sizes[0]),
-            "rp_count": len(captured), "rp_info": rt.to_device(rprobe_info(captured))}
+            "rp_count": len(captured), "rp_info": rt.to_device(rprobe_info(captured)),
+            "rp_excl": rt.to_device(own_masks(captured, nobj))}
 
 
 def probe_chains(c: dict) -> tuple:

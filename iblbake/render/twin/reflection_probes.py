@@ -268,19 +268,45 @@ def straddle(c: dict, p, r, lod):
     return edge * np.clip((shift - NEAR) / STRADDLE_RISE, 0.0, 1.0) * near(c, shift, lod)
 
 
-def blend(captured: list, p, r, lod, distant, env, lobe):
+OWN_MAX = 32      # kernels/reflection_probes.h RPROBE_OWN_MAX
+
+
+def own_masks(captured: list, nobj: int) -> np.ndarray:
+    """rp_excl (kernels/reflection_probes.h): per object, bit k where probe k < OWN_MAX excludes it
+    (capture k's `excluded`: render/reflection_probes.py excluded); later probes are not kept."""
+    masks = np.zeros(max(nobj, 1), np.uint32)
+    for k, c in enumerate(captured[:OWN_MAX]):
+        for i in c.get("excluded") or ():
+            if i < len(masks):
+                masks[i] |= np.uint32(1 << k)
+    return masks
+
+
+def own(captured: list, p, masks):
+    """Twin of rprobe_own: each point's mask where a probe in it holds the point, else 0."""
+    held = np.zeros(len(p), bool)
+    for k, c in enumerate(captured[:OWN_MAX]):
+        held |= ((masks >> np.uint32(k)) & 1).astype(bool) & (weight(c["settings"], p) > 0)
+    return np.where(held, masks, np.uint32(0)).astype(np.uint32)
+
+
+def blend(captured: list, p, r, lod, distant, env, lobe, masks=None):
     """Twin of reflection_probes: captured [{settings, levels, coverage, sky, depth (optional: the
     distance chain, rprobe_hit)}], distant the scaled distant chain's radiance at (p, r) (m, 3),
     which takes the share no probe's influence holds; env (the distant chain, its rotation, its
     intensity) and lobe (n, v) for a probe read in taps (everywhere, or at grazing views and on
-    lobes straddling an opening's edge: grazing, straddle)."""
+    lobes straddling an opening's edge: grazing, straddle). masks: each point's rp_excl of its
+    object (own_masks; None: 0): a point reads only the probes excluding its object where any of
+    them holds it (own)."""
     acc = np.zeros_like(distant)
     wsum = np.zeros(len(p))
     lod = np.broadcast_to(np.asarray(lod, np.float64), (len(p),))
     nov = (lobe[0] * lobe[1]).sum(-1) if lobe is not None else np.ones(len(p))     # no lobe: no taps
-    for c in captured:
+    mine = own(captured, p, np.asarray(masks, np.uint32)) if masks is not None else np.zeros(len(p), np.uint32)
+    for k, c in enumerate(captured):
         st = c["settings"]
-        w = weight(st, p)
+        kept = (mine == 0) | (((mine >> np.uint32(min(k, 31))) & 1).astype(bool) & (k < OWN_MAX))
+        w = np.where(kept, weight(st, p), 0.0)
         wsum += w
         g = grazing(st, nov)
         if lobe is not None and st["parallax"] and not st.get("taps") and st.get("grazing_taps"):

@@ -96,8 +96,11 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
         lit = w.sum(1) > 0                                              # what reflects: probes read there
         if reflection_probes and lit.any():
             nlev = len(reflection_probes[0]["levels"])
+            from iblbake.render.lightmaps.read import hit_objects
+            obj = hit_objects(gb, arrays)[hit][lit]
+            masks = rp_twin.own_masks(reflection_probes, int(obj.max()) + 1)[obj]
             li[lit] = rp_twin.blend(reflection_probes, gb["pos"][hit][lit], r[lit], rough[lit] * (nlev - 1), li[lit],
-                                    (prefiltered, rot, scale), (n[lit], v[lit]))
+                                    (prefiltered, rot, scale), (n[lit], v[lit]), masks)
         color += w * li
         if ssr_out is not None:
             ssr_out["w"] = w * material_occlusion(gb)[:, None]
