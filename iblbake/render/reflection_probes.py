@@ -38,7 +38,8 @@ def capture_directions(size: int, samples: int) -> np.ndarray:
 # a probe's settings that only its reading takes (kernels/reflection_probes.h: the lobe's taps, the
 # influence, its fade and its parallax proxy), out of its capture's key: changing them re-reads the
 # capture, never re-traces it (each frame reads its own: sources/reflection_probes.py rprobe_info)
-READ_KEYS = ("taps", "grazing_taps", "blend", "parallax", "shape", "min", "max", "radius")
+PROXY_KEYS = ("shape", "min", "max", "radius")        # the influence and parallax proxy: box or sphere
+READ_KEYS = ("taps", "grazing_taps", "blend", "parallax", *PROXY_KEYS)
 
 
 def capture_settings(settings: dict) -> dict:

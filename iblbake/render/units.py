@@ -540,7 +540,7 @@ class ReflectionProbes(Unit):
             levels, coverage, sky = chains
             # held by the memo as the chains are: the same arrays each frame, uploaded once; over the
             # probe's proxy, which the capture's key lacks
-            proxy = tuple(str(settings.get(n)) for n in ("shape", "min", "max", "radius"))
+            proxy = tuple(str(settings.get(n)) for n in rp.PROXY_KEYS)
             depth = job.bakes._get(("reflection-depth", key, proxy), lambda: rp.depth_levels(
                 image[..., 7], settings, [lv.shape[:2] for lv in levels]))
             out.append({"settings": settings, "levels": levels, "coverage": coverage, "sky": sky, "depth": depth,
