@@ -20,8 +20,9 @@ ADDS_UP = 0.25
 # the replay (shading with every ray answered from the record) plus the rays traced alone, against
 # the whole launch: the parts run apart re-read what the whole launch shares between shading and
 # traversal (the BVH, the record), so they come to more: measured 1.15-1.18 on the mesh with
-# lights on a quiet machine, 1.26 with another job on the second core
-REPLAY_ADDS_UP = 0.45
+# lights on a quiet machine, 1.26 with another job on the second core, 1.28 in CI, 1.49-1.59 at rest
+# on a later host of the same kind (the rays alone gather from the record: memory-bound, host-bound)
+REPLAY_ADDS_UP = 0.75
 
 
 def box(folder, env, bounces, *, size=(32, 24), samples=16, lights=None, name="box"):
@@ -47,10 +48,15 @@ def box(folder, env, bounces, *, size=(32, 24), samples=16, lights=None, name="b
 def check_profile(pr, bounces):
     """What every profile holds: an entry per bounce, each part positive, the parts adding up."""
     want = list(range(1, bounces + 1))
+    excess = max(pr["replay_and_traversal_over_whole"] - 1, 0) * pr["whole_ms"]
     assert [e["bounce"] for e in pr["per_bounce"]] == want
     assert pr["samples"] == pr["gbuffer_samples"] * pr["batch"]
     for e in pr["per_bounce"]:
-        assert e["ms"] > 0 and e["shading_ms"] > 0, e
+        # a bounce's shading is its launch's share less its rays traced alone, and the rays alone
+        # cost more than inside the whole launch (the replay's check below): a late bounce's
+        # shading may fall below zero by that excess (measured -1.3 to -4.8 ms on the mesh's third
+        # bounce, its rays alone 11-12 ms, the excess 15-38 ms)
+        assert e["ms"] > 0 and e["shading_ms"] > -excess, e
         assert e["traversal_shadow_ms"] > 0 and e["shadow_rays_per_sample"] > 0, e
         assert (e["traversal_closest_ms"] > 0) == (e["closest_rays_per_sample"] > 0), e
         assert e["msamples_per_s"] > 0
@@ -58,6 +64,7 @@ def check_profile(pr, bounces):
     # a path reaches a vertex only through the one before (each bounce at most the previous one's rays)
     per = [e["closest_rays_per_sample"] for e in pr["per_bounce"]]
     assert 0 < per[0] <= 1 and all(b <= a for a, b in zip(per, per[1:])), per
+    assert sum(e["shading_ms"] for e in pr["per_bounce"]) > 0
     total = sum(e["shading_ms"] + e["traversal_closest_ms"] + e["traversal_shadow_ms"] for e in pr["per_bounce"])
     assert abs(total / pr["whole_ms"] - 1) < ADDS_UP
     assert abs(pr["per_bounce_over_whole"] - 1) < ADDS_UP
