@@ -119,18 +119,31 @@ IBL_INLINE float3 rprobe_hit(RPROBE_PARAMS, int k, float3 p, float3 r)
     return x;
 }
 
+/* The probes a point reads among those excluding its object (own: rp_excl's bits): own where
+ * any of them holds p in its influence, else 0 (every probe, the usual blend). */
+#define RPROBE_OWN_MAX 32
+IBL_INLINE uint rprobe_own(float3 p, uint own, __global const float4 *rp_info, const int rp_count)
+{
+    for (int k = 0; k < min(rp_count, RPROBE_OWN_MAX); ++k)
+        if (((own >> k) & 1u) && rprobe_weight(p, rp_info[4 * k], rp_info[4 * k + 1], rp_info[4 * k + 2]) > 0.0f)
+            return own;
+    return 0u;
+}
+
 /* How much of the reflection along p + t r that meets the scene at x the probes at p already hold,
  * for a lobe of GGX alpha: the influence-weighted share of parallax probes whose proxy the ray
  * leaves within 3% of its travel from x (a wall or floor on the proxy: the capture, read with
  * parallax, shows that very point), to the capture's resolution (a lobe narrower than its texel,
  * a mirror's, sees more of the frame than of it). Screen-space reflections defer to them there and
- * add what lies off every proxy. */
-IBL_INLINE float reflection_probes_hold(float3 p, float3 r, float3 x, float alpha, __global const float4 *rp_info,
-                                    const int rp_count)
+ * add what lies off every proxy. own (rprobe_own): the probes the point reads, as reflection_probes
+ * reads them (an object that some probes exclude: only those). */
+IBL_INLINE float reflection_probes_hold(float3 p, float3 r, float3 x, float alpha, uint own,
+                                    __global const float4 *rp_info, const int rp_count)
 {
     float held = 0.0f, wsum = 0.0f;
     const float travel = distance(p, x);
     for (int k = 0; k < rp_count; ++k) {
+        if (own != 0u && (k >= RPROBE_OWN_MAX || !((own >> k) & 1u))) continue;    /* not its own probe */
         const float4 a = rp_info[4 * k], b = rp_info[4 * k + 1], c = rp_info[4 * k + 2], e = rp_info[4 * k + 3];
         const float w = rprobe_weight(p, a, b, c);
         if (w <= 0.0f) continue;
@@ -376,17 +389,6 @@ IBL_INLINE float rprobe_straddle(RPROBE_PARAMS, int k, float3 p, float3 r, float
     if (edge <= 0.0f) return 0.0f;
     const float shift = distance(p, a.xyz) / fmax(distance(rprobe_exit(p, r, a, b, c), a.xyz), 1e-6f);
     return edge * clamp((shift - RPROBE_NEAR) / RPROBE_STRADDLE_RISE, 0.0f, 1.0f) * rprobe_near(shift, lod, rp_nlev);
-}
-
-/* The probes a point reads among those excluding its object (own: rp_excl's bits): own where
- * any of them holds p in its influence, else 0 (every probe, the usual blend). */
-#define RPROBE_OWN_MAX 32
-IBL_INLINE uint rprobe_own(float3 p, uint own, __global const float4 *rp_info, const int rp_count)
-{
-    for (int k = 0; k < min(rp_count, RPROBE_OWN_MAX); ++k)
-        if (((own >> k) & 1u) && rprobe_weight(p, rp_info[4 * k], rp_info[4 * k + 1], rp_info[4 * k + 2]) > 0.0f)
-            return own;
-    return 0u;
 }
 
 /* The prefiltered radiance at point p (normal n, view v) along r (world frame) at chain level lod:

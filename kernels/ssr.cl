@@ -15,7 +15,7 @@
  * Everything the rays read is the whole frame's (ssr_pix, gathered from every tile before the
  * march), so a tiled frame gives the same pixels.
  *   ssr_gather   per tile pixel: its first sample's position and view depth, normal and roughness,
- *                lit radiance (of the samples on its plane; ssr_pix, 3 float4 a pixel)
+ *                lit radiance (of the samples on its plane) and object (ssr_pix, 3 float4 a pixel)
  *   ssr_depth    Hi-Z level 0 (+inf: nothing); ssr_reduce level k + 1: the min of each 2 x 2
  *   ssr_trace    per pixel: its rays, marched and validated, into (H, C) (ssr_hit)
  *   ssr_resolve  per pixel: the weighted mean of (H, C) over its neighbours (ssr_res)
@@ -54,7 +54,7 @@ __kernel void ssr_gather(__global const float4 *gb_pos, SURFACE_PARAMS, __consta
     if (p.w == MISS_T) {
         ssr_pix[3 * px] = (float4)(0.0f, 0.0f, 0.0f, INFINITY);
         ssr_pix[3 * px + 1] = (float4)(0.0f, 0.0f, 1.0f, 2.0f);
-        ssr_pix[3 * px + 2] = (float4)(0.0f);
+        ssr_pix[3 * px + 2] = (float4)(0.0f, 0.0f, 0.0f, as_float(-1));
         return;
     }
     Material mt;
@@ -72,7 +72,7 @@ __kernel void ssr_gather(__global const float4 *gb_pos, SURFACE_PARAMS, __consta
         sum += radiance[gid + j].xyz;
         ++k;
     }
-    ssr_pix[3 * px + 2] = (float4)(sum / (float)k, 1.0f);
+    ssr_pix[3 * px + 2] = (float4)(sum / (float)k, gb_dir[gid].w);     /* w: the object's index's bits */
 }
 
 __kernel void ssr_depth(__global const float4 *ssr_pix, const int npix, __global float *ssr_hiz)
@@ -198,7 +198,7 @@ __kernel void ssr_trace(__global const float4 *ssr_pix, __constant float4 *cam, 
                         __global const float *ssr_hiz, __global const int *hiz_off, const int nlev,
                         __global float4 *ssr_hit, const float max_roughness, const float thickness, const int steps,
                         const int rays, const float ray_length, const uint seed, __global const float4 *rp_info,
-                        const int rp_count, const int defer_to_probes)
+                        const int rp_count, __global const uint *rp_excl, const int defer_to_probes)
 {
     const int px = get_global_id(0);
     if (px >= width * height) return;
@@ -215,6 +215,10 @@ __kernel void ssr_trace(__global const float4 *ssr_pix, __constant float4 *cam, 
     /* fades: towards max_roughness (its last fifth) and within 5% of the screen's edges */
     const float fade_r = clamp((max_roughness - nr.w) / (0.2f * max_roughness), 0.0f, 1.0f);
     const int count = ssr_ray_count(nr.w, max_roughness, rays);
+#ifdef HAS_REFLECTION_PROBES
+    const int obj = as_int(ssr_pix[3 * px + 2].w);
+    const uint own = obj >= 0 ? rprobe_own(p, rp_excl[obj], rp_info, rp_count) : 0u;
+#endif
     float3 sum = (float3)(0.0f);
     float csum = 0.0f;
     for (int k = 0; k < count; ++k) {
@@ -241,7 +245,7 @@ __kernel void ssr_trace(__global const float4 *ssr_pix, __constant float4 *cam, 
         const float fade_e = clamp(fmin(fmin(ex, 1.0f - ex), fmin(ey, 1.0f - ey)) / 0.05f, 0.0f, 1.0f);
         float f = conf * fade_r * fade_e;
 #ifdef HAS_REFLECTION_PROBES
-        if (defer_to_probes) f *= 1.0f - reflection_probes_hold(p0, l, x, alpha, rp_info, rp_count);
+        if (defer_to_probes) f *= 1.0f - reflection_probes_hold(p0, l, x, alpha, own, rp_info, rp_count);
 #endif
         sum += f * ssr_pix[3 * hit + 2].xyz;
         csum += f;

@@ -163,9 +163,13 @@ def mirror_ball(folder, ortho=False, spp=1, probe=False, roughness=0.0, name="ba
         "materials": {"mirror": {"base_color": [1, 1, 1], "metallic": 1, "roughness": roughness},
                       "glow": {"base_color": [0, 0, 0], "emissive": [0.6, 0.3, 0.15], "specular": 0}},
         "objects": [{"sphere": {"center": [0, 0.8, 0], "radius": 0.6}, "material": "mirror", "name": "ball"},
-                    {"plane": {"point": [0, 0, 0], "size": [8, 8]}, "material": "glow"}],
+                    {"plane": {"point": [0, 0, 0], "size": [8, 8]}, "material": "glow", "name": "floor"}],
         "reflection_probes": [{"position": [0, 0.8, 0], "min": [-4, 0, -4], "max": [4, 4, 4], "size": 32,
-                               "samples": 4, "exclude": ["ball"]}] if probe else [],
+                               "samples": 4, "exclude": ["ball"] + ["floor"] * (probe == "own")}] * bool(probe)
+        # a second probe holding the ball, a smaller proxy: the ball's pixels defer to their own alone
+        # (which, blind to the floor, tells deferring to it from deferring to both)
+        + [{"position": [0.3, 1.6, 0.8], "min": [-1, 0, -1], "max": [1, 2, 1.5], "size": 32,
+            "samples": 4}] * (probe == "own"),
         "effects": {"diffuse": "off", "specular": "prefiltered", "ssr": "on"}})
 
 
@@ -211,17 +215,18 @@ def test_a_curved_mirror_shows_the_floor_it_reflects(tmp_path, rt, ortho):
     assert np.abs(off.hdr[..., :3].reshape(-1, 3)[sel]).max() < 1e-6
 
 
-@pytest.mark.parametrize("case", ["orthographic", "spp 4", "reflection probe", "rough"])
-def test_more_frames_match_the_twin(tmp_path, rt, case):
+@pytest.mark.parametrize("case", ["orthographic", "spp 4", "reflection probe", "own probe", "rough"])
+def test_more_frames_match_the_twin(tmp_path, rt, case, monkeypatch):
     """The frame against the twin's shade and SSR (the march, the plane test, the resolve) on its
     G-buffer with the same bakes, in the configurations the mirror wall does not reach: an
     orthographic camera, several samples per pixel, a reflection probe whose proxy the rays defer
-    to, a rough mirror (the resolve's neighbours): 99% of the hit samples within 1e-4 of the
+    to (and two probes, the ball's pixels deferring to their own alone), a rough mirror (the
+    resolve's neighbours): 99% of the hit samples within 1e-4 of the
     brightest (float32 through the march; a ray grazing a depth edge may hit on one side only)."""
     from iblbake.render import twin as rr
     from iblbake.render.twin import ssr as ssr_twin
     kw = {"orthographic": {"ortho": True}, "spp 4": {"spp": 4}, "reflection probe": {"probe": True},
-          "rough": {"roughness": 0.3}}[case]
+          "own probe": {"probe": "own", "roughness": 0.3}, "rough": {"roughness": 0.3}}[case]
     sc = mirror_ball(tmp_path, name=case.replace(" ", "_"), **kw)
     bakes = Bakes(tmp_path / "cache")
     frame = render(sc, runtime=rt, cache=bakes)
@@ -241,9 +246,18 @@ def test_more_frames_match_the_twin(tmp_path, rt, case):
     got = frame.hdr[..., :3].reshape(-1, 3)
     hit = gb["hit"].reshape(h * w, spp).all(1)
     changed = np.abs(got - src.reshape(h * w, spp, 3).mean(1)).max(1) > 1e-3
-    assert changed[hit].mean() > 0.05 or case == "reflection probe"      # SSR changed some to compare
+    assert changed[hit].mean() > 0.05 or "probe" in case      # SSR changed some to compare
     close = np.abs(got - want_px).max(1)[hit] <= 1e-4 * want_px.max()
     assert close.mean() > 0.99, close.mean()
+    if case == "own probe":
+        # deferring to every probe holding the ball (the second one's smaller proxy) is another frame
+        with monkeypatch.context() as m:
+            m.setattr(ssr_twin.rp_twin, "own", lambda c, p, masks: np.zeros(len(p), np.uint32))
+            every = ssr_twin.ssr(gb, arrays, sc["effects"], sc["camera"], src, out["w"], out["li"], captured)
+        every_px = every.reshape(h * w, spp, 3).mean(1)
+        apart = (np.abs(every_px - want_px).max(1) > 1e-2 * want_px.max()) & hit
+        assert apart.sum() >= 20, apart.sum()
+        assert (np.abs(got - want_px).max(1)[apart] <= 1e-4 * want_px.max()).mean() > 0.95
 
 
 def scaled_wall(folder, sky, s, name, ssr_settings=None):

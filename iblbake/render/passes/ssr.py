@@ -48,13 +48,13 @@ class ScreenSpaceReflections(Pass):
     name = "ssr"
     kernel = "ssr.cl"
     params = ("max_roughness", "thickness", "steps", "rays", "ray_length", "seed", "rp_info", "rp_count",
-              "defer_to_probes", "hiz_off", "nlev",
+              "rp_excl", "defer_to_probes", "hiz_off", "nlev",
               "src", "sw", "sh", "dst", "dw", "dh")
     functions = ("ssr_gather", "ssr_depth", "ssr_reduce", "ssr_trace", "ssr_resolve")
     whole_frame = True
     keeps = Traced
     # per pixel of the whole frame: its first sample's position and depth, normal and roughness, lit
-    # radiance (3 float4); the depth pyramid; each pixel's traced and resolved reflection
+    # radiance and object (3 float4); the depth pyramid; each pixel's traced and resolved reflection
     buffers = (Buffer("radiance"), Buffer("ssr_pix", per="frame", count=lambda d: 3 * _pixels(d)),
                Buffer("ssr_hiz", "float", per="frame", count=_hiz_floats),
                Buffer("ssr_hit", per="frame", count=_pixels), Buffer("ssr_res", per="frame", count=_pixels))
@@ -70,11 +70,11 @@ class ScreenSpaceReflections(Pass):
 
     def setup(self, ctx) -> dict:
         s = ctx.scene.data["effects"]["ssr_settings"]
-        rp = rprobe_args(ctx.rt, ctx.loaded.get("reflection_probes"), ctx.bakes)
+        rp = rprobe_args(ctx.rt, ctx.loaded.get("reflection_probes"), ctx.bakes, len(ctx.scene.data["objects"]))
         lengths = march_lengths(s, ctx.arrays, ctx.scene.data["camera"])
         return {"max_roughness": s["max_roughness"], "thickness": lengths["thickness"], "steps": s["steps"],
                 "rays": s["rays"], "ray_length": lengths["ray_length"], "seed": s["seed"], "rp_info": rp["rp_info"],
-                "rp_count": rp["rp_count"], "defer_to_probes": int(s["defer_to_probes"])}
+                "rp_count": rp["rp_count"], "rp_excl": rp["rp_excl"], "defer_to_probes": int(s["defer_to_probes"])}
 
     def gather(self, ctx):
         """This tile's first samples into the frame's ssr_pix."""
@@ -91,7 +91,7 @@ class ScreenSpaceReflections(Pass):
             ctx.launch(self, (dw * dh,), "ssr_reduce", src=so, sw=sw, sh=sh, dst=do, dw=dw, dh=dh)
         ctx.launch(self, (w * h,), "ssr_trace", hiz_off=off, nlev=len(levels), **{k: a[k] for k in (
             "max_roughness", "thickness", "steps", "rays", "ray_length", "seed", "rp_info", "rp_count",
-            "defer_to_probes")})
+            "rp_excl", "defer_to_probes")})
         ctx.launch(self, (w * h,), "ssr_resolve", max_roughness=a["max_roughness"])
         traced = self.kept(ctx)
         traced.gathered, traced.levels = True, len(levels)

@@ -290,6 +290,11 @@ def own(captured: list, p, masks):
     return np.where(held, masks, np.uint32(0)).astype(np.uint32)
 
 
+def kept(mine, k: int):
+    """Whether probe k counts for points whose own probes are mine (own): all where 0."""
+    return (mine == 0) | (((mine >> np.uint32(min(k, OWN_MAX - 1))) & 1).astype(bool) & (k < OWN_MAX))
+
+
 def blend(captured: list, p, r, lod, distant, env, lobe, masks=None):
     """Twin of reflection_probes: captured [{settings, levels, coverage, sky, depth (optional: the
     distance chain, rprobe_hit)}], distant the scaled distant chain's radiance at (p, r) (m, 3),
@@ -305,8 +310,7 @@ def blend(captured: list, p, r, lod, distant, env, lobe, masks=None):
     mine = own(captured, p, np.asarray(masks, np.uint32)) if masks is not None else np.zeros(len(p), np.uint32)
     for k, c in enumerate(captured):
         st = c["settings"]
-        kept = (mine == 0) | (((mine >> np.uint32(min(k, 31))) & 1).astype(bool) & (k < OWN_MAX))
-        w = np.where(kept, weight(st, p), 0.0)
+        w = np.where(kept(mine, k), weight(st, p), 0.0)
         wsum += w
         g = grazing(st, nov)
         if lobe is not None and st["parallax"] and not st.get("taps") and st.get("grazing_taps"):

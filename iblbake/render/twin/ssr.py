@@ -32,7 +32,8 @@ RESOLVE_RADIUS = 3            # kernels/ssr.cl SSR_RESOLVE_RADIUS
 
 def gather(cam: dict, gb, arrays, src):
     """Twin of ssr_gather: per pixel its first sample's (position, view depth: +inf nothing),
-    (normal, roughness), lit radiance."""
+    (normal, roughness), lit radiance, object (-1 nothing)."""
+    from iblbake.render.lightmaps.read import hit_objects
     w, h = cam["resolution"]
     spp = cam["spp"]
     first = np.arange(w * h) * spp
@@ -49,7 +50,7 @@ def gather(cam: dict, gb, arrays, src):
     z[hit] = project(cam, pos[hit])[:, 2]
     nrm[hit] = n[rows[k]]
     r[hit] = rough[rows[k]]
-    pix = {"pos": pos, "z": z, "n": nrm, "rough": r, "lit": lit}
+    pix = {"pos": pos, "z": z, "n": nrm, "rough": r, "lit": lit, "obj": hit_objects(gb, arrays)[first]}
     # the lit radiance: the mean over the pixel's samples on the first one's plane
     k = np.nonzero(gb["hit"])[0]
     on = k[on_plane(gb, pix, k // spp, k)]
@@ -174,15 +175,17 @@ def depth_at(z0, z1, t, ortho):
     return z0 + (z1 - z0) * t if ortho else 1 / (1 / z0 + (1 / z1 - 1 / z0) * t)
 
 
-def held(captured, p, r, x, alpha):
+def held(captured, p, r, x, alpha, mine=None):
     """Twin of reflection_probes_hold: the share of the reflection along p + t r meeting x that the
     parallax probes at p hold (their proxy left within 3% of the travel from x), for lobes of GGX
-    alpha, to each capture's resolution."""
+    alpha, to each capture's resolution. mine: each point's own probes (rp_twin.own; None: every
+    probe), as the reading weighs them."""
     out, wsum = np.zeros(len(p)), np.zeros(len(p))
     travel = np.linalg.norm(x - p, axis=1)
-    for c in captured or []:
+    mine = np.zeros(len(p), np.uint32) if mine is None else mine
+    for k, c in enumerate(captured or []):
         st = c["settings"]
-        w = rp_twin.weight(st, p)
+        w = np.where(rp_twin.kept(mine, k), rp_twin.weight(st, p), 0.0)
         wsum += w
         if st["parallax"]:
             e = rp_twin.exit_point(st, p, r)
@@ -210,6 +213,11 @@ def trace(pix, cam: dict, s: dict, captured=None):
     count = np.maximum(1, np.ceil(s["rays"] * np.float32(rough) / max(s["max_roughness"], 1e-6))).astype(int)
     acc, csum = np.zeros((len(sel), 3)), np.zeros(len(sel))
     p0 = p + n * (1e-4 * (np.linalg.norm(p, axis=1) + np.linalg.norm(p - pos, axis=1)))[:, None]
+    mine = None
+    if captured:
+        obj = pix["obj"][sel]
+        masks = np.where(obj >= 0, rp_twin.own_masks(captured, int(obj.max()) + 1)[np.maximum(obj, 0)], 0)
+        mine = rp_twin.own(captured, p, masks.astype(np.uint32))
     for k in range(int(count.max())):
         u = sampling.Sampler(s["seed"], sel, k).next_2d()
         hl = np.where((alpha < DELTA_ALPHA)[:, None], [0.0, 0.0, 1.0], sampling.sample_ggx_vndf(vl, alpha, u))
@@ -231,7 +239,7 @@ def trace(pix, cam: dict, s: dict, captured=None):
         fade_e = np.clip(np.minimum(np.minimum(hx, 1 - hx), np.minimum(hy, 1 - hy)) / 0.05, 0, 1)
         f = conf[ok] * fade_r[i[ok]] * fade_e
         if captured and s["defer_to_probes"]:
-            f = f * (1 - held(captured, p0[i[ok]], l[i[ok]], x[ok], alpha[i[ok]]))
+            f = f * (1 - held(captured, p0[i[ok]], l[i[ok]], x[ok], alpha[i[ok]], mine[i[ok]]))
         acc[i[ok]] += f[:, None] * pix["lit"][hit[ok]]
         csum[i[ok]] += f
     out[sel, :3] = acc / count[:, None]
