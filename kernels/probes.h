@@ -207,15 +207,16 @@ IBL_INLINE float4 probe_blend(float3 p, float3 n, float3 v, const float *spec, P
  * of probes nearest it. That layer stands a third of a cell or more off the wall and every point
  * between reads it (the layer beyond is off or unseen), so a junction read a neighbour's sun patch
  * as the layer sees it, not edge-on: a band up to a cell wide too bright (docs/conventions.md
- * "Junctions"). Along an axis where one side of the point's own cell (the point's, not the biased
- * one's: the biases move the read onto the layer) carries under PROBE_NEAR_DEAD of the probes'
- * weight (the axis' trilinear factor left out), the read goes on linearly from the live layer to
- * the point, its gradient the reads one cell apart (the point moved onto the next layer in): a
+ * "Junctions"). In a junction's cell: where one side of the point's own cell (the point's, not the
+ * biased one's: the biases move the read onto the layer) carries under PROBE_NEAR_DEAD of the
+ * probes' weight (the axis' trilinear factor left out) along two axes or three, along each the read
+ * goes on linearly from the live layer to the point, its gradient the reads one cell apart (the
+ * point moved onto the next layer in): a
  * first-order irradiance gradient (Ward & Heckbert 1992) in place of a finer grid; the sum of the
  * axes' steps kept within [0, 1] times the read: it only darkens (a point by a concave junction sees
- * part of what the layer sees, its neighbour edge-on; let to brighten as well, the ceiling by the
- * lower room's walls in two_storey under city read its floor's sun patch brighter still: 1.17
- * against 1.13 at 40 px). */
+ * part of what the layer sees, its neighbour edge-on). Measured at 40 px on two_storey under city:
+ * 1.22 -> 1.19; taken along one axis too (every wall's cells) 1.13, but trial70's window room's back
+ * wall, right at the layer's read (x1.005), went to x0.875; let to brighten as well, 1.17. */
 #define PROBE_NEAR_DEAD 0.05f      /* the twin's NEAR_DEAD (here, not in layout.h: every kernel includes that) */
 IBL_INLINE float4 probe_irradiance(float3 p, float3 n, float3 v, PROBE_PARAMS)
 {
@@ -243,6 +244,12 @@ IBL_INLINE float4 probe_irradiance(float3 p, float3 n, float3 v, PROBE_PARAMS)
     }
     const float ga[3] = {alpha.x, alpha.y, alpha.z}, sp[3] = {probe_spacing.x, probe_spacing.y, probe_spacing.z};
     const int gb[3] = {base.x, base.y, base.z}, gl[3] = {last.x, last.y, last.z};
+    int walls = 0;
+    for (int k = 0; k < 3; ++k) {
+        const float total = side[k][0] + side[k][1];
+        walls += total > 0.0f && (side[k][0] < PROBE_NEAR_DEAD * total || side[k][1] < PROBE_NEAR_DEAD * total);
+    }
+    if (walls < 2) return e;
     float3 step = (float3)(0.0f);
     for (int k = 0; k < 3; ++k) {
         const float total = side[k][0] + side[k][1];

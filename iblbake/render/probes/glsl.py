@@ -242,7 +242,8 @@ vec4 probeBlend(vec3 p, vec3 n, vec3 v, float roughness, bool specular) {{
 // the irradiance at p (0 where no active probe is near: probeBlend's w says so), stepped from the layer
 // nearest a wall to the point as kernels/probes.h probe_irradiance (docs/conventions.md "Junctions"):
 // along an axis where one side of the point's own cell carries under 0.05 of the weight, the read goes on
-// linearly from the live layer, by the read one cell further in; the steps only darken
+// linearly from the live layer, by the read one cell further in, in a cell where two axes or three have such a
+// side (a junction's); the steps only darken
 vec3 probeIrradiance(vec3 p, vec3 n, vec3 v) {{
     vec4 e = probeBlend(p, n, v, 0.0, false);
     if (!(e.w > 0.0)) return e.xyz;
@@ -263,6 +264,12 @@ vec3 probeIrradiance(vec3 p, vec3 n, vec3 v) {{
         side0 += share * (1.0 - vec3(off));
         side1 += share * vec3(off);
     }}
+    int walls = 0;
+    for (int k = 0; k < 3; ++k) {{
+        float total = side0[k] + side1[k];
+        if (total > 0.0 && (side0[k] < 0.05 * total || side1[k] < 0.05 * total)) ++walls;
+    }}
+    if (walls < 2) return e.xyz;                                    // a junction's cell only
     vec3 step = vec3(0.0);
     for (int k = 0; k < 3; ++k) {{
         float total = side0[k] + side1[k];

@@ -153,9 +153,10 @@ def irradiance_and_source(volume, p, n, v, *, visibility: bool, classification: 
 
 def near_wall(volume, p, n, v, e, source, visibility: bool, classification: bool):
     """Twin of probe_irradiance's step: where one side of the point's own (unbiased) cell along an
-    axis carries under NEAR_DEAD of the probes' weight (the axis' trilinear factor left out), the
-    read e goes on linearly from the live layer to the point, by the reads one cell apart; the
-    steps' sum kept within [0, 1] e: the step only darkens."""
+    axis carries under NEAR_DEAD of the probes' weight (the axis' trilinear factor left out), on two
+    axes or three (a junction's cell), the read e goes on linearly from the live layer to the point
+    along each, by the reads one cell apart; the steps' sum kept within [0, 1] e: the step only
+    darkens."""
     counts = np.asarray(volume["counts"])
     origin, spacing = np.asarray(volume["origin"], np.float64), np.asarray(volume["spacing"], np.float64)
     biased = p + n * volume["normal_bias"] + v * volume["view_bias"]
@@ -173,13 +174,15 @@ def near_wall(volume, p, n, v, e, source, visibility: bool, classification: bool
         for k in range(3):
             side[:, k, off[k]] += w * np.prod(np.delete(f, k, axis=1), axis=1)
     step = np.zeros_like(e)
+    total = side.sum(2)
+    walls = ((total > 0)[:, :, None] & (side < NEAR_DEAD * total[:, :, None])).any(2).sum(1)
     for k in range(3):
-        total = side[:, k].sum(1)
         for dead in (0, 1):
             t = alpha[:, k] if dead else 1 - alpha[:, k]
             nxt = base[:, k] - 1 if dead else base[:, k] + 2
-            rows = np.flatnonzero((total > 0) & (side[:, k, dead] < NEAR_DEAD * total) & (counts[k] > 2) & (t > 1e-6)
-                                  & (nxt >= 0) & (nxt <= counts[k] - 1) & (source == SOURCE_CELL))
+            rows = np.flatnonzero((total[:, k] > 0) & (side[:, k, dead] < NEAR_DEAD * total[:, k]) & (counts[k] > 2)
+                                  & (t > 1e-6) & (nxt >= 0) & (nxt <= counts[k] - 1) & (source == SOURCE_CELL)
+                                  & (walls >= 2))
             if not len(rows):
                 continue
             q = p[rows].copy()
