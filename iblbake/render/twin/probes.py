@@ -143,8 +143,8 @@ def irradiance(volume, p, n, v, *, visibility: bool, classification: bool):
 
 
 def irradiance_and_source(volume, p, n, v, *, visibility: bool, classification: bool, spec=None):
-    """Twin of probe_irradiance (blend_and_source extrapolated to a point between a wall and the
-    layer nearest it) and, given `spec`, of probe_blend's radiance along the lobe."""
+    """Twin of probe_irradiance (blend_and_source stepped from the layers to the point in a
+    junction's cell: near_wall) and, given `spec`, of probe_blend's radiance along the lobe."""
     e, source = blend_and_source(volume, p, n, v, visibility=visibility, classification=classification, spec=spec)
     if spec is not None:
         return e, source
