@@ -217,7 +217,6 @@ IBL_INLINE float4 probe_blend(float3 p, float3 n, float3 v, const float *spec, P
  * part of what the layer sees, its neighbour edge-on). Measured at 40 px on two_storey under city:
  * 1.22 -> 1.19; taken along one axis too (every wall's cells) 1.13, but trial70's window room's back
  * wall, right at the layer's read (x1.005), went to x0.875; let to brighten as well, 1.17. */
-#define PROBE_NEAR_DEAD 0.05f      /* the twin's NEAR_DEAD (here, not in layout.h: every kernel includes that) */
 IBL_INLINE float4 probe_irradiance(float3 p, float3 n, float3 v, PROBE_PARAMS)
 {
     const float4 e = probe_blend(p, n, v, (const float *)0, PROBE_ARGS);

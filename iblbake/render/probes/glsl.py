@@ -241,7 +241,7 @@ vec4 probeBlend(vec3 p, vec3 n, vec3 v, float roughness, bool specular) {{
 
 // the irradiance at p (0 where no active probe is near: probeBlend's w says so), stepped from the layer
 // nearest a wall to the point as kernels/probes.h probe_irradiance (docs/conventions.md "Junctions"):
-// along an axis where one side of the point's own cell carries under 0.05 of the weight, the read goes on
+// along an axis where one side of the point's own cell carries under NEAR_DEAD of the weight, the read goes on
 // linearly from the live layer, by the read one cell further in, in a cell where two axes or three have such a
 // side (a junction's); the steps only darken
 vec3 probeIrradiance(vec3 p, vec3 n, vec3 v) {{
@@ -267,7 +267,7 @@ vec3 probeIrradiance(vec3 p, vec3 n, vec3 v) {{
     int walls = 0;
     for (int k = 0; k < 3; ++k) {{
         float total = side0[k] + side1[k];
-        if (total > 0.0 && (side0[k] < 0.05 * total || side1[k] < 0.05 * total)) ++walls;
+        if (total > 0.0 && (side0[k] < {w['NEAR_DEAD']} * total || side1[k] < {w['NEAR_DEAD']} * total)) ++walls;
     }}
     if (walls < 2) return e.xyz;                                    // a junction's cell only
     vec3 step = vec3(0.0);
@@ -277,7 +277,7 @@ vec3 probeIrradiance(vec3 p, vec3 n, vec3 v) {{
             float t = dead == 1 ? alpha[k] : 1.0 - alpha[k];          // cells from the point to the live layer
             int next = dead == 1 ? base[k] - 1 : base[k] + 2;          // the layer after it, inwards
             float mine = dead == 1 ? side1[k] : side0[k];
-            if (!(total > 0.0) || mine >= 0.05 * total || last[k] < 2 || !(t > 1e-6) || next < 0 || next > last[k])
+            if (!(total > 0.0) || mine >= {w['NEAR_DEAD']} * total || last[k] < 2 || !(t > 1e-6) || next < 0 || next > last[k])
                 continue;
             vec3 q = p;
             q[k] += (dead == 1 ? -1.0 : 1.0) * (t + 1.0) * PROBE_SPACING[k];

@@ -11,8 +11,7 @@ from iblbake.scene.layout import PROBE_WEIGHTS
 # DDGI's weights (Irradiance.hlsl), the kernel's and probes.glsl's: scene/layout.py PROBE_WEIGHTS
 CRUSH, WRAP_FLOOR = PROBE_WEIGHTS["CRUSH"], PROBE_WEIGHTS["WRAP_FLOOR"]
 CHEBYSHEV_FLOOR, TRILINEAR_FLOOR = PROBE_WEIGHTS["CHEBYSHEV_FLOOR"], PROBE_WEIGHTS["TRILINEAR_FLOOR"]
-# a side of the point's cell under this share of the weight is a wall's (kernels/probes.h PROBE_NEAR_DEAD)
-NEAR_DEAD = 0.05
+NEAR_DEAD = PROBE_WEIGHTS["NEAR_DEAD"]        # probe_irradiance's step: a side with a wall
 
 
 def octahedral(d):
