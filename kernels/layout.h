@@ -88,5 +88,6 @@
 #define PROBE_CHEBYSHEV_FLOOR 0.05f
 #define PROBE_CRUSH 0.2f
 #define PROBE_TRILINEAR_FLOOR 0.001f
+#define PROBE_NEAR_DEAD 0.05f
 
 #endif

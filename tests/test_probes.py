@@ -100,6 +100,45 @@ def test_a_field_linear_in_position_is_exact_between_probes(rt, rep):
 
 
 @pytest.mark.parametrize("rep", ["octahedral", "sh"])
+@pytest.mark.parametrize("towards_walls", ["darker", "brighter"])
+def test_between_a_junction_and_its_layers_the_read_goes_on_to_the_point(rt, rep, towards_walls):
+    """probe_irradiance's step (docs/conventions.md "Junctions"): the layers below the floor (y = 0)
+    and behind the wall (x = 0) off, a point in the junction's cells (between the floor and its
+    layer and between the wall and its layer) reads a field linear in position exactly where the
+    field darkens towards both (each layer and the next one in give its gradient), and the layers'
+    read where it brightens (the step only darkens: a layer off a concave junction sees what the
+    junction sees edge-on); by one wall alone, the layer's read, as ever; elsewhere trilinear."""
+    a, b = np.array([2.5, 3.0, 2.5]), np.array([[0.5, 0.3, 0.6], [0.6, 0.9, 0.4], [0.2, 0.1, -0.3]])
+    if towards_walls == "brighter":
+        b[:2] = -b[:2]
+    counts, spacing, origin = (4, 5, 3), (0.5, 0.4, 0.7), (-1.0, -0.3, 2.0)
+    states = np.zeros(int(np.prod(counts)))
+    index = np.arange(len(states))
+    x, y = index % counts[0], index // (counts[0] * counts[2])    # probe index y * nx * nz + z * nx + x
+    states[(x == 0) | (y == 0)] = probes.INACTIVE
+    vol = probes.sampled(synthetic(counts, spacing, origin, rep, value=lambda p: a + p @ b, states=states),
+                         settings(visibility=False, normal_bias=0.0, view_bias=0.0))
+    rng = np.random.default_rng(3)
+    lo = np.array(origin) + [0.1, 0.1, 0]
+    hi = np.array(origin) + (np.array(counts) - 1) * spacing
+    p = rng.uniform(lo, hi, (3000, 3))
+    n, v = unit(rng.normal(size=p.shape)), unit(rng.normal(size=p.shape))
+    layer = np.array(origin[:2]) + spacing[:2]
+    by = p[:, :2] < layer                                   # between the wall / the floor and its layer
+    corner = by.all(1)
+    clamped = p.copy()
+    clamped[:, :2] = np.maximum(p[:, :2], layer)            # what the layers alone read
+    want = a + clamped @ b
+    if towards_walls == "darker":
+        want[corner] = a + p[corner] @ b
+    got_twin = twin.irradiance(vol, p, n, v, visibility=False, classification=True)
+    got = kernel_irradiance(rt, vol, p, n, v, False, True)
+    assert corner.sum() > 100 and (by.any(1) & ~corner).sum() > 300 and (~by.any(1)).sum() > 300
+    assert np.abs(got_twin - want).max() < 1e-12
+    assert np.abs(got - want).max() / want.max() < 3e-6
+
+
+@pytest.mark.parametrize("rep", ["octahedral", "sh"])
 def test_kernel_matches_twin_with_visibility_and_states(rt, rep):
     rng = np.random.default_rng(7)
     states = (rng.random(4 * 3 * 5) < 0.2).astype(float)

@@ -239,9 +239,53 @@ vec4 probeBlend(vec3 p, vec3 n, vec3 v, float roughness, bool specular) {{
     return vec4(s, 1.0);
 }}
 
-// the irradiance at p (0 where no active probe is near: probeBlend's w says so)
+// the irradiance at p (0 where no active probe is near: probeBlend's w says so), stepped from the layer
+// nearest a wall to the point as kernels/probes.h probe_irradiance (docs/conventions.md "Junctions"):
+// along an axis where one side of the point's own cell carries under NEAR_DEAD of the weight, the read goes on
+// linearly from the live layer, by the read one cell further in, in a cell where two axes or three have such a
+// side (a junction's); the steps only darken
 vec3 probeIrradiance(vec3 p, vec3 n, vec3 v) {{
-    return probeBlend(p, n, v, 0.0, false).xyz;
+    vec4 e = probeBlend(p, n, v, 0.0, false);
+    if (!(e.w > 0.0)) return e.xyz;
+    vec3 biased = p + n * PROBE_NORMAL_BIAS + v * PROBE_VIEW_BIAS;
+    vec3 g = (p - PROBE_ORIGIN) / PROBE_SPACING;
+    ivec3 last = PROBE_COUNTS - 1;
+    ivec3 base = clamp(ivec3(floor(g)), ivec3(0), last);
+    vec3 alpha = clamp(g - vec3(base), 0.0, 1.0);
+    vec3 side0 = vec3(0.0), side1 = vec3(0.0), value;
+    for (int i = 0; i < 8; ++i) {{
+        ivec3 off = ivec3(i & 1, (i >> 1) & 1, (i >> 2) & 1);
+        float w = probeContribution(clamp(base + off, ivec3(0), last), p, biased, n, v, vec3(1.0), 0.0, false, value);
+        vec3 f = mix(1.0 - alpha, alpha, vec3(off));
+#if PROBE_VISIBILITY
+        f = max(f, vec3({w['TRILINEAR_FLOOR']}));
+#endif
+        vec3 share = w * vec3(f.y * f.z, f.x * f.z, f.x * f.y);
+        side0 += share * (1.0 - vec3(off));
+        side1 += share * vec3(off);
+    }}
+    int walls = 0;
+    for (int k = 0; k < 3; ++k) {{
+        float total = side0[k] + side1[k];
+        if (total > 0.0 && (side0[k] < {w['NEAR_DEAD']} * total || side1[k] < {w['NEAR_DEAD']} * total)) ++walls;
+    }}
+    if (walls < 2) return e.xyz;                                    // a junction's cell only
+    vec3 step = vec3(0.0);
+    for (int k = 0; k < 3; ++k) {{
+        float total = side0[k] + side1[k];
+        for (int dead = 0; dead < 2; ++dead) {{
+            float t = dead == 1 ? alpha[k] : 1.0 - alpha[k];          // cells from the point to the live layer
+            int next = dead == 1 ? base[k] - 1 : base[k] + 2;          // the layer after it, inwards
+            float mine = dead == 1 ? side1[k] : side0[k];
+            if (!(total > 0.0) || mine >= {w['NEAR_DEAD']} * total || last[k] < 2 || !(t > 1e-6) || next < 0 || next > last[k])
+                continue;
+            vec3 q = p;
+            q[k] += (dead == 1 ? -1.0 : 1.0) * (t + 1.0) * PROBE_SPACING[k];
+            vec4 e2 = probeBlend(q, n, v, 0.0, false);
+            if (e2.w > 0.0) step -= t * (e2.xyz - e.xyz);
+        }}
+    }}
+    return clamp(e.xyz + step, vec3(0.0), e.xyz);
 }}
 
 #if PROBES_SPECULAR

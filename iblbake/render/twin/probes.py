@@ -11,6 +11,7 @@ from iblbake.scene.layout import PROBE_WEIGHTS
 # DDGI's weights (Irradiance.hlsl), the kernel's and probes.glsl's: scene/layout.py PROBE_WEIGHTS
 CRUSH, WRAP_FLOOR = PROBE_WEIGHTS["CRUSH"], PROBE_WEIGHTS["WRAP_FLOOR"]
 CHEBYSHEV_FLOOR, TRILINEAR_FLOOR = PROBE_WEIGHTS["CHEBYSHEV_FLOOR"], PROBE_WEIGHTS["TRILINEAR_FLOOR"]
+NEAR_DEAD = PROBE_WEIGHTS["NEAR_DEAD"]        # probe_irradiance's step: a side with a wall
 
 
 def octahedral(d):
@@ -141,7 +142,58 @@ def irradiance(volume, p, n, v, *, visibility: bool, classification: bool):
 
 
 def irradiance_and_source(volume, p, n, v, *, visibility: bool, classification: bool, spec=None):
-    """Twin of probe_irradiance for points p, normals n, view vectors v (m, 3): (irradiance (m, 3),
+    """Twin of probe_irradiance (blend_and_source stepped from the layers to the point in a
+    junction's cell: near_wall) and, given `spec`, of probe_blend's radiance along the lobe."""
+    e, source = blend_and_source(volume, p, n, v, visibility=visibility, classification=classification, spec=spec)
+    if spec is not None:
+        return e, source
+    return near_wall(volume, p, n, v, e, source, visibility, classification), source
+
+
+def near_wall(volume, p, n, v, e, source, visibility: bool, classification: bool):
+    """Twin of probe_irradiance's step: where one side of the point's own (unbiased) cell along an
+    axis carries under NEAR_DEAD of the probes' weight (the axis' trilinear factor left out), on two
+    axes or three (a junction's cell), the read e goes on linearly from the live layer to the point
+    along each, by the reads one cell apart; the steps' sum kept within [0, 1] e: the step only
+    darkens."""
+    counts = np.asarray(volume["counts"])
+    origin, spacing = np.asarray(volume["origin"], np.float64), np.asarray(volume["spacing"], np.float64)
+    biased = p + n * volume["normal_bias"] + v * volume["view_bias"]
+    g = (p - origin) / spacing
+    base = np.clip(np.floor(g).astype(int), 0, counts - 1)
+    alpha = np.clip(g - base, 0, 1)
+    side = np.zeros((len(p), 3, 2))
+    for i in range(8):
+        off = np.array([i & 1, (i >> 1) & 1, (i >> 2) & 1])
+        w, _ = contribution(volume, np.clip(base + off, 0, counts - 1), p, biased, n, np.ones((len(p), 3)),
+                            visibility, classification)
+        f = np.where(off == 1, alpha, 1 - alpha)
+        if visibility:
+            f = np.maximum(f, TRILINEAR_FLOOR)
+        for k in range(3):
+            side[:, k, off[k]] += w * np.prod(np.delete(f, k, axis=1), axis=1)
+    step = np.zeros_like(e)
+    total = side.sum(2)
+    walls = ((total > 0)[:, :, None] & (side < NEAR_DEAD * total[:, :, None])).any(2).sum(1)
+    for k in range(3):
+        for dead in (0, 1):
+            t = alpha[:, k] if dead else 1 - alpha[:, k]
+            nxt = base[:, k] - 1 if dead else base[:, k] + 2
+            rows = np.flatnonzero((total[:, k] > 0) & (side[:, k, dead] < NEAR_DEAD * total[:, k]) & (counts[k] > 2)
+                                  & (t > 1e-6) & (nxt >= 0) & (nxt <= counts[k] - 1) & (source == SOURCE_CELL)
+                                  & (walls >= 2))
+            if not len(rows):
+                continue
+            q = p[rows].copy()
+            q[:, k] += (-1 if dead else 1) * (t[rows] + 1) * spacing[k]
+            e2, s2 = blend_and_source(volume, q, n[rows], v[rows], visibility=visibility,
+                                      classification=classification)
+            step[rows] -= np.where((s2 == SOURCE_CELL)[:, None], t[rows, None] * (e2 - e[rows]), 0.0)
+    return np.clip(e + step, 0.0, e)
+
+
+def blend_and_source(volume, p, n, v, *, visibility: bool, classification: bool, spec=None):
+    """Twin of probe_blend for points p, normals n, view vectors v (m, 3): (irradiance (m, 3),
     source (m,): SOURCE_CELL the cell's eight probes, SOURCE_NEAREST the active probes of the 4^3
     around it by inverse square distance where all eight are off, SOURCE_NONE neither (0)).
     `volume`: counts, origin, spacing, normal_bias and view_bias (world units), data (probes, 4:
