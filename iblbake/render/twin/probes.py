@@ -141,6 +141,15 @@ def irradiance(volume, p, n, v, *, visibility: bool, classification: bool):
     return irradiance_and_source(volume, p, n, v, visibility=visibility, classification=classification)[0]
 
 
+def cell(volume, x):
+    """The grid cell of points x (m, 3): its lowest probe's (i, j, k), clamped to the grid, x's
+    trilinear fractions in it (0-1) and x in grid units."""
+    counts = np.asarray(volume["counts"])
+    g = (x - np.asarray(volume["origin"], np.float64)) / np.asarray(volume["spacing"], np.float64)
+    base = np.clip(np.floor(g).astype(int), 0, counts - 1)
+    return base, np.clip(g - base, 0, 1), g
+
+
 def irradiance_and_source(volume, p, n, v, *, visibility: bool, classification: bool, spec=None):
     """Twin of probe_irradiance (blend_and_source stepped from the layers to the point in a
     junction's cell: near_wall) and, given `spec`, of probe_blend's radiance along the lobe."""
@@ -156,12 +165,9 @@ def near_wall(volume, p, n, v, e, source, visibility: bool, classification: bool
     axes or three (a junction's cell), the read e goes on linearly from the live layer to the point
     along each, by the reads one cell apart; the steps' sum kept within [0, 1] e: the step only
     darkens."""
-    counts = np.asarray(volume["counts"])
-    origin, spacing = np.asarray(volume["origin"], np.float64), np.asarray(volume["spacing"], np.float64)
+    counts, spacing = np.asarray(volume["counts"]), np.asarray(volume["spacing"], np.float64)
     biased = p + n * volume["normal_bias"] + v * volume["view_bias"]
-    g = (p - origin) / spacing
-    base = np.clip(np.floor(g).astype(int), 0, counts - 1)
-    alpha = np.clip(g - base, 0, 1)
+    base, alpha, _ = cell(volume, p)
     side = np.zeros((len(p), 3, 2))
     for i in range(8):
         off = np.array([i & 1, (i >> 1) & 1, (i >> 2) & 1])
@@ -202,11 +208,8 @@ def blend_and_source(volume, p, n, v, *, visibility: bool, classification: bool,
     specular lobe's weights of a basis that carries one, the radiance along the lobe instead
     (kernels/probes.h probe_specular: the same weights, blended linearly)."""
     counts = np.asarray(volume["counts"])
-    origin, spacing = np.asarray(volume["origin"], np.float64), np.asarray(volume["spacing"], np.float64)
     biased = p + n * volume["normal_bias"] + v * volume["view_bias"]
-    g = (biased - origin) / spacing
-    base = np.clip(np.floor(g).astype(int), 0, counts - 1)
-    alpha = np.clip(g - base, 0, 1)
+    base, alpha, g = cell(volume, biased)
     total = np.zeros((len(p), 3))
     wsum = np.zeros(len(p))
     for i in range(8):
