@@ -156,6 +156,15 @@ IBL_INLINE float probe_contribution(int3 c, float3 p, float3 biased, float3 n, f
 #endif
 }
 
+/* The grid cell of g (a point in grid units): its lowest probe, clamped to the grid (last: the
+ * highest index per axis), and g's trilinear fractions in it (0-1) */
+IBL_INLINE int3 probe_cell(float3 g, int3 last, float3 *alpha)
+{
+    const int3 base = clamp(convert_int3(floor(g)), (int3)(0), last);
+    *alpha = clamp(g - convert_float3(base), 0.0f, 1.0f);
+    return base;
+}
+
 /* The irradiance at surface point p with shading normal n seen along v (towards the viewer), in
  * xyz; w where it came from (PROBE_SOURCE_*): the eight probes of the cell around the point
  * (RTXGI), or where all eight are inactive the active probes of the 4 x 4 x 4 around it, each
@@ -170,8 +179,8 @@ IBL_INLINE float4 probe_blend(float3 p, float3 n, float3 v, const float *spec, P
     const int3 last = (int3)(probe_nx - 1, probe_ny - 1, probe_nz - 1);
     const float3 biased = p + n * probe_normal_bias + v * probe_view_bias;
     const float3 g = (biased - origin) / spacing;
-    const int3 base = clamp(convert_int3(floor(g)), (int3)(0), last);
-    const float3 alpha = clamp(g - convert_float3(base), 0.0f, 1.0f);
+    float3 alpha;
+    const int3 base = probe_cell(g, last, &alpha);
     float3 sum = (float3)(0.0f), value;
     float wsum = 0.0f, source = PROBE_SOURCE_CELL;
     for (int i = 0; i < 8; ++i) {
@@ -224,9 +233,8 @@ IBL_INLINE float4 probe_irradiance(float3 p, float3 n, float3 v, PROBE_PARAMS)
     PROBE_VOLUME_LOCALS;
     const int3 last = (int3)(probe_nx - 1, probe_ny - 1, probe_nz - 1);
     const float3 biased = p + n * probe_normal_bias + v * probe_view_bias;
-    const float3 g = (p - probe_origin) / probe_spacing;
-    const int3 base = clamp(convert_int3(floor(g)), (int3)(0), last);
-    const float3 alpha = clamp(g - convert_float3(base), 0.0f, 1.0f);
+    float3 alpha;
+    const int3 base = probe_cell((p - probe_origin) / probe_spacing, last, &alpha);
     float side[3][2] = {{0.0f, 0.0f}, {0.0f, 0.0f}, {0.0f, 0.0f}};
     float3 value;
     for (int i = 0; i < 8; ++i) {
@@ -265,7 +273,7 @@ IBL_INLINE float4 probe_irradiance(float3 p, float3 n, float3 v, PROBE_PARAMS)
             if (e2.w == PROBE_SOURCE_CELL) step -= t * (e2.xyz - e.xyz);
         }
     }
-    return (float4)(clamp(e.xyz + step, (float3)(0.0f), 1.0f * e.xyz), e.w);
+    return (float4)(clamp(e.xyz + step, (float3)(0.0f), e.xyz), e.w);
 }
 
 /* The diffuse irradiance at p with the probes (their irradiance holds the panorama's intensity

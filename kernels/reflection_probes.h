@@ -130,6 +130,12 @@ IBL_INLINE uint rprobe_own(float3 p, uint own, __global const float4 *rp_info, c
     return 0u;
 }
 
+/* Whether probe k counts for a point whose own probes are own (rprobe_own): every probe where 0 */
+IBL_INLINE int rprobe_kept(uint own, int k)
+{
+    return own == 0u || (k < RPROBE_OWN_MAX && ((own >> k) & 1u));
+}
+
 /* How much of the reflection along p + t r that meets the scene at x the probes at p already hold,
  * for a lobe of GGX alpha: the influence-weighted share of parallax probes whose proxy the ray
  * leaves within 3% of its travel from x (a wall or floor on the proxy: the capture, read with
@@ -143,7 +149,7 @@ IBL_INLINE float reflection_probes_hold(float3 p, float3 r, float3 x, float alph
     float held = 0.0f, wsum = 0.0f;
     const float travel = distance(p, x);
     for (int k = 0; k < rp_count; ++k) {
-        if (own != 0u && (k >= RPROBE_OWN_MAX || !((own >> k) & 1u))) continue;    /* not its own probe */
+        if (!rprobe_kept(own, k)) continue;                 /* not its own probe */
         const float4 a = rp_info[4 * k], b = rp_info[4 * k + 1], c = rp_info[4 * k + 2], e = rp_info[4 * k + 3];
         const float w = rprobe_weight(p, a, b, c);
         if (w <= 0.0f) continue;
@@ -410,7 +416,7 @@ IBL_INLINE float3 reflection_probes(float3 p, float3 n, float3 v, float3 r, floa
     float wsum = 0.0f;
     const uint own = obj >= 0 ? rprobe_own(p, rp_excl[obj], rp_info, rp_count) : 0u;
     for (int k = 0; k < rp_count; ++k) {
-        if (own != 0u && (k >= RPROBE_OWN_MAX || !((own >> k) & 1u))) continue;    /* not its own probe */
+        if (!rprobe_kept(own, k)) continue;                 /* not its own probe */
         const float4 a = rp_info[4 * k], b = rp_info[4 * k + 1], c = rp_info[4 * k + 2], e = rp_info[4 * k + 3];
         const float w = rprobe_weight(p, a, b, c);
         if (w <= 0.0f) continue;

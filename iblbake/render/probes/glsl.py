@@ -199,6 +199,14 @@ float probeContribution(ivec3 c, vec3 p, vec3 biased, vec3 n, vec3 v, vec3 fallo
 #endif
 }}
 
+// the grid cell of g (a point in grid units) as kernels/probes.h probe_cell: its lowest probe, clamped
+// to the grid, and g's trilinear fractions in it
+ivec3 probeCell(vec3 g, ivec3 last, out vec3 alpha) {{
+    ivec3 base = clamp(ivec3(floor(g)), ivec3(0), last);
+    alpha = clamp(g - vec3(base), 0.0, 1.0);
+    return base;
+}}
+
 // the probes around p blended as kernels/probes.h probe_blend: the eight of the cell, or where all eight
 // are off the active ones of the 4 x 4 x 4 around it by inverse square distance; the irradiance at n
 // (sqrt-blended with visibility), or (specular) each probe's radiance along the warped GGX lobe, blended
@@ -207,8 +215,8 @@ vec4 probeBlend(vec3 p, vec3 n, vec3 v, float roughness, bool specular) {{
     vec3 biased = p + n * PROBE_NORMAL_BIAS + v * PROBE_VIEW_BIAS;
     vec3 g = (biased - PROBE_ORIGIN) / PROBE_SPACING;
     ivec3 last = PROBE_COUNTS - 1;
-    ivec3 base = clamp(ivec3(floor(g)), ivec3(0), last);
-    vec3 alpha = clamp(g - vec3(base), 0.0, 1.0);
+    vec3 alpha;
+    ivec3 base = probeCell(g, last, alpha);
     vec3 sum = vec3(0.0), value;
     float wsum = 0.0;
     for (int i = 0; i < 8; ++i) {{
@@ -248,10 +256,9 @@ vec3 probeIrradiance(vec3 p, vec3 n, vec3 v) {{
     vec4 e = probeBlend(p, n, v, 0.0, false);
     if (!(e.w > 0.0)) return e.xyz;
     vec3 biased = p + n * PROBE_NORMAL_BIAS + v * PROBE_VIEW_BIAS;
-    vec3 g = (p - PROBE_ORIGIN) / PROBE_SPACING;
     ivec3 last = PROBE_COUNTS - 1;
-    ivec3 base = clamp(ivec3(floor(g)), ivec3(0), last);
-    vec3 alpha = clamp(g - vec3(base), 0.0, 1.0);
+    vec3 alpha;
+    ivec3 base = probeCell((p - PROBE_ORIGIN) / PROBE_SPACING, last, alpha);
     vec3 side0 = vec3(0.0), side1 = vec3(0.0), value;
     for (int i = 0; i < 8; ++i) {{
         ivec3 off = ivec3(i & 1, (i >> 1) & 1, (i >> 2) & 1);

@@ -142,8 +142,8 @@ def irradiance(volume, p, n, v, *, visibility: bool, classification: bool):
 
 
 def cell(volume, x):
-    """The grid cell of points x (m, 3): its lowest probe's (i, j, k), clamped to the grid, x's
-    trilinear fractions in it (0-1) and x in grid units."""
+    """Twin of probe_cell: the grid cell of points x (m, 3), its lowest probe's (i, j, k) clamped to
+    the grid, x's trilinear fractions in it (0-1), and x in grid units."""
     counts = np.asarray(volume["counts"])
     g = (x - np.asarray(volume["origin"], np.float64)) / np.asarray(volume["spacing"], np.float64)
     base = np.clip(np.floor(g).astype(int), 0, counts - 1)

@@ -290,8 +290,18 @@ def own(captured: list, p, masks):
     return np.where(held, masks, np.uint32(0)).astype(np.uint32)
 
 
+def masks_of(captured: list, obj) -> np.ndarray:
+    """Each point's rp_excl, its object's (own_masks) by object index obj (-1: none, 0)."""
+    obj = np.asarray(obj)
+    if not len(obj):
+        return np.zeros(0, np.uint32)
+    masks = own_masks(captured, int(obj.max()) + 1)
+    return np.where(obj >= 0, masks[np.maximum(obj, 0)], 0).astype(np.uint32)
+
+
 def kept(mine, k: int):
-    """Whether probe k counts for points whose own probes are mine (own): all where 0."""
+    """Twin of rprobe_kept: whether probe k counts for points whose own probes are mine (own): all
+    where 0."""
     return (mine == 0) | (((mine >> np.uint32(min(k, OWN_MAX - 1))) & 1).astype(bool) & (k < OWN_MAX))
 
 

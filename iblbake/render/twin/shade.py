@@ -97,8 +97,7 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
         if reflection_probes and lit.any():
             nlev = len(reflection_probes[0]["levels"])
             from iblbake.render.lightmaps.read import hit_objects
-            obj = hit_objects(gb, arrays)[hit][lit]
-            masks = rp_twin.own_masks(reflection_probes, int(obj.max()) + 1)[obj]
+            masks = rp_twin.masks_of(reflection_probes, hit_objects(gb, arrays)[hit][lit])
             li[lit] = rp_twin.blend(reflection_probes, gb["pos"][hit][lit], r[lit], rough[lit] * (nlev - 1), li[lit],
                                     (prefiltered, rot, scale), (n[lit], v[lit]), masks)
         color += w * li

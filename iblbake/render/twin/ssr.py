@@ -215,9 +215,7 @@ def trace(pix, cam: dict, s: dict, captured=None):
     p0 = p + n * (1e-4 * (np.linalg.norm(p, axis=1) + np.linalg.norm(p - pos, axis=1)))[:, None]
     mine = None
     if captured:
-        obj = pix["obj"][sel]
-        masks = np.where(obj >= 0, rp_twin.own_masks(captured, int(obj.max()) + 1)[np.maximum(obj, 0)], 0)
-        mine = rp_twin.own(captured, p, masks.astype(np.uint32))
+        mine = rp_twin.own(captured, p, rp_twin.masks_of(captured, pix["obj"][sel]))
     for k in range(int(count.max())):
         u = sampling.Sampler(s["seed"], sel, k).next_2d()
         hl = np.where((alpha < DELTA_ALPHA)[:, None], [0.0, 0.0, 1.0], sampling.sample_ggx_vndf(vl, alpha, u))
