@@ -142,6 +142,29 @@ def test_ctrl_c_inside_an_extension_import_is_raised_after_it(module):
     assert p.stdout.strip() == "module"
 
 
+def test_ctrl_c_as_a_checked_read_opens_its_file_stays_a_ctrl_c(tmp_path, monkeypatch):
+    """A Ctrl-C landing as os.fdopen returns, before its file object is bound, drops that object:
+    the descriptor must be closed once, so the KeyboardInterrupt is what surfaces (CI's kill loop
+    saw `render` exit 1 on an EBADF when the descriptor was closed twice)."""
+    from iblbake.io import reads
+
+    real = os.fdopen
+
+    def fdopen_then_ctrl_c(*args, **kw):
+        real(*args, **kw)              # the object, never bound, is dropped: it closes what it owns
+        raise KeyboardInterrupt
+
+    path = tmp_path / "x.bin"
+    path.write_bytes(b"abc")
+    monkeypatch.setattr(os, "fdopen", fdopen_then_ctrl_c)
+    opened = len(os.listdir("/proc/self/fd"))
+    with pytest.raises(KeyboardInterrupt):
+        reads.read_bytes(path, 100)
+    monkeypatch.undo()
+    assert len(os.listdir("/proc/self/fd")) == opened      # and not leaked either
+    assert reads.read_bytes(path, 100) == b"abc"
+
+
 @pytest.mark.kill
 def test_a_held_ctrl_c_at_the_end_of_a_run_does_not_kill_it_with_an_alarm(tmp_path):
     """A Ctrl-C held back by an import that ends the run: the run's work is done and it exits 0,

@@ -101,16 +101,17 @@ def open_checked(path, limit: int, what: str = "an input file", hint: str = ""):
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
     except OSError as e:
         raise InputError(f"{path}: cannot read ({e.strerror or e})") from None
+    # The descriptor is closed here once, never by the file object: a Ctrl-C landing as fdopen
+    # returns (before its result is bound) would close it through the dropped object and then
+    # again here, an EBADF that replaced the KeyboardInterrupt (seen in CI's kill loop).
     try:
         _check_stat(path, os.fstat(fd), limit, what, hint)
         if hasattr(os, "set_blocking"):
             os.set_blocking(fd, True)
-        f = os.fdopen(fd, "rb")
-    except BaseException:
+        with os.fdopen(fd, "rb", closefd=False) as f:
+            yield f
+    finally:
         os.close(fd)
-        raise
-    with f:
-        yield f
 
 
 def read_bytes(path, limit: int, what: str = "an input file", hint: str = "") -> bytes:
