@@ -329,7 +329,8 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                           doc="EXR chromaticities other than Rec.709: keep the values and say so (auto), keep them "
                               "silently (keep), or convert to Rec.709/D65"),
         "sun": Enum(("auto", "none", "extract"), "auto",
-                    doc="extract: the panorama's sun (a compact region 1e4 x brighter than the median) leaves the "
+                    doc="extract: the panorama's sun (a compact region 1e4 x brighter than the median, or holding 4% of "
+                        "its energy) leaves the "
                         "panorama and comes back as a directional light of exactly its energy, so it casts shadows; "
                         "auto: extract where the scene has irradiance probes (a probes: section, or a frame that "
                         "reads them) or reflection probes and no lightmap (a lightmap: section, or a frame that reads one; a probe grid cannot hold a sun's or lamp's shadow edge "
