@@ -262,12 +262,14 @@ IBL_INLINE int probe_dead_side(const float side[3][2], int k)
  * the live layer to the point, its gradient the reads one cell apart (the point moved onto the next
  * layer in): a first-order irradiance gradient (Ward & Heckbert 1992) in place of a finer grid. The
  * live layer is where its probes stand, relocated (their mean offset along the axis, which moves it
- * off a wall by up to 0.4 cell more: two_storey's floor layer 0.3 cell above the floor reads it from
- * 0.38). The sum of the axes' steps kept within [0, 1] times the read: it only darkens (a point by a
- * concave junction sees part of what the layer sees, its neighbour edge-on). Measured at 40 px on
- * two_storey under city (4,096-sample reference): 1.179 with the junction's own cells and the
- * layers' nominal places, 1.12 now; taken along one axis everywhere (every wall's cells) 1.09, but
- * trial70's window room's back wall, right at the layer's read (x1.008), went to x0.877. */
+ * off a wall), at most PROBE_STEP_REACH cells from the layer's read. The sum of the axes' steps kept
+ * within [0, 1] times the read: it only darkens (a point by a concave junction sees part of what the
+ * layer sees, its neighbour edge-on). Measured at 40 px (256-sample references) on two_storey under
+ * city, whose floor by the window wall read the floor's layer, 0.3 cell and its relocation above it,
+ * in cells with one wall: 1.19 with the junction's own cells alone, 1.137 now. Taken along one axis
+ * everywhere (every wall's cells) 1.09, but trial70's window room's back wall, right at the layer's
+ * read (x1.008), went to x0.877; beyond 0.4 cell the secant overshot where the field bends (quad_room
+ * under city's floor under its window, flat in the truth, x0.4 by the wall). */
 IBL_INLINE float4 probe_irradiance(float3 p, float3 n, float3 v, PROBE_PARAMS)
 {
     const float4 e = probe_blend(p, n, v, (const float *)0, PROBE_ARGS);
