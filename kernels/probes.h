@@ -268,7 +268,7 @@ IBL_INLINE int probe_dead_side(const float side[3][2], int k)
  * city, whose floor by the window wall read the floor's layer, 0.3 cell and its relocation above it,
  * in cells with one wall: 1.19 with the junction's own cells alone, 1.137 now. Taken along one axis
  * everywhere (every wall's cells) 1.09, but trial70's window room's back wall, right at the layer's
- * read (x1.008), went to x0.877; beyond 0.4 cell the secant overshot where the field bends (quad_room
+ * read (x1.008), went to x0.877; reaching further the secant overshot where the field bends (quad_room
  * under city's floor under its window, flat in the truth, x0.4 by the wall). */
 IBL_INLINE float4 probe_irradiance(float3 p, float3 n, float3 v, PROBE_PARAMS)
 {
