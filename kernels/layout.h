@@ -89,5 +89,6 @@
 #define PROBE_CRUSH 0.2f
 #define PROBE_TRILINEAR_FLOOR 0.001f
 #define PROBE_NEAR_DEAD 0.05f
+#define PROBE_STEP_REACH 0.4f
 
 #endif

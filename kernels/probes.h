@@ -212,66 +212,100 @@ IBL_INLINE float4 probe_blend(float3 p, float3 n, float3 v, const float *spec, P
     return (float4)(s, source);
 }
 
+/* The probes' weight on either side of the (unbiased) cell of p along each axis, the axis' own
+ * trilinear factor left out (visibility and states as in the blend: side[k][0] the low side's), and
+ * each side's weighted mean offset along the axis in cells (shift[k][s], the relocated probes':
+ * where the layer stands); the cell's lowest probe and p's fractions in it */
+IBL_INLINE int3 probe_sides(float3 p, float3 n, float3 v, float side[3][2], float shift[3][2], float3 *alpha,
+                            PROBE_PARAMS)
+{
+    PROBE_VOLUME_LOCALS;
+    const int3 last = (int3)(probe_nx - 1, probe_ny - 1, probe_nz - 1);
+    const float3 biased = p + n * probe_normal_bias + v * probe_view_bias;
+    const int3 base = probe_cell((p - probe_origin) / probe_spacing, last, alpha);
+    for (int k = 0; k < 3; ++k) side[k][0] = side[k][1] = shift[k][0] = shift[k][1] = 0.0f;
+    float3 value;
+    for (int i = 0; i < 8; ++i) {
+        const int3 off = (int3)(i & 1, (i >> 1) & 1, (i >> 2) & 1), c = clamp(base + off, (int3)(0), last);
+        const float w = probe_contribution(c, p, biased, n, (float3)(1.0f), (const float *)0, &value, PROBE_ARGS);
+        float3 f = select(1.0f - *alpha, *alpha, off == (int3)(1));
+#ifdef PROBE_VISIBILITY
+        f = fmax(f, PROBE_TRILINEAR_FLOOR);
+#endif
+        const float3 o = probe_data[c.y * probe_nx * probe_nz + c.z * probe_nx + c.x].xyz / probe_spacing;
+        const float wx = w * f.y * f.z, wy = w * f.x * f.z, wz = w * f.x * f.y;
+        side[0][off.x] += wx; shift[0][off.x] += wx * o.x;
+        side[1][off.y] += wy; shift[1][off.y] += wy * o.y;
+        side[2][off.z] += wz; shift[2][off.z] += wz * o.z;
+    }
+    return base;
+}
+
+/* which side of axis k carries under PROBE_NEAR_DEAD of the weight (a wall's): 0 the low, 1 the high,
+ * -1 neither */
+IBL_INLINE int probe_dead_side(const float side[3][2], int k)
+{
+    const float total = side[k][0] + side[k][1];
+    if (!(total > 0.0f)) return -1;
+    return side[k][0] < PROBE_NEAR_DEAD * total ? 0 : side[k][1] < PROBE_NEAR_DEAD * total ? 1 : -1;
+}
+
 /* probe_blend's irradiance, extrapolated to the point where it stands between a wall and the layer
  * of probes nearest it. That layer stands a third of a cell or more off the wall and every point
- * between reads it (the layer beyond is off or unseen), so a junction read a neighbour's sun patch
- * as the layer sees it, not edge-on: a band up to a cell wide too bright (docs/conventions.md
- * "Junctions"). In a junction's cell: where one side of the point's own cell (the point's, not the
- * biased one's: the biases move the read onto the layer) carries under PROBE_NEAR_DEAD of the
- * probes' weight (the axis' trilinear factor left out) along two axes or three, along each the read
- * goes on linearly from the live layer to the point, its gradient the reads one cell apart (the
- * point moved onto the next layer in): a
- * first-order irradiance gradient (Ward & Heckbert 1992) in place of a finer grid; the sum of the
- * axes' steps kept within [0, 1] times the read: it only darkens (a point by a concave junction sees
- * part of what the layer sees, its neighbour edge-on). Measured at 40 px on two_storey under city:
- * 1.22 -> 1.19; taken along one axis too (every wall's cells) 1.13, but trial70's window room's back
- * wall, right at the layer's read (x1.005), went to x0.875; let to brighten as well, 1.17. */
+ * between reads it (the layer beyond is off or unseen), so a junction read a neighbour's light as the
+ * layer sees it, not edge-on: a band up to a cell wide too bright (docs/conventions.md "Junctions").
+ * By a junction: where one side of the point's own cell (the point's, not the biased one's: the
+ * biases move the read onto the layer) carries under PROBE_NEAR_DEAD of the probes' weight (the
+ * axis' trilinear factor left out) along two axes or three, or along one with the cell one further
+ * along another axis (towards the point's nearer layer) having such a side on that axis (the point
+ * within a cell of the junction), along each of the point's own walls the read goes on linearly from
+ * the live layer to the point, its gradient the reads one cell apart (the point moved onto the next
+ * layer in): a first-order irradiance gradient (Ward & Heckbert 1992) in place of a finer grid. The
+ * live layer is where its probes stand, relocated (their mean offset along the axis, which moves it
+ * off a wall), at most PROBE_STEP_REACH cells from the layer's read. The sum of the axes' steps kept
+ * within [0, 1] times the read: it only darkens (a point by a concave junction sees part of what the
+ * layer sees, its neighbour edge-on). Measured at 40 px (256-sample references) on two_storey under
+ * city, whose floor by the window wall read the floor's layer, 0.3 cell and its relocation above it,
+ * in cells with one wall: 1.19 with the junction's own cells alone, 1.137 now. Taken along one axis
+ * everywhere (every wall's cells) 1.09, but trial70's window room's back wall, right at the layer's
+ * read (x1.008), went to x0.877; reaching further the secant overshot where the field bends (quad_room
+ * under city's floor under its window, flat in the truth, x0.4 by the wall). */
 IBL_INLINE float4 probe_irradiance(float3 p, float3 n, float3 v, PROBE_PARAMS)
 {
     const float4 e = probe_blend(p, n, v, (const float *)0, PROBE_ARGS);
     if (e.w != PROBE_SOURCE_CELL) return e;
     PROBE_VOLUME_LOCALS;
-    const int3 last = (int3)(probe_nx - 1, probe_ny - 1, probe_nz - 1);
-    const float3 biased = p + n * probe_normal_bias + v * probe_view_bias;
-    float3 alpha;
-    const int3 base = probe_cell((p - probe_origin) / probe_spacing, last, &alpha);
-    float side[3][2] = {{0.0f, 0.0f}, {0.0f, 0.0f}, {0.0f, 0.0f}};
-    float3 value;
-    for (int i = 0; i < 8; ++i) {
-        const int3 off = (int3)(i & 1, (i >> 1) & 1, (i >> 2) & 1);
-        const float w = probe_contribution(clamp(base + off, (int3)(0), last), p, biased, n, (float3)(1.0f),
-                                           (const float *)0, &value, PROBE_ARGS);
-        float3 f = select(1.0f - alpha, alpha, off == (int3)(1));
-#ifdef PROBE_VISIBILITY
-        f = fmax(f, PROBE_TRILINEAR_FLOOR);
-#endif
-        side[0][off.x] += w * f.y * f.z;
-        side[1][off.y] += w * f.x * f.z;
-        side[2][off.z] += w * f.x * f.y;
-    }
+    float side[3][2], shift[3][2], near[3][2], nshift[3][2];
+    float3 alpha, nalpha;
+    const int3 base = probe_sides(p, n, v, side, shift, &alpha, PROBE_ARGS);
     const float ga[3] = {alpha.x, alpha.y, alpha.z}, sp[3] = {probe_spacing.x, probe_spacing.y, probe_spacing.z};
-    const int gb[3] = {base.x, base.y, base.z}, gl[3] = {last.x, last.y, last.z};
+    const int gb[3] = {base.x, base.y, base.z}, gl[3] = {probe_nx - 1, probe_ny - 1, probe_nz - 1};
     int walls = 0;
-    for (int k = 0; k < 3; ++k) {
-        const float total = side[k][0] + side[k][1];
-        walls += total > 0.0f && (side[k][0] < PROBE_NEAR_DEAD * total || side[k][1] < PROBE_NEAR_DEAD * total);
+    for (int k = 0; k < 3; ++k) walls += probe_dead_side(side, k) >= 0;
+    for (int k = 0; k < 3 && walls == 1; ++k) {
+        if (probe_dead_side(side, k) >= 0) continue;
+        float3 q = p;                                                /* one cell on, towards the nearer layer */
+        const float move = (ga[k] < 0.5f ? -1.0f : 1.0f) * sp[k];
+        if (k == 0) q.x += move; else if (k == 1) q.y += move; else q.z += move;
+        probe_sides(q, n, v, near, nshift, &nalpha, PROBE_ARGS);
+        walls += probe_dead_side(near, k) >= 0;
     }
     if (walls < 2) return e;
     float3 step = (float3)(0.0f);
     for (int k = 0; k < 3; ++k) {
-        const float total = side[k][0] + side[k][1];
-        for (int dead = 0; dead < 2; ++dead) {
-            const float t = dead ? ga[k] : 1.0f - ga[k];              /* cells from the point to the live layer */
-            const int next = dead ? gb[k] - 1 : gb[k] + 2;             /* the layer after it, inwards */
-            if (!(total > 0.0f) || side[k][dead] >= PROBE_NEAR_DEAD * total || gl[k] < 2 || !(t > 1e-6f)
-                || next < 0 || next > gl[k])
-                continue;
-            float3 q = p;
-            const float move = (dead ? -1.0f : 1.0f) * (t + 1.0f) * sp[k];
-            if (k == 0) q.x += move; else if (k == 1) q.y += move; else q.z += move;
-            const float4 e2 = probe_blend(q, n, v, (const float *)0, PROBE_ARGS);
-            if (e2.w == PROBE_SOURCE_CELL) step -= t * (e2.xyz - e.xyz);
-        }
+        const int dead = probe_dead_side(side, k);
+        if (dead < 0) continue;
+        const float t = dead ? ga[k] : 1.0f - ga[k];                  /* cells from the point to the live layer */
+        const int next = dead ? gb[k] - 1 : gb[k] + 2;                 /* the layer after it, inwards */
+        if (gl[k] < 2 || !(t > 1e-6f) || next < 0 || next > gl[k]) continue;
+        /* the live layer where its probes stand: o cells further in */
+        const float o = dead ? -shift[k][0] / side[k][0] : shift[k][1] / side[k][1];
+        float3 q = p;
+        const float move = (dead ? -1.0f : 1.0f) * (t + 1.0f) * sp[k];
+        if (k == 0) q.x += move; else if (k == 1) q.y += move; else q.z += move;
+        const float4 e2 = probe_blend(q, n, v, (const float *)0, PROBE_ARGS);
+        const float reach = fmin(fmax(t + o, 0.0f) / fmax(1.0f - o, 0.25f), PROBE_STEP_REACH);
+        if (e2.w == PROBE_SOURCE_CELL) step -= reach * (e2.xyz - e.xyz);
     }
     return (float4)(clamp(e.xyz + step, (float3)(0.0f), e.xyz), e.w);
 }

@@ -101,39 +101,62 @@ def test_a_field_linear_in_position_is_exact_between_probes(rt, rep):
 
 @pytest.mark.parametrize("rep", ["octahedral", "sh"])
 @pytest.mark.parametrize("towards_walls", ["darker", "brighter"])
-def test_between_a_junction_and_its_layers_the_read_goes_on_to_the_point(rt, rep, towards_walls):
+@pytest.mark.parametrize("relocated", [0.0, 0.15])
+def test_by_a_junction_the_read_goes_on_from_its_layers_to_the_point(rt, rep, towards_walls, relocated):
     """probe_irradiance's step (docs/conventions.md "Junctions"): the layers below the floor (y = 0)
-    and behind the wall (x = 0) off, a point in the junction's cells (between the floor and its
-    layer and between the wall and its layer) reads a field linear in position exactly where the
-    field darkens towards both (each layer and the next one in give its gradient), and the layers'
-    read where it brightens (the step only darkens: a layer off a concave junction sees what the
-    junction sees edge-on); by one wall alone, the layer's read, as ever; elsewhere trilinear."""
+    and behind the wall (x = 0) off, a point between the floor and its layer or between the wall and
+    its layer, in the junction's cells or within a cell of them (the cell one further towards its
+    nearer layer has the other wall), reads a field linear in position exactly where the field
+    darkens towards the walls (each layer, where its probes stand, and the next one in give its
+    gradient) up to STEP_REACH cells from the layer's read, and the layers' read where it brightens
+    (the step only darkens: a layer off a concave junction sees what the junction sees edge-on); by
+    one wall farther from the other, the layer's read, as ever; elsewhere trilinear. `relocated`: the
+    floor's and the wall's live layers moved that many cells further in (the bake's relocation), the
+    field held at where the probes stand."""
     a, b = np.array([2.5, 3.0, 2.5]), np.array([[0.5, 0.3, 0.6], [0.6, 0.9, 0.4], [0.2, 0.1, -0.3]])
     if towards_walls == "brighter":
         b[:2] = -b[:2]
-    counts, spacing, origin = (4, 5, 3), (0.5, 0.4, 0.7), (-1.0, -0.3, 2.0)
+    counts, spacing, origin = (5, 5, 3), (0.5, 0.4, 0.7), (-1.0, -0.3, 2.0)
     states = np.zeros(int(np.prod(counts)))
     index = np.arange(len(states))
     x, y = index % counts[0], index // (counts[0] * counts[2])    # probe index y * nx * nz + z * nx + x
     states[(x == 0) | (y == 0)] = probes.INACTIVE
-    vol = probes.sampled(synthetic(counts, spacing, origin, rep, value=lambda p: a + p @ b, states=states),
-                         settings(visibility=False, normal_bias=0.0, view_bias=0.0))
+    shift = np.zeros((len(states), 3))                          # world units
+    shift[x == 1, 0] = relocated * spacing[0]
+    shift[y == 1, 1] = relocated * spacing[1]
+    grid = probes.Grid(origin, spacing, counts)
+    stands = {tuple(np.round(q, 9)): q + d for q, d in zip(grid.positions(), shift)}
+    vol = synthetic(counts, spacing, origin, rep, value=lambda q: a + stands[tuple(np.round(q, 9))] @ b,
+                    states=states)
+    vol.data[:, :3] = shift
+    vol = probes.sampled(vol, settings(visibility=False, normal_bias=0.0, view_bias=0.0))
     rng = np.random.default_rng(3)
     lo = np.array(origin) + [0.1, 0.1, 0]
     hi = np.array(origin) + (np.array(counts) - 1) * spacing
-    p = rng.uniform(lo, hi, (3000, 3))
+    p = rng.uniform(lo, hi, (4000, 3))
     n, v = unit(rng.normal(size=p.shape)), unit(rng.normal(size=p.shape))
     layer = np.array(origin[:2]) + spacing[:2]
     by = p[:, :2] < layer                                   # between the wall / the floor and its layer
-    corner = by.all(1)
-    clamped = p.copy()
-    clamped[:, :2] = np.maximum(p[:, :2], layer)            # what the layers alone read
-    want = a + clamped @ b
+    near = p[:, :2] < layer + 0.5 * np.array(spacing[:2])   # or within half a cell past it
+    stepped = by & near[:, ::-1]                            # by one wall, within a cell of the other
+    # the layers' read: trilinear over the field where the probes stand (the first live layer's
+    # values from `relocated` cells further in)
+    read, s2 = p.copy(), np.array(spacing[:2])
+    past = np.clip((p[:, :2] - layer) / s2, 0, 1)
+    read[:, :2] = np.where(past < 1, layer + relocated * s2 + past * (1 - relocated) * s2, p[:, :2])
+    want = a + read @ b
     if towards_walls == "darker":
-        want[corner] = a + p[corner] @ b
+        # the step goes on from the layer's read to the point, STEP_REACH cells at most
+        t = (layer - p[:, :2]) / s2
+        reach = np.minimum((t + relocated) / (1 - relocated), twin.STEP_REACH)
+        exact = read.copy()
+        exact[:, :2] = np.where(stepped, layer + relocated * s2 - reach * (1 - relocated) * s2, read[:, :2])
+        want = a + exact @ b
+        assert (reach < twin.STEP_REACH)[stepped].sum() > 100     # the point itself, where in reach
     got_twin = twin.irradiance(vol, p, n, v, visibility=False, classification=True)
     got = kernel_irradiance(rt, vol, p, n, v, False, True)
-    assert corner.sum() > 100 and (by.any(1) & ~corner).sum() > 300 and (~by.any(1)).sum() > 300
+    assert stepped.all(1).sum() > 60 and (stepped.any(1) & ~by.all(1)).sum() > 150
+    assert (by.any(1) & ~stepped.any(1)).sum() > 300 and (~by.any(1)).sum() > 300
     assert np.abs(got_twin - want).max() < 1e-12
     assert np.abs(got - want).max() / want.max() < 3e-6
 

@@ -101,6 +101,7 @@ PROBE_WEIGHTS = {
     "CRUSH": 0.2,               # weights below it are crushed, w^3 / CRUSH^2
     "TRILINEAR_FLOOR": 0.001,   # the trilinear weight's floor, with visibility
     "NEAR_DEAD": 0.05,          # a side of a point's cell under this share of the weight: a wall's (probe_irradiance)
+    "STEP_REACH": 0.4,          # probe_irradiance's step goes on from a layer's read at most this many cells
 }
 # entries of the kernels' traversal stack of the 4-wide BVH (kernels/scene.h trace_range): a node
 # pushes at most 4 and pops one, so a tree of d levels needs 3 d + 1 (scene/bvh.py widen checks)

@@ -247,50 +247,77 @@ vec4 probeBlend(vec3 p, vec3 n, vec3 v, float roughness, bool specular) {{
     return vec4(s, 1.0);
 }}
 
-// the irradiance at p (0 where no active probe is near: probeBlend's w says so), stepped from the layer
-// nearest a wall to the point as kernels/probes.h probe_irradiance (docs/conventions.md "Junctions"):
-// along an axis where one side of the point's own cell carries under NEAR_DEAD of the weight, the read goes on
-// linearly from the live layer, by the read one cell further in, in a cell where two axes or three have such a
-// side (a junction's); the steps only darken
-vec3 probeIrradiance(vec3 p, vec3 n, vec3 v) {{
-    vec4 e = probeBlend(p, n, v, 0.0, false);
-    if (!(e.w > 0.0)) return e.xyz;
+// the probes' weight on either side of the (unbiased) cell of p along each axis, the axis' own trilinear factor
+// left out (side0 the low sides', side1 the high), and each side's weighted offset along the axis in cells
+// (shift0, shift1: divided by the side's weight, where the relocated layer stands), as kernels/probes.h probe_sides
+ivec3 probeSides(vec3 p, vec3 n, vec3 v, out vec3 side0, out vec3 side1, out vec3 shift0, out vec3 shift1,
+                 out vec3 alpha) {{
     vec3 biased = p + n * PROBE_NORMAL_BIAS + v * PROBE_VIEW_BIAS;
     ivec3 last = PROBE_COUNTS - 1;
-    vec3 alpha;
     ivec3 base = probeCell((p - PROBE_ORIGIN) / PROBE_SPACING, last, alpha);
-    vec3 side0 = vec3(0.0), side1 = vec3(0.0), value;
+    side0 = vec3(0.0); side1 = vec3(0.0); shift0 = vec3(0.0); shift1 = vec3(0.0);
+    vec3 value;
+    int planeWidth = PROBE_COUNTS.x * PROBE_COUNTS.y;
     for (int i = 0; i < 8; ++i) {{
-        ivec3 off = ivec3(i & 1, (i >> 1) & 1, (i >> 2) & 1);
-        float w = probeContribution(clamp(base + off, ivec3(0), last), p, biased, n, v, vec3(1.0), 0.0, false, value);
+        ivec3 off = ivec3(i & 1, (i >> 1) & 1, (i >> 2) & 1), c = clamp(base + off, ivec3(0), last);
+        float w = probeContribution(c, p, biased, n, v, vec3(1.0), 0.0, false, value);
         vec3 f = mix(1.0 - alpha, alpha, vec3(off));
 #if PROBE_VISIBILITY
         f = max(f, vec3({w['TRILINEAR_FLOOR']}));
 #endif
+        int index = c.y * PROBE_COUNTS.x * PROBE_COUNTS.z + c.z * PROBE_COUNTS.x + c.x;
+        vec3 o = texelFetch(probeDataTexture, ivec2(index % planeWidth, index / planeWidth), 0).xyz;
         vec3 share = w * vec3(f.y * f.z, f.x * f.z, f.x * f.y);
         side0 += share * (1.0 - vec3(off));
         side1 += share * vec3(off);
+        shift0 += share * o * (1.0 - vec3(off));
+        shift1 += share * o * vec3(off);
     }}
+    return base;
+}}
+
+// which side of axis k carries under NEAR_DEAD of the weight (a wall's): 0 the low, 1 the high, -1 neither
+int probeDeadSide(vec3 side0, vec3 side1, int k) {{
+    float total = side0[k] + side1[k];
+    if (!(total > 0.0)) return -1;
+    return side0[k] < {w['NEAR_DEAD']} * total ? 0 : side1[k] < {w['NEAR_DEAD']} * total ? 1 : -1;
+}}
+
+// the irradiance at p (0 where no active probe is near: probeBlend's w says so), stepped from the layer
+// nearest a wall to the point as kernels/probes.h probe_irradiance (docs/conventions.md "Junctions"):
+// along an axis where one side of the point's own cell carries under NEAR_DEAD of the weight, the read goes on
+// linearly from the live layer where its probes stand, by the read one cell further in, where two axes or three
+// have such a side, or one and the cell one further along another (towards the nearer layer) has one on that
+// axis (within a cell of a junction); the steps only darken
+vec3 probeIrradiance(vec3 p, vec3 n, vec3 v) {{
+    vec4 e = probeBlend(p, n, v, 0.0, false);
+    if (!(e.w > 0.0)) return e.xyz;
+    ivec3 last = PROBE_COUNTS - 1;
+    vec3 side0, side1, shift0, shift1, alpha, near0, near1, nshift0, nshift1, nalpha;
+    ivec3 base = probeSides(p, n, v, side0, side1, shift0, shift1, alpha);
     int walls = 0;
-    for (int k = 0; k < 3; ++k) {{
-        float total = side0[k] + side1[k];
-        if (total > 0.0 && (side0[k] < {w['NEAR_DEAD']} * total || side1[k] < {w['NEAR_DEAD']} * total)) ++walls;
+    for (int k = 0; k < 3; ++k) if (probeDeadSide(side0, side1, k) >= 0) ++walls;
+    for (int k = 0; k < 3 && walls == 1; ++k) {{
+        if (probeDeadSide(side0, side1, k) >= 0) continue;
+        vec3 q = p;                                                 // one cell on, towards the nearer layer
+        q[k] += (alpha[k] < 0.5 ? -1.0 : 1.0) * PROBE_SPACING[k];
+        probeSides(q, n, v, near0, near1, nshift0, nshift1, nalpha);
+        if (probeDeadSide(near0, near1, k) >= 0) ++walls;
     }}
-    if (walls < 2) return e.xyz;                                    // a junction's cell only
+    if (walls < 2) return e.xyz;                                    // by a junction only
     vec3 step = vec3(0.0);
     for (int k = 0; k < 3; ++k) {{
-        float total = side0[k] + side1[k];
-        for (int dead = 0; dead < 2; ++dead) {{
-            float t = dead == 1 ? alpha[k] : 1.0 - alpha[k];          // cells from the point to the live layer
-            int next = dead == 1 ? base[k] - 1 : base[k] + 2;          // the layer after it, inwards
-            float mine = dead == 1 ? side1[k] : side0[k];
-            if (!(total > 0.0) || mine >= {w['NEAR_DEAD']} * total || last[k] < 2 || !(t > 1e-6) || next < 0 || next > last[k])
-                continue;
-            vec3 q = p;
-            q[k] += (dead == 1 ? -1.0 : 1.0) * (t + 1.0) * PROBE_SPACING[k];
-            vec4 e2 = probeBlend(q, n, v, 0.0, false);
-            if (e2.w > 0.0) step -= t * (e2.xyz - e.xyz);
-        }}
+        int dead = probeDeadSide(side0, side1, k);
+        if (dead < 0) continue;
+        float t = dead == 1 ? alpha[k] : 1.0 - alpha[k];              // cells from the point to the live layer
+        int next = dead == 1 ? base[k] - 1 : base[k] + 2;              // the layer after it, inwards
+        if (last[k] < 2 || !(t > 1e-6) || next < 0 || next > last[k]) continue;
+        float o = dead == 1 ? -shift0[k] / side0[k] : shift1[k] / side1[k];   // the live layer o cells further in
+        vec3 q = p;
+        q[k] += (dead == 1 ? -1.0 : 1.0) * (t + 1.0) * PROBE_SPACING[k];
+        vec4 e2 = probeBlend(q, n, v, 0.0, false);
+        float reach = min(max(t + o, 0.0) / max(1.0 - o, 0.25), {w['STEP_REACH']});
+        if (e2.w > 0.0) step -= reach * (e2.xyz - e.xyz);
     }}
     return clamp(e.xyz + step, vec3(0.0), e.xyz);
 }}

@@ -12,6 +12,7 @@ from iblbake.scene.layout import PROBE_WEIGHTS
 CRUSH, WRAP_FLOOR = PROBE_WEIGHTS["CRUSH"], PROBE_WEIGHTS["WRAP_FLOOR"]
 CHEBYSHEV_FLOOR, TRILINEAR_FLOOR = PROBE_WEIGHTS["CHEBYSHEV_FLOOR"], PROBE_WEIGHTS["TRILINEAR_FLOOR"]
 NEAR_DEAD = PROBE_WEIGHTS["NEAR_DEAD"]        # probe_irradiance's step: a side with a wall
+STEP_REACH = PROBE_WEIGHTS["STEP_REACH"]      # and the farthest it goes on from a layer's read, in cells
 
 
 def octahedral(d):
@@ -159,42 +160,74 @@ def irradiance_and_source(volume, p, n, v, *, visibility: bool, classification: 
     return near_wall(volume, p, n, v, e, source, visibility, classification), source
 
 
-def near_wall(volume, p, n, v, e, source, visibility: bool, classification: bool):
-    """Twin of probe_irradiance's step: where one side of the point's own (unbiased) cell along an
-    axis carries under NEAR_DEAD of the probes' weight (the axis' trilinear factor left out), on two
-    axes or three (a junction's cell), the read e goes on linearly from the live layer to the point
-    along each, by the reads one cell apart; the steps' sum kept within [0, 1] e: the step only
-    darkens."""
+def sides(volume, p, n, v, visibility: bool, classification: bool):
+    """Twin of probe_sides: the probes' weight on either side of the (unbiased) cell of points p
+    along each axis, the axis' own trilinear factor left out (side (m, 3, 2)), each side's weighted
+    mean offset along the axis in cells (shift (m, 3, 2), the relocated probes': where the layer
+    stands), the cell's lowest probe and p's fractions in it."""
     counts, spacing = np.asarray(volume["counts"]), np.asarray(volume["spacing"], np.float64)
     biased = p + n * volume["normal_bias"] + v * volume["view_bias"]
     base, alpha, _ = cell(volume, p)
-    side = np.zeros((len(p), 3, 2))
+    side, shift = np.zeros((len(p), 3, 2)), np.zeros((len(p), 3, 2))
     for i in range(8):
         off = np.array([i & 1, (i >> 1) & 1, (i >> 2) & 1])
-        w, _ = contribution(volume, np.clip(base + off, 0, counts - 1), p, biased, n, np.ones((len(p), 3)),
-                            visibility, classification)
+        c = np.clip(base + off, 0, counts - 1)
+        w, _ = contribution(volume, c, p, biased, n, np.ones((len(p), 3)), visibility, classification)
+        o = np.asarray(volume["data"])[probe_index(c, counts), :3] / spacing
         f = np.where(off == 1, alpha, 1 - alpha)
         if visibility:
             f = np.maximum(f, TRILINEAR_FLOOR)
         for k in range(3):
-            side[:, k, off[k]] += w * np.prod(np.delete(f, k, axis=1), axis=1)
-    step = np.zeros_like(e)
+            wk = w * np.prod(np.delete(f, k, axis=1), axis=1)
+            side[:, k, off[k]] += wk
+            shift[:, k, off[k]] += wk * o[:, k]
+    return side, shift, base, alpha
+
+
+def dead_sides(side):
+    """Twin of probe_dead_side for every axis: (m, 3) 0 the low side under NEAR_DEAD of the weight
+    (a wall's), 1 the high, -1 neither."""
     total = side.sum(2)
-    walls = ((total > 0)[:, :, None] & (side < NEAR_DEAD * total[:, :, None])).any(2).sum(1)
+    return np.where(~(total > 0), -1, np.where(side[:, :, 0] < NEAR_DEAD * total, 0,
+                                               np.where(side[:, :, 1] < NEAR_DEAD * total, 1, -1)))
+
+
+def near_wall(volume, p, n, v, e, source, visibility: bool, classification: bool):
+    """Twin of probe_irradiance's step: where one side of the point's own (unbiased) cell along an
+    axis carries under NEAR_DEAD of the probes' weight (the axis' trilinear factor left out), on two
+    axes or three, or on one with the cell one further along another axis (towards the point's nearer
+    layer) having such a side on that axis (within a cell of a junction), the read e goes on linearly
+    along each of the point's own walls from the live layer where its probes stand (their mean
+    offset) to the point, by the reads one cell apart; the steps' sum kept within [0, 1] e: the step
+    only darkens."""
+    counts, spacing = np.asarray(volume["counts"]), np.asarray(volume["spacing"], np.float64)
+    side, shift, base, alpha = sides(volume, p, n, v, visibility, classification)
+    dead = dead_sides(side)
+    walls = (dead >= 0).sum(1)
     for k in range(3):
-        for dead in (0, 1):
-            t = alpha[:, k] if dead else 1 - alpha[:, k]
-            nxt = base[:, k] - 1 if dead else base[:, k] + 2
-            rows = np.flatnonzero((total[:, k] > 0) & (side[:, k, dead] < NEAR_DEAD * total[:, k]) & (counts[k] > 2)
-                                  & (t > 1e-6) & (nxt >= 0) & (nxt <= counts[k] - 1) & (source == SOURCE_CELL)
-                                  & (walls >= 2))
+        rows = np.flatnonzero((walls == 1) & (dead[:, k] < 0) & (source == SOURCE_CELL))
+        if not len(rows):
+            continue
+        q = p[rows].copy()
+        q[:, k] += np.where(alpha[rows, k] < 0.5, -1.0, 1.0) * spacing[k]
+        walls[rows] += dead_sides(sides(volume, q, n[rows], v[rows], visibility, classification)[0])[:, k] >= 0
+    step = np.zeros_like(e)
+    for k in range(3):
+        for d in (0, 1):
+            t = alpha[:, k] if d else 1 - alpha[:, k]
+            nxt = base[:, k] - 1 if d else base[:, k] + 2
+            rows = np.flatnonzero((dead[:, k] == d) & (counts[k] > 2) & (t > 1e-6) & (nxt >= 0)
+                                  & (nxt <= counts[k] - 1) & (source == SOURCE_CELL) & (walls >= 2))
             if not len(rows):
                 continue
+            live = 1 - d
+            o = (-1 if d else 1) * shift[rows, k, live] / side[rows, k, live]
             q = p[rows].copy()
-            q[:, k] += (-1 if dead else 1) * (t[rows] + 1) * spacing[k]
+            q[:, k] += (-1 if d else 1) * (t[rows] + 1) * spacing[k]
             e2, s2 = blend_and_source(volume, q, n[rows], v[rows], visibility=visibility,
                                       classification=classification)
-            step[rows] -= np.where((s2 == SOURCE_CELL)[:, None], t[rows, None] * (e2 - e[rows]), 0.0)
+            reach = np.minimum(np.maximum(t[rows] + o, 0.0) / np.maximum(1.0 - o, 0.25), STEP_REACH)
+            step[rows] -= np.where((s2 == SOURCE_CELL)[:, None], reach[:, None] * (e2 - e[rows]), 0.0)
     return np.clip(e + step, 0.0, e)
 
 
