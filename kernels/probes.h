@@ -108,28 +108,19 @@ IBL_INLINE float3 probe_value(__global const float4 *probe_irr, int index, float
     return probe_irradiance_at(probe_irr, index, n, texels, nx, ny, nz);
 }
 
-/* Probe c's weight at the biased point (its factor `falloff`: the trilinear one, or the fallback's
- * inverse square distance) and its value (probe_value; the irradiance as sqrt E with visibility,
- * E without; the specular radiance as it is): 0 and 0 for an inactive probe. The value is always
- * written: probe_blend adds weight x value, and an unwritten value (whatever the stack held: a
- * NaN now and then, as a pointer's bits) times a zero weight was a NaN pixel. */
-IBL_INLINE float probe_contribution(int3 c, float3 p, float3 biased, float3 n, float3 falloff, const float *spec,
-                                float3 *value, PROBE_PARAMS)
+/* Probe c's own weight at the biased point, its trilinear factor left out (DDGI's with visibility:
+ * wrap shading, Chebyshev visibility on the distance moments' atlas, the crush; 1 without): 0 for an
+ * inactive probe. Apart from its value: the junction step's side weights need no irradiance read. */
+IBL_INLINE float probe_weight(int3 c, float3 p, float3 biased, float3 n, PROBE_PARAMS)
 {
     PROBE_VOLUME_LOCALS;
-    const float3 origin = probe_origin, spacing = probe_spacing;
     const int index = c.y * probe_nx * probe_nz + c.z * probe_nx + c.x;
     const float4 data = probe_data[index];
 #ifdef PROBE_CLASSIFICATION
-    if (data.w != 0.0f) {
-        *value = (float3)(0.0f);
-        return 0.0f;
-    }
+    if (data.w != 0.0f) return 0.0f;
 #endif
-    const float3 e = probe_value(probe_irr, index, n, spec, probe_irr_texels, probe_nx, probe_ny, probe_nz);
 #ifdef PROBE_VISIBILITY
-    const float3 pp = origin + convert_float3(c) * spacing + data.xyz;
-    const float3 tri = fmax(falloff, PROBE_TRILINEAR_FLOOR);
+    const float3 pp = probe_origin + convert_float3(c) * probe_spacing + data.xyz;
     /* wrap shading: a probe behind the surface still counts a little */
     const float wrap = 0.5f * (dot(normalize(pp - p), n) + 1.0f);
     float w = wrap * wrap + PROBE_WRAP_FLOOR;
@@ -148,12 +139,42 @@ IBL_INLINE float probe_contribution(int3 c, float3 p, float3 biased, float3 n, f
     w *= fmax(PROBE_CHEBYSHEV_FLOOR, cheb);
     w = fmax(1e-6f, w);
     if (w < PROBE_CRUSH) w *= w * w * (1.0f / (PROBE_CRUSH * PROBE_CRUSH));     /* crush tiny weights, continuously */
+    return w;
+#else
+    return 1.0f;
+#endif
+}
+
+/* Probe c's weight given its own (probe_weight's w) and its factor `falloff` (the trilinear one, or
+ * the fallback's inverse square distance), and its value (probe_value; the irradiance as sqrt E with
+ * visibility, E without; the specular radiance as it is): 0 and 0 for an inactive probe (w 0). The
+ * value is always written: probe_blend adds weight x value, and an unwritten value (whatever the
+ * stack held: a NaN now and then, as a pointer's bits) times a zero weight was a NaN pixel. */
+IBL_INLINE float probe_weighted(float w, int3 c, float3 n, float3 falloff, const float *spec, float3 *value,
+                                PROBE_PARAMS)
+{
+    if (w == 0.0f) {
+        *value = (float3)(0.0f);
+        return 0.0f;
+    }
+    PROBE_VOLUME_LOCALS;
+    const int index = c.y * probe_nx * probe_nz + c.z * probe_nx + c.x;
+    const float3 e = probe_value(probe_irr, index, n, spec, probe_irr_texels, probe_nx, probe_ny, probe_nz);
+#ifdef PROBE_VISIBILITY
+    const float3 tri = fmax(falloff, PROBE_TRILINEAR_FLOOR);
     *value = spec ? e : sqrt(e);
     return w * tri.x * tri.y * tri.z;
 #else
     *value = e;
     return falloff.x * falloff.y * falloff.z;
 #endif
+}
+
+/* probe_weight and probe_weighted in one: probe c's weight at the biased point and its value */
+IBL_INLINE float probe_contribution(int3 c, float3 p, float3 biased, float3 n, float3 falloff, const float *spec,
+                                    float3 *value, PROBE_PARAMS)
+{
+    return probe_weighted(probe_weight(c, p, biased, n, PROBE_ARGS), c, n, falloff, spec, value, PROBE_ARGS);
 }
 
 /* The grid cell of g (a point in grid units): its lowest probe, clamped to the grid (last: the
@@ -171,8 +192,10 @@ IBL_INLINE int3 probe_cell(float3 g, int3 last, float3 *alpha)
  * weighted by its inverse square distance (in cells) with the same visibility (RTXGI returns 0
  * there), or none of those (0: the caller falls back to the panorama); the grid and biases from
  * the volume record (PROBE_VOLUME_LOCALS, world units). Given `spec` (the warped lobe's weights) the radiance along the lobe instead, the same weights
- * blending it linearly. */
-IBL_INLINE float4 probe_blend(float3 p, float3 n, float3 v, const float *spec, PROBE_PARAMS)
+ * blending it linearly. The cell's lowest probe in *cell and its eight probes' own weights
+ * (probe_weight) in own[off.x + 2 off.y + 4 off.z]: probe_irradiance's junction step reuses them. */
+IBL_INLINE float4 probe_blend_cell(float3 p, float3 n, float3 v, const float *spec, int3 *cell, float *own,
+                                   PROBE_PARAMS)
 {
     PROBE_VOLUME_LOCALS;
     const float3 origin = probe_origin, spacing = probe_spacing;
@@ -181,12 +204,15 @@ IBL_INLINE float4 probe_blend(float3 p, float3 n, float3 v, const float *spec, P
     const float3 g = (biased - origin) / spacing;
     float3 alpha;
     const int3 base = probe_cell(g, last, &alpha);
+    *cell = base;
     float3 sum = (float3)(0.0f), value;
     float wsum = 0.0f, source = PROBE_SOURCE_CELL;
     for (int i = 0; i < 8; ++i) {
         const int3 off = (int3)(i & 1, (i >> 1) & 1, (i >> 2) & 1);
-        const float w = probe_contribution(clamp(base + off, (int3)(0), last), p, biased, n,
-                                           select(1.0f - alpha, alpha, off == (int3)(1)), spec, &value, PROBE_ARGS);
+        const int3 c = clamp(base + off, (int3)(0), last);
+        own[i] = probe_weight(c, p, biased, n, PROBE_ARGS);
+        const float w = probe_weighted(own[i], c, n, select(1.0f - alpha, alpha, off == (int3)(1)), spec, &value,
+                                       PROBE_ARGS);
         sum += w * value;
         wsum += w;
     }
@@ -212,22 +238,33 @@ IBL_INLINE float4 probe_blend(float3 p, float3 n, float3 v, const float *spec, P
     return (float4)(s, source);
 }
 
+/* probe_blend_cell without its cell's weights */
+IBL_INLINE float4 probe_blend(float3 p, float3 n, float3 v, const float *spec, PROBE_PARAMS)
+{
+    int3 cell;
+    float own[8];
+    return probe_blend_cell(p, n, v, spec, &cell, own, PROBE_ARGS);
+}
+
 /* The probes' weight on either side of the (unbiased) cell of p along each axis, the axis' own
  * trilinear factor left out (visibility and states as in the blend: side[k][0] the low side's), and
  * each side's weighted mean offset along the axis in cells (shift[k][s], the relocated probes':
- * where the layer stands); the cell's lowest probe and p's fractions in it */
-IBL_INLINE int3 probe_sides(float3 p, float3 n, float3 v, float side[3][2], float shift[3][2], float3 *alpha,
-                            PROBE_PARAMS)
+ * where the layer stands); the cell's lowest probe and p's fractions in it. Own weights only
+ * (probe_weight: no irradiance read); given `own`, probe_blend_cell's weights of its cell `blended`,
+ * a probe of that cell (most of the point's, often all) weighs as it did there. */
+IBL_INLINE int3 probe_sides(float3 p, float3 n, float3 v, int3 blended, const float *own, float side[3][2],
+                            float shift[3][2], float3 *alpha, PROBE_PARAMS)
 {
     PROBE_VOLUME_LOCALS;
     const int3 last = (int3)(probe_nx - 1, probe_ny - 1, probe_nz - 1);
     const float3 biased = p + n * probe_normal_bias + v * probe_view_bias;
     const int3 base = probe_cell((p - probe_origin) / probe_spacing, last, alpha);
     for (int k = 0; k < 3; ++k) side[k][0] = side[k][1] = shift[k][0] = shift[k][1] = 0.0f;
-    float3 value;
     for (int i = 0; i < 8; ++i) {
         const int3 off = (int3)(i & 1, (i >> 1) & 1, (i >> 2) & 1), c = clamp(base + off, (int3)(0), last);
-        const float w = probe_contribution(c, p, biased, n, (float3)(1.0f), (const float *)0, &value, PROBE_ARGS);
+        const int3 d = c - blended;
+        const bool shared = own && d.x >= 0 && d.x <= 1 && d.y >= 0 && d.y <= 1 && d.z >= 0 && d.z <= 1;
+        const float w = shared ? own[d.x + 2 * d.y + 4 * d.z] : probe_weight(c, p, biased, n, PROBE_ARGS);
         float3 f = select(1.0f - *alpha, *alpha, off == (int3)(1));
 #ifdef PROBE_VISIBILITY
         f = fmax(f, PROBE_TRILINEAR_FLOOR);
@@ -272,14 +309,27 @@ IBL_INLINE int probe_dead_side(const float side[3][2], int k)
  * under city's floor under its window, flat in the truth, x0.4 by the wall). */
 IBL_INLINE float4 probe_irradiance(float3 p, float3 n, float3 v, PROBE_PARAMS)
 {
-    const float4 e = probe_blend(p, n, v, (const float *)0, PROBE_ARGS);
+    int3 blended;
+    float own[8];
+    const float4 e = probe_blend_cell(p, n, v, (const float *)0, &blended, own, PROBE_ARGS);
     if (e.w != PROBE_SOURCE_CELL) return e;
+#if !defined(PROBE_VISIBILITY) && !defined(PROBE_CLASSIFICATION)
+    return e;                       /* every probe weighs 1: no side is light */
+#endif
     PROBE_VOLUME_LOCALS;
-    float side[3][2], shift[3][2], near[3][2], nshift[3][2];
+    const int3 last = (int3)(probe_nx - 1, probe_ny - 1, probe_nz - 1);
     float3 alpha, nalpha;
-    const int3 base = probe_sides(p, n, v, side, shift, &alpha, PROBE_ARGS);
+    const int3 base = probe_cell((p - probe_origin) / probe_spacing, last, &alpha);
     const float ga[3] = {alpha.x, alpha.y, alpha.z}, sp[3] = {probe_spacing.x, probe_spacing.y, probe_spacing.z};
-    const int gb[3] = {base.x, base.y, base.z}, gl[3] = {probe_nx - 1, probe_ny - 1, probe_nz - 1};
+    const int gb[3] = {base.x, base.y, base.z}, gl[3] = {last.x, last.y, last.z};
+    /* the axes along which a step could be taken (a layer inwards of the live one, the point off it):
+     * with none, no pass over the cell */
+    int open = 0;
+    for (int k = 0; k < 3; ++k)
+        open += gl[k] >= 2 && ((ga[k] > 1e-6f && gb[k] - 1 >= 0) || (1.0f - ga[k] > 1e-6f && gb[k] + 2 <= gl[k]));
+    if (open == 0) return e;
+    float side[3][2], shift[3][2], near[3][2], nshift[3][2];
+    probe_sides(p, n, v, blended, own, side, shift, &alpha, PROBE_ARGS);
     int walls = 0;
     for (int k = 0; k < 3; ++k) walls += probe_dead_side(side, k) >= 0;
     for (int k = 0; k < 3 && walls == 1; ++k) {
@@ -287,7 +337,7 @@ IBL_INLINE float4 probe_irradiance(float3 p, float3 n, float3 v, PROBE_PARAMS)
         float3 q = p;                                                /* one cell on, towards the nearer layer */
         const float move = (ga[k] < 0.5f ? -1.0f : 1.0f) * sp[k];
         if (k == 0) q.x += move; else if (k == 1) q.y += move; else q.z += move;
-        probe_sides(q, n, v, near, nshift, &nalpha, PROBE_ARGS);
+        probe_sides(q, n, v, blended, (const float *)0, near, nshift, &nalpha, PROBE_ARGS);
         walls += probe_dead_side(near, k) >= 0;
     }
     if (walls < 2) return e;

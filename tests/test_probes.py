@@ -6,6 +6,7 @@ asked for."""
 
 import json
 import math
+import re
 import shutil
 from pathlib import Path
 from types import SimpleNamespace
@@ -395,10 +396,23 @@ def test_glsl_transcribes_the_volume(tmp_path, sky):
         expr = src.split(f"Y[{k}] = ")[1].split(";")[0]
         got = np.array([eval(expr, {}, {"d": SimpleNamespace(x=x, y=y, z=z)}) for x, y, z in d])
         assert np.abs(got - sh.sh_basis(d, 3)[:, k]).max() < 1e-12
-    for rep_src in (src, src.replace("#define PROBES_SH 1", "#define PROBES_SH 0")):
+    # probeBlend's w says where its value came from, as the kernel's: the junction step is taken on the
+    # cell's read only (and by the step's reads of a cell), never on the nearest probes' stand-in, whose
+    # w was 1 too (stop 72: a shader that stepped where the renderer does not); compiled, not run
+    step = src.split("vec3 probeIrradiance(")[1].split("\n}\n")[0]
+    assert "if (e.w != PROBE_SOURCE_CELL) return e.xyz;" in step and "if (e2.w == PROBE_SOURCE_CELL)" in step
+    assert "source = PROBE_SOURCE_NEAREST;" in src and "return vec4(s * s, source);" in src
+    sources = ("float w = probeBlend(P, normalize(N), normalize(V), 0.0, false).w;\n"
+               "color.a = w == PROBE_SOURCE_NEAREST ? 0.5 : w == PROBE_SOURCE_CELL ? 1.0 : PROBE_SOURCE_NONE;")
+    # each switch's branch: SH or the atlas; visibility; states alone (the step's pass on them); neither (no pass)
+    for sh_, vis, states in ((1, 1, 1), (0, 1, 0), (1, 0, 1), (1, 0, 0)):
+        rep_src = src
+        for name, on in (("PROBES_SH", sh_), ("PROBE_VISIBILITY", vis), ("PROBE_CLASSIFICATION", states)):
+            rep_src, subs = re.subn(rf"#define {name} [01]\n", f"#define {name} {on}\n", rep_src)
+            assert subs == 1, name
         glsl_compiles(tmp_path / "probes.frag", rep_src + "\nin vec3 P;\nin vec3 N;\nin vec3 V;\nout vec4 color;\n"
                       "void main() { color = vec4(probeIrradiance(P, normalize(N), normalize(V)) * probeVolumeWeight(P), "
-                      "1.0); }\n")
+                      "1.0);\n" + sources + " }\n")
 
 
 def test_probe_files_fuzzed(tmp_path, sky, stress):

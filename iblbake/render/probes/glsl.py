@@ -156,26 +156,17 @@ float probeVolumeWeight(vec3 p) {{
     return w.x * w.y * w.z;
 }}
 
-// probe c's weight at the biased point (its factor falloff: trilinear, or the fallback's inverse square
-// distance) and its value (probeOwnIrradiance, sqrt with visibility; or the specular radiance, as it
-// is): 0 for an inactive probe (kernels/probes.h probe_contribution)
-float probeContribution(ivec3 c, vec3 p, vec3 biased, vec3 n, vec3 v, vec3 falloff, float roughness, bool specular,
-                        out vec3 value) {{
-    value = vec3(0.0);
+// probe c's own weight at the biased point, its trilinear factor left out (DDGI's with visibility, 1
+// without): 0 for an inactive probe; no value read (kernels/probes.h probe_weight)
+float probeWeight(ivec3 c, vec3 p, vec3 biased, vec3 n) {{
     int index = c.y * PROBE_COUNTS.x * PROBE_COUNTS.z + c.z * PROBE_COUNTS.x + c.x;
     int planeWidth = PROBE_COUNTS.x * PROBE_COUNTS.y;
     vec4 data = texelFetch(probeDataTexture, ivec2(index % planeWidth, index / planeWidth), 0);
 #if PROBE_CLASSIFICATION
     if (data.w != 0.0) return 0.0;
 #endif
-#if PROBES_SPECULAR
-    vec3 e = specular ? probeOwnSpecular(index, n, v, roughness) : probeOwnIrradiance(index, n);
-#else
-    vec3 e = probeOwnIrradiance(index, n);
-#endif
 #if PROBE_VISIBILITY
     vec3 pp = PROBE_ORIGIN + vec3(c) * PROBE_SPACING + data.xyz * PROBE_SPACING;
-    vec3 tri = max(falloff, vec3({w['TRILINEAR_FLOOR']}));
     float wrap = 0.5 * (dot(normalize(pp - p), n) + 1.0);
     float w = wrap * wrap + {w['WRAP_FLOOR']};
     vec3 toProbe = pp - biased;
@@ -191,6 +182,26 @@ float probeContribution(ivec3 c, vec3 p, vec3 biased, vec3 n, vec3 v, vec3 fallo
     w *= max({w['CHEBYSHEV_FLOOR']}, cheb);
     w = max(1e-6, w);
     if (w < {w['CRUSH']}) w *= w * w * (1.0 / ({w['CRUSH']} * {w['CRUSH']}));
+    return w;
+#else
+    return 1.0;
+#endif
+}}
+
+// probe c's weight given its own (probeWeight's w) and its factor falloff (trilinear, or the fallback's
+// inverse square distance), and its value (probeOwnIrradiance, sqrt with visibility; or the specular
+// radiance, as it is): 0 for an inactive probe (kernels/probes.h probe_weighted)
+float probeWeighted(float w, ivec3 c, vec3 n, vec3 v, vec3 falloff, float roughness, bool specular, out vec3 value) {{
+    value = vec3(0.0);
+    if (w == 0.0) return 0.0;
+    int index = c.y * PROBE_COUNTS.x * PROBE_COUNTS.z + c.z * PROBE_COUNTS.x + c.x;
+#if PROBES_SPECULAR
+    vec3 e = specular ? probeOwnSpecular(index, n, v, roughness) : probeOwnIrradiance(index, n);
+#else
+    vec3 e = probeOwnIrradiance(index, n);
+#endif
+#if PROBE_VISIBILITY
+    vec3 tri = max(falloff, vec3({w['TRILINEAR_FLOOR']}));
     value = specular ? e : sqrt(e);
     return w * tri.x * tri.y * tri.z;
 #else
@@ -207,60 +218,75 @@ ivec3 probeCell(vec3 g, ivec3 last, out vec3 alpha) {{
     return base;
 }}
 
-// the probes around p blended as kernels/probes.h probe_blend: the eight of the cell, or where all eight
-// are off the active ones of the 4 x 4 x 4 around it by inverse square distance; the irradiance at n
+// where probeBlend's value came from (its w), as kernels/probes.h PROBE_SOURCE_*
+const float PROBE_SOURCE_NONE = 0.0, PROBE_SOURCE_CELL = 1.0, PROBE_SOURCE_NEAREST = 2.0;
+
+// the probes around p blended as kernels/probes.h probe_blend_cell: the eight of the cell, or where all
+// eight are off the active ones of the 4 x 4 x 4 around it by inverse square distance; the irradiance at n
 // (sqrt-blended with visibility), or (specular) each probe's radiance along the warped GGX lobe, blended
-// linearly; w 0 where no active probe is near (the renderer takes the sky's light there: do so too)
-vec4 probeBlend(vec3 p, vec3 n, vec3 v, float roughness, bool specular) {{
+// linearly; w the source, PROBE_SOURCE_NONE (0) where no active probe is near (the renderer takes the
+// sky's light there: do so too). The cell's lowest probe in cell, its eight probes' own weights in own.
+vec4 probeBlendCell(vec3 p, vec3 n, vec3 v, float roughness, bool specular, out ivec3 cell, out float own[8]) {{
     vec3 biased = p + n * PROBE_NORMAL_BIAS + v * PROBE_VIEW_BIAS;
     vec3 g = (biased - PROBE_ORIGIN) / PROBE_SPACING;
     ivec3 last = PROBE_COUNTS - 1;
     vec3 alpha;
     ivec3 base = probeCell(g, last, alpha);
+    cell = base;
     vec3 sum = vec3(0.0), value;
-    float wsum = 0.0;
+    float wsum = 0.0, source = PROBE_SOURCE_CELL;
     for (int i = 0; i < 8; ++i) {{
         ivec3 off = ivec3(i & 1, (i >> 1) & 1, (i >> 2) & 1);
-        float w = probeContribution(clamp(base + off, ivec3(0), last), p, biased, n, v,
-                                    mix(1.0 - alpha, alpha, vec3(off)), roughness, specular, value);
+        ivec3 c = clamp(base + off, ivec3(0), last);
+        own[i] = probeWeight(c, p, biased, n);
+        float w = probeWeighted(own[i], c, n, v, mix(1.0 - alpha, alpha, vec3(off)), roughness, specular, value);
         sum += w * value;
         wsum += w;
     }}
     if (!(wsum > 0.0)) {{
+        source = PROBE_SOURCE_NEAREST;
         ivec3 lo = max(base - 1, ivec3(0)), hi = min(base + 2, last);
         for (int z = lo.z; z <= hi.z; ++z)
             for (int y = lo.y; y <= hi.y; ++y)
                 for (int x = lo.x; x <= hi.x; ++x) {{
                     vec3 dc = vec3(x, y, z) - g;
-                    float w = probeContribution(ivec3(x, y, z), p, biased, n, v,
-                                                vec3(1.0 / max(dot(dc, dc), 0.01), 1.0, 1.0), roughness, specular,
-                                                value);
+                    ivec3 c = ivec3(x, y, z);
+                    float w = probeWeighted(probeWeight(c, p, biased, n), c, n, v,
+                                            vec3(1.0 / max(dot(dc, dc), 0.01), 1.0, 1.0), roughness, specular, value);
                     sum += w * value;
                     wsum += w;
                 }}
     }}
-    if (!(wsum > 0.0)) return vec4(0.0);
+    if (!(wsum > 0.0)) return vec4(0.0, 0.0, 0.0, PROBE_SOURCE_NONE);
     vec3 s = sum / wsum;
 #if PROBE_VISIBILITY
-    if (!specular) return vec4(s * s, 1.0);
+    if (!specular) return vec4(s * s, source);
 #endif
-    return vec4(s, 1.0);
+    return vec4(s, source);
+}}
+
+vec4 probeBlend(vec3 p, vec3 n, vec3 v, float roughness, bool specular) {{
+    ivec3 cell;
+    float own[8];
+    return probeBlendCell(p, n, v, roughness, specular, cell, own);
 }}
 
 // the probes' weight on either side of the (unbiased) cell of p along each axis, the axis' own trilinear factor
 // left out (side0 the low sides', side1 the high), and each side's weighted offset along the axis in cells
-// (shift0, shift1: divided by the side's weight, where the relocated layer stands), as kernels/probes.h probe_sides
-ivec3 probeSides(vec3 p, vec3 n, vec3 v, out vec3 side0, out vec3 side1, out vec3 shift0, out vec3 shift1,
-                 out vec3 alpha) {{
+// (shift0, shift1: divided by the side's weight, where the relocated layer stands), as kernels/probes.h
+// probe_sides: own weights only (probeWeight); with `reuse`, a probe of the blend's cell `blended` weighs as it
+// did there (own)
+ivec3 probeSides(vec3 p, vec3 n, vec3 v, bool reuse, ivec3 blended, float own[8], out vec3 side0, out vec3 side1,
+                 out vec3 shift0, out vec3 shift1, out vec3 alpha) {{
     vec3 biased = p + n * PROBE_NORMAL_BIAS + v * PROBE_VIEW_BIAS;
     ivec3 last = PROBE_COUNTS - 1;
     ivec3 base = probeCell((p - PROBE_ORIGIN) / PROBE_SPACING, last, alpha);
     side0 = vec3(0.0); side1 = vec3(0.0); shift0 = vec3(0.0); shift1 = vec3(0.0);
-    vec3 value;
     int planeWidth = PROBE_COUNTS.x * PROBE_COUNTS.y;
     for (int i = 0; i < 8; ++i) {{
-        ivec3 off = ivec3(i & 1, (i >> 1) & 1, (i >> 2) & 1), c = clamp(base + off, ivec3(0), last);
-        float w = probeContribution(c, p, biased, n, v, vec3(1.0), 0.0, false, value);
+        ivec3 off = ivec3(i & 1, (i >> 1) & 1, (i >> 2) & 1), c = clamp(base + off, ivec3(0), last), d = c - blended;
+        float w = reuse && all(greaterThanEqual(d, ivec3(0))) && all(lessThanEqual(d, ivec3(1)))
+                  ? own[d.x + 2 * d.y + 4 * d.z] : probeWeight(c, p, biased, n);
         vec3 f = mix(1.0 - alpha, alpha, vec3(off));
 #if PROBE_VISIBILITY
         f = max(f, vec3({w['TRILINEAR_FLOOR']}));
@@ -288,20 +314,33 @@ int probeDeadSide(vec3 side0, vec3 side1, int k) {{
 // along an axis where one side of the point's own cell carries under NEAR_DEAD of the weight, the read goes on
 // linearly from the live layer where its probes stand, by the read one cell further in, where two axes or three
 // have such a side, or one and the cell one further along another (towards the nearer layer) has one on that
-// axis (within a cell of a junction); the steps only darken
+// axis (within a cell of a junction); the steps only darken. Only a read of the cell's eight probes steps (not
+// the nearest probes' stand-in), and only by such a read.
 vec3 probeIrradiance(vec3 p, vec3 n, vec3 v) {{
-    vec4 e = probeBlend(p, n, v, 0.0, false);
-    if (!(e.w > 0.0)) return e.xyz;
+    ivec3 blended;
+    float own[8];
+    vec4 e = probeBlendCell(p, n, v, 0.0, false, blended, own);
+    if (e.w != PROBE_SOURCE_CELL) return e.xyz;
+#if !PROBE_VISIBILITY && !PROBE_CLASSIFICATION
+    return e.xyz;                                                   // every probe weighs 1: no side is light
+#else
     ivec3 last = PROBE_COUNTS - 1;
-    vec3 side0, side1, shift0, shift1, alpha, near0, near1, nshift0, nshift1, nalpha;
-    ivec3 base = probeSides(p, n, v, side0, side1, shift0, shift1, alpha);
+    vec3 alpha;
+    ivec3 base = probeCell((p - PROBE_ORIGIN) / PROBE_SPACING, last, alpha);
+    int open = 0;                                                   // axes a step could be taken along
+    for (int k = 0; k < 3; ++k)
+        if (last[k] >= 2 && ((alpha[k] > 1e-6 && base[k] >= 1) || (1.0 - alpha[k] > 1e-6 && base[k] + 2 <= last[k])))
+            ++open;
+    if (open == 0) return e.xyz;
+    vec3 side0, side1, shift0, shift1, near0, near1, nshift0, nshift1, nalpha;
+    probeSides(p, n, v, true, blended, own, side0, side1, shift0, shift1, alpha);
     int walls = 0;
     for (int k = 0; k < 3; ++k) if (probeDeadSide(side0, side1, k) >= 0) ++walls;
     for (int k = 0; k < 3 && walls == 1; ++k) {{
         if (probeDeadSide(side0, side1, k) >= 0) continue;
         vec3 q = p;                                                 // one cell on, towards the nearer layer
         q[k] += (alpha[k] < 0.5 ? -1.0 : 1.0) * PROBE_SPACING[k];
-        probeSides(q, n, v, near0, near1, nshift0, nshift1, nalpha);
+        probeSides(q, n, v, false, blended, own, near0, near1, nshift0, nshift1, nalpha);
         if (probeDeadSide(near0, near1, k) >= 0) ++walls;
     }}
     if (walls < 2) return e.xyz;                                    // by a junction only
@@ -317,9 +356,10 @@ vec3 probeIrradiance(vec3 p, vec3 n, vec3 v) {{
         q[k] += (dead == 1 ? -1.0 : 1.0) * (t + 1.0) * PROBE_SPACING[k];
         vec4 e2 = probeBlend(q, n, v, 0.0, false);
         float reach = min(max(t + o, 0.0) / max(1.0 - o, 0.25), {w['STEP_REACH']});
-        if (e2.w > 0.0) step -= reach * (e2.xyz - e.xyz);
+        if (e2.w == PROBE_SOURCE_CELL) step -= reach * (e2.xyz - e.xyz);
     }}
     return clamp(e.xyz + step, vec3(0.0), e.xyz);
+#endif
 }}
 
 #if PROBES_SPECULAR

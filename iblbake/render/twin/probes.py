@@ -104,37 +104,42 @@ def specular_at(volume, index, spec):
     return np.maximum(0.0, np.einsum("mk,mkc->mc", spec, c))
 
 
-def contribution(volume, c, p, biased, n, falloff, visibility: bool, classification: bool, spec=None):
-    """Twin of probe_contribution: (weight (m,), value (m, 3)) of probes at grid coordinates c; the
-    value is the irradiance (its square root with visibility) or, given the specular lobe's weights
-    spec (m, K), the radiance along it (linear)."""
-    counts = np.asarray(volume["counts"])
+def weight(volume, c, p, biased, n, visibility: bool, classification: bool):
+    """Twin of probe_weight: the own weights (m,) of probes at grid coordinates c, their trilinear
+    factors left out (DDGI's with visibility, 1 without), 0 for an inactive probe; no value read."""
     origin, spacing = np.asarray(volume["origin"], np.float64), np.asarray(volume["spacing"], np.float64)
-    index = probe_index(c, counts)
+    index = probe_index(c, np.asarray(volume["counts"]))
     data = volume["data"][index]
-    e = irradiance_at(volume, index, n) if spec is None else specular_at(volume, index, spec)
     live = data[:, 3] == 0 if classification else np.ones(len(p), bool)
+    if not visibility:
+        return np.where(live, 1.0, 0.0)
+    pp = origin + c * spacing + data[:, :3]
+    to_p = pp - p
+    wrap = 0.5 * ((to_p / np.linalg.norm(to_p, axis=1, keepdims=True) * n).sum(1) + 1)
+    w = wrap * wrap + WRAP_FLOOR
+    to_probe = pp - biased
+    dist = np.linalg.norm(to_probe, axis=1)
+    m = atlas_read(volume["distance"], index, octahedral(-to_probe / dist[:, None]), volume["distance_texels"],
+                   volume["counts"])
+    var = np.abs(m[:, 0] ** 2 - m[:, 1])
+    dv = dist - m[:, 0]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cheb = np.where(dist > m[:, 0], (var / (var + dv * dv)) ** 3, 1.0)
+    w = np.maximum(1e-6, w * np.maximum(CHEBYSHEV_FLOOR, cheb))
+    return np.where(live, np.where(w < CRUSH, w ** 3 / CRUSH ** 2, w), 0.0)
+
+
+def contribution(volume, c, p, biased, n, falloff, visibility: bool, classification: bool, spec=None):
+    """Twin of probe_contribution: (weight (m,), value (m, 3)) of probes at grid coordinates c: the
+    own weight (weight()) times the factor falloff (trilinear, floored with visibility); the value
+    the irradiance (its square root with visibility) or, given the specular lobe's weights spec
+    (m, K), the radiance along it (linear)."""
+    index = probe_index(c, np.asarray(volume["counts"]))
+    e = irradiance_at(volume, index, n) if spec is None else specular_at(volume, index, spec)
+    w = weight(volume, c, p, biased, n, visibility, classification)
     if visibility:
-        pp = origin + c * spacing + data[:, :3]
-        tri = np.maximum(falloff, TRILINEAR_FLOOR)
-        to_p = pp - p
-        wrap = 0.5 * ((to_p / np.linalg.norm(to_p, axis=1, keepdims=True) * n).sum(1) + 1)
-        w = wrap * wrap + WRAP_FLOOR
-        to_probe = pp - biased
-        dist = np.linalg.norm(to_probe, axis=1)
-        m = atlas_read(volume["distance"], index, octahedral(-to_probe / dist[:, None]), volume["distance_texels"],
-                       volume["counts"])
-        var = np.abs(m[:, 0] ** 2 - m[:, 1])
-        dv = dist - m[:, 0]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            cheb = np.where(dist > m[:, 0], (var / (var + dv * dv)) ** 3, 1.0)
-        w = np.maximum(1e-6, w * np.maximum(CHEBYSHEV_FLOOR, cheb))
-        w = np.where(w < CRUSH, w ** 3 / CRUSH ** 2, w) * tri.prod(1)
-        value = np.sqrt(e) if spec is None else e
-    else:
-        w = falloff.prod(1)
-        value = e
-    return np.where(live, w, 0.0), value
+        return w * np.maximum(falloff, TRILINEAR_FLOOR).prod(1), np.sqrt(e) if spec is None else e
+    return np.where(w > 0, falloff.prod(1), 0.0), e
 
 
 def irradiance(volume, p, n, v, *, visibility: bool, classification: bool):
@@ -164,7 +169,8 @@ def sides(volume, p, n, v, visibility: bool, classification: bool):
     """Twin of probe_sides: the probes' weight on either side of the (unbiased) cell of points p
     along each axis, the axis' own trilinear factor left out (side (m, 3, 2)), each side's weighted
     mean offset along the axis in cells (shift (m, 3, 2), the relocated probes': where the layer
-    stands), the cell's lowest probe and p's fractions in it."""
+    stands), the cell's lowest probe and p's fractions in it. Own weights only (weight(): no value
+    read); the kernel shares the blend's where the cells overlap, the same weights."""
     counts, spacing = np.asarray(volume["counts"]), np.asarray(volume["spacing"], np.float64)
     biased = p + n * volume["normal_bias"] + v * volume["view_bias"]
     base, alpha, _ = cell(volume, p)
@@ -172,7 +178,7 @@ def sides(volume, p, n, v, visibility: bool, classification: bool):
     for i in range(8):
         off = np.array([i & 1, (i >> 1) & 1, (i >> 2) & 1])
         c = np.clip(base + off, 0, counts - 1)
-        w, _ = contribution(volume, c, p, biased, n, np.ones((len(p), 3)), visibility, classification)
+        w = weight(volume, c, p, biased, n, visibility, classification)
         o = np.asarray(volume["data"])[probe_index(c, counts), :3] / spacing
         f = np.where(off == 1, alpha, 1 - alpha)
         if visibility:
@@ -200,6 +206,8 @@ def near_wall(volume, p, n, v, e, source, visibility: bool, classification: bool
     along each of the point's own walls from the live layer where its probes stand (their mean
     offset) to the point, by the reads one cell apart; the steps' sum kept within [0, 1] e: the step
     only darkens."""
+    if not (visibility or classification):
+        return e                    # every probe weighs 1: no side is light
     counts, spacing = np.asarray(volume["counts"]), np.asarray(volume["spacing"], np.float64)
     side, shift, base, alpha = sides(volume, p, n, v, visibility, classification)
     dead = dead_sides(side)
