@@ -78,6 +78,9 @@ def test_sheet_and_accuracy_name_a_missing_mesh_as_render_does(tmp_path):
     p = run_cli("accuracy", scene, "-o", tmp_path / "acc", "--cache", tmp_path / "c")
     one_line_error(p, 1, line)
     assert not (tmp_path / "s.png").exists() and not (tmp_path / "acc").exists()
+    # a path given by --set is blamed on the flag, not on the line of the file it replaced (trial72)
+    p = run_cli("render", scene, "-o", tmp_path / "f.png", "--set", "objects.0.mesh.path=also_gone.ply")
+    one_line_error(p, 1, f"{scene}: --set", f"objects.0.mesh: mesh {tmp_path / 'also_gone.ply'} not found")
 
 
 # the scripts that make the gallery's meshes and textures (the top Makefile's `meshes` target)

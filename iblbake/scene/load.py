@@ -399,7 +399,8 @@ def _check_mesh_files(v: "_Validator", key: str, path: str) -> None:
     from iblbake.scene.gltf import named_files
 
     if not os.path.exists(path):          # not Path.exists: a name too long raised OSError
-        v.fail(key.removesuffix(".path"), f"mesh {Path(path).resolve()} not found")
+        # where: the path's own key (a path given by --set is said as that), named as the mesh's
+        raise InputError(f"{v.where(key)}: {key.removesuffix('.path')}: mesh {Path(path).resolve()} not found")
     try:
         reads.check_file(path, reads.mesh_bytes(), "a mesh", reads.MESH_HINT)
         named = named_files(path)
