@@ -66,6 +66,11 @@ def warnings(scene, fx, arrays) -> list:
     share = met_share(arrays, cam[cam["projection"]]["position"])
     if share < ENCLOSED_SHARE:
         return []
+    # a scene whose probes this render leaves unread (a study's distant rung, effects.reflection_probes:
+    # false) is told so, not told to add one (trial72)
+    remedy = ("its reflection probes are not read here (they are with effects.specular: prefiltered and "
+              "effects.reflection_probes: true)" if scene.data["reflection_probes"]
+              else "add a reflection probe (reflection_probes:, docs/scene.md)")
     return [f"effects.specular: {fx.specular} reflects the distant panorama, but {100 * share:.0f}% of the "
-            f"directions from the camera meet the scene (a room): its reflections show the sky, not the room; add a "
-            f"reflection probe (reflection_probes:, docs/scene.md) or use effects.specular: reference"]
+            f"directions from the camera meet the scene (a room): its reflections show the sky, not the room; "
+            f"{remedy} or use effects.specular: reference"]
