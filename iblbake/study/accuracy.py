@@ -98,6 +98,7 @@ class Study:
         self.rt, self.bakes = runtime, bakes
         self._tell = warn or (lambda _m: None)
         self._said: set = set()            # what was said since the rung began (run_rung)
+        self._said_once: set = set()       # the panorama's notes, said once a study
         self.progress = progress or (lambda *_: None)
         self.scene = scene_load.load_any(scene_path, overrides, ["study.png"])
         self.base = base_values(self.scene, settings)
@@ -118,9 +119,13 @@ class Study:
     def warn(self, message: str) -> None:
         """Say `message` once per rung: a rung renders twice or more (a warm-up, its repeats, the
         diffuse term alone), and each render said the panorama's chromaticities and the probes'
-        share outside their volume again."""
-        if message not in self._said:
-            self._said.add(message)
+        share outside their volume again. A note on the panorama file itself (it names the file
+        first: its chromaticities) is the same on every rung: once a study (trial72: five times)."""
+        scene = getattr(self, "scene", None)
+        whole = scene is not None and message.startswith(f"{scene.data['environment']['path']}:")
+        said = self._said_once if whole else self._said
+        if message not in said:
+            said.add(message)
             self._tell(message)
 
     def load(self, values, origin="ladder"):
