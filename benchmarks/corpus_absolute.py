@@ -70,6 +70,12 @@ def short(label: str) -> str:
     return f"{name.strip(chr(39))} {rest.partition(')')[2].strip()}".strip()
 
 
+LEGEND = ("'name xR (A%, tint T%)': R the ratio of the region's (or half's) mean luminance, real-time over the "
+          "reference; A its worst channel's |mean difference| over the reference's mean luminance, what the "
+          "bounds (regions over 30%, halves over 10%) count; T the colour shift once the luminances match, shown "
+          "where the worst channel is mostly that. Each region's (half's) luminance ratio: R alone.")
+
+
 def worst(errors: dict) -> str:
     """The worst entry of {name: mean_errors} as 'name x ratio (absolute a%)', its tint (the
     colour shift once the luminances match) where the worst channel is most of it."""
@@ -152,6 +158,7 @@ def main():
         doc = json.loads(Path(args.from_json).read_text())
         print(diffuse_table(doc["results"]))
         print(specular_table(doc["results"]))
+        print(LEGEND)
         return
     root = Path(args.tree or Path(__file__).resolve().parents[1]).resolve()
     sys.path.insert(0, str(root))
@@ -182,6 +189,7 @@ def main():
           f"to {args.target_noise} or {args.max_samples} samples per pixel\n")
     print(diffuse_table(results))
     print(specular_table(results))
+    print(LEGEND)
 
 
 if __name__ == "__main__":
