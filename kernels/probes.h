@@ -108,13 +108,26 @@ IBL_INLINE float3 probe_value(__global const float4 *probe_irr, int index, float
     return probe_irradiance_at(probe_irr, index, n, texels, nx, ny, nz);
 }
 
+/* The index of the probe at grid coordinates c (the twin's probe_index: y, then z, then x) */
+IBL_INLINE int probe_index(int3 c, int nx, int nz)
+{
+    return c.y * nx * nz + c.z * nx + c.x;
+}
+
+/* p moved by `by` along axis k */
+IBL_INLINE float3 probe_moved(float3 p, int k, float by)
+{
+    if (k == 0) p.x += by; else if (k == 1) p.y += by; else p.z += by;
+    return p;
+}
+
 /* Probe c's own weight at the biased point, its trilinear factor left out (DDGI's with visibility:
  * wrap shading, Chebyshev visibility on the distance moments' atlas, the crush; 1 without): 0 for an
  * inactive probe. Apart from its value: the junction step's side weights need no irradiance read. */
 IBL_INLINE float probe_weight(int3 c, float3 p, float3 biased, float3 n, PROBE_PARAMS)
 {
     PROBE_VOLUME_LOCALS;
-    const int index = c.y * probe_nx * probe_nz + c.z * probe_nx + c.x;
+    const int index = probe_index(c, probe_nx, probe_nz);
     const float4 data = probe_data[index];
 #ifdef PROBE_CLASSIFICATION
     if (data.w != 0.0f) return 0.0f;
@@ -158,7 +171,7 @@ IBL_INLINE float probe_weighted(float w, int3 c, float3 n, float3 falloff, const
         return 0.0f;
     }
     PROBE_VOLUME_LOCALS;
-    const int index = c.y * probe_nx * probe_nz + c.z * probe_nx + c.x;
+    const int index = probe_index(c, probe_nx, probe_nz);
     const float3 e = probe_value(probe_irr, index, n, spec, probe_irr_texels, probe_nx, probe_ny, probe_nz);
 #ifdef PROBE_VISIBILITY
     const float3 tri = fmax(falloff, PROBE_TRILINEAR_FLOOR);
@@ -269,7 +282,7 @@ IBL_INLINE int3 probe_sides(float3 p, float3 n, float3 v, int3 blended, const fl
 #ifdef PROBE_VISIBILITY
         f = fmax(f, PROBE_TRILINEAR_FLOOR);
 #endif
-        const float3 o = probe_data[c.y * probe_nx * probe_nz + c.z * probe_nx + c.x].xyz / probe_spacing;
+        const float3 o = probe_data[probe_index(c, probe_nx, probe_nz)].xyz / probe_spacing;
         const float wx = w * f.y * f.z, wy = w * f.x * f.z, wz = w * f.x * f.y;
         side[0][off.x] += wx; shift[0][off.x] += wx * o.x;
         side[1][off.y] += wy; shift[1][off.y] += wy * o.y;
@@ -334,9 +347,8 @@ IBL_INLINE float4 probe_irradiance(float3 p, float3 n, float3 v, PROBE_PARAMS)
     for (int k = 0; k < 3; ++k) walls += probe_dead_side(side, k) >= 0;
     for (int k = 0; k < 3 && walls == 1; ++k) {
         if (probe_dead_side(side, k) >= 0) continue;
-        float3 q = p;                                                /* one cell on, towards the nearer layer */
-        const float move = (ga[k] < 0.5f ? -1.0f : 1.0f) * sp[k];
-        if (k == 0) q.x += move; else if (k == 1) q.y += move; else q.z += move;
+        /* one cell on, towards the nearer layer */
+        const float3 q = probe_moved(p, k, (ga[k] < 0.5f ? -1.0f : 1.0f) * sp[k]);
         probe_sides(q, n, v, blended, (const float *)0, near, nshift, &nalpha, PROBE_ARGS);
         walls += probe_dead_side(near, k) >= 0;
     }
@@ -350,9 +362,7 @@ IBL_INLINE float4 probe_irradiance(float3 p, float3 n, float3 v, PROBE_PARAMS)
         if (gl[k] < 2 || !(t > 1e-6f) || next < 0 || next > gl[k]) continue;
         /* the live layer where its probes stand: o cells further in */
         const float o = dead ? -shift[k][0] / side[k][0] : shift[k][1] / side[k][1];
-        float3 q = p;
-        const float move = (dead ? -1.0f : 1.0f) * (t + 1.0f) * sp[k];
-        if (k == 0) q.x += move; else if (k == 1) q.y += move; else q.z += move;
+        const float3 q = probe_moved(p, k, (dead ? -1.0f : 1.0f) * (t + 1.0f) * sp[k]);
         const float4 e2 = probe_blend(q, n, v, (const float *)0, PROBE_ARGS);
         const float reach = fmin(fmax(t + o, 0.0f) / fmax(1.0f - o, 0.25f), PROBE_STEP_REACH);
         if (e2.w == PROBE_SOURCE_CELL) step -= reach * (e2.xyz - e.xyz);

@@ -156,12 +156,22 @@ float probeVolumeWeight(vec3 p) {{
     return w.x * w.y * w.z;
 }}
 
+// the index of the probe at grid coordinates c (kernels/probes.h probe_index), and its data texel: the
+// offset in spacing units, the state in w
+int probeIndex(ivec3 c) {{
+    return c.y * PROBE_COUNTS.x * PROBE_COUNTS.z + c.z * PROBE_COUNTS.x + c.x;
+}}
+
+vec4 probeData(int index) {{
+    int planeWidth = PROBE_COUNTS.x * PROBE_COUNTS.y;
+    return texelFetch(probeDataTexture, ivec2(index % planeWidth, index / planeWidth), 0);
+}}
+
 // probe c's own weight at the biased point, its trilinear factor left out (DDGI's with visibility, 1
 // without): 0 for an inactive probe; no value read (kernels/probes.h probe_weight)
 float probeWeight(ivec3 c, vec3 p, vec3 biased, vec3 n) {{
-    int index = c.y * PROBE_COUNTS.x * PROBE_COUNTS.z + c.z * PROBE_COUNTS.x + c.x;
-    int planeWidth = PROBE_COUNTS.x * PROBE_COUNTS.y;
-    vec4 data = texelFetch(probeDataTexture, ivec2(index % planeWidth, index / planeWidth), 0);
+    int index = probeIndex(c);
+    vec4 data = probeData(index);
 #if PROBE_CLASSIFICATION
     if (data.w != 0.0) return 0.0;
 #endif
@@ -194,7 +204,7 @@ float probeWeight(ivec3 c, vec3 p, vec3 biased, vec3 n) {{
 float probeWeighted(float w, ivec3 c, vec3 n, vec3 v, vec3 falloff, float roughness, bool specular, out vec3 value) {{
     value = vec3(0.0);
     if (w == 0.0) return 0.0;
-    int index = c.y * PROBE_COUNTS.x * PROBE_COUNTS.z + c.z * PROBE_COUNTS.x + c.x;
+    int index = probeIndex(c);
 #if PROBES_SPECULAR
     vec3 e = specular ? probeOwnSpecular(index, n, v, roughness) : probeOwnIrradiance(index, n);
 #else
@@ -282,7 +292,6 @@ ivec3 probeSides(vec3 p, vec3 n, vec3 v, bool reuse, ivec3 blended, float own[8]
     ivec3 last = PROBE_COUNTS - 1;
     ivec3 base = probeCell((p - PROBE_ORIGIN) / PROBE_SPACING, last, alpha);
     side0 = vec3(0.0); side1 = vec3(0.0); shift0 = vec3(0.0); shift1 = vec3(0.0);
-    int planeWidth = PROBE_COUNTS.x * PROBE_COUNTS.y;
     for (int i = 0; i < 8; ++i) {{
         ivec3 off = ivec3(i & 1, (i >> 1) & 1, (i >> 2) & 1), c = clamp(base + off, ivec3(0), last), d = c - blended;
         float w = reuse && all(greaterThanEqual(d, ivec3(0))) && all(lessThanEqual(d, ivec3(1)))
@@ -291,8 +300,7 @@ ivec3 probeSides(vec3 p, vec3 n, vec3 v, bool reuse, ivec3 blended, float own[8]
 #if PROBE_VISIBILITY
         f = max(f, vec3({w['TRILINEAR_FLOOR']}));
 #endif
-        int index = c.y * PROBE_COUNTS.x * PROBE_COUNTS.z + c.z * PROBE_COUNTS.x + c.x;
-        vec3 o = texelFetch(probeDataTexture, ivec2(index % planeWidth, index / planeWidth), 0).xyz;
+        vec3 o = probeData(probeIndex(c)).xyz;
         vec3 share = w * vec3(f.y * f.z, f.x * f.z, f.x * f.y);
         side0 += share * (1.0 - vec3(off));
         side1 += share * vec3(off);
