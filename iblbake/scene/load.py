@@ -62,8 +62,9 @@ class _Validator:
         line = self.lines.get(p)
         return f"{self.source}:{line}" if line else self.source
 
-    def fail(self, path: str, msg: str):
-        raise InputError(f"{self.where(path)}: {path or 'scene'}: {msg}")
+    def fail(self, path: str, msg: str, at: str | None = None):
+        """`path: msg`, said where `at` (default path) came from: its line, or the flag that set it."""
+        raise InputError(f"{self.where(at or path)}: {path or 'scene'}: {msg}")
 
     def section(self, spec: Section, value, path: str) -> dict:
         if value is None:
@@ -399,8 +400,8 @@ def _check_mesh_files(v: "_Validator", key: str, path: str) -> None:
     from iblbake.scene.gltf import named_files
 
     if not os.path.exists(path):          # not Path.exists: a name too long raised OSError
-        # where: the path's own key (a path given by --set is said as that), named as the mesh's
-        raise InputError(f"{v.where(key)}: {key.removesuffix('.path')}: mesh {Path(path).resolve()} not found")
+        # named as the mesh's, said where its path came from (a path given by --set is said as that)
+        v.fail(key.removesuffix(".path"), f"mesh {Path(path).resolve()} not found", at=key)
     try:
         reads.check_file(path, reads.mesh_bytes(), "a mesh", reads.MESH_HINT)
         named = named_files(path)
