@@ -190,13 +190,13 @@ class Bakes:
 
         from iblbake.bake import sun as sunbake
         count = env.get("sun_lights", 1)
+        key = f"{info.sha256}:sun-extract:{sunbake.PEAK}:{sunbake.SUN_SHARE}:{sunbake.THRESHOLD}:{sunbake.RING}"
         if count == 1:
             residual, found = sunbake.extract_lights(image, 1)
-            tag = hashlib.sha256(f"{info.sha256}:sun-extract:{sunbake.PEAK}:{sunbake.SUN_SHARE}:{sunbake.THRESHOLD}:{sunbake.RING}".encode())
         else:                     # lamps too (bake/sun.py extract_lights)
             residual, found = sunbake.extract_lights(image, count, sunbake.LAMP_DIAMETER, sunbake.LAMP_SHARE)
-            tag = hashlib.sha256(f"{info.sha256}:sun-extract:{sunbake.PEAK}:{sunbake.SUN_SHARE}:{sunbake.THRESHOLD}:{sunbake.RING}:"
-                                 f"{count}:{sunbake.LAMP_DIAMETER}:{sunbake.LAMP_SHARE}".encode())
+            key += f":{count}:{sunbake.LAMP_DIAMETER}:{sunbake.LAMP_SHARE}"
+        tag = hashlib.sha256(key.encode())
         return residual, dataclasses.replace(info, sha256=tag.hexdigest()), found
 
     def sun(self, env: dict) -> list:
