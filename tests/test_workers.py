@@ -142,14 +142,23 @@ def test_cli_scheduler_local_and_jobs_equal_serial(tmp_path, small_panoramas):
 @pytest.mark.external
 def test_a_bad_cell_fails_once_with_its_error(tmp_path, small_panoramas):
     """A cell whose render fails (its panorama is not an EXR, which only decoding finds) comes
-    back as its one-line error, not retried: --keep-going marks it and the rest render."""
+    back as its one-line error, not retried: --keep-going marks it and the rest render. Port 8787
+    held meanwhile (as a second sheet's scheduler would, beside it in CI) adds no line."""
     pytest.importorskip("distributed")
+    import socket
+    held = socket.socket()
+    try:
+        held.bind(("0.0.0.0", 8787))
+        held.listen()
+    except OSError:
+        pass                                    # already held by someone else: the same condition
     (tmp_path / "gone.exr").write_bytes(b"not an image" * 100)
     scene = sheet_scene(tmp_path, small_panoramas["city"], {
         "rows": {"key": "environment.path", "values": [str(small_panoramas["city"]), str(tmp_path / "gone.exr")]}},
         res=(16, 12))
     p = run_cli("sheet", scene, "--cache", tmp_path / "c", "--json", "-o", tmp_path / "s.png", "--keep-going",
                 "--scheduler", "local", "--jobs", "2")
+    held.close()
     assert p.returncode == 1 and len(p.stderr.strip().splitlines()) == 1, p.stderr
     assert "gone.exr" in p.stderr and "Traceback" not in p.stderr
 

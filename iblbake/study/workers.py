@@ -317,6 +317,10 @@ def connect(scheduler: str, jobs: int, resources: dict):
         if scheduler == "local":
             cluster = distributed.LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
                                                resources=resources or None, dashboard_address=None,
+                                               # the scheduler's HTTP routes (health, metrics) start even
+                                               # without a dashboard, on 8787 unless told: a second sheet
+                                               # running beside would print "Port 8787 is already in use"
+                                               scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
                                                env=split_cores(jobs),
                                                silence_logs=logging.ERROR)
             return distributed.Client(cluster), cluster
