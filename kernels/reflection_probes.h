@@ -242,9 +242,8 @@ IBL_INLINE float3 rprobe_sky(RPROBE_PARAMS, int k, float3 r, float lod, float op
  * on the window half at 4x the tap's solid angle, x1.06 at half). */
 #define RPROBE_TAP_SPREAD 0.5f
 #define RPROBE_TAP_HORIZON 0.1f
-IBL_INLINE float rprobe_tap_rough(float noh, float voh, float nol, float alpha, int count)
+IBL_INLINE float rprobe_tap_rough(float pdf, float nol, float alpha, int count)
 {
-    const float pdf = d_ggx(noh, alpha) * noh / fmax(4.0f * voh, 1e-30f);
     const float omega = RPROBE_TAP_SPREAD / fmax((float)count * pdf, 1e-20f);
     const float a = fmin(sqrt(omega / (4.0f * 3.14159265358979323846f)), RPROBE_TAP_HORIZON * nol);
     return fmin(sqrt(a), sqrt(alpha));
@@ -309,16 +308,19 @@ IBL_INLINE float3 rprobe_taps(RPROBE_PARAMS, int k, float3 p, float3 n, float3 v
     float3 t, bt, acc = (float3)(0.0f);
     float wsum = 0.0f;
     tangent_frame(n, &t, &bt);
+    const float3 vl = (float3)(dot(v, t), dot(v, bt), nov);
+    const float g1 = g1_smith(nov, alpha);
     for (int i = 0; i < count; ++i) {
-        const float3 hl = sample_ggx_half(hammersley((uint)i, (uint)count), alpha);
+        const float3 hl = sample_ggx_vndf(vl, alpha, hammersley((uint)i, (uint)count));
         const float3 h = t * hl.x + bt * hl.y + n * hl.z;
         const float voh = dot(v, h);
         const float3 l = 2.0f * voh * h - v;
         const float nol = dot(n, l);
         if (nol <= 0.0f || voh <= 0.0f) continue;
         const float noh = fmax(hl.z, 1e-7f);
-        const float w = v_smith_ggx_correlated(nov, nol, alpha) * 4.0f * nol * voh / noh;
-        const float tap_rough = rprobe_tap_rough(noh, voh, nol, alpha, count), tap = tap_rough * top;
+        const float w = v_smith_ggx_correlated(nov, nol, alpha) * 4.0f * nov * nol / g1;
+        const float tap_rough = rprobe_tap_rough(pdf_ggx_vndf_reflected(nov, noh, alpha), nol, alpha, count);
+        const float tap = tap_rough * top;
         const float3 x = rprobe_hit(RPROBE_ARGS, k, p, l);
         const float3 d = (x - a.xyz) / fmax(distance(x, a.xyz), 1e-6f);
         const float open = fmax(1.0f - rprobe_lookup(RPROBE_ARGS, 4 * k + 1, d, 0.0f).x, 0.0f);

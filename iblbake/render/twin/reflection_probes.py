@@ -150,12 +150,11 @@ TAP_SPREAD = 0.5     # kernels/reflection_probes.h RPROBE_TAP_SPREAD
 TAP_HORIZON = 0.1     # kernels/reflection_probes.h RPROBE_TAP_HORIZON
 
 
-def tap_rough(noh, voh, nol, alpha, count: int):
+def tap_rough(pdf, nol, alpha, count: int):
     """Twin of rprobe_tap_rough: the roughness whose prefiltered lobe (about 4 pi alpha^2
-    steradians) spans TAP_SPREAD of the solid angle 1 / (count pdf) a tap stands for (filtered
-    importance sampling), no wider than the lobe's, its alpha within TAP_HORIZON NoL (above the
-    surface)."""
-    pdf = sampling.pdf_ggx_reflected(noh, voh, alpha)
+    steradians) spans TAP_SPREAD of the solid angle 1 / (count pdf) a tap of pdf `pdf` (over
+    directions) stands for (filtered importance sampling), no wider than the lobe's, its alpha
+    within TAP_HORIZON NoL (above the surface)."""
     omega = TAP_SPREAD / np.maximum(count * pdf, 1e-20)
     a = np.minimum(np.sqrt(omega / (4 * np.pi)), TAP_HORIZON * nol)
     return np.minimum(np.sqrt(a), np.sqrt(alpha))
@@ -193,8 +192,9 @@ def tap_sky(c: dict, l, d, rough_t, env):
 
 def taps(c: dict, p, n, v, lod, env, count: int):
     """Twin of rprobe_taps: the GGX lobe of normal n and view v (alpha rough^2, rough lod over the
-    chain's last level) read in `count` Hammersley directions l, each weighted as the BRDF over its
-    pdf without Fresnel (V 4 NoL VoH / NoH, none below the surface): the scene where l leaves the
+    chain's last level) read in `count` directions l of its visible normals (Heitz 2018) at the
+    Hammersley points, each weighted as the BRDF over its pdf without Fresnel (V 4 NoV NoL /
+    G1(NoV), none below the surface): the scene where l leaves the
     proxy, seen from the probe at the tap's own level (not floored at FINEST), and the sky along l
     itself (tap_sky; env: the distant chain, its rotation, its intensity), times whether p sees
     that direction open (the coverage at the capture's own level along the parallax-corrected
@@ -205,12 +205,19 @@ def taps(c: dict, p, n, v, lod, env, count: int):
     alpha = (lod / top) ** 2
     nov = np.maximum((n * v).sum(1), 1e-4)
     t, b = conventions.tangent_frame(n)
+    vl = np.stack([(v * t).sum(1), (v * b).sum(1), nov], -1)
+    g1 = sampling.g1_smith(nov, alpha)
     acc, wsum = np.zeros((len(p), 3)), np.zeros((len(p), 1))
     for u in sampling.hammersley(count):
-        noh, voh, l, nol = sampling.reflect_ggx_half(u, t, b, n, v, alpha)
+        hl = sampling.sample_ggx_vndf(vl, alpha, np.broadcast_to(u, (len(p), 2)))
+        h = t * hl[:, 0:1] + b * hl[:, 1:2] + n * hl[:, 2:3]
+        voh = (v * h).sum(1)
+        l = 2 * voh[:, None] * h - v
+        nol, noh = (n * l).sum(1), np.maximum(hl[:, 2], 1e-7)
         ok = (nol > 0) & (voh > 0)
-        w = np.where(ok, brdf.v_smith_ggx_correlated(nov, nol, alpha) * 4 * nol * voh / noh, 0.0)[:, None]
-        rough_t = tap_rough(noh, np.maximum(voh, 1e-30), np.maximum(nol, 0.0), alpha, count)
+        w = np.where(ok, brdf.v_smith_ggx_correlated(nov, nol, alpha) * 4 * nov * nol / g1, 0.0)[:, None]
+        pdf = g1 * brdf.d_ggx(noh, alpha) / (4 * nov)
+        rough_t = tap_rough(pdf, np.maximum(nol, 0.0), alpha, count)
         tap = rough_t * top
         x = hit(c, p, l)
         d = (x - pos) / np.maximum(np.linalg.norm(x - pos, axis=-1, keepdims=True), 1e-6)
