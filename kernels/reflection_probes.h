@@ -298,9 +298,14 @@ IBL_INLINE float3 rprobe_tap_sky(RPROBE_PARAMS, int k, float3 l, float3 d, float
 }
 
 /* Probe k's reading at p of the GGX lobe of normal n and view v (alpha rough^2, rough = lod over
- * the chain's last level) in `count` Hammersley directions l, each weighted as the BRDF over
- * its pdf without Fresnel (V 4 NoL VoH / NoH; none below the surface; the split sum's albedo
- * scales the mean), each at its own roughness (rprobe_tap_rough): the scene where l leaves the
+ * the chain's last level) in `count` directions l of its visible normals (Heitz 2018) at the
+ * Hammersley points turned about n by `turn` (rprobe_tap_turn), each weighted as the BRDF over its
+ * pdf without Fresnel (V 4 NoV NoL / G1(NoV) = G2 / G1, about 1 for every tap; none below the
+ * surface; the split sum's albedo scales the mean). Drawn from the normal distribution (before),
+ * a tap near the normal at a grazing view weighed V 4 NoL VoH / NoH, 9 or more against the others'
+ * 1: one such tap meeting a window's sky made a silhouette pixel of a new user's gold sphere 5x too
+ * bright, its half 13% (docs/conventions.md "Taps"). Each tap at its own roughness
+ * (rprobe_tap_rough): the scene where l leaves the
  * proxy (x), read from the probe along d = x - probe (at the tap's level, not floored at
  * RPROBE_FINEST: the taps average the capture's noise, and a floored read bled the black floor
  * under a probe's excluded cube into the lit floor beside it: metal_box under city, the -x face

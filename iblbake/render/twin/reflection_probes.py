@@ -203,10 +203,10 @@ def taps(c: dict, p, n, v, lod, env, count: int, turn):
     chain's last level) read in `count` directions l of its visible normals (Heitz 2018) at the
     Hammersley points turned about n by each point's `turn` (tap_turn), each weighted as the BRDF
     over its pdf without Fresnel (V 4 NoV NoL / G1(NoV), none below the surface): the scene where
-    l leaves the proxy, seen from the probe at the tap's own level (not floored at FINEST), and the sky along l
-    itself (tap_sky; env: the distant chain, its rotation, its intensity), times whether p sees
-    that direction open (the coverage at the capture's own level along the parallax-corrected
-    direction); each tap at its own roughness (tap_rough)."""
+    l leaves the proxy, seen from the probe at the tap's own level (not floored at FINEST), and
+    the sky along l itself (tap_sky; env: the distant chain, its rotation, its intensity), times
+    whether p sees that direction open (the coverage at the capture's own level along the
+    parallax-corrected direction); each tap at its own roughness (tap_rough)."""
     st, nlev = c["settings"], len(c["levels"])
     pos = np.asarray(st["position"], np.float64)
     top = max(nlev - 1, 1)
@@ -325,8 +325,8 @@ def blend(captured: list, p, r, lod, distant, env, lobe, masks=None):
     distance chain, rprobe_hit)}], distant the scaled distant chain's radiance at (p, r) (m, 3),
     which takes the share no probe's influence holds; env (the distant chain, its rotation, its
     intensity) and lobe (n, v[, sample]: each point's G-buffer sample number in the frame, which
-    turns its taps, tap_turn; 0 where not given) for a probe read in taps (everywhere, or at grazing views and on
-    lobes straddling an opening's edge: grazing, straddle). masks: each point's rp_excl of its
+    turns its taps, tap_turn; 0 where not given) for a probe read in taps (everywhere, or at
+    grazing views and on lobes straddling an opening's edge: grazing, straddle). masks: each point's rp_excl of its
     object (own_masks; None: 0): a point reads only the probes excluding its object where any of
     them holds it (own)."""
     acc = np.zeros_like(distant)
