@@ -59,7 +59,7 @@ CONFIGS = [
     ("textured mesh, 5 maps", "textured.yaml", []),
     ("textured mesh, untextured", "textured.yaml", ["objects.0.material=plain"]),
     # the corpus' window_room under its parallax reflection probe: one read a lobe everywhere, the
-    # default (32 taps at grazing views, reflection_probes.N.grazing_taps), taps everywhere
+    # default (64 taps at grazing views, reflection_probes.N.grazing_taps), taps everywhere
     # (reflection_probes.N.taps), each pixel that reflects in the probe's box paying them
 ] + [(f"reflection probe {res}, {label}", "../corpus/window_room.yaml",
       [f"camera.resolution=[{res.replace('x', ',')}]", *sets])

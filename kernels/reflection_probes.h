@@ -241,10 +241,9 @@ IBL_INLINE float3 rprobe_sky(RPROBE_PARAMS, int k, float3 r, float lod, float op
  * 64 taps, 2% now); wider taps leak a lamp behind a window's edge (quad_room under studio: x1.40
  * on the window half at 4x the tap's solid angle, x1.06 at half). */
 #define RPROBE_TAP_SPREAD 0.5f
-#define RPROBE_TAP_HORIZON 0.1f
-IBL_INLINE float rprobe_tap_rough(float noh, float voh, float nol, float alpha, int count)
+#define RPROBE_TAP_HORIZON 0.05f
+IBL_INLINE float rprobe_tap_rough(float pdf, float nol, float alpha, int count)
 {
-    const float pdf = d_ggx(noh, alpha) * noh / fmax(4.0f * voh, 1e-30f);
     const float omega = RPROBE_TAP_SPREAD / fmax((float)count * pdf, 1e-20f);
     const float a = fmin(sqrt(omega / (4.0f * 3.14159265358979323846f)), RPROBE_TAP_HORIZON * nol);
     return fmin(sqrt(a), sqrt(alpha));
@@ -258,6 +257,15 @@ IBL_INLINE float rprobe_tap_rough(float noh, float voh, float nol, float alpha, 
  * the share the probe saw reads the sky along l at the capture's own level (the panorama's where the
  * probe saw none of it open): p sees l open (rprobe_taps), and the sky is at infinity. */
 #define RPROBE_TAP_EDGE 0.02f
+/* Each G-buffer sample turns its taps about the normal by its own angle (its number in the frame
+ * hashed): one set in every pixel of a flat face read the same directions there, so its quadrature
+ * error did not average over the face (metal_box's cube under city, its -x face x0.89 in 32 taps
+ * over the visible normals, x0.94 in 256; x0.93 turned). */
+#define RPROBE_TAP_SEED 0x7A95u
+IBL_INLINE float rprobe_tap_turn(uint sample)
+{
+    return (float)(pcg_hash(RPROBE_TAP_SEED ^ pcg_hash(sample)) >> 8) * (1.0f / 16777216.0f);
+}
 /* The sky a tap along l (at roughness tap_rough, chain level tap_rough top) meets through probe k's
  * openings, per unit of the share of its footprint p sees open: where the probe saw that share
  * too, the capture's own sky about l per unit of its open share seen = 1 - coverage(l) (a lamp
@@ -290,16 +298,21 @@ IBL_INLINE float3 rprobe_tap_sky(RPROBE_PARAMS, int k, float3 l, float3 d, float
 }
 
 /* Probe k's reading at p of the GGX lobe of normal n and view v (alpha rough^2, rough = lod over
- * the chain's last level) in `count` Hammersley directions l, each weighted as the BRDF over
- * its pdf without Fresnel (V 4 NoL VoH / NoH; none below the surface; the split sum's albedo
- * scales the mean), each at its own roughness (rprobe_tap_rough): the scene where l leaves the
+ * the chain's last level) in `count` directions l of its visible normals (Heitz 2018) at the
+ * Hammersley points turned about n by `turn` (rprobe_tap_turn), each weighted as the BRDF over its
+ * pdf without Fresnel (V 4 NoV NoL / G1(NoV) = G2 / G1, about 1 for every tap; none below the
+ * surface; the split sum's albedo scales the mean). Drawn from the normal distribution (before),
+ * a tap near the normal at a grazing view weighed V 4 NoL VoH / NoH, 9 or more against the others'
+ * 1: one such tap meeting a window's sky made a silhouette pixel of a new user's gold sphere 5x too
+ * bright, its half 13% (docs/conventions.md "Taps"). Each tap at its own roughness
+ * (rprobe_tap_rough): the scene where l leaves the
  * proxy (x), read from the probe along d = x - probe (at the tap's level, not floored at
  * RPROBE_FINEST: the taps average the capture's noise, and a floored read bled the black floor
  * under a probe's excluded cube into the lit floor beside it: metal_box under city, the -x face
  * x0.88 at level 2, x0.93 at the tap's), and the sky
  * along l itself (at infinity: no parallax) where p sees that direction open (the coverage along
  * d at the capture's own level: a window's edge as sharp as the capture holds it), rprobe_tap_sky. */
-IBL_INLINE float3 rprobe_taps(RPROBE_PARAMS, int k, float3 p, float3 n, float3 v, float lod, int count,
+IBL_INLINE float3 rprobe_taps(RPROBE_PARAMS, int k, float3 p, float3 n, float3 v, float lod, int count, float turn,
                               CHAIN_PARAMS, float2 env_rot, float env_scale)
 {
     const float4 a = rp_info[4 * k];
@@ -309,16 +322,20 @@ IBL_INLINE float3 rprobe_taps(RPROBE_PARAMS, int k, float3 p, float3 n, float3 v
     float3 t, bt, acc = (float3)(0.0f);
     float wsum = 0.0f;
     tangent_frame(n, &t, &bt);
+    const float3 vl = (float3)(dot(v, t), dot(v, bt), nov);
+    const float g1 = g1_smith(nov, alpha);
     for (int i = 0; i < count; ++i) {
-        const float3 hl = sample_ggx_half(hammersley((uint)i, (uint)count), alpha);
+        const float2 u = hammersley((uint)i, (uint)count);
+        const float3 hl = sample_ggx_vndf(vl, alpha, (float2)(u.x, fmod(u.y + turn, 1.0f)));
         const float3 h = t * hl.x + bt * hl.y + n * hl.z;
         const float voh = dot(v, h);
         const float3 l = 2.0f * voh * h - v;
         const float nol = dot(n, l);
         if (nol <= 0.0f || voh <= 0.0f) continue;
         const float noh = fmax(hl.z, 1e-7f);
-        const float w = v_smith_ggx_correlated(nov, nol, alpha) * 4.0f * nol * voh / noh;
-        const float tap_rough = rprobe_tap_rough(noh, voh, nol, alpha, count), tap = tap_rough * top;
+        const float w = v_smith_ggx_correlated(nov, nol, alpha) * 4.0f * nov * nol / g1;
+        const float tap_rough = rprobe_tap_rough(pdf_ggx_vndf_reflected(nov, noh, alpha), nol, alpha, count);
+        const float tap = tap_rough * top;
         const float3 x = rprobe_hit(RPROBE_ARGS, k, p, l);
         const float3 d = (x - a.xyz) / fmax(distance(x, a.xyz), 1e-6f);
         const float open = fmax(1.0f - rprobe_lookup(RPROBE_ARGS, 4 * k + 1, d, 0.0f).x, 0.0f);
@@ -410,11 +427,12 @@ IBL_INLINE float rprobe_straddle(RPROBE_PARAMS, int k, float3 p, float3 r, float
  * it stands, x1.47 on its +x half). None of them holding p, or obj -1 (no object): every probe. Only
  * probes k < RPROBE_OWN_MAX are kept in the mask: a later probe never counts as an object's own. */
 IBL_INLINE float3 reflection_probes(float3 p, float3 n, float3 v, float3 r, float lod, float3 distant, int obj,
-                                    RPROBE_PARAMS, CHAIN_PARAMS, float2 env_rot, float env_scale)
+                                    uint sample, RPROBE_PARAMS, CHAIN_PARAMS, float2 env_rot, float env_scale)
 {
     float3 acc = (float3)(0.0f);
     float wsum = 0.0f;
     const uint own = obj >= 0 ? rprobe_own(p, rp_excl[obj], rp_info, rp_count) : 0u;
+    const float turn = rprobe_tap_turn(sample);
     for (int k = 0; k < rp_count; ++k) {
         if (!rprobe_kept(own, k)) continue;                 /* not its own probe */
         const float4 a = rp_info[4 * k], b = rp_info[4 * k + 1], c = rp_info[4 * k + 2], e = rp_info[4 * k + 3];
@@ -424,7 +442,7 @@ IBL_INLINE float3 reflection_probes(float3 p, float3 n, float3 v, float3 r, floa
         float g = e.x > 0.5f ? rprobe_grazing(e.z, dot(n, v)) : 0.0f;
         if (e.x > 0.5f && e.z < -0.5f && g < 1.0f) g = fmax(g, rprobe_straddle(RPROBE_ARGS, k, p, r, lod));
         if (g > 0.0f)
-            acc += w * g * rprobe_taps(RPROBE_ARGS, k, p, n, v, lod, (int)fabs(e.z), CHAIN_ARGS, env_rot, env_scale);
+            acc += w * g * rprobe_taps(RPROBE_ARGS, k, p, n, v, lod, (int)fabs(e.z), turn, CHAIN_ARGS, env_rot, env_scale);
         if (g < 1.0f)
             acc += w * (1.0f - g) * rprobe_read(RPROBE_ARGS, k, p, r, lod, distant);
     }

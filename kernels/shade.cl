@@ -54,7 +54,7 @@ IBL_INLINE float3 ao_multibounce(float ao, float3 albedo)
 /* Every source's function lives in its header (render/sources/ declares its defines, bakes and
  * arguments); this kernel only dispatches to them and applies occlusion. */
 __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
-                    const int n, const float2 env_rot, const float env_scale,
+                    const int n, const int pixel0, const int spp, const float2 env_rot, const float env_scale,
                     __constant float4 *sh_coeffs, __constant float4 *basis_coeffs, __global const float *basis_table,
                     CHAIN_PARAMS, __global const float2 *dfg, const int dfg_size,
                     LOBE_PARAMS, __global const float *ao_buf, __global const float4 *spec_sums, PROBE_PARAMS,
@@ -120,7 +120,7 @@ __kernel void shade(__global const float4 *gb_pos, SURFACE_PARAMS,
          * the lobe reflects anything (a Lambert wall of specular 0 pays no taps at grazing views) */
         if (w.x + w.y + w.z > 0.0f)
             li = reflection_probes(gb_pos[gid].xyz, nrm, v, r, mt.roughness * (float)(rp_nlev - 1), li,
-                                   as_int(gb_dir[gid].w), RPROBE_ARGS, CHAIN_ARGS, env_rot, env_scale);
+                                   as_int(gb_dir[gid].w), (uint)(pixel0 * spp + gid), RPROBE_ARGS, CHAIN_ARGS, env_rot, env_scale);
 #endif
         color += w * li;
 #ifdef HAS_SSR

@@ -188,7 +188,11 @@ def test_frame_matches_the_twin(tmp_path, rt, taps, grazing):
     want = rr.shade(gb, arrays, sc["effects"], sc["environment"], prefiltered=distant, dfg=table,
                     reflection_probes=captured)[gb["hit"]]
     got = frame.hdr[..., :3].reshape(-1, 3)[gb["hit"]]
-    assert np.abs(got - want).max() / want.max() < 2e-6
+    # float32 against float64: a tap whose march (rprobe_hit) grazes the ball's edge meets it in one
+    # and misses it in the other (with 16 taps over the visible normals, 1 pixel of 12,288: 0.0024
+    # bright, 7% of itself, 4.5e-6 of the frame's brightest; a read without the march, 0.010)
+    off = np.abs(got - want).max(1) / want.max()
+    assert (off > 2e-6).sum() <= 2 and off.max() < 1e-5, (int((off > 2e-6).sum()), off.max())
     boxed = rr.shade(gb, arrays, sc["effects"], sc["environment"], prefiltered=distant, dfg=table,
                      reflection_probes=[{**c, "depth": None} for c in captured])[gb["hit"]]
     assert np.abs(boxed - want).max() / want.max() > 0.1      # the march met the ball somewhere
@@ -666,12 +670,13 @@ def test_the_lobe_is_read_in_taps_above_the_surface_each_through_what_the_point_
     """A rough floor (n = +y, roughness 0.6) seen at a grazing angle under a key light below its
     horizon (1000 where y < -0.3, 1 elsewhere), a capture that saw no scene, only that panorama:
     the split sum's lobe about r reached below the surface and took the key light in (115 times the
-    sky's 1 before); 64 taps over the true lobe stop at the surface (1.89: each tap's filter, its
-    share of the lobe, kept within a tenth of NoL in alpha; 2.4 without that, 2.5 with 16 taps on
-    this chain of five levels). A point that sees the sky through a window (coverage 1 but for
-    x > 0.7 from the probe) along some of its taps and a black wall along the others gets the
-    window's sky along the open taps only: their weighted share, 0.605 with 256 taps (0.628 with
-    the 16 read; before: 1.0, the capture's whole sky along r)."""
+    sky's 1 before); 64 taps over the true lobe's visible normals stop at the surface (1.92 over 256
+    turns of the set: each tap's filter, its share of the lobe, kept within a twentieth of NoL in
+    alpha; 2.19 at a tenth, which the lobe's normal distribution's taps held at 1.89, having fewer
+    near the horizon; 1.91 with 16 or 32 taps, on this chain of five levels). A point that sees the
+    sky through a window (coverage 1 but for x > 0.7 from the probe) along some of its taps and a
+    black wall along the others gets the window's sky along the open taps only: their weighted
+    share, 0.605 with 256 taps (0.619 with 16; before: 1.0, the capture's whole sky along r)."""
     from iblbake.bake.prefilter import prefilter_bruteforce
     from iblbake.core import conventions
     from iblbake.render.twin import reflection_probes as rpt
@@ -686,9 +691,9 @@ def test_the_lobe_is_read_in_taps_above_the_surface_each_through_what_the_point_
     r = 2 * (n * v).sum(1, keepdims=True) * n - v
     p = np.array([[0.0, -0.5, 0.0]])
     split_sum = rpt.radiance.chain_lookup_twin(chain, r, 4 * 0.6)[0, 0]
-    got = rpt.blend([{"settings": box, "levels": zero, "coverage": zero, "sky": chain}], p, r, 4 * 0.6,
-                    np.zeros((1, 3)), (chain, 0.0, 1.0), (n, v))[0]
-    assert split_sum > 100 and np.all(np.abs(got - 1.0) < 1.0), (split_sum, got)
+    got, _ = turned([{"settings": box, "levels": zero, "coverage": zero, "sky": chain}], p, r, 4 * 0.6,
+                    (chain, 0.0, 1.0), n, v)
+    assert split_sum > 100 and abs(got - 1.0) < 1.0, (split_sum, got)
 
     wall = [np.repeat(1.0 - (dirs[..., 0:1] > 0.7), 3, -1)] * 5
     n = v = np.array([[1.0, 0.0, 0.0]])
@@ -696,8 +701,8 @@ def test_the_lobe_is_read_in_taps_above_the_surface_each_through_what_the_point_
     ones = [np.ones((8, 16, 3))] * 5
     window = [1.0 - c for c in wall]            # the sky the capture saw: 1 through the window
     box["taps"] = 16
-    got = rpt.blend([{"settings": box, "levels": zero, "coverage": wall, "sky": window}], p, n, 4 * 0.6,
-                    np.zeros((1, 3)), (ones, 0.0, 1.0), (n, v))[0, 0]
+    got, _ = turned([{"settings": box, "levels": zero, "coverage": wall, "sky": window}], p, n, 4 * 0.6,
+                    (ones, 0.0, 1.0), n, v)
     assert got == pytest.approx(0.605, abs=0.05), got
 
 
@@ -755,9 +760,9 @@ def test_taps_hold_a_resting_sphere_in_a_room_they_were_not_tuned_on(tmp_path, r
 def test_the_default_reading_holds_a_rough_sphere_facing_a_sunlit_window_of_a_room_not_tuned_on(tmp_path, rt,
                                                                                                   panoramas):
     """The square room (square_room) under city, a rough gold sphere (0.4, radius 0.4) a metre from
-    its window at a probe at its defaults (`grazing_taps: 32`; size 128, 256 samples), the camera
+    its window at a probe at its defaults (`grazing_taps: 64`; size 128, 256 samples), the camera
     across the room: every side within 12% of the reference at 512 samples a pixel (measured
-    1.9-11.0%; 2.7-10.1% with 16 taps). The grazing count was raised from 16 for a trial's window
+    1.9-10.4%; 1.9-11.0% with 32 taps from the normal distribution, 2.7-10.1% with 16). The grazing count was raised from 16 for a trial's window
     room under city, a like sphere facing its sunlit window: x1.17 on that half with 16 taps,
     within 6% with 32 (docs/conventions.md "Grazing")."""
     doc = square_room(tmp_path, panoramas["city"])
@@ -769,7 +774,7 @@ def test_the_default_reading_holds_a_rough_sphere_facing_a_sunlit_window_of_a_ro
     probe.update(position=centre, size=128, samples=256)
     doc["camera"]["perspective"] = {"position": [-1.5, 1.6, 1.2], "look_at": centre, "fov_y": 40}
     sc = load_scene(tmp_path, "facing", doc)
-    assert sc["reflection_probes"][0]["grazing_taps"] == 32
+    assert sc["reflection_probes"][0]["grazing_taps"] == 64
     err = sides_error(sc, load.load(sc.source, REFERENCE), rt, Bakes(tmp_path / "cache"), 0, centre)
     assert len(err) >= 5 and max(err.values()) < 0.12, err
 
@@ -932,13 +937,26 @@ def first_levels(img, dirs):
     return out + [out[-1]] * 2
 
 
+def turned(captured, p, r, lod, env, n, v, turns=256):
+    """What a region of `turns` pixels at one point reads of captured (blend): each pixel's taps
+    turned about n by its G-buffer sample's own angle (0 .. turns - 1, rprobe_tap_turn), their mean
+    (and their spread: one pixel's read)."""
+    from iblbake.render.twin import reflection_probes as rpt
+
+    got = rpt.blend(captured, np.repeat(p, turns, 0), np.repeat(r, turns, 0), lod, np.zeros((turns, 3)), env,
+                    (np.repeat(n, turns, 0), np.repeat(v, turns, 0), np.arange(turns)))[:, 0]
+    return got.mean(), got.std()
+
+
 def test_taps_fill_an_opening_only_the_point_sees_with_the_panorama_about_the_tap():
     """A probe at the centre of a box [-1, 1]^3 of black walls open on its +z side (32 x 64
     texels), the panorama 0.1 but one texel of 50 (a compact lamp) 40 degrees from +z towards +x,
     inside the opening's edge as the probe sees it (45 degrees). A point at (0, 0, 0.6), nearer the
     opening, roughness 0.3, its mirror direction 50 degrees from +z (past the probe's edge): its
-    taps see more of the opening than the probe saw about them. 64 taps read 1.16x the lobe's own
-    integral through the opening as the point sees it (65,536 directions, exact); the probe's sky
+    taps see more of the opening than the probe saw about them. 64 taps read 1.30x the lobe's own
+    integral through the opening as the point sees it (65,536 directions, exact) over 256 turns of
+    the set (1.32x with 32 taps, 1.36x with 16; one pixel's spread 4%, 12%, 36%; the lobe's normal
+    distribution's one set of 64 read 1.21x, 1.29x in 256 taps: the filtered taps' own bias); the probe's sky
     over its open share alone (before) spread the lamp it saw in a sliver of the opening over all
     the point sees of it: 2.20x (metal_box's cube under studio, its face mirroring the box's open
     corner 1.2x in red and blue against the converged reference, 11.4%; 3.0% now)."""
@@ -962,11 +980,47 @@ def test_taps_fill_an_opening_only_the_point_sees_with_the_panorama_about_the_ta
     n = np.array([[np.sin(np.radians(25)), 0.0, np.cos(np.radians(25))]])
     v = np.array([[0.0, 0.0, 1.0]])
     r = 2 * (n * v).sum(1, keepdims=True) * n - v
-    got = rpt.blend([c], p, r, 4 * 0.3, np.zeros((1, 3)), (distant, 0.0, 1.0), (n, v))[0, 0]
+    got, _ = turned([c], p, r, 4 * 0.3, (distant, 0.0, 1.0), n, v)
     ll, wt = lobe_samples(n, v, 0.09)
     through = rpt.exit_point(box, np.repeat(p, len(ll), 0), ll)[:, 2] > 1 - 1e-9
     truth = (wt * through * texel_red(pano, ll)).sum() / wt.sum()
-    assert 0.9 < got / truth < 1.35, (got, truth)
+    assert 0.9 < got / truth < 1.4, (got, truth)
+
+
+def test_taps_at_grazing_views_do_not_weigh_one_direction_over_the_lobe():
+    """A floor (n = +y) at the bottom of a dark box [-1, 1]^3 lit by a skylight overhead (|x|, |z| <
+    0.4 of the +y face, the sky 1), a point on it seen at grazing views (NoV 0.06, 0.15, 0.3;
+    roughness 0.4) in 32 taps. The lobe leans to the horizon, and little of it meets the skylight
+    (0.9-1.4% of the sky). Taps drawn from the lobe's normal distribution weighed V 4 NoL VoH / NoH
+    each, 9 or more on those near the normal, whose directions meet the skylight: one set read
+    14.3x, 14.0x and 4.8x (a new user's rough gold sphere under city, one silhouette pixel 5x and
+    its half 13% off, the specular frame 45%). Over the visible normals (Heitz 2018) each weighs
+    G2 / G1, about 1: over 256 turns of the set 1.01x, 0.97x, 0.92x, one pixel's spread 1.05-1.47x
+    the truth (a tap is a 32nd of the lobe; the skylight about a hundredth)."""
+    from iblbake.core import conventions
+    from iblbake.render.twin import reflection_probes as rpt
+
+    h, w = 32, 64
+    dirs = conventions.equirect_texel_dirs(w, h)
+    box = {"shape": "box", "position": [0, 0, 0], "min": [-1, -1, -1], "max": [1, 1, 1], "blend": 0.1,
+           "parallax": True, "taps": 32}
+
+    def skylight(q, ll):
+        x = rpt.exit_point(box, q, ll)
+        return (x[:, 1] > 1 - 1e-9) & (np.abs(x[:, 0]) < 0.4) & (np.abs(x[:, 2]) < 0.4)
+    opened = np.repeat(skylight(np.zeros((h * w, 3)), dirs.reshape(-1, 3)).reshape(h, w, 1), 3, -1) * 1.0
+    sky = np.ones((h, w, 3))
+    c = {"settings": box, "levels": [np.zeros_like(sky)] * 5, "coverage": first_levels(1 - opened, dirs),
+         "sky": first_levels(opened, dirs)}
+    p, n = np.array([[0.0, -0.9, 0.0]]), np.array([[0.0, 1.0, 0.0]])
+    for nov in (0.06, 0.15, 0.3):
+        v = np.array([[np.sqrt(1 - nov * nov), nov, 0.0]])
+        r = 2 * (n * v).sum(1, keepdims=True) * n - v
+        ll, wt = lobe_samples(n, v, 0.16)
+        truth = (wt * skylight(np.repeat(p, len(ll), 0), ll)).sum() / wt.sum()
+        got, spread = turned([c], p, r, 4 * 0.4, (first_levels(sky, dirs), 0.0, 1.0), n, v)
+        assert abs(got / truth - 1) < 0.12, (nov, got, truth)
+        assert spread / truth < 2.0, (nov, spread, truth)
 
 
 def lamp_inside_a_window_edge():
@@ -1005,23 +1059,22 @@ def lamp_inside_a_window_edge():
 
 def test_taps_keep_a_lamp_the_probe_saw_inside_a_window_edge_out_of_what_the_point_sees():
     """The mirror case (lamp_inside_a_window_edge): the taps hold the true lobe's integral: 16 taps
-    1.01x and 64 1.13x (the capture's own level along each tap whose footprint the edge crosses);
-    before, the capture's sky filtered at the tap's roughness per unit of its open share spread the
-    lamp over the part the point sees open: 1.55x and 1.44x (a new user's window room under studio,
-    the gold sphere's +x half x1.49 with 64 taps, x1.10 now)."""
-    from iblbake.render.twin import reflection_probes as rpt
-
+    1.09x and 64 1.10x over 256 turns of the set (the capture's own level along each tap whose
+    footprint the edge crosses; one pixel's spread 24% and 4%); before, the capture's sky filtered
+    at the tap's roughness per unit of its open share spread the lamp over the part the point sees
+    open: 1.55x and 1.44x in one set (a new user's window room under studio, the gold sphere's +x
+    half x1.49 with 64 taps, x1.10 after)."""
     c, box, p, n, pano_chain, truth = lamp_inside_a_window_edge()
-    for taps, bound in ((16, 0.05), (64, 0.25)):
+    for taps in (16, 64):
         c["settings"] = {**box, "taps": taps}
-        got = rpt.blend([c], p, n, 4 * 0.5, np.zeros((1, 3)), (pano_chain, 0.0, 1.0), (n, n))[0, 0]
-        assert abs(got / truth - 1) < bound, (taps, got, truth)
+        got, _ = turned([c], p, n, 4 * 0.5, (pano_chain, 0.0, 1.0), n, n)
+        assert abs(got / truth - 1) < 0.15, (taps, got, truth)
 
 
 def test_the_default_reading_takes_a_lobe_straddling_a_window_edge_in_taps():
     """The same lobe read at the probe's defaults (taps 0, grazing_taps 16), seen head-on (NoV 1: no
     grazing taps): the probe saw part of the lobe open and the point is off it, so the reading is
-    the 16 taps' (1.01x the true lobe). One read (before) spread the lamp the probe saw inside the
+    the 16 taps' (1.09x the true lobe over 256 turns of the set). One read (before) spread the lamp the probe saw inside the
     edge over all the point sees open: 14x (docs/conventions.md "What the reading misses"). The
     share in taps is a weight, not a threshold: from the probe to the point it rises from 0 with no
     step over 0.15 of an 80th of the way (a step at rprobe_read's `off` > 0: 1)."""
@@ -1029,8 +1082,8 @@ def test_the_default_reading_takes_a_lobe_straddling_a_window_edge_in_taps():
 
     c, box, p, n, pano_chain, truth = lamp_inside_a_window_edge()
     c["settings"] = {**box, "taps": 0, "grazing_taps": 16}
-    got = rpt.blend([c], p, n, 4 * 0.5, np.zeros((1, 3)), (pano_chain, 0.0, 1.0), (n, n))[0, 0]
-    assert abs(got / truth - 1) < 0.05, (got, truth)
+    got, _ = turned([c], p, n, 4 * 0.5, (pano_chain, 0.0, 1.0), n, n)
+    assert abs(got / truth - 1) < 0.15, (got, truth)
     share = rpt.straddle(c, np.linspace(0, 1, 81)[:, None] * p, np.repeat(n, 81, 0), np.full(81, 2.0))
     assert share[0] == 0 and share[-1] == 1 and np.abs(np.diff(share)).max() < 0.15, share
 

@@ -551,15 +551,15 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                                                  "metal object under compact key lights). 0: one read a lobe about the "
                                                  "reflected ray, in grazing_taps taps at grazing views and where "
                                                  "the lobe straddles an opening's edge"),
-        "grazing_taps": Num(32, 0, 256, integer=True,
+        "grazing_taps": Num(64, 0, 256, integer=True,
                             doc="parallax probes with `taps: 0`: read the lobe in this many taps where the view "
                                 "grazes the surface (all of the reading below NoV 0.4, blended into one read up to "
                                 "0.8), and where the lobe straddles an opening's edge at a point off the probe "
                                 "(blended by a weight), one read elsewhere: there the split sum's lobe about the "
                                 "reflected ray misses the material's, and one read spreads a lamp seen inside a "
                                 "window's edge over all the point sees open (the corpus' metal objects within 10% "
-                                "on every half, 13-20% off on four with one read; 32: a rough gold sphere facing a "
-                                "sunlit window 17% off on a half with 16). 0: one read everywhere"),
+                                "on every half, 13-20% off on four with one read; 64: a rough gold sphere in a room "
+                                "with two windows under forest 15% off on a half with 32). 0: one read everywhere"),
         "size": Num(128, 4, 2048, integer=True, doc="capture height in texels (an equirect of 2 size x size; the "
                                                    "prefiltered chain's base, effects.prefilter.size ignored)"),
         "samples": Num(64, 1, 1 << 16, integer=True, doc="paths per capture texel (stratified in the texel)"),

@@ -107,6 +107,7 @@ NEAR, FAR, FINEST = 0.1, 0.4, 2.0      # kernels/reflection_probes.h RPROBE_NEAR
 
 SKY_SEEN = 0.05       # kernels/reflection_probes.h RPROBE_SKY_SEEN
 EDGE = 0.02           # kernels/reflection_probes.h RPROBE_TAP_EDGE
+TAP_SEED = 0x7A95     # kernels/reflection_probes.h RPROBE_TAP_SEED
 
 
 def open_sky(c: dict, r, lod, distant):
@@ -147,15 +148,14 @@ def sky(c: dict, r, lod, open_, off, shift, distant):
 TAP_SPREAD = 0.5     # kernels/reflection_probes.h RPROBE_TAP_SPREAD
 
 
-TAP_HORIZON = 0.1     # kernels/reflection_probes.h RPROBE_TAP_HORIZON
+TAP_HORIZON = 0.05    # kernels/reflection_probes.h RPROBE_TAP_HORIZON
 
 
-def tap_rough(noh, voh, nol, alpha, count: int):
+def tap_rough(pdf, nol, alpha, count: int):
     """Twin of rprobe_tap_rough: the roughness whose prefiltered lobe (about 4 pi alpha^2
-    steradians) spans TAP_SPREAD of the solid angle 1 / (count pdf) a tap stands for (filtered
-    importance sampling), no wider than the lobe's, its alpha within TAP_HORIZON NoL (above the
-    surface)."""
-    pdf = sampling.pdf_ggx_reflected(noh, voh, alpha)
+    steradians) spans TAP_SPREAD of the solid angle 1 / (count pdf) a tap of pdf `pdf` (over
+    directions) stands for (filtered importance sampling), no wider than the lobe's, its alpha
+    within TAP_HORIZON NoL (above the surface)."""
     omega = TAP_SPREAD / np.maximum(count * pdf, 1e-20)
     a = np.minimum(np.sqrt(omega / (4 * np.pi)), TAP_HORIZON * nol)
     return np.minimum(np.sqrt(a), np.sqrt(alpha))
@@ -191,26 +191,41 @@ def tap_sky(c: dict, l, d, rough_t, env):
     return known * through + (1 - known) * distant(rough_t * np.sqrt(beyond[:, 0]))
 
 
-def taps(c: dict, p, n, v, lod, env, count: int):
+def tap_turn(sample):
+    """Twin of rprobe_tap_turn: G-buffer sample number `sample`'s turn of its taps about the normal
+    (a share of a whole turn)."""
+    h = sampling.pcg_hash(np.uint32(TAP_SEED) ^ sampling.pcg_hash(np.asarray(sample, np.uint64).astype(np.uint32)))
+    return (h >> 8).astype(np.float64) * (1.0 / 16777216.0)
+
+
+def taps(c: dict, p, n, v, lod, env, count: int, turn):
     """Twin of rprobe_taps: the GGX lobe of normal n and view v (alpha rough^2, rough lod over the
-    chain's last level) read in `count` Hammersley directions l, each weighted as the BRDF over its
-    pdf without Fresnel (V 4 NoL VoH / NoH, none below the surface): the scene where l leaves the
-    proxy, seen from the probe at the tap's own level (not floored at FINEST), and the sky along l
-    itself (tap_sky; env: the distant chain, its rotation, its intensity), times whether p sees
-    that direction open (the coverage at the capture's own level along the parallax-corrected
-    direction); each tap at its own roughness (tap_rough)."""
+    chain's last level) read in `count` directions l of its visible normals (Heitz 2018) at the
+    Hammersley points turned about n by each point's `turn` (tap_turn), each weighted as the BRDF
+    over its pdf without Fresnel (V 4 NoV NoL / G1(NoV), none below the surface): the scene where
+    l leaves the proxy, seen from the probe at the tap's own level (not floored at FINEST), and
+    the sky along l itself (tap_sky; env: the distant chain, its rotation, its intensity), times
+    whether p sees that direction open (the coverage at the capture's own level along the
+    parallax-corrected direction); each tap at its own roughness (tap_rough)."""
     st, nlev = c["settings"], len(c["levels"])
     pos = np.asarray(st["position"], np.float64)
     top = max(nlev - 1, 1)
     alpha = (lod / top) ** 2
     nov = np.maximum((n * v).sum(1), 1e-4)
     t, b = conventions.tangent_frame(n)
+    vl = np.stack([(v * t).sum(1), (v * b).sum(1), nov], -1)
+    g1 = sampling.g1_smith(nov, alpha)
     acc, wsum = np.zeros((len(p), 3)), np.zeros((len(p), 1))
     for u in sampling.hammersley(count):
-        noh, voh, l, nol = sampling.reflect_ggx_half(u, t, b, n, v, alpha)
+        hl = sampling.sample_ggx_vndf(vl, alpha, np.stack([np.full(len(p), u[0]), (u[1] + turn) % 1.0], -1))
+        h = t * hl[:, 0:1] + b * hl[:, 1:2] + n * hl[:, 2:3]
+        voh = (v * h).sum(1)
+        l = 2 * voh[:, None] * h - v
+        nol, noh = (n * l).sum(1), np.maximum(hl[:, 2], 1e-7)
         ok = (nol > 0) & (voh > 0)
-        w = np.where(ok, brdf.v_smith_ggx_correlated(nov, nol, alpha) * 4 * nol * voh / noh, 0.0)[:, None]
-        rough_t = tap_rough(noh, np.maximum(voh, 1e-30), np.maximum(nol, 0.0), alpha, count)
+        w = np.where(ok, brdf.v_smith_ggx_correlated(nov, nol, alpha) * 4 * nov * nol / g1, 0.0)[:, None]
+        pdf = g1 * brdf.d_ggx(noh, alpha) / (4 * nov)
+        rough_t = tap_rough(pdf, np.maximum(nol, 0.0), alpha, count)
         tap = rough_t * top
         x = hit(c, p, l)
         d = (x - pos) / np.maximum(np.linalg.norm(x - pos, axis=-1, keepdims=True), 1e-6)
@@ -309,8 +324,9 @@ def blend(captured: list, p, r, lod, distant, env, lobe, masks=None):
     """Twin of reflection_probes: captured [{settings, levels, coverage, sky, depth (optional: the
     distance chain, rprobe_hit)}], distant the scaled distant chain's radiance at (p, r) (m, 3),
     which takes the share no probe's influence holds; env (the distant chain, its rotation, its
-    intensity) and lobe (n, v) for a probe read in taps (everywhere, or at grazing views and on
-    lobes straddling an opening's edge: grazing, straddle). masks: each point's rp_excl of its
+    intensity) and lobe (n, v[, sample]: each point's G-buffer sample number in the frame, which
+    turns its taps, tap_turn; 0 where not given) for a probe read in taps (everywhere, or at
+    grazing views and on lobes straddling an opening's edge: grazing, straddle). masks: each point's rp_excl of its
     object (own_masks; None: 0): a point reads only the probes excluding its object where any of
     them holds it (own)."""
     acc = np.zeros_like(distant)
@@ -329,8 +345,9 @@ def blend(captured: list, p, r, lod, distant, env, lobe, masks=None):
         tapped = (w > 0) & (g > 0)
         if tapped.any():
             count = st.get("taps") or st["grazing_taps"]
+            turn = tap_turn(np.broadcast_to(lobe[2] if len(lobe) > 2 else 0, (len(p),)))
             got[tapped] = g[tapped, None] * taps(c, p[tapped], lobe[0][tapped], lobe[1][tapped], lod[tapped], env,
-                                                 count)
+                                                 count, turn[tapped])
         one = (w > 0) & (g < 1)
         if one.any():
             got[one] += (1 - g[one, None]) * read(c, p[one], r[one], lod[one], distant[one])

@@ -99,7 +99,7 @@ def shade(gb, arrays, effects: dict, env: dict, *, sh_coeffs=None, chain=None, p
             from iblbake.render.lightmaps.read import hit_objects
             masks = rp_twin.masks_of(reflection_probes, hit_objects(gb, arrays)[hit][lit])
             li[lit] = rp_twin.blend(reflection_probes, gb["pos"][hit][lit], r[lit], rough[lit] * (nlev - 1), li[lit],
-                                    (prefiltered, rot, scale), (n[lit], v[lit]), masks)
+                                    (prefiltered, rot, scale), (n[lit], v[lit], np.flatnonzero(hit)[lit]), masks)
         color += w * li
         if ssr_out is not None:
             ssr_out["w"] = w * material_occlusion(gb)[:, None]
