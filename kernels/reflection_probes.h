@@ -442,7 +442,8 @@ IBL_INLINE float3 reflection_probes(float3 p, float3 n, float3 v, float3 r, floa
         float g = e.x > 0.5f ? rprobe_grazing(e.z, dot(n, v)) : 0.0f;
         if (e.x > 0.5f && e.z < -0.5f && g < 1.0f) g = fmax(g, rprobe_straddle(RPROBE_ARGS, k, p, r, lod));
         if (g > 0.0f)
-            acc += w * g * rprobe_taps(RPROBE_ARGS, k, p, n, v, lod, (int)fabs(e.z), turn, CHAIN_ARGS, env_rot, env_scale);
+            acc += w * g * rprobe_taps(RPROBE_ARGS, k, p, n, v, lod, (int)fabs(e.z), turn, CHAIN_ARGS, env_rot,
+                                       env_scale);
         if (g < 1.0f)
             acc += w * (1.0f - g) * rprobe_read(RPROBE_ARGS, k, p, r, lod, distant);
     }
