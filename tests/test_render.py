@@ -540,7 +540,10 @@ def test_mesh_errors(tmp_path, constant_env):
     nan.write_text("v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n")
     degenerate = tmp_path / "deg.obj"
     degenerate.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nf 1 2 3\nf 1 2 4\nf 1 1 3\n")
-    for mesh, expected in ((bad_index, "bad.obj"), (nan, "not finite"), (tmp_path / "missing.ply", "not found")):
+    garbage = tmp_path / "crate.glb"           # a new user's: it was said as "not glTF JSON: Expecting value"
+    garbage.write_bytes(b"not a glb at all" * 8)
+    for mesh, expected in ((bad_index, "bad.obj"), (nan, "not finite"), (tmp_path / "missing.ply", "not found"),
+                           (garbage, "not a GLB file: its header is b'not '")):
         p = make_scene(tmp_path, constant_env, {"base_color": [1, 1, 1]},
                        objects=[{"mesh": {"path": str(mesh)}, "material": "m"}])
         r = run_cli("render", p, "--cache", tmp_path / "c")

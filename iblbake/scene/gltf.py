@@ -363,6 +363,8 @@ def read(path, where: str) -> Document:
             text, binary = split_glb(data)
         except ValueError as e:
             _fail(where, path, str(e))
+    elif path.suffix.lower() == ".glb":         # a .glb is read by its header, never as JSON
+        _fail(where, path, f"not a GLB file: its header is {data[:4]!r}, a GLB's starts with b'glTF'")
     else:
         text = data
     try:
