@@ -46,9 +46,12 @@ def study_scene(path, panorama, args, rt, bakes, root) -> dict:
     pano = Path(panorama) if Path(panorama).suffix else root / "examples" / "panoramas" / f"{panorama}.exr"
     sets = [f"environment.path={pano}"]
 
+    def warn(message: str):
+        if not message.startswith(DISTANT_NOTE):     # this script's own distant rung: not the scene's fault
+            print(f"  warning: {message}", file=sys.stderr)
+
     def make(extra):
-        return acc.Study(path, sets + extra, settings, runtime=rt, bakes=bakes,
-                         warn=lambda m: print(f"  warning: {m}", file=sys.stderr))
+        return acc.Study(path, sets + extra, settings, runtime=rt, bakes=bakes, warn=warn)
     study = make([])
     if not study.scene.data["reflection_probes"] and "specular" in study.terms:
         study = make(["effects.specular=off"])     # no reflection probe to judge: no specular reference
@@ -64,16 +67,24 @@ def study_scene(path, panorama, args, rt, bakes, root) -> dict:
             "rungs": [{k: r[k] for k in keep if k in r} for r in (study.run_rung(g) for g in rungs)]}
 
 
+# the render's note on a room reflecting the distant panorama, which the distant rung does by design (a new
+# user read it as a fault of their scene)
+DISTANT_NOTE = "effects.specular: prefiltered reflects the distant panorama"
+
+
 def short(label: str) -> str:
     """'far end' (objects.1) -> far end; 'gold' (objects.7) +x -> gold +x."""
     name, _, rest = label.partition(" (objects.")
     return f"{name.strip(chr(39))} {rest.partition(')')[2].strip()}".strip()
 
 
-LEGEND = ("'name xR (A%, tint T%)': R the ratio of the region's (or half's) mean luminance, real-time over the "
-          "reference; A its worst channel's |mean difference| over the reference's mean luminance, what the "
+LEGEND = ("'name xR (A%, tint T%; N px)': R the ratio of the region's (or half's) mean luminance, real-time over "
+          "the reference; A its worst channel's |mean difference| over the reference's mean luminance, what the "
           "bounds (regions over 30%, halves over 10%) count; T the colour shift once the luminances match, shown "
-          "where the worst channel is mostly that. Each region's (half's) luminance ratio: R alone.")
+          "where the worst channel is mostly that; N its pixels (a few pixels' mean is as noisy as a few pixels). "
+          "Each region's (half's) luminance ratio: R alone. Halves the camera sees in under 4 pixels are left "
+          "out. Reference noise: the frame's relative standard error per pixel; a region's mean has about that "
+          "over the square root of its pixels.")
 
 
 def worst(errors: dict) -> str:
@@ -81,7 +92,8 @@ def worst(errors: dict) -> str:
     colour shift once the luminances match) where the worst channel is most of it."""
     name, e = max(errors.items(), key=lambda kv: kv[1]["absolute"])
     tint = f", tint {100 * e['tint']:.0f}%" if e.get("channel", 0) > abs(e["ratio"] - 1) and "tint" in e else ""
-    return f"{short(name)} x{e['ratio']:.2f} ({100 * e['absolute']:.0f}%{tint})"
+    px = f"; {e['pixels']} px" if "pixels" in e else ""              # a JSON written before has none
+    return f"{short(name)} x{e['ratio']:.2f} ({100 * e['absolute']:.0f}%{tint}{px})"
 
 
 def ratios(errors: dict) -> str:
