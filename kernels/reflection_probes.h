@@ -299,20 +299,19 @@ IBL_INLINE float3 rprobe_tap_sky(RPROBE_PARAMS, int k, float3 l, float3 d, float
 
 /* Probe k's reading at p of the GGX lobe of normal n and view v (alpha rough^2, rough = lod over
  * the chain's last level) in `count` directions l of its visible normals (Heitz 2018) at the
- * Hammersley points turned about n by `turn` (rprobe_tap_turn), each weighted as the BRDF over its
- * pdf without Fresnel (V 4 NoV NoL / G1(NoV) = G2 / G1, about 1 for every tap; none below the
- * surface; the split sum's albedo scales the mean). Drawn from the normal distribution (before),
- * a tap near the normal at a grazing view weighed V 4 NoL VoH / NoH, 9 or more against the others'
- * 1: one such tap meeting a window's sky made a silhouette pixel of a new user's gold sphere 5x too
- * bright, its half 13% (docs/conventions.md "Taps"). Each tap at its own roughness
- * (rprobe_tap_rough): the scene where l leaves the
- * proxy (x), read from the probe along d = x - probe (at the tap's level, not floored at
- * RPROBE_FINEST: the taps average the capture's noise, and a floored read bled the black floor
- * under a probe's excluded cube into the lit floor beside it: metal_box under city, the -x face
- * x0.88 at level 2, x0.93 at the tap's), and the sky
- * along l itself (at infinity: no parallax) where p sees that direction open (the coverage along
- * d at the capture's own level: a window's edge as sharp as the capture holds it), rprobe_tap_sky. */
-IBL_INLINE float3 rprobe_taps(RPROBE_PARAMS, int k, float3 p, float3 n, float3 v, float lod, int count, float turn,
+ * Hammersley points turned about n by G-buffer sample `sample`'s angle (rprobe_tap_turn), each
+ * weighted as the BRDF over its pdf without Fresnel (V 4 NoV NoL / G1(NoV) = G2 / G1, about 1 for
+ * every tap; none below the surface; the split sum's albedo scales the mean). Drawn from the normal
+ * distribution (before), a tap near the normal at a grazing view weighed V 4 NoL VoH / NoH, 9 or
+ * more against the others' 1: one such tap meeting a window's sky made a silhouette pixel of a new
+ * user's gold sphere 5x too bright, its half 13% (docs/conventions.md "Taps"). Each tap at its own
+ * roughness (rprobe_tap_rough): the scene where l leaves the proxy (x), read from the probe along d
+ * = x - probe (at the tap's level, not floored at RPROBE_FINEST: the taps average the capture's
+ * noise, and a floored read bled the black floor under a probe's excluded cube into the lit floor
+ * beside it: metal_box under city, the -x face x0.88 at level 2, x0.93 at the tap's), and the sky
+ * along l itself (at infinity: no parallax) where p sees that direction open (the coverage along d
+ * at the capture's own level: a window's edge as sharp as the capture holds it), rprobe_tap_sky. */
+IBL_INLINE float3 rprobe_taps(RPROBE_PARAMS, int k, float3 p, float3 n, float3 v, float lod, int count, uint sample,
                               CHAIN_PARAMS, float2 env_rot, float env_scale)
 {
     const float4 a = rp_info[4 * k];
@@ -323,7 +322,7 @@ IBL_INLINE float3 rprobe_taps(RPROBE_PARAMS, int k, float3 p, float3 n, float3 v
     float wsum = 0.0f;
     tangent_frame(n, &t, &bt);
     const float3 vl = (float3)(dot(v, t), dot(v, bt), nov);
-    const float g1 = g1_smith(nov, alpha);
+    const float g1 = g1_smith(nov, alpha), turn = rprobe_tap_turn(sample);
     for (int i = 0; i < count; ++i) {
         const float2 u = hammersley((uint)i, (uint)count);
         const float3 hl = sample_ggx_vndf(vl, alpha, (float2)(u.x, fmod(u.y + turn, 1.0f)));
@@ -432,7 +431,6 @@ IBL_INLINE float3 reflection_probes(float3 p, float3 n, float3 v, float3 r, floa
     float3 acc = (float3)(0.0f);
     float wsum = 0.0f;
     const uint own = obj >= 0 ? rprobe_own(p, rp_excl[obj], rp_info, rp_count) : 0u;
-    const float turn = rprobe_tap_turn(sample);
     for (int k = 0; k < rp_count; ++k) {
         if (!rprobe_kept(own, k)) continue;                 /* not its own probe */
         const float4 a = rp_info[4 * k], b = rp_info[4 * k + 1], c = rp_info[4 * k + 2], e = rp_info[4 * k + 3];
@@ -442,7 +440,7 @@ IBL_INLINE float3 reflection_probes(float3 p, float3 n, float3 v, float3 r, floa
         float g = e.x > 0.5f ? rprobe_grazing(e.z, dot(n, v)) : 0.0f;
         if (e.x > 0.5f && e.z < -0.5f && g < 1.0f) g = fmax(g, rprobe_straddle(RPROBE_ARGS, k, p, r, lod));
         if (g > 0.0f)
-            acc += w * g * rprobe_taps(RPROBE_ARGS, k, p, n, v, lod, (int)fabs(e.z), turn, CHAIN_ARGS, env_rot,
+            acc += w * g * rprobe_taps(RPROBE_ARGS, k, p, n, v, lod, (int)fabs(e.z), sample, CHAIN_ARGS, env_rot,
                                        env_scale);
         if (g < 1.0f)
             acc += w * (1.0f - g) * rprobe_read(RPROBE_ARGS, k, p, r, lod, distant);

@@ -53,12 +53,27 @@ def sample_ggx_half(u, alpha):
 def reflect_ggx_half(u, t, b, n, v, alpha):
     """One GGX half vector a point (sample_ggx_half of u (2,), in the frame t, b, n) and the view v
     reflected about it: (noh, voh, l, nol), noh floored at 1e-7 (a weight divides by it). The
-    importance twin and the reflection probes' taps draw their lobes this way."""
+    importance twin draws its lobe this way."""
     hl = sample_ggx_half(np.broadcast_to(u, (len(n), 2)), alpha)
+    return (np.maximum(hl[:, 2], 1e-7), *_reflected(hl, t, b, n, v))
+
+
+def reflect_ggx_vndf(u, t, b, n, v, nov, alpha):
+    """One GGX visible normal a point (sample_ggx_vndf of u, (2,) or (points, 2), seen from v in the
+    frame t, b, n, its z the caller's NoV: floored as the kernel's) and the view v reflected about
+    it: (its NoH unfloored, voh, l, nol). The lobe mode's twin and the reflection probes' taps draw
+    their lobes this way."""
+    vl = np.stack([(v * t).sum(1), (v * b).sum(1), nov], -1)
+    hl = sample_ggx_vndf(vl, alpha, np.broadcast_to(u, (len(n), 2)))
+    return (hl[:, 2], *_reflected(hl, t, b, n, v))
+
+
+def _reflected(hl, t, b, n, v):
+    """(voh, l, nol) of the view v reflected about the local half vectors hl (frame t, b, n)."""
     h = t * hl[:, 0:1] + b * hl[:, 1:2] + n * hl[:, 2:3]
     voh = (v * h).sum(1)
     l = 2 * voh[:, None] * h - v
-    return np.maximum(hl[:, 2], 1e-7), voh, l, (n * l).sum(1)
+    return voh, l, (n * l).sum(1)
 
 
 def pdf_ggx_half(noh, alpha):

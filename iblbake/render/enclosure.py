@@ -58,6 +58,10 @@ def reads_distant_sky(scene, fx) -> bool:
     return any(m["metallic"] > 0 or m["specular"] > 0 for m in materials.used(scene))
 
 
+# the note's words (benchmarks/corpus_absolute.py leaves it out for its own distant rung)
+DISTANT_NOTE = "reflects the distant panorama, but"
+
+
 def warnings(scene, fx, arrays) -> list:
     """The frame's note where its specular term mirrors the distant sky from inside a room."""
     if not reads_distant_sky(scene, fx):
@@ -71,6 +75,6 @@ def warnings(scene, fx, arrays) -> list:
     remedy = ("its reflection probes are not read here (they are with effects.specular: prefiltered and "
               "effects.reflection_probes: true)" if scene.data["reflection_probes"]
               else "add a reflection probe (reflection_probes:, docs/scene.md)")
-    return [f"effects.specular: {fx.specular} reflects the distant panorama, but {100 * share:.0f}% of the "
+    return [f"effects.specular: {fx.specular} {DISTANT_NOTE} {100 * share:.0f}% of the "
             f"directions from the camera meet the scene (a room): its reflections show the sky, not the room; "
             f"{remedy} or use effects.specular: reference"]

@@ -198,10 +198,10 @@ def tap_turn(sample):
     return (h >> 8).astype(np.float64) * (1.0 / 16777216.0)
 
 
-def taps(c: dict, p, n, v, lod, env, count: int, turn):
+def taps(c: dict, p, n, v, lod, env, count: int, sample):
     """Twin of rprobe_taps: the GGX lobe of normal n and view v (alpha rough^2, rough lod over the
     chain's last level) read in `count` directions l of its visible normals (Heitz 2018) at the
-    Hammersley points turned about n by each point's `turn` (tap_turn), each weighted as the BRDF
+    Hammersley points turned about n by each point's G-buffer sample (tap_turn), each weighted as the BRDF
     over its pdf without Fresnel (V 4 NoV NoL / G1(NoV), none below the surface): the scene where
     l leaves the proxy, seen from the probe at the tap's own level (not floored at FINEST), and
     the sky along l itself (tap_sky; env: the distant chain, its rotation, its intensity), times
@@ -213,15 +213,13 @@ def taps(c: dict, p, n, v, lod, env, count: int, turn):
     alpha = (lod / top) ** 2
     nov = np.maximum((n * v).sum(1), 1e-4)
     t, b = conventions.tangent_frame(n)
-    vl = np.stack([(v * t).sum(1), (v * b).sum(1), nov], -1)
     g1 = sampling.g1_smith(nov, alpha)
+    turn = tap_turn(sample)
     acc, wsum = np.zeros((len(p), 3)), np.zeros((len(p), 1))
     for u in sampling.hammersley(count):
-        hl = sampling.sample_ggx_vndf(vl, alpha, np.stack([np.full(len(p), u[0]), (u[1] + turn) % 1.0], -1))
-        h = t * hl[:, 0:1] + b * hl[:, 1:2] + n * hl[:, 2:3]
-        voh = (v * h).sum(1)
-        l = 2 * voh[:, None] * h - v
-        nol, noh = (n * l).sum(1), np.maximum(hl[:, 2], 1e-7)
+        hz, voh, l, nol = sampling.reflect_ggx_vndf(np.stack([np.full(len(p), u[0]), (u[1] + turn) % 1.0], -1),
+                                                    t, b, n, v, nov, alpha)
+        noh = np.maximum(hz, 1e-7)
         ok = (nol > 0) & (voh > 0)
         w = np.where(ok, brdf.v_smith_ggx_correlated(nov, nol, alpha) * 4 * nov * nol / g1, 0.0)[:, None]
         pdf = g1 * brdf.d_ggx(noh, alpha) / (4 * nov)
@@ -334,6 +332,7 @@ def blend(captured: list, p, r, lod, distant, env, lobe, masks=None):
     lod = np.broadcast_to(np.asarray(lod, np.float64), (len(p),))
     nov = (lobe[0] * lobe[1]).sum(-1) if lobe is not None else np.ones(len(p))     # no lobe: no taps
     mine = own(captured, p, np.asarray(masks, np.uint32)) if masks is not None else np.zeros(len(p), np.uint32)
+    sample = np.broadcast_to(lobe[2] if lobe is not None and len(lobe) > 2 else 0, (len(p),))
     for k, c in enumerate(captured):
         st = c["settings"]
         w = np.where(kept(mine, k), weight(st, p), 0.0)
@@ -345,9 +344,8 @@ def blend(captured: list, p, r, lod, distant, env, lobe, masks=None):
         tapped = (w > 0) & (g > 0)
         if tapped.any():
             count = st.get("taps") or st["grazing_taps"]
-            turn = tap_turn(np.broadcast_to(lobe[2] if len(lobe) > 2 else 0, (len(p),)))
             got[tapped] = g[tapped, None] * taps(c, p[tapped], lobe[0][tapped], lobe[1][tapped], lod[tapped], env,
-                                                 count, turn[tapped])
+                                                 count, sample[tapped])
         one = (w > 0) & (g < 1)
         if one.any():
             got[one] += (1 - g[one, None]) * read(c, p[one], r[one], lod[one], distant[one])

@@ -182,19 +182,14 @@ def lobe(v, n, nov, alpha, rough, f0, f90, rot, k, spread, prefiltered, dfg):
     DFG table's albedo."""
     pts = sampling.lobe_points(k).astype(np.float32).astype(np.float64)
     t, b = conventions.tangent_frame(n)
-    vl = np.stack([(v * t).sum(1), (v * b).sum(1), nov], -1)
     g1 = sampling.g1_smith(nov, alpha)
     nlev = len(prefiltered)
     num = np.zeros((len(n), 3))
     den = np.zeros((len(n), 3))
     for u in pts:
-        hl = sampling.sample_ggx_vndf(vl, alpha, np.broadcast_to(u, (len(n), 2)))
-        h = t * hl[:, 0:1] + b * hl[:, 1:2] + n * hl[:, 2:3]
-        voh = (v * h).sum(1)
-        l = 2 * voh[:, None] * h - v
-        nol = (n * l).sum(1)
+        hz, voh, l, nol = sampling.reflect_ggx_vndf(u, t, b, n, v, nov, alpha)
         ok = (nol > 0) & (voh > 0)
-        pdf = g1 * brdf.d_ggx(hl[:, 2], alpha) / (4 * nov)
+        pdf = g1 * brdf.d_ggx(hz, alpha) / (4 * nov)
         a = np.minimum(np.sqrt(spread / (4 * np.pi * k * pdf)), alpha)
         w = brdf.f_schlick(voh[:, None], f0, f90) * (brdf.v_smith_ggx_correlated(nov, nol, alpha) * 4 * nov * nol / g1)[:, None]
         w = np.where(ok[:, None], w, 0.0)
