@@ -63,7 +63,7 @@ class Shade(Pass):
             d["HAS_EMISSIVE"] = 1
         if e["ao"] != "off" and fx.any_approximate:
             d["HAS_AO"] = 1
-            if e["ao_multibounce"] and fx.diffuse == "sh":
+            if e["ao_multibounce"] and fx.diffuse in ("sh", "probes"):     # the terms the twin bends too
                 d["AO_MULTIBOUNCE"] = 1
         return d
 
