@@ -180,3 +180,38 @@ def test_probes_json_carries_the_estimate_and_the_rays_it_did_not_count(tmp_path
     assert guess["seconds"] == pytest.approx(2048 / guess["paths_per_s"], abs=0.051)
     for name in ("irradiance.exr", "distance.exr", "probe_data.exr"):
         assert np.array_equal(images.read_exr(tmp_path / "plain" / name), images.read_exr(tmp_path / "timed" / name))
+
+
+def box_obj(path, lo, hi, open_top=False):
+    """An OBJ of a box's faces, quads of no thickness (the top left out where open_top)."""
+    (x0, y0, z0), (x1, y1, z1) = lo, hi
+    v = [(x0, y0, z0), (x1, y0, z0), (x1, y0, z1), (x0, y0, z1), (x0, y1, z0), (x1, y1, z0), (x1, y1, z1), (x0, y1, z1)]
+    faces = [(1, 2, 3, 4), (1, 5, 6, 2), (2, 6, 7, 3), (3, 7, 8, 4), (4, 8, 5, 1)] + ([] if open_top else [(5, 8, 7, 6)])
+    path.write_text("".join(f"v {a} {b} {c}\n" for a, b, c in v) + "".join(f"f {' '.join(map(str, f))}\n" for f in faces))
+    return path
+
+
+@pytest.mark.parametrize("unscaled", [False, True])
+def test_a_mesh_left_unscaled_is_said(tmp_path, sky, unscaled):
+    """A new user's two storeys scaled by 0.01 with one mesh left at scale 1 (trial73): the automatic
+    grid took the big mesh's interior scale (cells of 0.56 around a camera whose room is 0.04
+    across) and the frame washed out, nothing said (82% of the probes off, under OFF_SAID). Here a
+    room of 0.04 with the camera in it beside a box of 4 open above: the cells are over CAMERA_CELLS
+    times the camera's free distance, said with the box named (100 times any other object); the
+    room alone says nothing (the diagonal of the box, 6.403; of the room, 0.064)."""
+    room = box_obj(tmp_path / "room.obj", (-0.02, 0, -0.02), (0.02, 0.03, 0.02))
+    big = box_obj(tmp_path / "hall.obj", (-2, 0, -2), (2, 3, 2), open_top=True)
+    objects = [{"mesh": {"path": str(room)}, "material": "m", "name": "room"}]
+    if unscaled:
+        objects.append({"mesh": {"path": str(big)}, "material": "m", "name": "hall"})
+    path = scene_file(tmp_path, sky, camera={"perspective": {"position": [0, 0.015, 0.01], "look_at": [0, 0.01, -0.02],
+                                                             "fov_y": 60}, "resolution": [16, 16]},
+                      materials={"base_color": [0.8, 0.8, 0.8], "specular": 0}, objects=objects,
+                      probes={"rays": 256}, effects={"diffuse": "probes", "specular": "off"})
+    p = run_cli("render", path, "-o", tmp_path / "out.exr", "--cache", tmp_path / "cache", "--json")
+    assert p.returncode == 0, p.stderr
+    said = [w for w in json.loads(p.stdout)["warnings"] if "camera's surroundings" in w]
+    if not unscaled:
+        assert not said, said
+        return
+    assert len(said) == 1 and "'hall' (objects.1) spans 6.403, 100 times any other object" in said[0], said

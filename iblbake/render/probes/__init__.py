@@ -70,11 +70,38 @@ def scaled_grid(tracer, coarse: Grid, settings: dict, arrays, camera):
     info = {"interior_step": None if hint is None else round(hint, 6)}
     if hint is not None:
         info["lattice"] = lattice(grid, arrays)
+        # the camera's own surroundings: half its rays meet a front face within `free`
+        free = float(np.median(np.where(t[-1] < 0, np.inf, t[-1])))
+        if free * CAMERA_CELLS < grid.unit:
+            info["camera_cramped"] = {"free": round(free, 6), "cell": round(grid.unit, 6), **largest_object(arrays)}
     if hint is not None and grid.unit > min(hint, coarse.unit) * 1.0001:
         lo, hi = scene_bounds(arrays)
         info["capped"] = {"step": round(min(hint, coarse.unit), 6),
                           "probes": math.prod(axis_counts(hi - lo, min(hint, coarse.unit), 2))}
     return grid, info
+
+
+CAMERA_CELLS = 4       # an automatic cell this many times the camera's free distance is said (a mesh left unscaled)
+
+
+def largest_object(arrays) -> dict:
+    """The object whose bounding box is the largest and its diagonal, and the largest diagonal of
+    the others ({"object", "extent", "others"}; spheres and meshes: an unscaled mesh's mistake)."""
+    ext = {}
+    for s in arrays.spheres:
+        o = int(s[1, 1:2].view(np.int32)[0])
+        ext[o] = max(ext.get(o, 0.0), 2 * math.sqrt(3) * float(s[0, 3]))
+    if len(arrays.tris):
+        ids = arrays.tris[:, 1, 3].view(np.int32)
+        v = arrays.tris[:, :3, :3].astype(np.float64)
+        for o in np.unique(ids):
+            w = v[ids == o].reshape(-1, 3)
+            ext[int(o)] = float(np.linalg.norm(w.max(0) - w.min(0)))
+    if not ext:
+        return {}
+    big = max(ext, key=ext.get)
+    return {"object": big, "extent": round(ext[big], 6),
+            "others": round(max((e for o, e in ext.items() if o != big), default=0.0), 6)}
 
 
 def switch_off(tracer, grid: Grid, offset, t, dirs, obj, settings: dict, camera):
@@ -252,12 +279,17 @@ RULES = {"still_inside_geometry": "still inside geometry (relocation did not mov
                               "two cells, none in their own)"}
 
 
-def placement_warnings(report: dict) -> list:
+def placement_warnings(report: dict, scene_data: dict | None = None) -> list:
     """The grid's placement said: an automatic grid the AUTO_MAX_PROBES cap made coarser than the
-    scene's interior asks (the count and bytes it would have taken), a box wholly outside the
+    scene's interior asks (the count and bytes it would have taken), an automatic grid whose cells
+    are over CAMERA_CELLS times the camera's free distance (the space the camera is in finer than
+    the interior's scale: the object that sets it named where it is 10 times any other, as a mesh
+    left unscaled is), a box wholly outside the
     scene's bounds (box_outside: that, not its probes off), else more than OFF_SAID of the
     probes within the scene's bounds off, by which rule (those beyond the bounds, off around an
     interior the camera is in, are counted in the report, not said)."""
+    from iblbake.scene.load import object_label
+
     out = []
     cap = report.get("capped")
     if cap:
@@ -266,6 +298,16 @@ def placement_warnings(report: dict) -> list:
                    f"grid is capped at {AUTO_MAX_PROBES} probes, so {report['probes']} probes "
                    f"({report['bytes'] / 2**20:.0f} MiB) stand coarser; give probes.spacing (or probes.min/max "
                    "around the part the camera sees) for the finer grid")
+    cramped = report.get("camera_cramped")
+    if cramped:
+        big = cramped.get("object")
+        label = f"objects.{big}" if scene_data is None or big is None else object_label(scene_data, big)
+        said = "" if big is None or cramped["extent"] < 10 * cramped["others"] else (
+            f"; {label} spans {cramped['extent']:.4g}, {cramped['extent'] / max(cramped['others'], 1e-30):.0f} "
+            "times any other object: a mesh left at another scale? (objects.N.mesh.scale)")
+        out.append(f"probes: the camera's surroundings are finer than the automatic grid: half its rays meet a "
+                   f"surface within {cramped['free']:.4g}, the cells are {cramped['cell']:.4g}, so the probes cannot "
+                   f"resolve the space the camera is in{said}; else give probes.spacing")
     away = report.get("box_outside_bounds")
     if away:                  # its probes' rays meet no surface near: true of them, but no help said
         return out + [f"probes: the probe box {away['box'][0]}..{away['box'][1]} lies wholly outside the scene's "
@@ -305,7 +347,7 @@ def warnings(report: dict, scene_data: dict, volume: dict | None = None) -> list
             if max(w, h) > MAX_ATLAS_SIDE:
                 out.append(f"probes: the {what} atlas is {w} x {h} texels, over the {MAX_ATLAS_SIDE} most GPUs take "
                            f"in one texture; give fewer probes (probes.counts, probes.spacing) or texels")
-    out += placement_warnings(report)
+    out += placement_warnings(report, scene_data)
     if report.get("noisy_short_of_memory"):
         out.append(f"probes: {report['noisy_short_of_memory']} noisy probes took no more rays: their further rays "
                    "would not fit in this process's memory; give a lower probes.max_rays or fewer probes")
