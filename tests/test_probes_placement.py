@@ -283,6 +283,35 @@ def test_an_automatic_grid_fits_a_corridor(tmp_path, panoramas):
     assert (vol.data[~inside, 3] == 1).all() and 0 < vol.manifest["report"]["off_by"]["beyond_bounds"] <= (~inside).sum()
 
 
+def test_probes_beyond_the_bounds_are_not_traced(tmp_path, panoramas, monkeypatch):
+    """The corridor's probes beyond its walls (the camera within) are off whatever their rays meet:
+    neither relocated nor traced (probes.untraced), each probe traced keeping its own random stream
+    (kernels/paths/probe_trace.cl probe_ids). Against the same bake tracing every probe: the same
+    states, every active probe's offset, irradiance and distances the same to the bit, the rules'
+    counts the same but those beyond the bounds that classification had counted first, and the
+    untraced probes' rays not traced (measured: 606 of 1,092 probes, 54% of the paths)."""
+    path = corridor(tmp_path, panoramas["studio"], "probes", {"rays": 64})
+    skipping = iblbake.bake_probes(path, cache=tmp_path / "a")
+    monkeypatch.setattr(probes, "untraced", lambda grid, arrays, camera: np.zeros(grid.count, bool))
+    every = iblbake.bake_probes(path, cache=tmp_path / "b")
+    a, b = skipping.manifest["report"], every.manifest["report"]
+    live = every.data[:, 3] == 0
+    assert np.array_equal(skipping.data[:, 3], every.data[:, 3]) and live.sum() > 50
+    assert np.array_equal(skipping.data[live, :3], every.data[live, :3])
+    g = probes.Grid(tuple(every.grid["origin"]), tuple(every.grid["spacing"]), tuple(every.grid["counts"]))
+    skipped = probes.beyond_bounds(g.positions(), ([-1, 0, -16], [1, 2.5, 0]), [0.3, 1.3, -1.0])
+    assert a["off_by"]["beyond_bounds"] == skipped.sum() > 0.4 * g.count
+    for k in a["off_by"]:
+        if k not in ("beyond_bounds", "no_surface_near", "still_inside_geometry"):
+            assert a["off_by"][k] == b["off_by"][k], k
+    for atlas, texels in (("irradiance", every.manifest["irradiance_texels"]),
+                          ("distance", every.manifest["distance_texels"])):
+        for i in np.flatnonzero(live):
+            (x, y), m = twin.tile_origin(i, texels, g.counts), texels + 2
+            assert np.array_equal(getattr(skipping, atlas)[y:y + m, x:x + m], getattr(every, atlas)[y:y + m, x:x + m])
+    assert a["rays_traced"] < b["rays_traced"] - 0.4 * skipped.sum() * 64
+
+
 @pytest.mark.slow
 def test_a_corridors_far_end_is_near_the_reference(tmp_path, rt, panoramas):
     """Issue 59: default probes in a corridor open at one end: its closed far end 11-15x too bright

@@ -19,7 +19,8 @@
  * (-1: none), for the bakes' warnings. skip_obj[object] != 0 (where skip): the first ray passes
  * through that object (a capture's exclude list; later bounces see it).
  * Work item (probe first + i, ray r): out[i nrays + r]; the ray's random stream is its probe and
- * ray number ray0 + r, so a bake is the same however it is split into launches. The reflection
+ * ray number ray0 + r, so a bake is the same however it is split into launches. by_ids: the probes
+ * are probe_ids[first + i] (those traced of a grid, each with its own number and stream). The reflection
  * probes' captures (iblbake/render/reflection_probes.py) trace their texels' rays here too.
  * numpy twin of what the probes make of these rays: iblbake/render/probes/project.py. */
 #include "common.h"
@@ -30,7 +31,8 @@
 #include "light.h"
 #include "paths/paths.h"
 
-__kernel void probe_trace(__global const float4 *probe_pos, __global const float4 *ray_dirs, const int nrays,
+__kernel void probe_trace(__global const float4 *probe_pos, __global const int *probe_ids, const int by_ids,
+                          __global const float4 *ray_dirs, const int nrays,
                           const int first, const int count, const int ray0, const uint seed, const int shade,
                           const int back_faces_black, ENV_PARAMS, CHAIN_PARAMS, const float ray_solid_angle,
                           __global const float4 *materials, SCENE_PARAMS,
@@ -39,7 +41,8 @@ __kernel void probe_trace(__global const float4 *probe_pos, __global const float
 {
     const int item = get_global_id(0);
     if (item >= count * nrays) return;
-    const int probe = first + item / nrays, r = item % nrays;
+    const int slot = first + item / nrays, r = item % nrays;
+    const int probe = by_ids ? probe_ids[slot] : slot;      /* its position and random stream */
     const float3 o = probe_pos[probe].xyz, d = ray_dirs[r].xyz;
     const int cull = back_faces_black ? 2 : 1;       /* a probe meets solids' insides; a capture, what the camera does */
     Hit hh = trace_range(o, d, 0.0f, INFINITY, 0, cull, SCENE_ARGS);

@@ -22,15 +22,20 @@ class PointRays(Source):
     """Rays `dirs` ((rays, 3), or (rays, 4) with each ray's share of the sphere in w) from every
     position; result(): (radiance (positions, rays, 3), signed distance (positions, rays), the object
     each ray met, -1 none). shade False: distances only. probe0, ray0: the first position's and
-    ray's numbers (their random streams). progress(done + share * the fraction traced)."""
+    ray's numbers (their random streams). ids: the positions traced, by number (each keeps its
+    number's stream; the results are theirs, in that order). progress(done + share * the fraction
+    traced)."""
     program, function = PROGRAM, "probe_trace"
 
-    def __init__(self, tracer, positions, dirs, shade: bool, progress=None, done=0.0, share=1.0, probe0=0, ray0=0):
+    def __init__(self, tracer, positions, dirs, shade: bool, progress=None, done=0.0, share=1.0, probe0=0, ray0=0,
+                 ids=None):
         rt = self.rt = tracer.rt
         self.tracer, self.shade, self.probe0, self.ray0 = tracer, shade, probe0, ray0
         self.progress, self.done, self.share = progress, done, share
-        self.n, self.nrays = n, nrays = len(positions), len(dirs)
+        self.n, self.nrays = n, nrays = len(positions) if ids is None else len(ids), len(dirs)
         self.pos = rt.to_device(np.pad(np.asarray(positions, np.float32), ((probe0, 0), (0, 1))))
+        self.ids = rt.to_device(np.asarray([0] if ids is None else ids, np.int32))
+        self.by_ids = ids is not None
         dirs = np.asarray(dirs, np.float32)
         self.dirs = rt.to_device(dirs if dirs.shape[1] == 4 else np.pad(dirs, ((0, 0), (0, 1))))
         self.per = per = whole_units(rt, nrays)           # whole probes per launch (device/launch.py)
@@ -47,7 +52,8 @@ class PointRays(Source):
         for first in range(0, self.n, self.per):
             count = min(self.per, self.n - first)
             yield Launch(count * nrays, {
-                "probe_pos": self.pos, "ray_dirs": self.dirs, "nrays": nrays, "first": self.probe0 + first,
+                "probe_pos": self.pos, "probe_ids": self.ids, "by_ids": int(self.by_ids), "ray_dirs": self.dirs,
+                "nrays": nrays, "first": first if self.by_ids else self.probe0 + first,
                 "count": count, "ray0": self.ray0, "ray_solid_angle": 4 * np.pi / nrays, "seed": t.settings["seed"],
                 "shade": int(self.shade), "back_faces_black": int(t.back_faces_black),
                 "ray_out": self.buf, "ray_obj": self.obj_buf}, (first, count))

@@ -54,9 +54,10 @@ class Tracer:
         """Run probe_trace.cl's `function` with the scene's defines, table and bound arguments."""
         return self.rt.launch(PROGRAM, function, self.defines, global_size, self.table, **self.args, **args)
 
-    def trace(self, positions, dirs, shade: bool, progress=None, done=0.0, share=1.0, probe0=0, ray0=0):
+    def trace(self, positions, dirs, shade: bool, progress=None, done=0.0, share=1.0, probe0=0, ray0=0, ids=None):
         """(radiance (probes, rays, 3), signed distance (probes, rays), the object each ray met
-        (probes, rays), -1 none) from every position; dirs (rays, 3), or (rays, 4) with each ray's
-        share of the sphere in w (probe_trace.cl). probe0, ray0: the first probe's and ray's
-        numbers (their random streams). The rays are a PointRays source (render/paths/rays.py)."""
-        return trace(PointRays(self, positions, dirs, shade, progress, done, share, probe0, ray0))
+        (probes, rays), -1 none) from every position, or from those numbered `ids` alone (theirs, in
+        that order); dirs (rays, 3), or (rays, 4) with each ray's share of the sphere in w
+        (probe_trace.cl). probe0, ray0: the first probe's and ray's numbers (their random
+        streams). The rays are a PointRays source (render/paths/rays.py)."""
+        return trace(PointRays(self, positions, dirs, shade, progress, done, share, probe0, ray0, ids))

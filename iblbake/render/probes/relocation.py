@@ -61,7 +61,7 @@ def off_surfaces(tracer: Tracer, positions, spacing) -> np.ndarray:
     return offset
 
 
-def relocate(tracer: Tracer, grid: Grid, settings: dict, progress=None, start=None):
+def relocate(tracer: Tracer, grid: Grid, settings: dict, progress=None, start=None, keep=None):
     """Probe offsets (world units) after RELOCATION_PASSES of RTXGI's ProbeRelocationCS on the
     FIXED_RAYS unrotated rays: a probe whose rays meet back faces more often than the threshold is
     inside geometry and moves out past the nearest one; one nearer a front face than
@@ -71,11 +71,22 @@ def relocate(tracer: Tracer, grid: Grid, settings: dict, progress=None, start=No
     min(min_frontface_distance, half that distance)); one far from everything moves back
     towards its grid position. First, a probe standing on a surface is moved off it (off_surfaces,
     or `start`: those offsets, found already). A move that would leave 45% of the cell is not made. Returns the
-    offsets and inside_geometry() at the grid positions."""
+    offsets and inside_geometry() at the grid positions. keep: the probes relocated (their numbers),
+    the others' offsets 0 (and not inside)."""
+    every = np.arange(grid.count) if keep is None else np.asarray(keep)
+    offset, at_grid = np.zeros((grid.count, 3)), (np.zeros(grid.count, bool), np.full(grid.count, -1))
+    moved, at = _relocated(tracer, grid.positions()[every], np.asarray(grid.spacing), grid.unit, settings, progress,
+                           None if start is None else np.asarray(start, np.float64)[every])
+    offset[every] = moved
+    if at is not None:
+        at_grid[0][every], at_grid[1][every] = at
+    return offset, (at_grid if at is not None else None)
+
+
+def _relocated(tracer: Tracer, base, spacing, unit: float, settings: dict, progress, start):
+    """relocate() of the probes at `base` (offsets, inside_geometry() at base or None)."""
     dirs = spherical_fibonacci(FIXED_RAYS)
-    base = grid.positions()
-    spacing = np.asarray(grid.spacing)
-    min_front = settings["min_frontface_distance"] * grid.unit
+    min_front = settings["min_frontface_distance"] * unit
     offset = off_surfaces(tracer, base, spacing) if start is None else np.array(start, np.float64)
     at_grid = None
     for k in range(RELOCATION_PASSES):
