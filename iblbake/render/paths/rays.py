@@ -34,7 +34,7 @@ class PointRays(Source):
         self.progress, self.done, self.share = progress, done, share
         self.n, self.nrays = n, nrays = len(positions) if ids is None else len(ids), len(dirs)
         self.pos = rt.to_device(np.pad(np.asarray(positions, np.float32), ((probe0, 0), (0, 1))))
-        self.ids = rt.to_device(np.asarray([0] if ids is None else ids, np.int32))
+        self.ids = rt.to_device(np.asarray([0] if ids is None or not len(ids) else ids, np.int32))
         self.by_ids = ids is not None
         dirs = np.asarray(dirs, np.float32)
         self.dirs = rt.to_device(dirs if dirs.shape[1] == 4 else np.pad(dirs, ((0, 0), (0, 1))))

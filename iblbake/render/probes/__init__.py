@@ -126,8 +126,8 @@ def switch_off(tracer, grid: Grid, offset, t, dirs, obj, settings: dict, camera,
     inside = (states == INACTIVE) & ((t < 0).mean(1) > settings["backface_threshold"])
     empty = (states == INACTIVE) & ~inside
     pos = grid.positions() + offset
-    outside = outside_camera_rooms(pos, arrays, camera) & ~skipped
-    outside[~skipped] |= outside_sealed_room(tracer, camera, obj[~skipped])
+    outside = outside_camera_rooms(pos, arrays, camera)
+    outside[~skipped] |= outside_sealed_room(tracer, camera, obj[~skipped])     # the rule that reads their rays
     bounds = scene_bounds(arrays)          # where it stands, or where relocation moved it (off a wall: outwards)
     beyond = ((beyond_bounds(grid.positions(), bounds, camera) | beyond_bounds(pos, bounds, camera))
               & ~outside & (states != INACTIVE))
@@ -172,7 +172,8 @@ def bake(job, settings: dict, progress=None) -> dict:
     fits(job.scene.source, traced, rays)
     if settings["relocation"]:
         start = np.zeros((grid.count, 3))
-        start[keep] = off_surfaces(tracer, grid.positions()[keep], grid.spacing)
+        if len(keep):
+            start[keep] = off_surfaces(tracer, grid.positions()[keep], grid.spacing)
         placement["on_surface"] = int(start.any(1).sum())        # moved off a surface they stood on
         offset, at_grid = relocate(tracer, grid, settings, progress, start, keep)
     else:

@@ -75,6 +75,8 @@ def relocate(tracer: Tracer, grid: Grid, settings: dict, progress=None, start=No
     the others' offsets 0 (and not inside)."""
     every = np.arange(grid.count) if keep is None else np.asarray(keep)
     offset, at_grid = np.zeros((grid.count, 3)), (np.zeros(grid.count, bool), np.full(grid.count, -1))
+    if not len(every):
+        return offset, at_grid
     moved, at = _relocated(tracer, grid.positions()[every], np.asarray(grid.spacing), grid.unit, settings, progress,
                            None if start is None else np.asarray(start, np.float64)[every])
     offset[every] = moved
