@@ -107,7 +107,7 @@ def largest_object(arrays) -> dict:
 def untraced(grid: Grid, arrays, camera) -> np.ndarray:
     """The probes off whatever their rays meet, neither relocated nor traced: those beyond the
     scene's bounds at their grid positions where the camera is within them (relocation.beyond_bounds;
-    30-55% of an interior's grid, their rays 37-54% of its paths: the bake 9% faster, the frame the
+    30-55% of an interior's grid, their rays 31-54% of its paths: the bake 4-9% faster, the frame the
     same, each probe traced keeping its number's random stream)."""
     return beyond_bounds(grid.positions(), scene_bounds(arrays), camera)
 
@@ -165,7 +165,7 @@ def bake(job, settings: dict, progress=None) -> dict:
     skip = untraced(grid, arrays, camera)
     keep = np.flatnonzero(~skip)
     traced = len(keep)
-    guess = estimate(tracer, grid, settings, traced)  # and for a large one, its time on this device
+    guess = estimate(tracer, grid, settings, keep)    # and for a large one, its time on this device
     apart = f"; {grid.count - traced:,} beyond the scene's bounds not traced" if traced < grid.count else ""
     describe(progress, f"{traced:,} probes x {rays} rays{upto} = {traced * rays:,} paths "
                        f"({'x'.join(map(str, grid.counts))} grid, spacing {grid.unit:.4g}{apart}){estimate_said(guess)}")
@@ -214,21 +214,22 @@ ESTIMATE_PATHS = 1 << 24    # paths from which a bake's time is measured up fron
 CALIBRATION_PATHS = 1 << 16     # the paths timed for it, of probes spread over the grid (0.4-0.6 s on 2 shared cores)
 
 
-def estimate(tracer, grid: Grid, settings: dict, traced: int | None = None) -> dict:
+def estimate(tracer, grid: Grid, settings: dict, traced=None) -> dict:
     """A large bake's time, measured before it starts (a new user's million-probe grid said its
     size in paths alone): CALIBRATION_PATHS of its own paths (rays in its directions from probes
-    spread over the grid, at their grid positions), timed after a launch that builds the program,
-    the rate extrapolated to its paths, those of the `traced` probes (default all; and to its cap
+    spread over those it traces, `traced`, their numbers (default all), at their grid positions),
+    timed after a launch that builds the program, the rate extrapolated to its paths (and to its cap
     where noisy probes may take more). {} below ESTIMATE_PATHS. The calibration's rays are not
     counted as the bake's."""
     rays, cap = settings["rays"], ray_cap(settings)
-    traced = grid.count if traced is None else traced
-    paths = traced * rays
+    traced = np.arange(grid.count) if traced is None else np.asarray(traced)
+    paths = len(traced) * rays
     if paths < ESTIMATE_PATHS:
         return {}
     per_probe = min(rays, 256)
     dirs = ray_directions(rays, settings["seed"])[:per_probe]
-    pos = grid.positions()[np.linspace(0, grid.count - 1, max(1, CALIBRATION_PATHS // per_probe)).astype(np.int64)]
+    spread = np.linspace(0, len(traced) - 1, max(1, CALIBRATION_PATHS // per_probe)).astype(np.int64)
+    pos = grid.positions()[traced[spread]]
     counted = tracer.rays_traced
     tracer.trace(pos[:1], dirs, True)                 # the program built and the device warm
     t0 = time.perf_counter()
@@ -236,7 +237,7 @@ def estimate(tracer, grid: Grid, settings: dict, traced: int | None = None) -> d
     rate = len(pos) * per_probe / max(time.perf_counter() - t0, 1e-9)
     tracer.rays_traced = counted
     return {"paths": paths, "paths_per_s": round(rate), "seconds": round(paths / rate, 1),
-            **({"seconds_at_max_rays": round(traced * cap / rate, 1)} if cap > rays else {})}
+            **({"seconds_at_max_rays": round(len(traced) * cap / rate, 1)} if cap > rays else {})}
 
 
 def duration_said(seconds: float) -> str:
