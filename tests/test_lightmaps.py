@@ -522,3 +522,25 @@ def test_texel_estimate_matches_its_float64_twin(tmp_path):
     err = np.abs(got - want).max() / want.max()
     print(f"{len(up)} texels, E {want[:, 0].min():.4f}-{want[:, 0].max():.4f}, max |kernel - twin| / E {err:.2e}")
     assert err < 1e-5
+
+
+@pytest.mark.parametrize("scale", [1.0, 0.01])
+def test_a_density_of_another_scale_is_said(tmp_path, white, scale):
+    """lightmap.texels_per_unit is in the scene's units: a new user's room scaled by 0.01 took the
+    default 8 (0.32 texels a side of the room, the frame 84% off) and nothing was said (trial74).
+    A sphere of radius 0.8 x scale under the default density: at 0.01 the whole scene is 0.13 texels
+    across, said with a density of its scale (64 across: 4000); at 1, nothing."""
+    from iblbake.render import render
+    from iblbake.render.bakes import Bakes
+
+    sc = scene(tmp_path, white, [{"sphere": {"center": [0, 0.3 * scale, 0], "radius": 0.8 * scale}, "material": "m"}],
+               {"m": {"base_color": [0.8, 0.7, 0.6], **LAMBERT}}, camera=(0, 1.5 * scale, 3 * scale))
+    sc.data["effects"]["diffuse"] = "lightmap"
+    warned = []
+    render(sc, cache=Bakes(tmp_path / "cache"), warn=warned.append)
+    said = [w for w in warned if w.startswith("lightmap: 8 texels a unit")]
+    if scale == 1.0:
+        assert not said, warned
+    else:
+        assert said == ["lightmap: 8 texels a unit give the whole scene 0.13 texels across (its bounds span 0.016): "
+                        "lightmap.texels_per_unit is in the scene's units; give about 4000 (64 texels across it)"], warned

@@ -191,27 +191,45 @@ def box_obj(path, lo, hi, open_top=False):
     return path
 
 
-@pytest.mark.parametrize("unscaled", [False, True])
-def test_a_mesh_left_unscaled_is_said(tmp_path, sky, unscaled):
+@pytest.mark.parametrize("mistake", [None, "hall", "ball", "spacing"])
+def test_a_mesh_left_unscaled_is_said(tmp_path, sky, mistake):
     """A new user's two storeys scaled by 0.01 with one mesh left at scale 1 (trial73): the automatic
     grid took the big mesh's interior scale (cells of 0.56 around a camera whose room is 0.04
     across) and the frame washed out, nothing said (82% of the probes off, under OFF_SAID). Here a
-    room of 0.04 with the camera in it beside a box of 4 open above: the cells are over CAMERA_CELLS
-    times the camera's free distance, said with the box named (100 times any other object); the
-    room alone says nothing (the diagonal of the box, 6.403; of the room, 0.064)."""
+    room of 0.04 with the camera in it: beside a box of 4 open above (`hall`), or a sphere of radius
+    2 (`ball`), the cells are over CAMERA_CELLS times the camera's free distance, said with the
+    object named and its own key (100 and 108 times any other object: the diagonals of the box
+    6.403, of the ball's box 6.928, of the room 0.064) and nothing else said of the grid (trial74:
+    the cap's and the rules' advice, more probes.rays, were the wrong fix); a probes.spacing of 0.3
+    given in that room (the manual's number at scale 1) is said too; the room alone says nothing."""
     room = box_obj(tmp_path / "room.obj", (-0.02, 0, -0.02), (0.02, 0.03, 0.02))
     big = box_obj(tmp_path / "hall.obj", (-2, 0, -2), (2, 3, 2), open_top=True)
     objects = [{"mesh": {"path": str(room)}, "material": "m", "name": "room"}]
-    if unscaled:
+    if mistake == "hall":
         objects.append({"mesh": {"path": str(big)}, "material": "m", "name": "hall"})
+    if mistake == "ball":
+        objects.append({"sphere": {"center": [0, 5, 0], "radius": 2}, "material": "m", "name": "ball"})
     path = scene_file(tmp_path, sky, camera={"perspective": {"position": [0, 0.015, 0.01], "look_at": [0, 0.01, -0.02],
                                                              "fov_y": 60}, "resolution": [16, 16]},
                       materials={"base_color": [0.8, 0.8, 0.8], "specular": 0}, objects=objects,
-                      probes={"rays": 256}, effects={"diffuse": "probes", "specular": "off"})
+                      probes={"rays": 256, **({"spacing": 0.3} if mistake == "spacing" else {})},
+                      effects={"diffuse": "probes", "specular": "off"})
     p = run_cli("render", path, "-o", tmp_path / "out.exr", "--cache", tmp_path / "cache", "--json")
     assert p.returncode == 0, p.stderr
-    said = [w for w in json.loads(p.stdout)["warnings"] if "camera's surroundings" in w]
-    if not unscaled:
-        assert not said, said
+    said = [w for w in json.loads(p.stdout)["warnings"] if w.startswith("probes:")]
+    if mistake is None:
+        assert not [w for w in said if "camera's surroundings" in w], said
         return
-    assert len(said) == 1 and "'hall' (objects.1) spans 6.403, 100 times any other object" in said[0], said
+    if mistake == "spacing":       # no object to name: the rest said as ever (the probes outside the room)
+        tight = [w for w in said if "camera's surroundings" in w]
+        assert len(tight) == 1 and "finer than the probes' cells" in tight[0], said
+        assert tight[0].endswith("the cells are 0.3, so the probes cannot resolve the space the camera is in; give a "
+                                 "finer probes.spacing"), said
+        return
+    assert len(said) == 1 and "camera's surroundings are finer than the automatic grid" in said[0], said
+    if mistake == "hall":
+        assert "'hall' (objects.1) spans 6.403, 100 times any other object: left at another scale? " \
+               "(its objects.1.mesh.scale" in said[0], said
+    if mistake == "ball":
+        assert "'ball' (objects.1) spans 6.928, 108 times any other object: left at another scale? " \
+               "(its objects.1.sphere's center and radius" in said[0], said

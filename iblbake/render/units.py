@@ -576,8 +576,12 @@ class Lightmap(Unit):
         return lm, None, cached
 
     def result(self, job, made, held):
+        from iblbake.render.lightmaps.bake import coarse_said
+        from iblbake.render.probes.grid import scene_bounds
         lm, _manifest, cached = made
         rep, lay = lm["report"], lm["layout"]
+        for w in coarse_said(rep["texels_per_unit"], scene_bounds(job.arrays)):     # said for a cached one too
+            job.warn(w)
         objects = job.scene.data["objects"]
         without = [o.get("name") or f"objects.{i}" for i, o in enumerate(objects) if i not in lay.source]
         return lm, cached or held, {"atlas": [rep["width"], rep["height"]], "texels": rep["texels"],

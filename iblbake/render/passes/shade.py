@@ -102,7 +102,9 @@ class Shade(Pass):
             last = ctx.tile_index == ctx.tile_count - 1
             if fx.diffuse == "probes":
                 sky, outside, samples = tot["probe_fallback_sky"], tot["probe_outside_volume"], tot["probe_samples"]
-                if last and sky > SKY_SAID * samples:
+                # where the bake said the camera's surroundings are finer than the cells, that is the cause
+                cause = ctx.loaded["probes"]["report"].get("camera_cramped")
+                if last and sky > SKY_SAID * samples and not cause:
                     ctx.warn(f"probes: {100 * sky / samples:.0f}% of the samples on geometry found no active probe "
                              "near them and took the panorama's SH (no light between surfaces there); see the "
                              "bake's report (--report: probes off, by which rule) or give more probes.rays")

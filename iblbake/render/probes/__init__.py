@@ -70,10 +70,7 @@ def scaled_grid(tracer, coarse: Grid, settings: dict, arrays, camera):
     info = {"interior_step": None if hint is None else round(hint, 6)}
     if hint is not None:
         info["lattice"] = lattice(grid, arrays)
-        # the camera's own surroundings: half its rays meet a front face within `free`
-        free = float(np.median(np.where(t[-1] < 0, np.inf, t[-1])))
-        if free * CAMERA_CELLS < grid.unit:
-            info["camera_cramped"] = {"free": round(free, 6), "cell": round(grid.unit, 6), **largest_object(arrays)}
+        info.update(cramped(t[-1], grid, arrays, automatic=True))
     if hint is not None and grid.unit > min(hint, coarse.unit) * 1.0001:
         lo, hi = scene_bounds(arrays)
         info["capped"] = {"step": round(min(hint, coarse.unit), 6),
@@ -81,7 +78,18 @@ def scaled_grid(tracer, coarse: Grid, settings: dict, arrays, camera):
     return grid, info
 
 
-CAMERA_CELLS = 4       # an automatic cell this many times the camera's free distance is said (a mesh left unscaled)
+CAMERA_CELLS = 4       # a cell this many times the camera's free distance is said (a mesh left unscaled)
+
+
+def cramped(t, grid: Grid, arrays, automatic: bool) -> dict:
+    """{'camera_cramped': ...} where the grid's cells are over CAMERA_CELLS times the camera's free
+    distance (half of its SCALE_RAYS rays, t, meet a front face within it), with the largest object
+    (largest_object) and whether the grid was automatic; else {}."""
+    free = float(np.median(np.where(np.asarray(t) < 0, np.inf, t)))
+    if not free * CAMERA_CELLS < grid.unit:
+        return {}
+    return {"camera_cramped": {"free": round(free, 6), "cell": round(grid.unit, 6), "automatic": automatic,
+                               **largest_object(arrays)}}
 
 
 def largest_object(arrays) -> dict:
@@ -159,6 +167,9 @@ def bake(job, settings: dict, progress=None) -> dict:
     placement = {}
     if settings["min"] is None and settings["counts"] is None and settings["spacing"] is None:
         grid, placement = scaled_grid(tracer, grid, settings, arrays, camera)      # within the cap: no error
+    else:                                   # a grid given: its cells against the camera's surroundings too
+        placement = cramped(tracer.trace(np.asarray(camera, np.float64)[None], spherical_fibonacci(SCALE_RAYS),
+                                         False)[1][0], grid, arrays, automatic=False)
     from iblbake.render.paths.trace import describe
     rays, cap = settings["rays"], ray_cap(settings)   # the work's size said up front (a huge grid printed nothing)
     upto = f" (up to {cap} where noisy)" if cap > rays else ""
@@ -305,10 +316,10 @@ RULES = {"still_inside_geometry": "still inside geometry (relocation did not mov
 
 def placement_warnings(report: dict, scene_data: dict | None = None) -> list:
     """The grid's placement said: an automatic grid the AUTO_MAX_PROBES cap made coarser than the
-    scene's interior asks (the count and bytes it would have taken), an automatic grid whose cells
-    are over CAMERA_CELLS times the camera's free distance (the space the camera is in finer than
-    the interior's scale: the object that sets it named where it is 10 times any other, as a mesh
-    left unscaled is), a box wholly outside the
+    scene's interior asks (the count and bytes it would have taken), a grid whose cells are over
+    CAMERA_CELLS times the camera's free distance (the space the camera is in finer than the cells;
+    where an object spans 10 times any other, as one left unscaled does, that object named and
+    nothing else said: the cap's and the rules' advice would be the wrong fix), a box wholly outside the
     scene's bounds (box_outside: that, not its probes off), else more than OFF_SAID of the
     probes within the scene's bounds off, by which rule (those beyond the bounds, off around an
     interior the camera is in, are counted in the report, not said)."""
@@ -322,16 +333,24 @@ def placement_warnings(report: dict, scene_data: dict | None = None) -> list:
                    f"grid is capped at {AUTO_MAX_PROBES} probes, so {report['probes']} probes "
                    f"({report['bytes'] / 2**20:.0f} MiB) stand coarser; give probes.spacing (or probes.min/max "
                    "around the part the camera sees) for the finer grid")
-    cramped = report.get("camera_cramped")
-    if cramped:
-        big = cramped.get("object")
-        label = f"objects.{big}" if scene_data is None or big is None else object_label(scene_data, big)
-        said = "" if big is None or cramped["extent"] < 10 * cramped["others"] else (
-            f"; {label} spans {cramped['extent']:.4g}, {cramped['extent'] / max(cramped['others'], 1e-30):.0f} "
-            "times any other object: a mesh left at another scale? (objects.N.mesh.scale)")
-        out.append(f"probes: the camera's surroundings are finer than the automatic grid: half its rays meet a "
-                   f"surface within {cramped['free']:.4g}, the cells are {cramped['cell']:.4g}, so the probes cannot "
-                   f"resolve the space the camera is in{said}; else give probes.spacing")
+    tight = report.get("camera_cramped")
+    if tight:
+        big = tight.get("object")
+        scaled = big is not None and 0 < 10 * tight["others"] <= tight["extent"]     # two objects at least
+        grid = "automatic grid" if tight.get("automatic", True) else "probes' cells"
+        said = f"probes: the camera's surroundings are finer than the {grid}: half its rays meet a surface within " \
+               f"{tight['free']:.4g}, the cells are {tight['cell']:.4g}, so the probes cannot resolve the space the " \
+               "camera is in"
+        if not scaled:
+            out.append(said + "; give a finer probes.spacing")
+        else:                 # a scale mistake: the cap's and the rules' advice would be the wrong fix, not said
+            kind = next((k for k in ("mesh", "sphere", "plane") if scene_data and k in scene_data["objects"][big]),
+                        "mesh")
+            fix = {"mesh": f"objects.{big}.mesh.scale", "sphere": f"objects.{big}.sphere's center and radius",
+                   "plane": f"objects.{big}.plane's point and size"}[kind]
+            label = f"objects.{big}" if scene_data is None else object_label(scene_data, big)
+            return [f"{said}; {label} spans {tight['extent']:.4g}, {tight['extent'] / max(tight['others'], 1e-30):.0f} "
+                    f"times any other object: left at another scale? (its {fix}; else give a finer probes.spacing)"]
     away = report.get("box_outside_bounds")
     if away:                  # its probes' rays meet no surface near: true of them, but no help said
         return out + [f"probes: the probe box {away['box'][0]}..{away['box'][1]} lies wholly outside the scene's "
