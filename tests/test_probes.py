@@ -353,7 +353,10 @@ def test_cli_writes_the_volume_and_reads_refuse_damage(tmp_path, sky):
     p = run_cli("probes", sc.source, "-o", out, "--cache", tmp_path / "cache", "--json", "-q")
     assert p.returncode == 0, p.stderr
     doc = json.loads(p.stdout)
-    assert doc["states"] == {"active": 8, "inactive": 0} and doc["rays_traced"] == 8 * (64 + probes.FIXED_RAYS + probes.SURFACE_RAYS) + SEALED_RAYS + CAMERA_RAYS
+    # the rays: each probe's, its relocation's and surface tests', the sealed room's and the camera's,
+    # and SCALE_RAYS from the camera (a given grid's cells against its surroundings: probes.cramped)
+    assert doc["states"] == {"active": 8, "inactive": 0} and doc["rays_traced"] == 8 * (
+        64 + probes.FIXED_RAYS + probes.SURFACE_RAYS) + SEALED_RAYS + CAMERA_RAYS + probes.SCALE_RAYS
     man = json.loads((out / "probes.json").read_text())
     vol = probes.load(out, man)
     assert vol["irradiance"].shape == (16, 32, 3) and np.abs(vol["irradiance"] - 0.75 * math.pi).max() < 2e-6
