@@ -56,7 +56,8 @@ __all__ = ["ACTIVE", "AUTO_MAX_PROBES", "BACKFACE_BLEND_LIMIT", "CALIBRATION_PAT
            "manifest", "more_rays", "noise", "off_surfaces", "outside_camera_rooms", "outside_sealed_room",
            "placement_warnings", "probe_bytes", "probe_values", "project", "random_rotation", "ray_cap",
            "ray_directions", "read_manifest", "relocate", "sampled", "save", "scaled_grid", "scene_bounds", "sky_entry",
-           "spherical_fibonacci", "switch_off", "trace_defines", "untraced", "volume_dict", "warnings", "with_borders"]
+           "spherical_fibonacci", "switch_off", "trace_defines", "trace_kept", "untraced", "volume_dict", "warnings",
+           "with_borders"]
 
 
 def scaled_grid(tracer, coarse: Grid, settings: dict, arrays, camera):
@@ -120,6 +121,19 @@ def untraced(grid: Grid, arrays, camera) -> np.ndarray:
     return beyond_bounds(grid.positions(), scene_bounds(arrays), camera)
 
 
+def trace_kept(tracer, positions, dirs, keep, progress, done: float, share: float):
+    """The shaded rays (tracer.trace) of the probes numbered `keep`, each with its own random stream,
+    as arrays over every probe, the others' rays misses (radiance 0, distance +inf, object -1); where
+    every probe is kept, the trace's own arrays (no second set of them)."""
+    if len(keep) == len(positions):
+        return tracer.trace(positions, dirs, True, progress, done, share)
+    rad, dist, met = tracer.trace(positions, dirs, True, progress, done, share, ids=keep)
+    radiance = np.zeros((len(positions),) + rad.shape[1:])
+    t, obj = np.full((len(positions), len(dirs)), np.inf), np.full((len(positions), len(dirs)), -1, met.dtype)
+    radiance[keep], t[keep], obj[keep] = rad, dist, met
+    return radiance, t, obj
+
+
 def switch_off(tracer, grid: Grid, offset, t, dirs, obj, settings: dict, camera, skipped=None):
     """(each probe's state, how many each rule switched off, the probes outside the camera's room):
     classification (inside geometry; no surface within its cells), outside the camera's closed or
@@ -178,8 +192,9 @@ def bake(job, settings: dict, progress=None) -> dict:
     traced = len(keep)
     guess = estimate(tracer, grid, settings, keep)    # and for a large one, its time on this device
     apart = f"; {grid.count - traced:,} beyond the scene's bounds not traced" if traced < grid.count else ""
-    describe(progress, f"{traced:,} probes x {rays} rays{upto} = {traced * rays:,} paths "
-                       f"({'x'.join(map(str, grid.counts))} grid, spacing {grid.unit:.4g}{apart}){estimate_said(guess)}")
+    shape = "x".join(map(str, grid.counts))
+    describe(progress, f"{traced:,} probes x {rays} rays{upto} = {traced * rays:,} paths ({shape} grid, spacing "
+                       f"{grid.unit:.4g}{apart}){estimate_said(guess)}")
     fits(job.scene.source, traced, rays)
     if settings["relocation"]:
         start = np.zeros((grid.count, 3))
@@ -191,10 +206,7 @@ def bake(job, settings: dict, progress=None) -> dict:
         offset, at_grid = np.zeros((grid.count, 3)), None
     dirs = ray_directions(settings["rays"], settings["seed"])
     base = 0.2 if settings["relocation"] else 0.0
-    radiance, t, obj = np.zeros((grid.count, len(dirs), 3)), np.full((grid.count, len(dirs)), np.inf), \
-        np.full((grid.count, len(dirs)), -1, np.int32)          # an untraced probe's rays: misses
-    radiance[keep], t[keep], obj[keep] = tracer.trace(grid.positions() + offset, dirs, True, progress, base, 1.0 - base,
-                                                      ids=keep)
+    radiance, t, obj = trace_kept(tracer, grid.positions() + offset, dirs, keep, progress, base, 1.0 - base)
     states, off_by, outside = switch_off(tracer, grid, offset, t, dirs, obj, settings, camera, skip)
     counts, rounds, short = more_rays(tracer, grid.positions() + offset, states != INACTIVE, radiance, t, settings,
                                       progress)
