@@ -288,3 +288,28 @@ def test_what_a_new_user_tripped_on_is_said_plainly(tmp_path, lobed_sky):
     with pytest.raises(InputError, match="did you mean --ladder realtime"):
         ladder.ladder_from_file("realtim", sc, None)
     assert [sweep.format_value(v) for v in (False, True, 0.5)] == ["off", "on", "0.5"]
+
+
+def test_a_camera_far_outside_the_scene_is_said(tmp_path, sky):
+    """A camera left at scale 1 in a scene scaled by 0.01 (trial74) rendered a few pixels of the
+    room in a frame of sky, nothing said. The unit sphere's bounds (a sphere of radius 3^0.5 about
+    them) from 200 units span 1 degree of a 45 degree frame: said once, naming the key; from 3 units,
+    from inside the bounds, an orthographic view 4 units wide, or over an infinite floor: nothing."""
+    def said(name, **sections):
+        r = run_cli("render", scene_file(tmp_path, sky, name=name, **sections), "-o", tmp_path / f"{name}.exr",
+                    "--cache", tmp_path / "c", "--json")
+        assert r.returncode == 0, r.stderr
+        return [w for w in json.loads(r.stdout)["warnings"] if "stands" in w and "outside its bounds" in w]
+
+    far = {"perspective": {"position": [0, 0, 200], "fov_y": 45}, "resolution": [8, 8]}
+    w = said("far", camera=far)
+    assert len(w) == 1 and w[0].startswith("camera.perspective.position [0.0, 0.0, 200.0] stands 200 ") \
+        and "spans 2.2% of the frame's height" in w[0], w
+    assert said("near", camera={**far, "perspective": {"position": [0, 0, 3], "fov_y": 45}}) == []
+    assert said("inside", camera={**far, "perspective": {"position": [0, 0, 0.5], "fov_y": 45}}) == []
+    ortho = {"orthographic": {"position": [0, 0, 200], "width": 4}, "resolution": [8, 8]}
+    assert said("ortho", camera=ortho) == []
+    assert len(said("ortho_wide", camera={**ortho, "orthographic": {"position": [0, 0, 200], "width": 40}})) == 1
+    floor = [{"sphere": {"radius": 1}, "material": "m"}, {"plane": {"point": [0, -1, 0], "normal": [0, 1, 0]},
+                                                          "material": "m"}]
+    assert said("floor", camera=far, objects=floor) == []

@@ -1,17 +1,21 @@
-"""The note a frame's specular term earns inside a room: a split sum (or any mode) that reads the
-distant panorama mirrors the sky there, not the room around it (a new user's trial: +42% on a red
-wall of a closed room). Measured from the camera: the share of ENCLOSED_RAYS directions (a
-spherical Fibonacci set) whose rays meet the scene; at ENCLOSED_SHARE or more, and with no
-reflection probe read, the frame says so (docs/conventions.md "Reflection probes")."""
+"""What the camera's surroundings earn a frame, said once a series. Inside a room: a split sum (or
+any mode) that reads the distant panorama mirrors the sky there, not the room around it (a new
+user's trial: +42% on a red wall of a closed room). Measured from the camera: the share of
+ENCLOSED_RAYS directions (a spherical Fibonacci set) whose rays meet the scene; at ENCLOSED_SHARE
+or more, and with no reflection probe read, the frame says so (docs/conventions.md "Reflection
+probes"). Far outside the scene: a camera left unscaled in a scene scaled by 0.01 (trial74)
+rendered the room as a few pixels of a sky frame, nothing said (far_camera)."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from iblbake.render.probes.grid import scene_bounds
 from iblbake.render.probes.rays import spherical_fibonacci
 from iblbake.render.twin.gbuffer import _plane_t, _sphere_t
 
 ENCLOSED_RAYS = 256
+FAR_SPAN = 0.125           # the scene's bounding sphere over the frame's height: under it, far_camera says so
 ENCLOSED_SHARE = 0.9        # a room with a window or a door still counts; a floor alone, half, does not
 DISTANT_READERS = ("importance", "prefiltered", "lobe")      # and the specular bases (core/bases.py)
 
@@ -78,3 +82,34 @@ def warnings(scene, fx, arrays) -> list:
     return [f"effects.specular: {fx.specular} {DISTANT_NOTE} {100 * share:.0f}% of the "
             f"directions from the camera meet the scene (a room): its reflections show the sky, not the room; "
             f"{remedy} or use effects.specular: reference"]
+
+
+def far_camera(scene, arrays) -> list:
+    """The note where the camera stands outside the scene's bounds and their bounding sphere spans
+    under FAR_SPAN of the frame's height (its angle over fov_y; orthographic: its diameter over the
+    view's height): the frame is mostly sky, as a camera left at scale 1 in a scene scaled by 0.01
+    renders it. None where an infinite plane is in the scene (it reaches the camera)."""
+    bounds = scene_bounds(arrays)
+    if bounds is None or len(arrays.planes) and not np.isfinite(arrays.planes[:, 2:4, 3]).all():
+        return []
+    lo, hi = (np.asarray(b, np.float64) for b in bounds)
+    cam = scene.data["camera"]
+    kind = cam["projection"]
+    pos = np.asarray(cam[kind]["position"], np.float64)
+    if ((pos >= lo) & (pos <= hi)).all():
+        return []
+    centre, radius = (lo + hi) / 2, float(np.linalg.norm(hi - lo)) / 2
+    dist = float(np.linalg.norm(pos - centre))
+    w, h = cam["resolution"]
+    if kind == "perspective":
+        if dist <= radius:
+            return []
+        span = 2 * np.degrees(np.arcsin(radius / dist)) / cam[kind]["fov_y"]
+    else:
+        span = 2 * radius / (cam[kind]["width"] * h / w)
+    if span >= FAR_SPAN:
+        return []
+    key = f"camera.{kind}.position"
+    return [f"{key} {pos.tolist()} stands {dist:.3g} from the scene's centre, outside its bounds "
+            f"({np.round(lo, 6).tolist()}..{np.round(hi, 6).tolist()}, {2 * radius:.3g} across): the scene spans "
+            f"{100 * span:.1f}% of the frame's height; a camera not scaled with the scene? (move {key} and look_at)"]

@@ -473,6 +473,8 @@ def finish(ctx: Context, sweep: Sweep, builds_before: int, t_start: float, profi
     if sweep.prev is None:            # said once a series, after the frame (an error stays one line)
         for w in enclosure.warnings(ctx.scene, pl.effects, ctx.arrays):       # the sky mirrored inside a room
             ctx.warn(w)
+        for w in enclosure.far_camera(ctx.scene, ctx.arrays):                 # a camera left unscaled
+            ctx.warn(w)
     elapsed = time.perf_counter() - t_start
     builds = [{"kernel": b["kernel"], "defines": b["defines"], "seconds": round(b["seconds"], 4)}
               for b in rt.builds[builds_before:]]          # the frame's: the profile counts its own
