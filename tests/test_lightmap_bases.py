@@ -16,6 +16,7 @@ from iblbake.errors import IblbakeError, InputError
 from iblbake.io import images
 from iblbake.render import lightmaps
 from iblbake.render.lightmaps import bases, read, store
+from iblbake.render.lightmaps.bake import coarse_said
 from tests.helpers import flip_bytes, load_scene, stress_scale
 
 lb = importlib.import_module("iblbake.render.lightmaps.bake")
@@ -274,10 +275,15 @@ def test_corrupt_entry_baked_again(damage, tmp_path, white):
     assert np.array_equal(again["irradiance"], first["irradiance"])
 
 
+JUNK = [None, -1, 0, 1e308, float("nan"), "x", [], [1, 2], {"a": 1}, True, "octahedral", {"sg_lobes": 7}]
+
+
 def _mutated_manifest(m, rng):
-    junk = [None, -1, 0, 1e308, float("nan"), "x", [], [1, 2], {"a": 1}, True, "octahedral", {"sg_lobes": 7}]
     key = ["width", "height", "basis", "options", "uv_sources", "report"][rng.integers(6)]
-    m[key] = junk[rng.integers(len(junk))]
+    if key == "report" and rng.integers(2):       # a report's key a frame or the export reads
+        m[key][sorted(store.REPORT)[rng.integers(len(store.REPORT))]] = JUNK[rng.integers(len(JUNK))]
+    else:
+        m[key] = JUNK[rng.integers(len(JUNK))]
 
 
 def _mutated_array(case, rng):
@@ -301,10 +307,11 @@ def _mutated_array(case, rng):
 
 
 def test_lightmap_entries_fuzzed(tmp_path, white, stress):
-    """Mutated manifests (values of the wrong type, range or basis) and mutated arrays (bytes flipped or
-    cut, other shapes and dtypes, NaN, infinities, negative values) of an SG entry: each is read back
-    whole or refused with an IblbakeError of one line naming the entry; what is read gives finite,
-    non-negative irradiance at its own texels (read.irradiance); nothing else escapes."""
+    """Mutated manifests (values of the wrong type, range or basis; each key of the report read back
+    in turn, then at random) and mutated arrays (bytes flipped or cut, other shapes and dtypes, NaN,
+    infinities, negative values) of an SG entry: each is read back whole or refused with an
+    IblbakeError of one line naming the entry; what is read gives finite, non-negative irradiance at
+    its own texels (read.irradiance) and its report's density a frame's note; nothing else escapes."""
     sc = scene(tmp_path, white, PLANE, {"m": LAMBERT}, basis="sg")
     lm, _ = cached(sc, tmp_path)
     entry = entry_of(tmp_path)
@@ -312,11 +319,15 @@ def test_lightmap_entries_fuzzed(tmp_path, white, stress):
     tx = lightmaps.bake(job_of(sc, tmp_path), sc.data["lightmap"])["texels"]
     rng = np.random.default_rng(5)
     refused, n = 0, stress_scale(150, 1500)
-    for i in range(n):
+    keys = [(k, v) for k in sorted(store.REPORT) for v in ("x", None, -1, float("nan"))]
+    for i in range(len(keys) + n):
         case = tmp_path / f"case{i}"
         shutil.copytree(entry, case)
         m = json.loads(json.dumps(man))
-        _mutated_manifest(m, rng) if i % 3 == 0 else _mutated_array(case, rng)
+        if i < len(keys):
+            m["report"][keys[i][0]] = keys[i][1]
+        else:
+            _mutated_manifest(m, rng) if i % 3 == 0 else _mutated_array(case, rng)
         try:
             got = store.load(case, m)
         except IblbakeError as e:
@@ -325,8 +336,10 @@ def test_lightmap_entries_fuzzed(tmp_path, white, stress):
             continue
         finally:
             shutil.rmtree(case)
+        assert i >= len(keys), f"a report with {keys[i]} read back"
         e, found = read.irradiance(got, np.zeros(len(tx.index), int), tx.position, tx.normal)
         assert np.isfinite(e).all() and (e >= 0).all() and np.isfinite(got["irradiance"]).all()
+        coarse_said(got["report"]["texels_per_unit"], ((0, 0, 0), (1, 1, 1)))    # what a frame reads of it
     stress.count("inputs fuzzed", n)
     print(f"{refused} of {n} refused")
     assert refused > n // 2

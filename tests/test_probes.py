@@ -23,6 +23,7 @@ from iblbake.render import probes
 from iblbake.render.bakes import Bakes
 from iblbake.render.sources.probes import probe_args, probe_defines
 from iblbake.render.twin import probes as twin
+from iblbake.render.probes import files as probe_files
 from iblbake.render.probes.relocation import CAMERA_RAYS, SEALED_RAYS
 from tests.helpers import flip_bytes, glsl_compiles, load_scene, mend_cache_entry, run_cli
 from tests.probe_helpers import Given, far_sphere_scene, kernel_irradiance, settings, sphere_scene, synthetic, unit
@@ -419,9 +420,10 @@ def test_glsl_transcribes_the_volume(tmp_path, sky):
 
 
 def test_probe_files_fuzzed(tmp_path, sky, stress):
-    """Mutated manifests (values of the wrong type, range or shape) and mutated images (bytes
-    flipped or cut, arrays of other shapes, NaN, negative values): each is read, or refused with an
-    IblbakeError of one line naming the file; nothing else escapes."""
+    """Mutated manifests (values of the wrong type, range or shape; each of the bake report's keys a
+    frame and its warnings read, in turn, then at random) and mutated images (bytes flipped or cut, arrays of other shapes, NaN,
+    negative values): each is read, or refused with an IblbakeError of one line naming the file;
+    nothing else escapes."""
     from tests.helpers import stress_scale
 
     sc = far_sphere_scene(tmp_path, sky, "sh")
@@ -432,15 +434,21 @@ def test_probe_files_fuzzed(tmp_path, sky, stress):
     junk = [None, -1, 0, 1e308, float("nan"), "x", [], [1, 2], {"a": 1}, True, [0, 0, 0], [1e9, 1, 1]]
     refused = 0
     n = stress_scale(120, 1200)
-    for i in range(n):
+    keys = [(k, v) for k in sorted(probe_files.REPORT) for v in ("x", -1, [1, 2])]      # each read back in turn
+    for i in range(len(keys) + n):
         case = tmp_path / f"case{i}"
         shutil.copytree(out, case)
         m = json.loads(json.dumps(man))
-        if i % 2 == 0:                                 # the manifest
+        if i < len(keys):
+            m["report"][keys[i][0]] = keys[i][1]
+        elif i % 2 == 0:                               # the manifest
             path = [k for k in ("grid", "representation", "irradiance_texels", "distance_texels", "settings", "format",
-                                "version")][rng.integers(7)]
+                                "version", "report")][rng.integers(8)]
             if path == "grid":
                 m["grid"][["origin", "spacing", "counts"][rng.integers(3)]] = junk[rng.integers(len(junk))]
+            elif path == "report" and rng.integers(2):  # a report's key a frame or a warning reads
+                key = sorted(probe_files.REPORT)[rng.integers(len(probe_files.REPORT))]
+                m["report"][key] = junk[rng.integers(len(junk))]
             else:
                 m[path] = junk[rng.integers(len(junk))]
         else:                                          # an image
@@ -464,8 +472,10 @@ def test_probe_files_fuzzed(tmp_path, sky, stress):
             assert "\n" not in msg and str(case) in msg, msg
             refused += 1
             continue
+        assert i >= len(keys), f"a report with {keys[i]} read back"
         assert np.isfinite(vol["irradiance"]).all() and np.isfinite(vol["data"]).all()
         assert set(np.unique(vol["data"][:, 3])) <= {0.0, 1.0}
+        probes.warnings(vol["report"], sc.data, vol)       # what a frame says of a report read back
     stress.count("inputs fuzzed", n)
     assert refused > n // 3
 

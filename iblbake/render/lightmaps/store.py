@@ -15,6 +15,7 @@ from tokenize import TokenError
 
 import numpy as np
 
+from iblbake.bake import records as rec
 from iblbake.errors import IblbakeError
 
 VERSION = 2
@@ -96,6 +97,14 @@ def _basis(man: dict, key: str = "options") -> tuple:
     return name, opts
 
 
+# the bake report's keys that a frame, `lightmap` and the export read (render/units.py, cli/lightmap.py,
+# export.py), each with its check (bake/records.py)
+REPORT = {"width": rec.count, "height": rec.count, "texels": rec.count, "samples": rec.count,
+          "rays_traced": rec.count, "texels_per_unit": lambda v: rec.number(v) and v > 0,
+          "seconds": lambda v: rec.number(v) and v >= 0, "bytes": rec.counts_by(),
+          "uv_sources": lambda v: isinstance(v, dict) and all(k.isdigit() and isinstance(s, str) for k, s in v.items())}
+
+
 def load(folder: Path, man: dict) -> dict:
     """The lightmap of an entry, every array's dtype, shape (against the manifest's atlas size and
     basis), finiteness and range checked: an IblbakeError naming the folder where one fails."""
@@ -109,7 +118,10 @@ def load(folder: Path, man: dict) -> dict:
             raise ValueError(f"an atlas of {w!r} x {h!r} texels")
         name, opts = _basis(man)
         sources = {int(k): str(v) for k, v in man["uv_sources"].items()}
-        report = dict(man["report"])
+        report = man["report"]
+        wrong = rec.wrong(report, REPORT, tuple(REPORT))
+        if wrong or (report["width"], report["height"]) != (w, h):
+            raise ValueError(wrong or "its report's atlas size is not the manifest's")
         a = {"irradiance": _read(folder, "irradiance", (h, w, 3)), "valid": _read(folder, "valid", (h, w)),
              "basis": _read(folder, "basis", (h, w, bases.floats(name, opts), 3))}
         a["objects"] = _read(folder, "objects", (None,))

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from iblbake.bake import records as rec
 from iblbake.core.bases.probes import PROBE_BASES
 from iblbake.errors import IblbakeError
 from iblbake.render.probes.grid import Grid
@@ -138,6 +139,22 @@ def save(volume: dict, folder: Path) -> list:
     return names + ["distance.exr", "probe_data.exr"]
 
 
+# the bake report's keys that a frame, `probes` and the warnings read (render/units.py, cli/probes.py,
+# placement_warnings, warnings), each with its check (bake/records.py)
+REPORT = {"probes": rec.count, "rays_traced": rec.count, "inactive": rec.count, "relocated": rec.count,
+          "bytes": rec.count, "seconds": lambda v: rec.number(v) and v >= 0,
+          "inside_geometry": rec.count, "outside_camera_room": rec.count, "on_surface": rec.count,
+          "noisy_short_of_memory": rec.count, "rays_per_probe": rec.count,
+          "interior_step": lambda v: v is None or rec.number(v) and v > 0, "off_by": rec.counts_by(),
+          "inside_objects": rec.counts_by(str.isdigit), "more_rays": rec.counts_by(str.isdigit),
+          "capped": rec.fields({"step": rec.number, "probes": rec.count}, ("step", "probes")),
+          "camera_cramped": rec.fields({"free": rec.number, "cell": rec.number, "object": rec.count,
+                                        "automatic": lambda v: isinstance(v, bool), "extent": rec.number,
+                                        "others": rec.number}, ("free", "cell")),
+          "box_outside_bounds": rec.fields({"box": rec.box, "bounds": rec.box}, ("box", "bounds"))}
+REPORT_REQUIRED = ("probes", "rays_traced", "inactive", "relocated", "bytes", "seconds")
+
+
 def _bad(path, what: str):
     return IblbakeError(f"{path}: {what}; bake the probes again (iblbake probes SCENE -o DIR/)")
 
@@ -145,7 +162,8 @@ def _bad(path, what: str):
 def load(folder: Path, man: dict, manifest_name: str = "probes.json") -> dict:
     """A volume from its folder and manifest (manifest_name: how the folder calls it), every
     value checked: the manifest's types and ranges, the images' shapes against it, finite and
-    non-negative values, states 0 or 1, offsets within 45% of a cell."""
+    non-negative values, states 0 or 1, offsets within 45% of a cell, the bake report's keys read
+    back (REPORT)."""
     from iblbake.io import images
 
     folder = Path(folder)
@@ -170,6 +188,9 @@ def load(folder: Path, man: dict, manifest_name: str = "probes.json") -> dict:
                 raise ValueError(f"settings.{k}")
     except (KeyError, TypeError, ValueError) as e:
         raise _bad(where, f"manifest lacks or mangles {e}") from None
+    wrong = rec.wrong(man.get("report"), REPORT, REPORT_REQUIRED)
+    if wrong:
+        raise _bad(where, wrong)
     if min(grid.counts) < 1 or grid.count > 1 << 20 or min(grid.spacing) <= 0 \
             or not all(math.isfinite(x) for x in grid.origin + grid.spacing) or not (2 <= n <= 64 and 2 <= nd <= 64):
         raise _bad(where, "its grid or texel counts are out of range")
@@ -204,7 +225,8 @@ def load(folder: Path, man: dict, manifest_name: str = "probes.json") -> dict:
         raise _bad(folder / "probe_data.exr", "holds a probe state other than 0 or 1, or an offset beyond 45% of a cell")
     data = np.concatenate([rows[:, :3] * np.asarray(grid.spacing), rows[:, 3:]], 1)
     settings.update(irradiance=rep, irradiance_texels=n, distance_texels=nd)
-    return volume_dict(grid, settings, irr, dist, data, man.get("report", {}))
+    return volume_dict(grid, settings, irr, dist, data, man["report"])
+
 
 
 def read_manifest(path: Path) -> dict:
