@@ -64,7 +64,9 @@ def study_scene(path, panorama, args, rt, bakes, root) -> dict:
     refs = {t: study.render_reference(t) for t in study.terms}
     keep = ("term", "label", "relative_rmse", "region_absolute", "worst_region_absolute", "part_absolute",
             "worst_part_absolute", "edge_over_interior", "time_s")
-    return {"scene": Path(path).stem, "panorama": Path(panorama).stem,
+    # what each rung renders its term with, --rung-set's last (trial74: a lightmap rung read "probes")
+    modes = {g.label: dict(g.values).get(f"effects.{g.term}") for g in rungs}
+    return {"scene": Path(path).stem, "panorama": Path(panorama).stem, "modes": modes,
             "reference_noise": {t: refs[t]["noise"] for t in study.terms},
             "reference_spp": {t: refs[t]["samples_per_pixel"] for t in study.terms},
             "rungs": [{k: r[k] for k in keep if k in r} for r in (study.run_rung(g) for g in rungs)]}
@@ -112,8 +114,11 @@ def edge(rung) -> str:
 
 
 def diffuse_table(results) -> str:
-    out = ["| scene | panorama | probes: worst region | probes: regions over 30% | probes: frame rel. RMSE "
-           "(less noise) | probes: edge over interior | probes: each region's luminance ratio | SH + GTAO: worst region | "
+    # the probes rung's columns named by what it rendered (--rung-set effects.diffuse=lightmap: lightmap)
+    shown = {res.get("modes", {}).get("probes") or "probes" for res in results}
+    m = shown.pop() if len(shown) == 1 else "probes (or as --rung-set gives)"
+    out = [f"| scene | panorama | {m}: worst region | {m}: regions over 30% | {m}: frame rel. RMSE "
+           f"(less noise) | {m}: edge over interior | {m}: each region's luminance ratio | SH + GTAO: worst region | "
            "SH + GTAO: frame rel. RMSE (less noise) | "
            "reference noise |", "|---|---|---|---|---|---|---|---|---|---|"]
     for res in results:
