@@ -323,7 +323,8 @@ def flip_bytes(path, rng, n: int = 8) -> None:
 
 def quad_room_lightmap_study(cache, panoramas):
     """The corpus' quad_room under studio at 40 px (specular off; its lightmap at 4 texels a unit,
-    1024 rays a texel): (the study, its runtime, its bakes, the diffuse term's converged reference;
+    1024 rays a texel, holding the panorama whole: `environment.sun: none`, what the atlas alone
+    is judged by): (the study, its runtime, its bakes, the diffuse term's converged reference;
     two seeds to 3% or 256 samples, as tests/test_corpus.py's)."""
     from iblbake.device.runtime import Runtime
     from iblbake.render.bakes import Bakes
@@ -333,7 +334,7 @@ def quad_room_lightmap_study(cache, panoramas):
     rt, bakes = Runtime(), Bakes(cache)
     st = acc.Study(ROOT / "examples" / "corpus" / "quad_room.yaml",
                    [f"environment.path={panoramas['studio']}", "effects.specular=off", "lightmap.texels_per_unit=4",
-                    "lightmap.samples=1024"], settings, runtime=rt, bakes=bakes)
+                    "lightmap.samples=1024", "environment.sun=none"], settings, runtime=rt, bakes=bakes)
     return st, rt, bakes, st.render_reference("diffuse")
 
 

@@ -183,7 +183,9 @@ MIN_PIXELS = 10
 def test_quad_room_frame_holds_the_truth(tmp_path, panoramas):
     """quad_room under studio, the frame's `diffuse: lightmap` (4 texels a unit, 1024 rays a texel,
     L1 SH) against the converged reference's diffuse term: every lightmapped region within
-    CORPUS_BOUND (as benchmarks/bench_lightmaps.py measures the twin's reading at the same hits)."""
+    CORPUS_BOUND, the atlas holding the panorama whole (as benchmarks/bench_lightmaps.py measures
+    the twin's reading at the same hits) and at the default `environment.sun: auto` (studio's lamps
+    lit per pixel, the atlas the rest)."""
     from iblbake.render.frame import render
     from iblbake.render.lightmaps import read
 
@@ -200,6 +202,13 @@ def test_quad_room_frame_holds_the_truth(tmp_path, panoramas):
     assert not bad, bad
     for n, e in held.items():            # the frame is the twin's reading (the bench's)
         assert abs(e["ratio"] - twin_regions[n]["ratio"]) < 0.01
+    auto = render(st.load([("effects.diffuse", "lightmap"), ("camera.spp", 1), ("environment.sun", "auto")]),
+                  runtime=rt, cache=bakes)
+    lit = st.region_metrics(auto.hdr, ref["hdr"], st.metric_mask("diffuse", auto.hdr))["region_absolute"]
+    print({n: round(e["ratio"], 3) for n, e in lit.items()})
+    assert auto.report["passes"][[p["name"] for p in auto.report["passes"]].index("lights")]["lamps"]
+    bad = {n: round(e["ratio"], 3) for n, e in lit.items() if e["pixels"] >= MIN_PIXELS and e["absolute"] > CORPUS_BOUND}
+    assert not bad, bad
 
 
 def test_directional_lightmap_reads_the_normal_map(tmp_path, sky):

@@ -1,7 +1,8 @@
 """Lightmaps on the corpus (issue 62, docs/benchmarks.md "Lightmaps on the corpus' interiors"): each
 interior's lightmap at DENSITY texels a unit and SAMPLES rays a texel (RAYS' where the light comes
-through a small opening from small lamps), read at the camera's primary
-hits into the diffuse term, against the converged reference's diffuse term, region by region (the
+through a small opening from small lamps), read at the camera's primary hits into the diffuse term
+(the atlas holding the panorama whole, `environment.sun: none`: the lights `sun: auto` extracts are
+the frame's, not the atlas'), against the converged reference's diffuse term, region by region (the
 luminance ratio and the worst channel, as tests/test_corpus.py judges the probes), for both bases;
 and the same on scenes the lightmaps were not tuned on: the open box wound either way, at scales
 0.01 and 100 (the density scaled with the scene: the same texels), and with a glTF floor that brings
@@ -29,8 +30,11 @@ RAYS = {("corridor", "studio"): 4096, ("l_room", "studio"): 4096, ("l_room", "ci
 # Each interior's worst region (the larger of |ratio - 1| and the worst channel, the worse basis,
 # regions of at least MIN_PIXELS pixels) measured at these settings; the bound is 1.2x it (never
 # above CORPUS_BOUND).
+# corridor under city re-measured at stop 75: 6.1% (its far end x0.94; 4.6% when first measured),
+# over seeds 1-2 at 1024 and 4096 rays 3.8-9.2% (the far end x0.91-0.97, the sphere x1.00-1.07):
+# the light it holds comes after bounces, and the seed, fixed here, decides which of them a texel finds
 WORST = {
-    ("corridor", "studio"): 0.021, ("corridor", "city"): 0.046,
+    ("corridor", "studio"): 0.021, ("corridor", "city"): 0.061,
     ("quad_room", "studio"): 0.015, ("quad_room", "city"): 0.017,
     ("l_room", "studio"): 0.042, ("l_room", "city"): 0.039,
     ("two_storey", "studio"): 0.027, ("two_storey", "city"): 0.035,
@@ -55,7 +59,7 @@ def regions(name, panorama, panoramas, cache, sets=(), density=DENSITY, rays=SAM
     rt, bakes = Runtime(), Bakes(cache)
     st = acc.Study(ROOT / "examples" / "corpus" / f"{name}.yaml",
                    [f"environment.path={panoramas[panorama]}", f"lightmap.texels_per_unit={density}",
-                    f"lightmap.samples={rays}", *sets], settings, runtime=rt, bakes=bakes)
+                    f"lightmap.samples={rays}", "environment.sun=none", *sets], settings, runtime=rt, bakes=bakes)
     ref = st.render_reference("diffuse")
     lm = lightmaps.bake(Job(st.scene, rt, bakes), st.scene.data["lightmap"])
     out = {}

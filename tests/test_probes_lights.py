@@ -177,15 +177,19 @@ def test_sun_shadow_samples_sets_the_extracted_lights_soft_shadows(tmp_path, pan
     ({"diffuse": "sh", "specular": "importance"}, {"probe": True}, ("extract", 4, "soft")),
     ({"diffuse": "sh"}, {"sg": True}, ("extract", 4, "soft")),
     ({"diffuse": "sh"}, {"sun": "extract"}, ("extract", 1, "hard")),
-    ({"diffuse": "lightmap"}, {"sg": True, "lightmap": True}, ("none", 1, "hard")),
-    ({"diffuse": "probes"}, {"lightmap": True}, ("none", 1, "hard")),
+    ({"diffuse": "lightmap"}, {"sg": True, "lightmap": True}, ("extract", 4, "soft")),
+    ({"diffuse": "probes"}, {"lightmap": True}, ("extract", 4, "soft")),
+    ({"diffuse": "sh"}, {"lightmap": True}, ("extract", 4, "soft")),
+    ({"diffuse": "lightmap"}, {"lightmap": True, "sun": "none"}, ("none", 1, "hard")),
 ])
 def test_sun_auto_extracts_where_the_frame_reads_probes(tmp_path, panoramas, effects, given, want):
     """`environment.sun: auto` (the default) extracts the panorama's sun and lamps where the scene
-    has irradiance probes (a section, or a frame that reads them) or reflection probes, whichever
-    mode a frame reads (a volume baked by name keys what the frame reads), with 4 lights and soft
-    shadows unless the scene gives them, and leaves the panorama whole elsewhere (before: none unless asked: a new user's room
-    turned 30 degrees under studio, a sphere's lit side 1.7-2.1x bright at defaults)."""
+    has irradiance probes (a section, or a frame that reads them), reflection probes or a lightmap
+    (a section, or a frame that reads one), whichever mode a frame reads (a volume or lightmap baked
+    by name keys what the frame reads), with 4 lights and soft shadows unless the scene gives them,
+    and leaves the panorama whole elsewhere (before: none unless asked: a new user's room turned
+    30 degrees under studio, a sphere's lit side 1.7-2.1x bright at defaults; a lightmap kept the
+    panorama whole until stop 75: a new user's two storeys' frame 35% off where 17% lit per pixel)."""
     given = dict(given)
     probe, sg, lightmap = given.pop("probe", False), given.pop("sg", False), given.pop("lightmap", False)
     doc = {"camera": {"perspective": {"position": [0, 1, 3], "look_at": [0, 0.5, 0]}, "resolution": [8, 6]},
@@ -235,7 +239,8 @@ def test_sun_auto_lights_a_sphere_beside_a_lamps_beam_per_pixel(tmp_path, panora
 def test_render_says_what_sun_auto_extracted(tmp_path, panoramas):
     """A new user's trial: the frames of `sun: none` and the default differed and nothing but
     --report said why. The render's line says how many lights `sun: auto` took out of the
-    panorama; not where the scene asked for none, nor where it has no probes."""
+    panorama, and why (probes, or a lightmap); not where the scene asked for none, nor where it has
+    neither."""
     def line(**sections):
         path = scene_file(tmp_path, panoramas["studio"], camera={
             "perspective": {"position": [0, 0, 3], "fov_y": 45}, "resolution": [8, 8]}, **sections)
@@ -247,3 +252,5 @@ def test_render_says_what_sun_auto_extracted(tmp_path, panoramas):
                                         "auto, the scene has probes; environment.sun: none keeps them in it)")
     assert "extracted" not in line(probes=probes, environment={"sun": "none"})
     assert "extracted" not in line()
+    lit = line(lightmap={"texels_per_unit": 4, "samples": 16}, effects={"diffuse": "lightmap"})
+    assert lit.endswith("(environment.sun: auto, the scene has a lightmap; environment.sun: none keeps them in it)"), lit

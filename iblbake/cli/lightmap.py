@@ -6,7 +6,8 @@ from pathlib import Path
 
 import click
 
-from iblbake.cli.options import (API_FLAGS, Console, cache_option, refuse_foreign, scene_options)
+from iblbake.cli.options import (API_FLAGS, Console, cache_option, refuse_foreign, scene_options,
+                                 written_lights_said)
 
 
 @click.command("lightmap")
@@ -59,7 +60,8 @@ def lightmap_command(scene_path, out_dir, overrides, cache_dir, force, device, q
         summary["removed"] = removed
     con.result(summary, f"wrote {out}/ ({lm.width}x{lm.height} atlas at {man['atlas']['texels_per_unit']:g} texels a "
                         f"unit, {', '.join(man['bases'])}; {r['texels']} texels, {r['rays_traced']} rays in "
-                        f"{r['seconds']:.2f} s{' (cached)' if lm.cached else ''} on {lm.device})")
+                        f"{r['seconds']:.2f} s{' (cached)' if lm.cached else ''} on {lm.device})"
+                        f"{written_lights_said(man['lights'], 'lightmap.json', 'the atlases')}")
 
 
 def _remove_stale(out: Path, names: list) -> list:

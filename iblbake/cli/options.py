@@ -156,6 +156,14 @@ def extracted_said(n: int, how: str, kept_in: str, why: str = "") -> str:
     return f"; {n} light{s} extracted from the panorama{how} ({why}environment.sun: none keeps {them} in {kept_in})"
 
 
+def written_lights_said(lights: list, written: str, kept_in: str) -> str:
+    """What probes and lightmap say of the lights a bake's manifest (`written`) lists that were
+    extracted from the panorama: an engine cannot know of them but from it, and draws them per
+    pixel."""
+    n = sum(not lt["source"].startswith("lights.") for lt in lights)
+    return extracted_said(n, f", to draw per pixel: {written}'s lights", kept_in)
+
+
 def common_options(f):
     """--json, --quiet, --debug, shared by every command."""
     f = click.option("--debug", is_flag=True, expose_value=False, is_eager=True, callback=_set_debug,

@@ -7,7 +7,8 @@ from pathlib import Path
 
 import click
 
-from iblbake.cli.options import (API_FLAGS, Console, cache_option, extracted_said, refuse_foreign, scene_options)
+from iblbake.cli.options import (API_FLAGS, Console, cache_option, refuse_foreign, scene_options,
+                                 written_lights_said)
 
 
 @click.command("probes")
@@ -76,18 +77,12 @@ def probes_command(scene_path, out_dir, overrides, cache_dir, force, device, qui
                         f"{man['states']['inactive']} inactive, {r['relocated']} relocated; "
                         f"{r['rays_traced']} rays{more_said(r.get('more_rays', {}))} in {r['seconds']:.2f} s"
                         f"{' (cached)' if cached else ''} "
-                        f"on {vol.device}){lights_said(man['lights'])}")
+                        f"on {vol.device}){written_lights_said(man['lights'], 'probes.json', 'the probes')}")
 
 
 def more_said(more: dict) -> str:
     """The noisy probes' further rays (render/probes/adaptive.py): ' (2048 rays: 40 probes, ...)'."""
     return f" ({', '.join(f'{n} rays: {c} probes' for n, c in more.items())})" if more else ""
-
-
-def lights_said(lights: list) -> str:
-    """The lights extracted from the panorama, which an engine cannot know of but from probes.json."""
-    n = sum(not lt["source"].startswith("lights.") for lt in lights)
-    return extracted_said(n, ", to draw per pixel: probes.json's lights", "the probes")
 
 
 def _remove_stale(out: Path, names: list) -> list:

@@ -103,7 +103,9 @@ def _extracted(sc, rep) -> str:
     n = ("sun" in lit) + len(lit.get("lamps") or [])
     if ((sc.raw or {}).get("environment") or {}).get("sun", "auto") != "auto":
         return ""
-    return extracted_said(n, " and lit per pixel", "it", why="environment.sun: auto, the scene has probes; ")
+    from iblbake.scene.load import has_probes
+    held = "probes" if has_probes(sc.data, sc.raw or {}) else "a lightmap"
+    return extracted_said(n, " and lit per pixel", "it", why=f"environment.sun: auto, the scene has {held}; ")
 
 
 def _plain(value) -> str:

@@ -333,7 +333,8 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                         "its energy) leaves the "
                         "panorama and comes back as a directional light of exactly its energy, so it casts shadows; "
                         "auto: extract where the scene has irradiance probes (a probes: section, or a frame that "
-                        "reads them) or reflection probes and no lightmap (a lightmap: section, or a frame that reads one; a probe grid cannot hold a sun's or lamp's shadow edge "
+                        "reads them), reflection probes or a lightmap (a lightmap: section, or a frame that reads "
+                        "one; neither a probe grid nor a lightmap's texels hold a sun's or lamp's shadow edge "
                         "through a window: docs/manual.md 'Irradiance probes in interiors'), with sun_lights 4 and "
                         "soft shadows unless given; none elsewhere"),
         "sun_shadows": Enum(("hard", "soft", "none"), "hard", doc="the extracted sun's shadows (soft where sun: auto "
