@@ -363,6 +363,28 @@ def test_manifest_lists_the_lights_an_engine_draws(baked, tmp_path):
     assert [lt["source"] for lt in man["lights"]] == ["lights.0"] and "point" in man["lights"][0]
 
 
+
+def test_the_panoramas_sun_is_listed_and_said(tmp_path):
+    """`environment.sun: auto` extracts the panorama's sun where a lightmap is baked (stop 75): the
+    atlas holds the rest, lightmap.json lists the sun for the engine to draw per pixel, and
+    `iblbake lightmap` says so; `sun: none` keeps it in the atlas, nothing listed or said."""
+    sky = np.ones((32, 64, 3)) * [0.6, 0.8, 1.0]
+    sky[8, 20] = 1e6                                      # a sun 1e6 x the median, 40 degrees up
+    write_exr(tmp_path / "sky.exr", sky)
+    (tmp_path / "scene.yaml").write_text(SCENE + "lightmap: {texels_per_unit: 2, samples: 16}\n")
+    said = {}
+    for sun in ("auto", "none"):
+        p = run_cli("lightmap", tmp_path / "scene.yaml", "-o", tmp_path / sun, "--cache", tmp_path / "cache",
+                    "--set", f"environment.sun={sun}")
+        assert p.returncode == 0, p.stderr
+        man = json.loads((tmp_path / sun / "lightmap.json").read_text())
+        said[sun] = ([lt["source"] for lt in man["lights"]], p.stdout.strip().splitlines()[-1])
+    assert said["auto"][0] == ["environment.sun: extract (1 of 1, brightest first)"], said
+    assert said["auto"][1].endswith("; 1 light extracted from the panorama, to draw per pixel: lightmap.json's "
+                                    "lights (environment.sun: none keeps it in the atlases)"), said
+    assert said["none"][0] == [] and "extracted" not in said["none"][1], said
+
+
 def test_gltf_keeps_file_materials_specular_and_no_absolute_path(tmp_path):
     """lightmap.gltf's materials: a glTF mesh without a scene material keeps its file's own
     (examples/meshes/tiles.glb's "glazed tiles", not "file materials"); a scene material's
