@@ -98,10 +98,9 @@ IBL_INLINE float3 bsdf_sample(const Material mt, float3 v, float3 n, float3 t, f
         return f_schlick(nov, mt.f0, mt.f90) / ps;
     }
     if (u_lobe < ps) {
-        const float3 vl = (float3)(dot(v, t), dot(v, b), nov);
-        const float3 hl = sample_ggx_vndf(vl, mt.alpha, u);
-        const float3 hs = t * hl.x + b * hl.y + n * hl.z;
-        *l = 2.0f * dot(v, hs) * hs - v;
+        float3 h;
+        float noh;
+        *l = reflect_ggx_vndf(u, t, b, n, v, (float3)(dot(v, t), dot(v, b), nov), mt.alpha, &h, &noh);
     } else {
         const float3 ll = sample_cosine_hemisphere(u);
         *l = t * ll.x + b * ll.y + n * ll.z;

@@ -90,6 +90,18 @@ IBL_INLINE float3 sample_ggx_vndf(float3 vl, float alpha, float2 u)
     return normalize((float3)(alpha * nh.x, alpha * nh.y, fmax(1e-7f, nh.z)));
 }
 
+/* One GGX visible normal drawn from u, seen from v whose components in the frame (t, b, n) are
+ * vl (z the caller's NoV), and v reflected about it: the reflected direction; *h the world half
+ * vector, *noh its NoH (unfloored). The twin: core/sampling.py reflect_ggx_vndf. */
+IBL_INLINE float3 reflect_ggx_vndf(float2 u, float3 t, float3 b, float3 n, float3 v, float3 vl, float alpha,
+                                   float3 *h, float *noh)
+{
+    const float3 hl = sample_ggx_vndf(vl, alpha, u);
+    *noh = hl.z;
+    *h = t * hl.x + b * hl.y + n * hl.z;
+    return 2.0f * dot(v, *h) * *h - v;
+}
+
 IBL_INLINE float pdf_ggx_vndf_reflected(float nov, float noh, float alpha)
 {
     return g1_smith(nov, alpha) * d_ggx(noh, alpha) / (4.0f * nov);

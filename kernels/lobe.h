@@ -28,13 +28,13 @@ IBL_INLINE float3 lobe_specular(CHAIN_PARAMS, __global const float2 *dfg, const 
     const float g1 = g1_smith(nov, mt.alpha);
     float3 num = (float3)(0.0f), den = (float3)(0.0f);
     for (int i = 0; i < lobe_samples; ++i) {
-        const float3 hl = sample_ggx_vndf(vl, mt.alpha, lobe_pts[i].xy);
-        const float3 h = t * hl.x + b * hl.y + nrm * hl.z;
+        float3 h;
+        float noh;
+        const float3 l = reflect_ggx_vndf(lobe_pts[i].xy, t, b, nrm, v, vl, mt.alpha, &h, &noh);
         const float voh = dot(v, h);
-        const float3 l = 2.0f * voh * h - v;
         const float nol = dot(nrm, l);
         if (nol <= 0.0f || voh <= 0.0f) continue;
-        const float pdf = g1 * d_ggx(hl.z, mt.alpha) / (4.0f * nov);
+        const float pdf = g1 * d_ggx(noh, mt.alpha) / (4.0f * nov);
         const float a = fmin(sqrt(lobe_spread / (4.0f * IBL_PI * (float)lobe_samples * pdf)), mt.alpha);
         const float3 w = f_schlick(voh, mt.f0, mt.f90) * (v_smith_ggx_correlated(nov, nol, mt.alpha) * 4.0f * nov * nol / g1);
         num += w * chain_lookup(CHAIN_ARGS, to_env(l, env_rot), sqrt(a) * (float)(nlev - 1));

@@ -325,13 +325,13 @@ IBL_INLINE float3 rprobe_taps(RPROBE_PARAMS, int k, float3 p, float3 n, float3 v
     const float g1 = g1_smith(nov, alpha), turn = rprobe_tap_turn(sample);
     for (int i = 0; i < count; ++i) {
         const float2 u = hammersley((uint)i, (uint)count);
-        const float3 hl = sample_ggx_vndf(vl, alpha, (float2)(u.x, fmod(u.y + turn, 1.0f)));
-        const float3 h = t * hl.x + bt * hl.y + n * hl.z;
+        float3 h;
+        float hz;
+        const float3 l = reflect_ggx_vndf((float2)(u.x, fmod(u.y + turn, 1.0f)), t, bt, n, v, vl, alpha, &h, &hz);
         const float voh = dot(v, h);
-        const float3 l = 2.0f * voh * h - v;
         const float nol = dot(n, l);
         if (nol <= 0.0f || voh <= 0.0f) continue;
-        const float noh = fmax(hl.z, 1e-7f);
+        const float noh = fmax(hz, 1e-7f);
         const float w = v_smith_ggx_correlated(nov, nol, alpha) * 4.0f * nov * nol / g1;
         const float tap_rough = rprobe_tap_rough(pdf_ggx_vndf_reflected(nov, noh, alpha), nol, alpha, count);
         const float tap = tap_rough * top;

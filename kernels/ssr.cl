@@ -224,9 +224,10 @@ __kernel void ssr_trace(__global const float4 *ssr_pix, __constant float4 *cam, 
     for (int k = 0; k < count; ++k) {
         Sampler sp = sampler_start(seed, (uint)px, (uint)k);
         const float2 u = sampler_2d(&sp);
-        const float3 hl = alpha < DELTA_ALPHA ? (float3)(0.0f, 0.0f, 1.0f) : sample_ggx_vndf(vl, alpha, u);
-        const float3 h = t * hl.x + b * hl.y + nrm * hl.z;
-        const float3 l = 2.0f * dot(v, h) * h - v;
+        float3 h;
+        float noh;
+        const float3 l = alpha < DELTA_ALPHA ? 2.0f * dot(v, nrm) * nrm - v
+                                             : reflect_ggx_vndf(u, t, b, nrm, v, vl, alpha, &h, &noh);
         if (!(dot(nrm, l) > 0.0f)) continue;                 /* below the horizon: the environment */
         /* the offset in proportion to the distance and to p's own float precision: no scene unit */
         const float3 p0 = p + nrm * (1e-4f * (length(p) + length(p - cam[0].xyz)));
