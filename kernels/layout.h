@@ -90,5 +90,6 @@
 #define PROBE_TRILINEAR_FLOOR 0.001f
 #define PROBE_NEAR_DEAD 0.05f
 #define PROBE_STEP_REACH 0.4f
+#define PROBE_STEP_FLOOR 0.5f
 
 #endif

@@ -323,3 +323,27 @@ def test_negative_texels_do_not_spoil_a_bake(tmp_path, rt):
         assert (baked(bakes)["irradiance"] >= 0).all()
         (capture, _cached, _report), = list(bakes.held("reflection").values())
         assert (capture >= 0).all() and capture[..., 3].max() == 1
+
+
+def test_a_junction_step_past_a_bright_layer_keeps_its_floor(rt):
+    """The junction step goes on linearly from the live layer to the point, by the reads one cell
+    apart; past a layer 21x brighter (a sun patch's) its line went below 0 and the point read black
+    (a new user's L-shaped room: its inner corner's floor, RGB 0 where the truth was x0.8 of the
+    read). It keeps STEP_FLOOR of the read, in the kernel and the twin alike. Probes at x = 0 and
+    y = 0 off (two walls), those at x = 2 or y = 2 and beyond 21x the rest."""
+    from tests.probe_helpers import kernel_irradiance, settings, synthetic
+    counts = (4, 4, 4)
+    grid = probes.Grid((0.0, 0.0, 0.0), (1.0, 1.0, 1.0), counts)
+    pos = grid.positions()
+    states = np.where((pos[:, 0] < 0.5) | (pos[:, 1] < 0.5), probes.INACTIVE, 0.0)
+    vol = probes.sampled(synthetic(counts, grid.spacing, grid.origin, states=states,
+                                   value=lambda p: np.array([1.0, 1.0, 1.0]) * (21.0 if max(p[0], p[1]) > 1.5 else 1.0)),
+                         settings(visibility=False))
+    p = np.array([[0.3, 0.3, 1.5], [0.6, 0.2, 1.2]])
+    n = np.array([[0, 0, 1.0], [0, 0, 1.0]])
+    e, _ = twin.blend_and_source(vol, p, n, n, visibility=False, classification=True)
+    got, src = twin.irradiance_and_source(vol, p, n, n, visibility=False, classification=True)
+    assert (src == twin.SOURCE_CELL).all() and np.allclose(e, 1.0)
+    assert (got > 0).all() and np.allclose(got, twin.STEP_FLOOR * e, rtol=1e-9), got    # below 0: the floor
+    k = kernel_irradiance(rt, vol, p, n, n, False, True)
+    assert np.abs(k - got).max() < 1e-5, (k, got)

@@ -102,6 +102,8 @@ PROBE_WEIGHTS = {
     "TRILINEAR_FLOOR": 0.001,   # the trilinear weight's floor, with visibility
     "NEAR_DEAD": 0.05,          # a side of a point's cell under this share of the weight: a wall's (probe_irradiance)
     "STEP_REACH": 0.4,          # probe_irradiance's step goes on from a layer's read at most this many cells
+    "STEP_FLOOR": 0.5,          # and keeps at least this share of the read (its line past a bright layer went
+                                # below 0: a new user's L-shaped room's inner corner, black where the truth is x0.8)
 }
 # entries of the kernels' traversal stack of the 4-wide BVH (kernels/scene.h trace_range): a node
 # pushes at most 4 and pops one, so a tree of d levels needs 3 d + 1 (scene/bvh.py widen checks)

@@ -366,7 +366,7 @@ vec3 probeIrradiance(vec3 p, vec3 n, vec3 v) {{
         float reach = min(max(t + o, 0.0) / max(1.0 - o, 0.25), {w['STEP_REACH']});
         if (e2.w == PROBE_SOURCE_CELL) step -= reach * (e2.xyz - e.xyz);
     }}
-    return clamp(e.xyz + step, vec3(0.0), e.xyz);
+    return clamp(e.xyz + step, {w['STEP_FLOOR']} * e.xyz, e.xyz);
 #endif
 }}
 

@@ -13,6 +13,7 @@ CRUSH, WRAP_FLOOR = PROBE_WEIGHTS["CRUSH"], PROBE_WEIGHTS["WRAP_FLOOR"]
 CHEBYSHEV_FLOOR, TRILINEAR_FLOOR = PROBE_WEIGHTS["CHEBYSHEV_FLOOR"], PROBE_WEIGHTS["TRILINEAR_FLOOR"]
 NEAR_DEAD = PROBE_WEIGHTS["NEAR_DEAD"]        # probe_irradiance's step: a side with a wall
 STEP_REACH = PROBE_WEIGHTS["STEP_REACH"]      # and the farthest it goes on from a layer's read, in cells
+STEP_FLOOR = PROBE_WEIGHTS["STEP_FLOOR"]      # and the share of the read it keeps at least
 
 
 def octahedral(d):
@@ -204,8 +205,8 @@ def near_wall(volume, p, n, v, e, source, visibility: bool, classification: bool
     axes or three, or on one with the cell one further along another axis (towards the point's nearer
     layer) having such a side on that axis (within a cell of a junction), the read e goes on linearly
     along each of the point's own walls from the live layer where its probes stand (their mean
-    offset) to the point, by the reads one cell apart; the steps' sum kept within [0, 1] e: the step
-    only darkens."""
+    offset) to the point, by the reads one cell apart; the steps' sum kept within [STEP_FLOOR, 1] e:
+    the step only darkens, and not to black."""
     if not (visibility or classification):
         return e                    # every probe weighs 1: no side is light
     counts, spacing = np.asarray(volume["counts"]), np.asarray(volume["spacing"], np.float64)
@@ -236,7 +237,7 @@ def near_wall(volume, p, n, v, e, source, visibility: bool, classification: bool
                                       classification=classification)
             reach = np.minimum(np.maximum(t[rows] + o, 0.0) / np.maximum(1.0 - o, 0.25), STEP_REACH)
             step[rows] -= np.where((s2 == SOURCE_CELL)[:, None], reach[:, None] * (e2 - e[rows]), 0.0)
-    return np.clip(e + step, 0.0, e)
+    return np.clip(e + step, STEP_FLOOR * e, e)
 
 
 def blend_and_source(volume, p, n, v, *, visibility: bool, classification: bool, spec=None):
