@@ -34,6 +34,7 @@ import yaml
 
 DIFFUSE = ("probes", "SH + GTAO")
 SPECULAR = ("reflection probes", "distant")
+BASELINES = ("SH + GTAO", "distant")      # what each term's first rung is judged beside
 BOUND_REGION = 0.30        # issue 59: default probes within 30% on every region
 BOUND_PART = 0.10          # a reflection probe within 10% on every part of the metal object
 
@@ -59,7 +60,10 @@ def study_scene(path, panorama, args, rt, bakes, root) -> dict:
     if not study.scene.data["reflection_probes"] and "specular" in study.terms:
         study = make(["effects.specular=off"])     # no reflection probe to judge: no specular reference
     extra = [(k, yaml.safe_load(v)) for k, _, v in (kv.partition("=") for kv in args.rung_set)]
-    rungs = [ladder.Rung(r.term, r.label, r.values + extra)
+    # the baselines (SH + GTAO, distant) keep their own mode: --rung-set effects.diffuse=lightmap made the
+    # "SH + GTAO" columns the lightmap with GTAO (trial75)
+    rungs = [ladder.Rung(r.term, r.label, r.values + [(k, v) for k, v in extra
+                                                      if not (r.label in BASELINES and k == f"effects.{r.term}")])
              for r in ladder.realtime_ladder(study.scene, study.fx) if r.label in DIFFUSE + SPECULAR]
     refs = {t: study.render_reference(t) for t in study.terms}
     keep = ("term", "label", "relative_rmse", "region_absolute", "worst_region_absolute", "part_absolute",
@@ -166,7 +170,8 @@ def main():
     ap.add_argument("--cache", default=None)
     ap.add_argument("--json", default=None)
     ap.add_argument("--rung-set", action="append", default=[], metavar="KEY=VALUE",
-                    help="a scene key on every real-time rung (not the reference); repeatable")
+                    help="a scene key on every real-time rung (not the reference; the baselines SH + GTAO and "
+                         "distant keep their own effects.diffuse and effects.specular); repeatable")
     ap.add_argument("--from-json", default=None, help="print the tables of an earlier run's --json, rendering nothing")
     args = ap.parse_args()
     if args.from_json:
