@@ -228,7 +228,6 @@ def load(folder: Path, man: dict, manifest_name: str = "probes.json") -> dict:
     return volume_dict(grid, settings, irr, dist, data, man["report"])
 
 
-
 def read_manifest(path: Path) -> dict:
     try:
         man = json.loads(Path(path).read_text())
