@@ -367,7 +367,10 @@ def test_manifest_lists_the_lights_an_engine_draws(baked, tmp_path):
 def test_the_panoramas_sun_is_listed_and_said(tmp_path):
     """`environment.sun: auto` extracts the panorama's sun where a lightmap is baked (stop 75): the
     atlas holds the rest, lightmap.json lists the sun for the engine to draw per pixel, and
-    `iblbake lightmap` says so; `sun: none` keeps it in the atlas, nothing listed or said."""
+    `iblbake lightmap` says so; `sun: none` keeps it in the atlas, nothing listed or said. The
+    panorama the atlas saw is written beside it (lightmap_environment.exr: what an engine prefilters
+    for the specular; trial75's lightmap.json named no residual) and its diffuse reading states the
+    frame's weight, (1 - F) (1 - metallic)."""
     sky = np.ones((32, 64, 3)) * [0.6, 0.8, 1.0]
     sky[8, 20] = 1e6                                      # a sun 1e6 x the median, 40 degrees up
     write_exr(tmp_path / "sky.exr", sky)
@@ -383,6 +386,15 @@ def test_the_panoramas_sun_is_listed_and_said(tmp_path):
     assert said["auto"][1].endswith("; 1 light extracted from the panorama, to draw per pixel: lightmap.json's "
                                     "lights (environment.sun: none keeps it in the atlases)"), said
     assert said["none"][0] == [] and "extracted" not in said["none"][1], said
+    assert "x 16 paths and 16 shadow rays to the panorama = " in p.stderr, p.stderr     # the sun left in: not uniform
+    env = {sun: json.loads((tmp_path / sun / "lightmap.json").read_text()).get("environment") for sun in said}
+    assert env == {"auto": {"file": "lightmap_environment.exr", "rotation_y": 0.0, "intensity": 1.0}, "none": None}
+    residual = images.read_exr(tmp_path / "auto" / "lightmap_environment.exr")
+    assert residual.shape == (32, 64, 3) and residual.max() < 2, residual.max()        # the sun's texel filled
+    assert np.allclose(residual[16:], sky[16:], rtol=2 ** -10, atol=0)                 # the sky below as it was
+    assert not (tmp_path / "none" / "lightmap_environment.exr").exists()
+    man = json.loads((tmp_path / "auto" / "lightmap.json").read_text())
+    assert "(1 - F_r(n.v)) (1 - metallic) base_color / pi" in man["conventions"]["diffuse"]
 
 
 def test_gltf_keeps_file_materials_specular_and_no_absolute_path(tmp_path):

@@ -368,8 +368,9 @@ def test_box_flush_in_a_corner_leaks_no_sky(z_in, tmp_path, white):
 
 def test_bake_says_its_size_up_front(tmp_path, white, capsys):
     """The command line's progress (Console.fraction) is told the bake's size before the trace: a
-    note on stderr with the texel count, rays a texel and paths (the trial's density of 100 sat at 0%
-    for 40 s with no word of its 2 hours)."""
+    note on stderr with the texel count, paths a texel and rays (the trial's density of 100 sat at 0%
+    for 40 s with no word of its 2 hours), the rays the report's rays_traced (trial75 read 12M paths
+    said and 24M rays reported: a panorama that is not uniform adds a shadow ray a path)."""
     from iblbake.cli.options import Console
     sc = scene(tmp_path, white, [{"plane": {"point": [0, 0, 0], "size": 1.0}, "material": "m"}],
                {"m": LAMBERT}, texels_per_unit=8)
@@ -377,8 +378,8 @@ def test_bake_says_its_size_up_front(tmp_path, white, capsys):
         lm = baked(sc, tmp_path, progress)
     n = lm["report"]["texels"]
     err = capsys.readouterr().err
-    assert f"iblbake: {n:,} lightmap texels x 64 rays = {n * 64:,} paths" in err, err
-    assert n > 100
+    assert f"iblbake: {n:,} lightmap texels x 64 paths = {n * 64:,} rays" in err, err
+    assert n > 100 and lm["report"]["rays_traced"] == n * 64
 
 
 def test_progress_estimates_from_the_first_launch(monkeypatch):
@@ -522,6 +523,18 @@ def test_texel_estimate_matches_its_float64_twin(tmp_path):
     err = np.abs(got - want).max() / want.max()
     print(f"{len(up)} texels, E {want[:, 0].min():.4f}-{want[:, 0].max():.4f}, max |kernel - twin| / E {err:.2e}")
     assert err < 1e-5
+
+
+def test_a_density_far_too_coarse_is_said():
+    """A new user's trial (trial75): a 5 m room at lightmap.texels_per_unit 1 (5 texels across it,
+    the floor x0.88 against the reference) said nothing; under 8 texels across is said, with the
+    density of 64 across; the default 8 on a 1.6 m scene (12.8 across) is not."""
+    from iblbake.render.lightmaps.bake import coarse_said
+    room = ((0, 0, 0), (5, 2.6, 4))
+    assert coarse_said(1, room) == ["lightmap: 1 texels a unit give the whole scene 5 texels across (its bounds span "
+                                    "5): lightmap.texels_per_unit is in the scene's units; give about 13 (64 texels "
+                                    "across it)"]
+    assert coarse_said(8, ((-0.8, -0.8, -0.8), (0.8, 0.8, 0.8))) == [] and coarse_said(2, room) == []
 
 
 @pytest.mark.parametrize("scale", [1.0, 0.01])

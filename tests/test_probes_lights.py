@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import iblbake
+from iblbake.io import images
 from iblbake.render import render
 from iblbake.scene import pack
 from tests.helpers import glsl_compiles, load_scene, run_cli, scene_file
@@ -76,6 +77,8 @@ def test_probes_json_lists_the_lights_the_frame_draws(tmp_path, panoramas, rt):
     r = run_cli("probes", sc.source, "-o", tmp_path / "out", "--cache", tmp_path / "cache")
     assert r.returncode == 0 and "; 4 lights extracted from the panorama, to draw per pixel" in r.stdout, r.stdout + r.stderr
     assert json.loads((tmp_path / "out" / "probes.json").read_text())["lights"] == lights
+    written = images.read_exr(tmp_path / "out" / "environment.exr")      # the residual, half floats
+    assert np.allclose(written, vol.environment, rtol=2 ** -10, atol=0)
     assert "lights" in man["conventions"]
     src = vol.glsl()
     assert "#define PROBE_LIGHT_COUNT 4" in src
@@ -95,13 +98,17 @@ def test_probes_json_sky_is_the_residual_panoramas_sh(tmp_path, panoramas, rt):
     residual panorama (studio less its four lamps, taken out here in numpy and projected by the
     quadrature oracle), in the world frame (rotation_y 30) times intensity 2; evaluated at world
     normals it is the renderer's own fallback SH read in the panorama's frame; it differs from the
-    whole panorama's; probes.glsl's probeSkyIrradiance holds the same coefficients and compiles."""
+    whole panorama's; probes.glsl's probeSkyIrradiance holds the same coefficients and compiles.
+    The residual itself, what an engine prefilters for the specular (trial75: nothing said which
+    panorama the listed lights left), is the volume's `environment` with its manifest entry."""
     from iblbake.bake import sun as sunbake
     from iblbake.core import conventions, sh
     from iblbake.render.bakes import Bakes
     from iblbake.render.units import Job
     sc = lit_scene(tmp_path, panoramas["studio"])
-    sky = json.loads(json.dumps(iblbake.bake_probes(sc, cache=tmp_path / "cache").manifest))["sky"]
+    vol = iblbake.bake_probes(sc, cache=tmp_path / "cache")
+    man = json.loads(json.dumps(vol.manifest))
+    sky = man["sky"]
     env = sc.data["environment"]
     bakes = Bakes(tmp_path / "cache")
     whole = np.asarray(bakes.environment({**env, "sun": "none"})[0], np.float64)[..., :3]
@@ -111,6 +118,9 @@ def test_probes_json_sky_is_the_residual_panoramas_sh(tmp_path, panoramas, rt):
 
     def world_sh(image):
         return sh.project_direct(np.asarray(image, np.float64), 3, 30.0) * to_e
+    assert man["environment"] == {"file": "environment.exr", "rotation_y": 30.0, "intensity": 2.0}
+    assert "twice" in man["conventions"]["environment"]
+    assert np.array_equal(vol.environment, residual.astype(np.float32))
     got, want, full = np.asarray(sky["irradiance"]), world_sh(residual), world_sh(whole)
     assert np.abs(got - want).max() < 1e-12 * np.abs(want).max()      # measured 8e-16
     assert (full[0] > 4 * want[0]).all()          # the lamps are 7.3-8.2x the rest of studio's mean light

@@ -22,6 +22,8 @@ class Lightmap:
     report: the bake's (texels, rays traced, seconds...).  cached: whether it came from the cache.
     lights: the lights whose direct light is not in the atlases (the scene's and those extracted
     from the panorama), which an engine draws per pixel as the frame does (lightmap.json's `lights`).
+    environment: where lights were extracted (environment.sun: extract found some), the panorama less them
+    (float32 (h, w, 3), the bake's light; lightmap_environment.exr), else None.
     """
 
     atlases: dict
@@ -34,6 +36,7 @@ class Lightmap:
     scene: object = field(repr=False, default=None)
     baked: dict = field(repr=False, default_factory=dict)
     lights: list = field(repr=False, default_factory=list)
+    environment: object = field(repr=False, default=None)
 
     def write(self, folder) -> dict:
         """Every file of `iblbake lightmap` into folder (made where missing), replaced together
@@ -44,13 +47,13 @@ class Lightmap:
         for n in self.files():
             atomic.check_writable(folder / n)
         with atomic.Batch() as batch:
-            return export.write(self.baked, self.scene, folder, batch, self.lights)
+            return export.write(self.baked, self.scene, folder, batch, self.lights, self.environment)
 
     def files(self) -> list:
         """The names write() writes, lightmap.json last."""
         from iblbake.render.lightmaps import export
         return export.file_names(export.held(self.baked), self.scene.data["lightmap"],
-                                 self.baked.get("specular_options"))
+                                 self.baked.get("specular_options"), self.environment is not None)
 
 
 def declared(sc) -> bool:
@@ -86,5 +89,7 @@ def bake_lightmap(scene, device: str | None = None, *, cache=None, warn=None, pr
         lm, cached = store.baked(job, UnitLightmap.settings(job), progress=progress)   # the frame's: the lobe's set
     atlases = {b: lm[b] for b in export.held(lm)}
     from iblbake.render.probes import light_entries      # what an engine draws itself, as probes.json says
+    env = sc.data["environment"]
+    residual = bakes.environment(env)[0] if bakes.sun(env) else None     # lights were extracted: the rest
     return Lightmap(atlases, lm["valid"], lm["layout"].width, lm["layout"].height, lm["report"], cached,
-                    rt.device_label, sc, lm, light_entries(sc, bakes.sun(sc.data["environment"])))
+                    rt.device_label, sc, lm, light_entries(sc, bakes.sun(env)), residual)

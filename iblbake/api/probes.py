@@ -28,6 +28,8 @@ class ProbeVolume:
     reflections: each reflection probe's capture: {'capture': float32 (h, 2h, 8): R, G, B, A, sky.R,
         sky.G, sky.B, Z (render/reflection_probes.py CHANNELS), 'settings', and its prefiltered chains}.
     cached: whether the bake came from the cache. entry: the cache folder holding the atlases.
+    environment: where lights were extracted (environment.sun: extract found some), the panorama less them
+        (float32 (h, w, 3), the probes' light; environment.exr, probes.json's `environment`), else None.
     """
 
     irradiance: object
@@ -42,6 +44,7 @@ class ProbeVolume:
     entry: str
     device: str
     volume: dict = field(repr=False, default_factory=dict)
+    environment: object = field(repr=False, default=None)
 
     def glsl(self) -> str:
         """probes.glsl: a GLSL function that samples the volume's files."""
@@ -82,8 +85,11 @@ def bake_probes(scene, device: str | None = None, *, cache=None, warn=None, prog
         reflections = bakes.load("reflection_probes", job)[0] if sc.data["reflection_probes"] else []
     vol = probes.sampled(vol, sc.data["probes"])
     env, fx = sc.data["environment"], sc.data["effects"]
-    sky = probes.sky_entry(bakes.environment(env)[0], env, fx["sh_bands"], fx["sh_window"])   # what the probes saw
-    man = probes.manifest(vol, probes.light_entries(sc, bakes.sun(env)), sky)
+    seen = bakes.environment(env)[0]          # what the probes saw: the residual where lights were extracted
+    sky = probes.sky_entry(seen, env, fx["sh_bands"], fx["sh_window"])
+    residual = seen if bakes.sun(env) else None     # lights were extracted: the panorama less them
+    man = probes.manifest(vol, probes.light_entries(sc, bakes.sun(env)), sky,
+                          probes.environment_entry(env, probes.ENVIRONMENT_FILE) if residual is not None else None)
     from iblbake.render.reflection_probes import CHANNELS as rp_channels
     man["reflection_probes"] = [{"file": f"reflection_{k}.exr", **c["settings"],
                                  "channels": list(rp_channels),
@@ -96,4 +102,4 @@ def bake_probes(scene, device: str | None = None, *, cache=None, warn=None, prog
                                 for k, c in enumerate(reflections)]
     f32 = [np.asarray(vol[k], np.float32) for k in ("irradiance", "distance", "data")]     # as the files hold them
     return ProbeVolume(*f32, man["grid"], man["states"], man["representation"], man, list(reflections), cached,
-                       extra["entry"], rt.device_label, vol)
+                       extra["entry"], rt.device_label, vol, residual)

@@ -41,7 +41,8 @@ def lightmap_command(scene_path, out_dir, overrides, cache_dir, force, device, q
     out = Path(out_dir)
     # every file a bake may write, checked before it (a refused folder costs no bake)
     settings = sc.data["lightmap"]
-    writes = [("--output", out / n) for n in export.file_names(export.expected(settings), settings)]
+    writes = [("--output", out / n) for n in export.file_names(export.expected(settings), settings,
+                                                               environment=sc.data["environment"]["sun"] == "extract")]
     refuse_overlaps(writes, scene.named_input_files(sc))
     for _flag, p in writes:
         atomic.check_writable(p)

@@ -41,15 +41,18 @@ def probes_command(scene_path, out_dir, overrides, cache_dir, force, device, qui
     basis = PROBE_BASES[sc.data["probes"]["irradiance"]]
     captures = [f"reflection_{k}.exr" for k in range(len(sc.data["reflection_probes"]))]
     table = [basis.specular_table] if basis.specular_table else []     # probes.glsl's specular reads it
+    from iblbake.render import probes
     names = ["probes.json", basis.file, "distance.exr", "probe_data.exr", "probes.glsl", *table, *captures]
-    writes = [("--output", out / n) for n in names]
+    residual = [probes.ENVIRONMENT_FILE] if sc.data["environment"]["sun"] == "extract" else []   # if lights are found
+    writes = [("--output", out / n) for n in names + residual]
     refuse_overlaps(writes, scene.named_input_files(sc))
-    for n in names:                  # the folder is made when the files are written, not before
+    for n in names + residual:       # the folder is made when the files are written, not before
         atomic.check_writable(out / n)
     refuse_foreign(writes, force)
     with con.fraction("probes", "probe rays") as progress:
         vol = api.bake_probes(sc, device, cache=cache_dir, warn=con.warn, progress=progress, names=API_FLAGS)
     man, cached = vol.manifest, vol.cached
+    names += residual if vol.environment is not None else []
     entry = Path(vol.entry)
     from iblbake.io import images, reads
     from iblbake.render import reflection_probes
@@ -60,6 +63,8 @@ def probes_command(scene_path, out_dir, overrides, cache_dir, force, device, qui
             batch.write_bytes(out / n, reads.read_bytes(entry / n, 1 << 40, "a cached atlas"))
         if table:
             images.write_exr(out / table[0], basis.table_image(), channels=("R",), batch=batch)
+        if vol.environment is not None:      # what an engine prefilters for the specular (probes.json's environment)
+            probes.write_environment(vol.environment, out / probes.ENVIRONMENT_FILE, batch)
         batch.write_json(out / "probes.json", man)
         batch.write_text(out / "probes.glsl", vol.glsl())
     removed = _remove_stale(out, names)
@@ -91,7 +96,8 @@ def _remove_stale(out: Path, names: list) -> list:
     volume's files alone (a user's own files are left)."""
     from iblbake.io.guard import written_by_iblbake
     from iblbake.render import probes
-    stale = {*probes.FILES.values(), *probes.SPECULAR_TABLES, *(p.name for p in out.glob("reflection_*.exr"))} - set(names)
+    stale = {*probes.FILES.values(), *probes.SPECULAR_TABLES, probes.ENVIRONMENT_FILE,
+             *(p.name for p in out.glob("reflection_*.exr"))} - set(names)
     removed = []
     for n in sorted(stale):
         f = out / n

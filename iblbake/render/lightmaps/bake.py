@@ -38,7 +38,8 @@ REJECT = 0.1          # a texel whose rays meet a solid's inside more often than
 DILATE = 4            # dilation passes (PADDING texels between charts, and their seams)
 BASES = bases.OWN       # what a bake of the default basis (sh_l1) can be read as; every choice: bases.NAMES
 DEFAULT_BASIS = "sh_l1"  # a lightmap section's basis where it names none (the schema's default)
-ACROSS_SAID = 4         # texels across the whole scene under which its density is said (a unit of another scale)
+ACROSS_SAID = 8         # texels across the whole scene under which its density is said (another scale's unit,
+                        # or far too coarse: trial75's 5 m room at 1 texel a unit, the floor x0.88)
 
 
 def coarse_said(density: float, bounds) -> list:
@@ -362,8 +363,10 @@ def bake(job, settings: dict, progress=None) -> dict:
         raise InputError(f"lightmap.basis: {basis} carries no specular lobe; give one of {', '.join(bases.LOBED)} "
                          "for effects.specular: lightmap")
     texels = LightmapTexels(tracer, start, tx.normal, samples, settings["seed"], progress, basis, opts, specular)
-    describe(progress, f"{len(tx.index):,} lightmap texels x {samples} rays = {len(tx.index) * samples:,} paths "
-                       f"({lay.width}x{lay.height} atlas, {density:g} texels a unit)")
+    shadow = f" and {texels.extra} shadow rays to the panorama" if texels.extra else ""   # the report's rays_traced
+    describe(progress, f"{len(tx.index):,} lightmap texels x {samples} paths{shadow} = "
+                       f"{len(tx.index) * (samples + texels.extra):,} rays ({lay.width}x{lay.height} atlas, "
+                       f"{density:g} texels a unit)")
     e, coeffs, inside = trace(texels)
     ok = inside <= REJECT
     h, w = lay.height, lay.width

@@ -126,10 +126,14 @@ def atlas_names(name: str, floats: int) -> list:
     return [f"{STEM}_{name}"] if floats == 1 else [f"{STEM}_{name}_{k}" for k in range(floats)]
 
 
-def file_names(bases, settings: dict, specular: dict | None = None) -> list:
+ENVIRONMENT = f"{STEM}_environment.exr"   # the residual panorama (probes.files ENVIRONMENT_CONVENTION)
+
+
+def file_names(bases, settings: dict, specular: dict | None = None, environment: bool = False) -> list:
     """Every file write() writes for a bake holding `bases` (and the lobe's set of options
-    `specular`, where it holds one), the manifest last."""
-    names = [f"{STEM}.gltf", f"{STEM}.bin", f"{STEM}.png"]
+    `specular`, where it holds one; the residual panorama where lights were extracted:
+    `environment`), the manifest last."""
+    names = [f"{STEM}.gltf", f"{STEM}.bin", f"{STEM}.png", *([ENVIRONMENT] if environment else [])]
     for name in bases:
         stems = atlas_names(name, basis(name, settings).floats)
         names += [f"{s}.{x}" for s in stems for x in ("exr", "ktx2")] + [f"{STEM}_{name}.glsl"]
@@ -209,11 +213,12 @@ LIGHTS_CONVENTION = (
     "panorama the texels saw lacks them); adding them to the lightmap's light counts them twice. ")
 
 
-def manifest(lm: dict, settings: dict, scale: float, objects=(), lights=()) -> dict:
+def manifest(lm: dict, settings: dict, scale: float, objects=(), lights=(), environment: dict | None = None) -> dict:
     """lightmap.json: the atlas, every basis' files and reading, the glTF's, the bake's report;
     `objects` (gltf_scene.lightmapped) each object's name and glTF node; `lights`
-    (probes.light_entries) those an engine draws per pixel."""
-    from iblbake.render.probes.files import LIGHT_FIELDS
+    (probes.light_entries) those an engine draws per pixel; `environment` (probes'
+    environment_entry) the residual panorama where lights were extracted."""
+    from iblbake.render.probes.files import ENVIRONMENT_CONVENTION, LIGHT_FIELDS
     from iblbake.io.guard import mark
     from iblbake.render.lightmaps import gltf_scene
     from iblbake.render.lightmaps.uv import PADDING
@@ -248,6 +253,7 @@ def manifest(lm: dict, settings: dict, scale: float, objects=(), lights=()) -> d
         "bases": bases,
         "objects": [{"index": oid, "name": name, "gltf_node": node} for node, (oid, name) in enumerate(objects)],
         "lights": list(lights),
+        **({"environment": environment} if environment else {}),
         "gltf": {"file": f"{STEM}.gltf", "extension": EXTENSION, "image": f"{STEM}.png",
                  "encoding": gltf_scene.ENCODING,
                  "irradiance_scale": scale},
@@ -258,20 +264,28 @@ def manifest(lm: dict, settings: dict, scale: float, objects=(), lights=()) -> d
                         "(safe to sample), 0 on texels no chart reaches",
             "files": "EXR (OpenEXR, half, channels R G B A, first row at the top) and KTX2 (R16G16B16A16_SFLOAT, "
                      "orientation rd) hold the same values",
-            "diffuse": "albedo / pi * E(n) with E the basis' irradiance at the shading normal n (a normal map's "
-                       "included for a directional basis)",
+            "diffuse": "(1 - F_r(n.v)) (1 - metallic) base_color / pi * E(n), E the basis' irradiance at the "
+                       "shading normal n (a normal map's included for a directional basis), F_r the roughness-aware "
+                       "Schlick F0 + (max(F90 - roughness, F0) - F0) (1 - n.v)^5 (F0 = mix(0.04 specular "
+                       "specular_color, base_color, metallic), F90 = mix(specular, 1, metallic): a Lambert "
+                       "`specular: 0` surface albedo / pi * E)",
+            "linear": "every atlas and light is linear scene radiometry (environment.intensity applied): the "
+                      "frame's output.exposure and tone mapping come after shading, an engine's own likewise",
             "frame": "world, right-handed, +y up (the scene's and glTF's)",
             "sh_basis": "Y_k(n), k = l (l + 1) + m: " + "; ".join(SH_TERMS),
             "lights": LIGHTS_CONVENTION + LIGHT_FIELDS,
+            **({"environment": ENVIRONMENT_CONVENTION} if environment else {}),
         },
         "settings": {k: v for k, v in settings.items()},
         "report": rep,
     }
 
 
-def write(lm: dict, sc, folder: Path, batch, lights=()) -> dict:
+def write(lm: dict, sc, folder: Path, batch, lights=(), environment=None) -> dict:
     """Every file of the bake into folder through `batch` (atomic.Batch: replaced together or
-    none); the manifest written, with `lights` (manifest)."""
+    none); the manifest written, with `lights` (manifest); `environment` the residual panorama
+    (Bakes.environment's image where lights were extracted: ENVIRONMENT), or None."""
+    from iblbake.render.probes.files import environment_entry, write_environment
     from iblbake.io import images, ktx2
     from iblbake.io.guard import mark
     from iblbake.render.lightmaps import gltf_scene
@@ -290,7 +304,11 @@ def write(lm: dict, sc, folder: Path, batch, lights=()) -> dict:
     if "specular" in lm:
         _write_specular(lm, settings, folder, valid, batch)
     scale = gltf_scene.write(lm, sc, folder, STEM, EXTENSION, batch)
-    man = manifest(lm, settings, scale, gltf_scene.lightmapped(lm, sc), lights)
+    env = None
+    if environment is not None:
+        write_environment(environment, folder / ENVIRONMENT, batch)
+        env = environment_entry(sc.data["environment"], ENVIRONMENT)
+    man = manifest(lm, settings, scale, gltf_scene.lightmapped(lm, sc), lights, env)
     batch.write_text(folder / f"{STEM}.json", json.dumps(man, indent=1, allow_nan=False) + "\n")
     return man
 

@@ -31,8 +31,9 @@ import numpy as np
 from iblbake.errors import IblbakeError, InputError
 from iblbake.render.probes.adaptive import combined_values, more_rays, noise, ray_cap
 from iblbake.render.probes.dilate import dilate, dilate_values
-from iblbake.render.probes.files import (FILES, FORMAT, VERSION, data_texture, light_entries, load, manifest,
-                                         read_manifest, save, sky_entry)
+from iblbake.render.probes.files import (ENVIRONMENT_FILE, FILES, FORMAT, VERSION, data_texture,
+                                         environment_entry, light_entries, load, manifest, read_manifest, save,
+                                         sky_entry, write_environment)
 from iblbake.render.probes.glsl import SH_GLSL, SPECULAR_TABLES, basis_glsl, glsl
 from iblbake.render.probes.grid import (AUTO_MAX_PROBES, DEFAULT_LONGEST, MAX_PROBES, SCALE_RAYS, Grid, apart,
                                         auto_step, axis_counts, grid_of, lattice, probe_bytes, scene_bounds)
@@ -47,17 +48,17 @@ from iblbake.render.probes.volume import (SAMPLING_KEYS, Volume, bake_settings, 
                                           volume_dict)
 
 __all__ = ["ACTIVE", "AUTO_MAX_PROBES", "BACKFACE_BLEND_LIMIT", "CALIBRATION_PATHS", "DEFAULT_LONGEST",
-           "ESTIMATE_PATHS", "FILES", "FIXED_RAYS", "FORMAT", "INACTIVE", "INSIDE_WARN", "MAX_ATLAS_SIDE",
-           "MAX_DISTANCE", "MAX_OFFSET", "MAX_PROBES", "OFF_SAID", "RELOCATION_PASSES", "SAMPLING_KEYS", "SCALE_RAYS",
-           "SH_GLSL", "SPECULAR_TABLES", "SURFACE_RAYS", "VERSION", "Grid", "Tracer", "Volume", "atlas", "auto_step",
-           "bake", "bake_settings", "basis_glsl", "basis_of", "basis_options", "behind_surfaces", "beyond_bounds",
-           "box_outside", "classify", "combined_values", "data_texture", "dilate", "dilate_values", "duration_said",
-           "estimate", "estimate_said", "glsl", "grid_of", "inside_geometry", "layout", "light_entries", "load",
-           "manifest", "more_rays", "noise", "off_surfaces", "outside_camera_rooms", "outside_sealed_room",
-           "placement_warnings", "probe_bytes", "probe_values", "project", "random_rotation", "ray_cap",
-           "ray_directions", "read_manifest", "relocate", "sampled", "save", "scaled_grid", "scene_bounds", "sky_entry",
-           "spherical_fibonacci", "switch_off", "trace_defines", "trace_kept", "untraced", "volume_dict", "warnings",
-           "with_borders"]
+           "ENVIRONMENT_FILE", "ESTIMATE_PATHS", "FILES", "FIXED_RAYS", "FORMAT", "INACTIVE", "INSIDE_WARN",
+           "MAX_ATLAS_SIDE", "MAX_DISTANCE", "MAX_OFFSET", "MAX_PROBES", "OFF_SAID", "RELOCATION_PASSES",
+           "SAMPLING_KEYS", "SCALE_RAYS", "SH_GLSL", "SPECULAR_TABLES", "SURFACE_RAYS", "VERSION", "Grid", "Tracer",
+           "Volume", "atlas", "auto_step", "bake", "bake_settings", "basis_glsl", "basis_of", "basis_options",
+           "behind_surfaces", "beyond_bounds", "box_outside", "classify", "combined_values", "data_texture", "dilate",
+           "dilate_values", "duration_said", "environment_entry", "estimate", "estimate_said", "glsl", "grid_of",
+           "inside_geometry", "layout", "light_entries", "load", "manifest", "more_rays", "noise", "off_surfaces",
+           "outside_camera_rooms", "outside_sealed_room", "placement_warnings", "probe_bytes", "probe_values",
+           "project", "random_rotation", "ray_cap", "ray_directions", "read_manifest", "relocate", "sampled", "save",
+           "scaled_grid", "scene_bounds", "sky_entry", "spherical_fibonacci", "switch_off", "trace_defines",
+           "trace_kept", "untraced", "volume_dict", "warnings", "with_borders", "write_environment"]
 
 
 def scaled_grid(tracer, coarse: Grid, settings: dict, arrays, camera):

@@ -62,6 +62,31 @@ SKY_CONVENTION = (
     "Condon-Shortley phase, k = l (l + 1) + m, as `iblbake sh`'s irradiance; E(n) = sum_k E_k Y_k(n), clamped at 0")
 
 
+ENVIRONMENT_CONVENTION = (
+    "the panorama the bake lit the scene with where lights were extracted from it (environment.sun: extract): the "
+    "scene's panorama less the extracted `lights`, each disk filled from the ring about it, linear RGB as iblbake read "
+    "it, equirect in iblbake's mapping (docs/conventions.md 'Equirectangular panoramas'), neither environment.rotation_y nor "
+    "intensity applied (as the scene's own file). An engine prefilters it for the specular (iblbake mips) and "
+    "projects it for a sky SH: the scene's panorama there counts the listed lights twice. The background shows "
+    "the panorama whole")
+
+
+ENVIRONMENT_FILE = "environment.exr"      # `iblbake probes`' residual panorama (lightmaps': export.ENVIRONMENT)
+
+
+def environment_entry(env: dict, file: str) -> dict:
+    """A manifest's `environment` (ENVIRONMENT_CONVENTION): the residual panorama's file and what
+    turns and scales it as the frame does."""
+    return {"file": file, "rotation_y": float(env["rotation_y"]), "intensity": float(env["intensity"])}
+
+
+def write_environment(image, path, batch) -> None:
+    """The residual panorama (Bakes.environment's image with `sun: extract`) as a half-float RGB
+    EXR through `batch` (atomic.Batch)."""
+    from iblbake.io import images
+    images.write_exr(path, np.asarray(image, np.float32)[..., :3], half=True, batch=batch)
+
+
 def sky_entry(image, env: dict, bands: int, window: str) -> dict:
     """probes.json's `sky` (SKY_CONVENTION): the SH irradiance of `image`, the panorama the probes
     were baked with (Bakes.environment: the residual where lights were extracted), in the world
@@ -74,10 +99,11 @@ def sky_entry(image, env: dict, bands: int, window: str) -> dict:
             "irradiance": [[float(v) for v in row] for row in e]}
 
 
-def manifest(volume: dict, lights: list = (), sky: dict | None = None) -> dict:
+def manifest(volume: dict, lights: list = (), sky: dict | None = None, environment: dict | None = None) -> dict:
     """The manifest of a sampled volume's files: the grid, the representation, how to sample it
     and every convention the files are read with, each probe's state; `lights` (light_entries)
-    the lights an engine adds, `sky` (sky_entry) the light where no probe is."""
+    the lights an engine adds, `sky` (sky_entry) the light where no probe is, `environment`
+    (environment_entry) the residual panorama where lights were extracted."""
     g, s, basis = volume["grid"], volume["settings"], basis_of(volume)
     states = volume["data"][:, 3].astype(int)
     return {
@@ -106,10 +132,12 @@ def manifest(volume: dict, lights: list = (), sky: dict | None = None) -> dict:
                           "A = state (0 active, 1 inactive), as RTXGI's probe data texture",
             "lights": LIGHTS_CONVENTION,
             **({"sky": SKY_CONVENTION} if sky else {}),
+            **({"environment": ENVIRONMENT_CONVENTION} if environment else {}),
         },
         "report": volume["report"],
         "lights": list(lights),
         **({"sky": sky} if sky else {}),
+        **({"environment": environment} if environment else {}),
         **basis.manifest(volume),
     }
 
