@@ -206,7 +206,7 @@ def test_quad_room_frame_holds_the_truth(tmp_path, panoramas):
                   runtime=rt, cache=bakes)
     lit = st.region_metrics(auto.hdr, ref["hdr"], st.metric_mask("diffuse", auto.hdr))["region_absolute"]
     print({n: round(e["ratio"], 3) for n, e in lit.items()})
-    assert auto.report["passes"][[p["name"] for p in auto.report["passes"]].index("lights")]["lamps"]
+    assert auto.report["passes"][[p["name"] for p in auto.report["passes"]].index("lights")]["extracted"]
     bad = {n: round(e["ratio"], 3) for n, e in lit.items() if e["pixels"] >= MIN_PIXELS and e["absolute"] > CORPUS_BOUND}
     assert not bad, bad
 

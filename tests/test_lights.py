@@ -412,8 +412,9 @@ def test_sun_lights_extract_studios_lamps_in_a_render(tmp_path, panoramas, load_
             sc.data["environment"].update(sun="extract", sun_lights=count)
         frames[count] = render(sc, cache_root=tmp_path / "cache")
     lp = {c: next((p for p in f.report["passes"] if p["name"] == "lights"), {}) for c, f in frames.items()}
-    assert "sun" not in lp[1] and lp[4]["lights"] == 4 and len(lp[4]["lamps"]) == 3
-    assert lp[4]["sun"]["energy_fraction"] >= max(x["energy_fraction"] for x in lp[4]["lamps"])
+    assert "extracted" not in lp[1] and lp[4]["lights"] == 4 and len(lp[4]["extracted"]) == 4
+    shares = [x["energy_fraction"] for x in lp[4]["extracted"]]
+    assert shares[0] == max(shares), shares                 # the brightest first (then by peak, not share)
     from iblbake.bake import sh as shbake
     exact = lambert(shbake.exact_irradiance(load_panorama("studio").astype(np.float64), np.array([[0.0, 1, 0]]))[0])
     mean = {c: f.hdr[..., :3].mean((0, 1)) for c, f in frames.items()}
@@ -434,15 +435,16 @@ def test_extracted_sun_casts_a_shadow(tmp_path, panoramas):
         fr = render(sc, cache_root=tmp_path / "cache")
         results[with_ball] = fr
     lp = next(p for p in results[True].report["passes"] if p["name"] == "lights")
-    d = np.array(lp["sun"]["light_direction_world"])           # the way the sunlight travels
-    assert lp["sun"]["angular_diameter_deg"] < 6 and d[1] < 0
+    (sun,) = lp["extracted"]
+    d = np.array(sun["light_direction_world"])           # the way the sunlight travels
+    assert sun["angular_diameter_deg"] < 6 and d[1] < 0
     # where the sphere centre's shadow lands on y = 0, in pixels of the top view
     hit = np.array([0, 0.8, 0]) + d * (0.8 / -d[1])
     col = int((hit[0] + WIDTH / 2) / WIDTH * 64)
     row = int((hit[2] + WIDTH / 2) / WIDTH * 64)
     assert 0 <= row < 64 and 0 <= col < 64
     lost = results[False].hdr[row, col, :3] - results[True].hdr[row, col, :3]
-    sun_e = lp["sun"]["illuminance"] * np.array(lp["sun"]["color"]) * -d[1]
+    sun_e = sun["illuminance"] * np.array(sun["color"]) * -d[1]
     assert np.abs(lost / lambert(sun_e) - 1).max() < 0.01, (lost, lambert(sun_e))
 
 

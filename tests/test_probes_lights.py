@@ -51,12 +51,13 @@ def test_probes_json_lists_the_lights_the_frame_draws(tmp_path, panoramas, rt):
     lights = man["lights"]
     frame = render(sc, runtime=rt, cache_root=tmp_path / "cache")
     passed = next(p for p in frame.report["passes"] if p["name"] == "lights")
-    extracted = [passed["sun"], *passed["lamps"]]
+    extracted = passed["extracted"]
     assert len(extracted) == 4 and len(lights) == 5 and passed["lights"] == 5
     assert lights[0]["source"] == "lights.0" and lights[0]["point"]["intensity"] == 3
     for k, (got, said) in enumerate(zip(lights[1:], extracted)):
         d = got["directional"]
-        assert got["source"].startswith(f"environment.sun: extract ({k + 1} of 4") and got["shadows"] == "soft"
+        assert got["source"] == said["source"] == f"environment.sun: extract ({k + 1} of 4, brightest first)"
+        assert got["shadows"] == "soft"
         assert np.allclose(d["direction"], said["light_direction_world"], atol=1e-6)
         assert d["illuminance"] == pytest.approx(said["illuminance"], rel=1e-9)       # the frame's, as said
         assert d["illuminance"] == pytest.approx(2 * said["illuminance_before_intensity"], rel=1e-9)

@@ -99,8 +99,10 @@ def test_report_writes_the_suns_numbers_plainly(tmp_path, panoramas):
     assert p.returncode == 0, p.stderr
     row = next(line for line in p.stdout.splitlines() if line.startswith("pass  lights"))
     assert "np.float" not in row, row
-    sun = json.loads(re.search(r" sun=(\{.*?\})(?= lamps=|$)", row).group(1))
-    assert sun["illuminance"] == pytest.approx(2 * sun["illuminance_before_intensity"], rel=1e-6), sun
+    found = json.loads(re.search(r" extracted=(\[.*\])$", row).group(1))
+    assert [x["source"] for x in found] == [f"environment.sun: extract ({k} of 2, brightest first)" for k in (1, 2)]
+    for sun in found:
+        assert sun["illuminance"] == pytest.approx(2 * sun["illuminance_before_intensity"], rel=1e-6), sun
 
 
 def test_a_bake_whose_rays_cannot_fit_is_refused_up_front(tmp_path, sky, monkeypatch):

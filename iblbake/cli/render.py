@@ -100,7 +100,7 @@ def _extracted(sc, rep) -> str:
     """What `environment.sun: auto` took out of the panorama (a new user's trial: the frames of
     `sun: none` and the default differed and nothing but --report said why)."""
     lit = next((p for p in rep["passes"] if p["name"] == "lights"), {})
-    n = ("sun" in lit) + len(lit.get("lamps") or [])
+    n = len(lit.get("extracted") or [])
     if ((sc.raw or {}).get("environment") or {}).get("sun", "auto") != "auto":
         return ""
     from iblbake.scene.load import has_probes

@@ -82,13 +82,15 @@ class Lights(Pass):
         extra = {}
         first = len(ctx.scene.data["lights"])     # what was extracted; each light's direction in world space
         # its illuminance as the frame lights with it (environment.intensity's, as probes.json's lights)
-        said = [{**s.to_json(), "illuminance": float(lt["directional"]["illuminance"]),
+        # one list, brightest first, each named as the manifests' lights name it (trial75: a list of
+        # `sun` and `lamps` called studio's brightest softbox the sun)
+        found = args["sun"]
+        said = [{"source": f"environment.sun: extract ({k + 1} of {len(found)}, brightest first)", **s.to_json(),
+                 "illuminance": float(lt["directional"]["illuminance"]),
                  "illuminance_before_intensity": s.to_json()["illuminance"],
                  "light_direction_world": [round(x, 6) for x in lt["directional"]["direction"]]}
-                for s, lt in zip(args["sun"], args["frame_lights"][first:])]
+                for k, (s, lt) in enumerate(zip(found, args["frame_lights"][first:]))]
         if said:
-            extra["sun"] = said[0]
-        if len(said) > 1:
-            extra["lamps"] = said[1:]
+            extra["extracted"] = said
         return {"lights": ctx.args[self.name]["nlights"], "exact": exact(ctx.plan.effects),
                 "shadow_rays_per_sample": rays, "shadow_rays_per_s": round(n * rays / max(s, 1e-9)), **extra}
