@@ -266,8 +266,8 @@ def manifest(lm: dict, settings: dict, scale: float, objects=(), lights=(), envi
                      "orientation rd) hold the same values",
             "diffuse": "(1 - F_r(n.v)) (1 - metallic) base_color / pi * E(n), E the basis' irradiance at the "
                        "shading normal n (a normal map's included for a directional basis), F_r the roughness-aware "
-                       "Schlick F0 + (max(F90 - roughness, F0) - F0) (1 - n.v)^5 (F0 = mix(0.04 specular "
-                       "specular_color, base_color, metallic), F90 = mix(specular, 1, metallic): a Lambert "
+                       "Schlick F0 + (max(F90 - roughness, F0) - F0) (1 - n.v)^5 (F0 = mix(specular min(0.04 "
+                       "specular_color, 1), base_color, metallic), F90 = mix(specular, 1, metallic): a Lambert "
                        "`specular: 0` surface albedo / pi * E)",
             "linear": "every atlas and light is linear scene radiometry (environment.intensity applied): the "
                       "frame's output.exposure and tone mapping come after shading, an engine's own likewise",
