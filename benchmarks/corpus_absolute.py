@@ -18,8 +18,8 @@ the same reuses them:
         [--cache DIR] [--json out.json] [--rung-set KEY=VALUE ...]
 
 --rung-set puts a scene key on every real-time rung, the reference left as it is: docs/manual.md's
-quality setting for interiors is `--rung-set environment.sun=extract --rung-set
-environment.sun_lights=4 --rung-set environment.sun_shadows=soft`.
+quality setting for interiors is `--rung-set probes.rays=4096` (`environment.sun: auto`, the
+default, already extracts the lamps and sun where the scene has probes).
 """
 
 from __future__ import annotations

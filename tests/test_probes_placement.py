@@ -593,3 +593,31 @@ def test_probes_above_an_attics_roof_stay_out_of_its_gables(tmp_path, panoramas,
     live = vol["data"][:, 3] == probes.ACTIVE
     assert not (live & above & ~skylight).any(), pos[live & above & ~skylight]
     assert vol["report"]["off_by"]["outside_seen_room"] > 0
+
+
+def test_a_box_drawn_on_the_walls_takes_the_interiors_spacing(tmp_path, rt):
+    """A new user's trial (trial76): a probe box given by min/max alone took 8 cells along its
+    longest axis (0.5 in a 4 m room whose interior asks 0.35; its window wall x1.32 under city).
+    It takes the interior's scale as the automatic grid does, measured from the same points:
+    probe_box_walls' box (3 x 2.4 x 5, on the walls) is cut into cells within a cell's rounding of
+    the automatic grid's x and z spacing (whole cells across the box), and said in the report."""
+    path = ROOT / "examples" / "corpus" / "probe_box_walls.yaml"
+    if not (path.parent / "meshes" / "skylight_room.obj").exists():
+        pytest.fail("the corpus meshes are missing: run `make meshes`")
+    doc = yaml.safe_load(path.read_text())
+    doc["camera"]["resolution"] = [16, 12]
+    doc["environment"]["path"] = str(path.parent / doc["environment"]["path"])
+    for o in doc["objects"]:
+        if "mesh" in o:
+            o["mesh"]["path"] = str(path.parent / o["mesh"]["path"])
+    grids = {}
+    for name, box in (("box", doc["probes"]), ("auto", {})):
+        doc["probes"] = {**box, "rays": 64}
+        vol = iblbake.bake_probes(load_scene(tmp_path, name, doc), cache=tmp_path / "cache")
+        grids[name] = (vol.grid, vol.manifest["report"])
+    box, auto = grids["box"][0], grids["auto"][0]
+    step = grids["auto"][1]["interior_step"]
+    assert grids["box"][1]["interior_step"] == step and auto["spacing"][0] == pytest.approx(step, rel=1e-6)
+    extent = np.array([3.0, 2.4, 5.0])
+    assert box["counts"] == [math.ceil(e / step - 1e-9) for e in extent], (box, step)
+    assert np.allclose(box["spacing"], extent / box["counts"]) and max(box["spacing"]) < 1.15 * step

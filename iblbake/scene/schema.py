@@ -464,7 +464,8 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                             ">= 2 per axis), min and max >= 2 along an axis they differ on; at most 1048576 probes"),
         "spacing": Num(None, 0.0, lo_open=True, doc="the distance between probes, where counts is omitted (omitted too: "
                                                     "half the typical free distance of rays in the scene's enclosed "
-                                                    "spaces, at most 16384 probes, coarser above and said)"),
+                                                    "spaces, the whole scene's grid or a min/max box's, at most "
+                                                    "16384 probes, coarser above and said)"),
         "rays": Num(1024, 16, 1 << 16, integer=True,
                     doc="rays per probe, one path each (a spherical Fibonacci set, randomly rotated; DDGI traces "
                         "256 a frame and accumulates frames, a bake takes them at once: an unextracted sun's "
