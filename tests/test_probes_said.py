@@ -235,3 +235,23 @@ def test_a_mesh_left_unscaled_is_said(tmp_path, sky, mistake):
     if mistake == "ball":
         assert "'ball' (objects.1) spans 6.928, 108 times any other object: left at another scale? " \
                "(its objects.1.sphere's center and radius" in said[0], said
+
+
+@pytest.mark.parametrize("diffuse, specular, said", [
+    ("sh", "prefiltered", ["probes"]), ("probes", "off", []), ("sh", "probes", []), ("sh", "lobe", ["probes"]),
+    ("reference", "reference", []), ("sh", "reference", [])])
+def test_a_probes_section_the_frame_does_not_read_is_said(tmp_path, sky, diffuse, specular, said):
+    """A new user's trial (trial76): `probes: {}` beside `effects.diffuse: sh` baked nothing and said
+    nothing (a lightmap section was said); the reference's frame, the truth, says neither it nor the
+    unread reflection probes (their note beside `specular: reference` was noise)."""
+    import iblbake
+    from iblbake.render.plan import plan
+    path = scene_file(tmp_path, sky, effects={"diffuse": diffuse, "specular": specular},
+                      probes={"counts": 2, "irradiance": "sg"},
+                      reflection_probes=[{"position": [0, 0, 2], "min": [-2, -2, -2], "max": [2, 2, 3], "size": 8}])
+    notes = plan(iblbake.load_scene(path)).notes
+    got = sorted(n.split(":")[0] for n in notes if n.startswith(("probes: not read", "reflection_probes: 1 not read")))
+    want = sorted(said + (["reflection_probes"] if specular not in ("prefiltered", "reference") else []))
+    assert got == want, notes
+    if said:
+        assert f"probes: not read: effects.diffuse {diffuse} and specular {specular} light the frame" in str(notes)

@@ -21,6 +21,8 @@ from iblbake.scene.load import AOVS, Scene
 # a scene naming the removed key effects.reference.paths renders as before, with this note (scene/schema.py)
 UNREAD_LIGHTMAP = ("lightmap: not read: effects.diffuse {diffuse} lights the frame; effects.diffuse: lightmap "
                    "bakes and reads it (docs/manual.md 'Lightmaps')")
+UNREAD_PROBES = ("probes: not read: effects.diffuse {diffuse} and specular {specular} light the frame; "
+                 "effects.diffuse: probes bakes and reads them (docs/manual.md 'iblbake probes')")
 REMOVED_PATHS = ("effects.reference.paths is removed and changes nothing: every reference runs the megakernel "
                  "(the wavefront engine, slower on every device measured, is retired); delete the key")
 
@@ -66,7 +68,7 @@ def effect_modes(scene: Scene) -> Effects:
         if fx["ssr"] == "on":
             notes.append(f"effects.ssr: on does nothing with specular {specular}: screen-space reflections replace the "
                          "split sum's reflected environment (effects.specular: prefiltered)")
-        if d["reflection_probes"] and fx["reflection_probes"]:
+        if d["reflection_probes"] and fx["reflection_probes"] and specular != "reference":   # the truth: said of none
             notes.append(f"reflection_probes: {len(d['reflection_probes'])} not read with specular {specular}: the "
                          "split sum reads them (effects.specular: prefiltered)")
     notes += unread_basis_options(scene, diffuse, specular)
@@ -81,8 +83,12 @@ def effect_modes(scene: Scene) -> Effects:
     bounces = reference_bounces(scene, diffuse, specular, notes)
     if "paths" in (((scene.raw or {}).get("effects") or {}).get("reference") or {}):
         notes.append(REMOVED_PATHS)
-    if "lightmap" in (scene.raw or {}) and "lightmap" not in (diffuse, specular):
+    # a section the frame does not read, said, but not of the reference (trial76: noise beside the truth)
+    real_time = diffuse != "reference" and specular != "reference"
+    if "lightmap" in (scene.raw or {}) and "lightmap" not in (diffuse, specular) and real_time:
         notes.append(UNREAD_LIGHTMAP.format(diffuse=diffuse))
+    if "probes" in (scene.raw or {}) and "probes" not in (diffuse, specular) and real_time:
+        notes.append(UNREAD_PROBES.format(diffuse=diffuse, specular=specular))
     return Effects(diffuse, specular, background, emissive, notes, bounces)
 
 
