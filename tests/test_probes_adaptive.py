@@ -82,7 +82,7 @@ def test_noisy_probes_get_more_rays_and_their_estimate_is_one_pass_over_them():
     assert probes.ray_cap(st) == 256
     assert counts.tolist() == [256] * 48 + [64] * 5
     assert [c[1:] for c in tracer.calls[1:]] == [(64, 64), (128, 128)]     # 64 more, then 128 more
-    irr, mom = probes.combined_values(rad, t, counts, rounds, (1, 1, 1), st)
+    irr, mom = probes.combined_values(rad, t, rounds, (1, 1, 1), st)
     # one pass over the same 256 directions (batches 0-3), the same rays' numbers
     dirs = np.concatenate([probes.ray_directions(64, st["seed"], b) for b in range(4)])
     big, bt, _ = Scripted().trace(pos[:48], dirs, True)
@@ -96,6 +96,36 @@ def test_noisy_probes_get_more_rays_and_their_estimate_is_one_pass_over_them():
     first = probes.probe_values(rad[:48], t[:48], probes.ray_directions(64, st["seed"]), (1, 1, 1), st)[0]
     rms = [np.sqrt(np.mean((e / truth - 1) ** 2)) for e in (first, irr[:48])]
     assert rms[1] == pytest.approx(rms[0] / 2, rel=0.2)
+
+
+def test_a_probe_near_the_target_reads_the_same_either_side_of_it():
+    """A hard threshold flipped the probes on its edge with the float32 rounding of another scale
+    (l_room's frame 8% apart at scales 1 and 100; trial76's corridor needed target_noise). One round
+    (max_rays 2 x rays): a probe of first-pass noise n takes the round's mean by ramp(n): none under
+    LOW x target, all of it from the target, linearly between; a target a hair either side of n / LOW
+    reads the same to 1e-6 where the round's mean differs from the first pass's by percents."""
+    pos = np.array([[-1, 0, z] for z in range(6)], np.float64)
+    dirs = probes.ray_directions(64, 1)
+    rad, t, _ = Scripted().trace(pos, dirs, True)
+    n0 = adaptive.noise(rad, t, adaptive.batch_directions(settings(rays=64), 0, 1))
+    first = probes.probe_values(rad, t, dirs, (1, 1, 1), settings(rays=64, irradiance_texels=4, distance_texels=4))[0]
+
+    def baked(target):
+        st = settings(rays=64, target_noise=target, max_rays=128, irradiance_texels=4, distance_texels=4)
+        counts, rounds, _ = probes.more_rays(Scripted(), pos, np.ones(len(pos), bool), rad, t, st)
+        return probes.combined_values(rad, t, rounds, (1, 1, 1), st)[0], counts, rounds
+
+    edge = n0[2] / adaptive.LOW
+    below, c_below, _ = baked(edge * (1 + 1e-9))          # probe 2 a hair under LOW x target: no round
+    above, c_above, rounds = baked(edge * (1 - 1e-9))     # a hair over: a round, weighed ~0
+    assert c_below[2] == 64 and c_above[2] == 128
+    full = probes.combined_values(rad, t, [(r[0], r[1], r[2], np.ones(len(r[0]))) for r in rounds], (1, 1, 1),
+                                  settings(rays=64, irradiance_texels=4, distance_texels=4))[0]
+    assert np.abs(full[2] - first[2]).max() > 0.01 * np.abs(first[2]).max()         # the round's mean differs
+    assert np.abs(above[2] - below[2]).max() < 1e-6 * np.abs(first[2]).max()
+    mid, _, rounds = baked(n0[2] / 0.75)                   # n0 = 0.75 x target: half the round's mean
+    w = dict(zip(rounds[0][0].tolist(), rounds[0][3]))[2]
+    assert w == pytest.approx(0.5, abs=1e-9) and np.allclose(mid[2], first[2] + 0.5 * (full[2] - first[2]))
 
 
 def test_a_bake_whose_probes_all_take_more_rays_is_one_pass_over_their_directions(tmp_path, rt, panoramas):

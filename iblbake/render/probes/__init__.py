@@ -217,7 +217,7 @@ def bake(job, settings: dict, progress=None) -> dict:
     states, off_by, outside = switch_off(tracer, grid, offset, t, dirs, obj, settings, camera, skip)
     counts, rounds, short = more_rays(tracer, grid.positions() + offset, states != INACTIVE, radiance, t, settings,
                                       progress)
-    irr, dist = layout(*combined_values(radiance, t, counts, rounds, grid.spacing, settings), grid, settings)
+    irr, dist = layout(*combined_values(radiance, t, rounds, grid.spacing, settings), grid, settings)
     irr = dilate(irr, states == INACTIVE, grid.counts, settings["irradiance"], settings["irradiance_texels"])
     data = np.concatenate([offset, states[:, None].astype(np.float64)], 1)
     inside, who = inside_geometry(t, obj, settings["backface_threshold"])

@@ -3,9 +3,12 @@ rays gets more. A corridor's deep probes are lit after several bounces from its 
 their paths carry that light, so their mean over 1,024 rays moved 20-40% from seed to seed. After
 the first pass each live probe's relative standard error is estimated (noise); those over
 `probes.target_noise` trace as many rays again in fresh directions (rays.ray_directions' further
-batches), and again, until they are under it or at `probes.max_rays`. Each probe's irradiance and
-distance moments are then the equal-weight mean over all of its rays (combined_values): the same
-as one pass over those directions."""
+batches), and again, until they are under it or at `probes.max_rays`. A probe well over the target
+(at it or above) then holds the equal-weight mean over all of its rays (combined_values): the same
+as one pass over those directions. Between LOW and 1 times the target a round's mean is blended in
+by a weight rising from 0 to 1 (ramp), so that a probe a hair either side of a threshold reads the
+same: a hard threshold moved l_room's frame 8% between scales 1 and 100, whose float32 hits differ by
+1e-4 and flipped the probes on its edge."""
 
 from __future__ import annotations
 
@@ -45,6 +48,14 @@ def noise(radiance, t, dirs) -> np.ndarray:
     return np.where(judged, se / np.where(judged, mean, 1.0), 0.0).max(1)
 
 
+LOW = 0.5           # of target_noise: a probe over it takes a round, blended in by ramp
+
+
+def ramp(n, target: float) -> np.ndarray:
+    """A round's weight for probes of noise n (before it): 0 under LOW x target, 1 from the target."""
+    return np.clip((np.asarray(n, np.float64) / target - LOW) / (1.0 - LOW), 0.0, 1.0)
+
+
 CAP = 8             # the most rays a noisy probe takes, omitted max_rays: this many times rays
 RAY_BYTES = 64      # host memory a further ray takes: the trace's float32 results, the float64 copies kept and
                     # those its probe's combination concatenates
@@ -71,11 +82,13 @@ def batch_directions(settings: dict, first: int, count: int) -> np.ndarray:
 
 def more_rays(tracer, positions, live, radiance, t, settings: dict, progress=None):
     """(each probe's rays, the rounds) after the first pass (radiance, t of every probe over
-    ray_directions(rays, seed)): while a live probe's noise is over target_noise and twice its rays
-    are within ray_cap, it traces as many rays again (with k batches so far: batches k .. 2k - 1, its
-    rays numbered on from k x rays so that no ray's random stream repeats another's). A round is (the
-    probes' indices, their radiance, their t); a round whose rays would not fit in this process's
-    memory is not traced (the third value: how many probes it left noisy, else 0)."""
+    ray_directions(rays, seed)): while a live probe's noise is over LOW x target_noise (and every
+    round before weighed it in) and twice its rays are within ray_cap, it traces as many rays again
+    (with k batches so far: batches k .. 2k - 1, its rays numbered on from k x rays so that no ray's
+    random stream repeats another's). A round is (the probes' indices, their radiance, their t, the
+    weight its mean takes: the previous round's times ramp of the noise before it); a round whose
+    rays would not fit in this process's memory is not traced (the third value: how many probes it
+    left noisy, else 0)."""
     from iblbake.io import memory
     from iblbake.render.paths.trace import describe
 
@@ -83,8 +96,10 @@ def more_rays(tracer, positions, live, radiance, t, settings: dict, progress=Non
     counts = np.full(len(positions), rays)
     rounds = []
     todo = np.flatnonzero(live)
+    weight = np.zeros(0)
     if cap > rays and len(todo):
-        todo = todo[noise(radiance[todo], t[todo], batch_directions(settings, 0, 1)) > target]
+        weight = ramp(noise(radiance[todo], t[todo], batch_directions(settings, 0, 1)), target)
+        todo, weight = todo[weight > 0], weight[weight > 0]
     while len(todo) and 2 * counts[todo[0]] <= cap:
         k = counts[todo[0]] // rays                  # the batches each has: a round's probes have as many
         free = memory.host_bytes_available()
@@ -92,10 +107,11 @@ def more_rays(tracer, positions, live, radiance, t, settings: dict, progress=Non
             return counts, rounds, len(todo)
         describe(progress, f"{len(todo):,} noisy probes x {k * rays} more rays")
         rad, tt, _ = tracer.trace(positions[todo], batch_directions(settings, k, k), True, ray0=k * rays)
-        rounds.append((todo, rad, tt))
+        rounds.append((todo, rad, tt, weight))
         counts[todo] *= 2
         r, d, dirs = rays_of(todo, radiance, t, rounds, settings)
-        todo = todo[noise(r, d, dirs) > target]
+        weight = weight * ramp(noise(r, d, dirs), target)
+        todo, weight = todo[weight > 0], weight[weight > 0]
     return counts, rounds, 0
 
 
@@ -103,23 +119,24 @@ def rays_of(idx, radiance, t, rounds, settings: dict):
     """(radiance, t, dirs) of all the rays of probes idx, each of which took part in every round
     given: the first pass's, then each round's, in the order of their directions."""
     rad, dist = [radiance[idx]], [t[idx]]
-    for ids, r, d in rounds:
+    for ids, r, d, _w in rounds:
         at = np.searchsorted(ids, idx)
         rad.append(r[at])
         dist.append(d[at])
     return np.concatenate(rad, 1), np.concatenate(dist, 1), batch_directions(settings, 0, 1 << len(rounds))
 
 
-def combined_values(radiance, t, counts, rounds, spacing, settings: dict):
-    """probe_values of every probe over all of its rays: the first pass's for those that took no
-    more, the mean over the first pass's and their rounds' rays (one pass over those directions)
-    for the others."""
+def combined_values(radiance, t, rounds, spacing, settings: dict):
+    """probe_values of every probe: the first pass's, and for each round a probe took, its mean
+    over the first pass's and the rounds' rays so far (one pass over those directions) blended in
+    by the round's weight (1: that mean alone, what a probe over the target holds)."""
     dirs = batch_directions(settings, 0, 1)[:, :3]
     irr, moments = probe_values(radiance, t, dirs, spacing, settings)
-    rays = settings["rays"]
     for k in range(1, len(rounds) + 1):
-        idx = np.flatnonzero(counts == rays << k)
-        if len(idx):
-            r, d, more = rays_of(idx, radiance, t, rounds[:k], settings)
-            irr[idx], moments[idx] = probe_values(r, d, more[:, :3], spacing, settings)
+        idx, w = rounds[k - 1][0], rounds[k - 1][3]
+        r, d, more = rays_of(idx, radiance, t, rounds[:k], settings)
+        e, m = probe_values(r, d, more[:, :3], spacing, settings)
+        shape = (-1,) + (1,) * (e.ndim - 1)
+        irr[idx] = irr[idx] + w.reshape(shape) * (e - irr[idx])
+        moments[idx] = moments[idx] + w.reshape((-1,) + (1,) * (m.ndim - 1)) * (m - moments[idx])
     return irr, moments
