@@ -195,9 +195,9 @@ def test_the_new_keys_key_their_own_volume_and_a_cap_under_twice_rays_is_said(tm
     def key(*overrides):
         return units.UNITS["probes"].key(Job(iblbake.load_scene(path, list(overrides)), rt, bakes))
 
-    keys = {key(), key("probes.target_noise=0.1"), key("probes.target_noise=0.3"),
+    keys = {key(), key("probes.target_noise=0.1"), key("probes.target_noise=0"),
             key("probes.target_noise=0.3", "probes.max_rays=2048")}
-    assert len(keys) == 4 and key() == key() == key("probes.target_noise=0")
+    assert len(keys) == 4 and key() == key() == key("probes.target_noise=0.3")      # the default
     sc = iblbake.load_scene(path, ["probes.rays=1024", "probes.max_rays=1500", "probes.target_noise=0.3"])
     said = [w for w in probes.warnings({"probes": 8}, sc.data) if "max_rays" in w]
     assert said == ["probes.max_rays 1500 is under twice probes.rays 1024: no noisy probe takes more rays (a noisy "

@@ -70,7 +70,7 @@ def test_render_and_probes_say_the_box_outside_the_scene(tmp_path, sky):
     path = outside_scene(tmp_path, sky)
     p = run_cli("render", path, "-o", tmp_path / "out.exr", "--cache", tmp_path / "cache", "--json")
     assert p.returncode == 0, p.stderr
-    assert "iblbake: 8 probes x 256 rays = 2,048 paths (2x2x2 grid, spacing 1)" in p.stderr
+    assert "iblbake: 8 probes x 256 rays (up to 2048 where noisy) = 2,048 paths (2x2x2 grid, spacing 1)" in p.stderr
     doc = json.loads(p.stdout)
     shade = next(r for r in doc["passes"] if r["name"] == "shade")
     assert 250 < shade["probe_samples"] < 600 and shade["probe_outside_volume"] == shade["probe_samples"], shade
@@ -146,15 +146,16 @@ def test_a_huge_bake_says_its_time_up_front(tmp_path, sky, monkeypatch):
     with pytest.raises(iblbake.InputError, match="262,144 probes x 256 rays need about"):
         iblbake.bake_probes(huge, cache=tmp_path / "cache", progress=Progress())
     line, = said
-    m = re.fullmatch(r"262,144 probes x 256 rays = 67,108,864 paths \(64x64x64 grid, spacing 0\.0625\), about "
-                     r"(\S+ (?:s|min|h)) to trace \(([\d.]+)M paths/s measured on this device\)", line)
+    m = re.fullmatch(r"262,144 probes x 256 rays \(up to 2048 where noisy\) = 67,108,864 paths \(64x64x64 grid, "
+                     r"spacing 0\.0625\), about (\S+ (?:s|min|h)) to trace \(([\d.]+)M paths/s measured on this "
+                     r"device; up to \S+ (?:s|min|h) where noisy\)", line)
     assert m, line
     rate = float(m.group(2)) * 1e6                    # said to 2 digits: the time is of a rate within 5% of it
     assert m.group(1) in {probes.duration_said(2**26 / (rate * f)) for f in np.linspace(0.95, 1.05, 201)}, line
     said.clear()
     monkeypatch.undo()
     iblbake.bake_probes(iblbake.load_scene(path), cache=tmp_path / "cache", progress=Progress())
-    assert said == ["8 probes x 256 rays = 2,048 paths (2x2x2 grid, spacing 1)"]
+    assert said == ["8 probes x 256 rays (up to 2048 where noisy) = 2,048 paths (2x2x2 grid, spacing 1)"]
 
 
 def test_probes_json_carries_the_estimate_and_the_rays_it_did_not_count(tmp_path, sky, monkeypatch):

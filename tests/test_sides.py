@@ -126,7 +126,9 @@ def open_box(folder, sky, inward: bool, diffuse="probes"):
         "materials": {"white": {"base_color": [0.8, 0.8, 0.8], "specular": 0},
                       "red": {"base_color": [0.8, 0.1, 0.1], "specular": 0},
                       "green": {"base_color": [0.1, 0.8, 0.1], "specular": 0}},
-        "objects": objs, "probes": {"rays": 256},
+        # one pass of rays (target_noise 0): the windings' volumes compared ray for ray (adaptive rounds
+        # follow each winding's Monte Carlo noise, and their distance moments with them)
+        "objects": objs, "probes": {"rays": 256, "target_noise": 0},
         "effects": {"diffuse": diffuse, "specular": "off", "reference": {"max_samples": 256, "target_noise": 0}}})
 
 

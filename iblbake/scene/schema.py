@@ -470,12 +470,12 @@ SCHEMA = Section(doc="a scene", required=("environment",), fields={
                     doc="rays per probe, one path each (a spherical Fibonacci set, randomly rotated; DDGI traces "
                         "256 a frame and accumulates frames, a bake takes them at once: an unextracted sun's "
                         "visibility needs them)"),
-        "target_noise": Num(0.0, 0.0, 1.0, doc="adaptive rays (0: off, the default): a live probe whose irradiance's "
+        "target_noise": Num(0.3, 0.0, 1.0, doc="adaptive rays (0: off): a live probe whose irradiance's "
                                                 "relative standard error after its rays (the spread over 7 interleaved "
-                                                "batches of them, at the six axis directions) is over this traces as "
-                                                "many rays again in fresh directions, and again, up to max_rays; its "
-                                                "irradiance and distances the mean over all of them (0.3 measured: "
-                                                "docs/manual.md; not yet the same at every scale)"),
+                                                "batches of them, at the six axis directions) is over half this traces "
+                                                "as many rays again in fresh directions, and again, up to max_rays; its "
+                                                "irradiance and distances the mean over all of them, each round "
+                                                "weighed in from 0 at half this to 1 at it (docs/manual.md)"),
         "max_rays": Num(None, 0, 1 << 19, integer=True,
                         doc="adaptive rays: the most rays a noisy probe takes, rounded down to rays times a power "
                             "of two (omitted: 8 x rays; 0, or under twice rays: off)"),
