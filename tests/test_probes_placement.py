@@ -523,20 +523,27 @@ def test_relocation_moves_a_probe_towards_a_surface_not_the_sky():
     assert np.allclose(step, dirs[wall], atol=1e-9), (step, dirs[wall])
 
 
+def probe_box_walls(width, height) -> dict:
+    """examples/corpus/probe_box_walls.yaml (its probe box on the walls) at width x height, its
+    files' paths absolute."""
+    path = ROOT / "examples" / "corpus" / "probe_box_walls.yaml"
+    if not (path.parent / "meshes" / "skylight_room.obj").exists():
+        pytest.fail("the corpus meshes are missing: run `make meshes`")
+    doc = yaml.safe_load(path.read_text())
+    doc["camera"]["resolution"] = [width, height]
+    doc["environment"]["path"] = str(path.parent / doc["environment"]["path"])
+    for o in doc["objects"]:
+        if "mesh" in o:
+            o["mesh"]["path"] = str(path.parent / o["mesh"]["path"])
+    return doc
+
+
 def test_a_box_drawn_on_the_walls_counts_no_sample_outside_it(tmp_path, rt):
     """A new user's trial: with the probe box on the room's walls (examples/corpus/probe_box_walls),
     a frame's points on the walls, floor and ceiling, at the box's faces, weigh 1 - 2e-7 in float32
     and were counted outside the volume: "27% of the frame's samples lie outside the probe volume"
     was said of a room the box covers. None is outside; the warning is not said."""
-    path = ROOT / "examples" / "corpus" / "probe_box_walls.yaml"
-    if not (path.parent / "meshes" / "skylight_room.obj").exists():
-        pytest.fail("the corpus meshes are missing: run `make meshes`")
-    doc = yaml.safe_load(path.read_text())
-    doc["camera"]["resolution"] = [32, 24]
-    doc["environment"]["path"] = str(path.parent / doc["environment"]["path"])
-    for o in doc["objects"]:
-        if "mesh" in o:
-            o["mesh"]["path"] = str(path.parent / o["mesh"]["path"])
+    doc = probe_box_walls(32, 24)
     said = []
     frame = render(load_scene(tmp_path, "walls", doc), runtime=rt, cache_root=tmp_path / "cache", warn=said.append)
     shade = next(p for p in frame.report["passes"] if p["name"] == "shade")
@@ -601,15 +608,7 @@ def test_a_box_drawn_on_the_walls_takes_the_interiors_spacing(tmp_path, rt):
     It takes the interior's scale as the automatic grid does, measured from the same points:
     probe_box_walls' box (3 x 2.4 x 5, on the walls) is cut into cells within a cell's rounding of
     the automatic grid's x and z spacing (whole cells across the box), and said in the report."""
-    path = ROOT / "examples" / "corpus" / "probe_box_walls.yaml"
-    if not (path.parent / "meshes" / "skylight_room.obj").exists():
-        pytest.fail("the corpus meshes are missing: run `make meshes`")
-    doc = yaml.safe_load(path.read_text())
-    doc["camera"]["resolution"] = [16, 12]
-    doc["environment"]["path"] = str(path.parent / doc["environment"]["path"])
-    for o in doc["objects"]:
-        if "mesh" in o:
-            o["mesh"]["path"] = str(path.parent / o["mesh"]["path"])
+    doc = probe_box_walls(16, 12)
     grids = {}
     for name, box in (("box", doc["probes"]), ("auto", {})):
         doc["probes"] = {**box, "rays": 64}
