@@ -36,7 +36,8 @@ from iblbake.render.probes.files import (ENVIRONMENT_FILE, FILES, FORMAT, VERSIO
                                          sky_entry, write_environment)
 from iblbake.render.probes.glsl import SH_GLSL, SPECULAR_TABLES, basis_glsl, glsl
 from iblbake.render.probes.grid import (AUTO_MAX_PROBES, DEFAULT_LONGEST, MAX_PROBES, SCALE_RAYS, Grid, apart,
-                                        auto_step, axis_counts, grid_of, lattice, probe_bytes, scene_bounds)
+                                        auto_step, axis_counts, box_counts, grid_of, lattice, probe_bytes,
+                                        scene_bounds)
 from iblbake.render.probes.project import (BACKFACE_BLEND_LIMIT, MAX_DISTANCE, atlas, layout, probe_values, project,
                                            with_borders)
 from iblbake.render.paths.tracer import Tracer, trace_defines
@@ -78,11 +79,13 @@ def scaled_grid(tracer, coarse: Grid, settings: dict, arrays, camera):
         info["lattice"] = lattice(grid, arrays)
         info.update(cramped(t[-1], grid, arrays, automatic=True))
     if hint is not None and grid.unit > min(hint, coarse.unit) * 1.0001:
-        lo, hi = scene_bounds(arrays) if settings["min"] is None else (np.asarray(settings["min"], np.float64),
-                                                                       np.asarray(settings["max"], np.float64))
-        info["capped"] = {"step": round(min(hint, coarse.unit), 6),
-                          "probes": math.prod(max(c, 1) for c in axis_counts(hi - lo, min(hint, coarse.unit),
-                                                                             2 if settings["min"] is None else 0))}
+        step = min(hint, coarse.unit)
+        if settings["min"] is None:
+            lo, hi = scene_bounds(arrays)
+            asked = axis_counts(hi - lo, step, 2)
+        else:                                  # the box's cells at that step, as grid_of cuts them
+            asked = box_counts(np.asarray(settings["max"], np.float64) - np.asarray(settings["min"], np.float64), step)
+        info["capped"] = {"step": round(step, 6), "probes": math.prod(asked)}
     return grid, info
 
 

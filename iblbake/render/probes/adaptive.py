@@ -136,7 +136,6 @@ def combined_values(radiance, t, rounds, spacing, settings: dict):
         idx, w = rounds[k - 1][0], rounds[k - 1][3]
         r, d, more = rays_of(idx, radiance, t, rounds[:k], settings)
         e, m = probe_values(r, d, more[:, :3], spacing, settings)
-        shape = (-1,) + (1,) * (e.ndim - 1)
-        irr[idx] = irr[idx] + w.reshape(shape) * (e - irr[idx])
-        moments[idx] = moments[idx] + w.reshape((-1,) + (1,) * (m.ndim - 1)) * (m - moments[idx])
+        for held, mean in ((irr, e), (moments, m)):      # each probe's own weight over its values' axes
+            held[idx] += w.reshape((-1,) + (1,) * (mean.ndim - 1)) * (mean - held[idx])
     return irr, moments

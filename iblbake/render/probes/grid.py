@@ -298,11 +298,19 @@ def lattice(grid: Grid, arrays) -> dict:
     return {"counts": list(grid.counts), "spacing": [round(s, 6) for s in grid.spacing], "clearance": out}
 
 
+def box_counts(extent, step) -> list:
+    """A min/max box's cells along each axis at `step` (axis_counts): 2 at least where the box has
+    an extent, 1 where it has none."""
+    return [max(c, 2) if e > 0 and c is not None else (1 if e <= 0 else c)
+            for c, e in zip(axis_counts(extent, step, 0), extent)]
+
+
 def grid_of(settings: dict, arrays, step_hint: float | None = None) -> Grid:
     """The probe grid a scene's `probes` section asks for (docs/scene.md). With min and max: the box
     cut into cells (counts along each axis, or cells about one spacing wide: `spacing`, else
-    step_hint, else DEFAULT_LONGEST along its longest axis), a probe at each cell's centre, so that none stands on the box's faces (a box drawn on a room's walls left probes on the
-    walls, seeing the sky through them). Automatic: cubic cells (N along the longest axis, or
+    step_hint, else DEFAULT_LONGEST along its longest axis), a probe at each cell's centre, so that
+    none stands on the box's faces (a box drawn on a room's walls left probes on the walls, seeing
+    the sky through them). Automatic: cubic cells (N along the longest axis, or
     `spacing`, or step_hint: the scene's interior scale, auto_step) whose probes overhang the
     scene's bounds on every side by at least half a cell, so that every surface has probes on both
     of its sides (RTXGI's volumes enclose the scene), at most AUTO_MAX_PROBES (coarser above); from
@@ -329,16 +337,13 @@ def grid_of(settings: dict, arrays, step_hint: float | None = None) -> Grid:
             if counts is not None and counts < 2 and extent.max() > 0:
                 raise InputError(f"probes.counts {counts}: the box takes 2 cells along its longest axis; "
                                    f"give at least 2")
-            def cut(step):     # cells along each axis, 2 at least where the box has an extent
-                return [max(c, 2) if e > 0 and c is not None else (1 if e <= 0 else c)
-                        for c, e in zip(axis_counts(extent, step, 0), extent)]
             step = settings["spacing"] or max(float(extent.max()), 1e-6) / (counts or DEFAULT_LONGEST)
-            n = cut(step)
+            n = box_counts(extent, step)
             if not (settings["spacing"] or counts) and step_hint is not None:
                 # the interior's scale, as an automatic grid's (trial76: a box drawn on a room's walls took 8
                 # cells along its longest axis, 0.5 where the room asked 0.35: its window wall x1.32), capped
                 step = min(step, step_hint)
-                while math.prod(n := cut(step)) > AUTO_MAX_PROBES:
+                while math.prod(n := box_counts(extent, step)) > AUTO_MAX_PROBES:
                     step *= 1.05
         check_count(n, settings)
         cells = np.asarray(n, np.float64)
