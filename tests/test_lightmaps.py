@@ -77,6 +77,46 @@ def test_unwrap_texels_inside_their_triangles(tmp_path, white):
     assert 0.3 < use < 1.0
 
 
+def test_charts_packed_in_a_child_as_in_process(tmp_path, white):
+    """render/lightmaps/pack.py: the child process packs the cube and the sphere as xatlas does in
+    this process (the same atlas, index for index: xatlas is deterministic)."""
+    import xatlas
+    from iblbake.render.lightmaps import pack
+    sc = scene(tmp_path, white, [{"mesh": {"path": CUBE}, "material": "m"},
+                                 {"sphere": {"center": [1, 0.5, 0], "radius": 0.4}, "material": "m"}],
+               {"m": LAMBERT})
+    meshes = [(p[2], p[3], p[4]) for p in lightmaps.uv._parts(sc, host_triangles(sc))]
+    w, h, count, got = pack.charts(meshes, 16.0, 2, False)
+    atlas = xatlas.Atlas()
+    for v, f, _uv in meshes:
+        atlas.add_mesh(v.astype(np.float32), f.astype(np.uint32))
+    opts = xatlas.PackOptions()
+    opts.texels_per_unit, opts.padding, opts.bilinear, opts.resolution, opts.blockAlign = 16.0, 2, True, 0, False
+    atlas.generate(xatlas.ChartOptions(), opts)
+    assert (w, h, count) == (atlas.width, atlas.height, atlas.atlas_count) == (w, h, 1)
+    for i, mine in enumerate(got):
+        for a, b in zip(mine, atlas[i]):
+            assert a.dtype == b.dtype and np.array_equal(a, b)
+
+
+def test_a_crashed_packer_runs_again_then_stops_in_one_line(tmp_path, monkeypatch):
+    """A child killed by a signal (xatlas' rare segmentation fault) is run again: once, the atlas
+    comes back; every time, TRIES runs and one line naming the key and the signal."""
+    from iblbake.errors import IblbakeError
+    from iblbake.render.lightmaps import pack
+    flag = tmp_path / "crashed"
+    once = f'[ -e "{flag}" ] || {{ touch "{flag}"; kill -SEGV $$; }}; exec "$0" "$1"'
+    quad = [(np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float), np.array([[0, 1, 2], [0, 2, 3]]), None)]
+    monkeypatch.setattr(pack, "COMMAND", ["sh", "-c", once, *pack.COMMAND])
+    w, h, count, got = pack.charts(quad, 8.0, 2, False)
+    assert flag.exists() and count == 1 and w * h >= 64 and got[0][1].shape == (2, 3)
+    always = f'echo run >> "{tmp_path / "runs"}"; kill -SEGV $$'
+    monkeypatch.setattr(pack, "COMMAND", ["sh", "-c", always])
+    with pytest.raises(IblbakeError, match=r"^x.yaml: lightmap.texels_per_unit: xatlas died \(SIGSEGV\)") as e:
+        pack.charts(quad, 8.0, 2, False, what="x.yaml: lightmap.texels_per_unit")
+    assert "\n" not in str(e.value) and (tmp_path / "runs").read_text().count("run") == pack.TRIES
+
+
 def test_texels_the_same_in_chunks(tmp_path, white, monkeypatch):
     """The rasterisation tests every triangle's box of texels at once, uv.CHUNK (triangle, texel)
     pairs at a time: cut into chunks of a few triangles each, the same texels, triangles and points

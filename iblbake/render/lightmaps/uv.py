@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from iblbake.errors import InputError
+from iblbake.render.lightmaps import pack
 
 PADDING = 2                  # texels between charts
 SPHERE_SEGMENTS = (32, 16)   # a sphere's mesh: around, pole to pole
@@ -185,24 +186,18 @@ def layout(scene, tris, density: float, max_texels: int, key: str = "lightmap.te
     check_size(scene, area(parts), density, max_texels, key)
     if not parts:
         raise InputError(f"{scene.source}: lightmap: the scene has no mesh, sphere or finite plane to lightmap")
-    import xatlas                                   # only where lightmaps are baked (the lightmaps extra)
-    atlas = xatlas.Atlas()
+    meshes = []
     for _o, how, v, f, uv, s, _n in parts:
         if s is not None:             # a small sphere charted larger: at least SPHERE_TEXELS around
             v = s[0] + (v - s[0]) * max(1.0, SPHERE_TEXELS / (2 * math.pi * s[1] * density))
-        atlas.add_mesh(v.astype(np.float32), f.astype(np.uint32), None,
-                       None if uv is None else uv.astype(np.float32))
-    charts, pack = xatlas.ChartOptions(), xatlas.PackOptions()
-    charts.use_input_mesh_uvs = any(p[1] == "texcoord_1" for p in parts)
-    pack.texels_per_unit, pack.padding, pack.bilinear, pack.resolution = float(density), PADDING, True, 0
-    pack.blockAlign = False
-    atlas.generate(charts, pack)
-    if atlas.atlas_count != 1:
-        raise InputError(f"{scene.source}: {key}: the charts took {atlas.atlas_count} atlases; give a lower density")
-    w, h = atlas.width, atlas.height
+        meshes.append((v, f, uv))
+    use_uvs = any(p[1] == "texcoord_1" for p in parts)
+    w, h, count, packed = pack.charts(meshes, density, PADDING, use_uvs, what=f"{scene.source}: {key}")
+    if count != 1:
+        raise InputError(f"{scene.source}: {key}: the charts took {count} atlases; give a lower density")
     corners, normals, objs, uvs, sph = [], [], [], [], []
     for i, (oid, how, v, f, _uv, s, part_normals) in enumerate(parts):
-        vmap, idx, uv = atlas[i]
+        vmap, idx, uv = packed[i]
         idx = idx.reshape(-1, 3)
         c = v[vmap][idx]
         corners.append(c)
