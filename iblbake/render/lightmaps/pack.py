@@ -5,6 +5,7 @@ dies of a segmentation fault inside Atlas.generate on a loaded machine (measured
 the command, a pytest worker or a user's program with it. The child is this file run as a script by
 the same interpreter (it imports numpy and xatlas alone); one killed by a signal is run again, up to
 TRIES times, then the bake stops with one line. xatlas is deterministic: a rerun packs the same atlas.
+The child also leaves without destroying the atlas, whose destructor can hang (below).
 
 The meshes go to the child's standard input and its atlas comes back on its standard output, each as
 one .npz (numpy's format, read without pickle): in, per mesh i `v{i}` (n, 3) float32, `f{i}` (m, 3)
@@ -15,6 +16,7 @@ uint32 and, where the mesh keeps its own charts, `uv{i}` (n, 2) float32, and `op
 from __future__ import annotations
 
 import io
+import os
 import signal
 import subprocess
 import sys
@@ -75,7 +77,13 @@ def _child():
     buf = io.BytesIO()
     np.savez(buf, **out)
     sys.stdout.buffer.write(buf.getvalue())
+    sys.stdout.buffer.flush()
+    return atlas
 
 
 if __name__ == "__main__":
-    _child()
+    # leave with the atlas alive: xatlas' destructor wakes its workers without their lock and joins
+    # them, and a worker between its check and its wait sleeps for ever (a hang seen here, 1 in some
+    # hundreds of packs under load); the process' end frees everything
+    atlas = _child()
+    os._exit(0)
