@@ -87,7 +87,7 @@ LEGEND = ("'name xR (A%, tint T%; N px)': R the ratio of the region's (or half's
           "bounds (regions over 30%, halves over 10%) count; T the colour shift once the luminances match, shown "
           "where the worst channel is mostly that; N its pixels (a few pixels' mean is as noisy as a few pixels). "
           "Each region's (half's) luminance ratio: R alone. Halves the camera sees in under 4 pixels are left "
-          "out. Reference noise: the frame's relative standard error per pixel; a region's mean has about that "
+          "out, named beside the count with their pixels. Reference noise: the frame's relative standard error per pixel; a region's mean has about that "
           "over the square root of its pixels.")
 
 
@@ -150,7 +150,9 @@ def specular_table(results) -> str:
             continue
         parts, noise = p["part_absolute"], res["reference_noise"]["specular"]
         over = sum(e["absolute"] > BOUND_PART for e in parts.values())
-        out.append(f"| {res['scene']} | {res['panorama']} | {worst(parts)} | {over} of {len(parts)} | "
+        small = p.get("parts_left_out", {})
+        left = f" (left out: {', '.join(f'{short(n)} {v} px' for n, v in small.items())})" if small else ""
+        out.append(f"| {res['scene']} | {res['panorama']} | {worst(parts)} | {over} of {len(parts)}{left} | "
                    f"{ratios(parts)} | {worst(d['part_absolute']) if d and 'part_absolute' in d else ''} | "
                    f"{frame(p, noise)} | {100 * noise:.1f}% |")
     return "\n".join(out) + "\n"

@@ -127,6 +127,25 @@ def test_absolute_region_errors_read_brightness_and_colour():
     assert set(parts) == {"+y", "-y"} and parts["+y"].sum() == 4 and not (parts["+y"] & parts["-y"]).any()
 
 
+def test_halves_too_small_to_judge_are_named():
+    """Study.region_metrics, specular: a metal sphere's halves of 4 pixels or more are judged, one
+    the camera sees in 2 pixels is named with its pixels in parts_left_out (corpus_absolute.py
+    prints it beside the count) instead of vanishing."""
+    from types import SimpleNamespace
+
+    from iblbake.study.accuracy import Study
+    regions = np.zeros((4, 4), int)
+    normals = np.zeros((4, 4, 3))
+    normals[..., 1] = 1
+    normals[3, :2, 1], normals[3, :2, 0] = 0, 1           # two pixels face +x (and up, none)
+    ref = np.ones((4, 4, 4))
+    fake = SimpleNamespace(object_regions=lambda: regions, _normals=normals, metal_objects=lambda: [0],
+                           scene=SimpleNamespace(data={"objects": [{"sphere": {}, "name": "gold"}]}))
+    out = Study.region_metrics(fake, ref, ref, np.ones((4, 4), bool), "specular")
+    assert set(out["part_absolute"]) == {"'gold' (objects.0) +y"}
+    assert out["parts_left_out"] == {"'gold' (objects.0) +x": 2}
+
+
 def test_edge_over_interior_reads_a_seam_of_one_pixel():
     """core/metrics edge_over_interior (issue 59, "no seams"): a floor (rows below 8) and a wall
     of one mesh (one region; the junction found by the normals' turn) or two, the frame right

@@ -261,7 +261,8 @@ class Study:
         colour's relative error (metrics.region_errors) and the worst of them; the same in absolute
         terms (metrics.mean_errors: the ratio of mean luminances, the worst channel) and the worst
         |ratio - 1| or channel error. For the specular term, each half of each metal object
-        (metrics.halves: the side it faces) in absolute terms too. For the diffuse term the seams
+        (metrics.halves: the side it faces) in absolute terms too, and the halves too small to judge
+        with their pixels (`parts_left_out`). For the diffuse term the seams
         as one number (metrics.edge_over_interior: the junctions' one-pixel band over the interior)."""
         regions = self.object_regions()
 
@@ -276,13 +277,19 @@ class Study:
             eoi = edge_over_interior(hdr, ref, mask, regions, self._normals)
             out["edge_over_interior"] = None if eoi is None else round(eoi, 4)
         if term == "specular":
-            parts = {}
+            parts, left_out = {}, {}
             for k in self.metal_objects():
-                for side, e in region_absolute(hdr, ref, mask, halves(self._normals, regions == k)).items():
+                kept = halves(self._normals, regions == k)
+                for side, e in region_absolute(hdr, ref, mask, kept).items():
                     parts[f"{label(k)} {side}"] = rounded(e)
+                for side, sel in halves(self._normals, regions == k, min_pixels=1).items():
+                    if side not in kept:            # too few pixels to judge: said, not judged
+                        left_out[f"{label(k)} {side}"] = int(sel.sum())
             if parts:
                 out["part_absolute"] = parts
                 out["worst_part_absolute"] = max(e["absolute"] for e in parts.values())
+            if left_out:
+                out["parts_left_out"] = left_out
         return out
 
     def metric_mask(self, term: str, hdr) -> np.ndarray:
