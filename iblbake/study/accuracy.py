@@ -262,8 +262,8 @@ class Study:
         terms (metrics.mean_errors: the ratio of mean luminances, the worst channel) and the worst
         |ratio - 1| or channel error. For the specular term, each half of each metal object
         (metrics.halves: the side it faces) in absolute terms too, and the halves too small to judge
-        with their pixels (`parts_left_out`). For the diffuse term the seams
-        as one number (metrics.edge_over_interior: the junctions' one-pixel band over the interior)."""
+        with their pixels (`parts_left_out`). For the diffuse term the seams as one number
+        (metrics.edge_over_interior: the junctions' one-pixel band over the interior)."""
         regions = self.object_regions()
 
         def label(k):

@@ -83,7 +83,7 @@ def _child():
 
 if __name__ == "__main__":
     # leave with the atlas alive: xatlas' destructor wakes its workers without their lock and joins
-    # them, and a worker between its check and its wait sleeps for ever (a hang seen here, 1 in some
-    # hundreds of packs under load); the process' end frees everything
+    # them, and a worker between its check and its wait sleeps for ever (seen here once in the same
+    # stress of some thousands of packs); the process' end frees everything
     atlas = _child()
     os._exit(0)
