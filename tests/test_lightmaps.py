@@ -102,12 +102,12 @@ def test_a_crashed_packer_runs_again_then_stops_in_one_line(tmp_path, monkeypatc
     from iblbake.errors import IblbakeError
     from iblbake.render.lightmaps import pack
     flag = tmp_path / "crashed"
-    once = f'[ -e "{flag}" ] || {{ touch "{flag}"; kill -SEGV $$; }}; exec "$0" "$1"'
+    once = f'ulimit -c 0; [ -e "{flag}" ] || {{ touch "{flag}"; kill -SEGV $$; }}; exec "$0" "$1"'
     quad = [(np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float), np.array([[0, 1, 2], [0, 2, 3]]), None)]
     monkeypatch.setattr(pack, "COMMAND", ["sh", "-c", once, *pack.COMMAND])
     w, h, count, got = pack.charts(quad, 8.0, 2, False)
     assert flag.exists() and count == 1 and w * h >= 64 and got[0][1].shape == (2, 3)
-    always = f'echo run >> "{tmp_path / "runs"}"; kill -SEGV $$'
+    always = f'ulimit -c 0; echo run >> "{tmp_path / "runs"}"; kill -SEGV $$'
     monkeypatch.setattr(pack, "COMMAND", ["sh", "-c", always])
     with pytest.raises(IblbakeError, match=r"^x.yaml: lightmap.texels_per_unit: xatlas died \(SIGSEGV\)") as e:
         pack.charts(quad, 8.0, 2, False, what="x.yaml: lightmap.texels_per_unit")

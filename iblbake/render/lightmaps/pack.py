@@ -58,7 +58,12 @@ def charts(meshes, texels_per_unit: float, padding: int, use_input_uvs: bool, *,
 
 
 def _child():
+    import resource
+
     import xatlas
+
+    # a crash writes no core file into the user's folder (where a shell's `ulimit -c` would allow one)
+    resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
 
     with np.load(io.BytesIO(sys.stdin.buffer.read()), allow_pickle=False) as got:
         density, padding, use_uvs, n = got["options"]
