@@ -373,7 +373,11 @@ def bake(job, settings: dict, progress=None) -> dict:
     valid = np.zeros(h * w, bool)
     valid[tx.index[ok]] = True
     irr = np.zeros((h * w, 3))
-    irr[tx.index] = e
+    # irradiance is >= 0 (the frame clamps it too, kernels/lightmap.h lightmap_texel): the residual
+    # panorama where a sun was extracted dips a hair below 0 where the fitted lobe overshoots (city:
+    # 506 values, the least -0.0016), a dark texel's few paths land under 0 (trial77: -1e-5 at 16
+    # samples), and read back a negative texel fails the bake's check
+    irr[tx.index] = np.maximum(e, 0.0)
     atlas = np.zeros((h * w,) + coeffs.shape[1:])
     atlas[tx.index] = coeffs
     irr, filled = dilate(irr.reshape(h, w, 3), valid.reshape(h, w))
