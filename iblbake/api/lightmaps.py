@@ -68,9 +68,8 @@ def bake_lightmap(scene, device: str | None = None, *, cache=None, warn=None, pr
     every texel of its static geometry; cached by content in `cache` (as render). names: what
     error messages call each argument (the command line passes its flags)."""
     from iblbake.render import Bakes
-    from iblbake.render.lightmaps import export, store
+    from iblbake.render.lightmaps import export
     from iblbake.render.units import Job
-    from iblbake.render.units import Lightmap as UnitLightmap
 
     _names(names)
     _device(device)
@@ -85,8 +84,11 @@ def bake_lightmap(scene, device: str | None = None, *, cache=None, warn=None, pr
     bakes = Bakes(cache)
     bakes.runtime = rt
     job = Job(sc, rt, bakes, warn or (lambda _m: None), progress)
+    for w in bakes.environment(sc.data["environment"])[1].warnings:     # as a frame says them
+        job.warn(w)
     with _on_device(rt):
-        lm, cached = store.baked(job, UnitLightmap.settings(job), progress=progress)   # the frame's: the lobe's set
+        # the frame's unit (the lobe's set where the frame reads one), which says what a frame says of it
+        lm, cached, _extra = bakes.load("lightmap", job)
     atlases = {b: lm[b] for b in export.held(lm)}
     from iblbake.render.probes import light_entries      # what an engine draws itself, as probes.json says
     env = sc.data["environment"]
