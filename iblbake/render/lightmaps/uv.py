@@ -173,9 +173,13 @@ def check_size(scene, surface: float, density: float, max_texels: int, key: str 
     passes max_texels, in one line naming `key`."""
     estimate = int(surface * density ** 2 / 0.7)
     if estimate > max_texels:
+        # the density that fits, 2 significant digits rounded down (texels go as its square)
+        fits = density * math.sqrt(max_texels / estimate)
+        step = 10.0 ** (math.floor(math.log10(fits)) - 1)
+        fits = math.floor(fits / step) * step
         raise InputError(f"{scene.source}: {key}: {density:g} texels per unit asks about {estimate} texels "
                          f"(~{estimate * TEXEL_BYTES * 4 / 2**20:.0f} MiB to bake) over the cap of {max_texels} "
-                         f"(lightmap.max_texels); give a lower density")
+                         f"(lightmap.max_texels); give a lower density (about {fits:.2g} fits)")
 
 
 def layout(scene, tris, density: float, max_texels: int, key: str = "lightmap.texels_per_unit") -> Layout:
