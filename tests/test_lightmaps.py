@@ -623,12 +623,12 @@ def test_a_density_of_another_scale_is_said(tmp_path, white, scale):
     sc = scene(tmp_path, white, [{"sphere": {"center": [0, 0.3 * scale, 0], "radius": 0.8 * scale}, "material": "m"}],
                {"m": {"base_color": [0.8, 0.7, 0.6], **LAMBERT}}, camera=(0, 1.5 * scale, 3 * scale))
     sc.data["effects"]["diffuse"] = "lightmap"
-    warned, baked = [], []
+    warned, from_bake = [], []
     render(sc, cache=Bakes(tmp_path / "cache"), warn=warned.append)
     said = [w for w in warned if w.startswith("lightmap: 8 texels a unit")]
     # `iblbake lightmap`'s path (the API's bake) says the same (trial77: it had said nothing)
-    api.bake_lightmap(str(sc.source), cache=tmp_path / "cache", warn=baked.append)
-    assert [w for w in baked if w.startswith("lightmap: 8 texels a unit")] == said, baked
+    api.bake_lightmap(str(sc.source), cache=tmp_path / "cache", warn=from_bake.append)
+    assert [w for w in from_bake if w.startswith("lightmap: 8 texels a unit")] == said, from_bake
     if scale == 1.0:
         assert not said, warned
     else:

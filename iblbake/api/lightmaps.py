@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from iblbake.api.guards import _arguments, _cache, _callback, _device, _names, _path
-from iblbake.api.runtimes import _on_device, _runtime
+from iblbake.api.runtimes import _job, _on_device, _runtime
 from iblbake.api.scenes import load_scene
 from iblbake.errors import InputError
 
@@ -67,9 +67,7 @@ def bake_lightmap(scene, device: str | None = None, *, cache=None, warn=None, pr
     """Bake a scene's lightmap (its `lightmap:` section, which it must have) by tracing paths from
     every texel of its static geometry; cached by content in `cache` (as render). names: what
     error messages call each argument (the command line passes its flags)."""
-    from iblbake.render import Bakes
     from iblbake.render.lightmaps import export
-    from iblbake.render.units import Job
 
     _names(names)
     _device(device)
@@ -81,11 +79,8 @@ def bake_lightmap(scene, device: str | None = None, *, cache=None, warn=None, pr
         raise InputError(f"{sc.source}: the scene has no `lightmap:` section; add one (`lightmap: {{}}` takes the "
                          f"defaults, docs/scene.md)")
     rt = _runtime(device, names)
-    bakes = Bakes(cache)
-    bakes.runtime = rt
-    job = Job(sc, rt, bakes, warn or (lambda _m: None), progress)
-    for w in bakes.environment(sc.data["environment"])[1].warnings:     # as a frame says them
-        job.warn(w)
+    job = _job(sc, rt, cache, warn, progress)
+    bakes = job.bakes
     with _on_device(rt):
         # the frame's unit (the lobe's set where the frame reads one), which says what a frame says of it
         lm, cached, _extra = bakes.load("lightmap", job)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from iblbake.api.guards import _arguments, _cache, _callback, _device, _names
-from iblbake.api.runtimes import _on_device, _runtime
+from iblbake.api.runtimes import _job, _on_device, _runtime
 from iblbake.api.scenes import load_scene
 from iblbake.errors import InputError
 
@@ -63,8 +63,7 @@ def bake_probes(scene, device: str | None = None, *, cache=None, warn=None, prog
 
     import numpy as np
 
-    from iblbake.render import Bakes, probes
-    from iblbake.render.units import Job
+    from iblbake.render import probes
 
     _names(names)
     _device(device)
@@ -75,11 +74,8 @@ def bake_probes(scene, device: str | None = None, *, cache=None, warn=None, prog
     if not sc.data["objects"]:
         raise InputError(f"{sc.source}: the scene has no objects; probes light objects (add some)")
     rt = _runtime(device, names)
-    bakes = Bakes(cache)
-    bakes.runtime = rt
-    job = Job(sc, rt, bakes, warn or (lambda _m: None), progress)
-    for w in bakes.environment(sc.data["environment"])[1].warnings:     # as a frame says them
-        job.warn(w)
+    job = _job(sc, rt, cache, warn, progress)
+    bakes = job.bakes
     with _on_device(rt):
         vol, cached, extra = bakes.load("probes", job)
         reflections = bakes.load("reflection_probes", job)[0] if sc.data["reflection_probes"] else []

@@ -31,3 +31,16 @@ def _on_device(rt):
     """The lock of runtime `rt` (held while a call runs on it), or no lock for the host (None)."""
     import contextlib
     return contextlib.nullcontext() if rt is None else _LOCKS[id(rt)]
+
+
+def _job(sc, rt, cache, warn, progress):
+    """A bake's job on runtime `rt` (its store over `cache`), the panorama's read warnings said first,
+    as a frame says them (the unit a bake loads does not read the panorama itself)."""
+    from iblbake.render import Bakes
+    from iblbake.render.units import Job
+    bakes = Bakes(cache)
+    bakes.runtime = rt
+    job = Job(sc, rt, bakes, warn or (lambda _m: None), progress)
+    for w in bakes.environment(sc.data["environment"])[1].warnings:
+        job.warn(w)
+    return job

@@ -301,8 +301,7 @@ def lattice(grid: Grid, arrays) -> dict:
 def box_counts(extent, step) -> list:
     """A min/max box's cells along each axis at `step` (axis_counts): 2 at least where the box has
     an extent, 1 where it has none."""
-    return [max(c, 2) if e > 0 and c is not None else (1 if e <= 0 else c)
-            for c, e in zip(axis_counts(extent, step, 0), extent)]
+    return [1 if e <= 0 else (c if c is None else max(c, 2)) for c, e in zip(axis_counts(extent, step, 0), extent)]
 
 
 def grid_of(settings: dict, arrays, step_hint: float | None = None) -> Grid:
