@@ -87,8 +87,8 @@ LEGEND = ("'name xR (A%, tint T%; N px)': R the ratio of the region's (or half's
           "bounds (regions over 30%, halves over 10%) count; T the colour shift once the luminances match, shown "
           "where the worst channel is mostly that; N its pixels (a few pixels' mean is as noisy as a few pixels). "
           "Each region's (half's) luminance ratio: R alone. Halves the camera sees in under 4 pixels are left "
-          "out, named beside the count with their pixels. Reference noise: the frame's relative standard error per pixel; a region's mean has about that "
-          "over the square root of its pixels.")
+          "out, named beside the count with their pixels. Reference noise: the frame's relative standard error "
+          "per pixel; a region's mean has about that over the square root of its pixels.")
 
 
 def worst(errors: dict) -> str:
